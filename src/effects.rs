@@ -1,0 +1,84 @@
+//! Effects: Remark 2.5 of the paper as a rule — simulate only what the scene calls for.
+//! No Γ3,1 (or contact disabled) → no constraint; no Γ3,2, friction disabled or μF = 0 → no
+//! friction term; no relaxation → no memory state; neither contact nor friction → every step
+//! is one solve with the stored factorization and no optimization solver is built.
+
+use crate::fem::Discretization;
+use crate::scene::{ContactSolver, Scene};
+use crate::solver::{conic::ConicSolver, dual::DualSolver, Factor, Rows, StepSolver};
+use crate::Result;
+
+/// Which terms of (3.1) a run carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Effects {
+    /// Aε(w): always (θ > 0).
+    pub viscosity: bool,
+    /// Bε(u_n): E > 0 and not disabled.
+    pub elasticity: bool,
+    /// kΣ R(t_n − t_j) ε(u_j): a relaxation kernel is given.
+    pub memory: bool,
+    /// Unilateral constraint n·w ≤ 0 at the Γ3,1 nodes.
+    pub contact: bool,
+    /// Coulomb friction μF|w_τ| at the Γ3,2 nodes.
+    pub friction: bool,
+    /// The given normal stress F on Γ3,2 (the load g_F).
+    pub normal_stress: bool,
+    pub tractions: bool,
+    pub body_force: bool,
+}
+
+impl Effects {
+    pub fn new(scene: &Scene, disc: &Discretization) -> Self {
+        Effects {
+            viscosity: true,
+            elasticity: disc.k_b.is_some(),
+            memory: scene.relaxation.is_some(),
+            contact: !disc.contact.is_empty(),
+            friction: !disc.friction.is_empty(),
+            normal_stress: !disc.g_f.is_empty(),
+            tractions: !scene.tractions.is_empty(),
+            body_force: !scene.body_forces.is_empty(),
+        }
+    }
+
+    /// The names listed in summary.json and by `check`.
+    pub fn names(&self) -> Vec<&'static str> {
+        [
+            (self.viscosity, "viscosity"),
+            (self.elasticity, "elasticity"),
+            (self.memory, "memory"),
+            (self.contact, "contact"),
+            (self.friction, "friction"),
+            (self.normal_stress, "normal_stress"),
+            (self.tractions, "tractions"),
+            (self.body_force, "body_force"),
+        ]
+        .iter()
+        .filter(|(on, _)| *on)
+        .map(|(_, n)| *n)
+        .collect()
+    }
+
+    /// True when a step is a plain linear solve.
+    pub fn linear(&self) -> bool {
+        !self.contact && !self.friction
+    }
+}
+
+/// Picks and builds the step solver (Remark 2.5): `Linear` without constraint rows,
+/// otherwise the scene's choice of the fast dual method or clarabel.
+pub fn step_solver(
+    effects: &Effects,
+    scene: &Scene,
+    disc: &Discretization,
+    factor: &Factor,
+    rows: &Rows,
+) -> Result<StepSolver> {
+    if effects.linear() {
+        return Ok(StepSolver::Linear);
+    }
+    Ok(match scene.contact_solver {
+        ContactSolver::Fast => StepSolver::Dual(DualSolver::new(factor, rows)),
+        ContactSolver::Clarabel => StepSolver::Conic(ConicSolver::new(&disc.k_a, rows)?),
+    })
+}

@@ -1,0 +1,50 @@
+//! One error type for the whole crate. A user mistake (`Input`) exits with status 2, a solve
+//! that failed (`Solve`) with status 1; every message names the file, key or group at fault
+//! and says what would fix it.
+
+use std::path::Path;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Bad input: a scene, mesh or command-line value the user can fix. Exit status 2.
+    #[error("{0}")]
+    Input(String),
+    /// A solve or run that failed although its input was accepted. Exit status 1.
+    #[error("{0}")]
+    Solve(String),
+    /// An operating-system error while reading or writing a file. Exit status 1.
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl Error {
+    pub fn input(msg: impl Into<String>) -> Self {
+        Error::Input(msg.into())
+    }
+
+    pub fn solve(msg: impl Into<String>) -> Self {
+        Error::Solve(msg.into())
+    }
+
+    /// Wraps an I/O error with the path it concerns.
+    pub fn io(path: &Path, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.display().to_string(),
+            source,
+        }
+    }
+
+    /// The process exit status for this error (DESIGN.md: 2 for bad input, 1 otherwise).
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Error::Input(_) => 2,
+            Error::Solve(_) | Error::Io { .. } => 1,
+        }
+    }
+}
+
+pub type Result<T> = std::result::Result<T, Error>;

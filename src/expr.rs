@@ -1,0 +1,213 @@
+//! Scene expressions: loads f0(x, y, z, t), f2(x, y, z, t), F(x, y, z), μ(x, y, z) and a
+//! relaxation kernel r(s), parsed and compiled once by `fasteval2` (MIT, maintained fork of
+//! fasteval; every literal is an f64, so `1/2` is 0.5, not an integer division).
+//!
+//! Beyond fasteval's built-ins (`min`, `max`, `abs`, `sin`, …, `log(base, x)`, comparison and
+//! `&&`/`||` operators) an expression may call `if(cond, a, b)`, `exp`, `ln`, `sqrt`, `pow`,
+//! `tanh` and use the constants `pi` and `e`. Unknown variables and functions are refused when
+//! the scene is read, not in the middle of a run.
+
+use crate::{Error, Result};
+use fasteval2::{Compiler, Evaler, Instruction, Parser, Slab};
+
+/// Values of the variables an expression may use.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Point {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub t: f64,
+    pub s: f64,
+}
+
+/// A compiled expression of some of the variables x, y, z, t, s.
+pub struct Expr {
+    source: String,
+    slab: Slab,
+    instruction: Instruction,
+}
+
+impl std::fmt::Debug for Expr {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Expr({:?})", self.source)
+    }
+}
+
+/// The functions an expression may call besides fasteval's built-ins.
+fn call(name: &str, args: &[f64]) -> Option<f64> {
+    Some(match (name, args) {
+        ("if", [c, a, b]) => {
+            if *c != 0.0 {
+                *a
+            } else {
+                *b
+            }
+        }
+        ("exp", [a]) => a.exp(),
+        ("ln", [a]) => a.ln(),
+        ("sqrt", [a]) => a.sqrt(),
+        ("tanh", [a]) => a.tanh(),
+        ("pow", [a, b]) => a.powf(*b),
+        ("pi", []) => std::f64::consts::PI,
+        ("e", []) => std::f64::consts::E,
+        _ => return None,
+    })
+}
+
+fn variable(name: &str, p: &Point) -> Option<f64> {
+    match name {
+        "x" => Some(p.x),
+        "y" => Some(p.y),
+        "z" => Some(p.z),
+        "t" => Some(p.t),
+        "s" => Some(p.s),
+        _ => None,
+    }
+}
+
+impl Expr {
+    /// Parses `source`, allowing only the variables in `allowed`. `key` names the scene entry
+    /// in error messages (e.g. `load.traction[0].value[1]`).
+    pub fn parse(source: &str, allowed: &[&str], key: &str) -> Result<Expr> {
+        let mut slab = Slab::new();
+        let parsed = Parser::new()
+            .parse(source, &mut slab.ps)
+            .map_err(|e| Error::input(format!("{key}: cannot parse expression {source:?}: {e}")))?;
+        let instruction =
+            parsed
+                .from(&slab.ps)
+                .compile(&slab.ps, &mut slab.cs, &mut fasteval2::EmptyNamespace);
+        // Evaluate once with a recording namespace: every variable and custom function the
+        // expression reaches must be known (all call arguments are evaluated eagerly).
+        let mut unknown: Option<String> = None;
+        let probe = Point::default();
+        let mut ns = |name: &str, args: Vec<f64>| -> Option<f64> {
+            if args.is_empty() {
+                if let Some(v) = variable(name, &probe) {
+                    if allowed.contains(&name) {
+                        return Some(v);
+                    }
+                    unknown.get_or_insert_with(|| format!("variable '{name}'"));
+                    return Some(0.0);
+                }
+            }
+            match call(name, &args) {
+                Some(v) => Some(v),
+                None => {
+                    unknown.get_or_insert_with(|| {
+                        if args.is_empty() {
+                            format!("variable '{name}'")
+                        } else {
+                            format!("function '{name}' with {} argument(s)", args.len())
+                        }
+                    });
+                    Some(0.0)
+                }
+            }
+        };
+        // Evaluation errors at the probe point (e.g. a division by zero gives inf, not an
+        // error) are irrelevant here; only the names matter.
+        let _ = instruction.eval(&slab, &mut ns);
+        if let Some(what) = unknown {
+            return Err(Error::input(format!(
+                "{key}: expression {source:?} uses unknown {what}; allowed variables: {}; \
+                 functions: fasteval's built-ins (min, max, abs, sin, cos, log, ...) and \
+                 if(c, a, b), exp, ln, sqrt, pow, tanh, pi, e",
+                allowed.join(", ")
+            )));
+        }
+        Ok(Expr {
+            source: source.to_string(),
+            slab,
+            instruction,
+        })
+    }
+
+    /// The value at `p`. Unknown names were refused by `parse`, so an evaluation error cannot
+    /// occur; a NaN is returned if it ever did, and the caller's finiteness check reports it.
+    pub fn eval(&self, p: &Point) -> f64 {
+        let mut ns = |name: &str, args: Vec<f64>| -> Option<f64> {
+            if args.is_empty() {
+                if let Some(v) = variable(name, p) {
+                    return Some(v);
+                }
+            }
+            call(name, &args)
+        };
+        self.instruction
+            .eval(&self.slab, &mut ns)
+            .unwrap_or(f64::NAN)
+    }
+
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+}
+
+/// A scene value that is either a number or an expression.
+#[derive(Debug)]
+pub enum Scalar {
+    Const(f64),
+    Expr(Expr),
+}
+
+impl Scalar {
+    pub fn eval(&self, p: &Point) -> f64 {
+        match self {
+            Scalar::Const(v) => *v,
+            Scalar::Expr(e) => e.eval(p),
+        }
+    }
+
+    /// True if the value is the constant 0 (an effect that vanishes identically).
+    pub fn is_zero(&self) -> bool {
+        matches!(self, Scalar::Const(v) if *v == 0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_loads_evaluate() {
+        let f = Expr::parse("-0.1*x*(2-x)*min(t, 0.2)", &["x", "y", "t"], "k").unwrap();
+        let p = Point {
+            x: 0.5,
+            t: 0.1,
+            ..Default::default()
+        };
+        assert!((f.eval(&p) - (-0.1 * 0.5 * 1.5 * 0.1)).abs() < 1e-17);
+        let g = Expr::parse(
+            "if(t <= 0.5, 0.01*(1-y)*t, 0.01*(1-y)*0.2)",
+            &["y", "t"],
+            "k",
+        )
+        .unwrap();
+        let p = Point {
+            y: 0.25,
+            t: 0.75,
+            ..Default::default()
+        };
+        assert_eq!(g.eval(&p), 0.01 * 0.75 * 0.2);
+        let h = Expr::parse("1/2 + exp(-10*s)", &["s"], "k").unwrap();
+        let p = Point {
+            s: 0.1,
+            ..Default::default()
+        };
+        assert_eq!(h.eval(&p), 0.5 + (-1.0f64).exp());
+    }
+
+    #[test]
+    fn unknown_names_and_syntax_errors_are_refused() {
+        let e = Expr::parse("x + q", &["x"], "load.body[0].value[0]").unwrap_err();
+        assert!(e.to_string().contains("variable 'q'"), "{e}");
+        assert!(e.to_string().contains("load.body[0].value[0]"), "{e}");
+        let e = Expr::parse("s*t", &["s"], "r").unwrap_err();
+        assert!(e.to_string().contains("variable 't'"), "{e}");
+        let e = Expr::parse("foo(x)", &["x"], "r").unwrap_err();
+        assert!(e.to_string().contains("function 'foo'"), "{e}");
+        let e = Expr::parse("(x + ", &["x"], "r").unwrap_err();
+        assert!(e.to_string().contains("cannot parse"), "{e}");
+    }
+}

@@ -1,0 +1,399 @@
+//! Discretization: P1 triangles, the dofs of V^h (w = 0 on Γ1 eliminated), the stiffness
+//! matrices K_A, K_B, K_R, the load vector ⟨f_n, ·⟩, the given-normal-stress load g_F and the
+//! nodal constraint rows on Γ3,1 (n_i·w_i ≤ 0) and Γ3,2 (weight c_i of |w_τ,i|).
+
+pub mod element;
+pub mod loads;
+
+use crate::expr::Point;
+use crate::mesh::{Group, Mesh};
+use crate::scene::{Model, Scene};
+use crate::{Error, Result};
+pub use element::{Isotropic, Triangle};
+use faer::sparse::{SparseColMat, Triplet};
+pub use loads::Loads;
+
+/// Sparse symmetric matrix (both triangles stored), columns compressed.
+pub type Sparse = SparseColMat<usize, f64>;
+
+/// y += alpha · A x for a matrix in free-dof numbering.
+pub fn mul_add(a: &Sparse, x: &[f64], alpha: f64, y: &mut [f64]) {
+    let a = a.as_ref();
+    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    for j in 0..a.ncols() {
+        let xj = alpha * x[j];
+        if xj != 0.0 {
+            for p in cp[j]..cp[j + 1] {
+                y[ri[p]] += v[p] * xj;
+            }
+        }
+    }
+}
+
+/// One nodal row of the constraint operator P: the functional w ↦ dir·w_i at a node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodalRow {
+    pub node: usize,
+    /// Free indices of the node's x and y dofs.
+    pub dofs: [usize; 2],
+    /// n_i on Γ3,1 (constraint n_i·w_i ≤ 0), τ_i on Γ3,2 (friction on w_τ,i = τ_i·w_i).
+    pub dir: [f64; 2],
+    /// Γ3,2: c_i = ∫ μF φ_i da, the bound of the friction multiplier. Γ3,1: +∞.
+    pub bound: f64,
+    /// ∫ φ_i da over the group: turns the nodal multiplier into a traction.
+    pub area: f64,
+}
+
+impl NodalRow {
+    pub fn apply(&self, w: &[f64]) -> f64 {
+        self.dir[0] * w[self.dofs[0]] + self.dir[1] * w[self.dofs[1]]
+    }
+
+    /// w += z · Pᵀ_row.
+    pub fn add_transpose(&self, z: f64, w: &mut [f64]) {
+        w[self.dofs[0]] += z * self.dir[0];
+        w[self.dofs[1]] += z * self.dir[1];
+    }
+}
+
+/// Everything the time loop needs from space: matrices, loads, boundary operators.
+pub struct Discretization {
+    pub nodes: Vec<[f64; 3]>,
+    pub triangles: Vec<Triangle>,
+    /// Global dof 2·node + component → free index; None on Γ1 (w = 0 there).
+    pub free: Vec<Option<usize>>,
+    pub n_free: usize,
+    /// A (4.1), B (4.2) (None when E = 0 or disabled), R's constant part I.
+    pub a: Isotropic,
+    pub b: Option<Isotropic>,
+    pub r: Isotropic,
+    /// K_A, K_B, K_R in free numbering.
+    pub k_a: Sparse,
+    pub k_b: Option<Sparse>,
+    pub k_r: Sparse,
+    pub loads: Loads,
+    /// g_F_i = ∫_{Γ3,2} F φ_i ν da (free numbering); empty when F = 0 or no friction group.
+    pub g_f: Vec<f64>,
+    /// Rows n_i on Γ3,1 (empty when contact is off).
+    pub contact: Vec<NodalRow>,
+    /// Rows τ_i with c_i > 0 on Γ3,2 (empty when friction is off or μF = 0).
+    pub friction: Vec<NodalRow>,
+    /// The largest kink (degrees) between facet normals at a node of Γ3,1 or Γ3,2.
+    pub contact_kink_deg: f64,
+}
+
+fn group<'m>(mesh: &'m Mesh, scene: &Scene, key: &str, value: &str) -> Result<&'m Group> {
+    mesh.boundary_group(value)
+        .map_err(|e| Error::input(format!("{}: key '{key}': {e}", scene.path.display())))
+}
+
+impl Discretization {
+    pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
+        let nn = mesh.nodes.len();
+        let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.groups.fixed)?;
+        let mut clamped = vec![false; nn];
+        for n in mesh.group_nodes(fixed) {
+            clamped[n] = true;
+        }
+        let mut free = vec![None; 2 * nn];
+        let mut n_free = 0;
+        for (i, c) in clamped.iter().enumerate() {
+            if !c {
+                free[2 * i] = Some(n_free);
+                free[2 * i + 1] = Some(n_free + 1);
+                n_free += 2;
+            }
+        }
+        if n_free == 0 {
+            return Err(Error::input(format!(
+                "{}: every node of '{}' is on the clamped group '{}'; nothing can move",
+                scene.path.display(),
+                mesh.path.display(),
+                scene.groups.fixed
+            )));
+        }
+        let xy = |i: usize| [mesh.nodes[i][0], mesh.nodes[i][1]];
+        let triangles: Vec<Triangle> = mesh
+            .triangles
+            .iter()
+            .map(|t| Triangle::new(*t, [xy(t[0]), xy(t[1]), xy(t[2])]))
+            .collect();
+
+        let a = Isotropic::viscosity(scene.theta, scene.zeta);
+        let b = scene
+            .elasticity
+            .filter(|(e, _)| *e > 0.0)
+            .map(|(e, nu)| match scene.model {
+                Model::PlaneStress => Isotropic::plane_stress(e, nu),
+                Model::PlaneStrain => Isotropic::plane_strain(e, nu),
+            });
+        let r = Isotropic::identity();
+        let (k_a, k_b, k_r) = assemble(&triangles, &free, n_free, a, b, r)?;
+
+        let loads = Loads::new(mesh, scene, &triangles)?;
+
+        // Γ3,1: one row n_i per free node (Γ1 wins over every other part).
+        let mut contact = Vec::new();
+        let mut kink: f64 = 0.0;
+        if scene.contact {
+            let g = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+            let (normals, k) = mesh.nodal_normals(g);
+            kink = kink.max(k);
+            let area = lumped_area(mesh, g);
+            for (node, n) in normals {
+                if let (Some(dx), Some(dy)) = (free[2 * node], free[2 * node + 1]) {
+                    contact.push(NodalRow {
+                        node,
+                        dofs: [dx, dy],
+                        dir: n,
+                        bound: f64::INFINITY,
+                        area: area[node],
+                    });
+                }
+            }
+        }
+        // Γ3,2: g_F and the friction rows τ_i with c_i = ∫ μF φ_i da (2-point Gauss per edge).
+        let mut g_f = Vec::new();
+        let mut friction = Vec::new();
+        if let Some(fr) = &scene.friction {
+            let g = group(mesh, scene, "mesh.groups.friction", &scene.groups.friction)?;
+            let mut gf = vec![0.0; n_free];
+            let mut c = vec![0.0; nn];
+            for &f in &g.facets {
+                let n = mesh.facet_normal(f);
+                for (p, w, phi) in loads::edge_gauss(mesh, f) {
+                    let pt = Point {
+                        x: p[0],
+                        y: p[1],
+                        ..Default::default()
+                    };
+                    let big_f = fr.normal_stress.eval(&pt);
+                    let mu = fr.coefficient.eval(&pt);
+                    check_data(big_f, "friction.normal_stress", scene, p, true)?;
+                    check_data(mu, "friction.coefficient", scene, p, true)?;
+                    for (node, ph) in f.iter().zip(phi) {
+                        for comp in 0..2 {
+                            if let Some(d) = free[2 * node + comp] {
+                                gf[d] += w * ph * big_f * n[comp];
+                            }
+                        }
+                        c[*node] += w * ph * mu * big_f;
+                    }
+                }
+            }
+            if gf.iter().any(|&v| v != 0.0) {
+                g_f = gf;
+            }
+            let (normals, k) = mesh.nodal_normals(g);
+            kink = kink.max(k);
+            let area = lumped_area(mesh, g);
+            for (node, n) in normals {
+                if let (Some(dx), Some(dy)) = (free[2 * node], free[2 * node + 1]) {
+                    // μF may vanish on parts of Γ3,2: rows with c_i = 0 carry no friction.
+                    if c[node] > 0.0 {
+                        friction.push(NodalRow {
+                            node,
+                            dofs: [dx, dy],
+                            dir: [-n[1], n[0]],
+                            bound: c[node],
+                            area: area[node],
+                        });
+                    }
+                }
+            }
+        }
+
+        Ok(Discretization {
+            nodes: mesh.nodes.clone(),
+            triangles,
+            free,
+            n_free,
+            a,
+            b,
+            r,
+            k_a,
+            k_b,
+            k_r,
+            loads,
+            g_f,
+            contact,
+            friction,
+            contact_kink_deg: kink,
+        })
+    }
+
+    /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1, z = 0).
+    pub fn nodal(&self, v: &[f64]) -> Vec<f64> {
+        let nn = self.nodes.len();
+        let mut out = vec![0.0; 3 * nn];
+        for i in 0..nn {
+            for c in 0..2 {
+                if let Some(d) = self.free[2 * i + c] {
+                    out[3 * i + c] = v[d];
+                }
+            }
+        }
+        out
+    }
+
+    fn local(&self, t: &Triangle, v: &[f64]) -> [[f64; 2]; 3] {
+        let mut out = [[0.0; 2]; 3];
+        for (k, &n) in t.nodes.iter().enumerate() {
+            for c in 0..2 {
+                if let Some(d) = self.free[2 * n + c] {
+                    out[k][c] = v[d];
+                }
+            }
+        }
+        out
+    }
+
+    /// Per-cell stress σ_n = A ε(w_n) + B ε(u_n) + ε(m_n) (2.1 discretized; R = r·I, so the
+    /// memory term is ε of m_n = kΣ r(t_n − t_j) u_j) as 6 components XX YY ZZ XY YZ XZ, and
+    /// the von Mises stress. Plane stress has σ_zz = 0; plane strain σ_zz = b_A tr ε(w) +
+    /// b_B tr ε(u) (the out-of-plane strain is zero).
+    pub fn stress(
+        &self,
+        w: &[f64],
+        u: &[f64],
+        m: Option<&[f64]>,
+        model: Model,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let mut s6 = Vec::with_capacity(6 * self.triangles.len());
+        let mut vm = Vec::with_capacity(self.triangles.len());
+        for t in &self.triangles {
+            let ew = t.strain(self.local(t, w));
+            let eu = t.strain(self.local(t, u));
+            let mut s = self.a.apply(ew);
+            let mut szz = 0.0;
+            if model == Model::PlaneStrain {
+                szz += self.a.b * (ew[0] + ew[1]);
+            }
+            if let Some(b) = self.b {
+                let sb = b.apply(eu);
+                for c in 0..3 {
+                    s[c] += sb[c];
+                }
+                if model == Model::PlaneStrain {
+                    szz += b.b * (eu[0] + eu[1]);
+                }
+            }
+            if let Some(m) = m {
+                let sm = self.r.apply(t.strain(self.local(t, m)));
+                for c in 0..3 {
+                    s[c] += sm[c];
+                }
+            }
+            s6.extend_from_slice(&[s[0], s[1], szz, s[2], 0.0, 0.0]);
+            let (dx, dy, dz) = (s[0] - s[1], s[1] - szz, szz - s[0]);
+            vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * s[2] * s[2]).sqrt());
+        }
+        (s6, vm)
+    }
+
+    /// The largest stable step of the explicit elastic term, if there is one. One step maps
+    /// u_{n+1} = (I − k K_A⁻¹K_B) u_n + …, stable for k λ_max ≤ 2 with λ_max the largest
+    /// generalized eigenvalue of (K_B, K_A). Those lie within the pointwise eigenvalues of
+    /// A⁻¹B on symmetric tensors, which for the isotropic forms are a_B/a_A (deviatoric) and
+    /// (a_B + b_B)/(a_A + b_A) (trace). For 2θε' + Eε this is k ≤ 4θ/E. The memory term is
+    /// not included.
+    pub fn stable_step_limit(&self) -> Option<f64> {
+        let b = self.b?;
+        let a = self.a;
+        let lambda = (b.a / a.a).max((b.a + b.b) / (a.a + a.b));
+        (lambda > 0.0).then(|| 2.0 / lambda)
+    }
+
+    /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
+    pub fn norms(&self, v: &[f64]) -> (f64, f64) {
+        let (mut l2, mut h1) = (0.0, 0.0);
+        for t in &self.triangles {
+            let lv = self.local(t, v);
+            for c in 0..2 {
+                // ∫ (Σ v_i φ_i)² = |T|/12 (Σ v_i² + (Σ v_i)²).
+                let s: f64 = lv.iter().map(|x| x[c]).sum();
+                let q: f64 = lv.iter().map(|x| x[c] * x[c]).sum();
+                l2 += t.area / 12.0 * (q + s * s);
+                let gx: f64 = (0..3).map(|k| t.grad[k][0] * lv[k][c]).sum();
+                let gy: f64 = (0..3).map(|k| t.grad[k][1] * lv[k][c]).sum();
+                h1 += t.area * (gx * gx + gy * gy);
+            }
+        }
+        (l2.sqrt(), h1.sqrt())
+    }
+}
+
+/// ∫_g φ_i da for every node (zero off the group).
+fn lumped_area(mesh: &Mesh, g: &Group) -> Vec<f64> {
+    let mut area = vec![0.0; mesh.nodes.len()];
+    for &f in &g.facets {
+        let half = 0.5 * mesh.facet_length(f);
+        area[f[0]] += half;
+        area[f[1]] += half;
+    }
+    area
+}
+
+/// Refuses NaN/∞ (and negative values where `nonnegative`) in data evaluated on the mesh.
+pub(crate) fn check_data(
+    v: f64,
+    key: &str,
+    scene: &Scene,
+    p: [f64; 2],
+    nonnegative: bool,
+) -> Result<()> {
+    if !v.is_finite() || (nonnegative && v < 0.0) {
+        return Err(Error::input(format!(
+            "{}: key '{key}' evaluates to {v} at (x, y) = ({}, {}); it must be finite{}",
+            scene.path.display(),
+            p[0],
+            p[1],
+            if nonnegative { " and ≥ 0" } else { "" }
+        )));
+    }
+    Ok(())
+}
+
+/// Assembles K_A, K_B, K_R over all triangles in free-dof numbering (Γ1 rows and columns
+/// dropped); the three share one sparsity pattern.
+fn assemble(
+    triangles: &[Triangle],
+    free: &[Option<usize>],
+    n: usize,
+    a: Isotropic,
+    b: Option<Isotropic>,
+    r: Isotropic,
+) -> Result<(Sparse, Option<Sparse>, Sparse)> {
+    let cap = 36 * triangles.len();
+    let (mut ta, mut tb, mut tr) = (
+        Vec::with_capacity(cap),
+        Vec::with_capacity(if b.is_some() { cap } else { 0 }),
+        Vec::with_capacity(cap),
+    );
+    for t in triangles {
+        let ka = t.stiffness(a);
+        let kb = b.map(|b| t.stiffness(b));
+        let kr = t.stiffness(r);
+        let dof = |l: usize| free[2 * t.nodes[l / 2] + l % 2];
+        for i in 0..6 {
+            let Some(gi) = dof(i) else { continue };
+            for j in 0..6 {
+                let Some(gj) = dof(j) else { continue };
+                ta.push(Triplet::new(gi, gj, ka[i][j]));
+                if let Some(kb) = &kb {
+                    tb.push(Triplet::new(gi, gj, kb[i][j]));
+                }
+                tr.push(Triplet::new(gi, gj, kr[i][j]));
+            }
+        }
+    }
+    let build = |t: &[Triplet<usize, usize, f64>]| {
+        SparseColMat::try_new_from_triplets(n, n, t)
+            .map_err(|e| Error::solve(format!("sparse assembly failed: {e:?}")))
+    };
+    Ok((
+        build(&ta)?,
+        if b.is_some() { Some(build(&tb)?) } else { None },
+        build(&tr)?,
+    ))
+}

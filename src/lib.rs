@@ -1,0 +1,21 @@
+//! viscontact: quasi-static contact of viscoelastic bodies with long memory, solved by the
+//! fully discrete scheme of Problem 3.1 in Xu, Wang, He, Chen, Han, Huang (2021): P1 finite
+//! elements in space, the left endpoint rule for both history integrals in time.
+//!
+//! The modules follow the data flow of DESIGN.md, one stage each:
+//! [`scene`] → [`mesh`] → [`fem`] (discretization) → [`effects`] → [`solver`] (the per-step
+//! problem (3.1)) → [`time_loop`] (with [`history`]) → [`output`]; [`run`] drives them.
+
+pub mod effects;
+pub mod error;
+pub mod expr;
+pub mod fem;
+pub mod history;
+pub mod mesh;
+pub mod output;
+pub mod run;
+pub mod scene;
+pub mod solver;
+pub mod time_loop;
+
+pub use error::{Error, Result};

@@ -1,0 +1,612 @@
+//! Reading a gmsh MSH 4.1 file (ASCII or binary) into plain arrays, through `mshio`.
+//!
+//! What `mshio` 0.4 does and does not do, and what this module adds:
+//!
+//! - It parses `$MeshFormat`, `$Entities`, `$Nodes` and `$Elements` and silently skips every
+//!   other `$Section ... $EndSection` (`$PhysicalNames` included; see `physical_names`).
+//! - It accepts only version 4.1 but says just "unsupported format version"; the header is
+//!   checked here first so that an MSH 2.2 file gets a message saying how to convert it.
+//! - It can panic instead of returning an error on some malformed headers (an unsupported
+//!   binary `size_t` width hits `unimplemented!`; a `$Nodes`/`$Elements` header announcing 0
+//!   entries with a nonzero minimum tag underflows `num - 1`). Those headers are validated here
+//!   before `mshio` sees the file.
+//! - It keeps node tags only when they are sparse (`max - min + 1 > count`); for dense tags it
+//!   drops them, which is correct only if they appear in increasing order. The node tags are
+//!   therefore read here by a small scan of the `$Nodes` section, so nodes are always mapped
+//!   by their real tags.
+//! - Its `Display` for parse errors appends a hex dump of the whole rest of the file; the
+//!   message is built here from the error backtrace instead, with the byte offset / line.
+//! - It does not check that elements refer to existing nodes; this module does.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use mshio::{ElementType, MshParserError};
+
+use crate::Error;
+
+/// The parsed content of an MSH file, before any geometric processing. Node indices are
+/// positions in `nodes` (file order); tags are the file's tags.
+#[derive(Debug, Default)]
+pub(crate) struct RawMesh {
+    pub nodes: Vec<[f64; 3]>,
+    pub triangles: Vec<RawElement<3>>,
+    pub lines: Vec<RawElement<2>>,
+    /// Physical tags of each entity `(dim, entity tag)`, from `$Entities`.
+    pub physical: HashMap<(i32, i32), Vec<i32>>,
+    /// Every `(dim, physical tag)` that some entity lists, in file order (curves, then
+    /// surfaces, then volumes; points are skipped).
+    pub physical_order: Vec<(i32, i32)>,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RawElement<const N: usize> {
+    /// The element tag in the file (for messages).
+    pub tag: u64,
+    pub nodes: [usize; N],
+    /// `(dim, tag)` of the entity the element belongs to.
+    pub entity: (i32, i32),
+}
+
+/// Encoding details from `$MeshFormat`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Format {
+    pub binary: bool,
+    pub size_t: usize,
+    pub big_endian: bool,
+}
+
+/// Offset just past the line `name` (which must start a line and be alone on it), or `None`.
+pub(crate) fn find_section(bytes: &[u8], name: &[u8]) -> Option<usize> {
+    let mut from = 0;
+    while from + name.len() <= bytes.len() {
+        let hit = from + find_sub(&bytes[from..], name)?;
+        let at_line_start = hit == 0 || bytes[hit - 1] == b'\n';
+        let after = &bytes[hit + name.len()..];
+        let eol = if after.starts_with(b"\n") {
+            Some(1)
+        } else if after.starts_with(b"\r\n") {
+            Some(2)
+        } else {
+            None
+        };
+        if let (true, Some(eol)) = (at_line_start, eol) {
+            return Some(hit + name.len() + eol);
+        }
+        from = hit + 1;
+    }
+    None
+}
+
+fn find_sub(hay: &[u8], needle: &[u8]) -> Option<usize> {
+    let first = *needle.first()?;
+    let mut i = 0;
+    while i + needle.len() <= hay.len() {
+        let j = i + hay[i..=hay.len() - needle.len()]
+            .iter()
+            .position(|&b| b == first)?;
+        if hay[j..].starts_with(needle) {
+            return Some(j);
+        }
+        i = j + 1;
+    }
+    None
+}
+
+/// Checks the `$MeshFormat` header: an MSH file, version 4.1, ASCII or binary with a
+/// supported `size_t` width.
+pub(crate) fn check_format(path: &Path, bytes: &[u8]) -> crate::Result<Format> {
+    let file = path.display();
+    let not_msh = || {
+        Error::input(format!(
+            "mesh file '{file}' is not a gmsh MSH file (it does not start with a $MeshFormat \
+             section); export the mesh from gmsh in MSH 4.1 format (`gmsh -2 GEO -format msh41`)"
+        ))
+    };
+    if !bytes.starts_with(b"$MeshFormat") {
+        return Err(not_msh());
+    }
+    let start = find_section(bytes, b"$MeshFormat").ok_or_else(not_msh)?;
+    let line_end = bytes[start..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map_or(bytes.len(), |p| start + p);
+    let line = String::from_utf8_lossy(&bytes[start..line_end]);
+    let fields: Vec<&str> = line.split_whitespace().collect();
+    if fields.len() < 3 {
+        return Err(Error::input(format!(
+            "mesh file '{file}' has a malformed $MeshFormat line '{}' (expected 'version \
+             file-type data-size'); the file looks truncated or corrupt",
+            line.trim()
+        )));
+    }
+    if fields[0] != "4.1" {
+        let stem = path
+            .file_stem()
+            .map_or("mesh".into(), |s| s.to_string_lossy().into_owned());
+        let new = path.with_file_name(format!("{stem}_msh41.msh"));
+        let (from, to) = (shell_quote(path), shell_quote(&new));
+        return Err(Error::input(format!(
+            "mesh file '{file}' is in MSH format version {}; viscontact reads MSH 4.1 (ASCII or \
+             binary): convert it with `gmsh {from} -save -format msh41 -o {to}`",
+            fields[0]
+        )));
+    }
+    let binary = match fields[1] {
+        "0" => false,
+        "1" => true,
+        other => {
+            return Err(Error::input(format!(
+                "mesh file '{file}': unknown file-type '{other}' in $MeshFormat (0 = ASCII, \
+                 1 = binary); the file looks corrupt"
+            )))
+        }
+    };
+    let size_t: usize = match fields[2].parse() {
+        Ok(s @ (4 | 8)) => s,
+        _ => {
+            return Err(Error::input(format!(
+                "mesh file '{file}': unsupported data-size '{}' in $MeshFormat (gmsh writes 8); \
+                 the file looks corrupt",
+                fields[2]
+            )))
+        }
+    };
+    let mut big_endian = false;
+    if binary {
+        // The line after the header line holds the integer 1 in binary, to detect endianness.
+        let one = bytes.get(line_end + 1..line_end + 5);
+        match one {
+            Some([1, 0, 0, 0]) => big_endian = false,
+            Some([0, 0, 0, 1]) => big_endian = true,
+            _ => {
+                return Err(Error::input(format!(
+                    "mesh file '{file}': binary $MeshFormat without a valid endianness marker; \
+                     the file looks truncated or corrupt"
+                )))
+            }
+        }
+    }
+    Ok(Format {
+        binary,
+        size_t,
+        big_endian,
+    })
+}
+
+/// A path as a shell word (single-quoted if it has characters a shell would interpret).
+fn shell_quote(p: &Path) -> String {
+    let s = p.display().to_string();
+    let plain = |c: char| c.is_ascii_alphanumeric() || "_-./+,:@%".contains(c);
+    if !s.is_empty() && s.chars().all(plain) {
+        s
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
+/// Reads size_t / int / double values of an MSH section, ASCII or binary.
+struct Scanner<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    fmt: Format,
+}
+
+impl Scanner<'_> {
+    fn token(&mut self) -> Option<&str> {
+        let b = self.bytes;
+        while self.pos < b.len() && b[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        let start = self.pos;
+        while self.pos < b.len() && !b[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        if start == self.pos {
+            return None;
+        }
+        std::str::from_utf8(&b[start..self.pos]).ok()
+    }
+
+    fn fixed(&mut self, n: usize) -> Option<u64> {
+        let raw = self.bytes.get(self.pos..self.pos + n)?;
+        self.pos += n;
+        let mut v: u64 = 0;
+        if self.fmt.big_endian {
+            for &byte in raw {
+                v = (v << 8) | u64::from(byte);
+            }
+        } else {
+            for &byte in raw.iter().rev() {
+                v = (v << 8) | u64::from(byte);
+            }
+        }
+        Some(v)
+    }
+
+    fn size_t(&mut self) -> Option<u64> {
+        if self.fmt.binary {
+            self.fixed(self.fmt.size_t)
+        } else {
+            self.token()?.parse().ok()
+        }
+    }
+
+    fn int(&mut self) -> Option<i64> {
+        if self.fmt.binary {
+            self.fixed(4).map(|v| i64::from(v as u32 as i32))
+        } else {
+            self.token()?.parse().ok()
+        }
+    }
+
+    fn skip_doubles(&mut self, n: u64) -> Option<()> {
+        if self.fmt.binary {
+            let len = usize::try_from(n.checked_mul(8)?).ok()?;
+            let end = self.pos.checked_add(len)?;
+            if end > self.bytes.len() {
+                return None;
+            }
+            self.pos = end;
+        } else {
+            for _ in 0..n {
+                self.token()?;
+            }
+        }
+        Some(())
+    }
+}
+
+/// The four numbers heading each `$Nodes` or `$Elements` section:
+/// `numEntityBlocks numItems minTag maxTag` (unreadable headers are left out).
+fn section_headers(bytes: &[u8], fmt: Format, name: &[u8]) -> Vec<[u64; 4]> {
+    let mut out = Vec::new();
+    let mut from = 0;
+    while let Some(pos) = find_section(&bytes[from..], name).map(|p| from + p) {
+        let mut s = Scanner { bytes, pos, fmt };
+        if let (Some(a), Some(b), Some(c), Some(d)) =
+            (s.size_t(), s.size_t(), s.size_t(), s.size_t())
+        {
+            out.push([a, b, c, d]);
+        }
+        from = pos;
+    }
+    out
+}
+
+/// Node tags of each node block of `$Nodes`, in file order. `None` if the section cannot be
+/// scanned (mshio parsed it, so this does not happen for a consistent file).
+fn scan_node_tags(bytes: &[u8], fmt: Format) -> Option<Vec<Vec<u64>>> {
+    let pos = find_section(bytes, b"$Nodes")?;
+    let mut s = Scanner { bytes, pos, fmt };
+    let blocks = s.size_t()?;
+    let _count = s.size_t()?;
+    let _min = s.size_t()?;
+    let _max = s.size_t()?;
+    let mut out = Vec::new();
+    for _ in 0..blocks {
+        let entity_dim = s.int()?;
+        let _entity_tag = s.int()?;
+        let parametric = s.int()?;
+        let n = s.size_t()?;
+        let mut tags = Vec::with_capacity(usize::try_from(n).ok()?.min(bytes.len()));
+        for _ in 0..n {
+            tags.push(s.size_t()?);
+        }
+        let per_node = 3 + if parametric != 0 {
+            entity_dim.max(0) as u64
+        } else {
+            0
+        };
+        s.skip_doubles(n.checked_mul(per_node)?)?;
+        out.push(tags);
+    }
+    Some(out)
+}
+
+/// Turns an mshio parse error into an input error naming the file, the place and the problem.
+fn parse_error(path: &Path, bytes: &[u8], fmt: Format, e: &MshParserError<&[u8]>) -> Error {
+    let trace = e.filtered_backtrace();
+    let mut place = String::new();
+    if let Some((rest, _)) = trace.first() {
+        let offset = (rest.as_ptr() as usize).wrapping_sub(bytes.as_ptr() as usize);
+        if offset <= bytes.len() {
+            if fmt.binary {
+                place = format!(" at byte {offset}");
+            } else {
+                let line = bytes[..offset].iter().filter(|&&b| b == b'\n').count() + 1;
+                place = format!(" at line {line}");
+            }
+        }
+    }
+    // The backtrace runs from the innermost error outwards; print it outermost first.
+    let chain: Vec<String> = trace
+        .iter()
+        .rev()
+        .map(|(_, k)| {
+            k.context()
+                .map_or_else(|| k.to_string(), str::to_string)
+                .trim_end_matches('.')
+                .to_string()
+        })
+        .collect();
+    let what = if chain.is_empty() {
+        "unknown error".to_string()
+    } else {
+        chain.join(" > ")
+    };
+    let ending = if ends_with_end_tag(bytes) {
+        "looks corrupt"
+    } else {
+        "looks truncated (its last line is not an $End... line)"
+    };
+    Error::input(format!(
+        "mesh file '{}' cannot be read: it {ending}; the MSH parser stopped{place}: {what}; \
+         regenerate the file with gmsh",
+        path.display()
+    ))
+}
+
+fn ends_with_end_tag(bytes: &[u8]) -> bool {
+    let trimmed = bytes.trim_ascii_end();
+    let last_line = trimmed
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(trimmed, |p| &trimmed[p + 1..]);
+    last_line.starts_with(b"$End")
+}
+
+/// A short description of a gmsh element type and a hint how to avoid it.
+fn describe_element_type(t: ElementType) -> (String, &'static str) {
+    let code = t as i32;
+    let nodes = t.nodes().unwrap_or(0);
+    let (family, kind) = match code {
+        1 | 8 | 26 | 27 | 28 | 62..=70 => ("lines", 1),
+        2 | 9 | 20..=25 | 42..=46 | 52..=57 => ("triangles", 2),
+        3 | 10 | 16 | 36..=41 | 47..=51 | 58..=61 => ("quadrangles", 2),
+        4 | 11 | 29..=31 | 71..=79 => ("tetrahedra", 3),
+        5 | 12 | 17 | 92 | 93 => ("hexahedra", 3),
+        6 | 13 | 18 => ("prisms", 3),
+        7 | 14 | 19 => ("pyramids", 3),
+        _ => ("elements", 0),
+    };
+    let order = match code {
+        8 | 9 | 10 | 11 | 12 | 13 | 14 | 16 | 17 | 18 | 19 => " (quadratic)",
+        1..=7 | 15 => "",
+        _ => " (high-order)",
+    };
+    let text = format!("{nodes}-node{order} {family} (gmsh element type {code})");
+    let hint = match (kind, order.is_empty()) {
+        (3, _) => {
+            "viscontact reads 2D meshes of 3-node triangles: save a 2D mesh (`gmsh -2`); 3D is \
+             not supported yet"
+        }
+        (_, false) => {
+            "viscontact uses P1 triangles: remesh with `gmsh -2 -order 1` (or Mesh.ElementOrder = 1)"
+        }
+        _ if family == "quadrangles" => {
+            "viscontact uses 3-node triangles: remesh without recombination (remove `Recombine \
+             Surface` / set Mesh.RecombineAll = 0)"
+        }
+        _ => "viscontact reads 3-node triangles, 2-node boundary lines and points only",
+    };
+    (text, hint)
+}
+
+/// Reads the file content `bytes` of `path` into a [`RawMesh`].
+pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
+    let file = path.display();
+    let fmt = check_format(path, bytes)?;
+
+    // Headers that would make mshio panic (or mean an empty mesh).
+    for (name, what) in [(&b"$Nodes"[..], "nodes"), (&b"$Elements"[..], "elements")] {
+        for [_, count, min, max] in section_headers(bytes, fmt, name) {
+            if count == 0 || min == 0 || max < min {
+                let problem = if count == 0 {
+                    format!(
+                        "has no {what} (its {} section is empty)",
+                        name.escape_ascii()
+                    )
+                } else {
+                    format!(
+                        "has an invalid {} header (tags {min}..{max}); it looks corrupt",
+                        name.escape_ascii()
+                    )
+                };
+                return Err(Error::input(format!(
+                    "mesh file '{file}' {problem}; mesh the geometry with `gmsh -2` and save it \
+                     with its physical groups"
+                )));
+            }
+        }
+    }
+
+    let msh = mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(path, bytes, fmt, &e))?;
+    let data = msh.data;
+
+    let corrupt = |what: String| {
+        Error::input(format!(
+            "mesh file '{file}' is inconsistent: {what}; the file looks corrupt, regenerate it \
+             with gmsh"
+        ))
+    };
+
+    // Entities and their physical tags.
+    let mut raw = RawMesh::default();
+    if let Some(ent) = &data.entities {
+        let mut seen = std::collections::HashSet::new();
+        let mut add = |dim: i32, tag: i32, phys: &[i32]| {
+            raw.physical.insert((dim, tag), phys.to_vec());
+            for &p in phys {
+                // gmsh may write negative physical tags for entities of reversed orientation
+                let p = p.abs();
+                if dim > 0 && seen.insert((dim, p)) {
+                    raw.physical_order.push((dim, p));
+                }
+            }
+        };
+        for p in &ent.points {
+            add(0, p.tag, &p.physical_tags);
+        }
+        for c in &ent.curves {
+            add(1, c.tag, &c.physical_tags);
+        }
+        for s in &ent.surfaces {
+            add(2, s.tag, &s.physical_tags);
+        }
+        for v in &ent.volumes {
+            add(3, v.tag, &v.physical_tags);
+        }
+    }
+
+    // Nodes, mapped by their real tags.
+    let nodes = data.nodes.ok_or_else(|| {
+        Error::input(format!(
+            "mesh file '{file}' has no $Nodes section; it looks truncated, regenerate it with gmsh"
+        ))
+    })?;
+    let tags = scan_node_tags(bytes, fmt)
+        .ok_or_else(|| corrupt("the $Nodes section cannot be scanned for node tags".into()))?;
+    if tags.len() != nodes.node_blocks.len() {
+        return Err(corrupt(format!(
+            "$Nodes has {} blocks but {} were scanned",
+            nodes.node_blocks.len(),
+            tags.len()
+        )));
+    }
+    let mut index: HashMap<u64, usize> = HashMap::new();
+    for (block, tags) in nodes.node_blocks.iter().zip(&tags) {
+        if block.nodes.len() != tags.len() {
+            return Err(corrupt(
+                "a $Nodes block has a wrong number of node tags".into(),
+            ));
+        }
+        for (node, &tag) in block.nodes.iter().zip(tags) {
+            if index.insert(tag, raw.nodes.len()).is_some() {
+                return Err(corrupt(format!("node tag {tag} appears twice in $Nodes")));
+            }
+            raw.nodes.push([node.x, node.y, node.z]);
+        }
+    }
+
+    // Elements: only P1 triangles, 2-node lines and points.
+    let elements = data.elements.ok_or_else(|| {
+        Error::input(format!(
+            "mesh file '{file}' has no $Elements section; it looks truncated, regenerate it with \
+             gmsh"
+        ))
+    })?;
+    let mut unsupported: Vec<ElementType> = Vec::new();
+    for block in &elements.element_blocks {
+        let t = block.element_type;
+        if !matches!(t, ElementType::Pnt | ElementType::Lin2 | ElementType::Tri3)
+            && !unsupported.contains(&t)
+        {
+            unsupported.push(t);
+        }
+    }
+    if !unsupported.is_empty() {
+        // Report surface elements first: they decide the remedy.
+        unsupported.sort_by_key(
+            |&t| match describe_element_type(t).0.contains("triangles") {
+                true => 0,
+                false => 1,
+            },
+        );
+        let texts: Vec<String> = unsupported
+            .iter()
+            .map(|&t| describe_element_type(t).0)
+            .collect();
+        let mut hints: Vec<&str> = Vec::new();
+        for &t in &unsupported {
+            let h = describe_element_type(t).1;
+            if !hints.contains(&h) {
+                hints.push(h);
+            }
+        }
+        return Err(Error::input(format!(
+            "mesh file '{file}' contains {}; {}",
+            texts.join(" and "),
+            hints.join("; ")
+        )));
+    }
+    let node_of = |elem: u64, tag: u64| {
+        index.get(&tag).copied().ok_or_else(|| {
+            corrupt(format!(
+                "element {elem} refers to node {tag}, which is not in the $Nodes section"
+            ))
+        })
+    };
+    for block in &elements.element_blocks {
+        let entity = (block.entity_dim, block.entity_tag);
+        for e in &block.elements {
+            match block.element_type {
+                ElementType::Tri3 => raw.triangles.push(RawElement {
+                    tag: e.element_tag,
+                    nodes: [
+                        node_of(e.element_tag, e.nodes[0])?,
+                        node_of(e.element_tag, e.nodes[1])?,
+                        node_of(e.element_tag, e.nodes[2])?,
+                    ],
+                    entity,
+                }),
+                ElementType::Lin2 => raw.lines.push(RawElement {
+                    tag: e.element_tag,
+                    nodes: [
+                        node_of(e.element_tag, e.nodes[0])?,
+                        node_of(e.element_tag, e.nodes[1])?,
+                    ],
+                    entity,
+                }),
+                _ => {}
+            }
+        }
+    }
+    if data.entities.is_some() {
+        for b in &elements.element_blocks {
+            let key = (b.entity_dim, b.entity_tag);
+            if b.element_type != ElementType::Pnt && !raw.physical.contains_key(&key) {
+                return Err(corrupt(format!(
+                    "an element block belongs to entity (dim {}, tag {}), which is not in \
+                     $Entities",
+                    key.0, key.1
+                )));
+            }
+        }
+    }
+    Ok(raw)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_sections_only_at_line_starts() {
+        let b = b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\nx$Nodes\n$Nodes\r\n1 2";
+        assert_eq!(find_section(b, b"$MeshFormat"), Some(12));
+        let p = find_section(b, b"$Nodes").unwrap();
+        assert_eq!(&b[p..], b"1 2");
+        assert_eq!(find_section(b, b"$Elements"), None);
+    }
+
+    #[test]
+    fn dense_but_unordered_node_tags_are_mapped_by_tag() {
+        // Tags 1..3 are dense but written as 2, 3, 1: mshio drops them, the scan keeps them.
+        let src = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 3 1 3\n2 1 0 3\n2\n3\n1\n\
+                   1 0 0\n0 1 0\n0 0 0\n$EndNodes\n$Elements\n1 1 1 1\n2 1 2 1\n1 1 2 3\n\
+                   $EndElements\n";
+        let raw = read_raw(Path::new("t.msh"), src.as_bytes()).unwrap();
+        let t = raw.triangles[0].nodes;
+        assert_eq!(raw.nodes[t[0]], [0.0, 0.0, 0.0]);
+        assert_eq!(raw.nodes[t[1]], [1.0, 0.0, 0.0]);
+        assert_eq!(raw.nodes[t[2]], [0.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn empty_node_section_is_an_error_not_a_panic() {
+        let src = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n0 0 1 1\n$EndNodes\n";
+        let e = read_raw(Path::new("t.msh"), src.as_bytes()).unwrap_err();
+        assert!(e.to_string().contains("has no nodes"), "{e}");
+    }
+}

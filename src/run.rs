@@ -1,0 +1,332 @@
+//! The `run` command as a library function: scene → mesh → discretization → effects → step
+//! solver → time loop → ParaView series and summary.json. Reading this function tells the
+//! whole story of a run.
+
+use crate::fem::Discretization;
+use crate::mesh::Mesh;
+use crate::output::{write_atomic, Field, Frame, Series};
+use crate::scene::Scene;
+use crate::solver::{kkt_residual, Rows};
+use crate::time_loop::{Step, TimeLoop};
+use crate::{Error, Result};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// summary.json (DESIGN.md "Output of run").
+#[derive(Serialize, Debug, Clone)]
+pub struct Summary {
+    pub name: String,
+    pub scene: String,
+    pub mesh: String,
+    pub nodes: usize,
+    pub elements: usize,
+    pub dofs: usize,
+    pub steps: usize,
+    pub step_size: f64,
+    pub end_time: f64,
+    pub effects: Vec<String>,
+    pub solver: String,
+    pub timing: Timing,
+    pub final_: Final,
+    pub contact: ContactSummary,
+    pub iterations: Iterations,
+    pub output: OutputSummary,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct Timing {
+    pub setup_s: f64,
+    pub steps_s: f64,
+    pub total_s: f64,
+}
+
+/// Norms of u_N = u_0 + kΣ_{j<N} w_j, the displacement at t_N = T.
+#[derive(Serialize, Debug, Clone)]
+pub struct Final {
+    pub time: f64,
+    pub u_l2: f64,
+    /// The full H¹ norm (‖u‖²_{L²} + |u|²_{H¹})^{1/2}.
+    pub u_h1: f64,
+    pub u_max: f64,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct ContactSummary {
+    /// The largest n_i·w_i over Γ3,1 nodes and all steps (≤ 0 up to solver tolerance).
+    pub max_violation: f64,
+    /// Constrained rows: Γ3,1 nodes, Γ3,2 nodes with friction.
+    pub contact_nodes: usize,
+    pub friction_nodes: usize,
+    /// Γ3,1 nodes with an active constraint (n·w = 0) at the last step.
+    pub active_at_end: usize,
+    /// Γ3,2 nodes sticking (w_τ = 0) at the last step.
+    pub stick_at_end: usize,
+    /// The largest relative KKT residual over all steps (see `solver::kkt_residual`).
+    pub max_kkt_residual: f64,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct Iterations {
+    pub total: usize,
+    pub max: usize,
+    /// Iterations of the step solver at each step n = 0..=N.
+    pub per_step: Vec<usize>,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct OutputSummary {
+    pub directory: String,
+    pub files: usize,
+}
+
+/// The serialized form renames `final_` to `final` (a Rust keyword).
+fn summary_json(s: &Summary) -> String {
+    let mut v = serde_json::to_value(s).expect("summary serializes");
+    if let Some(obj) = v.as_object_mut() {
+        if let Some(f) = obj.remove("final_") {
+            obj.insert("final".into(), f);
+        }
+    }
+    serde_json::to_string_pretty(&v).expect("summary serializes") + "\n"
+}
+
+/// Options of a run that are not part of the scene.
+pub struct RunOptions {
+    pub out: Option<PathBuf>,
+    pub overrides: Vec<String>,
+    pub progress: bool,
+}
+
+/// The default output directory: `out/<scene name>/`.
+pub fn default_out(scene: &Scene) -> PathBuf {
+    Path::new("out").join(&scene.name)
+}
+
+/// Loads everything a run needs and checks it: scene, mesh, discretization.
+pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
+    let scene = Scene::load(scene_path, overrides)?;
+    let mesh = Mesh::read(&scene.mesh_file).map_err(|e| match e {
+        Error::Input(m) => Error::input(format!("{}: key 'mesh.file': {m}", scene.path.display())),
+        other => other,
+    })?;
+    let disc = Discretization::new(&mesh, &scene)?;
+    Ok((scene, mesh, disc))
+}
+
+/// Runs a scene to its end, writing the series and summary.json into the output directory.
+pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Summary> {
+    let start = Instant::now();
+    let (scene, mesh, disc) = setup(scene_path, &opts.overrides)?;
+    let out = opts.out.clone().unwrap_or_else(|| default_out(&scene));
+    std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
+    let mut tl = TimeLoop::new(&scene, &disc)?;
+    let setup_s = start.elapsed().as_secs_f64();
+
+    let cells: Vec<usize> = mesh.triangles.iter().flatten().copied().collect();
+    let mut series = Series::create(&out, &mesh.nodes, &cells, 3)?;
+    let n_steps = scene.steps;
+    let bar = progress_bar(opts.progress, n_steps as u64 + 1);
+    let mut per_step = Vec::with_capacity(n_steps + 1);
+    let mut max_violation = f64::NEG_INFINITY;
+    let mut max_kkt: f64 = 0.0;
+    let rows = tl.rows.clone();
+    let steps_start = Instant::now();
+    let (active_at_end, stick_at_end) = loop {
+        let n = tl.n();
+        let step = tl.solve_step()?;
+        per_step.push(step.report.iterations);
+        let (viol, kkt) = step_checks(&rows, &step);
+        max_violation = max_violation.max(viol);
+        max_kkt = max_kkt.max(kkt);
+        if n % scene.output_every == 0 || n == n_steps {
+            write_frame(&mut series, &disc, &scene, &rows, &step)?;
+        }
+        if n == n_steps {
+            break state_counts(&rows, &step);
+        }
+        tl.advance();
+        bar.inc(1);
+    };
+    bar.finish_and_clear();
+    let steps_s = steps_start.elapsed().as_secs_f64();
+    // u_N = u_0 + kΣ_{j<N} w_j is the history's u at n = N (w_N is not added).
+    let u_n = &tl.history.u;
+    let (l2, semi) = disc.norms(u_n);
+    let summary = Summary {
+        name: scene.name.clone(),
+        scene: scene.path.display().to_string(),
+        mesh: mesh.path.display().to_string(),
+        nodes: mesh.nodes.len(),
+        elements: mesh.triangles.len(),
+        dofs: disc.n_free,
+        steps: n_steps,
+        step_size: scene.k(),
+        end_time: scene.end,
+        effects: tl.effects.names().iter().map(|s| s.to_string()).collect(),
+        solver: tl.solver.name().to_string(),
+        timing: Timing {
+            setup_s,
+            steps_s,
+            total_s: start.elapsed().as_secs_f64(),
+        },
+        final_: Final {
+            time: scene.end,
+            u_l2: l2,
+            u_h1: (l2 * l2 + semi * semi).sqrt(),
+            u_max: u_n.iter().fold(0.0f64, |a, v| a.max(v.abs())),
+        },
+        contact: ContactSummary {
+            max_violation: if rows.n_contact == 0 {
+                0.0
+            } else {
+                max_violation
+            },
+            contact_nodes: rows.n_contact,
+            friction_nodes: rows.len() - rows.n_contact,
+            active_at_end,
+            stick_at_end,
+            max_kkt_residual: max_kkt,
+        },
+        iterations: Iterations {
+            total: per_step.iter().sum(),
+            max: per_step.iter().copied().max().unwrap_or(0),
+            per_step,
+        },
+        output: OutputSummary {
+            directory: out.display().to_string(),
+            files: series.files().len(),
+        },
+    };
+    write_atomic(&out.join("summary.json"), summary_json(&summary).as_bytes())?;
+    Ok(summary)
+}
+
+fn progress_bar(enabled: bool, len: u64) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !enabled || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} step {pos}/{len}  {elapsed} < {eta}")
+            .expect("valid template"),
+    );
+    bar
+}
+
+/// Scale of a step's velocities and multipliers for relative tolerances.
+fn scales(step: &Step) -> (f64, f64) {
+    let ws = step.w.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let zs = step.z.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    (ws, zs)
+}
+
+/// The largest n·w on Γ3,1 and the relative KKT residual of a solved step.
+fn step_checks(rows: &Rows, step: &Step) -> (f64, f64) {
+    let viol = rows.rows[..rows.n_contact]
+        .iter()
+        .map(|r| r.apply(step.w))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let (ws, zs) = scales(step);
+    (viol, kkt_residual(rows, step.w, step.z, ws, zs))
+}
+
+/// Γ3,1 rows with an active constraint and Γ3,2 rows that stick, up to 1e-9 of the
+/// largest velocity.
+fn state_flags(rows: &Rows, step: &Step) -> Vec<bool> {
+    let (ws, _) = scales(step);
+    let tol = 1e-9 * ws.max(f64::MIN_POSITIVE);
+    rows.rows
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let pw = r.apply(step.w);
+            if i < rows.n_contact {
+                step.z[i] > 0.0 || pw >= -tol
+            } else {
+                pw.abs() <= tol
+            }
+        })
+        .collect()
+}
+
+fn state_counts(rows: &Rows, step: &Step) -> (usize, usize) {
+    let flags = state_flags(rows, step);
+    let active = flags[..rows.n_contact].iter().filter(|&&f| f).count();
+    let stick = flags[rows.n_contact..].iter().filter(|&&f| f).count();
+    (active, stick)
+}
+
+fn write_frame(
+    series: &mut Series,
+    disc: &Discretization,
+    scene: &Scene,
+    rows: &Rows,
+    step: &Step,
+) -> Result<()> {
+    let nn = disc.nodes.len();
+    let u = disc.nodal(step.u);
+    let w = disc.nodal(step.w);
+    let (stress, von_mises) = disc.stress(step.w, step.u, step.m, scene.model);
+    // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and
+    // γ_i / ∫φ_i (friction traction along τ_i).
+    let mut pressure = vec![0.0; nn];
+    let mut friction = vec![0.0; nn];
+    let mut state = vec![0.0; nn];
+    for ((i, r), active) in rows.rows.iter().enumerate().zip(state_flags(rows, step)) {
+        if i < rows.n_contact {
+            pressure[r.node] = step.z[i] / r.area;
+        } else {
+            friction[r.node] = step.z[i] / r.area;
+        }
+        if active {
+            state[r.node] = 1.0;
+        }
+    }
+    let frame = Frame {
+        step: step.n,
+        time: step.t,
+        point_data: vec![
+            Field {
+                name: "displacement",
+                components: 3,
+                values: &u,
+            },
+            Field {
+                name: "velocity",
+                components: 3,
+                values: &w,
+            },
+            Field {
+                name: "contact_pressure",
+                components: 1,
+                values: &pressure,
+            },
+            Field {
+                name: "friction_traction",
+                components: 1,
+                values: &friction,
+            },
+            Field {
+                name: "contact_state",
+                components: 1,
+                values: &state,
+            },
+        ],
+        cell_data: vec![
+            Field {
+                name: "stress",
+                components: 6,
+                values: &stress,
+            },
+            Field {
+                name: "von_mises",
+                components: 1,
+                values: &von_mises,
+            },
+        ],
+    };
+    series.write(&frame)?;
+    Ok(())
+}

@@ -1,0 +1,645 @@
+//! The scene file (TOML, DESIGN.md "Scene file"): what the user asks for. Reading it is
+//! two steps: `SceneFile` mirrors the TOML exactly (unknown keys are errors, named by their
+//! dotted path), then `Scene::from_file` checks every value and compiles the expressions.
+//! `--set KEY=VALUE` overrides are applied to the TOML tree before either step, so an
+//! override is checked exactly like a key written in the file.
+
+use crate::expr::{Expr, Scalar};
+use crate::{Error, Result};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+// ---------------------------------------------------------------------------------------
+// The TOML schema
+// ---------------------------------------------------------------------------------------
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub name: Option<String>,
+    pub mesh: MeshSection,
+    pub time: TimeSection,
+    pub material: MaterialSection,
+    pub friction: Option<FrictionSection>,
+    pub contact: Option<ContactSection>,
+    #[serde(default)]
+    pub load: LoadSection,
+    #[serde(default)]
+    pub output: OutputSection,
+    #[serde(default)]
+    pub solver: SolverSection,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSection {
+    pub file: String,
+    #[serde(default)]
+    pub model: Model,
+    #[serde(default)]
+    pub groups: Groups,
+}
+
+/// The 2D model: how the elasticity tensor B is reduced to the plane.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Model {
+    /// B as printed in (4.2) of the paper.
+    #[default]
+    PlaneStress,
+    /// B with the 3D Lamé coefficient λ = Eν/((1+ν)(1−2ν)).
+    PlaneStrain,
+}
+
+/// Which physical groups carry which boundary condition.
+#[derive(Deserialize, Debug, Clone)]
+#[serde(deny_unknown_fields, default)]
+pub struct Groups {
+    pub fixed: String,
+    pub traction: String,
+    pub contact: String,
+    pub friction: String,
+}
+
+impl Default for Groups {
+    fn default() -> Self {
+        Groups {
+            fixed: "Γ1".into(),
+            traction: "Γ2".into(),
+            contact: "Γ3,1".into(),
+            friction: "Γ3,2".into(),
+        }
+    }
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct TimeSection {
+    pub end: f64,
+    pub steps: usize,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSection {
+    pub viscosity: ViscositySection,
+    pub elasticity: Option<ElasticitySection>,
+    pub relaxation: Option<RelaxationSection>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct ViscositySection {
+    pub theta: f64,
+    #[serde(default)]
+    pub zeta: f64,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct ElasticitySection {
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    pub young: f64,
+    #[serde(default)]
+    pub poisson: f64,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct RelaxationSection {
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    pub prony: Option<Vec<[f64; 2]>>,
+    pub expr: Option<String>,
+    pub table: Option<TableSection>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct TableSection {
+    pub s: Vec<f64>,
+    pub r: Vec<f64>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionSection {
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    /// F ≥ 0, the given normal stress on Γ3,2: a number or an expression of x, y, z.
+    pub normal_stress: NumOrExpr,
+    /// μ ≥ 0: a number or an expression of x, y, z.
+    pub coefficient: NumOrExpr,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSection {
+    #[serde(default = "yes")]
+    pub enabled: bool,
+}
+
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSection {
+    #[serde(default)]
+    pub traction: Vec<VectorLoad>,
+    #[serde(default)]
+    pub body: Vec<VectorLoad>,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct VectorLoad {
+    /// For a traction: the physical group it acts on (inside the traction group Γ2); the
+    /// whole traction group when absent. Not allowed for a body force.
+    pub on: Option<String>,
+    pub value: Vec<NumOrExpr>,
+}
+
+#[derive(Deserialize, Debug, Clone)]
+#[serde(untagged)]
+pub enum NumOrExpr {
+    Num(f64),
+    Expr(String),
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSection {
+    /// Write every this many steps (the last step is always written).
+    #[serde(default = "one")]
+    pub every: usize,
+}
+
+impl Default for OutputSection {
+    fn default() -> Self {
+        OutputSection { every: 1 }
+    }
+}
+
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SolverSection {
+    #[serde(default)]
+    pub contact: ContactSolver,
+}
+
+/// How a step with contact or friction is solved.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactSolver {
+    /// Condensed onto the constrained boundary dofs, primal-dual active set (the default).
+    #[default]
+    Fast,
+    /// The whole per-step problem handed to clarabel (the cross-check).
+    Clarabel,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn one() -> usize {
+    1
+}
+
+// ---------------------------------------------------------------------------------------
+// Reading and overriding
+// ---------------------------------------------------------------------------------------
+
+/// Applies one `--set KEY=VALUE` to a TOML tree. The value is read as a TOML value when it
+/// parses as one (`64`, `false`, `[[1.0, 10.0]]`, `"x"`) and as a string otherwise.
+pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<()> {
+    let (key, raw) = assignment.split_once('=').ok_or_else(|| {
+        Error::input(format!(
+            "--set {assignment:?}: expected KEY=VALUE, e.g. --set time.steps=64"
+        ))
+    })?;
+    let key = key.trim();
+    let value = parse_value(raw.trim());
+    let parts: Vec<&str> = key.split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(Error::input(format!(
+            "--set {assignment:?}: '{key}' is not a dotted key path"
+        )));
+    }
+    let mut table = root;
+    for part in &parts[..parts.len() - 1] {
+        let entry = table
+            .entry(part.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        table = match entry {
+            toml::Value::Table(t) => t,
+            _ => {
+                return Err(Error::input(format!(
+                    "--set {assignment:?}: '{part}' is a value, not a table"
+                )))
+            }
+        };
+    }
+    table.insert(parts[parts.len() - 1].to_string(), value);
+    Ok(())
+}
+
+fn parse_value(raw: &str) -> toml::Value {
+    // Parse as the right-hand side of `v = …`; anything that is not valid TOML is a string.
+    match format!("v = {raw}").parse::<toml::Table>() {
+        Ok(mut t) => t
+            .remove("v")
+            .unwrap_or_else(|| toml::Value::String(raw.into())),
+        Err(_) => toml::Value::String(raw.to_string()),
+    }
+}
+
+/// Reads a scene file and applies the overrides; returns the TOML text after overrides (the
+/// exact scene that ran) and the schema-checked tree.
+pub fn read_scene_file(path: &Path, overrides: &[String]) -> Result<(String, SceneFile)> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::input(format!("cannot read scene file '{}': {e}", path.display())))?;
+    let mut root: toml::Table = text
+        .parse()
+        .map_err(|e| Error::input(format!("{}: not valid TOML: {e}", path.display())))?;
+    for o in overrides {
+        apply_override(&mut root, o)?;
+    }
+    let effective = if overrides.is_empty() {
+        text
+    } else {
+        toml::to_string(&root).map_err(|e| Error::input(format!("{}: {e}", path.display())))?
+    };
+    let file: SceneFile =
+        serde_path_to_error::deserialize(toml::Value::Table(root)).map_err(|e| {
+            let at = e.path().to_string();
+            let inner = e.into_inner();
+            Error::input(format!(
+                "{}: {}{inner}",
+                path.display(),
+                if at == "." {
+                    String::new()
+                } else {
+                    format!("key '{at}': ")
+                }
+            ))
+        })?;
+    Ok((effective, file))
+}
+
+// ---------------------------------------------------------------------------------------
+// The checked scene
+// ---------------------------------------------------------------------------------------
+
+/// The relaxation function r(s) of R(s) = r(s)·I.
+#[derive(Debug)]
+pub enum Kernel {
+    /// Σ a_i exp(−b_i s): pairs (a_i, b_i); memory by the exact O(1) recursion.
+    Prony(Vec<(f64, f64)>),
+    /// An expression of s; memory by the direct O(n) sum.
+    Expr(Expr),
+    /// Piecewise linear through (s_i, r_i), constant beyond the ends; direct sum.
+    Table(Vec<f64>, Vec<f64>),
+}
+
+impl Kernel {
+    /// r(s).
+    pub fn eval(&self, s: f64) -> f64 {
+        match self {
+            Kernel::Prony(terms) => terms.iter().map(|(a, b)| a * (-b * s).exp()).sum(),
+            Kernel::Expr(e) => e.eval(&crate::expr::Point {
+                s,
+                ..Default::default()
+            }),
+            Kernel::Table(ss, rs) => {
+                let i = ss.partition_point(|&x| x <= s);
+                if i == 0 {
+                    rs[0]
+                } else if i == ss.len() {
+                    rs[rs.len() - 1]
+                } else {
+                    let w = (s - ss[i - 1]) / (ss[i] - ss[i - 1]);
+                    rs[i - 1] + w * (rs[i] - rs[i - 1])
+                }
+            }
+        }
+    }
+}
+
+#[derive(Debug)]
+pub struct Traction {
+    /// Physical group key (resolved against the mesh later).
+    pub on: String,
+    pub value: Vec<Scalar>,
+}
+
+#[derive(Debug)]
+pub struct Friction {
+    pub normal_stress: Scalar,
+    pub coefficient: Scalar,
+}
+
+/// A checked scene: every number in range, every expression compiled, paths resolved.
+#[derive(Debug)]
+pub struct Scene {
+    pub name: String,
+    /// The path the scene was read from.
+    pub path: PathBuf,
+    /// The TOML text that ran (after `--set` overrides).
+    pub text: String,
+    pub mesh_file: PathBuf,
+    pub model: Model,
+    pub groups: Groups,
+    pub end: f64,
+    pub steps: usize,
+    /// θ, ζ of (4.1).
+    pub theta: f64,
+    pub zeta: f64,
+    /// E, ν of (4.2); None when the elasticity term is disabled.
+    pub elasticity: Option<(f64, f64)>,
+    pub relaxation: Option<Kernel>,
+    pub contact: bool,
+    pub friction: Option<Friction>,
+    pub tractions: Vec<Traction>,
+    pub body_forces: Vec<Vec<Scalar>>,
+    pub output_every: usize,
+    pub contact_solver: ContactSolver,
+}
+
+fn finite(v: f64, key: &str, file: &Path) -> Result<f64> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Error::input(format!(
+            "{}: key '{key}' is {v}; it must be a finite number",
+            file.display()
+        )))
+    }
+}
+
+fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Scalar> {
+    match v {
+        NumOrExpr::Num(x) => Ok(Scalar::Const(finite(*x, key, file)?)),
+        NumOrExpr::Expr(s) => {
+            // A plain number written as a string is a constant too.
+            if let Ok(x) = s.trim().parse::<f64>() {
+                return Ok(Scalar::Const(finite(x, key, file)?));
+            }
+            Expr::parse(s, allowed, &format!("{}: key '{key}'", file.display())).map(Scalar::Expr)
+        }
+    }
+}
+
+const SPACE_TIME: &[&str] = &["x", "y", "z", "t"];
+const SPACE: &[&str] = &["x", "y", "z"];
+
+impl Scene {
+    /// Reads, overrides and checks a scene file.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<Scene> {
+        let (text, file) = read_scene_file(path, overrides)?;
+        Scene::from_file(path, text, file)
+    }
+
+    pub fn from_file(path: &Path, text: String, f: SceneFile) -> Result<Scene> {
+        let bad = |key: &str, why: &str| {
+            Err(Error::input(format!(
+                "{}: key '{key}': {why}",
+                path.display()
+            )))
+        };
+        let end = finite(f.time.end, "time.end", path)?;
+        if end <= 0.0 {
+            return bad("time.end", &format!("is {end}; the end time T must be > 0"));
+        }
+        if f.time.steps == 0 {
+            return bad("time.steps", "is 0; the number of steps N must be ≥ 1");
+        }
+        let theta = finite(f.material.viscosity.theta, "material.viscosity.theta", path)?;
+        if theta <= 0.0 {
+            return bad(
+                "material.viscosity.theta",
+                &format!("is {theta}; the viscosity θ must be > 0 (H(A) needs A coercive)"),
+            );
+        }
+        let zeta = finite(f.material.viscosity.zeta, "material.viscosity.zeta", path)?;
+        if zeta < 0.0 {
+            return bad(
+                "material.viscosity.zeta",
+                &format!("is {zeta}; the bulk viscosity ζ must be ≥ 0"),
+            );
+        }
+        let model = f.mesh.model;
+        let elasticity = match &f.material.elasticity {
+            Some(e) if e.enabled => {
+                let young = finite(e.young, "material.elasticity.young", path)?;
+                if young < 0.0 {
+                    return bad(
+                        "material.elasticity.young",
+                        &format!("is {young}; Young's modulus E must be ≥ 0"),
+                    );
+                }
+                let nu = finite(e.poisson, "material.elasticity.poisson", path)?;
+                let ok = match model {
+                    Model::PlaneStress => nu > -1.0 && nu <= 0.5,
+                    Model::PlaneStrain => nu > -1.0 && nu < 0.5,
+                };
+                if !ok {
+                    let range = match model {
+                        Model::PlaneStress => "−1 < ν ≤ 0.5",
+                        Model::PlaneStrain => "−1 < ν < 0.5 (plane strain)",
+                    };
+                    return bad(
+                        "material.elasticity.poisson",
+                        &format!("is {nu}; the Poisson ratio must satisfy {range}"),
+                    );
+                }
+                Some((young, nu))
+            }
+            _ => None,
+        };
+        let relaxation = match &f.material.relaxation {
+            Some(r) if r.enabled => Some(kernel(r, path)?),
+            _ => None,
+        };
+        let friction = match &f.friction {
+            Some(fr) if fr.enabled => {
+                let normal_stress =
+                    scalar(&fr.normal_stress, SPACE, "friction.normal_stress", path)?;
+                let coefficient = scalar(&fr.coefficient, SPACE, "friction.coefficient", path)?;
+                if let Scalar::Const(v) = normal_stress {
+                    if v < 0.0 {
+                        return bad(
+                            "friction.normal_stress",
+                            &format!("is {v}; the normal stress F must be ≥ 0 (H(C))"),
+                        );
+                    }
+                }
+                if let Scalar::Const(v) = coefficient {
+                    if v < 0.0 {
+                        return bad(
+                            "friction.coefficient",
+                            &format!("is {v}; the friction coefficient μ must be ≥ 0"),
+                        );
+                    }
+                }
+                Some(Friction {
+                    normal_stress,
+                    coefficient,
+                })
+            }
+            _ => None,
+        };
+        let components = 2; // 2D models; 3D adds z.
+        let vector = |v: &[NumOrExpr], key: &str| -> Result<Vec<Scalar>> {
+            if v.len() != components {
+                return Err(Error::input(format!(
+                    "{}: key '{key}': has {} components; a 2D model needs {components} \
+                     (x and y), e.g. [\"0\", \"-0.1*x\"]",
+                    path.display(),
+                    v.len()
+                )));
+            }
+            v.iter()
+                .enumerate()
+                .map(|(i, c)| scalar(c, SPACE_TIME, &format!("{key}[{i}]"), path))
+                .collect()
+        };
+        let mut tractions = Vec::new();
+        for (i, t) in f.load.traction.iter().enumerate() {
+            let key = format!("load.traction[{i}].value");
+            tractions.push(Traction {
+                on: t
+                    .on
+                    .clone()
+                    .unwrap_or_else(|| f.mesh.groups.traction.clone()),
+                value: vector(&t.value, &key)?,
+            });
+        }
+        let mut body_forces = Vec::new();
+        for (i, b) in f.load.body.iter().enumerate() {
+            if b.on.is_some() {
+                return bad(
+                    &format!("load.body[{i}].on"),
+                    "a body force acts on the whole domain; remove 'on'",
+                );
+            }
+            body_forces.push(vector(&b.value, &format!("load.body[{i}].value"))?);
+        }
+        if f.output.every == 0 {
+            return bad("output.every", "is 0; write every n ≥ 1 steps");
+        }
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let name = f.name.clone().unwrap_or_else(|| {
+            path.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "scene".into())
+        });
+        Ok(Scene {
+            name,
+            path: path.to_path_buf(),
+            text,
+            mesh_file: dir.join(&f.mesh.file),
+            model,
+            groups: f.mesh.groups.clone(),
+            end,
+            steps: f.time.steps,
+            theta,
+            zeta,
+            elasticity,
+            relaxation,
+            contact: f.contact.as_ref().is_some_and(|c| c.enabled),
+            friction,
+            tractions,
+            body_forces,
+            output_every: f.output.every,
+            contact_solver: f.solver.contact,
+        })
+    }
+
+    /// The time step k = T/N.
+    pub fn k(&self) -> f64 {
+        self.end / self.steps as f64
+    }
+}
+
+fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
+    let given = [r.prony.is_some(), r.expr.is_some(), r.table.is_some()];
+    if given.iter().filter(|&&g| g).count() != 1 {
+        return Err(Error::input(format!(
+            "{}: [material.relaxation] needs exactly one of 'prony', 'expr', 'table' \
+             (or enabled = false)",
+            path.display()
+        )));
+    }
+    if let Some(p) = &r.prony {
+        if p.is_empty() {
+            return Err(Error::input(format!(
+                "{}: key 'material.relaxation.prony' is empty; give pairs [a_i, b_i]",
+                path.display()
+            )));
+        }
+        let mut terms = Vec::new();
+        for (i, [a, b]) in p.iter().enumerate() {
+            let key = format!("material.relaxation.prony[{i}]");
+            let (a, b) = (finite(*a, &key, path)?, finite(*b, &key, path)?);
+            if b < 0.0 {
+                return Err(Error::input(format!(
+                    "{}: key '{key}': rate b = {b} < 0 makes exp(−b s) grow; give b ≥ 0",
+                    path.display()
+                )));
+            }
+            terms.push((a, b));
+        }
+        return Ok(Kernel::Prony(terms));
+    }
+    if let Some(e) = &r.expr {
+        let key = format!("{}: key 'material.relaxation.expr'", path.display());
+        return Ok(Kernel::Expr(Expr::parse(e, &["s"], &key)?));
+    }
+    let t = r.table.as_ref().expect("one of the three is present");
+    let key = "material.relaxation.table";
+    if t.s.len() != t.r.len() || t.s.is_empty() {
+        return Err(Error::input(format!(
+            "{}: key '{key}': 's' and 'r' must be non-empty and of equal length ({} vs {})",
+            path.display(),
+            t.s.len(),
+            t.r.len()
+        )));
+    }
+    for (i, v) in t.s.iter().chain(&t.r).enumerate() {
+        finite(*v, &format!("{key}[{i}]"), path)?;
+    }
+    if t.s.windows(2).any(|w| w[1] <= w[0]) {
+        return Err(Error::input(format!(
+            "{}: key '{key}.s' must be strictly increasing",
+            path.display()
+        )));
+    }
+    Ok(Kernel::Table(t.s.clone(), t.r.clone()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn override_values_are_typed() {
+        let mut root: toml::Table = "[time]\nend = 1.0\nsteps = 8\n".parse().unwrap();
+        apply_override(&mut root, "time.steps=64").unwrap();
+        apply_override(&mut root, "friction.enabled=false").unwrap();
+        apply_override(&mut root, "mesh.groups.contact=Γ3,1").unwrap();
+        apply_override(&mut root, "material.relaxation.prony=[[1.0, 10.0]]").unwrap();
+        assert_eq!(root["time"]["steps"].as_integer(), Some(64));
+        assert_eq!(root["friction"]["enabled"].as_bool(), Some(false));
+        assert_eq!(root["mesh"]["groups"]["contact"].as_str(), Some("Γ3,1"));
+        assert!(root["material"]["relaxation"]["prony"].is_array());
+        assert!(apply_override(&mut root, "novalue").is_err());
+    }
+
+    #[test]
+    fn table_kernel_interpolates() {
+        let k = Kernel::Table(vec![0.0, 1.0], vec![1.0, 0.0]);
+        assert_eq!(k.eval(0.25), 0.75);
+        assert_eq!(k.eval(2.0), 0.0);
+        assert_eq!(k.eval(-1.0), 1.0);
+    }
+}
