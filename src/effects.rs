@@ -79,6 +79,6 @@ pub fn step_solver(
     }
     Ok(match scene.contact_solver {
         ContactSolver::Fast => StepSolver::Dual(DualSolver::new(factor, rows)),
-        ContactSolver::Clarabel => StepSolver::Conic(ConicSolver::new(&disc.k_a, rows)?),
+        ContactSolver::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(&disc.k_a, rows)?)),
     })
 }

@@ -148,7 +148,7 @@ impl Expr {
 #[derive(Debug)]
 pub enum Scalar {
     Const(f64),
-    Expr(Expr),
+    Expr(Box<Expr>),
 }
 
 impl Scalar {

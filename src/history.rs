@@ -131,18 +131,21 @@ impl History {
             }
             Memory::Direct { past, .. } => past.push(self.u.clone()),
         }
-        for i in 0..self.u.len() {
+        let state = self
+            .u
+            .iter_mut()
+            .zip(self.u_sum.iter_mut().zip(&mut self.u_comp));
+        for ((u, (sum, comp)), wi) in state.zip(w) {
             // Neumaier: add k w_i to (sum, comp) without losing the low-order bits.
-            let x = k * w[i];
-            let s = self.u_sum[i];
-            let t = s + x;
-            self.u_comp[i] += if s.abs() >= x.abs() {
-                (s - t) + x
+            let x = k * wi;
+            let t = *sum + x;
+            *comp += if sum.abs() >= x.abs() {
+                (*sum - t) + x
             } else {
-                (x - t) + s
+                (x - t) + *sum
             };
-            self.u_sum[i] = t;
-            self.u[i] = t + self.u_comp[i];
+            *sum = t;
+            *u = t + *comp;
         }
         self.n += 1;
     }
@@ -156,9 +159,9 @@ mod tests {
     fn prony_recursion_equals_direct_sum() {
         let k = 0.01;
         let prony = Kernel::Prony(vec![(1.0, 10.0), (0.5, 3.0)]);
-        let table_like = Kernel::Expr(
+        let table_like = Kernel::Expr(Box::new(
             crate::expr::Expr::parse("exp(-10*s) + 0.5*exp(-3*s)", &["s"], "r").unwrap(),
-        );
+        ));
         let mut hp = History::new(3, k, Some(&prony));
         let mut hd = History::new(3, k, Some(&table_like));
         let (mut mp, mut md) = (vec![0.0; 3], vec![0.0; 3]);

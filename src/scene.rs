@@ -296,7 +296,7 @@ pub enum Kernel {
     /// Σ a_i exp(−b_i s): pairs (a_i, b_i); memory by the exact O(1) recursion.
     Prony(Vec<(f64, f64)>),
     /// An expression of s; memory by the direct O(n) sum.
-    Expr(Expr),
+    Expr(Box<Expr>),
     /// Piecewise linear through (s_i, r_i), constant beyond the ends; direct sum.
     Table(Vec<f64>, Vec<f64>),
 }
@@ -384,7 +384,8 @@ fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Sca
             if let Ok(x) = s.trim().parse::<f64>() {
                 return Ok(Scalar::Const(finite(x, key, file)?));
             }
-            Expr::parse(s, allowed, &format!("{}: key '{key}'", file.display())).map(Scalar::Expr)
+            Expr::parse(s, allowed, &format!("{}: key '{key}'", file.display()))
+                .map(|e| Scalar::Expr(Box::new(e)))
         }
     }
 }
@@ -593,7 +594,7 @@ fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
     }
     if let Some(e) = &r.expr {
         let key = format!("{}: key 'material.relaxation.expr'", path.display());
-        return Ok(Kernel::Expr(Expr::parse(e, &["s"], &key)?));
+        return Ok(Kernel::Expr(Box::new(Expr::parse(e, &["s"], &key)?)));
     }
     let t = r.table.as_ref().expect("one of the three is present");
     let key = "material.relaxation.table";

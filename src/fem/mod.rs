@@ -238,10 +238,10 @@ impl Discretization {
 
     fn local(&self, t: &Triangle, v: &[f64]) -> [[f64; 2]; 3] {
         let mut out = [[0.0; 2]; 3];
-        for (k, &n) in t.nodes.iter().enumerate() {
-            for c in 0..2 {
+        for (o, &n) in out.iter_mut().zip(&t.nodes) {
+            for (c, oc) in o.iter_mut().enumerate() {
                 if let Some(d) = self.free[2 * n + c] {
-                    out[k][c] = v[d];
+                    *oc = v[d];
                 }
             }
         }

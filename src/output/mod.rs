@@ -10,7 +10,8 @@
 //! Field conventions (the caller's, checked only for sizes):
 //! - vectors have 3 components, z = 0 in 2D;
 //! - a symmetric tensor (`stress`) has 6 components in ParaView's order
-//!   XX, YY, ZZ, XY, YZ, XZ (ParaView names the components of a 6-component array so);
+//!   XX, YY, ZZ, XY, YZ, XZ; every 6-component field is written with these component names
+//!   (`ComponentName0="XX"` …), so ParaView shows `stress_XY`;
 //! - all values are written as Float64, names exactly as given.
 //!
 //! Encoding: inline base64 binary, header_type UInt64, little endian, uncompressed: the layout

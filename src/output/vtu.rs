@@ -14,9 +14,9 @@
 //! # Why this module writes the XML itself instead of calling vtkio's writer
 //!
 //! The first version of this module wrote through `vtkio::Vtk::try_into_xml_format` and
-//! vtkio's XML serializer. Measured on a 33k-node / 65k-triangle frame with every field of
-//! DESIGN.md (12.7 MB): 70–100 ms per frame, 60 ms of it in vtkio's serializer alone
-//! (quick-xml escapes every byte of the base64 text, and the output is copied several times
+//! vtkio's XML serializer. Measured in a release build on a 33k-node / 65k-triangle frame with
+//! every field of DESIGN.md (12.7 MB): 70–100 ms per frame, 60 ms of it in vtkio's serializer
+//! alone (quick-xml escapes every byte of the base64 text, and the output is copied several times
 //! through growing buffers), against a budget of well under 50 ms. vtkio 0.6 also offers no
 //! way around it:
 //! - the encoded geometry cannot be kept between frames: the pieces of
@@ -27,7 +27,9 @@
 //!   compressed size of each block), so neither ParaView nor meshio could read it anyway.
 //!
 //! So the geometry is encoded once, in [`Grid::new`], and a frame base64-encodes its fields
-//! into a buffer kept between frames: about 10 ms per such frame. The layout is vtkio's, and
+//! into a buffer kept between frames: about 8 ms per such frame in a release build (5 ms to
+//! encode, 3 ms to write; `writing_a_33k_node_frame_is_fast` in tests/output_format.rs
+//! prints it). The layout is vtkio's (connectivity Int64 where vtkio writes UInt64), and
 //! the tests read every file back with vtkio (`vtkio::Vtk::import`, bit for bit), compare it
 //! with what vtkio's own writer produces for the same data, and read it with meshio.
 
@@ -84,12 +86,12 @@ impl Grid {
         let mut geometry = Vec::new();
         let mut raw = Vec::new();
         geometry.extend_from_slice(b"      <Points>\n");
-        raw_array(&mut raw, points.iter().flatten(), |x| x.to_le_bytes());
+        raw_array(&mut raw, points.as_flattened(), |x| x.to_le_bytes());
         data_array(&mut geometry, &raw, "Float64", "Points", 3);
         geometry.extend_from_slice(b"      </Points>\n      <Cells>\n");
         raw_array(&mut raw, cells, |&i| (i as i64).to_le_bytes());
         data_array(&mut geometry, &raw, "Int64", "connectivity", 1);
-        raw_array(&mut raw, 1..=num_cells, |c| {
+        raw_array(&mut raw, 1..num_cells + 1, |c| {
             ((c * nodes_per_cell) as i64).to_le_bytes()
         });
         data_array(&mut geometry, &raw, "Int64", "offsets", 1);
@@ -181,16 +183,17 @@ fn check_fields(fields: &[Field], count: usize, what: &str) -> std::result::Resu
 /// Fills `raw` with the UInt64 byte count of the array followed by its little-endian bytes.
 fn raw_array<T, const N: usize>(
     raw: &mut Vec<u8>,
-    items: impl IntoIterator<Item = T>,
+    items: impl IntoIterator<Item = T, IntoIter: ExactSizeIterator>,
     le_bytes: impl Fn(T) -> [u8; N],
 ) {
+    let items = items.into_iter();
+    let len = items.len() * N;
     raw.clear();
-    raw.extend_from_slice(&[0; 8]);
-    for item in items {
-        raw.extend_from_slice(&le_bytes(item));
+    raw.resize(8 + len, 0);
+    raw[..8].copy_from_slice(&(len as u64).to_le_bytes());
+    for (dst, item) in raw[8..].chunks_exact_mut(N).zip(items) {
+        dst.copy_from_slice(&le_bytes(item));
     }
-    let len = (raw.len() - 8) as u64;
-    raw[..8].copy_from_slice(&len.to_le_bytes());
 }
 
 /// Component names of a symmetric tensor, in ParaView's order.

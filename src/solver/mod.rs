@@ -104,7 +104,7 @@ pub enum StepSolver {
     /// Condensed onto the constrained boundary dofs; see `dual`.
     Dual(dual::DualSolver),
     /// The whole problem in clarabel; see `conic`.
-    Conic(conic::ConicSolver),
+    Conic(Box<conic::ConicSolver>),
 }
 
 impl StepSolver {

@@ -1,0 +1,710 @@
+//! Bad input through the real binary (issue 2, "Bad input"; DESIGN.md "Command line"): each
+//! case exits with status 2, names the file, key or physical group at fault on stderr and
+//! says what is wrong with it, does not panic, prints nothing on stdout, and leaves no output
+//! behind (`--out` points into a temporary directory that must stay absent or empty, or keep
+//! its earlier content untouched).
+//!
+//! Scenes are variants of examples/paper.toml written into a temporary directory, with
+//! `mesh.file` made absolute (it is relative to the scene file), or the example itself with
+//! `--set` overrides. A few positive cases check that good input is accepted.
+
+mod common;
+
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_viscontact");
+
+/// Runs the binary from the repository root.
+fn viscontact<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: Into<OsString>,
+{
+    Command::new(BIN)
+        .args(args.into_iter().map(Into::into))
+        .current_dir(common::repo())
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("the viscontact binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn describe(args: &[OsString], out: &Output) -> String {
+    let cmd: Vec<String> = args.iter().map(|a| a.to_string_lossy().into()).collect();
+    format!(
+        "command: viscontact {}\nstatus: {:?}\n--- stdout ---\n{}--- stderr ---\n{}",
+        cmd.join(" "),
+        out.status.code(),
+        text(&out.stdout),
+        text(&out.stderr)
+    )
+}
+
+/// Runs `args` and checks the bad-input contract: exit status 2, no panic, nothing on stdout,
+/// and every one of `needles` in stderr (the culprit and what is wrong with it).
+fn expect_input_error(case: &str, args: &[OsString], needles: &[&str]) -> String {
+    let out = viscontact(args);
+    let what = describe(args, &out);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "[{case}] expected exit status 2 (bad input)\n{what}"
+    );
+    let stderr = text(&out.stderr);
+    assert!(
+        !stderr.contains("panicked"),
+        "[{case}] the program panicked\n{what}"
+    );
+    assert!(
+        stderr.trim_start().starts_with("error"),
+        "[{case}] stderr should start with an error line\n{what}"
+    );
+    for needle in needles {
+        assert!(
+            stderr.contains(needle),
+            "[{case}] stderr does not mention {needle:?}\n{what}"
+        );
+    }
+    assert!(
+        out.stdout.is_empty(),
+        "[{case}] a failed command printed a report on stdout\n{what}"
+    );
+    stderr
+}
+
+/// The output directory is absent or empty.
+fn assert_no_output(case: &str, out_dir: &Path) {
+    if !out_dir.exists() {
+        return;
+    }
+    let entries: Vec<PathBuf> = std::fs::read_dir(out_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(
+        entries.is_empty(),
+        "[{case}] a failed run left files in {}: {entries:?}",
+        out_dir.display()
+    );
+    assert!(!out_dir.join("solution.pvd").exists());
+    assert!(!out_dir.join("summary.json").exists());
+}
+
+/// A temporary directory holding a variant of examples/paper.toml.
+struct Fixture {
+    dir: tempfile::TempDir,
+}
+
+impl Fixture {
+    fn new() -> Self {
+        Fixture {
+            dir: tempfile::tempdir().unwrap(),
+        }
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    fn out(&self) -> PathBuf {
+        self.path("out")
+    }
+
+    /// examples/paper.toml with `mesh.file` made absolute and each `(old, new)` replacement
+    /// applied (each `old` must occur exactly once), written as `scene.toml`.
+    fn scene(&self, edits: &[(&str, &str)]) -> PathBuf {
+        let mut s = paper_text();
+        for (old, new) in edits {
+            assert_eq!(
+                s.matches(old).count(),
+                1,
+                "{old:?} should occur once in examples/paper.toml"
+            );
+            s = s.replacen(old, new, 1);
+        }
+        common::write(self.dir.path(), "scene.toml", &s)
+    }
+
+    /// Runs `viscontact run SCENE --out OUT ARGS...` and checks the bad-input contract and that
+    /// no output appeared.
+    fn run_fails(&self, case: &str, scene: &Path, extra: &[&str], needles: &[&str]) -> String {
+        let mut args: Vec<OsString> = vec!["run".into(), scene.into(), "--out".into()];
+        args.push(self.out().into());
+        args.extend(extra.iter().map(OsString::from));
+        let stderr = expect_input_error(case, &args, needles);
+        assert_no_output(case, &self.out());
+        stderr
+    }
+}
+
+/// examples/paper.toml with its mesh path made absolute.
+fn paper_text() -> String {
+    let examples = common::repo().join("examples");
+    let s = std::fs::read_to_string(examples.join("paper.toml")).unwrap();
+    let line = s
+        .lines()
+        .find(|l| l.trim_start().starts_with("file = "))
+        .expect("examples/paper.toml has a mesh.file line");
+    let rel = line.split('"').nth(1).expect("mesh.file is a string");
+    let abs = examples.join(rel).canonicalize().unwrap();
+    s.replacen(line, &format!("file = {:?}", abs.display().to_string()), 1)
+}
+
+fn data(name: &str) -> String {
+    common::repo()
+        .join("tests/data")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn set_mesh(name: &str) -> String {
+    format!("mesh.file={}", data(name))
+}
+
+/// Runs examples/paper.toml with `--set` overrides into a fresh output directory and expects
+/// bad input.
+fn run_set_fails(case: &str, sets: &[&str], needles: &[&str]) -> String {
+    let f = Fixture::new();
+    let scene = f.scene(&[]);
+    let mut extra = Vec::new();
+    for s in sets {
+        extra.push("--set");
+        extra.push(s);
+    }
+    f.run_fails(case, &scene, &extra, needles)
+}
+
+/// Edits examples/paper.toml and expects bad input from `run`; the scene path must be named.
+fn run_edit_fails(case: &str, edits: &[(&str, &str)], needles: &[&str]) -> String {
+    let f = Fixture::new();
+    let scene = f.scene(edits);
+    let name = scene.display().to_string();
+    let mut all = vec![name.as_str()];
+    all.extend_from_slice(needles);
+    f.run_fails(case, &scene, &[], &all)
+}
+
+// ---- files -------------------------------------------------------------------------------
+
+#[test]
+fn missing_scene_file() {
+    let f = Fixture::new();
+    let scene = f.path("no_such_scene.toml");
+    let p = scene.display().to_string();
+    f.run_fails("run: missing scene", &scene, &[], &[&p]);
+    expect_input_error(
+        "check: missing scene",
+        &["check".into(), scene.clone().into()],
+        &[&p],
+    );
+}
+
+#[test]
+fn missing_mesh_file() {
+    let f = Fixture::new();
+    let scene = f.scene(&[]);
+    let mesh = f.path("no_such_mesh.msh").display().to_string();
+    let set = format!("mesh.file={mesh}");
+    f.run_fails("missing mesh", &scene, &["--set", &set], &[&mesh, "mesh.file"]);
+}
+
+#[test]
+fn missing_mesh_file_relative_to_scene() {
+    // mesh.file is relative to the scene file: the message must show where it looked.
+    let f = Fixture::new();
+    let scene = f.scene(&[]);
+    let s = std::fs::read_to_string(&scene).unwrap();
+    let line = s.lines().find(|l| l.starts_with("file = ")).unwrap();
+    let scene = common::write(
+        f.dir.path(),
+        "scene.toml",
+        &s.replacen(line, "file = \"meshes/gone.msh\"", 1),
+    );
+    f.run_fails(
+        "missing relative mesh",
+        &scene,
+        &[],
+        &["gone.msh", "mesh.file", "relative"],
+    );
+}
+
+// ---- physical groups ---------------------------------------------------------------------
+
+#[test]
+fn mesh_without_contact_group() {
+    let set = set_mesh("no_contact_group.msh");
+    let stderr = run_set_fails(
+        "mesh without Γ3,1",
+        &[&set],
+        &["no_contact_group.msh", "Γ3,1", "mesh.groups.contact"],
+    );
+    // It lists what the mesh does have, so the user can pick a name.
+    assert!(stderr.contains("Γ3,2"), "{stderr}");
+}
+
+#[test]
+fn misspelled_group_name() {
+    let stderr = run_set_fails(
+        "misspelled group",
+        &["mesh.groups.contact=Gamma3_9"],
+        &["Gamma3_9", "mesh.groups.contact"],
+    );
+    // The existing names are offered.
+    assert!(stderr.contains("Γ3,1"), "{stderr}");
+}
+
+#[test]
+fn misspelled_load_group() {
+    run_edit_fails(
+        "misspelled traction group",
+        &[(r#"on = "top""#, r#"on = "tpo""#)],
+        &["tpo", "load.traction"],
+    );
+}
+
+#[test]
+fn traction_outside_gamma2() {
+    run_edit_fails(
+        "traction on Γ3,1",
+        &[(r#"on = "top""#, r#"on = "Γ3,1""#)],
+        &["Γ3,1", "load.traction", "Γ2"],
+    );
+}
+
+// ---- unknown keys ------------------------------------------------------------------------
+
+#[test]
+fn unknown_top_level_key() {
+    run_edit_fails(
+        "unknown top-level key",
+        &[("name = \"paper\"", "name = \"paper\"\nbogus = 3")],
+        &["bogus", "unknown"],
+    );
+}
+
+#[test]
+fn unknown_nested_key() {
+    run_edit_fails(
+        "unknown nested key",
+        &[("theta = 0.1", "thetaa = 0.1")],
+        &["material.viscosity.thetaa", "unknown"],
+    );
+}
+
+#[test]
+fn unknown_key_in_array_of_tables() {
+    run_edit_fails(
+        "unknown key in [[load.traction]]",
+        &[(r#"on = "top""#, "on = \"top\"\nscale = 2.0")],
+        &["load.traction", "scale", "unknown"],
+    );
+}
+
+#[test]
+fn set_unknown_key() {
+    run_set_fails(
+        "--set unknown nested key",
+        &["material.viscosity.thetaa=1"],
+        &["material.viscosity.thetaa", "unknown"],
+    );
+    run_set_fails(
+        "--set unknown key",
+        &["time.stepz=64"],
+        &["time.stepz", "unknown"],
+    );
+    run_set_fails(
+        "--set unknown top-level key",
+        &["solverr.kind=x"],
+        &["solverr", "unknown"],
+    );
+}
+
+#[test]
+fn set_without_equals_sign() {
+    run_set_fails("--set without =", &["time.steps"], &["time.steps", "KEY=VALUE"]);
+}
+
+#[test]
+fn wrong_value_type() {
+    run_set_fails(
+        "time.steps = string",
+        &["time.steps=abc"],
+        &["time.steps", "abc"],
+    );
+    run_set_fails("time.steps = -3", &["time.steps=-3"], &["time.steps", "-3"]);
+}
+
+// ---- values ------------------------------------------------------------------------------
+
+#[test]
+fn theta_not_positive() {
+    run_set_fails(
+        "θ = 0",
+        &["material.viscosity.theta=0"],
+        &["material.viscosity.theta", "must"],
+    );
+    run_edit_fails(
+        "θ < 0",
+        &[("theta = 0.1", "theta = -0.1")],
+        &["material.viscosity.theta", "must"],
+    );
+}
+
+#[test]
+fn young_negative() {
+    run_set_fails(
+        "E < 0",
+        &["material.elasticity.young=-1"],
+        &["material.elasticity.young", "-1", "must"],
+    );
+}
+
+#[test]
+fn poisson_out_of_range() {
+    for nu in ["0.7", "-1.5"] {
+        let set = format!("material.elasticity.poisson={nu}");
+        run_set_fails(
+            &format!("ν = {nu}"),
+            &[&set],
+            &["material.elasticity.poisson", nu, "must"],
+        );
+    }
+}
+
+#[test]
+fn steps_zero() {
+    run_set_fails("N = 0", &["time.steps=0"], &["time.steps", "must"]);
+}
+
+#[test]
+fn end_not_positive() {
+    for end in ["0", "-1", "-0.5"] {
+        let set = format!("time.end={end}");
+        run_set_fails(&format!("T = {end}"), &[&set], &["time.end", end, "must"]);
+    }
+}
+
+#[test]
+fn nan_and_inf_in_scene() {
+    run_edit_fails(
+        "θ = nan",
+        &[("theta = 0.1", "theta = nan")],
+        &["material.viscosity.theta", "NaN"],
+    );
+    run_set_fails("T = nan", &["time.end=nan"], &["time.end", "NaN"]);
+    run_set_fails(
+        "E = inf",
+        &["material.elasticity.young=inf"],
+        &["material.elasticity.young", "finite"],
+    );
+}
+
+// ---- expressions -------------------------------------------------------------------------
+
+const TOP_LOAD: &str = r#""-0.1*x*(2-x)*min(t, 0.2)""#;
+
+#[test]
+fn expression_does_not_parse() {
+    run_edit_fails(
+        "unparsable expression",
+        &[(TOP_LOAD, r#""-0.1*x*(2-""#)],
+        &["load.traction", "-0.1*x*(2-", "parse"],
+    );
+}
+
+#[test]
+fn expression_unknown_variable() {
+    run_edit_fails(
+        "unknown variable",
+        &[(TOP_LOAD, r#""q*t""#)],
+        &["load.traction", "q*t", "unknown variable", "'q'"],
+    );
+}
+
+#[test]
+fn expression_unknown_function() {
+    run_edit_fails(
+        "unknown function",
+        &[(TOP_LOAD, r#""foo(t)""#)],
+        &["load.traction", "foo(t)", "unknown function", "foo"],
+    );
+}
+
+#[test]
+fn relaxation_expression_unknown_variable() {
+    // s is the variable of a relaxation expression; t is not.
+    run_edit_fails(
+        "relaxation expr with t",
+        &[("prony = [[1.0, 10.0]]", r#"expr = "exp(-10*t)""#)],
+        &["material.relaxation", "exp(-10*t)", "'t'"],
+    );
+}
+
+#[test]
+fn relaxation_with_two_kernels() {
+    run_edit_fails(
+        "prony + expr",
+        &[(
+            "prony = [[1.0, 10.0]]",
+            "prony = [[1.0, 10.0]]\nexpr = \"exp(-10*s)\"",
+        )],
+        &["material.relaxation", "exactly one"],
+    );
+    run_edit_fails(
+        "expr + table",
+        &[(
+            "prony = [[1.0, 10.0]]",
+            "expr = \"exp(-10*s)\"\ntable = { s = [0, 1], r = [1, 0.1] }",
+        )],
+        &["material.relaxation", "exactly one"],
+    );
+}
+
+// ---- meshes ------------------------------------------------------------------------------
+
+#[test]
+fn zero_area_element() {
+    let set = set_mesh("zero_area.msh");
+    run_set_fails(
+        "zero-area element",
+        &[&set],
+        &["zero_area.msh", "mesh.file", "zero area"],
+    );
+}
+
+#[test]
+fn quadratic_triangles() {
+    let set = set_mesh("quadratic.msh");
+    run_set_fails(
+        "6-node triangles",
+        &[&set],
+        &["quadratic.msh", "mesh.file", "6-node"],
+    );
+}
+
+#[test]
+fn truncated_msh() {
+    let set = set_mesh("truncated.msh");
+    run_set_fails(
+        "truncated .msh",
+        &[&set],
+        &["truncated.msh", "mesh.file", "truncated"],
+    );
+}
+
+#[test]
+fn msh22_file() {
+    let set = set_mesh("msh22.msh");
+    run_set_fails(
+        "MSH 2.2",
+        &[&set],
+        &["msh22.msh", "mesh.file", "2.2", "-format msh41"],
+    );
+}
+
+#[test]
+fn not_a_mesh_file() {
+    let f = Fixture::new();
+    let garbage = common::write(f.dir.path(), "garbage.msh", "this is not a gmsh file\n");
+    let set = format!("mesh.file={}", garbage.display());
+    let scene = f.scene(&[]);
+    f.run_fails(
+        "garbage .msh",
+        &scene,
+        &["--set", &set],
+        &["garbage.msh", "mesh.file"],
+    );
+}
+
+// ---- check and mesh-info -----------------------------------------------------------------
+
+#[test]
+fn check_rejects_bad_scenes() {
+    let f = Fixture::new();
+    let scene = f.scene(&[("theta = 0.1", "theta = 0")]);
+    let p = scene.display().to_string();
+    expect_input_error(
+        "check: θ = 0",
+        &["check".into(), scene.into()],
+        &[&p, "material.viscosity.theta"],
+    );
+    let set = set_mesh("no_contact_group.msh");
+    expect_input_error(
+        "check: mesh without Γ3,1",
+        &[
+            "check".into(),
+            "examples/paper.toml".into(),
+            "--set".into(),
+            set.into(),
+        ],
+        &["no_contact_group.msh", "Γ3,1", "mesh.groups.contact"],
+    );
+    expect_input_error(
+        "check: --set unknown key",
+        &[
+            "check".into(),
+            "examples/paper.toml".into(),
+            "--set".into(),
+            "contact.gap=1".into(),
+        ],
+        &["contact.gap", "unknown"],
+    );
+}
+
+#[test]
+fn mesh_info_rejects_bad_meshes() {
+    let cases: [(&str, &[&str]); 5] = [
+        ("truncated.msh", &["truncated"]),
+        ("msh22.msh", &["2.2", "-format msh41"]),
+        ("quadratic.msh", &["6-node"]),
+        ("zero_area.msh", &["zero area"]),
+        ("no_such_file.msh", &[]),
+    ];
+    for (name, needles) in cases {
+        let path = data(name);
+        let mut all = vec![path.as_str()];
+        all.extend_from_slice(needles);
+        for json in [false, true] {
+            let mut args: Vec<OsString> = vec!["mesh-info".into(), path.clone().into()];
+            if json {
+                args.push("--json".into());
+            }
+            expect_input_error(&format!("mesh-info {name} (json: {json})"), &args, &all);
+        }
+    }
+}
+
+// ---- no partial file where a good one was ------------------------------------------------
+
+#[test]
+fn failed_run_keeps_earlier_output() {
+    let f = Fixture::new();
+    let out = f.out();
+    std::fs::create_dir_all(&out).unwrap();
+    let earlier = [
+        ("solution.pvd", "earlier pvd\n"),
+        ("solution_000000.vtu", "earlier vtu\n"),
+        ("summary.json", "{\"earlier\": true}\n"),
+    ];
+    for (name, body) in earlier {
+        common::write(&out, name, body);
+    }
+    let scene = f.scene(&[("steps = 32", "steps = 0")]);
+    let args: Vec<OsString> = vec!["run".into(), scene.into(), "--out".into(), out.clone().into()];
+    expect_input_error("run into an earlier output", &args, &["time.steps"]);
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        ["solution.pvd", "solution_000000.vtu", "summary.json"],
+        "a failed run changed the output directory"
+    );
+    for (name, body) in earlier {
+        assert_eq!(std::fs::read_to_string(out.join(name)).unwrap(), body);
+    }
+}
+
+// ---- good input is accepted --------------------------------------------------------------
+
+#[test]
+fn check_paper_scene() {
+    let out = viscontact(["check", "examples/paper.toml"]);
+    let what = describe(&["check".into(), "examples/paper.toml".into()], &out);
+    assert_eq!(out.status.code(), Some(0), "{what}");
+    let stdout = text(&out.stdout);
+    let effects = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("effects"))
+        .unwrap_or_else(|| panic!("no effects line\n{what}"));
+    for e in ["contact", "friction", "memory"] {
+        assert!(effects.contains(e), "effects line lacks {e}: {effects}");
+    }
+}
+
+#[test]
+fn check_accepts_ascii_aliases() {
+    let out = viscontact([
+        "check",
+        "examples/paper.toml",
+        "--set",
+        "mesh.groups.contact=Gamma3_1",
+        "--set",
+        "mesh.groups.fixed=gamma1",
+        "--set",
+        "time.steps=4",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stdout:\n{}\nstderr:\n{}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+}
+
+const PAPER_GROUPS: [&str; 6] = ["Γ1", "Γ2", "Γ3,1", "Γ3,2", "top", "right"];
+
+#[test]
+fn mesh_info_lists_groups() {
+    let mesh = common::mesh_path("paper/rect_008.msh");
+    let out = viscontact(["mesh-info", mesh.as_str()]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    for g in PAPER_GROUPS {
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.split_whitespace().next() == Some(g)),
+            "mesh-info does not list group {g}:\n{stdout}"
+        );
+    }
+
+    let out = viscontact(["mesh-info", mesh.as_str(), "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("mesh-info --json");
+    let names: Vec<&str> = v["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g["name"].as_str().unwrap())
+        .collect();
+    for g in PAPER_GROUPS {
+        assert!(names.contains(&g), "--json lacks {g}: {names:?}");
+    }
+    assert_eq!(v["nodes"], 81);
+    assert_eq!(v["triangles"], 128);
+}
+
+#[test]
+fn inverted_triangle_is_reoriented() {
+    let mesh = data("inverted.msh");
+    let out = viscontact(["mesh-info", mesh.as_str(), "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("mesh-info --json");
+    assert_eq!(v["reoriented"], 1, "{v}");
+
+    let out = viscontact(["mesh-info", mesh.as_str()]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("1 reoriented"), "{stdout}");
+
+    // and a scene on it is accepted
+    let set = set_mesh("inverted.msh");
+    let out = viscontact(["check", "examples/paper.toml", "--set", set.as_str()]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stdout:\n{}\nstderr:\n{}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+}
