@@ -54,6 +54,22 @@ fn call(name: &str, args: &[f64]) -> Option<f64> {
     })
 }
 
+/// fasteval's parse errors in words a user can act on.
+fn parse_error(e: &fasteval2::Error) -> String {
+    use fasteval2::Error as E;
+    match e {
+        E::EofWhileParsing(_) | E::EOF => {
+            "it ends too early (an operand or a closing parenthesis is missing)".into()
+        }
+        E::UnparsedTokensRemaining(rest) => format!("unexpected text at {rest:?}"),
+        E::Expected(what) => format!("expected {what}"),
+        E::ParseF64(s) => format!("{s:?} is not a number"),
+        E::InvalidValue => "a value is missing or invalid".into(),
+        E::TooLong | E::TooDeep => "it is too long or too deeply nested".into(),
+        other => format!("{other:?}"),
+    }
+}
+
 fn variable(name: &str, p: &Point) -> Option<f64> {
     match name {
         "x" => Some(p.x),
@@ -70,9 +86,12 @@ impl Expr {
     /// in error messages (e.g. `load.traction[0].value[1]`).
     pub fn parse(source: &str, allowed: &[&str], key: &str) -> Result<Expr> {
         let mut slab = Slab::new();
-        let parsed = Parser::new()
-            .parse(source, &mut slab.ps)
-            .map_err(|e| Error::input(format!("{key}: cannot parse expression {source:?}: {e}")))?;
+        let parsed = Parser::new().parse(source, &mut slab.ps).map_err(|e| {
+            Error::input(format!(
+                "{key}: cannot parse expression {source:?}: {}",
+                parse_error(&e)
+            ))
+        })?;
         let instruction =
             parsed
                 .from(&slab.ps)

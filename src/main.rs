@@ -103,12 +103,14 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         "linear (one solve with the stored Cholesky factor of K_A per step)".to_string()
     } else {
         format!(
-            "{:?} contact solver on {} Γ3,1 rows + {} Γ3,2 rows",
-            scene.contact_solver,
+            "{} contact solver on {} Γ3,1 rows + {} Γ3,2 rows",
+            match scene.contact_solver {
+                viscontact::scene::ContactSolver::Fast => "fast (condensed dual active set)",
+                viscontact::scene::ContactSolver::Clarabel => "clarabel",
+            },
             disc.contact.len(),
             disc.friction.len()
         )
-        .to_lowercase()
     };
     println!("solver     {solver}");
     match disc.stable_step_limit() {

@@ -243,6 +243,25 @@ pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<()> {
     Ok(())
 }
 
+/// serde's messages in the scene's terms: no Rust type names, no repeated key line.
+fn plain_serde_message(msg: &str) -> String {
+    let mut out = msg
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("in `") && !l.trim().is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
+        .replace("expected usize", "expected a whole number ≥ 0")
+        .replace("expected f64", "expected a number")
+        .replace("expected a boolean", "expected true or false");
+    while let Some(p) = out.find("expected struct ") {
+        let end = out[p + 16..]
+            .find(|c: char| !c.is_alphanumeric())
+            .map_or(out.len(), |e| p + 16 + e);
+        out.replace_range(p..end, "expected a table");
+    }
+    out
+}
+
 fn parse_value(raw: &str) -> toml::Value {
     // Parse as the right-hand side of `v = …`; anything that is not valid TOML is a string.
     match format!("v = {raw}").parse::<toml::Table>() {
@@ -272,15 +291,26 @@ pub fn read_scene_file(path: &Path, overrides: &[String]) -> Result<(String, Sce
     let file: SceneFile =
         serde_path_to_error::deserialize(toml::Value::Table(root)).map_err(|e| {
             let at = e.path().to_string();
-            let inner = e.into_inner();
+            // Say where the key came from: a --set override or the file.
+            let from_set = overrides.iter().any(|o| {
+                let key = o.split('=').next().unwrap_or("").trim();
+                at == key
+                    || at.starts_with(&format!("{key}."))
+                    || key.starts_with(&format!("{at}."))
+            });
+            let place = if from_set {
+                format!("--set (scene {})", path.display())
+            } else {
+                path.display().to_string()
+            };
             Error::input(format!(
-                "{}: {}{inner}",
-                path.display(),
+                "{place}: {}{}",
                 if at == "." {
                     String::new()
                 } else {
                     format!("key '{at}': ")
-                }
+                },
+                plain_serde_message(&e.into_inner().to_string())
             ))
         })?;
     Ok((effective, file))
@@ -565,10 +595,21 @@ impl Scene {
 fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
     let given = [r.prony.is_some(), r.expr.is_some(), r.table.is_some()];
     if given.iter().filter(|&&g| g).count() != 1 {
+        let names: Vec<&str> = ["prony", "expr", "table"]
+            .iter()
+            .zip(given)
+            .filter(|(_, g)| *g)
+            .map(|(n, _)| *n)
+            .collect();
         return Err(Error::input(format!(
             "{}: [material.relaxation] needs exactly one of 'prony', 'expr', 'table' \
-             (or enabled = false)",
-            path.display()
+             (or enabled = false); it has {}",
+            path.display(),
+            if names.is_empty() {
+                "none".to_string()
+            } else {
+                names.join(" and ")
+            }
         )));
     }
     if let Some(p) = &r.prony {

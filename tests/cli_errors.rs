@@ -211,7 +211,12 @@ fn missing_mesh_file() {
     let scene = f.scene(&[]);
     let mesh = f.path("no_such_mesh.msh").display().to_string();
     let set = format!("mesh.file={mesh}");
-    f.run_fails("missing mesh", &scene, &["--set", &set], &[&mesh, "mesh.file"]);
+    f.run_fails(
+        "missing mesh",
+        &scene,
+        &["--set", &set],
+        &[&mesh, "mesh.file"],
+    );
 }
 
 #[test]
@@ -327,7 +332,11 @@ fn set_unknown_key() {
 
 #[test]
 fn set_without_equals_sign() {
-    run_set_fails("--set without =", &["time.steps"], &["time.steps", "KEY=VALUE"]);
+    run_set_fails(
+        "--set without =",
+        &["time.steps"],
+        &["time.steps", "KEY=VALUE"],
+    );
 }
 
 #[test]
@@ -596,7 +605,12 @@ fn failed_run_keeps_earlier_output() {
         common::write(&out, name, body);
     }
     let scene = f.scene(&[("steps = 32", "steps = 0")]);
-    let args: Vec<OsString> = vec!["run".into(), scene.into(), "--out".into(), out.clone().into()];
+    let args: Vec<OsString> = vec![
+        "run".into(),
+        scene.into(),
+        "--out".into(),
+        out.clone().into(),
+    ];
     expect_input_error("run into an earlier output", &args, &["time.steps"]);
     let mut names: Vec<String> = std::fs::read_dir(&out)
         .unwrap()

@@ -285,15 +285,7 @@ fn read_error(path: &Path, e: &std::io::Error) -> Error {
     if let Some(p) = msg.find(" (os error") {
         msg.truncate(p);
     }
-    let hint = if e.kind() == std::io::ErrorKind::NotFound {
-        " (check mesh.file in the scene; it is relative to the scene file)"
-    } else {
-        ""
-    };
-    Error::input(format!(
-        "cannot read mesh file '{}': {msg}{hint}",
-        path.display()
-    ))
+    Error::input(format!("cannot read mesh file '{}': {msg}", path.display()))
 }
 
 fn fmt_point(p: [f64; 3]) -> String {
