@@ -41,8 +41,9 @@ pub struct Step<'a> {
 impl<'p> TimeLoop<'p> {
     pub fn new(scene: &'p Scene, disc: &'p Discretization) -> Result<Self> {
         let effects = Effects::new(scene, disc);
-        let factor = Factor::new(&disc.k_a)?;
         let rows = Rows::new(&disc.contact, &disc.friction);
+        // K_A is factored once, with the constrained boundary dofs ordered last.
+        let factor = Factor::new(&disc.k_a, &rows.dofs())?;
         let solver = effects::step_solver(&effects, scene, disc, &factor, &rows)?;
         let n = disc.n_free;
         let history = History::new(n, scene.k(), scene.relaxation.as_ref());

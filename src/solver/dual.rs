@@ -10,20 +10,28 @@
 //!
 //!   minimize ½ zᵀ D z − dᵀ z  over  λ ≥ 0, |γ_i| ≤ c_i,   D = P K_A⁻¹ Pᵀ,  d = P K_A⁻¹ b,
 //!
-//! whose gradient is g = D z − d = −P w. D (m×m, m = number of constrained boundary dofs)
-//! is built once per run from one multi-column solve. Each step solves the dual exactly by
-//! an active-set Newton method — Bertsekas' projected Newton method for bound constraints,
-//! with an Armijo search along the projection arc, warm started from the previous step's
-//! multipliers. Multipliers at a bound whose gradient points outward are held there; the
-//! others solve a dense linear system with D, so once the active set is right the answer is
-//! exact up to rounding. (A plain primal-dual active set iteration cycles on this problem:
-//! D is not an M-matrix; the line search makes the method globally convergent.)
-//! Cost per step: two solves with the stored factor (K_A⁻¹b, then w) and O(m²..m³) dense work.
+//! whose gradient is g = D z − d = −P w.
+//!
+//! The factor of K_A orders the constrained dofs C last (`Factor`): P K_A Pᵀ = L Lᵀ with
+//! trailing block L_CC, and P touches only C (E: its C-block, |C|×m). With G = L_CC⁻¹ E
+//! (dense, once per run): D = GᵀG, and for a step with forward solve L y = b,
+//! d = Gᵀ y_C; the multipliers enter only through y_C ← y_C − G z; one backward solve
+//! Lᵀ w = y gives w. So a step costs one solve with the stored factor — the same as a step
+//! without contact — plus O(|C|·m) for G and the small problem below.
+//!
+//! The dual is solved exactly by an active-set Newton method — Bertsekas' projected Newton
+//! method for bound constraints, with an Armijo search along the projection arc, warm
+//! started from the previous step's multipliers. Multipliers at a bound whose gradient
+//! points outward are held there; the others solve a dense linear system with D, so once the
+//! active set is right the answer is exact up to rounding. (A plain primal-dual active set
+//! iteration cycles on this problem: D is not an M-matrix; the line search makes the method
+//! globally convergent.)
 
 use super::{Factor, Rows, StepReport};
 use crate::{Error, Result};
 use faer::linalg::solvers::Solve;
-use faer::{Mat, Side};
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::{Accum, Mat, MatMut, Side};
 
 /// Relative tolerance of the dual optimality conditions (in units of the velocities P w).
 pub const TOLERANCE: f64 = 1e-12;
@@ -37,46 +45,44 @@ enum Set {
 }
 
 pub struct DualSolver {
-    /// D = P K_A⁻¹ Pᵀ.
+    /// G = L_CC⁻¹ E (|C|×m).
+    g: Mat<f64>,
+    /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
     d: Mat<f64>,
     set: Vec<Set>,
+    /// The step's forward-solved right side, in the factor's ordering.
+    y: Vec<f64>,
 }
 
 impl DualSolver {
+    /// `factor` must have been built with the rows' dofs ordered last.
     pub fn new(factor: &Factor, rows: &Rows) -> Self {
-        let (n, m) = (factor.dim(), rows.len());
-        let mut d = Mat::zeros(m, m);
-        const BLOCK: usize = 128;
-        let mut start = 0;
-        while start < m {
-            let cols = BLOCK.min(m - start);
-            // Columns of Pᵀ, solved all at once: Z = K_A⁻¹ Pᵀ.
-            let mut z = Mat::<f64>::zeros(n, cols);
-            for c in 0..cols {
-                let row = &rows.rows[start + c];
-                z[(row.dofs[0], c)] = row.dir[0];
-                z[(row.dofs[1], c)] = row.dir[1];
-            }
-            factor.solve_many(z.as_mut());
-            for c in 0..cols {
-                let col = z.col(c).try_as_col_major().expect("contiguous").as_slice();
-                for (i, row) in rows.rows.iter().enumerate() {
-                    d[(i, start + c)] = row.apply(col);
-                }
-            }
-            start += cols;
-        }
-        // Symmetrize the rounding.
-        for i in 0..m {
-            for j in 0..i {
-                let s = 0.5 * (d[(i, j)] + d[(j, i)]);
-                d[(i, j)] = s;
-                d[(j, i)] = s;
+        let (n, c, m) = (factor.dim(), factor.last(), rows.len());
+        let first = n - c;
+        let mut g = Mat::<f64>::zeros(c, m);
+        for (r, row) in rows.rows.iter().enumerate() {
+            for k in 0..2 {
+                let pos = factor.position(row.dofs[k]);
+                debug_assert!(pos >= first, "constrained dofs are ordered last");
+                g[(pos - first, r)] = row.dir[k];
             }
         }
+        let l_cc = factor.trailing_block();
+        solve_lower_triangular_in_place(l_cc.as_ref(), g.as_mut(), faer::get_global_parallelism());
+        let mut d = Mat::<f64>::zeros(m, m);
+        faer::linalg::matmul::matmul(
+            d.as_mut(),
+            Accum::Replace,
+            g.transpose(),
+            g.as_ref(),
+            1.0,
+            faer::get_global_parallelism(),
+        );
         DualSolver {
+            g,
             d,
             set: vec![Set::Free; m],
+            y: vec![0.0; n],
         }
     }
 
@@ -102,10 +108,17 @@ impl DualSolver {
         z: &mut [f64],
     ) -> Result<StepReport> {
         let m = rows.len();
-        // y = K_A⁻¹ b, d = P y.
-        w.copy_from_slice(b);
-        factor.solve(w);
-        let dvec: Vec<f64> = rows.rows.iter().map(|r| r.apply(w)).collect();
+        let (n, c) = (factor.dim(), factor.last());
+        // Forward solve L y = b; d = Gᵀ y_C.
+        factor.permute(b, &mut self.y);
+        factor.forward(MatMut::from_column_major_slice_mut(&mut self.y, n, 1));
+        let y_c = &self.y[n - c..];
+        let dvec: Vec<f64> = (0..m)
+            .map(|r| {
+                let col = self.g.col(r);
+                (0..c).map(|i| col[i] * y_c[i]).sum()
+            })
+            .collect();
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = TOLERANCE * scale.max(f64::MIN_POSITIVE);
         let diag: Vec<f64> = (0..m).map(|i| self.d[(i, i)]).collect();
@@ -197,14 +210,17 @@ impl DualSolver {
             g.copy_from_slice(&g_trial);
             q = objective(z, &g, &dvec);
         }
-        // w = K_A⁻¹ (b − Pᵀ z); w = y already when no multiplier is active.
-        if z.iter().any(|&v| v != 0.0) {
-            w.copy_from_slice(b);
-            for (row, zi) in rows.rows.iter().zip(z.iter()) {
-                row.add_transpose(-zi, w);
+        // y_C ← y_C − G z, then the backward solve Lᵀ w = y.
+        let y_c = &mut self.y[n - c..];
+        for (r, &zr) in z.iter().enumerate() {
+            if zr != 0.0 {
+                for (yi, gi) in y_c.iter_mut().zip(self.g.col(r).iter()) {
+                    *yi -= gi * zr;
+                }
             }
-            factor.solve(w);
         }
+        factor.backward(MatMut::from_column_major_slice_mut(&mut self.y, n, 1));
+        factor.unpermute(&self.y, w);
         Ok(StepReport { iterations })
     }
 }

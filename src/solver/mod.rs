@@ -12,47 +12,11 @@
 
 pub mod conic;
 pub mod dual;
+pub mod factor;
 
-use crate::fem::{NodalRow, Sparse};
-use crate::{Error, Result};
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::{MatMut, Side};
-
-/// The sparse Cholesky factor of K_A, computed once per run.
-pub struct Factor {
-    llt: Llt<usize, f64>,
-    n: usize,
-}
-
-impl Factor {
-    pub fn new(a: &Sparse) -> Result<Self> {
-        let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower)
-            .map_err(|e| Error::solve(format!("symbolic Cholesky of K_A failed: {e:?}")))?;
-        let llt = Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| {
-            Error::solve(format!(
-                "K_A is not positive definite ({e:?}): is the clamped group Γ1 empty or are \
-                 parts of the mesh disconnected from it?"
-            ))
-        })?;
-        Ok(Factor { llt, n: a.nrows() })
-    }
-
-    /// x ← K_A⁻¹ x.
-    pub fn solve(&self, x: &mut [f64]) {
-        self.llt
-            .solve_in_place(faer::MatMut::from_column_major_slice_mut(x, self.n, 1));
-    }
-
-    /// X ← K_A⁻¹ X for many columns at once (much faster per column than one at a time).
-    pub fn solve_many(&self, x: MatMut<'_, f64>) {
-        self.llt.solve_in_place(x);
-    }
-
-    pub fn dim(&self) -> usize {
-        self.n
-    }
-}
+use crate::fem::NodalRow;
+use crate::Result;
+pub use factor::Factor;
 
 /// The constraint rows of a run: contact rows (multiplier λ ≥ 0) first, then friction rows
 /// (multiplier γ with |γ| ≤ c_i).
@@ -81,6 +45,14 @@ impl Rows {
     }
 
     /// Bounds of the multiplier of row i: [0, ∞) for contact, [−c_i, c_i] for friction.
+    /// Both dofs of every constrained node, sorted: the block C ordered last in the factor.
+    pub fn dofs(&self) -> Vec<usize> {
+        let mut d: Vec<usize> = self.rows.iter().flat_map(|r| r.dofs).collect();
+        d.sort_unstable();
+        d.dedup();
+        d
+    }
+
     pub fn bounds(&self, i: usize) -> (f64, f64) {
         if i < self.n_contact {
             (0.0, f64::INFINITY)

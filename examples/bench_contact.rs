@@ -1,0 +1,114 @@
+//! Contact at the cost of a linear solve: wall time of the paper scene with contact, friction
+//! and memory against the same scene with contact and friction disabled, side by side in one
+//! run, setup (assembly, factorization, condensed operator) included, output excluded (both
+//! runs would write the same files).
+//!
+//!   cargo run --release --example bench_contact -- 128 256
+//!
+//! Each argument is a level 1/h = 1/k. Meshes missing from meshes/paper/ (256, 512) are made
+//! with gmsh from meshes/paper/rect.geo into out/meshes/. Each pair is timed `REPEAT` times
+//! (alternating full and linear) and the medians are reported.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use viscontact::run::setup;
+use viscontact::time_loop::TimeLoop;
+
+const REPEAT: usize = 3;
+
+fn mesh_for(level: usize) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let shipped = root.join(format!("meshes/paper/rect_{level:03}.msh"));
+    if shipped.exists() {
+        return shipped;
+    }
+    let dir = root.join("out/meshes");
+    std::fs::create_dir_all(&dir).expect("out/meshes");
+    let out = dir.join(format!("rect_{level:03}.msh"));
+    if !out.exists() {
+        eprintln!("generating {} with gmsh", out.display());
+        let status = std::process::Command::new("gmsh")
+            .arg("-2")
+            .arg(root.join("meshes/paper/rect.geo"))
+            .args([
+                "-setnumber",
+                "n",
+                &level.to_string(),
+                "-format",
+                "msh41",
+                "-bin",
+                "-o",
+            ])
+            .arg(&out)
+            .stdout(std::process::Stdio::null())
+            .status()
+            .expect("gmsh on PATH (pip install gmsh)");
+        assert!(status.success(), "gmsh failed");
+    }
+    out
+}
+
+/// Setup + all steps of the scheme, no output. Returns (seconds, u_N max).
+fn time_run(scene: &Path, overrides: &[String]) -> (f64, f64, usize) {
+    let start = Instant::now();
+    let (scene, _mesh, disc) = setup(scene, overrides).expect("scene");
+    let mut tl = TimeLoop::new(&scene, &disc).expect("setup");
+    let mut iterations = 0;
+    loop {
+        let n = tl.n();
+        iterations += tl.solve_step().expect("step").report.iterations;
+        if n == scene.steps {
+            break;
+        }
+        tl.advance();
+    }
+    let umax = tl.history.u.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    (start.elapsed().as_secs_f64(), umax, iterations)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let levels: Vec<usize> = std::env::args()
+        .skip(1)
+        .map(|a| a.parse().expect("levels are integers"))
+        .collect();
+    let levels = if levels.is_empty() {
+        vec![128, 256]
+    } else {
+        levels
+    };
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/paper.toml");
+    println!(
+        "| h = k | dofs | steps | full (s) | linear only (s) | ratio | active-set iterations |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for level in levels {
+        let mesh = mesh_for(level);
+        let base = vec![
+            format!("mesh.file={}", mesh.display()),
+            format!("time.steps={level}"),
+        ];
+        let mut linear = base.clone();
+        linear.push("contact.enabled=false".into());
+        linear.push("friction.enabled=false".into());
+        let (mut tf, mut tl) = (Vec::new(), Vec::new());
+        let mut iterations = 0;
+        for _ in 0..REPEAT {
+            let (t, _, it) = time_run(&scene, &base);
+            tf.push(t);
+            iterations = it;
+            tl.push(time_run(&scene, &linear).0);
+        }
+        let (_, _, disc) = setup(&scene, &base).expect("scene");
+        let (f, l) = (median(tf), median(tl));
+        println!(
+            "| 1/{level} | {} | {level} | {f:.3} | {l:.3} | {:.2} | {iterations} |",
+            disc.n_free,
+            f / l
+        );
+    }
+}
