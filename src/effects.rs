@@ -3,7 +3,7 @@
 //! friction term; no relaxation → no memory state; neither contact nor friction → every step
 //! is one solve with the stored factorization and no optimization solver is built.
 
-use crate::fem::Discretization;
+use crate::fem::{Discretization, Sparse};
 use crate::scene::{ContactSolver, Scene};
 use crate::solver::{conic::ConicSolver, dual::DualSolver, Factor, Rows, StepSolver};
 use crate::Result;
@@ -66,11 +66,12 @@ impl Effects {
 }
 
 /// Picks and builds the step solver (Remark 2.5): `Linear` without constraint rows,
-/// otherwise the scene's choice of the fast dual method or clarabel.
+/// otherwise the scene's choice of the fast dual method or clarabel. `matrix` is the step
+/// matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor` holds.
 pub fn step_solver(
     effects: &Effects,
     scene: &Scene,
-    disc: &Discretization,
+    matrix: &Sparse,
     factor: &Factor,
     rows: &Rows,
 ) -> Result<StepSolver> {
@@ -79,6 +80,6 @@ pub fn step_solver(
     }
     Ok(match scene.contact_solver {
         ContactSolver::Fast => StepSolver::Dual(DualSolver::new(factor, rows)),
-        ContactSolver::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(&disc.k_a, rows)?)),
+        ContactSolver::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
     })
 }

@@ -16,6 +16,7 @@ pub mod output;
 pub mod run;
 pub mod scene;
 pub mod solver;
+pub mod stability;
 pub mod time_loop;
 
 pub use error::{Error, Result};

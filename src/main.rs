@@ -113,12 +113,21 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         )
     };
     println!("solver     {solver}");
-    match disc.stable_step_limit() {
-        Some(k) => println!(
-            "stability  elastic term explicit: k ≤ {k:.6e} (k/limit = {:.3}; memory term not included)",
+    let limit = viscontact::stability::step_limit(&disc, scene.relaxation.as_ref());
+    let memory_note = if limit.includes_memory {
+        ""
+    } else {
+        "; memory term of a non-Prony kernel not included"
+    };
+    match (scene.history, limit.k_max) {
+        (viscontact::scene::History::Implicit, _) => {
+            println!("stability  implicit history: unconditionally stable")
+        }
+        (_, Some(k)) => println!(
+            "stability  left endpoint scheme stable for k ≤ {k:.6e} (k/limit = {:.3}{memory_note})",
             scene.k() / k
         ),
-        None => println!("stability  no elastic term: no step limit"),
+        (_, None) => println!("stability  no explicit elastic or memory term: no step limit"),
     }
     let history_bytes = match &scene.relaxation {
         Some(viscontact::scene::Kernel::Prony(t)) => t.len() * disc.n_free * 8,

@@ -28,6 +28,31 @@ pub struct SceneFile {
     pub output: OutputSection,
     #[serde(default)]
     pub solver: SolverSection,
+    pub checkpoint: Option<CheckpointSection>,
+    #[serde(default)]
+    pub scheme: SchemeSection,
+}
+
+/// Which time discretization of the history terms.
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SchemeSection {
+    #[serde(default)]
+    pub history: History,
+    /// Run the left endpoint scheme even when k exceeds its stability limit.
+    #[serde(default)]
+    pub allow_unstable: bool,
+}
+
+/// The treatment of the elastic and memory terms in each step.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum History {
+    /// The paper's scheme (3.1): B ε(u_n) and the left endpoint memory sum, both explicit.
+    #[default]
+    Left,
+    /// B ε(u_n + k w_n) and the newest memory weight k² r(0) K_R implicit (see `time_loop`).
+    Implicit,
 }
 
 #[derive(Deserialize, Debug)]
@@ -179,6 +204,17 @@ impl Default for OutputSection {
     }
 }
 
+/// `[checkpoint]`: restart files (src/checkpoint.rs). Without the section a run still writes
+/// the final checkpoint; `enabled = false` writes none.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct CheckpointSection {
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    /// Also write a checkpoint every this many steps (steps ≥ 1).
+    pub every: Option<usize>,
+}
+
 #[derive(Deserialize, Debug, Default)]
 #[serde(deny_unknown_fields)]
 pub struct SolverSection {
@@ -277,6 +313,16 @@ fn parse_value(raw: &str) -> toml::Value {
 pub fn read_scene_file(path: &Path, overrides: &[String]) -> Result<(String, SceneFile)> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::input(format!("cannot read scene file '{}': {e}", path.display())))?;
+    parse_scene_text(path, text, overrides)
+}
+
+/// [`read_scene_file`] for a scene text in hand (a checkpoint's): `path` is where the text
+/// came from (errors name it; `mesh.file` is relative to its directory).
+pub fn parse_scene_text(
+    path: &Path,
+    text: String,
+    overrides: &[String],
+) -> Result<(String, SceneFile)> {
     let mut root: toml::Table = text
         .parse()
         .map_err(|e| Error::input(format!("{}: not valid TOML: {e}", path.display())))?;
@@ -393,6 +439,12 @@ pub struct Scene {
     pub body_forces: Vec<Vec<Scalar>>,
     pub output_every: usize,
     pub contact_solver: ContactSolver,
+    pub history: History,
+    pub allow_unstable: bool,
+    /// Write checkpoints at all (`[checkpoint] enabled`, default true: at least the final one).
+    pub checkpoint: bool,
+    /// Also write one every this many steps (`[checkpoint] every`).
+    pub checkpoint_every: Option<usize>,
 }
 
 fn finite(v: f64, key: &str, file: &Path) -> Result<f64> {
@@ -558,6 +610,13 @@ impl Scene {
         if f.output.every == 0 {
             return bad("output.every", "is 0; write every n ≥ 1 steps");
         }
+        if f.checkpoint.as_ref().and_then(|c| c.every) == Some(0) {
+            return bad(
+                "checkpoint.every",
+                "is 0; write a checkpoint every n ≥ 1 steps, or leave 'every' out for only the \
+                 final checkpoint (enabled = false for none)",
+            );
+        }
         let dir = path.parent().unwrap_or(Path::new("."));
         let name = f.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -583,6 +642,10 @@ impl Scene {
             body_forces,
             output_every: f.output.every,
             contact_solver: f.solver.contact,
+            history: f.scheme.history,
+            allow_unstable: f.scheme.allow_unstable,
+            checkpoint: f.checkpoint.as_ref().is_none_or(|c| c.enabled),
+            checkpoint_every: f.checkpoint.as_ref().and_then(|c| c.every),
         })
     }
 

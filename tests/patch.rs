@@ -37,7 +37,7 @@ fn scene(dir: &std::path::Path, model: &str, t: &[String; 2]) -> std::path::Path
 file = "{}"
 model = "{model}"
 [time]
-end = 1.0
+end = 0.01
 steps = 1
 [material.viscosity]
 theta = 0.3

@@ -291,17 +291,23 @@ impl Discretization {
         (s6, vm)
     }
 
-    /// The largest stable step of the explicit elastic term, if there is one. One step maps
-    /// u_{n+1} = (I − k K_A⁻¹K_B) u_n + …, stable for k λ_max ≤ 2 with λ_max the largest
-    /// generalized eigenvalue of (K_B, K_A). Those lie within the pointwise eigenvalues of
-    /// A⁻¹B on symmetric tensors, which for the isotropic forms are a_B/a_A (deviatoric) and
-    /// (a_B + b_B)/(a_A + b_A) (trace). For 2θε' + Eε this is k ≤ 4θ/E. The memory term is
-    /// not included.
-    pub fn stable_step_limit(&self) -> Option<f64> {
-        let b = self.b?;
-        let a = self.a;
-        let lambda = (b.a / a.a).max((b.a + b.b) / (a.a + a.b));
-        (lambda > 0.0).then(|| 2.0 / lambda)
+    /// K_A + k K_B + k² r(0) K_R: the step matrix of the implicit variant (the three share
+    /// one sparsity pattern, so this adds their value arrays).
+    pub fn implicit_matrix(&self, k: f64, r0: Option<f64>) -> Sparse {
+        let mut m = self.k_a.clone();
+        let mut add = |other: &Sparse, c: f64| {
+            debug_assert_eq!(other.symbolic().row_idx(), m.symbolic().row_idx());
+            for (v, o) in m.val_mut().iter_mut().zip(other.val()) {
+                *v += c * o;
+            }
+        };
+        if let Some(k_b) = &self.k_b {
+            add(k_b, k);
+        }
+        if let Some(r0) = r0 {
+            add(&self.k_r, k * k * r0);
+        }
+        m
     }
 
     /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
