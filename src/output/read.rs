@@ -1,0 +1,295 @@
+//! Reading a run's series back: `solution.pvd` and the `.vtu` files this module's writer
+//! produces (`vtu.rs`): inline base64 `DataArray`s, each one stream of a UInt64 byte count
+//! followed by the little-endian values, uncompressed. Float64/Float32, Int64/Int32,
+//! UInt64/UInt32/UInt8 arrays are read; compressed or appended data (other writers) are
+//! refused with a message saying so. Used by the `plot` command.
+
+use super::pvd;
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// One named data array with its number of components; values converted to f64.
+#[derive(Clone, Debug)]
+pub struct Array {
+    pub name: String,
+    pub components: usize,
+    pub values: Vec<f64>,
+}
+
+/// The content of one `.vtu` file.
+#[derive(Clone, Debug)]
+pub struct Vtu {
+    pub points: Vec<[f64; 3]>,
+    /// Node indices of each cell.
+    pub cells: Vec<Vec<usize>>,
+    pub point_data: Vec<Array>,
+    pub cell_data: Vec<Array>,
+}
+
+impl Vtu {
+    pub fn point_field(&self, name: &str) -> Option<&Array> {
+        self.point_data.iter().find(|a| a.name == name)
+    }
+
+    pub fn cell_field(&self, name: &str) -> Option<&Array> {
+        self.cell_data.iter().find(|a| a.name == name)
+    }
+}
+
+/// The `(time, path)` entries of a `.pvd`, paths resolved against its directory.
+pub fn read_pvd(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let entries =
+        pvd::parse(&text).map_err(|m| Error::input(format!("{}: {m}", path.display())))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    Ok(entries.into_iter().map(|(t, f)| (t, dir.join(f))).collect())
+}
+
+/// Reads a `.vtu` file written by [`super::Series`].
+pub fn read_vtu(path: &Path) -> Result<Vtu> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_vtu(&text).map_err(|m| Error::input(format!("{}: {m}", path.display())))
+}
+
+/// Parses the text of a `.vtu` file.
+pub fn parse_vtu(text: &str) -> std::result::Result<Vtu, String> {
+    if !text.contains("type=\"UnstructuredGrid\"") {
+        return Err("not a VTK UnstructuredGrid (.vtu) file".into());
+    }
+    if text.contains("compressor=") {
+        return Err(
+            "compressed .vtu files are not supported (this reader reads what `run` writes)".into(),
+        );
+    }
+    if !text.contains("header_type=\"UInt64\"") {
+        return Err("only header_type=\"UInt64\" is supported".into());
+    }
+    let section = |tag: &str| -> &str {
+        let open = format!("<{tag}>");
+        let close = format!("</{tag}>");
+        match (text.find(&open), text.find(&close)) {
+            (Some(a), Some(b)) if b > a => &text[a + open.len()..b],
+            _ => "",
+        }
+    };
+    let point_data = arrays(section("PointData"))?;
+    let cell_data = arrays(section("CellData"))?;
+    let points = arrays(section("Points"))?;
+    let cells = arrays(section("Cells"))?;
+    let pts = points
+        .first()
+        .ok_or_else(|| "no <Points> array".to_string())?;
+    if pts.components != 3 || pts.values.len() % 3 != 0 {
+        return Err("<Points> must have 3 components".into());
+    }
+    let points: Vec<[f64; 3]> = pts
+        .values
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    let get = |name: &str| {
+        cells
+            .iter()
+            .find(|a| a.name == name)
+            .ok_or_else(|| format!("<Cells> has no '{name}' array"))
+    };
+    let conn = get("connectivity")?;
+    let offsets = get("offsets")?;
+    let mut start = 0usize;
+    let mut out_cells = Vec::with_capacity(offsets.values.len());
+    for &o in &offsets.values {
+        let end = o as usize;
+        if end < start || end > conn.values.len() {
+            return Err("bad cell offsets".into());
+        }
+        let c: Vec<usize> = conn.values[start..end]
+            .iter()
+            .map(|&i| i as usize)
+            .collect();
+        if c.iter().any(|&i| i >= points.len()) {
+            return Err("a cell refers to a missing point".into());
+        }
+        out_cells.push(c);
+        start = end;
+    }
+    for (what, list, count) in [
+        ("point", &point_data, points.len()),
+        ("cell", &cell_data, out_cells.len()),
+    ] {
+        for a in list {
+            if a.values.len() != a.components * count {
+                return Err(format!(
+                    "{what} field '{}' has {} values for {count} {what}s × {} components",
+                    a.name,
+                    a.values.len(),
+                    a.components
+                ));
+            }
+        }
+    }
+    Ok(Vtu {
+        points,
+        cells: out_cells,
+        point_data,
+        cell_data,
+    })
+}
+
+/// Every `<DataArray …>base64</DataArray>` in `s`.
+fn arrays(s: &str) -> std::result::Result<Vec<Array>, String> {
+    let mut out = Vec::new();
+    let mut rest = s;
+    while let Some(a) = rest.find("<DataArray") {
+        let after = &rest[a + "<DataArray".len()..];
+        let gt = after.find('>').ok_or("unterminated <DataArray>")?;
+        let attrs = &after[..gt];
+        let name = attr(attrs, "Name").unwrap_or("").to_string();
+        let ty = attr(attrs, "type").ok_or("a <DataArray> has no type")?;
+        let components: usize = attr(attrs, "NumberOfComponents")
+            .unwrap_or("1")
+            .parse()
+            .map_err(|_| format!("array '{name}': bad NumberOfComponents"))?;
+        let format = attr(attrs, "format").unwrap_or("");
+        if format != "binary" {
+            return Err(format!(
+                "array '{name}': format=\"{format}\" is not supported (inline binary only)"
+            ));
+        }
+        let body = &after[gt + 1..];
+        let end = body
+            .find("</DataArray>")
+            .ok_or_else(|| format!("array '{name}' is not closed"))?;
+        let bytes = base64_decode(body[..end].trim())
+            .ok_or_else(|| format!("array '{name}': bad base64"))?;
+        if bytes.len() < 8 {
+            return Err(format!("array '{name}': no byte-count header"));
+        }
+        let len = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
+        let data = bytes
+            .get(8..8 + len)
+            .ok_or_else(|| format!("array '{name}': {len} bytes announced, fewer present"))?;
+        let values = decode(ty, data)
+            .ok_or_else(|| format!("array '{name}': type {ty} is not supported"))?;
+        out.push(Array {
+            name,
+            components: components.max(1),
+            values,
+        });
+        rest = &body[end..];
+    }
+    Ok(out)
+}
+
+fn decode(ty: &str, d: &[u8]) -> Option<Vec<f64>> {
+    macro_rules! conv {
+        ($t:ty, $n:expr) => {
+            d.chunks_exact($n)
+                .map(|c| <$t>::from_le_bytes(c.try_into().expect("chunk")) as f64)
+                .collect()
+        };
+    }
+    Some(match ty {
+        "Float64" => conv!(f64, 8),
+        "Float32" => conv!(f32, 4),
+        "Int64" => conv!(i64, 8),
+        "Int32" => conv!(i32, 4),
+        "UInt64" => conv!(u64, 8),
+        "UInt32" => conv!(u32, 4),
+        "UInt8" => d.iter().map(|&b| b as f64).collect(),
+        _ => return None,
+    })
+}
+
+/// The value of attribute `name` in an element's attribute text.
+fn attr<'a>(attrs: &'a str, name: &str) -> Option<&'a str> {
+    let pat = format!(" {name}=\"");
+    let i = attrs.find(&pat)? + pat.len();
+    let j = attrs[i..].find('"')?;
+    Some(&attrs[i..i + j])
+}
+
+/// Standard base64 (RFC 4648) with padding; None on a bad character.
+fn base64_decode(s: &str) -> Option<Vec<u8>> {
+    fn val(c: u8) -> Option<u32> {
+        Some(match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            b'/' => 63,
+            _ => return None,
+        } as u32)
+    }
+    let bytes: Vec<u8> = s.bytes().filter(|c| !c.is_ascii_whitespace()).collect();
+    let mut out = Vec::with_capacity(bytes.len() / 4 * 3);
+    for chunk in bytes.chunks(4) {
+        let pad = chunk.iter().rev().take_while(|&&c| c == b'=').count();
+        let mut n = 0u32;
+        for (i, &c) in chunk.iter().enumerate() {
+            let v = if i >= chunk.len() - pad { 0 } else { val(c)? };
+            n |= v << (18 - 6 * i);
+        }
+        let take = chunk.len().saturating_sub(1).saturating_sub(pad);
+        out.extend_from_slice(&[(n >> 16) as u8, (n >> 8) as u8, n as u8][..take]);
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_decodes_rfc_4648_vectors() {
+        for (plain, enc) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64_decode(enc).unwrap(), plain.as_bytes(), "{enc}");
+        }
+        assert!(base64_decode("Zm9*").is_none());
+    }
+
+    #[test]
+    fn series_round_trips_through_the_reader() {
+        let dir = tempfile::tempdir().unwrap();
+        let points = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        let cells = [0, 1, 2, 1, 3, 2];
+        let mut s = super::super::Series::create(dir.path(), &points, &cells, 3).unwrap();
+        let u = [0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, -0.2, 0.0, 0.3, 0.4, 0.0];
+        let vm = [1.5, -2.25];
+        s.write(&super::super::Frame {
+            step: 3,
+            time: 0.75,
+            point_data: vec![super::super::Field {
+                name: "displacement",
+                components: 3,
+                values: &u,
+            }],
+            cell_data: vec![super::super::Field {
+                name: "von_mises",
+                components: 1,
+                values: &vm,
+            }],
+        })
+        .unwrap();
+        let entries = read_pvd(&dir.path().join("solution.pvd")).unwrap();
+        assert_eq!(entries.len(), 1);
+        assert_eq!(entries[0].0, 0.75);
+        let v = read_vtu(&entries[0].1).unwrap();
+        assert_eq!(v.points, points);
+        assert_eq!(v.cells, vec![vec![0, 1, 2], vec![1, 3, 2]]);
+        assert_eq!(v.point_field("displacement").unwrap().values, u);
+        assert_eq!(v.cell_field("von_mises").unwrap().values, vm);
+    }
+}

@@ -1,0 +1,1089 @@
+//! Accuracy against cost: the `study` command (DESIGN.md "Command line", issue 5).
+//!
+//! A study runs one scene at several levels and measures, as Section 4 of the paper does,
+//! the error at the end time in the H¹ norm against a reference solution,
+//!
+//!   e = ‖u_ref(T) − u_N^{kh}‖_1,   ‖v‖_1 = (‖v‖²_{L²} + |v|²_{H¹})^{1/2}  (the full H¹ norm),
+//!
+//! computed on the reference mesh (see [`transfer`]: exact P1 prolongation for nested meshes,
+//! nodal interpolation for non-nested ones), together with the wall time of each run. The
+//! seminorm |e|_{H¹}, the L² norm and the errors relative to the reference's norms are
+//! reported too.
+//!
+//! # Levels, families and the reference
+//!
+//! A level n stands for the mesh of level n (h = 1/n: the `{n}` of the mesh pattern) and for
+//! N = n time steps (k = T/n; T = 1 in the paper, so k = 1/n). One family varies one thing:
+//!
+//! | `--vary` | level run             | reference run               | paper   |
+//! |----------|-----------------------|-----------------------------|---------|
+//! | `both`   | mesh n, N = n         | mesh R, N = R               | Table 1 |
+//! | `h`      | mesh n, N = F         | mesh R, N = F               | Table 2 |
+//! | `k`      | mesh F, N = n         | mesh F, N = R               | Table 3 |
+//!
+//! with R = `--reference` and F = `--fixed` (default F = R). The reference keeps the fixed
+//! parameter at its fixed value, so a family measures the error of what it varies alone;
+//! with F = R (the paper's choice) all three families share the reference h = k = 1/R,
+//! which is then computed once.
+//!
+//! # Meshes per level
+//!
+//! - A pattern (`--mesh-pattern`), relative to the scene file like `mesh.file`, with `{n}`
+//!   or `{n:03}` (zero-padded) for the level: `../meshes/paper/rect_{n:03}.msh`.
+//! - Without one, the pattern is derived from the scene's `mesh.file` when its name ends in
+//!   `_<digits>.msh` (`rect_032.msh` → `rect_{n:03}.msh`).
+//! - A list (`--meshes a.msh,b.msh,…,ref.msh`, relative to the working directory) for
+//!   families that are not numbered, such as unstructured meshes: one mesh per level, then
+//!   the reference mesh. `h` is then the longest edge of each mesh and a level is only the
+//!   number of steps N; `--vary k` runs on the last (reference) mesh.
+//!
+//! # Cost
+//!
+//! The wall time of a run is everything from reading the scene to u_N: mesh, assembly, the
+//! factorization of K_A and all N + 1 steps (no output is written). It is the median of
+//! `--repeat` runs (default: 3 when one run takes under a second, else 1). With
+//! `--kernel-compare` every level runs twice: with the scene's Prony kernel (O(1) memory
+//! update per step) and with the same kernel written as an expression, which the scheme sums
+//! directly (O(n) per step); the table and plot show how the time grows with N for each.
+
+pub mod transfer;
+
+use crate::fem::Discretization;
+use crate::run::setup;
+use crate::scene::{read_scene_file, Kernel};
+use crate::time_loop::TimeLoop;
+use crate::{Error, Result};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Instant;
+use transfer::{max_edge, nodal2, p1_norms, Transfer};
+
+/// Which parameter a family of runs varies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Vary {
+    /// h = k = 1/n (the paper's Table 1).
+    Both,
+    /// h = 1/n, k fixed (Table 2).
+    H,
+    /// k = T/n, h fixed (Table 3).
+    K,
+}
+
+impl FromStr for Vary {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.trim() {
+            "both" => Ok(Vary::Both),
+            "h" => Ok(Vary::H),
+            "k" => Ok(Vary::K),
+            other => Err(format!("'{other}' is not one of both, h, k")),
+        }
+    }
+}
+
+impl std::fmt::Display for Vary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Vary::Both => "both",
+            Vary::H => "h",
+            Vary::K => "k",
+        })
+    }
+}
+
+impl Vary {
+    /// A title naming the family and the paper's table it reproduces.
+    pub fn title(&self) -> &'static str {
+        match self {
+            Vary::Both => "h = k (the paper's Table 1)",
+            Vary::H => "k fixed, h varies (Table 2)",
+            Vary::K => "h fixed, k varies (Table 3)",
+        }
+    }
+}
+
+/// How the kernel of the scene is handed to the scheme.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KernelForm {
+    /// As the scene gives it.
+    AsGiven,
+    /// A Prony series rewritten as the expression Σ a_i exp(−b_i s): direct O(n) sum.
+    Expression,
+}
+
+impl KernelForm {
+    fn label(&self, scene_kernel: &str) -> String {
+        match self {
+            KernelForm::AsGiven => scene_kernel.to_string(),
+            KernelForm::Expression => "expression".into(),
+        }
+    }
+}
+
+/// Where the mesh of each level comes from.
+#[derive(Clone, Debug)]
+pub enum MeshFamily {
+    /// A path with `{n}` or `{n:0W}`, relative to the scene file.
+    Pattern(String),
+    /// One mesh per level followed by the reference mesh (relative to the working
+    /// directory).
+    List(Vec<PathBuf>),
+}
+
+/// Everything a study needs besides the scene.
+#[derive(Clone, Debug)]
+pub struct StudyOptions {
+    pub levels: Vec<usize>,
+    pub reference: usize,
+    pub vary: Vec<Vary>,
+    /// The level of the fixed parameter (default: the reference level).
+    pub fixed: Option<usize>,
+    /// None: derived from the scene's mesh.file.
+    pub meshes: Option<MeshFamily>,
+    /// Runs per level for the median wall time (None: 3 under a second, else 1).
+    pub repeat: Option<usize>,
+    pub overrides: Vec<String>,
+    pub kernel_compare: bool,
+    /// Progress lines on stderr.
+    pub progress: bool,
+}
+
+impl Default for StudyOptions {
+    fn default() -> Self {
+        StudyOptions {
+            levels: vec![8, 16, 32, 64],
+            reference: 128,
+            vary: vec![Vary::Both],
+            fixed: None,
+            meshes: None,
+            repeat: None,
+            overrides: Vec::new(),
+            kernel_compare: false,
+            progress: false,
+        }
+    }
+}
+
+/// One row of a study table.
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    pub family: Vary,
+    pub kernel: String,
+    pub level: usize,
+    /// The nominal mesh size: 1/n for a pattern family, the longest edge for a list.
+    pub h: f64,
+    /// The longest edge of the mesh.
+    pub h_max: f64,
+    pub k: f64,
+    pub steps: usize,
+    pub nodes: usize,
+    pub dofs: usize,
+    /// ‖e‖_1 = (‖e‖²_{L²} + |e|²_{H¹})^{1/2}, e = u_N − u_ref(T) on the reference mesh.
+    pub err_h1: f64,
+    /// |e|_{H¹}.
+    pub err_h1_semi: f64,
+    pub err_l2: f64,
+    /// ‖e‖_1 / ‖u_ref‖_1 and ‖e‖_{L²} / ‖u_ref‖_{L²}.
+    pub rel_h1: f64,
+    pub rel_l2: f64,
+    /// ln(e_{i−1}/e_i) / ln(p_{i−1}/p_i), p = h (vary h) or k (vary k, both).
+    pub order_h1: Option<f64>,
+    pub order_l2: Option<f64>,
+    /// Median wall time of a whole run (setup and all steps), and of the steps alone.
+    pub wall_s: f64,
+    pub steps_s: f64,
+    /// steps_s / (N + 1).
+    pub per_step_s: f64,
+    pub runs: usize,
+    /// The mesh is nested in the reference mesh (exact prolongation).
+    pub nested: bool,
+    pub mesh: String,
+}
+
+/// The reference run of a family.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReferenceInfo {
+    pub mesh: String,
+    pub h: f64,
+    pub h_max: f64,
+    pub k: f64,
+    pub steps: usize,
+    pub dofs: usize,
+    pub u_l2: f64,
+    pub u_h1: f64,
+    pub wall_s: f64,
+}
+
+/// One family: a table.
+#[derive(Clone, Debug, Serialize)]
+pub struct Family {
+    pub vary: Vary,
+    pub kernel: String,
+    pub form: KernelForm,
+    pub reference: ReferenceInfo,
+    pub rows: Vec<Row>,
+}
+
+/// Prony against expression at one level (`--kernel-compare`).
+#[derive(Clone, Debug, Serialize)]
+pub struct CostRow {
+    pub family: Vary,
+    pub level: usize,
+    pub steps: usize,
+    pub dofs: usize,
+    pub prony_steps_s: f64,
+    pub expression_steps_s: f64,
+    pub prony_wall_s: f64,
+    pub expression_wall_s: f64,
+    /// max|u_expr − u_prony| / max|u_prony| at T: the two forms agree up to rounding.
+    pub max_rel_diff: f64,
+}
+
+/// Everything a study found.
+#[derive(Clone, Debug, Serialize)]
+pub struct StudyReport {
+    pub scene: String,
+    pub end_time: f64,
+    pub families: Vec<Family>,
+    pub kernel_cost: Vec<CostRow>,
+}
+
+// ---------------------------------------------------------------------------------------
+// Running one case
+// ---------------------------------------------------------------------------------------
+
+/// The solution of one run at T and what it cost.
+pub struct Solved {
+    pub disc: Discretization,
+    /// u_N per node (2 components, 0 on Γ1).
+    pub u: Vec<[f64; 2]>,
+    pub steps: usize,
+    pub k: f64,
+    pub end: f64,
+    pub mesh: String,
+    pub wall_s: f64,
+    pub steps_s: f64,
+    pub runs: usize,
+}
+
+/// The scene's Prony kernel as the expression Σ a_i exp(−b_i s); other kernels are refused.
+pub fn prony_as_expression(kernel: Option<&Kernel>) -> Result<Kernel> {
+    let Some(Kernel::Prony(terms)) = kernel else {
+        return Err(Error::input(
+            "--kernel-compare needs a scene whose [material.relaxation] is a Prony series \
+             ('prony = [[a, b], …]'); this scene's kernel is not one",
+        ));
+    };
+    let text = terms
+        .iter()
+        .map(|(a, b)| format!("({a})*exp(-({b})*s)"))
+        .collect::<Vec<_>>()
+        .join(" + ");
+    let e = crate::expr::Expr::parse(&text, &["s"], "kernel-compare")?;
+    Ok(Kernel::Expr(Box::new(e)))
+}
+
+fn kernel_name(kernel: Option<&Kernel>) -> &'static str {
+    match kernel {
+        None => "none",
+        Some(Kernel::Prony(_)) => "prony",
+        Some(Kernel::Expr(_)) => "expression",
+        Some(Kernel::Table(_, _)) => "table",
+    }
+}
+
+/// Runs a scene once (with overrides) to t_N without output; returns u_N and the times.
+pub fn solve_once(
+    scene_path: &Path,
+    overrides: &[String],
+    form: KernelForm,
+) -> Result<(Solved, &'static str)> {
+    let start = Instant::now();
+    let (mut scene, mesh, disc) = setup(scene_path, overrides)?;
+    let given = kernel_name(scene.relaxation.as_ref());
+    if form == KernelForm::Expression {
+        scene.relaxation = Some(prony_as_expression(scene.relaxation.as_ref())?);
+    }
+    let steps_start = Instant::now();
+    let u = {
+        let mut tl = TimeLoop::new(&scene, &disc)?;
+        loop {
+            let n = tl.n();
+            tl.solve_step()?;
+            if n == scene.steps {
+                break;
+            }
+            tl.advance();
+        }
+        // u_N = u_0 + kΣ_{j<N} w_j is the history's u at n = N.
+        tl.history.u.clone()
+    };
+    let steps_s = steps_start.elapsed().as_secs_f64();
+    let wall_s = start.elapsed().as_secs_f64();
+    let u = nodal2(&disc, &u);
+    Ok((
+        Solved {
+            disc,
+            u,
+            steps: scene.steps,
+            k: scene.k(),
+            end: scene.end,
+            mesh: mesh.path.display().to_string(),
+            wall_s,
+            steps_s,
+            runs: 1,
+        },
+        given,
+    ))
+}
+
+/// Runs a case `repeat` times (None: 3 when the first run takes under a second) and keeps
+/// the median times.
+pub fn solve_timed(
+    scene_path: &Path,
+    overrides: &[String],
+    form: KernelForm,
+    repeat: Option<usize>,
+) -> Result<(Solved, &'static str)> {
+    let (mut first, given) = solve_once(scene_path, overrides, form)?;
+    let runs = repeat
+        .unwrap_or(if first.wall_s < 1.0 { 3 } else { 1 })
+        .max(1);
+    let (mut walls, mut steps) = (vec![first.wall_s], vec![first.steps_s]);
+    for _ in 1..runs {
+        let (again, _) = solve_once(scene_path, overrides, form)?;
+        walls.push(again.wall_s);
+        steps.push(again.steps_s);
+    }
+    first.wall_s = median(&mut walls);
+    first.steps_s = median(&mut steps);
+    first.runs = runs;
+    Ok((first, given))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Errors against the reference
+// ---------------------------------------------------------------------------------------
+
+/// The error norms of a solution against the reference, on the reference mesh.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ErrorNorms {
+    pub l2: f64,
+    pub h1_semi: f64,
+    /// The full H¹ norm (‖e‖²_{L²} + |e|²_{H¹})^{1/2}.
+    pub h1: f64,
+    pub nested: bool,
+}
+
+/// ‖u − u_ref‖ on the reference mesh: u is moved onto the reference nodes ([`Transfer`]) and
+/// the difference of the two P1 fields is integrated exactly.
+pub fn error_norms(
+    disc: &Discretization,
+    u: &[[f64; 2]],
+    reference: &Discretization,
+    u_ref: &[[f64; 2]],
+) -> ErrorNorms {
+    let t = Transfer::between(disc, reference);
+    let on_ref = t.apply(u);
+    let e: Vec<[f64; 2]> = on_ref
+        .iter()
+        .zip(u_ref)
+        .map(|(a, b)| [a[0] - b[0], a[1] - b[1]])
+        .collect();
+    let (l2, semi) = p1_norms(&reference.triangles, &e);
+    ErrorNorms {
+        l2,
+        h1_semi: semi,
+        h1: (l2 * l2 + semi * semi).sqrt(),
+        nested: t.nested,
+    }
+}
+
+/// ln(e0/e1) / ln(p0/p1).
+pub fn observed_order(e0: f64, e1: f64, p0: f64, p1: f64) -> Option<f64> {
+    (e0 > 0.0 && e1 > 0.0 && p0 != p1).then(|| (e0 / e1).ln() / (p0 / p1).ln())
+}
+
+// ---------------------------------------------------------------------------------------
+// The study
+// ---------------------------------------------------------------------------------------
+
+/// Expands `{n}` and `{n:0W}` in a mesh pattern.
+pub fn expand_pattern(pattern: &str, n: usize) -> std::result::Result<String, String> {
+    let mut out = String::new();
+    let mut rest = pattern;
+    let mut found = false;
+    while let Some(i) = rest.find('{') {
+        out.push_str(&rest[..i]);
+        let j = rest[i..]
+            .find('}')
+            .ok_or_else(|| format!("mesh pattern '{pattern}': unclosed '{{'"))?;
+        let spec = &rest[i + 1..i + j];
+        match spec {
+            "n" => write!(out, "{n}").expect("string"),
+            _ => {
+                let width = spec
+                    .strip_prefix("n:0")
+                    .and_then(|w| w.parse::<usize>().ok())
+                    .ok_or_else(|| {
+                        format!(
+                            "mesh pattern '{pattern}': '{{{spec}}}' is not {{n}} or {{n:0W}} \
+                             (e.g. {{n:03}})"
+                        )
+                    })?;
+                write!(out, "{n:0width$}").expect("string");
+            }
+        }
+        found = true;
+        rest = &rest[i + j + 1..];
+    }
+    out.push_str(rest);
+    if !found {
+        return Err(format!(
+            "mesh pattern '{pattern}' has no {{n}} or {{n:03}} for the level"
+        ));
+    }
+    Ok(out)
+}
+
+/// `dir/name_032.msh` → `dir/name_{n:03}.msh`.
+pub fn derive_pattern(mesh_file: &str) -> Option<String> {
+    let stem = mesh_file.strip_suffix(".msh")?;
+    let digits = stem.len() - stem.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+    let head = &stem[..stem.len() - digits];
+    (digits > 0 && head.ends_with('_')).then(|| format!("{head}{{n:0{digits}}}.msh"))
+}
+
+/// A TOML string value for a `--set` override.
+fn toml_string(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+/// The mesh of each level.
+struct Meshes {
+    family: MeshFamily,
+}
+
+impl Meshes {
+    /// The mesh file of level `n` (a pattern) or of entry `index` of a list (None: the
+    /// reference mesh, the last of the list).
+    fn file(&self, n: usize, index: Option<usize>) -> Result<String> {
+        match &self.family {
+            MeshFamily::Pattern(p) => expand_pattern(p, n).map_err(Error::input),
+            MeshFamily::List(list) => {
+                let p = match index {
+                    Some(i) => &list[i],
+                    None => list.last().expect("checked non-empty"),
+                };
+                let abs = std::path::absolute(p).map_err(|e| Error::io(p, e))?;
+                Ok(abs.display().to_string())
+            }
+        }
+    }
+
+    fn nominal_h(&self, n: usize, h_max: f64) -> f64 {
+        match self.family {
+            MeshFamily::Pattern(_) => 1.0 / n as f64,
+            MeshFamily::List(_) => h_max,
+        }
+    }
+}
+
+fn say(progress: bool, msg: &str) {
+    use std::io::IsTerminal;
+    if progress && std::io::stderr().is_terminal() {
+        eprintln!("{msg}");
+    }
+}
+
+/// Runs a study (no files written; see [`write_report`]).
+pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> {
+    if opts.levels.is_empty() {
+        return Err(Error::input(
+            "study: --levels is empty; give e.g. --levels 8,16,32,64",
+        ));
+    }
+    if opts.levels.contains(&0) || opts.reference == 0 || opts.fixed == Some(0) {
+        return Err(Error::input("study: levels must be ≥ 1"));
+    }
+    if opts.vary.is_empty() {
+        return Err(Error::input("study: --vary is empty; give both, h or k"));
+    }
+    let (_, file) = read_scene_file(scene_path, &opts.overrides)?;
+    let family = match &opts.meshes {
+        Some(MeshFamily::List(list)) => {
+            let needs_levels = opts.vary.iter().any(|v| *v != Vary::K);
+            if list.is_empty() || (needs_levels && list.len() != opts.levels.len() + 1) {
+                return Err(Error::input(format!(
+                    "study: --meshes has {} files; give one mesh per level ({}) and then the \
+                     reference mesh",
+                    list.len(),
+                    opts.levels.len()
+                )));
+            }
+            if opts.fixed.is_some() && opts.vary.contains(&Vary::K) {
+                return Err(Error::input(
+                    "study: with --meshes, --vary k runs on the last (reference) mesh; \
+                     --fixed picks a mesh level only with a pattern",
+                ));
+            }
+            MeshFamily::List(list.clone())
+        }
+        Some(MeshFamily::Pattern(p)) => {
+            expand_pattern(p, 1).map_err(Error::input)?;
+            MeshFamily::Pattern(p.clone())
+        }
+        None => MeshFamily::Pattern(derive_pattern(&file.mesh.file).ok_or_else(|| {
+            Error::input(format!(
+                "{}: key 'mesh.file' = '{}' has no level number (name_NNN.msh); give \
+                 --mesh-pattern 'name_{{n:03}}.msh' or --meshes a.msh,b.msh,…,reference.msh",
+                scene_path.display(),
+                file.mesh.file
+            ))
+        })?),
+    };
+    let meshes = Meshes { family };
+    let reference = opts.reference;
+    let fixed = opts.fixed.unwrap_or(reference);
+    let forms: &[KernelForm] = if opts.kernel_compare {
+        &[KernelForm::AsGiven, KernelForm::Expression]
+    } else {
+        &[KernelForm::AsGiven]
+    };
+    let overrides_for = |mesh: &str, steps: usize| {
+        let mut o = opts.overrides.clone();
+        o.push(format!("mesh.file={}", toml_string(mesh)));
+        o.push(format!("time.steps={steps}"));
+        o
+    };
+
+    let mut refs: Vec<((String, usize), Solved)> = Vec::new();
+    let mut families = Vec::new();
+    let mut kernel_cost = Vec::new();
+    let mut end_time = 0.0;
+    for &vary in &opts.vary {
+        // The reference keeps the fixed parameter (module docs).
+        let (ref_mesh, ref_steps, ref_n) = match vary {
+            Vary::Both => (meshes.file(reference, None)?, reference, reference),
+            Vary::H => (meshes.file(reference, None)?, fixed, reference),
+            Vary::K => (meshes.file(fixed, None)?, reference, fixed),
+        };
+        let key = (ref_mesh.clone(), ref_steps);
+        if !refs.iter().any(|(k, _)| *k == key) {
+            say(
+                opts.progress,
+                &format!("study: reference {ref_mesh}, N = {ref_steps} …"),
+            );
+            let (s, _) = solve_timed(
+                scene_path,
+                &overrides_for(&ref_mesh, ref_steps),
+                KernelForm::AsGiven,
+                Some(1),
+            )?;
+            refs.push((key.clone(), s));
+        }
+        let r = &refs.iter().find(|(k, _)| *k == key).expect("just added").1;
+        end_time = r.end;
+        let (ref_l2, ref_semi) = p1_norms(&r.disc.triangles, &r.u);
+        let ref_h1 = (ref_l2 * ref_l2 + ref_semi * ref_semi).sqrt();
+        let ref_hmax = max_edge(&r.disc.nodes, &r.disc.triangles);
+        let reference_info = ReferenceInfo {
+            mesh: r.mesh.clone(),
+            h: meshes.nominal_h(ref_n, ref_hmax),
+            h_max: ref_hmax,
+            k: r.k,
+            steps: r.steps,
+            dofs: r.disc.n_free,
+            u_l2: ref_l2,
+            u_h1: ref_h1,
+            wall_s: r.wall_s,
+        };
+        let mut solved_by_form: Vec<Vec<Solved>> = Vec::new();
+        for &form in forms {
+            let mut rows: Vec<Row> = Vec::new();
+            let mut solved = Vec::new();
+            let mut kernel = String::new();
+            for (i, &n) in opts.levels.iter().enumerate() {
+                let (mesh, steps, mesh_n) = match vary {
+                    Vary::Both => (meshes.file(n, Some(i))?, n, n),
+                    Vary::H => (meshes.file(n, Some(i))?, fixed, n),
+                    Vary::K => (meshes.file(fixed, None)?, n, fixed),
+                };
+                say(
+                    opts.progress,
+                    &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
+                );
+                let (s, given) =
+                    solve_timed(scene_path, &overrides_for(&mesh, steps), form, opts.repeat)?;
+                kernel = form.label(given);
+                let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
+                let h_max = max_edge(&s.disc.nodes, &s.disc.triangles);
+                let h = meshes.nominal_h(mesh_n, h_max);
+                let (order_h1, order_l2) = match rows.last() {
+                    Some(prev) => {
+                        let (p0, p1) = match vary {
+                            Vary::H => (prev.h, h),
+                            Vary::K | Vary::Both => (prev.k, s.k),
+                        };
+                        (
+                            observed_order(prev.err_h1, e.h1, p0, p1),
+                            observed_order(prev.err_l2, e.l2, p0, p1),
+                        )
+                    }
+                    None => (None, None),
+                };
+                rows.push(Row {
+                    family: vary,
+                    kernel: kernel.clone(),
+                    level: n,
+                    h,
+                    h_max,
+                    k: s.k,
+                    steps: s.steps,
+                    nodes: s.disc.nodes.len(),
+                    dofs: s.disc.n_free,
+                    err_h1: e.h1,
+                    err_h1_semi: e.h1_semi,
+                    err_l2: e.l2,
+                    rel_h1: e.h1 / ref_h1,
+                    rel_l2: e.l2 / ref_l2,
+                    order_h1,
+                    order_l2,
+                    wall_s: s.wall_s,
+                    steps_s: s.steps_s,
+                    per_step_s: s.steps_s / (s.steps + 1) as f64,
+                    runs: s.runs,
+                    nested: e.nested,
+                    mesh: s.mesh.clone(),
+                });
+                solved.push(s);
+            }
+            families.push(Family {
+                vary,
+                kernel,
+                form,
+                reference: reference_info.clone(),
+                rows,
+            });
+            solved_by_form.push(solved);
+        }
+        if let [prony, expr] = &solved_by_form[..] {
+            for (i, (p, x)) in prony.iter().zip(expr).enumerate() {
+                let scale =
+                    p.u.iter()
+                        .flatten()
+                        .fold(0.0f64, |a, v| a.max(v.abs()))
+                        .max(f64::MIN_POSITIVE);
+                let diff =
+                    p.u.iter()
+                        .flatten()
+                        .zip(x.u.iter().flatten())
+                        .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
+                kernel_cost.push(CostRow {
+                    family: vary,
+                    level: opts.levels[i],
+                    steps: p.steps,
+                    dofs: p.disc.n_free,
+                    prony_steps_s: p.steps_s,
+                    expression_steps_s: x.steps_s,
+                    prony_wall_s: p.wall_s,
+                    expression_wall_s: x.wall_s,
+                    max_rel_diff: diff / scale,
+                });
+            }
+        }
+    }
+    Ok(StudyReport {
+        scene: scene_path.display().to_string(),
+        end_time,
+        families,
+        kernel_cost,
+    })
+}
+
+// ---------------------------------------------------------------------------------------
+// Tables and plots
+// ---------------------------------------------------------------------------------------
+
+/// `1/n` when x is the reciprocal of an integer (up to rounding), else x in short form.
+pub fn fraction(x: f64) -> String {
+    let n = (1.0 / x).round();
+    if n >= 1.0 && ((1.0 / n) - x).abs() <= 1e-12 * x {
+        format!("1/{n}")
+    } else {
+        format!("{x:.4}")
+    }
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or("–".into(), |x| format!("{x:.4}"))
+}
+
+/// The study as Markdown: one table per family, then the cost of memory.
+pub fn markdown(report: &StudyReport) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Study of {} (T = {})\n", report.scene, report.end_time);
+    let _ = writeln!(
+        s,
+        "Error e = u_N − u_ref(T) on the reference mesh; ‖·‖_1 is the full H¹ norm \
+         (‖e‖²_L² + |e|²_H¹)^½. Wall time: median over runs of the whole run (setup + all \
+         steps, no output).\n"
+    );
+    for f in &report.families {
+        let r = &f.reference;
+        let _ = writeln!(
+            s,
+            "## {} — kernel: {}\n\nReference: h = {}, k = {} (N = {}, {} dofs, ‖u_ref‖_1 = {:.4e}, {:.2} s), {}\n",
+            f.vary.title(),
+            f.kernel,
+            fraction(r.h),
+            fraction(r.k),
+            r.steps,
+            r.dofs,
+            r.u_h1,
+            r.wall_s,
+            r.mesh
+        );
+        let _ = writeln!(
+            s,
+            "| h | k | dofs | steps | ‖e‖_1 | ‖e‖_1/‖u‖_1 | ‖e‖_L² | order ‖·‖_1 | order L² | wall [s] | per step [ms] | nested |"
+        );
+        let _ = writeln!(
+            s,
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|"
+        );
+        for row in &f.rows {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {:.4e} | {:.3e} | {:.4e} | {} | {} | {:.3} | {:.3} | {} |",
+                fraction(row.h),
+                fraction(row.k),
+                row.dofs,
+                row.steps,
+                row.err_h1,
+                row.rel_h1,
+                row.err_l2,
+                opt(row.order_h1),
+                opt(row.order_l2),
+                row.wall_s,
+                row.per_step_s * 1e3,
+                if row.nested { "yes" } else { "no" }
+            );
+        }
+        s.push('\n');
+    }
+    if !report.kernel_cost.is_empty() {
+        let _ = writeln!(
+            s,
+            "## The cost of memory: Prony recursion (O(1) per step) against the direct sum \
+             (O(n) per step)\n"
+        );
+        let _ = writeln!(
+            s,
+            "| vary | N | dofs | Prony steps [s] | expression steps [s] | ratio | Prony per step [ms] | expression per step [ms] | rel. max difference of u_N |"
+        );
+        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        for c in &report.kernel_cost {
+            let n1 = (c.steps + 1) as f64;
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.3} | {:.3} | {:.1e} |",
+                c.family,
+                c.steps,
+                c.dofs,
+                c.prony_steps_s,
+                c.expression_steps_s,
+                c.expression_steps_s / c.prony_steps_s,
+                c.prony_steps_s / n1 * 1e3,
+                c.expression_steps_s / n1 * 1e3,
+                c.max_rel_diff
+            );
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// The rows of every family as CSV.
+pub fn csv(report: &StudyReport) -> String {
+    let mut s = String::from(
+        "family,kernel,level,h,h_max,k,steps,nodes,dofs,err_h1,err_h1_semi,err_l2,rel_h1,rel_l2,\
+         order_h1,order_l2,wall_s,steps_s,per_step_s,runs,nested,mesh\n",
+    );
+    let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x}"));
+    for f in &report.families {
+        for r in &f.rows {
+            let _ = writeln!(
+                s,
+                "{},{},{},{},{},{},{},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{},{},{},{},{},\"{}\"",
+                r.family,
+                r.kernel,
+                r.level,
+                r.h,
+                r.h_max,
+                r.k,
+                r.steps,
+                r.nodes,
+                r.dofs,
+                r.err_h1,
+                r.err_h1_semi,
+                r.err_l2,
+                r.rel_h1,
+                r.rel_l2,
+                o(r.order_h1),
+                o(r.order_l2),
+                r.wall_s,
+                r.steps_s,
+                r.per_step_s,
+                r.runs,
+                r.nested,
+                r.mesh.replace('"', "\"\"")
+            );
+        }
+    }
+    s
+}
+
+fn kernel_cost_csv(report: &StudyReport) -> String {
+    let mut s = String::from(
+        "family,level,steps,dofs,prony_steps_s,expression_steps_s,prony_wall_s,expression_wall_s,max_rel_diff\n",
+    );
+    for c in &report.kernel_cost {
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{},{},{},{},{:e}",
+            c.family,
+            c.level,
+            c.steps,
+            c.dofs,
+            c.prony_steps_s,
+            c.expression_steps_s,
+            c.prony_wall_s,
+            c.expression_wall_s,
+            c.max_rel_diff
+        );
+    }
+    s
+}
+
+/// The default output directory: `out/<scene name>-study-<vary>/`.
+pub fn default_out(scene_path: &Path, opts: &StudyOptions) -> Result<PathBuf> {
+    let scene = crate::scene::Scene::load(scene_path, &opts.overrides)?;
+    let vary: Vec<String> = opts.vary.iter().map(|v| v.to_string()).collect();
+    Ok(Path::new("out").join(format!("{}-study-{}", scene.name, vary.join("-"))))
+}
+
+/// Writes study.md, study.csv, study.json, the PNG plots (and kernel_cost.csv) into `dir`;
+/// returns the paths written.
+pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
+    use crate::output::write_atomic;
+    use crate::plot::{log_log_chart, Curve};
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let mut written = Vec::new();
+    let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
+        let p = dir.join(name);
+        write_atomic(&p, bytes)?;
+        written.push(p);
+        Ok(())
+    };
+    put("study.md", markdown(report).as_bytes())?;
+    put("study.csv", csv(report).as_bytes())?;
+    let json = serde_json::to_string_pretty(report).expect("report serializes") + "\n";
+    put("study.json", json.as_bytes())?;
+    if !report.kernel_cost.is_empty() {
+        put("kernel_cost.csv", kernel_cost_csv(report).as_bytes())?;
+    }
+
+    let label = |f: &Family| {
+        if report.kernel_cost.is_empty() {
+            f.vary.title().to_string()
+        } else {
+            format!("{} [{}]", f.vary.title(), f.kernel)
+        }
+    };
+    // Error against wall time: which refinement buys accuracy most cheaply.
+    let curves: Vec<Curve> = report
+        .families
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            Curve::data(
+                i,
+                label(f),
+                f.rows.iter().map(|r| (r.wall_s, r.err_h1)).collect(),
+            )
+            .with_point_labels(
+                f.rows
+                    .iter()
+                    .map(|r| match f.vary {
+                        Vary::Both => format!("h=k={}", fraction(r.k)),
+                        Vary::H => format!("h={}", fraction(r.h)),
+                        Vary::K => format!("k={}", fraction(r.k)),
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    let p = dir.join("error_vs_time.png");
+    log_log_chart(
+        &p,
+        "Error at T against wall time",
+        "wall time of a run [s]",
+        "‖u_N − u_ref(T)‖₁",
+        &curves,
+    )?;
+    written.push(p);
+    // Error against h and against k, with slope-1 reference lines.
+    for (name, axis, x_of, varies) in [
+        (
+            "error_vs_h.png",
+            "h",
+            (|r: &Row| r.h) as fn(&Row) -> f64,
+            [Vary::Both, Vary::H],
+        ),
+        (
+            "error_vs_k.png",
+            "k",
+            (|r: &Row| r.k) as fn(&Row) -> f64,
+            [Vary::Both, Vary::K],
+        ),
+    ] {
+        let mut curves = Vec::new();
+        for (i, f) in report.families.iter().enumerate() {
+            if !varies.contains(&f.vary) || f.rows.is_empty() {
+                continue;
+            }
+            let pts: Vec<(f64, f64)> = f.rows.iter().map(|r| (x_of(r), r.err_h1)).collect();
+            let (x0, e0) = pts[0];
+            let x1 = pts[pts.len() - 1].0;
+            if curves.is_empty() {
+                // One slope-1 line, through the first point of the first family.
+                curves.push(Curve::reference(
+                    "slope 1".into(),
+                    vec![(x0, e0), (x1, e0 * x1 / x0)],
+                ));
+            }
+            let labels = pts.iter().map(|p| fraction(p.0)).collect();
+            curves.push(Curve::data(i, label(f), pts).with_point_labels(labels));
+        }
+        if curves.is_empty() {
+            continue;
+        }
+        let p = dir.join(name);
+        log_log_chart(
+            &p,
+            &format!("Error at T against {axis}"),
+            axis,
+            "‖u_N − u_ref(T)‖₁",
+            &curves,
+        )?;
+        written.push(p);
+    }
+    // The cost of memory: time of the steps against N.
+    if !report.kernel_cost.is_empty() {
+        let mut curves = Vec::new();
+        let mut varies: Vec<Vary> = report.kernel_cost.iter().map(|c| c.family).collect();
+        varies.dedup();
+        for (i, v) in varies.iter().enumerate() {
+            let rows: Vec<&CostRow> = report
+                .kernel_cost
+                .iter()
+                .filter(|c| c.family == *v)
+                .collect();
+            let pts = |f: fn(&CostRow) -> f64| -> Vec<(f64, f64)> {
+                rows.iter().map(|c| (c.steps as f64, f(c))).collect()
+            };
+            curves.push(Curve::data(
+                2 * i,
+                format!("Prony, O(1) per step (vary {v})"),
+                pts(|c| c.prony_steps_s),
+            ));
+            curves.push(Curve::data(
+                2 * i + 1,
+                format!("expression, O(n) per step (vary {v})"),
+                pts(|c| c.expression_steps_s),
+            ));
+        }
+        if let (Some(first), Some(last)) = (report.kernel_cost.first(), report.kernel_cost.last()) {
+            let (n0, n1) = (first.steps as f64, last.steps as f64);
+            let t0 = first.prony_steps_s.min(first.expression_steps_s);
+            if n1 > n0 {
+                curves.push(Curve::reference(
+                    "slope 1".into(),
+                    vec![(n0, t0), (n1, t0 * n1 / n0)],
+                ));
+                let mut slope2 = Curve::reference(
+                    "slope 2".into(),
+                    vec![(n0, t0), (n1, t0 * (n1 / n0).powi(2))],
+                );
+                slope2.color = 1;
+                curves.push(slope2);
+            }
+        }
+        let p = dir.join("kernel_cost.png");
+        log_log_chart(
+            &p,
+            "The cost of memory: time of the N + 1 steps",
+            "N (number of time steps)",
+            "time of all steps [s]",
+            &curves,
+        )?;
+        written.push(p);
+    }
+    Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn patterns_expand_and_derive() {
+        assert_eq!(
+            expand_pattern("m/rect_{n:03}.msh", 8).unwrap(),
+            "m/rect_008.msh"
+        );
+        assert_eq!(expand_pattern("a{n}b{n:04}", 16).unwrap(), "a16b0016");
+        assert!(expand_pattern("rect.msh", 8).is_err());
+        assert!(expand_pattern("rect_{k}.msh", 8).is_err());
+        assert_eq!(
+            derive_pattern("../meshes/paper/rect_032.msh").as_deref(),
+            Some("../meshes/paper/rect_{n:03}.msh")
+        );
+        assert_eq!(derive_pattern("plate_hole.msh"), None);
+        assert_eq!(derive_pattern("rect32.msh"), None);
+    }
+
+    #[test]
+    fn orders_and_fractions() {
+        let o = observed_order(0.4, 0.1, 0.5, 0.25).unwrap();
+        assert!((o - 2.0).abs() < 1e-15);
+        assert_eq!(observed_order(0.0, 0.1, 0.5, 0.25), None);
+        assert_eq!(fraction(0.125), "1/8");
+        assert_eq!(fraction(1.0 / 128.0), "1/128");
+        assert_eq!(fraction(0.3), "0.3000");
+        let mut v = vec![3.0, 1.0, 2.0];
+        assert_eq!(median(&mut v), 2.0);
+    }
+
+    #[test]
+    fn vary_parses() {
+        assert_eq!("both".parse::<Vary>().unwrap(), Vary::Both);
+        assert_eq!("k".parse::<Vary>().unwrap(), Vary::K);
+        assert!("x".parse::<Vary>().is_err());
+    }
+}
