@@ -6,6 +6,7 @@
 //! [`scene`] → [`mesh`] → [`fem`] (discretization) → [`effects`] → [`solver`] (the per-step
 //! problem (3.1)) → [`time_loop`] (with [`history`]) → [`output`]; [`run`] drives them.
 
+pub mod checkpoint;
 pub mod effects;
 pub mod error;
 pub mod expr;
@@ -13,10 +14,12 @@ pub mod fem;
 pub mod history;
 pub mod mesh;
 pub mod output;
+pub mod plot;
 pub mod run;
 pub mod scene;
 pub mod solver;
 pub mod stability;
+pub mod study;
 pub mod time_loop;
 
 pub use error::{Error, Result};

@@ -3,7 +3,7 @@
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use viscontact::run::{run, setup, RunOptions};
+use viscontact::run::{resume, run, setup, Outcome, ResumeOptions, RunOptions};
 use viscontact::{effects::Effects, mesh::Mesh, Result};
 
 #[derive(Parser)]
@@ -31,6 +31,28 @@ enum Command {
         /// Do not show a progress bar even on a terminal.
         #[arg(long)]
         quiet: bool,
+        /// Stop after step N (solved and written), leaving the checkpoint of the state at
+        /// t_{N+1}; `viscontact resume DIR/checkpoint.h5` continues the run.
+        #[arg(long, value_name = "N")]
+        stop_after: Option<usize>,
+    },
+    /// Continue a run from its checkpoint: same results as if it had never stopped.
+    Resume {
+        /// DIR/checkpoint.h5 of a run.
+        checkpoint: PathBuf,
+        /// Output directory (default: the checkpoint's directory, whose series is continued).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Only time.end (the step size stays: T2/k must be whole), output.* and
+        /// checkpoint.* may be overridden, e.g. --set time.end=2.0.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Do not show a progress bar even on a terminal.
+        #[arg(long)]
+        quiet: bool,
+        /// Stop again after step N (see `run --stop-after`).
+        #[arg(long, value_name = "N")]
+        stop_after: Option<usize>,
     },
     /// Validate a scene and print its effects, sizes and solver path; runs nothing.
     Check {
@@ -45,6 +67,26 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Accuracy against cost: errors at T against a reference, orders, wall times (tables
+    /// like the paper's Tables 1–3, CSV, Markdown, PNG plots).
+    Study(StudyArgs),
+    /// Draw the deformed body of a run coloured by a field (the paper's Fig. 3) as a PNG.
+    Plot {
+        /// The output directory of a run (or its solution.pvd).
+        dir: PathBuf,
+        /// The frame nearest to this time (default: the last).
+        #[arg(long)]
+        time: Option<f64>,
+        /// A point or cell field: von_mises, displacement, stress_XY, contact_pressure, …
+        #[arg(long, default_value = "von_mises")]
+        field: String,
+        /// Displacement scale (default: the largest displacement is 10% of the body size).
+        #[arg(long)]
+        scale: Option<f64>,
+        /// The PNG to write (default: DIR/<field>_t<time>.png).
+        #[arg(short = 'o', long = "output")]
+        output: Option<PathBuf>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -55,22 +97,63 @@ fn main() -> ExitCode {
             out,
             set,
             quiet,
+            stop_after,
         } => run(
             &scene,
             &RunOptions {
                 out,
                 overrides: set,
                 progress: !quiet,
+                stop_after,
             },
         )
-        .map(|s| {
-            println!(
-                "{}: {} steps, {} dofs, {:.2} s; ‖u_N‖_H1 = {:.6e}; wrote {}",
-                s.name, s.steps, s.dofs, s.timing.total_s, s.final_.u_h1, s.output.directory
-            );
-        }),
+        .map(report),
+        Command::Resume {
+            checkpoint,
+            out,
+            set,
+            quiet,
+            stop_after,
+        } => resume(
+            &checkpoint,
+            &ResumeOptions {
+                out,
+                overrides: set,
+                progress: !quiet,
+                stop_after,
+            },
+        )
+        .map(report),
         Command::Check { scene, set } => check(&scene, &set),
         Command::MeshInfo { mesh, json } => mesh_info(&mesh, json),
+        Command::Study(args) => study(args),
+        Command::Plot {
+            dir,
+            time,
+            field,
+            scale,
+            output,
+        } => viscontact::plot::plot_run(
+            &dir,
+            &viscontact::plot::PlotOptions {
+                time,
+                field,
+                scale,
+                output,
+                ..Default::default()
+            },
+        )
+        .map(|i| {
+            println!(
+                "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e})",
+                i.output.display(),
+                i.time,
+                i.scale,
+                i.frame.display(),
+                i.range.0,
+                i.range.1
+            );
+        }),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -78,6 +161,23 @@ fn main() -> ExitCode {
             eprintln!("error: {e}");
             ExitCode::from(e.exit_code() as u8)
         }
+    }
+}
+
+fn report(outcome: Outcome) {
+    match outcome {
+        Outcome::Finished(s) => println!(
+            "{}: {} steps, {} dofs, {:.2} s; ‖u_N‖_H1 = {:.6e}; wrote {}",
+            s.name, s.steps, s.dofs, s.timing.total_s, s.final_.u_h1, s.output.directory
+        ),
+        Outcome::Stopped {
+            step,
+            time,
+            checkpoint,
+        } => println!(
+            "stopped after step {step} (t = {time}); continue with: viscontact resume {}",
+            checkpoint.display()
+        ),
     }
 }
 
@@ -209,5 +309,69 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
         "  quality: min angle {:.2}°, max aspect ratio {:.3}, area {:.3e} .. {:.3e}",
         q.min_angle_deg, q.max_aspect_ratio, q.min_area, q.max_area
     );
+    Ok(())
+}
+
+#[derive(clap::Args)]
+struct StudyArgs {
+    scene: PathBuf,
+    /// Levels n: h = 1/n (the mesh of level n) and N = n steps (k = T/n).
+    #[arg(long, value_delimiter = ',', default_value = "8,16,32,64")]
+    levels: Vec<usize>,
+    /// The level of the reference solution.
+    #[arg(long, default_value_t = 128)]
+    reference: usize,
+    /// What varies: both (h = k), h (k fixed), k (h fixed); a list runs several families.
+    #[arg(long, value_delimiter = ',', default_value = "both")]
+    vary: Vec<viscontact::study::Vary>,
+    /// The level of the parameter held fixed (default: the reference level).
+    #[arg(long)]
+    fixed: Option<usize>,
+    /// Mesh of level n, relative to the scene file: `{n}` or `{n:03}` for the level
+    /// (default: from mesh.file when it ends in _NNN.msh).
+    #[arg(long, conflicts_with = "meshes")]
+    mesh_pattern: Option<String>,
+    /// One mesh per level, then the reference mesh (for meshes that are not numbered).
+    #[arg(long, value_delimiter = ',')]
+    meshes: Vec<PathBuf>,
+    /// Output directory (default: out/<scene name>-study-<vary>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Runs per level for the median wall time (default: 3 under a second, else 1).
+    #[arg(long)]
+    repeat: Option<usize>,
+    /// Also run every level with the Prony kernel written as an expression (direct sum).
+    #[arg(long)]
+    kernel_compare: bool,
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+}
+
+fn study(a: StudyArgs) -> Result<()> {
+    use viscontact::study::{self, MeshFamily, StudyOptions};
+    let opts = StudyOptions {
+        levels: a.levels,
+        reference: a.reference,
+        vary: a.vary,
+        fixed: a.fixed,
+        meshes: match (a.mesh_pattern, a.meshes.is_empty()) {
+            (Some(p), _) => Some(MeshFamily::Pattern(p)),
+            (None, false) => Some(MeshFamily::List(a.meshes)),
+            (None, true) => None,
+        },
+        repeat: a.repeat,
+        overrides: a.set,
+        kernel_compare: a.kernel_compare,
+        progress: true,
+    };
+    let out = match a.out {
+        Some(o) => o,
+        None => study::default_out(&a.scene, &opts)?,
+    };
+    let report = study::run_study(&a.scene, &opts)?;
+    print!("{}", study::markdown(&report));
+    for p in study::write_report(&report, &out)? {
+        println!("wrote {}", p.display());
+    }
     Ok(())
 }

@@ -2,6 +2,7 @@
 //! solver → time loop → ParaView series and summary.json. Reading this function tells the
 //! whole story of a run.
 
+use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::{write_atomic, Field, Frame, Series};
@@ -92,10 +93,28 @@ fn summary_json(s: &Summary) -> String {
 }
 
 /// Options of a run that are not part of the scene.
+#[derive(Clone, Debug, Default)]
 pub struct RunOptions {
     pub out: Option<PathBuf>,
     pub overrides: Vec<String>,
     pub progress: bool,
+    /// Stop once step S is solved and written: write the checkpoint of step S + 1 (the state
+    /// at t_{S+1}) and return [`Outcome::Stopped`]; `viscontact resume` continues from there.
+    pub stop_after: Option<usize>,
+}
+
+/// How a run ended.
+#[derive(Debug, Clone)]
+pub enum Outcome {
+    /// Every step solved; summary.json written.
+    Finished(Box<Summary>),
+    /// Stopped by `stop_after` after step `step`; `checkpoint` continues it. No summary.json
+    /// is written for a run that has not reached its end.
+    Stopped {
+        step: usize,
+        time: f64,
+        checkpoint: PathBuf,
+    },
 }
 
 /// The default output directory: `out/<scene name>/`.
@@ -106,53 +125,209 @@ pub fn default_out(scene: &Scene) -> PathBuf {
 /// Loads everything a run needs and checks it: scene, mesh, discretization.
 pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
     let scene = Scene::load(scene_path, overrides)?;
-    let mesh = Mesh::read(&scene.mesh_file).map_err(|e| match e {
-        Error::Input(m) => Error::input(format!("{}: key 'mesh.file': {m}", scene.path.display())),
-        other => other,
-    })?;
+    let mesh = read_mesh(&scene)?;
     let disc = Discretization::new(&mesh, &scene)?;
     Ok((scene, mesh, disc))
 }
 
-/// Runs a scene to its end, writing the series and summary.json into the output directory.
-pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Summary> {
+fn read_mesh(scene: &Scene) -> Result<Mesh> {
+    Mesh::read(&scene.mesh_file).map_err(|e| match e {
+        Error::Input(m) => Error::input(format!(
+            "{}: key 'mesh.file': {m} (mesh.file is relative to the scene file)",
+            scene.path.display()
+        )),
+        other => other,
+    })
+}
+
+/// Runs a scene to its end (or to `stop_after`), writing the series, the checkpoints and
+/// summary.json into the output directory.
+pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     let (scene, mesh, disc) = setup(scene_path, &opts.overrides)?;
     let out = opts.out.clone().unwrap_or_else(|| default_out(&scene));
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
-    let mut tl = TimeLoop::new(&scene, &disc)?;
-    let setup_s = start.elapsed().as_secs_f64();
-
+    let tl = TimeLoop::new(&scene, &disc)?;
     let cells: Vec<usize> = mesh.triangles.iter().flatten().copied().collect();
-    let mut series = Series::create(&out, &mesh.nodes, &cells, 3)?;
+    let series = Series::create(&out, &mesh.nodes, &cells, 3)?;
+    let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
+    let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
+    let setup_s = start.elapsed().as_secs_f64();
+    drive(Drive {
+        scene: &scene,
+        mesh: &mesh,
+        disc: &disc,
+        tl,
+        series,
+        writer,
+        log: RunLog::default(),
+        out,
+        start,
+        setup_s,
+        opts,
+        resumed_from: None,
+    })
+}
+
+/// Options of `viscontact resume`.
+#[derive(Clone, Debug, Default)]
+pub struct ResumeOptions {
+    /// Output directory (default: the checkpoint's directory).
+    pub out: Option<PathBuf>,
+    /// Only `time.end`, `output.*` and `checkpoint.*` (see [`checkpoint::Checkpoint::scene`]).
+    pub overrides: Vec<String>,
+    pub progress: bool,
+    pub stop_after: Option<usize>,
+}
+
+/// Continues a run from its checkpoint: the stored scene (with the allowed overrides), the
+/// same mesh (checked by fingerprint) and physics, the saved state; the series in the output
+/// directory keeps its frames before the checkpoint's step and gets the rest, summary.json
+/// describes the whole run. Bit for bit the run that never stopped.
+pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
+    let start = Instant::now();
+    let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
+    let scene = cp.scene(&opts.overrides)?;
+    let mesh = read_mesh(&scene).map_err(|e| {
+        Error::input(format!(
+            "{}: the run's mesh cannot be read: {e}",
+            checkpoint_path.display()
+        ))
+    })?;
+    let disc = Discretization::new(&mesh, &scene)?;
+    cp.check(&scene, &mesh, &disc)?;
+    let mut tl = TimeLoop::new(&scene, &disc)?;
+    cp.restore(&mut tl)?;
+    let out = opts.out.clone().unwrap_or_else(|| cp.dir());
+    std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
+    let cells: Vec<usize> = mesh.triangles.iter().flatten().copied().collect();
+    let series = if cp.n == 0 {
+        Series::create(&out, &mesh.nodes, &cells, 3)?
+    } else {
+        Series::reopen(&out, &mesh.nodes, &cells, 3, cp.n - 1)?
+    };
+    let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
+    let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
+    let setup_s = start.elapsed().as_secs_f64();
+    let run_opts = RunOptions {
+        out: Some(out.clone()),
+        overrides: Vec::new(),
+        progress: opts.progress,
+        stop_after: opts.stop_after,
+    };
+    drive(Drive {
+        scene: &scene,
+        mesh: &mesh,
+        disc: &disc,
+        tl,
+        series,
+        writer,
+        log: cp.log.clone(),
+        out,
+        start,
+        setup_s,
+        opts: &run_opts,
+        resumed_from: Some(cp.n),
+    })
+}
+
+/// A run in progress: what [`drive`] needs.
+struct Drive<'a> {
+    scene: &'a Scene,
+    mesh: &'a Mesh,
+    disc: &'a Discretization,
+    tl: TimeLoop<'a>,
+    series: Series,
+    writer: checkpoint::Writer,
+    log: RunLog,
+    out: PathBuf,
+    start: Instant,
+    setup_s: f64,
+    opts: &'a RunOptions,
+    /// The checkpoint step a resumed run starts from.
+    resumed_from: Option<usize>,
+}
+
+/// The time loop of a run: solve step n, record it, write its frame; advance; write a
+/// checkpoint at every `checkpoint.every`-th step, at the last step and where the run stops.
+fn drive(d: Drive) -> Result<Outcome> {
+    let Drive {
+        scene,
+        mesh,
+        disc,
+        mut tl,
+        mut series,
+        mut writer,
+        mut log,
+        out,
+        start,
+        setup_s,
+        opts,
+        resumed_from,
+    } = d;
     let n_steps = scene.steps;
-    let bar = progress_bar(opts.progress, n_steps as u64 + 1);
-    let mut per_step = Vec::with_capacity(n_steps + 1);
-    let mut max_violation = f64::NEG_INFINITY;
-    let mut max_kkt: f64 = 0.0;
+    let first = tl.n();
+    let bar = progress_bar(opts.progress, (n_steps + 1 - first) as u64);
     let rows = tl.rows.clone();
     let steps_start = Instant::now();
     let (active_at_end, stick_at_end) = loop {
         let n = tl.n();
         let step = tl.solve_step()?;
-        per_step.push(step.report.iterations);
+        log.iterations.push(step.report.iterations);
         let (viol, kkt) = step_checks(&rows, &step);
-        max_violation = max_violation.max(viol);
-        max_kkt = max_kkt.max(kkt);
+        log.max_violation = log.max_violation.max(viol);
+        log.max_kkt_residual = log.max_kkt_residual.max(kkt);
         if n % scene.output_every == 0 || n == n_steps {
-            write_frame(&mut series, &disc, &scene, &rows, &step)?;
+            write_frame(&mut series, disc, scene, &rows, &step)?;
         }
         if n == n_steps {
             break state_counts(&rows, &step);
         }
+        // The checkpoint after this step holds the state at t_{n+1} (before solving n + 1).
+        let next = n + 1;
+        let stop = opts.stop_after == Some(n);
+        let checkpoint_due = scene.checkpoint
+            && (stop || next == n_steps || scene.checkpoint_every.is_some_and(|e| next % e == 0));
+        let flags = if checkpoint_due {
+            state_flags(&rows, &step)
+        } else {
+            Vec::new()
+        };
         tl.advance();
+        if checkpoint_due {
+            writer.write(&tl, &log, &flags)?;
+        }
         bar.inc(1);
+        if stop {
+            bar.finish_and_clear();
+            let checkpoint = if scene.checkpoint {
+                writer.path()
+            } else {
+                PathBuf::new()
+            };
+            writer.finish()?;
+            return Ok(Outcome::Stopped {
+                step: n,
+                time: n as f64 * tl.history.k,
+                checkpoint,
+            });
+        }
     };
     bar.finish_and_clear();
+    // The last checkpoint reaches the disk before the run reports success.
+    writer.finish()?;
     let steps_s = steps_start.elapsed().as_secs_f64();
+    if let Some(from) = resumed_from {
+        remove_stale_frames(&series, from);
+    }
     // u_N = u_0 + kΣ_{j<N} w_j is the history's u at n = N (w_N is not added).
     let u_n = &tl.history.u;
     let (l2, semi) = disc.norms(u_n);
+    let RunLog {
+        iterations: per_step,
+        max_violation,
+        max_kkt_residual,
+    } = log;
     let summary = Summary {
         name: scene.name.clone(),
         scene: scene.path.display().to_string(),
@@ -161,7 +336,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Summary> {
         elements: mesh.triangles.len(),
         dofs: disc.n_free,
         steps: n_steps,
-        step_size: scene.k(),
+        step_size: tl.history.k,
         end_time: scene.end,
         effects: tl.effects.names().iter().map(|s| s.to_string()).collect(),
         solver: tl.solver.name().to_string(),
@@ -186,7 +361,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Summary> {
             friction_nodes: rows.len() - rows.n_contact,
             active_at_end,
             stick_at_end,
-            max_kkt_residual: max_kkt,
+            max_kkt_residual,
         },
         iterations: Iterations {
             total: per_step.iter().sum(),
@@ -199,7 +374,27 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Summary> {
         },
     };
     write_atomic(&out.join("summary.json"), summary_json(&summary).as_bytes())?;
-    Ok(summary)
+    Ok(Outcome::Finished(Box::new(summary)))
+}
+
+/// After a resume: frames of steps ≥ `from` left by the interrupted run that the finished
+/// series does not list (a run extended past its old end no longer has a frame at the old
+/// end, or one at a step beyond the new end) are removed, so the directory holds what an
+/// uninterrupted run would have written.
+fn remove_stale_frames(series: &Series, from: usize) {
+    let Ok(entries) = std::fs::read_dir(series.dir()) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let step = name
+            .strip_prefix("solution_")
+            .and_then(|r| r.strip_suffix(".vtu"))
+            .and_then(|r| r.parse::<usize>().ok());
+        if step.is_some_and(|s| s >= from) && !series.files().iter().any(|(_, f)| *f == name) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
 }
 
 fn progress_bar(enabled: bool, len: u64) -> indicatif::ProgressBar {

@@ -19,6 +19,7 @@
 //! by vtkio's writer, which is too slow and cannot reuse the geometry (details in `vtu.rs`).
 
 mod pvd;
+pub mod read;
 mod vtu;
 
 use std::io::Write;

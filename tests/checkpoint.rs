@@ -1,0 +1,706 @@
+//! Checkpoint and restart (issue 4): restarts are bit for bit (stopped, extended, killed with
+//! SIGKILL), runs are deterministic, h5py reads the documented layout, resume refuses broken
+//! and mismatched checkpoints (exit status 2, a message saying what differs, the file left
+//! alone), and the displacement sum does not drift over 10^5 steps.
+
+mod common;
+
+use hdf5_metno as hdf5;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use viscontact::run::{resume, run, Outcome, ResumeOptions, RunOptions};
+
+const BIN: &str = env!("CARGO_BIN_EXE_viscontact");
+
+/// examples/paper.toml (contact on Γ3,1, friction on Γ3,2, Prony memory) with its mesh
+/// path made absolute, written into `dir`; `expr` switches the kernel to the same function
+/// as an expression (the direct-sum path).
+fn paper_scene(dir: &Path, name: &str, mesh: &str, expr: bool) -> PathBuf {
+    let text = std::fs::read_to_string(common::repo().join("examples/paper.toml")).unwrap();
+    let text = text.replace(
+        "file = \"../meshes/paper/rect_032.msh\"",
+        &format!("file = {:?}", common::mesh_path(mesh)),
+    );
+    let text = if expr {
+        text.replace("prony = [[1.0, 10.0]]", "expr = \"exp(-10*s)\"")
+    } else {
+        text
+    };
+    assert!(text.contains(&common::mesh_path(mesh)));
+    common::write(dir, name, &text)
+}
+
+fn opts(out: &Path, set: &[&str], stop_after: Option<usize>) -> RunOptions {
+    RunOptions {
+        out: Some(out.to_path_buf()),
+        overrides: set.iter().map(|s| s.to_string()).collect(),
+        progress: false,
+        stop_after,
+    }
+}
+
+fn finished(o: Outcome) -> viscontact::run::Summary {
+    match o {
+        Outcome::Finished(s) => *s,
+        Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
+    }
+}
+
+/// summary.json without what legitimately differs between two runs: wall times and the
+/// output directory.
+fn summary_values(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v.as_object_mut().unwrap().remove("timing");
+    v["output"].as_object_mut().unwrap().remove("directory");
+    v
+}
+
+/// Every file of `dir` that a run's series consists of, by name.
+fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            n.ends_with(".vtu") || n.ends_with(".pvd")
+        })
+        .map(|e| {
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                std::fs::read(e.path()).unwrap(),
+            )
+        })
+        .collect()
+}
+
+fn assert_same_series(a: &Path, b: &Path, what: &str) {
+    let (fa, fb) = (frames(a), frames(b));
+    assert_eq!(
+        fa.keys().collect::<Vec<_>>(),
+        fb.keys().collect::<Vec<_>>(),
+        "{what}: the series differ in their files"
+    );
+    for (name, bytes) in &fa {
+        assert!(bytes == &fb[name], "{what}: {name} differs");
+    }
+    assert_eq!(
+        summary_values(a),
+        summary_values(b),
+        "{what}: summary.json differs"
+    );
+}
+
+/// Stop at N/2 and resume = the run that never stopped, for a Prony and a general kernel,
+/// with contact and friction active.
+#[test]
+fn stopped_and_resumed_equals_uninterrupted() {
+    let tmp = tempfile::tempdir().unwrap();
+    for expr in [false, true] {
+        let what = if expr {
+            "general kernel"
+        } else {
+            "Prony kernel"
+        };
+        let scene = paper_scene(
+            tmp.path(),
+            &format!("s{expr}.toml"),
+            "paper/rect_008.msh",
+            expr,
+        );
+        let set = ["time.steps=16", "checkpoint.every=3"];
+        let full = tmp.path().join(format!("full{expr}"));
+        let part = tmp.path().join(format!("part{expr}"));
+        let s = finished(run(&scene, &opts(&full, &set, None)).unwrap());
+        assert!(s.effects.iter().any(|e| e == "contact"), "{:?}", s.effects);
+        assert!(s.effects.iter().any(|e| e == "friction"), "{:?}", s.effects);
+        assert!(
+            s.iterations.total > 0,
+            "the contact solver must do some work"
+        );
+        assert!(s.contact.active_at_end > 0 || s.contact.stick_at_end > 0);
+        match run(&scene, &opts(&part, &set, Some(7))).unwrap() {
+            Outcome::Stopped {
+                step,
+                time,
+                checkpoint,
+            } => {
+                assert_eq!((step, time), (7, 7.0 / 16.0));
+                assert_eq!(checkpoint, part.join("checkpoint.h5"));
+            }
+            Outcome::Finished(_) => panic!("--stop-after 7 did not stop"),
+        }
+        assert!(!part.join("summary.json").exists());
+        assert!(part.join("solution_000007.vtu").exists());
+        assert!(!part.join("solution_000008.vtu").exists());
+        assert_eq!(part.join("checkpoint_history.h5").exists(), expr);
+        let r = finished(
+            resume(
+                &part.join("checkpoint.h5"),
+                &ResumeOptions {
+                    progress: false,
+                    ..Default::default()
+                },
+            )
+            .unwrap(),
+        );
+        assert_eq!(r.steps, 16);
+        assert_same_series(&full, &part, what);
+    }
+}
+
+/// A run to T/2 resumed with --set time.end=T keeps k and equals the run to T; and a finished
+/// run can be extended again, its history file growing by a copy, once.
+#[test]
+fn extending_past_the_end_equals_the_longer_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    for expr in [false, true] {
+        let what = if expr {
+            "general kernel"
+        } else {
+            "Prony kernel"
+        };
+        let scene = paper_scene(
+            tmp.path(),
+            &format!("s{expr}.toml"),
+            "paper/rect_008.msh",
+            expr,
+        );
+        let long = tmp.path().join(format!("long{expr}"));
+        let short = tmp.path().join(format!("short{expr}"));
+        finished(
+            run(
+                &scene,
+                &opts(&long, &["time.end=1.5", "time.steps=24"], None),
+            )
+            .unwrap(),
+        );
+        let s = finished(
+            run(
+                &scene,
+                &opts(
+                    &short,
+                    &["time.end=0.5", "time.steps=8", "output.every=1"],
+                    None,
+                ),
+            )
+            .unwrap(),
+        );
+        assert_eq!(s.steps, 8);
+        let cp = short.join("checkpoint.h5");
+        for end in ["1.0", "1.5"] {
+            let r = finished(
+                resume(
+                    &cp,
+                    &ResumeOptions {
+                        overrides: vec![format!("time.end={end}")],
+                        ..Default::default()
+                    },
+                )
+                .unwrap(),
+            );
+            assert_eq!(r.step_size, 1.0 / 16.0);
+        }
+        assert_same_series(&long, &short, what);
+    }
+}
+
+/// The same scene run twice writes identical bytes (series and summary values).
+#[test]
+fn runs_are_deterministic() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_016.msh", false);
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    for d in [&a, &b] {
+        finished(run(&scene, &opts(d, &["time.steps=16"], None)).unwrap());
+    }
+    assert_same_series(&a, &b, "two runs of one scene");
+}
+
+fn viscontact(args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(common::repo())
+        .output()
+        .unwrap()
+}
+
+/// Kill a run with SIGKILL while it checkpoints every step, resume it, compare with the run
+/// that was not killed.
+#[test]
+fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
+    let tmp = tempfile::tempdir().unwrap();
+    let seed = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos() as usize;
+    for (i, expr) in [false, true].into_iter().enumerate() {
+        let what = if expr {
+            "general kernel"
+        } else {
+            "Prony kernel"
+        };
+        let scene = paper_scene(
+            tmp.path(),
+            &format!("s{expr}.toml"),
+            "paper/rect_016.msh",
+            expr,
+        );
+        let scene = scene.to_str().unwrap();
+        let set = [
+            "--set",
+            "time.steps=1000",
+            "--set",
+            "output.every=10",
+            "--set",
+            "checkpoint.every=1",
+            "--quiet",
+        ];
+        let full = tmp.path().join(format!("full{expr}"));
+        let killed = tmp.path().join(format!("killed{expr}"));
+        let mut args = vec!["run", scene, "--out", full.to_str().unwrap()];
+        args.extend(set);
+        let out = viscontact(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+
+        // Kill somewhere after the frame of step 200..790 appeared (varies from run to run).
+        let at = 10 * (20 + (seed / (i + 1)) % 60);
+        let mut child = Command::new(BIN)
+            .args(["run", scene, "--out", killed.to_str().unwrap()])
+            .args(set)
+            .current_dir(common::repo())
+            .spawn()
+            .unwrap();
+        let frame = killed.join(format!("solution_{at:06}.vtu"));
+        let start = std::time::Instant::now();
+        while !frame.exists() {
+            assert!(
+                start.elapsed().as_secs() < 120,
+                "{what}: frame {at} never appeared"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+        assert!(
+            !killed.join("summary.json").exists(),
+            "{what}: the run finished before it was killed; make it longer"
+        );
+        let cp = killed.join("checkpoint.h5");
+        let out = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+        assert!(
+            out.status.success(),
+            "{what}: resume after SIGKILL at frame {at} failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_same_series(&full, &killed, what);
+        assert!(!killed.join("checkpoint.h5.tmp").exists());
+    }
+}
+
+/// With a general kernel the history file is appended to in place (never rewritten or
+/// replaced) when a run is resumed in its own directory within its length.
+#[test]
+fn history_file_is_appended_in_place() {
+    use std::os::unix::fs::MetadataExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", true);
+    let out = tmp.path().join("o");
+    run(
+        &scene,
+        &opts(&out, &["time.steps=16", "checkpoint.every=2"], Some(5)),
+    )
+    .unwrap();
+    let hist = out.join("checkpoint_history.h5");
+    let before = std::fs::metadata(&hist).unwrap();
+    finished(resume(&out.join("checkpoint.h5"), &ResumeOptions::default()).unwrap());
+    let after = std::fs::metadata(&hist).unwrap();
+    assert_eq!(before.ino(), after.ino(), "the history file was replaced");
+    assert_eq!(
+        before.len(),
+        after.len(),
+        "the history file's rows are preallocated: appends do not grow it"
+    );
+    let f = hdf5::File::open(out.join("checkpoint.h5")).unwrap();
+    let mem = f.group("memory").unwrap();
+    let rows: u64 = mem.dataset("history_rows").unwrap().read_scalar().unwrap();
+    assert_eq!(rows, 16);
+    let ds = f.dataset("memory/past_displacements").unwrap();
+    assert!(ds.is_chunked() && ds.is_resizable());
+    assert_eq!(ds.shape()[0], 16);
+}
+
+// ---- h5py ------------------------------------------------------------------------------
+
+const H5PY_CHECK: &str = r#"
+import sys, h5py, numpy as np
+path, kind = sys.argv[1], sys.argv[2]
+f = h5py.File(path, "r")
+assert f.attrs["format"] == "viscontact checkpoint", f.attrs["format"]
+assert int(f.attrs["format_version"]) == 1
+for a in ("writer", "description", "run_id"):
+    assert a in f.attrs, a
+expected = ["step", "time", "step_size", "state/u", "state/u_sum", "state/u_comp", "state/w",
+            "state/z", "state/active", "state/row_node", "run/iterations", "run/max_violation",
+            "run/max_kkt_residual", "scene/text", "mesh/fingerprint", "mesh/groups_fingerprint",
+            "mesh/dof_of"]
+if kind == "prony":
+    expected += ["memory/prony_a", "memory/prony_b", "memory/prony_decay", "memory/prony_state"]
+else:
+    expected += ["memory/past_displacements", "memory/history_rows", "memory/history_hash"]
+for name in expected:
+    ds = f[name]
+    assert isinstance(ds, h5py.Dataset), name
+    assert ds.attrs["description"], name
+    assert "units" in ds.attrs, name
+n, t, k = int(f["step"][()]), float(f["time"][()]), float(f["step_size"][()])
+assert n == 8 and t == n * k and k == 1 / 16, (n, t, k)
+u, s, c = f["state/u"][:], f["state/u_sum"][:], f["state/u_comp"][:]
+assert u.shape == s.shape == c.shape and np.array_equal(u, s + c)
+it = f["run/iterations"][:]
+assert it.shape == (17,) and (it[:n] >= 0).all() and (it[n:] == -1).all(), it
+assert f["state/z"].shape == f["state/active"].shape == f["state/row_node"].shape
+assert "viscosity" in f["scene/text"][()].decode()
+assert f["mesh/dof_of"].shape == (int(f["mesh"].attrs["nodes"]), 2)
+assert f["mesh/dof_of"][:].max() + 1 == u.shape[0]
+assert f["memory"].attrs["kind"] == kind
+assert "material.viscosity.theta" in f["physics"].attrs
+if kind == "prony":
+    assert f["memory/prony_state"].shape == (1, u.shape[0])
+    assert np.allclose(f["memory/prony_b"][:], [10.0])
+    assert np.isclose(f["memory/prony_decay"][0], np.exp(-10.0 / 16), rtol=1e-15, atol=0)
+else:
+    rows = int(f["memory/history_rows"][()])
+    assert f["memory/history_hash"].dtype == np.uint64
+    h = f["memory/past_displacements"]
+    assert rows == n and h.shape[0] >= rows and h.shape[1] == u.shape[0], (rows, h.shape)
+    assert h.chunks == (1, u.shape[0]) and h.maxshape == (None, u.shape[0])
+    assert not h[0].any(), "u_0 = 0"
+    w = f["state/w"][:]
+    assert np.allclose(h[rows - 1] + k * w, u, rtol=0, atol=1e-12 * abs(u).max())
+print("ok")
+"#;
+
+#[test]
+fn h5py_reads_the_documented_layout() {
+    let probe = Command::new("python3").args(["-c", "import h5py"]).output();
+    if !probe.map(|o| o.status.success()).unwrap_or(false) {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "python3 with h5py is required in CI"
+        );
+        eprintln!("SKIPPED h5py_reads_the_documented_layout: python3 with h5py is not installed");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    for (expr, kind) in [(false, "prony"), (true, "direct")] {
+        let scene = paper_scene(
+            tmp.path(),
+            &format!("s{expr}.toml"),
+            "paper/rect_008.msh",
+            expr,
+        );
+        let out = tmp.path().join(kind);
+        // Checkpoints at steps 1..8: all but the first are written by patching the first.
+        run(
+            &scene,
+            &opts(&out, &["time.steps=16", "checkpoint.every=1"], Some(7)),
+        )
+        .unwrap();
+        let py = Command::new("python3")
+            .args(["-c", H5PY_CHECK])
+            .arg(out.join("checkpoint.h5"))
+            .arg(kind)
+            .output()
+            .unwrap();
+        assert!(
+            py.status.success() && String::from_utf8_lossy(&py.stdout).contains("ok"),
+            "h5py check of the {kind} checkpoint failed:\n{}{}",
+            String::from_utf8_lossy(&py.stdout),
+            String::from_utf8_lossy(&py.stderr)
+        );
+    }
+}
+
+// ---- refusals ----------------------------------------------------------------------------
+
+/// `viscontact resume ARGS` must exit 2 with every `needles` in its message, and leave the
+/// checkpoint as it was.
+fn refused(case: &str, checkpoint: &Path, extra: &[&str], needles: &[&str]) {
+    let before = std::fs::read(checkpoint).ok();
+    let mut args = vec!["resume", checkpoint.to_str().unwrap(), "--quiet"];
+    args.extend(extra);
+    let out = viscontact(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "[{case}] {stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "[{case}] message lacks {n:?}: {stderr}");
+    }
+    assert_eq!(
+        std::fs::read(checkpoint).ok(),
+        before,
+        "[{case}] resume changed the file"
+    );
+}
+
+/// A stopped run in `dir/name`: scene `s.toml` beside a private copy of the mesh, so that
+/// the mesh can be changed afterwards.
+fn stopped_run(dir: &Path, name: &str, expr: bool) -> PathBuf {
+    let mesh = dir.join(format!("{name}.msh"));
+    std::fs::copy(common::mesh_path("paper/rect_008.msh"), &mesh).unwrap();
+    let scene = paper_scene(dir, &format!("{name}.toml"), "paper/rect_008.msh", expr);
+    let text = std::fs::read_to_string(&scene).unwrap().replace(
+        &common::mesh_path("paper/rect_008.msh"),
+        &format!("{name}.msh"),
+    );
+    std::fs::write(&scene, text).unwrap();
+    let out = dir.join(name);
+    run(&scene, &opts(&out, &["time.steps=16"], Some(7))).unwrap();
+    out.join("checkpoint.h5")
+}
+
+/// Rewrites one scalar string dataset or attribute of a copy of `cp`.
+fn tampered(cp: &Path, name: &str, edit: impl FnOnce(&hdf5::File)) -> PathBuf {
+    let copy = cp.with_file_name(name);
+    std::fs::copy(cp, &copy).unwrap();
+    let f = hdf5::File::open_rw(&copy).unwrap();
+    edit(&f);
+    f.close().unwrap();
+    copy
+}
+
+fn set_scene_text(f: &hdf5::File, from: &str, to: &str) {
+    use std::str::FromStr;
+    let ds = f.dataset("scene/text").unwrap();
+    let text: hdf5::types::VarLenUnicode = ds.read_scalar().unwrap();
+    assert!(text.as_str().contains(from), "{from:?} not in the scene");
+    let new = text.as_str().replacen(from, to, 1);
+    ds.write_scalar(&hdf5::types::VarLenUnicode::from_str(&new).unwrap())
+        .unwrap();
+}
+
+#[test]
+fn resume_refuses_broken_and_mismatched_checkpoints() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let cp = stopped_run(dir, "a", false);
+
+    // Not HDF5, truncated, missing, not a checkpoint, newer format.
+    let text = common::write(dir, "a/text.h5", "name = \"not hdf5\"\n");
+    refused("not HDF5", &text, &[], &["text.h5", "not an HDF5 file"]);
+    let bytes = std::fs::read(&cp).unwrap();
+    let cut = dir.join("a/cut.h5");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    refused("truncated", &cut, &[], &["cut.h5", "truncated or damaged"]);
+    let out = viscontact(&["resume", dir.join("a/none.h5").to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("none.h5"));
+    let foreign = dir.join("a/foreign.h5");
+    {
+        let f = hdf5::File::create(&foreign).unwrap();
+        f.new_dataset::<f64>().shape(3).create("x").unwrap();
+    }
+    refused(
+        "foreign HDF5",
+        &foreign,
+        &[],
+        &["foreign.h5", "not a viscontact checkpoint"],
+    );
+    let newer = tampered(&cp, "newer.h5", |f| {
+        f.attr("format_version")
+            .unwrap()
+            .write_scalar(&99u32)
+            .unwrap()
+    });
+    refused(
+        "newer format",
+        &newer,
+        &[],
+        &["newer.h5", "version 99", "newer"],
+    );
+
+    // Physics that differ from the run's (the stored scene edited): material, kernel,
+    // boundary groups, step size.
+    let cases = [
+        ("theta = 0.1", "theta = 0.2", "material.viscosity.theta"),
+        (
+            "prony = [[1.0, 10.0]]",
+            "prony = [[1.0, 11.0]]",
+            "material.relaxation.prony",
+        ),
+        (
+            "contact = \"Γ3,1\"",
+            "contact = \"Γ3,2\"",
+            "mesh.groups.contact",
+        ),
+        ("steps = 16", "steps = 20", "step size"),
+    ];
+    for (i, (from, to, needle)) in cases.into_iter().enumerate() {
+        let bad = tampered(&cp, &format!("physics{i}.h5"), |f| {
+            set_scene_text(f, from, to)
+        });
+        refused(needle, &bad, &[], &[&format!("physics{i}.h5"), needle]);
+    }
+
+    // Overrides a resume does not take, and an end time off the step grid.
+    refused(
+        "--set physics",
+        &cp,
+        &["--set", "material.viscosity.theta=0.3"],
+        &["material.viscosity.theta", "viscontact run"],
+    );
+    refused(
+        "--set time.steps",
+        &cp,
+        &["--set", "time.steps=32"],
+        &["time.steps"],
+    );
+    refused(
+        "T2/k not whole",
+        &cp,
+        &["--set", "time.end=1.01"],
+        &["time.end", "whole number", "0.0625"],
+    );
+    refused(
+        "T2 before the checkpoint",
+        &cp,
+        &["--set", "time.end=0.25"],
+        &["time.end", "before"],
+    );
+
+    // The mesh file changed since the run: other coordinates, then other groups.
+    let mesh = dir.join("a.msh");
+    let good = std::fs::read(&mesh).unwrap();
+    std::fs::copy(common::repo().join("tests/data/rect_004.msh"), &mesh).unwrap();
+    refused(
+        "other mesh",
+        &cp,
+        &[],
+        &["a.msh", "not the one the run used"],
+    );
+    std::fs::write(&mesh, &good).unwrap();
+
+    // A general kernel whose history file belongs to another run.
+    let cp_b = stopped_run(dir, "b", true);
+    let cp_c = stopped_run(dir, "c", true);
+    std::fs::copy(
+        cp_c.with_file_name("checkpoint_history.h5"),
+        cp_b.with_file_name("checkpoint_history.h5"),
+    )
+    .unwrap();
+    refused(
+        "foreign history",
+        &cp_b,
+        &[],
+        &["checkpoint_history.h5", "another run"],
+    );
+
+    // After all this the good checkpoint still resumes.
+    let out = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn checkpoint_section_is_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let out = tmp.path().join("off");
+    finished(
+        run(
+            &scene,
+            &opts(&out, &["time.steps=4", "checkpoint.enabled=false"], None),
+        )
+        .unwrap(),
+    );
+    assert!(!out.join("checkpoint.h5").exists());
+    let out = tmp.path().join("default");
+    finished(run(&scene, &opts(&out, &["time.steps=4"], None)).unwrap());
+    assert!(out.join("checkpoint.h5").exists(), "the final checkpoint");
+    for (set, needle) in [
+        ("checkpoint.every=0", "checkpoint.every"),
+        ("checkpoint.often=2", "often"),
+    ] {
+        let err = run(&scene, &opts(&tmp.path().join("x"), &[set], None)).unwrap_err();
+        assert_eq!(err.exit_code(), 2);
+        assert!(err.to_string().contains(needle), "{err}");
+    }
+}
+
+// ---- long-run numerics -------------------------------------------------------------------
+
+/// Issue 4: constant velocity (B = 0, no memory, constant load, no contact): u_N = T·w must
+/// hold to a few ulps after N = 10^5 steps with the compensated sum of the time loop, where
+/// plain summation drifts visibly.
+#[test]
+fn displacement_sum_does_not_drift_over_1e5_steps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = common::write(
+        tmp.path(),
+        "drift.toml",
+        &format!(
+            "[mesh]\nfile = {:?}\n[time]\nend = 1.0\nsteps = 100000\n\
+             [material.viscosity]\ntheta = 0.1\nzeta = 0.1\n\
+             [[load.traction]]\non = \"top\"\nvalue = [\"0.01\", \"-0.1\"]\n\
+             [checkpoint]\nenabled = false\n",
+            common::repo()
+                .join("tests/data/rect_004.msh")
+                .display()
+                .to_string()
+        ),
+    );
+    let (scene, _mesh, disc) = common::load(&scene, &[]);
+    let mut tl = viscontact::time_loop::TimeLoop::new(&scene, &disc).unwrap();
+    assert_eq!(tl.effects.names(), ["viscosity", "tractions"]);
+    let k = scene.k();
+    let mut plain = vec![0.0; disc.n_free];
+    let mut w0 = None;
+    loop {
+        let n = tl.n();
+        let step = tl.solve_step().unwrap();
+        let w = step.w.to_vec();
+        match &w0 {
+            None => w0 = Some(w.clone()),
+            Some(w0) => assert!(w == *w0, "the velocity is constant"),
+        }
+        if n == scene.steps {
+            break;
+        }
+        for (p, wi) in plain.iter_mut().zip(&w) {
+            *p += k * wi;
+        }
+        tl.advance();
+    }
+    let w = w0.unwrap();
+    let scale = common::max_abs(&w) * scene.end;
+    let (mut compensated, mut naive) = (0.0f64, 0.0f64);
+    for ((u, p), wi) in tl.history.u.iter().zip(&plain).zip(&w) {
+        let exact = scene.end * wi;
+        compensated = compensated.max((u - exact).abs() / scale);
+        naive = naive.max((p - exact).abs() / scale);
+    }
+    let ulp = f64::EPSILON;
+    assert!(
+        compensated <= 4.0 * ulp,
+        "compensated u_N is {:.1} ulps from T·w",
+        compensated / ulp
+    );
+    assert!(
+        naive > 100.0 * ulp,
+        "plain summation should drift visibly: only {:.1} ulps",
+        naive / ulp
+    );
+    eprintln!(
+        "after 10^5 steps: compensated {:.2} ulps, plain {:.0} ulps from T·w",
+        compensated / ulp,
+        naive / ulp
+    );
+}
