@@ -570,8 +570,8 @@ fn missing_file_is_refused() {
         &path,
         &[
             "cannot read mesh file",
+            "no_such_mesh.msh",
             "No such file or directory",
-            "mesh.file",
         ],
     );
 }

@@ -241,3 +241,21 @@ fn lifting_load_leaves_contact_inactive_and_pressing_load_activates_every_node()
         "every Γ3,1 node is pressed: {last:?}"
     );
 }
+
+#[test]
+fn load_that_becomes_infinite_during_the_run_stops_it_with_the_place() {
+    let rect = format!("mesh.file={}", mesh_path("paper/rect_008.msh"));
+    let bad = "load.traction=[{on = \"top\", value = [\"0\", \"-0.01/(t - 0.5)\"]}]";
+    let (s, _m, d) = load(&paper(), &[&rect, "time.steps=8", bad]);
+    let mut tl = TimeLoop::new(&s, &d).unwrap();
+    let err = loop {
+        match tl.solve_step() {
+            Ok(_) => tl.advance(),
+            Err(e) => break e,
+        }
+    };
+    assert!(matches!(err, Error::Solve(_)), "{err}");
+    let msg = err.to_string();
+    assert!(msg.contains("t = 0.5") && msg.contains("load.traction[0].value[1]"), "{msg}");
+    assert_eq!(tl.n(), 4);
+}

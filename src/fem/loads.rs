@@ -3,7 +3,7 @@
 //! Gauss per edge (exact for a quadratic traction times P1, e.g. the paper's x(2−x));
 //! body forces the edge-midpoint rule (exact for a linear force times P1).
 
-use super::{check_data, Triangle};
+use super::Triangle;
 use crate::expr::{Point, Scalar};
 use crate::mesh::Mesh;
 use crate::scene::Scene;
@@ -158,7 +158,15 @@ impl Loads {
                 for (c, v) in value.iter().enumerate() {
                     let val = v.eval(&pt);
                     if !val.is_finite() {
-                        check_data(val, &format!("{key}[{c}] at t = {t}"), scene, q.p, false)?;
+                        // The scene was valid; the data went bad during the run: a failed
+                        // run (exit 1), the last checkpoint stays as it was.
+                        return Err(Error::solve(format!(
+                            "{}: key '{key}[{c}]' evaluates to {val} at (x, y) = ({}, {}) at \
+                             t = {t}; the run stops here (the last checkpoint is kept)",
+                            scene.path.display(),
+                            q.p[0],
+                            q.p[1]
+                        )));
                     }
                     for (n, ph) in q.nodes.iter().zip(q.phi) {
                         if let Some(d) = free[2 * n + c] {
