@@ -65,6 +65,31 @@ impl Effects {
     }
 }
 
+/// Things a user should know about a scene that runs: nearly incompressible plane strain
+/// (P1 triangles lock) and a contact boundary that is not straight at a node (the nodal
+/// normal there is an average of the facet normals).
+pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
+    let mut w = Vec::new();
+    if let (crate::scene::Model::PlaneStrain, Some((_, nu))) = (scene.model, scene.elasticity) {
+        if nu > 0.45 {
+            w.push(format!(
+                "plane strain with Poisson ratio {nu}: P1 triangles lock for nearly \
+                 incompressible materials, so displacements come out too small; use a \
+                 smaller ν or plane stress"
+            ));
+        }
+    }
+    if disc.contact_kink_deg > 1.0 {
+        w.push(format!(
+            "the contact boundary bends by up to {:.2}° at a node; the nodal normal there \
+             averages the facet normals, so n·w ≤ 0 is only approximately the contact of \
+             each facet",
+            disc.contact_kink_deg
+        ));
+    }
+    w
+}
+
 /// Picks and builds the step solver (Remark 2.5): `Linear` without constraint rows,
 /// otherwise the scene's choice of the fast dual method or clarabel. `matrix` is the step
 /// matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor` holds.

@@ -35,6 +35,10 @@ enum Command {
         /// t_{N+1}; `viscontact resume DIR/checkpoint.h5` continues the run.
         #[arg(long, value_name = "N")]
         stop_after: Option<usize>,
+        /// Write into an output directory that also holds files viscontact did not write
+        /// (they are left alone).
+        #[arg(long)]
+        force: bool,
     },
     /// Continue a run from its checkpoint: same results as if it had never stopped.
     Resume {
@@ -98,6 +102,7 @@ fn main() -> ExitCode {
             set,
             quiet,
             stop_after,
+            force,
         } => run(
             &scene,
             &RunOptions {
@@ -105,6 +110,7 @@ fn main() -> ExitCode {
                 overrides: set,
                 progress: !quiet,
                 stop_after,
+                force,
             },
         )
         .map(report),
@@ -166,10 +172,15 @@ fn main() -> ExitCode {
 
 fn report(outcome: Outcome) {
     match outcome {
-        Outcome::Finished(s) => println!(
-            "{}: {} steps, {} dofs, {:.2} s; ‖u_N‖_H1 = {:.6e}; wrote {}",
-            s.name, s.steps, s.dofs, s.timing.total_s, s.final_.u_h1, s.output.directory
-        ),
+        Outcome::Finished(s) => {
+            for w in &s.warnings {
+                eprintln!("warning: {w}");
+            }
+            println!(
+                "{}: {} steps, {} dofs, {:.2} s; ‖u_N‖_H1 = {:.6e}; wrote {}",
+                s.name, s.steps, s.dofs, s.timing.total_s, s.final_.u_h1, s.output.directory
+            )
+        }
         Outcome::Stopped {
             step,
             time,
@@ -238,11 +249,8 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         "memory     history state ≈ {:.1} MB",
         history_bytes as f64 / 1e6
     );
-    if disc.contact_kink_deg > 1.0 {
-        println!(
-            "warning    the contact boundary bends by up to {:.1}° at a node; nodal normals average the facets there",
-            disc.contact_kink_deg
-        );
+    for w in viscontact::effects::warnings(&scene, &disc) {
+        println!("warning    {w}");
     }
     Ok(())
 }

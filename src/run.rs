@@ -33,6 +33,8 @@ pub struct Summary {
     pub contact: ContactSummary,
     pub iterations: Iterations,
     pub output: OutputSummary,
+    /// See `effects::warnings`.
+    pub warnings: Vec<String>,
 }
 
 #[derive(Serialize, Debug, Clone)]
@@ -101,6 +103,49 @@ pub struct RunOptions {
     /// Stop once step S is solved and written: write the checkpoint of step S + 1 (the state
     /// at t_{S+1}) and return [`Outcome::Stopped`]; `viscontact resume` continues from there.
     pub stop_after: Option<usize>,
+    /// Write into a directory that holds files viscontact did not write (never touching them).
+    pub force: bool,
+}
+
+/// The files a run writes into its directory; anything else there is the user's.
+fn ours(name: &str) -> bool {
+    let name = name.strip_suffix(".tmp").unwrap_or(name);
+    let frame = name
+        .strip_prefix("solution_")
+        .and_then(|r| r.strip_suffix(".vtu"))
+        .is_some_and(|d| d.len() == 6 && d.bytes().all(|b| b.is_ascii_digit()));
+    frame
+        || matches!(
+            name,
+            "solution.pvd" | "summary.json" | "checkpoint.h5" | "checkpoint_history.h5"
+        )
+}
+
+/// Refuses an output directory holding files viscontact did not write, unless `force`.
+fn check_out_dir(out: &Path, force: bool) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return Ok(()); // does not exist yet
+    };
+    let foreign: Vec<String> = entries
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| !ours(n))
+        .collect();
+    if foreign.is_empty() || force {
+        return Ok(());
+    }
+    Err(Error::input(format!(
+        "output directory '{}' holds files viscontact did not write ({}{}); choose another \
+         --out, or pass --force to write beside them (they are never touched)",
+        out.display(),
+        foreign
+            .iter()
+            .take(3)
+            .map(|n| format!("'{n}'"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        if foreign.len() > 3 { ", …" } else { "" }
+    )))
 }
 
 /// How a run ended.
@@ -146,6 +191,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     let (scene, mesh, disc) = setup(scene_path, &opts.overrides)?;
     let out = opts.out.clone().unwrap_or_else(|| default_out(&scene));
+    check_out_dir(&out, opts.force)?;
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let tl = TimeLoop::new(&scene, &disc)?;
     let cells: Vec<usize> = mesh.triangles.iter().flatten().copied().collect();
@@ -214,6 +260,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         overrides: Vec::new(),
         progress: opts.progress,
         stop_after: opts.stop_after,
+        force: false,
     };
     drive(Drive {
         scene: &scene,
@@ -317,9 +364,8 @@ fn drive(d: Drive) -> Result<Outcome> {
     // The last checkpoint reaches the disk before the run reports success.
     writer.finish()?;
     let steps_s = steps_start.elapsed().as_secs_f64();
-    if let Some(from) = resumed_from {
-        remove_stale_frames(&series, from);
-    }
+    // Frames an earlier (or the interrupted) run left that this series does not list.
+    remove_stale_frames(&series, resumed_from.unwrap_or(0));
     // u_N = u_0 + kΣ_{j<N} w_j is the history's u at n = N (w_N is not added).
     let u_n = &tl.history.u;
     let (l2, semi) = disc.norms(u_n);
@@ -372,6 +418,7 @@ fn drive(d: Drive) -> Result<Outcome> {
             directory: out.display().to_string(),
             files: series.files().len(),
         },
+        warnings: crate::effects::warnings(scene, disc),
     };
     write_atomic(&out.join("summary.json"), summary_json(&summary).as_bytes())?;
     Ok(Outcome::Finished(Box::new(summary)))

@@ -37,6 +37,7 @@ fn opts(out: &Path, set: &[&str], stop_after: Option<usize>) -> RunOptions {
         overrides: set.iter().map(|s| s.to_string()).collect(),
         progress: false,
         stop_after,
+        force: false,
     }
 }
 

@@ -722,3 +722,40 @@ fn inverted_triangle_is_reoriented() {
         text(&out.stderr)
     );
 }
+
+#[test]
+fn output_directory_with_foreign_files_is_refused_unless_forced() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let mesh = format!(
+        "mesh.file={}",
+        common::repo().join("meshes/paper/rect_008.msh").display()
+    );
+    let scene = common::repo().join("examples/paper.toml");
+    let run = |force: bool| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_viscontact"));
+        c.arg("run").arg(&scene).arg("--out").arg(&out);
+        c.args(["--set", &mesh, "--set", "time.steps=8"]);
+        if force {
+            c.arg("--force");
+        }
+        c.output().unwrap()
+    };
+    let o = run(false);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("notes.txt") && err.contains("--force"),
+        "{err}"
+    );
+    assert!(!out.join("solution.pvd").exists());
+    let o = run(true);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("solution.pvd").exists());
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+}
