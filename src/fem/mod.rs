@@ -312,21 +312,36 @@ impl Discretization {
 
     /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
-        let (mut l2, mut h1) = (0.0, 0.0);
-        for t in &self.triangles {
-            let lv = self.local(t, v);
-            for c in 0..2 {
-                // ∫ (Σ v_i φ_i)² = |T|/12 (Σ v_i² + (Σ v_i)²).
-                let s: f64 = lv.iter().map(|x| x[c]).sum();
-                let q: f64 = lv.iter().map(|x| x[c] * x[c]).sum();
-                l2 += t.area / 12.0 * (q + s * s);
-                let gx: f64 = (0..3).map(|k| t.grad[k][0] * lv[k][c]).sum();
-                let gy: f64 = (0..3).map(|k| t.grad[k][1] * lv[k][c]).sum();
-                h1 += t.area * (gx * gx + gy * gy);
-            }
-        }
-        (l2.sqrt(), h1.sqrt())
+        p1_norms(&self.triangles, &nodal2(self, v))
     }
+}
+
+/// The 2 in-plane components at every node of a free-dof vector (0 on Γ1).
+pub fn nodal2(disc: &Discretization, v: &[f64]) -> Vec<[f64; 2]> {
+    (0..disc.nodes.len())
+        .map(|i| {
+            let c = |k: usize| disc.free[2 * i + k].map_or(0.0, |d| v[d]);
+            [c(0), c(1)]
+        })
+        .collect()
+}
+
+/// ‖v‖_{L²} and |v|_{H¹} of a P1 vector field given by its nodal values, computed exactly:
+/// per triangle ∫(Σ v_i φ_i)² = |T|/12 (Σ v_i² + (Σ v_i)²) and the constant gradient.
+pub fn p1_norms(triangles: &[Triangle], v: &[[f64; 2]]) -> (f64, f64) {
+    let (mut l2, mut h1) = (0.0, 0.0);
+    for t in triangles {
+        let lv = t.nodes.map(|n| v[n]);
+        for c in 0..2 {
+            let s: f64 = lv.iter().map(|x| x[c]).sum();
+            let q: f64 = lv.iter().map(|x| x[c] * x[c]).sum();
+            l2 += t.area / 12.0 * (q + s * s);
+            let gx: f64 = (0..3).map(|k| t.grad[k][0] * lv[k][c]).sum();
+            let gy: f64 = (0..3).map(|k| t.grad[k][1] * lv[k][c]).sum();
+            h1 += t.area * (gx * gx + gy * gy);
+        }
+    }
+    (l2.sqrt(), h1.sqrt())
 }
 
 /// ∫_g φ_i da for every node (zero off the group).

@@ -239,34 +239,7 @@ impl Transfer {
     }
 }
 
-/// A free-dof vector as 2 components per node (0 on Γ1).
-pub fn nodal2(disc: &Discretization, v: &[f64]) -> Vec<[f64; 2]> {
-    (0..disc.nodes.len())
-        .map(|i| {
-            let c = |k: usize| disc.free[2 * i + k].map_or(0.0, |d| v[d]);
-            [c(0), c(1)]
-        })
-        .collect()
-}
-
-/// ‖v‖_{L²} and |v|_{H¹} of a P1 vector field given by its nodal values, computed exactly
-/// (the same formulas as `Discretization::norms`, on nodal instead of free-dof values).
-pub fn p1_norms(triangles: &[Triangle], v: &[[f64; 2]]) -> (f64, f64) {
-    let (mut l2, mut h1) = (0.0, 0.0);
-    for t in triangles {
-        let lv = t.nodes.map(|n| v[n]);
-        for c in 0..2 {
-            // ∫ (Σ v_i φ_i)² = |T|/12 (Σ v_i² + (Σ v_i)²)
-            let s: f64 = lv.iter().map(|x| x[c]).sum();
-            let q: f64 = lv.iter().map(|x| x[c] * x[c]).sum();
-            l2 += t.area / 12.0 * (q + s * s);
-            let gx: f64 = (0..3).map(|k| t.grad[k][0] * lv[k][c]).sum();
-            let gy: f64 = (0..3).map(|k| t.grad[k][1] * lv[k][c]).sum();
-            h1 += t.area * (gx * gx + gy * gy);
-        }
-    }
-    (l2.sqrt(), h1.sqrt())
-}
+pub use crate::fem::{nodal2, p1_norms};
 
 /// The largest edge of a triangulation (the mesh size h_max).
 pub fn max_edge(nodes: &[[f64; 3]], triangles: &[Triangle]) -> f64 {
