@@ -256,6 +256,9 @@ fn load_that_becomes_infinite_during_the_run_stops_it_with_the_place() {
     };
     assert!(matches!(err, Error::Solve(_)), "{err}");
     let msg = err.to_string();
-    assert!(msg.contains("t = 0.5") && msg.contains("load.traction[0].value[1]"), "{msg}");
+    assert!(
+        msg.contains("t = 0.5") && msg.contains("load.traction[0].value[1]"),
+        "{msg}"
+    );
     assert_eq!(tl.n(), 4);
 }
