@@ -759,3 +759,22 @@ fn output_directory_with_foreign_files_is_refused_unless_forced() {
         "mine"
     );
 }
+
+#[test]
+fn curved_contact_boundary_is_warned_about_with_its_worst_angle() {
+    let scene = common::repo().join("examples/plate_hole.toml");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_viscontact"))
+        .arg("check")
+        .arg(&scene)
+        .args(["--set", "mesh.groups.contact=hole"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("warning") && l.contains("bends by up to"))
+        .unwrap_or_else(|| panic!("no warning in:\n{out}"));
+    // The hole has 104 edges: neighbouring facet normals differ by 360°/104 ≈ 3.5°.
+    assert!(line.contains("3.4") || line.contains("3.5"), "{line}");
+}
