@@ -54,6 +54,17 @@ fn call(name: &str, args: &[f64]) -> Option<f64> {
     })
 }
 
+/// True if `src` calls `print(`: the identifier print, then optional blanks and a '('.
+fn uses_print(src: &str) -> bool {
+    let b = src.as_bytes();
+    let ident = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+    src.match_indices("print").any(|(i, _)| {
+        let before_ok = i == 0 || !ident(b[i - 1]);
+        let rest = src[i + 5..].trim_start();
+        before_ok && rest.starts_with('(')
+    })
+}
+
 /// fasteval's parse errors in words a user can act on.
 fn parse_error(e: &fasteval2::Error) -> String {
     use fasteval2::Error as E;
@@ -85,6 +96,12 @@ impl Expr {
     /// Parses `source`, allowing only the variables in `allowed`. `key` names the scene entry
     /// in error messages (e.g. `load.traction[0].value[1]`).
     pub fn parse(source: &str, allowed: &[&str], key: &str) -> Result<Expr> {
+        // fasteval's print() writes to stderr at every evaluation: not a scene function.
+        if uses_print(source) {
+            return Err(Error::input(format!(
+                "{key}: expression {source:?} calls print(), which is not available in scenes"
+            )));
+        }
         let mut slab = Slab::new();
         let parsed = Parser::new().parse(source, &mut slab.ps).map_err(|e| {
             Error::input(format!(
@@ -226,6 +243,9 @@ mod tests {
         assert!(e.to_string().contains("variable 't'"), "{e}");
         let e = Expr::parse("foo(x)", &["x"], "r").unwrap_err();
         assert!(e.to_string().contains("function 'foo'"), "{e}");
+        let e = Expr::parse("print(\"hi\", x)", &["x"], "r").unwrap_err();
+        assert!(e.to_string().contains("print()"), "{e}");
+        assert!(Expr::parse("printer", &["x"], "r").is_err()); // unknown variable, not print
         let e = Expr::parse("(x + ", &["x"], "r").unwrap_err();
         assert!(e.to_string().contains("cannot parse"), "{e}");
     }

@@ -690,3 +690,25 @@ fn garbage_is_refused_without_panic() {
         refused(&path, &[needle]);
     }
 }
+
+#[test]
+fn empty_boundary_group_is_refused_where_a_condition_needs_it() {
+    // A group named in $PhysicalNames that no curve carries would silently drop its
+    // boundary condition.
+    let text = std::fs::read_to_string(root().join("meshes/paper/rect_008.msh")).unwrap();
+    let text = text.replacen(
+        "$PhysicalNames\n7\n",
+        "$PhysicalNames\n8\n1 9 \"ghost\"\n",
+        1,
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ghost.msh");
+    std::fs::write(&path, text).unwrap();
+    let mesh = Mesh::read(&path).unwrap();
+    let err = mesh.boundary_group("ghost").unwrap_err().to_string();
+    assert!(
+        err.contains("ghost") && err.contains("no boundary edges"),
+        "{err}"
+    );
+    assert!(mesh.boundary_group("Γ3,1").is_ok());
+}

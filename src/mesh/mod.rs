@@ -95,8 +95,20 @@ impl Mesh {
     }
 
     /// Like [`Mesh::group`], but the group must be a boundary (dim-1, curve) group.
+    /// An empty group (named in `$PhysicalNames` but carried by no curve) is refused: a
+    /// boundary condition on it would silently do nothing.
     pub fn boundary_group(&self, key: &str) -> Result<&Group> {
-        self.find_group(key, true)
+        let g = self.find_group(key, true)?;
+        if g.facets.is_empty() {
+            return Err(Error::input(format!(
+                "mesh '{}': physical group '{}' (tag {}) has no boundary edges: no curve of the \
+                 mesh carries it; add the curves to the group in gmsh",
+                self.path.display(),
+                Self::display_name(g),
+                g.tag
+            )));
+        }
+        Ok(g)
     }
 
     /// Outward unit normal of the boundary facet `f = [a, b]` (body on the left of a → b):
@@ -455,7 +467,7 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
             .get(&entity)
             .into_iter()
             .flatten()
-            .filter_map(|p| slot.get(&(entity.0, p.abs())).copied())
+            .filter_map(|p| slot.get(&(entity.0, p.wrapping_abs())).copied())
             .collect();
         out.sort_unstable();
         out.dedup();

@@ -61,15 +61,18 @@ pub(crate) fn find_section(bytes: &[u8], name: &[u8]) -> Option<usize> {
     let mut from = 0;
     while from + name.len() <= bytes.len() {
         let hit = from + find_sub(&bytes[from..], name)?;
-        let at_line_start = hit == 0 || bytes[hit - 1] == b'\n';
+        // A marker may be indented and followed by blanks (mshio accepts both).
+        let before = bytes[..hit]
+            .iter()
+            .rev()
+            .find(|&&b| b != b' ' && b != b'\t');
+        let at_line_start = before.is_none_or(|&b| b == b'\n');
         let after = &bytes[hit + name.len()..];
-        let eol = if after.starts_with(b"\n") {
-            Some(1)
-        } else if after.starts_with(b"\r\n") {
-            Some(2)
-        } else {
-            None
-        };
+        let blanks = after
+            .iter()
+            .take_while(|&&b| b == b' ' || b == b'\t' || b == b'\r')
+            .count();
+        let eol = (after.get(blanks) == Some(&b'\n')).then_some(blanks + 1);
         if let (true, Some(eol)) = (at_line_start, eol) {
             return Some(hit + name.len() + eol);
         }
@@ -439,7 +442,7 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
             raw.physical.insert((dim, tag), phys.to_vec());
             for &p in phys {
                 // gmsh may write negative physical tags for entities of reversed orientation
-                let p = p.abs();
+                let p = p.wrapping_abs();
                 if dim > 0 && seen.insert((dim, p)) {
                     raw.physical_order.push((dim, p));
                 }
