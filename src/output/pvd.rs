@@ -30,7 +30,7 @@ pub(super) fn render(entries: &[(f64, String)]) -> String {
             s,
             "    <DataSet timestep=\"{}\" group=\"\" part=\"0\" file=\"{}\"/>",
             format_time(*time),
-            escape(file)
+            super::vtu::escape_attr(file)
         );
     }
     s.push_str("  </Collection>\n</VTKFile>\n");
@@ -46,21 +46,6 @@ fn format_time(t: f64) -> String {
     } else {
         format!("{t:e}")
     }
-}
-
-fn escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 fn unescape(s: &str) -> String {
@@ -155,6 +140,6 @@ mod tests {
     #[test]
     fn escape_round_trips() {
         let s = "a&b<c>\"d'";
-        assert_eq!(unescape(&escape(s)), s);
+        assert_eq!(unescape(&super::super::vtu::escape_attr(s)), s);
     }
 }

@@ -219,7 +219,7 @@ fn data_array(out: &mut Vec<u8>, raw: &[u8], ty: &str, name: &str, components: u
 }
 
 /// `s` with the five XML special characters escaped, for an attribute value.
-fn escape_attr(s: &str) -> std::borrow::Cow<'_, str> {
+pub(super) fn escape_attr(s: &str) -> std::borrow::Cow<'_, str> {
     if !s.contains(['&', '<', '>', '"', '\'']) {
         return s.into();
     }
