@@ -735,13 +735,15 @@ fn output_directory_with_foreign_files_is_refused_unless_forced() {
     );
     let scene = common::repo().join("examples/paper.toml");
     let run = |force: bool| {
-        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_viscontact"));
-        c.arg("run").arg(&scene).arg("--out").arg(&out);
-        c.args(["--set", &mesh, "--set", "time.steps=8"]);
-        if force {
-            c.arg("--force");
+        let mut args: Vec<OsString> = vec!["run".into(), scene.clone().into(), "--out".into()];
+        args.push(out.clone().into());
+        for a in ["--set", &mesh, "--set", "time.steps=8"] {
+            args.push(a.into());
         }
-        c.output().unwrap()
+        if force {
+            args.push("--force".into());
+        }
+        viscontact(args)
     };
     let o = run(false);
     assert_eq!(o.status.code(), Some(2));
@@ -763,12 +765,12 @@ fn output_directory_with_foreign_files_is_refused_unless_forced() {
 #[test]
 fn curved_contact_boundary_is_warned_about_with_its_worst_angle() {
     let scene = common::repo().join("examples/plate_hole.toml");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_viscontact"))
-        .arg("check")
-        .arg(&scene)
-        .args(["--set", "mesh.groups.contact=hole"])
-        .output()
-        .unwrap();
+    let o = viscontact([
+        OsString::from("check"),
+        scene.into(),
+        "--set".into(),
+        "mesh.groups.contact=hole".into(),
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let out = String::from_utf8_lossy(&o.stdout);
     let line = out

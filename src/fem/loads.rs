@@ -141,12 +141,9 @@ impl Loads {
         rhs: &mut [f64],
     ) -> Result<()> {
         for load in &self.loads {
-            let (value, key): (&[Scalar], String) = match load.source {
-                Source::Traction(i) => (
-                    &scene.tractions[i].value,
-                    format!("load.traction[{i}].value"),
-                ),
-                Source::Body(i) => (&scene.body_forces[i], format!("load.body[{i}].value")),
+            let value: &[Scalar] = match load.source {
+                Source::Traction(i) => &scene.tractions[i].value,
+                Source::Body(i) => &scene.body_forces[i],
             };
             for q in &load.qps {
                 let pt = Point {
@@ -160,6 +157,10 @@ impl Loads {
                     if !val.is_finite() {
                         // The scene was valid; the data went bad during the run: a failed
                         // run (exit 1), the last checkpoint stays as it was.
+                        let key = match load.source {
+                            Source::Traction(i) => format!("load.traction[{i}].value"),
+                            Source::Body(i) => format!("load.body[{i}].value"),
+                        };
                         return Err(Error::solve(format!(
                             "{}: key '{key}[{c}]' evaluates to {val} at (x, y) = ({}, {}) at \
                              t = {t}; the run stops here (the last checkpoint is kept)",

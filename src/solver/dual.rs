@@ -49,6 +49,9 @@ pub struct DualSolver {
     g: Mat<f64>,
     /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
     d: Mat<f64>,
+    /// diag(D) (scales the active-set test) and the multipliers' bounds, fixed per run.
+    diag: Vec<f64>,
+    bounds: Vec<(f64, f64)>,
     set: Vec<Set>,
     /// The step's forward-solved right side, in the factor's ordering.
     y: Vec<f64>,
@@ -80,6 +83,8 @@ impl DualSolver {
         );
         DualSolver {
             g,
+            diag: (0..m).map(|i| d[(i, i)]).collect(),
+            bounds: (0..m).map(|i| rows.bounds(i)).collect(),
             d,
             set: vec![Set::Free; m],
             y: vec![0.0; n],
@@ -138,8 +143,7 @@ impl DualSolver {
             .collect();
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = TOLERANCE * scale.max(f64::MIN_POSITIVE);
-        let diag: Vec<f64> = (0..m).map(|i| self.d[(i, i)]).collect();
-        let bounds: Vec<(f64, f64)> = (0..m).map(|i| rows.bounds(i)).collect();
+        let (diag, bounds) = (&self.diag, &self.bounds);
         let project = |i: usize, v: f64| v.clamp(bounds[i].0, bounds[i].1);
         // Warm start: the previous multipliers, projected into the box.
         for (i, zi) in z.iter_mut().enumerate() {
