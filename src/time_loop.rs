@@ -67,7 +67,7 @@ pub struct Step<'a> {
 impl<'p> TimeLoop<'p> {
     pub fn new(scene: &'p Scene, disc: &'p Discretization) -> Result<Self> {
         let effects = Effects::new(scene, disc);
-        let rows = Rows::new(&disc.contact, &disc.friction);
+        let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
         let implicit = match scene.history {
             scene::History::Left => {
                 check_stable(scene, disc)?;

@@ -168,7 +168,7 @@ fn nodes_where_boundary_parts_meet_get_every_row_of_their_parts_and_gamma1_wins(
     assert!(matches!(free(mid), (Some(_), Some(_))));
     let c = rows_at(&d.contact, mid);
     assert_eq!(c.len(), 1, "{c:?}");
-    assert_eq!(c[0].dir, [0.0, -1.0]);
+    assert_eq!(c[0].dir, [0.0, -1.0, 0.0]);
     assert_eq!(c[0].bound, f64::INFINITY);
     assert!((c[0].area - edge / 2.0).abs() <= 1e-15, "{}", c[0].area);
     let f = rows_at(&d.friction, mid);

@@ -31,13 +31,17 @@ pub fn mul_add(a: &Sparse, x: &[f64], alpha: f64, y: &mut [f64]) {
 }
 
 /// One nodal row of the constraint operator P: the functional w ↦ dir·w_i at a node.
+/// `dim` components are used (2 in 2D, 3 in 3D); unused entries are 0.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NodalRow {
     pub node: usize,
-    /// Free indices of the node's x and y dofs.
-    pub dofs: [usize; 2],
-    /// n_i on Γ3,1 (constraint n_i·w_i ≤ 0), τ_i on Γ3,2 (friction on w_τ,i = τ_i·w_i).
-    pub dir: [f64; 2],
+    /// Free indices of the node's x, y (and z) dofs.
+    pub dofs: [usize; 3],
+    /// n_i on Γ3,1 (constraint n_i·w_i ≤ 0); a unit tangent τ_i on Γ3,2 (in 3D each friction
+    /// node has two rows, τ_i1 and τ_i2, spanning its tangent plane: w_τ,i = Σ_k (τ_ik·w_i) τ_ik).
+    pub dir: [f64; 3],
+    /// The number of components: the spatial dimension.
+    pub dim: usize,
     /// Γ3,2: c_i = ∫ μF φ_i da, the bound of the friction multiplier. Γ3,1: +∞.
     pub bound: f64,
     /// ∫ φ_i da over the group: turns the nodal multiplier into a traction.
@@ -45,19 +49,30 @@ pub struct NodalRow {
 }
 
 impl NodalRow {
+    /// The (free dof, coefficient) pairs of the row.
+    pub fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.dofs[..self.dim]
+            .iter()
+            .copied()
+            .zip(self.dir[..self.dim].iter().copied())
+    }
+
     pub fn apply(&self, w: &[f64]) -> f64 {
-        self.dir[0] * w[self.dofs[0]] + self.dir[1] * w[self.dofs[1]]
+        self.entries().map(|(d, c)| c * w[d]).sum()
     }
 
     /// w += z · Pᵀ_row.
     pub fn add_transpose(&self, z: f64, w: &mut [f64]) {
-        w[self.dofs[0]] += z * self.dir[0];
-        w[self.dofs[1]] += z * self.dir[1];
+        for (d, c) in self.entries() {
+            w[d] += z * c;
+        }
     }
 }
 
 /// Everything the time loop needs from space: matrices, loads, boundary operators.
 pub struct Discretization {
+    /// Spatial dimension d (2 or 3): d dofs per node.
+    pub dim: usize,
     pub nodes: Vec<[f64; 3]>,
     pub triangles: Vec<Triangle>,
     /// Global dof 2·node + component → free index; None on Γ1 (w = 0 there).
@@ -144,8 +159,9 @@ impl Discretization {
                 if let (Some(dx), Some(dy)) = (free[2 * node], free[2 * node + 1]) {
                     contact.push(NodalRow {
                         node,
-                        dofs: [dx, dy],
-                        dir: n,
+                        dofs: [dx, dy, 0],
+                        dir: [n[0], n[1], 0.0],
+                        dim: 2,
                         bound: f64::INFINITY,
                         area: area[node],
                     });
@@ -193,8 +209,9 @@ impl Discretization {
                     if c[node] > 0.0 {
                         friction.push(NodalRow {
                             node,
-                            dofs: [dx, dy],
-                            dir: [-n[1], n[0]],
+                            dofs: [dx, dy, 0],
+                            dir: [-n[1], n[0], 0.0],
+                            dim: 2,
                             bound: c[node],
                             area: area[node],
                         });
@@ -204,6 +221,7 @@ impl Discretization {
         }
 
         Ok(Discretization {
+            dim: mesh.dim,
             nodes: mesh.nodes.clone(),
             triangles,
             free,

@@ -51,19 +51,19 @@ impl ConicSolver {
         let mut r = 0;
         for (i, row) in rows.rows.iter().enumerate() {
             if i < rows.n_contact {
-                for c in 0..2 {
+                for (dof, coef) in row.entries() {
                     ii.push(r);
-                    jj.push(row.dofs[c]);
-                    vv.push(row.dir[c]);
+                    jj.push(dof);
+                    vv.push(coef);
                 }
                 r += 1;
             } else {
                 let s = n + i - rows.n_contact;
                 for sign in [1.0, -1.0] {
-                    for c in 0..2 {
+                    for (dof, coef) in row.entries() {
                         ii.push(r);
-                        jj.push(row.dofs[c]);
-                        vv.push(sign * row.dir[c]);
+                        jj.push(dof);
+                        vv.push(sign * coef);
                     }
                     ii.push(r);
                     jj.push(s);

@@ -64,10 +64,10 @@ impl DualSolver {
         let first = n - c;
         let mut g = Mat::<f64>::zeros(c, m);
         for (r, row) in rows.rows.iter().enumerate() {
-            for k in 0..2 {
-                let pos = factor.position(row.dofs[k]);
+            for (dof, coef) in row.entries() {
+                let pos = factor.position(dof);
                 debug_assert!(pos >= first, "constrained dofs are ordered last");
-                g[(pos - first, r)] = row.dir[k];
+                g[(pos - first, r)] = coef;
             }
         }
         let l_cc = factor.trailing_block();

@@ -18,21 +18,28 @@ use crate::fem::NodalRow;
 use crate::Result;
 pub use factor::Factor;
 
-/// The constraint rows of a run: contact rows (multiplier λ ≥ 0) first, then friction rows
-/// (multiplier γ with |γ| ≤ c_i).
+/// The constraint rows of a run: contact rows (multiplier λ_i ≥ 0) first, then friction
+/// rows in blocks of `block` = d − 1 consecutive rows per node (the tangents τ_i1, …), whose
+/// multipliers γ_i lie in the ball |γ_i| ≤ c_i: an interval in 2D, a disc in 3D (the
+/// Coulomb cone's section at the given normal stress).
 #[derive(Clone, Debug, Default)]
 pub struct Rows {
     pub rows: Vec<NodalRow>,
     pub n_contact: usize,
+    /// Friction rows per node: 1 in 2D, 2 in 3D.
+    pub block: usize,
 }
 
 impl Rows {
-    pub fn new(contact: &[NodalRow], friction: &[NodalRow]) -> Self {
+    /// `friction` must list each node's tangent rows consecutively (`block` per node).
+    pub fn new(contact: &[NodalRow], friction: &[NodalRow], block: usize) -> Self {
+        debug_assert!(block >= 1 && friction.len() % block == 0);
         let mut rows = contact.to_vec();
         rows.extend_from_slice(friction);
         Rows {
             rows,
             n_contact: contact.len(),
+            block,
         }
     }
 
@@ -44,15 +51,31 @@ impl Rows {
         self.rows.is_empty()
     }
 
-    /// Bounds of the multiplier of row i: [0, ∞) for contact, [−c_i, c_i] for friction.
-    /// Both dofs of every constrained node, sorted: the block C ordered last in the factor.
+    /// The number of friction nodes (blocks).
+    pub fn n_friction_nodes(&self) -> usize {
+        (self.rows.len() - self.n_contact) / self.block.max(1)
+    }
+
+    /// The row indices of friction block j.
+    pub fn friction_block(&self, j: usize) -> std::ops::Range<usize> {
+        let start = self.n_contact + j * self.block;
+        start..start + self.block
+    }
+
+    /// Every dof of every constrained node, sorted: the block C ordered last in the factor.
     pub fn dofs(&self) -> Vec<usize> {
-        let mut d: Vec<usize> = self.rows.iter().flat_map(|r| r.dofs).collect();
+        let mut d: Vec<usize> = self
+            .rows
+            .iter()
+            .flat_map(|r| r.entries().map(|(d, _)| d))
+            .collect();
         d.sort_unstable();
         d.dedup();
         d
     }
 
+    /// Bounds of the multiplier of row i: [0, ∞) for contact, [−c_i, c_i] for friction
+    /// (per component; in 3D the binding constraint is the disc of the row's block).
     pub fn bounds(&self, i: usize) -> (f64, f64) {
         if i < self.n_contact {
             (0.0, f64::INFINITY)
