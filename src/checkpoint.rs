@@ -137,6 +137,15 @@ pub fn mesh_fingerprint(mesh: &Mesh) -> u64 {
             h.word(i as u64);
         }
     }
+    // 3D meshes only, so that 2D fingerprints stay what they were.
+    if !mesh.tetrahedra.is_empty() {
+        h.word(mesh.tetrahedra.len() as u64);
+        for t in &mesh.tetrahedra {
+            for &i in t {
+                h.word(i as u64);
+            }
+        }
+    }
     h.0
 }
 
@@ -152,6 +161,14 @@ pub fn groups_fingerprint(mesh: &Mesh) -> u64 {
         for f in &g.facets {
             h.word(f[0] as u64);
             h.word(f[1] as u64);
+        }
+        if !g.faces.is_empty() {
+            h.word(g.faces.len() as u64);
+            for f in &g.faces {
+                for &i in f {
+                    h.word(i as u64);
+                }
+            }
         }
         h.word(g.cells.len() as u64);
         for &c in &g.cells {
@@ -268,7 +285,7 @@ impl Identity {
             mesh_fingerprint: mesh_fingerprint(mesh),
             groups_fingerprint: groups_fingerprint(mesh),
             nodes: mesh.nodes.len(),
-            triangles: mesh.triangles.len(),
+            triangles: mesh.n_cells(),
             physics: physics_signature(&scene.text),
             dof_of: disc
                 .free
@@ -1216,9 +1233,10 @@ fn write_checkpoint(
     vector(
         &mesh,
         "dof_of",
-        &[id.dof_of.len() / 2, 2],
+        &[id.nodes, id.dof_of.len() / id.nodes.max(1)],
         &id.dof_of,
-        "free dof index of each node's x and y component (row = node), -1 on Γ1 (w = 0)",
+        "free dof index of each node's x, y (and z in 3D) component (row = node), -1 on Γ1 \
+         (w = 0)",
         "1",
     )?;
 
@@ -1574,12 +1592,12 @@ impl Checkpoint {
         let mut diffs = Vec::new();
         if mesh_fingerprint(mesh) != self.id.mesh_fingerprint {
             diffs.push(format!(
-                "the mesh {} is not the one the run used (now {} nodes, {} triangles; the run \
-                 had {} nodes, {} triangles; node coordinates or connectivity differ): restore \
+                "the mesh {} is not the one the run used (now {} nodes, {} cells; the run \
+                 had {} nodes, {} cells; node coordinates or connectivity differ): restore \
                  that mesh file",
                 mesh.path.display(),
                 mesh.nodes.len(),
-                mesh.triangles.len(),
+                mesh.n_cells(),
                 self.id.nodes,
                 self.id.triangles
             ));

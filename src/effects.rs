@@ -65,17 +65,21 @@ impl Effects {
     }
 }
 
-/// Things a user should know about a scene that runs: nearly incompressible plane strain
-/// (P1 triangles lock) and a contact boundary that is not straight at a node (the nodal
+/// Things a user should know about a scene that runs: nearly incompressible plane strain or
+/// 3D (P1 elements lock) and a contact boundary that is not straight at a node (the nodal
 /// normal there is an average of the facet normals).
 pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
     let mut w = Vec::new();
-    if let (crate::scene::Model::PlaneStrain, Some((_, nu))) = (scene.model, scene.elasticity) {
+    use crate::scene::Model;
+    if let (Model::PlaneStrain | Model::ThreeD, Some((_, nu))) = (scene.model, scene.elasticity) {
         if nu > 0.45 {
+            let (model, elements, remedy) = match scene.model {
+                Model::PlaneStrain => ("plane strain", "triangles", "a smaller ν or plane stress"),
+                _ => ("3D", "tetrahedra", "a smaller ν"),
+            };
             w.push(format!(
-                "plane strain with Poisson ratio {nu}: P1 triangles lock for nearly \
-                 incompressible materials, so displacements come out too small; use a \
-                 smaller ν or plane stress"
+                "{model} with Poisson ratio {nu}: P1 {elements} lock for nearly \
+                 incompressible materials, so displacements come out too small; use {remedy}"
             ));
         }
     }

@@ -197,10 +197,16 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let effects = Effects::new(&scene, &disc);
     println!("scene      {} ({})", scene.name, scene.path.display());
     println!(
-        "mesh       {}: {} nodes, {} triangles, {} free dofs",
+        "mesh       {}: {}D, {} nodes, {} {}, {} free dofs",
         mesh.path.display(),
+        mesh.dim,
         mesh.nodes.len(),
-        mesh.triangles.len(),
+        mesh.n_cells(),
+        if mesh.dim == 2 {
+            "triangles"
+        } else {
+            "tetrahedra"
+        },
         disc.n_free
     );
     println!(
@@ -214,7 +220,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         "linear (one solve with the stored Cholesky factor of K_A per step)".to_string()
     } else {
         format!(
-            "{} contact solver on {} Γ3,1 rows + {} Γ3,2 rows",
+            "{} contact solver on {} Γ3,1 rows + {} Γ3,2 rows (nodes × tangents)",
             match scene.contact_solver {
                 viscontact::scene::ContactSolver::Fast => "fast (condensed dual active set)",
                 viscontact::scene::ContactSolver::Clarabel => "clarabel",
@@ -258,33 +264,43 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
 fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
     let mesh = Mesh::read(path)?;
     let q = mesh.quality();
+    let (cells_key, angle, orientation) = match mesh.dim {
+        2 => ("triangles", "angle", "counter-clockwise"),
+        _ => ("tetrahedra", "dihedral angle", "positive volume"),
+    };
+    let size = if mesh.dim == 2 { "area" } else { "volume" };
+    let size_key = |which: &str| format!("{which}_{size}");
     let groups: Vec<serde_json::Value> = mesh
         .groups
         .iter()
         .map(|g| {
-            let length: f64 = g.facets.iter().map(|f| mesh.facet_length(*f)).sum();
+            // The measure of a boundary group: length (2D) or area (3D).
+            let measure: f64 = mesh.boundary_facets(g).iter().map(|f| f.measure).sum();
+            let boundary = g.dim + 1 == mesh.dim;
+            let key = if mesh.dim == 2 { "length" } else { "area" };
             serde_json::json!({
                 "name": Mesh::display_name(g),
                 "tag": g.tag,
                 "dim": g.dim,
-                "elements": if g.dim == 1 { g.facets.len() } else { g.cells.len() },
+                "elements": if boundary { g.n_facets() } else { g.cells.len() },
                 "nodes": mesh.group_nodes(g).len(),
-                "length": if g.dim == 1 { Some(length) } else { None },
+                key: if boundary { Some(measure) } else { None },
             })
         })
         .collect();
     if json {
         let v = serde_json::json!({
             "file": path.display().to_string(),
+            "dim": mesh.dim,
             "nodes": mesh.nodes.len(),
-            "triangles": mesh.triangles.len(),
+            cells_key: mesh.n_cells(),
             "reoriented": mesh.flipped,
             "groups": groups,
             "quality": {
                 "min_angle_deg": q.min_angle_deg,
                 "max_aspect_ratio": q.max_aspect_ratio,
-                "min_area": q.min_area,
-                "max_area": q.max_area,
+                size_key("min"): q.min_area,
+                size_key("max"): q.max_area,
             }
         });
         println!("{}", serde_json::to_string_pretty(&v).expect("json"));
@@ -292,9 +308,10 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
     }
     println!("{}", path.display());
     println!(
-        "  {} nodes, {} triangles ({} reoriented to counter-clockwise)",
+        "  {}D: {} nodes, {} {cells_key} ({} reoriented to {orientation})",
+        mesh.dim,
         mesh.nodes.len(),
-        mesh.triangles.len(),
+        mesh.n_cells(),
         mesh.flipped
     );
     println!("  physical groups:");
@@ -305,16 +322,20 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
             g["tag"],
             g["dim"],
             g["elements"],
-            if g["dim"] == 1 { "edges" } else { "cells" },
+            match (mesh.dim, g["dim"].as_u64()) {
+                (2, Some(1)) => "edges",
+                (3, Some(2)) => "faces",
+                _ => "cells",
+            },
             g["nodes"],
-            g["length"]
-                .as_f64()
-                .map(|l| format!("  length {l:.6}"))
+            ["length", "area"]
+                .iter()
+                .find_map(|k| g[*k].as_f64().map(|l| format!("  {k} {l:.6}")))
                 .unwrap_or_default()
         );
     }
     println!(
-        "  quality: min angle {:.2}°, max aspect ratio {:.3}, area {:.3e} .. {:.3e}",
+        "  quality: min {angle} {:.2}°, max aspect ratio {:.3}, {size} {:.3e} .. {:.3e}",
         q.min_angle_deg, q.max_aspect_ratio, q.min_area, q.max_area
     );
     Ok(())

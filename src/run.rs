@@ -194,8 +194,8 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     check_out_dir(&out, opts.force)?;
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let tl = TimeLoop::new(&scene, &disc)?;
-    let cells: Vec<usize> = mesh.triangles.iter().flatten().copied().collect();
-    let series = Series::create(&out, &mesh.nodes, &cells, 3)?;
+    let (cells, per_cell) = mesh.cell_nodes();
+    let series = Series::create(&out, &mesh.nodes, &cells, per_cell)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
     let setup_s = start.elapsed().as_secs_f64();
@@ -246,11 +246,11 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     cp.restore(&mut tl)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
-    let cells: Vec<usize> = mesh.triangles.iter().flatten().copied().collect();
+    let (cells, per_cell) = mesh.cell_nodes();
     let series = if cp.n == 0 {
-        Series::create(&out, &mesh.nodes, &cells, 3)?
+        Series::create(&out, &mesh.nodes, &cells, per_cell)?
     } else {
-        Series::reopen(&out, &mesh.nodes, &cells, 3, cp.n - 1)?
+        Series::reopen(&out, &mesh.nodes, &cells, per_cell, cp.n - 1)?
     };
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
     let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
@@ -379,7 +379,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         scene: scene.path.display().to_string(),
         mesh: mesh.path.display().to_string(),
         nodes: mesh.nodes.len(),
-        elements: mesh.triangles.len(),
+        elements: mesh.n_cells(),
         dofs: disc.n_free,
         steps: n_steps,
         step_size: tl.history.k,
@@ -404,7 +404,7 @@ fn drive(d: Drive) -> Result<Outcome> {
                 max_violation
             },
             contact_nodes: rows.n_contact,
-            friction_nodes: rows.len() - rows.n_contact,
+            friction_nodes: rows.n_friction_nodes(),
             active_at_end,
             stick_at_end,
             max_kkt_residual,
@@ -474,30 +474,34 @@ fn step_checks(rows: &Rows, step: &Step) -> (f64, f64) {
     (viol, kkt_residual(rows, step.w, step.z, ws, zs))
 }
 
-/// Γ3,1 rows with an active constraint and Γ3,2 rows that stick, up to 1e-9 of the
-/// largest velocity.
+/// Γ3,1 rows with an active constraint and Γ3,2 rows whose node sticks (|w_τ| of the
+/// node's block), up to 1e-9 of the largest velocity.
 fn state_flags(rows: &Rows, step: &Step) -> Vec<bool> {
     let (ws, _) = scales(step);
     let tol = 1e-9 * ws.max(f64::MIN_POSITIVE);
-    rows.rows
+    let mut flags: Vec<bool> = rows.rows[..rows.n_contact]
         .iter()
         .enumerate()
-        .map(|(i, r)| {
-            let pw = r.apply(step.w);
-            if i < rows.n_contact {
-                step.z[i] > 0.0 || pw >= -tol
-            } else {
-                pw.abs() <= tol
-            }
-        })
-        .collect()
+        .map(|(i, r)| step.z[i] > 0.0 || r.apply(step.w) >= -tol)
+        .collect();
+    for j in 0..rows.n_friction_nodes() {
+        let block = rows.friction_block(j);
+        let slip: f64 = rows.rows[block.clone()]
+            .iter()
+            .map(|r| r.apply(step.w).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        flags.extend(block.map(|_| slip <= tol));
+    }
+    flags
 }
 
+/// (active Γ3,1 nodes, sticking Γ3,2 nodes).
 fn state_counts(rows: &Rows, step: &Step) -> (usize, usize) {
     let flags = state_flags(rows, step);
     let active = flags[..rows.n_contact].iter().filter(|&&f| f).count();
     let stick = flags[rows.n_contact..].iter().filter(|&&f| f).count();
-    (active, stick)
+    (active, stick / rows.block.max(1))
 }
 
 fn write_frame(
@@ -511,16 +515,22 @@ fn write_frame(
     let u = disc.nodal(step.u);
     let w = disc.nodal(step.w);
     let (stress, von_mises) = disc.stress(step.w, step.u, step.m, scene.model);
-    // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and
-    // γ_i / ∫φ_i (friction traction along τ_i).
+    // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and the
+    // friction traction γ_i / ∫φ_i: a scalar along τ_i in 2D, the tangential vector
+    // Σ_k γ_ik τ_ik / ∫φ_i in 3D.
+    let fc = if disc.dim == 2 { 1 } else { 3 };
     let mut pressure = vec![0.0; nn];
-    let mut friction = vec![0.0; nn];
+    let mut friction = vec![0.0; fc * nn];
     let mut state = vec![0.0; nn];
     for ((i, r), active) in rows.rows.iter().enumerate().zip(state_flags(rows, step)) {
         if i < rows.n_contact {
             pressure[r.node] = step.z[i] / r.area;
-        } else {
+        } else if fc == 1 {
             friction[r.node] = step.z[i] / r.area;
+        } else {
+            for (k, t) in r.dir.iter().enumerate() {
+                friction[3 * r.node + k] += step.z[i] * t / r.area;
+            }
         }
         if active {
             state[r.node] = 1.0;
@@ -547,7 +557,7 @@ fn write_frame(
             },
             Field {
                 name: "friction_traction",
-                components: 1,
+                components: fc,
                 values: &friction,
             },
             Field {

@@ -65,7 +65,7 @@ pub struct MeshSection {
     pub groups: Groups,
 }
 
-/// The 2D model: how the elasticity tensor B is reduced to the plane.
+/// The model: 2D (how the elasticity tensor B is reduced to the plane) or 3D.
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Model {
@@ -74,6 +74,20 @@ pub enum Model {
     PlaneStress,
     /// B with the 3D Lamé coefficient λ = Eν/((1+ν)(1−2ν)).
     PlaneStrain,
+    /// Tetrahedral meshes; A and B in their 3D isotropic forms: Aτ = 2θτ + ζ tr(τ) I (4.1)
+    /// and Bτ = E/(1+ν) τ + λ tr(τ) I with the 3D Lamé λ = Eν/((1+ν)(1−2ν)).
+    #[serde(rename = "3d")]
+    ThreeD,
+}
+
+impl Model {
+    /// The spatial dimension of the model.
+    pub fn dim(self) -> usize {
+        match self {
+            Model::ThreeD => 3,
+            _ => 2,
+        }
+    }
 }
 
 /// Which physical groups carry which boundary condition.
@@ -523,12 +537,13 @@ impl Scene {
                 let nu = finite(e.poisson, "material.elasticity.poisson", path)?;
                 let ok = match model {
                     Model::PlaneStress => nu > -1.0 && nu <= 0.5,
-                    Model::PlaneStrain => nu > -1.0 && nu < 0.5,
+                    Model::PlaneStrain | Model::ThreeD => nu > -1.0 && nu < 0.5,
                 };
                 if !ok {
                     let range = match model {
                         Model::PlaneStress => "−1 < ν ≤ 0.5",
                         Model::PlaneStrain => "−1 < ν < 0.5 (plane strain)",
+                        Model::ThreeD => "−1 < ν < 0.5 (3D)",
                     };
                     return bad(
                         "material.elasticity.poisson",
@@ -571,12 +586,15 @@ impl Scene {
             }
             _ => None,
         };
-        let components = 2; // 2D models; 3D adds z.
+        let components = model.dim();
         let vector = |v: &[NumOrExpr], key: &str| -> Result<Vec<Scalar>> {
             if v.len() != components {
+                let example = match components {
+                    2 => "a 2D model needs 2 (x and y), e.g. [\"0\", \"-0.1*x\"]",
+                    _ => "the 3D model needs 3 (x, y and z), e.g. [\"0\", \"0\", \"-0.1*x\"]",
+                };
                 return Err(Error::input(format!(
-                    "{}: key '{key}': has {} components; a 2D model needs {components} \
-                     (x and y), e.g. [\"0\", \"-0.1*x\"]",
+                    "{}: key '{key}': has {} components; {example}",
                     path.display(),
                     v.len()
                 )));

@@ -32,13 +32,13 @@ pub struct StepLimit {
     pub includes_memory: bool,
 }
 
-/// The two modal ratios (λ_B, λ_R) of the pointwise tensors against A.
-fn modes(a: Isotropic, b: Option<Isotropic>, r: Isotropic) -> [(f64, f64); 2] {
+/// The two modal ratios (λ_B, λ_R) of the pointwise tensors against A in dimension d: the
+/// deviatoric mode (C τ = 2a τ) and the volumetric one (C I = (2a + d b) I).
+fn modes(a: Isotropic, b: Option<Isotropic>, r: Isotropic, d: usize) -> [(f64, f64); 2] {
     let b = b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
-    [
-        (b.a / a.a, r.a / a.a),
-        ((b.a + b.b) / (a.a + a.b), (r.a + r.b) / (a.a + a.b)),
-    ]
+    let d = d as f64;
+    let vol = |c: Isotropic| 2.0 * c.a + d * c.b;
+    [(b.a / a.a, r.a / a.a), (vol(b) / vol(a), vol(r) / vol(a))]
 }
 
 /// Spectral radius of the one-mode recursion at step k.
@@ -73,7 +73,7 @@ pub fn step_limit(disc: &Discretization, kernel: Option<&Kernel>) -> StepLimit {
     }
     let tol = 1e-12;
     let stable = |k: f64| {
-        modes(disc.a, disc.b, disc.r)
+        modes(disc.a, disc.b, disc.r, disc.dim)
             .iter()
             .all(|&(lb, lr)| radius(k, lb, lr, &prony) <= 1.0 + tol)
     };

@@ -58,7 +58,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Instant;
-use transfer::{max_edge, nodal2, p1_norms, Transfer};
+use transfer::{max_edge, nodal_vectors, p1_norms, Transfer};
 
 /// Which parameter a family of runs varies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -259,8 +259,8 @@ pub struct StudyReport {
 /// The solution of one run at T and what it cost.
 pub struct Solved {
     pub disc: Discretization,
-    /// u_N per node (2 components, 0 on Γ1).
-    pub u: Vec<[f64; 2]>,
+    /// u_N per node (3 components, z = 0 in 2D; 0 on Γ1).
+    pub u: Vec<[f64; 3]>,
     pub steps: usize,
     pub k: f64,
     pub end: f64,
@@ -324,7 +324,7 @@ pub fn solve_once(
     };
     let steps_s = steps_start.elapsed().as_secs_f64();
     let wall_s = start.elapsed().as_secs_f64();
-    let u = nodal2(&disc, &u);
+    let u = nodal_vectors::<3>(&disc, &u);
     Ok((
         Solved {
             disc,
@@ -393,18 +393,18 @@ pub struct ErrorNorms {
 /// the difference of the two P1 fields is integrated exactly.
 pub fn error_norms(
     disc: &Discretization,
-    u: &[[f64; 2]],
+    u: &[[f64; 3]],
     reference: &Discretization,
-    u_ref: &[[f64; 2]],
+    u_ref: &[[f64; 3]],
 ) -> ErrorNorms {
     let t = Transfer::between(disc, reference);
     let on_ref = t.apply(u);
-    let e: Vec<[f64; 2]> = on_ref
+    let e: Vec<[f64; 3]> = on_ref
         .iter()
         .zip(u_ref)
-        .map(|(a, b)| [a[0] - b[0], a[1] - b[1]])
+        .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
         .collect();
-    let (l2, semi) = p1_norms(&reference.triangles, &e);
+    let (l2, semi) = p1_norms(&reference.cells, &e);
     ErrorNorms {
         l2,
         h1_semi: semi,
@@ -476,23 +476,60 @@ fn toml_string(s: &str) -> String {
 /// The mesh of each level.
 struct Meshes {
     family: MeshFamily,
+    /// The scene file's directory (a pattern is relative to it).
+    dir: PathBuf,
+    /// The scene's spatial dimension.
+    dim: usize,
 }
 
 impl Meshes {
     /// The mesh file of level `n` (a pattern) or of entry `index` of a list (None: the
-    /// reference mesh, the last of the list).
+    /// reference mesh, the last of the list); an input error when it does not exist.
     fn file(&self, n: usize, index: Option<usize>) -> Result<String> {
-        match &self.family {
-            MeshFamily::Pattern(p) => expand_pattern(p, n).map_err(Error::input),
+        let file = match &self.family {
+            MeshFamily::Pattern(p) => expand_pattern(p, n).map_err(Error::input)?,
             MeshFamily::List(list) => {
                 let p = match index {
                     Some(i) => &list[i],
                     None => list.last().expect("checked non-empty"),
                 };
                 let abs = std::path::absolute(p).map_err(|e| Error::io(p, e))?;
-                Ok(abs.display().to_string())
+                abs.display().to_string()
             }
+        };
+        let path = self.dir.join(&file);
+        if !path.exists() {
+            let (what, make) = match self.family {
+                MeshFamily::Pattern(_) => (
+                    format!("the mesh of level {n}"),
+                    how_to_make(&path, n, self.dim)
+                        .map_or(String::new(), |m| format!("; make it with `{m}`")),
+                ),
+                MeshFamily::List(_) => ("a mesh of --meshes".into(), String::new()),
+            };
+            return Err(Error::input(format!(
+                "study: {what}, {}, does not exist{make}",
+                path.display()
+            )));
         }
+        Ok(file)
+    }
+
+    /// The mesh file, number of steps and mesh level of a run of family `vary` at level n
+    /// (`index` in a list; None: the reference run at n = the reference level): the level
+    /// sets what varies, `fixed` the other.
+    fn case(
+        &self,
+        vary: Vary,
+        n: usize,
+        index: Option<usize>,
+        fixed: usize,
+    ) -> Result<(String, usize, usize)> {
+        Ok(match vary {
+            Vary::Both => (self.file(n, index)?, n, n),
+            Vary::H => (self.file(n, index)?, fixed, n),
+            Vary::K => (self.file(fixed, None)?, n, fixed),
+        })
     }
 
     fn nominal_h(&self, n: usize, h_max: f64) -> f64 {
@@ -501,6 +538,41 @@ impl Meshes {
             MeshFamily::List(_) => h_max,
         }
     }
+}
+
+/// How to make the missing mesh `dir/NAME_NNN.msh` of level n: with the generator script
+/// in `dir` or up to two directories above it when its text offers `generate.sh NAME N`
+/// (meshes too big to commit, e.g. `meshes/generate.sh block 16`), else with gmsh from
+/// `dir/NAME.geo` when there is one.
+fn how_to_make(path: &Path, n: usize, dim: usize) -> Option<String> {
+    let name = path.file_name()?.to_str()?.strip_suffix(".msh")?;
+    let stem = name
+        .trim_end_matches(|c: char| c.is_ascii_digit())
+        .strip_suffix('_')?;
+    let dir = path.parent()?.canonicalize().ok()?;
+    let shown = |p: &Path| {
+        let cwd = std::env::current_dir().and_then(|d| d.canonicalize());
+        cwd.ok()
+            .and_then(|cwd| p.strip_prefix(cwd).ok().map(Path::to_path_buf))
+            .unwrap_or_else(|| p.to_path_buf())
+            .display()
+            .to_string()
+    };
+    let offer = format!("generate.sh {stem} N");
+    for d in dir.ancestors().take(3) {
+        let script = d.join("generate.sh");
+        if std::fs::read_to_string(&script).is_ok_and(|text| text.contains(&offer)) {
+            return Some(format!("{} {stem} {n}", shown(&script)));
+        }
+    }
+    let geo = dir.join(format!("{stem}.geo"));
+    geo.exists().then(|| {
+        format!(
+            "gmsh -{dim} {} -setnumber n {n} -format msh41 -o {}",
+            shown(&geo),
+            shown(&dir.join(format!("{name}.msh")))
+        )
+    })
 }
 
 fn say(progress: bool, msg: &str) {
@@ -556,9 +628,20 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
             ))
         })?),
     };
-    let meshes = Meshes { family };
+    let meshes = Meshes {
+        family,
+        dir: scene_path.parent().unwrap_or(Path::new("")).to_path_buf(),
+        dim: file.mesh.model.dim(),
+    };
     let reference = opts.reference;
     let fixed = opts.fixed.unwrap_or(reference);
+    // Every mesh is there before anything runs: a missing mesh fails at once.
+    for &vary in &opts.vary {
+        meshes.case(vary, reference, None, fixed)?;
+        for (i, &n) in opts.levels.iter().enumerate() {
+            meshes.case(vary, n, Some(i), fixed)?;
+        }
+    }
     let forms: &[KernelForm] = if opts.kernel_compare {
         &[KernelForm::AsGiven, KernelForm::Expression]
     } else {
@@ -577,11 +660,7 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
     let mut end_time = 0.0;
     for &vary in &opts.vary {
         // The reference keeps the fixed parameter (module docs).
-        let (ref_mesh, ref_steps, ref_n) = match vary {
-            Vary::Both => (meshes.file(reference, None)?, reference, reference),
-            Vary::H => (meshes.file(reference, None)?, fixed, reference),
-            Vary::K => (meshes.file(fixed, None)?, reference, fixed),
-        };
+        let (ref_mesh, ref_steps, ref_n) = meshes.case(vary, reference, None, fixed)?;
         let key = (ref_mesh.clone(), ref_steps);
         if !refs.iter().any(|(k, _)| *k == key) {
             say(
@@ -598,9 +677,9 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
         }
         let r = &refs.iter().find(|(k, _)| *k == key).expect("just added").1;
         end_time = r.end;
-        let (ref_l2, ref_semi) = p1_norms(&r.disc.triangles, &r.u);
+        let (ref_l2, ref_semi) = p1_norms(&r.disc.cells, &r.u);
         let ref_h1 = (ref_l2 * ref_l2 + ref_semi * ref_semi).sqrt();
-        let ref_hmax = max_edge(&r.disc.nodes, &r.disc.triangles);
+        let ref_hmax = max_edge(&r.disc.nodes, &r.disc.cells);
         let reference_info = ReferenceInfo {
             mesh: r.mesh.clone(),
             h: meshes.nominal_h(ref_n, ref_hmax),
@@ -618,11 +697,7 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
             let mut solved = Vec::new();
             let mut kernel = String::new();
             for (i, &n) in opts.levels.iter().enumerate() {
-                let (mesh, steps, mesh_n) = match vary {
-                    Vary::Both => (meshes.file(n, Some(i))?, n, n),
-                    Vary::H => (meshes.file(n, Some(i))?, fixed, n),
-                    Vary::K => (meshes.file(fixed, None)?, n, fixed),
-                };
+                let (mesh, steps, mesh_n) = meshes.case(vary, n, Some(i), fixed)?;
                 say(
                     opts.progress,
                     &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
@@ -631,7 +706,7 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
                     solve_timed(scene_path, &overrides_for(&mesh, steps), form, opts.repeat)?;
                 kernel = form.label(given);
                 let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
-                let h_max = max_edge(&s.disc.nodes, &s.disc.triangles);
+                let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
                 let h = meshes.nominal_h(mesh_n, h_max);
                 let (order_h1, order_l2) = match rows.last() {
                     Some(prev) => {

@@ -85,7 +85,11 @@ fn assert_normals(m: &Mesh, key: &str, expected: [f64; 2]) {
     );
     assert_eq!(kink, 0.0, "{key}: a straight group has no kink");
     for (node, n) in normals {
-        assert_eq!(n, expected, "{key}: nodal normal at node {node}");
+        assert_eq!(
+            n,
+            [expected[0], expected[1], 0.0],
+            "{key}: nodal normal at node {node}"
+        );
     }
     assert_oriented(m, g);
 }
@@ -197,6 +201,9 @@ fn every_shipped_mesh_reads_and_its_boundary_is_partitioned() {
     assert!(files.len() >= 3, "{files:?}");
     for path in &files {
         let m = Mesh::read(path).unwrap_or_else(|e| panic!("{e}"));
+        if m.dim == 3 {
+            continue; // the 3D meshes are checked in tests/three_d.rs
+        }
         let name = path.display();
         assert_eq!(m.flipped, 0, "{name}");
         assert!(
@@ -656,13 +663,13 @@ fn garbage_is_refused_without_panic() {
             "refers to node 7",
         ),
         (
-            "tetrahedra",
+            "flat_tetrahedron",
             format!(
-                "{head}$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n\
+                "{head}$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n\
                  $EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 4\n$EndElements\n"
             )
             .into(),
-            "4-node tetrahedra (gmsh element type 4)",
+            "tetrahedron 1 (gmsh element tag) has zero volume",
         ),
         (
             "not_planar",

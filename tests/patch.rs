@@ -16,9 +16,9 @@ const Q: f64 = -0.4;
 
 /// The traction σ n on the three edges of Γ2 for σ = C ε(v), as expressions of x, y.
 fn traction(c: Isotropic) -> [String; 2] {
-    let e = [P, 0.0, 0.5 * Q];
+    let e = [P, 0.0, 0.0, 0.5 * Q, 0.0, 0.0];
     let s = c.apply(e);
-    let (s11, s22, s12) = (s[0], s[1], s[2]);
+    let (s11, s22, s12) = (s[0], s[1], s[3]);
     // bottom y = 0: n = (0, −1); right x = 1: n = (1, 0); top y = 1: n = (0, 1).
     [
         format!("if(y < 1e-9, {}, if(x > 1 - 1e-9, {s11}, {s12}))", -s12),
@@ -126,7 +126,7 @@ fn first_step_reproduces_a_linear_velocity_exactly() {
 fn printed_tensors_match_the_paper() {
     // (4.1): (Aτ)_ij = 2θ τ_ij + ζ tr τ δ_ij; (4.2): (Bτ)_ij = E/(1+κ) τ_ij + Eκ/(1−κ²) tr τ δ_ij.
     let (theta, zeta, e, k) = (0.1, 0.1, 0.1, 0.3);
-    let tau = [0.3, -0.2, 0.05];
+    let tau = [0.3, -0.2, 0.0, 0.05, 0.0, 0.0];
     let a = Isotropic::viscosity(theta, zeta).apply(tau);
     let b = Isotropic::plane_stress(e, k).apply(tau);
     let tr = tau[0] + tau[1];
@@ -134,6 +134,6 @@ fn printed_tensors_match_the_paper() {
         assert!((a[i] - (2.0 * theta * tau[i] + zeta * tr)).abs() < 1e-16);
         assert!((b[i] - (e / (1.0 + k) * tau[i] + e * k / (1.0 - k * k) * tr)).abs() < 1e-16);
     }
-    assert!((a[2] - 2.0 * theta * tau[2]).abs() < 1e-16);
-    assert!((b[2] - e / (1.0 + k) * tau[2]).abs() < 1e-16);
+    assert!((a[3] - 2.0 * theta * tau[3]).abs() < 1e-16);
+    assert!((b[3] - e / (1.0 + k) * tau[3]).abs() < 1e-16);
 }

@@ -1,33 +1,21 @@
 //! The load functional ⟨f_n, v⟩ = (f_0(t_n), v) + (f_2(t_n), v)_{Γ2}: quadrature points are
-//! laid out once, the expressions are evaluated at t_n each step. Boundary loads use 2-point
-//! Gauss per edge (exact for a quadratic traction times P1, e.g. the paper's x(2−x));
-//! body forces the edge-midpoint rule (exact for a linear force times P1).
+//! laid out once, the expressions are evaluated at t_n each step. Boundary loads use
+//! [`Facet::quadrature`] (exact for a quadratic traction times P1, e.g. the paper's x(2−x));
+//! body forces a degree-2 rule (exact for a linear force times P1): the edge midpoints of a
+//! triangle, the 4-point rule of a tetrahedron.
 
-use super::Triangle;
+use super::Cell;
 use crate::expr::{Point, Scalar};
 use crate::mesh::Mesh;
 use crate::scene::Scene;
 use crate::{Error, Result};
 
-/// 2-point Gauss on a facet: (point, weight, [φ_a, φ_b] at the point).
-pub fn edge_gauss(mesh: &Mesh, f: [usize; 2]) -> [([f64; 2], f64, [f64; 2]); 2] {
-    let (pa, pb) = (mesh.nodes[f[0]], mesh.nodes[f[1]]);
-    let half = 0.5 * mesh.facet_length(f);
-    let g = 0.5 / 3f64.sqrt();
-    let at = |s: f64| -> ([f64; 2], f64, [f64; 2]) {
-        // s ∈ (0, 1) along a → b; φ_a = 1 − s, φ_b = s.
-        let p = [pa[0] + s * (pb[0] - pa[0]), pa[1] + s * (pb[1] - pa[1])];
-        (p, half, [1.0 - s, s])
-    };
-    [at(0.5 - g), at(0.5 + g)]
-}
-
 /// A quadrature point of a load: where, how much weight, which nodes with which φ.
 struct Qp {
-    p: [f64; 2],
+    p: [f64; 3],
     weight: f64,
-    nodes: [usize; 3],
-    phi: [f64; 3],
+    nodes: [usize; 4],
+    phi: [f64; 4],
 }
 
 /// A traction (index into `Scene::tractions`) or a body force (into `Scene::body_forces`).
@@ -47,13 +35,13 @@ pub struct Loads {
 }
 
 impl Loads {
-    pub fn new(mesh: &Mesh, scene: &Scene, triangles: &[Triangle]) -> Result<Self> {
+    pub fn new(mesh: &Mesh, scene: &Scene, cells: &[Cell]) -> Result<Self> {
         let mut loads = Vec::new();
         // The traction boundary Γ2, for the check that every load group lies inside it.
-        let gamma2: Option<std::collections::HashSet<[usize; 2]>> = mesh
+        let gamma2: Option<std::collections::HashSet<Vec<usize>>> = mesh
             .boundary_group(&scene.groups.traction)
             .ok()
-            .map(|g| g.facets.iter().map(|f| sorted(*f)).collect());
+            .map(|g| mesh.boundary_facets(g).iter().map(sorted).collect());
         for (i, t) in scene.tractions.iter().enumerate() {
             let g = mesh.boundary_group(&t.on).map_err(|e| {
                 Error::input(format!(
@@ -63,18 +51,30 @@ impl Loads {
             })?;
             match &gamma2 {
                 Some(g2) => {
-                    if let Some(f) = g.facets.iter().find(|f| !g2.contains(&sorted(**f))) {
-                        let (a, b) = (mesh.nodes[f[0]], mesh.nodes[f[1]]);
+                    let facets = mesh.boundary_facets(g);
+                    if let Some(f) = facets.iter().find(|f| !g2.contains(&sorted(f))) {
+                        let corners: Vec<String> = f
+                            .nodes()
+                            .iter()
+                            .map(|&n| {
+                                let p = mesh.nodes[n];
+                                match mesh.dim {
+                                    2 => format!("({}, {})", p[0], p[1]),
+                                    _ => format!("({}, {}, {})", p[0], p[1], p[2]),
+                                }
+                            })
+                            .collect();
+                        let (what, entity) = match mesh.dim {
+                            2 => ("edge", "curve"),
+                            _ => ("face", "surface"),
+                        };
                         return Err(Error::input(format!(
-                            "{}: key 'load.traction[{i}].on': group '{}' has the edge \
-                             ({}, {})–({}, {}) outside the traction boundary '{}' (Γ2); \
-                             tractions act on Γ2 only: add the curve to Γ2 in gmsh",
+                            "{}: key 'load.traction[{i}].on': group '{}' has the {what} {} \
+                             outside the traction boundary '{}' (Γ2); tractions act on Γ2 \
+                             only: add the {entity} to Γ2 in gmsh",
                             scene.path.display(),
                             t.on,
-                            a[0],
-                            a[1],
-                            b[0],
-                            b[1],
+                            corners.join("–"),
                             scene.groups.traction
                         )));
                     }
@@ -90,13 +90,15 @@ impl Loads {
                 }
             }
             let mut qps = Vec::new();
-            for &f in &g.facets {
-                for (p, weight, phi) in edge_gauss(mesh, f) {
+            for f in mesh.boundary_facets(g) {
+                let fnodes = f.nodes();
+                let nodes = [0, 1, 2, 3].map(|k| fnodes[k.min(fnodes.len() - 1)]);
+                for (p, weight, phi) in f.quadrature(mesh) {
                     qps.push(Qp {
                         p,
                         weight,
-                        nodes: [f[0], f[1], f[1]],
-                        phi: [phi[0], phi[1], 0.0],
+                        nodes,
+                        phi: [phi[0], phi[1], phi[2], 0.0],
                     });
                 }
             }
@@ -107,15 +109,19 @@ impl Loads {
         }
         for i in 0..scene.body_forces.len() {
             let mut qps = Vec::new();
-            for t in triangles {
-                // Edge-midpoint rule: weight |T|/3 at each midpoint, φ = ½ at its two ends.
-                for (a, b, c) in [(0, 1, 2), (1, 2, 0), (2, 0, 1)] {
-                    let (pa, pb) = (mesh.nodes[t.nodes[a]], mesh.nodes[t.nodes[b]]);
+            for t in cells {
+                for (phi, weight) in body_rule(t) {
+                    let mut p = [0.0; 3];
+                    for (k, pk) in p.iter_mut().enumerate() {
+                        *pk = (0..=t.dim)
+                            .map(|i| phi[i] * mesh.nodes[t.nodes[i]][k])
+                            .sum();
+                    }
                     qps.push(Qp {
-                        p: [0.5 * (pa[0] + pb[0]), 0.5 * (pa[1] + pb[1])],
-                        weight: t.area / 3.0,
-                        nodes: [t.nodes[a], t.nodes[b], t.nodes[c]],
-                        phi: [0.5, 0.5, 0.0],
+                        p,
+                        weight,
+                        nodes: t.nodes,
+                        phi,
                     });
                 }
             }
@@ -149,6 +155,7 @@ impl Loads {
                 let pt = Point {
                     x: q.p[0],
                     y: q.p[1],
+                    z: q.p[2],
                     t,
                     ..Default::default()
                 };
@@ -162,15 +169,17 @@ impl Loads {
                             Source::Body(i) => format!("load.body[{i}].value"),
                         };
                         return Err(Error::solve(format!(
-                            "{}: key '{key}[{c}]' evaluates to {val} at (x, y) = ({}, {}) at \
-                             t = {t}; the run stops here (the last checkpoint is kept)",
+                            "{}: key '{key}[{c}]' evaluates to {val} at {} at t = {t}; the run \
+                             stops here (the last checkpoint is kept)",
                             scene.path.display(),
-                            q.p[0],
-                            q.p[1]
+                            super::fmt_at(q.p, scene.model)
                         )));
                     }
                     for (n, ph) in q.nodes.iter().zip(q.phi) {
-                        if let Some(d) = free[2 * n + c] {
+                        if ph == 0.0 {
+                            continue;
+                        }
+                        if let Some(d) = free[value.len() * n + c] {
                             rhs[d] += q.weight * ph * val;
                         }
                     }
@@ -181,6 +190,33 @@ impl Loads {
     }
 }
 
-fn sorted(f: [usize; 2]) -> [usize; 2] {
-    [f[0].min(f[1]), f[0].max(f[1])]
+fn sorted(f: &crate::mesh::Facet) -> Vec<usize> {
+    let mut v = f.nodes().to_vec();
+    v.sort_unstable();
+    v
+}
+
+/// A degree-2 rule on a cell as (φ of its vertices at the point, weight): the three edge
+/// midpoints with weight |T|/3 on a triangle; on a tetrahedron the 4 points with barycentric
+/// coordinates (α, β, β, β) and permutations, α = (5 + 3√5)/20, β = (5 − √5)/20, weight |T|/4.
+fn body_rule(t: &Cell) -> Vec<([f64; 4], f64)> {
+    if t.dim == 2 {
+        return [
+            [0.5, 0.5, 0.0, 0.0],
+            [0.0, 0.5, 0.5, 0.0],
+            [0.5, 0.0, 0.5, 0.0],
+        ]
+        .into_iter()
+        .map(|phi| (phi, t.measure / 3.0))
+        .collect();
+    }
+    let s5 = 5f64.sqrt();
+    let (a, b) = ((5.0 + 3.0 * s5) / 20.0, (5.0 - s5) / 20.0);
+    (0..4)
+        .map(|k| {
+            let mut phi = [b; 4];
+            phi[k] = a;
+            (phi, t.measure / 4.0)
+        })
+        .collect()
 }

@@ -1,6 +1,7 @@
-//! Discretization: P1 triangles, the dofs of V^h (w = 0 on Γ1 eliminated), the stiffness
-//! matrices K_A, K_B, K_R, the load vector ⟨f_n, ·⟩, the given-normal-stress load g_F and the
-//! nodal constraint rows on Γ3,1 (n_i·w_i ≤ 0) and Γ3,2 (weight c_i of |w_τ,i|).
+//! Discretization: P1 triangles (2D) or tetrahedra (3D), the dofs of V^h (w = 0 on Γ1
+//! eliminated; d per node), the stiffness matrices K_A, K_B, K_R, the load vector ⟨f_n, ·⟩,
+//! the given-normal-stress load g_F and the nodal constraint rows on Γ3,1 (n_i·w_i ≤ 0) and
+//! Γ3,2 (weight c_i of |w_τ,i|, with w_τ,i in the tangent line (2D) or plane (3D)).
 
 pub mod element;
 pub mod loads;
@@ -9,7 +10,7 @@ use crate::expr::Point;
 use crate::mesh::{Group, Mesh};
 use crate::scene::{Model, Scene};
 use crate::{Error, Result};
-pub use element::{Isotropic, Triangle};
+pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, Triplet};
 pub use loads::Loads;
 
@@ -74,8 +75,9 @@ pub struct Discretization {
     /// Spatial dimension d (2 or 3): d dofs per node.
     pub dim: usize,
     pub nodes: Vec<[f64; 3]>,
-    pub triangles: Vec<Triangle>,
-    /// Global dof 2·node + component → free index; None on Γ1 (w = 0 there).
+    /// The triangles (2D) or tetrahedra (3D).
+    pub cells: Vec<Cell>,
+    /// Global dof d·node + component → free index; None on Γ1 (w = 0 there).
     pub free: Vec<Option<usize>>,
     pub n_free: usize,
     /// A (4.1), B (4.2) (None when E = 0 or disabled), R's constant part I.
@@ -91,7 +93,8 @@ pub struct Discretization {
     pub g_f: Vec<f64>,
     /// Rows n_i on Γ3,1 (empty when contact is off).
     pub contact: Vec<NodalRow>,
-    /// Rows τ_i with c_i > 0 on Γ3,2 (empty when friction is off or μF = 0).
+    /// Rows τ_i (2D) or τ_i1, τ_i2 (3D, consecutive) at the Γ3,2 nodes with c_i > 0 (empty
+    /// when friction is off or μF = 0).
     pub friction: Vec<NodalRow>,
     /// The largest kink (degrees) between facet normals at a node of Γ3,1 or Γ3,2.
     pub contact_kink_deg: f64,
@@ -104,19 +107,21 @@ fn group<'m>(mesh: &'m Mesh, scene: &Scene, key: &str, value: &str) -> Result<&'
 
 impl Discretization {
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
-        let nn = mesh.nodes.len();
+        check_model(mesh, scene)?;
+        let (nn, d) = (mesh.nodes.len(), mesh.dim);
         let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.groups.fixed)?;
         let mut clamped = vec![false; nn];
         for n in mesh.group_nodes(fixed) {
             clamped[n] = true;
         }
-        let mut free = vec![None; 2 * nn];
+        let mut free = vec![None; d * nn];
         let mut n_free = 0;
         for (i, c) in clamped.iter().enumerate() {
             if !c {
-                free[2 * i] = Some(n_free);
-                free[2 * i + 1] = Some(n_free + 1);
-                n_free += 2;
+                for slot in &mut free[d * i..d * (i + 1)] {
+                    *slot = Some(n_free);
+                    n_free += 1;
+                }
             }
         }
         if n_free == 0 {
@@ -128,11 +133,18 @@ impl Discretization {
             )));
         }
         let xy = |i: usize| [mesh.nodes[i][0], mesh.nodes[i][1]];
-        let triangles: Vec<Triangle> = mesh
-            .triangles
-            .iter()
-            .map(|t| Triangle::new(*t, [xy(t[0]), xy(t[1]), xy(t[2])]))
-            .collect();
+        let cells: Vec<Cell> = match d {
+            2 => mesh
+                .triangles
+                .iter()
+                .map(|t| Cell::triangle(*t, t.map(xy)))
+                .collect(),
+            _ => mesh
+                .tetrahedra
+                .iter()
+                .map(|t| Cell::tetrahedron(*t, t.map(|i| mesh.nodes[i])))
+                .collect(),
+        };
 
         let a = Isotropic::viscosity(scene.theta, scene.zeta);
         let b = scene
@@ -140,14 +152,30 @@ impl Discretization {
             .filter(|(e, _)| *e > 0.0)
             .map(|(e, nu)| match scene.model {
                 Model::PlaneStress => Isotropic::plane_stress(e, nu),
-                Model::PlaneStrain => Isotropic::plane_strain(e, nu),
+                Model::PlaneStrain | Model::ThreeD => Isotropic::lame(e, nu),
             });
         let r = Isotropic::identity();
-        let (k_a, k_b, k_r) = assemble(&triangles, &free, n_free, a, b, r)?;
+        let (k_a, k_b, k_r) = assemble(&cells, d, &free, n_free, a, b, r)?;
 
-        let loads = Loads::new(mesh, scene, &triangles)?;
+        let loads = Loads::new(mesh, scene, &cells)?;
+        // The free dofs of a node, if none is clamped (Γ1 wins over every other part).
+        let node_dofs = |node: usize| -> Option<[usize; 3]> {
+            let mut out = [0; 3];
+            for (c, o) in out.iter_mut().enumerate().take(d) {
+                *o = free[d * node + c]?;
+            }
+            Some(out)
+        };
+        let row = |node: usize, dofs: [usize; 3], dir: [f64; 3], bound: f64, area: f64| NodalRow {
+            node,
+            dofs,
+            dir,
+            dim: d,
+            bound,
+            area,
+        };
 
-        // Γ3,1: one row n_i per free node (Γ1 wins over every other part).
+        // Γ3,1: one row n_i per free node.
         let mut contact = Vec::new();
         let mut kink: f64 = 0.0;
         if scene.contact {
@@ -156,44 +184,37 @@ impl Discretization {
             kink = kink.max(k);
             let area = lumped_area(mesh, g);
             for (node, n) in normals {
-                if let (Some(dx), Some(dy)) = (free[2 * node], free[2 * node + 1]) {
-                    contact.push(NodalRow {
-                        node,
-                        dofs: [dx, dy, 0],
-                        dir: [n[0], n[1], 0.0],
-                        dim: 2,
-                        bound: f64::INFINITY,
-                        area: area[node],
-                    });
+                if let Some(dofs) = node_dofs(node) {
+                    contact.push(row(node, dofs, n, f64::INFINITY, area[node]));
                 }
             }
         }
-        // Γ3,2: g_F and the friction rows τ_i with c_i = ∫ μF φ_i da (2-point Gauss per edge).
+        // Γ3,2: g_F and the friction rows τ_i with c_i = ∫ μF φ_i da (facet quadrature).
         let mut g_f = Vec::new();
         let mut friction = Vec::new();
         if let Some(fr) = &scene.friction {
             let g = group(mesh, scene, "mesh.groups.friction", &scene.groups.friction)?;
             let mut gf = vec![0.0; n_free];
             let mut c = vec![0.0; nn];
-            for &f in &g.facets {
-                let n = mesh.facet_normal(f);
-                for (p, w, phi) in loads::edge_gauss(mesh, f) {
+            for f in mesh.boundary_facets(g) {
+                for (p, w, phi) in f.quadrature(mesh) {
                     let pt = Point {
                         x: p[0],
                         y: p[1],
+                        z: p[2],
                         ..Default::default()
                     };
                     let big_f = fr.normal_stress.eval(&pt);
                     let mu = fr.coefficient.eval(&pt);
                     check_data(big_f, "friction.normal_stress", scene, p, true)?;
                     check_data(mu, "friction.coefficient", scene, p, true)?;
-                    for (node, ph) in f.iter().zip(phi) {
-                        for comp in 0..2 {
-                            if let Some(d) = free[2 * node + comp] {
-                                gf[d] += w * ph * big_f * n[comp];
+                    for (&node, ph) in f.nodes().iter().zip(phi) {
+                        for comp in 0..d {
+                            if let Some(dof) = free[d * node + comp] {
+                                gf[dof] += w * ph * big_f * f.normal[comp];
                             }
                         }
-                        c[*node] += w * ph * mu * big_f;
+                        c[node] += w * ph * mu * big_f;
                     }
                 }
             }
@@ -204,26 +225,19 @@ impl Discretization {
             kink = kink.max(k);
             let area = lumped_area(mesh, g);
             for (node, n) in normals {
-                if let (Some(dx), Some(dy)) = (free[2 * node], free[2 * node + 1]) {
-                    // μF may vanish on parts of Γ3,2: rows with c_i = 0 carry no friction.
-                    if c[node] > 0.0 {
-                        friction.push(NodalRow {
-                            node,
-                            dofs: [dx, dy, 0],
-                            dir: [-n[1], n[0], 0.0],
-                            dim: 2,
-                            bound: c[node],
-                            area: area[node],
-                        });
+                // μF may vanish on parts of Γ3,2: nodes with c_i = 0 carry no friction.
+                if let (Some(dofs), true) = (node_dofs(node), c[node] > 0.0) {
+                    for t in tangents(n, d) {
+                        friction.push(row(node, dofs, t, c[node], area[node]));
                     }
                 }
             }
         }
 
         Ok(Discretization {
-            dim: mesh.dim,
+            dim: d,
             nodes: mesh.nodes.clone(),
-            triangles,
+            cells,
             free,
             n_free,
             a,
@@ -240,26 +254,18 @@ impl Discretization {
         })
     }
 
-    /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1, z = 0).
+    /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1; z = 0 in 2D).
     pub fn nodal(&self, v: &[f64]) -> Vec<f64> {
-        let nn = self.nodes.len();
-        let mut out = vec![0.0; 3 * nn];
-        for i in 0..nn {
-            for c in 0..2 {
-                if let Some(d) = self.free[2 * i + c] {
-                    out[3 * i + c] = v[d];
-                }
-            }
-        }
-        out
+        nodal_vectors::<3>(self, v).concat()
     }
 
-    fn local(&self, t: &Triangle, v: &[f64]) -> [[f64; 2]; 3] {
-        let mut out = [[0.0; 2]; 3];
-        for (o, &n) in out.iter_mut().zip(&t.nodes) {
-            for (c, oc) in o.iter_mut().enumerate() {
-                if let Some(d) = self.free[2 * n + c] {
-                    *oc = v[d];
+    fn local(&self, t: &Cell, v: &[f64]) -> [[f64; 3]; 4] {
+        let d = self.dim;
+        let mut out = [[0.0; 3]; 4];
+        for (o, &n) in out.iter_mut().zip(t.vertices()) {
+            for (c, oc) in o.iter_mut().enumerate().take(d) {
+                if let Some(dof) = self.free[d * n + c] {
+                    *oc = v[dof];
                 }
             }
         }
@@ -277,34 +283,29 @@ impl Discretization {
         m: Option<&[f64]>,
         model: Model,
     ) -> (Vec<f64>, Vec<f64>) {
-        let mut s6 = Vec::with_capacity(6 * self.triangles.len());
-        let mut vm = Vec::with_capacity(self.triangles.len());
-        for t in &self.triangles {
-            let ew = t.strain(self.local(t, w));
-            let eu = t.strain(self.local(t, u));
-            let mut s = self.a.apply(ew);
-            let mut szz = 0.0;
-            if model == Model::PlaneStrain {
-                szz += self.a.b * (ew[0] + ew[1]);
+        let mut s6 = Vec::with_capacity(6 * self.cells.len());
+        let mut vm = Vec::with_capacity(self.cells.len());
+        let add = |s: &mut [f64; 6], c: Isotropic, e: [f64; 6]| {
+            for (sk, ck) in s.iter_mut().zip(c.apply(e)) {
+                *sk += ck;
             }
+        };
+        for t in &self.cells {
+            let mut s = [0.0; 6];
+            add(&mut s, self.a, t.strain(&self.local(t, w)));
             if let Some(b) = self.b {
-                let sb = b.apply(eu);
-                for c in 0..3 {
-                    s[c] += sb[c];
-                }
-                if model == Model::PlaneStrain {
-                    szz += b.b * (eu[0] + eu[1]);
-                }
+                add(&mut s, b, t.strain(&self.local(t, u)));
             }
             if let Some(m) = m {
-                let sm = self.r.apply(t.strain(self.local(t, m)));
-                for c in 0..3 {
-                    s[c] += sm[c];
-                }
+                add(&mut s, self.r, t.strain(&self.local(t, m)));
             }
-            s6.extend_from_slice(&[s[0], s[1], szz, s[2], 0.0, 0.0]);
-            let (dx, dy, dz) = (s[0] - s[1], s[1] - szz, szz - s[0]);
-            vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * s[2] * s[2]).sqrt());
+            if model == Model::PlaneStress {
+                s[2] = 0.0;
+            }
+            s6.extend_from_slice(&s);
+            let (dx, dy, dz) = (s[0] - s[1], s[1] - s[2], s[2] - s[0]);
+            let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
+            vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt());
         }
         (s6, vm)
     }
@@ -330,47 +331,113 @@ impl Discretization {
 
     /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
-        p1_norms(&self.triangles, &nodal2(self, v))
+        p1_norms(&self.cells, &nodal_vectors::<3>(self, v))
     }
 }
 
-/// The 2 in-plane components at every node of a free-dof vector (0 on Γ1).
-pub fn nodal2(disc: &Discretization, v: &[f64]) -> Vec<[f64; 2]> {
+/// The first N components at every node of a free-dof vector (0 on Γ1 and beyond d).
+pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f64; N]> {
+    let d = disc.dim;
     (0..disc.nodes.len())
         .map(|i| {
-            let c = |k: usize| disc.free[2 * i + k].map_or(0.0, |d| v[d]);
-            [c(0), c(1)]
+            let mut out = [0.0; N];
+            for (k, o) in out.iter_mut().enumerate().take(d) {
+                *o = disc.free[d * i + k].map_or(0.0, |dof| v[dof]);
+            }
+            out
         })
         .collect()
 }
 
+/// The 2 in-plane components at every node of a free-dof vector (0 on Γ1).
+pub fn nodal2(disc: &Discretization, v: &[f64]) -> Vec<[f64; 2]> {
+    nodal_vectors::<2>(disc, v)
+}
+
 /// ‖v‖_{L²} and |v|_{H¹} of a P1 vector field given by its nodal values, computed exactly:
-/// per triangle ∫(Σ v_i φ_i)² = |T|/12 (Σ v_i² + (Σ v_i)²) and the constant gradient.
-pub fn p1_norms(triangles: &[Triangle], v: &[[f64; 2]]) -> (f64, f64) {
+/// per simplex of dimension d, ∫(Σ v_i φ_i)² = |T|/((d+1)(d+2)) (Σ v_i² + (Σ v_i)²), and the
+/// gradient is constant.
+pub fn p1_norms<const N: usize>(cells: &[Cell], v: &[[f64; N]]) -> (f64, f64) {
     let (mut l2, mut h1) = (0.0, 0.0);
-    for t in triangles {
-        let lv = t.nodes.map(|n| v[n]);
-        for c in 0..2 {
-            let s: f64 = lv.iter().map(|x| x[c]).sum();
-            let q: f64 = lv.iter().map(|x| x[c] * x[c]).sum();
-            l2 += t.area / 12.0 * (q + s * s);
-            let gx: f64 = (0..3).map(|k| t.grad[k][0] * lv[k][c]).sum();
-            let gy: f64 = (0..3).map(|k| t.grad[k][1] * lv[k][c]).sum();
-            h1 += t.area * (gx * gx + gy * gy);
+    for t in cells {
+        let vs = t.vertices();
+        let denom = ((t.dim + 1) * (t.dim + 2)) as f64;
+        for c in 0..N {
+            let s: f64 = vs.iter().map(|&n| v[n][c]).sum();
+            let q: f64 = vs.iter().map(|&n| v[n][c] * v[n][c]).sum();
+            l2 += t.measure / denom * (q + s * s);
+            for k in 0..t.dim {
+                let g: f64 = vs
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &n)| t.grad[i][k] * v[n][c])
+                    .sum();
+                h1 += t.measure * g * g;
+            }
         }
     }
     (l2.sqrt(), h1.sqrt())
 }
 
-/// ∫_g φ_i da for every node (zero off the group).
+/// ∫_g φ_i da for every node (zero off the group): a facet's measure shared equally by its
+/// nodes.
 fn lumped_area(mesh: &Mesh, g: &Group) -> Vec<f64> {
     let mut area = vec![0.0; mesh.nodes.len()];
-    for &f in &g.facets {
-        let half = 0.5 * mesh.facet_length(f);
-        area[f[0]] += half;
-        area[f[1]] += half;
+    for f in mesh.boundary_facets(g) {
+        let share = f.measure / f.nodes().len() as f64;
+        for &n in f.nodes() {
+            area[n] += share;
+        }
     }
     area
+}
+
+/// Unit tangents at a boundary node with unit normal n: τ = (−n_y, n_x) in 2D; in 3D an
+/// orthonormal pair τ_1 = e × n / |e × n| (e the coordinate axis least aligned with n),
+/// τ_2 = n × τ_1. Any orthonormal pair gives the same |w_τ| (the friction is isotropic).
+fn tangents(n: [f64; 3], d: usize) -> Vec<[f64; 3]> {
+    if d == 2 {
+        return vec![[-n[1], n[0], 0.0]];
+    }
+    let k = (0..3)
+        .min_by(|&i, &j| n[i].abs().total_cmp(&n[j].abs()))
+        .unwrap_or(0);
+    let mut e = [0.0; 3];
+    e[k] = 1.0;
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let t1 = cross(e, n);
+    let len = (t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]).sqrt();
+    let t1 = t1.map(|x| x / len);
+    vec![t1, cross(n, t1)]
+}
+
+/// The scene's model must match the mesh's dimension.
+fn check_model(mesh: &Mesh, scene: &Scene) -> Result<()> {
+    let model_3d = scene.model == Model::ThreeD;
+    if model_3d == (mesh.dim == 3) {
+        return Ok(());
+    }
+    let (has, fix) = if mesh.dim == 3 {
+        ("tetrahedra (a 3D mesh)", "set mesh.model = \"3d\"")
+    } else {
+        (
+            "triangles (a 2D mesh)",
+            "set mesh.model = \"plane_stress\" or \"plane_strain\", or mesh the volume with \
+             `gmsh -3`",
+        )
+    };
+    Err(Error::input(format!(
+        "{}: key 'mesh.model': the mesh '{}' has {has} but the model is {:?}; {fix}",
+        scene.path.display(),
+        mesh.path.display(),
+        scene.model
+    )))
 }
 
 /// Refuses NaN/∞ (and negative values where `nonnegative`) in data evaluated on the mesh.
@@ -378,45 +445,54 @@ pub(crate) fn check_data(
     v: f64,
     key: &str,
     scene: &Scene,
-    p: [f64; 2],
+    p: [f64; 3],
     nonnegative: bool,
 ) -> Result<()> {
     if !v.is_finite() || (nonnegative && v < 0.0) {
         return Err(Error::input(format!(
-            "{}: key '{key}' evaluates to {v} at (x, y) = ({}, {}); it must be finite{}",
+            "{}: key '{key}' evaluates to {v} at {}; it must be finite{}",
             scene.path.display(),
-            p[0],
-            p[1],
+            fmt_at(p, scene.model),
             if nonnegative { " and ≥ 0" } else { "" }
         )));
     }
     Ok(())
 }
 
-/// Assembles K_A, K_B, K_R over all triangles in free-dof numbering (Γ1 rows and columns
+/// "(x, y) = (…, …)" in 2D, "(x, y, z) = (…, …, …)" in 3D, for messages.
+pub(crate) fn fmt_at(p: [f64; 3], model: Model) -> String {
+    match model {
+        Model::ThreeD => format!("(x, y, z) = ({}, {}, {})", p[0], p[1], p[2]),
+        _ => format!("(x, y) = ({}, {})", p[0], p[1]),
+    }
+}
+
+/// Assembles K_A, K_B, K_R over all cells in free-dof numbering (Γ1 rows and columns
 /// dropped); the three share one sparsity pattern.
 fn assemble(
-    triangles: &[Triangle],
+    cells: &[Cell],
+    d: usize,
     free: &[Option<usize>],
     n: usize,
     a: Isotropic,
     b: Option<Isotropic>,
     r: Isotropic,
 ) -> Result<(Sparse, Option<Sparse>, Sparse)> {
-    let cap = 36 * triangles.len();
+    let ne = d * (d + 1);
+    let cap = ne * ne * cells.len();
     let (mut ta, mut tb, mut tr) = (
         Vec::with_capacity(cap),
         Vec::with_capacity(if b.is_some() { cap } else { 0 }),
         Vec::with_capacity(cap),
     );
-    for t in triangles {
+    for t in cells {
         let ka = t.stiffness(a);
         let kb = b.map(|b| t.stiffness(b));
         let kr = t.stiffness(r);
-        let dof = |l: usize| free[2 * t.nodes[l / 2] + l % 2];
-        for i in 0..6 {
+        let dof = |l: usize| free[d * t.nodes[l / d] + l % d];
+        for i in 0..ne {
             let Some(gi) = dof(i) else { continue };
-            for j in 0..6 {
+            for j in 0..ne {
                 let Some(gj) = dof(j) else { continue };
                 ta.push(Triplet::new(gi, gj, ka[i][j]));
                 if let Some(kb) = &kb {

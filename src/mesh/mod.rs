@@ -2,9 +2,11 @@
 //!
 //! [`Mesh::read`] reads the file through `mshio` (see `msh.rs` for what `mshio` does and
 //! what is added here) and the `$PhysicalNames` section with a small reader of its own
-//! (`physical_names.rs`: `mshio` skips that section). It accepts 3-node triangles (gmsh type
-//! 2), 2-node lines (type 1) and points (type 15); anything else is refused with a message
-//! naming the type and how to remesh. Then:
+//! (`physical_names.rs`: `mshio` skips that section). It accepts 4-node tetrahedra (gmsh
+//! type 4), 3-node triangles (type 2), 2-node lines (type 1) and points (type 15); anything
+//! else is refused with a message naming the type and how to remesh. A file with tetrahedra
+//! is a 3D mesh (its triangles are boundary faces), one without is a 2D mesh in the
+//! xy-plane. For a 2D mesh:
 //!
 //! - triangles given clockwise are reoriented (counted in [`Mesh::flipped`]); triangles of
 //!   zero area, and meshes that fold over themselves or have an edge shared by three or more
@@ -15,15 +17,20 @@
 //!   physical surface group a list of triangle indices. Physical point and volume groups are
 //!   ignored.
 //!
-//! Groups are found by name, by an ASCII alias of the name, or by integer tag
-//! ([`Mesh::group`]).
+//! A 3D mesh is read the same way one dimension up (`solid.rs`): tetrahedra of negative
+//! volume are reoriented, flat ones, folds and faces shared by three tetrahedra are refused;
+//! every physical surface group becomes a list of boundary faces (triangles oriented with the
+//! outward normal by the right-hand rule), every physical volume group a list of tetrahedra;
+//! curve groups are ignored.
 //!
-//! The mesh is 2D ([`Mesh::dim`] = 2); the data layout (`dim`, 3 coordinates per node,
-//! `dim`-tagged groups) leaves room for tetrahedral meshes later.
+//! Groups are found by name, by an ASCII alias of the name, or by integer tag
+//! ([`Mesh::group`]). The code downstream sees the boundary of either dimension through
+//! [`Mesh::boundary_facets`]: edges in 2D, triangles in 3D, with normal and measure.
 
 mod msh;
 mod physical_names;
 mod quality;
+mod solid;
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -35,39 +42,116 @@ use msh::RawMesh;
 use physical_names::PhysicalName;
 use quality::signed_area;
 
-/// A P1 triangle mesh with its physical groups.
+/// A P1 simplex mesh (triangles in 2D, tetrahedra in 3D) with its physical groups.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mesh {
     /// The file the mesh was read from (as given to [`Mesh::read`]).
     pub path: PathBuf,
-    /// Spatial dimension: 2 (triangles in the xy-plane).
+    /// Spatial dimension: 2 (triangles in the xy-plane) or 3 (tetrahedra).
     pub dim: usize,
-    /// Node coordinates; only nodes used by the triangles, numbered `0..` in file order;
+    /// Node coordinates; only nodes used by the cells, numbered `0..` in file order;
     /// z = 0 in 2D.
     pub nodes: Vec<[f64; 3]>,
-    /// Triangles as 0-based node indices, counter-clockwise (positive signed area).
+    /// 2D: the cells, as 0-based node indices, counter-clockwise (positive signed area).
+    /// Empty in 3D.
     pub triangles: Vec<[usize; 3]>,
-    /// All physical curve and surface groups, in file order (the order of `$PhysicalNames`,
-    /// then unnamed groups in the order of `$Entities`).
+    /// 3D: the cells, positively oriented ((b−a)·((c−a)×(d−a)) > 0). Empty in 2D.
+    pub tetrahedra: Vec<[usize; 4]>,
+    /// All physical groups of dimension `dim − 1` (boundary) and `dim` (cells), in file
+    /// order (the order of `$PhysicalNames`, then unnamed groups in the order of
+    /// `$Entities`).
     pub groups: Vec<Group>,
-    /// How many triangles were clockwise in the file and got reoriented.
+    /// How many cells had negative orientation in the file and got reoriented.
     pub flipped: usize,
+}
+
+/// A boundary facet of either dimension: an edge in 2D, a triangle in 3D, its nodes ordered
+/// so that the normal points out of the body.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Facet {
+    nodes: [usize; 3],
+    count: usize,
+    /// Outward unit normal ν.
+    pub normal: [f64; 3],
+    /// Length (2D) or area (3D).
+    pub measure: f64,
+}
+
+impl Facet {
+    /// The facet's 2 (2D) or 3 (3D) nodes.
+    pub fn nodes(&self) -> &[usize] {
+        &self.nodes[..self.count]
+    }
+
+    /// Quadrature on the facet, exact for cubic polynomials (a quadratic traction times P1):
+    /// 2-point Gauss on an edge, the 6-point degree-4 Dunavant rule on a triangle. Each point
+    /// as (x, weight, φ of the facet's nodes at x; unused entries 0).
+    pub fn quadrature(&self, mesh: &Mesh) -> Vec<([f64; 3], f64, [f64; 3])> {
+        let p = self.nodes.map(|n| mesh.nodes[n]);
+        let at = |bary: [f64; 3], weight: f64| {
+            let mut x = [0.0; 3];
+            for (k, xk) in x.iter_mut().enumerate() {
+                *xk = (0..self.count).map(|i| bary[i] * p[i][k]).sum();
+            }
+            (x, weight, bary)
+        };
+        if self.count == 2 {
+            // s ∈ (0, 1) along a → b; φ_a = 1 − s, φ_b = s.
+            let half = 0.5 * self.measure;
+            let g = 0.5 / 3f64.sqrt();
+            let edge = |s: f64| {
+                let x = [0, 1, 2].map(|k| p[0][k] + s * (p[1][k] - p[0][k]));
+                (x, half, [1.0 - s, s, 0.0])
+            };
+            return vec![edge(0.5 - g), edge(0.5 + g)];
+        }
+        // Dunavant (1985), degree 4: two orbits of 3 points.
+        const ORBITS: [(f64, f64, f64); 2] = [
+            (
+                0.445_948_490_915_965,
+                0.108_103_018_168_070,
+                0.223_381_589_678_011,
+            ),
+            (
+                0.091_576_213_509_771,
+                0.816_847_572_980_459,
+                0.109_951_743_655_322,
+            ),
+        ];
+        let mut out = Vec::with_capacity(6);
+        for (a, b, w) in ORBITS {
+            for bary in [[b, a, a], [a, b, a], [a, a, b]] {
+                out.push(at(bary, w * self.measure));
+            }
+        }
+        out
+    }
 }
 
 /// A physical group of the mesh.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Group {
-    /// 1 = boundary curve group, 2 = surface group.
+    /// 1 = curve, 2 = surface, 3 = volume. Boundary groups have dimension `Mesh::dim − 1`.
     pub dim: usize,
     /// The physical tag in the file.
     pub tag: i32,
     /// The name from `$PhysicalNames` (UTF-8, e.g. `"Γ3,1"`), if the group has one.
     pub name: Option<String>,
-    /// For `dim == 1`: boundary edges `[a, b]`, each once, oriented so that the body lies on
-    /// the left of a → b (outward normal `(dy, -dx) / len`). Empty for surface groups.
+    /// 2D curve groups: boundary edges `[a, b]`, each once, oriented so that the body lies on
+    /// the left of a → b (outward normal `(dy, -dx) / len`). Empty otherwise.
     pub facets: Vec<[usize; 2]>,
-    /// For `dim == 2`: indices into [`Mesh::triangles`]. Empty for curve groups.
+    /// 3D surface groups: boundary triangles `[a, b, c]`, each once, oriented so that
+    /// (b − a) × (c − a) points out of the body. Empty otherwise.
+    pub faces: Vec<[usize; 3]>,
+    /// Cell groups: indices into [`Mesh::triangles`] (2D) or [`Mesh::tetrahedra`] (3D).
     pub cells: Vec<usize>,
+}
+
+impl Group {
+    /// The number of boundary facets (edges or faces).
+    pub fn n_facets(&self) -> usize {
+        self.facets.len() + self.faces.len()
+    }
 }
 
 impl Mesh {
@@ -79,7 +163,11 @@ impl Mesh {
         let raw = msh::read_raw(path, &bytes)?;
         let names = physical_names::read_physical_names(&bytes)
             .map_err(|m| Error::input(format!("mesh file '{}': {m}", path.display())))?;
-        build(path, raw, &names)
+        if raw.tetrahedra.is_empty() {
+            build(path, raw, &names)
+        } else {
+            solid::build(path, raw, &names)
+        }
     }
 
     /// A group by name, ASCII alias or integer tag.
@@ -94,15 +182,19 @@ impl Mesh {
         self.find_group(key, false)
     }
 
-    /// Like [`Mesh::group`], but the group must be a boundary (dim-1, curve) group.
-    /// An empty group (named in `$PhysicalNames` but carried by no curve) is refused: a
-    /// boundary condition on it would silently do nothing.
+    /// Like [`Mesh::group`], but the group must be a boundary group: a curve group in 2D, a
+    /// surface group in 3D. An empty group (named in `$PhysicalNames` but carried by no
+    /// boundary entity) is refused: a boundary condition on it would silently do nothing.
     pub fn boundary_group(&self, key: &str) -> Result<&Group> {
         let g = self.find_group(key, true)?;
-        if g.facets.is_empty() {
+        if g.n_facets() == 0 {
+            let (what, entity) = match self.dim {
+                2 => ("boundary edges", "curve"),
+                _ => ("boundary faces", "surface"),
+            };
             return Err(Error::input(format!(
-                "mesh '{}': physical group '{}' (tag {}) has no boundary edges: no curve of the \
-                 mesh carries it; add the curves to the group in gmsh",
+                "mesh '{}': physical group '{}' (tag {}) has no {what}: no {entity} of the \
+                 mesh carries it; add the {entity}s to the group in gmsh",
                 self.path.display(),
                 Self::display_name(g),
                 g.tag
@@ -111,7 +203,7 @@ impl Mesh {
         Ok(g)
     }
 
-    /// Outward unit normal of the boundary facet `f = [a, b]` (body on the left of a → b):
+    /// Outward unit normal of the 2D boundary edge `f = [a, b]` (body on the left of a → b):
     /// `(dy, -dx) / len`.
     pub fn facet_normal(&self, f: [usize; 2]) -> [f64; 2] {
         let (a, b) = (self.nodes[f[0]], self.nodes[f[1]]);
@@ -120,66 +212,108 @@ impl Mesh {
         [dy / len, -dx / len]
     }
 
-    /// Length of the facet `f`.
+    /// Length of the 2D boundary edge `f`.
     pub fn facet_length(&self, f: [usize; 2]) -> f64 {
         let (a, b) = (self.nodes[f[0]], self.nodes[f[1]]);
         (b[0] - a[0]).hypot(b[1] - a[1])
     }
 
-    /// The nodes of a group's facets (curve group) or cells (surface group), sorted, unique.
+    /// The boundary facets of a group, edges (2D) or triangles (3D), with outward normal and
+    /// measure. Empty for a cell group.
+    pub fn boundary_facets(&self, g: &Group) -> Vec<Facet> {
+        let edges = g.facets.iter().map(|&f| {
+            let n = self.facet_normal(f);
+            Facet {
+                nodes: [f[0], f[1], f[1]],
+                count: 2,
+                normal: [n[0], n[1], 0.0],
+                measure: self.facet_length(f),
+            }
+        });
+        let faces = g.faces.iter().map(|&f| {
+            let [a, b, c] = f.map(|i| self.nodes[i]);
+            let cross = solid::cross(solid::sub(b, a), solid::sub(c, a));
+            let norm = solid::norm(cross);
+            Facet {
+                nodes: f,
+                count: 3,
+                normal: cross.map(|x| x / norm),
+                measure: 0.5 * norm,
+            }
+        });
+        edges.chain(faces).collect()
+    }
+
+    /// The cells as one flat list of node indices, and the number of nodes per cell.
+    pub fn cell_nodes(&self) -> (Vec<usize>, usize) {
+        match self.dim {
+            2 => (self.triangles.iter().flatten().copied().collect(), 3),
+            _ => (self.tetrahedra.iter().flatten().copied().collect(), 4),
+        }
+    }
+
+    /// The number of cells (triangles or tetrahedra).
+    pub fn n_cells(&self) -> usize {
+        self.triangles.len() + self.tetrahedra.len()
+    }
+
+    /// The nodes of a group's facets or cells, sorted, unique.
     pub fn group_nodes(&self, g: &Group) -> Vec<usize> {
         let mut nodes: Vec<usize> = g
             .facets
             .iter()
             .flatten()
+            .chain(g.faces.iter().flatten())
             .copied()
-            .chain(g.cells.iter().flat_map(|&c| self.triangles[c]))
+            .chain(g.cells.iter().flat_map(|&c| match self.dim {
+                2 => self.triangles[c].to_vec(),
+                _ => self.tetrahedra[c].to_vec(),
+            }))
             .collect();
         nodes.sort_unstable();
         nodes.dedup();
         nodes
     }
 
-    /// Outward unit normal at each node of a boundary group: the length-weighted average of
+    /// Outward unit normal at each node of a boundary group: the measure-weighted average of
     /// the group's own facet normals at that node, normalized; sorted by node. Also returns
     /// the largest angle in degrees between two facet normals of the group meeting at a node
-    /// (0 for a straight boundary), so that callers can warn about kinks. Where the facet
+    /// (0 for a flat boundary), so that callers can warn about kinks. Where the facet
     /// normals cancel (a boundary folding back by 180°), the normal of the node's first facet
-    /// is used. A surface group has no facets: empty list, angle 0.
-    pub fn nodal_normals(&self, g: &Group) -> (Vec<(usize, [f64; 2])>, f64) {
-        /// Per node: Σ len·n, Σ len, and the facet normals.
+    /// is used. A cell group has no facets: empty list, angle 0.
+    pub fn nodal_normals(&self, g: &Group) -> (Vec<(usize, [f64; 3])>, f64) {
+        /// Per node: Σ measure·n, Σ measure, and the facet normals.
         #[derive(Default)]
         struct Acc {
-            sum: [f64; 2],
-            total_len: f64,
-            ns: Vec<[f64; 2]>,
+            sum: [f64; 3],
+            total: f64,
+            ns: Vec<[f64; 3]>,
         }
         let mut at: BTreeMap<usize, Acc> = BTreeMap::new();
-        for &f in &g.facets {
-            let n = self.facet_normal(f);
-            let len = self.facet_length(f);
-            for node in f {
+        for f in self.boundary_facets(g) {
+            for &node in f.nodes() {
                 let e = at.entry(node).or_default();
-                e.sum[0] += len * n[0];
-                e.sum[1] += len * n[1];
-                e.total_len += len;
-                e.ns.push(n);
+                for k in 0..3 {
+                    e.sum[k] += f.measure * f.normal[k];
+                }
+                e.total += f.measure;
+                e.ns.push(f.normal);
             }
         }
         let mut max_angle: f64 = 0.0;
         let normals = at
             .into_iter()
-            .map(|(node, Acc { sum, total_len, ns })| {
+            .map(|(node, Acc { sum, total, ns })| {
                 for (i, a) in ns.iter().enumerate() {
                     for b in &ns[i + 1..] {
-                        let cross = a[0] * b[1] - a[1] * b[0];
-                        let dot = a[0] * b[0] + a[1] * b[1];
-                        max_angle = max_angle.max(cross.abs().atan2(dot).to_degrees());
+                        let cross = solid::norm(solid::cross(*a, *b));
+                        let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+                        max_angle = max_angle.max(cross.atan2(dot).to_degrees());
                     }
                 }
-                let norm = sum[0].hypot(sum[1]);
-                let n = if norm > 1e-12 * total_len {
-                    [sum[0] / norm, sum[1] / norm]
+                let norm = solid::norm(sum);
+                let n = if norm > 1e-12 * total {
+                    sum.map(|x| x / norm)
                 } else {
                     ns[0]
                 };
@@ -189,9 +323,13 @@ impl Mesh {
         (normals, max_angle)
     }
 
-    /// Element quality: smallest angle, largest aspect ratio, smallest and largest area.
+    /// Element quality: smallest angle, largest aspect ratio, smallest and largest area
+    /// (2D) or volume (3D; the angle is the smallest dihedral angle).
     pub fn quality(&self) -> Quality {
-        quality::quality(&self.nodes, &self.triangles)
+        match self.dim {
+            2 => quality::quality(&self.nodes, &self.triangles),
+            _ => solid::quality(&self.nodes, &self.tetrahedra),
+        }
     }
 
     /// The group's name if it has one, else its tag as a string.
@@ -213,19 +351,25 @@ impl Mesh {
             if found.is_empty() {
                 continue;
             }
-            let curves: Vec<&Group> = found.iter().copied().filter(|g| g.dim == 1).collect();
-            let chosen = if !curves.is_empty() {
-                curves
+            let bdim = self.dim - 1;
+            let on_boundary: Vec<&Group> =
+                found.iter().copied().filter(|g| g.dim == bdim).collect();
+            let chosen = if !on_boundary.is_empty() {
+                on_boundary
             } else if boundary {
                 let boundary_groups: Vec<String> = self
                     .groups
                     .iter()
-                    .filter(|g| g.dim == 1)
+                    .filter(|g| g.dim == bdim)
                     .map(describe)
                     .collect();
+                let (is, needed) = match self.dim {
+                    2 => ("a surface", "a boundary (curve)"),
+                    _ => ("a volume", "a boundary (surface)"),
+                };
                 return Err(Error::input(format!(
-                    "mesh '{file}': '{key}' names the physical group {}, which is a surface \
-                     group, but a boundary (curve) group is needed here; the boundary groups \
+                    "mesh '{file}': '{key}' names the physical group {}, which is {is} \
+                     group, but {needed} group is needed here; the boundary groups \
                      are: {}",
                     describe(found[0]),
                     or_none(&boundary_groups)
@@ -276,7 +420,11 @@ fn normalize_name(s: &str) -> String {
 fn describe(g: &Group) -> String {
     let size = match g.dim {
         1 => format!("curve, {} edges", g.facets.len()),
-        _ => format!("surface, {} triangles", g.cells.len()),
+        2 if g.cells.is_empty() && !g.faces.is_empty() => {
+            format!("surface, {} faces", g.faces.len())
+        }
+        2 => format!("surface, {} triangles", g.cells.len()),
+        _ => format!("volume, {} tetrahedra", g.cells.len()),
     };
     match &g.name {
         Some(n) => format!("\"{n}\" (tag {}, {size})", g.tag),
@@ -309,28 +457,14 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
     let file = path.display();
     if raw.triangles.is_empty() {
         return Err(Error::input(format!(
-            "mesh file '{file}' contains no triangles (gmsh element type 2); viscontact needs a \
-             2D triangle mesh: mesh the surface with `gmsh -2` and put it in a physical surface \
-             group (gmsh saves only elements of physical groups)"
+            "mesh file '{file}' contains no triangles (gmsh element type 2) and no tetrahedra \
+             (type 4); viscontact needs a 2D triangle mesh (`gmsh -2`) or a 3D tetrahedral \
+             mesh (`gmsh -3`) with the cells in a physical surface or volume group (gmsh saves \
+             only elements of physical groups)"
         )));
     }
 
-    // Renumber the nodes used by triangles, in file order.
-    const UNUSED: usize = usize::MAX;
-    let mut new_index = vec![UNUSED; raw.nodes.len()];
-    for t in &raw.triangles {
-        for &n in &t.nodes {
-            new_index[n] = 0;
-        }
-    }
-    let mut nodes = Vec::new();
-    for (old, slot) in new_index.iter_mut().enumerate() {
-        if *slot != UNUSED {
-            *slot = nodes.len();
-            nodes.push(raw.nodes[old]);
-        }
-    }
-
+    let (new_index, mut nodes) = renumber(&raw.nodes, &raw.triangles);
     // Planarity and the coordinate scale for the zero-area test.
     let scale = nodes
         .iter()
@@ -344,13 +478,7 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         }
     }
     let diag = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
-    if let Some(p) = nodes.iter().find(|p| p.iter().any(|c| !c.is_finite())) {
-        return Err(Error::input(format!(
-            "mesh file '{file}' has a node with a non-finite coordinate ({}, {}, {}); the file \
-             looks corrupt, regenerate it with gmsh",
-            p[0], p[1], p[2]
-        )));
-    }
+    check_finite(&file, &nodes)?;
     if let Some(p) = nodes.iter().find(|p| p[2].abs() > 1e-12 * diag.max(scale)) {
         return Err(Error::input(format!(
             "mesh file '{file}' is not a 2D mesh in the xy-plane: node ({}, {}, {}) has z ≠ 0; \
@@ -440,40 +568,7 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         }
     }
 
-    // Groups: named ones in $PhysicalNames order, then unnamed ones from $Entities.
-    let mut groups: Vec<Group> = Vec::new();
-    let mut slot: HashMap<(i32, i32), usize> = HashMap::new();
-    let mut add_group = |dim: i32, tag: i32, name: Option<String>| {
-        if (dim == 1 || dim == 2) && !slot.contains_key(&(dim, tag)) {
-            slot.insert((dim, tag), groups.len());
-            groups.push(Group {
-                dim: dim as usize,
-                tag,
-                name,
-                facets: Vec::new(),
-                cells: Vec::new(),
-            });
-        }
-    };
-    for n in names {
-        add_group(n.dim, n.tag, Some(n.name.clone()));
-    }
-    for &(dim, tag) in &raw.physical_order {
-        add_group(dim, tag, None);
-    }
-    let groups_of = |entity: (i32, i32)| -> Vec<usize> {
-        let mut out: Vec<usize> = raw
-            .physical
-            .get(&entity)
-            .into_iter()
-            .flatten()
-            .filter_map(|p| slot.get(&(entity.0, p.wrapping_abs())).copied())
-            .collect();
-        out.sort_unstable();
-        out.dedup();
-        out
-    };
-
+    let (mut groups, groups_of) = group_table(&raw, names, 2);
     for (k, t) in raw.triangles.iter().enumerate() {
         if t.entity.0 == 2 {
             for g in groups_of(t.entity) {
@@ -526,9 +621,90 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         dim: 2,
         nodes,
         triangles,
+        tetrahedra: Vec::new(),
         groups,
         flipped,
     })
+}
+
+/// The index of a node no cell uses.
+const UNUSED: usize = usize::MAX;
+
+/// The nodes used by `cells`, renumbered `0..` in file order: (old → new index, with
+/// `usize::MAX` for unused nodes; the coordinates of the used ones).
+fn renumber<const N: usize>(
+    raw_nodes: &[[f64; 3]],
+    cells: &[msh::RawElement<N>],
+) -> (Vec<usize>, Vec<[f64; 3]>) {
+    let mut new_index = vec![UNUSED; raw_nodes.len()];
+    for t in cells {
+        for &n in &t.nodes {
+            new_index[n] = 0;
+        }
+    }
+    let mut nodes = Vec::new();
+    for (old, slot) in new_index.iter_mut().enumerate() {
+        if *slot != UNUSED {
+            *slot = nodes.len();
+            nodes.push(raw_nodes[old]);
+        }
+    }
+    (new_index, nodes)
+}
+
+fn check_finite(file: &impl std::fmt::Display, nodes: &[[f64; 3]]) -> Result<()> {
+    match nodes.iter().find(|p| p.iter().any(|c| !c.is_finite())) {
+        Some(p) => Err(Error::input(format!(
+            "mesh file '{file}' has a node with a non-finite coordinate ({}, {}, {}); the file \
+             looks corrupt, regenerate it with gmsh",
+            p[0], p[1], p[2]
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// The physical groups of dimensions `dim − 1` and `dim` (named ones in `$PhysicalNames`
+/// order, then unnamed ones from `$Entities`), still empty, and a map from an entity
+/// `(dim, tag)` to the indices of the groups it belongs to.
+fn group_table<'r>(
+    raw: &'r RawMesh,
+    names: &[PhysicalName],
+    dim: i32,
+) -> (Vec<Group>, impl Fn((i32, i32)) -> Vec<usize> + 'r) {
+    let mut groups: Vec<Group> = Vec::new();
+    let mut slot: HashMap<(i32, i32), usize> = HashMap::new();
+    let mut add_group = |d: i32, tag: i32, name: Option<String>| {
+        if (d == dim - 1 || d == dim) && !slot.contains_key(&(d, tag)) {
+            slot.insert((d, tag), groups.len());
+            groups.push(Group {
+                dim: d as usize,
+                tag,
+                name,
+                facets: Vec::new(),
+                faces: Vec::new(),
+                cells: Vec::new(),
+            });
+        }
+    };
+    for n in names {
+        add_group(n.dim, n.tag, Some(n.name.clone()));
+    }
+    for &(d, tag) in &raw.physical_order {
+        add_group(d, tag, None);
+    }
+    let groups_of = move |entity: (i32, i32)| -> Vec<usize> {
+        let mut out: Vec<usize> = raw
+            .physical
+            .get(&entity)
+            .into_iter()
+            .flatten()
+            .filter_map(|p| slot.get(&(entity.0, p.wrapping_abs())).copied())
+            .collect();
+        out.sort_unstable();
+        out.dedup();
+        out
+    };
+    (groups, groups_of)
 }
 
 #[cfg(test)]

@@ -31,6 +31,7 @@ use crate::Error;
 pub(crate) struct RawMesh {
     pub nodes: Vec<[f64; 3]>,
     pub triangles: Vec<RawElement<3>>,
+    pub tetrahedra: Vec<RawElement<4>>,
     pub lines: Vec<RawElement<2>>,
     /// Physical tags of each entity `(dim, entity tag)`, from `$Entities`.
     pub physical: HashMap<(i32, i32), Vec<i32>>,
@@ -380,9 +381,14 @@ fn describe_element_type(t: ElementType) -> (String, &'static str) {
     };
     let text = format!("{nodes}-node{order} {family} (gmsh element type {code})");
     let hint = match (kind, order.is_empty()) {
-        (3, _) => {
-            "viscontact reads 2D meshes of 3-node triangles: save a 2D mesh (`gmsh -2`); 3D is \
-             not supported yet"
+        (3, false) => {
+            "viscontact uses P1 tetrahedra in 3D: remesh with `gmsh -3 -order 1` (or \
+             Mesh.ElementOrder = 1)"
+        }
+        (3, true) => {
+            "viscontact reads 3D meshes of 4-node tetrahedra only: remesh the volume without \
+             recombination or extrusion into prisms (Mesh.RecombineAll = 0, no Recombine in \
+             Extrude)"
         }
         (_, false) => {
             "viscontact uses P1 triangles: remesh with `gmsh -2 -order 1` (or Mesh.ElementOrder = 1)"
@@ -391,7 +397,9 @@ fn describe_element_type(t: ElementType) -> (String, &'static str) {
             "viscontact uses 3-node triangles: remesh without recombination (remove `Recombine \
              Surface` / set Mesh.RecombineAll = 0)"
         }
-        _ => "viscontact reads 3-node triangles, 2-node boundary lines and points only",
+        _ => {
+            "viscontact reads 4-node tetrahedra, 3-node triangles, 2-node lines and points only"
+        }
     };
     (text, hint)
 }
@@ -492,7 +500,7 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
         }
     }
 
-    // Elements: only P1 triangles, 2-node lines and points.
+    // Elements: only P1 tetrahedra and triangles, 2-node lines and points.
     let elements = data.elements.ok_or_else(|| {
         Error::input(format!(
             "mesh file '{file}' has no $Elements section; it looks truncated, regenerate it with \
@@ -502,20 +510,20 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
     let mut unsupported: Vec<ElementType> = Vec::new();
     for block in &elements.element_blocks {
         let t = block.element_type;
-        if !matches!(t, ElementType::Pnt | ElementType::Lin2 | ElementType::Tri3)
-            && !unsupported.contains(&t)
+        if !matches!(
+            t,
+            ElementType::Pnt | ElementType::Lin2 | ElementType::Tri3 | ElementType::Tet4
+        ) && !unsupported.contains(&t)
         {
             unsupported.push(t);
         }
     }
     if !unsupported.is_empty() {
-        // Report surface elements first: they decide the remedy.
-        unsupported.sort_by_key(
-            |&t| match describe_element_type(t).0.contains("triangles") {
-                true => 0,
-                false => 1,
-            },
-        );
+        // Report cell elements first: they decide the remedy.
+        unsupported.sort_by_key(|&t| {
+            let text = describe_element_type(t).0;
+            !(text.contains("triangles") || text.contains("tetrahedra"))
+        });
         let texts: Vec<String> = unsupported
             .iter()
             .map(|&t| describe_element_type(t).0)
@@ -540,27 +548,30 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
             ))
         })
     };
+    // The element's first N nodes as indices into `raw.nodes`.
+    fn element<const N: usize>(
+        e: &mshio::Element<u64>,
+        entity: (i32, i32),
+        node_of: &dyn Fn(u64, u64) -> crate::Result<usize>,
+    ) -> crate::Result<RawElement<N>> {
+        // mshio reads exactly the type's node count (N for the types used here).
+        let mut nodes = [0; N];
+        for (slot, &tag) in nodes.iter_mut().zip(&e.nodes) {
+            *slot = node_of(e.element_tag, tag)?;
+        }
+        Ok(RawElement {
+            tag: e.element_tag,
+            nodes,
+            entity,
+        })
+    }
     for block in &elements.element_blocks {
         let entity = (block.entity_dim, block.entity_tag);
         for e in &block.elements {
             match block.element_type {
-                ElementType::Tri3 => raw.triangles.push(RawElement {
-                    tag: e.element_tag,
-                    nodes: [
-                        node_of(e.element_tag, e.nodes[0])?,
-                        node_of(e.element_tag, e.nodes[1])?,
-                        node_of(e.element_tag, e.nodes[2])?,
-                    ],
-                    entity,
-                }),
-                ElementType::Lin2 => raw.lines.push(RawElement {
-                    tag: e.element_tag,
-                    nodes: [
-                        node_of(e.element_tag, e.nodes[0])?,
-                        node_of(e.element_tag, e.nodes[1])?,
-                    ],
-                    entity,
-                }),
+                ElementType::Tri3 => raw.triangles.push(element(e, entity, &node_of)?),
+                ElementType::Tet4 => raw.tetrahedra.push(element(e, entity, &node_of)?),
+                ElementType::Lin2 => raw.lines.push(element(e, entity, &node_of)?),
                 _ => {}
             }
         }

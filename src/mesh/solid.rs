@@ -1,0 +1,283 @@
+//! 3D meshes: 4-node tetrahedra with physical surface (boundary) and volume groups.
+//!
+//! The same checks as for triangles, one dimension up: a tetrahedron of negative volume is
+//! reoriented (counted in [`Mesh::flipped`]), a flat one is refused, and so is a mesh in which
+//! a face is shared by two tetrahedra on the same side (a fold) or by three or more. Every
+//! triangle of a physical surface group must be a boundary face of the tetrahedral mesh; it
+//! is stored with the outward orientation of its tetrahedron.
+
+use std::collections::{HashMap, HashSet};
+use std::path::Path;
+
+use super::msh::RawMesh;
+use super::physical_names::PhysicalName;
+use super::quality::Quality;
+use super::{check_finite, group_table, renumber, Mesh, UNUSED};
+use crate::{Error, Result};
+
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+pub(crate) fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// Six times the signed volume of (a, b, c, d): (b − a)·((c − a) × (d − a)).
+pub(crate) fn volume6(p: [[f64; 3]; 4]) -> f64 {
+    dot(sub(p[1], p[0]), cross(sub(p[2], p[0]), sub(p[3], p[0])))
+}
+
+/// The faces of a positively oriented tetrahedron, each ordered so that its right-hand
+/// normal points out of the tetrahedron; face k is opposite vertex k.
+pub(crate) const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+
+fn fmt_point(p: [f64; 3]) -> String {
+    format!("({}, {}, {})", p[0], p[1], p[2])
+}
+
+/// Geometry, topology and groups of a 3D mesh from the raw file content.
+pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
+    let file = path.display();
+    let (new_index, nodes) = renumber(&raw.nodes, &raw.tetrahedra);
+    check_finite(&file, &nodes)?;
+    let scale = nodes
+        .iter()
+        .map(|p| p.iter().fold(0.0_f64, |a, c| a.max(c.abs())))
+        .fold(0.0_f64, f64::max);
+
+    // Orientation and degeneracy: a tetrahedron is flat if its height over the largest face
+    // is at most 1e-12 of its longest edge, or at most 1e-13 of the largest coordinate.
+    let mut tetrahedra = Vec::with_capacity(raw.tetrahedra.len());
+    let mut flipped = 0;
+    let mut flat = Vec::new();
+    for t in &raw.tetrahedra {
+        let mut tet = t.nodes.map(|n| new_index[n]);
+        let p = tet.map(|n| nodes[n]);
+        let v6 = volume6(p);
+        let mut lmax: f64 = 0.0;
+        let mut amax: f64 = 0.0;
+        for i in 0..4 {
+            for j in i + 1..4 {
+                lmax = lmax.max(norm(sub(p[j], p[i])));
+            }
+            let [a, b, c] = FACES[i].map(|k| p[k]);
+            amax = amax.max(norm(cross(sub(b, a), sub(c, a))));
+        }
+        // height = v6 / (2 · face area) = v6 / amax (amax is twice the largest face area).
+        if v6.abs() <= amax * (1e-12 * lmax + 1e-13 * scale) {
+            flat.push(t);
+        } else if v6 < 0.0 {
+            tet.swap(1, 2);
+            flipped += 1;
+        }
+        tetrahedra.push(tet);
+    }
+    if let Some(t) = flat.first() {
+        let pts: Vec<String> = t.nodes.iter().map(|&n| fmt_point(raw.nodes[n])).collect();
+        let more = match flat.len() {
+            1 => String::new(),
+            n => format!(" ({} more tetrahedra are flat)", n - 1),
+        };
+        return Err(Error::input(format!(
+            "mesh file '{file}': tetrahedron {} (gmsh element tag) has zero volume: its nodes \
+             {} are coplanar or coincide{more}; fix the geometry or remesh",
+            t.tag,
+            pts.join(", ")
+        )));
+    }
+
+    // Faces: each is used by one tetrahedron (boundary) or by two in opposite orientations.
+    struct FaceUse {
+        dir: [usize; 3],
+        tet: usize,
+        count: u32,
+    }
+    let key = |f: [usize; 3]| {
+        let mut k = f;
+        k.sort_unstable();
+        k
+    };
+    let mut faces: HashMap<[usize; 3], FaceUse> = HashMap::with_capacity(tetrahedra.len() * 3);
+    let tet_tag = |k: usize| raw.tetrahedra[k].tag;
+    for (k, tet) in tetrahedra.iter().enumerate() {
+        for local in FACES {
+            let dir = local.map(|i| tet[i]);
+            let e = faces.entry(key(dir)).or_insert(FaceUse {
+                dir,
+                tet: k,
+                count: 0,
+            });
+            e.count += 1;
+            let face_at = || {
+                let pts: Vec<String> = dir.iter().map(|&n| fmt_point(nodes[n])).collect();
+                pts.join("–")
+            };
+            // The same face seen from the other side is an even permutation of the reverse.
+            let same_side = e.count == 2
+                && (0..3).any(|r| [e.dir[r], e.dir[(r + 1) % 3], e.dir[(r + 2) % 3]] == dir);
+            if same_side {
+                return Err(Error::input(format!(
+                    "mesh file '{file}' folds over itself: tetrahedra {} and {} (gmsh element \
+                     tags) overlap at the face {}; fix the geometry or remesh",
+                    tet_tag(e.tet),
+                    tet_tag(k),
+                    face_at()
+                )));
+            }
+            if e.count == 3 {
+                return Err(Error::input(format!(
+                    "mesh file '{file}': the face {} is shared by three or more tetrahedra \
+                     (e.g. {} and {}, gmsh element tags); the mesh is not a valid 3D domain \
+                     (overlapping volumes?): fix the geometry or remesh",
+                    face_at(),
+                    tet_tag(e.tet),
+                    tet_tag(k)
+                )));
+            }
+        }
+    }
+
+    let (mut groups, groups_of) = group_table(&raw, names, 3);
+    for (k, t) in raw.tetrahedra.iter().enumerate() {
+        if t.entity.0 == 3 {
+            for g in groups_of(t.entity) {
+                groups[g].cells.push(k);
+            }
+        }
+    }
+    let mut seen: Vec<HashSet<[usize; 3]>> = vec![HashSet::new(); groups.len()];
+    for tri in raw.triangles.iter().filter(|t| t.entity.0 == 2) {
+        let member = groups_of(tri.entity);
+        if member.is_empty() {
+            continue;
+        }
+        let f = tri.nodes.map(|n| new_index[n]);
+        let found = if f.contains(&UNUSED) {
+            None
+        } else {
+            faces.get(&key(f)).map(|e| (e.dir, e.count))
+        };
+        let dir = match found {
+            Some((dir, 1)) => dir,
+            other => {
+                let g = &groups[member[0]];
+                let group = match &g.name {
+                    Some(n) => format!("\"{n}\" (tag {})", g.tag),
+                    None => format!("with tag {} (no name)", g.tag),
+                };
+                let why = match other {
+                    Some(_) => "it is shared by two tetrahedra (an interior face)",
+                    None => "it is not a face of any tetrahedron",
+                };
+                let pts: Vec<String> = tri.nodes.iter().map(|&n| fmt_point(raw.nodes[n])).collect();
+                return Err(Error::input(format!(
+                    "mesh file '{file}': physical group {group} contains the triangle {} (gmsh \
+                     element {}), which is not on the boundary of the tetrahedral mesh: {why}; \
+                     a boundary group must consist of boundary surfaces of the meshed volume",
+                    pts.join("–"),
+                    tri.tag
+                )));
+            }
+        };
+        for g in member {
+            if seen[g].insert(key(dir)) {
+                groups[g].faces.push(dir);
+            }
+        }
+    }
+
+    Ok(Mesh {
+        path: path.to_path_buf(),
+        dim: 3,
+        nodes,
+        triangles: Vec::new(),
+        tetrahedra,
+        groups,
+        flipped,
+    })
+}
+
+/// Quality of a tetrahedral mesh: the smallest dihedral angle (70.53° for a regular
+/// tetrahedron), the largest aspect ratio ℓ_max / (2√6 r) with r = 3V / (total face area) the
+/// inradius (1 for a regular tetrahedron), the smallest and largest volume.
+pub(crate) fn quality(nodes: &[[f64; 3]], tets: &[[usize; 4]]) -> Quality {
+    let mut q = Quality {
+        min_angle_deg: f64::INFINITY,
+        max_aspect_ratio: 0.0,
+        min_area: f64::INFINITY,
+        max_area: 0.0,
+    };
+    for t in tets {
+        let p = t.map(|i| nodes[i]);
+        let vol = volume6(p).abs() / 6.0;
+        // Face normals (outward, scaled by twice the face area).
+        let n = FACES.map(|f| {
+            let [a, b, c] = f.map(|k| p[k]);
+            cross(sub(b, a), sub(c, a))
+        });
+        let area: f64 = n.iter().map(|v| 0.5 * norm(*v)).sum();
+        let mut lmax: f64 = 0.0;
+        for i in 0..4 {
+            for j in i + 1..4 {
+                lmax = lmax.max(norm(sub(p[j], p[i])));
+                // The dihedral angle at the edge shared by faces i and j: π minus the angle
+                // between their outward normals.
+                let c = dot(n[i], n[j]) / (norm(n[i]) * norm(n[j]));
+                let angle = std::f64::consts::PI - c.clamp(-1.0, 1.0).acos();
+                q.min_angle_deg = q.min_angle_deg.min(angle.to_degrees());
+            }
+        }
+        let r = 3.0 * vol / area;
+        q.max_aspect_ratio = q.max_aspect_ratio.max(lmax / (2.0 * 6f64.sqrt() * r));
+        q.min_area = q.min_area.min(vol);
+        q.max_area = q.max_area.max(vol);
+    }
+    q
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regular_tetrahedron_quality_and_outward_faces() {
+        let s = 1.0 / 2f64.sqrt();
+        let nodes = [
+            [1.0, 0.0, -s],
+            [-1.0, 0.0, -s],
+            [0.0, 1.0, s],
+            [0.0, -1.0, s],
+        ];
+        let t = if volume6(nodes) > 0.0 {
+            [0, 1, 2, 3]
+        } else {
+            [0, 2, 1, 3]
+        };
+        let q = quality(&nodes, &[t]);
+        assert!((q.min_angle_deg - (1.0f64 / 3.0).acos().to_degrees()).abs() < 1e-12);
+        assert!(
+            (q.max_aspect_ratio - 1.0).abs() < 1e-12,
+            "{}",
+            q.max_aspect_ratio
+        );
+        // Each face's right-hand normal points away from the opposite vertex.
+        let p = t.map(|i| nodes[i]);
+        for (k, f) in FACES.iter().enumerate() {
+            let [a, b, c] = f.map(|i| p[i]);
+            assert!(dot(cross(sub(b, a), sub(c, a)), sub(a, p[k])) > 0.0);
+        }
+    }
+}
