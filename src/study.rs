@@ -8,7 +8,8 @@
 //! computed on the reference mesh (see [`transfer`]: exact P1 prolongation for nested meshes,
 //! nodal interpolation for non-nested ones), together with the wall time of each run. The
 //! seminorm |e|_{H¹}, the L² norm and the errors relative to the reference's norms are
-//! reported too.
+//! reported too. 2D scenes (triangles) and 3D scenes (tetrahedra, `mesh.model = "3d"`) are
+//! studied alike: the fields carry 3 components, z = 0 in 2D.
 //!
 //! # Levels, families and the reference
 //!
@@ -31,7 +32,11 @@
 //! - A pattern (`--mesh-pattern`), relative to the scene file like `mesh.file`, with `{n}`
 //!   or `{n:03}` (zero-padded) for the level: `../meshes/paper/rect_{n:03}.msh`.
 //! - Without one, the pattern is derived from the scene's `mesh.file` when its name ends in
-//!   `_<digits>.msh` (`rect_032.msh` → `rect_{n:03}.msh`).
+//!   `_<digits>.msh` (`rect_032.msh` → `rect_{n:03}.msh`, `block_008.msh` →
+//!   `block_{n:03}.msh`: the block's level n has cubes of side h = 1/n, each cut into 6
+//!   tetrahedra). Every mesh must exist before anything runs; a missing one is an input
+//!   error that says how to make it (`meshes/generate.sh block 16` for the block meshes too
+//!   big to commit, else gmsh on the `.geo` beside it).
 //! - A list (`--meshes a.msh,b.msh,…,ref.msh`, relative to the working directory) for
 //!   families that are not numbered, such as unstructured meshes: one mesh per level, then
 //!   the reference mesh. `h` is then the longest edge of each mesh and a level is only the

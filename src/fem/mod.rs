@@ -362,6 +362,8 @@ pub fn p1_norms<const N: usize>(cells: &[Cell], v: &[[f64; N]]) -> (f64, f64) {
     for t in cells {
         let vs = t.vertices();
         let denom = ((t.dim + 1) * (t.dim + 2)) as f64;
+        // c is a component of v[n] for every vertex n, not an index into v.
+        #[allow(clippy::needless_range_loop)]
         for c in 0..N {
             let s: f64 = vs.iter().map(|&n| v[n][c]).sum();
             let q: f64 = vs.iter().map(|&n| v[n][c] * v[n][c]).sum();
