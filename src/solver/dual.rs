@@ -1,14 +1,18 @@
 //! The fast step solver: the problem condensed onto its constraint rows.
 //!
-//! With P the m×n matrix of the nodal rows (n_iᵀ on Γ3,1, τ_iᵀ on Γ3,2), the optimality
+//! With P the m×n matrix of the nodal rows (n_iᵀ on Γ3,1; τ_iᵀ on Γ3,2 in 2D, the two unit
+//! tangents τ_i1ᵀ, τ_i2ᵀ of node i in 3D), write w_τ,i = (τ_ik·w_i)_k for the tangential
+//! velocity of a Γ3,2 node in its tangent frame (one number in 2D, two in 3D). The optimality
 //! conditions of the step problem are
 //!
 //!   K_A w = b − Pᵀ z,   z_i = λ_i ≥ 0, λ_i n_i·w_i = 0, n_i·w_i ≤ 0       (Γ3,1)
-//!                       z_i = γ_i ∈ c_i ∂|·|(τ_i·w_i)                       (Γ3,2)
+//!                       z_i = γ_i ∈ c_i ∂|·|(w_τ,i)                         (Γ3,2)
 //!
-//! Eliminating w = K_A⁻¹(b − Pᵀz) leaves the box-constrained dual
+//! where γ_i is node i's block of multipliers: |γ_i| ≤ c_i, and γ_i = c_i w_τ,i/|w_τ,i| where
+//! the node slides (w_τ,i ≠ 0). Eliminating w = K_A⁻¹(b − Pᵀz) leaves the dual
 //!
-//!   minimize ½ zᵀ D z − dᵀ z  over  λ ≥ 0, |γ_i| ≤ c_i,   D = P K_A⁻¹ Pᵀ,  d = P K_A⁻¹ b,
+//!   minimize q(z) = ½ zᵀ D z − dᵀ z  over  z ∈ Z,   D = P K_A⁻¹ Pᵀ,  d = P K_A⁻¹ b,
+//!   Z = Π_i {λ_i ≥ 0} × Π_i {|γ_i| ≤ c_i}   (|·| Euclidean: an interval in 2D, a disc in 3D),
 //!
 //! whose gradient is g = D z − d = −P w.
 //!
@@ -19,29 +23,212 @@
 //! Lᵀ w = y gives w. So a step costs one solve with the stored factor — the same as a step
 //! without contact — plus O(|C|·m) for G and the small problem below.
 //!
-//! The dual is solved exactly by an active-set Newton method — Bertsekas' projected Newton
-//! method for bound constraints, with an Armijo search along the projection arc, warm
-//! started from the previous step's multipliers. Multipliers at a bound whose gradient
-//! points outward are held there; the others solve a dense linear system with D, so once the
-//! active set is right the answer is exact up to rounding. (A plain primal-dual active set
-//! iteration cycles on this problem: D is not an M-matrix; the line search makes the method
-//! globally convergent.)
+//! # The dual solve
+//!
+//! The multipliers come in groups j — one per contact row, one per friction node — each with
+//! its closed convex set Z_j and Euclidean projection Π_j:
+//!
+//!   Π_j(λ) = max(λ, 0),   Π_j(γ) = γ min(1, c_j/|γ|).
+//!
+//! z solves the dual iff z = Π(z − g/δ), δ_j > 0 a scale per group (the mean of diag D over
+//! its rows). The method is a semismooth Newton method on this fixed-point equation, warm
+//! started from the previous step's multipliers, globalized by descent of q.
+//!
+//! Newton step. At v = z − g/δ each group is
+//!  - free (v_j ∈ Z_j; Π' = I): the Newton equations are g_j(z⁺) = 0;
+//!  - at zero (contact, v_j < 0; Π' = 0): z⁺_j = 0;
+//!  - on the rim (friction, |v_j| > c_j; Π' = ρ(I − v̂v̂ᵀ), ρ = c_j/|v_j|): the equations
+//!    split into a radial part v̂·z⁺_j = c_j and a tangential part
+//!    T(g_j(z⁺) + κ_j z⁺_j) = 0,  T = I − v̂v̂ᵀ,  κ_j = δ_j (|v_j| − c_j)/c_j ≥ 0.
+//!    At the solution −g_j = w_τ,j = μ_j γ̂_j and κ_j = μ_j/c_j: the circle's curvature times
+//!    the radial multiplier, the second-order term of the constraint |γ_j| ≤ c_j. In 2D
+//!    T = 0 and the multiplier is simply fixed at ±c_j.
+//!
+//! With z⁺ = z₀ + Q x — z₀ holds the fixed parts (c_j v̂_j, zeros), the columns of Q are the
+//! free rows' unit vectors and the rims' unit tangents — the step is one SPD system
+//!
+//!   (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d),
+//!
+//! solved by a dense Cholesky factorization; z⁺ is projected onto Z. In 2D this is the
+//! primal-dual active set step (Hintermüller, Ito, Kunisch 2002): once the sets are right the
+//! answer is exact up to rounding. In 3D it converges quadratically near the solution.
+//!
+//! Globalization. The Newton point is taken if it lowers q, else the damped point
+//! Π(z + α(z⁺ − z)), α = ½ or ¼, if that does. Otherwise (a plain active set iteration can
+//! cycle: D is not an M-matrix) the iteration takes a projected Newton step (Bertsekas
+//! 1982), which always descends. A group is binding when it lies within ε of the boundary in
+//! the direction the gradient pushes it (z_j − ε ĝ_j ∉ int Z_j, ε the length of the
+//! projected gradient step); it moves along −g_j/δ_j, except a binding disc multiplier
+//! pushed outward (μ_j = −g_j·ẑ_j > 0), which moves radially onto the rim and along the rim
+//! as a Newton coordinate (tangent t̂ ⊥ ẑ, shift κ_j = μ_j/c_j as above). The other (free)
+//! rows F and these tangents take the Newton step of the face, (QᵀDQ + diag κ) x = −Qᵀg;
+//! then an Armijo search along the projection arc z(α) = Π(z + α p). So the method converges
+//! from any start; in 2D the fallback is Bertsekas' method for bound constraints as it
+//! stands. Near the solution the decrease of q sinks below its rounding level (a disc
+//! multiplier c v̂ has the norm c only to a few ulps, and g is large along it); there the
+//! Newton point is taken when it lowers the residual below.
+//!
+//! Stopping test: the part of g not balanced by the normal cone of Z at z, per group — for a
+//! contact row |g| if λ > 0 and max(0, −g) if λ = 0 (n·w ≤ 0); for a friction node |g_j|
+//! inside the disc, and on its rim |T g_j| + max(0, g_j·γ̂_j) (there −g_j = w_τ,j must be a
+//! nonnegative multiple of γ_j: the node slides along its friction force, or sticks) — at
+//! most TOLERANCE · max|d|, in units of the velocities P w.
 
 use super::{Factor, Rows, StepReport};
 use crate::{Error, Result};
 use faer::linalg::solvers::Solve;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, MatMut, Side};
+use std::ops::Range;
 
 /// Relative tolerance of the dual optimality conditions (in units of the velocities P w).
 pub const TOLERANCE: f64 = 1e-12;
 const MAX_ITERATIONS: usize = 500;
+/// The shortest damped Newton step tried before the projected Newton step.
+const MIN_DAMPING: f64 = 0.25;
+/// |γ_j| ≥ RIM · c_j counts as on the rim: a projected disc multiplier c v̂ has norm c only
+/// up to a few roundings.
+const RIM: f64 = 1.0 - 8.0 * f64::EPSILON;
 
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+/// The set Z_j of a group of multipliers.
+#[derive(Clone, Copy, Debug)]
 enum Set {
-    Lower,
-    Upper,
-    Free,
+    /// λ ≥ 0: a contact row.
+    HalfLine,
+    /// |γ| ≤ c: a friction node's block (an interval in 2D, a disc in 3D).
+    Ball(f64),
+}
+
+/// One group of multipliers: a contact row or a friction node's block of rows.
+#[derive(Clone, Copy, Debug)]
+struct Group {
+    start: usize,
+    len: usize,
+    set: Set,
+    /// δ_j: the mean of diag(D) over the group's rows.
+    scale: f64,
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |a, x| a.hypot(*x))
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a * b).sum()
+}
+
+impl Group {
+    fn rows(&self) -> Range<usize> {
+        self.start..self.start + self.len
+    }
+
+    /// Projects v (the group's entries) onto Z_j in place. Returns None if v was in Z_j,
+    /// otherwise Some(ρ): 0 for a contact row set to 0, c/|v| for a friction block scaled
+    /// onto the rim.
+    fn project(&self, v: &mut [f64]) -> Option<f64> {
+        match self.set {
+            Set::HalfLine => (v[0] < 0.0).then(|| {
+                v[0] = 0.0;
+                0.0
+            }),
+            Set::Ball(c) => {
+                let nv = norm(v);
+                (nv > c).then(|| {
+                    // v/|v| first: exactly ±1 in 2D, so the 2D multiplier is exactly ±c.
+                    for x in v.iter_mut() {
+                        *x = *x / nv * c;
+                    }
+                    c / nv
+                })
+            }
+        }
+    }
+
+    /// True when v lies on the boundary of Z_j or outside.
+    fn not_interior(&self, v: &[f64]) -> bool {
+        match self.set {
+            Set::HalfLine => v[0] <= 0.0,
+            Set::Ball(c) => norm(v) >= c,
+        }
+    }
+
+    /// The unit tangent t̂ ⊥ n of a disc block (the rim's direction at n ≠ 0) as a Newton
+    /// coordinate with diagonal shift κ; None for 1-row groups (their rim is two points).
+    fn tangent(&self, n: &[f64], shift: f64) -> Option<Coord> {
+        (self.len == 2).then(|| {
+            let nn = norm(n);
+            Coord {
+                start: self.start,
+                len: 2,
+                dir: [-n[1] / nn, n[0] / nn],
+                shift,
+            }
+        })
+    }
+
+    /// The group's part of the optimality residual (see the module doc); z in Z_j.
+    fn residual(&self, z: &[f64], g: &[f64]) -> f64 {
+        match self.set {
+            Set::HalfLine if z[0] > 0.0 => g[0].abs(),
+            Set::HalfLine => (-g[0]).max(0.0),
+            Set::Ball(c) => {
+                let nz = norm(z);
+                if nz < RIM * c {
+                    norm(g)
+                } else if nz == 0.0 {
+                    0.0 // c = 0: Z_j = {0}, every g is balanced
+                } else {
+                    // g·γ̂ and |T g| = |g − (g·γ̂) γ̂|, computed without cancellation.
+                    let gn = dot(g, z) / nz;
+                    let tangential = g
+                        .iter()
+                        .zip(z)
+                        .fold(0.0f64, |a, (g, z)| a.hypot(g - gn * z / nz));
+                    tangential + gn.max(0.0)
+                }
+            }
+        }
+    }
+}
+
+/// A column of Q in the Newton systems: a unit vector in the rows of one group (a free
+/// multiplier, or the tangent of a disc multiplier on its rim) and its diagonal shift κ.
+#[derive(Clone, Copy, Debug)]
+struct Coord {
+    start: usize,
+    len: usize,
+    dir: [f64; 2],
+    shift: f64,
+}
+
+impl Coord {
+    fn row(i: usize) -> Self {
+        Coord {
+            start: i,
+            len: 1,
+            dir: [1.0, 0.0],
+            shift: 0.0,
+        }
+    }
+
+    fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        (self.start..self.start + self.len).zip(self.dir.iter().copied())
+    }
+}
+
+/// Vectors of a solve, kept between steps so that the iterations do not allocate them.
+struct Work {
+    /// d = P K_A⁻¹ b.
+    d: Vec<f64>,
+    /// g = D z − d at the iterate, and at the trial point.
+    grad: Vec<f64>,
+    trial: Vec<f64>,
+    grad_trial: Vec<f64>,
+    /// The projected Newton direction.
+    p: Vec<f64>,
+    coords: Vec<Coord>,
+    /// Per group: binding (moving along −g/δ) in the projected Newton step.
+    binding: Vec<bool>,
 }
 
 pub struct DualSolver {
@@ -49,10 +236,9 @@ pub struct DualSolver {
     g: Mat<f64>,
     /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
     d: Mat<f64>,
-    /// diag(D) (scales the active-set test) and the multipliers' bounds, fixed per run.
-    diag: Vec<f64>,
-    bounds: Vec<(f64, f64)>,
-    set: Vec<Set>,
+    /// The multiplier groups, in row order; fixed per run.
+    groups: Vec<Group>,
+    work: Box<Work>,
     /// The step's forward-solved right side, in the factor's ordering.
     y: Vec<f64>,
 }
@@ -81,43 +267,37 @@ impl DualSolver {
             1.0,
             faer::get_global_parallelism(),
         );
+        debug_assert!(rows.block <= 2, "friction blocks span a tangent plane");
+        let contact = (0..rows.n_contact).map(|i| (i..i + 1, Set::HalfLine));
+        let friction = (0..rows.n_friction_nodes()).map(|j| {
+            let r = rows.friction_block(j);
+            let c = rows.rows[r.start].bound;
+            (r, Set::Ball(c))
+        });
+        let groups = contact
+            .chain(friction)
+            .map(|(r, set)| Group {
+                start: r.start,
+                len: r.len(),
+                set,
+                scale: r.clone().map(|i| d[(i, i)]).sum::<f64>() / r.len() as f64,
+            })
+            .collect::<Vec<_>>();
+        let work = Box::new(Work {
+            d: vec![0.0; m],
+            grad: vec![0.0; m],
+            trial: vec![0.0; m],
+            grad_trial: vec![0.0; m],
+            p: vec![0.0; m],
+            coords: Vec::with_capacity(m),
+            binding: vec![false; groups.len()],
+        });
         DualSolver {
             g,
-            diag: (0..m).map(|i| d[(i, i)]).collect(),
-            bounds: (0..m).map(|i| rows.bounds(i)).collect(),
             d,
-            set: vec![Set::Free; m],
+            groups,
+            work,
             y: vec![0.0; n],
-        }
-    }
-
-    /// Solves D_FF x = rhs on the free multipliers F (dense Cholesky).
-    fn face_solve(&self, free: &[usize], rhs: Vec<f64>) -> Result<Vec<f64>> {
-        let nf = free.len();
-        if nf == 0 {
-            return Ok(Vec::new());
-        }
-        let a = Mat::<f64>::from_fn(nf, nf, |r, c| self.d[(free[r], free[c])]);
-        let b = Mat::<f64>::from_fn(nf, 1, |r, _| rhs[r]);
-        let llt = a.llt(Side::Lower).map_err(|e| {
-            Error::solve(format!(
-                "the condensed contact matrix is not positive definite ({e:?})"
-            ))
-        })?;
-        let sol = llt.solve(&b);
-        Ok((0..nf).map(|r| sol[(r, 0)]).collect())
-    }
-
-    fn gradient(&self, z: &[f64], dvec: &[f64], g: &mut [f64]) {
-        let m = z.len();
-        for i in 0..m {
-            let mut s = -dvec[i];
-            for (j, zj) in z.iter().enumerate() {
-                if *zj != 0.0 {
-                    s += self.d[(i, j)] * zj;
-                }
-            }
-            g[i] = s;
         }
     }
 
@@ -129,128 +309,16 @@ impl DualSolver {
         w: &mut [f64],
         z: &mut [f64],
     ) -> Result<StepReport> {
-        let m = rows.len();
+        debug_assert_eq!(z.len(), rows.len());
         let (n, c) = (factor.dim(), factor.last());
         // Forward solve L y = b; d = Gᵀ y_C.
         factor.permute(b, &mut self.y);
         factor.forward(MatMut::from_column_major_slice_mut(&mut self.y, n, 1));
         let y_c = &self.y[n - c..];
-        let dvec: Vec<f64> = (0..m)
-            .map(|r| {
-                let col = self.g.col(r);
-                (0..c).map(|i| col[i] * y_c[i]).sum()
-            })
-            .collect();
-        let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        let tol = TOLERANCE * scale.max(f64::MIN_POSITIVE);
-        let (diag, bounds) = (&self.diag, &self.bounds);
-        let project = |i: usize, v: f64| v.clamp(bounds[i].0, bounds[i].1);
-        // Warm start: the previous multipliers, projected into the box.
-        for (i, zi) in z.iter_mut().enumerate() {
-            *zi = project(i, *zi);
+        for (r, dr) in self.work.d.iter_mut().enumerate() {
+            *dr = dot(self.g.col(r).try_as_col_major().unwrap().as_slice(), y_c);
         }
-        let mut g = vec![0.0; m];
-        self.gradient(z, &dvec, &mut g);
-        let mut q = objective(z, &g, &dvec);
-        let mut iterations = 0;
-        let (mut trial, mut g_trial, mut p) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
-        loop {
-            let residual = dual_residual(rows, z, &g);
-            if residual <= tol {
-                break;
-            }
-            if iterations == MAX_ITERATIONS {
-                return Err(Error::solve(format!(
-                    "the dual active-set method did not converge in {MAX_ITERATIONS} \
-                     iterations (residual {residual:e} relative to {scale:e}); \
-                     try [solver] contact = \"clarabel\""
-                )));
-            }
-            iterations += 1;
-            // 1. The primal-dual active set step (semismooth Newton on z = proj(z − g/diag D)):
-            // fix the multipliers the test puts at a bound, solve D_FF z_F = d_F − D_FA z_A for
-            // the others, project. Taken only if it lowers the dual objective; it changes many
-            // sets at once and usually finishes in a few iterations.
-            for i in 0..m {
-                let (lo, hi) = bounds[i];
-                let v = z[i] - g[i] / diag[i];
-                (self.set[i], trial[i]) = if v < lo {
-                    (Set::Lower, lo)
-                } else if v > hi {
-                    (Set::Upper, hi)
-                } else {
-                    (Set::Free, 0.0)
-                };
-            }
-            let free: Vec<usize> = (0..m).filter(|&i| self.set[i] == Set::Free).collect();
-            let rhs: Vec<f64> = free
-                .iter()
-                .map(|&i| {
-                    dvec[i]
-                        - (0..m)
-                            .filter(|&j| self.set[j] != Set::Free)
-                            .map(|j| self.d[(i, j)] * trial[j])
-                            .sum::<f64>()
-                })
-                .collect();
-            for (&i, v) in free.iter().zip(self.face_solve(&free, rhs)?) {
-                trial[i] = project(i, v);
-            }
-            self.gradient(&trial, &dvec, &mut g_trial);
-            let q_trial = objective(&trial, &g_trial, &dvec);
-            if q_trial < q {
-                z.copy_from_slice(&trial);
-                g.copy_from_slice(&g_trial);
-                q = q_trial;
-                continue;
-            }
-            // 2. Otherwise a projected Newton step (Bertsekas 1982), which always descends:
-            // multipliers within ε of a bound whose gradient pushes them outward are held
-            // there (binding); the others take the Newton step of the face, D_FF p_F = −g_F.
-            let eps = (0..m)
-                .map(|i| (z[i] - project(i, z[i] - g[i] / diag[i])).abs())
-                .fold(0.0f64, f64::max);
-            for i in 0..m {
-                let (lo, hi) = bounds[i];
-                self.set[i] = if z[i] <= lo + eps && g[i] > 0.0 {
-                    Set::Lower
-                } else if z[i] >= hi - eps && g[i] < 0.0 {
-                    Set::Upper
-                } else {
-                    Set::Free
-                };
-            }
-            let free: Vec<usize> = (0..m).filter(|&i| self.set[i] == Set::Free).collect();
-            for i in 0..m {
-                p[i] = -g[i] / diag[i];
-            }
-            let rhs: Vec<f64> = free.iter().map(|&i| -g[i]).collect();
-            for (&i, v) in free.iter().zip(self.face_solve(&free, rhs)?) {
-                p[i] = v;
-            }
-            // Armijo search along the projection arc z(α) = proj(z + α p).
-            let mut alpha = 1.0;
-            loop {
-                for i in 0..m {
-                    trial[i] = project(i, z[i] + alpha * p[i]);
-                }
-                self.gradient(&trial, &dvec, &mut g_trial);
-                let q_trial = objective(&trial, &g_trial, &dvec);
-                let predicted: f64 = (0..m)
-                    .map(|i| match self.set[i] {
-                        Set::Free => -alpha * g[i] * p[i],
-                        _ => g[i] * (z[i] - trial[i]),
-                    })
-                    .sum();
-                if q - q_trial >= 1e-4 * predicted || alpha < 1e-12 {
-                    break;
-                }
-                alpha *= 0.5;
-            }
-            z.copy_from_slice(&trial);
-            g.copy_from_slice(&g_trial);
-            q = objective(z, &g, &dvec);
-        }
+        let iterations = self.dual_solve(z)?;
         // y_C ← y_C − G z, then the backward solve Lᵀ w = y.
         let y_c = &mut self.y[n - c..];
         for (r, &zr) in z.iter().enumerate() {
@@ -264,32 +332,256 @@ impl DualSolver {
         factor.unpermute(&self.y, w);
         Ok(StepReport { iterations })
     }
+
+    /// Minimizes ½ zᵀDz − dᵀz over Z (d in `work.d`), from z (the warm start); returns the
+    /// number of iterations.
+    fn dual_solve(&mut self, z: &mut [f64]) -> Result<usize> {
+        let DualSolver {
+            d, groups, work, ..
+        } = self;
+        let Work {
+            d: dvec,
+            grad: g,
+            trial,
+            grad_trial: g_trial,
+            p,
+            coords,
+            binding,
+        } = &mut **work;
+        let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let tol = TOLERANCE * scale.max(f64::MIN_POSITIVE);
+        let project = |v: &mut [f64]| {
+            for grp in groups.iter() {
+                grp.project(&mut v[grp.rows()]);
+            }
+        };
+        // Warm start: the previous multipliers, projected onto Z.
+        project(z);
+        gradient(d, z, dvec, g);
+        let mut iterations = 0;
+        let residual = |z: &[f64], g: &[f64]| {
+            groups
+                .iter()
+                .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()]))
+                .fold(0.0f64, f64::max)
+        };
+        loop {
+            let res = residual(z, g);
+            if res <= tol {
+                return Ok(iterations);
+            }
+            if iterations == MAX_ITERATIONS {
+                return Err(Error::solve(format!(
+                    "the dual semismooth Newton method did not converge in {MAX_ITERATIONS} \
+                     iterations (residual {res:e} relative to {scale:e}); \
+                     try [solver] contact = \"clarabel\""
+                )));
+            }
+            iterations += 1;
+            // 1. The semismooth Newton step at v = z − g/δ: z₀ (the fixed parts) in `trial`,
+            // the columns of Q in `coords`; then trial = Π(z₀ + Q x).
+            coords.clear();
+            for grp in groups.iter() {
+                let r = grp.rows();
+                for i in r.clone() {
+                    trial[i] = z[i] - g[i] / grp.scale;
+                }
+                match grp.project(&mut trial[r.clone()]) {
+                    None => {
+                        trial[r.clone()].fill(0.0);
+                        coords.extend(r.map(Coord::row));
+                    }
+                    // On the rim of a disc: radial part fixed at c v̂, the tangent t̂ ⊥ v̂ free
+                    // with κ = δ (|v| − c)/c = δ (1/ρ − 1). (ρ = 0: a contact row at 0.)
+                    Some(rho) if rho > 0.0 => {
+                        let shift = grp.scale * (1.0 / rho - 1.0);
+                        coords.extend(grp.tangent(&trial[r], shift));
+                    }
+                    Some(_) => {}
+                }
+            }
+            gradient(d, trial, dvec, g_trial);
+            newton_step(d, coords, g_trial, trial)?;
+            // The Newton point z⁺ (kept in p), then damped: trial = Π(z + α(z⁺ − z)) for
+            // α = 1, ½, ¼ (a damped trial costs one product with D, no factorization).
+            p.copy_from_slice(trial);
+            let mut alpha = 1.0;
+            let accepted = loop {
+                if alpha < 1.0 {
+                    for i in 0..z.len() {
+                        trial[i] = z[i] + alpha * (p[i] - z[i]);
+                    }
+                }
+                project(trial);
+                gradient(d, trial, dvec, g_trial);
+                // Near the solution the change of q sinks below its rounding level (a
+                // multiplier on a disc's rim has the norm c only to a few ulps, and g is large
+                // along it); there the residual decides.
+                let (dq, noise) = (change(z, trial, g, g_trial), rounding(z, trial, g, g_trial));
+                if dq < -noise || (alpha == 1.0 && dq <= noise && residual(trial, g_trial) < res) {
+                    break true;
+                }
+                if alpha <= MIN_DAMPING {
+                    break false;
+                }
+                alpha *= 0.5;
+            };
+            if accepted {
+                z.copy_from_slice(trial);
+                g.copy_from_slice(g_trial);
+                continue;
+            }
+            // 2. Otherwise the projected Newton step. ε: the length of the projected gradient
+            // step z − Π(z − g/δ).
+            let mut eps: f64 = 0.0;
+            for grp in groups.iter() {
+                let r = grp.rows();
+                for i in r.clone() {
+                    trial[i] = z[i] - g[i] / grp.scale;
+                }
+                grp.project(&mut trial[r.clone()]);
+                eps = eps.max(r.fold(0.0, |a, i| a.hypot(z[i] - trial[i])));
+            }
+            coords.clear();
+            for (grp, bind) in groups.iter().zip(binding.iter_mut()) {
+                let r = grp.rows();
+                let gn = norm(&g[r.clone()]);
+                *bind = gn > 0.0 && {
+                    for i in r.clone() {
+                        trial[i] = z[i] - eps * g[i] / gn;
+                    }
+                    grp.not_interior(&trial[r.clone()])
+                };
+                // A binding disc multiplier pushed outward (μ = −g·ẑ > 0) goes to the rim
+                // radially and along it by Newton, with the curvature shift κ = μ/c.
+                let to_rim = match grp.set {
+                    Set::Ball(c) if *bind && grp.len == 2 => {
+                        let nz = norm(&z[r.clone()]);
+                        let mu = -dot(&g[r.clone()], &z[r.clone()]) / nz;
+                        (mu > 0.0).then_some((c, nz, mu))
+                    }
+                    _ => None,
+                };
+                if let Some((c, nz, mu)) = to_rim {
+                    for i in r.clone() {
+                        p[i] = (c / nz - 1.0) * z[i];
+                    }
+                    coords.extend(grp.tangent(&z[r], mu / c));
+                } else if *bind {
+                    for i in r {
+                        p[i] = -g[i] / grp.scale;
+                    }
+                } else {
+                    p[r.clone()].fill(0.0);
+                    coords.extend(r.map(Coord::row));
+                }
+            }
+            newton_step(d, coords, g, p)?;
+            // Armijo search along the projection arc z(α) = Π(z + α p).
+            let mut alpha = 1.0;
+            loop {
+                for i in 0..z.len() {
+                    trial[i] = z[i] + alpha * p[i];
+                }
+                project(trial);
+                gradient(d, trial, dvec, g_trial);
+                let predicted: f64 = groups
+                    .iter()
+                    .zip(binding.iter())
+                    .map(|(grp, &bind)| {
+                        grp.rows()
+                            .map(|i| {
+                                if bind {
+                                    g[i] * (z[i] - trial[i])
+                                } else {
+                                    -alpha * g[i] * p[i]
+                                }
+                            })
+                            .sum::<f64>()
+                    })
+                    .sum();
+                if -change(z, trial, g, g_trial) >= 1e-4 * predicted || alpha < 1e-12 {
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            z.copy_from_slice(trial);
+            g.copy_from_slice(g_trial);
+        }
+    }
 }
 
-/// The dual objective ½ zᵀDz − dᵀz = ½ zᵀ(g − d) with g = Dz − d.
-fn objective(z: &[f64], g: &[f64], d: &[f64]) -> f64 {
+/// g = D z − d (D symmetric: column j of D is its row j).
+fn gradient(dmat: &Mat<f64>, z: &[f64], d: &[f64], g: &mut [f64]) {
+    for (gi, di) in g.iter_mut().zip(d) {
+        *gi = -di;
+    }
+    for (j, &zj) in z.iter().enumerate() {
+        if zj != 0.0 {
+            let col = dmat.col(j).try_as_col_major().unwrap().as_slice();
+            for (gi, dij) in g.iter_mut().zip(col) {
+                *gi += dij * zj;
+            }
+        }
+    }
+}
+
+/// q(t) − q(z) = (t − z)·(g(z) + g(t))/2 for the quadratic q: exact up to the rounding of
+/// the gradients, where the difference of two objective values would lose it to cancellation.
+fn change(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
     0.5 * z
         .iter()
-        .zip(g.iter().zip(d))
-        .map(|(z, (g, d))| z * (g - d))
+        .zip(t)
+        .zip(g.iter().zip(g_t))
+        .map(|((z, t), (g, g_t))| (t - z) * (g + g_t))
         .sum::<f64>()
 }
 
-/// Violation of the dual optimality conditions (z in the box assumed): g_i ≤ 0 wherever
-/// z_i > lo_i and g_i ≥ 0 wherever z_i < hi_i (g = −P w: so n·w ≤ 0 on free contact rows).
-fn dual_residual(rows: &Rows, z: &[f64], g: &[f64]) -> f64 {
-    let mut r: f64 = 0.0;
-    for i in 0..z.len() {
-        let (lo, hi) = rows.bounds(i);
-        if z[i] < lo || z[i] > hi {
-            return f64::INFINITY;
+/// The rounding level of `change`: 8 ε Σ (|z_i| + |t_i|)(|g_i| + |g_t,i|), for errors of
+/// relative size ε in z and t.
+fn rounding(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
+    8.0 * f64::EPSILON
+        * z.iter()
+            .zip(t)
+            .zip(g.iter().zip(g_t))
+            .map(|((z, t), (g, g_t))| (z.abs() + t.abs()) * (g.abs() + g_t.abs()))
+            .sum::<f64>()
+}
+
+/// out += Q x, where (QᵀDQ + diag κ) x = −Qᵀ grad and Q, κ are given by `coords`: the Newton
+/// step on those coordinates (dense Cholesky).
+fn newton_step(dmat: &Mat<f64>, coords: &[Coord], grad: &[f64], out: &mut [f64]) -> Result<()> {
+    let nq = coords.len();
+    if nq == 0 {
+        return Ok(());
+    }
+    let h = Mat::<f64>::from_fn(nq, nq, |a, b| {
+        let (qa, qb) = (&coords[a], &coords[b]);
+        let mut s = 0.0;
+        for (i, x) in qa.entries() {
+            for (j, y) in qb.entries() {
+                s += x * dmat[(i, j)] * y;
+            }
         }
-        if z[i] > lo {
-            r = r.max(g[i]);
+        if a == b {
+            s + qa.shift
+        } else {
+            s
         }
-        if z[i] < hi {
-            r = r.max(-g[i]);
+    });
+    let rhs = Mat::<f64>::from_fn(nq, 1, |a, _| {
+        -coords[a].entries().map(|(i, x)| x * grad[i]).sum::<f64>()
+    });
+    let llt = h.llt(Side::Lower).map_err(|e| {
+        Error::solve(format!(
+            "the condensed contact matrix is not positive definite ({e:?})"
+        ))
+    })?;
+    let x = llt.solve(&rhs);
+    for (a, q) in coords.iter().enumerate() {
+        for (i, v) in q.entries() {
+            out[i] += v * x[(a, 0)];
         }
     }
-    r
+    Ok(())
 }
