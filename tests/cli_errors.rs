@@ -780,3 +780,185 @@ fn curved_contact_boundary_is_warned_about_with_its_worst_angle() {
     // The hole has 104 edges: neighbouring facet normals differ by 360°/104 ≈ 3.5°.
     assert!(line.contains("3.4") || line.contains("3.5"), "{line}");
 }
+
+// ---- 3D input ------------------------------------------------------------------------------
+
+/// examples/block.toml (the 3D scene) with its mesh path made absolute and each `(old, new)`
+/// replacement applied (each `old` must occur exactly once), written as `block.toml`.
+fn block_scene(f: &Fixture, edits: &[(&str, &str)]) -> PathBuf {
+    let examples = common::repo().join("examples");
+    let mut s = std::fs::read_to_string(examples.join("block.toml")).unwrap();
+    let line = s
+        .lines()
+        .find(|l| l.trim_start().starts_with("file = "))
+        .expect("examples/block.toml has a mesh.file line")
+        .to_string();
+    let abs = examples
+        .join(line.split('"').nth(1).unwrap())
+        .canonicalize()
+        .unwrap();
+    s = s.replacen(&line, &format!("file = {:?}", abs.display().to_string()), 1);
+    for (old, new) in edits {
+        assert_eq!(s.matches(old).count(), 1, "{old:?} in examples/block.toml");
+        s = s.replacen(old, new, 1);
+    }
+    common::write(f.dir.path(), "block.toml", &s)
+}
+
+fn data3d(name: &str) -> String {
+    common::repo()
+        .join("tests/data/3d")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+#[test]
+fn three_d_model_on_a_2d_mesh() {
+    let f = Fixture::new();
+    let scene = block_scene(&f, &[]);
+    let set = format!("mesh.file={}", common::mesh_path("paper/rect_008.msh"));
+    let p = scene.display().to_string();
+    f.run_fails(
+        "3D model on a triangle mesh",
+        &scene,
+        &["--set", &set],
+        &[&p, "'mesh.model'", "rect_008.msh", "triangles"],
+    );
+}
+
+#[test]
+fn two_d_model_on_a_3d_mesh() {
+    let f = Fixture::new();
+    let scene = f.scene(&[]);
+    let set = format!("mesh.file={}", common::mesh_path("3d/block_004.msh"));
+    let p = scene.display().to_string();
+    f.run_fails(
+        "plane stress on a tetrahedral mesh",
+        &scene,
+        &["--set", &set],
+        &[&p, "'mesh.model'", "block_004.msh", "tetrahedra", "\"3d\""],
+    );
+}
+
+#[test]
+fn three_d_load_with_two_components() {
+    let f = Fixture::new();
+    let scene = block_scene(
+        &f,
+        &[(
+            r#"value = ["0", "0", "-0.1*x*(2-x)*min(t, 0.2)"]"#,
+            r#"value = ["0", "-0.1*x*(2-x)*min(t, 0.2)"]"#,
+        )],
+    );
+    let p = scene.display().to_string();
+    f.run_fails(
+        "3D traction with 2 components",
+        &scene,
+        &[],
+        &[
+            &p,
+            "load.traction[0].value",
+            "2 components",
+            "3D model needs 3",
+        ],
+    );
+}
+
+#[test]
+fn three_d_volume_group_as_a_boundary_condition() {
+    let f = Fixture::new();
+    let scene = block_scene(&f, &[]);
+    f.run_fails(
+        "volume group as Γ1",
+        &scene,
+        &["--set", "mesh.groups.fixed=Ω"],
+        &["mesh.groups.fixed", "Ω", "volume", "boundary (surface)"],
+    );
+}
+
+#[test]
+fn three_d_mesh_without_contact_group() {
+    // slider.msh has no Γ3,1; block.toml asks for contact there (its loads moved to the
+    // slider's load group "sides", so that the contact group is what is missing).
+    let f = Fixture::new();
+    let scene = block_scene(
+        &f,
+        &[
+            ("on = \"top\"", "on = \"sides\""),
+            ("on = \"right\"", "on = \"sides\""),
+        ],
+    );
+    let set = format!("mesh.file={}", common::mesh_path("3d/slider.msh"));
+    f.run_fails(
+        "3D mesh without Γ3,1",
+        &scene,
+        &["--set", &set],
+        &["mesh.groups.contact", "Γ3,1", "slider.msh"],
+    );
+}
+
+const BAD_TET_MESHES: [(&str, &[&str]); 6] = [
+    ("flat_tet.msh", &["tetrahedron 42", "zero volume"]),
+    ("folded_tets.msh", &["folds over itself", "10 and 12"]),
+    ("three_tets_face.msh", &["three or more tetrahedra"]),
+    ("interior_face.msh", &["\"inner\"", "interior face"]),
+    ("quadratic_tets.msh", &["type 11", "gmsh -3 -order 1"]),
+    ("hexahedron.msh", &["type 5", "Mesh.RecombineAll = 0"]),
+];
+
+#[test]
+fn bad_tetrahedral_meshes_are_refused_by_run() {
+    for (name, needles) in BAD_TET_MESHES {
+        let f = Fixture::new();
+        let scene = block_scene(&f, &[]);
+        let set = format!("mesh.file={}", data3d(name));
+        let mut all = vec![name, "mesh.file"];
+        all.extend_from_slice(needles);
+        f.run_fails(&format!("run on {name}"), &scene, &["--set", &set], &all);
+    }
+}
+
+#[test]
+fn bad_tetrahedral_meshes_are_refused_by_mesh_info_and_check() {
+    for (name, needles) in BAD_TET_MESHES {
+        let path = data3d(name);
+        let mut all = vec![path.as_str()];
+        all.extend_from_slice(needles);
+        for json in [false, true] {
+            let mut args: Vec<OsString> = vec!["mesh-info".into(), path.clone().into()];
+            if json {
+                args.push("--json".into());
+            }
+            expect_input_error(&format!("mesh-info {name} (json: {json})"), &args, &all);
+        }
+        let set = format!("mesh.file={path}");
+        expect_input_error(
+            &format!("check on {name}"),
+            &[
+                "check".into(),
+                "examples/block.toml".into(),
+                "--set".into(),
+                set.into(),
+            ],
+            &all,
+        );
+    }
+}
+
+#[test]
+fn inverted_tetrahedron_is_reoriented_by_mesh_info() {
+    let mesh = data3d("inverted_tet.msh");
+    let out = viscontact(["mesh-info", mesh.as_str(), "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("mesh-info --json");
+    assert_eq!(
+        (v["dim"].as_u64(), v["reoriented"].as_u64()),
+        (Some(3), Some(1)),
+        "{v}"
+    );
+    assert_eq!(v["tetrahedra"], 2);
+    let out = viscontact(["mesh-info", mesh.as_str()]);
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("2 tetrahedra (1 reoriented"), "{stdout}");
+}

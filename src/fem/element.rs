@@ -190,6 +190,9 @@ mod tests {
         ]
     }
 
+    /// A displacement field x ↦ v(x).
+    type Motion = fn([f64; 3]) -> [f64; 3];
+
     #[test]
     fn rigid_motions_have_zero_energy() {
         for (cell, p) in cells() {
@@ -200,7 +203,7 @@ mod tests {
                 .map(|c| dofs(&p, d, |_| [0, 1, 2].map(|i| f64::from(i == c))))
                 .collect();
             // Infinitesimal rotations ω × x about the axes the dimension has.
-            let rotations: &[fn([f64; 3]) -> [f64; 3]] = match d {
+            let rotations: &[Motion] = match d {
                 2 => &[|x| [-x[1], x[0], 0.0]],
                 _ => &[
                     |x| [-x[1], x[0], 0.0],

@@ -519,17 +519,27 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
         }
     }
     if !unsupported.is_empty() {
-        // Report cell elements first: they decide the remedy.
-        unsupported.sort_by_key(|&t| {
+        // Report the highest-dimensional elements first: they are the cells and decide the
+        // remedy (in a 3D file the triangles are only boundary faces).
+        let rank = |t: ElementType| {
             let text = describe_element_type(t).0;
-            !(text.contains("triangles") || text.contains("tetrahedra"))
-        });
+            let has = |fams: &[&str]| fams.iter().any(|f| text.contains(f));
+            if has(&["tetrahedra", "hexahedra", "prisms", "pyramids"]) {
+                0
+            } else if has(&["triangles", "quadrangles"]) {
+                1
+            } else {
+                2
+            }
+        };
+        unsupported.sort_by_key(|&t| rank(t));
+        let top = rank(unsupported[0]);
         let texts: Vec<String> = unsupported
             .iter()
             .map(|&t| describe_element_type(t).0)
             .collect();
         let mut hints: Vec<&str> = Vec::new();
-        for &t in &unsupported {
+        for &t in unsupported.iter().filter(|&&t| rank(t) == top) {
             let h = describe_element_type(t).1;
             if !hints.contains(&h) {
                 hints.push(h);

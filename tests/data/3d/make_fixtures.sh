@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Regenerates the gmsh-made 3D fixtures of tests/data/3d/ from patch_box.geo with the gmsh
+# CLI (4.15.2, pip install gmsh); the other .msh files here are hand-written (README.md).
+# Deterministic; run from any directory.
+#
+#   patch_box.msh       unstructured box, lc = 0.2, all groups          (valid; patch tests)
+#   quadratic_tets.msh  the same box, lc = 2, -order 2: 10-node tetrahedra, 6-node triangles
+#                                                                        (unsupported elements)
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")"
+GMSH=${GMSH:-gmsh}
+
+mesh() {
+    local log
+    log=$("$GMSH" -3 -format msh41 -v 2 "$@" 2>&1) || { echo "$log" >&2; exit 1; }
+    if grep -q '^Error' <<<"$log"; then echo "$log" >&2; exit 1; fi
+}
+
+mesh patch_box.geo -o patch_box.msh
+mesh patch_box.geo -setnumber lc 2 -order 2 -o quadratic_tets.msh
