@@ -568,53 +568,26 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         }
     }
 
-    let (mut groups, groups_of) = group_table(&raw, names, 2);
-    for (k, t) in raw.triangles.iter().enumerate() {
-        if t.entity.0 == 2 {
-            for g in groups_of(t.entity) {
-                groups[g].cells.push(k);
-            }
-        }
-    }
-    let mut seen: Vec<HashSet<[usize; 2]>> = vec![HashSet::new(); groups.len()];
-    for line in raw.lines.iter().filter(|l| l.entity.0 == 1) {
-        let member = groups_of(line.entity);
-        if member.is_empty() {
-            continue;
-        }
-        let [a, b] = line.nodes.map(|n| new_index[n]);
-        let facet = if a == UNUSED || b == UNUSED {
-            None
-        } else {
-            edges.get(&[a.min(b), a.max(b)]).map(|e| (e.dir, e.count))
-        };
-        let dir = match facet {
-            Some((dir, 1)) => dir,
-            other => {
-                let g = &groups[member[0]];
-                let group = match &g.name {
-                    Some(n) => format!("\"{n}\" (tag {})", g.tag),
-                    None => format!("with tag {} (no name)", g.tag),
-                };
-                let why = match other {
-                    Some(_) => "it is shared by two triangles (an interior edge)",
-                    None => "it is not an edge of any triangle",
-                };
-                let [p, q] = line.nodes.map(|n| fmt_point(raw.nodes[n]));
-                return Err(Error::input(format!(
-                    "mesh file '{file}': physical group {} contains the line {p}–{q} (gmsh \
-                     element {}), which is not on the boundary of the triangle mesh: {why}; a \
-                     boundary group must consist of boundary curves of the meshed surface",
-                    group, line.tag
-                )));
-            }
-        };
-        for g in member {
-            if seen[g].insert(dir) {
-                groups[g].facets.push(dir);
-            }
-        }
-    }
+    let words = Words {
+        element: "line",
+        mesh: "triangle mesh",
+        cells: "triangles",
+        cell: "triangle",
+        facet: "edge",
+        a_facet: "an edge",
+        boundary: "curves of the meshed surface",
+    };
+    let lookup = |[a, b]: [usize; 2]| edges.get(&[a.min(b), a.max(b)]).map(|e| (e.dir, e.count));
+    let groups = fill_groups(
+        &file,
+        &raw,
+        (&raw.triangles, &raw.lines),
+        group_table(&raw, names, 2),
+        &new_index,
+        lookup,
+        &words,
+        |g, f| g.facets.push(f),
+    )?;
 
     Ok(Mesh {
         path: path.to_path_buf(),
@@ -625,6 +598,103 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         groups,
         flipped,
     })
+}
+
+/// The words of `fill_groups`' messages for one dimension.
+struct Words {
+    element: &'static str,
+    mesh: &'static str,
+    cells: &'static str,
+    cell: &'static str,
+    facet: &'static str,
+    a_facet: &'static str,
+    boundary: &'static str,
+}
+
+/// Fills the groups of `group_table` (dimension D of the cells, D − 1 of the facets): each
+/// cell element goes into the cell groups of its entity, each facet element (a line in 2D, a
+/// triangle in 3D) into the boundary groups of its entity, once, as the oriented boundary
+/// facet that `lookup` finds for its nodes (`(oriented nodes, number of cells using it)`). A
+/// facet element that is not a boundary facet of the cells is refused.
+#[allow(clippy::too_many_arguments)]
+fn fill_groups<const C: usize, const F: usize>(
+    file: &impl std::fmt::Display,
+    raw: &RawMesh,
+    (cells, facets): (&[msh::RawElement<C>], &[msh::RawElement<F>]),
+    (mut groups, groups_of): (Vec<Group>, impl Fn((i32, i32)) -> Vec<usize>),
+    new_index: &[usize],
+    lookup: impl Fn([usize; F]) -> Option<([usize; F], u32)>,
+    words: &Words,
+    store: impl Fn(&mut Group, [usize; F]),
+) -> Result<Vec<Group>> {
+    let (cell_dim, facet_dim) = (C as i32 - 1, F as i32 - 1);
+    for (k, t) in cells.iter().enumerate() {
+        if t.entity.0 == cell_dim {
+            for g in groups_of(t.entity) {
+                groups[g].cells.push(k);
+            }
+        }
+    }
+    let sorted = |mut f: [usize; F]| {
+        f.sort_unstable();
+        f
+    };
+    let mut seen: Vec<HashSet<[usize; F]>> = vec![HashSet::new(); groups.len()];
+    for el in facets.iter().filter(|e| e.entity.0 == facet_dim) {
+        let member = groups_of(el.entity);
+        if member.is_empty() {
+            continue;
+        }
+        let f = el.nodes.map(|n| new_index[n]);
+        let found = if f.contains(&UNUSED) { None } else { lookup(f) };
+        let dir = match found {
+            Some((dir, 1)) => dir,
+            other => {
+                let g = &groups[member[0]];
+                let group = match &g.name {
+                    Some(n) => format!("\"{n}\" (tag {})", g.tag),
+                    None => format!("with tag {} (no name)", g.tag),
+                };
+                let Words {
+                    element,
+                    mesh,
+                    cells,
+                    cell,
+                    facet,
+                    a_facet,
+                    boundary,
+                } = words;
+                let why = match other {
+                    Some(_) => format!("it is shared by two {cells} (an interior {facet})"),
+                    None => format!("it is not {a_facet} of any {cell}"),
+                };
+                let pts: Vec<String> = el
+                    .nodes
+                    .iter()
+                    .map(|&n| {
+                        let p = raw.nodes[n];
+                        match F {
+                            2 => fmt_point(p),
+                            _ => format!("({}, {}, {})", p[0], p[1], p[2]),
+                        }
+                    })
+                    .collect();
+                return Err(Error::input(format!(
+                    "mesh file '{file}': physical group {group} contains the {element} {} (gmsh \
+                     element {}), which is not on the boundary of the {mesh}: {why}; a boundary \
+                     group must consist of boundary {boundary}",
+                    pts.join("–"),
+                    el.tag
+                )));
+            }
+        };
+        for g in member {
+            if seen[g].insert(sorted(dir)) {
+                store(&mut groups[g], dir);
+            }
+        }
+    }
+    Ok(groups)
 }
 
 /// The index of a node no cell uses.

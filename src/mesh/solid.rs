@@ -6,13 +6,13 @@
 //! triangle of a physical surface group must be a boundary face of the tetrahedral mesh; it
 //! is stored with the outward orientation of its tetrahedron.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::path::Path;
 
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::{check_finite, group_table, renumber, Mesh, UNUSED};
+use super::{check_finite, fill_groups, group_table, renumber, Mesh, Words};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -150,54 +150,26 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         }
     }
 
-    let (mut groups, groups_of) = group_table(&raw, names, 3);
-    for (k, t) in raw.tetrahedra.iter().enumerate() {
-        if t.entity.0 == 3 {
-            for g in groups_of(t.entity) {
-                groups[g].cells.push(k);
-            }
-        }
-    }
-    let mut seen: Vec<HashSet<[usize; 3]>> = vec![HashSet::new(); groups.len()];
-    for tri in raw.triangles.iter().filter(|t| t.entity.0 == 2) {
-        let member = groups_of(tri.entity);
-        if member.is_empty() {
-            continue;
-        }
-        let f = tri.nodes.map(|n| new_index[n]);
-        let found = if f.contains(&UNUSED) {
-            None
-        } else {
-            faces.get(&key(f)).map(|e| (e.dir, e.count))
-        };
-        let dir = match found {
-            Some((dir, 1)) => dir,
-            other => {
-                let g = &groups[member[0]];
-                let group = match &g.name {
-                    Some(n) => format!("\"{n}\" (tag {})", g.tag),
-                    None => format!("with tag {} (no name)", g.tag),
-                };
-                let why = match other {
-                    Some(_) => "it is shared by two tetrahedra (an interior face)",
-                    None => "it is not a face of any tetrahedron",
-                };
-                let pts: Vec<String> = tri.nodes.iter().map(|&n| fmt_point(raw.nodes[n])).collect();
-                return Err(Error::input(format!(
-                    "mesh file '{file}': physical group {group} contains the triangle {} (gmsh \
-                     element {}), which is not on the boundary of the tetrahedral mesh: {why}; \
-                     a boundary group must consist of boundary surfaces of the meshed volume",
-                    pts.join("–"),
-                    tri.tag
-                )));
-            }
-        };
-        for g in member {
-            if seen[g].insert(key(dir)) {
-                groups[g].faces.push(dir);
-            }
-        }
-    }
+    let words = Words {
+        element: "triangle",
+        mesh: "tetrahedral mesh",
+        cells: "tetrahedra",
+        cell: "tetrahedron",
+        facet: "face",
+        a_facet: "a face",
+        boundary: "surfaces of the meshed volume",
+    };
+    let lookup = |f: [usize; 3]| faces.get(&key(f)).map(|e| (e.dir, e.count));
+    let groups = fill_groups(
+        &file,
+        &raw,
+        (&raw.tetrahedra, &raw.triangles),
+        group_table(&raw, names, 3),
+        &new_index,
+        lookup,
+        &words,
+        |g, f| g.faces.push(f),
+    )?;
 
     Ok(Mesh {
         path: path.to_path_buf(),
