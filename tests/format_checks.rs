@@ -90,6 +90,22 @@ print(json.dumps({
 }))
 "#;
 
+/// Runs examples/`name`.toml on meshes/`mesh` with `steps` steps into `out`.
+fn run_example(out: &Path, name: &str, mesh: &str, steps: usize) {
+    let mesh_key = format!("mesh.file={}", common::mesh_path(mesh));
+    let steps_key = format!("time.steps={steps}");
+    let scene = format!("examples/{name}.toml");
+    checked(
+        &format!("viscontact run {scene} ({mesh}, {steps} steps)"),
+        Command::new(BIN)
+            .current_dir(common::repo())
+            .args(["run", &scene, "--quiet", "--out"])
+            .arg(out)
+            .args(["--set", &mesh_key, "--set", &steps_key])
+            .output(),
+    );
+}
+
 #[test]
 fn paper_series_reads_back_with_meshio() {
     if !meshio_available("paper_series_reads_back_with_meshio") {
@@ -97,16 +113,7 @@ fn paper_series_reads_back_with_meshio() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    let mesh = format!("mesh.file={}", common::mesh_path("paper/rect_008.msh"));
-    checked(
-        "viscontact run examples/paper.toml (h = k = 1/8)",
-        Command::new(BIN)
-            .current_dir(common::repo())
-            .args(["run", "examples/paper.toml", "--quiet", "--out"])
-            .arg(&out)
-            .args(["--set", &mesh, "--set", "time.steps=8"])
-            .output(),
-    );
+    run_example(&out, "paper", "paper/rect_008.msh", 8);
 
     let report = checked(
         "scripts/check_vtu.py",
@@ -384,16 +391,7 @@ fn block_series_reads_back_with_meshio() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    let mesh = format!("mesh.file={}", common::mesh_path("3d/block_002.msh"));
-    checked(
-        "viscontact run examples/block.toml (block_002, 4 steps)",
-        Command::new(BIN)
-            .current_dir(common::repo())
-            .args(["run", "examples/block.toml", "--quiet", "--out"])
-            .arg(&out)
-            .args(["--set", &mesh, "--set", "time.steps=4"])
-            .output(),
-    );
+    run_example(&out, "block", "3d/block_002.msh", 4);
 
     // block_002: (2n+1)(n+1)² = 45 nodes, 12 n³ = 96 tetrahedra for n = 2.
     let report = checked(
