@@ -84,6 +84,8 @@ use std::ops::Range;
 /// Relative tolerance of the dual optimality conditions (in units of the velocities P w).
 pub const TOLERANCE: f64 = 1e-12;
 const MAX_ITERATIONS: usize = 500;
+/// A projected Newton step shorter than this also tries the projected gradient step.
+const PG_SWITCH: f64 = 1e-3;
 /// The shortest damped Newton step tried before the projected Newton step.
 const MIN_DAMPING: f64 = 0.25;
 /// |γ_j| ≥ RIM · c_j counts as on the rim: a projected disc multiplier c v̂ has norm c only
@@ -226,6 +228,9 @@ struct Work {
     grad_trial: Vec<f64>,
     /// The projected Newton direction.
     p: Vec<f64>,
+    /// The projected gradient trial point and its gradient.
+    alt: Vec<f64>,
+    grad_alt: Vec<f64>,
     coords: Vec<Coord>,
     /// Per group: binding (moving along −g/δ) in the projected Newton step.
     binding: Vec<bool>,
@@ -297,6 +302,8 @@ impl DualSolver {
             trial: vec![0.0; m],
             grad_trial: vec![0.0; m],
             p: vec![0.0; m],
+            alt: vec![0.0; m],
+            grad_alt: vec![0.0; m],
             coords: Vec::with_capacity(m),
             binding: vec![false; groups.len()],
             cache: None,
@@ -354,6 +361,8 @@ impl DualSolver {
             trial,
             grad_trial: g_trial,
             p,
+            alt,
+            grad_alt: g_alt,
             coords,
             binding,
             cache,
@@ -518,6 +527,31 @@ impl DualSolver {
                     break;
                 }
                 alpha *= 0.5;
+            }
+            // 3. A projected Newton direction that needed a short step can stall on an
+            // ill-conditioned D (thin slabs: flat tetrahedra), zigzagging at the edge of its
+            // binding set. Then the projected gradient step z(β) = Π(z − β g/δ) with Armijo,
+            // which decreases q in proportion to the residual, is taken when it does better.
+            if alpha < PG_SWITCH {
+                let mut beta = 1.0;
+                loop {
+                    for grp in groups.iter() {
+                        for i in grp.rows() {
+                            alt[i] = z[i] - beta * g[i] / grp.scale;
+                        }
+                    }
+                    project(alt);
+                    gradient(d, alt, dvec, g_alt);
+                    let predicted: f64 = (0..z.len()).map(|i| g[i] * (z[i] - alt[i])).sum();
+                    if -change(z, alt, g, g_alt) >= 1e-4 * predicted || beta < 1e-12 {
+                        break;
+                    }
+                    beta *= 0.5;
+                }
+                if change(z, alt, g, g_alt) < change(z, trial, g, g_trial) {
+                    trial.copy_from_slice(alt);
+                    g_trial.copy_from_slice(g_alt);
+                }
             }
             z.copy_from_slice(trial);
             g.copy_from_slice(g_trial);

@@ -6,6 +6,8 @@
 #   patch_box.msh       unstructured box, lc = 0.2, all groups          (valid; patch tests)
 #   quadratic_tets.msh  the same box, lc = 2, -order 2: 10-node tetrahedra, 6-node triangles
 #                                                                        (unsupported elements)
+#   slab_t0008.msh      meshes/3d/slab.geo, n = 16, t = 0.008 (1/250 of the width): flat
+#                       tetrahedra that once stalled the dual solver (tests/robustness.rs)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 GMSH=${GMSH:-gmsh}
@@ -18,3 +20,4 @@ mesh() {
 
 mesh patch_box.geo -o patch_box.msh
 mesh patch_box.geo -setnumber lc 2 -order 2 -o quadratic_tets.msh
+mesh ../../../meshes/3d/slab.geo -setnumber n 16 -setnumber t 0.008 -o slab_t0008.msh
