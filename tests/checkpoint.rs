@@ -151,6 +151,29 @@ fn stopped_and_resumed_equals_uninterrupted() {
     }
 }
 
+/// The same in 3D: the block (tetrahedra, contact and disc friction, Prony memory) stopped
+/// at step 13 of 32 and resumed equals the run that never stopped, bit for bit.
+#[test]
+fn stopped_and_resumed_equals_uninterrupted_in_3d() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = common::repo().join("examples/block.toml");
+    let mesh = format!("mesh.file={}", common::mesh_path("3d/block_004.msh"));
+    let set = [mesh.as_str(), "checkpoint.every=5"];
+    let (full, part) = (tmp.path().join("full"), tmp.path().join("part"));
+    let s = finished(run(&scene, &opts(&full, &set, None)).unwrap());
+    assert!(s.iterations.total > 0 && s.contact.friction_nodes > 0);
+    assert!(matches!(
+        run(&scene, &opts(&part, &set, Some(13))).unwrap(),
+        Outcome::Stopped { step: 13, .. }
+    ));
+    let resume_opts = ResumeOptions {
+        progress: false,
+        ..Default::default()
+    };
+    finished(resume(&part.join("checkpoint.h5"), &resume_opts).unwrap());
+    assert_same_series(&full, &part, "3D block");
+}
+
 /// A run to T/2 resumed with --set time.end=T keeps k and equals the run to T; and a finished
 /// run can be extended again, its history file growing by a copy, once.
 #[test]
