@@ -727,18 +727,24 @@ impl Template {
     }
 }
 
-impl Writer {
-    /// A writer for a run of `steps` steps into `dir`; `tl` gives the sizes.
-    pub fn new(dir: &Path, id: Identity, steps: usize, tl: &TimeLoop) -> Writer {
-        let disk = Disk {
+impl Disk {
+    /// The disk side of a run of `steps` steps into `dir`, no history file yet.
+    fn new(dir: &Path, id: Identity, steps: usize, tl: &TimeLoop) -> Disk {
+        Disk {
             dir: dir.to_path_buf(),
             id,
             capacity: steps,
             history: None,
             row_node: tl.rows.rows.iter().map(|r| r.node as u64).collect(),
             template: None,
-        };
-        Writer::start(disk, 0)
+        }
+    }
+}
+
+impl Writer {
+    /// A writer for a run of `steps` steps into `dir`; `tl` gives the sizes.
+    pub fn new(dir: &Path, id: Identity, steps: usize, tl: &TimeLoop) -> Writer {
+        Writer::start(Disk::new(dir, id, steps, tl), 0)
     }
 
     /// A writer that continues `cp` in `dir` for a run of `steps` steps. The history file is
@@ -751,14 +757,7 @@ impl Writer {
         tl: &TimeLoop,
         cp: &Checkpoint,
     ) -> Writer {
-        let mut disk = Disk {
-            dir: dir.to_path_buf(),
-            id,
-            capacity: steps,
-            history: None,
-            row_node: tl.rows.rows.iter().map(|r| r.node as u64).collect(),
-            template: None,
-        };
+        let mut disk = Disk::new(dir, id, steps, tl);
         let mut rows_sent = 0;
         if let StoredMemory::Direct {
             rows,

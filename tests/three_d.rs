@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::*;
-use viscontact::fem::{mul_add, nodal2, nodal_vectors, p1_norms, Cell, Discretization, Isotropic};
+use viscontact::fem::{mul_add, nodal_vectors, p1_norms, Cell, Discretization, Isotropic};
 use viscontact::mesh::Mesh;
 use viscontact::Error;
 
@@ -1330,7 +1330,7 @@ fn slab_differences(
     assert_eq!(mesh2.dim, 2);
     let tr2 = trace(&s2, &disc2);
     assert!(tr2.effects.contains(&"contact") && tr2.effects.contains(&"friction"));
-    let u2 = nodal2(&disc2, &tr2.u_final);
+    let u2 = nodal_vectors::<2>(&disc2, &tr2.u_final);
     let max2 = u2.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
     let (l2_ref, h1_ref) = p1_norms(&disc2.cells, &u2);
     // slab.geo: the mid-plane nodes (z = 0 exactly) have bit for bit the coordinates of

@@ -1,6 +1,8 @@
 //! The P1 simplex (triangle or tetrahedron): basis gradients, measure, and the element
-//! matrix of a tensor of the isotropic form C τ = 2a τ + b tr(τ) I. Viscosity A (4.1), elasticity B (4.2) and the
-//! relaxation tensor's constant part R = I all have this form.
+//! matrix of a tensor of the isotropic form C τ = 2a τ + b tr(τ) I. Viscosity A (4.1),
+//! elasticity B (4.2) and the relaxation tensor's constant part R = I all have this form.
+
+use crate::mesh::{cross, dot, sub};
 
 /// A tensor C τ = 2a τ + b tr(τ) I on symmetric tensors.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -91,19 +93,11 @@ impl Cell {
     /// A positively oriented tetrahedron: ∇φ_i = (face opposite i's inward normal) · area /
     /// (3V), i.e. ∇φ_0 = (p2 − p1) × (p3 − p1) / 6V with the signs of the vertex cycle.
     pub fn tetrahedron(nodes: [usize; 4], p: [[f64; 3]; 4]) -> Self {
-        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        let cross = |a: [f64; 3], b: [f64; 3]| {
-            [
-                a[1] * b[2] - a[2] * b[1],
-                a[2] * b[0] - a[0] * b[2],
-                a[0] * b[1] - a[1] * b[0],
-            ]
-        };
         let (e1, e2, e3) = (sub(p[1], p[0]), sub(p[2], p[0]), sub(p[3], p[0]));
         // Rows of the inverse Jacobian: ∇λ_1 = (e2 × e3)/det, ∇λ_2 = (e3 × e1)/det,
         // ∇λ_3 = (e1 × e2)/det, ∇λ_0 = −Σ.
         let c1 = cross(e2, e3);
-        let det = e1[0] * c1[0] + e1[1] * c1[1] + e1[2] * c1[2];
+        let det = dot(e1, c1);
         let g1 = c1.map(|x| x / det);
         let g2 = cross(e3, e1).map(|x| x / det);
         let g3 = cross(e1, e2).map(|x| x / det);

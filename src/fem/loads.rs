@@ -32,6 +32,8 @@ struct VectorLoad {
 /// All loads of a scene, ready to be evaluated at any t.
 pub struct Loads {
     loads: Vec<VectorLoad>,
+    /// Dofs per node (the mesh's dimension).
+    dim: usize,
 }
 
 impl Loads {
@@ -130,7 +132,10 @@ impl Loads {
                 qps,
             });
         }
-        Ok(Loads { loads })
+        Ok(Loads {
+            loads,
+            dim: mesh.dim,
+        })
     }
 
     pub fn is_empty(&self) -> bool {
@@ -179,7 +184,7 @@ impl Loads {
                         if ph == 0.0 {
                             continue;
                         }
-                        if let Some(d) = free[value.len() * n + c] {
+                        if let Some(d) = free[self.dim * n + c] {
                             rhs[d] += q.weight * ph * val;
                         }
                     }

@@ -7,7 +7,7 @@ pub mod element;
 pub mod loads;
 
 use crate::expr::Point;
-use crate::mesh::{Group, Mesh};
+use crate::mesh::{cross, norm, Group, Mesh};
 use crate::scene::{Model, Scene};
 use crate::{Error, Result};
 pub use element::{Cell, Isotropic};
@@ -349,11 +349,6 @@ pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f
         .collect()
 }
 
-/// The 2 in-plane components at every node of a free-dof vector (0 on Γ1).
-pub fn nodal2(disc: &Discretization, v: &[f64]) -> Vec<[f64; 2]> {
-    nodal_vectors::<2>(disc, v)
-}
-
 /// ‖v‖_{L²} and |v|_{H¹} of a P1 vector field given by its nodal values, computed exactly:
 /// per simplex of dimension d, ∫(Σ v_i φ_i)² = |T|/((d+1)(d+2)) (Σ v_i² + (Σ v_i)²), and the
 /// gradient is constant.
@@ -406,15 +401,8 @@ fn tangents(n: [f64; 3], d: usize) -> Vec<[f64; 3]> {
         .unwrap_or(0);
     let mut e = [0.0; 3];
     e[k] = 1.0;
-    let cross = |a: [f64; 3], b: [f64; 3]| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
     let t1 = cross(e, n);
-    let len = (t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]).sqrt();
+    let len = norm(t1);
     let t1 = t1.map(|x| x / len);
     vec![t1, cross(n, t1)]
 }

@@ -36,6 +36,7 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 pub use quality::Quality;
+pub(crate) use solid::{cross, dot, norm, sub};
 
 use crate::{Error, Result};
 use msh::RawMesh;
@@ -232,8 +233,8 @@ impl Mesh {
         });
         let faces = g.faces.iter().map(|&f| {
             let [a, b, c] = f.map(|i| self.nodes[i]);
-            let cross = solid::cross(solid::sub(b, a), solid::sub(c, a));
-            let norm = solid::norm(cross);
+            let cross = cross(sub(b, a), sub(c, a));
+            let norm = norm(cross);
             Facet {
                 nodes: f,
                 count: 3,
@@ -306,12 +307,12 @@ impl Mesh {
             .map(|(node, Acc { sum, total, ns })| {
                 for (i, a) in ns.iter().enumerate() {
                     for b in &ns[i + 1..] {
-                        let cross = solid::norm(solid::cross(*a, *b));
+                        let cross = norm(cross(*a, *b));
                         let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
                         max_angle = max_angle.max(cross.atan2(dot).to_degrees());
                     }
                 }
-                let norm = solid::norm(sum);
+                let norm = norm(sum);
                 let n = if norm > 1e-12 * total {
                     sum.map(|x| x / norm)
                 } else {
