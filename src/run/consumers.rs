@@ -6,9 +6,10 @@
 //! - [`Statistics`]: the run-wide numbers of summary.json (iterations, the largest n·w on
 //!   Γ3,1, the largest KKT residual, the contact state at the last step);
 //! - [`Frames`]: the ParaView series, a frame every `output.every` steps and at the end;
-//! - [`Checkpoints`]: `checkpoint.h5` at every `checkpoint.every`-th step, before the last
-//!   step and where the run stops;
-//! - [`Progress`]: the progress bar on a terminal.
+//! - [`Checkpoints`]: `checkpoint.h5` at every `checkpoint.every`-th step, once
+//!   `checkpoint.every_seconds` of wall time passed since the last one, before the last step
+//!   and where the run stops;
+//! - [`Progress`]: the progress bar on a terminal, a progress line every 10 s in a log.
 
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
@@ -17,6 +18,7 @@ use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
 use crate::time_loop::{Step, TimeLoop};
 use crate::Result;
+use std::time::{Duration, Instant};
 
 /// A solved step n as the consumers see it.
 pub(super) struct Solved<'s> {
@@ -24,7 +26,7 @@ pub(super) struct Solved<'s> {
     pub rows: &'s Rows,
     /// n = N: the run ends with this step.
     pub last: bool,
-    /// The run stops after this step (`--stop-after`) and continues by resume.
+    /// The run stops after this step (`--stop-after`, a signal) and continues by resume.
     pub stop: bool,
 }
 
@@ -59,6 +61,8 @@ pub(super) struct Statistics {
     /// Γ3,1 nodes with an active constraint and sticking Γ3,2 nodes at the last step solved.
     pub active: usize,
     pub stick: usize,
+    /// The last step solved.
+    pub last: Option<usize>,
 }
 
 impl Statistics {
@@ -67,6 +71,7 @@ impl Statistics {
             log,
             active: 0,
             stick: 0,
+            last: None,
         }
     }
 
@@ -76,9 +81,9 @@ impl Statistics {
         let (viol, kkt) = step_checks(s.rows, &s.step);
         log.max_violation = log.max_violation.max(viol);
         log.max_kkt_residual = log.max_kkt_residual.max(kkt);
-        if s.last {
-            (self.active, self.stick) = state_counts(s.rows, &s.step);
-        }
+        // At every step: a run that fails or stops reports the last one it solved.
+        (self.active, self.stick) = state_counts(s.rows, &s.step);
+        self.last = Some(s.step.n);
     }
 }
 
@@ -99,12 +104,18 @@ impl Frames<'_> {
 }
 
 /// `checkpoint.h5`: the state at t_{n+1} after step n at every `checkpoint.every`-th step,
-/// before the last step and where the run stops (`[checkpoint] enabled = false`: never).
+/// after the first step that ends `checkpoint.every_seconds` or more after the last
+/// checkpoint (or the start), before the last step and where the run stops
+/// (`[checkpoint] enabled = false`: never). The wall-clock checkpoints change no result: a
+/// checkpoint copies the state, and resume from any of them is bit for bit.
 pub(super) struct Checkpoints {
     pub writer: checkpoint::Writer,
     pub enabled: bool,
     pub every: Option<usize>,
+    pub every_seconds: Option<Duration>,
     pub steps: usize,
+    /// When the last checkpoint was handed to the writer (or the loop started).
+    last_written: Instant,
     /// The contact/stick flags of the step just solved, when its checkpoint is due.
     due: Option<Vec<bool>>,
 }
@@ -115,7 +126,9 @@ impl Checkpoints {
             writer,
             enabled: scene.checkpoint,
             every: scene.checkpoint_every,
+            every_seconds: scene.checkpoint_every_seconds.map(Duration::from_secs_f64),
             steps: scene.steps,
+            last_written: Instant::now(),
             due: None,
         }
     }
@@ -123,9 +136,18 @@ impl Checkpoints {
     /// Decides whether the state after step n is saved; the flags are the solved step's.
     fn solved(&mut self, s: &Solved) {
         let next = s.step.n + 1;
+        let clock = self
+            .every_seconds
+            .is_some_and(|d| self.last_written.elapsed() >= d);
         let due = self.enabled
             && !s.last
-            && (s.stop || next == self.steps || self.every.is_some_and(|e| next.is_multiple_of(e)));
+            && (s.stop
+                || clock
+                || next == self.steps
+                || self.every.is_some_and(|e| next.is_multiple_of(e)));
+        if due {
+            self.last_written = Instant::now();
+        }
         self.due = due.then(|| state_flags(s.rows, &s.step));
     }
 
@@ -142,39 +164,100 @@ impl Checkpoints {
     }
 }
 
-/// The progress bar on a terminal (hidden otherwise or with `--quiet`).
+/// The progress bar on a terminal; without a terminal (a batch job's log) a line every
+/// [`Progress::EVERY`] on stderr: step, t, solver iterations, elapsed and estimated
+/// remaining time. Nothing with `--quiet`.
 pub(super) struct Progress {
-    bar: indicatif::ProgressBar,
+    kind: Kind,
+    first: usize,
+    last: usize,
+    start: Instant,
+    /// When the last line was printed (or the loop started).
+    printed: Instant,
+}
+
+enum Kind {
+    Quiet,
+    Bar(indicatif::ProgressBar),
+    Lines,
 }
 
 impl Progress {
+    /// Seconds between two progress lines in a log.
+    pub const EVERY: Duration = Duration::from_secs(10);
+
     /// Progress over the steps `first..=last`.
     pub fn new(enabled: bool, first: usize, last: usize) -> Progress {
+        use std::io::IsTerminal;
+        let kind = match (enabled, std::io::stderr().is_terminal()) {
+            (false, _) => Kind::Quiet,
+            (true, false) => Kind::Lines,
+            (true, true) => {
+                let bar = indicatif::ProgressBar::new((last + 1 - first) as u64);
+                bar.set_style(
+                    indicatif::ProgressStyle::with_template(
+                        "{bar:40} step {pos}/{len}  {elapsed} < {eta}",
+                    )
+                    .expect("valid template"),
+                );
+                Kind::Bar(bar)
+            }
+        };
+        let now = Instant::now();
         Progress {
-            bar: progress_bar(enabled, (last + 1 - first) as u64),
+            kind,
+            first,
+            last,
+            start: now,
+            printed: now,
         }
     }
 
-    fn solved(&mut self, _s: &Solved) {
-        self.bar.inc(1);
+    fn solved(&mut self, s: &Solved) {
+        match &self.kind {
+            Kind::Quiet => {}
+            Kind::Bar(bar) => bar.inc(1),
+            Kind::Lines => {
+                if self.printed.elapsed() >= Self::EVERY {
+                    self.printed = Instant::now();
+                    eprintln!(
+                        "{}",
+                        self.line(s.step.n, s.step.t, s.step.report.iterations)
+                    );
+                }
+            }
+        }
+    }
+
+    /// `step n/N  t = …  iterations i  elapsed …  remaining ≈ …`: the remaining time assumes
+    /// the steps left cost what the steps of this process cost on average.
+    fn line(&self, n: usize, t: f64, iterations: usize) -> String {
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let done = (n + 1 - self.first) as f64;
+        let remaining = elapsed / done * (self.last - n) as f64;
+        format!(
+            "step {n}/{}  t = {t:.6e}  iterations {iterations}  elapsed {}  remaining ≈ {}",
+            self.last,
+            clock(elapsed),
+            clock(remaining)
+        )
     }
 
     pub fn finish(&self) {
-        self.bar.finish_and_clear();
+        if let Kind::Bar(bar) = &self.kind {
+            bar.finish_and_clear();
+        }
     }
 }
 
-fn progress_bar(enabled: bool, len: u64) -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    if !enabled || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
+/// Seconds as `1h02m03s` / `2m03s` / `3s`.
+fn clock(seconds: f64) -> String {
+    let s = seconds.round() as u64;
+    match (s / 3600, s / 60 % 60, s % 60) {
+        (0, 0, s) => format!("{s}s"),
+        (0, m, s) => format!("{m}m{s:02}s"),
+        (h, m, s) => format!("{h}h{m:02}m{s:02}s"),
     }
-    let bar = indicatif::ProgressBar::new(len);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:40} step {pos}/{len}  {elapsed} < {eta}")
-            .expect("valid template"),
-    );
-    bar
 }
 
 /// Scale of a step's velocities and multipliers for relative tolerances.
@@ -301,4 +384,23 @@ fn write_frame(
     };
     series.write(&frame)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_line_estimates_the_remaining_time() {
+        let mut p = Progress::new(false, 10, 110);
+        p.start = Instant::now() - Duration::from_secs(20);
+        // 10 of 100 steps (10..=19) took 20 s: 91 steps left take about 182 s.
+        let line = p.line(19, 0.125, 7);
+        assert!(
+            line.starts_with("step 19/110  t = 1.250000e-1  iterations 7  elapsed 20s"),
+            "{line}"
+        );
+        assert!(line.ends_with("remaining ≈ 3m02s"), "{line}");
+        assert_eq!(clock(3723.4), "1h02m03s");
+    }
 }

@@ -7,9 +7,17 @@ use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use serde::Serialize;
 
-/// summary.json (DESIGN.md "Output of run").
+/// summary.json (DESIGN.md "Output of run"), written for every run that got past its
+/// setup: completed, failed or interrupted.
 #[derive(Serialize, Debug, Clone)]
 pub struct Summary {
+    pub status: Status,
+    /// The run's id (kept by resume; the checkpoint's root attribute `run_id`).
+    pub run_id: String,
+    /// The last step n solved (null when none was).
+    pub last_step: Option<usize>,
+    /// Why a run that did not complete ended, and how to continue it (null when completed).
+    pub message: Option<String>,
     pub name: String,
     pub scene: String,
     pub mesh: String,
@@ -30,6 +38,26 @@ pub struct Summary {
     pub warnings: Vec<String>,
 }
 
+/// How a run ended.
+#[derive(Serialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    /// Every step solved.
+    Completed,
+    /// A step or a write failed (the command exits 1, or 2 for input found bad only then).
+    Failed,
+    /// Stopped by SIGINT/SIGTERM or `--stop-after`; the checkpoint continues it.
+    Interrupted,
+}
+
+/// The end of a run as summary.json tells it.
+pub(super) struct Ending {
+    pub status: Status,
+    pub message: Option<String>,
+    pub timing: Timing,
+    pub output: OutputSummary,
+}
+
 #[derive(Serialize, Debug, Clone)]
 pub struct Timing {
     pub setup_s: f64,
@@ -37,7 +65,8 @@ pub struct Timing {
     pub total_s: f64,
 }
 
-/// Norms of u_N = u_0 + kΣ_{j<N} w_j, the displacement at t_N = T.
+/// Norms of u_N = u_0 + kΣ_{j<N} w_j, the displacement at t_N = T; for a run that did not
+/// complete, of the latest displacement u_n it computed (at `time` = t_n).
 #[derive(Serialize, Debug, Clone)]
 pub struct Final {
     pub time: f64,
@@ -92,20 +121,30 @@ impl Summary {
     /// w_j is the history's u at n = N: w_N is not added), with the statistics of every
     /// step solved.
     pub(super) fn new(
+        ending: Ending,
+        run_id: &str,
         scene: &Scene,
         mesh: &Mesh,
         disc: &Discretization,
         tl: &TimeLoop,
         stats: Statistics,
-        timing: Timing,
-        output: OutputSummary,
     ) -> Summary {
         let u_n = &tl.history.u;
         let (l2, semi) = disc.norms(u_n);
-        let Statistics { log, active, stick } = stats;
+        let Statistics {
+            log,
+            active,
+            stick,
+            last,
+        } = stats;
         let rows = &tl.rows;
         let per_step = log.iterations;
+        let completed = ending.status == Status::Completed;
         Summary {
+            status: ending.status,
+            run_id: run_id.to_string(),
+            last_step: last,
+            message: ending.message,
             name: scene.name.clone(),
             scene: scene.path.display().to_string(),
             mesh: mesh.path.display().to_string(),
@@ -117,9 +156,9 @@ impl Summary {
             end_time: scene.end,
             effects: tl.effects.names().iter().map(|s| s.to_string()).collect(),
             solver: tl.solver.name().to_string(),
-            timing,
+            timing: ending.timing,
             final_: Final {
-                time: scene.end,
+                time: if completed { scene.end } else { tl.time() },
                 u_l2: l2,
                 u_h1: (l2 * l2 + semi * semi).sqrt(),
                 u_max: u_n.iter().fold(0.0f64, |a, v| a.max(v.abs())),
@@ -141,7 +180,7 @@ impl Summary {
                 max: per_step.iter().copied().max().unwrap_or(0),
                 per_step,
             },
-            output,
+            output: ending.output,
             warnings: crate::effects::warnings(scene, disc),
         }
     }
