@@ -962,3 +962,38 @@ fn inverted_tetrahedron_is_reoriented_by_mesh_info() {
     let stdout = text(&out.stdout);
     assert!(stdout.contains("2 tetrahedra (1 reoriented"), "{stdout}");
 }
+
+/// A scene name is a name, not a path: without --out it would choose out/<name>/, so a name
+/// that is absolute or climbs out of out/ is refused, and nothing is written anywhere.
+#[test]
+fn scene_name_that_is_a_path() {
+    let f = Fixture::new();
+    let target = f.path("elsewhere");
+    for (case, name) in [
+        ("absolute name", target.display().to_string()),
+        ("name with ..", "../../escaped".to_string()),
+        ("name with a separator", "a/b".to_string()),
+    ] {
+        let scene = f.scene(&[("name = \"paper\"", &format!("name = {name:?}"))]);
+        let args: Vec<OsString> = vec!["run".into(), scene.into()];
+        expect_input_error(case, &args, &["scene.toml", "key 'name'", "--out"]);
+        assert!(!target.exists(), "[{case}] wrote outside out/");
+        assert!(!common::repo().join("escaped").exists());
+    }
+}
+
+/// `--out` naming an existing file says so; the file is left as it was.
+#[test]
+fn out_is_a_file() {
+    let f = Fixture::new();
+    let scene = f.scene(&[]);
+    let file = common::write(f.dir.path(), "taken", "mine\n");
+    let args: Vec<OsString> = vec![
+        "run".into(),
+        scene.into(),
+        "--out".into(),
+        file.clone().into(),
+    ];
+    expect_input_error("--out is a file", &args, &["taken", "is an existing file"]);
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine\n");
+}

@@ -232,8 +232,8 @@ fn summary_run_id(dir: &Path) -> Option<String> {
 pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()> {
     let refuse = |what: String| {
         Err(Error::input(format!(
-            "output directory '{}' holds another run ({what}) than the checkpoint {} (run \
-             {run_id}); resume into the checkpoint's own directory or an empty one",
+            "output directory '{}' holds another run than the checkpoint {} (run {run_id}): \
+             {what}; resume into the checkpoint's own directory or an empty one",
             dir.display(),
             checkpoint.display()
         )))
