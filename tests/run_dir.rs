@@ -31,6 +31,13 @@ fn vtus(dir: &Path) -> Vec<String> {
         .collect()
 }
 
+/// A temporary directory with the paper scene on `meshes/paper/MESH.msh` in it.
+fn paper(mesh: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = common::paper_scene(tmp.path(), "s.toml", &format!("paper/{mesh}.msh"), false);
+    (tmp, scene)
+}
+
 fn run_ok(args: &[&str]) {
     let out = common::viscontact(args);
     assert!(
@@ -42,8 +49,7 @@ fn run_ok(args: &[&str]) {
 
 #[test]
 fn a_rerun_that_fails_in_setup_leaves_the_old_run_untouched() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let (tmp, scene) = paper("rect_008");
     let (scene, dir) = (scene.to_str().unwrap(), tmp.path().join("o"));
     let dir_s = dir.to_str().unwrap();
     run_ok(&["run", scene, "--out", dir_s, "--quiet"]);
@@ -66,8 +72,7 @@ fn a_rerun_that_fails_in_setup_leaves_the_old_run_untouched() {
 /// the old run, a summary that says "failed", at which step, and why.
 #[test]
 fn a_rerun_that_fails_later_replaces_the_old_run() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let (tmp, scene) = paper("rect_008");
     let text = std::fs::read_to_string(&scene).unwrap().replace(
         "\"-0.1*x*(2-x)*min(t, 0.2)\"",
         "\"if(t > 0.53, 1/0, -0.1*x*(2-x)*min(t, 0.2))\"",
@@ -104,8 +109,7 @@ fn a_rerun_that_fails_later_replaces_the_old_run() {
 /// that owns it; the owner finishes undisturbed.
 #[test]
 fn a_directory_in_use_is_refused_naming_its_owner() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_016.msh", false);
+    let (tmp, scene) = paper("rect_016");
     let (scene, dir) = (scene.to_str().unwrap(), tmp.path().join("o"));
     let dir_s = dir.to_str().unwrap();
     let set = [
@@ -165,8 +169,7 @@ fn a_directory_in_use_is_refused_naming_its_owner() {
 /// refusing the directory; a user's file stays as it was (with --force).
 #[test]
 fn leftover_temporaries_are_removed_and_user_files_kept() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let (tmp, scene) = paper("rect_008");
     let (scene, dir) = (scene.to_str().unwrap(), tmp.path().join("o"));
     let dir_s = dir.to_str().unwrap();
     std::fs::create_dir(&dir).unwrap();
@@ -201,8 +204,7 @@ fn leftover_temporaries_are_removed_and_user_files_kept() {
 /// not viscontact's, and leaves B as it was; into an empty directory it continues the run.
 #[test]
 fn resume_does_not_mix_runs() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let (tmp, scene) = paper("rect_008");
     let scene = scene.to_str().unwrap();
     let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
     let a_s = a.to_str().unwrap();

@@ -33,7 +33,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use summary::{summary_json, Ending};
 
-/// Options of a run that are not part of the scene.
+/// Options of a run (and of a resume) that are not part of the scene.
 #[derive(Clone, Debug, Default)]
 pub struct RunOptions {
     pub out: Option<PathBuf>,
@@ -137,27 +137,15 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
         _lock: lock,
         start,
         setup_s: start.elapsed().as_secs_f64(),
-        progress: opts.progress,
-        stop_after: opts.stop_after,
-        interrupt: &opts.interrupt,
-        force: opts.force,
+        opts,
         resumed_from: None,
     })
 }
 
-/// Options of `viscontact resume`.
-#[derive(Clone, Debug, Default)]
-pub struct ResumeOptions {
-    /// Output directory (default: the checkpoint's directory).
-    pub out: Option<PathBuf>,
-    /// Only `time.end`, `output.*` and `checkpoint.*` (see [`checkpoint::Checkpoint::scene`]).
-    pub overrides: Vec<String>,
-    pub progress: bool,
-    pub stop_after: Option<usize>,
-    /// As [`RunOptions::force`].
-    pub force: bool,
-    pub interrupt: Interrupt,
-}
+/// Options of `viscontact resume`: those of a run; `out` defaults to the checkpoint's
+/// directory, and `overrides` may only set `time.end`, `output.*` and `checkpoint.*` (see
+/// [`checkpoint::Checkpoint::scene`]).
+pub type ResumeOptions = RunOptions;
 
 /// Continues a run from its checkpoint: the stored scene (with the allowed overrides), the
 /// same mesh (checked by fingerprint) and physics, the saved state; the series in the output
@@ -206,10 +194,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         _lock: lock,
         start,
         setup_s: start.elapsed().as_secs_f64(),
-        progress: opts.progress,
-        stop_after: opts.stop_after,
-        interrupt: &opts.interrupt,
-        force: opts.force,
+        opts,
         resumed_from: Some(cp.n),
     })
 }
@@ -229,11 +214,7 @@ struct Drive<'a> {
     _lock: DirLock,
     start: Instant,
     setup_s: f64,
-    progress: bool,
-    stop_after: Option<usize>,
-    interrupt: &'a Interrupt,
-    /// The run writes beside files that are not viscontact's (`--force`).
-    force: bool,
+    opts: &'a RunOptions,
     /// The checkpoint step a resumed run starts from.
     resumed_from: Option<usize>,
 }
@@ -257,10 +238,10 @@ fn drive(d: Drive) -> Result<Outcome> {
             scene: d.scene,
         },
         checkpoints: Checkpoints::new(d.writer, d.scene),
-        progress: Progress::new(d.progress, tl.n(), d.scene.steps),
+        progress: Progress::new(d.opts.progress, tl.n(), d.scene.steps),
     };
     let steps_start = Instant::now();
-    let ended = steps(&mut tl, &rows, &mut consumers, d.stop_after, d.interrupt);
+    let ended = steps(&mut tl, &rows, &mut consumers, d.opts);
     let Consumers {
         statistics,
         frames,
@@ -278,7 +259,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         dir::remove_stale_frames(&frames.series, d.resumed_from.unwrap_or(0));
     }
     let last = statistics.last.unwrap_or(0);
-    let signal = d.interrupt.signal();
+    let signal = d.opts.interrupt.signal();
     let message = match &ended {
         Ok(End::Completed) => None,
         Ok(End::Stopped) => Some(stopped_message(
@@ -286,7 +267,7 @@ fn drive(d: Drive) -> Result<Outcome> {
             last as f64 * tl.history.k,
             signal,
             checkpoint.as_deref(),
-            d.force,
+            d.opts.force,
         )),
         Err(e) => Some(e.to_string()),
     };
@@ -332,8 +313,7 @@ fn steps(
     tl: &mut TimeLoop,
     rows: &crate::solver::Rows,
     consumers: &mut Consumers,
-    stop_after: Option<usize>,
-    interrupt: &Interrupt,
+    opts: &RunOptions,
 ) -> Result<End> {
     let end = tl.scene.steps;
     loop {
@@ -342,7 +322,7 @@ fn steps(
             step: tl.solve_step()?,
             rows,
             last: n == end,
-            stop: stop_after == Some(n) || interrupt.signal().is_some(),
+            stop: opts.stop_after == Some(n) || opts.interrupt.signal().is_some(),
         };
         consumers.solved(&solved)?;
         let (last, stop) = (solved.last, solved.stop);
