@@ -219,6 +219,17 @@ fn resume_does_not_mix_runs() {
     assert!(stderr.contains("holds another run"), "{stderr}");
     assert!(contents(&b) == before, "the other run changed");
 
+    // A copy of b's checkpoint resumed beside a's run.
+    let copy = a.join("copy.h5");
+    std::fs::copy(b.join("checkpoint.h5"), &copy).unwrap();
+    let a_before = contents(&a);
+    let out = common::viscontact(&["resume", copy.to_str().unwrap(), "--force", "--quiet"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("holds another run"), "{stderr}");
+    assert!(contents(&a) == a_before, "a's run changed");
+    std::fs::remove_file(&copy).unwrap();
+
     // Frames with nothing that names their run.
     std::fs::remove_file(b.join("summary.json")).unwrap();
     std::fs::remove_file(b.join("checkpoint.h5")).unwrap();

@@ -238,19 +238,24 @@ pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()>
             checkpoint.display()
         )))
     };
-    let own_dir = match (dir.canonicalize(), checkpoint.canonicalize()) {
-        (Ok(d), Ok(c)) => c.parent() == Some(d.as_path()),
-        _ => false,
-    };
-    let mut identified = own_dir;
+    let theirs = dir.join(crate::checkpoint::FILE_NAME);
+    let (dir_c, theirs_c, cp_c) = (
+        dir.canonicalize().ok(),
+        theirs.canonicalize().ok(),
+        checkpoint.canonicalize().ok(),
+    );
+    // The checkpoint being resumed names the run of its own directory's frames.
+    let mut identified = cp_c
+        .as_ref()
+        .is_some_and(|c| c.parent() == dir_c.as_deref());
+    let is_the_checkpoint = theirs_c.is_some() && theirs_c == cp_c;
     if let Some(other) = summary_run_id(dir) {
         if other != run_id {
             return refuse(format!("summary.json of run {other}"));
         }
         identified = true;
     }
-    let theirs = dir.join(crate::checkpoint::FILE_NAME);
-    if theirs.exists() && !own_dir {
+    if theirs.exists() && !is_the_checkpoint {
         match crate::checkpoint::Checkpoint::read(&theirs) {
             Ok(cp) if cp.id.run_id == run_id => identified = true,
             Ok(cp) => return refuse(format!("checkpoint.h5 of run {}", cp.id.run_id)),

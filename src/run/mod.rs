@@ -308,7 +308,8 @@ fn drive(d: Drive) -> Result<Outcome> {
 }
 
 /// The stream of solved steps: solve step n, hand it to the consumers; unless it is the last
-/// or the run stops after it, advance to t_{n+1} and tell them.
+/// or the run stops after it, advance to t_{n+1} and tell them. A signal that comes while
+/// the last step is solved lets the run complete: nothing would be left to resume.
 fn steps(
     tl: &mut TimeLoop,
     rows: &crate::solver::Rows,
