@@ -1,6 +1,15 @@
 //! Scene expressions: loads f0(x, y, z, t), f2(x, y, z, t), F(x, y, z), μ(x, y, z) and a
-//! relaxation kernel r(s), parsed and compiled once by `fasteval2` (MIT, maintained fork of
-//! fasteval; every literal is an f64, so `1/2` is 0.5, not an integer division).
+//! relaxation kernel r(s), parsed once by `fasteval2` (MIT, maintained fork of fasteval;
+//! every literal is an f64, so `1/2` is 0.5, not an integer division).
+//!
+//! The parse tree is evaluated as it stands, not fasteval's compiled form: the compiler's
+//! constant folding compares folded constants with 1 and 0 up to 8ε, and NaN compares as
+//! neither, so `0/0` compiled to the constant 1, `x + 0/0` to `x` and `-(0/0)` to −1
+//! (fasteval2 2.1; `compiler_folds_nan_away` below pins that behaviour, so an upgrade that
+//! fixes it shows). Every part of an expression that uses no variable (the whole, each
+//! parenthesized part, each function argument) must be finite: `0/0`, `0*(1/0)` or
+//! `(0-0)/(1-1)` are refused when the scene is read; `x + 0/0` is NaN wherever it is
+//! evaluated, which the loads' check at t = 0 refuses before the run.
 //!
 //! Beyond fasteval's built-ins (`min`, `max`, `abs`, `sin`, …, `log(base, x)`, comparison and
 //! `&&`/`||` operators) an expression may call `if(cond, a, b)`, `exp`, `ln`, `sqrt`, `pow`,
@@ -8,7 +17,7 @@
 //! the scene is read, not in the middle of a run.
 
 use crate::{Error, Result};
-use fasteval2::{Compiler, Evaler, Instruction, Parser, Slab};
+use fasteval2::{Evaler, ExpressionI, Parser, Slab};
 
 /// Values of the variables an expression may use.
 #[derive(Clone, Copy, Debug, Default)]
@@ -20,11 +29,11 @@ pub struct Point {
     pub s: f64,
 }
 
-/// A compiled expression of some of the variables x, y, z, t, s.
+/// A parsed expression of some of the variables x, y, z, t, s.
 pub struct Expr {
     source: String,
     slab: Slab,
-    instruction: Instruction,
+    root: ExpressionI,
 }
 
 impl std::fmt::Debug for Expr {
@@ -109,10 +118,6 @@ impl Expr {
                 parse_error(&e)
             ))
         })?;
-        let instruction =
-            parsed
-                .from(&slab.ps)
-                .compile(&slab.ps, &mut slab.cs, &mut fasteval2::EmptyNamespace);
         // Evaluate once with a recording namespace: every variable and custom function the
         // expression reaches must be known (all call arguments are evaluated eagerly).
         let mut unknown: Option<String> = None;
@@ -143,7 +148,7 @@ impl Expr {
         };
         // Evaluation errors at the probe point (e.g. a division by zero gives inf, not an
         // error) are irrelevant here; only the names matter.
-        let _ = instruction.eval(&slab, &mut ns);
+        let _ = parsed.from(&slab.ps).eval(&slab, &mut ns);
         if let Some(what) = unknown {
             return Err(Error::input(format!(
                 "{key}: expression {source:?} uses unknown {what}; allowed variables: {}; \
@@ -152,10 +157,17 @@ impl Expr {
                 allowed.join(", ")
             )));
         }
+        if let Some(v) = non_finite_constant(&slab) {
+            return Err(Error::input(format!(
+                "{key}: expression {source:?} has a part without variables that evaluates to \
+                 {v} (a division by zero, or a function outside its domain); write a finite \
+                 value"
+            )));
+        }
         Ok(Expr {
             source: source.to_string(),
             slab,
-            instruction,
+            root: parsed,
         })
     }
 
@@ -170,7 +182,8 @@ impl Expr {
             }
             call(name, &args)
         };
-        self.instruction
+        self.root
+            .from(&self.slab.ps)
             .eval(&self.slab, &mut ns)
             .unwrap_or(f64::NAN)
     }
@@ -178,6 +191,28 @@ impl Expr {
     pub fn source(&self) -> &str {
         &self.source
     }
+}
+
+/// The value of the first sub-expression of the parse slab (the whole expression, each
+/// parenthesized part, each function argument) that uses no variable and is not finite.
+fn non_finite_constant(slab: &Slab) -> Option<f64> {
+    // `get_expr` answers an index past the end with the slab's default expression.
+    let end = slab.ps.get_expr(ExpressionI(usize::MAX));
+    (0..)
+        .map(|i| slab.ps.get_expr(ExpressionI(i)))
+        .take_while(|e| !std::ptr::eq(*e, end))
+        .find_map(|e| {
+            let mut uses_variable = false;
+            let mut ns = |name: &str, args: Vec<f64>| -> Option<f64> {
+                if args.is_empty() && variable(name, &Point::default()).is_some() {
+                    uses_variable = true;
+                    return Some(0.0);
+                }
+                call(name, &args)
+            };
+            let v = e.eval(slab, &mut ns).ok()?;
+            (!uses_variable && !v.is_finite()).then_some(v)
+        })
 }
 
 /// A scene value that is either a number or an expression.
@@ -225,13 +260,65 @@ mod tests {
             t: 0.75,
             ..Default::default()
         };
-        assert_eq!(g.eval(&p), 0.01 * 0.75 * 0.2);
+        assert!((g.eval(&p) - 0.01 * 0.75 * 0.2).abs() < 1e-18);
         let h = Expr::parse("1/2 + exp(-10*s)", &["s"], "k").unwrap();
         let p = Point {
             s: 0.1,
             ..Default::default()
         };
         assert_eq!(h.eval(&p), 0.5 + (-1.0f64).exp());
+    }
+
+    /// fasteval2's compiler folds a NaN constant into 1 (or drops it from a sum): the reason
+    /// `Expr` evaluates the parse tree. When this fails, the library has changed: check
+    /// whether compiling is safe again.
+    #[test]
+    fn compiler_folds_nan_away() {
+        use fasteval2::Compiler;
+        let mut slab = Slab::new();
+        let parsed = Parser::new().parse("0/0", &mut slab.ps).unwrap();
+        let compiled =
+            parsed
+                .from(&slab.ps)
+                .compile(&slab.ps, &mut slab.cs, &mut fasteval2::EmptyNamespace);
+        let v = compiled
+            .eval(&slab, &mut fasteval2::EmptyNamespace)
+            .unwrap();
+        assert_eq!(v, 1.0, "fasteval2's folding of 0/0 changed");
+    }
+
+    #[test]
+    fn non_finite_constants_are_refused() {
+        for src in [
+            "0/0",
+            "0*(1/0)",
+            "(0-0)/(1-1)",
+            "-(0/0)",
+            "1/0",
+            "if(t > 1, 0/0, 1)",
+            "ln(0)",
+            "x + (sqrt(-1))",
+        ] {
+            let e = Expr::parse(src, &["x", "t"], "load.traction[0].value[1]").unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.contains("load.traction[0].value[1]"), "{src}: {msg}");
+            assert!(msg.contains("without variables"), "{src}: {msg}");
+        }
+        // Parts that use a variable are judged where they are evaluated (loads at every
+        // quadrature point: at t = 0 before the run, later during it).
+        for src in ["x + 0/0", "ln(0)*t"] {
+            let e = Expr::parse(src, &["x", "t"], "k").unwrap();
+            assert!(!e.eval(&Point::default()).is_finite(), "{src}");
+        }
+        let e = Expr::parse("1/x", &["x"], "k").unwrap();
+        assert!(e.eval(&Point::default()).is_infinite());
+        assert_eq!(
+            e.eval(&Point {
+                x: 4.0,
+                ..Default::default()
+            }),
+            0.25
+        );
     }
 
     #[test]
