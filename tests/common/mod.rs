@@ -134,3 +134,19 @@ impl Lcg {
         (self.0 >> 11) as f64 / (1u64 << 53) as f64
     }
 }
+
+/// Runs the `viscontact` binary from the repository root: (exit status, stdout + stderr).
+pub fn cli(args: &[&str]) -> (i32, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_viscontact"))
+        .args(args)
+        .current_dir(repo())
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("the viscontact binary runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.code().unwrap_or(-1), text)
+}
