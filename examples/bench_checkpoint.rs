@@ -48,7 +48,7 @@ fn main() {
                     overrides,
                     progress: false,
                     stop_after: None,
-                    force: false,
+                    ..Default::default()
                 };
                 let t = Instant::now();
                 match run(Path::new("examples/paper.toml"), &opts).expect("the paper scene runs") {

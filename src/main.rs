@@ -3,7 +3,7 @@
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use viscontact::run::{resume, run, setup, Outcome, ResumeOptions, RunOptions};
+use viscontact::run::{resume, run, setup, Interrupt, Outcome, ResumeOptions, RunOptions};
 use viscontact::{effects::Effects, mesh::Mesh, Result};
 
 #[derive(Parser)]
@@ -57,6 +57,10 @@ enum Command {
         /// Stop again after step N (see `run --stop-after`).
         #[arg(long, value_name = "N")]
         stop_after: Option<usize>,
+        /// Write into an output directory that also holds files viscontact did not write
+        /// (they are left alone).
+        #[arg(long)]
+        force: bool,
     },
     /// Validate a scene and print its effects, sizes and solver path; runs nothing.
     Check {
@@ -95,6 +99,17 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // SIGINT/SIGTERM stop a run or resume after its current step (exit 130 / 143).
+    let interrupt = match cli.command {
+        Command::Run { .. } | Command::Resume { .. } => match Interrupt::on_signals() {
+            Ok(i) => i,
+            Err(e) => {
+                eprintln!("error: cannot handle SIGINT/SIGTERM: {e}");
+                return ExitCode::FAILURE;
+            }
+        },
+        _ => Interrupt::default(),
+    };
     let result = match cli.command {
         Command::Run {
             scene,
@@ -111,6 +126,7 @@ fn main() -> ExitCode {
                 progress: !quiet,
                 stop_after,
                 force,
+                interrupt,
             },
         )
         .map(report),
@@ -120,6 +136,7 @@ fn main() -> ExitCode {
             set,
             quiet,
             stop_after,
+            force,
         } => resume(
             &checkpoint,
             &ResumeOptions {
@@ -127,12 +144,14 @@ fn main() -> ExitCode {
                 overrides: set,
                 progress: !quiet,
                 stop_after,
+                force,
+                interrupt,
             },
         )
         .map(report),
-        Command::Check { scene, set } => check(&scene, &set),
-        Command::MeshInfo { mesh, json } => mesh_info(&mesh, json),
-        Command::Study(args) => study(args),
+        Command::Check { scene, set } => check(&scene, &set).map(|()| None),
+        Command::MeshInfo { mesh, json } => mesh_info(&mesh, json).map(|()| None),
+        Command::Study(args) => study(args).map(|()| None),
         Command::Plot {
             dir,
             time,
@@ -159,10 +178,13 @@ fn main() -> ExitCode {
                 i.range.0,
                 i.range.1
             );
+            None
         }),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(None) => ExitCode::SUCCESS,
+        // 128 + the signal: what a shell reports for a process the signal ended.
+        Ok(Some(signal)) => ExitCode::from((128 + signal) as u8),
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(e.exit_code() as u8)
@@ -170,7 +192,8 @@ fn main() -> ExitCode {
     }
 }
 
-fn report(outcome: Outcome) {
+/// Prints how a run ended; the signal that stopped it, if one did.
+fn report(outcome: Outcome) -> Option<i32> {
     match outcome {
         Outcome::Finished(s) => {
             for w in &s.warnings {
@@ -179,16 +202,25 @@ fn report(outcome: Outcome) {
             println!(
                 "{}: {} steps, {} dofs, {:.2} s; ‖u_N‖_H1 = {:.6e}; wrote {}",
                 s.name, s.steps, s.dofs, s.timing.total_s, s.final_.u_h1, s.output.directory
-            )
+            );
+            None
         }
         Outcome::Stopped {
-            step,
-            time,
-            checkpoint,
-        } => println!(
-            "stopped after step {step} (t = {time}); continue with: viscontact resume {}",
-            checkpoint.display()
-        ),
+            signal: None,
+            message,
+            ..
+        } => {
+            println!("{message}");
+            None
+        }
+        Outcome::Stopped {
+            signal: Some(signal),
+            message,
+            ..
+        } => {
+            eprintln!("{message}");
+            Some(signal)
+        }
     }
 }
 

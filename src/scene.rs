@@ -267,7 +267,22 @@ pub struct CheckpointSection {
     pub enabled: bool,
     /// Also write a checkpoint every this many steps (steps ≥ 1).
     pub every: Option<usize>,
+    /// Also write one once this many seconds of wall time passed since the last (default
+    /// [`DEFAULT_CHECKPOINT_SECONDS`]; 0 or false: not by time; true: the default).
+    pub every_seconds: Option<Seconds>,
 }
+
+/// `[checkpoint] every_seconds`: a number of seconds, or true / false.
+#[derive(Deserialize, Debug, Clone, Copy)]
+#[serde(untagged)]
+pub enum Seconds {
+    Switch(bool),
+    Seconds(f64),
+}
+
+/// Wall time between two checkpoints by default: a kill -9 or a power cut loses at most
+/// this much work (plus the step in progress).
+pub const DEFAULT_CHECKPOINT_SECONDS: f64 = 600.0;
 
 #[derive(Deserialize, Debug, Default)]
 #[serde(deny_unknown_fields)]
@@ -583,6 +598,9 @@ pub struct Scene {
     pub checkpoint: bool,
     /// Also write one every this many steps (`[checkpoint] every`).
     pub checkpoint_every: Option<usize>,
+    /// Also write one once this many seconds of wall time passed since the last
+    /// (`[checkpoint] every_seconds`, default 600; None: not by time).
+    pub checkpoint_every_seconds: Option<f64>,
 }
 
 fn finite(v: f64, key: &str, file: &Path) -> Result<f64> {
@@ -759,6 +777,21 @@ impl Scene {
                  final checkpoint (enabled = false for none)",
             );
         }
+        let checkpoint_every_seconds = match f.checkpoint.as_ref().and_then(|c| c.every_seconds) {
+            None | Some(Seconds::Switch(true)) => Some(DEFAULT_CHECKPOINT_SECONDS),
+            Some(Seconds::Switch(false)) => None,
+            Some(Seconds::Seconds(0.0)) => None,
+            Some(Seconds::Seconds(s)) if s.is_finite() && s > 0.0 => Some(s),
+            Some(Seconds::Seconds(s)) => {
+                return bad(
+                    "checkpoint.every_seconds",
+                    &format!(
+                        "is {s}; give the wall time between checkpoints in seconds (> 0), or 0 \
+                         or false to write them by step count only"
+                    ),
+                )
+            }
+        };
         let dir = path.parent().unwrap_or(Path::new("."));
         let name = f.name.clone().unwrap_or_else(|| {
             path.file_stem()
@@ -788,6 +821,7 @@ impl Scene {
             allow_unstable: f.scheme.allow_unstable,
             checkpoint: f.checkpoint.as_ref().is_none_or(|c| c.enabled),
             checkpoint_every: f.checkpoint.as_ref().and_then(|c| c.every),
+            checkpoint_every_seconds,
         })
     }
 

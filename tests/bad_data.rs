@@ -224,3 +224,32 @@ fn a_2d_model_on_a_3d_mesh_is_reported_under_mesh_model() {
         "{text}"
     );
 }
+
+/// tests/data/3d/interior_face.msh: two tetrahedra and a surface group "inner" holding their
+/// shared face. The mesh is read; only a scene using "inner" as a boundary is refused.
+#[test]
+fn an_interior_face_group_is_refused_only_where_it_is_used() {
+    let mesh = repo().join("tests/data/3d/interior_face.msh");
+    let mesh = mesh.to_str().unwrap();
+    let (code, text) = cli(&["mesh-info", mesh]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("warning") && text.contains("\"inner\""),
+        "{text}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let s = write(
+        dir.path(),
+        "s.toml",
+        &format!(
+            "[mesh]\nfile = \"{mesh}\"\nmodel = \"3d\"\n[mesh.groups]\ntraction = \"inner\"\n\
+             [time]\nend = 1.0\nsteps = 2\n[material.viscosity]\ntheta = 0.1\n\
+             [[load.traction]]\nvalue = [\"0\", \"0\", \"-1\"]\n"
+        ),
+    );
+    let (code, text) = cli(&["check", s.to_str().unwrap()]);
+    assert_eq!(code, 2, "{text}");
+    for needle in ["load.traction[0].on", "\"inner\"", "interior face"] {
+        assert!(text.contains(needle), "{text}");
+    }
+}

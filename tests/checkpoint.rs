@@ -6,30 +6,9 @@
 mod common;
 
 use hdf5_metno as hdf5;
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use viscontact::run::{resume, run, Outcome, ResumeOptions, RunOptions};
-
-const BIN: &str = env!("CARGO_BIN_EXE_viscontact");
-
-/// examples/paper.toml (contact on Γ3,1, friction on Γ3,2, Prony memory) with its mesh
-/// path made absolute, written into `dir`; `expr` switches the kernel to the same function
-/// as an expression (the direct-sum path).
-fn paper_scene(dir: &Path, name: &str, mesh: &str, expr: bool) -> PathBuf {
-    let text = std::fs::read_to_string(common::repo().join("examples/paper.toml")).unwrap();
-    let text = text.replace(
-        "file = \"../meshes/paper/rect_032.msh\"",
-        &format!("file = {:?}", common::mesh_path(mesh)),
-    );
-    let text = if expr {
-        text.replace("prony = [[1.0, 10.0]]", "expr = \"exp(-10*s)\"")
-    } else {
-        text
-    };
-    assert!(text.contains(&common::mesh_path(mesh)));
-    common::write(dir, name, &text)
-}
 
 fn opts(out: &Path, set: &[&str], stop_after: Option<usize>) -> RunOptions {
     RunOptions {
@@ -37,7 +16,7 @@ fn opts(out: &Path, set: &[&str], stop_after: Option<usize>) -> RunOptions {
         overrides: set.iter().map(|s| s.to_string()).collect(),
         progress: false,
         stop_after,
-        force: false,
+        ..Default::default()
     }
 }
 
@@ -46,51 +25,6 @@ fn finished(o: Outcome) -> viscontact::run::Summary {
         Outcome::Finished(s) => *s,
         Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
     }
-}
-
-/// summary.json without what legitimately differs between two runs: wall times and the
-/// output directory.
-fn summary_values(dir: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(dir.join("summary.json")).unwrap();
-    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    v.as_object_mut().unwrap().remove("timing");
-    v["output"].as_object_mut().unwrap().remove("directory");
-    v
-}
-
-/// Every file of `dir` that a run's series consists of, by name.
-fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .filter(|e| {
-            let n = e.file_name().to_string_lossy().into_owned();
-            n.ends_with(".vtu") || n.ends_with(".pvd")
-        })
-        .map(|e| {
-            (
-                e.file_name().to_string_lossy().into_owned(),
-                std::fs::read(e.path()).unwrap(),
-            )
-        })
-        .collect()
-}
-
-fn assert_same_series(a: &Path, b: &Path, what: &str) {
-    let (fa, fb) = (frames(a), frames(b));
-    assert_eq!(
-        fa.keys().collect::<Vec<_>>(),
-        fb.keys().collect::<Vec<_>>(),
-        "{what}: the series differ in their files"
-    );
-    for (name, bytes) in &fa {
-        assert!(bytes == &fb[name], "{what}: {name} differs");
-    }
-    assert_eq!(
-        summary_values(a),
-        summary_values(b),
-        "{what}: summary.json differs"
-    );
 }
 
 /// Stop at N/2 and resume = the run that never stopped, for a Prony and a general kernel,
@@ -104,7 +38,7 @@ fn stopped_and_resumed_equals_uninterrupted() {
         } else {
             "Prony kernel"
         };
-        let scene = paper_scene(
+        let scene = common::paper_scene(
             tmp.path(),
             &format!("s{expr}.toml"),
             "paper/rect_008.msh",
@@ -126,13 +60,17 @@ fn stopped_and_resumed_equals_uninterrupted() {
                 step,
                 time,
                 checkpoint,
+                signal,
+                ..
             } => {
-                assert_eq!((step, time), (7, 7.0 / 16.0));
-                assert_eq!(checkpoint, part.join("checkpoint.h5"));
+                assert_eq!((step, time, signal), (7, 7.0 / 16.0, None));
+                assert_eq!(checkpoint, Some(part.join("checkpoint.h5")));
             }
             Outcome::Finished(_) => panic!("--stop-after 7 did not stop"),
         }
-        assert!(!part.join("summary.json").exists());
+        let stopped = common::summary(&part);
+        assert_eq!(stopped["status"], "interrupted");
+        assert_eq!(stopped["last_step"], 7);
         assert!(part.join("solution_000007.vtu").exists());
         assert!(!part.join("solution_000008.vtu").exists());
         assert_eq!(part.join("checkpoint_history.h5").exists(), expr);
@@ -147,7 +85,7 @@ fn stopped_and_resumed_equals_uninterrupted() {
             .unwrap(),
         );
         assert_eq!(r.steps, 16);
-        assert_same_series(&full, &part, what);
+        common::assert_same_series(&full, &part, what);
     }
 }
 
@@ -171,7 +109,7 @@ fn stopped_and_resumed_equals_uninterrupted_in_3d() {
         ..Default::default()
     };
     finished(resume(&part.join("checkpoint.h5"), &resume_opts).unwrap());
-    assert_same_series(&full, &part, "3D block");
+    common::assert_same_series(&full, &part, "3D block");
 }
 
 /// A run to T/2 resumed with --set time.end=T keeps k and equals the run to T; and a finished
@@ -185,7 +123,7 @@ fn extending_past_the_end_equals_the_longer_run() {
         } else {
             "Prony kernel"
         };
-        let scene = paper_scene(
+        let scene = common::paper_scene(
             tmp.path(),
             &format!("s{expr}.toml"),
             "paper/rect_008.msh",
@@ -226,7 +164,7 @@ fn extending_past_the_end_equals_the_longer_run() {
             );
             assert_eq!(r.step_size, 1.0 / 16.0);
         }
-        assert_same_series(&long, &short, what);
+        common::assert_same_series(&long, &short, what);
     }
 }
 
@@ -234,97 +172,117 @@ fn extending_past_the_end_equals_the_longer_run() {
 #[test]
 fn runs_are_deterministic() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_016.msh", false);
+    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_016.msh", false);
     let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
     for d in [&a, &b] {
         finished(run(&scene, &opts(d, &["time.steps=16"], None)).unwrap());
     }
-    assert_same_series(&a, &b, "two runs of one scene");
+    common::assert_same_series(&a, &b, "two runs of one scene");
 }
 
-fn viscontact(args: &[&str]) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .current_dir(common::repo())
-        .output()
-        .unwrap()
-}
-
-/// Kill a run with SIGKILL while it checkpoints every step, resume it, compare with the run
-/// that was not killed.
-#[test]
-fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
+/// Stops a run with `signal` (KILL, INT, TERM) somewhere after the frame of step 200..790
+/// of 1000 appeared (the step varies from run to run), resumes it, and compares with the run
+/// that was not stopped: every .vtu, the .pvd and summary.json's values. SIGKILL needs a
+/// checkpoint at every step to lose nothing; SIGINT/SIGTERM write their own and exit
+/// 130/143 with summary.json saying "interrupted".
+fn stopped_by_signal_and_resumed(signal: &str, exit: Option<i32>, set: &[&str]) {
     let tmp = tempfile::tempdir().unwrap();
     let seed = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
         .subsec_nanos() as usize;
     for (i, expr) in [false, true].into_iter().enumerate() {
-        let what = if expr {
-            "general kernel"
-        } else {
-            "Prony kernel"
-        };
-        let scene = paper_scene(
+        let what = format!(
+            "SIG{signal}, {}",
+            if expr {
+                "general kernel"
+            } else {
+                "Prony kernel"
+            }
+        );
+        let scene = common::paper_scene(
             tmp.path(),
             &format!("s{expr}.toml"),
             "paper/rect_016.msh",
             expr,
         );
         let scene = scene.to_str().unwrap();
-        let set = [
-            "--set",
-            "time.steps=1000",
-            "--set",
-            "output.every=10",
-            "--set",
-            "checkpoint.every=1",
-            "--quiet",
-        ];
+        let mut args = vec!["--set", "time.steps=1000", "--set", "output.every=10"];
+        for s in set {
+            args.extend(["--set", s]);
+        }
+        args.push("--quiet");
         let full = tmp.path().join(format!("full{expr}"));
-        let killed = tmp.path().join(format!("killed{expr}"));
-        let mut args = vec!["run", scene, "--out", full.to_str().unwrap()];
-        args.extend(set);
-        let out = viscontact(&args);
+        let stopped = tmp.path().join(format!("stopped{expr}"));
+        let mut run = vec!["run", scene, "--out", full.to_str().unwrap()];
+        run.extend(&args);
+        let out = common::viscontact(&run);
         assert!(
             out.status.success(),
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
 
-        // Kill somewhere after the frame of step 200..790 appeared (varies from run to run).
         let at = 10 * (20 + (seed / (i + 1)) % 60);
-        let mut child = Command::new(BIN)
-            .args(["run", scene, "--out", killed.to_str().unwrap()])
-            .args(set)
-            .current_dir(common::repo())
-            .spawn()
-            .unwrap();
-        let frame = killed.join(format!("solution_{at:06}.vtu"));
-        let start = std::time::Instant::now();
-        while !frame.exists() {
-            assert!(
-                start.elapsed().as_secs() < 120,
-                "{what}: frame {at} never appeared"
-            );
-            std::thread::sleep(std::time::Duration::from_millis(2));
+        let mut run = vec!["run", scene, "--out", stopped.to_str().unwrap()];
+        run.extend(&args);
+        let (status, stderr) = common::signal_at_frame(&run, &stopped, at, signal);
+        assert_eq!(status.code(), exit, "{what}: {stderr}");
+        let summary = stopped.join("summary.json");
+        match exit {
+            None => assert!(
+                !summary.exists(),
+                "{what}: the run finished before it was killed; make it longer"
+            ),
+            Some(_) => {
+                let s = common::summary(&stopped);
+                assert_eq!(s["status"], "interrupted", "{what}");
+                let last = s["last_step"].as_u64().unwrap() as usize;
+                assert!(
+                    last >= at && last < 1000,
+                    "{what}: stopped after step {last}"
+                );
+                assert!(
+                    stderr.contains(&format!("interrupted by SIG{signal} after step {last}"))
+                        && stderr.contains("viscontact resume"),
+                    "{what}: {stderr}"
+                );
+                assert_eq!(s["message"].as_str(), Some(stderr.trim()), "{what}");
+            }
         }
-        child.kill().unwrap(); // SIGKILL
-        child.wait().unwrap();
-        assert!(
-            !killed.join("summary.json").exists(),
-            "{what}: the run finished before it was killed; make it longer"
-        );
-        let cp = killed.join("checkpoint.h5");
-        let out = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+        let cp = stopped.join("checkpoint.h5");
+        let out = common::viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
         assert!(
             out.status.success(),
-            "{what}: resume after SIGKILL at frame {at} failed: {}",
+            "{what}: resume after the signal at frame {at} failed: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        assert_same_series(&full, &killed, what);
-        assert!(!killed.join("checkpoint.h5.tmp").exists());
+        common::assert_same_series(&full, &stopped, &what);
+        assert_eq!(common::summary(&stopped)["status"], "completed");
+        assert!(!cp.with_file_name("checkpoint.h5.tmp").exists());
     }
+}
+
+#[test]
+fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
+    stopped_by_signal_and_resumed("KILL", None, &["checkpoint.every=1"]);
+}
+
+/// Without `every`, the checkpoints by wall time (here every millisecond) are what a resume
+/// after SIGKILL continues from.
+#[test]
+fn killed_after_wall_clock_checkpoints_and_resumed_equals_uninterrupted() {
+    stopped_by_signal_and_resumed("KILL", None, &["checkpoint.every_seconds=0.001"]);
+}
+
+#[test]
+fn interrupted_with_sigint_and_resumed_equals_uninterrupted() {
+    stopped_by_signal_and_resumed("INT", Some(130), &[]);
+}
+
+#[test]
+fn terminated_with_sigterm_and_resumed_equals_uninterrupted() {
+    stopped_by_signal_and_resumed("TERM", Some(143), &[]);
 }
 
 /// With a general kernel the history file is appended to in place (never rewritten or
@@ -333,7 +291,7 @@ fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
 fn history_file_is_appended_in_place() {
     use std::os::unix::fs::MetadataExt;
     let tmp = tempfile::tempdir().unwrap();
-    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", true);
+    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", true);
     let out = tmp.path().join("o");
     run(
         &scene,
@@ -423,7 +381,7 @@ fn h5py_reads_the_documented_layout() {
     }
     let tmp = tempfile::tempdir().unwrap();
     for (expr, kind) in [(false, "prony"), (true, "direct")] {
-        let scene = paper_scene(
+        let scene = common::paper_scene(
             tmp.path(),
             &format!("s{expr}.toml"),
             "paper/rect_008.msh",
@@ -459,7 +417,7 @@ fn refused(case: &str, checkpoint: &Path, extra: &[&str], needles: &[&str]) {
     let before = std::fs::read(checkpoint).ok();
     let mut args = vec!["resume", checkpoint.to_str().unwrap(), "--quiet"];
     args.extend(extra);
-    let out = viscontact(&args);
+    let out = common::viscontact(&args);
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(2), "[{case}] {stderr}");
     for n in needles {
@@ -477,7 +435,7 @@ fn refused(case: &str, checkpoint: &Path, extra: &[&str], needles: &[&str]) {
 fn stopped_run(dir: &Path, name: &str, expr: bool) -> PathBuf {
     let mesh = dir.join(format!("{name}.msh"));
     std::fs::copy(common::mesh_path("paper/rect_008.msh"), &mesh).unwrap();
-    let scene = paper_scene(dir, &format!("{name}.toml"), "paper/rect_008.msh", expr);
+    let scene = common::paper_scene(dir, &format!("{name}.toml"), "paper/rect_008.msh", expr);
     let text = std::fs::read_to_string(&scene).unwrap().replace(
         &common::mesh_path("paper/rect_008.msh"),
         &format!("{name}.msh"),
@@ -521,7 +479,7 @@ fn resume_refuses_broken_and_mismatched_checkpoints() {
     let cut = dir.join("a/cut.h5");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
     refused("truncated", &cut, &[], &["cut.h5", "truncated or damaged"]);
-    let out = viscontact(&["resume", dir.join("a/none.h5").to_str().unwrap()]);
+    let out = common::viscontact(&["resume", dir.join("a/none.h5").to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("none.h5"));
     let foreign = dir.join("a/foreign.h5");
@@ -624,8 +582,9 @@ fn resume_refuses_broken_and_mismatched_checkpoints() {
         &["checkpoint_history.h5", "another run"],
     );
 
-    // After all this the good checkpoint still resumes.
-    let out = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+    // After all this the good checkpoint still resumes (beside the broken copies above,
+    // which are not viscontact's files: --force).
+    let out = common::viscontact(&["resume", cp.to_str().unwrap(), "--quiet", "--force"]);
     assert!(
         out.status.success(),
         "{}",
@@ -636,7 +595,7 @@ fn resume_refuses_broken_and_mismatched_checkpoints() {
 #[test]
 fn checkpoint_section_is_checked() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
     let out = tmp.path().join("off");
     finished(
         run(
@@ -649,9 +608,18 @@ fn checkpoint_section_is_checked() {
     let out = tmp.path().join("default");
     finished(run(&scene, &opts(&out, &["time.steps=4"], None)).unwrap());
     assert!(out.join("checkpoint.h5").exists(), "the final checkpoint");
+    for set in [
+        "checkpoint.every_seconds=false",
+        "checkpoint.every_seconds=0",
+    ] {
+        let out = tmp.path().join("no-clock");
+        finished(run(&scene, &opts(&out, &["time.steps=4", set], None)).unwrap());
+    }
     for (set, needle) in [
         ("checkpoint.every=0", "checkpoint.every"),
         ("checkpoint.often=2", "often"),
+        ("checkpoint.every_seconds=-1", "checkpoint.every_seconds"),
+        ("checkpoint.every_seconds=\"often\"", "every_seconds"),
     ] {
         let err = run(&scene, &opts(&tmp.path().join("x"), &[set], None)).unwrap_err();
         assert_eq!(err.exit_code(), 2);

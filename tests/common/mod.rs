@@ -1,11 +1,16 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 use viscontact::fem::Discretization;
 use viscontact::mesh::Mesh;
 use viscontact::scene::Scene;
 use viscontact::time_loop::TimeLoop;
+
+/// The viscontact binary.
+pub const BIN: &str = env!("CARGO_BIN_EXE_viscontact");
 
 /// The repository root.
 pub fn repo() -> PathBuf {
@@ -135,18 +140,131 @@ impl Lcg {
     }
 }
 
-/// Runs the `viscontact` binary from the repository root: (exit status, stdout + stderr).
+/// Runs the binary from the repository root: (exit status, stdout + stderr).
 pub fn cli(args: &[&str]) -> (i32, String) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_viscontact"))
-        .args(args)
-        .current_dir(repo())
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("the viscontact binary runs");
+    let out = viscontact(args);
     let text = format!(
         "{}{}",
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
     (out.status.code().unwrap_or(-1), text)
+}
+
+/// examples/paper.toml (contact on Γ3,1, friction on Γ3,2, Prony memory) with its mesh
+/// path made absolute, written into `dir`; `expr` switches the kernel to the same function
+/// as an expression (the direct-sum path).
+pub fn paper_scene(dir: &Path, name: &str, mesh: &str, expr: bool) -> PathBuf {
+    let text = std::fs::read_to_string(repo().join("examples/paper.toml")).unwrap();
+    let text = text.replace(
+        "file = \"../meshes/paper/rect_032.msh\"",
+        &format!("file = {:?}", mesh_path(mesh)),
+    );
+    let text = if expr {
+        text.replace("prony = [[1.0, 10.0]]", "expr = \"exp(-10*s)\"")
+    } else {
+        text
+    };
+    assert!(text.contains(&mesh_path(mesh)));
+    write(dir, name, &text)
+}
+
+/// summary.json of a run directory.
+pub fn summary(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+/// summary.json without what legitimately differs between two runs: wall times and the
+/// output directory.
+pub fn summary_values(dir: &Path) -> serde_json::Value {
+    let mut v = summary(dir);
+    v.as_object_mut().unwrap().remove("timing");
+    v.as_object_mut().unwrap().remove("run_id");
+    v["output"].as_object_mut().unwrap().remove("directory");
+    v
+}
+
+/// Every file of `dir` that a run's series consists of, by name.
+pub fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            n.ends_with(".vtu") || n.ends_with(".pvd")
+        })
+        .map(|e| {
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                std::fs::read(e.path()).unwrap(),
+            )
+        })
+        .collect()
+}
+
+pub fn assert_same_series(a: &Path, b: &Path, what: &str) {
+    let (fa, fb) = (frames(a), frames(b));
+    assert_eq!(
+        fa.keys().collect::<Vec<_>>(),
+        fb.keys().collect::<Vec<_>>(),
+        "{what}: the series differ in their files"
+    );
+    for (name, bytes) in &fa {
+        assert!(bytes == &fb[name], "{what}: {name} differs");
+    }
+    assert_eq!(
+        summary_values(a),
+        summary_values(b),
+        "{what}: summary.json differs"
+    );
+}
+
+/// Runs the binary from the repository root.
+pub fn viscontact(args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .unwrap()
+}
+
+/// Spawns `viscontact ARGS`, waits until `dir` holds the frame of step `at`, sends `signal`
+/// (`kill -s SIGNAL`) and waits for the process: its exit status and stderr.
+pub fn signal_at_frame(
+    args: &[&str],
+    dir: &Path,
+    at: usize,
+    signal: &str,
+) -> (std::process::ExitStatus, String) {
+    use std::io::Read;
+    let mut child = Command::new(BIN)
+        .args(args)
+        .current_dir(repo())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let frame = dir.join(format!("solution_{at:06}.vtu"));
+    let start = std::time::Instant::now();
+    while !frame.exists() {
+        assert!(
+            start.elapsed().as_secs() < 120,
+            "frame {at} never appeared in {}",
+            dir.display()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let kill = Command::new("kill")
+        .args(["-s", signal, &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success(), "kill -s {signal} failed");
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    (child.wait().unwrap(), stderr)
 }

@@ -1,0 +1,406 @@
+//! The consumers of a run's stream of solved steps (STYLE.md, scikit-fem's time loop as an
+//! iterator): the loop in `run::drive` solves step n, hands it to each consumer, advances to
+//! t_{n+1} and tells the consumers that need the new state. Each consumer is a small type
+//! that knows one job:
+//!
+//! - [`Statistics`]: the run-wide numbers of summary.json (iterations, the largest n·w on
+//!   Γ3,1, the largest KKT residual, the contact state at the last step);
+//! - [`Frames`]: the ParaView series, a frame every `output.every` steps and at the end;
+//! - [`Checkpoints`]: `checkpoint.h5` at every `checkpoint.every`-th step, once
+//!   `checkpoint.every_seconds` of wall time passed since the last one, before the last step
+//!   and where the run stops;
+//! - [`Progress`]: the progress bar on a terminal, a progress line every 10 s in a log.
+
+use crate::checkpoint::{self, RunLog};
+use crate::fem::Discretization;
+use crate::output::{Field, Frame, Series};
+use crate::scene::Scene;
+use crate::solver::{kkt_residual, Rows};
+use crate::time_loop::{Step, TimeLoop};
+use crate::Result;
+use std::time::{Duration, Instant};
+
+/// A solved step n as the consumers see it.
+pub(super) struct Solved<'s> {
+    pub step: Step<'s>,
+    pub rows: &'s Rows,
+    /// n = N: the run ends with this step.
+    pub last: bool,
+    /// The run stops after this step (`--stop-after`, a signal) and continues by resume.
+    pub stop: bool,
+}
+
+/// Everything that consumes the solved steps, in the order they see them.
+pub(super) struct Consumers<'a> {
+    pub statistics: Statistics,
+    pub frames: Frames<'a>,
+    pub checkpoints: Checkpoints,
+    pub progress: Progress,
+}
+
+impl Consumers<'_> {
+    /// Step n is solved.
+    pub fn solved(&mut self, s: &Solved) -> Result<()> {
+        self.statistics.solved(s);
+        self.frames.solved(s)?;
+        self.checkpoints.solved(s);
+        self.progress.solved(s);
+        Ok(())
+    }
+
+    /// The loop advanced to t_{n+1}.
+    pub fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
+        self.checkpoints.advanced(tl, &self.statistics.log)
+    }
+}
+
+/// The run-wide numbers of summary.json that depend on every step so far.
+pub(super) struct Statistics {
+    /// What a checkpoint saves of them (iterations, running maxima).
+    pub log: RunLog,
+    /// Γ3,1 nodes with an active constraint and sticking Γ3,2 nodes at the last step solved.
+    pub active: usize,
+    pub stick: usize,
+    /// The last step solved.
+    pub last: Option<usize>,
+}
+
+impl Statistics {
+    pub fn new(log: RunLog) -> Statistics {
+        Statistics {
+            log,
+            active: 0,
+            stick: 0,
+            last: None,
+        }
+    }
+
+    fn solved(&mut self, s: &Solved) {
+        let log = &mut self.log;
+        log.iterations.push(s.step.report.iterations);
+        let (viol, kkt) = step_checks(s.rows, &s.step);
+        log.max_violation = log.max_violation.max(viol);
+        log.max_kkt_residual = log.max_kkt_residual.max(kkt);
+        // At every step: a run that fails or stops reports the last one it solved.
+        (self.active, self.stick) = state_counts(s.rows, &s.step);
+        self.last = Some(s.step.n);
+    }
+}
+
+/// The ParaView series: a frame at every `output.every`-th step and at the last.
+pub(super) struct Frames<'a> {
+    pub series: Series,
+    pub disc: &'a Discretization,
+    pub scene: &'a Scene,
+}
+
+impl Frames<'_> {
+    fn solved(&mut self, s: &Solved) -> Result<()> {
+        if s.step.n.is_multiple_of(self.scene.output_every) || s.last {
+            write_frame(&mut self.series, self.disc, self.scene, s.rows, &s.step)?;
+        }
+        Ok(())
+    }
+}
+
+/// `checkpoint.h5`: the state at t_{n+1} after step n at every `checkpoint.every`-th step,
+/// after the first step that ends `checkpoint.every_seconds` or more after the last
+/// checkpoint (or the start), before the last step and where the run stops
+/// (`[checkpoint] enabled = false`: never). The wall-clock checkpoints change no result: a
+/// checkpoint copies the state, and resume from any of them is bit for bit.
+pub(super) struct Checkpoints {
+    pub writer: checkpoint::Writer,
+    pub enabled: bool,
+    pub every: Option<usize>,
+    pub every_seconds: Option<Duration>,
+    pub steps: usize,
+    /// When the last checkpoint was handed to the writer (or the loop started).
+    last_written: Instant,
+    /// The contact/stick flags of the step just solved, when its checkpoint is due.
+    due: Option<Vec<bool>>,
+}
+
+impl Checkpoints {
+    pub fn new(writer: checkpoint::Writer, scene: &Scene) -> Checkpoints {
+        Checkpoints {
+            writer,
+            enabled: scene.checkpoint,
+            every: scene.checkpoint_every,
+            every_seconds: scene.checkpoint_every_seconds.map(Duration::from_secs_f64),
+            steps: scene.steps,
+            last_written: Instant::now(),
+            due: None,
+        }
+    }
+
+    /// Decides whether the state after step n is saved; the flags are the solved step's.
+    fn solved(&mut self, s: &Solved) {
+        let next = s.step.n + 1;
+        let clock = self
+            .every_seconds
+            .is_some_and(|d| self.last_written.elapsed() >= d);
+        let due = self.enabled
+            && !s.last
+            && (s.stop
+                || clock
+                || next == self.steps
+                || self.every.is_some_and(|e| next.is_multiple_of(e)));
+        if due {
+            self.last_written = Instant::now();
+        }
+        self.due = due.then(|| state_flags(s.rows, &s.step));
+    }
+
+    fn advanced(&mut self, tl: &TimeLoop, log: &RunLog) -> Result<()> {
+        match self.due.take() {
+            Some(flags) => self.writer.write(tl, log, &flags),
+            None => Ok(()),
+        }
+    }
+
+    /// `DIR/checkpoint.h5` when checkpoints are written.
+    pub fn path(&self) -> Option<std::path::PathBuf> {
+        self.enabled.then(|| self.writer.path())
+    }
+}
+
+/// The progress bar on a terminal; without a terminal (a batch job's log) a line every
+/// [`Progress::EVERY`] on stderr: step, t, solver iterations, elapsed and estimated
+/// remaining time. Nothing with `--quiet`.
+pub(super) struct Progress {
+    kind: Kind,
+    first: usize,
+    last: usize,
+    start: Instant,
+    /// When the last line was printed (or the loop started).
+    printed: Instant,
+}
+
+enum Kind {
+    Quiet,
+    Bar(indicatif::ProgressBar),
+    Lines,
+}
+
+impl Progress {
+    /// Seconds between two progress lines in a log.
+    pub const EVERY: Duration = Duration::from_secs(10);
+
+    /// Progress over the steps `first..=last`.
+    pub fn new(enabled: bool, first: usize, last: usize) -> Progress {
+        use std::io::IsTerminal;
+        let kind = match (enabled, std::io::stderr().is_terminal()) {
+            (false, _) => Kind::Quiet,
+            (true, false) => Kind::Lines,
+            (true, true) => {
+                let bar = indicatif::ProgressBar::new((last + 1 - first) as u64);
+                bar.set_style(
+                    indicatif::ProgressStyle::with_template(
+                        "{bar:40} step {pos}/{len}  {elapsed} < {eta}",
+                    )
+                    .expect("valid template"),
+                );
+                Kind::Bar(bar)
+            }
+        };
+        let now = Instant::now();
+        Progress {
+            kind,
+            first,
+            last,
+            start: now,
+            printed: now,
+        }
+    }
+
+    fn solved(&mut self, s: &Solved) {
+        match &self.kind {
+            Kind::Quiet => {}
+            Kind::Bar(bar) => bar.inc(1),
+            Kind::Lines => {
+                if self.printed.elapsed() >= Self::EVERY {
+                    self.printed = Instant::now();
+                    eprintln!(
+                        "{}",
+                        self.line(s.step.n, s.step.t, s.step.report.iterations)
+                    );
+                }
+            }
+        }
+    }
+
+    /// `step n/N  t = …  iterations i  elapsed …  remaining ≈ …`: the remaining time assumes
+    /// the steps left cost what the steps of this process cost on average.
+    fn line(&self, n: usize, t: f64, iterations: usize) -> String {
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let done = (n + 1 - self.first) as f64;
+        let remaining = elapsed / done * (self.last - n) as f64;
+        format!(
+            "step {n}/{}  t = {t:.6e}  iterations {iterations}  elapsed {}  remaining ≈ {}",
+            self.last,
+            clock(elapsed),
+            clock(remaining)
+        )
+    }
+
+    pub fn finish(&self) {
+        if let Kind::Bar(bar) = &self.kind {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+/// Seconds as `1h02m03s` / `2m03s` / `3s`.
+fn clock(seconds: f64) -> String {
+    let s = seconds.round() as u64;
+    match (s / 3600, s / 60 % 60, s % 60) {
+        (0, 0, s) => format!("{s}s"),
+        (0, m, s) => format!("{m}m{s:02}s"),
+        (h, m, s) => format!("{h}h{m:02}m{s:02}s"),
+    }
+}
+
+/// Scale of a step's velocities and multipliers for relative tolerances.
+fn scales(step: &Step) -> (f64, f64) {
+    let ws = step.w.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let zs = step.z.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    (ws, zs)
+}
+
+/// The largest n·w on Γ3,1 and the relative KKT residual of a solved step.
+fn step_checks(rows: &Rows, step: &Step) -> (f64, f64) {
+    let viol = rows.rows[..rows.n_contact]
+        .iter()
+        .map(|r| r.apply(step.w))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let (ws, zs) = scales(step);
+    (viol, kkt_residual(rows, step.w, step.z, ws, zs))
+}
+
+/// Γ3,1 rows with an active constraint and Γ3,2 rows whose node sticks (|w_τ| of the
+/// node's block), up to 1e-9 of the largest velocity.
+fn state_flags(rows: &Rows, step: &Step) -> Vec<bool> {
+    let (ws, _) = scales(step);
+    let tol = 1e-9 * ws.max(f64::MIN_POSITIVE);
+    let mut flags: Vec<bool> = rows.rows[..rows.n_contact]
+        .iter()
+        .enumerate()
+        .map(|(i, r)| step.z[i] > 0.0 || r.apply(step.w) >= -tol)
+        .collect();
+    for j in 0..rows.n_friction_nodes() {
+        let block = rows.friction_block(j);
+        let slip: f64 = rows.rows[block.clone()]
+            .iter()
+            .map(|r| r.apply(step.w).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        flags.extend(block.map(|_| slip <= tol));
+    }
+    flags
+}
+
+/// (active Γ3,1 nodes, sticking Γ3,2 nodes).
+fn state_counts(rows: &Rows, step: &Step) -> (usize, usize) {
+    let flags = state_flags(rows, step);
+    let active = flags[..rows.n_contact].iter().filter(|&&f| f).count();
+    let stick = flags[rows.n_contact..].iter().filter(|&&f| f).count();
+    (active, stick / rows.block.max(1))
+}
+
+fn write_frame(
+    series: &mut Series,
+    disc: &Discretization,
+    scene: &Scene,
+    rows: &Rows,
+    step: &Step,
+) -> Result<()> {
+    let nn = disc.nodes.len();
+    let u = disc.nodal(step.u);
+    let w = disc.nodal(step.w);
+    let (stress, von_mises) = disc.stress(step.w, step.u, step.m, scene.model);
+    // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and the
+    // friction traction γ_i / ∫φ_i: a scalar along τ_i in 2D, the tangential vector
+    // Σ_k γ_ik τ_ik / ∫φ_i in 3D.
+    let fc = if disc.dim == 2 { 1 } else { 3 };
+    let mut pressure = vec![0.0; nn];
+    let mut friction = vec![0.0; fc * nn];
+    let mut state = vec![0.0; nn];
+    for ((i, r), active) in rows.rows.iter().enumerate().zip(state_flags(rows, step)) {
+        if i < rows.n_contact {
+            pressure[r.node] = step.z[i] / r.area;
+        } else if fc == 1 {
+            friction[r.node] = step.z[i] / r.area;
+        } else {
+            for (k, t) in r.dir.iter().enumerate() {
+                friction[3 * r.node + k] += step.z[i] * t / r.area;
+            }
+        }
+        if active {
+            state[r.node] = 1.0;
+        }
+    }
+    let frame = Frame {
+        step: step.n,
+        time: step.t,
+        point_data: vec![
+            Field {
+                name: "displacement",
+                components: 3,
+                values: &u,
+            },
+            Field {
+                name: "velocity",
+                components: 3,
+                values: &w,
+            },
+            Field {
+                name: "contact_pressure",
+                components: 1,
+                values: &pressure,
+            },
+            Field {
+                name: "friction_traction",
+                components: fc,
+                values: &friction,
+            },
+            Field {
+                name: "contact_state",
+                components: 1,
+                values: &state,
+            },
+        ],
+        cell_data: vec![
+            Field {
+                name: "stress",
+                components: 6,
+                values: &stress,
+            },
+            Field {
+                name: "von_mises",
+                components: 1,
+                values: &von_mises,
+            },
+        ],
+    };
+    series.write(&frame)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_line_estimates_the_remaining_time() {
+        let mut p = Progress::new(false, 10, 110);
+        p.start = Instant::now() - Duration::from_secs(20);
+        // 10 of 100 steps (10..=19) took 20 s: 91 steps left take about 182 s.
+        let line = p.line(19, 0.125, 7);
+        assert!(
+            line.starts_with("step 19/110  t = 1.250000e-1  iterations 7  elapsed 20s"),
+            "{line}"
+        );
+        assert!(line.ends_with("remaining ≈ 3m02s"), "{line}");
+        assert_eq!(clock(3723.4), "1h02m03s");
+    }
+}

@@ -1,0 +1,350 @@
+//! A run's directory holds exactly one run.
+//!
+//! - One process owns a directory at a time: [`DirLock`] holds an advisory lock
+//!   (`flock`, std's `File::try_lock`) on `DIR/.viscontact.lock`, which the kernel releases
+//!   when the process ends however it ends; a second process is refused (exit 2) with the
+//!   holder's pid, host and start time, which the holder writes into the file.
+//! - Files are ours by name ([`ours`]): the series, summary.json, the checkpoint files, the
+//!   lock file, and the temporary files our writers use (`.NAME.tmp.PID.N` of
+//!   `output::write_atomic`, `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`). Under the
+//!   lock no other process is writing, so temporary files are leftovers of a killed process
+//!   and are removed ([`remove_temporaries`]); everything else in the directory is the
+//!   user's and never touched.
+//! - A new run replaces the old one only once its setup succeeded ([`remove_run`]), before
+//!   its first frame: a run that fails during setup leaves the old run as it was.
+//! - `resume` continues only the run the directory holds ([`check_same_run`]): the run id
+//!   of summary.json and of a checkpoint in the directory must be the checkpoint's.
+
+use crate::{Error, Result};
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// The lock file of a run directory.
+pub const LOCK_NAME: &str = ".viscontact.lock";
+
+/// The files a run writes into its directory (besides temporaries); anything else there is
+/// the user's.
+fn run_file(name: &str) -> bool {
+    let frame = name
+        .strip_prefix("solution_")
+        .and_then(|r| r.strip_suffix(".vtu"))
+        .is_some_and(|d| d.len() >= 6 && d.bytes().all(|b| b.is_ascii_digit()));
+    frame
+        || matches!(
+            name,
+            "solution.pvd" | "summary.json" | "checkpoint.h5" | "checkpoint_history.h5"
+        )
+}
+
+/// A temporary file of our writers: `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`, or
+/// `.NAME.tmp.PID.N` (`output::write_atomic`) for a NAME of ours.
+fn temporary(name: &str) -> bool {
+    if let Some(base) = name.strip_suffix(".tmp") {
+        return matches!(base, "checkpoint.h5" | "checkpoint_history.h5");
+    }
+    let Some(rest) = name.strip_prefix('.') else {
+        return false;
+    };
+    let mut parts = rest.rsplitn(3, '.');
+    let (Some(n), Some(pid), Some(head)) = (parts.next(), parts.next(), parts.next()) else {
+        return false;
+    };
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    digits(n) && digits(pid) && head.strip_suffix(".tmp").is_some_and(run_file)
+}
+
+/// Every file a run of viscontact writes into its directory.
+pub fn ours(name: &str) -> bool {
+    run_file(name) || temporary(name) || name == LOCK_NAME
+}
+
+/// Names of the directory's entries that `keep` selects (none if it does not exist).
+fn entries(dir: &Path, keep: impl Fn(&str) -> bool) -> Vec<String> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut names: Vec<String> = entries
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| keep(n))
+        .collect();
+    names.sort();
+    names
+}
+
+/// Refuses an output path that is an existing file, and a directory holding files
+/// viscontact did not write unless `force`.
+pub fn check_out_dir(out: &Path, force: bool) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        return Err(Error::input(format!(
+            "output directory '{}' is an existing file, not a directory; choose another --out \
+             (a directory, created if missing)",
+            out.display()
+        )));
+    }
+    let foreign = entries(out, |n| !ours(n));
+    if foreign.is_empty() || force {
+        return Ok(());
+    }
+    Err(Error::input(format!(
+        "output directory '{}' holds files viscontact did not write ({}{}); choose another \
+         --out, or pass --force to write beside them (they are never touched)",
+        out.display(),
+        foreign
+            .iter()
+            .take(3)
+            .map(|n| format!("'{n}'"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        if foreign.len() > 3 { ", …" } else { "" }
+    )))
+}
+
+/// Exclusive ownership of a run directory for the life of this value (or of the process).
+///
+/// The lock file is removed when the owner is done, while still locked; a process that
+/// opened the old file just before finds, once it holds the lock, that the path names
+/// another file (or none) and tries again, so two owners never hold locks on different
+/// files of one name.
+#[derive(Debug)]
+pub struct DirLock {
+    file: File,
+    path: PathBuf,
+    /// The directory did not exist before this run created it.
+    created: bool,
+}
+
+impl DirLock {
+    /// Creates `dir` if missing and locks it for `command` ("run" or "resume"), or refuses
+    /// (exit 2) naming the process that holds it.
+    pub fn acquire(dir: &Path, command: &str) -> Result<DirLock> {
+        use std::os::unix::fs::MetadataExt;
+        let created = !dir.exists();
+        std::fs::create_dir_all(dir).map_err(|e| {
+            Error::input(format!(
+                "output directory '{}' cannot be created ({e}); choose another --out",
+                dir.display()
+            ))
+        })?;
+        let path = dir.join(LOCK_NAME);
+        let file = loop {
+            let file = OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(&path)
+                .map_err(|e| Error::io(&path, e))?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    let holder = std::fs::read_to_string(&path).unwrap_or_default();
+                    let holder = holder.trim();
+                    return Err(Error::input(format!(
+                        "output directory '{}' is in use by another viscontact process ({}); \
+                         wait until it ends, or choose another --out",
+                        dir.display(),
+                        if holder.is_empty() {
+                            "which has not yet said who it is".to_string()
+                        } else {
+                            holder.replace('\n', ", ")
+                        }
+                    )));
+                }
+                Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(&path, e)),
+            }
+            let same = match (file.metadata(), std::fs::metadata(&path)) {
+                (Ok(a), Ok(b)) => a.ino() == b.ino() && a.dev() == b.dev(),
+                _ => false,
+            };
+            if same {
+                break file;
+            }
+        };
+        let mut lock = DirLock {
+            file,
+            path,
+            created,
+        };
+        lock.describe(command)
+            .map_err(|e| Error::io(&lock.path, e))?;
+        Ok(lock)
+    }
+
+    /// Writes who holds the lock: pid, host, start time, command.
+    fn describe(&mut self, command: &str) -> std::io::Result<()> {
+        let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .ok()
+            .or_else(|| std::env::var("HOSTNAME").ok())
+            .map(|h| h.trim().to_string())
+            .filter(|h| !h.is_empty())
+            .unwrap_or_else(|| "an unknown host".into());
+        let text = format!(
+            "pid {}\nhost {host}\nstarted {}\ncommand viscontact {command}\n",
+            std::process::id(),
+            humantime::format_rfc3339_seconds(std::time::SystemTime::now())
+        );
+        self.file.set_len(0)?;
+        self.file.write_all(text.as_bytes())?;
+        self.file.flush()
+    }
+}
+
+impl Drop for DirLock {
+    /// Removes the lock file (still locked), and the directory if this run created it and
+    /// left nothing in it (its setup failed).
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+        if let (true, Some(dir)) = (self.created, self.path.parent()) {
+            let _ = std::fs::remove_dir(dir);
+        }
+    }
+}
+
+/// Removes what killed processes left half-written (only under the lock).
+pub fn remove_temporaries(dir: &Path) {
+    for name in entries(dir, temporary) {
+        let _ = std::fs::remove_file(dir.join(name));
+    }
+}
+
+/// Removes the run the directory holds (only under the lock, once the new run's setup
+/// succeeded): its series, summary, checkpoints and leftovers. The user's files stay.
+pub fn remove_run(dir: &Path) -> Result<()> {
+    for name in entries(dir, |n| run_file(n) || temporary(n)) {
+        let path = dir.join(name);
+        std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+    }
+    Ok(())
+}
+
+/// The run id summary.json records, if it records one.
+fn summary_run_id(dir: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v.get("run_id")?.as_str().map(str::to_string)
+}
+
+/// Refuses to resume run `run_id` (of `checkpoint`) into `dir` when `dir` holds another run:
+/// a summary.json or a checkpoint.h5 of another run id, or, in a directory that is not the
+/// checkpoint's own, frames whose run no file identifies.
+pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()> {
+    let refuse = |what: String| {
+        Err(Error::input(format!(
+            "output directory '{}' holds another run than the checkpoint {} (run {run_id}): \
+             {what}; resume into the checkpoint's own directory or an empty one",
+            dir.display(),
+            checkpoint.display()
+        )))
+    };
+    let own_dir = match (dir.canonicalize(), checkpoint.canonicalize()) {
+        (Ok(d), Ok(c)) => c.parent() == Some(d.as_path()),
+        _ => false,
+    };
+    let mut identified = own_dir;
+    if let Some(other) = summary_run_id(dir) {
+        if other != run_id {
+            return refuse(format!("summary.json of run {other}"));
+        }
+        identified = true;
+    }
+    let theirs = dir.join(crate::checkpoint::FILE_NAME);
+    if theirs.exists() && !own_dir {
+        match crate::checkpoint::Checkpoint::read(&theirs) {
+            Ok(cp) if cp.id.run_id == run_id => identified = true,
+            Ok(cp) => return refuse(format!("checkpoint.h5 of run {}", cp.id.run_id)),
+            Err(e) => return refuse(format!("a checkpoint.h5 that cannot be read: {e}")),
+        }
+    }
+    let frames = entries(dir, run_file);
+    if !identified && !frames.is_empty() {
+        return refuse(format!(
+            "'{}' and no summary.json or checkpoint.h5 naming its run",
+            frames[0]
+        ));
+    }
+    Ok(())
+}
+
+/// After a resume: frames of steps ≥ `from` left by the interrupted run that the finished
+/// series does not list (a run extended past its old end no longer has a frame at the old
+/// end, or one at a step beyond the new end) are removed, so the directory holds what an
+/// uninterrupted run would have written.
+pub fn remove_stale_frames(series: &crate::output::Series, from: usize) {
+    let dir = series.dir();
+    for name in entries(dir, run_file) {
+        let step = name
+            .strip_prefix("solution_")
+            .and_then(|r| r.strip_suffix(".vtu"))
+            .and_then(|r| r.parse::<usize>().ok());
+        if step.is_some_and(|s| s >= from) && !series.files().iter().any(|(_, f)| *f == name) {
+            let _ = std::fs::remove_file(dir.join(name));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn our_names_and_theirs() {
+        for name in [
+            "solution.pvd",
+            "solution_000012.vtu",
+            "summary.json",
+            "checkpoint.h5",
+            "checkpoint_history.h5",
+            "checkpoint.h5.tmp",
+            "checkpoint_history.h5.tmp",
+            ".solution_000012.vtu.tmp.4242.7",
+            ".solution.pvd.tmp.1.0",
+            ".summary.json.tmp.99.3",
+            LOCK_NAME,
+        ] {
+            assert!(ours(name), "{name}");
+        }
+        for name in [
+            "notes.txt",
+            "solution_12.vtu",
+            "solution.pvd.tmp",
+            ".notes.txt.tmp.1.2",
+            ".solution.pvd.tmp.x.2",
+            ".solution.pvd.tmp.1.",
+            "summary.json.bak",
+            ".summary.json.tmp.1",
+        ] {
+            assert!(!ours(name), "{name}");
+        }
+        assert!(temporary(".solution_000001.vtu.tmp.12.0"));
+        assert!(!temporary("solution_000001.vtu"));
+    }
+
+    #[test]
+    fn a_second_lock_is_refused_naming_the_holder_and_the_first_is_released() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("d");
+        let first = DirLock::acquire(&dir, "run").unwrap();
+        let err = DirLock::acquire(&dir, "resume").unwrap_err();
+        assert_eq!(err.exit_code(), 2);
+        let msg = err.to_string();
+        for needle in [
+            "in use by another viscontact process",
+            &format!("pid {}", std::process::id()),
+            "started 20",
+            "command viscontact run",
+        ] {
+            assert!(msg.contains(needle), "{needle:?} not in: {msg}");
+        }
+        drop(first);
+        assert!(
+            !dir.exists(),
+            "an empty directory the lock created is removed again"
+        );
+        std::fs::create_dir(&dir).unwrap();
+        drop(DirLock::acquire(&dir, "run").unwrap());
+        assert!(!dir.join(LOCK_NAME).exists());
+        assert!(dir.exists(), "a directory the lock did not create stays");
+    }
+}

@@ -1,0 +1,384 @@
+//! The `run` and `resume` commands as library functions: scene → mesh → discretization →
+//! effects → step solver → time loop → ParaView series, checkpoints and summary.json.
+//! Reading [`run`] and [`resume`] tells the whole story of a run:
+//!
+//! 1. load and check everything the run needs (the scene first, then, owning the output
+//!    directory, the mesh, the discretization and the step solver); a failure here leaves
+//!    the directory as it was (`dir`);
+//! 2. replace the run the directory holds (`run`) or continue it (`resume`);
+//! 3. [`drive`] the time loop: each solved step goes to the consumers (`consumers`:
+//!    statistics, frames, checkpoints, progress) until the last step, a `--stop-after` step,
+//!    a signal (`interrupt`) or a failure;
+//! 4. write summary.json however the run ended (`summary`).
+
+mod consumers;
+mod dir;
+mod interrupt;
+mod summary;
+
+pub use dir::LOCK_NAME;
+pub use interrupt::{signal_name, Interrupt};
+pub use summary::{ContactSummary, Final, Iterations, OutputSummary, Status, Summary, Timing};
+
+use crate::checkpoint::{self, RunLog};
+use crate::fem::Discretization;
+use crate::mesh::Mesh;
+use crate::output::{write_atomic, Series};
+use crate::scene::Scene;
+use crate::time_loop::TimeLoop;
+use crate::{Error, Result};
+use consumers::{Checkpoints, Consumers, Frames, Progress, Solved, Statistics};
+use dir::DirLock;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use summary::{summary_json, Ending};
+
+/// Options of a run that are not part of the scene.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    pub out: Option<PathBuf>,
+    pub overrides: Vec<String>,
+    pub progress: bool,
+    /// Stop once step S is solved and written: write the checkpoint of step S + 1 (the state
+    /// at t_{S+1}) and return [`Outcome::Stopped`]; `viscontact resume` continues from there.
+    pub stop_after: Option<usize>,
+    /// Write into a directory that holds files viscontact did not write (never touching them).
+    pub force: bool,
+    /// Set by SIGINT/SIGTERM (see [`Interrupt::on_signals`]): stop like `stop_after` after
+    /// the step being solved.
+    pub interrupt: Interrupt,
+}
+
+/// How a run ended, when it did not fail (a failed run returns its error, after writing
+/// summary.json with status "failed").
+#[derive(Debug, Clone)]
+pub enum Outcome {
+    /// Every step solved; summary.json written (status "completed").
+    Finished(Box<Summary>),
+    /// Stopped after step `step` by `stop_after` or by `signal`; `checkpoint` (None when
+    /// checkpoints are disabled) continues it; summary.json says "interrupted" and
+    /// `message` (also in summary.json) says how to continue.
+    Stopped {
+        step: usize,
+        time: f64,
+        checkpoint: Option<PathBuf>,
+        signal: Option<i32>,
+        message: String,
+    },
+}
+
+/// The default output directory: `out/<scene name>/`. A scene name is a name, not a path:
+/// one that is not a single plain file name (`/abs`, `a/b`, `..`, empty) is refused.
+pub fn default_out(scene: &Scene) -> Result<PathBuf> {
+    use std::path::Component;
+    let mut parts = Path::new(&scene.name).components();
+    match (parts.next(), parts.next()) {
+        (Some(Component::Normal(_)), None) if !scene.name.contains(['/', '\\']) => {
+            Ok(Path::new("out").join(&scene.name))
+        }
+        _ => Err(Error::input(format!(
+            "{}: key 'name' = {:?} is not a plain name (the default output directory is \
+             out/<name>/); use a name without '/' or '..', or choose the directory with --out",
+            scene.path.display(),
+            scene.name
+        ))),
+    }
+}
+
+/// Loads everything a run needs and checks it: scene, mesh, discretization.
+pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
+    let scene = Scene::load(scene_path, overrides)
+        .map_err(|e| crate::fem::model_mismatch(scene_path, overrides).unwrap_or(e))?;
+    let mesh = read_mesh(&scene)?;
+    let disc = Discretization::new(&mesh, &scene)?;
+    Ok((scene, mesh, disc))
+}
+
+fn read_mesh(scene: &Scene) -> Result<Mesh> {
+    Mesh::read(&scene.mesh_file).map_err(|e| match e {
+        Error::Input(m) => Error::input(format!(
+            "{}: key 'mesh.file': {m} (mesh.file is relative to the scene file)",
+            scene.path.display()
+        )),
+        other => other,
+    })
+}
+
+/// Runs a scene to its end (or to `stop_after`, or a signal), writing the series, the
+/// checkpoints and summary.json into the output directory, which then holds this run alone.
+pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
+    let start = Instant::now();
+    let scene = Scene::load(scene_path, &opts.overrides)?;
+    let out = match &opts.out {
+        Some(out) => out.clone(),
+        None => default_out(&scene)?,
+    };
+    dir::check_out_dir(&out, opts.force)?;
+    let lock = DirLock::acquire(&out, "run")?;
+    let mesh = read_mesh(&scene)?;
+    let disc = Discretization::new(&mesh, &scene)?;
+    let tl = TimeLoop::new(&scene, &disc)?;
+    let (cells, per_cell) = mesh.cell_nodes();
+    let series = Series::create(&out, &mesh.nodes, &cells, per_cell)?;
+    // Setup succeeded: the run the directory held goes, before the first new frame.
+    dir::remove_run(&out)?;
+    let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
+    let run_id = identity.run_id.clone();
+    let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
+    drive(Drive {
+        scene: &scene,
+        mesh: &mesh,
+        disc: &disc,
+        tl,
+        series,
+        writer,
+        log: RunLog::default(),
+        run_id,
+        out,
+        _lock: lock,
+        start,
+        setup_s: start.elapsed().as_secs_f64(),
+        progress: opts.progress,
+        stop_after: opts.stop_after,
+        interrupt: &opts.interrupt,
+        force: opts.force,
+        resumed_from: None,
+    })
+}
+
+/// Options of `viscontact resume`.
+#[derive(Clone, Debug, Default)]
+pub struct ResumeOptions {
+    /// Output directory (default: the checkpoint's directory).
+    pub out: Option<PathBuf>,
+    /// Only `time.end`, `output.*` and `checkpoint.*` (see [`checkpoint::Checkpoint::scene`]).
+    pub overrides: Vec<String>,
+    pub progress: bool,
+    pub stop_after: Option<usize>,
+    /// As [`RunOptions::force`].
+    pub force: bool,
+    pub interrupt: Interrupt,
+}
+
+/// Continues a run from its checkpoint: the stored scene (with the allowed overrides), the
+/// same mesh (checked by fingerprint) and physics, the saved state; the series in the output
+/// directory keeps its frames before the checkpoint's step and gets the rest, summary.json
+/// describes the whole run. Bit for bit the run that never stopped. An output directory
+/// that holds another run is refused.
+pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
+    let start = Instant::now();
+    // What is wrong with the checkpoint itself is said first, then the directory.
+    let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
+    let scene = cp.scene(&opts.overrides)?;
+    let mesh = read_mesh(&scene).map_err(|e| {
+        Error::input(format!(
+            "{}: the run's mesh cannot be read: {e}",
+            checkpoint_path.display()
+        ))
+    })?;
+    let disc = Discretization::new(&mesh, &scene)?;
+    cp.check(&scene, &mesh, &disc)?;
+    let out = opts.out.clone().unwrap_or_else(|| cp.dir());
+    dir::check_out_dir(&out, opts.force)?;
+    let lock = DirLock::acquire(&out, "resume")?;
+    dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
+    let mut tl = TimeLoop::new(&scene, &disc)?;
+    cp.restore(&mut tl)?;
+    let (cells, per_cell) = mesh.cell_nodes();
+    let series = if cp.n == 0 {
+        Series::create(&out, &mesh.nodes, &cells, per_cell)?
+    } else {
+        Series::reopen(&out, &mesh.nodes, &cells, per_cell, cp.n - 1)?
+    };
+    dir::remove_temporaries(&out);
+    let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
+    let run_id = identity.run_id.clone();
+    let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
+    drive(Drive {
+        scene: &scene,
+        mesh: &mesh,
+        disc: &disc,
+        tl,
+        series,
+        writer,
+        log: cp.log.clone(),
+        run_id,
+        out,
+        _lock: lock,
+        start,
+        setup_s: start.elapsed().as_secs_f64(),
+        progress: opts.progress,
+        stop_after: opts.stop_after,
+        interrupt: &opts.interrupt,
+        force: opts.force,
+        resumed_from: Some(cp.n),
+    })
+}
+
+/// A run in progress: what [`drive`] needs.
+struct Drive<'a> {
+    scene: &'a Scene,
+    mesh: &'a Mesh,
+    disc: &'a Discretization,
+    tl: TimeLoop<'a>,
+    series: Series,
+    writer: checkpoint::Writer,
+    log: RunLog,
+    run_id: String,
+    out: PathBuf,
+    /// The directory is this run's until `drive` returns.
+    _lock: DirLock,
+    start: Instant,
+    setup_s: f64,
+    progress: bool,
+    stop_after: Option<usize>,
+    interrupt: &'a Interrupt,
+    /// The run writes beside files that are not viscontact's (`--force`).
+    force: bool,
+    /// The checkpoint step a resumed run starts from.
+    resumed_from: Option<usize>,
+}
+
+/// How the loop of [`drive`] ended, when no step failed.
+enum End {
+    Completed,
+    /// After a step: `--stop-after` or a signal.
+    Stopped,
+}
+
+/// The time loop of a run with its consumers, then summary.json however the run ended.
+fn drive(d: Drive) -> Result<Outcome> {
+    let mut tl = d.tl;
+    let rows = tl.rows.clone();
+    let mut consumers = Consumers {
+        statistics: Statistics::new(d.log),
+        frames: Frames {
+            series: d.series,
+            disc: d.disc,
+            scene: d.scene,
+        },
+        checkpoints: Checkpoints::new(d.writer, d.scene),
+        progress: Progress::new(d.progress, tl.n(), d.scene.steps),
+    };
+    let steps_start = Instant::now();
+    let ended = steps(&mut tl, &rows, &mut consumers, d.stop_after, d.interrupt);
+    let Consumers {
+        statistics,
+        frames,
+        checkpoints,
+        progress,
+    } = consumers;
+    progress.finish();
+    let checkpoint = checkpoints.path();
+    // Every checkpoint handed over reaches the disk before the run reports how it ended.
+    let flushed = checkpoints.writer.finish();
+    let ended = ended.and_then(|end| flushed.map(|()| end));
+    let steps_s = steps_start.elapsed().as_secs_f64();
+    if let Ok(End::Completed) = ended {
+        // Frames an earlier (or the interrupted) run left that this series does not list.
+        dir::remove_stale_frames(&frames.series, d.resumed_from.unwrap_or(0));
+    }
+    let last = statistics.last.unwrap_or(0);
+    let signal = d.interrupt.signal();
+    let message = match &ended {
+        Ok(End::Completed) => None,
+        Ok(End::Stopped) => Some(stopped_message(
+            last,
+            last as f64 * tl.history.k,
+            signal,
+            checkpoint.as_deref(),
+            d.force,
+        )),
+        Err(e) => Some(e.to_string()),
+    };
+    let ending = Ending {
+        status: match &ended {
+            Ok(End::Completed) => Status::Completed,
+            Ok(End::Stopped) => Status::Interrupted,
+            Err(_) => Status::Failed,
+        },
+        message: message.clone(),
+        timing: Timing {
+            setup_s: d.setup_s,
+            steps_s,
+            total_s: d.start.elapsed().as_secs_f64(),
+        },
+        output: OutputSummary {
+            directory: d.out.display().to_string(),
+            files: frames.series.files().len(),
+        },
+    };
+    let summary = Summary::new(ending, &d.run_id, d.scene, d.mesh, d.disc, &tl, statistics);
+    let written = write_atomic(
+        &d.out.join("summary.json"),
+        summary_json(&summary).as_bytes(),
+    );
+    match ended {
+        // The failure is what the run reports; its summary is written if the disk allows.
+        Err(e) => Err(e),
+        Ok(End::Completed) => written.map(|()| Outcome::Finished(Box::new(summary))),
+        Ok(End::Stopped) => written.map(|()| Outcome::Stopped {
+            step: last,
+            time: last as f64 * tl.history.k,
+            checkpoint,
+            signal,
+            message: message.unwrap_or_default(),
+        }),
+    }
+}
+
+/// The stream of solved steps: solve step n, hand it to the consumers; unless it is the last
+/// or the run stops after it, advance to t_{n+1} and tell them.
+fn steps(
+    tl: &mut TimeLoop,
+    rows: &crate::solver::Rows,
+    consumers: &mut Consumers,
+    stop_after: Option<usize>,
+    interrupt: &Interrupt,
+) -> Result<End> {
+    let end = tl.scene.steps;
+    loop {
+        let n = tl.n();
+        let solved = Solved {
+            step: tl.solve_step()?,
+            rows,
+            last: n == end,
+            stop: stop_after == Some(n) || interrupt.signal().is_some(),
+        };
+        consumers.solved(&solved)?;
+        let (last, stop) = (solved.last, solved.stop);
+        if last {
+            return Ok(End::Completed);
+        }
+        tl.advance();
+        consumers.advanced(tl)?;
+        if stop {
+            return Ok(End::Stopped);
+        }
+    }
+}
+
+/// What summary.json and the command say about a run stopped after step `step`.
+fn stopped_message(
+    step: usize,
+    time: f64,
+    signal: Option<i32>,
+    checkpoint: Option<&Path>,
+    force: bool,
+) -> String {
+    let why = match signal {
+        Some(s) => format!("interrupted by {}", signal_name(s)),
+        None => "stopped as asked (--stop-after)".to_string(),
+    };
+    let next = match checkpoint {
+        Some(cp) => format!(
+            "continue with: viscontact resume {}{}",
+            cp.display(),
+            if force { " --force" } else { "" }
+        ),
+        None => "checkpoints are disabled ([checkpoint] enabled = false), so the run cannot \
+                 be continued"
+            .to_string(),
+    };
+    format!("{why} after step {step} (t = {time}); {next}")
+}

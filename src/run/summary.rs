@@ -1,0 +1,187 @@
+//! summary.json (DESIGN.md "Output of run"): what a run did, in numbers.
+
+use super::consumers::Statistics;
+use crate::fem::Discretization;
+use crate::mesh::Mesh;
+use crate::scene::Scene;
+use crate::time_loop::TimeLoop;
+use serde::Serialize;
+
+/// summary.json (DESIGN.md "Output of run"), written for every run that got past its
+/// setup: completed, failed or interrupted.
+#[derive(Serialize, Debug, Clone)]
+pub struct Summary {
+    pub status: Status,
+    /// The run's id (kept by resume; the checkpoint's root attribute `run_id`).
+    pub run_id: String,
+    /// The last step n solved (null when none was).
+    pub last_step: Option<usize>,
+    /// Why a run that did not complete ended, and how to continue it (null when completed).
+    pub message: Option<String>,
+    pub name: String,
+    pub scene: String,
+    pub mesh: String,
+    pub nodes: usize,
+    pub elements: usize,
+    pub dofs: usize,
+    pub steps: usize,
+    pub step_size: f64,
+    pub end_time: f64,
+    pub effects: Vec<String>,
+    pub solver: String,
+    pub timing: Timing,
+    pub final_: Final,
+    pub contact: ContactSummary,
+    pub iterations: Iterations,
+    pub output: OutputSummary,
+    /// See `effects::warnings`.
+    pub warnings: Vec<String>,
+}
+
+/// How a run ended.
+#[derive(Serialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    /// Every step solved.
+    Completed,
+    /// A step or a write failed (the command exits 1, or 2 for input found bad only then).
+    Failed,
+    /// Stopped by SIGINT/SIGTERM or `--stop-after`; the checkpoint continues it.
+    Interrupted,
+}
+
+/// The end of a run as summary.json tells it.
+pub(super) struct Ending {
+    pub status: Status,
+    pub message: Option<String>,
+    pub timing: Timing,
+    pub output: OutputSummary,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct Timing {
+    pub setup_s: f64,
+    pub steps_s: f64,
+    pub total_s: f64,
+}
+
+/// Norms of u_N = u_0 + kΣ_{j<N} w_j, the displacement at t_N = T; for a run that did not
+/// complete, of the latest displacement u_n it computed (at `time` = t_n).
+#[derive(Serialize, Debug, Clone)]
+pub struct Final {
+    pub time: f64,
+    pub u_l2: f64,
+    /// The full H¹ norm (‖u‖²_{L²} + |u|²_{H¹})^{1/2}.
+    pub u_h1: f64,
+    pub u_max: f64,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct ContactSummary {
+    /// The largest n_i·w_i over Γ3,1 nodes and all steps (≤ 0 up to solver tolerance).
+    pub max_violation: f64,
+    /// Constrained rows: Γ3,1 nodes, Γ3,2 nodes with friction.
+    pub contact_nodes: usize,
+    pub friction_nodes: usize,
+    /// Γ3,1 nodes with an active constraint (n·w = 0) at the last step.
+    pub active_at_end: usize,
+    /// Γ3,2 nodes sticking (w_τ = 0) at the last step.
+    pub stick_at_end: usize,
+    /// The largest relative KKT residual over all steps (see `solver::kkt_residual`).
+    pub max_kkt_residual: f64,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct Iterations {
+    pub total: usize,
+    pub max: usize,
+    /// Iterations of the step solver at each step n = 0..=N.
+    pub per_step: Vec<usize>,
+}
+
+#[derive(Serialize, Debug, Clone)]
+pub struct OutputSummary {
+    pub directory: String,
+    pub files: usize,
+}
+
+/// The serialized form renames `final_` to `final` (a Rust keyword).
+pub(super) fn summary_json(s: &Summary) -> String {
+    let mut v = serde_json::to_value(s).expect("summary serializes");
+    if let Some(obj) = v.as_object_mut() {
+        if let Some(f) = obj.remove("final_") {
+            obj.insert("final".into(), f);
+        }
+    }
+    serde_json::to_string_pretty(&v).expect("summary serializes") + "\n"
+}
+
+impl Summary {
+    /// The summary of a run of `scene` whose time loop stands at `tl` (u_N = u_0 + kΣ_{j<N}
+    /// w_j is the history's u at n = N: w_N is not added), with the statistics of every
+    /// step solved.
+    pub(super) fn new(
+        ending: Ending,
+        run_id: &str,
+        scene: &Scene,
+        mesh: &Mesh,
+        disc: &Discretization,
+        tl: &TimeLoop,
+        stats: Statistics,
+    ) -> Summary {
+        let u_n = &tl.history.u;
+        let (l2, semi) = disc.norms(u_n);
+        let Statistics {
+            log,
+            active,
+            stick,
+            last,
+        } = stats;
+        let rows = &tl.rows;
+        let per_step = log.iterations;
+        let completed = ending.status == Status::Completed;
+        Summary {
+            status: ending.status,
+            run_id: run_id.to_string(),
+            last_step: last,
+            message: ending.message,
+            name: scene.name.clone(),
+            scene: scene.path.display().to_string(),
+            mesh: mesh.path.display().to_string(),
+            nodes: mesh.nodes.len(),
+            elements: mesh.n_cells(),
+            dofs: disc.n_free,
+            steps: scene.steps,
+            step_size: tl.history.k,
+            end_time: scene.end,
+            effects: tl.effects.names().iter().map(|s| s.to_string()).collect(),
+            solver: tl.solver.name().to_string(),
+            timing: ending.timing,
+            final_: Final {
+                time: if completed { scene.end } else { tl.time() },
+                u_l2: l2,
+                u_h1: (l2 * l2 + semi * semi).sqrt(),
+                u_max: u_n.iter().fold(0.0f64, |a, v| a.max(v.abs())),
+            },
+            contact: ContactSummary {
+                max_violation: if rows.n_contact == 0 {
+                    0.0
+                } else {
+                    log.max_violation
+                },
+                contact_nodes: rows.n_contact,
+                friction_nodes: rows.n_friction_nodes(),
+                active_at_end: active,
+                stick_at_end: stick,
+                max_kkt_residual: log.max_kkt_residual,
+            },
+            iterations: Iterations {
+                total: per_step.iter().sum(),
+                max: per_step.iter().copied().max().unwrap_or(0),
+                per_step,
+            },
+            output: ending.output,
+            warnings: crate::effects::warnings(scene, disc),
+        }
+    }
+}
