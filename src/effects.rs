@@ -91,6 +91,23 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             disc.contact_kink_deg
         ));
     }
+    let dependent = Rows::new(&disc.contact, &disc.friction, disc.dim - 1).dependent_nodes();
+    if !dependent.is_empty() {
+        w.push(format!(
+            "{} node(s) where Γ3,1 meets Γ3,2 at a corner (the first at ({})) carry a contact \
+             row and friction rows that are (nearly) dependent: the velocity is unique, the \
+             split of the force there between contact pressure and friction traction is not; \
+             the fast solver regularizes its Newton steps at these nodes and still stops at \
+             the exact optimality conditions",
+            dependent.len(),
+            disc.nodes[dependent[0]]
+                .iter()
+                .take(disc.dim)
+                .map(|c| format!("{c}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
     w
 }
 

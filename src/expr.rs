@@ -1,6 +1,19 @@
 //! Scene expressions: loads f0(x, y, z, t), f2(x, y, z, t), F(x, y, z), μ(x, y, z) and a
-//! relaxation kernel r(s), parsed and compiled once by `fasteval2` (MIT, maintained fork of
-//! fasteval; every literal is an f64, so `1/2` is 0.5, not an integer division).
+//! relaxation kernel r(s), parsed once by `fasteval2` (MIT, maintained fork of fasteval;
+//! every literal is an f64, so `1/2` is 0.5, not an integer division).
+//!
+//! fasteval's compiled form is 3× faster than its parse tree, but the compiler's constant
+//! folding drops a folded product within 8ε of 1 and a folded sum within 8ε of 0, and NaN
+//! counts as both: `0/0` compiled to the constant 1, `x + 0/0` to `x`, `-(0/0)` to −1, and
+//! `1e-20 + 0*x` to 0 (fasteval2 2.1; `compiler_folds_nan_away` below pins that behaviour,
+//! so an upgrade that fixes it shows). So every expression is checked when the scene is
+//! read: each part of it (the whole, each parenthesized part, each function argument) is
+//! compiled on its own and evaluated both ways at a few probe points. Where the parse tree
+//! gives a value that is not finite and the compiled form does not, the expression holds a
+//! constant that is not finite (`0/0`, `0*(1/0)`, `(0-0)/(1-1)`, or `x*0/0` inside a
+//! chain) and is refused; where they differ otherwise (a tiny constant dropped), the
+//! expression is evaluated from its parse tree, exactly as written. Every part that uses no
+//! variable must be finite as well.
 //!
 //! Beyond fasteval's built-ins (`min`, `max`, `abs`, `sin`, …, `log(base, x)`, comparison and
 //! `&&`/`||` operators) an expression may call `if(cond, a, b)`, `exp`, `ln`, `sqrt`, `pow`,
@@ -8,7 +21,7 @@
 //! the scene is read, not in the middle of a run.
 
 use crate::{Error, Result};
-use fasteval2::{Compiler, Evaler, Instruction, Parser, Slab};
+use fasteval2::{Compiler, Evaler, ExpressionI, Instruction, Parser, Slab};
 
 /// Values of the variables an expression may use.
 #[derive(Clone, Copy, Debug, Default)]
@@ -20,11 +33,13 @@ pub struct Point {
     pub s: f64,
 }
 
-/// A compiled expression of some of the variables x, y, z, t, s.
+/// A parsed expression of some of the variables x, y, z, t, s.
 pub struct Expr {
     source: String,
     slab: Slab,
-    instruction: Instruction,
+    root: ExpressionI,
+    /// The compiled form, where it agrees with the parse tree (see the module doc).
+    compiled: Option<Instruction>,
 }
 
 impl std::fmt::Debug for Expr {
@@ -109,10 +124,6 @@ impl Expr {
                 parse_error(&e)
             ))
         })?;
-        let instruction =
-            parsed
-                .from(&slab.ps)
-                .compile(&slab.ps, &mut slab.cs, &mut fasteval2::EmptyNamespace);
         // Evaluate once with a recording namespace: every variable and custom function the
         // expression reaches must be known (all call arguments are evaluated eagerly).
         let mut unknown: Option<String> = None;
@@ -143,7 +154,7 @@ impl Expr {
         };
         // Evaluation errors at the probe point (e.g. a division by zero gives inf, not an
         // error) are irrelevant here; only the names matter.
-        let _ = instruction.eval(&slab, &mut ns);
+        let _ = parsed.from(&slab.ps).eval(&slab, &mut ns);
         if let Some(what) = unknown {
             return Err(Error::input(format!(
                 "{key}: expression {source:?} uses unknown {what}; allowed variables: {}; \
@@ -152,10 +163,31 @@ impl Expr {
                 allowed.join(", ")
             )));
         }
+        let refuse = |v: f64| {
+            Error::input(format!(
+                "{key}: expression {source:?} has a part without variables that evaluates to \
+                 {v} (a division by zero, or a function outside its domain); write a finite \
+                 value"
+            ))
+        };
+        if let Some(v) = non_finite_constant(&slab) {
+            return Err(refuse(v));
+        }
+        let exact = match folding_differs(&mut slab) {
+            Some(Folding::DropsNonFinite(v)) => return Err(refuse(v)),
+            Some(Folding::Inexact) => true,
+            None => false,
+        };
+        let compiled = (!exact).then(|| {
+            parsed
+                .from(&slab.ps)
+                .compile(&slab.ps, &mut slab.cs, &mut fasteval2::EmptyNamespace)
+        });
         Ok(Expr {
             source: source.to_string(),
             slab,
-            instruction,
+            root: parsed,
+            compiled,
         })
     }
 
@@ -170,14 +202,85 @@ impl Expr {
             }
             call(name, &args)
         };
-        self.instruction
-            .eval(&self.slab, &mut ns)
-            .unwrap_or(f64::NAN)
+        match &self.compiled {
+            Some(c) => c.eval(&self.slab, &mut ns),
+            None => self.root.from(&self.slab.ps).eval(&self.slab, &mut ns),
+        }
+        .unwrap_or(f64::NAN)
     }
 
     pub fn source(&self) -> &str {
         &self.source
     }
+}
+
+/// How fasteval's compiled form of some part of an expression differs from its parse tree.
+enum Folding {
+    /// The parse tree gives this non-finite value where the compiled form does not.
+    DropsNonFinite(f64),
+    /// Some other difference (a tiny constant dropped).
+    Inexact,
+}
+
+/// Compiles every part of the expression on its own (into the slab's compile area; the
+/// instructions of the parts are never used) and compares it with the parse tree at probe
+/// points where every variable takes one of a few unremarkable values.
+fn folding_differs(slab: &mut Slab) -> Option<Folding> {
+    const PROBES: [f64; 3] = [0.739_085_133_2, 1.324_717_957_2, -0.567_143_290_4];
+    let end = slab.ps.get_expr(ExpressionI(usize::MAX)) as *const _;
+    let mut inexact = false;
+    for i in 0.. {
+        if std::ptr::eq(slab.ps.get_expr(ExpressionI(i)), end) {
+            break;
+        }
+        let ins = slab.ps.get_expr(ExpressionI(i)).compile(
+            &slab.ps,
+            &mut slab.cs,
+            &mut fasteval2::EmptyNamespace,
+        );
+        for v in PROBES {
+            let mut ns = |name: &str, args: Vec<f64>| -> Option<f64> {
+                if args.is_empty() && variable(name, &Point::default()).is_some() {
+                    return Some(v);
+                }
+                call(name, &args)
+            };
+            let tree = slab.ps.get_expr(ExpressionI(i)).eval(slab, &mut ns);
+            let comp = ins.eval(slab, &mut ns);
+            let (Ok(tree), Ok(comp)) = (tree, comp) else {
+                continue;
+            };
+            if tree.to_bits() != comp.to_bits() && !(tree.is_nan() && comp.is_nan()) {
+                if !tree.is_finite() && comp.is_finite() {
+                    return Some(Folding::DropsNonFinite(tree));
+                }
+                inexact = true;
+            }
+        }
+    }
+    inexact.then_some(Folding::Inexact)
+}
+
+/// The value of the first sub-expression of the parse slab (the whole expression, each
+/// parenthesized part, each function argument) that uses no variable and is not finite.
+fn non_finite_constant(slab: &Slab) -> Option<f64> {
+    // `get_expr` answers an index past the end with the slab's default expression.
+    let end = slab.ps.get_expr(ExpressionI(usize::MAX));
+    (0..)
+        .map(|i| slab.ps.get_expr(ExpressionI(i)))
+        .take_while(|e| !std::ptr::eq(*e, end))
+        .find_map(|e| {
+            let mut uses_variable = false;
+            let mut ns = |name: &str, args: Vec<f64>| -> Option<f64> {
+                if args.is_empty() && variable(name, &Point::default()).is_some() {
+                    uses_variable = true;
+                    return Some(0.0);
+                }
+                call(name, &args)
+            };
+            let v = e.eval(slab, &mut ns).ok()?;
+            (!uses_variable && !v.is_finite()).then_some(v)
+        })
 }
 
 /// A scene value that is either a number or an expression.
@@ -225,13 +328,66 @@ mod tests {
             t: 0.75,
             ..Default::default()
         };
-        assert_eq!(g.eval(&p), 0.01 * 0.75 * 0.2);
+        assert!((g.eval(&p) - 0.01 * 0.75 * 0.2).abs() < 1e-18);
         let h = Expr::parse("1/2 + exp(-10*s)", &["s"], "k").unwrap();
         let p = Point {
             s: 0.1,
             ..Default::default()
         };
         assert_eq!(h.eval(&p), 0.5 + (-1.0f64).exp());
+    }
+
+    /// fasteval2's compiler folds a NaN constant into 1 (or drops it from a sum): the reason
+    /// `Expr` evaluates the parse tree. When this fails, the library has changed: check
+    /// whether compiling is safe again.
+    #[test]
+    fn compiler_folds_nan_away() {
+        use fasteval2::Compiler;
+        let mut slab = Slab::new();
+        let parsed = Parser::new().parse("0/0", &mut slab.ps).unwrap();
+        let compiled =
+            parsed
+                .from(&slab.ps)
+                .compile(&slab.ps, &mut slab.cs, &mut fasteval2::EmptyNamespace);
+        let v = compiled
+            .eval(&slab, &mut fasteval2::EmptyNamespace)
+            .unwrap();
+        assert_eq!(v, 1.0, "fasteval2's folding of 0/0 changed");
+    }
+
+    #[test]
+    fn non_finite_constants_are_refused() {
+        for src in [
+            "0/0",
+            "0*(1/0)",
+            "(0-0)/(1-1)",
+            "-(0/0)",
+            "1/0",
+            "x + 0/0",
+            "x*0/0",
+            "if(t > 1, 0/0, 1)",
+            "ln(0)",
+            "x + (sqrt(-1))",
+        ] {
+            let e = Expr::parse(src, &["x", "t"], "load.traction[0].value[1]").unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.contains("load.traction[0].value[1]"), "{src}: {msg}");
+            assert!(msg.contains("without variables"), "{src}: {msg}");
+        }
+        // Parts that use a variable are judged where they are evaluated (loads at every
+        // quadrature point: at t = 0 before the run, later during it).
+        // A tiny constant that the compiler would drop is kept.
+        let e = Expr::parse("1e-20 + 0*x", &["x"], "k").unwrap();
+        assert_eq!(e.eval(&Point::default()), 1e-20);
+        let e = Expr::parse("1/x", &["x"], "k").unwrap();
+        assert!(e.eval(&Point::default()).is_infinite());
+        assert_eq!(
+            e.eval(&Point {
+                x: 4.0,
+                ..Default::default()
+            }),
+            0.25
+        );
     }
 
     #[test]

@@ -290,7 +290,8 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     for w in viscontact::effects::warnings(&scene, &disc) {
         println!("warning    {w}");
     }
-    Ok(())
+    // Whatever `run` refuses before its first step, `check` refuses too (exit 2).
+    viscontact::time_loop::preflight(&scene, &disc)
 }
 
 fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
@@ -307,7 +308,12 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
         .iter()
         .map(|g| {
             // The measure of a boundary group: length (2D) or area (3D).
-            let measure: f64 = mesh.boundary_facets(g).iter().map(|f| f.measure).sum();
+            let measure: f64 = mesh
+                .boundary_facets(g)
+                .iter()
+                .map(|f| f.measure)
+                .sum::<f64>()
+                + 0.0;
             let boundary = g.dim + 1 == mesh.dim;
             let key = if mesh.dim == 2 { "length" } else { "area" };
             serde_json::json!({
@@ -317,6 +323,7 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
                 "elements": if boundary { g.n_facets() } else { g.cells.len() },
                 "nodes": mesh.group_nodes(g).len(),
                 key: if boundary { Some(measure) } else { None },
+                "defect": g.defect,
             })
         })
         .collect();
@@ -370,6 +377,17 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
         "  quality: min {angle} {:.2}°, max aspect ratio {:.3}, {size} {:.3e} .. {:.3e}",
         q.min_angle_deg, q.max_aspect_ratio, q.min_area, q.max_area
     );
+    for (dim, tag, name) in &mesh.other_groups {
+        let kind = ["point", "curve", "surface", "volume"][(*dim).min(3)];
+        println!(
+            "  note: physical {kind} {} (tag {tag}) carries no condition in a {}D mesh",
+            name.as_deref().unwrap_or("(no name)"),
+            mesh.dim
+        );
+    }
+    for g in mesh.groups.iter().filter_map(|g| g.defect.as_ref()) {
+        println!("  warning: {g} (refused only where a scene uses it as a boundary group)");
+    }
     Ok(())
 }
 

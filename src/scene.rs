@@ -81,6 +81,15 @@ pub enum Model {
 }
 
 impl Model {
+    /// The model as a scene writes it (`mesh.model`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::PlaneStress => "plane_stress",
+            Model::PlaneStrain => "plane_strain",
+            Model::ThreeD => "3d",
+        }
+    }
+
     /// The spatial dimension of the model.
     pub fn dim(self) -> usize {
         match self {
@@ -90,14 +99,44 @@ impl Model {
     }
 }
 
-/// Which physical groups carry which boundary condition.
+/// Which physical groups carry which boundary condition: each by its name or its integer
+/// tag, written as a TOML string or integer (`fixed = "Γ1"`, `fixed = 5`, `fixed = "5"`).
 #[derive(Deserialize, Debug, Clone)]
 #[serde(deny_unknown_fields, default)]
 pub struct Groups {
+    #[serde(deserialize_with = "group_ref")]
     pub fixed: String,
+    #[serde(deserialize_with = "group_ref")]
     pub traction: String,
+    #[serde(deserialize_with = "group_ref")]
     pub contact: String,
+    #[serde(deserialize_with = "group_ref")]
     pub friction: String,
+}
+
+/// A physical group's name, or its tag given as a TOML integer (kept as its decimal text:
+/// the mesh resolves names and tags alike).
+#[derive(Deserialize)]
+#[serde(
+    untagged,
+    expecting = "a physical group's name (a string) or tag (an integer)"
+)]
+enum GroupRef {
+    Name(String),
+    Tag(i64),
+}
+
+fn group_ref<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<String, D::Error> {
+    Ok(match GroupRef::deserialize(d)? {
+        GroupRef::Name(s) => s,
+        GroupRef::Tag(t) => t.to_string(),
+    })
+}
+
+fn opt_group_ref<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<String>, D::Error> {
+    group_ref(d).map(Some)
 }
 
 impl Default for Groups {
@@ -193,6 +232,7 @@ pub struct LoadSection {
 pub struct VectorLoad {
     /// For a traction: the physical group it acts on (inside the traction group Γ2); the
     /// whole traction group when absent. Not allowed for a body force.
+    #[serde(default, deserialize_with = "opt_group_ref")]
     pub on: Option<String>,
     pub value: Vec<NumOrExpr>,
 }
@@ -340,9 +380,86 @@ fn parse_value(raw: &str) -> toml::Value {
 /// Reads a scene file and applies the overrides; returns the TOML text after overrides (the
 /// exact scene that ran) and the schema-checked tree.
 pub fn read_scene_file(path: &Path, overrides: &[String]) -> Result<(String, SceneFile)> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::input(format!("cannot read scene file '{}': {e}", path.display())))?;
+    let bytes = read_input_file(path, "scene file", Some(SCENE_MAX_BYTES))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        Error::input(format!(
+            "scene file '{}' is not UTF-8 text (invalid byte at offset {}); save it as UTF-8",
+            path.display(),
+            e.utf8_error().valid_up_to()
+        ))
+    })?;
     parse_scene_text(path, text, overrides)
+}
+
+/// A scene is a few kilobytes; a larger file is not one.
+const SCENE_MAX_BYTES: u64 = 16 << 20;
+
+/// Reads an input file (a scene, a mesh) whole. It must be a regular file — a device such as
+/// /dev/zero would be read until memory runs out, a FIFO could block forever — and is read up
+/// to the size its metadata declares (and at most `max` bytes). `what` names the file in
+/// messages.
+pub(crate) fn read_input_file(path: &Path, what: &str, max: Option<u64>) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let fail =
+        |why: String| Error::input(format!("cannot read {what} '{}': {why}", path.display()));
+    let plain = |e: std::io::Error| {
+        let mut m = e.to_string();
+        if let Some(p) = m.find(" (os error") {
+            m.truncate(p);
+        }
+        m
+    };
+    let meta = std::fs::metadata(path).map_err(|e| fail(plain(e)))?;
+    if !meta.is_file() {
+        let kind = if meta.is_dir() {
+            "a directory"
+        } else {
+            "a device, FIFO or socket"
+        };
+        return Err(fail(format!("it is {kind}, not a regular file")));
+    }
+    let len = meta.len();
+    if let Some(max) = max.filter(|&m| len > m) {
+        return Err(fail(format!(
+            "it has {len} bytes, more than a {what} can have ({max})"
+        )));
+    }
+    let file = std::fs::File::open(path).map_err(|e| fail(plain(e)))?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(len)
+        .read_to_end(&mut bytes)
+        .map_err(|e| fail(plain(e)))?;
+    Ok(bytes)
+}
+
+/// At most this many characters of a scene's text are quoted in a message.
+const EXCERPT: usize = 80;
+
+/// `text` cut to `EXCERPT` characters around byte `at` (a 2 MB line is not echoed whole).
+fn excerpt(text: &str, at: usize) -> String {
+    let at = at.min(text.len());
+    let start = text[..at].rfind('\n').map_or(0, |p| p + 1);
+    let end = text[at..].find('\n').map_or(text.len(), |p| at + p);
+    let line = &text[start..end];
+    let col = text[start..at].chars().count();
+    let chars: Vec<char> = line.chars().collect();
+    let from = col.saturating_sub(EXCERPT / 2).min(chars.len());
+    let to = (from + EXCERPT).min(chars.len());
+    format!(
+        "{}{}{}",
+        if from > 0 { "…" } else { "" },
+        chars[from..to].iter().collect::<String>(),
+        if to < chars.len() { "…" } else { "" }
+    )
+}
+
+/// A message cut to a few hundred characters (a huge value quoted by serde, say).
+fn shorten(msg: String) -> String {
+    const MAX: usize = 300;
+    match msg.char_indices().nth(MAX) {
+        Some((cut, _)) => format!("{}…", &msg[..cut]),
+        None => msg,
+    }
 }
 
 /// [`read_scene_file`] for a scene text in hand (a checkpoint's): `path` is where the text
@@ -352,9 +469,16 @@ pub fn parse_scene_text(
     text: String,
     overrides: &[String],
 ) -> Result<(String, SceneFile)> {
-    let mut root: toml::Table = text
-        .parse()
-        .map_err(|e| Error::input(format!("{}: not valid TOML: {e}", path.display())))?;
+    let mut root: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        let at = e.span().map_or(0, |s| s.start);
+        let line = text[..at.min(text.len())].matches('\n').count() + 1;
+        Error::input(format!(
+            "{}: not valid TOML at line {line}: {} (near {:?})",
+            path.display(),
+            shorten(e.message().trim().to_string()),
+            excerpt(&text, at)
+        ))
+    })?;
     for o in overrides {
         apply_override(&mut root, o)?;
     }
@@ -385,7 +509,7 @@ pub fn parse_scene_text(
                 } else {
                     format!("key '{at}': ")
                 },
-                plain_serde_message(&e.into_inner().to_string())
+                shorten(plain_serde_message(&e.into_inner().to_string()))
             ))
         })?;
     Ok((effective, file))

@@ -75,7 +75,7 @@ fn a_rerun_that_fails_later_replaces_the_old_run() {
     let (tmp, scene) = paper("rect_008");
     let text = std::fs::read_to_string(&scene).unwrap().replace(
         "\"-0.1*x*(2-x)*min(t, 0.2)\"",
-        "\"if(t > 0.53, 1/0, -0.1*x*(2-x)*min(t, 0.2))\"",
+        "\"if(t > 0.53, 1/(t-t), -0.1*x*(2-x)*min(t, 0.2))\"",
     );
     let bad = common::write(tmp.path(), "bad.toml", &text);
     let dir = tmp.path().join("o");

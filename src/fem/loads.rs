@@ -143,7 +143,7 @@ impl Loads {
     }
 
     /// Adds ⟨f(t), φ_d⟩ for every free dof d to `rhs`. A value that is not finite stops the
-    /// run with the key, the time and the place.
+    /// run with the key, the time and the place (bad input at t = 0, a failed run later).
     pub fn add(
         &self,
         t: f64,
@@ -167,18 +167,26 @@ impl Loads {
                 for (c, v) in value.iter().enumerate() {
                     let val = v.eval(&pt);
                     if !val.is_finite() {
-                        // The scene was valid; the data went bad during the run: a failed
-                        // run (exit 1), the last checkpoint stays as it was.
                         let key = match load.source {
                             Source::Traction(i) => format!("load.traction[{i}].value"),
                             Source::Body(i) => format!("load.body[{i}].value"),
                         };
-                        return Err(Error::solve(format!(
-                            "{}: key '{key}[{c}]' evaluates to {val} at {} at t = {t}; the run \
-                             stops here (the last checkpoint is kept)",
+                        let what = format!(
+                            "{}: key '{key}[{c}]' evaluates to {val} at {} at t = {t}",
                             scene.path.display(),
                             super::fmt_at(q.p, scene.model)
-                        )));
+                        );
+                        // At t = 0 it is known before any step (`TimeLoop::new` evaluates
+                        // the loads there): bad input.
+                        return Err(if t == 0.0 {
+                            Error::input(format!(
+                                "{what}; a load must be finite wherever and whenever it acts"
+                            ))
+                        } else {
+                            Error::solve(format!(
+                                "{what}; the run stops here (the last checkpoint is kept)"
+                            ))
+                        });
                     }
                     for (n, ph) in q.nodes.iter().zip(q.phi) {
                         if ph == 0.0 {

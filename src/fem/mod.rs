@@ -13,6 +13,7 @@ use crate::{Error, Result};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, Triplet};
 pub use loads::Loads;
+use std::path::Path;
 
 /// Sparse symmetric matrix (both triangles stored), columns compressed.
 pub type Sparse = SparseColMat<usize, f64>;
@@ -188,6 +189,14 @@ impl Discretization {
                     contact.push(row(node, dofs, n, f64::INFINITY, area[node]));
                 }
             }
+            if contact.is_empty() {
+                return Err(on_fixed(
+                    scene,
+                    "contact",
+                    &scene.groups.contact,
+                    "[contact]",
+                ));
+            }
         }
         // Γ3,2: g_F and the friction rows τ_i with c_i = ∫ μF φ_i da (facet quadrature).
         let mut g_f = Vec::new();
@@ -222,6 +231,14 @@ impl Discretization {
                 g_f = gf;
             }
             let (normals, k) = mesh.nodal_normals(g);
+            if normals.iter().all(|&(node, _)| node_dofs(node).is_none()) {
+                return Err(on_fixed(
+                    scene,
+                    "friction",
+                    &scene.groups.friction,
+                    "[friction]",
+                ));
+            }
             kink = kink.max(k);
             let area = lumped_area(mesh, g);
             for (node, n) in normals {
@@ -408,8 +425,33 @@ fn tangents(n: [f64; 3], d: usize) -> Vec<[f64; 3]> {
 }
 
 /// The scene's model must match the mesh's dimension.
+/// A constraint group all of whose nodes are clamped: its condition would vanish silently.
+fn on_fixed(scene: &Scene, role: &str, value: &str, table: &str) -> Error {
+    Error::input(format!(
+        "{}: key 'mesh.groups.{role}': every node of the group '{value}' lies on the clamped \
+         group '{}', so its condition would have no effect; name the right group, or remove \
+         {table} (or set enabled = false)",
+        scene.path.display(),
+        scene.groups.fixed
+    ))
+}
+
 fn check_model(mesh: &Mesh, scene: &Scene) -> Result<()> {
-    let model_3d = scene.model == Model::ThreeD;
+    model_fits(mesh, scene.model, &scene.path)
+}
+
+/// For a scene that failed its checks: the mesh.model error if the model does not fit the
+/// mesh. A 3D mesh run with a 2D model fails first on its three-component loads; the model
+/// is what to fix, so that is reported.
+pub fn model_mismatch(scene_path: &Path, overrides: &[String]) -> Option<Error> {
+    let (_, f) = crate::scene::read_scene_file(scene_path, overrides).ok()?;
+    let dir = scene_path.parent().unwrap_or(Path::new("."));
+    let mesh = Mesh::read(&dir.join(&f.mesh.file)).ok()?;
+    model_fits(&mesh, f.mesh.model, scene_path).err()
+}
+
+fn model_fits(mesh: &Mesh, model: Model, scene_path: &Path) -> Result<()> {
+    let model_3d = model == Model::ThreeD;
     if model_3d == (mesh.dim == 3) {
         return Ok(());
     }
@@ -423,10 +465,10 @@ fn check_model(mesh: &Mesh, scene: &Scene) -> Result<()> {
         )
     };
     Err(Error::input(format!(
-        "{}: key 'mesh.model': the mesh '{}' has {has} but the model is {:?}; {fix}",
-        scene.path.display(),
+        "{}: key 'mesh.model': the mesh '{}' has {has} but the model is \"{}\"; {fix}",
+        scene_path.display(),
         mesh.path.display(),
-        scene.model
+        model.name()
     )))
 }
 

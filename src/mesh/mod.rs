@@ -64,6 +64,9 @@ pub struct Mesh {
     pub groups: Vec<Group>,
     /// How many cells had negative orientation in the file and got reoriented.
     pub flipped: usize,
+    /// Physical groups of the other dimensions (points; curves in 3D), which carry no
+    /// condition: (dimension, tag, name). Kept to say so when a scene names one.
+    pub other_groups: Vec<(usize, i32, Option<String>)>,
 }
 
 /// A boundary facet of either dimension: an edge in 2D, a triangle in 3D, its nodes ordered
@@ -146,6 +149,10 @@ pub struct Group {
     pub faces: Vec<[usize; 3]>,
     /// Cell groups: indices into [`Mesh::triangles`] (2D) or [`Mesh::tetrahedra`] (3D).
     pub cells: Vec<usize>,
+    /// Why the group cannot carry a boundary condition (it holds elements inside the body:
+    /// an embedded curve or surface), if so. Only a group the scene uses as a boundary group
+    /// is refused for it; `mesh-info` shows it as a warning.
+    pub defect: Option<String>,
 }
 
 impl Group {
@@ -160,7 +167,7 @@ impl Mesh {
     /// wrong version, unsupported elements, truncated, degenerate or folded elements, boundary
     /// groups off the boundary) is an [`Error::Input`] naming the file and the culprit.
     pub fn read(path: &Path) -> Result<Mesh> {
-        let bytes = std::fs::read(path).map_err(|e| read_error(path, &e))?;
+        let bytes = crate::scene::read_input_file(path, "mesh file", None)?;
         let raw = msh::read_raw(path, &bytes)?;
         let names = physical_names::read_physical_names(&bytes)
             .map_err(|m| Error::input(format!("mesh file '{}': {m}", path.display())))?;
@@ -188,6 +195,9 @@ impl Mesh {
     /// boundary entity) is refused: a boundary condition on it would silently do nothing.
     pub fn boundary_group(&self, key: &str) -> Result<&Group> {
         let g = self.find_group(key, true)?;
+        if let Some(why) = &g.defect {
+            return Err(Error::input(why.clone()));
+        }
         if g.n_facets() == 0 {
             let (what, entity) = match self.dim {
                 2 => ("boundary edges", "curve"),
@@ -341,11 +351,11 @@ impl Mesh {
     fn find_group(&self, key: &str, boundary: bool) -> Result<&Group> {
         let file = self.path.display();
         let normalized = normalize_name(key);
-        let tag: Option<i32> = key.trim().parse().ok();
+        let tag_key: Option<i32> = key.trim().parse().ok();
         let stages: [&dyn Fn(&Group) -> bool; 3] = [
             &|g| g.name.as_deref() == Some(key),
             &|g| g.name.as_deref().map(normalize_name).as_deref() == Some(normalized.as_str()),
-            &|g| Some(g.tag) == tag,
+            &|g| Some(g.tag) == tag_key,
         ];
         for matches in stages {
             let found: Vec<&Group> = self.groups.iter().filter(|&g| matches(g)).collect();
@@ -387,6 +397,24 @@ impl Mesh {
                 )));
             }
             return Ok(chosen[0]);
+        }
+        let elsewhere = self.other_groups.iter().find(|(_, tag, name)| {
+            name.as_deref() == Some(key)
+                || name.as_deref().map(normalize_name).as_deref() == Some(normalized.as_str())
+                || Some(*tag) == tag_key
+        });
+        if let Some((dim, tag, _)) = elsewhere {
+            let kind = ["point", "curve", "surface", "volume"][(*dim).min(3)];
+            let (boundary, cells) = match self.dim {
+                2 => ("curve", "surface"),
+                _ => ("surface", "volume"),
+            };
+            return Err(Error::input(format!(
+                "mesh '{file}': '{key}' is a physical {kind} (tag {tag}); a boundary condition \
+                 acts on a physical {boundary} and the body is a physical {cells} in a {}D \
+                 mesh: put the boundary {boundary}s into the group in gmsh",
+                self.dim
+            )));
         }
         let list: Vec<String> = self.groups.iter().map(describe).collect();
         let hint = if self.groups.is_empty() {
@@ -439,14 +467,6 @@ fn or_none(list: &[String]) -> String {
     } else {
         list.join(", ")
     }
-}
-
-fn read_error(path: &Path, e: &std::io::Error) -> Error {
-    let mut msg = e.to_string();
-    if let Some(p) = msg.find(" (os error") {
-        msg.truncate(p);
-    }
-    Error::input(format!("cannot read mesh file '{}': {msg}", path.display()))
 }
 
 fn fmt_point(p: [f64; 3]) -> String {
@@ -598,6 +618,7 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         tetrahedra: Vec::new(),
         groups,
         flipped,
+        other_groups: other_groups(&raw, names, 2),
     })
 }
 
@@ -616,7 +637,8 @@ struct Words {
 /// cell element goes into the cell groups of its entity, each facet element (a line in 2D, a
 /// triangle in 3D) into the boundary groups of its entity, once, as the oriented boundary
 /// facet that `lookup` finds for its nodes (`(oriented nodes, number of cells using it)`). A
-/// facet element that is not a boundary facet of the cells is refused.
+/// facet element that is not a boundary facet of the cells (an embedded curve or surface)
+/// marks its groups with a `defect`: refused where a scene uses the group as a boundary.
 #[allow(clippy::too_many_arguments)]
 fn fill_groups<const C: usize, const F: usize>(
     file: &impl std::fmt::Display,
@@ -651,6 +673,9 @@ fn fill_groups<const C: usize, const F: usize>(
         let dir = match found {
             Some((dir, 1)) => dir,
             other => {
+                if member.iter().all(|&g| groups[g].defect.is_some()) {
+                    continue;
+                }
                 let g = &groups[member[0]];
                 let group = match &g.name {
                     Some(n) => format!("\"{n}\" (tag {})", g.tag),
@@ -680,13 +705,17 @@ fn fill_groups<const C: usize, const F: usize>(
                         }
                     })
                     .collect();
-                return Err(Error::input(format!(
+                let defect = format!(
                     "mesh file '{file}': physical group {group} contains the {element} {} (gmsh \
                      element {}), which is not on the boundary of the {mesh}: {why}; a boundary \
                      group must consist of boundary {boundary}",
                     pts.join("–"),
                     el.tag
-                )));
+                );
+                for &g in &member {
+                    groups[g].defect.get_or_insert_with(|| defect.clone());
+                }
+                continue;
             }
         };
         for g in member {
@@ -734,6 +763,25 @@ fn check_finite(file: &impl std::fmt::Display, nodes: &[[f64; 3]]) -> Result<()>
     }
 }
 
+/// The physical groups of the file whose dimension is neither `dim − 1` nor `dim`.
+fn other_groups(
+    raw: &RawMesh,
+    names: &[PhysicalName],
+    dim: i32,
+) -> Vec<(usize, i32, Option<String>)> {
+    let mut out: Vec<(usize, i32, Option<String>)> = names
+        .iter()
+        .filter(|n| n.dim != dim && n.dim != dim - 1)
+        .map(|n| (n.dim as usize, n.tag, Some(n.name.clone())))
+        .collect();
+    for &(d, tag) in &raw.physical_order {
+        if d != dim && d != dim - 1 && !out.iter().any(|o| (o.0, o.1) == (d as usize, tag)) {
+            out.push((d as usize, tag, None));
+        }
+    }
+    out
+}
+
 /// The physical groups of dimensions `dim − 1` and `dim` (named ones in `$PhysicalNames`
 /// order, then unnamed ones from `$Entities`), still empty, and a map from an entity
 /// `(dim, tag)` to the indices of the groups it belongs to.
@@ -754,6 +802,7 @@ fn group_table<'r>(
                 facets: Vec::new(),
                 faces: Vec::new(),
                 cells: Vec::new(),
+                defect: None,
             });
         }
     };

@@ -281,6 +281,16 @@ fn section_headers(bytes: &[u8], fmt: Format, name: &[u8]) -> Vec<[u64; 4]> {
 /// Node tags of each node block of `$Nodes`, in file order. `None` if the section cannot be
 /// scanned (mshio parsed it, so this does not happen for a consistent file).
 fn scan_node_tags(bytes: &[u8], fmt: Format) -> Option<Vec<Vec<u64>>> {
+    Some(
+        scan_node_blocks(bytes, fmt)?
+            .into_iter()
+            .map(|(t, _)| t)
+            .collect(),
+    )
+}
+
+/// Each node block of `$Nodes`: its node tags and whether it stores parametric coordinates.
+fn scan_node_blocks(bytes: &[u8], fmt: Format) -> Option<Vec<(Vec<u64>, bool)>> {
     let pos = find_section(bytes, b"$Nodes")?;
     let mut s = Scanner { bytes, pos, fmt };
     let blocks = s.size_t()?;
@@ -303,7 +313,7 @@ fn scan_node_tags(bytes: &[u8], fmt: Format) -> Option<Vec<Vec<u64>>> {
             0
         };
         s.skip_doubles(n.checked_mul(per_node)?)?;
-        out.push(tags);
+        out.push((tags, parametric != 0));
     }
     Some(out)
 }
@@ -432,6 +442,21 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
         }
     }
 
+    // Two legal gmsh options that mshio cannot read: say which option to change.
+    if find_section(bytes, b"$PartitionedEntities").is_some() {
+        return Err(Error::input(format!(
+            "mesh file '{file}' was saved partitioned (`gmsh -part N`, or Mesh.NbPartitions > \
+             0); viscontact reads a whole mesh: save it again without partitioning (drop \
+             `-part`, or `-setnumber Mesh.NbPartitions 0`)"
+        )));
+    }
+    if scan_node_blocks(bytes, fmt).is_some_and(|b| b.iter().any(|(_, param)| *param)) {
+        return Err(Error::input(format!(
+            "mesh file '{file}' stores parametric node coordinates (saved with \
+             Mesh.SaveParametric = 1), which the MSH reader (mshio) does not support: save it \
+             again with `-setnumber Mesh.SaveParametric 0` (the default)"
+        )));
+    }
     let msh = mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(path, bytes, fmt, &e))?;
     let data = msh.data;
 

@@ -12,7 +12,7 @@ use std::path::Path;
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::{check_finite, fill_groups, group_table, renumber, Mesh, Words};
+use super::{check_finite, fill_groups, group_table, other_groups, renumber, Mesh, Words};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -179,6 +179,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         tetrahedra,
         groups,
         flipped,
+        other_groups: other_groups(&raw, names, 3),
     })
 }
 

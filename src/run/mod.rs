@@ -87,7 +87,8 @@ pub fn default_out(scene: &Scene) -> Result<PathBuf> {
 
 /// Loads everything a run needs and checks it: scene, mesh, discretization.
 pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
-    let scene = Scene::load(scene_path, overrides)?;
+    let scene = Scene::load(scene_path, overrides)
+        .map_err(|e| crate::fem::model_mismatch(scene_path, overrides).unwrap_or(e))?;
     let mesh = read_mesh(&scene)?;
     let disc = Discretization::new(&mesh, &scene)?;
     Ok((scene, mesh, disc))

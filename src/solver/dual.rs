@@ -68,6 +68,26 @@
 //! multiplier c v̂ has the norm c only to a few ulps, and g is large along it); there the
 //! Newton point is taken when it lowers the residual below.
 //!
+//! Dependent rows. Where Γ3,1 meets Γ3,2 at a corner, a node carries a contact row along
+//! its normal n_i and friction rows whose tangents span n_i (a 90° corner: τ_i = ±n_i), so
+//! P has dependent rows and D is singular: w is unique (K_A is SPD), the split of the force
+//! Pᵀz between λ_i and γ_i is not. The Newton matrices of such nodes' groups get the shift
+//! ρ δ_j (ρ = `DEPENDENT_SHIFT`) on their coordinates: (QᵀDQ + diag κ + ρ diag δ) x = −Qᵀg
+//! is solvable whatever the sets are, and since Qᵀg lies in the range of QᵀDQ its solution
+//! differs from an exact Newton step only by O(ρ) along the near-null directions: a
+//! Levenberg–Marquardt step, which contracts the error in the range by ρδ/(ρδ + σ) per
+//! iteration (σ the curvature there: σ/δ ≈ 1 − cos 0.1° = 1.5e-6 at an 89.9° corner, so
+//! 7e-3 per iteration) and leaves the non-unique direction alone. ρ is not smaller because
+//! the rounding of g along the null direction is amplified by 1/ρ in x: at ρ = 1e-10 those
+//! steps wandered by 1e-6 |z| and the 3D edge case (tests/corner.rs) stalled at 5× the
+//! tolerance. The stopping test below is the unregularized one, so the iteration still
+//! ends at the exact KKT point; only which of the equivalent multipliers it reports depends
+//! on the path. Nodes whose rows are far from dependent (the paper's x = 1, n_i ⊥ τ_i) get
+//! no shift, so those runs are unchanged. (A pivoted factorization would also solve the
+//! singular systems, but nearly dependent rows at 89.9° would still leave pivots at the
+//! rounding level whose sign decides the outcome: the same mesh failed as ASCII and ran as
+//! binary.)
+//!
 //! Stopping test: the part of g not balanced by the normal cone of Z at z, per group — for a
 //! contact row |g| if λ > 0 and max(0, −g) if λ = 0 (n·w ≤ 0); for a friction node |g_j|
 //! inside the disc, and on its rim |T g_j| + max(0, g_j·γ̂_j) (there −g_j = w_τ,j must be a
@@ -91,6 +111,10 @@ const MIN_DAMPING: f64 = 0.25;
 /// |γ_j| ≥ RIM · c_j counts as on the rim: a projected disc multiplier c v̂ has norm c only
 /// up to a few roundings.
 const RIM: f64 = 1.0 - 8.0 * f64::EPSILON;
+/// ρ: the relative Newton shift of the groups at nodes with dependent rows (see the module
+/// doc): far above the rounding level of the factorizations and of g, far below the
+/// curvature of independent rows.
+const DEPENDENT_SHIFT: f64 = 1e-8;
 
 /// The set Z_j of a group of multipliers.
 #[derive(Clone, Copy, Debug)]
@@ -109,6 +133,8 @@ struct Group {
     set: Set,
     /// δ_j: the mean of diag(D) over the group's rows.
     scale: f64,
+    /// The Newton shift ρ δ_j of a group at a node with dependent rows, else 0.
+    shift: f64,
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -156,15 +182,25 @@ impl Group {
 
     /// The unit tangent t̂ ⊥ n of a disc block (the rim's direction at n ≠ 0) as a Newton
     /// coordinate with diagonal shift κ; None for 1-row groups (their rim is two points).
-    fn tangent(&self, n: &[f64], shift: f64) -> Option<Coord> {
+    fn tangent(&self, n: &[f64], kappa: f64) -> Option<Coord> {
         (self.len == 2).then(|| {
             let nn = norm(n);
             Coord {
                 start: self.start,
                 len: 2,
                 dir: [-n[1] / nn, n[0] / nn],
-                shift,
+                shift: kappa + self.shift,
             }
+        })
+    }
+
+    /// The group's rows as free Newton coordinates.
+    fn free(&self) -> impl Iterator<Item = Coord> + '_ {
+        self.rows().map(|i| Coord {
+            start: i,
+            len: 1,
+            dir: [1.0, 0.0],
+            shift: self.shift,
         })
     }
 
@@ -204,15 +240,6 @@ struct Coord {
 }
 
 impl Coord {
-    fn row(i: usize) -> Self {
-        Coord {
-            start: i,
-            len: 1,
-            dir: [1.0, 0.0],
-            shift: 0.0,
-        }
-    }
-
     fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         (self.start..self.start + self.len).zip(self.dir.iter().copied())
     }
@@ -282,6 +309,7 @@ impl DualSolver {
         );
         debug_assert!(rows.block <= 2, "friction blocks span a tangent plane");
         let contact = (0..rows.n_contact).map(|i| (i..i + 1, Set::HalfLine));
+        let dependent = rows.dependent_nodes();
         let friction = (0..rows.n_friction_nodes()).map(|j| {
             let r = rows.friction_block(j);
             let c = rows.rows[r.start].bound;
@@ -289,11 +317,20 @@ impl DualSolver {
         });
         let groups = contact
             .chain(friction)
-            .map(|(r, set)| Group {
-                start: r.start,
-                len: r.len(),
-                set,
-                scale: r.clone().map(|i| d[(i, i)]).sum::<f64>() / r.len() as f64,
+            .map(|(r, set)| {
+                let scale = r.clone().map(|i| d[(i, i)]).sum::<f64>() / r.len() as f64;
+                let at_dependent = dependent.contains(&rows.rows[r.start].node);
+                Group {
+                    start: r.start,
+                    len: r.len(),
+                    set,
+                    scale,
+                    shift: if at_dependent {
+                        DEPENDENT_SHIFT * scale
+                    } else {
+                        0.0
+                    },
+                }
             })
             .collect::<Vec<_>>();
         let work = Box::new(Work {
@@ -412,7 +449,7 @@ impl DualSolver {
                 match grp.project(&mut trial[r.clone()]) {
                     None => {
                         trial[r.clone()].fill(0.0);
-                        coords.extend(r.map(Coord::row));
+                        coords.extend(grp.free());
                     }
                     // On the rim of a disc: radial part fixed at c v̂, the tangent t̂ ⊥ v̂ free
                     // with κ = δ (|v| − c)/c = δ (1/ρ − 1). (ρ = 0: a contact row at 0.)
@@ -496,7 +533,7 @@ impl DualSolver {
                     }
                 } else {
                     p[r.clone()].fill(0.0);
-                    coords.extend(r.map(Coord::row));
+                    coords.extend(grp.free());
                 }
             }
             newton_step(d, coords, g, p, cache)?;

@@ -66,6 +66,37 @@ impl Rows {
         start..start + self.block
     }
 
+    /// Nodes whose contact row n_i and friction rows τ_ik are dependent or nearly so: the
+    /// contact normal lies within 60° of the friction tangent space (|Π_τ n_i| > ½, where
+    /// Π_τ projects onto span τ_ik). That happens where Γ3,1 meets Γ3,2 at a corner (a
+    /// 90° corner makes n_i = ±τ_i exactly, so D = P K_A⁻¹ Pᵀ is singular). Where the two
+    /// sides continue each other (the paper's x = 1) n_i ⊥ τ_i and the node is not listed.
+    pub fn dependent_nodes(&self) -> Vec<usize> {
+        let friction: std::collections::HashMap<usize, usize> = (0..self.n_friction_nodes())
+            .map(|j| (self.rows[self.friction_block(j).start].node, j))
+            .collect();
+        self.rows[..self.n_contact]
+            .iter()
+            .filter(|r| {
+                friction.get(&r.node).is_some_and(|&j| {
+                    let along: f64 = self.rows[self.friction_block(j)]
+                        .iter()
+                        .map(|t| {
+                            t.dir
+                                .iter()
+                                .zip(&r.dir)
+                                .map(|(a, b)| a * b)
+                                .sum::<f64>()
+                                .powi(2)
+                        })
+                        .sum();
+                    along > 0.25
+                })
+            })
+            .map(|r| r.node)
+            .collect()
+    }
+
     /// Every dof of every constrained node, sorted: the block C ordered last in the factor.
     pub fn dofs(&self) -> Vec<usize> {
         let mut d: Vec<usize> = self

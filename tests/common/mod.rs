@@ -83,6 +83,74 @@ pub fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
     d / max_abs(b).max(f64::MIN_POSITIVE)
 }
 
+/// The text of an ASCII MSH 4.1 file with every node's coordinates mapped by `f` (the
+/// `$Nodes` section; entity bounding boxes are left as they are, nothing reads them).
+pub fn map_msh_nodes(text: &str, f: impl Fn([f64; 3]) -> [f64; 3]) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut lines = text.lines();
+    while let Some(line) = lines.next() {
+        out.push_str(line);
+        out.push('\n');
+        if line.trim() != "$Nodes" {
+            continue;
+        }
+        let header = lines.next().unwrap();
+        out.push_str(header);
+        out.push('\n');
+        let blocks: usize = header.split_whitespace().next().unwrap().parse().unwrap();
+        for _ in 0..blocks {
+            let block = lines.next().unwrap();
+            out.push_str(block);
+            out.push('\n');
+            let b: Vec<usize> = block
+                .split_whitespace()
+                .map(|v| v.parse().unwrap())
+                .collect();
+            assert_eq!(b[2], 0, "parametric nodes are not mapped");
+            for _ in 0..b[3] {
+                out.push_str(lines.next().unwrap());
+                out.push('\n');
+            }
+            for _ in 0..b[3] {
+                let x: Vec<f64> = lines
+                    .next()
+                    .unwrap()
+                    .split_whitespace()
+                    .map(|v| v.parse().unwrap())
+                    .collect();
+                let y = f([x[0], x[1], x[2]]);
+                out.push_str(&format!("{:e} {:e} {:e}\n", y[0], y[1], y[2]));
+            }
+        }
+    }
+    out
+}
+
+/// Deterministic pseudo-random numbers in [0, 1) (a 64-bit LCG): "random" angles, bit
+/// positions and the like that are the same in every run of a test.
+pub struct Lcg(pub u64);
+
+impl Lcg {
+    pub fn next_f64(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Runs the binary from the repository root: (exit status, stdout + stderr).
+pub fn cli(args: &[&str]) -> (i32, String) {
+    let out = viscontact(args);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.code().unwrap_or(-1), text)
+}
+
 /// examples/paper.toml (contact on Γ3,1, friction on Γ3,2, Prony memory) with its mesh
 /// path made absolute, written into `dir`; `expr` switches the kernel to the same function
 /// as an expression (the direct-sum path).
