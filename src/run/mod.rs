@@ -87,11 +87,17 @@ pub fn default_out(scene: &Scene) -> Result<PathBuf> {
 
 /// Loads everything a run needs and checks it: scene, mesh, discretization.
 pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
-    let scene = Scene::load(scene_path, overrides)
-        .map_err(|e| crate::fem::model_mismatch(scene_path, overrides).unwrap_or(e))?;
+    let scene = load_scene(scene_path, overrides)?;
     let mesh = read_mesh(&scene)?;
     let disc = Discretization::new(&mesh, &scene)?;
     Ok((scene, mesh, disc))
+}
+
+/// The scene; when it fails its checks because its model does not fit the mesh, that is
+/// what is reported (see `fem::model_mismatch`).
+fn load_scene(scene_path: &Path, overrides: &[String]) -> Result<Scene> {
+    Scene::load(scene_path, overrides)
+        .map_err(|e| crate::fem::model_mismatch(scene_path, overrides).unwrap_or(e))
 }
 
 fn read_mesh(scene: &Scene) -> Result<Mesh> {
@@ -108,7 +114,7 @@ fn read_mesh(scene: &Scene) -> Result<Mesh> {
 /// checkpoints and summary.json into the output directory, which then holds this run alone.
 pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
-    let scene = Scene::load(scene_path, &opts.overrides)?;
+    let scene = load_scene(scene_path, &opts.overrides)?;
     let out = match &opts.out {
         Some(out) => out.clone(),
         None => default_out(&scene)?,
