@@ -236,7 +236,8 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let scene = cp.scene(&opts.overrides)?;
     let mesh = read_mesh(&scene).map_err(|e| {
         Error::input(format!(
-            "{}: the run's mesh cannot be read: {e}",
+            "{}: the run's mesh cannot be read: {e} (a run moved to another place: give its \
+             mesh with --set mesh.file=NEW)",
             checkpoint_path.display()
         ))
     })?;

@@ -19,6 +19,15 @@ pub(super) fn h5_file<P: AsRef<Path>>(mode: OpenMode, path: P) -> hdf5::Result<h
         .open_as(path, mode)
 }
 
+/// Creates an HDF5 file (locking off, as [`h5_file`]) whose first 512 bytes are a user block
+/// for the integrity header of `seal.rs`.
+pub(super) fn h5_create_sealed<P: AsRef<Path>>(path: P) -> hdf5::Result<hdf5::File> {
+    hdf5::File::with_options()
+        .with_fapl(|p| p.file_locking(false))
+        .with_fcpl(|p| p.userblock(super::seal::USERBLOCK as u64))
+        .create(path)
+}
+
 pub(super) fn h5err(path: &Path, e: hdf5::Error) -> Error {
     Error::io(path, std::io::Error::other(format!("HDF5: {e}")))
 }

@@ -1,7 +1,7 @@
 //! The checkpoint's HDF5 layout: every group, dataset and attribute (written through the
 //! library), and the datasets whose values change between checkpoints.
 
-use super::h5::{h5_file, scalar, str_attr, string_dataset, vector, OpenMode};
+use super::h5::{h5_create_sealed, scalar, str_attr, string_dataset, vector};
 use super::history_file::HistoryFile;
 use super::writer::{Snapshot, SnapshotMemory};
 use super::{Identity, RunLog, FORMAT, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
@@ -52,14 +52,19 @@ pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Ve
     out
 }
 
-/// Iterations of steps 0..n, then −1 up to the run's `steps` + 1 entries.
+/// Iterations of steps 0..n, then −1 up to a length that grows with n: the run's `steps` + 1
+/// entries, or fewer for long runs (at least 1024, a power of two ≥ n + 1), so that a run of
+/// N = 10^12 steps does not write (or allocate) N entries per checkpoint, while the length,
+/// and with it the `Template`, changes only log₂ N times.
 pub(super) fn iterations(log: &RunLog, steps: usize) -> Vec<i32> {
+    let len =
+        (steps.saturating_add(1)).min((log.iterations.len() + 1).next_power_of_two().max(1024));
     let mut v: Vec<i32> = log
         .iterations
         .iter()
         .map(|&i| i.min(i32::MAX as usize) as i32)
         .collect();
-    v.resize(v.len().max(steps + 1), -1);
+    v.resize(v.len().max(len), -1);
     v
 }
 
@@ -72,7 +77,7 @@ pub(super) fn write_checkpoint(
     history: Option<&HistoryFile>,
 ) -> hdf5::Result<()> {
     let n_free = s.u.len();
-    let f = h5_file(OpenMode::Create, path)?;
+    let f = h5_create_sealed(path)?;
     str_attr(&f, "format", FORMAT)?;
     f.new_attr::<u32>()
         .shape(())
@@ -227,11 +232,6 @@ pub(super) fn write_checkpoint(
                  past_displacements (src/checkpoint.rs Hash64); resume checks it",
                 "1",
             )?;
-            memory
-                .new_attr::<u64>()
-                .shape(())
-                .create("history_capacity")?
-                .write_scalar(&(hist.capacity as u64))?;
             str_attr(&memory, "history_file", HISTORY_FILE_NAME)?;
             str_attr(
                 &memory,

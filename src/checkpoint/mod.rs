@@ -69,11 +69,26 @@ mod history_file;
 mod layout;
 mod read;
 mod resume;
+mod seal;
 mod template;
 mod writer;
 
 pub use fingerprint::{groups_fingerprint, mesh_fingerprint, physics_signature, Hash64};
 pub use writer::Writer;
+
+/// Recomputes the CRC-32 in the header of a checkpoint that was edited on purpose (with h5py,
+/// say): resume refuses a checkpoint whose bytes changed in any other way.
+pub fn reseal(path: &std::path::Path) -> crate::Result<()> {
+    let mut bytes = std::fs::read(path).map_err(|e| crate::Error::io(path, e))?;
+    if !seal::looks_sealed(&bytes) {
+        return Err(crate::Error::input(format!(
+            "{}: not a checkpoint with a viscontact header",
+            path.display()
+        )));
+    }
+    seal::seal_checkpoint(&mut bytes);
+    std::fs::write(path, bytes).map_err(|e| crate::Error::io(path, e))
+}
 
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
@@ -84,7 +99,7 @@ use std::path::PathBuf;
 pub const FORMAT: &str = "viscontact checkpoint";
 /// The layout version written (root attribute `format_version`); files of a newer version
 /// are refused.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// The checkpoint's file name in a run directory.
 pub const FILE_NAME: &str = "checkpoint.h5";
 /// The append-only history file of a general (direct-sum) kernel, beside the checkpoint.
@@ -192,12 +207,11 @@ pub enum StoredMemory {
         /// m^(i)_n per term.
         m: Vec<Vec<f64>>,
     },
-    /// Rows 0..rows of the history file, their running hash, the file's capacity.
+    /// Rows 0..rows of the history file and their running hash.
     Direct {
         file: String,
         rows: usize,
         hash: u64,
-        capacity: usize,
     },
 }
 

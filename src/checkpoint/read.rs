@@ -1,6 +1,7 @@
 //! Reading a checkpoint back.
 
-use super::h5::{h5_file, has_hdf5_signature, str_attr_of, OpenMode};
+use super::h5::{h5_file, has_hdf5_signature, str_attr_of, OpenMode, HDF5_SIGNATURE};
+use super::seal;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FORMAT, FORMAT_VERSION};
 use crate::{Error, Result};
 use hdf5::types::VarLenUnicode;
@@ -17,24 +18,45 @@ impl Checkpoint {
     }
 
     /// Reads and checks a checkpoint file. Refuses (input errors naming the file): a missing
-    /// file, a file that is not HDF5, a truncated or damaged one, an HDF5 file that is not a
-    /// viscontact checkpoint, a newer format version.
+    /// file or one that is not a regular file, a file that is not HDF5, a truncated or damaged
+    /// one (its CRC-32, checked before libhdf5 parses anything, `seal.rs`), an HDF5 file that
+    /// is not a viscontact checkpoint, a format version without a checksum or newer than
+    /// this one.
     pub fn read(path: &Path) -> Result<Checkpoint> {
         let shown = path.display();
-        match has_hdf5_signature(path) {
-            Ok(true) => {}
-            Ok(false) => {
-                return Err(Error::input(format!(
-                    "{shown}: not an HDF5 file, so not a viscontact checkpoint; give the \
-                     checkpoint.h5 of a run directory"
-                )))
-            }
-            Err(e) => {
-                return Err(Error::input(format!(
-                    "cannot read checkpoint '{shown}': {e}; give the checkpoint.h5 of a run \
-                     directory"
-                )))
-            }
+        let cannot = |e: String| {
+            Error::input(format!(
+                "cannot read checkpoint '{shown}': {e}; give the checkpoint.h5 of a run \
+                 directory"
+            ))
+        };
+        match std::fs::metadata(path) {
+            Ok(m) if m.is_file() => {}
+            Ok(_) => return Err(cannot("not a regular file".into())),
+            Err(e) => return Err(cannot(e.to_string())),
+        }
+        let bytes = std::fs::read(path).map_err(|e| cannot(e.to_string()))?;
+        if seal::looks_sealed(&bytes) {
+            seal::verify_checkpoint(&bytes).map_err(|why| {
+                Error::input(format!(
+                    "{shown}: damaged checkpoint, refused: {why}; resume from an intact copy \
+                     of the run directory or start the run again"
+                ))
+            })?;
+        } else if bytes.starts_with(HDF5_SIGNATURE) {
+            // An HDF5 file without our header: someone else's file, or an unverifiable
+            // checkpoint of format version 1 (both told apart below, and refused).
+        } else if has_hdf5_signature(path).map_err(|e| cannot(e.to_string()))? {
+            return Err(Error::input(format!(
+                "{shown}: damaged checkpoint, refused: its 512-byte header is not a \
+                 viscontact checkpoint header (or this is an HDF5 file of another program); \
+                 resume from an intact copy of the run directory or start the run again"
+            )));
+        } else {
+            return Err(Error::input(format!(
+                "{shown}: not an HDF5 file, so not a viscontact checkpoint; give the \
+                 checkpoint.h5 of a run directory"
+            )));
         }
         let f = h5_file(OpenMode::Read, path).map_err(|e| {
             Error::input(format!(
@@ -64,6 +86,15 @@ impl Checkpoint {
                     "{shown}: damaged checkpoint: attribute 'format_version' unreadable ({e})"
                 ))
             })?;
+        if !seal::looks_sealed(&bytes) {
+            return Err(Error::input(format!(
+                "{shown}: checkpoint format version {version} carries no checksum, so its \
+                 integrity cannot be verified and it is refused (a damaged file could give \
+                 wrong results); resume it with the viscontact version that wrote it ({}) or \
+                 start the run again",
+                str_attr_of(&f, "writer").unwrap_or_else(|_| "unknown".into())
+            )));
+        }
         if version > FORMAT_VERSION {
             return Err(Error::input(format!(
                 "{shown}: checkpoint format version {version} is newer than this viscontact \
@@ -111,7 +142,6 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
             file: str_attr_of(&mem, "history_file")?,
             rows: mem.dataset("history_rows")?.read_scalar::<u64>()? as usize,
             hash: mem.dataset("history_hash")?.read_scalar::<u64>()?,
-            capacity: mem.attr("history_capacity")?.read_scalar::<u64>()? as usize,
         },
         other => return Err(format!("/memory kind {other:?} is unknown").into()),
     };

@@ -11,9 +11,14 @@ use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use std::path::PathBuf;
 
-/// Keys a resume may override: the end time (the step size stays), output and checkpoints.
+/// Keys a resume may override: the end time (the step size stays), output, checkpoints, and
+/// where the mesh is now (a run moved to another machine; the mesh itself must be the same,
+/// checked by its fingerprint).
 pub(super) fn overridable(key: &str) -> bool {
-    key == "time.end" || key.starts_with("output.") || key.starts_with("checkpoint.")
+    key == "time.end"
+        || key == "mesh.file"
+        || key.starts_with("output.")
+        || key.starts_with("checkpoint.")
 }
 
 impl Checkpoint {
@@ -34,9 +39,26 @@ impl Checkpoint {
             if !overridable(key) {
                 return Err(Error::input(format!(
                     "--set {key}: a resume continues the physics of {shown} and may only \
-                     change time.end, output.* and checkpoint.*; to change {key}, start a new \
-                     run with `viscontact run`"
+                     change time.end, mesh.file (the same mesh in a new place), output.* and \
+                     checkpoint.*; to change {key}, start a new run with `viscontact run`"
                 )));
+            }
+            if key == "mesh.file" {
+                // Given on the command line, so relative to the working directory (not to the
+                // stored scene's directory, which may not exist on this machine).
+                let value = value.trim();
+                let value = value
+                    .strip_prefix('"')
+                    .and_then(|v| v.strip_suffix('"'))
+                    .unwrap_or(value);
+                let new = std::path::absolute(value).map_err(|e| {
+                    Error::input(format!(
+                        "--set mesh.file={value}: {e}; give the mesh's path"
+                    ))
+                })?;
+                let new = toml::Value::String(new.display().to_string());
+                all.push(format!("mesh.file={new}"));
+                continue;
             }
             if key == "time.end" {
                 let end: f64 = value.trim().parse().map_err(|_| {
@@ -100,10 +122,11 @@ impl Checkpoint {
         let mut diffs = Vec::new();
         if mesh_fingerprint(mesh) != self.id.mesh_fingerprint {
             diffs.push(format!(
-                "the mesh {} is not the one the run used (now {} nodes, {} cells; the run \
+                "the mesh {} is not the one the run used, {} (now {} nodes, {} cells; the run \
                  had {} nodes, {} cells; node coordinates or connectivity differ): restore \
                  that mesh file",
                 mesh.path.display(),
+                self.id.mesh_path,
                 mesh.nodes.len(),
                 mesh.n_cells(),
                 self.id.nodes,
@@ -111,14 +134,20 @@ impl Checkpoint {
             ));
         } else if groups_fingerprint(mesh) != self.id.groups_fingerprint {
             diffs.push(format!(
-                "the physical groups of the mesh {} differ from the run's: restore that mesh \
-                 file",
-                mesh.path.display()
+                "the physical groups of the mesh {} differ from those of the run's mesh {}: \
+                 restore that mesh file",
+                mesh.path.display(),
+                self.id.mesh_path
             ));
         }
-        let now = physics_signature(&scene.text);
-        let stored = &self.id.physics;
-        for (k, v) in stored {
+        // The mesh is compared by its fingerprint above, not by where its file is.
+        let moved = |k: &str| k == "mesh.file";
+        let now: Vec<_> = physics_signature(&scene.text)
+            .into_iter()
+            .filter(|(k, _)| !moved(k))
+            .collect();
+        let stored: Vec<_> = self.id.physics.iter().filter(|(k, _)| !moved(k)).collect();
+        for (k, v) in stored.iter().copied() {
             match now.iter().find(|(k2, _)| k2 == k) {
                 Some((_, v2)) if v2 == v => {}
                 Some((_, v2)) => diffs.push(format!("{k}: the run had {v}, the scene says {v2}")),

@@ -48,7 +48,7 @@ impl Template {
     }
 
     /// The file bytes for `data`; None when the sizes no longer match.
-    pub(super) fn patch(&mut self, data: &[(&'static str, Vec<u8>)]) -> Option<&[u8]> {
+    pub(super) fn patch(&mut self, data: &[(&'static str, Vec<u8>)]) -> Option<&mut [u8]> {
         if data.len() != self.regions.len() {
             return None;
         }
@@ -60,6 +60,6 @@ impl Template {
         for ((offset, len), (_, d)) in self.regions.iter().zip(data) {
             self.bytes[*offset..offset + len].copy_from_slice(d);
         }
-        Some(&self.bytes)
+        Some(&mut self.bytes)
     }
 }

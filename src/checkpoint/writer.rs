@@ -2,10 +2,11 @@
 //! thread (history rows, `checkpoint.h5.tmp`, fsync, rename).
 
 use super::h5::{fsync_dir, fsync_file, h5err};
-use super::history_file::HistoryFile;
+use super::history_file::{grown_capacity, HistoryFile};
 use super::layout::{variable_data, write_checkpoint};
+use super::seal;
 use super::template::Template;
-use super::{Checkpoint, Hash64, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
+use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
 use crate::history::{Memory, PronyTerm};
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
@@ -121,8 +122,8 @@ pub struct Writer {
 pub(super) struct Disk {
     dir: PathBuf,
     id: Identity,
-    /// Rows to preallocate in a new history file (the run's number of steps).
-    capacity: usize,
+    /// The run's number of steps.
+    steps: usize,
     history: Option<HistoryFile>,
     row_node: Vec<u64>,
     /// The bytes of the last checkpoint written through HDF5 and where its variable data
@@ -136,7 +137,7 @@ impl Disk {
         Disk {
             dir: dir.to_path_buf(),
             id,
-            capacity: steps,
+            steps,
             history: None,
             row_node: tl.rows.rows.iter().map(|r| r.node as u64).collect(),
             template: None,
@@ -151,8 +152,8 @@ impl Writer {
     }
 
     /// A writer that continues `cp` in `dir` for a run of `steps` steps. The history file is
-    /// appended to in place when it is the checkpoint's own and has room; otherwise the first
-    /// checkpoint writes a new one with all rows (once).
+    /// appended to in place when it is the checkpoint's own (grown when full); otherwise the
+    /// first checkpoint writes a new one with all rows (once).
     pub fn resume(
         dir: &Path,
         id: Identity,
@@ -162,25 +163,17 @@ impl Writer {
     ) -> Writer {
         let mut disk = Disk::new(dir, id, steps, tl);
         let mut rows_sent = 0;
-        if let StoredMemory::Direct {
-            rows,
-            hash,
-            capacity,
-            ..
-        } = &cp.memory
-        {
+        if let StoredMemory::Direct { rows, hash, .. } = &cp.memory {
             let same_dir = match (std::fs::canonicalize(dir), cp.dir().canonicalize()) {
                 (Ok(a), Ok(b)) => a == b,
                 _ => false,
             };
-            if same_dir && *capacity >= steps {
-                disk.history = Some(HistoryFile {
-                    path: dir.join(HISTORY_FILE_NAME),
-                    capacity: *capacity,
-                    rows: *rows,
-                    hash: Hash64(*hash),
-                });
-                rows_sent = *rows;
+            let path = dir.join(HISTORY_FILE_NAME);
+            if same_dir {
+                disk.history = HistoryFile::open(&path, &disk.id, cp.u.len(), *rows, *hash).ok();
+                if disk.history.is_some() {
+                    rows_sent = *rows;
+                }
             }
         }
         Writer::start(disk, rows_sent)
@@ -323,14 +316,14 @@ impl Disk {
     fn write(&mut self, s: &Snapshot) -> Result<()> {
         if let SnapshotMemory::Direct { from, rows } = &s.memory {
             match &mut self.history {
-                Some(h) => h.append(*from, rows)?,
+                Some(h) => h.append(*from, rows, &self.id.run_id, self.steps)?,
                 None => {
                     assert_eq!(*from, 0, "a new history file starts at row 0");
                     self.history = Some(HistoryFile::create(
                         &self.dir.join(HISTORY_FILE_NAME),
                         &self.id.run_id,
                         s.u.len(),
-                        self.capacity,
+                        grown_capacity(0, rows.len(), self.steps),
                         rows,
                     )?)
                 }
@@ -338,7 +331,7 @@ impl Disk {
         }
         let path = self.dir.join(FILE_NAME);
         let tmp = self.dir.join(format!("{FILE_NAME}.tmp"));
-        let data = variable_data(s, self.capacity);
+        let data = variable_data(s, self.steps);
         let history_hash = self.history.as_ref().map(|h| h.hash.0);
         let fast = match (&mut self.template, history_hash) {
             (Some(t), hash) => {
@@ -347,6 +340,7 @@ impl Disk {
                     data.push(("memory/history_hash", h.to_le_bytes().to_vec()));
                 }
                 t.patch(&data).map(|bytes| {
+                    seal::seal_checkpoint(bytes);
                     std::fs::write(&tmp, bytes).map_err(|e| {
                         let _ = std::fs::remove_file(&tmp);
                         Error::io(&path, e)
@@ -363,12 +357,18 @@ impl Disk {
                     &self.id,
                     &self.row_node,
                     s,
-                    self.capacity,
+                    self.steps,
                     self.history.as_ref(),
                 )
                 .map_err(|e| {
                     let _ = std::fs::remove_file(&tmp);
                     h5err(&path, e)
+                })?;
+                let mut bytes = std::fs::read(&tmp).map_err(|e| Error::io(&tmp, e))?;
+                seal::seal_checkpoint(&mut bytes);
+                std::fs::write(&tmp, &bytes).map_err(|e| {
+                    let _ = std::fs::remove_file(&tmp);
+                    Error::io(&path, e)
                 })?;
                 let mut data = data;
                 if let Some(h) = history_hash {
