@@ -733,3 +733,168 @@ fn displacement_sum_does_not_drift_over_1e5_steps() {
         naive / ulp
     );
 }
+
+// ---- damage (issue 12 item 3) ----------------------------------------------------------------
+
+/// `resume` of `cp` (into `out`) must exit 2 naming `name` and saying "damaged": never 0,
+/// never a signal.
+fn refused_as_damaged(cp: &Path, out: &Path, name: &str, what: &str) {
+    let o = viscontact(&[
+        "resume",
+        cp.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{what}: resume gave {:?}: {stderr}",
+        o.status
+    );
+    assert!(
+        stderr.contains(name) && stderr.contains("damaged"),
+        "{what}: {stderr}"
+    );
+}
+
+/// Random single bit flips anywhere in checkpoint.h5, of a Prony and of an expression-kernel
+/// run: every one is refused with exit 2 and a message, before libhdf5 could misread it.
+#[test]
+fn any_flipped_bit_in_a_checkpoint_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut rng = common::SplitMix(12);
+    for expr in [false, true] {
+        let cp = stopped_run(tmp.path(), &format!("r{expr}"), expr);
+        let good = std::fs::read(&cp).unwrap();
+        let damaged = cp.with_file_name("damaged.h5");
+        for trial in 0..200 {
+            let bit = rng.below(good.len() * 8);
+            let mut bytes = good.clone();
+            bytes[bit / 8] ^= 1 << (bit % 8);
+            std::fs::write(&damaged, &bytes).unwrap();
+            let what = format!(
+                "expr {expr}, trial {trial}, bit {bit} of {}",
+                good.len() * 8
+            );
+            refused_as_damaged(&damaged, &tmp.path().join("never"), "damaged.h5", &what);
+        }
+        assert!(!tmp.path().join("never").exists());
+        // The intact one still resumes.
+        let o = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+}
+
+/// The history file's `key value` header line.
+fn header_value(bytes: &[u8], key: &str) -> usize {
+    let text = String::from_utf8_lossy(&bytes[..512]);
+    text.lines()
+        .find_map(|l| l.strip_prefix(key)?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {key} in {text:?}"))
+}
+
+/// Random single bit flips in checkpoint_history.h5: a flip in its header, its HDF5 metadata
+/// or the rows the checkpoint uses is refused (exit 2, a message naming the file); a flip in
+/// its unused preallocated rows changes nothing: resume succeeds with the series of the
+/// undamaged resume, bit for bit.
+#[test]
+fn any_flipped_bit_in_a_history_file_is_refused_or_harmless() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cp = stopped_run(tmp.path(), "r", true);
+    let run_dir = cp.parent().unwrap().to_path_buf();
+    let reference = tmp.path().join("reference");
+    common::copy_dir(&run_dir, &reference);
+    let o = viscontact(&[
+        "resume",
+        reference.join("checkpoint.h5").to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let good = std::fs::read(run_dir.join("checkpoint_history.h5")).unwrap();
+    let rows: u64 = hdf5::File::open(&cp)
+        .unwrap()
+        .dataset("memory/history_rows")
+        .unwrap()
+        .read_scalar()
+        .unwrap();
+    let offset = header_value(&good, "rows_offset");
+    let row_bytes = header_value(&good, "row_bytes");
+    let unused =
+        offset + rows as usize * row_bytes..offset + header_value(&good, "capacity") * row_bytes;
+    assert!(!unused.is_empty() && unused.end <= good.len());
+    let mut rng = common::SplitMix(34);
+    let (mut refused, mut harmless) = (0, 0);
+    for trial in 0..100 {
+        let bit = rng.below(good.len() * 8);
+        let dir = tmp.path().join(format!("t{trial}"));
+        common::copy_dir(&run_dir, &dir);
+        let mut bytes = good.clone();
+        bytes[bit / 8] ^= 1 << (bit % 8);
+        std::fs::write(dir.join("checkpoint_history.h5"), &bytes).unwrap();
+        let what = format!("trial {trial}, bit {bit} of {}", good.len() * 8);
+        let cp = dir.join("checkpoint.h5");
+        if unused.contains(&(bit / 8)) {
+            let o = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+            assert!(
+                o.status.success(),
+                "{what}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            assert_eq!(frames(&dir), frames(&reference), "{what}");
+            harmless += 1;
+        } else {
+            refused_as_damaged(&cp, &dir, "checkpoint_history.h5", &what);
+            refused += 1;
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+    assert!(
+        refused > 20 && harmless > 5,
+        "{refused} refused, {harmless} harmless"
+    );
+}
+
+// ---- moved runs (issue 12 item 5) ------------------------------------------------------------
+
+/// A run directory and its mesh copied to another place (the original gone) resumes with
+/// `--set mesh.file=NEW` and gives the series of the run that never stopped; without it, the
+/// message says how; a different mesh is refused naming both files.
+#[test]
+fn a_moved_run_resumes_with_its_mesh_in_a_new_place() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (here, there) = (tmp.path().join("cluster"), tmp.path().join("laptop"));
+    std::fs::create_dir_all(&here).unwrap();
+    let cp = stopped_run(&here, "a", false);
+    let full = tmp.path().join("full");
+    let scene = here.join("a.toml");
+    finished(run(&scene, &opts(&full, &["time.steps=16"], None)).unwrap());
+
+    common::copy_dir(&here.join("a"), &there.join("run"));
+    std::fs::copy(here.join("a.msh"), there.join("moved.msh")).unwrap();
+    std::fs::remove_dir_all(&here).unwrap();
+    assert!(!cp.exists());
+    let cp = there.join("run/checkpoint.h5");
+
+    refused("mesh gone", &cp, &[], &["a.msh", "--set mesh.file=NEW"]);
+    let other = common::repo().join("tests/data/rect_004.msh");
+    let set_other = format!("mesh.file={}", other.display());
+    refused(
+        "other mesh",
+        &cp,
+        &["--set", &set_other],
+        &["rect_004.msh", "a.msh", "not the one the run used"],
+    );
+    let set_moved = format!("mesh.file={}", there.join("moved.msh").display());
+    let o = viscontact(&[
+        "resume",
+        cp.to_str().unwrap(),
+        "--set",
+        &set_moved,
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(frames(&there.join("run")), frames(&full));
+}
