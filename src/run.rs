@@ -191,6 +191,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     let (scene, mesh, disc) = setup(scene_path, &opts.overrides)?;
     let out = opts.out.clone().unwrap_or_else(|| default_out(&scene));
+    crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
     check_out_dir(&out, opts.force)?;
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let tl = TimeLoop::new(&scene, &disc)?;
@@ -246,6 +247,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let mut tl = TimeLoop::new(&scene, &disc)?;
     cp.restore(&mut tl)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
+    crate::resources::Estimate::new(&scene, &disc, cp.n).check(&out)?;
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let (cells, per_cell) = mesh.cell_nodes();
     let series = if cp.n == 0 {

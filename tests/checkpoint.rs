@@ -898,3 +898,68 @@ fn a_moved_run_resumes_with_its_mesh_in_a_new_place() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(frames(&there.join("run")), frames(&full));
 }
+
+// ---- hostile sizes (issue 12 item 4) ---------------------------------------------------------
+
+/// The history file grows with the run (64, 128, 256 rows, …, at most N + 1) instead of
+/// being allocated for all N steps, and a run resumed across the growth equals the run that
+/// never stopped.
+#[test]
+fn history_file_grows_with_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", true);
+    let set = ["time.steps=300", "checkpoint.every=7", "output.every=50"];
+    let (full, part) = (tmp.path().join("full"), tmp.path().join("part"));
+    finished(run(&scene, &opts(&full, &set, None)).unwrap());
+    run(&scene, &opts(&part, &set, Some(150))).unwrap();
+    let capacity = |dir: &Path| {
+        header_value(
+            &std::fs::read(dir.join("checkpoint_history.h5")).unwrap(),
+            "capacity",
+        )
+    };
+    // 64, 128, 256 rows (or fewer steps between when checkpoints coalesce).
+    assert_eq!(
+        capacity(&part),
+        256,
+        "a power of two ≥ 151 rows by step 150"
+    );
+    finished(resume(&part.join("checkpoint.h5"), &ResumeOptions::default()).unwrap());
+    assert_eq!(capacity(&part), 301, "at most N + 1 rows");
+    assert_same_series(&full, &part, "resumed across the history file's growth");
+}
+
+/// `time.steps = 10^12` is refused by `check` and by `run` (exit 2, the estimate and the key
+/// to change) before anything is written.
+#[test]
+fn a_run_this_machine_cannot_hold_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    for expr in [false, true] {
+        let scene = paper_scene(
+            tmp.path(),
+            &format!("s{expr}.toml"),
+            "paper/rect_008.msh",
+            expr,
+        );
+        let out = tmp.path().join(format!("o{expr}"));
+        for cmd in ["check", "run"] {
+            let mut args = vec![
+                cmd,
+                scene.to_str().unwrap(),
+                "--set",
+                "time.steps=1000000000000",
+            ];
+            if cmd == "run" {
+                args.extend(["--out", out.to_str().unwrap()]);
+            }
+            let o = viscontact(&args);
+            let stderr = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{cmd}: {stderr}");
+            assert!(
+                stderr.contains("time.steps") && stderr.contains("TB"),
+                "{cmd}: {stderr}"
+            );
+        }
+        assert!(!out.exists(), "a refused run writes nothing");
+    }
+}

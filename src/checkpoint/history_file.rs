@@ -49,9 +49,14 @@ struct Header {
     row_bytes: u64,
 }
 
-/// The capacity for `needed` rows of a run of `steps` steps, growing from `old`.
+/// The capacity for `needed` rows of a run of `steps` steps, growing from `old`: at least
+/// doubled and a power of two (at least 64), so that growths are few however the
+/// checkpoints fall, at most `steps` + 1 rows (all a run can need).
 pub(super) fn grown_capacity(old: usize, needed: usize, steps: usize) -> usize {
-    needed.max((2 * old).max(FIRST_CAPACITY).min(steps + 1))
+    let doubled = (2 * old)
+        .max(needed.next_power_of_two())
+        .max(FIRST_CAPACITY);
+    needed.max(doubled.min(steps.saturating_add(1)))
 }
 
 impl HistoryFile {
