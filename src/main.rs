@@ -47,8 +47,9 @@ enum Command {
         /// Output directory (default: the checkpoint's directory, whose series is continued).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Only time.end (the step size stays: T2/k must be whole), output.* and
-        /// checkpoint.* may be overridden, e.g. --set time.end=2.0.
+        /// Only time.end (the step size stays: T2/k must be whole), mesh.file (the same mesh
+        /// in a new place, checked by fingerprint), output.* and checkpoint.* may be
+        /// overridden, e.g. --set time.end=2.0.
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
         /// Do not show a progress bar even on a terminal.

@@ -229,7 +229,7 @@ pub(super) fn write_checkpoint(
                 "history_hash",
                 hist.hash.0,
                 "64-bit running hash of the bits of rows 0..history_rows-1 of \
-                 past_displacements (src/checkpoint.rs Hash64); resume checks it",
+                 past_displacements (src/checkpoint/fingerprint.rs Hash64); resume checks it",
                 "1",
             )?;
             str_attr(&memory, "history_file", HISTORY_FILE_NAME)?;
@@ -301,7 +301,7 @@ pub(super) fn write_checkpoint(
         "fingerprint",
         id.mesh_fingerprint,
         "64-bit hash of the node coordinates' bits and the triangles' node indices \
-         (src/checkpoint.rs mesh_fingerprint)",
+         (src/checkpoint/fingerprint.rs mesh_fingerprint)",
         "1",
     )?;
     scalar(

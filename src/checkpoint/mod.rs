@@ -30,27 +30,26 @@
 //!
 //! The past displacements of a general kernel grow by one row per step, so rewriting them in
 //! every checkpoint would make checkpoint k cost O(k). They live instead in
-//! `checkpoint_history.h5`, dataset `past_displacements` (rows × free dofs, chunked one row
-//! per chunk, maxshape unlimited in rows), which is only ever appended to: a checkpoint
-//! writes the rows new since the last one, fsyncs the file, and only then renames the new
-//! `checkpoint.h5`, which records how many rows are valid (`/memory/history_rows` = n) and a
-//! running 64-bit hash of them (`/memory/history_hash`). Two details keep the appends safe
-//! against a kill in the middle:
-//!
-//! - the file is created (through a temporary file and a rename) with all chunks of its
-//!   capacity allocated up front (`H5D_ALLOC_TIME_EARLY`, no fill), so an append writes raw
-//!   data into chunks that already exist and changes no HDF5 metadata (no chunk-index node
-//!   is split or rewritten); one row per chunk, so a torn write can only touch rows beyond
-//!   the recorded length, which resume ignores and overwrites;
-//! - resume reads the valid rows back and checks their hash, so a history file that does
-//!   not belong to the checkpoint (another run wrote it, or it was damaged) is refused, never
-//!   silently used.
-//!
-//! The capacity is the run's number of steps; a resume that extends the run past it (or
-//! writes into another directory) copies the valid rows into a new, larger file, once,
-//! through a temporary file and a rename. The dataset's shape is its capacity; rows past
-//! `history_rows` are unused. `checkpoint.h5` holds an HDF5 external link
+//! `checkpoint_history.h5`, dataset `past_displacements` (capacity × free dofs, contiguous,
+//! allocated at creation without fill), which is only ever appended to: a checkpoint writes
+//! the rows new since the last one (positioned writes at their byte offsets, so no HDF5
+//! metadata ever changes), fsyncs the file, and only then renames the new `checkpoint.h5`,
+//! which records how many rows are valid (`/memory/history_rows` = n) and a running 64-bit
+//! hash of them (`/memory/history_hash`). A torn append can only touch rows beyond the
+//! recorded length, which resume ignores and overwrites. The capacity grows with the run by
+//! powers of two (a new file, rows copied, temp + rename; `history_file.rs`), so the old
+//! checkpoint stays valid against the new file. `checkpoint.h5` holds an HDF5 external link
 //! `/memory/past_displacements` to it, so h5py opening the checkpoint finds the history there.
+//!
+//! # Integrity
+//!
+//! Both files begin with a 512-byte HDF5 user block (`seal.rs`) holding a CRC-32: of every
+//! byte after it for `checkpoint.h5` (computed over the final bytes, also when a later
+//! checkpoint is the template patched in place), of the header and the HDF5 metadata for the
+//! history file, whose rows are covered by the running hash instead. Resume checks both
+//! before libhdf5 parses anything and reads the history rows by offset, so a damaged file
+//! is refused with exit 2 naming it, never parsed into a crash or a silent answer. Format
+//! version 1 (no user block) cannot be verified and is refused.
 //!
 //! # Cost
 //!
