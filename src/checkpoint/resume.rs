@@ -23,9 +23,12 @@ pub(super) fn overridable(key: &str) -> bool {
 
 impl Checkpoint {
     /// The scene of a resumed run: the stored scene text with `overrides` applied. Only
-    /// `time.end`, `output.*` and `checkpoint.*` may be overridden; `time.end = T2` keeps the
-    /// step size k and sets `time.steps` = T2/k, which must be an integer (within 1e-9) not
-    /// below the checkpoint's step. `mesh.file` is resolved against the stored scene path.
+    /// `time.end`, `mesh.file`, `output.*` and `checkpoint.*` may be overridden;
+    /// `time.end = T2` keeps the step size k and sets `time.steps` = T2/k, which must be an
+    /// integer (within 1e-9) not below the checkpoint's step. The stored `mesh.file` is
+    /// resolved against the stored scene path; an overriding one (a run moved to another
+    /// place) against the working directory, and [`Checkpoint::check`] then requires the
+    /// recorded fingerprints.
     pub fn scene(&self, overrides: &[String]) -> Result<Scene> {
         let shown = self.path.display();
         let mut all = Vec::new();
