@@ -10,6 +10,8 @@
 //!    checkpoint, waited for, at steps n of a 256-step run. It stays flat: each checkpoint
 //!    appends the new rows only.
 //!
+//! 3. The CRC-32 of a checkpoint's bytes (the integrity check), per checkpoint.
+//!
 //! Run: `cargo run --release --example bench_checkpoint [REPEAT]` (from the repository root).
 
 use std::path::Path;
@@ -104,6 +106,26 @@ fn main() {
         latency.push((tl.n(), t.elapsed().as_secs_f64()));
     }
     writer.finish().expect("checkpoint");
+    // 3. The integrity check's own cost: the CRC-32 over a checkpoint's bytes, which every
+    //    checkpoint computes once and resume once more (src/checkpoint/seal.rs).
+    for (what, path) in [
+        ("Prony, rect_064", tmp.join("run2/checkpoint.h5")),
+        ("general kernel, rect_032", dir.join("checkpoint.h5")),
+    ] {
+        let bytes = std::fs::read(&path).expect("a checkpoint");
+        let t: Vec<f64> = (0..101)
+            .map(|_| {
+                let t = Instant::now();
+                std::hint::black_box(crc32fast::hash(std::hint::black_box(&bytes)));
+                t.elapsed().as_secs_f64()
+            })
+            .collect();
+        println!(
+            "CRC-32 of a checkpoint ({what}, {} kB): median {:.1} µs",
+            bytes.len() / 1000,
+            median(t) * 1e6
+        );
+    }
     println!(
         "general kernel (direct sum), rect_032 ({} free dofs), one checkpoint per step, \
          written and waited for:",

@@ -15,6 +15,7 @@ pub mod history;
 pub mod mesh;
 pub mod output;
 pub mod plot;
+pub mod resources;
 pub mod run;
 pub mod scene;
 pub mod solver;

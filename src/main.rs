@@ -47,8 +47,9 @@ enum Command {
         /// Output directory (default: the checkpoint's directory, whose series is continued).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Only time.end (the step size stays: T2/k must be whole), output.* and
-        /// checkpoint.* may be overridden, e.g. --set time.end=2.0.
+        /// Only time.end (the step size stays: T2/k must be whole), mesh.file (the same mesh
+        /// in a new place, checked by fingerprint), output.* and checkpoint.* may be
+        /// overridden, e.g. --set time.end=2.0.
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
         /// Do not show a progress bar even on a terminal.
@@ -278,15 +279,9 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         ),
         (_, None) => println!("stability  no explicit elastic or memory term: no step limit"),
     }
-    let history_bytes = match &scene.relaxation {
-        Some(viscontact::scene::Kernel::Prony(t)) => t.len() * disc.n_free * 8,
-        Some(_) => (scene.steps + 1) * disc.n_free * 8,
-        None => 0,
-    };
-    println!(
-        "memory     history state ≈ {:.1} MB",
-        history_bytes as f64 / 1e6
-    );
+    let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
+    println!("resources  {estimate}");
+    estimate.check(&viscontact::run::default_out(&scene)?)?;
     for w in viscontact::effects::warnings(&scene, &disc) {
         println!("warning    {w}");
     }

@@ -5,6 +5,7 @@
 
 mod common;
 
+use common::{assert_same_series, frames, paper_scene, viscontact};
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -313,8 +314,11 @@ fn history_file_is_appended_in_place() {
     let rows: u64 = mem.dataset("history_rows").unwrap().read_scalar().unwrap();
     assert_eq!(rows, 16);
     let ds = f.dataset("memory/past_displacements").unwrap();
-    assert!(ds.is_chunked() && ds.is_resizable());
-    assert_eq!(ds.shape()[0], 16);
+    assert_eq!(
+        ds.shape()[0],
+        17,
+        "room for the run's rows: steps + 1 (< 64)"
+    );
 }
 
 // ---- h5py ------------------------------------------------------------------------------
@@ -324,7 +328,8 @@ import sys, h5py, numpy as np
 path, kind = sys.argv[1], sys.argv[2]
 f = h5py.File(path, "r")
 assert f.attrs["format"] == "viscontact checkpoint", f.attrs["format"]
-assert int(f.attrs["format_version"]) == 1
+assert int(f.attrs["format_version"]) == 2
+assert open(path, "rb").read(22) == b"viscontact checkpoint\n", "the integrity header"
 for a in ("writer", "description", "run_id"):
     assert a in f.attrs, a
 expected = ["step", "time", "step_size", "state/u", "state/u_sum", "state/u_comp", "state/w",
@@ -361,7 +366,7 @@ else:
     assert f["memory/history_hash"].dtype == np.uint64
     h = f["memory/past_displacements"]
     assert rows == n and h.shape[0] >= rows and h.shape[1] == u.shape[0], (rows, h.shape)
-    assert h.chunks == (1, u.shape[0]) and h.maxshape == (None, u.shape[0])
+    assert h.chunks is None and h.shape[0] <= 17
     assert not h[0].any(), "u_0 = 0"
     w = f["state/w"][:]
     assert np.allclose(h[rows - 1] + k * w, u, rtol=0, atol=1e-12 * abs(u).max())
@@ -453,6 +458,7 @@ fn tampered(cp: &Path, name: &str, edit: impl FnOnce(&hdf5::File)) -> PathBuf {
     let f = hdf5::File::open_rw(&copy).unwrap();
     edit(&f);
     f.close().unwrap();
+    viscontact::checkpoint::reseal(&copy).unwrap();
     copy
 }
 
@@ -695,4 +701,235 @@ fn displacement_sum_does_not_drift_over_1e5_steps() {
         compensated / ulp,
         naive / ulp
     );
+}
+
+// ---- damage (issue 12 item 3) ----------------------------------------------------------------
+
+/// `resume` of `cp` (into `out`) must exit 2 naming `name` and saying "damaged": never 0,
+/// never a signal.
+fn refused_as_damaged(cp: &Path, out: &Path, name: &str, what: &str) {
+    let o = viscontact(&[
+        "resume",
+        cp.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{what}: resume gave {:?}: {stderr}",
+        o.status
+    );
+    assert!(
+        stderr.contains(name) && stderr.contains("damaged"),
+        "{what}: {stderr}"
+    );
+}
+
+/// Random single bit flips anywhere in checkpoint.h5, of a Prony and of an expression-kernel
+/// run: every one is refused with exit 2 and a message, before libhdf5 could misread it.
+#[test]
+fn any_flipped_bit_in_a_checkpoint_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut rng = common::SplitMix(12);
+    for expr in [false, true] {
+        let cp = stopped_run(tmp.path(), &format!("r{expr}"), expr);
+        let good = std::fs::read(&cp).unwrap();
+        let damaged = cp.with_file_name("damaged.h5");
+        for trial in 0..200 {
+            let bit = rng.below(good.len() * 8);
+            let mut bytes = good.clone();
+            bytes[bit / 8] ^= 1 << (bit % 8);
+            std::fs::write(&damaged, &bytes).unwrap();
+            let what = format!(
+                "expr {expr}, trial {trial}, bit {bit} of {}",
+                good.len() * 8
+            );
+            refused_as_damaged(&damaged, &tmp.path().join("never"), "damaged.h5", &what);
+        }
+        assert!(!tmp.path().join("never").exists());
+        // The intact one still resumes (the damaged copy, not viscontact's, goes first).
+        std::fs::remove_file(&damaged).unwrap();
+        let o = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+}
+
+/// The history file's `key value` header line.
+fn header_value(bytes: &[u8], key: &str) -> usize {
+    let text = String::from_utf8_lossy(&bytes[..512]);
+    text.lines()
+        .find_map(|l| l.strip_prefix(key)?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {key} in {text:?}"))
+}
+
+/// Random single bit flips in checkpoint_history.h5: a flip in its header, its HDF5 metadata
+/// or the rows the checkpoint uses is refused (exit 2, a message naming the file); a flip in
+/// its unused preallocated rows changes nothing: resume succeeds with the series of the
+/// undamaged resume, bit for bit.
+#[test]
+fn any_flipped_bit_in_a_history_file_is_refused_or_harmless() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cp = stopped_run(tmp.path(), "r", true);
+    let run_dir = cp.parent().unwrap().to_path_buf();
+    let reference = tmp.path().join("reference");
+    common::copy_dir(&run_dir, &reference);
+    let o = viscontact(&[
+        "resume",
+        reference.join("checkpoint.h5").to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let good = std::fs::read(run_dir.join("checkpoint_history.h5")).unwrap();
+    let rows: u64 = hdf5::File::open(&cp)
+        .unwrap()
+        .dataset("memory/history_rows")
+        .unwrap()
+        .read_scalar()
+        .unwrap();
+    let offset = header_value(&good, "rows_offset");
+    let row_bytes = header_value(&good, "row_bytes");
+    let unused =
+        offset + rows as usize * row_bytes..offset + header_value(&good, "capacity") * row_bytes;
+    assert!(!unused.is_empty() && unused.end <= good.len());
+    let mut rng = common::SplitMix(34);
+    let (mut refused, mut harmless) = (0, 0);
+    for trial in 0..100 {
+        let bit = rng.below(good.len() * 8);
+        let dir = tmp.path().join(format!("t{trial}"));
+        common::copy_dir(&run_dir, &dir);
+        let mut bytes = good.clone();
+        bytes[bit / 8] ^= 1 << (bit % 8);
+        std::fs::write(dir.join("checkpoint_history.h5"), &bytes).unwrap();
+        let what = format!("trial {trial}, bit {bit} of {}", good.len() * 8);
+        let cp = dir.join("checkpoint.h5");
+        if unused.contains(&(bit / 8)) {
+            let o = viscontact(&["resume", cp.to_str().unwrap(), "--quiet"]);
+            assert!(
+                o.status.success(),
+                "{what}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            assert_eq!(frames(&dir), frames(&reference), "{what}");
+            harmless += 1;
+        } else {
+            refused_as_damaged(&cp, &dir, "checkpoint_history.h5", &what);
+            refused += 1;
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+    assert!(
+        refused > 20 && harmless > 5,
+        "{refused} refused, {harmless} harmless"
+    );
+}
+
+// ---- moved runs (issue 12 item 5) ------------------------------------------------------------
+
+/// A run directory and its mesh copied to another place (the original gone) resumes with
+/// `--set mesh.file=NEW` and gives the series of the run that never stopped; without it, the
+/// message says how; a different mesh is refused naming both files.
+#[test]
+fn a_moved_run_resumes_with_its_mesh_in_a_new_place() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (here, there) = (tmp.path().join("cluster"), tmp.path().join("laptop"));
+    std::fs::create_dir_all(&here).unwrap();
+    let cp = stopped_run(&here, "a", false);
+    let full = tmp.path().join("full");
+    let scene = here.join("a.toml");
+    finished(run(&scene, &opts(&full, &["time.steps=16"], None)).unwrap());
+
+    common::copy_dir(&here.join("a"), &there.join("run"));
+    std::fs::copy(here.join("a.msh"), there.join("moved.msh")).unwrap();
+    std::fs::remove_dir_all(&here).unwrap();
+    assert!(!cp.exists());
+    let cp = there.join("run/checkpoint.h5");
+
+    refused("mesh gone", &cp, &[], &["a.msh", "--set mesh.file=NEW"]);
+    let other = common::repo().join("tests/data/rect_004.msh");
+    let set_other = format!("mesh.file={}", other.display());
+    refused(
+        "other mesh",
+        &cp,
+        &["--set", &set_other],
+        &["rect_004.msh", "a.msh", "not the one the run used"],
+    );
+    let set_moved = format!("mesh.file={}", there.join("moved.msh").display());
+    let o = viscontact(&[
+        "resume",
+        cp.to_str().unwrap(),
+        "--set",
+        &set_moved,
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(frames(&there.join("run")), frames(&full));
+}
+
+// ---- hostile sizes (issue 12 item 4) ---------------------------------------------------------
+
+/// The history file grows with the run (64, 128, 256 rows, …, at most N + 1) instead of
+/// being allocated for all N steps, and a run resumed across the growth equals the run that
+/// never stopped.
+#[test]
+fn history_file_grows_with_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", true);
+    let set = ["time.steps=300", "checkpoint.every=7", "output.every=50"];
+    let (full, part) = (tmp.path().join("full"), tmp.path().join("part"));
+    finished(run(&scene, &opts(&full, &set, None)).unwrap());
+    run(&scene, &opts(&part, &set, Some(150))).unwrap();
+    let capacity = |dir: &Path| {
+        header_value(
+            &std::fs::read(dir.join("checkpoint_history.h5")).unwrap(),
+            "capacity",
+        )
+    };
+    // 64, 128, 256 rows (or fewer steps between when checkpoints coalesce).
+    assert_eq!(
+        capacity(&part),
+        256,
+        "a power of two ≥ 151 rows by step 150"
+    );
+    finished(resume(&part.join("checkpoint.h5"), &ResumeOptions::default()).unwrap());
+    assert_eq!(capacity(&part), 301, "at most N + 1 rows");
+    assert_same_series(&full, &part, "resumed across the history file's growth");
+}
+
+/// `time.steps = 10^12` is refused by `check` and by `run` (exit 2, the estimate and the key
+/// to change) before anything is written.
+#[test]
+fn a_run_this_machine_cannot_hold_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    for expr in [false, true] {
+        let scene = paper_scene(
+            tmp.path(),
+            &format!("s{expr}.toml"),
+            "paper/rect_008.msh",
+            expr,
+        );
+        let out = tmp.path().join(format!("o{expr}"));
+        for cmd in ["check", "run"] {
+            let mut args = vec![
+                cmd,
+                scene.to_str().unwrap(),
+                "--set",
+                "time.steps=1000000000000",
+            ];
+            if cmd == "run" {
+                args.extend(["--out", out.to_str().unwrap()]);
+            }
+            let o = viscontact(&args);
+            let stderr = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{cmd}: {stderr}");
+            assert!(
+                stderr.contains("time.steps") && stderr.contains("TB"),
+                "{cmd}: {stderr}"
+            );
+        }
+        assert!(!out.exists(), "a refused run writes nothing");
+    }
 }

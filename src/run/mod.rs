@@ -123,6 +123,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let lock = DirLock::acquire(&out, "run")?;
     let mesh = read_mesh(&scene)?;
     let disc = Discretization::new(&mesh, &scene)?;
+    crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
     let tl = TimeLoop::new(&scene, &disc)?;
     let (cells, per_cell) = mesh.cell_nodes();
     let series = Series::create(&out, &mesh.nodes, &cells, per_cell)?;
@@ -166,13 +167,15 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let scene = cp.scene(&opts.overrides)?;
     let mesh = read_mesh(&scene).map_err(|e| {
         Error::input(format!(
-            "{}: the run's mesh cannot be read: {e}",
+            "{}: the run's mesh cannot be read: {e} (a run moved to another place: give its \
+             mesh with --set mesh.file=NEW)",
             checkpoint_path.display()
         ))
     })?;
     let disc = Discretization::new(&mesh, &scene)?;
     cp.check(&scene, &mesh, &disc)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
+    crate::resources::Estimate::new(&scene, &disc, cp.n).check(&out)?;
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;

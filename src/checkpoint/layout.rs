@@ -1,0 +1,336 @@
+//! The checkpoint's HDF5 layout: every group, dataset and attribute (written through the
+//! library), and the datasets whose values change between checkpoints.
+
+use super::h5::{h5_create_sealed, scalar, str_attr, string_dataset, vector};
+use super::history_file::HistoryFile;
+use super::writer::{Snapshot, SnapshotMemory};
+use super::{Identity, RunLog, FORMAT, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
+use hdf5_metno as hdf5;
+use std::path::Path;
+
+/// The datasets whose values change from one checkpoint to the next, in file byte order
+/// (little endian, as the datasets are declared).
+pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Vec<u8>)> {
+    fn f64s(v: &[f64]) -> Vec<u8> {
+        v.iter().flat_map(|x| x.to_le_bytes()).collect()
+    }
+    let mut out = vec![
+        ("step", (s.n as u64).to_le_bytes().to_vec()),
+        ("time", (s.n as f64 * s.k).to_le_bytes().to_vec()),
+        ("state/u", f64s(&s.u)),
+        ("state/u_sum", f64s(&s.u_sum)),
+        ("state/u_comp", f64s(&s.u_comp)),
+        ("state/w", f64s(&s.w)),
+        ("state/z", f64s(&s.z)),
+        ("state/active", s.active.iter().map(|&a| a as u8).collect()),
+        (
+            "run/iterations",
+            iterations(&s.log, steps)
+                .iter()
+                .flat_map(|x| x.to_le_bytes())
+                .collect(),
+        ),
+        (
+            "run/max_violation",
+            s.log.max_violation.to_le_bytes().to_vec(),
+        ),
+        (
+            "run/max_kkt_residual",
+            s.log.max_kkt_residual.to_le_bytes().to_vec(),
+        ),
+    ];
+    match &s.memory {
+        SnapshotMemory::None => {}
+        SnapshotMemory::Prony(terms) => {
+            let m: Vec<f64> = terms.iter().flat_map(|t| t.m.iter().copied()).collect();
+            out.push(("memory/prony_state", f64s(&m)));
+        }
+        SnapshotMemory::Direct { .. } => {
+            out.push(("memory/history_rows", (s.n as u64).to_le_bytes().to_vec()));
+        }
+    }
+    out
+}
+
+/// Iterations of steps 0..n, then −1 up to a length that grows with n: the run's `steps` + 1
+/// entries, or fewer for long runs (at least 1024, a power of two ≥ n + 1), so that a run of
+/// N = 10^12 steps does not write (or allocate) N entries per checkpoint, while the length,
+/// and with it the `Template`, changes only log₂ N times.
+pub(super) fn iterations(log: &RunLog, steps: usize) -> Vec<i32> {
+    let len =
+        (steps.saturating_add(1)).min((log.iterations.len() + 1).next_power_of_two().max(1024));
+    let mut v: Vec<i32> = log
+        .iterations
+        .iter()
+        .map(|&i| i.min(i32::MAX as usize) as i32)
+        .collect();
+    v.resize(v.len().max(len), -1);
+    v
+}
+
+pub(super) fn write_checkpoint(
+    path: &Path,
+    id: &Identity,
+    row_node: &[u64],
+    s: &Snapshot,
+    steps: usize,
+    history: Option<&HistoryFile>,
+) -> hdf5::Result<()> {
+    let n_free = s.u.len();
+    let f = h5_create_sealed(path)?;
+    str_attr(&f, "format", FORMAT)?;
+    f.new_attr::<u32>()
+        .shape(())
+        .create("format_version")?
+        .write_scalar(&FORMAT_VERSION)?;
+    str_attr(
+        &f,
+        "writer",
+        concat!("viscontact ", env!("CARGO_PKG_VERSION")),
+    )?;
+    str_attr(
+        &f,
+        "description",
+        "restart state of a viscontact run (Problem 3.1 of Xu et al. 2021) before step \
+         `step` is solved; continue it with `viscontact resume THIS_FILE`",
+    )?;
+    str_attr(&f, "run_id", &id.run_id)?;
+
+    scalar(
+        &f,
+        "step",
+        s.n as u64,
+        "n: the next step to solve; steps 0..n-1 are done",
+        "1",
+    )?;
+    scalar(&f, "time", s.n as f64 * s.k, "t_n = n k", "s")?;
+    scalar(&f, "step_size", s.k, "k = T/N, the time step", "s")?;
+
+    let state = f.create_group("state")?;
+    let nf = [n_free];
+    vector(
+        &state,
+        "u",
+        &nf,
+        &s.u,
+        "u_n = u_0 + k Σ_{j<n} w_j, displacement at t_n (free dofs, see /mesh/dof_of) \
+         = u_sum + u_comp",
+        "m",
+    )?;
+    vector(
+        &state,
+        "u_sum",
+        &nf,
+        &s.u_sum,
+        "running sum of k w_j (Neumaier compensated summation)",
+        "m",
+    )?;
+    vector(
+        &state,
+        "u_comp",
+        &nf,
+        &s.u_comp,
+        "Neumaier compensation: rounding error not yet in u_sum",
+        "m",
+    )?;
+    vector(
+        &state,
+        "w",
+        &nf,
+        &s.w,
+        "w_{n-1}: velocity of the last solved step (free dofs)",
+        "m/s",
+    )?;
+    vector(
+        &state,
+        "z",
+        &[s.z.len()],
+        &s.z,
+        "multipliers of the last solved step: λ_i ≥ 0 on the Γ3,1 contact rows, then γ_i \
+         (|γ_i| ≤ μF∫φ_i) on the Γ3,2 friction rows (nodal forces); the warm start of step n",
+        "N/m",
+    )?;
+    let flags: Vec<u8> = s.active.iter().map(|&a| a as u8).collect();
+    vector(
+        &state,
+        "active",
+        &[flags.len()],
+        &flags,
+        "per row of z: 1 = contact active (Γ3,1) or sticking (Γ3,2) at the last solved step, \
+         0 = free or slipping; recomputed by the solver from z, stored for inspection",
+        "1",
+    )?;
+    vector(
+        &state,
+        "row_node",
+        &[row_node.len()],
+        row_node,
+        "mesh node of each row of z (contact rows first, then friction rows)",
+        "1",
+    )?;
+
+    let memory = f.create_group("memory")?;
+    match &s.memory {
+        SnapshotMemory::None => str_attr(&memory, "kind", "none")?,
+        SnapshotMemory::Prony(terms) => {
+            str_attr(&memory, "kind", "prony")?;
+            let a: Vec<f64> = terms.iter().map(|t| t.a).collect();
+            let decay: Vec<f64> = terms.iter().map(|t| t.decay).collect();
+            let b: Vec<f64> = terms.iter().map(|t| -t.decay.ln() / s.k).collect();
+            let m: Vec<f64> = terms.iter().flat_map(|t| t.m.iter().copied()).collect();
+            let nt = [terms.len()];
+            vector(
+                &memory,
+                "prony_a",
+                &nt,
+                &a,
+                "weights a_i of r(s) = Σ a_i exp(-b_i s)",
+                "Pa/s",
+            )?;
+            vector(
+                &memory,
+                "prony_b",
+                &nt,
+                &b,
+                "rates b_i of r(s) = Σ a_i exp(-b_i s) (recovered from prony_decay; \
+                 informational)",
+                "1/s",
+            )?;
+            vector(
+                &memory,
+                "prony_decay",
+                &nt,
+                &decay,
+                "one-step decay exp(-b_i k) of each term (exactly as used)",
+                "1",
+            )?;
+            vector(
+                &memory,
+                "prony_state",
+                &[terms.len(), n_free],
+                &m,
+                "m^(i)_n = k Σ_{j<n} exp(-b_i (t_n - t_j)) u_j, one row per term; \
+                 m_n = Σ a_i m^(i)_n",
+                "m s",
+            )?;
+        }
+        SnapshotMemory::Direct { .. } => {
+            str_attr(&memory, "kind", "direct")?;
+            let hist = history.expect("a direct-sum memory has a history file");
+            scalar(
+                &memory,
+                "history_rows",
+                s.n as u64,
+                "valid rows of past_displacements: u_0..u_{n-1} (= step)",
+                "1",
+            )?;
+            scalar(
+                &memory,
+                "history_hash",
+                hist.hash.0,
+                "64-bit running hash of the bits of rows 0..history_rows-1 of \
+                 past_displacements (src/checkpoint/fingerprint.rs Hash64); resume checks it",
+                "1",
+            )?;
+            str_attr(&memory, "history_file", HISTORY_FILE_NAME)?;
+            str_attr(
+                &memory,
+                "description",
+                "general kernel: m_n = k Σ_{j<n} r((n-j)k) u_j by the direct sum; \
+                 u_0..u_{n-1} are rows 0..history_rows-1 of past_displacements (an external \
+                 link to history_file, appended to at each checkpoint); history_hash is a \
+                 64-bit running hash of those rows' bits",
+            )?;
+            memory.link_external(HISTORY_FILE_NAME, HISTORY_DATASET, "past_displacements")?;
+        }
+    }
+
+    let run = f.create_group("run")?;
+    let iterations = iterations(&s.log, steps);
+    vector(
+        &run,
+        "iterations",
+        &[iterations.len()],
+        &iterations,
+        "step solver iterations of each step 0..N of the run (summary.json \
+         iterations.per_step); -1 for the steps n..N not solved yet",
+        "1",
+    )?;
+    scalar(
+        &run,
+        "max_violation",
+        s.log.max_violation,
+        "largest n·w over the Γ3,1 nodes and steps 0..n-1 (-inf: none yet)",
+        "m/s",
+    )?;
+    scalar(
+        &run,
+        "max_kkt_residual",
+        s.log.max_kkt_residual,
+        "largest relative KKT residual over steps 0..n-1",
+        "1",
+    )?;
+
+    let sc = f.create_group("scene")?;
+    string_dataset(
+        &sc,
+        "text",
+        &id.scene_text,
+        "the scene file (TOML) that ran, after --set overrides",
+    )?;
+    str_attr(&sc, "path", &id.scene_path)?;
+    str_attr(&sc, "absolute_path", &id.scene_path_absolute)?;
+    str_attr(
+        &sc,
+        "description",
+        "mesh.file in text is relative to the directory of absolute_path",
+    )?;
+
+    let mesh = f.create_group("mesh")?;
+    str_attr(&mesh, "file", &id.mesh_path)?;
+    mesh.new_attr::<u64>()
+        .shape(())
+        .create("nodes")?
+        .write_scalar(&(id.nodes as u64))?;
+    mesh.new_attr::<u64>()
+        .shape(())
+        .create("triangles")?
+        .write_scalar(&(id.triangles as u64))?;
+    scalar(
+        &mesh,
+        "fingerprint",
+        id.mesh_fingerprint,
+        "64-bit hash of the node coordinates' bits and the triangles' node indices \
+         (src/checkpoint/fingerprint.rs mesh_fingerprint)",
+        "1",
+    )?;
+    scalar(
+        &mesh,
+        "groups_fingerprint",
+        id.groups_fingerprint,
+        "64-bit hash of the physical groups: name, tag, dimension, facets, cells",
+        "1",
+    )?;
+    vector(
+        &mesh,
+        "dof_of",
+        &[id.nodes, id.dof_of.len() / id.nodes.max(1)],
+        &id.dof_of,
+        "free dof index of each node's x, y (and z in 3D) component (row = node), -1 on Γ1 \
+         (w = 0)",
+        "1",
+    )?;
+
+    let physics = f.create_group("physics")?;
+    str_attr(
+        &physics,
+        "description",
+        "every physics key of the scene (all but name, time, output, checkpoint) as \
+         'dotted.key' = TOML value; resume refuses a scene that differs",
+    )?;
+    for (k, v) in &id.physics {
+        str_attr(&physics, k, v)?;
+    }
+    f.close()?;
+    Ok(())
+}

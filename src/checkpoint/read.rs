@@ -1,0 +1,214 @@
+//! Reading a checkpoint back.
+
+use super::h5::{h5_file, has_hdf5_signature, str_attr_of, OpenMode, HDF5_SIGNATURE};
+use super::seal;
+use super::{Checkpoint, Identity, RunLog, StoredMemory, FORMAT, FORMAT_VERSION};
+use crate::{Error, Result};
+use hdf5::types::VarLenUnicode;
+use hdf5_metno as hdf5;
+use std::path::{Path, PathBuf};
+
+impl Checkpoint {
+    /// The directory the checkpoint is in.
+    pub fn dir(&self) -> PathBuf {
+        match self.path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
+    }
+
+    /// Reads and checks a checkpoint file. Refuses (input errors naming the file): a missing
+    /// file or one that is not a regular file, a file that is not HDF5, a truncated or damaged
+    /// one (its CRC-32, checked before libhdf5 parses anything, `seal.rs`), an HDF5 file that
+    /// is not a viscontact checkpoint, a format version without a checksum or newer than
+    /// this one.
+    pub fn read(path: &Path) -> Result<Checkpoint> {
+        let shown = path.display();
+        let cannot = |e: String| {
+            Error::input(format!(
+                "cannot read checkpoint '{shown}': {e}; give the checkpoint.h5 of a run \
+                 directory"
+            ))
+        };
+        match std::fs::metadata(path) {
+            Ok(m) if m.is_file() => {}
+            Ok(_) => return Err(cannot("not a regular file".into())),
+            Err(e) => return Err(cannot(e.to_string())),
+        }
+        let bytes = std::fs::read(path).map_err(|e| cannot(e.to_string()))?;
+        if seal::looks_sealed(&bytes) {
+            seal::verify_checkpoint(&bytes).map_err(|why| {
+                Error::input(format!(
+                    "{shown}: damaged checkpoint, refused: {why}; resume from an intact copy \
+                     of the run directory or start the run again"
+                ))
+            })?;
+        } else if bytes.starts_with(HDF5_SIGNATURE) {
+            // An HDF5 file without our header: someone else's file, or an unverifiable
+            // checkpoint of format version 1 (both told apart below, and refused).
+        } else if has_hdf5_signature(path).map_err(|e| cannot(e.to_string()))? {
+            return Err(Error::input(format!(
+                "{shown}: damaged checkpoint, refused: its 512-byte header is not a \
+                 viscontact checkpoint header (or this is an HDF5 file of another program); \
+                 resume from an intact copy of the run directory or start the run again"
+            )));
+        } else {
+            return Err(Error::input(format!(
+                "{shown}: not an HDF5 file, so not a viscontact checkpoint; give the \
+                 checkpoint.h5 of a run directory"
+            )));
+        }
+        let f = h5_file(OpenMode::Read, path).map_err(|e| {
+            Error::input(format!(
+                "{shown}: cannot open as HDF5 ({e}): the file is truncated or damaged; resume \
+                 from an intact checkpoint (a run writes checkpoint.h5 whole and renames it, \
+                 so the one a run left is intact unless something else changed it)"
+            ))
+        })?;
+        let format = f
+            .attr("format")
+            .and_then(|a| a.read_scalar::<VarLenUnicode>())
+            .map(|s| s.as_str().to_string())
+            .ok();
+        if format.as_deref() != Some(FORMAT) {
+            return Err(Error::input(format!(
+                "{shown}: an HDF5 file but not a viscontact checkpoint (its root attribute \
+                 'format' is {}, expected \"{FORMAT}\"); give the checkpoint.h5 that \
+                 `viscontact run` wrote",
+                format.map_or("missing".to_string(), |s| format!("{s:?}"))
+            )));
+        }
+        let version = f
+            .attr("format_version")
+            .and_then(|a| a.read_scalar::<u32>())
+            .map_err(|e| {
+                Error::input(format!(
+                    "{shown}: damaged checkpoint: attribute 'format_version' unreadable ({e})"
+                ))
+            })?;
+        if !seal::looks_sealed(&bytes) {
+            return Err(Error::input(format!(
+                "{shown}: checkpoint format version {version} carries no checksum, so its \
+                 integrity cannot be verified and it is refused (a damaged file could give \
+                 wrong results); resume it with the viscontact version that wrote it ({}) or \
+                 start the run again",
+                str_attr_of(&f, "writer").unwrap_or_else(|_| "unknown".into())
+            )));
+        }
+        if version > FORMAT_VERSION {
+            return Err(Error::input(format!(
+                "{shown}: checkpoint format version {version} is newer than this viscontact \
+                 reads (≤ {FORMAT_VERSION}); resume it with the viscontact version that \
+                 wrote it ({})",
+                str_attr_of(&f, "writer").unwrap_or_else(|_| "unknown".into())
+            )));
+        }
+        read_body(&f, path, version).map_err(|e| {
+            Error::input(format!(
+                "{shown}: damaged checkpoint ({e}); resume from an intact checkpoint or start \
+                 the run again"
+            ))
+        })
+    }
+}
+
+pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Result<Checkpoint> {
+    let ds = |name: &str| f.dataset(name);
+    let vec = |name: &str| -> hdf5::Result<Vec<f64>> { ds(name)?.read_raw::<f64>() };
+    let n = ds("step")?.read_scalar::<u64>()? as usize;
+    let time = ds("time")?.read_scalar::<f64>()?;
+    let k = ds("step_size")?.read_scalar::<f64>()?;
+    let mem = f.group("memory")?;
+    let kind = str_attr_of(&mem, "kind")?;
+    let memory = match kind.as_str() {
+        "none" => StoredMemory::None,
+        "prony" => {
+            let a = vec("memory/prony_a")?;
+            let decay = vec("memory/prony_decay")?;
+            let state = ds("memory/prony_state")?;
+            let flat = state.read_raw::<f64>()?;
+            let shape = state.shape();
+            if shape.len() != 2 || shape[0] != a.len() || decay.len() != a.len() {
+                return Err("memory/prony_* have inconsistent shapes".into());
+            }
+            let m = if shape[1] == 0 {
+                vec![Vec::new(); shape[0]]
+            } else {
+                flat.chunks(shape[1]).map(|c| c.to_vec()).collect()
+            };
+            StoredMemory::Prony { a, decay, m }
+        }
+        "direct" => StoredMemory::Direct {
+            file: str_attr_of(&mem, "history_file")?,
+            rows: mem.dataset("history_rows")?.read_scalar::<u64>()? as usize,
+            hash: mem.dataset("history_hash")?.read_scalar::<u64>()?,
+        },
+        other => return Err(format!("/memory kind {other:?} is unknown").into()),
+    };
+    let run = f.group("run")?;
+    let log = RunLog {
+        iterations: {
+            let all = run.dataset("iterations")?.read_raw::<i32>()?;
+            if all.len() < n || all[..n].iter().any(|&i| i < 0) {
+                return Err(format!("/run/iterations lacks the counts of steps 0..{n}").into());
+            }
+            all[..n].iter().map(|&i| i as usize).collect()
+        },
+        max_violation: run.dataset("max_violation")?.read_scalar::<f64>()?,
+        max_kkt_residual: run.dataset("max_kkt_residual")?.read_scalar::<f64>()?,
+    };
+    let sc = f.group("scene")?;
+    let mesh = f.group("mesh")?;
+    let physics_group = f.group("physics")?;
+    let mut physics = Vec::new();
+    for name in physics_group.attr_names()? {
+        if name != "description" {
+            physics.push((name.clone(), str_attr_of(&physics_group, &name)?));
+        }
+    }
+    physics.sort();
+    let id = Identity {
+        run_id: str_attr_of(f, "run_id")?,
+        scene_text: sc
+            .dataset("text")?
+            .read_scalar::<VarLenUnicode>()?
+            .as_str()
+            .to_string(),
+        scene_path: str_attr_of(&sc, "path")?,
+        scene_path_absolute: str_attr_of(&sc, "absolute_path")?,
+        mesh_path: str_attr_of(&mesh, "file")?,
+        mesh_fingerprint: mesh.dataset("fingerprint")?.read_scalar::<u64>()?,
+        groups_fingerprint: mesh.dataset("groups_fingerprint")?.read_scalar::<u64>()?,
+        nodes: mesh.attr("nodes")?.read_scalar::<u64>()? as usize,
+        triangles: mesh.attr("triangles")?.read_scalar::<u64>()? as usize,
+        physics,
+        dof_of: mesh.dataset("dof_of")?.read_raw::<i64>()?,
+    };
+    let cp = Checkpoint {
+        path: path.to_path_buf(),
+        version,
+        n,
+        time,
+        k,
+        id,
+        u: vec("state/u")?,
+        u_sum: vec("state/u_sum")?,
+        u_comp: vec("state/u_comp")?,
+        w: vec("state/w")?,
+        z: vec("state/z")?,
+        memory,
+        log,
+    };
+    if cp.log.iterations.len() != cp.n {
+        return Err(format!(
+            "/run/iterations has {} entries for step {}",
+            cp.log.iterations.len(),
+            cp.n
+        )
+        .into());
+    }
+    if !(cp.k > 0.0 && cp.k.is_finite()) {
+        return Err(format!("step_size {} is not a positive number", cp.k).into());
+    }
+    Ok(cp)
+}

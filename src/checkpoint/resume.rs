@@ -1,0 +1,275 @@
+//! Resuming: the scene of a resumed run, the checks that it continues the same physics on
+//! the same mesh, and the state put back into a time loop.
+
+use super::history_file::read_history;
+use super::{groups_fingerprint, mesh_fingerprint, physics_signature, Checkpoint, StoredMemory};
+use crate::fem::Discretization;
+use crate::history::{Memory, PronyTerm};
+use crate::mesh::Mesh;
+use crate::scene::{self, Scene};
+use crate::time_loop::TimeLoop;
+use crate::{Error, Result};
+use std::path::PathBuf;
+
+/// Keys a resume may override: the end time (the step size stays), output, checkpoints, and
+/// where the mesh is now (a run moved to another machine; the mesh itself must be the same,
+/// checked by its fingerprint).
+pub(super) fn overridable(key: &str) -> bool {
+    key == "time.end"
+        || key == "mesh.file"
+        || key.starts_with("output.")
+        || key.starts_with("checkpoint.")
+}
+
+impl Checkpoint {
+    /// The scene of a resumed run: the stored scene text with `overrides` applied. Only
+    /// `time.end`, `mesh.file`, `output.*` and `checkpoint.*` may be overridden;
+    /// `time.end = T2` keeps the step size k and sets `time.steps` = T2/k, which must be an
+    /// integer (within 1e-9) not below the checkpoint's step. The stored `mesh.file` is
+    /// resolved against the stored scene path; an overriding one (a run moved to another
+    /// place) against the working directory, and [`Checkpoint::check`] then requires the
+    /// recorded fingerprints.
+    pub fn scene(&self, overrides: &[String]) -> Result<Scene> {
+        let shown = self.path.display();
+        let mut all = Vec::new();
+        for o in overrides {
+            let (key, value) = o.split_once('=').ok_or_else(|| {
+                Error::input(format!(
+                    "--set {o:?}: expected KEY=VALUE, e.g. --set time.end=2.0"
+                ))
+            })?;
+            let key = key.trim();
+            if !overridable(key) {
+                return Err(Error::input(format!(
+                    "--set {key}: a resume continues the physics of {shown} and may only \
+                     change time.end, mesh.file (the same mesh in a new place), output.* and \
+                     checkpoint.*; to change {key}, start a new run with `viscontact run`"
+                )));
+            }
+            if key == "mesh.file" {
+                // Given on the command line, so relative to the working directory (not to the
+                // stored scene's directory, which may not exist on this machine).
+                let value = value.trim();
+                let value = value
+                    .strip_prefix('"')
+                    .and_then(|v| v.strip_suffix('"'))
+                    .unwrap_or(value);
+                let new = std::path::absolute(value).map_err(|e| {
+                    Error::input(format!(
+                        "--set mesh.file={value}: {e}; give the mesh's path"
+                    ))
+                })?;
+                let new = toml::Value::String(new.display().to_string());
+                all.push(format!("mesh.file={new}"));
+                continue;
+            }
+            if key == "time.end" {
+                let end: f64 = value.trim().parse().map_err(|_| {
+                    Error::input(format!(
+                        "--set time.end={}: not a number; give the new end time T2 in seconds",
+                        value.trim()
+                    ))
+                })?;
+                let ratio = end / self.k;
+                let steps = ratio.round();
+                if !(ratio.is_finite() && (ratio - steps).abs() <= 1e-9 * steps.max(1.0)) {
+                    return Err(Error::input(format!(
+                        "--set time.end={end}: T2/k = {ratio} is not a whole number of steps of \
+                         the run's step size k = {} ({shown}); choose T2 = N·k, e.g. {}",
+                        self.k,
+                        (ratio.ceil().max(1.0)) * self.k
+                    )));
+                }
+                let steps = steps as usize;
+                if steps < self.n {
+                    return Err(Error::input(format!(
+                        "--set time.end={end}: ends before the checkpoint's time t = {} (step \
+                         {}) of {shown}; choose T2 ≥ {}",
+                        self.time, self.n, self.time
+                    )));
+                }
+                all.push(format!("time.end={end:?}"));
+                all.push(format!("time.steps={steps}"));
+            } else {
+                all.push(o.clone());
+            }
+        }
+        let scene_path = self.scene_path();
+        let (text, file) = scene::parse_scene_text(&scene_path, self.id.scene_text.clone(), &all)
+            .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
+        let scene = Scene::from_file(&scene_path, text, file)
+            .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
+        if scene.steps < self.n {
+            return Err(Error::input(format!(
+                "{shown}: the stored scene has {} steps but the checkpoint is at step {}: \
+                 the file is inconsistent",
+                scene.steps, self.n
+            )));
+        }
+        Ok(scene)
+    }
+
+    /// The scene path to use: the path as the run was given it when that still names the
+    /// same file from here (so summary.json says the same), else the absolute one.
+    fn scene_path(&self) -> PathBuf {
+        let given = PathBuf::from(&self.id.scene_path);
+        match std::fs::canonicalize(&given) {
+            Ok(p) if p.display().to_string() == self.id.scene_path_absolute => given,
+            _ => PathBuf::from(&self.id.scene_path_absolute),
+        }
+    }
+
+    /// Refuses a mesh, physics or step size that differ from the checkpoint's, naming what.
+    pub fn check(&self, scene: &Scene, mesh: &Mesh, disc: &Discretization) -> Result<()> {
+        let shown = self.path.display();
+        let mut diffs = Vec::new();
+        if mesh_fingerprint(mesh) != self.id.mesh_fingerprint {
+            diffs.push(format!(
+                "the mesh {} is not the one the run used, {} (now {} nodes, {} cells; the run \
+                 had {} nodes, {} cells; node coordinates or connectivity differ): restore \
+                 that mesh file",
+                mesh.path.display(),
+                self.id.mesh_path,
+                mesh.nodes.len(),
+                mesh.n_cells(),
+                self.id.nodes,
+                self.id.triangles
+            ));
+        } else if groups_fingerprint(mesh) != self.id.groups_fingerprint {
+            diffs.push(format!(
+                "the physical groups of the mesh {} differ from those of the run's mesh {}: \
+                 restore that mesh file",
+                mesh.path.display(),
+                self.id.mesh_path
+            ));
+        }
+        // The mesh is compared by its fingerprint above, not by where its file is.
+        let moved = |k: &str| k == "mesh.file";
+        let now: Vec<_> = physics_signature(&scene.text)
+            .into_iter()
+            .filter(|(k, _)| !moved(k))
+            .collect();
+        let stored: Vec<_> = self.id.physics.iter().filter(|(k, _)| !moved(k)).collect();
+        for (k, v) in stored.iter().copied() {
+            match now.iter().find(|(k2, _)| k2 == k) {
+                Some((_, v2)) if v2 == v => {}
+                Some((_, v2)) => diffs.push(format!("{k}: the run had {v}, the scene says {v2}")),
+                None => diffs.push(format!("{k}: the run had {v}, the scene has no such key")),
+            }
+        }
+        for (k, v) in &now {
+            if !stored.iter().any(|(k2, _)| k2 == k) {
+                diffs.push(format!("{k}: the run had no such key, the scene says {v}"));
+            }
+        }
+        let k_scene = scene.k();
+        if (k_scene - self.k).abs() > 1e-9 * self.k {
+            diffs.push(format!(
+                "step size: the run had k = {}, the scene gives k = {} / {} = {k_scene}",
+                self.k, scene.end, scene.steps
+            ));
+        }
+        let dof_of: Vec<i64> = disc
+            .free
+            .iter()
+            .map(|d| d.map_or(-1, |i| i as i64))
+            .collect();
+        if diffs.is_empty() && dof_of != self.id.dof_of {
+            diffs.push(
+                "the clamped dofs (Γ1) differ from the run's: check mesh.groups.fixed".into(),
+            );
+        }
+        if diffs.is_empty() {
+            return Ok(());
+        }
+        Err(Error::input(format!(
+            "{shown}: cannot resume, the checkpoint does not match its scene:\n  - {}",
+            diffs.join("\n  - ")
+        )))
+    }
+
+    /// Puts the saved state into a freshly built time loop (of the scene from
+    /// [`Checkpoint::scene`]): n, k, u with its compensation, the memory, w and z. For a
+    /// general kernel the past displacements are read from the history file and their hash
+    /// checked.
+    pub fn restore(&self, tl: &mut TimeLoop) -> Result<()> {
+        let shown = self.path.display();
+        let n_free = tl.disc.n_free;
+        let sizes = [
+            ("state/u", self.u.len(), n_free),
+            ("state/u_sum", self.u_sum.len(), n_free),
+            ("state/u_comp", self.u_comp.len(), n_free),
+            ("state/w", self.w.len(), n_free),
+            ("state/z", self.z.len(), tl.rows.len()),
+        ];
+        for (name, have, want) in sizes {
+            if have != want {
+                return Err(Error::input(format!(
+                    "{shown}: {name} has {have} values but the scene's discretization needs \
+                     {want}: the checkpoint does not belong to this scene and mesh"
+                )));
+            }
+        }
+        let h = &mut tl.history;
+        let mismatch = |what: &str| {
+            Error::input(format!(
+                "{shown}: the stored memory is {what}, which the scene's relaxation kernel \
+                 does not match: the checkpoint does not belong to this scene"
+            ))
+        };
+        match (&mut h.memory, &self.memory) {
+            (Memory::None, StoredMemory::None) => {}
+            (Memory::Prony(terms), StoredMemory::Prony { a, decay, m }) => {
+                if terms.len() != a.len() {
+                    return Err(mismatch(&format!("{} Prony terms", a.len())));
+                }
+                for (i, t) in terms.iter_mut().enumerate() {
+                    // decay = exp(−b k) is recomputed by History::new from the scene's b and
+                    // the same k: equal bits unless the kernel changed.
+                    let expected = (t.decay.ln() / h.k) * self.k;
+                    if t.a.to_bits() != a[i].to_bits()
+                        || (expected.exp() - decay[i]).abs() > 1e-12 * decay[i].abs()
+                    {
+                        return Err(mismatch(&format!(
+                            "term {i}: a = {}, exp(-b k) = {}",
+                            a[i], decay[i]
+                        )));
+                    }
+                    if m[i].len() != n_free {
+                        return Err(mismatch(&format!("term {i} of the wrong size")));
+                    }
+                    *t = PronyTerm {
+                        a: a[i],
+                        decay: decay[i],
+                        m: m[i].clone(),
+                    };
+                }
+            }
+            (
+                Memory::Direct { past, r_lag },
+                StoredMemory::Direct {
+                    file, rows, hash, ..
+                },
+            ) => {
+                if *rows != self.n {
+                    return Err(mismatch(&format!("{rows} history rows at step {}", self.n)));
+                }
+                *past = read_history(&self.dir().join(file), *rows, *hash, n_free, &self.id)?;
+                r_lag.clear();
+            }
+            (_, StoredMemory::None) => return Err(mismatch("absent (no relaxation)")),
+            (_, StoredMemory::Prony { .. }) => return Err(mismatch("a Prony series")),
+            (_, StoredMemory::Direct { .. }) => {
+                return Err(mismatch("a general kernel's direct sum"))
+            }
+        }
+        h.k = self.k;
+        h.n = self.n;
+        h.u.clone_from(&self.u);
+        h.u_sum.clone_from(&self.u_sum);
+        h.u_comp.clone_from(&self.u_comp);
+        tl.w.clone_from(&self.w);
+        tl.z.clone_from(&self.z);
+        Ok(())
+    }
+}

@@ -1,0 +1,385 @@
+//! The background writer: snapshots handed over by the run, coalesced, and written by a
+//! thread (history rows, `checkpoint.h5.tmp`, fsync, rename).
+
+use super::h5::{fsync_dir, fsync_file, h5err};
+use super::history_file::{grown_capacity, HistoryFile};
+use super::layout::{variable_data, write_checkpoint};
+use super::seal;
+use super::template::Template;
+use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
+use crate::history::{Memory, PronyTerm};
+use crate::time_loop::TimeLoop;
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// The state saved at one checkpoint, copied out of the time loop (so that the run goes on
+/// while a background thread writes it).
+pub(super) struct Snapshot {
+    pub(super) n: usize,
+    pub(super) k: f64,
+    pub(super) u: Vec<f64>,
+    pub(super) u_sum: Vec<f64>,
+    pub(super) u_comp: Vec<f64>,
+    pub(super) w: Vec<f64>,
+    pub(super) z: Vec<f64>,
+    pub(super) active: Vec<bool>,
+    pub(super) memory: SnapshotMemory,
+    pub(super) log: RunLog,
+}
+
+pub(super) enum SnapshotMemory {
+    None,
+    Prony(Vec<PronyTerm>),
+    /// The past displacements not yet sent to the writer: rows `from..from + rows.len()`.
+    Direct {
+        from: usize,
+        rows: Vec<Vec<f64>>,
+    },
+}
+
+impl Snapshot {
+    /// Folds a newer snapshot into this unwritten one: the newer state wins, history rows
+    /// accumulate.
+    fn absorb(&mut self, newer: Snapshot) {
+        let older_rows = match &mut self.memory {
+            SnapshotMemory::Direct { rows, .. } => Some(std::mem::take(rows)),
+            _ => None,
+        };
+        let from = match &self.memory {
+            SnapshotMemory::Direct { from, .. } => *from,
+            _ => 0,
+        };
+        *self = match (older_rows, newer) {
+            (
+                Some(mut rows),
+                Snapshot {
+                    memory: SnapshotMemory::Direct { rows: more, .. },
+                    n,
+                    k,
+                    u,
+                    u_sum,
+                    u_comp,
+                    w,
+                    z,
+                    active,
+                    log,
+                },
+            ) => {
+                rows.extend(more);
+                Snapshot {
+                    n,
+                    k,
+                    u,
+                    u_sum,
+                    u_comp,
+                    w,
+                    z,
+                    active,
+                    memory: SnapshotMemory::Direct { from, rows },
+                    log,
+                }
+            }
+            (_, newer) => newer,
+        };
+    }
+}
+
+/// What the background writer and the run share.
+#[derive(Default)]
+pub(super) struct Mailbox {
+    /// The newest snapshot not yet taken by the writer.
+    pending: Option<Snapshot>,
+    /// The writer is writing a snapshot.
+    busy: bool,
+    /// No more snapshots will come.
+    closed: bool,
+    /// The first failure of the writer; reported to the run at its next checkpoint.
+    error: Option<Error>,
+}
+
+pub(super) struct Shared {
+    mailbox: std::sync::Mutex<Mailbox>,
+    changed: std::sync::Condvar,
+}
+
+/// Writes the checkpoints of one run into its directory, on a background thread.
+///
+/// [`Writer::write`] copies the state (O(dofs) plus the history rows new since the last
+/// checkpoint) and returns; a thread writes it (history rows, `checkpoint.h5.tmp`, fsync,
+/// rename), so the time loop does not wait for the disk. When checkpoints fall due faster
+/// than the disk takes them, a snapshot still waiting is replaced by the newer one (its
+/// history rows are kept): the checkpoint on disk is always a complete state of the run,
+/// at most one write behind. [`Writer::finish`] waits until the last one is on disk.
+pub struct Writer {
+    path: PathBuf,
+    /// History rows already handed to the writer thread.
+    rows_sent: usize,
+    shared: std::sync::Arc<Shared>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// The writer thread's side: the files.
+pub(super) struct Disk {
+    dir: PathBuf,
+    id: Identity,
+    /// The run's number of steps.
+    steps: usize,
+    history: Option<HistoryFile>,
+    row_node: Vec<u64>,
+    /// The bytes of the last checkpoint written through HDF5 and where its variable data
+    /// lie; later checkpoints patch them (see [`Template`]).
+    template: Option<Template>,
+}
+
+impl Disk {
+    /// The disk side of a run of `steps` steps into `dir`, no history file yet.
+    fn new(dir: &Path, id: Identity, steps: usize, tl: &TimeLoop) -> Disk {
+        Disk {
+            dir: dir.to_path_buf(),
+            id,
+            steps,
+            history: None,
+            row_node: tl.rows.rows.iter().map(|r| r.node as u64).collect(),
+            template: None,
+        }
+    }
+}
+
+impl Writer {
+    /// A writer for a run of `steps` steps into `dir`; `tl` gives the sizes.
+    pub fn new(dir: &Path, id: Identity, steps: usize, tl: &TimeLoop) -> Writer {
+        Writer::start(Disk::new(dir, id, steps, tl), 0)
+    }
+
+    /// A writer that continues `cp` in `dir` for a run of `steps` steps. The history file is
+    /// appended to in place when it is the checkpoint's own (grown when full); otherwise the
+    /// first checkpoint writes a new one with all rows (once).
+    pub fn resume(
+        dir: &Path,
+        id: Identity,
+        steps: usize,
+        tl: &TimeLoop,
+        cp: &Checkpoint,
+    ) -> Writer {
+        let mut disk = Disk::new(dir, id, steps, tl);
+        let mut rows_sent = 0;
+        if let StoredMemory::Direct { rows, hash, .. } = &cp.memory {
+            let same_dir = match (std::fs::canonicalize(dir), cp.dir().canonicalize()) {
+                (Ok(a), Ok(b)) => a == b,
+                _ => false,
+            };
+            let path = dir.join(HISTORY_FILE_NAME);
+            if same_dir {
+                disk.history = HistoryFile::open(&path, &disk.id, cp.u.len(), *rows, *hash).ok();
+                if disk.history.is_some() {
+                    rows_sent = *rows;
+                }
+            }
+        }
+        Writer::start(disk, rows_sent)
+    }
+
+    fn start(mut disk: Disk, rows_sent: usize) -> Writer {
+        let shared = std::sync::Arc::new(Shared {
+            mailbox: std::sync::Mutex::new(Mailbox::default()),
+            changed: std::sync::Condvar::new(),
+        });
+        let path = disk.dir.join(FILE_NAME);
+        let theirs = shared.clone();
+        let thread = std::thread::Builder::new()
+            .name("checkpoint writer".into())
+            .spawn(move || loop {
+                let snapshot = {
+                    let mut mb = theirs.mailbox.lock().expect("checkpoint mailbox");
+                    loop {
+                        if let Some(s) = mb.pending.take() {
+                            mb.busy = true;
+                            break Some(s);
+                        }
+                        if mb.closed {
+                            break None;
+                        }
+                        mb = theirs.changed.wait(mb).expect("checkpoint mailbox");
+                    }
+                };
+                let Some(snapshot) = snapshot else { return };
+                let result = disk.write(&snapshot);
+                let mut mb = theirs.mailbox.lock().expect("checkpoint mailbox");
+                mb.busy = false;
+                if let Err(e) = result {
+                    mb.error.get_or_insert(e);
+                    mb.closed = true;
+                    mb.pending = None;
+                }
+                theirs.changed.notify_all();
+            })
+            .expect("a thread for the checkpoint writer");
+        Writer {
+            path,
+            rows_sent,
+            shared,
+            thread: Some(thread),
+        }
+    }
+
+    /// `DIR/checkpoint.h5`.
+    pub fn path(&self) -> PathBuf {
+        self.path.clone()
+    }
+
+    /// Hands the checkpoint of `tl` (at step n = `tl.n()`, before solving it) to the writer
+    /// thread. `active`: the contact/stick flags of the last solved step's rows. Returns the
+    /// error of an earlier checkpoint that failed.
+    pub fn write(&mut self, tl: &TimeLoop, log: &RunLog, active: &[bool]) -> Result<()> {
+        let h = &tl.history;
+        let memory = match &h.memory {
+            Memory::None => SnapshotMemory::None,
+            Memory::Prony(terms) => SnapshotMemory::Prony(terms.clone()),
+            Memory::Direct { past, .. } => {
+                let from = self.rows_sent;
+                self.rows_sent = past.len();
+                SnapshotMemory::Direct {
+                    from,
+                    rows: past[from..].to_vec(),
+                }
+            }
+        };
+        let snapshot = Snapshot {
+            n: h.n,
+            k: h.k,
+            u: h.u.clone(),
+            u_sum: h.u_sum.clone(),
+            u_comp: h.u_comp.clone(),
+            w: tl.w.clone(),
+            z: tl.z.clone(),
+            active: active.to_vec(),
+            memory,
+            log: log.clone(),
+        };
+        let mut mb = self.shared.mailbox.lock().expect("checkpoint mailbox");
+        if let Some(e) = mb.error.take() {
+            return Err(e);
+        }
+        match &mut mb.pending {
+            Some(older) => older.absorb(snapshot),
+            None => mb.pending = Some(snapshot),
+        }
+        self.shared.changed.notify_all();
+        Ok(())
+    }
+
+    /// Waits until every checkpoint handed over so far is on disk (the writer stays open);
+    /// returns the first failure.
+    pub fn flush(&self) -> Result<()> {
+        let mut mb = self.shared.mailbox.lock().expect("checkpoint mailbox");
+        while mb.pending.is_some() || mb.busy {
+            mb = self.shared.changed.wait(mb).expect("checkpoint mailbox");
+        }
+        match mb.error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Waits until every checkpoint handed over is on disk; returns the first failure.
+    pub fn finish(mut self) -> Result<()> {
+        self.close()
+    }
+
+    fn close(&mut self) -> Result<()> {
+        {
+            let mut mb = self.shared.mailbox.lock().expect("checkpoint mailbox");
+            mb.closed = true;
+            self.shared.changed.notify_all();
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        let mut mb = self.shared.mailbox.lock().expect("checkpoint mailbox");
+        match mb.error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for Writer {
+    /// A run that fails still lets the checkpoint being written reach the disk.
+    fn drop(&mut self) {
+        let _ = self.close();
+    }
+}
+
+impl Disk {
+    /// First the new history rows (fsync'ed), then `checkpoint.h5.tmp`, fsync, rename, fsync
+    /// of the directory.
+    fn write(&mut self, s: &Snapshot) -> Result<()> {
+        if let SnapshotMemory::Direct { from, rows } = &s.memory {
+            match &mut self.history {
+                Some(h) => h.append(*from, rows, &self.id.run_id, self.steps)?,
+                None => {
+                    assert_eq!(*from, 0, "a new history file starts at row 0");
+                    self.history = Some(HistoryFile::create(
+                        &self.dir.join(HISTORY_FILE_NAME),
+                        &self.id.run_id,
+                        s.u.len(),
+                        grown_capacity(0, rows.len(), self.steps),
+                        rows,
+                    )?)
+                }
+            }
+        }
+        let path = self.dir.join(FILE_NAME);
+        let tmp = self.dir.join(format!("{FILE_NAME}.tmp"));
+        let data = variable_data(s, self.steps);
+        let history_hash = self.history.as_ref().map(|h| h.hash.0);
+        let fast = match (&mut self.template, history_hash) {
+            (Some(t), hash) => {
+                let mut data = data.clone();
+                if let Some(h) = hash {
+                    data.push(("memory/history_hash", h.to_le_bytes().to_vec()));
+                }
+                t.patch(&data).map(|bytes| {
+                    seal::seal_checkpoint(bytes);
+                    std::fs::write(&tmp, bytes).map_err(|e| {
+                        let _ = std::fs::remove_file(&tmp);
+                        Error::io(&path, e)
+                    })
+                })
+            }
+            (None, _) => None,
+        };
+        match fast {
+            Some(result) => result?,
+            None => {
+                write_checkpoint(
+                    &tmp,
+                    &self.id,
+                    &self.row_node,
+                    s,
+                    self.steps,
+                    self.history.as_ref(),
+                )
+                .map_err(|e| {
+                    let _ = std::fs::remove_file(&tmp);
+                    h5err(&path, e)
+                })?;
+                let mut bytes = std::fs::read(&tmp).map_err(|e| Error::io(&tmp, e))?;
+                seal::seal_checkpoint(&mut bytes);
+                std::fs::write(&tmp, &bytes).map_err(|e| {
+                    let _ = std::fs::remove_file(&tmp);
+                    Error::io(&path, e)
+                })?;
+                let mut data = data;
+                if let Some(h) = history_hash {
+                    data.push(("memory/history_hash", h.to_le_bytes().to_vec()));
+                }
+                self.template = Template::capture(&tmp, &data);
+            }
+        }
+        fsync_file(&tmp)?;
+        std::fs::rename(&tmp, &path).map_err(|e| Error::io(&path, e))?;
+        fsync_dir(&self.dir);
+        Ok(())
+    }
+}

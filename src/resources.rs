@@ -1,0 +1,172 @@
+//! What a run will hold in memory and write to disk, estimated before it starts from the
+//! scene's sizes, and refused when this machine cannot hold it (`time.steps = 10^12` once
+//! passed `check` and then aborted in an allocation, or grew a 631 GB history file).
+//!
+//! Only what grows with the number of steps N is counted; the mesh, the matrices and their
+//! factor are the same for N = 10 and N = 10^9 and are known to fit once setup has built
+//! them. With d free dofs, n nodes and c cells:
+//!
+//! - memory: a general kernel's direct sum keeps u_0..u_N (8 d (N+1) bytes) and r at every
+//!   lag (8 (N+1)), and the checkpoint writer may copy all rows once more; every kernel keeps
+//!   the per-step iteration counts (8 N);
+//! - disk: a frame every `output.every` steps (≈ 320 n + 24 c bytes each in the base64 VTU
+//!   of `output/vtu.rs`, measured: 384 kB for n = 1089, c = 2048), and for a general kernel
+//!   the history file (8 d (N+1) bytes).
+//!
+//! A run is refused when the memory estimate exceeds 80 % of `MemAvailable` (/proc/meminfo)
+//! or the disk estimate exceeds 80 % of the space free to this user on the output
+//! directory's file system (statvfs): the margin covers what the estimate leaves out and the
+//! other programs of the machine.
+
+use crate::fem::Discretization;
+use crate::scene::{Kernel, Scene};
+use crate::{Error, Result};
+use std::path::Path;
+
+/// The share of available memory or free disk a run may plan to use.
+const MARGIN: f64 = 0.8;
+
+/// A run's estimated memory and disk use, in bytes, for its steps from `from` on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate {
+    pub memory: f64,
+    pub disk: f64,
+    /// The key to change when the memory does not fit.
+    memory_key: &'static str,
+}
+
+impl Estimate {
+    /// The estimate for a run of `scene` (its `time.steps` N) continuing from step `from`
+    /// (0 for a new run; a resumed run writes only the rest).
+    pub fn new(scene: &Scene, disc: &Discretization, from: usize) -> Estimate {
+        let steps = scene.steps as f64;
+        let d = disc.n_free as f64;
+        let direct = matches!(scene.relaxation, Some(Kernel::Expr(_) | Kernel::Table(..)));
+        let rows = if direct { 8.0 * d * (steps + 1.0) } else { 0.0 };
+        let copies = if scene.checkpoint { 2.0 } else { 1.0 };
+        let memory = copies * rows + if direct { 8.0 * (steps + 1.0) } else { 0.0 } + 8.0 * steps;
+        let remaining = (scene.steps.saturating_sub(from) + 1) as f64;
+        let frames = (remaining / scene.output_every as f64).ceil() + 1.0;
+        let frame = 320.0 * disc.nodes.len() as f64 + 24.0 * disc.cells.len() as f64;
+        let history = if scene.checkpoint { rows } else { 0.0 };
+        Estimate {
+            memory,
+            disk: frames * frame + history,
+            memory_key: if direct {
+                "time.steps (a general kernel keeps every step's displacement; a Prony kernel, \
+                 material.relaxation.prony, keeps O(1) per step)"
+            } else {
+                "time.steps"
+            },
+        }
+    }
+
+    /// Refuses (exit 2, the estimate and what to change) a run this machine cannot hold:
+    /// memory beyond 80 % of what is available, disk beyond 80 % of what is free where `out`
+    /// (or its nearest existing parent) is. Unknown capacities (no /proc/meminfo) pass.
+    pub fn check(&self, out: &Path) -> Result<()> {
+        if let Some(avail) = available_memory() {
+            if self.memory > MARGIN * avail {
+                return Err(Error::input(format!(
+                    "the run would need ≈ {} of memory for its steps but this machine has {} \
+                     available (a run may plan {:.0} % of it): lower {}",
+                    human(self.memory),
+                    human(avail),
+                    100.0 * MARGIN,
+                    self.memory_key
+                )));
+            }
+        }
+        if let Some((free, fs)) = free_disk(out) {
+            if self.disk > MARGIN * free {
+                return Err(Error::input(format!(
+                    "the run would write ≈ {} but {} has {} free (a run may plan {:.0} % of \
+                     it): lower time.steps, raise output.every, or give --out on a larger disk",
+                    human(self.disk),
+                    fs.display(),
+                    human(free),
+                    100.0 * MARGIN
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl std::fmt::Display for Estimate {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        write!(
+            f,
+            "≈ {} of memory and {} of disk that grow with the steps",
+            human(self.memory),
+            human(self.disk)
+        )
+    }
+}
+
+fn human(bytes: f64) -> String {
+    match bytes {
+        b if b >= 1e12 => format!("{:.1} TB", b / 1e12),
+        b if b >= 1e9 => format!("{:.1} GB", b / 1e9),
+        b => format!("{:.1} MB", b / 1e6),
+    }
+}
+
+/// `MemAvailable` of /proc/meminfo, in bytes.
+fn available_memory() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024.0)
+}
+
+/// Bytes free to this user on the file system of `dir` or of its nearest existing parent,
+/// and that directory.
+fn free_disk(dir: &Path) -> Option<(f64, std::path::PathBuf)> {
+    let abs = std::path::absolute(dir).ok()?;
+    let existing = abs.ancestors().find(|p| p.exists())?.to_path_buf();
+    let c = std::ffi::CString::new(existing.as_os_str().as_encoded_bytes()).ok()?;
+    let mut s: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: `c` is a NUL-terminated path and `s` a statvfs the call fills in.
+    if unsafe { libc::statvfs(c.as_ptr(), &mut s) } != 0 {
+        return None;
+    }
+    Some((s.f_bavail as f64 * s.f_frsize as f64, existing))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_impossible_estimate_is_refused_naming_the_key() {
+        let e = Estimate {
+            memory: 1e30,
+            disk: 0.0,
+            memory_key: "time.steps",
+        };
+        if available_memory().is_some() {
+            let err = e.check(Path::new(".")).unwrap_err().to_string();
+            assert!(
+                err.contains("time.steps") && err.contains("memory"),
+                "{err}"
+            );
+        }
+        let e = Estimate {
+            memory: 0.0,
+            disk: 1e30,
+            memory_key: "time.steps",
+        };
+        let err = e.check(Path::new("no/such/dir")).unwrap_err().to_string();
+        assert!(
+            err.contains("output.every") && err.contains("free"),
+            "{err}"
+        );
+        let fits = Estimate {
+            memory: 1.0,
+            disk: 1.0,
+            memory_key: "time.steps",
+        };
+        fits.check(Path::new(".")).unwrap();
+    }
+}
