@@ -23,10 +23,10 @@
 
 use crate::effects::{self, Effects};
 use crate::fem::{mul_add, Discretization};
-use crate::history::History;
+use crate::history::{History, Plan};
 use crate::scene::{self, Scene};
 use crate::solver::{Factor, Rows, StepReport, StepSolver};
-use crate::stability;
+use crate::stability::Verdict;
 use crate::{Error, Result};
 
 pub struct TimeLoop<'p> {
@@ -37,6 +37,8 @@ pub struct TimeLoop<'p> {
     pub solver: StepSolver,
     pub rows: Rows,
     pub history: History,
+    /// How the memory sum is computed (the compressed kernel's fit, if any).
+    pub plan: Plan,
     /// w_n of the last solved step.
     pub w: Vec<f64>,
     /// Multipliers of the last solved step: λ on contact rows, γ on friction rows.
@@ -68,13 +70,15 @@ impl<'p> TimeLoop<'p> {
     pub fn new(scene: &'p Scene, disc: &'p Discretization) -> Result<Self> {
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+        let plan = Plan::new(scene)?;
         let implicit = match scene.history {
             scene::History::Left => {
-                check_stable(scene, disc)?;
+                // Refuses a step beyond the scheme's stability limit (exit 2).
+                Verdict::new(scene, disc, &plan).check(scene)?;
                 None
             }
             scene::History::Implicit => Some(
-                disc.implicit_matrix(scene.k(), scene.relaxation.as_ref().map(|r| r.eval(0.0))),
+                disc.implicit_matrix(scene.k(), plan.r0(scene.relaxation.as_ref())),
             ),
         };
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
@@ -82,7 +86,7 @@ impl<'p> TimeLoop<'p> {
         let factor = Factor::new(matrix, &rows.dofs())?;
         let solver = effects::step_solver(&effects, scene, matrix, &factor, &rows)?;
         let n = disc.n_free;
-        let history = History::new(n, scene.k(), scene.relaxation.as_ref());
+        let history = History::new(n, scene.k(), &plan);
         let m = if history.has_memory() {
             vec![0.0; n]
         } else {
@@ -97,6 +101,7 @@ impl<'p> TimeLoop<'p> {
             z: vec![0.0; rows.len()],
             rows,
             history,
+            plan,
             w: vec![0.0; n],
             m,
             b: vec![0.0; n],
@@ -169,29 +174,5 @@ impl<'p> TimeLoop<'p> {
     /// n → n + 1: u_{n+1} = u_n + k w_n and the memory update.
     pub fn advance(&mut self) {
         self.history.advance(&self.w);
-    }
-}
-
-/// Refuses a left endpoint run whose step exceeds the scheme's stability limit (exit 2),
-/// unless `[scheme] allow_unstable = true`.
-fn check_stable(scene: &Scene, disc: &Discretization) -> Result<()> {
-    let limit = stability::step_limit(disc, scene.relaxation.as_ref());
-    let k = scene.k();
-    match limit.k_max {
-        Some(k_max) if k > k_max && !scene.allow_unstable => Err(Error::input(format!(
-            "{}: the time step k = T/N = {k:e} exceeds the stability limit {k_max:e} of the \
-             paper's left endpoint scheme for this material (its elastic{} term is explicit). \
-             Either use time.steps ≥ {} or set [scheme] history = \"implicit\" \
-             (unconditionally stable, first order); [scheme] allow_unstable = true runs it \
-             anyway",
-            scene.path.display(),
-            if limit.includes_memory {
-                " and memory"
-            } else {
-                ""
-            },
-            (scene.end / k_max).ceil() as u64
-        ))),
-        _ => Ok(()),
     }
 }
