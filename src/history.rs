@@ -47,7 +47,10 @@ pub enum Plan {
     Compressed(Fit),
     /// The direct sum over r on the lags; `fallback` says why compression was not used when
     /// it was asked for (None: `memory = "exact"`).
-    Exact { lags: Lags, fallback: Option<String> },
+    Exact {
+        lags: Lags,
+        fallback: Option<String>,
+    },
 }
 
 impl Plan {

@@ -18,8 +18,8 @@
 //! constant b = 0 — and non-negative least squares weights (Lawson–Hanson) on a sample of the
 //! lags: every lag up to 64, then lags growing by 3 %, and the last. NNLS picks a sparse set
 //! of active rates; the zero weights are dropped. If the certified error on all lags is above
-//! the tolerance, the lags where the error peaks are added to the sample, the grid is made
-//! 1.25× denser, and the fit is repeated (at most `ROUNDS` times). Why this and not the
+//! the tolerance, the lags where the error peaks are added to the sample, the grid is
+//! bisected around every active rate, and the fit is repeated (at most `ROUNDS` times). Why this and not the
 //! trapezoid rule on s^(−α) = Γ(α)^{−1} ∫ t^{α−1} e^{−ts} dt followed by a Prony reduction:
 //! that rule needs the kernel's inverse Laplace transform, which an expression or a table does
 //! not give; NNLS on a grid needs only values, works for tables and stretched exponentials
@@ -69,10 +69,10 @@ impl Lags {
             if !v.is_finite() {
                 return Err(Error::input(format!(
                     "key '{key}': r(s) = {v} at s = {s} (lag {l} of the run's {n}, k = {k}); the \
-                     memory sum reads r on s = 0{}, k, 2k, …, T: give a kernel that is finite \
+                     memory sum reads r on s = {}k, 2k, …, T: give a kernel that is finite \
                      there{}",
                     if with_zero {
-                        " (implicit variant)"
+                        "0 (implicit variant), "
                     } else {
                         ""
                     },
@@ -110,13 +110,16 @@ pub struct Fit {
     pub seconds: f64,
 }
 
-/// Grid rates per decade for a tolerance: about 0.6 per digit, at least 3.
+/// Grid rates per decade for a tolerance: about 0.8 per digit, at least 3.
 fn density(tolerance: f64) -> f64 {
-    (0.6 * (-tolerance.log10())).max(3.0)
+    (0.8 * (-tolerance.log10())).max(3.0)
 }
 
 /// Refinement rounds after the first fit.
-const ROUNDS: usize = 2;
+const ROUNDS: usize = 16;
+
+/// Candidate rates beyond which refinement stops (each NNLS iteration is a dense solve).
+const MAX_RATES: usize = 240;
 
 /// Fits the lags within `tolerance` (relative to max|r|), or says why it cannot.
 pub fn fit(lags: &Lags, tolerance: f64) -> std::result::Result<Fit, String> {
@@ -133,10 +136,9 @@ pub fn fit(lags: &Lags, tolerance: f64) -> std::result::Result<Fit, String> {
     let n = lags.lag(lags.r.len() - 1);
     let k = lags.k;
     let mut rows = sample(lags);
-    let mut per_decade = density(tolerance);
+    let mut rates = grid(k, n as f64 * k, density(tolerance));
     let mut best: Option<(Vec<(f64, f64)>, f64)> = None;
     for _ in 0..=ROUNDS {
-        let rates = grid(k, n as f64 * k, per_decade);
         let weights = nnls(&design(lags, &rows, &rates), &values(lags, &rows));
         let terms: Vec<(f64, f64)> = weights
             .iter()
@@ -153,13 +155,16 @@ pub fn fit(lags: &Lags, tolerance: f64) -> std::result::Result<Fit, String> {
             break;
         }
         rows = refined(&rows, &errors);
-        per_decade *= 1.25;
+        rates = bisected(&rates, &weights);
+        if rates.len() > MAX_RATES {
+            break;
+        }
     }
     let (terms, error) = best.expect("at least one round");
     if error > tolerance {
         return Err(format!(
             "the best sum of exponentials with positive weights reaches a relative error of \
-             {error:.2e} on the lags, above the tolerance {tolerance:e} (a kernel that is not \
+             {error:.2e} on the lags, above the tolerance {tolerance:e} (likely a kernel that is not \
              completely monotone, e.g. a kinked table): set [material.relaxation] tolerance \
              ≥ {:.0e} to compress it, or memory = \"exact\"",
             10f64.powf(error.log10().ceil())
@@ -225,6 +230,27 @@ fn refined(rows: &[usize], errors: &[f64]) -> Vec<usize> {
     peaks.truncate(64);
     let mut out: Vec<usize> = rows.iter().copied().chain(peaks).collect();
     out.sort_unstable();
+    out.dedup();
+    out
+}
+
+/// The active rates, their neighbours and the geometric midpoints between them: a kernel
+/// whose spectrum is concentrated (a single exponential, a stretched exponential with β near
+/// 1) needs rates closer to its own than any fixed grid holds, since a positive mixture of
+/// other rates matches e^{−bs} only to the order of the mixture's spread. Rates far from
+/// every active one are dropped, so the candidate set stays about 5× the active one.
+fn bisected(rates: &[f64], weights: &[f64]) -> Vec<f64> {
+    let mut out = Vec::new();
+    for i in (0..rates.len()).filter(|&i| weights[i] > 0.0) {
+        out.push(rates[i]);
+        for j in [i.wrapping_sub(1), i + 1] {
+            if let Some(&b) = rates.get(j) {
+                out.push(b);
+                out.push((b * rates[i]).sqrt());
+            }
+        }
+    }
+    out.sort_by(|a, b| b.total_cmp(a));
     out.dedup();
     out
 }

@@ -204,9 +204,12 @@ impl Verdict {
             Verdict::Limit(StepLimit {
                 k_max: Some(k_max), ..
             })
-            | Verdict::Amplification(_, StepLimit {
-                k_max: Some(k_max), ..
-            }) if k > k_max => Err(Error::input(format!(
+            | Verdict::Amplification(
+                _,
+                StepLimit {
+                    k_max: Some(k_max), ..
+                },
+            ) if k > k_max => Err(Error::input(format!(
                 "{}: the time step k = T/N = {k:e} exceeds the stability limit {k_max:e} of the \
                  paper's left endpoint scheme for this material (its elastic{} term is \
                  explicit). Either use time.steps ≥ {} or {advice}",

@@ -77,9 +77,9 @@ impl<'p> TimeLoop<'p> {
                 Verdict::new(scene, disc, &plan).check(scene)?;
                 None
             }
-            scene::History::Implicit => Some(
-                disc.implicit_matrix(scene.k(), plan.r0(scene.relaxation.as_ref())),
-            ),
+            scene::History::Implicit => {
+                Some(disc.implicit_matrix(scene.k(), plan.r0(scene.relaxation.as_ref())))
+            }
         };
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
         // The step matrix is factored once, with the constrained boundary dofs ordered last.

@@ -23,7 +23,10 @@ fn paper_scene(dir: &Path, name: &str, mesh: &str, expr: bool) -> PathBuf {
         &format!("file = {:?}", common::mesh_path(mesh)),
     );
     let text = if expr {
-        text.replace("prony = [[1.0, 10.0]]", "expr = \"exp(-10*s)\"")
+        text.replace(
+            "prony = [[1.0, 10.0]]",
+            "expr = \"exp(-10*s)\"\nmemory = \"exact\"",
+        )
     } else {
         text
     };
