@@ -235,8 +235,8 @@ fn refined(rows: &[usize], errors: &[f64]) -> Vec<usize> {
 }
 
 /// The active rates, their neighbours and the geometric midpoints between them: a kernel
-/// whose spectrum is concentrated (a single exponential, a stretched exponential with β near
-/// 1) needs rates closer to its own than any fixed grid holds, since a positive mixture of
+/// whose spectrum is concentrated (a single exponential, a stretched exponential with β
+/// near one) needs rates closer to its own than any fixed grid holds, since a positive mixture of
 /// other rates matches e^{−bs} only to the order of the mixture's spread. Rates far from
 /// every active one are dropped, so the candidate set stays about 5× the active one.
 fn bisected(rates: &[f64], weights: &[f64]) -> Vec<f64> {

@@ -158,8 +158,13 @@ pub fn amplification(disc: &Discretization, lags: &Lags) -> f64 {
         for n in 0..n_max {
             let memory: f64 = rev[n_max - n..].iter().zip(&u).map(|(a, b)| a * b).sum();
             let next = (1.0 - k * lb) * u[n] - k * k * lr * memory;
-            peak = peak.max(next.abs());
-            if !(peak <= 1e6 * MAX_AMPLIFICATION) {
+            // A NaN (overflow) counts as unbounded growth.
+            peak = if next.is_finite() {
+                peak.max(next.abs())
+            } else {
+                f64::INFINITY
+            };
+            if peak > 1e6 * MAX_AMPLIFICATION {
                 return peak;
             }
             u.push(next);
@@ -221,7 +226,7 @@ impl Verdict {
                 },
                 (scene.end / k_max).ceil() as u64
             ))),
-            Verdict::Amplification(a, _) if !(a <= MAX_AMPLIFICATION) => {
+            Verdict::Amplification(a, _) if a.is_nan() || a > MAX_AMPLIFICATION => {
                 Err(Error::input(format!(
                     "{}: with the relaxation kernel run by the direct sum, the time step k = \
                      T/N = {k:e} is unstable for the paper's left endpoint scheme: the scheme's \
