@@ -6,10 +6,11 @@
 
 mod common;
 
+use common::{finished, run_options as opts};
 use std::path::{Path, PathBuf};
 use viscontact::expr::Expr;
 use viscontact::kernel_fit::{fit, Lags};
-use viscontact::run::{resume, run, Outcome, ResumeOptions, RunOptions, Summary};
+use viscontact::run::{resume, run, Outcome, ResumeOptions};
 use viscontact::scene::Kernel;
 
 /// examples/paper.toml on `mesh` with the relaxation lines replaced by `relaxation`.
@@ -23,23 +24,6 @@ fn paper_scene(dir: &Path, name: &str, mesh: &str, relaxation: &str) -> PathBuf 
         .replace("prony = [[1.0, 10.0]]", relaxation);
     assert!(text.contains(relaxation));
     common::write(dir, name, &text)
-}
-
-fn opts(out: &Path, set: &[&str], stop_after: Option<usize>) -> RunOptions {
-    RunOptions {
-        out: Some(out.to_path_buf()),
-        overrides: set.iter().map(|s| s.to_string()).collect(),
-        progress: false,
-        stop_after,
-        force: false,
-    }
-}
-
-fn finished(o: Outcome) -> Summary {
-    match o {
-        Outcome::Finished(s) => *s,
-        Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
-    }
 }
 
 fn expr(e: &str) -> Kernel {

@@ -77,3 +77,26 @@ pub fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
         .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
     d / max_abs(b).max(f64::MIN_POSITIVE)
 }
+
+/// Options of a library run into `out` with `--set` overrides, no progress bar.
+pub fn run_options(
+    out: &Path,
+    set: &[&str],
+    stop_after: Option<usize>,
+) -> viscontact::run::RunOptions {
+    viscontact::run::RunOptions {
+        out: Some(out.to_path_buf()),
+        overrides: set.iter().map(|s| s.to_string()).collect(),
+        progress: false,
+        stop_after,
+        force: false,
+    }
+}
+
+/// The summary of a run that must have finished.
+pub fn finished(o: viscontact::run::Outcome) -> viscontact::run::Summary {
+    match o {
+        viscontact::run::Outcome::Finished(s) => *s,
+        viscontact::run::Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
+    }
+}
