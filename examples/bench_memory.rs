@@ -4,11 +4,21 @@
 //! times, their ratio and max|u_N^compressed − u_N^exact| / max|u_N^exact|.
 //!
 //!   cargo run --release --example bench_memory [N]   (default 4096)
+//!   cargo run --release --example bench_memory tolerances
+//!
+//! `tolerances`: for ε = 1e-4 … 1e-12 and N = 1024, 4096 (against the exact sum) and 10^5
+//! (compressed only): terms, relative max difference of u_N, wall time.
 
 use std::time::Instant;
 use viscontact::time_loop::TimeLoop;
 
 fn u_final(scene: &std::path::Path, set: &[String]) -> (Vec<f64>, f64) {
+    let (u, t, _) = run(scene, set);
+    (u, t)
+}
+
+/// u_N, the wall time of setup + steps, and the number of Prony terms run.
+fn run(scene: &std::path::Path, set: &[String]) -> (Vec<f64>, f64, usize) {
     let (scene, _mesh, disc) = viscontact::run::setup(scene, set).unwrap();
     let start = Instant::now();
     let mut tl = TimeLoop::new(&scene, &disc).unwrap();
@@ -20,11 +30,50 @@ fn u_final(scene: &std::path::Path, set: &[String]) -> (Vec<f64>, f64) {
         }
         tl.advance();
     }
-    (tl.history.u.clone(), start.elapsed().as_secs_f64())
+    let terms = tl.plan.prony().map_or(0, |t| t.len());
+    (tl.history.u.clone(), start.elapsed().as_secs_f64(), terms)
+}
+
+fn max(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / max(b)
+}
+
+fn tolerances(scene: &std::path::Path) {
+    println!("| N | tolerance | terms | max|u_N − u_N^exact| / max|u_N^exact| | wall (s) |");
+    println!("|---:|---:|---:|---:|---:|");
+    for n in [1024usize, 4096, 100_000] {
+        let base = vec![
+            format!("time.steps={n}"),
+            format!("time.end={}", n as f64 / 32.0),
+        ];
+        let exact = (n <= 4096).then(|| {
+            let mut set = base.clone();
+            set.push("material.relaxation.memory=exact".into());
+            let (u, t, _) = run(scene, &set);
+            println!("| {n} | exact | – | – | {t:.2} |");
+            u
+        });
+        for tol in [1e-4, 1e-6, 1e-8, 1e-10, 1e-12] {
+            let mut set = base.clone();
+            set.push(format!("material.relaxation.tolerance={tol:e}"));
+            let (u, t, terms) = run(scene, &set);
+            let err = exact
+                .as_ref()
+                .map_or("–".to_string(), |e| format!("{:.1e}", rel(&u, e)));
+            println!("| {n} | {tol:.0e} | {terms} | {err} | {t:.2} |");
+        }
+    }
 }
 
 fn main() {
-    let n: usize = std::env::args().nth(1).map_or(4096, |a| a.parse().unwrap());
+    let arg = std::env::args().nth(1);
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(root.join("examples/paper.toml"))
         .unwrap()
@@ -34,6 +83,12 @@ fn main() {
     std::fs::create_dir_all(&dir).unwrap();
     let scene = dir.join("paper_power_law.toml");
     std::fs::write(&scene, text).unwrap();
+    if arg.as_deref() == Some("tolerances") {
+        tolerances(&scene);
+        std::fs::remove_dir_all(&dir).ok();
+        return;
+    }
+    let n: usize = arg.map_or(4096, |a| a.parse().unwrap());
     let set = |memory: &str| {
         vec![
             format!("time.steps={n}"),
@@ -49,8 +104,6 @@ fn main() {
         let (u, t) = u_final(&scene, &set("exact"));
         (u_exact, t_exact) = (u, [t_exact, vec![t]].concat());
     }
-    let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let diff: Vec<f64> = u_comp.iter().zip(&u_exact).map(|(a, b)| a - b).collect();
     let best = |t: &[f64]| t.iter().cloned().fold(f64::INFINITY, f64::min);
     println!(
         "N = {n}, k = 1/32: exact {:.2} s, compressed {:.2} s (best of 2 each, alternating): \
@@ -58,7 +111,7 @@ fn main() {
         best(&t_exact),
         best(&t_comp),
         best(&t_exact) / best(&t_comp),
-        max(&diff) / max(&u_exact)
+        rel(&u_comp, &u_exact)
     );
     std::fs::remove_dir_all(&dir).ok();
 }
