@@ -7,10 +7,14 @@
 //! 10^5..10^6 steps. For a Prony kernel r(s) = Σ a_i e^{−b_i s} each term keeps its own state
 //! m^(i)_n = k Σ_{j<n} e^{−b_i (t_n − t_j)} u_j, updated exactly in O(1) per step by
 //! m^(i)_{n+1} = e^{−b_i k} (m^(i)_n + k u_n); m_n = Σ a_i m^(i)_n. Any other kernel (an
-//! expression or a table) keeps u_0..u_{n−1} and evaluates the direct sum, O(n) per step.
-//! t_n − t_j is taken as (n − j)·k exactly.
+//! expression or a table) is by default compressed to a certified sum of exponentials
+//! (`kernel_fit`) and then runs the same recursion; with `memory = "exact"`, or when it
+//! cannot be fitted within its tolerance, it keeps u_0..u_{n−1} and evaluates the direct sum,
+//! O(n) per step. t_n − t_j is taken as (n − j)·k exactly.
 
-use crate::scene::Kernel;
+use crate::kernel_fit::{self, Fit, Lags};
+use crate::scene::{self, Kernel, Scene};
+use crate::Result;
 
 /// One Prony term a e^{−b s}: its weight, its one-step decay e^{−b k}, its state m^(i)_n.
 #[derive(Clone, Debug)]
@@ -33,6 +37,73 @@ pub enum Memory {
     },
 }
 
+/// How a run computes its memory sum, decided at setup from the scene (before any step).
+#[derive(Clone, Debug)]
+pub enum Plan {
+    None,
+    /// The scene's own Prony series.
+    Prony(Vec<(f64, f64)>),
+    /// An expression or table compressed to a certified Prony series.
+    Compressed(Fit),
+    /// The direct sum over r on the lags; `fallback` says why compression was not used when
+    /// it was asked for (None: `memory = "exact"`).
+    Exact {
+        lags: Lags,
+        fallback: Option<String>,
+    },
+}
+
+impl Plan {
+    /// Evaluates an expression or table kernel on every lag the run reads (r(k)..r(Nk), and
+    /// r(0) for the implicit variant) — a non-finite value is bad input naming the key — and
+    /// fits it when the scene asks for compression.
+    pub fn new(scene: &Scene) -> Result<Plan> {
+        let kernel = match &scene.relaxation {
+            None => return Ok(Plan::None),
+            Some(Kernel::Prony(terms)) => return Ok(Plan::Prony(terms.clone())),
+            Some(kernel) => kernel,
+        };
+        let key = match kernel {
+            Kernel::Table(..) => "material.relaxation.table",
+            _ => "material.relaxation.expr",
+        };
+        let implicit = scene.history == scene::History::Implicit;
+        let lags = Lags::new(kernel, scene.k(), scene.steps, implicit, key)
+            .map_err(|e| crate::Error::input(format!("{}: {e}", scene.path.display())))?;
+        Ok(match scene.compression {
+            None => Plan::Exact {
+                lags,
+                fallback: None,
+            },
+            Some(tolerance) => match kernel_fit::fit(&lags, tolerance) {
+                Ok(fit) => Plan::Compressed(fit),
+                Err(why) => Plan::Exact {
+                    lags,
+                    fallback: Some(why),
+                },
+            },
+        })
+    }
+
+    /// The Prony series the recursion runs, if any.
+    pub fn prony(&self) -> Option<&[(f64, f64)]> {
+        match self {
+            Plan::Prony(terms) => Some(terms),
+            Plan::Compressed(fit) => Some(&fit.terms),
+            _ => None,
+        }
+    }
+
+    /// r(0) as the run uses it (the implicit variant's newest memory weight).
+    pub fn r0(&self, kernel: Option<&Kernel>) -> Option<f64> {
+        match self {
+            Plan::None => None,
+            Plan::Compressed(fit) => Some(fit.terms.iter().map(|t| t.0).sum()),
+            _ => kernel.map(|k| k.eval(0.0)),
+        }
+    }
+}
+
 /// The state carried from step to step: n, u_n (compensated) and the memory.
 #[derive(Clone, Debug)]
 pub struct History {
@@ -50,10 +121,10 @@ pub struct History {
 impl History {
     /// The state at n = 0: u_0 = 0 (the paper's example; the initial displacement is zero)
     /// and m_0 = 0.
-    pub fn new(n_free: usize, k: f64, kernel: Option<&Kernel>) -> Self {
-        let memory = match kernel {
-            None => Memory::None,
-            Some(Kernel::Prony(terms)) => Memory::Prony(
+    pub fn new(n_free: usize, k: f64, plan: &Plan) -> Self {
+        let memory = match plan {
+            Plan::None => Memory::None,
+            Plan::Prony(terms) | Plan::Compressed(Fit { terms, .. }) => Memory::Prony(
                 terms
                     .iter()
                     .map(|&(a, b)| PronyTerm {
@@ -63,7 +134,7 @@ impl History {
                     })
                     .collect(),
             ),
-            Some(_) => Memory::Direct {
+            Plan::Exact { .. } => Memory::Direct {
                 r_lag: Vec::new(),
                 past: Vec::new(),
             },
@@ -162,8 +233,12 @@ mod tests {
         let table_like = Kernel::Expr(Box::new(
             crate::expr::Expr::parse("exp(-10*s) + 0.5*exp(-3*s)", &["s"], "r").unwrap(),
         ));
-        let mut hp = History::new(3, k, Some(&prony));
-        let mut hd = History::new(3, k, Some(&table_like));
+        let mut hp = History::new(3, k, &Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]));
+        let exact = Plan::Exact {
+            lags: Lags::new(&table_like, k, 200, false, "r").unwrap(),
+            fallback: None,
+        };
+        let mut hd = History::new(3, k, &exact);
         let (mut mp, mut md) = (vec![0.0; 3], vec![0.0; 3]);
         for n in 0..200 {
             let w = [(n as f64 * 0.1).sin(), 1.0, -0.5 * n as f64];
@@ -185,7 +260,7 @@ mod tests {
     fn compensated_sum_is_exact_for_constant_velocity() {
         // k = 0.1 is not a binary fraction: plain summation of 10^5 terms drifts visibly.
         let (k, n) = (0.1, 100_000);
-        let mut h = History::new(1, k, None);
+        let mut h = History::new(1, k, &Plan::None);
         let mut plain = 0.0f64;
         for _ in 0..n {
             h.advance(&[1.0]);

@@ -12,6 +12,7 @@ pub mod error;
 pub mod expr;
 pub mod fem;
 pub mod history;
+pub mod kernel_fit;
 pub mod mesh;
 pub mod output;
 pub mod plot;

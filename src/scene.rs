@@ -191,6 +191,20 @@ pub struct RelaxationSection {
     pub prony: Option<Vec<[f64; 2]>>,
     pub expr: Option<String>,
     pub table: Option<TableSection>,
+    /// "compressed" (default) or "exact"; for `expr` and `table` only.
+    pub memory: Option<MemoryMode>,
+    /// Certified max relative error of the compressed kernel on the lags (default 1e-10).
+    pub tolerance: Option<f64>,
+}
+
+/// How the memory sum of an expression or table kernel is computed.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MemoryMode {
+    /// A certified sum-of-exponentials fit run by the O(1) Prony recursion (`kernel_fit`).
+    Compressed,
+    /// The direct O(n) sum over every past displacement (the reference).
+    Exact,
 }
 
 #[derive(Deserialize, Debug)]
@@ -586,6 +600,9 @@ pub struct Scene {
     /// E, ν of (4.2); None when the elasticity term is disabled.
     pub elasticity: Option<(f64, f64)>,
     pub relaxation: Option<Kernel>,
+    /// For an expression or table kernel: compressed with this tolerance, or exact (None).
+    /// Always None for a Prony series (already O(1)).
+    pub compression: Option<f64>,
     pub contact: bool,
     pub friction: Option<Friction>,
     pub tractions: Vec<Traction>,
@@ -700,6 +717,32 @@ impl Scene {
             Some(r) if r.enabled => Some(kernel(r, path)?),
             _ => None,
         };
+        let compression = match (&relaxation, &f.material.relaxation) {
+            (Some(Kernel::Prony(_)), Some(r)) if r.memory.is_some() || r.tolerance.is_some() => {
+                return bad(
+                    "material.relaxation.memory",
+                    "a Prony series already runs by the exact O(1) recursion; 'memory' and \
+                     'tolerance' apply to 'expr' and 'table' kernels only: remove them",
+                )
+            }
+            (Some(Kernel::Expr(_) | Kernel::Table(..)), Some(r)) => {
+                let tolerance = r.tolerance.unwrap_or(1e-10);
+                if !(tolerance > 0.0 && tolerance < 1.0) {
+                    return bad(
+                        "material.relaxation.tolerance",
+                        &format!(
+                            "is {tolerance}; the relative error of the compressed kernel must \
+                             lie in (0, 1), e.g. 1e-10"
+                        ),
+                    );
+                }
+                match r.memory.unwrap_or(MemoryMode::Compressed) {
+                    MemoryMode::Compressed => Some(tolerance),
+                    MemoryMode::Exact => None,
+                }
+            }
+            _ => None,
+        };
         let friction = match &f.friction {
             Some(fr) if fr.enabled => {
                 let normal_stress =
@@ -811,6 +854,7 @@ impl Scene {
             zeta,
             elasticity,
             relaxation,
+            compression,
             contact: f.contact.as_ref().is_some_and(|c| c.enabled),
             friction,
             tractions,

@@ -16,11 +16,36 @@
 //!
 //! For each mode the recursion above is a (1 + p)×(1 + p) matrix in (u, m^(1..p)); the step
 //! limit is the largest k below which its spectral radius stays ≤ 1 (found by bisection on a
-//! logarithmic scan). Without memory this is k ≤ 2/λ_B. For a kernel that is not a Prony
-//! series the memory term's contribution is not included (the limit printed says so).
+//! logarithmic scan). Without memory this is k ≤ 2/λ_B. A compressed expression or table
+//! kernel (`kernel_fit`) is a Prony series, and the run is exactly the scheme with it, so it
+//! gets this exact limit too.
+//!
+//! # Kernels run by the direct sum (`memory = "exact"`, or a kernel that could not be fitted)
+//!
+//! Here the limit comes from the kernel on the run's own lags r_l = r(lk), l = 1..N. In each
+//! mode the scheme is the scalar Volterra recursion
+//!
+//!   u_{n+1} = (1 − kλ_B) u_n − k² λ_R Σ_{l=1}^{n} r_l u_{n−l},
+//!
+//! linear and shift-invariant, so every run of the mode is a superposition of shifted copies
+//! of its response h_n to u_0 = 1 (f = 0). [`amplification`] computes that response for
+//! n ≤ N exactly as the scheme would (O(N²) per mode: negligible against the O(N² · dofs) of
+//! the direct-sum run itself) and returns max_n |h_n|. The guard refuses the step when it
+//! exceeds [`MAX_AMPLIFICATION`]. Why that is safe: for a kernel of positive type (every
+//! completely monotone kernel, every kernel a Prony series can fit) the exact modal solution
+//! obeys ½u(t)² = ½u_0² − λ_B∫u² − λ_R∫u (r∗u) ≤ ½u_0², so |h| ≤ 1 is what a faithful
+//! discretization returns; an explicit step past its limit amplifies geometrically, reaching
+//! any bound within the run (100·e^{−s} as an expression at k = 1/32: 1e33). Nothing is
+//! assumed about the kernel's shape, and the check is on the run's actual N and k, so a
+//! kernel that is stable only for a while is judged on the horizon it runs. A kernel that is
+//! not of positive type may have a genuinely growing solution; the guard refuses it too,
+//! and `[scheme] allow_unstable = true` runs it anyway.
 
 use crate::fem::{Discretization, Isotropic};
-use crate::scene::Kernel;
+use crate::history::Plan;
+use crate::kernel_fit::Lags;
+use crate::scene::{self, Scene};
+use crate::{Error, Result};
 use faer::Mat;
 
 /// The largest stable step of the left endpoint scheme.
@@ -58,12 +83,13 @@ fn radius(k: f64, lambda_b: f64, lambda_r: f64, prony: &[(f64, f64)]) -> f64 {
     }
 }
 
-/// The largest k for which every mode is stable.
-pub fn step_limit(disc: &Discretization, kernel: Option<&Kernel>) -> StepLimit {
-    let (prony, includes_memory): (Vec<(f64, f64)>, bool) = match kernel {
-        None => (Vec::new(), true),
-        Some(Kernel::Prony(t)) => (t.clone(), true),
-        Some(_) => (Vec::new(), false),
+/// The largest k for which every mode is stable, for a Prony series (`None`: no memory).
+/// `includes_memory` is false only for a kernel run by the direct sum, whose memory term is
+/// judged by [`amplification`] instead.
+pub fn step_limit(disc: &Discretization, plan: &Plan) -> StepLimit {
+    let (prony, includes_memory): (Vec<(f64, f64)>, bool) = match plan {
+        Plan::Exact { .. } => (Vec::new(), false),
+        _ => (plan.prony().unwrap_or(&[]).to_vec(), true),
     };
     if disc.b.is_none() && prony.is_empty() {
         return StepLimit {
@@ -110,6 +136,108 @@ pub fn step_limit(disc: &Discretization, kernel: Option<&Kernel>) -> StepLimit {
     StepLimit {
         k_max: Some(lo),
         includes_memory,
+    }
+}
+
+/// The largest modal response max_n |h_n| that counts as stable (see the module doc).
+pub const MAX_AMPLIFICATION: f64 = 10.0;
+
+/// max over both modes and n ≤ N of |h_n|, the response of the direct-sum recursion to
+/// u_0 = 1 on the run's lags (`lags.r` without r(0), which the left endpoint rule does not
+/// read). Stops early once the response passes 10⁶·[`MAX_AMPLIFICATION`].
+pub fn amplification(disc: &Discretization, lags: &Lags) -> f64 {
+    let k = lags.k;
+    let r = &lags.r[usize::from(lags.with_zero)..];
+    let n_max = r.len();
+    // rev[n_max − l] = r_l, so that Σ_{l=1}^{n} r_l u_{n−l} is a contiguous dot product.
+    let rev: Vec<f64> = r.iter().rev().copied().collect();
+    let mut peak: f64 = 1.0;
+    for (lb, lr) in modes(disc.a, disc.b, disc.r, disc.dim) {
+        let mut u = Vec::with_capacity(n_max + 1);
+        u.push(1.0f64);
+        for n in 0..n_max {
+            let memory: f64 = rev[n_max - n..].iter().zip(&u).map(|(a, b)| a * b).sum();
+            let next = (1.0 - k * lb) * u[n] - k * k * lr * memory;
+            // A NaN (overflow) counts as unbounded growth.
+            peak = if next.is_finite() {
+                peak.max(next.abs())
+            } else {
+                f64::INFINITY
+            };
+            if peak > 1e6 * MAX_AMPLIFICATION {
+                return peak;
+            }
+            u.push(next);
+        }
+    }
+    peak
+}
+
+/// What the stability guard found for a left endpoint run.
+#[derive(Clone, Copy, Debug)]
+pub enum Verdict {
+    /// The implicit variant: unconditionally stable.
+    Implicit,
+    /// A Prony (given or compressed) kernel, or none: the exact limit.
+    Limit(StepLimit),
+    /// A direct-sum kernel: the modal amplification on the run's lags, with the limit of the
+    /// terms without memory.
+    Amplification(f64, StepLimit),
+}
+
+impl Verdict {
+    pub fn new(scene: &Scene, disc: &Discretization, plan: &Plan) -> Verdict {
+        if scene.history == scene::History::Implicit {
+            return Verdict::Implicit;
+        }
+        let limit = step_limit(disc, plan);
+        match plan {
+            Plan::Exact { lags, .. } => Verdict::Amplification(amplification(disc, lags), limit),
+            _ => Verdict::Limit(limit),
+        }
+    }
+
+    /// Refuses a step the scheme cannot take (exit 2), unless `[scheme] allow_unstable`.
+    pub fn check(&self, scene: &Scene) -> Result<()> {
+        if scene.allow_unstable {
+            return Ok(());
+        }
+        let k = scene.k();
+        let advice = "set [scheme] history = \"implicit\" (unconditionally stable, first \
+                      order); [scheme] allow_unstable = true runs it anyway";
+        match *self {
+            Verdict::Limit(StepLimit {
+                k_max: Some(k_max), ..
+            })
+            | Verdict::Amplification(
+                _,
+                StepLimit {
+                    k_max: Some(k_max), ..
+                },
+            ) if k > k_max => Err(Error::input(format!(
+                "{}: the time step k = T/N = {k:e} exceeds the stability limit {k_max:e} of the \
+                 paper's left endpoint scheme for this material (its elastic{} term is \
+                 explicit). Either use time.steps ≥ {} or {advice}",
+                scene.path.display(),
+                if matches!(self, Verdict::Limit(_)) {
+                    " and memory"
+                } else {
+                    ""
+                },
+                (scene.end / k_max).ceil() as u64
+            ))),
+            Verdict::Amplification(a, _) if a.is_nan() || a > MAX_AMPLIFICATION => {
+                Err(Error::input(format!(
+                    "{}: with the relaxation kernel run by the direct sum, the time step k = \
+                     T/N = {k:e} is unstable for the paper's left endpoint scheme: the scheme's \
+                     response to a unit state grows to {a:.1e} within the run's {} steps \
+                     (stable: ≤ {MAX_AMPLIFICATION}). Use more time steps, or {advice}",
+                    scene.path.display(),
+                    scene.steps
+                )))
+            }
+            _ => Ok(()),
+        }
     }
 }
 

@@ -312,6 +312,8 @@ pub fn solve_once(
     let given = kernel_name(scene.relaxation.as_ref());
     if form == KernelForm::Expression {
         scene.relaxation = Some(prony_as_expression(scene.relaxation.as_ref())?);
+        // The reference form is the direct sum, not a fit of it.
+        scene.compression = None;
     }
     let steps_start = Instant::now();
     let u = {

@@ -23,10 +23,10 @@
 
 use crate::effects::{self, Effects};
 use crate::fem::{mul_add, Discretization};
-use crate::history::History;
+use crate::history::{History, Plan};
 use crate::scene::{self, Scene};
 use crate::solver::{Factor, Rows, StepReport, StepSolver};
-use crate::stability;
+use crate::stability::Verdict;
 use crate::{Error, Result};
 
 pub struct TimeLoop<'p> {
@@ -37,6 +37,8 @@ pub struct TimeLoop<'p> {
     pub solver: StepSolver,
     pub rows: Rows,
     pub history: History,
+    /// How the memory sum is computed (the compressed kernel's fit, if any).
+    pub plan: Plan,
     /// w_n of the last solved step.
     pub w: Vec<f64>,
     /// Multipliers of the last solved step: λ on contact rows, γ on friction rows.
@@ -112,19 +114,19 @@ impl<'p> TimeLoop<'p> {
     pub fn new(scene: &'p Scene, disc: &'p Discretization) -> Result<Self> {
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-        preflight(scene, disc)?;
+        let plan = preflight(scene, disc)?;
         let implicit = match scene.history {
             scene::History::Left => None,
-            scene::History::Implicit => Some(
-                disc.implicit_matrix(scene.k(), scene.relaxation.as_ref().map(|r| r.eval(0.0))),
-            ),
+            scene::History::Implicit => {
+                Some(disc.implicit_matrix(scene.k(), plan.r0(scene.relaxation.as_ref())))
+            }
         };
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
         // The step matrix is factored once, with the constrained boundary dofs ordered last.
         let factor = Factor::new(matrix, &rows.dofs())?;
         let solver = effects::step_solver(&effects, scene, matrix, &factor, &rows)?;
         let n = disc.n_free;
-        let history = History::new(n, scene.k(), scene.relaxation.as_ref());
+        let history = History::new(n, scene.k(), &plan);
         let m = if history.has_memory() {
             vec![0.0; n]
         } else {
@@ -139,6 +141,7 @@ impl<'p> TimeLoop<'p> {
             z: vec![0.0; rows.len()],
             rows,
             history,
+            plan,
             w: vec![0.0; n],
             m,
             b: vec![0.0; n],
@@ -259,39 +262,19 @@ fn remedy(k: f64) -> String {
     )
 }
 
-/// What a run refuses before it factors anything (exit 2): a left endpoint step above the
-/// stability limit, loads that are not finite at t = 0. `viscontact check` calls it too, so
-/// that `check` fails wherever `run` would.
-pub fn preflight(scene: &Scene, disc: &Discretization) -> Result<()> {
+/// What a run refuses before it factors anything (exit 2): a kernel that is not finite on
+/// the run's lags (`Plan::new`), a left endpoint step above the stability limit of the
+/// kernel as it will run (`Verdict`), loads that are not finite at t = 0. Returns how the
+/// memory will be computed. `viscontact check` calls it too, so that `check` fails wherever
+/// `run` would.
+pub fn preflight(scene: &Scene, disc: &Discretization) -> Result<Plan> {
+    let plan = Plan::new(scene)?;
     if scene.history == scene::History::Left {
-        check_stable(scene, disc)?;
+        Verdict::new(scene, disc, &plan).check(scene)?;
     }
     disc.loads
-        .add(0.0, &disc.free, scene, &mut vec![0.0; disc.n_free])
-}
-
-/// Refuses a left endpoint run whose step exceeds the scheme's stability limit (exit 2),
-/// unless `[scheme] allow_unstable = true`.
-fn check_stable(scene: &Scene, disc: &Discretization) -> Result<()> {
-    let limit = stability::step_limit(disc, scene.relaxation.as_ref());
-    let k = scene.k();
-    match limit.k_max {
-        Some(k_max) if k > k_max && !scene.allow_unstable => Err(Error::input(format!(
-            "{}: the time step k = T/N = {k:e} exceeds the stability limit {k_max:e} of the \
-             paper's left endpoint scheme for this material (its elastic{} term is explicit). \
-             Either use time.steps ≥ {} or set [scheme] history = \"implicit\" \
-             (unconditionally stable, first order); [scheme] allow_unstable = true runs it \
-             anyway",
-            scene.path.display(),
-            if limit.includes_memory {
-                " and memory"
-            } else {
-                ""
-            },
-            (scene.end / k_max).ceil() as u64
-        ))),
-        _ => Ok(()),
-    }
+        .add(0.0, &disc.free, scene, &mut vec![0.0; disc.n_free])?;
+    Ok(plan)
 }
 
 #[cfg(test)]

@@ -1191,6 +1191,7 @@ young = 2.0
 poisson = 0.0
 [material.relaxation]
 expr = "0.7*exp(-3*s) + 0.2*exp(-0.5*s)"
+memory = "exact"
 "#;
     let s = [[1.0, 0.0, 0.0], [0.0; 3], [0.0; 3]];
     let scene = box_scene(dir.path(), material, &box_tractions(s, F_EXPR), STEPS, END);

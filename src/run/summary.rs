@@ -36,6 +36,8 @@ pub struct Summary {
     pub output: OutputSummary,
     /// See `effects::warnings`.
     pub warnings: Vec<String>,
+    /// How the memory sum was computed (`history::Plan`); absent without relaxation.
+    pub memory: Option<MemorySummary>,
 }
 
 /// How a run ended.
@@ -182,6 +184,40 @@ impl Summary {
             },
             output: ending.output,
             warnings: crate::effects::warnings(scene, disc),
+            memory: MemorySummary::new(&tl.plan),
         }
+    }
+}
+
+/// summary.json "memory": the kernel's compression (issue 13).
+#[derive(Serialize, Debug, Clone)]
+pub struct MemorySummary {
+    /// "prony" (the scene's series), "compressed" or "exact" (direct sum).
+    pub method: &'static str,
+    /// Exponential terms run by the recursion (0 for the direct sum).
+    pub terms: usize,
+    /// Certified max relative error of the compressed kernel on the lags.
+    pub certified_error: Option<f64>,
+    pub fit_s: Option<f64>,
+    /// Why an expression or table kernel runs exact although compression was asked for.
+    pub fallback: Option<String>,
+}
+
+impl MemorySummary {
+    fn new(plan: &crate::history::Plan) -> Option<Self> {
+        use crate::history::Plan;
+        let (method, terms, fit, fallback) = match plan {
+            Plan::None => return None,
+            Plan::Prony(t) => ("prony", t.len(), None, None),
+            Plan::Compressed(f) => ("compressed", f.terms.len(), Some(f), None),
+            Plan::Exact { fallback, .. } => ("exact", 0, None, fallback.clone()),
+        };
+        Some(MemorySummary {
+            method,
+            terms,
+            certified_error: fit.map(|f| f.error),
+            fit_s: fit.map(|f| f.seconds),
+            fallback,
+        })
     }
 }

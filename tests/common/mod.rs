@@ -161,7 +161,10 @@ pub fn paper_scene(dir: &Path, name: &str, mesh: &str, expr: bool) -> PathBuf {
         &format!("file = {:?}", mesh_path(mesh)),
     );
     let text = if expr {
-        text.replace("prony = [[1.0, 10.0]]", "expr = \"exp(-10*s)\"")
+        text.replace(
+            "prony = [[1.0, 10.0]]",
+            "expr = \"exp(-10*s)\"\nmemory = \"exact\"",
+        )
     } else {
         text
     };
@@ -295,5 +298,28 @@ impl SplitMix {
     /// Uniform in 0..n.
     pub fn below(&mut self, n: usize) -> usize {
         (self.next() % n as u64) as usize
+    }
+}
+
+/// Options of a library run into `out` with `--set` overrides, no progress bar.
+pub fn run_options(
+    out: &Path,
+    set: &[&str],
+    stop_after: Option<usize>,
+) -> viscontact::run::RunOptions {
+    viscontact::run::RunOptions {
+        out: Some(out.to_path_buf()),
+        overrides: set.iter().map(|s| s.to_string()).collect(),
+        progress: false,
+        stop_after,
+        ..Default::default()
+    }
+}
+
+/// The summary of a run that must have finished.
+pub fn finished(o: viscontact::run::Outcome) -> viscontact::run::Summary {
+    match o {
+        viscontact::run::Outcome::Finished(s) => *s,
+        viscontact::run::Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
     }
 }
