@@ -5,7 +5,7 @@
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
-use crate::output::{write_atomic, Field, Frame, Series};
+use crate::output::{write_atomic, Geometry, Series};
 use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
 use crate::time_loop::{Step, TimeLoop};
@@ -195,8 +195,15 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let tl = TimeLoop::new(&scene, &disc)?;
     let (cells, per_cell) = mesh.cell_nodes();
-    let series = Series::create(&out, &mesh.nodes, &cells, per_cell)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
+    let region = crate::output::frame::region(&mesh);
+    let geometry = Geometry {
+        points: &mesh.nodes,
+        cells: &cells,
+        nodes_per_cell: per_cell,
+        region: &region,
+    };
+    let series = Series::create(&out, &geometry, &identity.run_id, &scene.output)?;
     let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
     let setup_s = start.elapsed().as_secs_f64();
     drive(Drive {
@@ -247,12 +254,19 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let (cells, per_cell) = mesh.cell_nodes();
-    let series = if cp.n == 0 {
-        Series::create(&out, &mesh.nodes, &cells, per_cell)?
-    } else {
-        Series::reopen(&out, &mesh.nodes, &cells, per_cell, cp.n - 1)?
-    };
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
+    let region = crate::output::frame::region(&mesh);
+    let geometry = Geometry {
+        points: &mesh.nodes,
+        cells: &cells,
+        nodes_per_cell: per_cell,
+        region: &region,
+    };
+    let series = if cp.n == 0 {
+        Series::create(&out, &geometry, &identity.run_id, &scene.output)?
+    } else {
+        Series::reopen(&out, &geometry, &identity.run_id, &scene.output, cp.n - 1)?
+    };
     let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
     let setup_s = start.elapsed().as_secs_f64();
     let run_opts = RunOptions {
@@ -325,7 +339,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         log.max_violation = log.max_violation.max(viol);
         log.max_kkt_residual = log.max_kkt_residual.max(kkt);
         if n % scene.output_every == 0 || n == n_steps {
-            write_frame(&mut series, disc, scene, &rows, &step)?;
+            series.write_step(disc, scene, &rows, &step, &state_flags(&rows, &step))?;
         }
         if n == n_steps {
             break state_counts(&rows, &step);
@@ -353,6 +367,7 @@ fn drive(d: Drive) -> Result<Outcome> {
                 PathBuf::new()
             };
             writer.finish()?;
+            series.finish()?;
             return Ok(Outcome::Stopped {
                 step: n,
                 time: n as f64 * tl.history.k,
@@ -363,6 +378,7 @@ fn drive(d: Drive) -> Result<Outcome> {
     bar.finish_and_clear();
     // The last checkpoint reaches the disk before the run reports success.
     writer.finish()?;
+    series.finish()?;
     let steps_s = steps_start.elapsed().as_secs_f64();
     // Frames an earlier (or the interrupted) run left that this series does not list.
     remove_stale_frames(&series, resumed_from.unwrap_or(0));
@@ -502,83 +518,4 @@ fn state_counts(rows: &Rows, step: &Step) -> (usize, usize) {
     let active = flags[..rows.n_contact].iter().filter(|&&f| f).count();
     let stick = flags[rows.n_contact..].iter().filter(|&&f| f).count();
     (active, stick / rows.block.max(1))
-}
-
-fn write_frame(
-    series: &mut Series,
-    disc: &Discretization,
-    scene: &Scene,
-    rows: &Rows,
-    step: &Step,
-) -> Result<()> {
-    let nn = disc.nodes.len();
-    let u = disc.nodal(step.u);
-    let w = disc.nodal(step.w);
-    let (stress, von_mises) = disc.stress(step.w, step.u, step.m, scene.model);
-    // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and the
-    // friction traction γ_i / ∫φ_i: a scalar along τ_i in 2D, the tangential vector
-    // Σ_k γ_ik τ_ik / ∫φ_i in 3D.
-    let fc = if disc.dim == 2 { 1 } else { 3 };
-    let mut pressure = vec![0.0; nn];
-    let mut friction = vec![0.0; fc * nn];
-    let mut state = vec![0.0; nn];
-    for ((i, r), active) in rows.rows.iter().enumerate().zip(state_flags(rows, step)) {
-        if i < rows.n_contact {
-            pressure[r.node] = step.z[i] / r.area;
-        } else if fc == 1 {
-            friction[r.node] = step.z[i] / r.area;
-        } else {
-            for (k, t) in r.dir.iter().enumerate() {
-                friction[3 * r.node + k] += step.z[i] * t / r.area;
-            }
-        }
-        if active {
-            state[r.node] = 1.0;
-        }
-    }
-    let frame = Frame {
-        step: step.n,
-        time: step.t,
-        point_data: vec![
-            Field {
-                name: "displacement",
-                components: 3,
-                values: &u,
-            },
-            Field {
-                name: "velocity",
-                components: 3,
-                values: &w,
-            },
-            Field {
-                name: "contact_pressure",
-                components: 1,
-                values: &pressure,
-            },
-            Field {
-                name: "friction_traction",
-                components: fc,
-                values: &friction,
-            },
-            Field {
-                name: "contact_state",
-                components: 1,
-                values: &state,
-            },
-        ],
-        cell_data: vec![
-            Field {
-                name: "stress",
-                components: 6,
-                values: &stress,
-            },
-            Field {
-                name: "von_mises",
-                components: 1,
-                values: &von_mises,
-            },
-        ],
-    };
-    series.write(&frame)?;
-    Ok(())
 }
