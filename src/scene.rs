@@ -661,9 +661,13 @@ impl Scene {
         if f.output.every == 0 {
             return bad("output.every", "is 0; write every n ≥ 1 steps");
         }
-        if let Some(unknown) = f.output.fields.iter().flatten().find(|n| {
-            !crate::output::FIELDS.contains(&n.as_str())
-        }) {
+        if let Some(unknown) = f
+            .output
+            .fields
+            .iter()
+            .flatten()
+            .find(|n| !crate::output::FIELDS.contains(&n.as_str()))
+        {
             return bad(
                 "output.fields",
                 &format!(

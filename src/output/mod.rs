@@ -272,10 +272,16 @@ impl Series {
     /// The little-endian bytes of a field in the chosen precision.
     fn array(&self, f: &Field) -> vtu::Array {
         let (ty, bytes) = match self.options.precision {
-            Precision::Float64 => ("Float64", f.values.iter().flat_map(|x| x.to_le_bytes()).collect()),
+            Precision::Float64 => (
+                "Float64",
+                f.values.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            ),
             Precision::Float32 => (
                 "Float32",
-                f.values.iter().flat_map(|&x| (x as f32).to_le_bytes()).collect(),
+                f.values
+                    .iter()
+                    .flat_map(|&x| (x as f32).to_le_bytes())
+                    .collect(),
             ),
         };
         vtu::Array {

@@ -187,17 +187,37 @@ impl Grid {
                 at,
             }
         };
-        let points_s = add("Points", "Float64", 3, le(points.as_flattened().iter(), |x| x.to_le_bytes()));
-        let conn = add("connectivity", "Int64", 1, le(cells.iter(), |&i| (i as i64).to_le_bytes()));
+        // In reverse document order (see `encode`): types, offsets, connectivity, points,
+        // region.
+        let types = add("types", "UInt8", 1, vec![cell_type; num_cells]);
         let offsets = add(
             "offsets",
             "Int64",
             1,
-            le(1..num_cells + 1, |c| ((c * nodes_per_cell) as i64).to_le_bytes()),
+            le(1..num_cells + 1, |c| {
+                ((c * nodes_per_cell) as i64).to_le_bytes()
+            }),
         );
-        let types = add("types", "UInt8", 1, vec![cell_type; num_cells]);
-        let region = (!g.region.is_empty())
-            .then(|| add("region", "Int32", 1, le(g.region.iter(), |t| t.to_le_bytes())));
+        let conn = add(
+            "connectivity",
+            "Int64",
+            1,
+            le(cells.iter(), |&i| (i as i64).to_le_bytes()),
+        );
+        let points_s = add(
+            "Points",
+            "Float64",
+            3,
+            le(points.as_flattened().iter(), |x| x.to_le_bytes()),
+        );
+        let region = (!g.region.is_empty()).then(|| {
+            add(
+                "region",
+                "Int32",
+                1,
+                le(g.region.iter(), |t| t.to_le_bytes()),
+            )
+        });
 
         let id: Vec<String> = run_id.bytes().map(|b| b.to_string()).collect();
         let field_data = format!(
@@ -247,24 +267,39 @@ impl Grid {
              <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n",
             self.field_data, self.num_points, self.num_cells
         );
-        let mut fields = |tag: &str, arrays: &[Array], out: &mut Vec<u8>| {
-            let _ = writeln!(out, "      <{tag}>");
-            for a in arrays {
-                let _ = writeln!(
-                    out,
-                    "{} offset=\"{}\"/>",
-                    array_open(a.ty, &a.name, a.components),
-                    appended.len()
-                );
-                self.encoder.append(appended, &a.bytes);
+        // The appended data hold the static arrays, then the fields in reverse document
+        // order: meshio's raw appended reader walks the arrays by offset and looks each one
+        // up by its offset attribute after rewriting those of the arrays before it, so the
+        // array it looks for must come first in the document among equal offsets.
+        let base = self.statics.len();
+        let arrays: Vec<&Array> = point_data.iter().chain(cell_data).collect();
+        let mut offsets = vec![0; arrays.len()];
+        for (k, a) in arrays.iter().enumerate().rev() {
+            offsets[k] = base + appended.len();
+            self.encoder.append(appended, &a.bytes);
+        }
+        for (k, a) in arrays.iter().enumerate() {
+            if k == 0 {
+                out.extend_from_slice(b"      <PointData>\n");
             }
-        };
-        fields("PointData", point_data, out);
-        let _ = writeln!(out, "      </PointData>");
-        fields("CellData", cell_data, out);
-        let base = appended.len();
+            if k == point_data.len() {
+                out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
+            }
+            let _ = writeln!(
+                out,
+                "{} offset=\"{}\"/>",
+                array_open(a.ty, &a.name, a.components),
+                offsets[k]
+            );
+        }
+        if arrays.is_empty() {
+            out.extend_from_slice(b"      <PointData>\n");
+        }
+        if point_data.len() == arrays.len() {
+            out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
+        }
         let put = |s: &Static, out: &mut Vec<u8>| {
-            let _ = writeln!(out, "{} offset=\"{}\"/>", s.open, base + s.at);
+            let _ = writeln!(out, "{} offset=\"{}\"/>", s.open, s.at);
         };
         if let Some(r) = &self.region {
             put(r, out);
@@ -278,8 +313,8 @@ impl Grid {
         out.extend_from_slice(
             b"      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _",
         );
-        out.extend_from_slice(appended);
         out.extend_from_slice(&self.statics);
+        out.extend_from_slice(appended);
         out.extend_from_slice(b"\n  </AppendedData>\n</VTKFile>\n");
         &self.out
     }

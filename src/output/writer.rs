@@ -27,53 +27,61 @@ pub(super) struct Job {
     pub pvd: (PathBuf, String),
 }
 
+/// The thread hands the encoded mesh back when it ends, so that a finished series can be
+/// written to again (the thread is started on demand).
+type Thread = JoinHandle<(vtu::Grid, Result<()>)>;
+
 pub(super) struct Writer {
+    /// The mesh while no thread runs.
+    grid: Option<vtu::Grid>,
     tx: Option<SyncSender<Job>>,
-    thread: Option<JoinHandle<Result<()>>>,
+    thread: Option<Thread>,
 }
 
 impl Writer {
-    /// Starts the thread; it owns the encoded mesh.
-    pub(super) fn new(mut grid: vtu::Grid) -> Writer {
-        let (tx, rx) = sync_channel::<Job>(QUEUE);
-        let thread = std::thread::spawn(move || {
-            for job in rx {
-                write_atomic(&job.path, grid.encode(&job.point_data, &job.cell_data))?;
-                write_atomic(&job.pvd.0, job.pvd.1.as_bytes())?;
-            }
-            Ok(())
-        });
+    pub(super) fn new(grid: vtu::Grid) -> Writer {
         Writer {
-            tx: Some(tx),
-            thread: Some(thread),
+            grid: Some(grid),
+            tx: None,
+            thread: None,
         }
     }
 
     /// Queues a frame (waits while the queue is full). Errors: the failed write of an
     /// earlier frame.
     pub(super) fn send(&mut self, job: Job) -> Result<()> {
-        let sent = match &self.tx {
-            Some(tx) => tx.send(job).is_ok(),
-            None => false,
-        };
+        if let Some(mut grid) = self.grid.take() {
+            let (tx, rx) = sync_channel::<Job>(QUEUE);
+            self.tx = Some(tx);
+            self.thread = Some(std::thread::spawn(move || {
+                let result = rx.iter().try_for_each(|job| {
+                    write_atomic(&job.path, grid.encode(&job.point_data, &job.cell_data))?;
+                    write_atomic(&job.pvd.0, job.pvd.1.as_bytes())
+                });
+                (grid, result)
+            }));
+        }
+        let sent = self.tx.as_ref().is_some_and(|tx| tx.send(job).is_ok());
         if sent {
             return Ok(());
         }
-        // The thread has stopped: at an error, which finish returns.
+        // The thread stopped at an error, which finish returns.
         self.finish()?;
-        Err(Error::solve(
-            "output: a frame was written after the series was finished",
-        ))
+        Err(Error::solve("output: the writer thread stopped"))
     }
 
     /// Waits until every queued frame is written; the first failed write is the error.
     pub(super) fn finish(&mut self) -> Result<()> {
         self.tx = None;
-        match self.thread.take() {
-            Some(t) => t
-                .join()
-                .unwrap_or_else(|_| Err(Error::solve("output: the writer thread panicked"))),
-            None => Ok(()),
+        let Some(thread) = self.thread.take() else {
+            return Ok(());
+        };
+        match thread.join() {
+            Ok((grid, result)) => {
+                self.grid = Some(grid);
+                result
+            }
+            Err(_) => Err(Error::solve("output: the writer thread panicked")),
         }
     }
 }
