@@ -5,7 +5,8 @@
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
-use crate::output::{write_atomic, Geometry, Series};
+use crate::output::frame::open_series;
+use crate::output::{write_atomic, Series};
 use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
 use crate::time_loop::{Step, TimeLoop};
@@ -194,16 +195,8 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     check_out_dir(&out, opts.force)?;
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
     let tl = TimeLoop::new(&scene, &disc)?;
-    let (cells, per_cell) = mesh.cell_nodes();
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
-    let region = crate::output::frame::region(&mesh);
-    let geometry = Geometry {
-        points: &mesh.nodes,
-        cells: &cells,
-        nodes_per_cell: per_cell,
-        region: &region,
-    };
-    let series = Series::create(&out, &geometry, &identity.run_id, &scene.output)?;
+    let series = open_series(&out, &mesh, &identity.run_id, &scene.output, None)?;
     let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
     let setup_s = start.elapsed().as_secs_f64();
     drive(Drive {
@@ -253,20 +246,9 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     cp.restore(&mut tl)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
-    let (cells, per_cell) = mesh.cell_nodes();
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
-    let region = crate::output::frame::region(&mesh);
-    let geometry = Geometry {
-        points: &mesh.nodes,
-        cells: &cells,
-        nodes_per_cell: per_cell,
-        region: &region,
-    };
-    let series = if cp.n == 0 {
-        Series::create(&out, &geometry, &identity.run_id, &scene.output)?
-    } else {
-        Series::reopen(&out, &geometry, &identity.run_id, &scene.output, cp.n - 1)?
-    };
+    let keep_until = cp.n.checked_sub(1);
+    let series = open_series(&out, &mesh, &identity.run_id, &scene.output, keep_until)?;
     let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
     let setup_s = start.elapsed().as_secs_f64();
     let run_opts = RunOptions {

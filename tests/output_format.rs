@@ -788,3 +788,48 @@ fn writing_a_33k_node_frame_is_fast() {
     assert_eq!(series.files().len(), frames);
     assert!(median < 500.0, "writing a frame took {median:.1} ms");
 }
+
+/// `[output]` keys are checked: an unknown field name is an input error (exit 2) that names
+/// `output.fields` and lists the fields; a run with a subset writes only those.
+#[test]
+fn output_keys_are_checked_and_applied() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = repo_root();
+    let run = |out: &str, set: &str| {
+        Command::new(env!("CARGO_BIN_EXE_viscontact"))
+            .args([
+                "run",
+                "examples/paper.toml",
+                "--quiet",
+                "--set",
+                set,
+                "--out",
+            ])
+            .arg(tmp.path().join(out))
+            .args(["--set", "mesh.file=../meshes/paper/rect_008.msh"])
+            .current_dir(&root)
+            .output()
+            .unwrap()
+    };
+    let o = run("bad", r#"output.fields=["displacement", "bogus"]"#);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("output.fields") && err.contains("bogus"),
+        "{err}"
+    );
+    assert!(err.contains("von_mises") && err.contains("region"), "{err}");
+
+    let o = run("some", r#"output.fields=["von_mises", "region"]"#);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let last = tmp.path().join("some").join("solution_000032.vtu");
+    let vtu = viscontact::output::read::read_vtu(&last).unwrap();
+    assert!(vtu.point_data.is_empty());
+    let names: Vec<_> = vtu.cell_data.iter().map(|a| a.name.as_str()).collect();
+    assert_eq!(names, ["von_mises", "region"]);
+    let region = &vtu.cell_data[1].values;
+    assert!(
+        region.iter().all(|&t| t > 0.0),
+        "every cell is in a physical surface"
+    );
+}

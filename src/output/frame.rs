@@ -1,13 +1,39 @@
 //! The frame of a solved step: the fields of DESIGN.md "Output of run" computed from the
 //! step's velocity w_n, displacement u_n, memory m_n and multipliers z_n.
 
-use super::{Field, Frame, Series};
+use std::path::Path;
+
+use super::{Field, Frame, Geometry, Options, Series};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::scene::Scene;
 use crate::solver::Rows;
 use crate::time_loop::Step;
 use crate::Result;
+
+/// The series of a run on `mesh` in `out`: a new one, or for a resume from a checkpoint of
+/// step n ≥ 1 the existing one continued after step `keep_until` = n − 1
+/// ([`Series::reopen`]).
+pub fn open_series(
+    out: &Path,
+    mesh: &Mesh,
+    run_id: &str,
+    options: &Options,
+    keep_until: Option<usize>,
+) -> Result<Series> {
+    let (cells, nodes_per_cell) = mesh.cell_nodes();
+    let region = region(mesh);
+    let geometry = Geometry {
+        points: &mesh.nodes,
+        cells: &cells,
+        nodes_per_cell,
+        region: &region,
+    };
+    match keep_until {
+        None => Series::create(out, &geometry, run_id, options),
+        Some(step) => Series::reopen(out, &geometry, run_id, options, step),
+    }
+}
 
 /// The gmsh physical tag of each cell: the first group of the cells' dimension (in file
 /// order) that holds it, 0 for a cell in none (gmsh tags are ≥ 1).
