@@ -192,7 +192,7 @@ impl Series {
         };
         let entries = pvd::parse(&text).map_err(bad)?;
         match pvd::run_id(&text) {
-            Some(id) if id == run_id => {}
+            Some(id) if id == pvd::comment_safe(run_id) => {}
             stored => {
                 return Err(Error::input(format!(
                     "{} holds frames of another run (run id {}, this run is {run_id}); \

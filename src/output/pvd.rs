@@ -28,7 +28,7 @@ pub(super) fn render(entries: &[(f64, String)], run_id: &str) -> String {
         "<?xml version=\"1.0\"?>\n<!-- run_id: {} -->\n\
          <VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  \
          <Collection>\n",
-        run_id.replace("--", "- -")
+        comment_safe(run_id)
     );
     for (time, file) in entries {
         let _ = writeln!(
@@ -88,7 +88,12 @@ pub(super) fn parse(text: &str) -> Result<Vec<(f64, String)>, String> {
     Ok(entries)
 }
 
-/// The run id of a collection written by [`render`].
+/// `id` as it stands in the comment: `--` may not occur inside an XML comment.
+pub(super) fn comment_safe(id: &str) -> String {
+    id.replace("--", "- -")
+}
+
+/// The run id of a collection written by [`render`] (as [`comment_safe`] made it).
 pub(super) fn run_id(text: &str) -> Option<&str> {
     let start = text.find("<!-- run_id: ")? + "<!-- run_id: ".len();
     let len = text[start..].find(" -->")?;
