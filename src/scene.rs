@@ -264,12 +264,43 @@ pub struct OutputSection {
     /// Write every this many steps (the last step is always written).
     #[serde(default = "one")]
     pub every: usize,
+    /// "zlib" (default) or "none" (raw appended data).
+    #[serde(default)]
+    pub compression: OutputCompression,
+    /// "float64" (default) or "float32" for the field values.
+    #[serde(default)]
+    pub precision: OutputPrecision,
+    /// The fields to write (crate::output::FIELDS); all when left out.
+    pub fields: Option<Vec<String>>,
 }
 
 impl Default for OutputSection {
     fn default() -> Self {
-        OutputSection { every: 1 }
+        OutputSection {
+            every: 1,
+            compression: OutputCompression::default(),
+            precision: OutputPrecision::default(),
+            fields: None,
+        }
     }
+}
+
+/// `output.compression`.
+#[derive(Deserialize, Debug, Clone, Copy, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputCompression {
+    None,
+    #[default]
+    Zlib,
+}
+
+/// `output.precision`.
+#[derive(Deserialize, Debug, Clone, Copy, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputPrecision {
+    #[default]
+    Float64,
+    Float32,
 }
 
 /// `[checkpoint]`: restart files (src/checkpoint.rs). Without the section a run still writes
@@ -608,6 +639,8 @@ pub struct Scene {
     pub tractions: Vec<Traction>,
     pub body_forces: Vec<Vec<Scalar>>,
     pub output_every: usize,
+    /// `[output]` compression, precision and fields.
+    pub output: crate::output::Options,
     pub contact_solver: ContactSolver,
     pub history: History,
     pub allow_unstable: bool,
@@ -813,6 +846,21 @@ impl Scene {
         if f.output.every == 0 {
             return bad("output.every", "is 0; write every n ≥ 1 steps");
         }
+        if let Some(unknown) = f
+            .output
+            .fields
+            .iter()
+            .flatten()
+            .find(|n| !crate::output::FIELDS.contains(&n.as_str()))
+        {
+            return bad(
+                "output.fields",
+                &format!(
+                    "'{unknown}' is not a field; the fields are {}",
+                    crate::output::FIELDS.join(", ")
+                ),
+            );
+        }
         if f.checkpoint.as_ref().and_then(|c| c.every) == Some(0) {
             return bad(
                 "checkpoint.every",
@@ -860,6 +908,17 @@ impl Scene {
             tractions,
             body_forces,
             output_every: f.output.every,
+            output: crate::output::Options {
+                compression: match f.output.compression {
+                    OutputCompression::None => crate::output::Compression::None,
+                    OutputCompression::Zlib => crate::output::Compression::Zlib,
+                },
+                precision: match f.output.precision {
+                    OutputPrecision::Float64 => crate::output::Precision::Float64,
+                    OutputPrecision::Float32 => crate::output::Precision::Float32,
+                },
+                fields: f.output.fields.clone(),
+            },
             contact_solver: f.solver.contact,
             history: f.scheme.history,
             allow_unstable: f.scheme.allow_unstable,

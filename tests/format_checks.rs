@@ -124,7 +124,7 @@ fn paper_series_reads_back_with_meshio() {
                 "--expect-points",
                 "81",
                 "--expect-fields",
-                "displacement,velocity,contact_pressure,friction_traction,contact_state,stress,von_mises",
+                "displacement,velocity,contact_pressure,friction_traction,contact_state,stress,von_mises,region",
             ])
             .output(),
     );
@@ -403,7 +403,7 @@ fn block_series_reads_back_with_meshio() {
                 "--expect-points",
                 "45",
                 "--expect-fields",
-                "displacement,velocity,contact_pressure,friction_traction,contact_state,stress,von_mises",
+                "displacement,velocity,contact_pressure,friction_traction,contact_state,stress,von_mises,region",
             ])
             .output(),
     );
@@ -446,7 +446,7 @@ fn block_series_reads_back_with_meshio() {
     );
     assert_eq!(
         read["cell_data"],
-        serde_json::json!({"stress": [[96, 6]], "von_mises": [[96, 1]]})
+        serde_json::json!({"stress": [[96, 6]], "von_mises": [[96, 1]], "region": [[96, 1]]})
     );
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())

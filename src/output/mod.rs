@@ -7,20 +7,28 @@
 //! Every file goes through [`write_atomic`]: a crash never leaves a half-written file where a
 //! good one was.
 //!
+//! Frames are encoded and written on a background thread ([`writer`]): the time loop hands
+//! over a frame's values and goes on; it waits only when two frames are already queued. A
+//! write that failed stops the run at the next [`Series::write`] or at [`Series::finish`],
+//! naming the file.
+//!
 //! Field conventions (the caller's, checked only for sizes):
 //! - vectors have 3 components, z = 0 in 2D;
 //! - a symmetric tensor (`stress`) has 6 components in ParaView's order
 //!   XX, YY, ZZ, XY, YZ, XZ; every 6-component field is written with these component names
 //!   (`ComponentName0="XX"` …), so ParaView shows `stress_XY`;
-//! - all values are written as Float64, names exactly as given.
+//! - values are written as Float64 or Float32 ([`Precision`]), names exactly as given;
+//! - [`FIELDS`] lists the fields a run writes; [`Options::fields`] selects some of them.
 //!
-//! Encoding: inline base64 binary, header_type UInt64, little endian, uncompressed: the layout
-//! vtkio writes, which ParaView, meshio and vtkio read. The XML is written by this module, not
-//! by vtkio's writer, which is too slow and cannot reuse the geometry (details in `vtu.rs`).
+//! Encoding: raw appended data, zlib-compressed by default (details in `vtu.rs`). The run id
+//! given to [`Series::create`] is stored in every `.vtu` (FieldData `run_id`) and in the
+//! `.pvd` (a comment), and [`Series::reopen`] refuses a directory of another run.
 
+pub mod frame;
 mod pvd;
 pub mod read;
 mod vtu;
+mod writer;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -30,6 +38,67 @@ use crate::{Error, Result};
 
 /// Name of the collection file in a run's directory.
 pub const PVD_NAME: &str = "solution.pvd";
+
+/// The fields a run writes (`[output] fields` chooses among them): point fields, cell fields,
+/// and `region`, the gmsh physical tag of each cell.
+pub const FIELDS: [&str; 8] = [
+    "displacement",
+    "velocity",
+    "contact_pressure",
+    "friction_traction",
+    "contact_state",
+    "stress",
+    "von_mises",
+    "region",
+];
+
+/// `[output] compression`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Compression {
+    /// Raw appended data.
+    None,
+    /// VTK's zlib blocks (`vtkZLibDataCompressor`).
+    #[default]
+    Zlib,
+}
+
+/// `[output] precision` of the field values (coordinates stay Float64).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Precision {
+    #[default]
+    Float64,
+    Float32,
+}
+
+/// How a series is written.
+#[derive(Clone, Debug, Default)]
+pub struct Options {
+    pub compression: Compression,
+    pub precision: Precision,
+    /// The fields to write, names from [`FIELDS`]; `None` = all.
+    pub fields: Option<Vec<String>>,
+}
+
+impl Options {
+    /// Whether the field `name` is written.
+    pub fn wants(&self, name: &str) -> bool {
+        self.fields
+            .as_ref()
+            .is_none_or(|f| f.iter().any(|g| g == name))
+    }
+}
+
+/// The mesh of a series. `points`: node coordinates (3 per node, z = 0 in 2D); `cells`:
+/// `nodes_per_cell` node indices per cell, concatenated (3 → VTK_TRIANGLE, 4 → VTK_TETRA,
+/// anything else is an input error); `region`: the gmsh physical tag of each cell, or empty
+/// for none.
+#[derive(Clone, Copy, Debug)]
+pub struct Geometry<'a> {
+    pub points: &'a [[f64; 3]],
+    pub cells: &'a [usize],
+    pub nodes_per_cell: usize,
+    pub region: &'a [i32],
+}
 
 /// The `.vtu` file name of output step `step`: `solution_{step:06}.vtu`.
 pub fn vtu_name(step: usize) -> String {
@@ -55,64 +124,85 @@ pub struct Frame<'a> {
 
 /// A ParaView time series in a directory: `solution_NNNNNN.vtu` per frame + `solution.pvd`.
 ///
-/// The geometry (points, connectivity, offsets, cell types) is encoded once, in
+/// The geometry (points, connectivity, offsets, cell types, region) is encoded once, in
 /// [`Series::create`]; a frame encodes only its fields.
 pub struct Series {
     dir: PathBuf,
-    grid: vtu::Grid,
+    run_id: String,
+    options: Options,
+    sizes: (usize, usize),
     /// `(time, file name relative to dir)`, in the order written; one entry per step.
     files: Vec<(f64, String)>,
+    writer: writer::Writer,
 }
 
 impl Series {
-    /// Starts a new series in `dir` (created if missing).
-    ///
-    /// `points`: node coordinates (3 per node, z = 0 in 2D); `cells`: `nodes_per_cell` node
-    /// indices per cell, concatenated. `nodes_per_cell` = 3 writes VTK_TRIANGLE (5),
-    /// 4 writes VTK_TETRA (10); anything else is an input error.
+    /// Starts a new series in `dir` (created if missing) for the run `run_id`.
     ///
     /// Existing `solution_*.vtu` files of an earlier run are left alone; `solution.pvd` is
     /// rewritten by the first [`Series::write`]. To continue an earlier series (resume), use
     /// [`Series::reopen`].
     pub fn create(
         dir: &Path,
-        points: &[[f64; 3]],
-        cells: &[usize],
-        nodes_per_cell: usize,
+        geometry: &Geometry,
+        run_id: &str,
+        options: &Options,
     ) -> Result<Series> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let grid = vtu::Grid::new(points, cells, nodes_per_cell)?;
+        let mut g = *geometry;
+        if !options.wants("region") {
+            g.region = &[];
+        }
+        let grid = vtu::Grid::new(&g, run_id, options.compression)?;
         Ok(Series {
             dir: dir.to_path_buf(),
-            grid,
+            run_id: run_id.to_string(),
+            options: options.clone(),
+            sizes: (grid.num_points(), grid.num_cells()),
             files: Vec::new(),
+            writer: writer::Writer::new(grid),
         })
     }
 
     /// Continues the series in `dir` (for `resume`): reads `dir/solution.pvd` if there is one
     /// and keeps its frames of step ≤ `last_step` (later ones are about to be recomputed), so
     /// that the collection lists the whole run again. Without a `.pvd`, same as
-    /// [`Series::create`]. A `.pvd` that this module did not write is an input error.
+    /// [`Series::create`]. A `.pvd` that this module did not write, or one of a run whose id
+    /// is not `run_id`, is an input error.
     pub fn reopen(
         dir: &Path,
-        points: &[[f64; 3]],
-        cells: &[usize],
-        nodes_per_cell: usize,
+        geometry: &Geometry,
+        run_id: &str,
+        options: &Options,
         last_step: usize,
     ) -> Result<Series> {
-        let mut series = Series::create(dir, points, cells, nodes_per_cell)?;
         let pvd_path = dir.join(PVD_NAME);
         let text = match std::fs::read_to_string(&pvd_path) {
             Ok(text) => text,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(series),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Series::create(dir, geometry, run_id, options)
+            }
             Err(e) => return Err(Error::io(&pvd_path, e)),
         };
-        let entries = pvd::parse(&text).map_err(|msg| {
+        let bad = |msg: String| {
             Error::input(format!(
                 "{}: {msg}; remove it or choose another output directory",
                 pvd_path.display()
             ))
-        })?;
+        };
+        let entries = pvd::parse(&text).map_err(bad)?;
+        match pvd::run_id(&text) {
+            Some(id) if id == pvd::comment_safe(run_id) => {}
+            stored => {
+                return Err(Error::input(format!(
+                    "{} holds frames of another run (run id {}, this run is {run_id}); \
+                     choose another output directory (--out) or remove them",
+                    dir.display(),
+                    stored.unwrap_or("missing")
+                )))
+            }
+        }
+        let mut series = Series::create(dir, geometry, run_id, options)?;
         series.files = entries
             .into_iter()
             .filter(|(_, file)| step_of(file).is_some_and(|s| s <= last_step))
@@ -120,14 +210,15 @@ impl Series {
         Ok(series)
     }
 
-    /// Writes `dir/solution_{step:06}.vtu` (through a temporary file + rename), then rewrites
-    /// `dir/solution.pvd` (temp + rename) so the `.pvd` is valid after every frame, listing
-    /// every frame so far with its real time. Writing a step again replaces its file and its
-    /// entry. Returns the path of the `.vtu`.
+    /// Hands `dir/solution_{step:06}.vtu` to the writer thread, which writes it (temporary
+    /// file + rename), then `dir/solution.pvd` (likewise) listing every frame so far with its
+    /// real time, so the directory is a valid series after every frame. Writing a step again
+    /// replaces its file and its entry. Fields not chosen by [`Options::fields`] are left out.
+    /// Returns the path of the `.vtu`.
     ///
     /// Errors: a field whose length is not `components` × (number of points or cells), a
     /// field with 0 components or a repeated or empty name, or a non-finite time →
-    /// `Error::Input`; any file-system failure → `Error::Io` naming the file.
+    /// `Error::Input`; a failed write of an earlier frame → `Error::Io` naming its file.
     pub fn write(&mut self, frame: &Frame) -> Result<PathBuf> {
         if !frame.time.is_finite() {
             return Err(Error::input(format!(
@@ -137,25 +228,68 @@ impl Series {
         }
         let name = vtu_name(frame.step);
         let path = self.dir.join(&name);
-        let bytes = self
-            .grid
-            .encode(&frame.point_data, &frame.cell_data)
-            .map_err(|msg| {
-                Error::input(format!(
-                    "{} (output step {}): {msg}",
-                    path.display(),
-                    frame.step
-                ))
-            })?;
-        write_atomic(&path, bytes)?;
-
+        let (points, cells) = self.sizes;
+        let arrays = |fields: &[Field], count, what| {
+            check_fields(fields, count, what)
+                .map(|()| {
+                    fields
+                        .iter()
+                        .filter(|f| self.options.wants(f.name))
+                        .map(|f| self.array(f))
+                        .collect::<Vec<_>>()
+                })
+                .map_err(|msg| {
+                    Error::input(format!(
+                        "{} (output step {}): {msg}",
+                        path.display(),
+                        frame.step
+                    ))
+                })
+        };
+        let point_data = arrays(&frame.point_data, points, "point")?;
+        let cell_data = arrays(&frame.cell_data, cells, "cell")?;
         match self.files.iter_mut().find(|(_, f)| *f == name) {
             Some(entry) => entry.0 = frame.time,
             None => self.files.push((frame.time, name)),
         }
-        let pvd_path = self.dir.join(PVD_NAME);
-        write_atomic(&pvd_path, pvd::render(&self.files).as_bytes())?;
+        self.writer.send(writer::Job {
+            path: path.clone(),
+            point_data,
+            cell_data,
+            pvd: (
+                self.dir.join(PVD_NAME),
+                pvd::render(&self.files, &self.run_id),
+            ),
+        })?;
         Ok(path)
+    }
+
+    /// Waits until every frame handed over is on disk; the first failed write is the error.
+    pub fn finish(&mut self) -> Result<()> {
+        self.writer.finish()
+    }
+
+    /// The little-endian bytes of a field in the chosen precision.
+    fn array(&self, f: &Field) -> vtu::Array {
+        let (ty, bytes) = match self.options.precision {
+            Precision::Float64 => (
+                "Float64",
+                f.values.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            ),
+            Precision::Float32 => (
+                "Float32",
+                f.values
+                    .iter()
+                    .flat_map(|&x| (x as f32).to_le_bytes())
+                    .collect(),
+            ),
+        };
+        vtu::Array {
+            name: f.name.to_string(),
+            ty,
+            components: f.components,
+            bytes,
+        }
     }
 
     /// `(time, file name relative to the directory)` of every frame listed in the `.pvd`.
@@ -168,10 +302,36 @@ impl Series {
         &self.dir
     }
 
+    /// The options the series was created with.
+    pub fn options(&self) -> &Options {
+        &self.options
+    }
+
     /// Number of points and cells of the mesh.
     pub fn sizes(&self) -> (usize, usize) {
-        (self.grid.num_points(), self.grid.num_cells())
+        self.sizes
     }
+}
+
+/// Checks sizes and names of the fields of one kind (`what` = "point" or "cell").
+fn check_fields(fields: &[Field], count: usize, what: &str) -> std::result::Result<(), String> {
+    for (k, f) in fields.iter().enumerate() {
+        if f.name.is_empty() {
+            return Err(format!("{what} field #{k} has an empty name"));
+        }
+        if fields[..k].iter().any(|g| g.name == f.name) {
+            return Err(format!("{what} field `{}` is given twice", f.name));
+        }
+        if f.components == 0 || f.values.len() != f.components * count {
+            return Err(format!(
+                "{what} field `{}` has {} values, expected {} components × {count} {what}s",
+                f.name,
+                f.values.len(),
+                f.components
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The step number encoded in a `solution_NNNNNN.vtu` name.

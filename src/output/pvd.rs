@@ -18,12 +18,17 @@
 
 use std::fmt::Write as _;
 
-/// The collection file listing `entries` = `(time, file name)` in order.
-pub(super) fn render(entries: &[(f64, String)]) -> String {
-    let mut s = String::from(
-        "<?xml version=\"1.0\"?>\n\
+/// The collection file of run `run_id` listing `entries` = `(time, file name)` in order.
+///
+/// The run id is an XML comment `<!-- run_id: ID -->` after the declaration: readers ignore
+/// comments, and an unknown attribute of `<VTKFile>` is not something every reader is sure to
+/// pass over.
+pub(super) fn render(entries: &[(f64, String)], run_id: &str) -> String {
+    let mut s = format!(
+        "<?xml version=\"1.0\"?>\n<!-- run_id: {} -->\n\
          <VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  \
          <Collection>\n",
+        comment_safe(run_id)
     );
     for (time, file) in entries {
         let _ = writeln!(
@@ -83,6 +88,18 @@ pub(super) fn parse(text: &str) -> Result<Vec<(f64, String)>, String> {
     Ok(entries)
 }
 
+/// `id` as it stands in the comment: `--` may not occur inside an XML comment.
+pub(super) fn comment_safe(id: &str) -> String {
+    id.replace("--", "- -")
+}
+
+/// The run id of a collection written by [`render`] (as [`comment_safe`] made it).
+pub(super) fn run_id(text: &str) -> Option<&str> {
+    let start = text.find("<!-- run_id: ")? + "<!-- run_id: ".len();
+    let len = text[start..].find(" -->")?;
+    Some(&text[start..start + len])
+}
+
 /// The value of attribute `name` in the attribute text of an element.
 fn attribute<'a>(attrs: &'a str, name: &str) -> Option<&'a str> {
     let mut rest = attrs;
@@ -118,7 +135,8 @@ mod tests {
             (1.0 / 3.0, "solution_000004.vtu".to_string()),
             (1e22, "solution_000005.vtu".to_string()),
         ];
-        let text = render(&entries);
+        let text = render(&entries, "abc");
+        assert_eq!(run_id(&text), Some("abc"));
         assert!(text.contains(
             "<DataSet timestep=\"0.03125\" group=\"\" part=\"0\" file=\"solution_000001.vtu\"/>"
         ));

@@ -1,8 +1,8 @@
 //! Reading a run's series back: `solution.pvd` and the `.vtu` files this module's writer
-//! produces (`vtu.rs`): inline base64 `DataArray`s, each one stream of a UInt64 byte count
-//! followed by the little-endian values, uncompressed. Float64/Float32, Int64/Int32,
-//! UInt64/UInt32/UInt8 arrays are read; compressed or appended data (other writers) are
-//! refused with a message saying so. Used by the `plot` command.
+//! produces (`vtu.rs`): raw appended data, uncompressed or in VTK's zlib blocks, and the
+//! inline base64 uncompressed arrays of earlier versions; header_type UInt64.
+//! Float64/Float32, Int64/Int32, UInt64/UInt32/UInt8 arrays are read; other layouts (other
+//! writers) are refused with a message saying so. Used by the `plot` command.
 
 use super::pvd;
 use crate::{Error, Result};
@@ -47,19 +47,40 @@ pub fn read_pvd(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
 
 /// Reads a `.vtu` file written by [`super::Series`].
 pub fn read_vtu(path: &Path) -> Result<Vtu> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    parse_vtu(&text).map_err(|m| Error::input(format!("{}: {m}", path.display())))
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_vtu(&bytes).map_err(|m| Error::input(format!("{}: {m}", path.display())))
 }
 
-/// Parses the text of a `.vtu` file.
-pub fn parse_vtu(text: &str) -> std::result::Result<Vtu, String> {
+/// The bytes of the `_`-prefixed raw appended section, and whether they are zlib blocks.
+struct Appended<'a> {
+    data: &'a [u8],
+    zlib: bool,
+}
+
+/// Parses the bytes of a `.vtu` file.
+pub fn parse_vtu(bytes: &[u8]) -> std::result::Result<Vtu, String> {
+    let tag = b"<AppendedData";
+    let (head, data) = match bytes.windows(tag.len()).position(|w| w == tag) {
+        Some(at) => {
+            let rest = &bytes[at..];
+            let us = rest
+                .iter()
+                .position(|&b| b == b'_')
+                .ok_or("<AppendedData> without its '_' marker")?;
+            (&bytes[..at], &rest[us + 1..])
+        }
+        None => (bytes, &[][..]),
+    };
+    let text = std::str::from_utf8(head).map_err(|_| "the XML part is not UTF-8".to_string())?;
     if !text.contains("type=\"UnstructuredGrid\"") {
         return Err("not a VTK UnstructuredGrid (.vtu) file".into());
     }
-    if text.contains("compressor=") {
-        return Err(
-            "compressed .vtu files are not supported (this reader reads what `run` writes)".into(),
-        );
+    let appended = Appended {
+        data,
+        zlib: text.contains("compressor=\"vtkZLibDataCompressor\""),
+    };
+    if !appended.zlib && text.contains("compressor=") {
+        return Err("only vtkZLibDataCompressor compression is supported".into());
     }
     if !text.contains("header_type=\"UInt64\"") {
         return Err("only header_type=\"UInt64\" is supported".into());
@@ -72,10 +93,10 @@ pub fn parse_vtu(text: &str) -> std::result::Result<Vtu, String> {
             _ => "",
         }
     };
-    let point_data = arrays(section("PointData"))?;
-    let cell_data = arrays(section("CellData"))?;
-    let points = arrays(section("Points"))?;
-    let cells = arrays(section("Cells"))?;
+    let point_data = arrays(section("PointData"), &appended)?;
+    let cell_data = arrays(section("CellData"), &appended)?;
+    let points = arrays(section("Points"), &appended)?;
+    let cells = arrays(section("Cells"), &appended)?;
     let pts = points
         .first()
         .ok_or_else(|| "no <Points> array".to_string())?;
@@ -135,8 +156,9 @@ pub fn parse_vtu(text: &str) -> std::result::Result<Vtu, String> {
     })
 }
 
-/// Every `<DataArray …>base64</DataArray>` in `s`.
-fn arrays(s: &str) -> std::result::Result<Vec<Array>, String> {
+/// Every `<DataArray …>` in `s`: inline base64 (`format="binary"`, uncompressed) or
+/// appended (`format="appended" offset="N"`).
+fn arrays(s: &str, appended: &Appended) -> std::result::Result<Vec<Array>, String> {
     let mut out = Vec::new();
     let mut rest = s;
     while let Some(a) = rest.find("<DataArray") {
@@ -150,32 +172,83 @@ fn arrays(s: &str) -> std::result::Result<Vec<Array>, String> {
             .parse()
             .map_err(|_| format!("array '{name}': bad NumberOfComponents"))?;
         let format = attr(attrs, "format").unwrap_or("");
-        if format != "binary" {
-            return Err(format!(
-                "array '{name}': format=\"{format}\" is not supported (inline binary only)"
-            ));
-        }
         let body = &after[gt + 1..];
-        let end = body
-            .find("</DataArray>")
-            .ok_or_else(|| format!("array '{name}' is not closed"))?;
-        let bytes = base64_decode(body[..end].trim())
-            .ok_or_else(|| format!("array '{name}': bad base64"))?;
-        if bytes.len() < 8 {
-            return Err(format!("array '{name}': no byte-count header"));
+        let raw = match format {
+            "appended" => {
+                let offset: usize = attr(attrs, "offset")
+                    .and_then(|o| o.parse().ok())
+                    .ok_or_else(|| format!("array '{name}': no offset"))?;
+                let data = appended
+                    .data
+                    .get(offset..)
+                    .ok_or_else(|| format!("array '{name}': offset {offset} past the data"))?;
+                rest = body;
+                if appended.zlib {
+                    inflate_blocks(data)
+                } else {
+                    counted(data)
+                }
+            }
+            "binary" => {
+                let end = body
+                    .find("</DataArray>")
+                    .ok_or_else(|| format!("array '{name}' is not closed"))?;
+                rest = &body[end..];
+                let bytes = base64_decode(body[..end].trim()).ok_or("bad base64")?;
+                counted(&bytes)
+            }
+            _ => {
+                return Err(format!(
+                    "array '{name}': format=\"{format}\" is not supported (appended or binary)"
+                ))
+            }
         }
-        let len = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
-        let data = bytes
-            .get(8..8 + len)
-            .ok_or_else(|| format!("array '{name}': {len} bytes announced, fewer present"))?;
-        let values = decode(ty, data)
+        .map_err(|m| format!("array '{name}': {m}"))?;
+        let values = decode(ty, &raw)
             .ok_or_else(|| format!("array '{name}': type {ty} is not supported"))?;
         out.push(Array {
             name,
             components: components.max(1),
             values,
         });
-        rest = &body[end..];
+    }
+    Ok(out)
+}
+
+/// The UInt64 little-endian word `k` of `d`.
+fn word(d: &[u8], k: usize) -> std::result::Result<usize, String> {
+    d.get(8 * k..8 * k + 8)
+        .map(|w| u64::from_le_bytes(w.try_into().expect("8 bytes")) as usize)
+        .ok_or_else(|| "truncated header".to_string())
+}
+
+/// Uncompressed: a UInt64 byte count, then the bytes.
+fn counted(d: &[u8]) -> std::result::Result<Vec<u8>, String> {
+    let len = word(d, 0)?;
+    d.get(8..8 + len)
+        .map(<[u8]>::to_vec)
+        .ok_or_else(|| format!("{len} bytes announced, fewer present"))
+}
+
+/// VTK's zlib blocks: number of blocks, block size, last partial block size (0 = full),
+/// compressed sizes, then the blocks.
+fn inflate_blocks(d: &[u8]) -> std::result::Result<Vec<u8>, String> {
+    let (blocks, size, last) = (word(d, 0)?, word(d, 1)?, word(d, 2)?);
+    let total = blocks
+        .checked_mul(size)
+        .map(|t| if last > 0 { t - size + last } else { t })
+        .ok_or("bad block header")?;
+    let mut out = Vec::with_capacity(total.min(1 << 30));
+    let mut at = 8 * (3 + blocks);
+    for b in 0..blocks {
+        let n = word(d, 3 + b)?;
+        let block = d.get(at..at + n).ok_or("a compressed block is cut short")?;
+        std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(block), &mut out)
+            .map_err(|e| format!("zlib: {e}"))?;
+        at += n;
+    }
+    if out.len() != total {
+        return Err(format!("{} bytes inflated, {total} announced", out.len()));
     }
     Ok(out)
 }
@@ -257,7 +330,7 @@ mod tests {
 
     #[test]
     fn series_round_trips_through_the_reader() {
-        let dir = tempfile::tempdir().unwrap();
+        use super::super::{Compression, Field, Frame, Geometry, Options, Precision, Series};
         let points = [
             [0.0, 0.0, 0.0],
             [1.0, 0.0, 0.0],
@@ -265,31 +338,55 @@ mod tests {
             [1.0, 1.0, 0.0],
         ];
         let cells = [0, 1, 2, 1, 3, 2];
-        let mut s = super::super::Series::create(dir.path(), &points, &cells, 3).unwrap();
         let u = [0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, -0.2, 0.0, 0.3, 0.4, 0.0];
         let vm = [1.5, -2.25];
-        s.write(&super::super::Frame {
-            step: 3,
-            time: 0.75,
-            point_data: vec![super::super::Field {
-                name: "displacement",
-                components: 3,
-                values: &u,
-            }],
-            cell_data: vec![super::super::Field {
-                name: "von_mises",
-                components: 1,
-                values: &vm,
-            }],
-        })
-        .unwrap();
-        let entries = read_pvd(&dir.path().join("solution.pvd")).unwrap();
-        assert_eq!(entries.len(), 1);
-        assert_eq!(entries[0].0, 0.75);
-        let v = read_vtu(&entries[0].1).unwrap();
-        assert_eq!(v.points, points);
-        assert_eq!(v.cells, vec![vec![0, 1, 2], vec![1, 3, 2]]);
-        assert_eq!(v.point_field("displacement").unwrap().values, u);
-        assert_eq!(v.cell_field("von_mises").unwrap().values, vm);
+        for compression in [Compression::None, Compression::Zlib] {
+            for precision in [Precision::Float64, Precision::Float32] {
+                let dir = tempfile::tempdir().unwrap();
+                let geometry = Geometry {
+                    points: &points,
+                    cells: &cells,
+                    nodes_per_cell: 3,
+                    region: &[7, 9],
+                };
+                let options = Options {
+                    compression,
+                    precision,
+                    fields: None,
+                };
+                let mut s = Series::create(dir.path(), &geometry, "id", &options).unwrap();
+                s.write(&Frame {
+                    step: 3,
+                    time: 0.75,
+                    point_data: vec![Field {
+                        name: "displacement",
+                        components: 3,
+                        values: &u,
+                    }],
+                    cell_data: vec![Field {
+                        name: "von_mises",
+                        components: 1,
+                        values: &vm,
+                    }],
+                })
+                .unwrap();
+                s.finish().unwrap();
+                let entries = read_pvd(&dir.path().join("solution.pvd")).unwrap();
+                assert_eq!(entries.len(), 1);
+                assert_eq!(entries[0].0, 0.75);
+                let v = read_vtu(&entries[0].1).unwrap();
+                assert_eq!(v.points, points);
+                assert_eq!(v.cells, vec![vec![0, 1, 2], vec![1, 3, 2]]);
+                let round = |x: &[f64]| -> Vec<f64> {
+                    match precision {
+                        Precision::Float64 => x.to_vec(),
+                        Precision::Float32 => x.iter().map(|&v| v as f32 as f64).collect(),
+                    }
+                };
+                assert_eq!(v.point_field("displacement").unwrap().values, round(&u));
+                assert_eq!(v.cell_field("von_mises").unwrap().values, round(&vm));
+                assert_eq!(v.cell_field("region").unwrap().values, [7.0, 9.0]);
+            }
+        }
     }
 }

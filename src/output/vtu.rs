@@ -1,63 +1,154 @@
-//! One `.vtu` file: a VTK XML UnstructuredGrid.
+//! One `.vtu` file: a VTK XML UnstructuredGrid with its arrays in raw appended data.
 //!
 //! # Encoding
 //!
-//! `format="binary"` (inline base64) with `header_type="UInt64"`, `byte_order="LittleEndian"`,
-//! `version="1.0"`, no compression: each `DataArray` holds base64 of one stream made of a
-//! UInt64 byte count followed by the values, exactly what vtkio 0.6 writes and what VTK itself
-//! writes for uncompressed inline data. ParaView, meshio and vtkio read it. Field values are
-//! Float64, coordinates Float64, `connectivity`/`offsets` Int64 (VTK's `vtkIdType`), `types`
-//! UInt8 (5 = VTK_TRIANGLE, 10 = VTK_TETRA). Version 1.0 is the first that knows
-//! `header_type` and the newest meshio 5 accepts. A 6-component field is a symmetric tensor
-//! and gets VTK's component names XX, YY, ZZ, XY, YZ, XZ.
+//! `<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian"
+//! header_type="UInt64" [compressor="vtkZLibDataCompressor"]>`; every `DataArray` is
+//! `format="appended"` with its `offset` into the `<AppendedData encoding="raw">` section
+//! that follows the `_`, the layout VTK's own `vtkXMLUnstructuredGridWriter` writes by default
+//! and ParaView, VTK's readers and meshio read:
+//! - uncompressed (`compression = "none"`): a UInt64 byte count, then the little-endian values;
+//! - zlib (`compression = "zlib"`, the default): VTK's block header — UInt64 number of blocks,
+//!   block size (32768 bytes, VTK's default), size of the last block if partial (0 if full),
+//!   the compressed size of each block — then each block as one zlib stream.
+//!
+//! Field values are Float64 or Float32 (`output.precision`), coordinates always Float64 (the
+//! mesh is exact in the file, and it costs once per frame after compression of a few
+//! percent), `connectivity`/`offsets` Int64 (`vtkIdType`), `types` UInt8 (5 = VTK_TRIANGLE,
+//! 10 = VTK_TETRA), the cell field `region` Int32 (gmsh physical tag). The run id is a
+//! `FieldData` array `run_id`: UInt8, the bytes of the string, ascii — a VTK `String` array
+//! would say it better, but meshio refuses that type, and ParaView shows the UInt8 array too.
+//! A 6-component field is a symmetric tensor and gets VTK's component names XX, YY, ZZ, XY,
+//! YZ, XZ.
+//!
+//! The static arrays (points, connectivity, offsets, types, region) are encoded and
+//! compressed once, in [`Grid::new`]; a frame compresses only its fields and copies the
+//! static bytes behind them.
 //!
 //! # Why this module writes the XML itself instead of calling vtkio's writer
 //!
-//! The first version of this module wrote through `vtkio::Vtk::try_into_xml_format` and
-//! vtkio's XML serializer. Measured in a release build on a 33k-node / 65k-triangle frame with
-//! every field of DESIGN.md (12.7 MB): 70–100 ms per frame, 60 ms of it in vtkio's serializer
-//! alone (quick-xml escapes every byte of the base64 text, and the output is copied several times
-//! through growing buffers), against a budget of well under 50 ms. vtkio 0.6 also offers no
-//! way around it:
-//! - the encoded geometry cannot be kept between frames: the pieces of
-//!   `vtkio::xml::Unstructured` are private and `vtkio::xml::EncodingInfo` has private fields
-//!   and no constructor, so a prepared file cannot be given new point/cell data;
-//! - its compressed output (`Compressor::ZLib`, `LZ4`, `LZMA`) is one compressed stream behind a
-//!   single size word, not VTK's block header (number of blocks, block size, last block size,
-//!   compressed size of each block), so neither ParaView nor meshio could read it anyway.
-//!
-//! So the geometry is encoded once, in [`Grid::new`], and a frame base64-encodes its fields
-//! into a buffer kept between frames: about 8 ms per such frame in a release build (5 ms to
-//! encode, 3 ms to write; `writing_a_33k_node_frame_is_fast` in tests/output_format.rs
-//! prints it). The layout is vtkio's (connectivity Int64 where vtkio writes UInt64), and
-//! the tests read every file back with vtkio (`vtkio::Vtk::import`, bit for bit), compare it
-//! with what vtkio's own writer produces for the same data, and read it with meshio.
+//! vtkio 0.6 cannot keep an encoded geometry between frames (the pieces of
+//! `vtkio::xml::Unstructured` are private), its serializer took 60 ms of a 70–100 ms frame at
+//! 33k nodes (quick-xml escapes every byte of base64 text), and its compressed output is one
+//! stream behind a single size word, not VTK's block header, so neither ParaView nor meshio
+//! could read it; its reader also cannot read raw appended data (its XML parser stops at a
+//! `<` byte in the binary). The tests read every file back with VTK's own reader (Python
+//! `vtk`), meshio and this crate's reader (`read.rs`).
 
 use std::io::Write as _;
 
-use super::Field;
+use flate2::{Compress, Compression as Level, FlushCompress, Status};
+
+use super::{Compression, Geometry};
 use crate::{Error, Result};
 
 /// VTK cell type codes.
 const VTK_TRIANGLE: u8 = 5;
 const VTK_TETRA: u8 = 10;
 
-/// The mesh of a series, encoded once, and the buffers reused by every frame.
+/// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
+const BLOCK: usize = 32768;
+
+/// zlib level. Measured on the fields of an h = 1/128 frame of examples/paper.toml (3.16 MB
+/// raw, 32 KiB blocks, Python's zlib): level 1 → 1.559 MB in 29 ms, level 4 → 1.542 MB in
+/// 35 ms, level 6 → 1.544 MB in 46 ms, level 9 → 1.544 MB in 203 ms. Level 1 is 1% larger
+/// than level 6 at 60% of its time, and the time is what a run writing every step pays.
+const ZLIB_LEVEL: u32 = 1;
+
+/// One array of a frame, already in its little-endian bytes.
+pub(super) struct Array {
+    pub name: String,
+    /// "Float64", "Float32", …
+    pub ty: &'static str,
+    pub components: usize,
+    pub bytes: Vec<u8>,
+}
+
+/// Encodes arrays in the appended layout (see the module doc).
+struct Encoder {
+    compression: Compression,
+    zlib: Compress,
+}
+
+impl Encoder {
+    fn new(compression: Compression) -> Encoder {
+        Encoder {
+            compression,
+            zlib: Compress::new(Level::new(ZLIB_LEVEL), true),
+        }
+    }
+
+    /// Appends the header and data of one array holding `raw` to `out`.
+    fn append(&mut self, out: &mut Vec<u8>, raw: &[u8]) {
+        match self.compression {
+            Compression::None => {
+                out.extend_from_slice(&(raw.len() as u64).to_le_bytes());
+                out.extend_from_slice(raw);
+            }
+            Compression::Zlib => {
+                let blocks = raw.len().div_ceil(BLOCK);
+                let header = out.len();
+                for word in [blocks, BLOCK, raw.len() % BLOCK] {
+                    out.extend_from_slice(&(word as u64).to_le_bytes());
+                }
+                out.resize(out.len() + 8 * blocks, 0);
+                for (b, chunk) in raw.chunks(BLOCK).enumerate() {
+                    let start = out.len();
+                    self.zlib.reset();
+                    loop {
+                        out.reserve(chunk.len() / 2 + 64);
+                        let done = self.zlib.total_in() as usize;
+                        let status = self
+                            .zlib
+                            .compress_vec(&chunk[done..], out, FlushCompress::Finish)
+                            .expect("zlib compression in memory cannot fail");
+                        if status == Status::StreamEnd {
+                            break;
+                        }
+                    }
+                    let size = (out.len() - start) as u64;
+                    let at = header + 24 + 8 * b;
+                    out[at..at + 8].copy_from_slice(&size.to_le_bytes());
+                }
+            }
+        }
+    }
+}
+
+/// Where in the static bytes an array lies, and its element attributes.
+struct Static {
+    /// The `<DataArray …` text up to (not including) ` offset=`.
+    open: String,
+    /// Offset into [`Grid::statics`].
+    at: usize,
+}
+
+/// The mesh of a series, encoded once, and the state reused by every frame.
 pub(super) struct Grid {
     num_points: usize,
     num_cells: usize,
-    /// The `<Points>` and `<Cells>` elements, ready to copy into every file.
-    geometry: Vec<u8>,
+    encoder: Encoder,
+    /// `<FieldData>` with the run id.
+    field_data: String,
+    points: Static,
+    cells: [Static; 3],
+    region: Option<Static>,
+    /// Appended bytes of the static arrays.
+    statics: Vec<u8>,
     /// The file being written (kept to reuse its allocation).
     out: Vec<u8>,
-    /// The little-endian bytes of one array before base64 (kept likewise).
-    raw: Vec<u8>,
+    appended: Vec<u8>,
+}
+
+fn le<T, const N: usize>(items: impl Iterator<Item = T>, f: impl Fn(T) -> [u8; N]) -> Vec<u8> {
+    items.flat_map(f).collect()
 }
 
 impl Grid {
     /// Checks and encodes the geometry. `cells` holds `nodes_per_cell` node indices per
     /// cell: 3 → VTK_TRIANGLE, 4 → VTK_TETRA.
-    pub(super) fn new(points: &[[f64; 3]], cells: &[usize], nodes_per_cell: usize) -> Result<Grid> {
+    pub(super) fn new(g: &Geometry, run_id: &str, compression: Compression) -> Result<Grid> {
+        let (points, cells, nodes_per_cell) = (g.points, g.cells, g.nodes_per_cell);
         let cell_type = match nodes_per_cell {
             3 => VTK_TRIANGLE,
             4 => VTK_TETRA,
@@ -82,29 +173,73 @@ impl Grid {
                 cells[pos]
             )));
         }
+        if !g.region.is_empty() && g.region.len() != num_cells {
+            return Err(Error::input(format!(
+                "output: {} region tags for {num_cells} cells",
+                g.region.len()
+            )));
+        }
 
-        let mut geometry = Vec::new();
-        let mut raw = Vec::new();
-        geometry.extend_from_slice(b"      <Points>\n");
-        raw_array(&mut raw, points.as_flattened(), |x| x.to_le_bytes());
-        data_array(&mut geometry, &raw, "Float64", "Points", 3);
-        geometry.extend_from_slice(b"      </Points>\n      <Cells>\n");
-        raw_array(&mut raw, cells, |&i| (i as i64).to_le_bytes());
-        data_array(&mut geometry, &raw, "Int64", "connectivity", 1);
-        raw_array(&mut raw, 1..num_cells + 1, |c| {
-            ((c * nodes_per_cell) as i64).to_le_bytes()
+        let mut encoder = Encoder::new(compression);
+        let mut statics = Vec::new();
+        let mut add = |name: &str, ty: &str, components: usize, raw: Vec<u8>| {
+            let at = statics.len();
+            encoder.append(&mut statics, &raw);
+            Static {
+                open: array_open(ty, name, components),
+                at,
+            }
+        };
+        // In reverse document order (see `encode`): types, offsets, connectivity, points,
+        // region.
+        let types = add("types", "UInt8", 1, vec![cell_type; num_cells]);
+        let offsets = add(
+            "offsets",
+            "Int64",
+            1,
+            le(1..num_cells + 1, |c| {
+                ((c * nodes_per_cell) as i64).to_le_bytes()
+            }),
+        );
+        let conn = add(
+            "connectivity",
+            "Int64",
+            1,
+            le(cells.iter(), |&i| (i as i64).to_le_bytes()),
+        );
+        let points_s = add(
+            "Points",
+            "Float64",
+            3,
+            le(points.as_flattened().iter(), |x| x.to_le_bytes()),
+        );
+        let region = (!g.region.is_empty()).then(|| {
+            add(
+                "region",
+                "Int32",
+                1,
+                le(g.region.iter(), |t| t.to_le_bytes()),
+            )
         });
-        data_array(&mut geometry, &raw, "Int64", "offsets", 1);
-        raw_array(&mut raw, 0..num_cells, |_| [cell_type]);
-        data_array(&mut geometry, &raw, "UInt8", "types", 1);
-        geometry.extend_from_slice(b"      </Cells>\n");
 
+        let id: Vec<String> = run_id.bytes().map(|b| b.to_string()).collect();
+        let field_data = format!(
+            "    <FieldData>\n      <DataArray type=\"UInt8\" Name=\"run_id\" \
+             NumberOfTuples=\"{}\" format=\"ascii\">{}</DataArray>\n    </FieldData>\n",
+            id.len(),
+            id.join(" ")
+        );
         Ok(Grid {
             num_points,
             num_cells,
-            geometry,
+            encoder,
+            field_data,
+            points: points_s,
+            cells: [conn, offsets, types],
+            region,
+            statics,
             out: Vec::new(),
-            raw,
+            appended: Vec::new(),
         })
     }
 
@@ -116,106 +251,96 @@ impl Grid {
         self.num_cells
     }
 
-    /// The whole `.vtu` file for these fields (valid until the next call). Errors say which
-    /// field does not fit the mesh.
-    pub(super) fn encode(
-        &mut self,
-        point_data: &[Field],
-        cell_data: &[Field],
-    ) -> std::result::Result<&[u8], String> {
-        check_fields(point_data, self.num_points, "point")?;
-        check_fields(cell_data, self.num_cells, "cell")?;
-
-        let out = &mut self.out;
+    /// The whole `.vtu` file for these fields (valid until the next call); sizes were
+    /// checked by the caller.
+    pub(super) fn encode(&mut self, point_data: &[Array], cell_data: &[Array]) -> &[u8] {
+        let (out, appended) = (&mut self.out, &mut self.appended);
         out.clear();
-        let values: usize = point_data
-            .iter()
-            .chain(cell_data)
-            .map(|f| f.values.len())
-            .sum();
-        let fields = point_data.len() + cell_data.len();
-        out.reserve(self.geometry.len() + (values * 8 + fields * 11) * 4 / 3 + fields * 200 + 512);
-
+        appended.clear();
+        let compressor = match self.encoder.compression {
+            Compression::None => "",
+            Compression::Zlib => " compressor=\"vtkZLibDataCompressor\"",
+        };
         // Writing into a Vec cannot fail.
         let _ = write!(
             out,
             "<?xml version=\"1.0\"?>\n\
              <VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" \
-             header_type=\"UInt64\">\n  <UnstructuredGrid>\n    \
+             header_type=\"UInt64\"{compressor}>\n  <UnstructuredGrid>\n{}    \
              <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n",
-            self.num_points, self.num_cells
+            self.field_data, self.num_points, self.num_cells
         );
-        for (tag, fields) in [("PointData", point_data), ("CellData", cell_data)] {
-            let _ = writeln!(out, "      <{tag}>");
-            for f in fields {
-                raw_array(&mut self.raw, f.values, |x| x.to_le_bytes());
-                data_array(out, &self.raw, "Float64", f.name, f.components);
+        // The appended data hold the static arrays, then the fields in reverse document
+        // order: meshio's raw appended reader walks the arrays by offset and looks each one
+        // up by its offset attribute after rewriting those of the arrays before it, so the
+        // array it looks for must come first in the document among equal offsets.
+        let base = self.statics.len();
+        let arrays: Vec<&Array> = point_data.iter().chain(cell_data).collect();
+        let mut offsets = vec![0; arrays.len()];
+        for (k, a) in arrays.iter().enumerate().rev() {
+            offsets[k] = base + appended.len();
+            self.encoder.append(appended, &a.bytes);
+        }
+        for (k, a) in arrays.iter().enumerate() {
+            if k == 0 {
+                out.extend_from_slice(b"      <PointData>\n");
             }
-            let _ = writeln!(out, "      </{tag}>");
+            if k == point_data.len() {
+                out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
+            }
+            let _ = writeln!(
+                out,
+                "{} offset=\"{}\"/>",
+                array_open(a.ty, &a.name, a.components),
+                offsets[k]
+            );
         }
-        out.extend_from_slice(&self.geometry);
-        out.extend_from_slice(b"    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
-        Ok(&self.out)
-    }
-}
-
-/// Checks sizes and names of the fields of one kind (`what` = "point" or "cell").
-fn check_fields(fields: &[Field], count: usize, what: &str) -> std::result::Result<(), String> {
-    for (k, f) in fields.iter().enumerate() {
-        if f.name.is_empty() {
-            return Err(format!("{what} field #{k} has an empty name"));
+        if arrays.is_empty() {
+            out.extend_from_slice(b"      <PointData>\n");
         }
-        if fields[..k].iter().any(|g| g.name == f.name) {
-            return Err(format!("{what} field `{}` is given twice", f.name));
+        if point_data.len() == arrays.len() {
+            out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
         }
-        if f.components == 0 || f.values.len() != f.components * count {
-            return Err(format!(
-                "{what} field `{}` has {} values, expected {} components × {count} {what}s",
-                f.name,
-                f.values.len(),
-                f.components
-            ));
+        let put = |s: &Static, out: &mut Vec<u8>| {
+            let _ = writeln!(out, "{} offset=\"{}\"/>", s.open, s.at);
+        };
+        if let Some(r) = &self.region {
+            put(r, out);
         }
-    }
-    Ok(())
-}
-
-/// Fills `raw` with the UInt64 byte count of the array followed by its little-endian bytes.
-fn raw_array<T, const N: usize>(
-    raw: &mut Vec<u8>,
-    items: impl IntoIterator<Item = T, IntoIter: ExactSizeIterator>,
-    le_bytes: impl Fn(T) -> [u8; N],
-) {
-    let items = items.into_iter();
-    let len = items.len() * N;
-    raw.clear();
-    raw.resize(8 + len, 0);
-    raw[..8].copy_from_slice(&(len as u64).to_le_bytes());
-    for (dst, item) in raw[8..].chunks_exact_mut(N).zip(items) {
-        dst.copy_from_slice(&le_bytes(item));
+        out.extend_from_slice(b"      </CellData>\n      <Points>\n");
+        put(&self.points, out);
+        out.extend_from_slice(b"      </Points>\n      <Cells>\n");
+        for s in &self.cells {
+            put(s, out);
+        }
+        out.extend_from_slice(
+            b"      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _",
+        );
+        out.extend_from_slice(&self.statics);
+        out.extend_from_slice(appended);
+        out.extend_from_slice(b"\n  </AppendedData>\n</VTKFile>\n");
+        &self.out
     }
 }
 
 /// Component names of a symmetric tensor, in ParaView's order.
 const SYMMETRIC_TENSOR: [&str; 6] = ["XX", "YY", "ZZ", "XY", "YZ", "XZ"];
 
-/// Appends one `<DataArray format="binary">` holding base64 of `raw`. A 6-component array is
-/// a symmetric tensor: its components are named XX, YY, ZZ, XY, YZ, XZ (`ComponentName0` …,
-/// as VTK writes them), so ParaView shows `stress_XY` and not `stress_3`.
-fn data_array(out: &mut Vec<u8>, raw: &[u8], ty: &str, name: &str, components: usize) {
-    let _ = write!(
-        out,
+/// `<DataArray type=… Name=… NumberOfComponents=… format="appended"`, without the offset. A
+/// 6-component array is a symmetric tensor: its components are named XX, YY, ZZ, XY, YZ, XZ
+/// (`ComponentName0` …, as VTK writes them), so ParaView shows `stress_XY`.
+fn array_open(ty: &str, name: &str, components: usize) -> String {
+    let mut s = format!(
         "        <DataArray type=\"{ty}\" Name=\"{}\" NumberOfComponents=\"{components}\"",
         escape_attr(name)
     );
     if components == 6 {
         for (i, c) in SYMMETRIC_TENSOR.iter().enumerate() {
-            let _ = write!(out, " ComponentName{i}=\"{c}\"");
+            s.push_str(&format!(" ComponentName{i}=\"{c}\""));
         }
     }
-    out.extend_from_slice(b" format=\"binary\">");
-    base64_into(out, raw);
-    out.extend_from_slice(b"</DataArray>\n");
+    s.push_str(" format=\"appended\"");
+    s
 }
 
 /// `s` with the five XML special characters escaped, for an attribute value.
@@ -237,66 +362,30 @@ pub(super) fn escape_attr(s: &str) -> std::borrow::Cow<'_, str> {
     out.into()
 }
 
-const BASE64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-
-/// Appends standard base64 (RFC 4648, with `=` padding) of `bytes` to `out`.
-fn base64_into(out: &mut Vec<u8>, bytes: &[u8]) {
-    let start = out.len();
-    let len = bytes.len().div_ceil(3) * 4;
-    out.resize(start + len, 0);
-    let dst = &mut out[start..];
-    let sextet = |n: u32, shift: u32| BASE64[((n >> shift) & 63) as usize];
-    let mut chunks = bytes.chunks_exact(3);
-    for (src, d) in (&mut chunks).zip(dst.chunks_exact_mut(4)) {
-        let n = u32::from(src[0]) << 16 | u32::from(src[1]) << 8 | u32::from(src[2]);
-        d.copy_from_slice(&[sextet(n, 18), sextet(n, 12), sextet(n, 6), sextet(n, 0)]);
-    }
-    let rest = chunks.remainder();
-    if !rest.is_empty() {
-        let b1 = rest.get(1).copied().unwrap_or(0);
-        let n = u32::from(rest[0]) << 16 | u32::from(b1) << 8;
-        let d = &mut dst[len - 4..];
-        d[0] = sextet(n, 18);
-        d[1] = sextet(n, 12);
-        d[2] = if rest.len() == 2 { sextet(n, 6) } else { b'=' };
-        d[3] = b'=';
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn b64(bytes: &[u8]) -> String {
+    #[test]
+    fn zlib_blocks_follow_vtk_header() {
+        let raw: Vec<u8> = (0..(BLOCK * 2 + 100)).map(|i| (i % 7) as u8).collect();
         let mut out = Vec::new();
-        base64_into(&mut out, bytes);
-        String::from_utf8(out).unwrap()
-    }
-
-    #[test]
-    fn base64_matches_rfc_4648_vectors() {
-        let cases = [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ];
-        for (plain, encoded) in cases {
-            assert_eq!(b64(plain.as_bytes()), encoded);
+        Encoder::new(Compression::Zlib).append(&mut out, &raw);
+        let word = |k: usize| u64::from_le_bytes(out[8 * k..8 * k + 8].try_into().unwrap());
+        assert_eq!(word(0), 3);
+        assert_eq!(word(1), BLOCK as u64);
+        assert_eq!(word(2), 100);
+        let sizes: u64 = (3..6).map(word).sum();
+        assert_eq!(out.len() as u64, 48 + sizes);
+        let mut back = Vec::new();
+        let mut at = 48;
+        for k in 3..6 {
+            let n = word(k) as usize;
+            let mut d = flate2::read::ZlibDecoder::new(&out[at..at + n]);
+            std::io::Read::read_to_end(&mut d, &mut back).unwrap();
+            at += n;
         }
-        assert_eq!(b64(&[0xfb, 0xff, 0xbf]), "+/+/");
-    }
-
-    #[test]
-    fn raw_array_has_the_byte_count_first() {
-        let mut raw = Vec::new();
-        raw_array(&mut raw, [1.5f64, -2.0], |x| x.to_le_bytes());
-        assert_eq!(raw.len(), 24);
-        assert_eq!(u64::from_le_bytes(raw[..8].try_into().unwrap()), 16);
-        assert_eq!(f64::from_le_bytes(raw[16..].try_into().unwrap()), -2.0);
+        assert_eq!(back, raw);
     }
 
     #[test]

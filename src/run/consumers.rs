@@ -13,7 +13,7 @@
 
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
-use crate::output::{Field, Frame, Series};
+use crate::output::Series;
 use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
 use crate::time_loop::{Step, TimeLoop};
@@ -97,7 +97,9 @@ pub(super) struct Frames<'a> {
 impl Frames<'_> {
     fn solved(&mut self, s: &Solved) -> Result<()> {
         if s.step.n.is_multiple_of(self.scene.output_every) || s.last {
-            write_frame(&mut self.series, self.disc, self.scene, s.rows, &s.step)?;
+            let flags = state_flags(s.rows, &s.step);
+            self.series
+                .write_step(self.disc, self.scene, s.rows, &s.step, &flags)?;
         }
         Ok(())
     }
@@ -305,85 +307,6 @@ fn state_counts(rows: &Rows, step: &Step) -> (usize, usize) {
     let active = flags[..rows.n_contact].iter().filter(|&&f| f).count();
     let stick = flags[rows.n_contact..].iter().filter(|&&f| f).count();
     (active, stick / rows.block.max(1))
-}
-
-fn write_frame(
-    series: &mut Series,
-    disc: &Discretization,
-    scene: &Scene,
-    rows: &Rows,
-    step: &Step,
-) -> Result<()> {
-    let nn = disc.nodes.len();
-    let u = disc.nodal(step.u);
-    let w = disc.nodal(step.w);
-    let (stress, von_mises) = disc.stress(step.w, step.u, step.m, scene.model);
-    // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and the
-    // friction traction γ_i / ∫φ_i: a scalar along τ_i in 2D, the tangential vector
-    // Σ_k γ_ik τ_ik / ∫φ_i in 3D.
-    let fc = if disc.dim == 2 { 1 } else { 3 };
-    let mut pressure = vec![0.0; nn];
-    let mut friction = vec![0.0; fc * nn];
-    let mut state = vec![0.0; nn];
-    for ((i, r), active) in rows.rows.iter().enumerate().zip(state_flags(rows, step)) {
-        if i < rows.n_contact {
-            pressure[r.node] = step.z[i] / r.area;
-        } else if fc == 1 {
-            friction[r.node] = step.z[i] / r.area;
-        } else {
-            for (k, t) in r.dir.iter().enumerate() {
-                friction[3 * r.node + k] += step.z[i] * t / r.area;
-            }
-        }
-        if active {
-            state[r.node] = 1.0;
-        }
-    }
-    let frame = Frame {
-        step: step.n,
-        time: step.t,
-        point_data: vec![
-            Field {
-                name: "displacement",
-                components: 3,
-                values: &u,
-            },
-            Field {
-                name: "velocity",
-                components: 3,
-                values: &w,
-            },
-            Field {
-                name: "contact_pressure",
-                components: 1,
-                values: &pressure,
-            },
-            Field {
-                name: "friction_traction",
-                components: fc,
-                values: &friction,
-            },
-            Field {
-                name: "contact_state",
-                components: 1,
-                values: &state,
-            },
-        ],
-        cell_data: vec![
-            Field {
-                name: "stress",
-                components: 6,
-                values: &stress,
-            },
-            Field {
-                name: "von_mises",
-                components: 1,
-                values: &von_mises,
-            },
-        ],
-    };
-    series.write(&frame)?;
-    Ok(())
 }
 
 #[cfg(test)]

@@ -23,6 +23,7 @@ pub use summary::{ContactSummary, Final, Iterations, OutputSummary, Status, Summ
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
+use crate::output::frame::open_series;
 use crate::output::{write_atomic, Series};
 use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
@@ -125,11 +126,10 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let disc = Discretization::new(&mesh, &scene)?;
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
     let tl = TimeLoop::new(&scene, &disc)?;
-    let (cells, per_cell) = mesh.cell_nodes();
-    let series = Series::create(&out, &mesh.nodes, &cells, per_cell)?;
+    let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
+    let series = open_series(&out, &mesh, &identity.run_id, &scene.output, None)?;
     // Setup succeeded: the run the directory held goes, before the first new frame.
     dir::remove_run(&out)?;
-    let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
     drive(Drive {
@@ -181,14 +181,15 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
     let mut tl = TimeLoop::new(&scene, &disc)?;
     cp.restore(&mut tl)?;
-    let (cells, per_cell) = mesh.cell_nodes();
-    let series = if cp.n == 0 {
-        Series::create(&out, &mesh.nodes, &cells, per_cell)?
-    } else {
-        Series::reopen(&out, &mesh.nodes, &cells, per_cell, cp.n - 1)?
-    };
-    dir::remove_temporaries(&out);
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
+    let series = open_series(
+        &out,
+        &mesh,
+        &identity.run_id,
+        &scene.output,
+        cp.n.checked_sub(1),
+    )?;
+    dir::remove_temporaries(&out);
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
     drive(Drive {
@@ -254,14 +255,18 @@ fn drive(d: Drive) -> Result<Outcome> {
     let ended = steps(&mut tl, &rows, &mut consumers, d.opts);
     let Consumers {
         statistics,
-        frames,
+        mut frames,
         checkpoints,
         progress,
     } = consumers;
     progress.finish();
     let checkpoint = checkpoints.path();
     // Every checkpoint handed over reaches the disk before the run reports how it ended.
-    let flushed = checkpoints.writer.finish();
+    // So does every frame handed to the series' writer thread (its errors name the file).
+    let flushed = checkpoints
+        .writer
+        .finish()
+        .and_then(|()| frames.series.finish());
     let ended = ended.and_then(|end| flushed.map(|()| end));
     let steps_s = steps_start.elapsed().as_secs_f64();
     if let Ok(End::Completed) = ended {

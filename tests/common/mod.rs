@@ -200,10 +200,31 @@ pub fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         .map(|e| {
             (
                 e.file_name().to_string_lossy().into_owned(),
-                std::fs::read(e.path()).unwrap(),
+                without_run_id(std::fs::read(e.path()).unwrap()),
             )
         })
         .collect()
+}
+
+/// The bytes of a series file without its run id (the `<FieldData>` of a `.vtu`, the
+/// `<!-- run_id: … -->` comment of the `.pvd`): two runs of one scene differ only there.
+pub fn without_run_id(mut bytes: Vec<u8>) -> Vec<u8> {
+    let find = |b: &[u8], pat: &[u8], from: usize| {
+        b[from..]
+            .windows(pat.len())
+            .position(|w| w == pat)
+            .map(|p| p + from)
+    };
+    for (open, close) in [
+        (&b"<FieldData>"[..], &b"</FieldData>"[..]),
+        (b"<!-- run_id:", b"-->"),
+    ] {
+        if let Some(a) = find(&bytes, open, 0) {
+            let b = find(&bytes, close, a).expect("closed") + close.len();
+            bytes.drain(a..b);
+        }
+    }
+    bytes
 }
 
 pub fn assert_same_series(a: &Path, b: &Path, what: &str) {

@@ -1,0 +1,75 @@
+//! What output costs (issue 14's targets): the h = k = 1/128 paper scene (examples/paper.toml
+//! on rect_128.msh, 128 steps) writing a frame every step, in each layout, against the same
+//! run writing only its last frame. The configurations run `REPEAT` times, interleaved (the
+//! machine is shared, so only side-by-side ratios mean something); the median wall time and
+//! the size of one frame (the last) and of the whole series are reported.
+//!
+//! Run: `cargo run --release --example bench_output [REPEAT]` (from the repository root).
+
+use std::path::Path;
+use std::time::Instant;
+use viscontact::run::{run, RunOptions};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn dir_size(dir: &Path) -> u64 {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("solution"))
+        .map(|e| e.metadata().unwrap().len())
+        .sum()
+}
+
+fn main() {
+    let repeat: usize = std::env::args()
+        .nth(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(5);
+    let base = ["mesh.file=../meshes/paper/rect_128.msh", "time.steps=128"];
+    let configs: [(&str, &[&str]); 4] = [
+        ("last frame only (zlib)", &["output.every=1000000"]),
+        ("every step, zlib (default)", &[]),
+        ("every step, zlib, float32", &["output.precision=float32"]),
+        ("every step, none (raw)", &["output.compression=none"]),
+    ];
+    let tmp = tempfile::tempdir().unwrap();
+    let mut times = vec![Vec::new(); configs.len()];
+    let mut sizes = vec![(0, 0); configs.len()];
+    for _ in 0..repeat {
+        for (i, (_, set)) in configs.iter().enumerate() {
+            let out = tmp.path().join(format!("c{i}"));
+            let _ = std::fs::remove_dir_all(&out);
+            let opts = RunOptions {
+                out: Some(out.clone()),
+                overrides: base
+                    .iter()
+                    .chain(set.iter())
+                    .map(|s| s.to_string())
+                    .collect(),
+                ..RunOptions::default()
+            };
+            let t = Instant::now();
+            run(Path::new("examples/paper.toml"), &opts).unwrap();
+            times[i].push(t.elapsed().as_secs_f64());
+            let last = std::fs::metadata(out.join("solution_000128.vtu"))
+                .unwrap()
+                .len();
+            sizes[i] = (last, dir_size(&out));
+        }
+    }
+    let reference = median(times[0].clone());
+    println!("h = k = 1/128, 128 steps, median of {repeat} interleaved runs:");
+    for (i, (name, _)) in configs.iter().enumerate() {
+        let t = median(times[i].clone());
+        println!(
+            "  {name:28} {t:6.2} s ({:4.2}×)  frame {:6.2} MB  series {:7.1} MB",
+            t / reference,
+            sizes[i].0 as f64 / 1e6,
+            sizes[i].1 as f64 / 1e6
+        );
+    }
+}
