@@ -50,6 +50,12 @@ impl Consumers<'_> {
 
     /// The loop advanced to t_{n+1}.
     pub fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
+        // A checkpoint of step n + 1 may reach the disk only after the frames of steps ≤ n
+        // have: the frame writer runs on its own thread, and a resume keeps the frames
+        // before its step (a kill -9 in between lost a frame for good).
+        if self.checkpoints.due.is_some() {
+            self.frames.series.finish()?;
+        }
         self.checkpoints.advanced(tl, &self.statistics.log)
     }
 }
