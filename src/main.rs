@@ -321,7 +321,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         println!("warning    {w}");
     }
     // Whatever `run` refuses before its first step, `check` refuses too (exit 2).
-    viscontact::time_loop::preflight(&scene, &disc).map(|_| ())
+    viscontact::time_loop::refusals(&scene, &disc, &plan)
 }
 
 fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {

@@ -269,12 +269,18 @@ fn remedy(k: f64) -> String {
 /// `run` would.
 pub fn preflight(scene: &Scene, disc: &Discretization) -> Result<Plan> {
     let plan = Plan::new(scene)?;
+    refusals(scene, disc, &plan)?;
+    Ok(plan)
+}
+
+/// [`preflight`] for a memory plan in hand (`check` builds it to print it; a fit is not
+/// cheap enough to do twice).
+pub fn refusals(scene: &Scene, disc: &Discretization, plan: &Plan) -> Result<()> {
     if scene.history == scene::History::Left {
-        Verdict::new(scene, disc, &plan).check(scene)?;
+        Verdict::new(scene, disc, plan).check(scene)?;
     }
     disc.loads
-        .add(0.0, &disc.free, scene, &mut vec![0.0; disc.n_free])?;
-    Ok(plan)
+        .add(0.0, &disc.free, scene, &mut vec![0.0; disc.n_free])
 }
 
 #[cfg(test)]

@@ -5,28 +5,14 @@
 
 mod common;
 
-use common::{assert_same_series, frames, paper_scene, viscontact};
+use common::{
+    assert_same_series, finished, frames, paper_scene, resume_quiet, run_options as opts,
+    viscontact,
+};
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use viscontact::run::{resume, run, Outcome, ResumeOptions, RunOptions};
-
-fn opts(out: &Path, set: &[&str], stop_after: Option<usize>) -> RunOptions {
-    RunOptions {
-        out: Some(out.to_path_buf()),
-        overrides: set.iter().map(|s| s.to_string()).collect(),
-        progress: false,
-        stop_after,
-        ..Default::default()
-    }
-}
-
-fn finished(o: Outcome) -> viscontact::run::Summary {
-    match o {
-        Outcome::Finished(s) => *s,
-        Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
-    }
-}
+use viscontact::run::{resume, run, Outcome, ResumeOptions};
 
 /// Stop at N/2 and resume = the run that never stopped, for a Prony and a general kernel,
 /// with contact and friction active.
@@ -75,16 +61,7 @@ fn stopped_and_resumed_equals_uninterrupted() {
         assert!(part.join("solution_000007.vtu").exists());
         assert!(!part.join("solution_000008.vtu").exists());
         assert_eq!(part.join("checkpoint_history.h5").exists(), expr);
-        let r = finished(
-            resume(
-                &part.join("checkpoint.h5"),
-                &ResumeOptions {
-                    progress: false,
-                    ..Default::default()
-                },
-            )
-            .unwrap(),
-        );
+        let r = finished(resume_quiet(&part.join("checkpoint.h5")));
         assert_eq!(r.steps, 16);
         common::assert_same_series(&full, &part, what);
     }

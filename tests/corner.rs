@@ -17,42 +17,72 @@ fn scene_2d(dir: &Path, mesh: &Path, a: f64, solver: &str) -> std::path::PathBuf
         let (c, s) = (a.cos(), a.sin());
         format!("\"{c:e}*({x}) - {s:e}*({y})\", \"{s:e}*({x}) + {c:e}*({y})\"")
     };
-    write(
-        dir,
-        &format!("corner_{solver}.toml"),
-        &format!(
-            r#"
-name = "corner"
+    let corner = Corner {
+        name: "corner",
+        mesh,
+        model: "plane_stress",
+        steps: 16,
+        extra: "[material.relaxation]\nprony = [[1.0, 10.0]]",
+        loads: [rot("0.02*t", "-0.01*t"), rot("0.01*sin(3*t)", "-0.05*t")],
+    };
+    corner.write(dir, solver)
+}
+
+/// A scene pressing a body onto Γ3,1 and along Γ3,2: the traction and the body force are
+/// `loads` (TOML vector bodies), `extra` is more TOML (a relaxation kernel).
+struct Corner<'a> {
+    name: &'a str,
+    mesh: &'a Path,
+    model: &'a str,
+    steps: usize,
+    extra: &'a str,
+    loads: [String; 2],
+}
+
+impl Corner<'_> {
+    fn write(&self, dir: &Path, solver: &str) -> std::path::PathBuf {
+        let Corner {
+            name,
+            mesh,
+            model,
+            steps,
+            extra,
+            loads: [traction, body],
+        } = self;
+        write(
+            dir,
+            &format!("{name}_{solver}.toml"),
+            &format!(
+                r#"
+name = "{name}"
 [mesh]
 file = "{}"
-model = "plane_stress"
+model = "{model}"
 [time]
 end = 1.0
-steps = 16
+steps = {steps}
 [material.viscosity]
 theta = 0.1
 zeta = 0.1
 [material.elasticity]
 young = 0.1
 poisson = 0.3
-[material.relaxation]
-prony = [[1.0, 10.0]]
+{extra}
 [contact]
 [friction]
 normal_stress = 0.01
 coefficient = 0.5
 [[load.traction]]
-value = [{}]
+value = [{traction}]
 [[load.body]]
-value = [{}]
+value = [{body}]
 [solver]
 contact = "{solver}"
 "#,
-            mesh.display(),
-            rot("0.02*t", "-0.01*t"),
-            rot("0.01*sin(3*t)", "-0.05*t"),
-        ),
-    )
+                mesh.display(),
+            ),
+        )
+    }
 }
 
 fn rotate_z(a: f64) -> impl Fn([f64; 3]) -> [f64; 3] {
@@ -61,7 +91,7 @@ fn rotate_z(a: f64) -> impl Fn([f64; 3]) -> [f64; 3] {
 }
 
 /// u_N of a scene with the fast solver and with clarabel.
-fn both(dir: &Path, make: impl Fn(&str) -> std::path::PathBuf) -> (Vec<f64>, Vec<f64>, usize) {
+fn both(make: impl Fn(&str) -> std::path::PathBuf) -> (Vec<f64>, Vec<f64>, usize) {
     let run = |solver: &str| {
         let (scene, _, disc) = load(&make(solver), &[]);
         let t = trace(&scene, &disc);
@@ -71,7 +101,6 @@ fn both(dir: &Path, make: impl Fn(&str) -> std::path::PathBuf) -> (Vec<f64>, Vec
             .count();
         (t.u_final, dependent)
     };
-    let _ = dir;
     let (fast, dep) = run("fast");
     let (clarabel, _) = run("clarabel");
     (fast, clarabel, dep)
@@ -103,7 +132,7 @@ fn corners_2d_fast_equals_clarabel_at_any_rotation() {
             rng.next_f64(),
         ] {
             let mesh = write(dir.path(), "m.msh", &map_msh_nodes(&text, rotate_z(a)));
-            let (fast, clarabel, dep) = both(dir.path(), |s| scene_2d(dir.path(), &mesh, a, s));
+            let (fast, clarabel, dep) = both(|s| scene_2d(dir.path(), &mesh, a, s));
             let d = rel_diff(&fast, &clarabel);
             assert!(d <= 1e-7, "{name} rotated by {a}: fast vs clarabel {d:e}");
             assert_eq!(dep, 1, "{name}: the corner is reported in the warnings");
@@ -144,43 +173,16 @@ fn edge_3d_fast_equals_clarabel_at_any_rotation() {
             let r = rot(v);
             format!("\"{:e}*t\", \"{:e}*t\", \"{:e}*t\"", r[0], r[1], r[2])
         };
-        let make = |solver: &str| {
-            write(
-                dir.path(),
-                &format!("edge_{solver}.toml"),
-                &format!(
-                    r#"
-name = "edge"
-[mesh]
-file = "{}"
-model = "3d"
-[time]
-end = 1.0
-steps = 8
-[material.viscosity]
-theta = 0.1
-zeta = 0.1
-[material.elasticity]
-young = 0.1
-poisson = 0.3
-[contact]
-[friction]
-normal_stress = 0.01
-coefficient = 0.5
-[[load.traction]]
-value = [{}]
-[[load.body]]
-value = [{}]
-[solver]
-contact = "{solver}"
-"#,
-                    mesh.display(),
-                    load([0.02, 0.01, -0.01]),
-                    load([0.01, 0.02, -0.05]),
-                ),
-            )
+        let edge = Corner {
+            name: "edge",
+            mesh: &mesh,
+            model: "3d",
+            steps: 8,
+            extra: "",
+            loads: [load([0.02, 0.01, -0.01]), load([0.01, 0.02, -0.05])],
         };
-        let (fast, clarabel, dep) = both(dir.path(), make);
+        let make = |solver: &str| edge.write(dir.path(), solver);
+        let (fast, clarabel, dep) = both(make);
         let d = rel_diff(&fast, &clarabel);
         assert!(d <= 1e-7, "edge box rotated by {a}: fast vs clarabel {d:e}");
         assert_eq!(dep, 1, "the edge's nodes are reported");

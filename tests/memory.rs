@@ -6,11 +6,11 @@
 
 mod common;
 
-use common::{finished, run_options as opts, without_run_id};
+use common::{finished, resume_quiet, run_options as opts, without_run_id};
 use std::path::{Path, PathBuf};
 use viscontact::expr::Expr;
 use viscontact::kernel_fit::{fit, Lags};
-use viscontact::run::{resume, run, Outcome, ResumeOptions};
+use viscontact::run::{run, Outcome};
 use viscontact::scene::Kernel;
 
 /// examples/paper.toml on `mesh` with the relaxation lines replaced by `relaxation`.
@@ -157,16 +157,7 @@ fn compressed_run_resumed_equals_uninterrupted_bit_for_bit() {
     ));
     // No past displacements: the compressed kernel's state is its Prony terms.
     assert!(!part.join("checkpoint_history.h5").exists());
-    let r = finished(
-        resume(
-            &part.join("checkpoint.h5"),
-            &ResumeOptions {
-                progress: false,
-                ..Default::default()
-            },
-        )
-        .unwrap(),
-    );
+    let r = finished(resume_quiet(&part.join("checkpoint.h5")));
     assert_eq!(r.steps, 16);
     for n in [8, 12, 16] {
         let name = format!("solution_{n:06}.vtu");

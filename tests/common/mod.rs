@@ -337,6 +337,11 @@ pub fn run_options(
     }
 }
 
+/// Resumes a checkpoint into its own directory without a progress bar.
+pub fn resume_quiet(checkpoint: &Path) -> viscontact::run::Outcome {
+    viscontact::run::resume(checkpoint, &viscontact::run::ResumeOptions::default()).unwrap()
+}
+
 /// The summary of a run that must have finished.
 pub fn finished(o: viscontact::run::Outcome) -> viscontact::run::Summary {
     match o {
