@@ -37,6 +37,14 @@ pub enum Memory {
     },
 }
 
+/// The memory a checkpoint holds, as [`Plan::resumed`] needs it.
+pub enum Stored {
+    /// The Prony terms (a_i, b_i) the run's recursion used.
+    Terms(Vec<(f64, f64)>),
+    /// The past displacements of the direct sum (or no memory at all).
+    Direct,
+}
+
 /// How a run computes its memory sum, decided at setup from the scene (before any step).
 #[derive(Clone, Debug)]
 pub enum Plan {
@@ -55,12 +63,93 @@ pub enum Plan {
 
 impl Plan {
     /// Evaluates an expression or table kernel on every lag the run reads (r(k)..r(Nk), and
-    /// r(0) for the implicit variant) — a non-finite value is bad input naming the key — and
-    /// fits it when the scene asks for compression.
+    /// r(0) for the implicit variant; a compressed kernel up to its horizon) — a non-finite
+    /// value is bad input naming the key — and fits it when the scene asks for compression.
     pub fn new(scene: &Scene) -> Result<Plan> {
+        let Some((lags, tolerance)) = Self::lags(scene)? else {
+            return Ok(Self::fixed(scene));
+        };
+        Ok(match tolerance {
+            None => Self::exact(lags, scene, None),
+            Some(tolerance) => match kernel_fit::fit(&lags, tolerance) {
+                Ok(fit) => Plan::Compressed(fit),
+                Err(why) => Self::exact(lags, scene, Some(why)),
+            },
+        })
+    }
+
+    /// The plan of a run resumed from a checkpoint whose memory is `stored`: the memory the
+    /// run started with, whatever the end time now. A compressed run continues with its own
+    /// fit (the term states belong to it; nothing is stored to refit from), certified again on
+    /// every lag up to the scene's end — the same lags without `--set time.end`, more with it.
+    /// Where the fit leaves the tolerance on the new lags the resume is refused, naming the
+    /// latest end time it still covers. A run that kept its past displacements continues the
+    /// direct sum.
+    pub fn resumed(scene: &Scene, stored: Stored) -> Result<Plan> {
+        let Some((lags, tolerance)) = Self::lags(scene)? else {
+            return Ok(Self::fixed(scene));
+        };
+        Ok(match (tolerance, stored) {
+            (Some(tolerance), Stored::Terms(terms)) => {
+                let start = std::time::Instant::now();
+                let (error, within) = kernel_fit::certify(&lags, &terms, tolerance);
+                if error > tolerance {
+                    let t_ok = within.map_or(0.0, |l| l as f64 * lags.k);
+                    return Err(crate::Error::input(format!(
+                        "cannot continue this compressed run to T = {}: its kernel fit ({} \
+                         terms, fitted on the lags of the run as it started) is off by {error:.2e} \
+                         (relative) on the lags up to T, above the tolerance {tolerance:e}, and \
+                         the checkpoint keeps no past displacements to fit again from. The fit \
+                         holds up to t = {t_ok}: resume with --set time.end ≤ {t_ok}, or run \
+                         the scene again from the start with [material.relaxation] horizon = \
+                         {} (the latest end time its fit must cover)",
+                        scene.end,
+                        terms.len(),
+                        scene.end
+                    )));
+                }
+                Plan::Compressed(Fit {
+                    terms,
+                    error,
+                    last_lag: lags.last(),
+                    seconds: start.elapsed().as_secs_f64(),
+                })
+            }
+            (Some(_), Stored::Direct) => Self::exact(
+                lags,
+                scene,
+                Some(
+                    "the run used the direct sum from its start (its kernel was not fitted \
+                     within the tolerance then); it continues with the stored past \
+                     displacements"
+                        .into(),
+                ),
+            ),
+            // memory = "exact"; a checkpoint whose memory kind differs is refused when it
+            // is restored.
+            _ => Self::exact(lags, scene, None),
+        })
+    }
+
+    /// The direct sum on the run's own lags (`lags` may reach further, to a fit's horizon).
+    fn exact(mut lags: Lags, scene: &Scene, fallback: Option<String>) -> Plan {
+        lags.truncate(scene.steps);
+        Plan::Exact { lags, fallback }
+    }
+
+    /// The plan of a scene without relaxation or with its own Prony series.
+    fn fixed(scene: &Scene) -> Plan {
+        match &scene.relaxation {
+            Some(Kernel::Prony(terms)) => Plan::Prony(terms.clone()),
+            _ => Plan::None,
+        }
+    }
+
+    /// For an expression or table kernel: r on every lag the run reads, and the tolerance of
+    /// its compression (None: `memory = "exact"`); None for the other kernels.
+    fn lags(scene: &Scene) -> Result<Option<(Lags, Option<f64>)>> {
         let kernel = match &scene.relaxation {
-            None => return Ok(Plan::None),
-            Some(Kernel::Prony(terms)) => return Ok(Plan::Prony(terms.clone())),
+            None | Some(Kernel::Prony(_)) => return Ok(None),
             Some(kernel) => kernel,
         };
         let key = match kernel {
@@ -68,21 +157,15 @@ impl Plan {
             _ => "material.relaxation.expr",
         };
         let implicit = scene.history == scene::History::Implicit;
-        let lags = Lags::new(kernel, scene.k(), scene.steps, implicit, key)
+        // A compressed kernel is fitted up to its horizon, which a resume may extend the run
+        // to (the scene checks horizon ≥ time.end).
+        let steps = match (scene.compression, scene.horizon) {
+            (Some(_), Some(h)) => scene.steps.max((h / scene.k() - 1e-9).ceil() as usize),
+            _ => scene.steps,
+        };
+        let lags = Lags::new(kernel, scene.k(), steps, implicit, key)
             .map_err(|e| crate::Error::input(format!("{}: {e}", scene.path.display())))?;
-        Ok(match scene.compression {
-            None => Plan::Exact {
-                lags,
-                fallback: None,
-            },
-            Some(tolerance) => match kernel_fit::fit(&lags, tolerance) {
-                Ok(fit) => Plan::Compressed(fit),
-                Err(why) => Plan::Exact {
-                    lags,
-                    fallback: Some(why),
-                },
-            },
-        })
+        Ok(Some((lags, scene.compression)))
     }
 
     /// The Prony series the recursion runs, if any.

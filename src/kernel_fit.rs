@@ -88,6 +88,16 @@ impl Lags {
         Ok(Lags { k, with_zero, r })
     }
 
+    /// Keeps the lags up to l = n.
+    pub fn truncate(&mut self, n: usize) {
+        self.r.truncate(n + usize::from(self.with_zero));
+    }
+
+    /// The last lag l.
+    pub fn last(&self) -> usize {
+        self.lag(self.r.len() - 1)
+    }
+
     /// The lag index l of `r[i]`.
     fn lag(&self, i: usize) -> usize {
         i + usize::from(!self.with_zero)
@@ -106,6 +116,8 @@ pub struct Fit {
     pub terms: Vec<(f64, f64)>,
     /// The certified max_l |r̃(s_l) − r(s_l)| / max_l |r(s_l)| over every lag.
     pub error: f64,
+    /// The last lag l it is certified on (N, or the horizon's steps).
+    pub last_lag: usize,
     /// Wall time of the fit and its certificate.
     pub seconds: f64,
 }
@@ -124,6 +136,7 @@ pub fn fit(lags: &Lags, tolerance: f64) -> std::result::Result<Fit, String> {
         return Ok(Fit {
             terms: Vec::new(),
             error: 0.0,
+            last_lag: lags.last(),
             seconds: start.elapsed().as_secs_f64(),
         });
     }
@@ -154,6 +167,7 @@ pub fn fit(lags: &Lags, tolerance: f64) -> std::result::Result<Fit, String> {
     Ok(Fit {
         terms,
         error,
+        last_lag: lags.last(),
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -161,7 +175,7 @@ pub fn fit(lags: &Lags, tolerance: f64) -> std::result::Result<Fit, String> {
 /// One fit from a grid of `per_digit`·digits rates per decade: NNLS, certificate, and up to
 /// `ROUNDS` refinements; the best (terms, certified error) seen.
 fn attempt(lags: &Lags, tolerance: f64, scale: f64, per_digit: f64) -> (Vec<(f64, f64)>, f64) {
-    let n = lags.lag(lags.r.len() - 1);
+    let n = lags.last();
     let k = lags.k;
     let mut rows = sample(lags);
     let mut rates = grid(k, n as f64 * k, (-per_digit * tolerance.log10()).max(3.0));
@@ -294,6 +308,23 @@ fn design(lags: &Lags, rows: &[usize], rates: &[f64]) -> Mat<f64> {
 
 fn values(lags: &Lags, rows: &[usize]) -> Vec<f64> {
     rows.iter().map(|&i| lags.r[i]).collect()
+}
+
+/// The certificate of `terms` on every lag: the relative error max_l |r̃(s_l) − r(s_l)| /
+/// max_l |r(s_l)|, and the last lag index l* such that the error stays within `tolerance` on
+/// every lag up to it (`None` when it fails already on the first).
+pub fn certify(lags: &Lags, terms: &[(f64, f64)], tolerance: f64) -> (f64, Option<usize>) {
+    let scale = lags.scale();
+    if scale == 0.0 {
+        return (0.0, lags.r.len().checked_sub(1).map(|i| lags.lag(i)));
+    }
+    let errors = deviation(lags, terms);
+    let error = errors.iter().fold(0.0f64, |m, e| m.max(*e)) / scale;
+    let within = errors
+        .iter()
+        .position(|e| e / scale > tolerance)
+        .unwrap_or(errors.len());
+    (error, within.checked_sub(1).map(|i| lags.lag(i)))
 }
 
 /// |r̃(s_l) − r(s_l)| on every lag, r̃(s_l) = Σ a_i d_i^l. d_i^l is recomputed by exp every

@@ -300,7 +300,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
              the {} lags, fitted in {:.3} s; saves {:.1} MB against the direct sum",
             fit.terms.len(),
             fit.error,
-            scene.steps,
+            fit.last_lag,
             fit.seconds,
             (direct_bytes.saturating_sub(history_bytes)) as f64 / 1e6
         ),

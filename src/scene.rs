@@ -195,6 +195,9 @@ pub struct RelaxationSection {
     pub memory: Option<MemoryMode>,
     /// Certified max relative error of the compressed kernel on the lags (default 1e-10).
     pub tolerance: Option<f64>,
+    /// The latest end time the compressed kernel's fit covers (default time.end): a run
+    /// resumed with a later `time.end` keeps its fit, so it must already hold there.
+    pub horizon: Option<f64>,
 }
 
 /// How the memory sum of an expression or table kernel is computed.
@@ -634,6 +637,9 @@ pub struct Scene {
     /// For an expression or table kernel: compressed with this tolerance, or exact (None).
     /// Always None for a Prony series (already O(1)).
     pub compression: Option<f64>,
+    /// `material.relaxation.horizon`: the fit of a compressed kernel covers the lags up to
+    /// max(time.end, horizon).
+    pub horizon: Option<f64>,
     pub contact: bool,
     pub friction: Option<Friction>,
     pub tractions: Vec<Traction>,
@@ -751,11 +757,14 @@ impl Scene {
             _ => None,
         };
         let compression = match (&relaxation, &f.material.relaxation) {
-            (Some(Kernel::Prony(_)), Some(r)) if r.memory.is_some() || r.tolerance.is_some() => {
+            (Some(Kernel::Prony(_)), Some(r))
+                if r.memory.is_some() || r.tolerance.is_some() || r.horizon.is_some() =>
+            {
                 return bad(
                     "material.relaxation.memory",
-                    "a Prony series already runs by the exact O(1) recursion; 'memory' and \
-                     'tolerance' apply to 'expr' and 'table' kernels only: remove them",
+                    "a Prony series already runs by the exact O(1) recursion; 'memory', \
+                     'tolerance' and 'horizon' apply to 'expr' and 'table' kernels only: remove \
+                     them",
                 )
             }
             (Some(Kernel::Expr(_) | Kernel::Table(..)), Some(r)) => {
@@ -775,6 +784,27 @@ impl Scene {
                 }
             }
             _ => None,
+        };
+        let horizon = match f.material.relaxation.as_ref().and_then(|r| r.horizon) {
+            Some(h) if compression.is_none() => {
+                return bad(
+                    "material.relaxation.horizon",
+                    &format!(
+                        "is {h}, but only a compressed kernel (an 'expr' or 'table' with memory \
+                         = \"compressed\") is fitted: remove it"
+                    ),
+                )
+            }
+            Some(h) if !(h.is_finite() && h > 0.0 && h <= 1e6 * end) => {
+                return bad(
+                    "material.relaxation.horizon",
+                    &format!(
+                        "is {h}; the fit's horizon is the latest time.end a resume may set, a \
+                         time up to 10^6 times time.end = {end}"
+                    ),
+                )
+            }
+            h => h,
         };
         let friction = match &f.friction {
             Some(fr) if fr.enabled => {
@@ -903,6 +933,7 @@ impl Scene {
             elasticity,
             relaxation,
             compression,
+            horizon,
             contact: f.contact.as_ref().is_some_and(|c| c.enabled),
             friction,
             tractions,

@@ -112,9 +112,15 @@ pub struct Step<'a> {
 
 impl<'p> TimeLoop<'p> {
     pub fn new(scene: &'p Scene, disc: &'p Discretization) -> Result<Self> {
+        Self::with_plan(scene, disc, Plan::new(scene)?)
+    }
+
+    /// A time loop with a memory plan in hand (a resumed run's, `Plan::resumed`), checked
+    /// as [`preflight`] checks a new one.
+    pub fn with_plan(scene: &'p Scene, disc: &'p Discretization, plan: Plan) -> Result<Self> {
+        refusals(scene, disc, &plan)?;
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-        let plan = preflight(scene, disc)?;
         let implicit = match scene.history {
             scene::History::Left => None,
             scene::History::Implicit => {

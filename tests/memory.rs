@@ -256,3 +256,90 @@ fn non_finite_kernel_is_bad_input_naming_its_key() {
     .unwrap_err();
     assert!(err.to_string().contains("s = 0"), "{err}");
 }
+
+#[test]
+fn compressed_run_extends_to_its_horizon_and_no_further() {
+    let dir = tempfile::tempdir().unwrap();
+    let kernel = "expr = \"0.2*(s+0.01)^(-0.5)\"\ntolerance = 1e-8";
+    let with_horizon = paper_scene(
+        dir.path(),
+        "h.toml",
+        "paper/rect_008.msh",
+        &format!("{kernel}\nhorizon = 2.0"),
+    );
+    let extend = |cp: &Path, end: &str| {
+        viscontact::run::resume(
+            cp,
+            &viscontact::run::ResumeOptions {
+                overrides: vec![format!("time.end={end}")],
+                ..Default::default()
+            },
+        )
+    };
+    // Run to T = 1, extend to T = 2: the run straight to T = 2 with the same horizon, bit for
+    // bit (the fit covers the lags up to the horizon in both).
+    let straight = dir.path().join("straight");
+    let s = finished(
+        run(
+            &with_horizon,
+            &opts(&straight, &["time.steps=32", "time.end=2"], None),
+        )
+        .unwrap(),
+    );
+    let memory = s.memory.as_ref().unwrap();
+    assert_eq!(memory.method, "compressed");
+    assert_eq!(memory.certified_until, Some(2.0));
+    let part = dir.path().join("part");
+    finished(run(&with_horizon, &opts(&part, &["time.steps=16"], None)).unwrap());
+    let r = finished(extend(&part.join("checkpoint.h5"), "2").unwrap());
+    assert_eq!(r.steps, 32);
+    assert_eq!(s.final_.u_h1.to_bits(), r.final_.u_h1.to_bits());
+    for n in [17, 32] {
+        let name = format!("solution_{n:06}.vtu");
+        assert!(
+            without_run_id(std::fs::read(straight.join(&name)).unwrap())
+                == without_run_id(std::fs::read(part.join(&name)).unwrap()),
+            "{name} differs after the extension"
+        );
+    }
+    // Beyond the horizon, and without one: refused (bad input), naming the time the fit holds
+    // to and the key that would make it hold further; nothing in the directory changes.
+    let before = std::fs::read(part.join("checkpoint.h5")).unwrap();
+    let e = extend(&part.join("checkpoint.h5"), "3").unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    let msg = e.to_string();
+    assert!(
+        msg.contains("holds up to t = 2") && msg.contains("horizon = 3"),
+        "{msg}"
+    );
+    assert_eq!(before, std::fs::read(part.join("checkpoint.h5")).unwrap());
+    let plain = paper_scene(dir.path(), "p.toml", "paper/rect_008.msh", kernel);
+    let short = dir.path().join("short");
+    finished(run(&plain, &opts(&short, &["time.steps=16"], None)).unwrap());
+    let msg = extend(&short.join("checkpoint.h5"), "1.5")
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("holds up to t = 1:"), "{msg}");
+    // The key is checked: only a compressed kernel has a fit, and a horizon is a positive time.
+    for (relaxation, why) in [
+        (
+            "prony = [[1.0, 10.0]]\nhorizon = 2.0",
+            "apply to 'expr' and 'table'",
+        ),
+        (
+            &format!("{kernel}\nmemory = \"exact\"\nhorizon = 2.0") as &str,
+            "only a compressed",
+        ),
+        (&format!("{kernel}\nhorizon = -1.0"), "is -1"),
+    ] {
+        let scene = paper_scene(dir.path(), "bad.toml", "paper/rect_008.msh", relaxation);
+        let e =
+            viscontact::run::run(&scene, &opts(&dir.path().join("bad"), &[], None)).unwrap_err();
+        assert_eq!(e.exit_code(), 2);
+        let msg = e.to_string();
+        assert!(
+            msg.contains("material.relaxation") && msg.contains(why),
+            "{msg}"
+        );
+    }
+}

@@ -4,7 +4,7 @@
 use super::history_file::read_history;
 use super::{groups_fingerprint, mesh_fingerprint, physics_signature, Checkpoint, StoredMemory};
 use crate::fem::Discretization;
-use crate::history::{Memory, PronyTerm};
+use crate::history::{Memory, Plan, PronyTerm, Stored};
 use crate::mesh::Mesh;
 use crate::scene::{self, Scene};
 use crate::time_loop::TimeLoop;
@@ -186,6 +186,22 @@ impl Checkpoint {
             "{shown}: cannot resume, the checkpoint does not match its scene:\n  - {}",
             diffs.join("\n  - ")
         )))
+    }
+
+    /// The memory plan the resumed run continues with ([`Plan::resumed`]): a compressed
+    /// run's own fit, its terms (a_i, b_i) read back from the stored a_i and e^{−b_i k}.
+    pub fn plan(&self, scene: &Scene) -> Result<Plan> {
+        let stored = match &self.memory {
+            StoredMemory::Prony { a, decay, .. } => Stored::Terms(
+                a.iter()
+                    .zip(decay)
+                    .map(|(&a, &d)| (a, -d.ln() / self.k))
+                    .collect(),
+            ),
+            StoredMemory::None | StoredMemory::Direct { .. } => Stored::Direct,
+        };
+        Plan::resumed(scene, stored)
+            .map_err(|e| Error::input(format!("{}: {e}", self.path.display())))
     }
 
     /// Puts the saved state into a freshly built time loop (of the scene from

@@ -179,7 +179,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
-    let mut tl = TimeLoop::new(&scene, &disc)?;
+    let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
     cp.restore(&mut tl)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
     let series = open_series(

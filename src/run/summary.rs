@@ -184,7 +184,7 @@ impl Summary {
             },
             output: ending.output,
             warnings: crate::effects::warnings(scene, disc),
-            memory: MemorySummary::new(&tl.plan),
+            memory: MemorySummary::new(&tl.plan, tl.history.k),
         }
     }
 }
@@ -198,13 +198,16 @@ pub struct MemorySummary {
     pub terms: usize,
     /// Certified max relative error of the compressed kernel on the lags.
     pub certified_error: Option<f64>,
+    /// The last lag the certificate covers, as a time: time.end, or the fit's horizon.
+    pub certified_until: Option<f64>,
+    /// Wall time of the fit and its certificate (a resumed run: of its certificate).
     pub fit_s: Option<f64>,
     /// Why an expression or table kernel runs exact although compression was asked for.
     pub fallback: Option<String>,
 }
 
 impl MemorySummary {
-    fn new(plan: &crate::history::Plan) -> Option<Self> {
+    fn new(plan: &crate::history::Plan, k: f64) -> Option<Self> {
         use crate::history::Plan;
         let (method, terms, fit, fallback) = match plan {
             Plan::None => return None,
@@ -216,6 +219,7 @@ impl MemorySummary {
             method,
             terms,
             certified_error: fit.map(|f| f.error),
+            certified_until: fit.map(|f| f.last_lag as f64 * k),
             fit_s: fit.map(|f| f.seconds),
             fallback,
         })
