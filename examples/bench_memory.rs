@@ -4,34 +4,19 @@
 //! times, their ratio and max|u_N^compressed − u_N^exact| / max|u_N^exact|.
 //!
 //!   cargo run --release --example bench_memory [N]   (default 4096)
-//!   cargo run --release --example bench_memory tolerances
 //!
-//! `tolerances`: for ε = 1e-4 … 1e-12 and N = 1024, 4096 (against the exact sum) and 10^5
-//! (compressed only): terms, relative max difference of u_N, wall time.
+//! The cost of each tolerance is the `study --tolerances` command (`study::memory_cost`).
 
 use std::time::Instant;
 use viscontact::time_loop::TimeLoop;
 
+/// u_N and the wall time of setup + steps.
 fn u_final(scene: &std::path::Path, set: &[String]) -> (Vec<f64>, f64) {
-    let (u, t, _) = run(scene, set);
-    (u, t)
-}
-
-/// u_N, the wall time of setup + steps, and the number of Prony terms run.
-fn run(scene: &std::path::Path, set: &[String]) -> (Vec<f64>, f64, usize) {
     let (scene, _mesh, disc) = viscontact::run::setup(scene, set).unwrap();
     let start = Instant::now();
     let mut tl = TimeLoop::new(&scene, &disc).unwrap();
-    loop {
-        let n = tl.n();
-        tl.solve_step().unwrap();
-        if n == scene.steps {
-            break;
-        }
-        tl.advance();
-    }
-    let terms = tl.plan.prony().map_or(0, |t| t.len());
-    (tl.history.u.clone(), start.elapsed().as_secs_f64(), terms)
+    viscontact::study::solve_to_end(&mut tl, scene.steps).unwrap();
+    (tl.history.u.clone(), start.elapsed().as_secs_f64())
 }
 
 fn max(v: &[f64]) -> f64 {
@@ -45,33 +30,6 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
         / max(b)
 }
 
-fn tolerances(scene: &std::path::Path) {
-    println!("| N | tolerance | terms | max|u_N − u_N^exact| / max|u_N^exact| | wall (s) |");
-    println!("|---:|---:|---:|---:|---:|");
-    for n in [1024usize, 4096, 100_000] {
-        let base = vec![
-            format!("time.steps={n}"),
-            format!("time.end={}", n as f64 / 32.0),
-        ];
-        let exact = (n <= 4096).then(|| {
-            let mut set = base.clone();
-            set.push("material.relaxation.memory=exact".into());
-            let (u, t, _) = run(scene, &set);
-            println!("| {n} | exact | – | – | {t:.2} |");
-            u
-        });
-        for tol in [1e-4, 1e-6, 1e-8, 1e-10, 1e-12] {
-            let mut set = base.clone();
-            set.push(format!("material.relaxation.tolerance={tol:e}"));
-            let (u, t, terms) = run(scene, &set);
-            let err = exact
-                .as_ref()
-                .map_or("–".to_string(), |e| format!("{:.1e}", rel(&u, e)));
-            println!("| {n} | {tol:.0e} | {terms} | {err} | {t:.2} |");
-        }
-    }
-}
-
 fn main() {
     let arg = std::env::args().nth(1);
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -83,11 +41,6 @@ fn main() {
     std::fs::create_dir_all(&dir).unwrap();
     let scene = dir.join("paper_power_law.toml");
     std::fs::write(&scene, text).unwrap();
-    if arg.as_deref() == Some("tolerances") {
-        tolerances(&scene);
-        std::fs::remove_dir_all(&dir).ok();
-        return;
-    }
     let n: usize = arg.map_or(4096, |a| a.parse().unwrap());
     let set = |memory: &str| {
         vec![

@@ -452,12 +452,49 @@ struct StudyArgs {
     /// Also run every level with the Prony kernel written as an expression (direct sum).
     #[arg(long)]
     kernel_compare: bool,
+    /// What accuracy costs instead of convergence: the scene's expression or table kernel
+    /// compressed at each tolerance, against the direct sum (e.g. 1e-4,1e-6,1e-8,1e-10,1e-12).
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["levels", "vary", "kernel_compare"])]
+    tolerances: Vec<f64>,
+    /// With --tolerances: the numbers of steps N, at the scene's step size k.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "1024,4096",
+        requires = "tolerances"
+    )]
+    steps: Vec<usize>,
+    /// With --tolerances: run the direct sum (O(N²)) for N up to this.
+    #[arg(long, default_value_t = 4096, requires = "tolerances")]
+    exact_up_to: usize,
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
 }
 
 fn study(a: StudyArgs) -> Result<()> {
-    use viscontact::study::{self, MeshFamily, StudyOptions};
+    use viscontact::study::{self, memory_cost, MeshFamily, StudyOptions};
+    if !a.tolerances.is_empty() {
+        let opts = memory_cost::Options {
+            tolerances: a.tolerances,
+            steps: a.steps,
+            exact_up_to: a.exact_up_to,
+            overrides: a.set,
+            progress: true,
+        };
+        let out = match a.out {
+            Some(o) => o,
+            None => {
+                let scene = viscontact::scene::Scene::load(&a.scene, &opts.overrides)?;
+                PathBuf::from("out").join(format!("{}-study-memory", scene.name))
+            }
+        };
+        let report = memory_cost::run_memory_cost(&a.scene, &opts)?;
+        print!("{}", memory_cost::markdown(&report));
+        for p in memory_cost::write_report(&report, &out)? {
+            println!("wrote {}", p.display());
+        }
+        return Ok(());
+    }
     let opts = StudyOptions {
         levels: a.levels,
         reference: a.reference,

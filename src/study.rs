@@ -51,6 +51,7 @@
 //! update per step) and with the same kernel written as an expression, which the scheme sums
 //! directly (O(n) per step); the table and plot show how the time grows with N for each.
 
+pub mod memory_cost;
 pub mod transfer;
 
 use crate::fem::Discretization;
@@ -318,15 +319,7 @@ pub fn solve_once(
     let steps_start = Instant::now();
     let u = {
         let mut tl = TimeLoop::new(&scene, &disc)?;
-        loop {
-            let n = tl.n();
-            tl.solve_step()?;
-            if n == scene.steps {
-                break;
-            }
-            tl.advance();
-        }
-        // u_N = u_0 + kΣ_{j<N} w_j is the history's u at n = N.
+        solve_to_end(&mut tl, scene.steps)?;
         tl.history.u.clone()
     };
     let steps_s = steps_start.elapsed().as_secs_f64();
@@ -346,6 +339,19 @@ pub fn solve_once(
         },
         given,
     ))
+}
+
+/// Solves the steps of a time loop up to n = N, without output: then `tl.history.u` is
+/// u_N = u_0 + kΣ_{j<N} w_j.
+pub fn solve_to_end(tl: &mut TimeLoop, steps: usize) -> Result<()> {
+    loop {
+        let n = tl.n();
+        tl.solve_step()?;
+        if n == steps {
+            return Ok(());
+        }
+        tl.advance();
+    }
 }
 
 /// Runs a case `repeat` times (None: 3 when the first run takes under a second) and keeps

@@ -343,3 +343,60 @@ fn compressed_run_extends_to_its_horizon_and_no_further() {
         );
     }
 }
+
+#[test]
+fn study_of_tolerances_tracks_the_direct_sum() {
+    use viscontact::study::memory_cost::{markdown, run_memory_cost, write_report, Options};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = paper_scene(
+        dir.path(),
+        "pl.toml",
+        "paper/rect_008.msh",
+        "expr = \"0.2*(s+0.01)^(-0.5)\"",
+    );
+    let opts = Options {
+        tolerances: vec![1e-4, 1e-7, 1e-10, 1e-14],
+        steps: vec![48, 96],
+        exact_up_to: 48,
+        overrides: vec![],
+        progress: false,
+    };
+    let report = run_memory_cost(&scene, &opts).unwrap();
+    // N = 48: the direct sum and four tolerances; N = 96: four tolerances, no direct sum.
+    assert_eq!(report.rows.len(), 9);
+    let rows = |n: usize| report.rows.iter().filter(move |r| r.steps == n);
+    let compressed: Vec<_> = rows(48).filter(|r| r.method == "compressed").collect();
+    assert_eq!(compressed.len(), 3);
+    for r in &compressed {
+        let tol = r.tolerance.unwrap();
+        assert!(r.certified_error.unwrap() <= tol && r.terms > 0);
+        assert!(r.error_u.unwrap() <= 10.0 * tol, "{r:?}");
+    }
+    assert!(compressed[0].error_u.unwrap() > 100.0 * compressed[2].error_u.unwrap());
+    assert!(compressed[0].terms < compressed[2].terms);
+    // 1e-14 is beyond what the fit reaches: the direct sum runs where it is allowed (and
+    // equals the exact row), and is not run beyond --exact-up-to.
+    let missed: Vec<_> = report
+        .rows
+        .iter()
+        .filter(|r| r.fallback.is_some())
+        .collect();
+    assert_eq!(missed.len(), 2, "{report:?}");
+    assert_eq!(missed[0].error_u, Some(0.0));
+    assert!(missed[1].steps == 96 && missed[1].wall_s.is_none());
+    assert!(rows(96).all(|r| r.error_u.is_none()));
+    let out = dir.path().join("study");
+    let written = write_report(&report, &out).unwrap();
+    assert_eq!(written.len(), 5);
+    assert!(markdown(&report).contains("| 96 | 1e-14 | fit missed ε; direct sum not run |"));
+    // A Prony kernel has nothing to compress: bad input naming the key.
+    let prony = paper_scene(
+        dir.path(),
+        "p.toml",
+        "paper/rect_008.msh",
+        "prony = [[1.0, 10.0]]",
+    );
+    let e = run_memory_cost(&prony, &opts).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(e.to_string().contains("[material.relaxation]"));
+}
