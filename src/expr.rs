@@ -23,6 +23,128 @@
 use crate::{Error, Result};
 use fasteval2::{Compiler, Evaler, ExpressionI, Instruction, Parser, Slab};
 
+/// `source` with every unary minus whose operand is raised to a power wrapped around the
+/// power: `-s^2` → `-(s^2)`, `exp(-(s/2)^0.5)` → `exp(-((s/2)^0.5))`, `2^-s^2` → `2^-(s^2)`.
+/// fasteval binds a unary minus tighter than `^` (it reads `-s^2` as s², `-2^0.5` as NaN);
+/// the convention of mathematics, and of every language users write kernels in (Python,
+/// Julia, MATLAB, gmsh), is −(s²). Nothing else changes, so every other expression parses
+/// exactly as fasteval reads it.
+fn power_before_negation(source: &str) -> String {
+    let b = source.as_bytes();
+    let mut out = String::with_capacity(source.len() + 8);
+    let mut i = 0;
+    let mut last = None; // the last non-space byte copied
+    while i < b.len() {
+        let c = b[i];
+        let unary = c == b'-' && last.is_none_or(|p: u8| b"(,+-*/^%<>=!&|".contains(&p));
+        if unary {
+            let start = skip_spaces(b, i + 1);
+            let mut end = operand_end(b, start);
+            let mut powered = false;
+            loop {
+                let j = skip_spaces(b, end);
+                if j < b.len() && b[j] == b'^' && end > start {
+                    let e = skip_spaces(b, j + 1);
+                    // The exponent may carry its own sign: 2^-s^2 = 2^(−(s²)).
+                    let e = if e < b.len() && (b[e] == b'-' || b[e] == b'+') {
+                        skip_spaces(b, e + 1)
+                    } else {
+                        e
+                    };
+                    end = operand_end(b, e);
+                    powered = true;
+                } else {
+                    break;
+                }
+            }
+            if powered {
+                out.push_str("-(");
+                out.push_str(&power_before_negation(&source[i + 1..end]));
+                out.push(')');
+                last = Some(b')');
+                i = end;
+                continue;
+            }
+        }
+        // Copy one whole character (a non-ASCII one is refused by the parser, by name).
+        let next = (i + 1..=b.len())
+            .find(|&j| source.is_char_boundary(j))
+            .unwrap_or(b.len());
+        out.push_str(&source[i..next]);
+        if !c.is_ascii_whitespace() {
+            last = Some(c);
+        }
+        i = next;
+    }
+    out
+}
+
+fn skip_spaces(b: &[u8], mut i: usize) -> usize {
+    while i < b.len() && b[i].is_ascii_whitespace() {
+        i += 1;
+    }
+    i
+}
+
+/// The end of the operand starting at `i`: a number (with its exponent, `1e-3`), a name
+/// with its call arguments, a parenthesized group, or a signed operand.
+fn operand_end(b: &[u8], i: usize) -> usize {
+    let close = |mut j: usize| {
+        let mut depth = 0usize;
+        while j < b.len() {
+            match b[j] {
+                b'(' => depth += 1,
+                b')' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        return j + 1;
+                    }
+                }
+                _ => {}
+            }
+            j += 1;
+        }
+        j
+    };
+    match b.get(i) {
+        None => i,
+        Some(b'(') => close(i),
+        Some(b'-' | b'+') => operand_end(b, skip_spaces(b, i + 1)),
+        Some(c) if c.is_ascii_digit() || *c == b'.' => {
+            let mut j = i;
+            while j < b.len() && (b[j].is_ascii_digit() || b[j] == b'.') {
+                j += 1;
+            }
+            if j < b.len() && (b[j] == b'e' || b[j] == b'E') {
+                let mut k = j + 1;
+                if k < b.len() && (b[k] == b'-' || b[k] == b'+') {
+                    k += 1;
+                }
+                if k < b.len() && b[k].is_ascii_digit() {
+                    j = k;
+                    while j < b.len() && b[j].is_ascii_digit() {
+                        j += 1;
+                    }
+                }
+            }
+            j
+        }
+        Some(c) if c.is_ascii_alphabetic() || *c == b'_' => {
+            let mut j = i;
+            while j < b.len() && (b[j].is_ascii_alphanumeric() || b[j] == b'_') {
+                j += 1;
+            }
+            let k = skip_spaces(b, j);
+            if k < b.len() && b[k] == b'(' {
+                close(k)
+            } else {
+                j
+            }
+        }
+        Some(_) => i,
+    }
+}
+
 /// Values of the variables an expression may use.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Point {
@@ -118,12 +240,14 @@ impl Expr {
             )));
         }
         let mut slab = Slab::new();
-        let parsed = Parser::new().parse(source, &mut slab.ps).map_err(|e| {
-            Error::input(format!(
-                "{key}: cannot parse expression {source:?}: {}",
-                parse_error(&e)
-            ))
-        })?;
+        let parsed = Parser::new()
+            .parse(&power_before_negation(source), &mut slab.ps)
+            .map_err(|e| {
+                Error::input(format!(
+                    "{key}: cannot parse expression {source:?}: {}",
+                    parse_error(&e)
+                ))
+            })?;
         // Evaluate once with a recording namespace: every variable and custom function the
         // expression reaches must be known (all call arguments are evaluated eagerly).
         let mut unknown: Option<String> = None;
@@ -307,6 +431,41 @@ impl Scalar {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_power_binds_tighter_than_a_unary_minus() {
+        let at = |e: &str, s: f64| {
+            Expr::parse(e, &["s", "x"], "k").unwrap().eval(&Point {
+                s,
+                x: s,
+                ..Point::default()
+            })
+        };
+        let cases: [(&str, f64, f64); 12] = [
+            ("-s^2", 3.0, -9.0),
+            ("-2^2", 0.0, -4.0),
+            ("2*-3^2", 0.0, -18.0),
+            ("2^-1", 0.0, 0.5),
+            ("2^-s^2", 1.0, 0.5f64.powi(1)),
+            ("exp(-(s/0.5)^0.3)", 0.5, (-1.0f64).exp()),
+            ("exp(-(s/2)^0.5)", 8.0, (-2.0f64).exp()),
+            ("-0.1*x*(2-x)", 1.0, -0.1),
+            ("1e-3^2 - s", 0.0, 1e-6),
+            ("- s ^ 2 + 1", 2.0, -3.0),
+            ("-pow(s, 2)^2", 2.0, -16.0),
+            ("3 - -s^2", 2.0, 7.0),
+        ];
+        for (e, s, want) in cases {
+            let got = at(e, s);
+            assert!(
+                (got - want).abs() <= 1e-15 * want.abs().max(1.0),
+                "{e} at {s}: {got}"
+            );
+        }
+        assert_eq!(power_before_negation("-(0.0625)^0.3"), "-((0.0625)^0.3)");
+        assert_eq!(power_before_negation("a - b^2"), "a - b^2");
+        assert_eq!(power_before_negation("2*μ^2 + é"), "2*μ^2 + é");
+    }
 
     #[test]
     fn paper_loads_evaluate() {
