@@ -154,7 +154,10 @@ pub fn fit(lags: &Lags, tolerance: f64) -> std::result::Result<Fit, String> {
             break;
         }
     }
-    let (terms, error) = best.expect("at least one round");
+    let (mut terms, mut error) = best.expect("at least one round");
+    if error > tolerance {
+        (terms, error) = polished(lags, tolerance, scale, terms, error);
+    }
     if error > tolerance {
         return Err(format!(
             "the best sum of exponentials with positive weights reaches a relative error of \
@@ -203,6 +206,110 @@ fn attempt(lags: &Lags, tolerance: f64, scale: f64, per_digit: f64) -> (Vec<(f64
         }
     }
     best.expect("at least one round")
+}
+
+/// A fit that missed the tolerance on the grid, with its rates freed: Levenberg–Marquardt
+/// ([`polish`]) on the sample, then on the sample plus the lags where the error peaks, up
+/// to `ROUNDS` times; the best certified (terms, error). A grid cannot hold the rate of
+/// e^{−s} exactly, and its neighbours approximate it only to ~1e-10 (measured: e^{−s},
+/// 100 e^{−s} and e^{−s} + 0.1 e^{−0.01 s} missed 1e-10 before this step); freed rates reach
+/// it to round-off.
+fn polished(
+    lags: &Lags,
+    tolerance: f64,
+    scale: f64,
+    terms: Vec<(f64, f64)>,
+    error: f64,
+) -> (Vec<(f64, f64)>, f64) {
+    let mut rows = sample(lags);
+    let mut best = (terms, error);
+    for _ in 0..ROUNDS {
+        let terms = polish(lags, &rows, &best.0);
+        let errors = deviation(lags, &terms);
+        let error = errors.iter().fold(0.0f64, |m, e| m.max(*e)) / scale;
+        if error >= best.1 {
+            break;
+        }
+        best = (terms, error);
+        if error <= tolerance {
+            break;
+        }
+        rows = refined(&rows, &errors);
+    }
+    best
+}
+
+/// Levenberg–Marquardt on min Σ_rows (r(s_l) − Σ a_i e^{−b_i s_l})² over the weights a_i and
+/// the logarithms of the positive rates θ_i = ln b_i (a constant term keeps b = 0), with
+/// Marquardt's column scaling; a step is taken only if it lowers the sum and keeps every
+/// a_i > 0, so the fit stays a positive sum of exponentials.
+fn polish(lags: &Lags, rows: &[usize], terms: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let y = values(lags, rows);
+    let m = rows.len();
+    let model = |terms: &[(f64, f64)]| -> (Mat<f64>, f64) {
+        let rates: Vec<f64> = terms.iter().map(|t| t.1).collect();
+        let e = design(lags, rows, &rates);
+        let res = (0..m)
+            .map(|i| y[i] - (0..terms.len()).map(|j| terms[j].0 * e[(i, j)]).sum::<f64>())
+            .map(|r| r * r)
+            .sum();
+        (e, res)
+    };
+    let mut cur = terms.to_vec();
+    let (mut e, mut cost) = model(&cur);
+    let mut lambda: f64 = 1e-3;
+    for _ in 0..200 {
+        let free: Vec<usize> = (0..cur.len()).filter(|&j| cur[j].1 > 0.0).collect();
+        let n = cur.len() + free.len();
+        let mut jac = Mat::<f64>::zeros(m + n, n);
+        let mut rhs = vec![0.0; m + n];
+        for i in 0..m {
+            let s = lags.lag(rows[i]) as f64 * lags.k;
+            let mut fit = 0.0;
+            for (j, t) in cur.iter().enumerate() {
+                jac[(i, j)] = e[(i, j)];
+                fit += t.0 * e[(i, j)];
+            }
+            for (c, &j) in free.iter().enumerate() {
+                jac[(i, cur.len() + c)] = -cur[j].0 * cur[j].1 * s * e[(i, j)];
+            }
+            rhs[i] = y[i] - fit;
+        }
+        for c in 0..n {
+            let norm = (0..m).map(|i| jac[(i, c)].powi(2)).sum::<f64>().sqrt();
+            jac[(m + c, c)] = lambda.sqrt() * norm.max(f64::MIN_POSITIVE);
+        }
+        let step = lstsq(&jac, &(0..n).collect::<Vec<_>>(), &rhs);
+        let mut next = cur.clone();
+        for (j, t) in next.iter_mut().enumerate() {
+            t.0 += step[j];
+        }
+        for (c, &j) in free.iter().enumerate() {
+            next[j].1 *= step[cur.len() + c].exp();
+        }
+        let trial = next
+            .iter()
+            .all(|t| t.0 > 0.0 && t.1.is_finite())
+            .then(|| model(&next));
+        match trial {
+            Some((e_next, c_next)) if c_next < cost => {
+                let done = cost - c_next <= 1e-12 * cost;
+                (cur, e, cost) = (next, e_next, c_next);
+                lambda = (lambda / 3.0).max(1e-12);
+                if done {
+                    break;
+                }
+            }
+            _ => {
+                lambda *= 4.0;
+                if lambda > 1e12 {
+                    break;
+                }
+            }
+        }
+    }
+    cur.sort_by(|p, q| q.1.total_cmp(&p.1));
+    cur
 }
 
 /// The shape no positive sum of exponentials can follow: a sign change or growth beyond the
@@ -491,16 +598,52 @@ mod tests {
 
     #[test]
     fn power_laws_fit_within_tolerance_with_few_terms() {
+        // The time limit is on the CPU time of this thread: the wall time of a test depends
+        // on what else the machine runs (the tests run in parallel).
+        let cpu = || {
+            let mut t = libc::timespec {
+                tv_sec: 0,
+                tv_nsec: 0,
+            };
+            // SAFETY: clock_gettime writes the timespec it is given.
+            unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+            t.tv_sec as f64 + 1e-9 * t.tv_nsec as f64
+        };
         for alpha in [0.2, 0.5, 0.8] {
             let lags = power_law(alpha, 1_000_000);
+            let start = cpu();
             let fit = fit(&lags, 1e-10).unwrap();
+            let seconds = cpu() - start;
             let check = deviation(&lags, &fit.terms)
                 .iter()
                 .fold(0.0f64, |m, e| m.max(*e));
             assert!(fit.error <= 1e-10 && check == fit.error * lags.scale());
             assert!(fit.terms.len() <= 80, "{alpha}: {} terms", fit.terms.len());
             assert!(fit.terms.iter().all(|&(a, b)| a > 0.0 && b >= 0.0));
-            assert!(fit.seconds < 1.0, "{alpha}: {} s", fit.seconds);
+            assert!(seconds < 1.0, "{alpha}: {seconds} s of CPU");
+        }
+    }
+
+    #[test]
+    fn exponentials_off_the_grid_are_recovered_to_round_off() {
+        let on_lags = |r: &dyn Fn(f64) -> f64| Lags {
+            k: 1.0 / 32.0,
+            with_zero: false,
+            r: (1..=4096).map(|l| r(l as f64 / 32.0)).collect(),
+        };
+        let cases: [(&dyn Fn(f64) -> f64, usize); 3] = [
+            (&|s: f64| (-s).exp(), 2),
+            (&|s: f64| 100.0 * (-s).exp(), 2),
+            (&|s: f64| (-s).exp() + 0.1 * (-0.01 * s).exp(), 4),
+        ];
+        for (i, (r, most)) in cases.into_iter().enumerate() {
+            let fit = fit(&on_lags(r), 1e-12).unwrap();
+            assert!(fit.terms.len() <= most, "case {i}: {:?}", fit.terms);
+        }
+        // Stretched exponentials exp(−(s/τ)^β) are completely monotone: they fit too.
+        for (tau, beta) in [(0.5, 0.3), (2.0, 0.5)] {
+            let lags = on_lags(&|s: f64| (-(s / tau).powf(beta)).exp());
+            assert!(fit(&lags, 1e-10).unwrap().error <= 1e-10);
         }
     }
 
