@@ -250,7 +250,11 @@ fn polish(lags: &Lags, rows: &[usize], terms: &[(f64, f64)]) -> Vec<(f64, f64)> 
         let rates: Vec<f64> = terms.iter().map(|t| t.1).collect();
         let e = design(lags, rows, &rates);
         let res = (0..m)
-            .map(|i| y[i] - (0..terms.len()).map(|j| terms[j].0 * e[(i, j)]).sum::<f64>())
+            .map(|i| {
+                y[i] - (0..terms.len())
+                    .map(|j| terms[j].0 * e[(i, j)])
+                    .sum::<f64>()
+            })
             .map(|r| r * r)
             .sum();
         (e, res)

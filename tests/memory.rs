@@ -26,6 +26,22 @@ fn paper_scene(dir: &Path, name: &str, mesh: &str, relaxation: &str) -> PathBuf 
     common::write(dir, name, &text)
 }
 
+/// The frames of `steps` in two run directories are the same bytes (but for the run id).
+fn assert_same_frames(a: &Path, b: &Path, steps: &[usize]) {
+    for n in steps {
+        let name = format!("solution_{n:06}.vtu");
+        let read = |d: &Path| without_run_id(std::fs::read(d.join(&name)).unwrap());
+        assert!(read(a) == read(b), "{name} differs");
+    }
+}
+
+/// The paper scene on rect_008 with r(s) = 0.2(s + 0.01)^(−1/2) and the relaxation keys
+/// `extra`.
+fn power_law(dir: &Path, extra: &str) -> PathBuf {
+    let kernel = format!("expr = \"0.2*(s+0.01)^(-0.5)\"\n{extra}");
+    paper_scene(dir, "pl.toml", "paper/rect_008.msh", &kernel)
+}
+
 fn expr(e: &str) -> Kernel {
     Kernel::Expr(Box::new(Expr::parse(e, &["s"], "r").unwrap()))
 }
@@ -103,12 +119,7 @@ fn certified_error_holds_on_every_lag() {
 #[test]
 fn compressed_agrees_with_exact_to_the_order_of_the_tolerance() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = paper_scene(
-        dir.path(),
-        "pl.toml",
-        "paper/rect_008.msh",
-        "expr = \"0.2*(s+0.01)^(-0.5)\"",
-    );
+    let scene = power_law(dir.path(), "");
     let set = ["time.steps=256", "time.end=8"];
     let u_n = |extra: &str| {
         let mut o: Vec<&str> = set.to_vec();
@@ -138,12 +149,7 @@ fn compressed_agrees_with_exact_to_the_order_of_the_tolerance() {
 #[test]
 fn compressed_run_resumed_equals_uninterrupted_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = paper_scene(
-        dir.path(),
-        "pl.toml",
-        "paper/rect_008.msh",
-        "expr = \"0.2*(s+0.01)^(-0.5)\"\ntolerance = 1e-8",
-    );
+    let scene = power_law(dir.path(), "tolerance = 1e-8");
     let set = ["time.steps=16", "checkpoint.every=3"];
     let full = dir.path().join("full");
     let part = dir.path().join("part");
@@ -159,14 +165,7 @@ fn compressed_run_resumed_equals_uninterrupted_bit_for_bit() {
     assert!(!part.join("checkpoint_history.h5").exists());
     let r = finished(resume_quiet(&part.join("checkpoint.h5")));
     assert_eq!(r.steps, 16);
-    for n in [8, 12, 16] {
-        let name = format!("solution_{n:06}.vtu");
-        assert!(
-            without_run_id(std::fs::read(full.join(&name)).unwrap())
-                == without_run_id(std::fs::read(part.join(&name)).unwrap()),
-            "{name} differs after resume"
-        );
-    }
+    assert_same_frames(&full, &part, &[8, 12, 16]);
     assert_eq!(s.final_.u_h1.to_bits(), r.final_.u_h1.to_bits());
 }
 
@@ -294,14 +293,7 @@ fn compressed_run_extends_to_its_horizon_and_no_further() {
     let r = finished(extend(&part.join("checkpoint.h5"), "2").unwrap());
     assert_eq!(r.steps, 32);
     assert_eq!(s.final_.u_h1.to_bits(), r.final_.u_h1.to_bits());
-    for n in [17, 32] {
-        let name = format!("solution_{n:06}.vtu");
-        assert!(
-            without_run_id(std::fs::read(straight.join(&name)).unwrap())
-                == without_run_id(std::fs::read(part.join(&name)).unwrap()),
-            "{name} differs after the extension"
-        );
-    }
+    assert_same_frames(&straight, &part, &[17, 32]);
     // Beyond the horizon, and without one: refused (bad input), naming the time the fit holds
     // to and the key that would make it hold further; nothing in the directory changes.
     let before = std::fs::read(part.join("checkpoint.h5")).unwrap();
@@ -348,12 +340,7 @@ fn compressed_run_extends_to_its_horizon_and_no_further() {
 fn study_of_tolerances_tracks_the_direct_sum() {
     use viscontact::study::memory_cost::{markdown, run_memory_cost, write_report, Options};
     let dir = tempfile::tempdir().unwrap();
-    let scene = paper_scene(
-        dir.path(),
-        "pl.toml",
-        "paper/rect_008.msh",
-        "expr = \"0.2*(s+0.01)^(-0.5)\"",
-    );
+    let scene = power_law(dir.path(), "");
     let opts = Options {
         tolerances: vec![1e-4, 1e-7, 1e-10, 1e-14],
         steps: vec![48, 96],
