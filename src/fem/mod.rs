@@ -32,6 +32,36 @@ pub fn mul_add(a: &Sparse, x: &[f64], alpha: f64, y: &mut [f64]) {
     }
 }
 
+/// y += alpha · (A x + B z) for two matrices with the same sparsity pattern (K_B and K_R
+/// share the one `assemble` builds; check with [`same_pattern`]): one pass over the
+/// pattern instead of two.
+pub fn mul_add_pair(a: &Sparse, x: &[f64], b: &Sparse, z: &[f64], alpha: f64, y: &mut [f64]) {
+    let (a, b) = (a.as_ref(), b.as_ref());
+    debug_assert!(same_pattern(a.symbolic(), b.symbolic()));
+    let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
+    let (va, vb) = (a.val(), b.val());
+    for j in 0..a.ncols() {
+        let (xj, zj) = (alpha * x[j], alpha * z[j]);
+        if xj != 0.0 || zj != 0.0 {
+            for p in cp[j]..cp[j + 1] {
+                y[ri[p]] += va[p] * xj + vb[p] * zj;
+            }
+        }
+    }
+}
+
+/// True when two matrices have the same pattern.
+pub fn same_pattern(
+    a: faer::sparse::SymbolicSparseColMatRef<'_, usize>,
+    b: faer::sparse::SymbolicSparseColMatRef<'_, usize>,
+) -> bool {
+    a.nrows() == b.nrows()
+        && a.col_ptr() == b.col_ptr()
+        && a.row_idx() == b.row_idx()
+        && a.col_nnz().is_none()
+        && b.col_nnz().is_none()
+}
+
 /// One nodal row of the constraint operator P: the functional w ↦ dir·w_i at a node.
 /// `dim` components are used (2 in 2D, 3 in 3D); unused entries are 0.
 #[derive(Clone, Copy, Debug, PartialEq)]
