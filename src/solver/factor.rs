@@ -236,7 +236,8 @@ impl Factor {
         self.values.len()
     }
 
-    /// The number of nonzero values of L: nnz(L) without the zeros amalgamation stores.
+    /// The number of stored values of L that are not exactly 0: nnz(L) without the zeros
+    /// that amalgamation stores (and without entries of the pattern that happen to be 0).
     pub fn nonzeros(&self) -> usize {
         self.values.iter().filter(|v| **v != 0.0).count()
     }
