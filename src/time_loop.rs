@@ -22,7 +22,7 @@
 //! elastic response ε_{n+1} = f/E.
 
 use crate::effects::{self, Effects};
-use crate::fem::{mul_add, Discretization};
+use crate::fem::{mul_add, mul_add_pair, same_pattern, Discretization};
 use crate::history::{History, Plan};
 use crate::scene::{self, Scene};
 use crate::solver::{Factor, Rows, StepReport, StepSolver};
@@ -47,6 +47,8 @@ pub struct TimeLoop<'p> {
     pub m: Vec<f64>,
     b: Vec<f64>,
     growth: Growth,
+    /// K_B and K_R share their pattern: K_B u_n + K_R m_n in one pass (`mul_add_pair`).
+    paired: bool,
 }
 
 /// The divergence detector. A stable run's displacement is bounded by its loads: with
@@ -156,6 +158,10 @@ impl<'p> TimeLoop<'p> {
             m,
             b: vec![0.0; n],
             growth: Growth::default(),
+            paired: disc
+                .k_b
+                .as_ref()
+                .is_some_and(|k_b| same_pattern(k_b.symbolic(), disc.k_r.symbolic())),
         })
     }
 
@@ -180,11 +186,19 @@ impl<'p> TimeLoop<'p> {
         // max|f_n − g_F| (g_F is empty without friction).
         let g_f = self.disc.g_f.iter().chain(std::iter::repeat(&0.0));
         let load_max = max_abs(self.b.iter().zip(g_f).map(|(f, g)| f - g));
-        if let Some(k_b) = &self.disc.k_b {
-            mul_add(k_b, &h.u, -1.0, &mut self.b);
-        }
-        if h.memory_into(self.scene.relaxation.as_ref(), &mut self.m) {
-            mul_add(&self.disc.k_r, &self.m, -1.0, &mut self.b);
+        let memory = h.memory_into(self.scene.relaxation.as_ref(), &mut self.m);
+        match &self.disc.k_b {
+            Some(k_b) if memory && self.paired => {
+                mul_add_pair(k_b, &h.u, &self.disc.k_r, &self.m, -1.0, &mut self.b);
+            }
+            k_b => {
+                if let Some(k_b) = k_b {
+                    mul_add(k_b, &h.u, -1.0, &mut self.b);
+                }
+                if memory {
+                    mul_add(&self.disc.k_r, &self.m, -1.0, &mut self.b);
+                }
+            }
         }
         for (b, g) in self.b.iter_mut().zip(&self.disc.g_f) {
             *b -= g;

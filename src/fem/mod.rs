@@ -11,7 +11,7 @@ use crate::mesh::{cross, norm, Group, Mesh};
 use crate::scene::{Model, Scene};
 use crate::{Error, Result};
 pub use element::{Cell, Isotropic};
-use faer::sparse::{SparseColMat, Triplet};
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::Loads;
 use std::path::Path;
 
@@ -30,6 +30,36 @@ pub fn mul_add(a: &Sparse, x: &[f64], alpha: f64, y: &mut [f64]) {
             }
         }
     }
+}
+
+/// y += alpha · (A x + B z) for two matrices with the same sparsity pattern (K_B and K_R
+/// share the one `assemble` builds; check with [`same_pattern`]): one pass over the
+/// pattern instead of two.
+pub fn mul_add_pair(a: &Sparse, x: &[f64], b: &Sparse, z: &[f64], alpha: f64, y: &mut [f64]) {
+    let (a, b) = (a.as_ref(), b.as_ref());
+    debug_assert!(same_pattern(a.symbolic(), b.symbolic()));
+    let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
+    let (va, vb) = (a.val(), b.val());
+    for j in 0..a.ncols() {
+        let (xj, zj) = (alpha * x[j], alpha * z[j]);
+        if xj != 0.0 || zj != 0.0 {
+            for p in cp[j]..cp[j + 1] {
+                y[ri[p]] += va[p] * xj + vb[p] * zj;
+            }
+        }
+    }
+}
+
+/// True when two matrices have the same pattern.
+pub fn same_pattern(
+    a: faer::sparse::SymbolicSparseColMatRef<'_, usize>,
+    b: faer::sparse::SymbolicSparseColMatRef<'_, usize>,
+) -> bool {
+    a.nrows() == b.nrows()
+        && a.col_ptr() == b.col_ptr()
+        && a.row_idx() == b.row_idx()
+        && a.col_nnz().is_none()
+        && b.col_nnz().is_none()
 }
 
 /// One nodal row of the constraint operator P: the functional w ↦ dir·w_i at a node.
@@ -156,7 +186,7 @@ impl Discretization {
                 Model::PlaneStrain | Model::ThreeD => Isotropic::lame(e, nu),
             });
         let r = Isotropic::identity();
-        let (k_a, k_b, k_r) = assemble(&cells, d, &free, n_free, a, b, r)?;
+        let (k_a, k_b, k_r) = assemble(&cells, d, &free, n_free, a, b, r);
 
         let loads = Loads::new(mesh, scene, &cells)?;
         // The free dofs of a node, if none is clamped (Γ1 wins over every other part).
@@ -500,7 +530,11 @@ pub(crate) fn fmt_at(p: [f64; 3], model: Model) -> String {
 }
 
 /// Assembles K_A, K_B, K_R over all cells in free-dof numbering (Γ1 rows and columns
-/// dropped); the three share one sparsity pattern.
+/// dropped); the three share one sparsity pattern, built once from the mesh: node q couples
+/// with node p when a cell holds both. Γ1 clamps whole nodes, so a free node has all d dofs
+/// free, numbered consecutively in node order; the column of dof (p, c) lists, for each
+/// neighbour q of p in increasing order, the rows (q, 0..d). The element matrices are then
+/// added at their positions: no triplets, no sorting.
 fn assemble(
     cells: &[Cell],
     d: usize,
@@ -509,38 +543,63 @@ fn assemble(
     a: Isotropic,
     b: Option<Isotropic>,
     r: Isotropic,
-) -> Result<(Sparse, Option<Sparse>, Sparse)> {
-    let ne = d * (d + 1);
-    let cap = ne * ne * cells.len();
-    let (mut ta, mut tb, mut tr) = (
-        Vec::with_capacity(cap),
-        Vec::with_capacity(if b.is_some() { cap } else { 0 }),
-        Vec::with_capacity(cap),
+) -> (Sparse, Option<Sparse>, Sparse) {
+    let is_free = |p: usize| free[d * p].is_some();
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
+    for t in cells {
+        for &p in t.vertices().iter().filter(|&&p| is_free(p)) {
+            let free_q = t.vertices().iter().filter(|&&q| is_free(q));
+            neighbours[p].extend(free_q.map(|&q| q as u32));
+        }
+    }
+    let mut col_ptr = vec![0usize];
+    let mut row_idx = Vec::new();
+    for (p, list) in neighbours.iter_mut().enumerate() {
+        list.sort_unstable();
+        list.dedup();
+        for _ in 0..if is_free(p) { d } else { 0 } {
+            for &q in list.iter() {
+                row_idx.extend(free[d * q as usize..d * (q as usize + 1)].iter().flatten());
+            }
+            col_ptr.push(row_idx.len());
+        }
+    }
+    let nnz = row_idx.len();
+    let (mut va, mut vb, mut vr) = (
+        vec![0.0; nnz],
+        vec![0.0; if b.is_some() { nnz } else { 0 }],
+        vec![0.0; nnz],
     );
     for t in cells {
         let ka = t.stiffness(a);
         let kb = b.map(|b| t.stiffness(b));
         let kr = t.stiffness(r);
-        let dof = |l: usize| free[d * t.nodes[l / d] + l % d];
-        for i in 0..ne {
-            let Some(gi) = dof(i) else { continue };
-            for j in 0..ne {
-                let Some(gj) = dof(j) else { continue };
-                ta.push(Triplet::new(gi, gj, ka[i][j]));
-                if let Some(kb) = &kb {
-                    tb.push(Triplet::new(gi, gj, kb[i][j]));
+        let nodes = t.vertices();
+        for (j, &p) in nodes.iter().enumerate().filter(|(_, &p)| is_free(p)) {
+            for (i, &q) in nodes.iter().enumerate().filter(|(_, &q)| is_free(q)) {
+                // The block (q, p) starts at row d·k of p's columns, k = q's place among
+                // p's neighbours.
+                let k = neighbours[p]
+                    .binary_search(&(q as u32))
+                    .expect("the pattern holds every pair of a cell");
+                for be in 0..d {
+                    let start = col_ptr[free[d * p + be].expect("p is free")] + d * k;
+                    for al in 0..d {
+                        let (li, lj) = (d * i + al, d * j + be);
+                        va[start + al] += ka[li][lj];
+                        if let Some(kb) = &kb {
+                            vb[start + al] += kb[li][lj];
+                        }
+                        vr[start + al] += kr[li][lj];
+                    }
                 }
-                tr.push(Triplet::new(gi, gj, kr[i][j]));
             }
         }
     }
-    let build = |t: &[Triplet<usize, usize, f64>]| {
-        SparseColMat::try_new_from_triplets(n, n, t)
-            .map_err(|e| Error::solve(format!("sparse assembly failed: {e:?}")))
-    };
-    Ok((
-        build(&ta)?,
-        if b.is_some() { Some(build(&tb)?) } else { None },
-        build(&tr)?,
-    ))
+    let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+    (
+        SparseColMat::new(pattern.clone(), va),
+        b.map(|_| SparseColMat::new(pattern.clone(), vb)),
+        SparseColMat::new(pattern, vr),
+    )
 }

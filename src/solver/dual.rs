@@ -98,7 +98,7 @@ use super::{Factor, Rows, StepReport};
 use crate::{Error, Result};
 use faer::linalg::solvers::{Llt, Solve};
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
-use faer::{Accum, Mat, MatMut, Side};
+use faer::{Accum, Mat, Side};
 use std::ops::Range;
 
 /// Relative tolerance of the dual optimality conditions (in units of the velocities P w).
@@ -366,7 +366,7 @@ impl DualSolver {
         let (n, c) = (factor.dim(), factor.last());
         // Forward solve L y = b; d = Gᵀ y_C.
         factor.permute(b, &mut self.y);
-        factor.forward(MatMut::from_column_major_slice_mut(&mut self.y, n, 1));
+        factor.forward(&mut self.y);
         let y_c = &self.y[n - c..];
         for (r, dr) in self.work.d.iter_mut().enumerate() {
             *dr = dot(self.g.col(r).try_as_col_major().unwrap().as_slice(), y_c);
@@ -381,7 +381,7 @@ impl DualSolver {
                 }
             }
         }
-        factor.backward(MatMut::from_column_major_slice_mut(&mut self.y, n, 1));
+        factor.backward(&mut self.y);
         factor.unpermute(&self.y, w);
         Ok(StepReport { iterations })
     }

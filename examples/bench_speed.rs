@@ -1,0 +1,178 @@
+//! Issue 15's 2D targets: the paper scene (examples/paper.toml) at h = k = 1/n, contact +
+//! friction + memory, run by a baseline binary and by this tree's binary, alternating in one
+//! benchmark run (the machine is shared, so only side-by-side ratios mean something). Each
+//! run is the whole `viscontact run` process — mesh reading, assembly, factorization, all
+//! n + 1 steps and the last frame — with `output.every` beyond the last step (only the last
+//! frame is written) and no checkpoints. Reported: the median wall time of each binary, their
+//! ratio, and max|u_N − u_N,base| / max|u_N,base| from the two last frames.
+//!
+//! Then, in this process: the time per step (setup excluded, all of `solve_step` and
+//! `advance`), the time of one forward + backward solve with the stored factor, and the
+//! streaming bound: two passes (sums) over an array of nnz(L) f64, the least a step that
+//! reads the factor forward and backward can cost. Medians throughout.
+//!
+//!   cargo build --release && cargo run --release --example bench_speed -- BASELINE [n] [repeat]
+//!
+//! BASELINE is the baseline's `viscontact` binary (or set VISCONTACT_BASELINE); n = 128 by
+//! default (meshes/paper/rect_n.msh must exist), repeat = 3.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+use viscontact::output::read::read_vtu;
+use viscontact::run::setup;
+use viscontact::time_loop::TimeLoop;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// One `viscontact run` of the scene into `out`; its wall time in seconds.
+fn run(bin: &Path, scene: &Path, sets: &[String], out: &Path) -> f64 {
+    let _ = std::fs::remove_dir_all(out);
+    let mut cmd = Command::new(bin);
+    cmd.arg("run")
+        .arg(scene)
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet");
+    cmd.stdout(std::process::Stdio::null());
+    for s in sets {
+        cmd.args(["--set", s]);
+    }
+    let start = Instant::now();
+    let status = cmd.status().expect("the viscontact binary runs");
+    let t = start.elapsed().as_secs_f64();
+    assert!(status.success(), "{} failed: {status}", bin.display());
+    t
+}
+
+/// The displacement field of the last frame.
+fn last_displacement(out: &Path, n: usize) -> Vec<f64> {
+    let vtu = read_vtu(&out.join(format!("solution_{n:06}.vtu"))).expect("last frame");
+    vtu.point_field("displacement")
+        .expect("displacement field")
+        .values
+        .clone()
+}
+
+fn max_abs(v: impl Iterator<Item = f64>) -> f64 {
+    v.fold(0.0f64, |a, x| a.max(x.abs()))
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let baseline = args
+        .next()
+        .or_else(|| std::env::var("VISCONTACT_BASELINE").ok())
+        .map(PathBuf::from)
+        .expect("usage: bench_speed BASELINE [n] [repeat] (or VISCONTACT_BASELINE)");
+    let n: usize = args.next().map_or(128, |a| a.parse().expect("n"));
+    let repeat: usize = args.next().map_or(3, |a| a.parse().expect("repeat"));
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let new = root.join("target/release/viscontact");
+    assert!(
+        new.exists(),
+        "{} missing: run cargo build --release first",
+        new.display()
+    );
+    let scene = root.join("examples/paper.toml");
+    let mesh = format!("../meshes/paper/rect_{n:03}.msh");
+    assert!(root.join("examples").join(&mesh).exists(), "{mesh} missing");
+    let sets: Vec<String> = [
+        format!("mesh.file={mesh}"),
+        format!("time.steps={n}"),
+        "output.every=1000000".into(),
+        "checkpoint.enabled=false".into(),
+    ]
+    .into();
+
+    let tmp = tempfile::tempdir().unwrap();
+    let bins = [("baseline", &baseline), ("new", &new)];
+    let mut times = [Vec::new(), Vec::new()];
+    for r in 0..repeat {
+        // Alternate which binary goes first, so that neither always follows the other.
+        for k in 0..2 {
+            let i = (k + r) % 2;
+            let t = run(bins[i].1, &scene, &sets, &tmp.path().join(bins[i].0));
+            eprintln!("  round {r}: {} {t:.3} s", bins[i].0);
+            times[i].push(t);
+        }
+    }
+    let (base, fast) = (median(times[0].clone()), median(times[1].clone()));
+    let u_base = last_displacement(&tmp.path().join("baseline"), n);
+    let u_new = last_displacement(&tmp.path().join("new"), n);
+    assert_eq!(u_base.len(), u_new.len());
+    let diff =
+        max_abs(u_base.iter().zip(&u_new).map(|(a, b)| a - b)) / max_abs(u_base.iter().copied());
+    println!("paper scene h = k = 1/{n}, full run (process wall time, medians of {repeat}):");
+    println!(
+        "  baseline {base:.3} s, new {fast:.3} s: ratio {:.2}",
+        base / fast
+    );
+    println!("  max|u_N − u_N,base| / max|u_N,base| = {diff:.1e}");
+
+    // In this process: per-step time and the streaming bound.
+    let overrides: Vec<String> = sets[..2].to_vec();
+    let (scene, _mesh, disc) = setup(&scene, &overrides).expect("scene");
+    let mut step_times = Vec::new();
+    let mut tl = TimeLoop::new(&scene, &disc).expect("setup");
+    for _ in 0..repeat {
+        tl = TimeLoop::new(&scene, &disc).expect("setup");
+        let start = Instant::now();
+        loop {
+            let last = tl.n() == scene.steps;
+            tl.solve_step().expect("step");
+            if last {
+                break;
+            }
+            tl.advance();
+        }
+        step_times.push(start.elapsed().as_secs_f64() / (scene.steps + 1) as f64);
+    }
+    let per_step = median(step_times);
+    let factor = &tl.factor;
+    let mut y: Vec<f64> = (0..factor.dim()).map(|i| (i % 7) as f64 - 3.0).collect();
+    let solves: Vec<f64> = (0..20)
+        .map(|_| {
+            let start = Instant::now();
+            factor.forward(&mut y);
+            factor.backward(&mut y);
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    let solve = median(solves);
+    let nnz = factor.nonzeros();
+    let l: Vec<f64> = (0..nnz).map(|i| (i % 13) as f64).collect();
+    let passes: Vec<f64> = (0..20)
+        .map(|_| {
+            let start = Instant::now();
+            let mut s = 0.0;
+            for _ in 0..2 {
+                s += std::hint::black_box(&l).iter().sum::<f64>();
+            }
+            std::hint::black_box(s);
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    let bound = median(passes);
+    println!(
+        "per step (setup excluded, medians of {repeat} runs of {} steps): {:.2} ms",
+        scene.steps + 1,
+        per_step * 1e3
+    );
+    println!(
+        "  one forward + backward solve: {:.2} ms; two passes over nnz(L) = {nnz} f64 \
+         ({:.1} MB; {} stored): {:.2} ms",
+        solve * 1e3,
+        nnz as f64 * 8e-6,
+        factor.stored(),
+        bound * 1e3
+    );
+    println!(
+        "  per step / two passes = {:.2}; solve / two passes = {:.2}",
+        per_step / bound,
+        solve / bound
+    );
+}
