@@ -4,7 +4,7 @@
 //! Text is drawn with DejaVu Sans embedded in the binary (crate `dejavu`, rendered by
 //! ab_glyph), so a figure needs no system font and no fontconfig.
 
-use crate::output::read::{read_pvd, read_vtu, Vtu};
+use crate::output::read::{read_frame, read_series, Vtu};
 use crate::{Error, Result};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -368,21 +368,21 @@ fn contact_edges(dir: &Path, nodes: usize) -> Option<ContactEdges> {
 /// Draws the deformed body of a run at one time, coloured by a field (the paper's Fig. 3).
 pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
     register_fonts();
-    let (dir, pvd) = if dir.extension().is_some_and(|e| e == "pvd") {
-        (
-            dir.parent().unwrap_or(Path::new(".")).to_path_buf(),
-            dir.to_path_buf(),
-        )
-    } else {
-        (dir.to_path_buf(), dir.join(crate::output::PVD_NAME))
-    };
-    if !pvd.exists() {
+    if !dir.exists() {
         return Err(Error::input(format!(
             "plot: {} does not exist; give the output directory of a run (viscontact run … --out DIR)",
-            pvd.display()
+            dir.display()
         )));
     }
-    let entries = read_pvd(&pvd)?;
+    let (series, entries) = read_series(dir).map_err(|e| match e {
+        Error::Input(m) => Error::input(format!("plot: {m}")),
+        other => other,
+    })?;
+    let dir = if dir.is_dir() {
+        dir.to_path_buf()
+    } else {
+        dir.parent().unwrap_or(Path::new(".")).to_path_buf()
+    };
     let (time, frame) = match opts.time {
         None => entries.last(),
         Some(t) => entries
@@ -390,8 +390,9 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
             .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs())),
     }
     .cloned()
-    .ok_or_else(|| Error::input(format!("plot: {} lists no frames", pvd.display())))?;
-    let v = read_vtu(&frame)?;
+    .ok_or_else(|| Error::input(format!("plot: {} lists no frames", series.display())))?;
+    let v = read_frame(&frame)?;
+    let frame = frame.path().to_path_buf();
     let disp = v
         .point_field("displacement")
         .filter(|a| a.components == 3)

@@ -267,6 +267,9 @@ pub struct OutputSection {
     /// Write every this many steps (the last step is always written).
     #[serde(default = "one")]
     pub every: usize,
+    /// "vtu" (default: a .vtu file per frame + solution.pvd) or "vtkhdf" (one file).
+    #[serde(default)]
+    pub format: OutputFormat,
     /// "zlib" (default) or "none" (raw appended data).
     #[serde(default)]
     pub compression: OutputCompression,
@@ -281,11 +284,21 @@ impl Default for OutputSection {
     fn default() -> Self {
         OutputSection {
             every: 1,
+            format: OutputFormat::default(),
             compression: OutputCompression::default(),
             precision: OutputPrecision::default(),
             fields: None,
         }
     }
+}
+
+/// `output.format`.
+#[derive(Deserialize, Debug, Clone, Copy, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputFormat {
+    #[default]
+    Vtu,
+    Vtkhdf,
 }
 
 /// `output.compression`.
@@ -940,6 +953,10 @@ impl Scene {
             body_forces,
             output_every: f.output.every,
             output: crate::output::Options {
+                format: match f.output.format {
+                    OutputFormat::Vtu => crate::output::Format::Vtu,
+                    OutputFormat::Vtkhdf => crate::output::Format::Vtkhdf,
+                },
                 compression: match f.output.compression {
                     OutputCompression::None => crate::output::Compression::None,
                     OutputCompression::Zlib => crate::output::Compression::Zlib,

@@ -577,6 +577,7 @@ for kind, data in (("point", g.GetPointData()), ("cell", g.GetCellData())):
                 compression,
                 precision,
                 fields: None,
+                ..Options::default()
             };
             let mut series = Series::create(dir.path(), &g, RUN, &options).unwrap();
             for k in 0..3 {

@@ -28,7 +28,7 @@ pub(super) fn h5_create_sealed<P: AsRef<Path>>(path: P) -> hdf5::Result<hdf5::Fi
         .create(path)
 }
 
-pub(super) fn h5err(path: &Path, e: hdf5::Error) -> Error {
+pub(crate) fn h5err(path: &Path, e: hdf5::Error) -> Error {
     Error::io(path, std::io::Error::other(format!("HDF5: {e}")))
 }
 

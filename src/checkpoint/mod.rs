@@ -63,7 +63,7 @@
 //! `--stop-after`) waits until the last checkpoint is on disk.
 
 mod fingerprint;
-mod h5;
+pub(crate) mod h5;
 mod history_file;
 mod layout;
 mod read;

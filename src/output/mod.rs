@@ -1,11 +1,17 @@
 //! Writers: the ParaView time series of a run (DESIGN.md, "Output of run").
 //!
-//! A run's directory holds `solution_NNNNNN.vtu` (one VTK XML UnstructuredGrid per output
-//! step) and `solution.pvd` (the collection that makes ParaView open them as one time series).
-//! [`Series`] owns both: [`Series::create`] takes the mesh once, [`Series::write`] writes one
-//! [`Frame`] and rewrites the `.pvd`, so the directory is a valid series after every frame.
-//! Every file goes through [`write_atomic`]: a crash never leaves a half-written file where a
-//! good one was.
+//! Two formats (`[output] format`, [`Format`]):
+//! - `"vtu"` (the default): `solution_NNNNNN.vtu` (one VTK XML UnstructuredGrid per output
+//!   step) and `solution.pvd` (the collection that makes ParaView open them as one time
+//!   series). [`Series::write`] writes one [`Frame`] and rewrites the `.pvd`, so the directory
+//!   is a valid series after every frame. Every file goes through [`write_atomic`]: a crash
+//!   never leaves a half-written file where a good one was.
+//! - `"vtkhdf"`: one file `solution.vtkhdf`, a temporal VTKHDF 2.x UnstructuredGrid (the
+//!   mesh once, each frame's fields appended, the times in `Steps/Values`; layout and crash
+//!   behaviour in `vtkhdf.rs`), flushed after every frame.
+//!
+//! [`Series`] owns either: [`Series::create`] takes the mesh once; the checks of a frame, the
+//! choice of fields and precision and the writer thread are shared, only the sink differs.
 //!
 //! Frames are encoded and written on a background thread ([`writer`]): the time loop hands
 //! over a frame's values and goes on; it waits only when two frames are already queued. A
@@ -20,13 +26,16 @@
 //! - values are written as Float64 or Float32 ([`Precision`]), names exactly as given;
 //! - [`FIELDS`] lists the fields a run writes; [`Options::fields`] selects some of them.
 //!
-//! Encoding: raw appended data, zlib-compressed by default (details in `vtu.rs`). The run id
-//! given to [`Series::create`] is stored in every `.vtu` (FieldData `run_id`) and in the
-//! `.pvd` (a comment), and [`Series::reopen`] refuses a directory of another run.
+//! Encoding: `.vtu` raw appended data, zlib-compressed by default (details in `vtu.rs`);
+//! `.vtkhdf` HDF5 deflate chunks, or none. The run id given to
+//! [`Series::create`] is stored in every `.vtu` and in `solution.vtkhdf` (FieldData
+//! `run_id`) and in the `.pvd` (a comment), and [`Series::reopen`] refuses a series of
+//! another run.
 
 pub mod frame;
 mod pvd;
 pub mod read;
+mod vtkhdf;
 mod vtu;
 mod writer;
 
@@ -38,6 +47,13 @@ use crate::{Error, Result};
 
 /// Name of the collection file in a run's directory.
 pub const PVD_NAME: &str = "solution.pvd";
+
+/// Name of the one-file series (`format = "vtkhdf"`) in a run's directory.
+pub const VTKHDF_NAME: &str = "solution.vtkhdf";
+
+/// VTK cell type codes.
+const VTK_TRIANGLE: u8 = 5;
+const VTK_TETRA: u8 = 10;
 
 /// The fields a run writes (`[output] fields` chooses among them): point fields, cell fields,
 /// and `region`, the gmsh physical tag of each cell.
@@ -70,9 +86,20 @@ pub enum Precision {
     Float32,
 }
 
+/// `[output] format`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Format {
+    /// `solution_NNNNNN.vtu` per frame + `solution.pvd`.
+    #[default]
+    Vtu,
+    /// One temporal VTKHDF file, `solution.vtkhdf`.
+    Vtkhdf,
+}
+
 /// How a series is written.
 #[derive(Clone, Debug, Default)]
 pub struct Options {
+    pub format: Format,
     pub compression: Compression,
     pub precision: Precision,
     /// The fields to write, names from [`FIELDS`]; `None` = all.
@@ -100,6 +127,79 @@ pub struct Geometry<'a> {
     pub region: &'a [i32],
 }
 
+impl Geometry<'_> {
+    /// Checks the mesh and returns its VTK cell type: 3 nodes per cell → VTK_TRIANGLE, 4 →
+    /// VTK_TETRA, anything else, node indices out of range or a region tag count that is not
+    /// the cell count → `Error::Input`.
+    fn cell_type(&self) -> Result<u8> {
+        let (cells, nodes_per_cell) = (self.cells, self.nodes_per_cell);
+        let cell_type = match nodes_per_cell {
+            3 => VTK_TRIANGLE,
+            4 => VTK_TETRA,
+            n => {
+                return Err(Error::input(format!(
+                    "output: {n} nodes per cell is not supported (3 = triangle, 4 = tetrahedron)"
+                )))
+            }
+        };
+        if !cells.len().is_multiple_of(nodes_per_cell) {
+            return Err(Error::input(format!(
+                "output: {} cell node indices is not a multiple of {nodes_per_cell} nodes per cell",
+                cells.len()
+            )));
+        }
+        let num_points = self.points.len();
+        let num_cells = cells.len() / nodes_per_cell;
+        if let Some(pos) = cells.iter().position(|&i| i >= num_points) {
+            return Err(Error::input(format!(
+                "output: cell {} refers to node {}, but the mesh has {num_points} nodes",
+                pos / nodes_per_cell,
+                cells[pos]
+            )));
+        }
+        if !self.region.is_empty() && self.region.len() != num_cells {
+            return Err(Error::input(format!(
+                "output: {} region tags for {num_cells} cells",
+                self.region.len()
+            )));
+        }
+        Ok(cell_type)
+    }
+}
+
+/// The values of one array of a frame in the chosen precision.
+#[derive(Clone, Debug)]
+pub(super) enum Values {
+    F64(Vec<f64>),
+    F32(Vec<f32>),
+}
+
+/// One array of a frame, as the writer thread gets it.
+#[derive(Clone, Debug)]
+pub(super) struct Array {
+    pub name: String,
+    pub components: usize,
+    pub values: Values,
+}
+
+impl Array {
+    /// VTK's XML name of the value type.
+    fn vtk_type(&self) -> &'static str {
+        match self.values {
+            Values::F64(_) => "Float64",
+            Values::F32(_) => "Float32",
+        }
+    }
+
+    /// The values' little-endian bytes.
+    fn le_bytes(&self) -> Vec<u8> {
+        match &self.values {
+            Values::F64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            Values::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+        }
+    }
+}
+
 /// The `.vtu` file name of output step `step`: `solution_{step:06}.vtu`.
 pub fn vtu_name(step: usize) -> String {
     format!("solution_{step:06}.vtu")
@@ -122,7 +222,8 @@ pub struct Frame<'a> {
     pub cell_data: Vec<Field<'a>>,
 }
 
-/// A ParaView time series in a directory: `solution_NNNNNN.vtu` per frame + `solution.pvd`.
+/// A ParaView time series in a directory: `solution_NNNNNN.vtu` per frame + `solution.pvd`,
+/// or `solution.vtkhdf` ([`Options::format`]).
 ///
 /// The geometry (points, connectivity, offsets, cell types, region) is encoded once, in
 /// [`Series::create`]; a frame encodes only its fields.
@@ -131,44 +232,94 @@ pub struct Series {
     run_id: String,
     options: Options,
     sizes: (usize, usize),
-    /// `(time, file name relative to dir)`, in the order written; one entry per step.
+    /// `(time, file name relative to dir)`, in the order written; one entry per frame (for
+    /// `vtkhdf`, every frame's file is `solution.vtkhdf`).
     files: Vec<(f64, String)>,
-    writer: writer::Writer,
+    sink: Sink,
+}
+
+/// The writer thread of each format.
+enum Sink {
+    Vtu(writer::Writer<vtu::Grid>),
+    Vtkhdf {
+        /// The step of each frame in `files`.
+        steps: Vec<usize>,
+        writer: writer::Writer<vtkhdf::Sink>,
+    },
 }
 
 impl Series {
-    /// Starts a new series in `dir` (created if missing) for the run `run_id`.
+    /// Starts a new series in `dir` (created if missing) for the run `run_id`. Nothing is
+    /// written before the first frame.
     ///
     /// Existing `solution_*.vtu` files of an earlier run are left alone; `solution.pvd` is
-    /// rewritten by the first [`Series::write`]. To continue an earlier series (resume), use
-    /// [`Series::reopen`].
+    /// rewritten by the first [`Series::write`]; an existing `solution.vtkhdf` is replaced by
+    /// the first frame. To continue an earlier series (resume), use [`Series::reopen`].
     pub fn create(
         dir: &Path,
         geometry: &Geometry,
         run_id: &str,
         options: &Options,
     ) -> Result<Series> {
+        Series::start(dir, geometry, run_id, options, Vec::new())
+    }
+
+    /// A series whose first frames are `kept` (`vtkhdf`: `(step, time)` of the frames
+    /// `solution.vtkhdf` holds and keeps).
+    fn start(
+        dir: &Path,
+        geometry: &Geometry,
+        run_id: &str,
+        options: &Options,
+        kept: Vec<(usize, f64)>,
+    ) -> Result<Series> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         let mut g = *geometry;
         if !options.wants("region") {
             g.region = &[];
         }
-        let grid = vtu::Grid::new(&g, run_id, options.compression)?;
+        let sizes = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
+        let (sink, files) = match options.format {
+            Format::Vtu => (
+                Sink::Vtu(writer::Writer::new(vtu::Grid::new(
+                    &g,
+                    run_id,
+                    options.compression,
+                )?)),
+                Vec::new(),
+            ),
+            Format::Vtkhdf => (
+                Sink::Vtkhdf {
+                    steps: kept.iter().map(|&(s, _)| s).collect(),
+                    writer: writer::Writer::new(vtkhdf::Sink::new(
+                        &dir.join(VTKHDF_NAME),
+                        &g,
+                        run_id,
+                        options.compression,
+                    )?),
+                },
+                kept.iter()
+                    .map(|&(_, t)| (t, VTKHDF_NAME.to_string()))
+                    .collect(),
+            ),
+        };
         Ok(Series {
             dir: dir.to_path_buf(),
             run_id: run_id.to_string(),
             options: options.clone(),
-            sizes: (grid.num_points(), grid.num_cells()),
-            files: Vec::new(),
-            writer: writer::Writer::new(grid),
+            sizes,
+            files,
+            sink,
         })
     }
 
-    /// Continues the series in `dir` (for `resume`): reads `dir/solution.pvd` if there is one
-    /// and keeps its frames of step ≤ `last_step` (later ones are about to be recomputed), so
-    /// that the collection lists the whole run again. Without a `.pvd`, same as
-    /// [`Series::create`]. A `.pvd` that this module did not write, or one of a run whose id
-    /// is not `run_id`, is an input error.
+    /// Continues the series in `dir` (for `resume`) and keeps its frames of step ≤
+    /// `last_step` (later ones are about to be recomputed), so that it holds the whole run
+    /// again: `.vtu` reads `dir/solution.pvd`, `vtkhdf` reads `dir/solution.vtkhdf` (and its
+    /// first new frame cuts the file back to the frames kept). Without that file, same as
+    /// [`Series::create`]. A file that this module did not write, one that cannot be read,
+    /// one of a run whose id is not `run_id`, or (`vtkhdf`) one of another precision is an
+    /// input error that names it; nothing is changed on disk then.
     pub fn reopen(
         dir: &Path,
         geometry: &Geometry,
@@ -176,6 +327,23 @@ impl Series {
         options: &Options,
         last_step: usize,
     ) -> Result<Series> {
+        if options.format == Format::Vtkhdf {
+            let path = dir.join(VTKHDF_NAME);
+            if !path.exists() {
+                return Series::create(dir, geometry, run_id, options);
+            }
+            let stored = vtkhdf::Stored::read(&path)?;
+            if stored.run_id != run_id {
+                return Err(other_run(&path, &stored.run_id, run_id));
+            }
+            stored.check(&path, geometry, options.precision)?;
+            let kept = stored
+                .frames
+                .into_iter()
+                .filter(|&(s, _)| s <= last_step)
+                .collect();
+            return Series::start(dir, geometry, run_id, options, kept);
+        }
         let pvd_path = dir.join(PVD_NAME);
         let text = match std::fs::read_to_string(&pvd_path) {
             Ok(text) => text,
@@ -193,14 +361,7 @@ impl Series {
         let entries = pvd::parse(&text).map_err(bad)?;
         match pvd::run_id(&text) {
             Some(id) if id == pvd::comment_safe(run_id) => {}
-            stored => {
-                return Err(Error::input(format!(
-                    "{} holds frames of another run (run id {}, this run is {run_id}); \
-                     choose another output directory (--out) or remove them",
-                    dir.display(),
-                    stored.unwrap_or("missing")
-                )))
-            }
+            stored => return Err(other_run(dir, stored.unwrap_or("missing"), run_id)),
         }
         let mut series = Series::create(dir, geometry, run_id, options)?;
         series.files = entries
@@ -210,15 +371,22 @@ impl Series {
         Ok(series)
     }
 
-    /// Hands `dir/solution_{step:06}.vtu` to the writer thread, which writes it (temporary
-    /// file + rename), then `dir/solution.pvd` (likewise) listing every frame so far with its
-    /// real time, so the directory is a valid series after every frame. Writing a step again
-    /// replaces its file and its entry. Fields not chosen by [`Options::fields`] are left out.
-    /// Returns the path of the `.vtu`.
+    /// Hands the frame to the writer thread and returns the path of the file it goes to.
+    ///
+    /// `vtu`: the thread writes `dir/solution_{step:06}.vtu` (temporary file + rename), then
+    /// `dir/solution.pvd` (likewise) listing every frame so far with its real time, so the
+    /// directory is a valid series after every frame. Writing a step again replaces its file
+    /// and its entry.
+    ///
+    /// `vtkhdf`: the thread appends the frame to `dir/solution.vtkhdf` (creating it at the
+    /// first frame) and flushes the file. A frame of step s first drops the frames of steps
+    /// ≥ s, so the steps in the file always increase.
+    ///
+    /// Fields not chosen by [`Options::fields`] are left out.
     ///
     /// Errors: a field whose length is not `components` × (number of points or cells), a
     /// field with 0 components or a repeated or empty name, or a non-finite time →
-    /// `Error::Input`; a failed write of an earlier frame → `Error::Io` naming its file.
+    /// `Error::Input`; a failed write of an earlier frame → that error, naming its file.
     pub fn write(&mut self, frame: &Frame) -> Result<PathBuf> {
         if !frame.time.is_finite() {
             return Err(Error::input(format!(
@@ -226,7 +394,10 @@ impl Series {
                 frame.step, frame.time
             )));
         }
-        let name = vtu_name(frame.step);
+        let name = match self.sink {
+            Sink::Vtu(_) => vtu_name(frame.step),
+            Sink::Vtkhdf { .. } => VTKHDF_NAME.to_string(),
+        };
         let path = self.dir.join(&name);
         let (points, cells) = self.sizes;
         let arrays = |fields: &[Field], count, what| {
@@ -248,51 +419,61 @@ impl Series {
         };
         let point_data = arrays(&frame.point_data, points, "point")?;
         let cell_data = arrays(&frame.cell_data, cells, "cell")?;
-        match self.files.iter_mut().find(|(_, f)| *f == name) {
-            Some(entry) => entry.0 = frame.time,
-            None => self.files.push((frame.time, name)),
+        match &mut self.sink {
+            Sink::Vtu(writer) => {
+                match self.files.iter_mut().find(|(_, f)| *f == name) {
+                    Some(entry) => entry.0 = frame.time,
+                    None => self.files.push((frame.time, name)),
+                }
+                writer.send(vtu::Job {
+                    path: path.clone(),
+                    point_data,
+                    cell_data,
+                    pvd: (
+                        self.dir.join(PVD_NAME),
+                        pvd::render(&self.files, &self.run_id),
+                    ),
+                })?;
+            }
+            Sink::Vtkhdf { steps, writer } => {
+                let index = steps.iter().take_while(|&&s| s < frame.step).count();
+                steps.truncate(index);
+                steps.push(frame.step);
+                self.files.truncate(index);
+                self.files.push((frame.time, name));
+                writer.send(vtkhdf::Job {
+                    index,
+                    step: frame.step,
+                    time: frame.time,
+                    point_data,
+                    cell_data,
+                })?;
+            }
         }
-        self.writer.send(writer::Job {
-            path: path.clone(),
-            point_data,
-            cell_data,
-            pvd: (
-                self.dir.join(PVD_NAME),
-                pvd::render(&self.files, &self.run_id),
-            ),
-        })?;
         Ok(path)
     }
 
     /// Waits until every frame handed over is on disk; the first failed write is the error.
     pub fn finish(&mut self) -> Result<()> {
-        self.writer.finish()
-    }
-
-    /// The little-endian bytes of a field in the chosen precision.
-    fn array(&self, f: &Field) -> vtu::Array {
-        let (ty, bytes) = match self.options.precision {
-            Precision::Float64 => (
-                "Float64",
-                f.values.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            ),
-            Precision::Float32 => (
-                "Float32",
-                f.values
-                    .iter()
-                    .flat_map(|&x| (x as f32).to_le_bytes())
-                    .collect(),
-            ),
-        };
-        vtu::Array {
-            name: f.name.to_string(),
-            ty,
-            components: f.components,
-            bytes,
+        match &mut self.sink {
+            Sink::Vtu(writer) => writer.finish(),
+            Sink::Vtkhdf { writer, .. } => writer.finish(),
         }
     }
 
-    /// `(time, file name relative to the directory)` of every frame listed in the `.pvd`.
+    /// A field in the chosen precision.
+    fn array(&self, f: &Field) -> Array {
+        Array {
+            name: f.name.to_string(),
+            components: f.components,
+            values: match self.options.precision {
+                Precision::Float64 => Values::F64(f.values.to_vec()),
+                Precision::Float32 => Values::F32(f.values.iter().map(|&x| x as f32).collect()),
+            },
+        }
+    }
+
+    /// `(time, file name relative to the directory)` of every frame of the series.
     pub fn files(&self) -> &[(f64, String)] {
         &self.files
     }
@@ -311,6 +492,15 @@ impl Series {
     pub fn sizes(&self) -> (usize, usize) {
         self.sizes
     }
+}
+
+/// The error for a series of another run in `at` (a directory or a file).
+fn other_run(at: &Path, stored: &str, run_id: &str) -> Error {
+    Error::input(format!(
+        "{} holds frames of another run (run id {stored}, this run is {run_id}); choose \
+         another output directory (--out) or remove them",
+        at.display()
+    ))
 }
 
 /// Checks sizes and names of the fields of one kind (`what` = "point" or "cell").

@@ -2,11 +2,87 @@
 //! produces (`vtu.rs`): raw appended data, uncompressed or in VTK's zlib blocks, and the
 //! inline base64 uncompressed arrays of earlier versions; header_type UInt64.
 //! Float64/Float32, Int64/Int32, UInt64/UInt32/UInt8 arrays are read; other layouts (other
-//! writers) are refused with a message saying so. Used by the `plot` command.
+//! writers) are refused with a message saying so. `solution.vtkhdf` (`vtkhdf.rs`) is read
+//! frame by frame through HDF5. Used by the `plot` command.
 
-use super::pvd;
+use super::{pvd, vtkhdf};
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
+
+/// Where one frame of a series is.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrameRef {
+    /// A `.vtu` file.
+    Vtu(PathBuf),
+    /// Frame `index` (0-based) of a `.vtkhdf` file.
+    Vtkhdf { path: PathBuf, index: usize },
+}
+
+impl FrameRef {
+    /// The file that holds the frame.
+    pub fn path(&self) -> &Path {
+        match self {
+            FrameRef::Vtu(p) | FrameRef::Vtkhdf { path: p, .. } => p,
+        }
+    }
+}
+
+/// The frames `(time, where)` of a series: `path` is a `.pvd`, a `.vtkhdf`, or a run's
+/// directory (its `solution.pvd`, else its `solution.vtkhdf`). Also returns the series
+/// file read. A directory with neither file is an input error that names both.
+pub fn read_series(path: &Path) -> Result<(PathBuf, Vec<(f64, FrameRef)>)> {
+    let file = if path.is_dir() {
+        let pvd = path.join(super::PVD_NAME);
+        let h5 = path.join(super::VTKHDF_NAME);
+        match (pvd.exists(), h5.exists()) {
+            (true, _) => pvd,
+            (false, true) => h5,
+            (false, false) => {
+                return Err(Error::input(format!(
+                    "{} holds neither {} nor {}; give the output directory of a run                      (viscontact run … --out DIR)",
+                    path.display(),
+                    super::PVD_NAME,
+                    super::VTKHDF_NAME
+                )))
+            }
+        }
+    } else {
+        path.to_path_buf()
+    };
+    let frames = if file.extension().is_some_and(|e| e == "vtkhdf") {
+        read_vtkhdf(&file)?
+            .into_iter()
+            .enumerate()
+            .map(|(index, (_, t))| {
+                let path = file.clone();
+                (t, FrameRef::Vtkhdf { path, index })
+            })
+            .collect()
+    } else {
+        read_pvd(&file)?
+            .into_iter()
+            .map(|(t, p)| (t, FrameRef::Vtu(p)))
+            .collect()
+    };
+    Ok((file, frames))
+}
+
+/// Reads one frame of a series.
+pub fn read_frame(frame: &FrameRef) -> Result<Vtu> {
+    match frame {
+        FrameRef::Vtu(path) => read_vtu(path),
+        FrameRef::Vtkhdf { path, index } => vtkhdf::read_frame(path, *index),
+    }
+}
+
+/// The `(step, time)` of every complete frame of a `solution.vtkhdf` written by
+/// [`super::Series`]. A file that cannot be read is an input error naming it.
+pub fn read_vtkhdf(path: &Path) -> Result<Vec<(usize, f64)>> {
+    if !path.exists() {
+        return Err(Error::input(format!("{}: no such file", path.display())));
+    }
+    Ok(vtkhdf::Stored::read(path)?.frames)
+}
 
 /// One named data array with its number of components; values converted to f64.
 #[derive(Clone, Debug)]
@@ -353,6 +429,7 @@ mod tests {
                     compression,
                     precision,
                     fields: None,
+                    ..Options::default()
                 };
                 let mut s = Series::create(dir.path(), &geometry, "id", &options).unwrap();
                 s.write(&Frame {

@@ -39,12 +39,11 @@ use std::io::Write as _;
 
 use flate2::{Compress, Compression as Level, FlushCompress, Status};
 
-use super::{Compression, Geometry};
-use crate::{Error, Result};
+use std::path::PathBuf;
 
-/// VTK cell type codes.
-const VTK_TRIANGLE: u8 = 5;
-const VTK_TETRA: u8 = 10;
+use super::writer::Sink;
+use super::{write_atomic, Array, Compression, Geometry};
+use crate::Result;
 
 /// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
 const BLOCK: usize = 32768;
@@ -55,13 +54,13 @@ const BLOCK: usize = 32768;
 /// than level 6 at 60% of its time, and the time is what a run writing every step pays.
 const ZLIB_LEVEL: u32 = 1;
 
-/// One array of a frame, already in its little-endian bytes.
-pub(super) struct Array {
-    pub name: String,
-    /// "Float64", "Float32", …
-    pub ty: &'static str,
-    pub components: usize,
-    pub bytes: Vec<u8>,
+/// One frame for the writer thread: the `.vtu` to write, then the `.pvd` that lists it.
+pub(super) struct Job {
+    pub path: PathBuf,
+    pub point_data: Vec<Array>,
+    pub cell_data: Vec<Array>,
+    /// The collection file and its new text.
+    pub pvd: (PathBuf, String),
 }
 
 /// Encodes arrays in the appended layout (see the module doc).
@@ -145,40 +144,12 @@ fn le<T, const N: usize>(items: impl Iterator<Item = T>, f: impl Fn(T) -> [u8; N
 }
 
 impl Grid {
-    /// Checks and encodes the geometry. `cells` holds `nodes_per_cell` node indices per
-    /// cell: 3 → VTK_TRIANGLE, 4 → VTK_TETRA.
+    /// Checks ([`Geometry::cell_type`]) and encodes the geometry.
     pub(super) fn new(g: &Geometry, run_id: &str, compression: Compression) -> Result<Grid> {
+        let cell_type = g.cell_type()?;
         let (points, cells, nodes_per_cell) = (g.points, g.cells, g.nodes_per_cell);
-        let cell_type = match nodes_per_cell {
-            3 => VTK_TRIANGLE,
-            4 => VTK_TETRA,
-            n => {
-                return Err(Error::input(format!(
-                    "output: {n} nodes per cell is not supported (3 = triangle, 4 = tetrahedron)"
-                )))
-            }
-        };
-        if !cells.len().is_multiple_of(nodes_per_cell) {
-            return Err(Error::input(format!(
-                "output: {} cell node indices is not a multiple of {nodes_per_cell} nodes per cell",
-                cells.len()
-            )));
-        }
         let num_points = points.len();
         let num_cells = cells.len() / nodes_per_cell;
-        if let Some(pos) = cells.iter().position(|&i| i >= num_points) {
-            return Err(Error::input(format!(
-                "output: cell {} refers to node {}, but the mesh has {num_points} nodes",
-                pos / nodes_per_cell,
-                cells[pos]
-            )));
-        }
-        if !g.region.is_empty() && g.region.len() != num_cells {
-            return Err(Error::input(format!(
-                "output: {} region tags for {num_cells} cells",
-                g.region.len()
-            )));
-        }
 
         let mut encoder = Encoder::new(compression);
         let mut statics = Vec::new();
@@ -243,14 +214,6 @@ impl Grid {
         })
     }
 
-    pub(super) fn num_points(&self) -> usize {
-        self.num_points
-    }
-
-    pub(super) fn num_cells(&self) -> usize {
-        self.num_cells
-    }
-
     /// The whole `.vtu` file for these fields (valid until the next call); sizes were
     /// checked by the caller.
     pub(super) fn encode(&mut self, point_data: &[Array], cell_data: &[Array]) -> &[u8] {
@@ -279,7 +242,7 @@ impl Grid {
         let mut offsets = vec![0; arrays.len()];
         for (k, a) in arrays.iter().enumerate().rev() {
             offsets[k] = base + appended.len();
-            self.encoder.append(appended, &a.bytes);
+            self.encoder.append(appended, &a.le_bytes());
         }
         for (k, a) in arrays.iter().enumerate() {
             if k == 0 {
@@ -291,7 +254,7 @@ impl Grid {
             let _ = writeln!(
                 out,
                 "{} offset=\"{}\"/>",
-                array_open(a.ty, &a.name, a.components),
+                array_open(a.vtk_type(), &a.name, a.components),
                 offsets[k]
             );
         }
@@ -320,6 +283,21 @@ impl Grid {
         out.extend_from_slice(appended);
         out.extend_from_slice(b"\n  </AppendedData>\n</VTKFile>\n");
         &self.out
+    }
+}
+
+impl Sink for Grid {
+    type Job = Job;
+
+    /// The `.vtu` (temporary file + rename), then the `.pvd` (likewise).
+    fn write(&mut self, job: Job) -> Result<()> {
+        write_atomic(&job.path, self.encode(&job.point_data, &job.cell_data))?;
+        write_atomic(&job.pvd.0, job.pvd.1.as_bytes())
+    }
+
+    /// Every file was closed when it was written.
+    fn close(&mut self) -> Result<()> {
+        Ok(())
     }
 }
 

@@ -5,43 +5,45 @@
 //! compressor falls that far behind, which bounds the memory held by frames in flight. The
 //! thread stops at its first failed write; its error (naming the file) is what the next
 //! [`Writer::send`] or [`Writer::finish`] returns, so a run never ends well with a frame
-//! missing. The pattern is the checkpoint writer's (src/checkpoint.rs), without its
+//! missing. The pattern is the checkpoint writer's (src/checkpoint/writer.rs), without its
 //! replacement of waiting snapshots: every frame is kept.
+//!
+//! What a frame becomes on disk is the [`Sink`]'s business: `.vtu` + `.pvd` (`vtu.rs`) or
+//! one more step of `solution.vtkhdf` (`vtkhdf.rs`).
 
-use std::path::PathBuf;
 use std::sync::mpsc::{sync_channel, SyncSender};
 use std::thread::JoinHandle;
 
-use super::{vtu, write_atomic};
 use crate::{Error, Result};
 
 /// Frames waiting for the writer thread at most, besides the one it works on.
 const QUEUE: usize = 2;
 
-/// One frame to write: the `.vtu` and then the `.pvd` that lists it.
-pub(super) struct Job {
-    pub path: PathBuf,
-    pub point_data: Vec<vtu::Array>,
-    pub cell_data: Vec<vtu::Array>,
-    /// The collection file and its new text.
-    pub pvd: (PathBuf, String),
+/// Where the frames of a series go.
+pub(super) trait Sink: Send + 'static {
+    /// One frame, ready to be written.
+    type Job: Send + 'static;
+    /// Writes one frame; an error names the file.
+    fn write(&mut self, job: Self::Job) -> Result<()>;
+    /// The thread ends (the queue was drained by [`Writer::finish`]): let go of open files.
+    fn close(&mut self) -> Result<()>;
 }
 
-/// The thread hands the encoded mesh back when it ends, so that a finished series can be
-/// written to again (the thread is started on demand).
-type Thread = JoinHandle<(vtu::Grid, Result<()>)>;
+/// The thread hands the sink back when it ends, so that a finished series can be written to
+/// again (the thread is started on demand).
+type Thread<S> = JoinHandle<(Box<S>, Result<()>)>;
 
-pub(super) struct Writer {
-    /// The mesh while no thread runs.
-    grid: Option<vtu::Grid>,
-    tx: Option<SyncSender<Job>>,
-    thread: Option<Thread>,
+pub(super) struct Writer<S: Sink> {
+    /// The sink while no thread runs (boxed: a sink holds the mesh).
+    sink: Option<Box<S>>,
+    tx: Option<SyncSender<S::Job>>,
+    thread: Option<Thread<S>>,
 }
 
-impl Writer {
-    pub(super) fn new(grid: vtu::Grid) -> Writer {
+impl<S: Sink> Writer<S> {
+    pub(super) fn new(sink: S) -> Writer<S> {
         Writer {
-            grid: Some(grid),
+            sink: Some(Box::new(sink)),
             tx: None,
             thread: None,
         }
@@ -49,16 +51,14 @@ impl Writer {
 
     /// Queues a frame (waits while the queue is full). Errors: the failed write of an
     /// earlier frame.
-    pub(super) fn send(&mut self, job: Job) -> Result<()> {
-        if let Some(mut grid) = self.grid.take() {
-            let (tx, rx) = sync_channel::<Job>(QUEUE);
+    pub(super) fn send(&mut self, job: S::Job) -> Result<()> {
+        if let Some(mut sink) = self.sink.take() {
+            let (tx, rx) = sync_channel::<S::Job>(QUEUE);
             self.tx = Some(tx);
             self.thread = Some(std::thread::spawn(move || {
-                let result = rx.iter().try_for_each(|job| {
-                    write_atomic(&job.path, grid.encode(&job.point_data, &job.cell_data))?;
-                    write_atomic(&job.pvd.0, job.pvd.1.as_bytes())
-                });
-                (grid, result)
+                let written = rx.iter().try_for_each(|job| sink.write(job));
+                let closed = sink.close();
+                (sink, written.and(closed))
             }));
         }
         let sent = self.tx.as_ref().is_some_and(|tx| tx.send(job).is_ok());
@@ -70,15 +70,16 @@ impl Writer {
         Err(Error::solve("output: the writer thread stopped"))
     }
 
-    /// Waits until every queued frame is written; the first failed write is the error.
+    /// Waits until every queued frame is written and the sink closed its files; the first
+    /// failed write is the error.
     pub(super) fn finish(&mut self) -> Result<()> {
         self.tx = None;
         let Some(thread) = self.thread.take() else {
             return Ok(());
         };
         match thread.join() {
-            Ok((grid, result)) => {
-                self.grid = Some(grid);
+            Ok((sink, result)) => {
+                self.sink = Some(sink);
                 result
             }
             Err(_) => Err(Error::solve("output: the writer thread panicked")),
@@ -86,7 +87,7 @@ impl Writer {
     }
 }
 
-impl Drop for Writer {
+impl<S: Sink> Drop for Writer<S> {
     /// A series dropped without [`Writer::finish`] (a run that failed elsewhere) still
     /// completes its queued frames; their errors are moot then.
     fn drop(&mut self) {

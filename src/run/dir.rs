@@ -33,7 +33,11 @@ fn run_file(name: &str) -> bool {
     frame
         || matches!(
             name,
-            "solution.pvd" | "summary.json" | "checkpoint.h5" | "checkpoint_history.h5"
+            "solution.pvd"
+                | "solution.vtkhdf"
+                | "summary.json"
+                | "checkpoint.h5"
+                | "checkpoint_history.h5"
         )
 }
 
@@ -297,6 +301,7 @@ mod tests {
     fn our_names_and_theirs() {
         for name in [
             "solution.pvd",
+            "solution.vtkhdf",
             "solution_000012.vtu",
             "summary.json",
             "checkpoint.h5",

@@ -261,6 +261,24 @@ pub fn signal_at_frame(
     at: usize,
     signal: &str,
 ) -> (std::process::ExitStatus, String) {
+    let frame = dir.join(format!("solution_{at:06}.vtu"));
+    signal_when(
+        args,
+        || frame.exists(),
+        &frame.display().to_string(),
+        signal,
+    )
+}
+
+/// Spawns `viscontact ARGS`, waits until `ready()` (polled every 2 ms; `what` names what is
+/// awaited in the panic after 120 s), sends `signal` (`kill -s SIGNAL`) and waits for the
+/// process: its exit status and stderr.
+pub fn signal_when(
+    args: &[&str],
+    ready: impl Fn() -> bool,
+    what: &str,
+    signal: &str,
+) -> (std::process::ExitStatus, String) {
     use std::io::Read;
     let mut child = Command::new(BIN)
         .args(args)
@@ -268,13 +286,11 @@ pub fn signal_at_frame(
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let frame = dir.join(format!("solution_{at:06}.vtu"));
     let start = std::time::Instant::now();
-    while !frame.exists() {
+    while !ready() {
         assert!(
             start.elapsed().as_secs() < 120,
-            "frame {at} never appeared in {}",
-            dir.display()
+            "{what} never appeared ({args:?})"
         );
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
