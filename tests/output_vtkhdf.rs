@@ -334,6 +334,21 @@ fn resume_refuses_foreign_damaged_and_mismatched_files() {
         "{err}"
     );
     assert!(std::fs::read(&file).unwrap() == good);
+    // One run, one series: its format cannot change on resume.
+    let o = viscontact(&[
+        "resume",
+        cp_a.to_str().unwrap(),
+        "--quiet",
+        "--set",
+        "output.format=\"vtu\"",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("output.format") && err.contains("as vtkhdf"),
+        "{err}"
+    );
+    assert!(std::fs::read(&file).unwrap() == good && !a.join("solution.pvd").exists());
 
     // The intact file resumes.
     let o = resume_a();
@@ -353,6 +368,21 @@ fn resume_refuses_foreign_damaged_and_mismatched_files() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(
         err.contains("output.format") && err.contains("vtkhdf") && err.contains("vtu"),
+        "{err}"
+    );
+    // LZ4 is a .vtu compressor only.
+    let o = viscontact(&[
+        "check",
+        scene.to_str().unwrap(),
+        "--set",
+        VTKHDF,
+        "--set",
+        "output.compression=\"lz4\"",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("output.compression") && err.contains("lz4"),
         "{err}"
     );
 }

@@ -99,6 +99,25 @@ impl Checkpoint {
             .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
         let scene = Scene::from_file(&scene_path, text, file)
             .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
+        // One run, one series: frames in two formats would split its time series.
+        let stored_format = self
+            .id
+            .scene_text
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|t| t.get("output")?.get("format")?.as_str().map(str::to_string))
+            .unwrap_or_else(|| "vtu".into());
+        let format = match scene.output.format {
+            crate::output::Format::Vtu => "vtu",
+            crate::output::Format::Vtkhdf => "vtkhdf",
+        };
+        if format != stored_format {
+            return Err(Error::input(format!(
+                "--set output.format={format}: the run of {shown} writes its frames as \
+                 {stored_format}, and a resumed run continues that series (frames in two \
+                 formats would split it): resume without changing output.format"
+            )));
+        }
         if scene.steps < self.n {
             return Err(Error::input(format!(
                 "{shown}: the stored scene has {} steps but the checkpoint is at step {}: \

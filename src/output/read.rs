@@ -127,10 +127,18 @@ pub fn read_vtu(path: &Path) -> Result<Vtu> {
     parse_vtu(&bytes).map_err(|m| Error::input(format!("{}: {m}", path.display())))
 }
 
-/// The bytes of the `_`-prefixed raw appended section, and whether they are zlib blocks.
+/// How appended arrays are stored: raw, or in VTK's blocks of a compressor.
+#[derive(Clone, Copy, PartialEq)]
+enum Blocks {
+    Raw,
+    Zlib,
+    Lz4,
+}
+
+/// The bytes of the `_`-prefixed raw appended section, and how they are stored.
 struct Appended<'a> {
     data: &'a [u8],
-    zlib: bool,
+    blocks: Blocks,
 }
 
 /// Parses the bytes of a `.vtu` file.
@@ -151,13 +159,18 @@ pub fn parse_vtu(bytes: &[u8]) -> std::result::Result<Vtu, String> {
     if !text.contains("type=\"UnstructuredGrid\"") {
         return Err("not a VTK UnstructuredGrid (.vtu) file".into());
     }
-    let appended = Appended {
-        data,
-        zlib: text.contains("compressor=\"vtkZLibDataCompressor\""),
+    let blocks = if text.contains("compressor=\"vtkZLibDataCompressor\"") {
+        Blocks::Zlib
+    } else if text.contains("compressor=\"vtkLZ4DataCompressor\"") {
+        Blocks::Lz4
+    } else if text.contains("compressor=") {
+        return Err(
+            "only vtkZLibDataCompressor and vtkLZ4DataCompressor compression are supported".into(),
+        );
+    } else {
+        Blocks::Raw
     };
-    if !appended.zlib && text.contains("compressor=") {
-        return Err("only vtkZLibDataCompressor compression is supported".into());
-    }
+    let appended = Appended { data, blocks };
     if !text.contains("header_type=\"UInt64\"") {
         return Err("only header_type=\"UInt64\" is supported".into());
     }
@@ -259,10 +272,9 @@ fn arrays(s: &str, appended: &Appended) -> std::result::Result<Vec<Array>, Strin
                     .get(offset..)
                     .ok_or_else(|| format!("array '{name}': offset {offset} past the data"))?;
                 rest = body;
-                if appended.zlib {
-                    inflate_blocks(data)
-                } else {
-                    counted(data)
+                match appended.blocks {
+                    Blocks::Raw => counted(data),
+                    compressed => inflate_blocks(data, compressed),
                 }
             }
             "binary" => {
@@ -306,9 +318,9 @@ fn counted(d: &[u8]) -> std::result::Result<Vec<u8>, String> {
         .ok_or_else(|| format!("{len} bytes announced, fewer present"))
 }
 
-/// VTK's zlib blocks: number of blocks, block size, last partial block size (0 = full),
-/// compressed sizes, then the blocks.
-fn inflate_blocks(d: &[u8]) -> std::result::Result<Vec<u8>, String> {
+/// VTK's compressed blocks (zlib or LZ4): number of blocks, block size, last partial block
+/// size (0 = full), compressed sizes, then the blocks.
+fn inflate_blocks(d: &[u8], kind: Blocks) -> std::result::Result<Vec<u8>, String> {
     let (blocks, size, last) = (word(d, 0)?, word(d, 1)?, word(d, 2)?);
     let total = blocks
         .checked_mul(size)
@@ -319,8 +331,19 @@ fn inflate_blocks(d: &[u8]) -> std::result::Result<Vec<u8>, String> {
     for b in 0..blocks {
         let n = word(d, 3 + b)?;
         let block = d.get(at..at + n).ok_or("a compressed block is cut short")?;
-        std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(block), &mut out)
-            .map_err(|e| format!("zlib: {e}"))?;
+        if kind == Blocks::Lz4 {
+            let want = if b + 1 == blocks && last > 0 {
+                last
+            } else {
+                size
+            };
+            let inflated = lz4_flex::block::decompress(block, want.min(1 << 30))
+                .map_err(|e| format!("lz4: {e}"))?;
+            out.extend_from_slice(&inflated);
+        } else {
+            std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(block), &mut out)
+                .map_err(|e| format!("zlib: {e}"))?;
+        }
         at += n;
     }
     if out.len() != total {
@@ -416,7 +439,7 @@ mod tests {
         let cells = [0, 1, 2, 1, 3, 2];
         let u = [0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, -0.2, 0.0, 0.3, 0.4, 0.0];
         let vm = [1.5, -2.25];
-        for compression in [Compression::None, Compression::Zlib] {
+        for compression in [Compression::None, Compression::Zlib, Compression::Lz4] {
             for precision in [Precision::Float64, Precision::Float32] {
                 let dir = tempfile::tempdir().unwrap();
                 let geometry = Geometry {

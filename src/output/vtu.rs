@@ -84,7 +84,7 @@ impl Encoder {
                 out.extend_from_slice(&(raw.len() as u64).to_le_bytes());
                 out.extend_from_slice(raw);
             }
-            Compression::Zlib => {
+            Compression::Zlib | Compression::Lz4 => {
                 let blocks = raw.len().div_ceil(BLOCK);
                 let header = out.len();
                 for word in [blocks, BLOCK, raw.len() % BLOCK] {
@@ -93,22 +93,31 @@ impl Encoder {
                 out.resize(out.len() + 8 * blocks, 0);
                 for (b, chunk) in raw.chunks(BLOCK).enumerate() {
                     let start = out.len();
-                    self.zlib.reset();
-                    loop {
-                        out.reserve(chunk.len() / 2 + 64);
-                        let done = self.zlib.total_in() as usize;
-                        let status = self
-                            .zlib
-                            .compress_vec(&chunk[done..], out, FlushCompress::Finish)
-                            .expect("zlib compression in memory cannot fail");
-                        if status == Status::StreamEnd {
-                            break;
-                        }
+                    if self.compression == Compression::Lz4 {
+                        out.extend_from_slice(&lz4_flex::block::compress(chunk));
+                    } else {
+                        self.deflate(chunk, out);
                     }
                     let size = (out.len() - start) as u64;
                     let at = header + 24 + 8 * b;
                     out[at..at + 8].copy_from_slice(&size.to_le_bytes());
                 }
+            }
+        }
+    }
+
+    /// One zlib stream of `chunk` appended to `out`.
+    fn deflate(&mut self, chunk: &[u8], out: &mut Vec<u8>) {
+        self.zlib.reset();
+        loop {
+            out.reserve(chunk.len() / 2 + 64);
+            let done = self.zlib.total_in() as usize;
+            let status = self
+                .zlib
+                .compress_vec(&chunk[done..], out, FlushCompress::Finish)
+                .expect("zlib compression in memory cannot fail");
+            if status == Status::StreamEnd {
+                break;
             }
         }
     }
@@ -223,6 +232,7 @@ impl Grid {
         let compressor = match self.encoder.compression {
             Compression::None => "",
             Compression::Zlib => " compressor=\"vtkZLibDataCompressor\"",
+            Compression::Lz4 => " compressor=\"vtkLZ4DataCompressor\"",
         };
         // Writing into a Vec cannot fail.
         let _ = write!(
