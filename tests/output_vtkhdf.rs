@@ -319,71 +319,63 @@ fn resume_refuses_foreign_damaged_and_mismatched_files() {
     std::fs::write(&file, b"not HDF5 at all").unwrap();
     refused("not HDF5", &["solution.vtkhdf", "cannot be read"]);
 
+    // Bad input on the command line: exit 2 and every needle in the message.
+    let input_error = |args: &[&str], needles: &[&str]| {
+        let o = viscontact(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(
+            needles.iter().all(|n| err.contains(n)),
+            "{needles:?}: {err}"
+        );
+    };
     std::fs::write(&file, &good).unwrap();
-    let o = viscontact(&[
-        "resume",
-        cp_a.to_str().unwrap(),
-        "--quiet",
-        "--set",
+    let cp = cp_a.to_str().unwrap();
+    let resume_set = |set: &str, needles: &[&str]| {
+        input_error(&["resume", cp, "--quiet", "--set", set], needles);
+        assert!(
+            std::fs::read(&file).unwrap() == good,
+            "{set}: the file was changed"
+        );
+    };
+    resume_set(
         "output.precision=\"float32\"",
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("solution.vtkhdf") && err.contains("float64"),
-        "{err}"
+        &["solution.vtkhdf", "float64"],
     );
-    assert!(std::fs::read(&file).unwrap() == good);
     // One run, one series: its format cannot change on resume.
-    let o = viscontact(&[
-        "resume",
-        cp_a.to_str().unwrap(),
-        "--quiet",
-        "--set",
-        "output.format=\"vtu\"",
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("output.format") && err.contains("as vtkhdf"),
-        "{err}"
-    );
-    assert!(std::fs::read(&file).unwrap() == good && !a.join("solution.pvd").exists());
+    resume_set("output.format=\"vtu\"", &["output.format", "as vtkhdf"]);
+    assert!(!a.join("solution.pvd").exists());
 
     // The intact file resumes.
     let o = resume_a();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(read_vtkhdf(&file).unwrap().len(), 9);
 
-    let o = viscontact(&[
-        "run",
-        scene.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        tmp.path().join("c").to_str().unwrap(),
-        "--set",
-        "output.format=\"hdf\"",
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("output.format") && err.contains("vtkhdf") && err.contains("vtu"),
-        "{err}"
+    let scene = scene.to_str().unwrap();
+    let c = tmp.path().join("c");
+    input_error(
+        &[
+            "run",
+            scene,
+            "--quiet",
+            "--out",
+            c.to_str().unwrap(),
+            "--set",
+            "output.format=\"hdf\"",
+        ],
+        &["output.format", "vtkhdf", "vtu"],
     );
     // LZ4 is a .vtu compressor only.
-    let o = viscontact(&[
-        "check",
-        scene.to_str().unwrap(),
-        "--set",
-        VTKHDF,
-        "--set",
-        "output.compression=\"lz4\"",
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("output.compression") && err.contains("lz4"),
-        "{err}"
+    input_error(
+        &[
+            "check",
+            scene,
+            "--set",
+            VTKHDF,
+            "--set",
+            "output.compression=\"lz4\"",
+        ],
+        &["output.compression", "lz4"],
     );
 }
 
