@@ -31,11 +31,10 @@ fn main() {
         .and_then(|a| a.parse().ok())
         .unwrap_or(5);
     let base = ["mesh.file=../meshes/paper/rect_128.msh", "time.steps=128"];
-    let configs: [(&str, &[&str]); 6] = [
+    let configs: [(&str, &[&str]); 5] = [
         ("last frame only (zlib)", &["output.every=1000000"]),
         ("every step, zlib (default)", &[]),
         ("every step, zlib, float32", &["output.precision=float32"]),
-        ("every step, lz4", &["output.compression=lz4"]),
         ("every step, none (raw)", &["output.compression=none"]),
         ("every step, vtkhdf (zlib)", &["output.format=vtkhdf"]),
     ];

@@ -308,7 +308,6 @@ pub enum OutputCompression {
     None,
     #[default]
     Zlib,
-    Lz4,
 }
 
 /// `output.precision`.
@@ -766,16 +765,6 @@ impl Scene {
             }
             _ => None,
         };
-        if matches!(f.output.format, OutputFormat::Vtkhdf)
-            && matches!(f.output.compression, OutputCompression::Lz4)
-        {
-            return bad(
-                "output.compression",
-                "is \"lz4\", which applies to .vtu frames: HDF5 has no built-in LZ4 filter \
-                 that VTK's reader could rely on; use \"zlib\" or \"none\" with format = \
-                 \"vtkhdf\"",
-            );
-        }
         let relaxation = match &f.material.relaxation {
             Some(r) if r.enabled => Some(kernel(r, path)?),
             _ => None,
@@ -971,7 +960,6 @@ impl Scene {
                 compression: match f.output.compression {
                     OutputCompression::None => crate::output::Compression::None,
                     OutputCompression::Zlib => crate::output::Compression::Zlib,
-                    OutputCompression::Lz4 => crate::output::Compression::Lz4,
                 },
                 precision: match f.output.precision {
                     OutputPrecision::Float64 => crate::output::Precision::Float64,

@@ -365,18 +365,6 @@ fn resume_refuses_foreign_damaged_and_mismatched_files() {
         ],
         &["output.format", "vtkhdf", "vtu"],
     );
-    // LZ4 is a .vtu compressor only.
-    input_error(
-        &[
-            "check",
-            scene,
-            "--set",
-            VTKHDF,
-            "--set",
-            "output.compression=\"lz4\"",
-        ],
-        &["output.compression", "lz4"],
-    );
 }
 
 /// kill -9 at a random moment of a run writing a frame every step and a checkpoint every 7

@@ -76,8 +76,6 @@ pub enum Compression {
     /// VTK's zlib blocks (`vtkZLibDataCompressor`).
     #[default]
     Zlib,
-    /// VTK's LZ4 blocks (`vtkLZ4DataCompressor`); `.vtu` only (HDF5 has no built-in LZ4).
-    Lz4,
 }
 
 /// `[output] precision` of the field values (coordinates stay Float64).

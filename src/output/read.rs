@@ -127,18 +127,10 @@ pub fn read_vtu(path: &Path) -> Result<Vtu> {
     parse_vtu(&bytes).map_err(|m| Error::input(format!("{}: {m}", path.display())))
 }
 
-/// How appended arrays are stored: raw, or in VTK's blocks of a compressor.
-#[derive(Clone, Copy, PartialEq)]
-enum Blocks {
-    Raw,
-    Zlib,
-    Lz4,
-}
-
-/// The bytes of the `_`-prefixed raw appended section, and how they are stored.
+/// The bytes of the `_`-prefixed raw appended section, and whether they are zlib blocks.
 struct Appended<'a> {
     data: &'a [u8],
-    blocks: Blocks,
+    zlib: bool,
 }
 
 /// Parses the bytes of a `.vtu` file.
@@ -159,18 +151,13 @@ pub fn parse_vtu(bytes: &[u8]) -> std::result::Result<Vtu, String> {
     if !text.contains("type=\"UnstructuredGrid\"") {
         return Err("not a VTK UnstructuredGrid (.vtu) file".into());
     }
-    let blocks = if text.contains("compressor=\"vtkZLibDataCompressor\"") {
-        Blocks::Zlib
-    } else if text.contains("compressor=\"vtkLZ4DataCompressor\"") {
-        Blocks::Lz4
-    } else if text.contains("compressor=") {
-        return Err(
-            "only vtkZLibDataCompressor and vtkLZ4DataCompressor compression are supported".into(),
-        );
-    } else {
-        Blocks::Raw
+    let appended = Appended {
+        data,
+        zlib: text.contains("compressor=\"vtkZLibDataCompressor\""),
     };
-    let appended = Appended { data, blocks };
+    if !appended.zlib && text.contains("compressor=") {
+        return Err("only vtkZLibDataCompressor compression is supported".into());
+    }
     if !text.contains("header_type=\"UInt64\"") {
         return Err("only header_type=\"UInt64\" is supported".into());
     }
@@ -272,9 +259,10 @@ fn arrays(s: &str, appended: &Appended) -> std::result::Result<Vec<Array>, Strin
                     .get(offset..)
                     .ok_or_else(|| format!("array '{name}': offset {offset} past the data"))?;
                 rest = body;
-                match appended.blocks {
-                    Blocks::Raw => counted(data),
-                    compressed => inflate_blocks(data, compressed),
+                if appended.zlib {
+                    inflate_blocks(data)
+                } else {
+                    counted(data)
                 }
             }
             "binary" => {
@@ -318,9 +306,9 @@ fn counted(d: &[u8]) -> std::result::Result<Vec<u8>, String> {
         .ok_or_else(|| format!("{len} bytes announced, fewer present"))
 }
 
-/// VTK's compressed blocks (zlib or LZ4): number of blocks, block size, last partial block
-/// size (0 = full), compressed sizes, then the blocks.
-fn inflate_blocks(d: &[u8], kind: Blocks) -> std::result::Result<Vec<u8>, String> {
+/// VTK's zlib blocks: number of blocks, block size, last partial block size (0 = full),
+/// compressed sizes, then the blocks.
+fn inflate_blocks(d: &[u8]) -> std::result::Result<Vec<u8>, String> {
     let (blocks, size, last) = (word(d, 0)?, word(d, 1)?, word(d, 2)?);
     let total = blocks
         .checked_mul(size)
@@ -331,19 +319,8 @@ fn inflate_blocks(d: &[u8], kind: Blocks) -> std::result::Result<Vec<u8>, String
     for b in 0..blocks {
         let n = word(d, 3 + b)?;
         let block = d.get(at..at + n).ok_or("a compressed block is cut short")?;
-        if kind == Blocks::Lz4 {
-            let want = if b + 1 == blocks && last > 0 {
-                last
-            } else {
-                size
-            };
-            let inflated = lz4_flex::block::decompress(block, want.min(1 << 30))
-                .map_err(|e| format!("lz4: {e}"))?;
-            out.extend_from_slice(&inflated);
-        } else {
-            std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(block), &mut out)
-                .map_err(|e| format!("zlib: {e}"))?;
-        }
+        std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(block), &mut out)
+            .map_err(|e| format!("zlib: {e}"))?;
         at += n;
     }
     if out.len() != total {
@@ -439,7 +416,7 @@ mod tests {
         let cells = [0, 1, 2, 1, 3, 2];
         let u = [0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, -0.2, 0.0, 0.3, 0.4, 0.0];
         let vm = [1.5, -2.25];
-        for compression in [Compression::None, Compression::Zlib, Compression::Lz4] {
+        for compression in [Compression::None, Compression::Zlib] {
             for precision in [Precision::Float64, Precision::Float32] {
                 let dir = tempfile::tempdir().unwrap();
                 let geometry = Geometry {

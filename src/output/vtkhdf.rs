@@ -252,7 +252,6 @@ impl Sink {
         match self.compression {
             Compression::Zlib => b.deflate(DEFLATE_LEVEL).create(a.name.as_str()),
             Compression::None => b.create(a.name.as_str()),
-            Compression::Lz4 => unreachable!("the scene refuses lz4 for vtkhdf"),
         }
     }
 
