@@ -122,7 +122,7 @@ impl<'p> TimeLoop<'p> {
     }
 
     /// A time loop with a memory plan in hand (a resumed run's, `Plan::resumed`), checked
-    /// as [`preflight`] checks a new one.
+    /// by [`refusals`] before anything is factored.
     pub fn with_plan(scene: &'p Scene, disc: &'p Discretization, plan: Plan) -> Result<Self> {
         refusals(scene, disc, &plan)?;
         let effects = Effects::new(scene, disc);
@@ -231,14 +231,13 @@ impl<'p> TimeLoop<'p> {
             .iter()
             .map(|r| (r.apply(&self.w), r.node))
             .fold((f64::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
-        let velocity_scale = w_max.max(u_max / t.max(h.k));
-        if violation.0 > VIOLATION_TOLERANCE * velocity_scale {
+        let mean_velocity = u_max / t.max(h.k);
+        if violation.0 > VIOLATION_TOLERANCE * w_max.max(mean_velocity) {
             return Err(Error::solve(format!(
                 "the contact solver's answer violates n·w ≤ 0 on Γ3,1 by {:e} (max|w| = \
-                 {w_max:e}, max|u|/t = {:e}) at node {} at step {}, t = {t}; the results \
+                 {w_max:e}, max|u|/t = {mean_velocity:e}) at node {} at step {}, t = {t}; the results \
                  cannot be trusted: try [solver] contact = \"{}\"",
                 violation.0,
-                u_max / t.max(h.k),
                 violation.1,
                 h.n,
                 match self.scene.contact_solver {
@@ -288,19 +287,11 @@ fn remedy(k: f64) -> String {
     )
 }
 
-/// What a run refuses before it factors anything (exit 2): a kernel that is not finite on
-/// the run's lags (`Plan::new`), a left endpoint step above the stability limit of the
-/// kernel as it will run (`Verdict`), loads that are not finite at t = 0. Returns how the
-/// memory will be computed. `viscontact check` calls it too, so that `check` fails wherever
-/// `run` would.
-pub fn preflight(scene: &Scene, disc: &Discretization) -> Result<Plan> {
-    let plan = Plan::new(scene)?;
-    refusals(scene, disc, &plan)?;
-    Ok(plan)
-}
-
-/// [`preflight`] for a memory plan in hand (`check` builds it to print it; a fit is not
-/// cheap enough to do twice).
+/// What a run refuses before it factors anything (exit 2), for the memory plan it will run
+/// (`Plan::new`, which already refused a kernel that is not finite on the run's lags, or a
+/// resumed run's `Plan::resumed`): a left endpoint step above the stability limit of the
+/// kernel as it will run (`Verdict`), loads that are not finite at t = 0. `viscontact check`
+/// calls it with the plan it prints, so that `check` fails wherever `run` would.
 pub fn refusals(scene: &Scene, disc: &Discretization, plan: &Plan) -> Result<()> {
     if scene.history == scene::History::Left {
         Verdict::new(scene, disc, plan).check(scene)?;

@@ -265,6 +265,12 @@ impl Sink {
             self.open = Some(Open { file, frames: 0 });
         } else if self.open.is_none() {
             let file = h5_open(&self.path, OpenMode::ReadWrite).map_err(h5)?;
+            // The fields are the run's, the same in every frame: checked once, when an
+            // existing file is opened, before anything in it is cut.
+            let root = file.group("VTKHDF").map_err(h5)?;
+            for (group, arrays) in [("PointData", &job.point_data), ("CellData", &job.cell_data)] {
+                self.check_fields(&root.group(group).map_err(h5)?, arrays)?;
+            }
             let frames = frames_in(&file, self.num_points(), self.num_cells()).map_err(h5)?;
             self.open = Some(Open { file, frames });
         }
@@ -311,7 +317,6 @@ impl Sink {
         ] {
             let data = root.group(data).map_err(h5)?;
             let offsets = steps.group(offsets).map_err(h5)?;
-            self.check_fields(&data, arrays)?;
             (|| {
                 for a in arrays {
                     let ds = data.dataset(&a.name)?;

@@ -23,6 +23,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::say;
 use crate::history::Plan;
 use crate::run::setup;
 use crate::scene::Kernel;
@@ -169,12 +170,6 @@ fn relative_max(u: &[f64], exact: &[f64]) -> f64 {
         .zip(exact)
         .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
     diff / max
-}
-
-fn say(progress: bool, msg: &str) {
-    if progress {
-        eprintln!("study: {msg}");
-    }
 }
 
 fn opt(v: Option<f64>, fmt: fn(f64) -> String) -> String {
