@@ -38,6 +38,7 @@ pub mod read;
 mod vtkhdf;
 mod vtu;
 mod writer;
+mod zlib;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

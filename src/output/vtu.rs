@@ -37,22 +37,14 @@
 
 use std::io::Write as _;
 
-use flate2::{Compress, Compression as Level, FlushCompress, Status};
-
 use std::path::PathBuf;
 
 use super::writer::Sink;
-use super::{write_atomic, Array, Compression, Geometry};
+use super::{write_atomic, zlib, Array, Compression, Geometry};
 use crate::Result;
 
 /// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
 const BLOCK: usize = 32768;
-
-/// zlib level. Measured on the fields of an h = 1/128 frame of examples/paper.toml (3.16 MB
-/// raw, 32 KiB blocks, Python's zlib): level 1 → 1.559 MB in 29 ms, level 4 → 1.542 MB in
-/// 35 ms, level 6 → 1.544 MB in 46 ms, level 9 → 1.544 MB in 203 ms. Level 1 is 1% larger
-/// than level 6 at 60% of its time, and the time is what a run writing every step pays.
-const ZLIB_LEVEL: u32 = 1;
 
 /// One frame for the writer thread: the `.vtu` to write, then the `.pvd` that lists it.
 pub(super) struct Job {
@@ -66,23 +58,17 @@ pub(super) struct Job {
 /// Encodes arrays in the appended layout (see the module doc).
 struct Encoder {
     compression: Compression,
-    zlib: Compress,
-    /// Output of one zlib stream (a block compresses to less than this; a larger one is
-    /// written in several passes).
-    scratch: Vec<u8>,
 }
 
 impl Encoder {
     fn new(compression: Compression) -> Encoder {
-        Encoder {
-            compression,
-            zlib: Compress::new(Level::new(ZLIB_LEVEL), true),
-            scratch: vec![0; BLOCK + BLOCK / 8 + 64],
-        }
+        Encoder { compression }
     }
 
-    /// Appends the header and data of one array holding `raw` to `out`.
-    fn append(&mut self, out: &mut Vec<u8>, raw: &[u8]) {
+    /// Appends the header and data of one array holding `raw` to `out`; `deflate` makes a
+    /// zlib stream of a block (`zlib::compress` for fields, `zlib::compress_once` for the
+    /// mesh).
+    fn append(&self, out: &mut Vec<u8>, raw: &[u8], deflate: fn(&[u8], &mut Vec<u8>)) {
         match self.compression {
             Compression::None => {
                 out.extend_from_slice(&(raw.len() as u64).to_le_bytes());
@@ -97,34 +83,11 @@ impl Encoder {
                 out.resize(out.len() + 8 * blocks, 0);
                 for (b, chunk) in raw.chunks(BLOCK).enumerate() {
                     let start = out.len();
-                    self.deflate(chunk, out);
+                    deflate(chunk, out);
                     let size = (out.len() - start) as u64;
                     let at = header + 24 + 8 * b;
                     out[at..at + 8].copy_from_slice(&size.to_le_bytes());
                 }
-            }
-        }
-    }
-
-    /// One zlib stream of `chunk` appended to `out`, through a block-sized scratch buffer:
-    /// flate2's `compress_vec` zeroes all the spare capacity of the vector it writes to, and
-    /// `out` (a whole frame) has megabytes of it — 6 % of a run writing every step went to
-    /// that memset before.
-    fn deflate(&mut self, chunk: &[u8], out: &mut Vec<u8>) {
-        self.zlib.reset();
-        loop {
-            let (done, produced) = (self.zlib.total_in(), self.zlib.total_out());
-            let status = self
-                .zlib
-                .compress(
-                    &chunk[done as usize..],
-                    &mut self.scratch,
-                    FlushCompress::Finish,
-                )
-                .expect("zlib compression in memory cannot fail");
-            out.extend_from_slice(&self.scratch[..(self.zlib.total_out() - produced) as usize]);
-            if status == Status::StreamEnd {
-                break;
             }
         }
     }
@@ -167,11 +130,11 @@ impl Grid {
         let num_points = points.len();
         let num_cells = cells.len() / nodes_per_cell;
 
-        let mut encoder = Encoder::new(compression);
+        let encoder = Encoder::new(compression);
         let mut statics = Vec::new();
         let mut add = |name: &str, ty: &str, components: usize, raw: Vec<u8>| {
             let at = statics.len();
-            encoder.append(&mut statics, &raw);
+            encoder.append(&mut statics, &raw, zlib::compress_once);
             Static {
                 open: array_open(ty, name, components),
                 at,
@@ -258,7 +221,7 @@ impl Grid {
         let mut offsets = vec![0; arrays.len()];
         for (k, a) in arrays.iter().enumerate().rev() {
             offsets[k] = base + appended.len();
-            self.encoder.append(appended, &a.le_bytes());
+            self.encoder.append(appended, &a.le_bytes(), zlib::compress);
         }
         for (k, a) in arrays.iter().enumerate() {
             if k == 0 {
@@ -364,7 +327,7 @@ mod tests {
     fn zlib_blocks_follow_vtk_header() {
         let raw: Vec<u8> = (0..(BLOCK * 2 + 100)).map(|i| (i % 7) as u8).collect();
         let mut out = Vec::new();
-        Encoder::new(Compression::Zlib).append(&mut out, &raw);
+        Encoder::new(Compression::Zlib).append(&mut out, &raw, zlib::compress);
         let word = |k: usize| u64::from_le_bytes(out[8 * k..8 * k + 8].try_into().unwrap());
         assert_eq!(word(0), 3);
         assert_eq!(word(1), BLOCK as u64);
