@@ -57,6 +57,19 @@ value = ["{}", "{}"]
     )
 }
 
+/// The free-dof vector of the linear field (p x, q x).
+fn linear(disc: &viscontact::fem::Discretization, p: f64, q: f64) -> Vec<f64> {
+    let mut v = vec![0.0; disc.n_free];
+    for (i, x) in disc.nodes.iter().enumerate() {
+        for (comp, val) in [(0, p * x[0]), (1, q * x[0])] {
+            if let Some(d) = disc.free[2 * i + comp] {
+                v[d] = val;
+            }
+        }
+    }
+    v
+}
+
 fn check(model: &str, pick: impl Fn(&viscontact::fem::Discretization) -> (Isotropic, &Sparse)) {
     let dir = tempfile::tempdir().unwrap();
     // First load with any traction to learn the tensor, then with the matching traction.
@@ -64,14 +77,7 @@ fn check(model: &str, pick: impl Fn(&viscontact::fem::Discretization) -> (Isotro
     let (c, _) = pick(&d0);
     let (s, _, disc) = load(&scene(dir.path(), model, &traction(c)), &[]);
     let (_, k) = pick(&disc);
-    let mut v = vec![0.0; disc.n_free];
-    for (i, p) in disc.nodes.iter().enumerate() {
-        for (comp, val) in [(0, P * p[0]), (1, Q * p[0])] {
-            if let Some(d) = disc.free[2 * i + comp] {
-                v[d] = val;
-            }
-        }
-    }
+    let v = linear(&disc, P, Q);
     let mut kv = vec![0.0; disc.n_free];
     mul_add(k, &v, 1.0, &mut kv);
     let mut f = vec![0.0; disc.n_free];
@@ -101,6 +107,53 @@ fn elasticity_patch_test_plane_strain() {
 #[test]
 fn relaxation_patch_test() {
     check("plane_stress", |d| (d.r, &d.k_r));
+}
+
+/// The frame's stress of linear w, u, m is A ε(w) + B ε(u) + ε(m) in every cell (σ_zz = 0 in
+/// plane stress, b_A tr ε(w) + b_B tr ε(u) + 0 in plane strain), and von Mises follows.
+#[test]
+fn stress_of_linear_fields_is_exact_in_every_cell() {
+    let dir = tempfile::tempdir().unwrap();
+    for model in ["plane_stress", "plane_strain"] {
+        let (_, _, disc) = load(&scene(dir.path(), model, &["0".into(), "0".into()]), &[]);
+        let fields = [(P, Q), (-0.3, 0.9), (0.25, 0.5)];
+        let [w, u, m] = fields.map(|(p, q)| linear(&disc, p, q));
+        let tensors = [disc.a, disc.b.unwrap(), disc.r];
+        let mut want = [0.0; 6];
+        for (c, (p, q)) in tensors.iter().zip(fields) {
+            for (x, y) in want
+                .iter_mut()
+                .zip(c.apply([p, 0.0, 0.0, 0.5 * q, 0.0, 0.0]))
+            {
+                *x += y;
+            }
+        }
+        if model == "plane_stress" {
+            want[2] = 0.0;
+        }
+        let [xx, yy, zz, xy, ..] = want;
+        let vm = (0.5 * ((xx - yy).powi(2) + (yy - zz).powi(2) + (zz - xx).powi(2))
+            + 3.0 * xy * xy)
+            .sqrt();
+        let model = match model {
+            "plane_stress" => viscontact::scene::Model::PlaneStress,
+            _ => viscontact::scene::Model::PlaneStrain,
+        };
+        let (stress, von_mises) = disc.stress(&w, &u, Some(&m), model);
+        assert_eq!(von_mises.len(), disc.cells.len());
+        for (c, (s, v)) in stress.chunks(6).zip(&von_mises).enumerate() {
+            for (k, (x, y)) in s.iter().zip(&want).enumerate() {
+                assert!(
+                    (x - y).abs() < 1e-13,
+                    "{model:?} cell {c} component {k}: {x} vs {y}"
+                );
+            }
+            assert!(
+                (v - vm).abs() < 1e-13,
+                "{model:?} cell {c}: von Mises {v} vs {vm}"
+            );
+        }
+    }
 }
 
 #[test]
