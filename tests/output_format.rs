@@ -252,6 +252,47 @@ fn pvd_lists_every_frame_with_its_exact_time() {
     );
 }
 
+/// The `.pvd` lists every frame, so it is not rewritten per frame (a run of 10⁵ frames would
+/// write gigabytes of it): the first frame writes it, later ones at most every PVD_EVERY, and
+/// `finish` (before every checkpoint and at the end of a run) brings it up to date. What is on
+/// disk is always a prefix of the frames, every listed file present.
+#[test]
+fn pvd_is_rewritten_at_most_every_second_and_complete_after_finish() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut series = create(dir.path(), &POINTS, &CELLS, 3).unwrap();
+    let v = frame_values(0);
+    let frames = 40;
+    let start = std::time::Instant::now();
+    let mut listed_before_finish = 0;
+    for k in 0..frames {
+        series
+            .write(&Frame {
+                step: k,
+                time: k as f64 * 0.5,
+                ..frame(0, &v)
+            })
+            .unwrap();
+        // The writer thread holds at most 3 frames, so frame 0's .pvd is on disk by now.
+        if k >= 3 {
+            let text = std::fs::read_to_string(dir.path().join("solution.pvd")).unwrap();
+            let entries = pvd_entries(&text);
+            assert!(!entries.is_empty() && entries.len() <= k + 1);
+            for (i, (t, file)) in entries.iter().enumerate() {
+                assert_eq!(file, &format!("solution_{i:06}.vtu"));
+                assert_eq!(t.parse::<f64>().unwrap(), i as f64 * 0.5);
+                assert!(dir.path().join(file).is_file(), "{file}");
+            }
+            listed_before_finish = entries.len();
+        }
+    }
+    if start.elapsed() < viscontact::output::PVD_EVERY {
+        assert_eq!(listed_before_finish, 1, "rewritten within a second");
+    }
+    series.finish().unwrap();
+    let text = std::fs::read_to_string(dir.path().join("solution.pvd")).unwrap();
+    assert_eq!(pvd_entries(&text).len(), frames);
+}
+
 #[test]
 fn rewriting_a_step_replaces_its_entry_and_reopen_keeps_earlier_frames() {
     let dir = tempfile::tempdir().unwrap();

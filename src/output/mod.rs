@@ -3,9 +3,12 @@
 //! Two formats (`[output] format`, [`Format`]):
 //! - `"vtu"` (the default): `solution_NNNNNN.vtu` (one VTK XML UnstructuredGrid per output
 //!   step) and `solution.pvd` (the collection that makes ParaView open them as one time
-//!   series). [`Series::write`] writes one [`Frame`] and rewrites the `.pvd`, so the directory
-//!   is a valid series after every frame. Every file goes through [`write_atomic`]: a crash
-//!   never leaves a half-written file where a good one was.
+//!   series). [`Series::write`] writes one [`Frame`]; the `.pvd` is rewritten with the first
+//!   frame, then at most every [`PVD_EVERY`] and by [`Series::finish`] (which the run calls
+//!   before every checkpoint and at its end), so the directory is always a valid series of
+//!   the frames so far, and a resume finds every frame before its checkpoint listed. Every
+//!   file goes through [`write_atomic`]: a crash never leaves a half-written file where a
+//!   good one was.
 //! - `"vtkhdf"`: one file `solution.vtkhdf`, a temporal VTKHDF 2.x UnstructuredGrid (the
 //!   mesh once, each frame's fields appended, the times in `Steps/Values`; layout and crash
 //!   behaviour in `vtkhdf.rs`), flushed after every frame.
@@ -43,6 +46,7 @@ mod zlib;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 use crate::{Error, Result};
 
@@ -51,6 +55,11 @@ pub const PVD_NAME: &str = "solution.pvd";
 
 /// Name of the one-file series (`format = "vtkhdf"`) in a run's directory.
 pub const VTKHDF_NAME: &str = "solution.vtkhdf";
+
+/// The `.pvd` is rewritten at most this often (and when the series finishes): it lists every
+/// frame, so rewriting it per frame made a run's output cost grow with the square of its
+/// frames (10⁵ frames: 7 MB of XML per frame).
+pub const PVD_EVERY: Duration = Duration::from_secs(1);
 
 /// VTK cell type codes.
 const VTK_TRIANGLE: u8 = 5;
@@ -236,6 +245,9 @@ pub struct Series {
     /// `(time, file name relative to dir)`, in the order written; one entry per frame (for
     /// `vtkhdf`, every frame's file is `solution.vtkhdf`).
     files: Vec<(f64, String)>,
+    /// `vtu`: when the `.pvd` was last handed to the writer, and whether frames came since.
+    pvd_written: Option<Instant>,
+    pvd_stale: bool,
     sink: Sink,
 }
 
@@ -310,6 +322,8 @@ impl Series {
             options: options.clone(),
             sizes,
             files,
+            pvd_written: None,
+            pvd_stale: false,
             sink,
         })
     }
@@ -374,10 +388,11 @@ impl Series {
 
     /// Hands the frame to the writer thread and returns the path of the file it goes to.
     ///
-    /// `vtu`: the thread writes `dir/solution_{step:06}.vtu` (temporary file + rename), then
-    /// `dir/solution.pvd` (likewise) listing every frame so far with its real time, so the
-    /// directory is a valid series after every frame. Writing a step again replaces its file
-    /// and its entry.
+    /// `vtu`: the thread writes `dir/solution_{step:06}.vtu` (temporary file + rename), then,
+    /// at the first frame and once [`PVD_EVERY`] passed since the last time,
+    /// `dir/solution.pvd` (likewise) listing every frame so far with its real time (the
+    /// frames after it are listed by the next one or by [`Series::finish`]). Writing a step
+    /// again replaces its file and its entry.
     ///
     /// `vtkhdf`: the thread appends the frame to `dir/solution.vtkhdf` (creating it at the
     /// first frame) and flushes the file. A frame of step s first drops the frames of steps
@@ -422,18 +437,33 @@ impl Series {
         let cell_data = arrays(&frame.cell_data, cells, "cell")?;
         match &mut self.sink {
             Sink::Vtu(writer) => {
-                match self.files.iter_mut().find(|(_, f)| *f == name) {
+                // Steps normally increase: only an older step can already be listed.
+                let newer = self
+                    .files
+                    .last()
+                    .is_none_or(|(_, f)| step_of(f) < Some(frame.step));
+                let listed = if newer {
+                    None
+                } else {
+                    self.files.iter_mut().find(|(_, f)| *f == name)
+                };
+                match listed {
                     Some(entry) => entry.0 = frame.time,
                     None => self.files.push((frame.time, name)),
                 }
+                let due = self.pvd_written.is_none_or(|t| t.elapsed() >= PVD_EVERY);
+                self.pvd_stale = !due;
+                if due {
+                    self.pvd_written = Some(Instant::now());
+                }
+                let pvd = due.then(|| collection(&self.dir, &self.files, &self.run_id));
                 writer.send(vtu::Job {
-                    path: path.clone(),
-                    point_data,
-                    cell_data,
-                    pvd: (
-                        self.dir.join(PVD_NAME),
-                        pvd::render(&self.files, &self.run_id),
-                    ),
+                    vtu: Some(vtu::Vtu {
+                        path: path.clone(),
+                        point_data,
+                        cell_data,
+                    }),
+                    pvd,
                 })?;
             }
             Sink::Vtkhdf { steps, writer } => {
@@ -454,8 +484,17 @@ impl Series {
         Ok(path)
     }
 
-    /// Waits until every frame handed over is on disk; the first failed write is the error.
+    /// Waits until every frame handed over is on disk, and the `.pvd` lists them; the first
+    /// failed write is the error.
     pub fn finish(&mut self) -> Result<()> {
+        if self.pvd_stale {
+            self.pvd_stale = false;
+            self.pvd_written = Some(Instant::now());
+            let pvd = Some(collection(&self.dir, &self.files, &self.run_id));
+            if let Sink::Vtu(writer) = &mut self.sink {
+                writer.send(vtu::Job { vtu: None, pvd })?;
+            }
+        }
         match &mut self.sink {
             Sink::Vtu(writer) => writer.finish(),
             Sink::Vtkhdf { writer, .. } => writer.finish(),
@@ -493,6 +532,19 @@ impl Series {
     pub fn sizes(&self) -> (usize, usize) {
         self.sizes
     }
+}
+
+impl Drop for Series {
+    /// A series dropped without [`Series::finish`] (a run that failed elsewhere) still lists
+    /// its frames in the `.pvd`; errors are moot then.
+    fn drop(&mut self) {
+        let _ = self.finish();
+    }
+}
+
+/// The `.pvd` of `dir` listing `files`, path and text.
+fn collection(dir: &Path, files: &[(f64, String)], run_id: &str) -> (PathBuf, String) {
+    (dir.join(PVD_NAME), pvd::render(files, run_id))
 }
 
 /// The error for a series of another run in `at` (a directory or a file).

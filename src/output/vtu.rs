@@ -46,13 +46,18 @@ use crate::Result;
 /// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
 const BLOCK: usize = 32768;
 
-/// One frame for the writer thread: the `.vtu` to write, then the `.pvd` that lists it.
+/// Work for the writer thread: a `.vtu` to write, then (when due) the `.pvd` that lists it.
 pub(super) struct Job {
+    pub vtu: Option<Vtu>,
+    /// The collection file and its new text.
+    pub pvd: Option<(PathBuf, String)>,
+}
+
+/// One frame's file and fields.
+pub(super) struct Vtu {
     pub path: PathBuf,
     pub point_data: Vec<Array>,
     pub cell_data: Vec<Array>,
-    /// The collection file and its new text.
-    pub pvd: (PathBuf, String),
 }
 
 /// Encodes arrays in the appended layout (see the module doc).
@@ -270,8 +275,13 @@ impl Sink for Grid {
 
     /// The `.vtu` (temporary file + rename), then the `.pvd` (likewise).
     fn write(&mut self, job: Job) -> Result<()> {
-        write_atomic(&job.path, self.encode(&job.point_data, &job.cell_data))?;
-        write_atomic(&job.pvd.0, job.pvd.1.as_bytes())
+        if let Some(v) = job.vtu {
+            write_atomic(&v.path, self.encode(&v.point_data, &v.cell_data))?;
+        }
+        match job.pvd {
+            Some((path, text)) => write_atomic(&path, text.as_bytes()),
+            None => Ok(()),
+        }
     }
 
     /// Every file was closed when it was written.
