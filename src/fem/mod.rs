@@ -326,16 +326,14 @@ impl Discretization {
         let d = self.dim;
         let nn = self.nodes.len();
         let (mut p, mut q) = (vec![[0.0; 3]; nn], vec![[0.0; 3]; nn]);
-        let terms = [
-            (Some(self.a), Some(w)),
-            (self.b, Some(u)),
-            (Some(self.r), m),
-        ];
-        for (c, v) in terms.iter().filter_map(|&(c, v)| c.zip(v)) {
-            for (i, dof) in self.free.iter().enumerate() {
-                if let Some(dof) = *dof {
-                    p[i / d][i % d] += c.a * v[dof];
-                    q[i / d][i % d] += c.b * v[dof];
+        let b = self.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
+        let (a, r) = (self.a, self.r);
+        for (n, (pn, qn)) in p.iter_mut().zip(&mut q).enumerate() {
+            for c in 0..d {
+                if let Some(dof) = self.free[d * n + c] {
+                    let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
+                    pn[c] = a.a * w + b.a * u + r.a * m;
+                    qn[c] = a.b * w + b.b * u + r.b * m;
                 }
             }
         }
