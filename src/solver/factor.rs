@@ -1,11 +1,11 @@
 //! The sparse Cholesky factor of K_A, computed once per run (faer, supernodal LLᵀ).
 //!
-//! A fill-reducing ordering (AMD) is computed for K_A and then the constrained boundary dofs
-//! C (both components of every Γ3 node) are moved to the end, keeping their relative order:
+//! The ordering puts the constrained boundary dofs C (both components of every Γ3 node) last
+//! and orders the others by nested dissection (`ordering.rs`, METIS):
 //! P K_A Pᵀ = L Lᵀ with L = [L_II 0; L_CI L_CC]. Then the forward solve L y = b leaves in
 //! y_C everything the contact problem needs, the trailing block L_CC (dense, |C|×|C|) gives
 //! the condensed operator, and one backward solve finishes the step (see `dual`). Without
-//! constrained dofs the factor is the plain AMD-ordered one.
+//! constrained dofs the whole matrix is ordered by nested dissection.
 //!
 //! The step's solves are this module's loops over faer's supernodes, one pass each over the
 //! stored values: supernode s (columns s₀..s₁, off-diagonal rows R) is stored column-major
@@ -141,25 +141,8 @@ impl Factor {
         let fail = |what: &str, e: &dyn std::fmt::Debug| {
             Error::solve(format!("{what} of K_A failed: {e:?}"))
         };
-        // AMD on the whole matrix, then C moved to the end in AMD's relative order.
-        let amd = factorize_symbolic_cholesky(
-            a.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| fail("symbolic analysis", &e))?;
-        let order: Vec<usize> = match amd.perm() {
-            Some(p) => p.arrays().0.to_vec(),
-            None => (0..n).collect(),
-        };
-        drop(amd);
-        let mut in_last = vec![false; n];
-        for &d in last {
-            in_last[d] = true;
-        }
-        let mut fwd: Vec<usize> = order.iter().copied().filter(|&d| !in_last[d]).collect();
-        fwd.extend(order.iter().copied().filter(|&d| in_last[d]));
+        // Nested dissection of the other dofs, then C (ordering.rs).
+        let fwd = super::ordering::constrained_last(a, last)?;
         let mut inv = vec![0; n];
         for (i, &d) in fwd.iter().enumerate() {
             inv[d] = i;

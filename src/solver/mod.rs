@@ -17,6 +17,7 @@
 pub mod conic;
 pub mod dual;
 pub mod factor;
+mod ordering;
 
 use crate::fem::NodalRow;
 use crate::Result;
