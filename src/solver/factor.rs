@@ -7,10 +7,14 @@
 //! the condensed operator, and one backward solve finishes the step (see `dual`). Without
 //! constrained dofs the factor is the plain AMD-ordered one.
 //!
-//! The step's solves are this module's loops over faer's supernodes, one pass each over the
-//! stored values: supernode s (columns s₀..s₁, off-diagonal rows R) is stored column-major
-//! as [L_ss; L_Rs]; the forward pass, in supernode order, does y_s ← L_ss⁻¹ y_s and
-//! y_R ← y_R − L_Rs y_s; the backward pass, in reverse order, y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R).
+//! The ordering is faer's AMD alone (`amd::order_maybe_unsorted`), then one symbolic analysis with C last;
+//! the numeric factorization is faer's. The step's solves are this module's loops over
+//! faer's supernodes, one pass each over the stored values, which are repacked after the
+//! factorization (`Layout`: the upper triangles of the diagonal blocks dropped, 16% of the
+//! values at h = 1/128): supernode s (columns s₀..s₁, off-diagonal rows R) is the block
+//! [L_ss; L_Rs], column by column; the forward pass, in supernode order, does
+//! y_s ← L_ss⁻¹ y_s and y_R ← y_R − L_Rs y_s; the backward pass, in reverse order,
+//! y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R).
 //! faer's default amalgamation may merge a supernode across the boundary between the
 //! interior dofs and C; `trailing_block` reads L_CC column by column and does not care.
 
@@ -19,16 +23,16 @@ use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::perm::PermRef;
-use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
-    SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::{Mat, Par, Side};
 
 pub struct Factor {
-    symbolic: SymbolicCholesky<usize>,
+    /// L's values in the packed layout of `Layout`.
     values: Vec<f64>,
     n: usize,
     /// Permuted index i holds original dof fwd[i]; original dof j sits at inv[j].
@@ -39,21 +43,28 @@ pub struct Factor {
     layout: Layout,
 }
 
-/// The supernodes of L as plain arrays, read by the step's solves.
+/// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
+/// their values: column j of a supernode with `size` columns and off-diagonal rows R holds
+/// the rows j..size of its diagonal block, then R (`size − j + |R|` values). faer stores the
+/// diagonal block as a full square; its upper triangle (never read) is dropped.
 struct Layout {
     /// Supernode s holds columns begin[s]..begin[s + 1].
     begin: Vec<usize>,
     /// Its off-diagonal rows are rows[row_ptr[s]..row_ptr[s + 1]] (u32: less to stream).
     row_ptr: Vec<usize>,
     rows: Vec<u32>,
-    /// Its values, column-major (size + |rows|) × size, start at val_ptr[s].
+    /// Its packed values start at val_ptr[s].
     val_ptr: Vec<usize>,
     /// The largest |rows| of a supernode.
     widest_pattern: usize,
 }
 
 impl Layout {
-    fn new(llt: SupernodalLltRef<'_, usize, f64>, n_supernodes: usize) -> Result<Self> {
+    /// The layout of faer's supernodal structure `sym`; its factor's values (`values`, in
+    /// faer's layout: supernode by supernode, each column-major (size + |R|) × size) are
+    /// packed in place.
+    fn new(sym: &SymbolicSupernodalCholesky<usize>, values: &mut Vec<f64>) -> Result<Self> {
+        let n_supernodes = sym.n_supernodes();
         let mut layout = Layout {
             begin: vec![0],
             row_ptr: vec![0],
@@ -61,22 +72,33 @@ impl Layout {
             val_ptr: vec![0],
             widest_pattern: 0,
         };
+        // Supernode s starts at `from` in faer's layout, at val_ptr[s] ≤ from in ours: the
+        // columns move towards the start in order, never over values still to be moved.
+        let mut from = 0;
         for s in 0..n_supernodes {
-            let node = llt.supernode(s);
-            let size = node.val().ncols();
-            let pattern = node.pattern();
+            let (start, end) = (sym.supernode_begin()[s], sym.supernode_end()[s]);
+            let size = end - start;
+            let pattern = sym.supernode(s).pattern();
             for &r in pattern {
                 layout.rows.push(
                     u32::try_from(r)
                         .map_err(|_| Error::solve(format!("K_A has more than 2^32 dofs ({r})")))?,
                 );
             }
-            layout.begin.push(node.start() + size);
+            layout.begin.push(end);
             layout.row_ptr.push(layout.rows.len());
-            let done = layout.val_ptr[s];
-            layout.val_ptr.push(done + (size + pattern.len()) * size);
+            let m = size + pattern.len();
+            let mut to = layout.val_ptr[s];
+            for j in 0..size {
+                values.copy_within(from + j * m + j..from + (j + 1) * m, to);
+                to += m - j;
+            }
+            from += m * size;
+            layout.val_ptr.push(to);
             layout.widest_pattern = layout.widest_pattern.max(pattern.len());
         }
+        values.truncate(layout.val_ptr[n_supernodes]);
+        values.shrink_to_fit();
         Ok(layout)
     }
 
@@ -84,7 +106,7 @@ impl Layout {
         self.begin.len() - 1
     }
 
-    /// Supernode s: its columns, its off-diagonal rows and its values.
+    /// Supernode s: its columns, its off-diagonal rows and its packed values.
     fn supernode<'a>(
         &'a self,
         s: usize,
@@ -130,9 +152,11 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
-fn par() -> Par {
-    faer::get_global_parallelism()
-}
+/// The numeric factorization runs on one thread: its supernodes are small (2D: mostly ≤ 16
+/// columns), and faer's parallel factorization was slower on the two cores of the
+/// benchmark machine (h = 1/128: 80 ms against 100 ms; the 3D block at h = 1/8: 39 against
+/// 47 ms, side by side in one process).
+const PAR: Par = Par::Seq;
 
 impl Factor {
     /// Factors `a`, with the dofs in `last` ordered last.
@@ -142,24 +166,27 @@ impl Factor {
             Error::solve(format!("{what} of K_A failed: {e:?}"))
         };
         // AMD on the whole matrix, then C moved to the end in AMD's relative order.
-        let amd = factorize_symbolic_cholesky(
-            a.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| fail("symbolic analysis", &e))?;
-        let order: Vec<usize> = match amd.perm() {
-            Some(p) => p.arrays().0.to_vec(),
-            None => (0..n).collect(),
-        };
-        drop(amd);
+        let (mut order, mut order_inv) = (vec![0usize; n], vec![0usize; n]);
+        {
+            let nnz = a.symbolic().compute_nnz();
+            let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<usize>(n, nnz));
+            amd::order_maybe_unsorted(
+                &mut order,
+                &mut order_inv,
+                a.symbolic(),
+                amd::Control::default(),
+                MemStack::new(&mut mem),
+            )
+            .map_err(|e| fail("the ordering", &e))?;
+        }
+        drop(order_inv);
         let mut in_last = vec![false; n];
         for &d in last {
             in_last[d] = true;
         }
         let mut fwd: Vec<usize> = order.iter().copied().filter(|&d| !in_last[d]).collect();
         fwd.extend(order.iter().copied().filter(|&d| in_last[d]));
+        drop(order);
         let mut inv = vec![0; n];
         for (i, &d) in fwd.iter().enumerate() {
             inv[d] = i;
@@ -179,7 +206,7 @@ impl Factor {
         let mut values = vec![0.0; symbolic.len_val()];
         {
             let mut mem = MemBuffer::new(
-                symbolic.factorize_numeric_llt_scratch::<f64>(par(), Default::default()),
+                symbolic.factorize_numeric_llt_scratch::<f64>(PAR, Default::default()),
             );
             symbolic
                 .factorize_numeric_llt(
@@ -187,7 +214,7 @@ impl Factor {
                     a.as_ref(),
                     Side::Lower,
                     LltRegularization::default(),
-                    par(),
+                    PAR,
                     MemStack::new(&mut mem),
                     Default::default(),
                 )
@@ -199,13 +226,10 @@ impl Factor {
                 })?;
         }
         let layout = match symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => {
-                Layout::new(SupernodalLltRef::new(s, &values), s.n_supernodes())?
-            }
+            SymbolicCholeskyRaw::Supernodal(s) => Layout::new(s, &mut values)?,
             SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodal was forced"),
         };
         Ok(Factor {
-            symbolic,
             values,
             n,
             fwd,
@@ -214,14 +238,6 @@ impl Factor {
             layout,
         })
     }
-
-    fn llt(&self) -> SupernodalLltRef<'_, usize, f64> {
-        match self.symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => SupernodalLltRef::new(s, &self.values),
-            SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodal was forced"),
-        }
-    }
-
     pub fn dim(&self) -> usize {
         self.n
     }
@@ -262,26 +278,30 @@ impl Factor {
     }
 
     /// y ← L⁻¹ y in the factor's ordering: one pass over the supernodes in order. Supernode
-    /// s (columns c₀..c₁, off-diagonal rows R) is the column-major block [L_ss; L_Rs]:
-    /// y_s ← L_ss⁻¹ y_s column by column, and L_Rs y_s is accumulated in a contiguous
-    /// buffer and subtracted from y_R once. One thread: a single right side is memory-bound.
+    /// s (columns c₀..c₁, off-diagonal rows R) is the block [L_ss; L_Rs], its columns packed
+    /// (`Layout`): y_s ← L_ss⁻¹ y_s column by column, and L_Rs y_s is accumulated in a
+    /// contiguous buffer and subtracted from y_R once. One thread: a single right side is
+    /// memory-bound.
     pub fn forward(&self, y: &mut [f64]) {
         let layout = &self.layout;
         let mut t = vec![0.0; layout.widest_pattern];
         for s in 0..layout.n_supernodes() {
             let (cols, rows, vals) = layout.supernode(s, &self.values);
             let size = cols.len();
-            let m = size + rows.len();
             let t = &mut t[..rows.len()];
             t.fill(0.0);
             let ys = &mut y[cols];
-            for (j, col) in vals.chunks_exact(m).enumerate() {
-                let yj = ys[j] / col[j];
+            let mut rest = vals;
+            for j in 0..size {
+                let (col, next) = rest.split_at(size - j + t.len());
+                rest = next;
+                let (diag, below) = col.split_at(size - j);
+                let yj = ys[j] / diag[0];
                 ys[j] = yj;
-                for (yi, l) in ys[j + 1..].iter_mut().zip(&col[j + 1..size]) {
+                for (yi, l) in ys[j + 1..].iter_mut().zip(&diag[1..]) {
                     *yi -= l * yj;
                 }
-                for (ti, l) in t.iter_mut().zip(&col[size..]) {
+                for (ti, l) in t.iter_mut().zip(below) {
                     *ti += l * yj;
                 }
             }
@@ -310,19 +330,23 @@ impl Factor {
             }
             let (cols, rows, vals) = layout.supernode(s, &self.values);
             let size = cols.len();
-            let m = size + rows.len();
-            let g = &mut g[..rows.len()];
-            for (gi, &r) in g.iter_mut().zip(rows) {
-                *gi = y[r as usize];
+            let r = rows.len();
+            let g = &mut g[..r];
+            for (gi, &row) in g.iter_mut().zip(rows) {
+                *gi = y[row as usize];
             }
             let ys = &mut y[cols];
             // y_s − L_Rsᵀ y_R, the columns in memory order.
-            for (yj, col) in ys.iter_mut().zip(vals.chunks_exact(m)) {
-                *yj -= dot(&col[size..], g);
+            let mut end = 0;
+            for (j, yj) in ys.iter_mut().enumerate() {
+                end += size - j + r;
+                *yj -= dot(&vals[end - r..end], g);
             }
             // L_ssᵀ⁻¹, the last column first (the block is in cache now).
-            for (j, col) in vals.chunks_exact(m).enumerate().rev() {
-                ys[j] = (ys[j] - dot(&col[j + 1..size], &ys[j + 1..])) / col[j];
+            for j in (0..size).rev() {
+                let col = &vals[end - (size - j + r)..end - r];
+                end -= size - j + r;
+                ys[j] = (ys[j] - dot(&col[1..], &ys[j + 1..])) / col[0];
             }
         }
     }
@@ -338,32 +362,25 @@ impl Factor {
 
     /// The trailing block L_CC (last × last, lower triangular) of L.
     pub fn trailing_block(&self) -> Mat<f64> {
-        let (n, c) = (self.n, self.last);
-        let first = n - c;
-        let mut out = Mat::zeros(c, c);
-        let llt = self.llt();
-        let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() else {
-            unreachable!("supernodal was forced")
-        };
-        for s in 0..sym.n_supernodes() {
-            let node = llt.supernode(s);
-            let (start, m) = (node.start(), node.val());
-            let size = m.ncols();
-            if start + size <= first {
+        let first = self.n - self.last;
+        let mut out = Mat::zeros(self.last, self.last);
+        let layout = &self.layout;
+        for s in 0..layout.n_supernodes() {
+            let (cols, rows, vals) = layout.supernode(s, &self.values);
+            if cols.end <= first {
                 continue;
             }
-            let pattern = node.pattern();
-            for j in 0..size {
-                let col = start + j;
+            let mut rest = vals;
+            for col in cols.clone() {
+                let (values, next) = rest.split_at(cols.end - col + rows.len());
+                rest = next;
                 if col < first {
                     continue;
                 }
                 // Rows of the diagonal block, then the pattern rows (all > col).
-                for i in j..size {
-                    out[(start + i - first, col - first)] = m[(i, j)];
-                }
-                for (p, &row) in pattern.iter().enumerate() {
-                    out[(row - first, col - first)] = m[(size + p, j)];
+                let at = (col..cols.end).chain(rows.iter().map(|&r| r as usize));
+                for (row, &v) in at.zip(values) {
+                    out[(row - first, col - first)] = v;
                 }
             }
         }
