@@ -152,6 +152,31 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
+/// (c_k · g)_k for four columns c_k as long as g: g is read once for the four.
+#[inline(always)]
+fn dot4(c: [&[f64]; 4], g: &[f64]) -> [f64; 4] {
+    let n = g.len();
+    let mut acc = [[0.0; 4]; 4];
+    let mut i = 0;
+    while i + 4 <= n {
+        let gi = &g[i..i + 4];
+        for (acc, c) in acc.iter_mut().zip(&c) {
+            for ((a, x), y) in acc.iter_mut().zip(&c[i..i + 4]).zip(gi) {
+                *a += x * y;
+            }
+        }
+        i += 4;
+    }
+    let mut out = [0.0; 4];
+    for ((o, acc), c) in out.iter_mut().zip(&acc).zip(&c) {
+        *o = (acc[0] + acc[2]) + (acc[1] + acc[3]);
+        for (x, y) in c[i..].iter().zip(&g[i..]) {
+            *o += x * y;
+        }
+    }
+    out
+}
+
 /// The numeric factorization runs on one thread: its supernodes are small (2D: mostly ≤ 16
 /// columns), and faer's parallel factorization was slower on the two cores of the
 /// benchmark machine (h = 1/128: 80 ms against 100 ms; the 3D block at h = 1/8: 39 against
@@ -329,16 +354,26 @@ impl Factor {
                 prefetch(v);
             }
             let (cols, rows, vals) = layout.supernode(s, &self.values);
-            let size = cols.len();
-            let r = rows.len();
+            let (size, r) = (cols.len(), rows.len());
             let g = &mut g[..r];
             for (gi, &row) in g.iter_mut().zip(rows) {
                 *gi = y[row as usize];
             }
             let ys = &mut y[cols];
-            // y_s − L_Rsᵀ y_R, the columns in memory order.
-            let mut end = 0;
-            for (j, yj) in ys.iter_mut().enumerate() {
+            // y_s − L_Rsᵀ y_R, four columns at a time, in memory order.
+            let (mut end, mut j) = (0, 0);
+            while j + 4 <= size {
+                let mut c = [&vals[..0]; 4];
+                for (k, ck) in c.iter_mut().enumerate() {
+                    end += size - (j + k) + r;
+                    *ck = &vals[end - r..end];
+                }
+                for (yj, d) in ys[j..j + 4].iter_mut().zip(dot4(c, g)) {
+                    *yj -= d;
+                }
+                j += 4;
+            }
+            for (j, yj) in ys.iter_mut().enumerate().skip(j) {
                 end += size - j + r;
                 *yj -= dot(&vals[end - r..end], g);
             }
