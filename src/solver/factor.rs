@@ -7,14 +7,17 @@
 //! the condensed operator, and one backward solve finishes the step (see `dual`). Without
 //! constrained dofs the factor is the plain AMD-ordered one.
 //!
-//! The ordering is faer's AMD alone (`amd::order_maybe_unsorted`), then one symbolic analysis with C last;
-//! the numeric factorization is faer's. The step's solves are this module's loops over
-//! faer's supernodes, one pass each over the stored values, which are repacked after the
-//! factorization (`Layout`: the upper triangles of the diagonal blocks dropped, 16% of the
-//! values at h = 1/128): supernode s (columns s₀..s₁, off-diagonal rows R) is the block
-//! [L_ss; L_Rs], column by column; the forward pass, in supernode order, does
+//! The ordering is faer's AMD alone (`amd::order_maybe_unsorted`), then one symbolic
+//! analysis with C last; the numeric factorization is faer's. The step's solves are this
+//! module's loops over faer's supernodes, one pass each over the stored values, which are
+//! repacked after the factorization (`Layout`: the upper triangles of the diagonal blocks
+//! dropped, 16% of the values at h = 1/128): supernode s (columns s₀..s₁, off-diagonal rows
+//! R) is the block [L_ss; L_Rs], column by column; the forward pass, in supernode order, does
 //! y_s ← L_ss⁻¹ y_s and y_R ← y_R − L_Rs y_s; the backward pass, in reverse order,
-//! y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R).
+//! y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R). A single right side is memory-bound, so a big factor's
+//! passes run on two threads: two groups of disjoint subtrees of the elimination tree,
+//! each on its own thread, and the rest (`Split`). At h = 1/128 the two groups hold 43% and
+//! 46% of the values and the rest 12% (the 3D block at h = 1/8: 30%, 24%, 46%).
 //! faer's default amalgamation may merge a supernode across the boundary between the
 //! interior dofs and C; `trailing_block` reads L_CC column by column and does not care.
 
@@ -41,6 +44,10 @@ pub struct Factor {
     /// The number of dofs ordered last (the block C).
     last: usize,
     layout: Layout,
+    /// The solves' two groups of subtrees, for factors big enough to gain from them.
+    split: Option<Split>,
+    /// Whether a second thread takes the second group (else this one does it after the first).
+    threads: bool,
 }
 
 /// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
@@ -120,6 +127,99 @@ impl Layout {
     }
 }
 
+/// Supernodes that the solves may treat on two threads: two groups, each a union of whole
+/// subtrees of the supernodal elimination tree (so the rows a group's supernodes update
+/// lie in the group or in `top`), and `top`, the rest (every ancestor of both groups).
+/// The forward pass does both groups, then `top`; the backward pass `top`, then both
+/// groups. The second group works in a vector of its own, merged in a fixed way, so the
+/// arithmetic is the same with one thread or two.
+#[derive(Clone, Debug)]
+struct Split {
+    /// The supernodes of each group and of `top`, increasing.
+    groups: [Vec<usize>; 2],
+    top: Vec<usize>,
+}
+
+impl Split {
+    /// The split whose longest path, top + max(group), is shortest, counted in stored values;
+    /// None when it would not save a fifth of a pass or the factor is smaller than `min`.
+    fn new(layout: &Layout, min: usize) -> Option<Split> {
+        let ns = layout.n_supernodes();
+        let total = *layout.val_ptr.last()?;
+        if total < min || ns < 2 {
+            return None;
+        }
+        let mut owner = vec![0; *layout.begin.last()?];
+        for s in 0..ns {
+            owner[layout.begin[s]..layout.begin[s + 1]].fill(s);
+        }
+        // Children of each supernode (a parent's index exceeds its children's).
+        let mut children = vec![Vec::new(); ns];
+        let mut roots = Vec::new();
+        for s in 0..ns {
+            match layout.rows[layout.row_ptr[s]..layout.row_ptr[s + 1]].first() {
+                Some(&r) => children[owner[r as usize]].push(s),
+                None => roots.push(s),
+            }
+        }
+        let mut weight: Vec<usize> = (0..ns)
+            .map(|s| layout.val_ptr[s + 1] - layout.val_ptr[s])
+            .collect();
+        for s in 0..ns {
+            if let Some(&r) = layout.rows[layout.row_ptr[s]..layout.row_ptr[s + 1]].first() {
+                weight[owner[r as usize]] += weight[s];
+            }
+        }
+        // Open the heaviest subtree of the frontier into its children, one at a time; each
+        // frontier is dealt to two bins, heaviest first, into the lighter bin.
+        let deal = |frontier: &[usize]| {
+            let mut sorted = frontier.to_vec();
+            sorted.sort_by_key(|&s| std::cmp::Reverse(weight[s]));
+            let mut bins = [(0, Vec::new()), (0, Vec::new())];
+            for s in sorted {
+                let b = usize::from(bins[1].0 < bins[0].0);
+                bins[b].0 += weight[s];
+                bins[b].1.push(s);
+            }
+            bins
+        };
+        let (mut frontier, mut top_weight) = (roots, 0);
+        let mut best: Option<(usize, Vec<usize>)> = None;
+        for _ in 0..256 {
+            let bins = deal(&frontier);
+            let path = top_weight + bins[0].0.max(bins[1].0);
+            if best.as_ref().is_none_or(|b| path < b.0) {
+                best = Some((path, frontier.clone()));
+            }
+            let Some(heaviest) = frontier.iter().copied().max_by_key(|&s| weight[s]) else {
+                break;
+            };
+            frontier.retain(|&s| s != heaviest);
+            frontier.extend_from_slice(&children[heaviest]);
+            top_weight += layout.val_ptr[heaviest + 1] - layout.val_ptr[heaviest];
+        }
+        let (path, frontier) = best?;
+        if path * 5 > total * 4 {
+            return None;
+        }
+        let mut label = vec![2u8; ns];
+        for (b, (_, subtrees)) in deal(&frontier).into_iter().enumerate() {
+            for root in subtrees {
+                let mut stack = vec![root];
+                while let Some(s) = stack.pop() {
+                    label[s] = b as u8;
+                    stack.extend_from_slice(&children[s]);
+                }
+            }
+        }
+        let members = |b: u8| (0..ns).filter(|&s| label[s] == b).collect::<Vec<_>>();
+        Some(Split {
+            groups: [members(0), members(1)],
+            top: members(2),
+        })
+    }
+}
+
 /// Asks the CPU to bring the cache line holding `x` into cache (without waiting for it).
 #[inline(always)]
 fn prefetch(x: &f64) {
@@ -177,6 +277,10 @@ fn dot4(c: [&[f64]; 4], g: &[f64]) -> [f64; 4] {
     out
 }
 
+/// The smallest factor (stored values) whose solves are split in two groups: 2 MB, where a
+/// pass takes about 0.2 ms and a thread's start and join are a small part of it.
+const MIN_SPLIT: usize = 1 << 18;
+
 /// The numeric factorization runs on one thread: its supernodes are small (2D: mostly ≤ 16
 /// columns), and faer's parallel factorization was slower on the two cores of the
 /// benchmark machine (h = 1/128: 80 ms against 100 ms; the 3D block at h = 1/8: 39 against
@@ -186,6 +290,12 @@ const PAR: Par = Par::Seq;
 impl Factor {
     /// Factors `a`, with the dofs in `last` ordered last.
     pub fn new(a: &Sparse, last: &[usize]) -> Result<Self> {
+        Self::with_split(a, last, MIN_SPLIT)
+    }
+
+    /// `new`, with the solves split in two groups (`Split`) if the factor stores at least
+    /// `min_split` values.
+    fn with_split(a: &Sparse, last: &[usize], min_split: usize) -> Result<Self> {
         let n = a.nrows();
         let fail = |what: &str, e: &dyn std::fmt::Debug| {
             Error::solve(format!("{what} of K_A failed: {e:?}"))
@@ -260,6 +370,8 @@ impl Factor {
             fwd,
             inv,
             last: last.len(),
+            split: Split::new(&layout, min_split),
+            threads: std::thread::available_parallelism().is_ok_and(|p| p.get() >= 2),
             layout,
         })
     }
@@ -308,9 +420,36 @@ impl Factor {
     /// contiguous buffer and subtracted from y_R once. One thread: a single right side is
     /// memory-bound.
     pub fn forward(&self, y: &mut [f64]) {
+        let Some(split) = &self.split else {
+            return self.forward_over(0..self.layout.n_supernodes(), y);
+        };
+        // The second group in a vector of its own: its columns, zeros elsewhere; it subtracts
+        // its updates of `top` rows from those zeros.
+        let mut z = vec![0.0; self.n];
+        let cols = |s: usize| self.layout.begin[s]..self.layout.begin[s + 1];
+        for &s in &split.groups[1] {
+            z[cols(s)].copy_from_slice(&y[cols(s)]);
+        }
+        self.both(
+            || self.forward_over(split.groups[0].iter().copied(), y),
+            || self.forward_over(split.groups[1].iter().copied(), &mut z),
+        );
+        for &s in &split.groups[1] {
+            y[cols(s)].copy_from_slice(&z[cols(s)]);
+        }
+        for &s in &split.top {
+            for c in cols(s) {
+                y[c] += z[c];
+            }
+        }
+        self.forward_over(split.top.iter().copied(), y);
+    }
+
+    /// The forward pass over the supernodes `order` (increasing).
+    fn forward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
         let layout = &self.layout;
         let mut t = vec![0.0; layout.widest_pattern];
-        for s in 0..layout.n_supernodes() {
+        for s in order {
             let (cols, rows, vals) = layout.supernode(s, &self.values);
             let size = cols.len();
             let t = &mut t[..rows.len()];
@@ -340,9 +479,27 @@ impl Factor {
     /// supernode s, y_R is gathered once and y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R), the last
     /// column first.
     pub fn backward(&self, y: &mut [f64]) {
+        let Some(split) = &self.split else {
+            return self.backward_over((0..self.layout.n_supernodes()).rev(), y);
+        };
+        self.backward_over(split.top.iter().rev().copied(), y);
+        // The second group reads `top` rows from a copy and writes its own columns there.
+        let mut z = y.to_vec();
+        self.both(
+            || self.backward_over(split.groups[0].iter().rev().copied(), y),
+            || self.backward_over(split.groups[1].iter().rev().copied(), &mut z),
+        );
+        for &s in &split.groups[1] {
+            let cols = self.layout.begin[s]..self.layout.begin[s + 1];
+            y[cols.clone()].copy_from_slice(&z[cols]);
+        }
+    }
+
+    /// The backward pass over the supernodes `order` (decreasing).
+    fn backward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
         let layout = &self.layout;
         let mut g = vec![0.0; layout.widest_pattern];
-        for s in (0..layout.n_supernodes()).rev() {
+        for s in order {
             // All loads of the block at once, before the dependent arithmetic needs them:
             // the pass runs from the factor's end to its start, a stream the hardware
             // prefetchers follow poorly across many small supernodes (measured at h = 1/128:
@@ -383,6 +540,22 @@ impl Factor {
                 end -= size - j + r;
                 ys[j] = (ys[j] - dot(&col[1..], &ys[j + 1..])) / col[0];
             }
+        }
+    }
+
+    /// Runs `a` and `b`, on two threads when there are two cores.
+    fn both(&self, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
+        if self.threads {
+            std::thread::scope(|scope| {
+                let second = scope.spawn(b);
+                a();
+                if let Err(panic) = second.join() {
+                    std::panic::resume_unwind(panic);
+                }
+            });
+        } else {
+            a();
+            b();
         }
     }
 
@@ -460,13 +633,32 @@ mod tests {
         let b: Vec<f64> = (0..n)
             .map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0)
             .collect();
-        let mut x = b.clone();
-        factor.solve(&mut x);
         let dense = k.to_dense().llt(Side::Lower).unwrap();
         let expected = dense.solve(faer::Mat::from_fn(n, 1, |i, _| b[i]));
         let scale = (0..n).fold(0.0f64, |a, i| a.max(expected[(i, 0)].abs()));
-        let err = (0..n).fold(0.0f64, |a, i| a.max((x[i] - expected[(i, 0)]).abs()));
-        assert!(err <= 1e-12 * scale, "{err:e} vs {scale:e}");
+        // Unsplit (too small for MIN_SPLIT), then split in two groups, on one thread and two.
+        let split = Factor::with_split(&k, &last, 0).unwrap();
+        let groups = split
+            .split
+            .as_ref()
+            .expect("the grid's tree splits")
+            .groups
+            .clone();
+        assert!(groups.iter().all(|g| !g.is_empty()), "{groups:?}");
+        let one_thread = Factor {
+            threads: false,
+            ..Factor::with_split(&k, &last, 0).unwrap()
+        };
+        assert!(factor.split.is_none());
+        let solved = [&factor, &split, &one_thread].map(|f| {
+            let mut x = b.clone();
+            f.solve(&mut x);
+            let err = (0..n).fold(0.0f64, |a, i| a.max((x[i] - expected[(i, 0)]).abs()));
+            assert!(err <= 1e-12 * scale, "{err:e} vs {scale:e}");
+            x
+        });
+        // The split's arithmetic does not depend on the threads.
+        assert_eq!(solved[1], solved[2]);
         // The constrained dofs are the last ones and L_CC L_CCᵀ is their Schur complement:
         // its inverse is the C block of K⁻¹ (in the factor's order of C).
         let c = last.len();
