@@ -618,10 +618,9 @@ fn assemble(
         vec![0.0; if b.is_some() { nnz } else { 0 }],
         vec![0.0; nnz],
     );
+    // The entries of the three matrices from the same two factors (`Cell::parts`), without
+    // building three element matrices per cell.
     for t in cells {
-        let ka = t.stiffness(a);
-        let kb = b.map(|b| t.stiffness(b));
-        let kr = t.stiffness(r);
         let nodes = t.vertices();
         for (j, &p) in nodes.iter().enumerate().filter(|(_, &p)| is_free(p)) {
             for (i, &q) in nodes.iter().enumerate().filter(|(_, &q)| is_free(q)) {
@@ -633,12 +632,12 @@ fn assemble(
                 for be in 0..d {
                     let start = col_ptr[free[d * p + be].expect("p is free")] + d * k;
                     for al in 0..d {
-                        let (li, lj) = (d * i + al, d * j + be);
-                        va[start + al] += ka[li][lj];
-                        if let Some(kb) = &kb {
-                            vb[start + al] += kb[li][lj];
+                        let parts = t.parts(i, j, al, be);
+                        va[start + al] += t.entry(a, parts);
+                        if let Some(b) = b {
+                            vb[start + al] += t.entry(b, parts);
                         }
-                        vr[start + al] += kr[li][lj];
+                        vr[start + al] += t.entry(r, parts);
                     }
                 }
             }
