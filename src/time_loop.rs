@@ -22,7 +22,7 @@
 //! elastic response ε_{n+1} = f/E.
 
 use crate::effects::{self, Effects};
-use crate::fem::{mul_add, mul_add_pair, same_pattern, Discretization};
+use crate::fem::{mul_add, Discretization, SymmetricPair};
 use crate::history::{History, Plan};
 use crate::scene::{self, Scene};
 use crate::solver::{Factor, Rows, StepReport, StepSolver};
@@ -47,8 +47,9 @@ pub struct TimeLoop<'p> {
     pub m: Vec<f64>,
     b: Vec<f64>,
     growth: Growth,
-    /// K_B and K_R share their pattern: K_B u_n + K_R m_n in one pass (`mul_add_pair`).
-    paired: bool,
+    /// K_B and K_R (when both are used and share their pattern): K_B u_n + K_R m_n in one
+    /// pass over their lower triangles.
+    paired: Option<SymmetricPair>,
 }
 
 /// The divergence detector. A stable run's displacement is bounded by its loads: with
@@ -139,6 +140,11 @@ impl<'p> TimeLoop<'p> {
         let solver = effects::step_solver(&effects, scene, matrix, &factor, &rows)?;
         let n = disc.n_free;
         let history = History::new(n, scene.k(), &plan);
+        let paired = disc
+            .k_b
+            .as_ref()
+            .filter(|_| history.has_memory())
+            .and_then(|k_b| SymmetricPair::new(k_b, &disc.k_r));
         let m = if history.has_memory() {
             vec![0.0; n]
         } else {
@@ -158,10 +164,7 @@ impl<'p> TimeLoop<'p> {
             m,
             b: vec![0.0; n],
             growth: Growth::default(),
-            paired: disc
-                .k_b
-                .as_ref()
-                .is_some_and(|k_b| same_pattern(k_b.symbolic(), disc.k_r.symbolic())),
+            paired,
         })
     }
 
@@ -187,11 +190,9 @@ impl<'p> TimeLoop<'p> {
         let g_f = self.disc.g_f.iter().chain(std::iter::repeat(&0.0));
         let load_max = max_abs(self.b.iter().zip(g_f).map(|(f, g)| f - g));
         let memory = h.memory_into(self.scene.relaxation.as_ref(), &mut self.m);
-        match &self.disc.k_b {
-            Some(k_b) if memory && self.paired => {
-                mul_add_pair(k_b, &h.u, &self.disc.k_r, &self.m, -1.0, &mut self.b);
-            }
-            k_b => {
+        match (&self.paired, &self.disc.k_b) {
+            (Some(pair), _) if memory => pair.mul_add(&h.u, &self.m, -1.0, &mut self.b),
+            (_, k_b) => {
                 if let Some(k_b) = k_b {
                     mul_add(k_b, &h.u, -1.0, &mut self.b);
                 }

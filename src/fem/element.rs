@@ -137,18 +137,32 @@ impl Cell {
         let mut k = [[0.0; 12]; 12];
         for i in 0..=d {
             for j in 0..=d {
-                let (gi, gj) = (self.grad[i], self.grad[j]);
-                let dot = gi[0] * gj[0] + gi[1] * gj[1] + gi[2] * gj[2];
                 for al in 0..d {
                     for be in 0..d {
-                        let delta = if al == be { dot } else { 0.0 };
-                        k[d * i + al][d * j + be] = self.measure
-                            * (c.a * (delta + gi[be] * gj[al]) + c.b * gi[al] * gj[be]);
+                        k[d * i + al][d * j + be] = self.entry(c, self.parts(i, j, al, be));
                     }
                 }
             }
         }
         k
+    }
+
+    /// The two factors of a, b in the entry (d i + α, d j + β) of [`Cell::stiffness`]:
+    /// (δ_αβ ∇φ_i·∇φ_j + ∂_β φ_i ∂_α φ_j, ∂_α φ_i ∂_β φ_j); shared by the materials of a
+    /// cell, whose entries [`Cell::entry`] then gives.
+    pub fn parts(&self, i: usize, j: usize, al: usize, be: usize) -> [f64; 2] {
+        let (gi, gj) = (self.grad[i], self.grad[j]);
+        let delta = if al == be {
+            gi[0] * gj[0] + gi[1] * gj[1] + gi[2] * gj[2]
+        } else {
+            0.0
+        };
+        [delta + gi[be] * gj[al], gi[al] * gj[be]]
+    }
+
+    /// The stiffness entry of material c with the factors `parts` (see [`Cell::parts`]).
+    pub fn entry(&self, c: Isotropic, parts: [f64; 2]) -> f64 {
+        self.measure * (c.a * parts[0] + c.b * parts[1])
     }
 }
 

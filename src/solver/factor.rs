@@ -7,10 +7,17 @@
 //! the condensed operator, and one backward solve finishes the step (see `dual`). Without
 //! constrained dofs the whole matrix is ordered by nested dissection.
 //!
-//! The step's solves are this module's loops over faer's supernodes, one pass each over the
-//! stored values: supernode s (columns s₀..s₁, off-diagonal rows R) is stored column-major
-//! as [L_ss; L_Rs]; the forward pass, in supernode order, does y_s ← L_ss⁻¹ y_s and
-//! y_R ← y_R − L_Rs y_s; the backward pass, in reverse order, y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R).
+//! The ordering is computed on its own (no symbolic factorization for it), then one symbolic
+//! analysis in that order; the numeric factorization is faer's. The step's solves are this
+//! module's loops over faer's supernodes, one pass each over the stored values, which are
+//! repacked after the factorization (`Layout`: the upper triangles of the diagonal blocks
+//! dropped, 16% of the values at h = 1/128): supernode s (columns s₀..s₁, off-diagonal rows
+//! R) is the block [L_ss; L_Rs], column by column; the forward pass, in supernode order, does
+//! y_s ← L_ss⁻¹ y_s and y_R ← y_R − L_Rs y_s; the backward pass, in reverse order,
+//! y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R). A single right side is memory-bound, so a big factor's
+//! passes run on two threads: two groups of disjoint subtrees of the elimination tree,
+//! each on its own thread, and the rest (`Split`; nested dissection's top separator splits
+//! the tree into two such halves).
 //! faer's default amalgamation may merge a supernode across the boundary between the
 //! interior dofs and C; `trailing_block` reads L_CC column by column and does not care.
 
@@ -19,16 +26,16 @@ use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::perm::PermRef;
-use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
-    SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::{Mat, Par, Side};
+use std::sync::Mutex;
 
 pub struct Factor {
-    symbolic: SymbolicCholesky<usize>,
+    /// L's values in the packed layout of `Layout`.
     values: Vec<f64>,
     n: usize,
     /// Permuted index i holds original dof fwd[i]; original dof j sits at inv[j].
@@ -37,23 +44,58 @@ pub struct Factor {
     /// The number of dofs ordered last (the block C).
     last: usize,
     layout: Layout,
+    /// The solves' two groups of subtrees, for factors big enough to gain from them.
+    split: Option<Split>,
+    /// Whether a second thread may take the second group (else this one does it after the
+    /// first).
+    threads: bool,
+    /// Which way the groups ran faster lately, per pass (`Pass`).
+    ways: [Mutex<Ways>; 2],
 }
 
-/// The supernodes of L as plain arrays, read by the step's solves.
+/// The forward and the backward pass, indices of `Factor::ways`.
+#[derive(Clone, Copy)]
+enum Pass {
+    Forward = 0,
+    Backward = 1,
+}
+
+/// The smoothed times (seconds) of a pass's two groups on two threads and on one, and the
+/// pass's calls so far. A second thread pays only when a core is free for it: on a machine
+/// loaded to 3.5–4 with two cores the threaded run was 0.78× as fast as the unsplit one. So
+/// the faster way is taken, and every `PROBE`th call the other one, to follow the load.
+/// The arithmetic does not depend on the way (see `Split`).
+#[derive(Default)]
+struct Ways {
+    two: f64,
+    one: f64,
+    calls: usize,
+}
+
+const PROBE: usize = 16;
+
+/// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
+/// their values: column j of a supernode with `size` columns and off-diagonal rows R holds
+/// the rows j..size of its diagonal block, then R (`size − j + |R|` values). faer stores the
+/// diagonal block as a full square; its upper triangle (never read) is dropped.
 struct Layout {
     /// Supernode s holds columns begin[s]..begin[s + 1].
     begin: Vec<usize>,
     /// Its off-diagonal rows are rows[row_ptr[s]..row_ptr[s + 1]] (u32: less to stream).
     row_ptr: Vec<usize>,
     rows: Vec<u32>,
-    /// Its values, column-major (size + |rows|) × size, start at val_ptr[s].
+    /// Its packed values start at val_ptr[s].
     val_ptr: Vec<usize>,
     /// The largest |rows| of a supernode.
     widest_pattern: usize,
 }
 
 impl Layout {
-    fn new(llt: SupernodalLltRef<'_, usize, f64>, n_supernodes: usize) -> Result<Self> {
+    /// The layout of faer's supernodal structure `sym`; its factor's values (`values`, in
+    /// faer's layout: supernode by supernode, each column-major (size + |R|) × size) are
+    /// packed in place.
+    fn new(sym: &SymbolicSupernodalCholesky<usize>, values: &mut Vec<f64>) -> Result<Self> {
+        let n_supernodes = sym.n_supernodes();
         let mut layout = Layout {
             begin: vec![0],
             row_ptr: vec![0],
@@ -61,22 +103,33 @@ impl Layout {
             val_ptr: vec![0],
             widest_pattern: 0,
         };
+        // Supernode s starts at `from` in faer's layout, at val_ptr[s] ≤ from in ours: the
+        // columns move towards the start in order, never over values still to be moved.
+        let mut from = 0;
         for s in 0..n_supernodes {
-            let node = llt.supernode(s);
-            let size = node.val().ncols();
-            let pattern = node.pattern();
+            let (start, end) = (sym.supernode_begin()[s], sym.supernode_end()[s]);
+            let size = end - start;
+            let pattern = sym.supernode(s).pattern();
             for &r in pattern {
                 layout.rows.push(
                     u32::try_from(r)
                         .map_err(|_| Error::solve(format!("K_A has more than 2^32 dofs ({r})")))?,
                 );
             }
-            layout.begin.push(node.start() + size);
+            layout.begin.push(end);
             layout.row_ptr.push(layout.rows.len());
-            let done = layout.val_ptr[s];
-            layout.val_ptr.push(done + (size + pattern.len()) * size);
+            let m = size + pattern.len();
+            let mut to = layout.val_ptr[s];
+            for j in 0..size {
+                values.copy_within(from + j * m + j..from + (j + 1) * m, to);
+                to += m - j;
+            }
+            from += m * size;
+            layout.val_ptr.push(to);
             layout.widest_pattern = layout.widest_pattern.max(pattern.len());
         }
+        values.truncate(layout.val_ptr[n_supernodes]);
+        values.shrink_to_fit();
         Ok(layout)
     }
 
@@ -84,7 +137,7 @@ impl Layout {
         self.begin.len() - 1
     }
 
-    /// Supernode s: its columns, its off-diagonal rows and its values.
+    /// Supernode s: its columns, its off-diagonal rows and its packed values.
     fn supernode<'a>(
         &'a self,
         s: usize,
@@ -95,6 +148,99 @@ impl Layout {
             &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]],
             &values[self.val_ptr[s]..self.val_ptr[s + 1]],
         )
+    }
+}
+
+/// Supernodes that the solves may treat on two threads: two groups, each a union of whole
+/// subtrees of the supernodal elimination tree (so the rows a group's supernodes update
+/// lie in the group or in `top`), and `top`, the rest (every ancestor of both groups).
+/// The forward pass does both groups, then `top`; the backward pass `top`, then both
+/// groups. The second group works in a vector of its own, merged in a fixed way, so the
+/// arithmetic is the same with one thread or two.
+#[derive(Clone, Debug)]
+struct Split {
+    /// The supernodes of each group and of `top`, increasing.
+    groups: [Vec<usize>; 2],
+    top: Vec<usize>,
+}
+
+impl Split {
+    /// The split whose longest path, top + max(group), is shortest, counted in stored values;
+    /// None when it would not save a fifth of a pass or the factor is smaller than `min`.
+    fn new(layout: &Layout, min: usize) -> Option<Split> {
+        let ns = layout.n_supernodes();
+        let total = *layout.val_ptr.last()?;
+        if total < min || ns < 2 {
+            return None;
+        }
+        let mut owner = vec![0; *layout.begin.last()?];
+        for s in 0..ns {
+            owner[layout.begin[s]..layout.begin[s + 1]].fill(s);
+        }
+        // Children of each supernode (a parent's index exceeds its children's).
+        let mut children = vec![Vec::new(); ns];
+        let mut roots = Vec::new();
+        for s in 0..ns {
+            match layout.rows[layout.row_ptr[s]..layout.row_ptr[s + 1]].first() {
+                Some(&r) => children[owner[r as usize]].push(s),
+                None => roots.push(s),
+            }
+        }
+        let mut weight: Vec<usize> = (0..ns)
+            .map(|s| layout.val_ptr[s + 1] - layout.val_ptr[s])
+            .collect();
+        for s in 0..ns {
+            if let Some(&r) = layout.rows[layout.row_ptr[s]..layout.row_ptr[s + 1]].first() {
+                weight[owner[r as usize]] += weight[s];
+            }
+        }
+        // Open the heaviest subtree of the frontier into its children, one at a time; each
+        // frontier is dealt to two bins, heaviest first, into the lighter bin.
+        let deal = |frontier: &[usize]| {
+            let mut sorted = frontier.to_vec();
+            sorted.sort_by_key(|&s| std::cmp::Reverse(weight[s]));
+            let mut bins = [(0, Vec::new()), (0, Vec::new())];
+            for s in sorted {
+                let b = usize::from(bins[1].0 < bins[0].0);
+                bins[b].0 += weight[s];
+                bins[b].1.push(s);
+            }
+            bins
+        };
+        let (mut frontier, mut top_weight) = (roots, 0);
+        let mut best: Option<(usize, Vec<usize>)> = None;
+        for _ in 0..256 {
+            let bins = deal(&frontier);
+            let path = top_weight + bins[0].0.max(bins[1].0);
+            if best.as_ref().is_none_or(|b| path < b.0) {
+                best = Some((path, frontier.clone()));
+            }
+            let Some(heaviest) = frontier.iter().copied().max_by_key(|&s| weight[s]) else {
+                break;
+            };
+            frontier.retain(|&s| s != heaviest);
+            frontier.extend_from_slice(&children[heaviest]);
+            top_weight += layout.val_ptr[heaviest + 1] - layout.val_ptr[heaviest];
+        }
+        let (path, frontier) = best?;
+        if path * 5 > total * 4 {
+            return None;
+        }
+        let mut label = vec![2u8; ns];
+        for (b, (_, subtrees)) in deal(&frontier).into_iter().enumerate() {
+            for root in subtrees {
+                let mut stack = vec![root];
+                while let Some(s) = stack.pop() {
+                    label[s] = b as u8;
+                    stack.extend_from_slice(&children[s]);
+                }
+            }
+        }
+        let members = |b: u8| (0..ns).filter(|&s| label[s] == b).collect::<Vec<_>>();
+        Some(Split {
+            groups: [members(0), members(1)],
+            top: members(2),
+        })
     }
 }
 
@@ -130,13 +276,50 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
-fn par() -> Par {
-    faer::get_global_parallelism()
+/// (c_k · g)_k for four columns c_k as long as g: g is read once for the four.
+#[inline(always)]
+fn dot4(c: [&[f64]; 4], g: &[f64]) -> [f64; 4] {
+    let n = g.len();
+    let mut acc = [[0.0; 4]; 4];
+    let mut i = 0;
+    while i + 4 <= n {
+        let gi = &g[i..i + 4];
+        for (acc, c) in acc.iter_mut().zip(&c) {
+            for ((a, x), y) in acc.iter_mut().zip(&c[i..i + 4]).zip(gi) {
+                *a += x * y;
+            }
+        }
+        i += 4;
+    }
+    let mut out = [0.0; 4];
+    for ((o, acc), c) in out.iter_mut().zip(&acc).zip(&c) {
+        *o = (acc[0] + acc[2]) + (acc[1] + acc[3]);
+        for (x, y) in c[i..].iter().zip(&g[i..]) {
+            *o += x * y;
+        }
+    }
+    out
 }
+
+/// The smallest factor (stored values) whose solves are split in two groups: 2 MB, where a
+/// pass takes about 0.2 ms and a thread's start and join are a small part of it.
+const MIN_SPLIT: usize = 1 << 18;
+
+/// The numeric factorization runs on one thread: its supernodes are small (2D: mostly ≤ 16
+/// columns), and faer's parallel factorization was slower on the two cores of the
+/// benchmark machine (h = 1/128: 80 ms against 100 ms; the 3D block at h = 1/8: 39 against
+/// 47 ms, side by side in one process).
+const PAR: Par = Par::Seq;
 
 impl Factor {
     /// Factors `a`, with the dofs in `last` ordered last.
     pub fn new(a: &Sparse, last: &[usize]) -> Result<Self> {
+        Self::with_split(a, last, MIN_SPLIT)
+    }
+
+    /// `new`, with the solves split in two groups (`Split`) if the factor stores at least
+    /// `min_split` values.
+    fn with_split(a: &Sparse, last: &[usize], min_split: usize) -> Result<Self> {
         let n = a.nrows();
         let fail = |what: &str, e: &dyn std::fmt::Debug| {
             Error::solve(format!("{what} of K_A failed: {e:?}"))
@@ -162,7 +345,7 @@ impl Factor {
         let mut values = vec![0.0; symbolic.len_val()];
         {
             let mut mem = MemBuffer::new(
-                symbolic.factorize_numeric_llt_scratch::<f64>(par(), Default::default()),
+                symbolic.factorize_numeric_llt_scratch::<f64>(PAR, Default::default()),
             );
             symbolic
                 .factorize_numeric_llt(
@@ -170,7 +353,7 @@ impl Factor {
                     a.as_ref(),
                     Side::Lower,
                     LltRegularization::default(),
-                    par(),
+                    PAR,
                     MemStack::new(&mut mem),
                     Default::default(),
                 )
@@ -182,29 +365,21 @@ impl Factor {
                 })?;
         }
         let layout = match symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => {
-                Layout::new(SupernodalLltRef::new(s, &values), s.n_supernodes())?
-            }
+            SymbolicCholeskyRaw::Supernodal(s) => Layout::new(s, &mut values)?,
             SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodal was forced"),
         };
         Ok(Factor {
-            symbolic,
             values,
             n,
             fwd,
             inv,
             last: last.len(),
+            split: Split::new(&layout, min_split),
+            threads: std::thread::available_parallelism().is_ok_and(|p| p.get() >= 2),
+            ways: Default::default(),
             layout,
         })
     }
-
-    fn llt(&self) -> SupernodalLltRef<'_, usize, f64> {
-        match self.symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => SupernodalLltRef::new(s, &self.values),
-            SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodal was forced"),
-        }
-    }
-
     pub fn dim(&self) -> usize {
         self.n
     }
@@ -245,26 +420,58 @@ impl Factor {
     }
 
     /// y ← L⁻¹ y in the factor's ordering: one pass over the supernodes in order. Supernode
-    /// s (columns c₀..c₁, off-diagonal rows R) is the column-major block [L_ss; L_Rs]:
-    /// y_s ← L_ss⁻¹ y_s column by column, and L_Rs y_s is accumulated in a contiguous
-    /// buffer and subtracted from y_R once. One thread: a single right side is memory-bound.
+    /// s (columns c₀..c₁, off-diagonal rows R) is the block [L_ss; L_Rs], its columns packed
+    /// (`Layout`): y_s ← L_ss⁻¹ y_s column by column, and L_Rs y_s is accumulated in a
+    /// contiguous buffer and subtracted from y_R once. One thread: a single right side is
+    /// memory-bound.
     pub fn forward(&self, y: &mut [f64]) {
+        let Some(split) = &self.split else {
+            return self.forward_over(0..self.layout.n_supernodes(), y);
+        };
+        // The second group in a vector of its own: its columns, zeros elsewhere; it subtracts
+        // its updates of `top` rows from those zeros.
+        let mut z = vec![0.0; self.n];
+        let cols = |s: usize| self.layout.begin[s]..self.layout.begin[s + 1];
+        for &s in &split.groups[1] {
+            z[cols(s)].copy_from_slice(&y[cols(s)]);
+        }
+        self.both(
+            Pass::Forward,
+            || self.forward_over(split.groups[0].iter().copied(), y),
+            || self.forward_over(split.groups[1].iter().copied(), &mut z),
+        );
+        for &s in &split.groups[1] {
+            y[cols(s)].copy_from_slice(&z[cols(s)]);
+        }
+        for &s in &split.top {
+            for c in cols(s) {
+                y[c] += z[c];
+            }
+        }
+        self.forward_over(split.top.iter().copied(), y);
+    }
+
+    /// The forward pass over the supernodes `order` (increasing).
+    fn forward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
         let layout = &self.layout;
         let mut t = vec![0.0; layout.widest_pattern];
-        for s in 0..layout.n_supernodes() {
+        for s in order {
             let (cols, rows, vals) = layout.supernode(s, &self.values);
             let size = cols.len();
-            let m = size + rows.len();
             let t = &mut t[..rows.len()];
             t.fill(0.0);
             let ys = &mut y[cols];
-            for (j, col) in vals.chunks_exact(m).enumerate() {
-                let yj = ys[j] / col[j];
+            let mut rest = vals;
+            for j in 0..size {
+                let (col, next) = rest.split_at(size - j + t.len());
+                rest = next;
+                let (diag, below) = col.split_at(size - j);
+                let yj = ys[j] / diag[0];
                 ys[j] = yj;
-                for (yi, l) in ys[j + 1..].iter_mut().zip(&col[j + 1..size]) {
+                for (yi, l) in ys[j + 1..].iter_mut().zip(&diag[1..]) {
                     *yi -= l * yj;
                 }
-                for (ti, l) in t.iter_mut().zip(&col[size..]) {
+                for (ti, l) in t.iter_mut().zip(below) {
                     *ti += l * yj;
                 }
             }
@@ -278,9 +485,28 @@ impl Factor {
     /// supernode s, y_R is gathered once and y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R), the last
     /// column first.
     pub fn backward(&self, y: &mut [f64]) {
+        let Some(split) = &self.split else {
+            return self.backward_over((0..self.layout.n_supernodes()).rev(), y);
+        };
+        self.backward_over(split.top.iter().rev().copied(), y);
+        // The second group reads `top` rows from a copy and writes its own columns there.
+        let mut z = y.to_vec();
+        self.both(
+            Pass::Backward,
+            || self.backward_over(split.groups[0].iter().rev().copied(), y),
+            || self.backward_over(split.groups[1].iter().rev().copied(), &mut z),
+        );
+        for &s in &split.groups[1] {
+            let cols = self.layout.begin[s]..self.layout.begin[s + 1];
+            y[cols.clone()].copy_from_slice(&z[cols]);
+        }
+    }
+
+    /// The backward pass over the supernodes `order` (decreasing).
+    fn backward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
         let layout = &self.layout;
         let mut g = vec![0.0; layout.widest_pattern];
-        for s in (0..layout.n_supernodes()).rev() {
+        for s in order {
             // All loads of the block at once, before the dependent arithmetic needs them:
             // the pass runs from the factor's end to its start, a stream the hardware
             // prefetchers follow poorly across many small supernodes (measured at h = 1/128:
@@ -292,22 +518,76 @@ impl Factor {
                 prefetch(v);
             }
             let (cols, rows, vals) = layout.supernode(s, &self.values);
-            let size = cols.len();
-            let m = size + rows.len();
-            let g = &mut g[..rows.len()];
-            for (gi, &r) in g.iter_mut().zip(rows) {
-                *gi = y[r as usize];
+            let (size, r) = (cols.len(), rows.len());
+            let g = &mut g[..r];
+            for (gi, &row) in g.iter_mut().zip(rows) {
+                *gi = y[row as usize];
             }
             let ys = &mut y[cols];
-            // y_s − L_Rsᵀ y_R, the columns in memory order.
-            for (yj, col) in ys.iter_mut().zip(vals.chunks_exact(m)) {
-                *yj -= dot(&col[size..], g);
+            // y_s − L_Rsᵀ y_R, four columns at a time, in memory order.
+            let (mut end, mut j) = (0, 0);
+            while j + 4 <= size {
+                let mut c = [&vals[..0]; 4];
+                for (k, ck) in c.iter_mut().enumerate() {
+                    end += size - (j + k) + r;
+                    *ck = &vals[end - r..end];
+                }
+                for (yj, d) in ys[j..j + 4].iter_mut().zip(dot4(c, g)) {
+                    *yj -= d;
+                }
+                j += 4;
+            }
+            for (j, yj) in ys.iter_mut().enumerate().skip(j) {
+                end += size - j + r;
+                *yj -= dot(&vals[end - r..end], g);
             }
             // L_ssᵀ⁻¹, the last column first (the block is in cache now).
-            for (j, col) in vals.chunks_exact(m).enumerate().rev() {
-                ys[j] = (ys[j] - dot(&col[j + 1..size], &ys[j + 1..])) / col[j];
+            for j in (0..size).rev() {
+                let col = &vals[end - (size - j + r)..end - r];
+                end -= size - j + r;
+                ys[j] = (ys[j] - dot(&col[1..], &ys[j + 1..])) / col[0];
             }
         }
+    }
+
+    /// Runs `a` and `b`: on two threads when there are two cores and that was the faster
+    /// way for this pass lately (`Ways`), else one after the other.
+    fn both(&self, pass: Pass, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
+        if !self.threads {
+            a();
+            b();
+            return;
+        }
+        let two = {
+            let mut w = self.ways[pass as usize]
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            w.calls += 1;
+            (w.two <= w.one) != w.calls.is_multiple_of(PROBE)
+        };
+        let start = std::time::Instant::now();
+        if two {
+            std::thread::scope(|scope| {
+                let second = scope.spawn(b);
+                a();
+                if let Err(panic) = second.join() {
+                    std::panic::resume_unwind(panic);
+                }
+            });
+        } else {
+            a();
+            b();
+        }
+        let took = start.elapsed().as_secs_f64();
+        let mut w = self.ways[pass as usize]
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        let slot = if two { &mut w.two } else { &mut w.one };
+        *slot = if *slot == 0.0 {
+            took
+        } else {
+            0.75 * *slot + 0.25 * took
+        };
     }
 
     /// x ← K_A⁻¹ x (original ordering).
@@ -321,32 +601,25 @@ impl Factor {
 
     /// The trailing block L_CC (last × last, lower triangular) of L.
     pub fn trailing_block(&self) -> Mat<f64> {
-        let (n, c) = (self.n, self.last);
-        let first = n - c;
-        let mut out = Mat::zeros(c, c);
-        let llt = self.llt();
-        let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() else {
-            unreachable!("supernodal was forced")
-        };
-        for s in 0..sym.n_supernodes() {
-            let node = llt.supernode(s);
-            let (start, m) = (node.start(), node.val());
-            let size = m.ncols();
-            if start + size <= first {
+        let first = self.n - self.last;
+        let mut out = Mat::zeros(self.last, self.last);
+        let layout = &self.layout;
+        for s in 0..layout.n_supernodes() {
+            let (cols, rows, vals) = layout.supernode(s, &self.values);
+            if cols.end <= first {
                 continue;
             }
-            let pattern = node.pattern();
-            for j in 0..size {
-                let col = start + j;
+            let mut rest = vals;
+            for col in cols.clone() {
+                let (values, next) = rest.split_at(cols.end - col + rows.len());
+                rest = next;
                 if col < first {
                     continue;
                 }
                 // Rows of the diagonal block, then the pattern rows (all > col).
-                for i in j..size {
-                    out[(start + i - first, col - first)] = m[(i, j)];
-                }
-                for (p, &row) in pattern.iter().enumerate() {
-                    out[(row - first, col - first)] = m[(size + p, j)];
+                let at = (col..cols.end).chain(rows.iter().map(|&r| r as usize));
+                for (row, &v) in at.zip(values) {
+                    out[(row - first, col - first)] = v;
                 }
             }
         }
@@ -391,13 +664,32 @@ mod tests {
         let b: Vec<f64> = (0..n)
             .map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0)
             .collect();
-        let mut x = b.clone();
-        factor.solve(&mut x);
         let dense = k.to_dense().llt(Side::Lower).unwrap();
         let expected = dense.solve(faer::Mat::from_fn(n, 1, |i, _| b[i]));
         let scale = (0..n).fold(0.0f64, |a, i| a.max(expected[(i, 0)].abs()));
-        let err = (0..n).fold(0.0f64, |a, i| a.max((x[i] - expected[(i, 0)]).abs()));
-        assert!(err <= 1e-12 * scale, "{err:e} vs {scale:e}");
+        // Unsplit (too small for MIN_SPLIT), then split in two groups, on one thread and two.
+        let split = Factor::with_split(&k, &last, 0).unwrap();
+        let groups = split
+            .split
+            .as_ref()
+            .expect("the grid's tree splits")
+            .groups
+            .clone();
+        assert!(groups.iter().all(|g| !g.is_empty()), "{groups:?}");
+        let one_thread = Factor {
+            threads: false,
+            ..Factor::with_split(&k, &last, 0).unwrap()
+        };
+        assert!(factor.split.is_none());
+        let solved = [&factor, &split, &one_thread].map(|f| {
+            let mut x = b.clone();
+            f.solve(&mut x);
+            let err = (0..n).fold(0.0f64, |a, i| a.max((x[i] - expected[(i, 0)]).abs()));
+            assert!(err <= 1e-12 * scale, "{err:e} vs {scale:e}");
+            x
+        });
+        // The split's arithmetic does not depend on the threads.
+        assert_eq!(solved[1], solved[2]);
         // The constrained dofs are the last ones and L_CC L_CCᵀ is their Schur complement:
         // its inverse is the C block of K⁻¹ (in the factor's order of C).
         let c = last.len();
