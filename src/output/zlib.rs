@@ -19,10 +19,10 @@
 //! literal 0 followed by matches at distance 1 covering the other r − 1 (≤ 258 bytes a
 //! match). A zero double between non-zero ones costs 20 bits instead of 64; a block of zeros
 //! about 13 bits per 258 bytes. Eight bytes without a zero (most of a double's words) go out
-//! through the literal table without a branch. A stream that would not shrink (von Mises
+//! through the literal table three at a time, without a branch. A stream that would not shrink (von Mises
 //! stress, say: literals ≥ 144 take 9 bits) is written as stored blocks instead, so
 //! compression never grows a frame by more than the few bytes of the headers. On the same
-//! fields: 3.6 ms (845 MB/s) for 62.8% of the size — the 7 points zlib gains come from
+//! fields: 3.2 ms (950 MB/s) for 62.8% of the size — the 7 points zlib gains come from
 //! matching the leading bytes of neighbouring values of smooth fields, which is the search
 //! that costs it three times the time.
 //!
@@ -122,7 +122,7 @@ struct Bits<'a> {
 }
 
 impl Bits<'_> {
-    /// Appends the `count` ≤ 32 low bits of `bits`.
+    /// Appends the `count` ≤ 32 low bits of `bits` (`n` < 32 before and after).
     #[inline(always)]
     fn put(&mut self, bits: u64, count: u32) {
         self.acc |= bits << self.n;
@@ -138,6 +138,19 @@ impl Bits<'_> {
     fn literal(&mut self, byte: u8) {
         let c = LITERALS[byte as usize];
         self.put((c & 0xffff) as u64, c >> 16);
+    }
+
+    /// Up to three literals (at most 27 bits) in one put.
+    #[inline(always)]
+    fn literals<const N: usize>(&mut self, b: [u8; N]) {
+        let mut bits = 0u64;
+        let mut count = 0;
+        for byte in b {
+            let c = LITERALS[byte as usize];
+            bits |= ((c & 0xffff) as u64) << count;
+            count += c >> 16;
+        }
+        self.put(bits, count);
     }
 
     /// `r` more copies of the byte before (r ≥ 3), as matches at distance 1.
@@ -174,9 +187,10 @@ pub(super) fn compress(data: &[u8], out: &mut Vec<u8>) {
         if let Some(word) = data.get(i..i + 8) {
             let w = u64::from_le_bytes(word.try_into().expect("8 bytes"));
             if !has_zero_byte(w) {
-                for b in w.to_le_bytes() {
-                    bits.literal(b);
-                }
+                let [a, b, c, d, e, f, g, h] = w.to_le_bytes();
+                bits.literals([a, b, c]);
+                bits.literals([d, e, f]);
+                bits.literals([g, h]);
                 i += 8;
                 continue;
             }
