@@ -10,8 +10,8 @@
 //! Why not AMD, as faer offers: ordering the whole matrix by AMD and then moving C to the end
 //! adds 41–43% fill in 3D, and nested dissection with C left out of the graph cuts nnz(L) by
 //! 29–35% against that (measured on the block meshes; see the README's performance section).
-//! METIS is deterministic (fixed seed), so a resumed run orders and factors K_A exactly as the
-//! uninterrupted run did.
+//! METIS is deterministic (fixed seed; calls are serialized, see `dissect`), so a resumed run
+//! orders and factors K_A exactly as the uninterrupted run did.
 
 use crate::fem::Sparse;
 use crate::{Error, Result};
@@ -88,6 +88,12 @@ fn dissect<'a>(
     }
     let mut nvtxs = idx(nv)?;
     let (mut perm, mut iperm) = (vec![0; nv], vec![0; nv]);
+    // METIS seeds and draws from one random generator shared by the whole process (GKlib's,
+    // not thread-safe): two orderings at once (threads of a study, tests run in parallel)
+    // raced on it and came out different from run to run. One call at a time, each seeded
+    // afresh by METIS, gives every run the same ordering.
+    static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one_at_a_time = METIS.lock().unwrap_or_else(|e| e.into_inner());
     // SAFETY: xadj (nv + 1 entries) and adjncy describe a graph on nv vertices with no self
     // loops, symmetric because the pattern of K_A is; perm and iperm hold nv entries; null
     // weights and options mean unit weights and METIS's defaults. METIS only reads the graph
@@ -189,6 +195,15 @@ mod tests {
         tail.sort_unstable();
         assert_eq!(tail, last);
         assert_eq!(fwd, constrained_last(&a, &last).unwrap(), "deterministic");
+        // Also when orderings run at once (METIS's random generator is process-wide).
+        std::thread::scope(|scope| {
+            let runs: Vec<_> = (0..4)
+                .map(|_| scope.spawn(|| constrained_last(&a, &last).unwrap()))
+                .collect();
+            for run in runs {
+                assert_eq!(run.join().unwrap(), fwd, "concurrent orderings differ");
+            }
+        });
 
         let amd = factorize_symbolic_cholesky(
             a.symbolic(),
