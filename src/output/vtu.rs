@@ -60,39 +60,33 @@ pub(super) struct Vtu {
     pub cell_data: Vec<Array>,
 }
 
-/// Encodes arrays in the appended layout (see the module doc).
-struct Encoder {
+/// Appends the header and data of one array holding `raw` to `out` in the appended layout
+/// (see the module doc); `deflate` makes a zlib stream of a block (`zlib::compress` for
+/// fields, `zlib::compress_once` for the mesh).
+fn append(
     compression: Compression,
-}
-
-impl Encoder {
-    fn new(compression: Compression) -> Encoder {
-        Encoder { compression }
-    }
-
-    /// Appends the header and data of one array holding `raw` to `out`; `deflate` makes a
-    /// zlib stream of a block (`zlib::compress` for fields, `zlib::compress_once` for the
-    /// mesh).
-    fn append(&self, out: &mut Vec<u8>, raw: &[u8], deflate: fn(&[u8], &mut Vec<u8>)) {
-        match self.compression {
-            Compression::None => {
-                out.extend_from_slice(&(raw.len() as u64).to_le_bytes());
-                out.extend_from_slice(raw);
+    out: &mut Vec<u8>,
+    raw: &[u8],
+    deflate: fn(&[u8], &mut Vec<u8>),
+) {
+    match compression {
+        Compression::None => {
+            out.extend_from_slice(&(raw.len() as u64).to_le_bytes());
+            out.extend_from_slice(raw);
+        }
+        Compression::Zlib => {
+            let blocks = raw.len().div_ceil(BLOCK);
+            let header = out.len();
+            for word in [blocks, BLOCK, raw.len() % BLOCK] {
+                out.extend_from_slice(&(word as u64).to_le_bytes());
             }
-            Compression::Zlib => {
-                let blocks = raw.len().div_ceil(BLOCK);
-                let header = out.len();
-                for word in [blocks, BLOCK, raw.len() % BLOCK] {
-                    out.extend_from_slice(&(word as u64).to_le_bytes());
-                }
-                out.resize(out.len() + 8 * blocks, 0);
-                for (b, chunk) in raw.chunks(BLOCK).enumerate() {
-                    let start = out.len();
-                    deflate(chunk, out);
-                    let size = (out.len() - start) as u64;
-                    let at = header + 24 + 8 * b;
-                    out[at..at + 8].copy_from_slice(&size.to_le_bytes());
-                }
+            out.resize(out.len() + 8 * blocks, 0);
+            for (b, chunk) in raw.chunks(BLOCK).enumerate() {
+                let start = out.len();
+                deflate(chunk, out);
+                let size = (out.len() - start) as u64;
+                let at = header + 24 + 8 * b;
+                out[at..at + 8].copy_from_slice(&size.to_le_bytes());
             }
         }
     }
@@ -110,7 +104,7 @@ struct Static {
 pub(super) struct Grid {
     num_points: usize,
     num_cells: usize,
-    encoder: Encoder,
+    compression: Compression,
     /// `<FieldData>` with the run id.
     field_data: String,
     points: Static,
@@ -135,11 +129,10 @@ impl Grid {
         let num_points = points.len();
         let num_cells = cells.len() / nodes_per_cell;
 
-        let encoder = Encoder::new(compression);
         let mut statics = Vec::new();
         let mut add = |name: &str, ty: &str, components: usize, raw: Vec<u8>| {
             let at = statics.len();
-            encoder.append(&mut statics, &raw, zlib::compress_once);
+            append(compression, &mut statics, &raw, zlib::compress_once);
             Static {
                 open: array_open(ty, name, components),
                 at,
@@ -187,7 +180,7 @@ impl Grid {
         Ok(Grid {
             num_points,
             num_cells,
-            encoder,
+            compression,
             field_data,
             points: points_s,
             cells: [conn, offsets, types],
@@ -204,7 +197,7 @@ impl Grid {
         let (out, appended) = (&mut self.out, &mut self.appended);
         out.clear();
         appended.clear();
-        let compressor = match self.encoder.compression {
+        let compressor = match self.compression {
             Compression::None => "",
             Compression::Zlib => " compressor=\"vtkZLibDataCompressor\"",
         };
@@ -226,7 +219,7 @@ impl Grid {
         let mut offsets = vec![0; arrays.len()];
         for (k, a) in arrays.iter().enumerate().rev() {
             offsets[k] = base + appended.len();
-            self.encoder.append(appended, &a.le_bytes(), zlib::compress);
+            append(self.compression, appended, &a.le_bytes(), zlib::compress);
         }
         for (k, a) in arrays.iter().enumerate() {
             if k == 0 {
@@ -337,7 +330,7 @@ mod tests {
     fn zlib_blocks_follow_vtk_header() {
         let raw: Vec<u8> = (0..(BLOCK * 2 + 100)).map(|i| (i % 7) as u8).collect();
         let mut out = Vec::new();
-        Encoder::new(Compression::Zlib).append(&mut out, &raw, zlib::compress);
+        append(Compression::Zlib, &mut out, &raw, zlib::compress);
         let word = |k: usize| u64::from_le_bytes(out[8 * k..8 * k + 8].try_into().unwrap());
         assert_eq!(word(0), 3);
         assert_eq!(word(1), BLOCK as u64);

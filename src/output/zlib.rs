@@ -134,12 +134,6 @@ impl Bits<'_> {
         }
     }
 
-    #[inline(always)]
-    fn literal(&mut self, byte: u8) {
-        let c = LITERALS[byte as usize];
-        self.put((c & 0xffff) as u64, c >> 16);
-    }
-
     /// Up to three literals (at most 27 bits) in one put.
     #[inline(always)]
     fn literals<const N: usize>(&mut self, b: [u8; N]) {
@@ -167,8 +161,10 @@ impl Bits<'_> {
         }
     }
 
-    /// Pads to a byte boundary and writes out what is left.
-    fn finish(self) {
+    /// The end-of-block symbol 256, then pads to a byte boundary and writes out what is left.
+    fn finish(mut self) {
+        let (code, len) = fixed_code(256);
+        self.put(code as u64, len);
         let bytes = self.n.div_ceil(8) as usize;
         self.out.extend_from_slice(&self.acc.to_le_bytes()[..bytes]);
     }
@@ -197,34 +193,25 @@ pub(super) fn compress(data: &[u8], out: &mut Vec<u8>) {
         }
         let b = data[i];
         i += 1;
-        bits.literal(b);
+        bits.literals([b]);
         if b == 0 {
             let run = data[i..].iter().take_while(|&&x| x == 0).count();
             if run >= 3 {
                 bits.repeat(run);
             } else {
                 for _ in 0..run {
-                    bits.literal(0);
+                    bits.literals([0]);
                 }
             }
             i += run;
         }
     }
-    bits.literal_end();
     bits.finish();
     if out.len() - start > stored_size(data.len()) {
         out.truncate(start);
         store(data, out);
     } else {
         out.extend_from_slice(&zlib_rs::adler32::adler32(1, data).to_be_bytes());
-    }
-}
-
-impl Bits<'_> {
-    /// The end-of-block symbol 256.
-    fn literal_end(&mut self) {
-        let (code, len) = fixed_code(256);
-        self.put(code as u64, len);
     }
 }
 

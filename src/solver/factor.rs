@@ -321,9 +321,6 @@ impl Factor {
     /// `min_split` values.
     fn with_split(a: &Sparse, last: &[usize], min_split: usize) -> Result<Self> {
         let n = a.nrows();
-        let fail = |what: &str, e: &dyn std::fmt::Debug| {
-            Error::solve(format!("{what} of K_A failed: {e:?}"))
-        };
         // Nested dissection of the other dofs, then C (ordering.rs).
         let fwd = super::ordering::constrained_last(a, last)?;
         let mut inv = vec![0; n];
@@ -341,7 +338,7 @@ impl Factor {
             SymmetricOrdering::Custom(perm),
             params,
         )
-        .map_err(|e| fail("symbolic analysis", &e))?;
+        .map_err(|e| Error::solve(format!("symbolic analysis of K_A failed: {e:?}")))?;
         let mut values = vec![0.0; symbolic.len_val()];
         {
             let mut mem = MemBuffer::new(
@@ -380,6 +377,8 @@ impl Factor {
             layout,
         })
     }
+
+    /// The number of dofs.
     pub fn dim(&self) -> usize {
         self.n
     }
