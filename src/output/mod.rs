@@ -41,7 +41,7 @@ pub mod read;
 mod vtkhdf;
 mod vtu;
 mod writer;
-mod zlib;
+pub mod zlib;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -26,7 +26,8 @@
 //! matching the leading bytes of neighbouring values of smooth fields, which is the search
 //! that costs it three times the time.
 //!
-//! Measured on the same fields: see the README's output section and `compresses_a_frame_*`.
+//! Measured by examples/bench_output.rs on the last frame of its run (figures in the README's
+//! output section).
 
 use std::io::Write as _;
 
@@ -114,27 +115,30 @@ const MATCHES: [u64; 256] = {
 /// Bytes of zlib header: deflate with a 32 KiB window, "fastest" level, no dictionary.
 const HEADER: [u8; 2] = [0x78, 0x01];
 
-/// The bits of a deflate stream under construction.
+/// The bits of a deflate stream under construction, written without a branch: every put
+/// stores the whole 64-bit accumulator at the current byte and moves on by the bytes it
+/// completed, keeping at most 7 bits (`out` holds 8 bytes of slack past any position).
 struct Bits<'a> {
-    out: &'a mut Vec<u8>,
+    out: &'a mut [u8],
+    pos: usize,
     acc: u64,
     n: u32,
 }
 
 impl Bits<'_> {
-    /// Appends the `count` ≤ 32 low bits of `bits` (`n` < 32 before and after).
+    /// Appends the `count` ≤ 56 low bits of `bits`.
     #[inline(always)]
     fn put(&mut self, bits: u64, count: u32) {
         self.acc |= bits << self.n;
         self.n += count;
-        if self.n >= 32 {
-            self.out.extend_from_slice(&(self.acc as u32).to_le_bytes());
-            self.acc >>= 32;
-            self.n -= 32;
-        }
+        self.out[self.pos..self.pos + 8].copy_from_slice(&self.acc.to_le_bytes());
+        let bytes = self.n / 8;
+        self.pos += bytes as usize;
+        self.acc >>= 8 * bytes;
+        self.n %= 8;
     }
 
-    /// Up to three literals (at most 27 bits) in one put.
+    /// Up to six literals (at most 54 bits) in one put.
     #[inline(always)]
     fn literals<const N: usize>(&mut self, b: [u8; N]) {
         let mut bits = 0u64;
@@ -161,41 +165,53 @@ impl Bits<'_> {
         }
     }
 
-    /// The end-of-block symbol 256, then pads to a byte boundary and writes out what is left.
-    fn finish(mut self) {
+    /// The end-of-block symbol 256, padded to a byte boundary: the stream's length in bytes.
+    fn finish(mut self) -> usize {
         let (code, len) = fixed_code(256);
         self.put(code as u64, len);
-        let bytes = self.n.div_ceil(8) as usize;
-        self.out.extend_from_slice(&self.acc.to_le_bytes()[..bytes]);
+        self.pos + self.n.div_ceil(8) as usize
     }
 }
 
-/// Appends one zlib stream of `data` to `out`.
-pub(super) fn compress(data: &[u8], out: &mut Vec<u8>) {
+/// Appends one zlib stream of `data` to `out` (public for examples/bench_output.rs).
+pub fn compress(data: &[u8], out: &mut Vec<u8>) {
     let start = out.len();
-    out.reserve(data.len() + data.len() / 8 + 16);
-    out.extend_from_slice(&HEADER);
-    let mut bits = Bits { out, acc: 0, n: 0 };
+    // The stream is stored if it would be longer than this; slack for the puts past it (an
+    // iteration adds at most 9 bytes, a put stores 8).
+    let limit = stored_size(data.len());
+    out.resize(start + limit + 32, 0);
+    out[start..start + 2].copy_from_slice(&HEADER);
+    let mut bits = Bits {
+        out: &mut out[start + 2..],
+        pos: 0,
+        acc: 0,
+        n: 0,
+    };
     // BFINAL = 1, BTYPE = 01 (fixed Huffman codes).
     bits.put(0b011, 3);
     let mut i = 0;
-    while i < data.len() {
-        if let Some(word) = data.get(i..i + 8) {
-            let w = u64::from_le_bytes(word.try_into().expect("8 bytes"));
-            if !has_zero_byte(w) {
+    while i < data.len() && bits.pos <= limit {
+        if let Some(w) = word(data, i) {
+            let zeros = zero_bytes(w);
+            if zeros == 0 {
                 let [a, b, c, d, e, f, g, h] = w.to_le_bytes();
-                bits.literals([a, b, c]);
-                bits.literals([d, e, f]);
-                bits.literals([g, h]);
+                bits.literals([a, b, c, d]);
+                bits.literals([e, f, g, h]);
                 i += 8;
                 continue;
             }
+            // The bytes before the word's first zero.
+            let first = (zeros.trailing_zeros() / 8) as usize;
+            for &b in &data[i..i + first] {
+                bits.literals([b]);
+            }
+            i += first;
         }
         let b = data[i];
         i += 1;
         bits.literals([b]);
         if b == 0 {
-            let run = data[i..].iter().take_while(|&&x| x == 0).count();
+            let run = zero_run(&data[i..]);
             if run >= 3 {
                 bits.repeat(run);
             } else {
@@ -206,11 +222,12 @@ pub(super) fn compress(data: &[u8], out: &mut Vec<u8>) {
             i += run;
         }
     }
-    bits.finish();
-    if out.len() - start > stored_size(data.len()) {
+    let len = 2 + bits.finish();
+    if i < data.len() || len + 4 > limit {
         out.truncate(start);
         store(data, out);
     } else {
+        out.truncate(start + len);
         out.extend_from_slice(&zlib_rs::adler32::adler32(1, data).to_be_bytes());
     }
 }
@@ -224,12 +241,33 @@ pub(super) fn compress_once(data: &[u8], out: &mut Vec<u8>) {
     z.finish().expect("writing to memory cannot fail");
 }
 
-/// Whether a word has a zero byte (the classic bit trick: exact, no false positives).
+/// The 8 bytes of `data` at `i`, little-endian, if there are 8.
 #[inline(always)]
-fn has_zero_byte(w: u64) -> bool {
+fn word(data: &[u8], i: usize) -> Option<u64> {
+    let bytes = data.get(i..i + 8)?;
+    Some(u64::from_le_bytes(bytes.try_into().expect("8 bytes")))
+}
+
+/// The high bit of every zero byte of `w` set, others clear, except that bits above the
+/// first zero byte may be set too (the classic bit trick: the lowest set bit is exact).
+#[inline(always)]
+fn zero_bytes(w: u64) -> u64 {
     const LO: u64 = 0x0101_0101_0101_0101;
     const HI: u64 = 0x8080_8080_8080_8080;
-    w.wrapping_sub(LO) & !w & HI != 0
+    w.wrapping_sub(LO) & !w & HI
+}
+
+/// The number of leading zero bytes of `data`, a word at a time.
+#[inline(always)]
+fn zero_run(data: &[u8]) -> usize {
+    let mut r = 0;
+    while let Some(w) = word(data, r) {
+        if w != 0 {
+            return r + (w.trailing_zeros() / 8) as usize;
+        }
+        r += 8;
+    }
+    r + data[r..].iter().take_while(|&&x| x == 0).count()
 }
 
 /// Bytes of a zlib stream of `n` bytes in stored blocks.
