@@ -2,11 +2,12 @@
 //! step's velocity w_n, displacement u_n, memory m_n and multipliers z_n.
 
 use std::path::Path;
+use std::sync::Arc;
 
-use super::{Field, Frame, Geometry, Options, Series};
+use super::{Geometry, Options, OwnedField, Series};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
-use crate::scene::Scene;
+use crate::scene::Model;
 use crate::solver::Rows;
 use crate::time_loop::Step;
 use crate::Result;
@@ -48,68 +49,93 @@ pub fn region(mesh: &Mesh) -> Vec<i32> {
 }
 
 impl Series {
-    /// Writes the frame of step `step`; `active[i]` says whether contact/friction row block
-    /// `i` is active (the run's state flags). Fields not chosen are not computed.
+    /// Hands the frame of step `step` to the writer thread; `active[i]` says whether
+    /// contact/friction row block `i` is active (the run's state flags). The time loop only
+    /// copies the step's state (w, u, m, z: a few hundred kB at h = 1/128); the fields are
+    /// computed on the writer thread, which shares `disc` and `rows`. Fields not chosen are
+    /// not computed.
     pub fn write_step(
         &mut self,
-        disc: &Discretization,
-        scene: &Scene,
-        rows: &Rows,
+        disc: &Arc<Discretization>,
+        model: Model,
+        rows: &Arc<Rows>,
         step: &Step,
         active: &[bool],
     ) -> Result<()> {
-        let nn = disc.nodes.len();
-        let u = disc.nodal(step.u);
-        let w = disc.nodal(step.w);
-        let (stress, von_mises) =
-            if self.options().wants("stress") || self.options().wants("von_mises") {
-                disc.stress(step.w, step.u, step.m, scene.model)
-            } else {
-                (Vec::new(), Vec::new())
-            };
-        // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and
-        // the friction traction γ_i / ∫φ_i: a scalar along τ_i in 2D, the tangential vector
-        // Σ_k γ_ik τ_ik / ∫φ_i in 3D.
-        let fc = if disc.dim == 2 { 1 } else { 3 };
-        let mut pressure = vec![0.0; nn];
-        let mut friction = vec![0.0; fc * nn];
-        let mut state = vec![0.0; nn];
-        for ((i, r), &on) in rows.rows.iter().enumerate().zip(active) {
-            if i < rows.n_contact {
-                pressure[r.node] = step.z[i] / r.area;
-            } else if fc == 1 {
-                friction[r.node] = step.z[i] / r.area;
-            } else {
-                for (k, t) in r.dir.iter().enumerate() {
-                    friction[3 * r.node + k] += step.z[i] * t / r.area;
-                }
-            }
-            if on {
-                state[r.node] = 1.0;
-            }
-        }
-        let field = |name, components, values| Field {
-            name,
-            components,
-            values,
-        };
-        let mut cell_data = Vec::new();
-        if !stress.is_empty() {
-            cell_data.push(field("stress", 6, &stress[..]));
-            cell_data.push(field("von_mises", 1, &von_mises[..]));
-        }
-        self.write(&Frame {
-            step: step.n,
-            time: step.t,
-            point_data: vec![
-                field("displacement", 3, &u),
-                field("velocity", 3, &w),
-                field("contact_pressure", 1, &pressure),
-                field("friction_traction", fc, &friction),
-                field("contact_state", 1, &state),
-            ],
-            cell_data,
+        let (disc, rows) = (Arc::clone(disc), Arc::clone(rows));
+        let (w, u, m, z) = (
+            step.w.to_vec(),
+            step.u.to_vec(),
+            step.m.map(<[f64]>::to_vec),
+            step.z.to_vec(),
+        );
+        let active = active.to_vec();
+        let stress = self.options().wants("stress") || self.options().wants("von_mises");
+        self.write_with(step.n, step.t, move || {
+            fields(
+                &disc,
+                model,
+                &rows,
+                &active,
+                stress,
+                [&w, &u, &z],
+                m.as_deref(),
+            )
         })?;
         Ok(())
     }
+}
+
+/// The fields of a step's frame (DESIGN.md "Output of run"): point fields, then cell fields
+/// (the stress and von Mises stress when `stress`), from `[w, u, z]` and m.
+fn fields(
+    disc: &Discretization,
+    model: Model,
+    rows: &Rows,
+    active: &[bool],
+    stress: bool,
+    [w, u, z]: [&[f64]; 3],
+    m: Option<&[f64]>,
+) -> (Vec<OwnedField>, Vec<OwnedField>) {
+    let nn = disc.nodes.len();
+    // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and the
+    // friction traction γ_i / ∫φ_i: a scalar along τ_i in 2D, the tangential vector
+    // Σ_k γ_ik τ_ik / ∫φ_i in 3D.
+    let fc = if disc.dim == 2 { 1 } else { 3 };
+    let mut pressure = vec![0.0; nn];
+    let mut friction = vec![0.0; fc * nn];
+    let mut state = vec![0.0; nn];
+    for ((i, r), &on) in rows.rows.iter().enumerate().zip(active) {
+        if i < rows.n_contact {
+            pressure[r.node] = z[i] / r.area;
+        } else if fc == 1 {
+            friction[r.node] = z[i] / r.area;
+        } else {
+            for (k, t) in r.dir.iter().enumerate() {
+                friction[3 * r.node + k] += z[i] * t / r.area;
+            }
+        }
+        if on {
+            state[r.node] = 1.0;
+        }
+    }
+    let field = |name: &str, components, values| OwnedField {
+        name: name.to_string(),
+        components,
+        values,
+    };
+    let mut cell_data = Vec::new();
+    if stress {
+        let (stress, von_mises) = disc.stress(w, u, m, model);
+        cell_data.push(field("stress", 6, stress));
+        cell_data.push(field("von_mises", 1, von_mises));
+    }
+    let point_data = vec![
+        field("displacement", 3, disc.nodal(u)),
+        field("velocity", 3, disc.nodal(w)),
+        field("contact_pressure", 1, pressure),
+        field("friction_traction", fc, friction),
+        field("contact_state", 1, state),
+    ];
+    (point_data, cell_data)
 }

@@ -18,8 +18,10 @@
 //!
 //! Frames are encoded and written on a background thread ([`writer`]): the time loop hands
 //! over a frame's values and goes on; it waits only when two frames are already queued. A
-//! write that failed stops the run at the next [`Series::write`] or at [`Series::finish`],
-//! naming the file.
+//! run's frames are computed there too ([`Series::write_with`], `frame.rs`): the time loop
+//! copies the step's state (w, u, m, z), the thread makes the fields (nodal values, stress,
+//! contact tractions). A write that failed stops the run at the next [`Series::write`] or at
+//! [`Series::finish`], naming the file.
 //!
 //! Field conventions (the caller's, checked only for sizes):
 //! - vectors have 3 components, z = 0 in 2D;
@@ -43,6 +45,7 @@ mod vtu;
 mod writer;
 pub mod zlib;
 
+use std::borrow::Cow;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -201,12 +204,19 @@ impl Array {
         }
     }
 
-    /// The values' little-endian bytes.
-    fn le_bytes(&self) -> Vec<u8> {
-        match &self.values {
+    /// The values' little-endian bytes: the values' own memory on a little-endian machine
+    /// (a frame's 3 MB are not copied once more), a copy elsewhere.
+    fn le_bytes(&self) -> Cow<'_, [u8]> {
+        if cfg!(target_endian = "little") {
+            return match &self.values {
+                Values::F64(v) => Cow::Borrowed(bytemuck::cast_slice(v)),
+                Values::F32(v) => Cow::Borrowed(bytemuck::cast_slice(v)),
+            };
+        }
+        Cow::Owned(match &self.values {
             Values::F64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
             Values::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-        }
+        })
     }
 }
 
@@ -221,6 +231,28 @@ pub struct Field<'a> {
     pub name: &'a str,
     pub components: usize,
     pub values: &'a [f64],
+}
+
+/// A field that owns its values (see [`Series::write_with`]).
+#[derive(Clone, Debug)]
+pub struct OwnedField {
+    pub name: String,
+    pub components: usize,
+    pub values: Vec<f64>,
+}
+
+impl OwnedField {
+    /// The array of the field in the chosen precision (Float64 keeps the values).
+    fn array(self, precision: Precision) -> Array {
+        Array {
+            name: self.name,
+            components: self.components,
+            values: match precision {
+                Precision::Float64 => Values::F64(self.values),
+                Precision::Float32 => Values::F32(self.values.iter().map(|&x| x as f32).collect()),
+            },
+        }
+    }
 }
 
 /// One output step.
@@ -404,52 +436,112 @@ impl Series {
     /// field with 0 components or a repeated or empty name, or a non-finite time →
     /// `Error::Input`; a failed write of an earlier frame → that error, naming its file.
     pub fn write(&mut self, frame: &Frame) -> Result<PathBuf> {
-        if !frame.time.is_finite() {
+        let path = self.path(frame.step, frame.time)?;
+        let (points, cells) = self.sizes;
+        let owned = |fields: &[Field], count, what| {
+            check_fields(
+                fields
+                    .iter()
+                    .map(|f| (f.name, f.components, f.values.len())),
+                count,
+                what,
+            )
+            .map_err(|msg| frame_error(&path, frame.step, msg))?;
+            Ok::<_, Error>(
+                fields
+                    .iter()
+                    .filter(|f| self.options.wants(f.name))
+                    .map(|f| OwnedField {
+                        name: f.name.to_string(),
+                        components: f.components,
+                        values: f.values.to_vec(),
+                    })
+                    .collect::<Vec<_>>(),
+            )
+        };
+        let fields = (
+            owned(&frame.point_data, points, "point")?,
+            owned(&frame.cell_data, cells, "cell")?,
+        );
+        self.send(frame.step, frame.time, path, move || fields)
+    }
+
+    /// As [`Series::write`], for fields that `make` computes on the writer thread: (point
+    /// fields, cell fields). A run's frames go this way, so that the time loop only copies
+    /// the state of a step. The fields' sizes are checked on the thread: a wrong one is the
+    /// error of the next write or of [`Series::finish`].
+    pub fn write_with(
+        &mut self,
+        step: usize,
+        time: f64,
+        make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
+    ) -> Result<PathBuf> {
+        let path = self.path(step, time)?;
+        self.send(step, time, path, make)
+    }
+
+    /// The file of step `step`'s frame; a non-finite time is an input error.
+    fn path(&self, step: usize, time: f64) -> Result<PathBuf> {
+        if !time.is_finite() {
             return Err(Error::input(format!(
-                "output step {}: time {} is not a finite number",
-                frame.step, frame.time
+                "output step {step}: time {time} is not a finite number"
             )));
         }
-        let name = match self.sink {
-            Sink::Vtu(_) => vtu_name(frame.step),
+        Ok(self.dir.join(match self.sink {
+            Sink::Vtu(_) => vtu_name(step),
             Sink::Vtkhdf { .. } => VTKHDF_NAME.to_string(),
-        };
-        let path = self.dir.join(&name);
-        let (points, cells) = self.sizes;
-        let arrays = |fields: &[Field], count, what| {
-            check_fields(fields, count, what)
-                .map(|()| {
+        }))
+    }
+
+    /// Lists the frame and queues it: the thread makes its fields, checks them and keeps
+    /// those chosen, in the chosen precision.
+    fn send(
+        &mut self,
+        step: usize,
+        time: f64,
+        path: PathBuf,
+        make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
+    ) -> Result<PathBuf> {
+        let (options, sizes, at) = (self.options.clone(), self.sizes, path.clone());
+        let arrays = move || {
+            let (points, cells) = make();
+            let arrays = |fields: Vec<OwnedField>, count, what| {
+                let sizes = fields
+                    .iter()
+                    .map(|f| (&f.name[..], f.components, f.values.len()));
+                check_fields(sizes, count, what).map_err(|msg| frame_error(&at, step, msg))?;
+                Ok::<_, Error>(
                     fields
-                        .iter()
-                        .filter(|f| self.options.wants(f.name))
-                        .map(|f| self.array(f))
-                        .collect::<Vec<_>>()
-                })
-                .map_err(|msg| {
-                    Error::input(format!(
-                        "{} (output step {}): {msg}",
-                        path.display(),
-                        frame.step
-                    ))
-                })
+                        .into_iter()
+                        .filter(|f| options.wants(&f.name))
+                        .map(|f| f.array(options.precision))
+                        .collect::<Vec<_>>(),
+                )
+            };
+            Ok((
+                arrays(points, sizes.0, "point")?,
+                arrays(cells, sizes.1, "cell")?,
+            ))
         };
-        let point_data = arrays(&frame.point_data, points, "point")?;
-        let cell_data = arrays(&frame.cell_data, cells, "cell")?;
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
         match &mut self.sink {
             Sink::Vtu(writer) => {
                 // Steps normally increase: only an older step can already be listed.
                 let newer = self
                     .files
                     .last()
-                    .is_none_or(|(_, f)| step_of(f) < Some(frame.step));
+                    .is_none_or(|(_, f)| step_of(f) < Some(step));
                 let listed = if newer {
                     None
                 } else {
                     self.files.iter_mut().find(|(_, f)| *f == name)
                 };
                 match listed {
-                    Some(entry) => entry.0 = frame.time,
-                    None => self.files.push((frame.time, name)),
+                    Some(entry) => entry.0 = time,
+                    None => self.files.push((time, name)),
                 }
                 let due = self.pvd_written.is_none_or(|t| t.elapsed() >= PVD_EVERY);
                 self.pvd_stale = !due;
@@ -457,28 +549,35 @@ impl Series {
                     self.pvd_written = Some(Instant::now());
                 }
                 let pvd = due.then(|| collection(&self.dir, &self.files, &self.run_id));
-                writer.send(vtu::Job {
-                    vtu: Some(vtu::Vtu {
-                        path: path.clone(),
-                        point_data,
-                        cell_data,
-                    }),
-                    pvd,
-                })?;
+                let file = path.clone();
+                writer.send(Box::new(move || {
+                    let (point_data, cell_data) = arrays()?;
+                    Ok(vtu::Job {
+                        vtu: Some(vtu::Vtu {
+                            path: file,
+                            point_data,
+                            cell_data,
+                        }),
+                        pvd,
+                    })
+                }))?;
             }
             Sink::Vtkhdf { steps, writer } => {
-                let index = steps.iter().take_while(|&&s| s < frame.step).count();
+                let index = steps.iter().take_while(|&&s| s < step).count();
                 steps.truncate(index);
-                steps.push(frame.step);
+                steps.push(step);
                 self.files.truncate(index);
-                self.files.push((frame.time, name));
-                writer.send(vtkhdf::Job {
-                    index,
-                    step: frame.step,
-                    time: frame.time,
-                    point_data,
-                    cell_data,
-                })?;
+                self.files.push((time, name));
+                writer.send(Box::new(move || {
+                    let (point_data, cell_data) = arrays()?;
+                    Ok(vtkhdf::Job {
+                        index,
+                        step,
+                        time,
+                        point_data,
+                        cell_data,
+                    })
+                }))?;
             }
         }
         Ok(path)
@@ -492,24 +591,12 @@ impl Series {
             self.pvd_written = Some(Instant::now());
             let pvd = Some(collection(&self.dir, &self.files, &self.run_id));
             if let Sink::Vtu(writer) = &mut self.sink {
-                writer.send(vtu::Job { vtu: None, pvd })?;
+                writer.send(Box::new(move || Ok(vtu::Job { vtu: None, pvd })))?;
             }
         }
         match &mut self.sink {
             Sink::Vtu(writer) => writer.finish(),
             Sink::Vtkhdf { writer, .. } => writer.finish(),
-        }
-    }
-
-    /// A field in the chosen precision.
-    fn array(&self, f: &Field) -> Array {
-        Array {
-            name: f.name.to_string(),
-            components: f.components,
-            values: match self.options.precision {
-                Precision::Float64 => Values::F64(f.values.to_vec()),
-                Precision::Float32 => Values::F32(f.values.iter().map(|&x| x as f32).collect()),
-            },
         }
     }
 
@@ -556,25 +643,35 @@ fn other_run(at: &Path, stored: &str, run_id: &str) -> Error {
     ))
 }
 
-/// Checks sizes and names of the fields of one kind (`what` = "point" or "cell").
-fn check_fields(fields: &[Field], count: usize, what: &str) -> std::result::Result<(), String> {
-    for (k, f) in fields.iter().enumerate() {
-        if f.name.is_empty() {
+/// Checks sizes and names of the fields of one kind (`what` = "point" or "cell"), given as
+/// (name, components, number of values).
+fn check_fields<'f>(
+    fields: impl Iterator<Item = (&'f str, usize, usize)>,
+    count: usize,
+    what: &str,
+) -> std::result::Result<(), String> {
+    let mut names = Vec::new();
+    for (k, (name, components, len)) in fields.enumerate() {
+        if name.is_empty() {
             return Err(format!("{what} field #{k} has an empty name"));
         }
-        if fields[..k].iter().any(|g| g.name == f.name) {
-            return Err(format!("{what} field `{}` is given twice", f.name));
+        if names.contains(&name) {
+            return Err(format!("{what} field `{name}` is given twice"));
         }
-        if f.components == 0 || f.values.len() != f.components * count {
+        names.push(name);
+        if components == 0 || len != components * count {
             return Err(format!(
-                "{what} field `{}` has {} values, expected {} components × {count} {what}s",
-                f.name,
-                f.values.len(),
-                f.components
+                "{what} field `{name}` has {len} values, expected {components} components × \
+                 {count} {what}s"
             ));
         }
     }
     Ok(())
+}
+
+/// The input error of a frame's field.
+fn frame_error(path: &Path, step: usize, msg: String) -> Error {
+    Error::input(format!("{} (output step {step}): {msg}", path.display()))
 }
 
 /// The step number encoded in a `solution_NNNNNN.vtu` name.
@@ -592,6 +689,11 @@ fn step_of(file: &str) -> Option<usize> {
 /// are not fsync'ed: the rename makes a process crash safe, which is what a run needs; the
 /// output of a run is reproducible and a power failure is out of scope. Errors name `path`.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic_parts(path, &[bytes])
+}
+
+/// [`write_atomic`] of the concatenation of `parts`, which are not copied together first.
+fn write_atomic_parts(path: &Path, parts: &[&[u8]]) -> Result<()> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let file_name = path.file_name().ok_or_else(|| {
         Error::io(
@@ -608,7 +710,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = path.with_file_name(tmp_name);
     let result = (|| {
         let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(bytes)?;
+        for part in parts {
+            file.write_all(part)?;
+        }
         file.flush()?;
         drop(file);
         std::fs::rename(&tmp, path)

@@ -40,7 +40,7 @@ use std::io::Write as _;
 use std::path::PathBuf;
 
 use super::writer::Sink;
-use super::{write_atomic, zlib, Array, Compression, Geometry};
+use super::{write_atomic, write_atomic_parts, zlib, Array, Compression, Geometry};
 use crate::Result;
 
 /// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
@@ -191,9 +191,10 @@ impl Grid {
         })
     }
 
-    /// The whole `.vtu` file for these fields (valid until the next call); sizes were
-    /// checked by the caller.
-    pub(super) fn encode(&mut self, point_data: &[Array], cell_data: &[Array]) -> &[u8] {
+    /// The whole `.vtu` file for these fields in four parts (valid until the next call): the
+    /// XML up to the appended data, the mesh, the fields, the end. Sizes were checked by the
+    /// caller.
+    pub(super) fn encode(&mut self, point_data: &[Array], cell_data: &[Array]) -> [&[u8]; 4] {
         let (out, appended) = (&mut self.out, &mut self.appended);
         out.clear();
         appended.clear();
@@ -256,10 +257,12 @@ impl Grid {
         out.extend_from_slice(
             b"      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _",
         );
-        out.extend_from_slice(&self.statics);
-        out.extend_from_slice(appended);
-        out.extend_from_slice(b"\n  </AppendedData>\n</VTKFile>\n");
-        &self.out
+        [
+            &self.out,
+            &self.statics,
+            &self.appended,
+            b"\n  </AppendedData>\n</VTKFile>\n",
+        ]
     }
 }
 
@@ -269,7 +272,7 @@ impl Sink for Grid {
     /// The `.vtu` (temporary file + rename), then the `.pvd` (likewise).
     fn write(&mut self, job: Job) -> Result<()> {
         if let Some(v) = job.vtu {
-            write_atomic(&v.path, self.encode(&v.point_data, &v.cell_data))?;
+            write_atomic_parts(&v.path, &self.encode(&v.point_data, &v.cell_data))?;
         }
         match job.pvd {
             Some((path, text)) => write_atomic(&path, text.as_bytes()),

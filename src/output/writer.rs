@@ -1,5 +1,5 @@
-//! The writer thread of a series: encodes frames (compression is the expensive part) and
-//! writes them, off the time loop.
+//! The writer thread of a series: computes frames' fields from a step's state, encodes them
+//! (compression is the expensive part) and writes them, off the time loop.
 //!
 //! The queue holds [`QUEUE`] frames: the time loop waits only when the disk or the
 //! compressor falls that far behind, which bounds the memory held by frames in flight. The
@@ -29,6 +29,10 @@ pub(super) trait Sink: Send + 'static {
     fn close(&mut self) -> Result<()>;
 }
 
+/// A frame as the time loop hands it over: what makes the sink's job on the writer thread
+/// (a step's fields are computed there, from copies of its state).
+pub(super) type Make<J> = Box<dyn FnOnce() -> Result<J> + Send>;
+
 /// The thread hands the sink back when it ends, so that a finished series can be written to
 /// again (the thread is started on demand).
 type Thread<S> = JoinHandle<(Box<S>, Result<()>)>;
@@ -36,7 +40,7 @@ type Thread<S> = JoinHandle<(Box<S>, Result<()>)>;
 pub(super) struct Writer<S: Sink> {
     /// The sink while no thread runs (boxed: a sink holds the mesh).
     sink: Option<Box<S>>,
-    tx: Option<SyncSender<S::Job>>,
+    tx: Option<SyncSender<Make<S::Job>>>,
     thread: Option<Thread<S>>,
 }
 
@@ -49,19 +53,19 @@ impl<S: Sink> Writer<S> {
         }
     }
 
-    /// Queues a frame (waits while the queue is full). Errors: the failed write of an
-    /// earlier frame.
-    pub(super) fn send(&mut self, job: S::Job) -> Result<()> {
+    /// Queues a frame (waits while the queue is full); the thread calls `make` and writes
+    /// its job. Errors: the failed write of an earlier frame.
+    pub(super) fn send(&mut self, make: Make<S::Job>) -> Result<()> {
         if let Some(mut sink) = self.sink.take() {
-            let (tx, rx) = sync_channel::<S::Job>(QUEUE);
+            let (tx, rx) = sync_channel::<Make<S::Job>>(QUEUE);
             self.tx = Some(tx);
             self.thread = Some(std::thread::spawn(move || {
-                let written = rx.iter().try_for_each(|job| sink.write(job));
+                let written = rx.iter().try_for_each(|make| sink.write(make()?));
                 let closed = sink.close();
                 (sink, written.and(closed))
             }));
         }
-        let sent = self.tx.as_ref().is_some_and(|tx| tx.send(job).is_ok());
+        let sent = self.tx.as_ref().is_some_and(|tx| tx.send(make).is_ok());
         if sent {
             return Ok(());
         }

@@ -18,6 +18,7 @@ use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
 use crate::time_loop::{Step, TimeLoop};
 use crate::Result;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// A solved step n as the consumers see it.
@@ -96,7 +97,9 @@ impl Statistics {
 /// The ParaView series: a frame at every `output.every`-th step and at the last.
 pub(super) struct Frames<'a> {
     pub series: Series,
-    pub disc: &'a Discretization,
+    /// Shared with the writer thread, which computes the frames' fields.
+    pub disc: Arc<Discretization>,
+    pub rows: Arc<Rows>,
     pub scene: &'a Scene,
 }
 
@@ -105,7 +108,7 @@ impl Frames<'_> {
         if s.step.n.is_multiple_of(self.scene.output_every) || s.last {
             let flags = state_flags(s.rows, &s.step);
             self.series
-                .write_step(self.disc, self.scene, s.rows, &s.step, &flags)?;
+                .write_step(&self.disc, self.scene.model, &self.rows, &s.step, &flags)?;
         }
         Ok(())
     }

@@ -31,6 +31,7 @@ use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Frames, Progress, Solved, Statistics};
 use dir::DirLock;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 use summary::{summary_json, Ending};
 
@@ -123,7 +124,8 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "run")?;
     let mesh = read_mesh(&scene)?;
-    let disc = Discretization::new(&mesh, &scene)?;
+    // Shared with the frame writer's thread (output::frame).
+    let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
     let tl = TimeLoop::new(&scene, &disc)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
@@ -172,7 +174,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
             checkpoint_path.display()
         ))
     })?;
-    let disc = Discretization::new(&mesh, &scene)?;
+    let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     cp.check(&scene, &mesh, &disc)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     crate::resources::Estimate::new(&scene, &disc, cp.n).check(&out)?;
@@ -214,7 +216,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
 struct Drive<'a> {
     scene: &'a Scene,
     mesh: &'a Mesh,
-    disc: &'a Discretization,
+    disc: &'a Arc<Discretization>,
     tl: TimeLoop<'a>,
     series: Series,
     writer: checkpoint::Writer,
@@ -240,12 +242,13 @@ enum End {
 /// The time loop of a run with its consumers, then summary.json however the run ended.
 fn drive(d: Drive) -> Result<Outcome> {
     let mut tl = d.tl;
-    let rows = tl.rows.clone();
+    let rows = Arc::new(tl.rows.clone());
     let mut consumers = Consumers {
         statistics: Statistics::new(d.log),
         frames: Frames {
             series: d.series,
-            disc: d.disc,
+            disc: Arc::clone(d.disc),
+            rows: Arc::clone(&rows),
             scene: d.scene,
         },
         checkpoints: Checkpoints::new(d.writer, d.scene),
