@@ -385,36 +385,24 @@ impl Discretization {
                 }
             }
         }
-        let mut s6 = Vec::with_capacity(6 * self.cells.len());
-        let mut vm = Vec::with_capacity(self.cells.len());
-        for t in &self.cells {
-            let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
-            let mut tr = 0.0;
-            for (g, &n) in t.grad.iter().zip(t.vertices()) {
-                for (row, gk) in g_p.iter_mut().zip(g) {
-                    for (x, pk) in row.iter_mut().zip(&p[n]) {
-                        *x += gk * pk;
-                    }
-                }
-                tr += g[0] * q[n][0] + g[1] * q[n][1] + g[2] * q[n][2];
-            }
-            let sym = |a: usize, b: usize| g_p[a][b] + g_p[b][a];
-            let mut s = [
-                sym(0, 0) + tr,
-                sym(1, 1) + tr,
-                sym(2, 2) + tr,
-                sym(0, 1),
-                sym(1, 2),
-                sym(0, 2),
-            ];
-            if model == Model::PlaneStress {
+        let mut s6 = vec![0.0; 6 * self.cells.len()];
+        match d {
+            2 => cell_stresses::<2>(&self.cells, &p, &q, &mut s6),
+            _ => cell_stresses::<3>(&self.cells, &p, &q, &mut s6),
+        }
+        if model == Model::PlaneStress {
+            for s in s6.chunks_exact_mut(6) {
                 s[2] = 0.0;
             }
-            s6.extend_from_slice(&s);
-            let (dx, dy, dz) = (s[0] - s[1], s[1] - s[2], s[2] - s[0]);
-            let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
-            vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt());
         }
+        let vm = s6
+            .chunks_exact(6)
+            .map(|s| {
+                let (dx, dy, dz) = (s[0] - s[1], s[1] - s[2], s[2] - s[0]);
+                let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
+                (0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt()
+            })
+            .collect();
         (s6, vm)
     }
 
@@ -440,6 +428,33 @@ impl Discretization {
     /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
         p1_norms(&self.cells, &nodal_vectors::<3>(self, v))
+    }
+}
+
+/// σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I of every cell (XX YY ZZ XY YZ XZ
+/// into `out`), for cells of dimension D: the z entries of ∇φ_i and of p_i, q_i are zero in
+/// 2D, so only D × D products are formed.
+fn cell_stresses<const D: usize>(cells: &[Cell], p: &[[f64; 3]], q: &[[f64; 3]], out: &mut [f64]) {
+    for (t, s) in cells.iter().zip(out.chunks_exact_mut(6)) {
+        let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
+        let mut tr = 0.0;
+        for (g, &n) in t.grad[..=D].iter().zip(&t.nodes[..=D]) {
+            for a in 0..D {
+                for b in 0..D {
+                    g_p[a][b] += g[a] * p[n][b];
+                }
+                tr += g[a] * q[n][a];
+            }
+        }
+        let sym = |a: usize, b: usize| g_p[a][b] + g_p[b][a];
+        s.copy_from_slice(&[
+            sym(0, 0) + tr,
+            sym(1, 1) + tr,
+            sym(2, 2) + tr,
+            sym(0, 1),
+            sym(1, 2),
+            sym(0, 2),
+        ]);
     }
 }
 
