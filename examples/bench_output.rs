@@ -10,13 +10,14 @@
 //! 32 KiB blocks, through `output::zlib::compress` and through zlib-rs at level 1 (flate2),
 //! best of 20.
 //!
-//! Run: `cargo run --release --example bench_output [REPEAT]` (from the repository root).
+//! Run: `cargo build --release && cargo run --release --example bench_output [REPEAT]` (from
+//! the repository root; the runs are processes of target/release/viscontact).
 
 use std::io::Write;
 use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::Instant;
 use viscontact::output::{read::read_vtu, zlib};
-use viscontact::run::{run, RunOptions};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -45,6 +46,10 @@ fn main() {
         ("every step, none (raw)", &["output.compression=none"]),
         ("every step, vtkhdf (zlib)", &["output.format=vtkhdf"]),
     ];
+    // Each run is a process of its own, as a user runs it (runs in one process shared its
+    // heap and were slower with frames, faster without).
+    let bin = Path::new("target/release/viscontact");
+    assert!(bin.exists(), "build the binary first: cargo build --release");
     let tmp = tempfile::tempdir().unwrap();
     let mut times = vec![Vec::new(); configs.len()];
     let mut sizes = vec![(0, 0); configs.len()];
@@ -52,18 +57,15 @@ fn main() {
         for (i, (_, set)) in configs.iter().enumerate() {
             let out = tmp.path().join(format!("c{i}"));
             let _ = std::fs::remove_dir_all(&out);
-            let opts = RunOptions {
-                out: Some(out.clone()),
-                overrides: base
-                    .iter()
-                    .chain(set.iter())
-                    .map(|s| s.to_string())
-                    .collect(),
-                ..RunOptions::default()
-            };
+            let mut cmd = Command::new(&bin);
+            cmd.args(["run", "examples/paper.toml", "--quiet", "--out"]).arg(&out);
+            for s in base.iter().chain(set.iter()) {
+                cmd.args(["--set", s]);
+            }
             let t = Instant::now();
-            run(Path::new("examples/paper.toml"), &opts).unwrap();
+            let status = cmd.stdout(Stdio::null()).status().unwrap();
             times[i].push(t.elapsed().as_secs_f64());
+            assert!(status.success(), "{} failed", bin.display());
             let series = dir_size(&out);
             let last = std::fs::metadata(out.join("solution_000128.vtu"))
                 .map_or(series / 129, |m| m.len());
