@@ -385,7 +385,7 @@ impl Discretization {
                 }
             }
         }
-        let mut s6 = vec![0.0; 6 * self.cells.len()];
+        let mut s6 = Vec::with_capacity(6 * self.cells.len());
         match d {
             2 => cell_stresses::<2>(&self.cells, &p, &q, &mut s6),
             _ => cell_stresses::<3>(&self.cells, &p, &q, &mut s6),
@@ -432,10 +432,15 @@ impl Discretization {
 }
 
 /// σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I of every cell (XX YY ZZ XY YZ XZ
-/// into `out`), for cells of dimension D: the z entries of ∇φ_i and of p_i, q_i are zero in
+/// appended to `out`), for cells of dimension D: the z entries of ∇φ_i and of p_i, q_i are zero in
 /// 2D, so only D × D products are formed.
-fn cell_stresses<const D: usize>(cells: &[Cell], p: &[[f64; 3]], q: &[[f64; 3]], out: &mut [f64]) {
-    for (t, s) in cells.iter().zip(out.chunks_exact_mut(6)) {
+fn cell_stresses<const D: usize>(
+    cells: &[Cell],
+    p: &[[f64; 3]],
+    q: &[[f64; 3]],
+    out: &mut Vec<f64>,
+) {
+    for t in cells {
         let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
         let mut tr = 0.0;
         for (g, &n) in t.grad[..=D].iter().zip(&t.nodes[..=D]) {
@@ -447,7 +452,7 @@ fn cell_stresses<const D: usize>(cells: &[Cell], p: &[[f64; 3]], q: &[[f64; 3]],
             }
         }
         let sym = |a: usize, b: usize| g_p[a][b] + g_p[b][a];
-        s.copy_from_slice(&[
+        out.extend_from_slice(&[
             sym(0, 0) + tr,
             sym(1, 1) + tr,
             sym(2, 2) + tr,
