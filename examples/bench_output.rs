@@ -49,7 +49,10 @@ fn main() {
     // Each run is a process of its own, as a user runs it (runs in one process shared its
     // heap and were slower with frames, faster without).
     let bin = Path::new("target/release/viscontact");
-    assert!(bin.exists(), "build the binary first: cargo build --release");
+    assert!(
+        bin.exists(),
+        "build the binary first: cargo build --release"
+    );
     let tmp = tempfile::tempdir().unwrap();
     let mut times = vec![Vec::new(); configs.len()];
     let mut sizes = vec![(0, 0); configs.len()];
@@ -57,8 +60,9 @@ fn main() {
         for (i, (_, set)) in configs.iter().enumerate() {
             let out = tmp.path().join(format!("c{i}"));
             let _ = std::fs::remove_dir_all(&out);
-            let mut cmd = Command::new(&bin);
-            cmd.args(["run", "examples/paper.toml", "--quiet", "--out"]).arg(&out);
+            let mut cmd = Command::new(bin);
+            cmd.args(["run", "examples/paper.toml", "--quiet", "--out"])
+                .arg(&out);
             for s in base.iter().chain(set.iter()) {
                 cmd.args(["--set", s]);
             }
