@@ -351,7 +351,7 @@ impl Discretization {
 
     /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1; z = 0 in 2D).
     pub fn nodal(&self, v: &[f64]) -> Vec<f64> {
-        nodal_vectors::<3>(self, v).concat()
+        nodal_vectors::<3>(self, v).into_flattened()
     }
 
     /// Per-cell stress σ_n = A ε(w_n) + B ε(u_n) + ε(m_n) (2.1 discretized; R = r·I, so the
