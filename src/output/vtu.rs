@@ -98,6 +98,8 @@ struct Static {
     open: String,
     /// Offset into [`Grid::statics`].
     at: usize,
+    /// The array's bytes until [`Grid::prepare`] appends them to the statics.
+    raw: Vec<u8>,
 }
 
 /// The mesh of a series, encoded once, and the state reused by every frame.
@@ -110,8 +112,9 @@ pub(super) struct Grid {
     points: Static,
     cells: [Static; 3],
     region: Option<Static>,
-    /// Appended bytes of the static arrays.
+    /// Appended bytes of the static arrays (compressed by [`Grid::prepare`]).
     statics: Vec<u8>,
+    prepared: bool,
     /// The file being written (kept to reuse its allocation).
     out: Vec<u8>,
     appended: Vec<u8>,
@@ -129,17 +132,11 @@ impl Grid {
         let num_points = points.len();
         let num_cells = cells.len() / nodes_per_cell;
 
-        let mut statics = Vec::new();
-        let mut add = |name: &str, ty: &str, components: usize, raw: Vec<u8>| {
-            let at = statics.len();
-            append(compression, &mut statics, &raw, zlib::compress_once);
-            Static {
-                open: array_open(ty, name, components),
-                at,
-            }
+        let add = |name: &str, ty: &str, components: usize, raw: Vec<u8>| Static {
+            open: array_open(ty, name, components),
+            at: 0,
+            raw,
         };
-        // In reverse document order (see `encode`): types, offsets, connectivity, points,
-        // region.
         let types = add("types", "UInt8", 1, vec![cell_type; num_cells]);
         let offsets = add(
             "offsets",
@@ -185,16 +182,42 @@ impl Grid {
             points: points_s,
             cells: [conn, offsets, types],
             region,
-            statics,
+            statics: Vec::new(),
+            prepared: false,
             out: Vec::new(),
             appended: Vec::new(),
         })
+    }
+
+    /// Compresses the static arrays (once; zlib's search at level 6 takes about 20 ms at
+    /// h = 1/128, which the writer thread spends beside the run's setup).
+    fn prepare(&mut self) {
+        if self.prepared {
+            return;
+        }
+        self.prepared = true;
+        // In reverse document order (see `encode`): types, offsets, connectivity, points,
+        // region.
+        let [conn, offsets, types] = &mut self.cells;
+        let order = [types, offsets, conn, &mut self.points]
+            .into_iter()
+            .chain(self.region.as_mut());
+        for s in order {
+            s.at = self.statics.len();
+            append(
+                self.compression,
+                &mut self.statics,
+                &std::mem::take(&mut s.raw),
+                zlib::compress_once,
+            );
+        }
     }
 
     /// The whole `.vtu` file for these fields in four parts (valid until the next call): the
     /// XML up to the appended data, the mesh, the fields, the end. Sizes were checked by the
     /// caller.
     pub(super) fn encode(&mut self, point_data: &[Array], cell_data: &[Array]) -> [&[u8]; 4] {
+        self.prepare();
         let (out, appended) = (&mut self.out, &mut self.appended);
         out.clear();
         appended.clear();
@@ -278,6 +301,10 @@ impl Sink for Grid {
             Some((path, text)) => write_atomic(&path, text.as_bytes()),
             None => Ok(()),
         }
+    }
+
+    fn prepare(&mut self) {
+        Grid::prepare(self);
     }
 
     /// Every file was closed when it was written.

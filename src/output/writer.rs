@@ -23,6 +23,8 @@ const QUEUE: usize = 2;
 pub(super) trait Sink: Send + 'static {
     /// One frame, ready to be written.
     type Job: Send + 'static;
+    /// What can be done before the first frame (the thread starts with the series).
+    fn prepare(&mut self) {}
     /// Writes one frame; an error names the file.
     fn write(&mut self, job: Self::Job) -> Result<()>;
     /// The thread ends (the queue was drained by [`Writer::finish`]): let go of open files.
@@ -45,26 +47,35 @@ pub(super) struct Writer<S: Sink> {
 }
 
 impl<S: Sink> Writer<S> {
+    /// The writer of `sink`; its thread starts at once with [`Sink::prepare`].
     pub(super) fn new(sink: S) -> Writer<S> {
-        Writer {
+        let mut writer = Writer {
             sink: Some(Box::new(sink)),
             tx: None,
             thread: None,
+        };
+        writer.start();
+        writer
+    }
+
+    /// Starts the thread unless it runs.
+    fn start(&mut self) {
+        if let Some(mut sink) = self.sink.take() {
+            let (tx, rx) = sync_channel::<Make<S::Job>>(QUEUE);
+            self.tx = Some(tx);
+            self.thread = Some(std::thread::spawn(move || {
+                sink.prepare();
+                let written = rx.iter().try_for_each(|make| sink.write(make()?));
+                let closed = sink.close();
+                (sink, written.and(closed))
+            }));
         }
     }
 
     /// Queues a frame (waits while the queue is full); the thread calls `make` and writes
     /// its job. Errors: the failed write of an earlier frame.
     pub(super) fn send(&mut self, make: Make<S::Job>) -> Result<()> {
-        if let Some(mut sink) = self.sink.take() {
-            let (tx, rx) = sync_channel::<Make<S::Job>>(QUEUE);
-            self.tx = Some(tx);
-            self.thread = Some(std::thread::spawn(move || {
-                let written = rx.iter().try_for_each(|make| sink.write(make()?));
-                let closed = sink.close();
-                (sink, written.and(closed))
-            }));
-        }
+        self.start();
         let sent = self.tx.as_ref().is_some_and(|tx| tx.send(make).is_ok());
         if sent {
             return Ok(());

@@ -127,9 +127,10 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     // Shared with the frame writer's thread (output::frame).
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
-    let tl = TimeLoop::new(&scene, &disc)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
+    // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(&out, &mesh, &identity.run_id, &scene.output, None)?;
+    let tl = TimeLoop::new(&scene, &disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame.
     dir::remove_run(&out)?;
     let run_id = identity.run_id.clone();
@@ -181,9 +182,8 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
-    let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
-    cp.restore(&mut tl)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
+    // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(
         &out,
         &mesh,
@@ -191,6 +191,8 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         &scene.output,
         cp.n.checked_sub(1),
     )?;
+    let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
+    cp.restore(&mut tl)?;
     dir::remove_temporaries(&out);
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
