@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use viscontact::output::{write_atomic, Field, Frame, Geometry, Options, Series};
+use viscontact::output::{write_atomic, Field, Frame, Geometry, Options, OwnedField, Series};
 
 /// The run id the series of these tests carry.
 const RUN: &str = "test-run";
@@ -388,6 +388,66 @@ fn errors_name_the_path_or_the_field() {
 
     let err = write_atomic(&dir.path().join("no/such/dir/x.txt"), b"x").unwrap_err();
     assert!(err.to_string().contains("x.txt"), "{err}");
+}
+
+#[test]
+fn fields_made_on_the_writer_thread_are_written_and_checked_there() {
+    // The frame that `write` takes, and the same fields made by a closure on the writer
+    // thread (`write_with`, how a run writes its steps): the files are equal byte for byte.
+    let dir = tempfile::tempdir().unwrap();
+    let v = frame_values(1);
+    let eager = dir.path().join("eager");
+    let mut series = create(&eager, &POINTS, &CELLS, 3).unwrap();
+    series.write(&frame(1, &v)).unwrap();
+    series.finish().unwrap();
+    let owned = |fields: &[Field]| {
+        fields
+            .iter()
+            .map(|f| OwnedField {
+                name: f.name.to_string(),
+                components: f.components,
+                values: f.values.to_vec(),
+            })
+            .collect::<Vec<_>>()
+    };
+    let f = frame(1, &v);
+    let (points, cells) = (owned(&f.point_data), owned(&f.cell_data));
+    let later = dir.path().join("later");
+    let mut series = create(&later, &POINTS, &CELLS, 3).unwrap();
+    let path = series
+        .write_with(f.step, f.time, move || (points, cells))
+        .unwrap();
+    series.finish().unwrap();
+    assert_eq!(path, later.join("solution_000001.vtu"));
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        std::fs::read(eager.join("solution_000001.vtu")).unwrap()
+    );
+
+    // A field that does not fit the mesh is an input error of the next write or of finish,
+    // naming the file and the field; nothing is written for that frame.
+    let bad = dir.path().join("bad");
+    let mut series = create(&bad, &POINTS, &CELLS, 3).unwrap();
+    let short = OwnedField {
+        name: "displacement".into(),
+        components: 3,
+        values: vec![0.0; 5],
+    };
+    series
+        .write_with(2, 0.5, move || (vec![short], Vec::new()))
+        .unwrap();
+    let err = series.finish().unwrap_err();
+    assert!(matches!(err, Error::Input(_)), "{err:?}");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("solution_000002.vtu") && msg.contains("displacement"),
+        "{msg}"
+    );
+    assert!(!bad.join("solution_000002.vtu").exists());
+    assert!(matches!(
+        series.write_with(3, f64::INFINITY, || (Vec::new(), Vec::new())),
+        Err(Error::Input(_))
+    ));
 }
 
 #[test]
