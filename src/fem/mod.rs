@@ -363,7 +363,7 @@ impl Discretization {
     /// nodal combinations p = Σ_C a_C v_C and q = Σ_C b_C v_C (v_A = w, v_B = u, v_R = m)
     /// σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I over the cell's vertices i:
     /// one pass over the cells instead of three strains each (a frame at every step pays
-    /// this on the time loop).
+    /// this on the frame writer's thread, beside the time loop).
     pub fn stress(
         &self,
         w: &[f64],
