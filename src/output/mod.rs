@@ -436,7 +436,8 @@ impl Series {
     /// field with 0 components or a repeated or empty name, or a non-finite time →
     /// `Error::Input`; a failed write of an earlier frame → that error, naming its file.
     pub fn write(&mut self, frame: &Frame) -> Result<PathBuf> {
-        let path = self.path(frame.step, frame.time)?;
+        let name = self.file_name(frame.step, frame.time)?;
+        let path = self.dir.join(&name);
         let (points, cells) = self.sizes;
         let owned = |fields: &[Field], count, what| {
             check_fields(
@@ -463,7 +464,7 @@ impl Series {
             owned(&frame.point_data, points, "point")?,
             owned(&frame.cell_data, cells, "cell")?,
         );
-        self.send(frame.step, frame.time, path, move || fields)
+        self.send(frame.step, frame.time, name, move || fields)
     }
 
     /// As [`Series::write`], for fields that `make` computes on the writer thread: (point
@@ -476,21 +477,22 @@ impl Series {
         time: f64,
         make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
     ) -> Result<PathBuf> {
-        let path = self.path(step, time)?;
-        self.send(step, time, path, make)
+        let name = self.file_name(step, time)?;
+        self.send(step, time, name, make)
     }
 
-    /// The file of step `step`'s frame; a non-finite time is an input error.
-    fn path(&self, step: usize, time: f64) -> Result<PathBuf> {
+    /// The file (in the series' directory) of step `step`'s frame; a non-finite time is an
+    /// input error.
+    fn file_name(&self, step: usize, time: f64) -> Result<String> {
         if !time.is_finite() {
             return Err(Error::input(format!(
                 "output step {step}: time {time} is not a finite number"
             )));
         }
-        Ok(self.dir.join(match self.sink {
+        Ok(match self.sink {
             Sink::Vtu(_) => vtu_name(step),
             Sink::Vtkhdf { .. } => VTKHDF_NAME.to_string(),
-        }))
+        })
     }
 
     /// Lists the frame and queues it: the thread makes its fields, checks them and keeps
@@ -499,9 +501,10 @@ impl Series {
         &mut self,
         step: usize,
         time: f64,
-        path: PathBuf,
+        name: String,
         make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
     ) -> Result<PathBuf> {
+        let path = self.dir.join(&name);
         let (options, sizes, at) = (self.options.clone(), self.sizes, path.clone());
         let arrays = move || {
             let (points, cells) = make();
@@ -523,10 +526,6 @@ impl Series {
                 arrays(cells, sizes.1, "cell")?,
             ))
         };
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
         match &mut self.sink {
             Sink::Vtu(writer) => {
                 // Steps normally increase: only an older step can already be listed.

@@ -98,7 +98,7 @@ struct Static {
     open: String,
     /// Offset into [`Grid::statics`].
     at: usize,
-    /// The array's bytes until [`Grid::prepare`] appends them to the statics.
+    /// The array's bytes until [`Sink::prepare`] appends them to the statics.
     raw: Vec<u8>,
 }
 
@@ -112,9 +112,9 @@ pub(super) struct Grid {
     points: Static,
     cells: [Static; 3],
     region: Option<Static>,
-    /// Appended bytes of the static arrays (compressed by [`Grid::prepare`]).
+    /// Appended bytes of the static arrays: empty until [`Sink::prepare`] compresses them
+    /// (every array has a header, so they are never empty after it).
     statics: Vec<u8>,
-    prepared: bool,
     /// The file being written (kept to reuse its allocation).
     out: Vec<u8>,
     appended: Vec<u8>,
@@ -183,34 +183,9 @@ impl Grid {
             cells: [conn, offsets, types],
             region,
             statics: Vec::new(),
-            prepared: false,
             out: Vec::new(),
             appended: Vec::new(),
         })
-    }
-
-    /// Compresses the static arrays (once; zlib's search at level 6 takes about 20 ms at
-    /// h = 1/128, which the writer thread spends beside the run's setup).
-    fn prepare(&mut self) {
-        if self.prepared {
-            return;
-        }
-        self.prepared = true;
-        // In reverse document order (see `encode`): types, offsets, connectivity, points,
-        // region.
-        let [conn, offsets, types] = &mut self.cells;
-        let order = [types, offsets, conn, &mut self.points]
-            .into_iter()
-            .chain(self.region.as_mut());
-        for s in order {
-            s.at = self.statics.len();
-            append(
-                self.compression,
-                &mut self.statics,
-                &std::mem::take(&mut s.raw),
-                zlib::compress_once,
-            );
-        }
     }
 
     /// The whole `.vtu` file for these fields in four parts (valid until the next call): the
@@ -303,8 +278,27 @@ impl Sink for Grid {
         }
     }
 
+    /// Compresses the static arrays (once; zlib's search at level 6 takes about 20 ms at
+    /// h = 1/128, which the writer thread spends beside the run's setup).
     fn prepare(&mut self) {
-        Grid::prepare(self);
+        if !self.statics.is_empty() {
+            return;
+        }
+        // In reverse document order (see `encode`): types, offsets, connectivity, points,
+        // region.
+        let [conn, offsets, types] = &mut self.cells;
+        let order = [types, offsets, conn, &mut self.points]
+            .into_iter()
+            .chain(self.region.as_mut());
+        for s in order {
+            s.at = self.statics.len();
+            append(
+                self.compression,
+                &mut self.statics,
+                &std::mem::take(&mut s.raw),
+                zlib::compress_once,
+            );
+        }
     }
 
     /// Every file was closed when it was written.

@@ -41,8 +41,8 @@ use std::io::Write as _;
 /// in every block): the literals 0..=253 take 8 bits, and canonical codes give literal b the
 /// code b itself; the literals 254 and 255, the end of block 256 and the lengths 257..=285
 /// take 12 bits (codes 4064..=4095, which complete the code). So a word of eight bytes
-/// without a 0, 254 or 255 — most of a frame's non-zero doubles — is coded as its bytes with
-/// each byte's bits reversed (deflate packs a code from its most significant bit into a
+/// without a 254 or 255 — almost every non-zero double — is coded as its bytes with each
+/// byte's bits reversed (deflate packs a code from its most significant bit into a
 /// stream read from the least significant bit of each byte), without a table.
 /// Returns the reversed code and its length.
 const fn code(symbol: u32) -> (u32, u32) {
@@ -148,7 +148,7 @@ impl Bits<'_> {
         self.n %= 8;
     }
 
-    /// Up to six literals (at most 54 bits) in one put.
+    /// Up to four literals (at most 48 bits) in one put.
     #[inline(always)]
     fn literals<const N: usize>(&mut self, b: [u8; N]) {
         let mut bits = 0u64;
@@ -161,8 +161,8 @@ impl Bits<'_> {
         self.put(bits, count);
     }
 
-    /// Eight literals, the bytes of `w` (none of them 0, 254 or 255): each byte's bits
-    /// reversed, one 8-byte store.
+    /// Eight literals, the bytes of `w` (none of them 254 or 255, whose codes are not their
+    /// values): each byte's bits reversed, one 8-byte store.
     #[inline(always)]
     fn word(&mut self, w: u64) {
         let r = reverse_bits_in_bytes(w);
@@ -283,7 +283,7 @@ pub fn compress(data: &[u8], out: &mut Vec<u8>) {
         bits.zeros(zeros, after_zero);
         zeros = 0;
         // A byte b ≥ 254 has b | 1 = 255, and !(b | 1) a zero byte.
-        if zero_bytes(!(w | 0x0101_0101_0101_0101)) == 0 {
+        if !has_zero_byte(!(w | 0x0101_0101_0101_0101)) {
             bits.word(w);
         } else {
             let [a, b, c, d, e, f, g, h] = w.to_le_bytes();
@@ -324,13 +324,12 @@ fn reverse_bits_in_bytes(w: u64) -> u64 {
     (w >> 4 & 0x0f0f_0f0f_0f0f_0f0f) | (w & 0x0f0f_0f0f_0f0f_0f0f) << 4
 }
 
-/// The high bit of every zero byte of `w` set, others clear, except that bits above the
-/// first zero byte may be set too (the classic bit trick: the lowest set bit is exact).
+/// Whether a word has a zero byte (the classic bit trick: exact, no false positives).
 #[inline(always)]
-fn zero_bytes(w: u64) -> u64 {
+fn has_zero_byte(w: u64) -> bool {
     const LO: u64 = 0x0101_0101_0101_0101;
     const HI: u64 = 0x8080_8080_8080_8080;
-    w.wrapping_sub(LO) & !w & HI
+    w.wrapping_sub(LO) & !w & HI != 0
 }
 
 /// Bytes of a zlib stream of `n` bytes in stored blocks.
