@@ -46,6 +46,8 @@ fn main() {
         ("every step, none (raw)", &["output.compression=none"]),
         ("every step, vtkhdf (zlib)", &["output.format=vtkhdf"]),
     ];
+    // The raw configuration, whose last frame the encoder is timed on.
+    const RAW: usize = 3;
     // Each run is a process of its own, as a user runs it (runs in one process shared its
     // heap and were slower with frames, faster without).
     let bin = Path::new("target/release/viscontact");
@@ -77,10 +79,10 @@ fn main() {
             // The next run must not pay for writing this one's frames back to the disk:
             // drop them (the raw run's last frame is kept for the encoder's timing) and wait
             // for the disk.
-            if i != 3 {
+            if i != RAW {
                 std::fs::remove_dir_all(&out).unwrap();
             }
-            let _ = std::process::Command::new("sync").status();
+            let _ = Command::new("sync").status();
         }
     }
     let reference = median(times[0].clone());
@@ -95,7 +97,7 @@ fn main() {
         );
     }
     // The encoder on the fields of the last raw frame (region is not a field of the step).
-    let raw = read_vtu(&tmp.path().join("c3/solution_000128.vtu")).unwrap();
+    let raw = read_vtu(&tmp.path().join(format!("c{RAW}/solution_000128.vtu"))).unwrap();
     let bytes: Vec<u8> = raw
         .point_data
         .iter()
