@@ -21,6 +21,7 @@
 //! faer's default amalgamation may merge a supernode across the boundary between the
 //! interior dofs and C; `trailing_block` reads L_CC column by column and does not care.
 
+use super::pair::Pair;
 use crate::fem::Sparse;
 use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -32,7 +33,6 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::{Mat, Par, Side};
-use std::sync::Mutex;
 
 pub struct Factor {
     /// L's values in the packed layout of `Layout`.
@@ -46,33 +46,10 @@ pub struct Factor {
     layout: Layout,
     /// The solves' two groups of subtrees, for factors big enough to gain from them.
     split: Option<Split>,
-    /// Whether a second thread may take the second group (else this one does it after the
-    /// first).
-    threads: bool,
-    /// Which way the groups ran faster lately, per pass (`Pass`).
-    ways: [Mutex<Ways>; 2],
+    /// The forward and the backward pass's two groups, on two threads when that pays.
+    forward_pair: Pair,
+    backward_pair: Pair,
 }
-
-/// The forward and the backward pass, indices of `Factor::ways`.
-#[derive(Clone, Copy)]
-enum Pass {
-    Forward = 0,
-    Backward = 1,
-}
-
-/// The smoothed times (seconds) of a pass's two groups on two threads and on one, and the
-/// pass's calls so far. A second thread pays only when a core is free for it: on a machine
-/// loaded to 3.5–4 with two cores the threaded run was 0.78× as fast as the unsplit one. So
-/// the faster way is taken, and every `PROBE`th call the other one, to follow the load.
-/// The arithmetic does not depend on the way (see `Split`).
-#[derive(Default)]
-struct Ways {
-    two: f64,
-    one: f64,
-    calls: usize,
-}
-
-const PROBE: usize = 16;
 
 /// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
 /// their values: column j of a supernode with `size` columns and off-diagonal rows R holds
@@ -372,8 +349,8 @@ impl Factor {
             inv,
             last: last.len(),
             split: Split::new(&layout, min_split),
-            threads: std::thread::available_parallelism().is_ok_and(|p| p.get() >= 2),
-            ways: Default::default(),
+            forward_pair: Pair::default(),
+            backward_pair: Pair::default(),
             layout,
         })
     }
@@ -434,8 +411,7 @@ impl Factor {
         for &s in &split.groups[1] {
             z[cols(s)].copy_from_slice(&y[cols(s)]);
         }
-        self.both(
-            Pass::Forward,
+        self.forward_pair.both(
             || self.forward_over(split.groups[0].iter().copied(), y),
             || self.forward_over(split.groups[1].iter().copied(), &mut z),
         );
@@ -490,8 +466,7 @@ impl Factor {
         self.backward_over(split.top.iter().rev().copied(), y);
         // The second group reads `top` rows from a copy and writes its own columns there.
         let mut z = y.to_vec();
-        self.both(
-            Pass::Backward,
+        self.backward_pair.both(
             || self.backward_over(split.groups[0].iter().rev().copied(), y),
             || self.backward_over(split.groups[1].iter().rev().copied(), &mut z),
         );
@@ -547,46 +522,6 @@ impl Factor {
                 ys[j] = (ys[j] - dot(&col[1..], &ys[j + 1..])) / col[0];
             }
         }
-    }
-
-    /// Runs `a` and `b`: on two threads when there are two cores and that was the faster
-    /// way for this pass lately (`Ways`), else one after the other.
-    fn both(&self, pass: Pass, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
-        if !self.threads {
-            a();
-            b();
-            return;
-        }
-        let two = {
-            let mut w = self.ways[pass as usize]
-                .lock()
-                .unwrap_or_else(|e| e.into_inner());
-            w.calls += 1;
-            (w.two <= w.one) != w.calls.is_multiple_of(PROBE)
-        };
-        let start = std::time::Instant::now();
-        if two {
-            std::thread::scope(|scope| {
-                let second = scope.spawn(b);
-                a();
-                if let Err(panic) = second.join() {
-                    std::panic::resume_unwind(panic);
-                }
-            });
-        } else {
-            a();
-            b();
-        }
-        let took = start.elapsed().as_secs_f64();
-        let mut w = self.ways[pass as usize]
-            .lock()
-            .unwrap_or_else(|e| e.into_inner());
-        let slot = if two { &mut w.two } else { &mut w.one };
-        *slot = if *slot == 0.0 {
-            took
-        } else {
-            0.75 * *slot + 0.25 * took
-        };
     }
 
     /// x ← K_A⁻¹ x (original ordering).
@@ -676,7 +611,8 @@ mod tests {
             .clone();
         assert!(groups.iter().all(|g| !g.is_empty()), "{groups:?}");
         let one_thread = Factor {
-            threads: false,
+            forward_pair: Pair::one_thread(),
+            backward_pair: Pair::one_thread(),
             ..Factor::with_split(&k, &last, 0).unwrap()
         };
         assert!(factor.split.is_none());

@@ -18,6 +18,7 @@ pub mod conic;
 pub mod dual;
 pub mod factor;
 mod ordering;
+mod pair;
 
 use crate::fem::NodalRow;
 use crate::Result;
