@@ -129,12 +129,15 @@ pub struct NodalRow {
 }
 
 impl NodalRow {
-    /// The (free dof, coefficient) pairs of the row.
+    /// The (free dof, coefficient) pairs of the row with a nonzero coefficient: the dofs it
+    /// touches (a flat boundary's normal touches one dof of a node, its tangents two; so
+    /// the block C ordered last in the factor holds only these).
     pub fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         self.dofs[..self.dim]
             .iter()
             .copied()
             .zip(self.dir[..self.dim].iter().copied())
+            .filter(|&(_, c)| c != 0.0)
     }
 
     pub fn apply(&self, w: &[f64]) -> f64 {

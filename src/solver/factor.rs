@@ -1,6 +1,6 @@
 //! The sparse Cholesky factor of K_A, computed once per run (faer, supernodal LLᵀ).
 //!
-//! The ordering puts the constrained boundary dofs C (both components of every Γ3 node) last
+//! The ordering puts the constrained boundary dofs C (those the Γ3 rows touch) last
 //! and orders the others by nested dissection (`ordering.rs`, METIS):
 //! P K_A Pᵀ = L Lᵀ with L = [L_II 0; L_CI L_CC]. Then the forward solve L y = b leaves in
 //! y_C everything the contact problem needs, the trailing block L_CC (dense, |C|×|C|) gives
