@@ -125,7 +125,7 @@ pub fn step_solver(
         return Ok(StepSolver::Linear);
     }
     Ok(match scene.contact_solver {
-        ContactSolver::Fast => StepSolver::Dual(DualSolver::new(factor, rows)),
+        ContactSolver::Fast => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
         ContactSolver::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
     })
 }

@@ -49,7 +49,9 @@
 //!
 //!   (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d),
 //!
-//! solved by a dense Cholesky factorization; z⁺ is projected onto Z. In 2D this is the
+//! solved by a dense Cholesky factorization — in 3D, where this is the bottleneck, by its
+//! Woodbury form through B = D⁻¹ when that is cheaper (`newton_step`); z⁺ is projected
+//! onto Z. In 2D this is the
 //! primal-dual active set step (Hintermüller, Ito, Kunisch 2002): once the sets are right the
 //! answer is exact up to rounding. In 3D it converges quadratically near the solution.
 //!
@@ -94,9 +96,10 @@
 //! nonnegative multiple of γ_j: the node slides along its friction force, or sticks) — at
 //! most TOLERANCE · max|d|, in units of the velocities P w.
 
+use super::pair::Pair;
 use super::{Factor, Rows, StepReport};
 use crate::{Error, Result};
-use faer::linalg::solvers::{Llt, Solve};
+use faer::linalg::solvers::{DenseSolveCore, Llt, Solve};
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Side};
 use std::ops::Range;
@@ -243,6 +246,11 @@ impl Coord {
     fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         (self.start..self.start + self.len).zip(self.dir.iter().copied())
     }
+
+    /// qᵀ v.
+    fn dot(&self, v: &[f64]) -> f64 {
+        self.entries().map(|(i, x)| x * v[i]).sum()
+    }
 }
 
 /// Vectors of a solve, kept between steps so that the iterations do not allocate them.
@@ -261,21 +269,75 @@ struct Work {
     coords: Vec<Coord>,
     /// Per group: binding (moving along −g/δ) in the projected Newton step.
     binding: Vec<bool>,
-    /// The step's last factorization of a Newton matrix; see `newton_step`.
-    cache: Option<Cached>,
+    /// z_u = B d, the unconstrained minimizer of q, when B = D⁻¹ is kept.
+    z_u: Vec<f64>,
+    /// What the Newton steps need besides D: see `newton_step`.
+    newton: Scratch,
 }
 
-/// A Cholesky factor of QᵀDQ + diag κ and the coordinates (Q, κ) it was built from.
+/// The buffers of `newton_step`, and its counts.
+struct Scratch {
+    /// The columns of U (the Woodbury form's coordinates).
+    u: Vec<Coord>,
+    /// A Newton point, and the gradient there.
+    point: Vec<f64>,
+    grad: Vec<f64>,
+    /// m-vectors of the Woodbury form: its right side s and B-products.
+    sv: Vec<f64>,
+    bv: Vec<f64>,
+    /// The step's last factorization of a Newton matrix.
+    cache: Option<Cached>,
+    counts: NewtonCounts,
+}
+
+/// How many Newton systems a solver solved in each form (cumulative over its steps).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NewtonCounts {
+    pub direct: usize,
+    pub woodbury: usize,
+    /// Refinement passes of Woodbury solves.
+    pub refinements: usize,
+    /// Woodbury solves not accurate enough after refinement, solved directly instead.
+    pub fallbacks: usize,
+}
+
+/// Which matrix a cached factor belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Form {
+    /// H = QᵀDQ + diag κ.
+    Direct,
+    /// H_U = UᵀBU + diag(0 on N, 1/κ on R).
+    Woodbury,
+}
+
+/// A Cholesky factor of a Newton matrix, its form and the coordinates it was built from.
 struct Cached {
+    form: Form,
     coords: Vec<Coord>,
     llt: Llt<f64>,
+}
+
+/// Which form the Newton systems are solved in (see `newton_step`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NewtonForm {
+    /// In 3D, whichever form the flop estimate finds cheaper, iteration by iteration; in 2D
+    /// the direct form (the default).
+    Cheaper,
+    /// Always the direct form.
+    Direct,
+    /// The Woodbury form whenever B exists (tests).
+    Woodbury,
 }
 
 pub struct DualSolver {
     /// G = L_CC⁻¹ E (|C|×m).
     g: Mat<f64>,
     /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
-    d: Mat<f64>,
+    d: Delassus,
+    /// B = D⁻¹ for the Woodbury form of the Newton steps, when it is used: D definite (no
+    /// dependent rows) and the form allowed.
+    inverse: Option<Mat<f64>>,
+    form: NewtonForm,
     /// The multiplier groups, in row order; fixed per run.
     groups: Vec<Group>,
     work: Box<Work>,
@@ -286,6 +348,11 @@ pub struct DualSolver {
 impl DualSolver {
     /// `factor` must have been built with the rows' dofs ordered last.
     pub fn new(factor: &Factor, rows: &Rows) -> Self {
+        Self::with_form(factor, rows, NewtonForm::Cheaper)
+    }
+
+    /// As `new`, with the form of the Newton systems chosen.
+    pub fn with_form(factor: &Factor, rows: &Rows, form: NewtonForm) -> Self {
         let (n, c, m) = (factor.dim(), factor.last(), rows.len());
         let first = n - c;
         let mut g = Mat::<f64>::zeros(c, m);
@@ -343,15 +410,45 @@ impl DualSolver {
             grad_alt: vec![0.0; m],
             coords: Vec::with_capacity(m),
             binding: vec![false; groups.len()],
-            cache: None,
+            z_u: vec![0.0; m],
+            newton: Scratch {
+                u: Vec::with_capacity(m),
+                point: vec![0.0; m],
+                grad: vec![0.0; m],
+                sv: vec![0.0; m],
+                bv: vec![0.0; m],
+                cache: None,
+                counts: NewtonCounts::default(),
+            },
         });
+        // B = D⁻¹ (m³ flops once) where the Woodbury form may be used: 3D, where the rim
+        // tangents of sliding nodes make U small, and D definite. In 2D the direct form stays:
+        // its systems are at most one boundary line's rows.
+        let woodbury = match form {
+            NewtonForm::Direct => false,
+            NewtonForm::Cheaper => rows.block == 2,
+            NewtonForm::Woodbury => true,
+        };
+        let inverse = (woodbury && m > 0 && groups.iter().all(|g| g.shift == 0.0))
+            .then(|| d.llt(Side::Lower).ok().map(|llt| llt.inverse()))
+            .flatten();
         DualSolver {
             g,
-            d,
+            d: Delassus {
+                mat: d,
+                pair: Pair::default(),
+            },
+            inverse,
+            form,
             groups,
             work,
             y: vec![0.0; n],
         }
+    }
+
+    /// The Newton systems solved so far, by form.
+    pub fn newton_counts(&self) -> NewtonCounts {
+        self.work.newton.counts
     }
 
     pub fn solve(
@@ -390,7 +487,12 @@ impl DualSolver {
     /// number of iterations.
     fn dual_solve(&mut self, z: &mut [f64]) -> Result<usize> {
         let DualSolver {
-            d, groups, work, ..
+            d,
+            inverse,
+            form,
+            groups,
+            work,
+            ..
         } = self;
         let Work {
             d: dvec,
@@ -402,14 +504,27 @@ impl DualSolver {
             grad_alt: g_alt,
             coords,
             binding,
-            cache,
+            z_u,
+            newton,
         } = &mut **work;
         // A factorization is reused within the step only, so that a run resumed from a
         // checkpoint (which starts with an empty cache) repeats the uninterrupted run bit
         // for bit.
-        *cache = None;
+        newton.cache = None;
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = TOLERANCE * scale.max(f64::MIN_POSITIVE);
+        if let Some(b) = inverse {
+            // z_u = B d (B symmetric: column j of B is its row j).
+            z_u.fill(0.0);
+            axpy_columns(b, dvec.iter().copied().enumerate(), z_u);
+        }
+        let ops = Operators {
+            d,
+            dvec,
+            woodbury: inverse.as_ref().map(|b| (b, &z_u[..])),
+            form: *form,
+            accuracy: NEWTON_ACCURACY * tol,
+        };
         let project = |v: &mut [f64]| {
             for grp in groups.iter() {
                 grp.project(&mut v[grp.rows()]);
@@ -417,7 +532,7 @@ impl DualSolver {
         };
         // Warm start: the previous multipliers, projected onto Z.
         project(z);
-        gradient(d, z, dvec, g);
+        d.gradient(z, dvec, g);
         let mut iterations = 0;
         let residual = |z: &[f64], g: &[f64]| {
             groups
@@ -460,20 +575,29 @@ impl DualSolver {
                     Some(_) => {}
                 }
             }
-            gradient(d, trial, dvec, g_trial);
-            newton_step(d, coords, g_trial, trial, cache)?;
-            // The Newton point z⁺ (kept in p), then damped: trial = Π(z + α(z⁺ − z)) for
-            // α = 1, ½, ¼ (a damped trial costs one product with D, no factorization).
             p.copy_from_slice(trial);
+            newton_step(
+                &ops,
+                groups,
+                coords,
+                trial,
+                Gradient::Unknown(g_trial),
+                p,
+                newton,
+            )?;
+            // The Newton point z⁺ (in p), then damped: trial = Π(z + α(z⁺ − z)) for
+            // α = 1, ½, ¼ (a damped trial costs one product with D, no factorization).
             let mut alpha = 1.0;
             let accepted = loop {
                 if alpha < 1.0 {
                     for i in 0..z.len() {
                         trial[i] = z[i] + alpha * (p[i] - z[i]);
                     }
+                } else {
+                    trial.copy_from_slice(p);
                 }
                 project(trial);
-                gradient(d, trial, dvec, g_trial);
+                d.gradient(trial, dvec, g_trial);
                 // Near the solution the change of q sinks below its rounding level (a
                 // multiplier on a disc's rim has the norm c only to a few ulps, and g is large
                 // along it); there the residual decides.
@@ -536,7 +660,7 @@ impl DualSolver {
                     coords.extend(grp.free());
                 }
             }
-            newton_step(d, coords, g, p, cache)?;
+            newton_step(&ops, groups, coords, z, Gradient::Known(g), p, newton)?;
             // Armijo search along the projection arc z(α) = Π(z + α p).
             let mut alpha = 1.0;
             loop {
@@ -544,7 +668,7 @@ impl DualSolver {
                     trial[i] = z[i] + alpha * p[i];
                 }
                 project(trial);
-                gradient(d, trial, dvec, g_trial);
+                d.gradient(trial, dvec, g_trial);
                 let predicted: f64 = groups
                     .iter()
                     .zip(binding.iter())
@@ -578,7 +702,7 @@ impl DualSolver {
                         }
                     }
                     project(alt);
-                    gradient(d, alt, dvec, g_alt);
+                    d.gradient(alt, dvec, g_alt);
                     let predicted: f64 = (0..z.len()).map(|i| g[i] * (z[i] - alt[i])).sum();
                     if -change(z, alt, g, g_alt) >= 1e-4 * predicted || beta < 1e-12 {
                         break;
@@ -596,18 +720,38 @@ impl DualSolver {
     }
 }
 
-/// g = D z − d (D symmetric: column j of D is its row j).
-fn gradient(dmat: &Mat<f64>, z: &[f64], d: &[f64], g: &mut [f64]) {
-    for (gi, di) in g.iter_mut().zip(d) {
-        *gi = -di;
-    }
-    for (j, &zj) in z.iter().enumerate() {
-        if zj != 0.0 {
-            let col = dmat.col(j).try_as_col_major().unwrap().as_slice();
-            for (gi, dij) in g.iter_mut().zip(col) {
-                *gi += dij * zj;
+/// D, with its products split over two threads where it is large (`Pair`).
+struct Delassus {
+    mat: Mat<f64>,
+    pair: Pair,
+}
+
+/// Below this many rows a product with D takes less time than starting a thread.
+const SPLIT_ROWS: usize = 512;
+
+impl Delassus {
+    /// g = D z − d (D symmetric: column j of D is its row j). Split in two halves of the
+    /// rows; each entry is summed in the same order either way.
+    fn gradient(&self, z: &[f64], d: &[f64], g: &mut [f64]) {
+        let m = g.len();
+        let part = |rows: Range<usize>, g: &mut [f64]| {
+            for (gi, di) in g.iter_mut().zip(&d[rows.clone()]) {
+                *gi = -di;
             }
+            for (j, &zj) in z.iter().enumerate() {
+                if zj != 0.0 {
+                    let col = &self.mat.col(j).try_as_col_major().unwrap().as_slice()[rows.clone()];
+                    for (gi, dij) in g.iter_mut().zip(col) {
+                        *gi += dij * zj;
+                    }
+                }
+            }
+        };
+        if m < SPLIT_ROWS {
+            return part(0..m, g);
         }
+        let (g0, g1) = g.split_at_mut(m / 2);
+        self.pair.both(|| part(0..m / 2, g0), || part(m / 2..m, g1));
     }
 }
 
@@ -633,82 +777,292 @@ fn rounding(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
             .sum::<f64>()
 }
 
-/// out += Q x, where (QᵀDQ + diag κ) x = −Qᵀ grad and Q, κ are given by `coords`: the Newton
-/// step on those coordinates.
+/// A Woodbury solve is accepted when its Newton equations hold to this fraction of the
+/// dual's tolerance (so its inexactness cannot reach the stopping test); it is refined at
+/// most `REFINEMENTS` times, then the system is solved in the direct form.
+const NEWTON_ACCURACY: f64 = 1e-2;
+const REFINEMENTS: usize = 2;
+
+/// What the Newton steps are solved with.
+struct Operators<'a> {
+    d: &'a Delassus,
+    /// d = P K_A⁻¹ b.
+    dvec: &'a [f64],
+    /// B = D⁻¹ and z_u = B d, when the Woodbury form is available.
+    woodbury: Option<(&'a Mat<f64>, &'a [f64])>,
+    form: NewtonForm,
+    /// The Newton residual a Woodbury solve must reach (absolute).
+    accuracy: f64,
+}
+
+/// The gradient D z₀ − d at a Newton step's base point, if known; else a buffer for it.
+enum Gradient<'a> {
+    Known(&'a [f64]),
+    Unknown(&'a mut [f64]),
+}
+
+/// out += Q x, where (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d) and Q, κ are given by `coords`: the
+/// Newton step from z₀ on those coordinates.
 ///
-/// The matrix H = QᵀDQ + diag κ is SPD; a dense Cholesky factorization costs nq³/3 and
-/// dominates an iteration on large contact boundaries (nq ≈ 2000 in 3D). Consecutive
-/// iterations of a step mostly keep the same coordinate structure (which rows are free, which
-/// discs on their rim) and change only the rims' tangents and shifts slightly, so the step's
-/// last factor, when its structure matches, preconditions conjugate gradients on the new H
-/// (O(nq²) per iteration) to the accuracy of a direct solve; only a new structure, or CG not
-/// converging in `PCG_MAX` iterations, costs a new factorization. For an unchanged H the
-/// first preconditioned solve is already the direct solution.
+/// Direct form. The matrix H = QᵀDQ + diag κ is SPD; a dense Cholesky factorization costs
+/// nq³/3 and dominates an iteration on large contact boundaries (nq ≈ 1350 of m = 1850
+/// rows on the 3D block at h = 1/24).
+///
+/// Woodbury form. Let N be the directions the step keeps fixed (a contact row at zero, the
+/// radial direction v̂ of a disc on its rim: the complement of Q, column by column within
+/// each group) and R the columns of Q with κ > 0 (the rims' tangents). The step is the
+/// point z⁺ = z₀ + Q x with Nᵀ z⁺ = Nᵀ z₀ and Qᵀ(D z⁺ − d) + K x = 0; with ν = K_R x_R,
+/// D z⁺ − d + R ν lies in the span of N, so with B = D⁻¹, z_u = B d and U = [N R]:
+///
+///   z⁺ = z_u − B U c,   (UᵀBU + diag(0 on N, 1/κ on R)) c = Uᵀ(z_u − z₀),   x = Qᵀ(z⁺ − z₀).
+///
+/// Its matrix has |U| = (m − nq) + |R| rows — in 3D the rims' tangents, which make nq
+/// large, leave U small (820 against 1350 on average on the block) — and the step costs
+/// |U|³/3 + one pass over |U| columns of B. Rounding: z⁺ is a difference of terms that
+/// grow with the conditioning of D, so the Newton residual Qᵀ(D z⁺ − d) + K x is checked
+/// (one product with D, which the direct form spends on D z₀ − d) and refined by the same
+/// formula (x' = Qᵀ(s − B U c'), s = B Q r, for the residual r). The form is chosen per
+/// system by its flop estimate.
+///
+/// Either form's factor is reused within a step: consecutive iterations mostly keep the
+/// same coordinate structure (which rows are free, which discs on their rim) and change
+/// only the rims' tangents and shifts slightly, so the step's last factor, when its
+/// structure matches, preconditions conjugate gradients on the new matrix (O(nq²) per
+/// iteration) to the accuracy of a direct solve; only a new structure, or CG not converging
+/// in `PCG_MAX` iterations, costs a new factorization. For an unchanged matrix the first
+/// preconditioned solve is already the direct solution.
 fn newton_step(
-    dmat: &Mat<f64>,
+    ops: &Operators,
+    groups: &[Group],
     coords: &[Coord],
-    grad: &[f64],
+    z0: &[f64],
+    grad: Gradient,
     out: &mut [f64],
-    cache: &mut Option<Cached>,
+    s: &mut Scratch,
 ) -> Result<()> {
     let nq = coords.len();
     if nq == 0 {
         return Ok(());
     }
-    // H = QᵀDQ + diag κ, column by column from D's contiguous columns.
-    let mut h = Mat::<f64>::zeros(nq, nq);
-    let mut dq = vec![0.0; dmat.nrows()];
-    for (b, qb) in coords.iter().enumerate() {
-        // dq = D q_b.
-        dq.fill(0.0);
-        for (j, y) in qb.entries() {
-            let col = dmat.col(j).try_as_col_major().unwrap().as_slice();
-            for (v, dij) in dq.iter_mut().zip(col) {
-                *v += y * dij;
+    if let Some((b, z_u)) = ops.woodbury {
+        complement(groups, coords, &mut s.u);
+        if ops.form == NewtonForm::Woodbury || woodbury_cost(nq, s.u.len()) < direct_cost(nq) {
+            if let Some(x) = woodbury_step(ops, b, z_u, coords, z0, s)? {
+                s.counts.woodbury += 1;
+                add_columns(coords, &x, out);
+                return Ok(());
+            }
+            s.counts.fallbacks += 1;
+        }
+    }
+    s.counts.direct += 1;
+    let grad = match grad {
+        Gradient::Known(g) => g,
+        Gradient::Unknown(buf) => {
+            ops.d.gradient(z0, ops.dvec, buf);
+            &*buf
+        }
+    };
+    let h = gram(&ops.d.mat, coords);
+    let rhs = Mat::<f64>::from_fn(nq, 1, |a, _| -coords[a].dot(grad));
+    let x = solve_cached(Form::Direct, &h, &rhs, coords, &mut s.cache)?;
+    add_columns(coords, &x, out);
+    Ok(())
+}
+
+/// The Woodbury form of `newton_step`: x, or None if it is not accurate to
+/// `ops.accuracy` after `REFINEMENTS` refinements.
+fn woodbury_step(
+    ops: &Operators,
+    b: &Mat<f64>,
+    z_u: &[f64],
+    coords: &[Coord],
+    z0: &[f64],
+    s: &mut Scratch,
+) -> Result<Option<Mat<f64>>> {
+    let Scratch {
+        u,
+        point,
+        grad,
+        sv,
+        bv,
+        cache,
+        counts,
+    } = s;
+    let h = gram(b, u);
+    let mut x = Mat::<f64>::zeros(coords.len(), 1);
+    // In y = z − z₀: y⁺ = s − B U c, (UᵀBU + diag) c = Uᵀ s, x = Qᵀ y⁺, with s = z_u − z₀;
+    // a refinement solves for the residual r the same way with s = −B Q r.
+    for ((t, zu), z) in sv.iter_mut().zip(z_u).zip(z0) {
+        *t = zu - z;
+    }
+    for refinement in 0..=REFINEMENTS {
+        bv.copy_from_slice(sv);
+        if !u.is_empty() {
+            let rhs = Mat::<f64>::from_fn(u.len(), 1, |a, _| u[a].dot(sv));
+            let c = solve_cached(Form::Woodbury, &h, &rhs, u, cache)?;
+            axpy_columns(b, scaled_entries(u, |a| -c[(a, 0)]), bv);
+        }
+        for (a, q) in coords.iter().enumerate() {
+            x[(a, 0)] += q.dot(bv);
+        }
+        // The Newton residual r = Qᵀ(D (z₀ + Q x) − d) + K x.
+        point.copy_from_slice(z0);
+        add_columns(coords, &x, point);
+        ops.d.gradient(point, ops.dvec, grad);
+        let r = Mat::<f64>::from_fn(coords.len(), 1, |a, _| {
+            coords[a].dot(grad) + coords[a].shift * x[(a, 0)]
+        });
+        if r.norm_max() <= ops.accuracy {
+            return Ok(Some(x));
+        }
+        if refinement == REFINEMENTS {
+            break;
+        }
+        counts.refinements += 1;
+        sv.fill(0.0);
+        axpy_columns(b, scaled_entries(coords, |a| -r[(a, 0)]), sv);
+    }
+    Ok(None)
+}
+
+/// The entries (i, f(a) v) of the columns a of Q (or U) scaled by f(a).
+fn scaled_entries<'a>(
+    coords: &'a [Coord],
+    f: impl Fn(usize) -> f64 + 'a,
+) -> impl Iterator<Item = (usize, f64)> + 'a {
+    coords.iter().enumerate().flat_map(move |(a, q)| {
+        let fa = f(a);
+        q.entries().map(move |(i, v)| (i, fa * v))
+    })
+}
+
+/// out += Σ y_j M e_j over the pairs (j, y_j): columns of M scaled and summed.
+fn axpy_columns(mat: &Mat<f64>, pairs: impl Iterator<Item = (usize, f64)>, out: &mut [f64]) {
+    for (j, y) in pairs {
+        if y != 0.0 {
+            let col = mat.col(j).try_as_col_major().unwrap().as_slice();
+            for (o, mij) in out.iter_mut().zip(col) {
+                *o += y * mij;
             }
         }
-        let hb = h.col_mut(b).try_as_col_major_mut().unwrap().as_slice_mut();
-        for (hab, qa) in hb.iter_mut().zip(coords) {
-            *hab = qa.entries().map(|(i, x)| x * dq[i]).sum();
-        }
-        hb[b] += qb.shift;
     }
-    let rhs = Mat::<f64>::from_fn(nq, 1, |a, _| {
-        -coords[a].entries().map(|(i, x)| x * grad[i]).sum::<f64>()
-    });
-    let same_structure = cache.as_ref().is_some_and(|c| {
-        c.coords.len() == nq
-            && c.coords
-                .iter()
-                .zip(coords)
-                .all(|(a, b)| a.start == b.start && a.len == b.len)
-    });
-    let solved = match cache.as_ref() {
-        Some(c) if same_structure => pcg(&h, &rhs, &c.llt),
-        _ => None,
-    };
-    let x = match solved {
-        Some(x) => x,
-        None => {
-            let llt = h.llt(Side::Lower).map_err(|e| {
-                Error::solve(format!(
-                    "the condensed contact matrix is not positive definite ({e:?})"
-                ))
-            })?;
-            let x = llt.solve(&rhs);
-            *cache = Some(Cached {
-                coords: coords.to_vec(),
-                llt,
-            });
-            x
-        }
-    };
+}
+
+/// out += Q x.
+fn add_columns(coords: &[Coord], x: &Mat<f64>, out: &mut [f64]) {
     for (a, q) in coords.iter().enumerate() {
         for (i, v) in q.entries() {
             out[i] += v * x[(a, 0)];
         }
     }
-    Ok(())
+}
+
+/// The columns of U for the columns Q of a Newton step (`newton_step`), group by group:
+/// the directions of each group that Q leaves out (shift 0), then its columns with κ > 0
+/// (shift 1/κ). `coords` lists each group's columns together, in group order.
+fn complement(groups: &[Group], coords: &[Coord], u: &mut Vec<Coord>) {
+    u.clear();
+    let mut k = 0;
+    for grp in groups {
+        let first = k;
+        while k < coords.len() && grp.rows().contains(&coords[k].start) {
+            k += 1;
+        }
+        let own = &coords[first..k];
+        match own {
+            [] => u.extend(grp.free().map(|c| Coord { shift: 0.0, ..c })),
+            // A disc on its rim: the radial direction, normal to the tangent t̂.
+            [t] if t.len == 2 => u.push(Coord {
+                dir: [t.dir[1], -t.dir[0]],
+                shift: 0.0,
+                ..*t
+            }),
+            _ => debug_assert_eq!(own.len(), grp.len, "a group is all free"),
+        }
+        u.extend(own.iter().filter(|q| q.shift > 0.0).map(|q| Coord {
+            shift: 1.0 / q.shift,
+            ..*q
+        }));
+    }
+    debug_assert_eq!(k, coords.len());
+}
+
+/// Flops of a Newton system in the direct form: the factorization (building H and the
+/// product D z₀ are about the same in both forms).
+fn direct_cost(nq: usize) -> f64 {
+    (nq as f64).powi(3) / 3.0
+}
+
+/// Flops of the Woodbury form: the factorization and the pass over |U| columns of B.
+fn woodbury_cost(nq: usize, nu: usize) -> f64 {
+    let (nq, nu) = (nq as f64, nu as f64);
+    nu.powi(3) / 3.0 + 2.0 * nu * (nq + nu)
+}
+
+/// H = CᵀMC + diag(shift) for the columns C given by `coords`, column by column from M's
+/// contiguous columns (M symmetric).
+fn gram(mat: &Mat<f64>, coords: &[Coord]) -> Mat<f64> {
+    let n = coords.len();
+    let col = |j: usize| mat.col(j).try_as_col_major().unwrap().as_slice();
+    let mut h = Mat::<f64>::zeros(n, n);
+    for (b, qb) in coords.iter().enumerate() {
+        // (M q_b)_i = Σ_j y_j M_ij, gathered at the rows of the other columns only.
+        let mut cols = qb.entries().map(|(j, y)| (col(j), y));
+        let (c0, y0) = cols.next().expect("a column has an entry");
+        let second = cols.next();
+        let mq = |i: usize| match second {
+            None => 0.0 + y0 * c0[i],
+            Some((c1, y1)) => 0.0 + y0 * c0[i] + y1 * c1[i],
+        };
+        let hb = h.col_mut(b).try_as_col_major_mut().unwrap().as_slice_mut();
+        for (hab, qa) in hb.iter_mut().zip(coords) {
+            *hab = qa.entries().map(|(i, x)| x * mq(i)).sum();
+        }
+        hb[b] += qb.shift;
+    }
+    h
+}
+
+/// Solves H x = rhs by the cached factor of the step (conjugate gradients preconditioned
+/// with it, when it was built for the same form and structure) or a new factorization,
+/// which is then cached.
+///
+/// (A single-precision factorization refined by the same conjugate gradients was tried:
+/// twice as fast to factor, but its two to three CG iterations of O(nq²) each cost about
+/// as much again, and the 3D block ran 8% slower side by side.)
+fn solve_cached(
+    form: Form,
+    h: &Mat<f64>,
+    rhs: &Mat<f64>,
+    coords: &[Coord],
+    cache: &mut Option<Cached>,
+) -> Result<Mat<f64>> {
+    let same_structure = cache.as_ref().is_some_and(|c| {
+        c.form == form
+            && c.coords.len() == coords.len()
+            && c.coords
+                .iter()
+                .zip(coords)
+                .all(|(a, b)| a.start == b.start && a.len == b.len)
+    });
+    if same_structure {
+        if let Some(x) = pcg(h, rhs, &cache.as_ref().unwrap().llt) {
+            return Ok(x);
+        }
+    }
+    let llt = h.llt(Side::Lower).map_err(|e| {
+        Error::solve(format!(
+            "the condensed contact matrix is not positive definite ({e:?})"
+        ))
+    })?;
+    let x = llt.solve(rhs);
+    *cache = Some(Cached {
+        form,
+        coords: coords.to_vec(),
+        llt,
+    });
+    Ok(x)
 }
 
 /// Most conjugate gradient iterations with a reused factor before a new factorization.

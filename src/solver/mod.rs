@@ -99,7 +99,7 @@ impl Rows {
             .collect()
     }
 
-    /// Every dof of every constrained node, sorted: the block C ordered last in the factor.
+    /// Every dof a row touches, sorted: the block C ordered last in the factor.
     pub fn dofs(&self) -> Vec<usize> {
         let mut d: Vec<usize> = self
             .rows
@@ -124,7 +124,7 @@ pub enum StepSolver {
     /// w = K_A⁻¹ b: no contact and no friction.
     Linear,
     /// Condensed onto the constrained boundary dofs; see `dual`.
-    Dual(dual::DualSolver),
+    Dual(Box<dual::DualSolver>),
     /// The whole problem in clarabel; see `conic`.
     Conic(Box<conic::ConicSolver>),
 }
@@ -454,6 +454,61 @@ mod tests {
     fn dual_and_clarabel_agree_in_2d() {
         for seed in [1, 2, 3] {
             cross_check(2, seed);
+        }
+    }
+
+    /// The two forms of the dual's Newton systems (`dual::newton_step`) give the same
+    /// solution, that of clarabel, over a sequence of warm-started steps; the Woodbury form
+    /// is really taken when forced and never in the direct form.
+    #[test]
+    fn newton_forms_agree_in_3d() {
+        use dual::{DualSolver, NewtonForm};
+        for seed in [1, 2, 3] {
+            let p = lattice(3, 6, 3, seed);
+            let mut s = Solvers::new(&p);
+            let mut forms = [NewtonForm::Woodbury, NewtonForm::Direct].map(|form| {
+                (
+                    DualSolver::with_form(&s.factor, &p.rows, form),
+                    vec![0.0; p.rows.len()],
+                )
+            });
+            for step in 0..4 {
+                // b turned and scaled from step to step: other sets, warm starts.
+                let b: Vec<f64> = p
+                    .b
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| {
+                        v * (1.0 + 0.3 * step as f64) + 0.2 * step as f64 * p.b[(i + 7) % p.b.len()]
+                    })
+                    .collect();
+                let (wc, zc) = s.conic(&p, &b);
+                let solved = forms.each_mut().map(|(dual, z)| {
+                    let mut w = vec![0.0; b.len()];
+                    dual.solve(&s.factor, &p.rows, &b, &mut w, z).unwrap();
+                    w
+                });
+                for (w, (_, z)) in solved.iter().zip(&forms) {
+                    let (dw, dz) = (rel_diff(&wc, w), rel_diff(&zc, z));
+                    assert!(
+                        dw <= 1e-7 && dz <= 1e-7,
+                        "seed {seed} step {step}: {dw:e} {dz:e}"
+                    );
+                    assert!(kkt(&p.rows, w, z) <= 1e-10);
+                }
+                let dw = rel_diff(&solved[1], &solved[0]);
+                assert!(
+                    dw <= 1e-9,
+                    "seed {seed} step {step}: forms differ by {dw:e}"
+                );
+            }
+            let [woodbury, direct] = forms.map(|(dual, _)| dual.newton_counts());
+            eprintln!("seed {seed}: Woodbury form {woodbury:?}, direct form {direct:?}");
+            assert!(
+                woodbury.woodbury > 0 && woodbury.fallbacks == 0,
+                "{woodbury:?}"
+            );
+            assert!(direct.woodbury == 0 && direct.direct > 0, "{direct:?}");
         }
     }
 
