@@ -730,29 +730,62 @@ struct Delassus {
 const SPLIT_ROWS: usize = 512;
 
 impl Delassus {
-    /// g = D z − d (D symmetric: column j of D is its row j). Split in two halves of the
-    /// rows; each entry is summed in the same order either way.
+    /// g = D z − d from the lower triangle of D alone: the entry D_ij below the diagonal of
+    /// column j serves both (D z)_i (with z_j) and (D z)_j (with z_i), so a product reads half
+    /// of D (the multipliers are almost all non-zero: 97% on the 3D block, so skipping zero
+    /// columns of the whole D read more). The columns are split into [0, c) and [c, m) with
+    /// about as many entries each, c = m(1 − 1/√2); the second part's sums (rows ≥ c) are
+    /// added to the first's at the end, so the arithmetic is the same on one thread or two.
     fn gradient(&self, z: &[f64], d: &[f64], g: &mut [f64]) {
         let m = g.len();
-        let part = |rows: Range<usize>, g: &mut [f64]| {
-            for (gi, di) in g.iter_mut().zip(&d[rows.clone()]) {
-                *gi = -di;
-            }
-            for (j, &zj) in z.iter().enumerate() {
-                if zj != 0.0 {
-                    let col = &self.mat.col(j).try_as_col_major().unwrap().as_slice()[rows.clone()];
-                    for (gi, dij) in g.iter_mut().zip(col) {
-                        *gi += dij * zj;
-                    }
-                }
+        let c = m - (m as f64 / std::f64::consts::SQRT_2) as usize;
+        // The columns `cols`' share of D z, accumulated into y (rows first.. of D z).
+        let part = |cols: Range<usize>, y: &mut [f64], first: usize| {
+            for j in cols {
+                let col = &self.mat.col(j).try_as_col_major().unwrap().as_slice()[j..];
+                let (y_j, y_below) = y[j - first..].split_first_mut().unwrap();
+                let below = axpy_dot(&col[1..], z[j], &z[j + 1..], y_below);
+                *y_j += col[0] * z[j] + below;
             }
         };
-        if m < SPLIT_ROWS {
-            return part(0..m, g);
+        for (gi, di) in g.iter_mut().zip(d) {
+            *gi = -di;
         }
-        let (g0, g1) = g.split_at_mut(m / 2);
-        self.pair.both(|| part(0..m / 2, g0), || part(m / 2..m, g1));
+        let mut tail = vec![0.0; m - c];
+        if m < SPLIT_ROWS {
+            part(0..c, g, 0);
+            part(c..m, &mut tail, c);
+        } else {
+            let (head, t) = (&mut *g, &mut tail);
+            self.pair.both(|| part(0..c, head, 0), || part(c..m, t, c));
+        }
+        for (gi, ti) in g[c..].iter_mut().zip(&tail) {
+            *gi += ti;
+        }
     }
+}
+
+/// y += x a, and returns a·v (in four partial sums, so that it vectorizes): the two uses of
+/// a column of a symmetric matrix's lower triangle, in one pass over it.
+fn axpy_dot(a: &[f64], x: f64, v: &[f64], y: &mut [f64]) -> f64 {
+    let n = a.len() / 4 * 4;
+    let mut acc = [0.0; 4];
+    for ((a, v), y) in a[..n]
+        .chunks_exact(4)
+        .zip(v[..n].chunks_exact(4))
+        .zip(y[..n].chunks_exact_mut(4))
+    {
+        for k in 0..4 {
+            y[k] += x * a[k];
+            acc[k] += a[k] * v[k];
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for i in n..a.len() {
+        y[i] += x * a[i];
+        s += a[i] * v[i];
+    }
+    s
 }
 
 /// q(t) − q(z) = (t − z)·(g(z) + g(t))/2 for the quadratic q: exact up to the rounding of
@@ -1099,4 +1132,53 @@ fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, m: &Llt<f64>) -> Option<Mat<f64>> {
         rz = rz_new;
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Delassus, Pair};
+    use faer::Mat;
+
+    /// D z − d from the lower triangle equals the full product to rounding, below and above
+    /// the size where it splits over two threads, and is the same bit for bit on one thread
+    /// or two.
+    #[test]
+    fn gradient_from_the_lower_triangle() {
+        for m in [1, 5, 37, 700] {
+            // A symmetric D with entries of both signs, z with zeros among its entries.
+            let entry = |i: usize, j: usize| (((i * 7 + j * 13) % 17) as f64 - 8.0) / 3.0;
+            let mat = Mat::from_fn(m, m, |i, j| {
+                entry(i.max(j), i.min(j)) + f64::from(u8::from(i == j))
+            });
+            let z: Vec<f64> = (0..m)
+                .map(|i| if i % 5 == 3 { 0.0 } else { (i as f64).sin() })
+                .collect();
+            let d: Vec<f64> = (0..m).map(|i| (i as f64 * 0.3).cos()).collect();
+            let expected: Vec<f64> = (0..m)
+                .map(|i| (0..m).map(|j| mat[(i, j)] * z[j]).sum::<f64>() - d[i])
+                .collect();
+            let scale = m as f64 * 3.0;
+            let mut got = [vec![0.0; m], vec![0.0; m]];
+            for (pair, g) in [Pair::default(), Pair::one_thread()]
+                .into_iter()
+                .zip(&mut got)
+            {
+                let op = Delassus {
+                    mat: mat.clone(),
+                    pair,
+                };
+                op.gradient(&z, &d, g);
+            }
+            for (a, b) in got[0].iter().zip(&expected) {
+                assert!((a - b).abs() <= 1e-14 * scale, "m = {m}: {a} against {b}");
+            }
+            assert!(
+                got[0]
+                    .iter()
+                    .zip(&got[1])
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "m = {m}: two threads and one differ"
+            );
+        }
+    }
 }
