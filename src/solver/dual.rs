@@ -501,8 +501,9 @@ impl DualSolver {
         };
         let m = z.len();
         let (d0, d1) = self.work.d.split_at_mut(m / 2);
+        let large = m >= SPLIT_ROWS;
         self.g_pair
-            .both(|| d_of(0..m / 2, d0), || d_of(m / 2..m, d1));
+            .both_if(large, || d_of(0..m / 2, d0), || d_of(m / 2..m, d1));
         let iterations = self.dual_solve(z)?;
         // y_C ← y_C − G z (the two halves of y_C on two threads, each row's sum in column
         // order either way), then the backward solve Lᵀ w = y.
@@ -518,7 +519,7 @@ impl DualSolver {
             }
         };
         self.g_pair
-            .both(|| update(0..c / 2, y0), || update(c / 2..c, y1));
+            .both_if(large, || update(0..c / 2, y0), || update(c / 2..c, y1));
         factor.backward(&mut self.y);
         factor.unpermute(&self.y, w);
         Ok(StepReport { iterations })
@@ -779,7 +780,8 @@ struct Delassus {
     pair: Pair,
 }
 
-/// Below this many rows a product with D takes less time than starting a thread.
+/// Below this many rows (columns of a Newton matrix) a pass over D, G or the Newton matrix
+/// takes less time than starting a thread.
 const SPLIT_ROWS: usize = 512;
 
 impl Delassus {
@@ -805,13 +807,9 @@ impl Delassus {
             *gi = -di;
         }
         let mut tail = vec![0.0; m - c];
-        if m < SPLIT_ROWS {
-            part(0..c, g, 0);
-            part(c..m, &mut tail, c);
-        } else {
-            let (head, t) = (&mut *g, &mut tail);
-            self.pair.both(|| part(0..c, head, 0), || part(c..m, t, c));
-        }
+        let (head, t) = (&mut *g, &mut tail);
+        self.pair
+            .both_if(m >= SPLIT_ROWS, || part(0..c, head, 0), || part(c..m, t, c));
         for (gi, ti) in g[c..].iter_mut().zip(&tail) {
             *gi += ti;
         }
@@ -1140,12 +1138,11 @@ fn gram(mat: &Mat<f64>, coords: &[Coord], h: &mut Mat<f64>, pair: &Pair) {
         }
     };
     let (h0, h1) = h.as_mut().split_at_col_mut(n / 2);
-    if n < SPLIT_ROWS {
-        fill(0..n / 2, h0);
-        fill(n / 2..n, h1);
-    } else {
-        pair.both(|| fill(0..n / 2, h0), || fill(n / 2..n, h1));
-    }
+    pair.both_if(
+        n >= SPLIT_ROWS,
+        || fill(0..n / 2, h0),
+        || fill(n / 2..n, h1),
+    );
 }
 
 /// Solves H x = rhs (H in `s.h`) by the cached factor of the step (conjugate gradients

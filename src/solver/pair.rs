@@ -48,6 +48,17 @@ impl Pair {
         }
     }
 
+    /// As [`Pair::both`] for a pass that is `large`, else `a` then `b` on this thread (a small
+    /// pass takes less time than starting a thread).
+    pub fn both_if(&self, large: bool, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
+        if large {
+            self.both(a, b);
+        } else {
+            a();
+            b();
+        }
+    }
+
     /// Runs `a` and `b`: on two threads when there are two cores and that was the faster
     /// way lately, else one after the other.
     pub fn both(&self, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
