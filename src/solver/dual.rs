@@ -296,14 +296,11 @@ struct Scratch {
     /// m-vectors of the Woodbury form: its right side s and B-products.
     sv: Vec<f64>,
     bv: Vec<f64>,
-    /// The step's last factorization of a Newton matrix.
-    cache: Option<Cached>,
-    /// The Newton matrix, and the buffer of the factor while none is cached: a factor is
-    /// computed in its predecessor's buffer, so the iterations allocate no matrix (at
-    /// nq = 1350 each is 14.6 MB, and fresh pages cost 9% of the 3D block's run in page
-    /// faults and zeroing).
+    /// The Newton matrix, and the step's last factorization of one. Both buffers are kept
+    /// across iterations, so the iterations allocate no matrix (at nq = 1350 each is
+    /// 14.6 MB, and fresh pages cost 9% of the 3D block's run in page faults and zeroing).
     h: Mat<f64>,
-    spare: Mat<f64>,
+    factor: NewtonFactor,
     /// Building a Newton matrix, split over two threads where that pays.
     gram_pair: Pair,
     counts: NewtonCounts,
@@ -330,11 +327,12 @@ enum Form {
 }
 
 /// A Cholesky factor of a Newton matrix, its form and the coordinates it was built from.
-struct Cached {
-    form: Form,
-    coords: Vec<Coord>,
+struct NewtonFactor {
     /// L in the lower triangle (the upper one holds what the matrix had there).
     l: Mat<f64>,
+    /// The form of the matrix factored in `l`; None while `l` holds no valid factor.
+    form: Option<Form>,
+    coords: Vec<Coord>,
 }
 
 /// Which form the Newton systems are solved in (see `newton_step`).
@@ -440,9 +438,12 @@ impl DualSolver {
                 grad: vec![0.0; m],
                 sv: vec![0.0; m],
                 bv: vec![0.0; m],
-                cache: None,
                 h: Mat::new(),
-                spare: Mat::new(),
+                factor: NewtonFactor {
+                    l: Mat::new(),
+                    form: None,
+                    coords: Vec::with_capacity(m),
+                },
                 gram_pair: Pair::default(),
                 counts: NewtonCounts::default(),
             },
@@ -552,9 +553,7 @@ impl DualSolver {
         // A factorization is reused within the step only, so that a run resumed from a
         // checkpoint (which starts with an empty cache) repeats the uninterrupted run bit
         // for bit.
-        if let Some(cached) = newton.cache.take() {
-            newton.spare = cached.l;
-        }
+        newton.factor.form = None;
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = TOLERANCE * scale.max(f64::MIN_POSITIVE);
         if let Some(b) = inverse {
@@ -972,7 +971,7 @@ fn newton_step(
     };
     gram(&ops.d.mat, coords, &mut s.h, &s.gram_pair);
     let rhs = Mat::<f64>::from_fn(nq, 1, |a, _| -coords[a].dot(grad));
-    let x = solve_cached(Form::Direct, &rhs, coords, s)?;
+    let x = solve_cached(Form::Direct, &rhs, coords, &s.h, &mut s.factor)?;
     add_columns(coords, &x, out);
     Ok(())
 }
@@ -998,10 +997,7 @@ fn woodbury_step(
         s.bv.copy_from_slice(&s.sv);
         if !s.u.is_empty() {
             let rhs = Mat::<f64>::from_fn(s.u.len(), 1, |a, _| s.u[a].dot(&s.sv));
-            let u = std::mem::take(&mut s.u);
-            let c = solve_cached(Form::Woodbury, &rhs, &u, s);
-            s.u = u;
-            let c = c?;
+            let c = solve_cached(Form::Woodbury, &rhs, &s.u, &s.h, &mut s.factor)?;
             axpy_columns(b, scaled_entries(&s.u, |a| -c[(a, 0)]), &mut s.bv);
         }
         let Scratch {
@@ -1145,39 +1141,42 @@ fn gram(mat: &Mat<f64>, coords: &[Coord], h: &mut Mat<f64>, pair: &Pair) {
     );
 }
 
-/// Solves H x = rhs (H in `s.h`) by the cached factor of the step (conjugate gradients
-/// preconditioned with it, when it was built for the same form and structure) or a new
-/// factorization, which is then cached, in the buffer of the factor it replaces.
+/// Solves H x = rhs by the step's last factor `f` (conjugate gradients preconditioned with
+/// it, when it was built for the same form and structure) or a new factorization, which
+/// then replaces it in its buffer.
 ///
 /// (A single-precision factorization refined by the same conjugate gradients was tried:
 /// twice as fast to factor, but its two to three CG iterations of O(nq²) each cost about
 /// as much again, and the 3D block ran 8% slower side by side.)
-fn solve_cached(form: Form, rhs: &Mat<f64>, coords: &[Coord], s: &mut Scratch) -> Result<Mat<f64>> {
-    let cached = s.cache.as_ref().filter(|c| {
-        c.form == form
-            && c.coords.len() == coords.len()
-            && c.coords
-                .iter()
-                .zip(coords)
-                .all(|(a, b)| a.start == b.start && a.len == b.len)
-    });
-    if let Some(x) = cached.and_then(|c| pcg(&s.h, rhs, &c.l)) {
-        return Ok(x);
+fn solve_cached(
+    form: Form,
+    rhs: &Mat<f64>,
+    coords: &[Coord],
+    h: &Mat<f64>,
+    f: &mut NewtonFactor,
+) -> Result<Mat<f64>> {
+    let same_structure = f.form == Some(form)
+        && f.coords.len() == coords.len()
+        && f.coords
+            .iter()
+            .zip(coords)
+            .all(|(a, b)| a.start == b.start && a.len == b.len);
+    if same_structure {
+        if let Some(x) = pcg(h, rhs, &f.l) {
+            return Ok(x);
+        }
     }
-    let mut l = s
-        .cache
-        .take()
-        .map_or_else(|| std::mem::replace(&mut s.spare, Mat::new()), |c| c.l);
-    l.resize_with(s.h.nrows(), s.h.ncols(), |_, _| 0.0);
-    l.copy_from_triangular_lower(&s.h);
+    f.form = None;
+    f.l.resize_with(h.nrows(), h.ncols(), |_, _| 0.0);
+    f.l.copy_from_triangular_lower(h);
     let par = faer::get_global_parallelism();
     let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
-        l.nrows(),
+        f.l.nrows(),
         par,
         Default::default(),
     ));
     llt::factor::cholesky_in_place(
-        l.as_mut(),
+        f.l.as_mut(),
         Default::default(),
         par,
         MemStack::new(&mut mem),
@@ -1188,13 +1187,10 @@ fn solve_cached(form: Form, rhs: &Mat<f64>, coords: &[Coord], s: &mut Scratch) -
             "the condensed contact matrix is not positive definite ({e:?})"
         ))
     })?;
-    let x = llt_solve(&l, rhs);
-    s.cache = Some(Cached {
-        form,
-        coords: coords.to_vec(),
-        l,
-    });
-    Ok(x)
+    f.form = Some(form);
+    f.coords.clear();
+    f.coords.extend_from_slice(coords);
+    Ok(llt_solve(&f.l, rhs))
 }
 
 /// x = (L Lᵀ)⁻¹ rhs for L in the lower triangle of `l`.
