@@ -253,15 +253,36 @@ impl Bits<'_> {
 
 /// Appends one zlib stream of `data` to `out` (public for examples/bench_output.rs).
 pub fn compress(data: &[u8], out: &mut Vec<u8>) {
-    let start = out.len();
+    thread_local! {
+        /// Where a stream is encoded before it is copied to `out`: zeroed once, where
+        /// encoding at the end of `out` zeroed its room first (3 MB a frame at h = 1/128).
+        static ROOM: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
     // The stream is stored if it would be longer than this, which is checked before each
     // non-zero word. Slack for what goes out past it: the word (12 bytes at most), the
     // zeros before it (at most 3 bytes per match of 258), the end of block, a put's store.
     let limit = stored_size(data.len());
-    out.resize(start + limit + 64 + data.len() / 64, 0);
-    out[start..start + 2].copy_from_slice(&HEADER);
+    let encoded = ROOM.with_borrow_mut(|room| {
+        let need = limit + 64 + data.len() / 64;
+        if room.len() < need {
+            room.resize(need, 0);
+        }
+        let len = encode(data, limit, room)?;
+        out.extend_from_slice(&room[..len]);
+        Some(())
+    });
+    match encoded {
+        Some(()) => out.extend_from_slice(&zlib_rs::adler32::adler32(1, data).to_be_bytes()),
+        None => store(data, out),
+    }
+}
+
+/// The zlib header and deflate block of `data` at the start of `room`: their length, or
+/// None if they would take more than `limit` bytes (then the stream is stored).
+fn encode(data: &[u8], limit: usize, room: &mut [u8]) -> Option<usize> {
+    room[..2].copy_from_slice(&HEADER);
     let mut bits = Bits {
-        out: &mut out[start + 2..],
+        out: &mut room[2..],
         pos: 0,
         acc: 0,
         n: 0,
@@ -278,7 +299,7 @@ pub fn compress(data: &[u8], out: &mut Vec<u8>) {
             continue;
         }
         if bits.pos > limit {
-            break;
+            return None;
         }
         bits.zeros(zeros, after_zero);
         zeros = 0;
@@ -298,13 +319,7 @@ pub fn compress(data: &[u8], out: &mut Vec<u8>) {
         bits.literals([b]);
     }
     let len = 2 + bits.finish();
-    if !done || len + 4 > limit {
-        out.truncate(start);
-        store(data, out);
-    } else {
-        out.truncate(start + len);
-        out.extend_from_slice(&zlib_rs::adler32::adler32(1, data).to_be_bytes());
-    }
+    (done && len + 4 <= limit).then_some(len)
 }
 
 /// Appends one zlib stream of `data` compressed by zlib itself (flate2, level 6): for what
