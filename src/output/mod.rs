@@ -688,11 +688,14 @@ fn step_of(file: &str) -> Option<usize> {
 /// are not fsync'ed: the rename makes a process crash safe, which is what a run needs; the
 /// output of a run is reproducible and a power failure is out of scope. Errors name `path`.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic_parts(path, &[bytes])
+    write_atomic_with(path, |file| file.write_all(bytes))
 }
 
-/// [`write_atomic`] of the concatenation of `parts`, which are not copied together first.
-fn write_atomic_parts(path: &Path, parts: &[&[u8]]) -> Result<()> {
+/// [`write_atomic`] of what `write` writes into the (empty) temporary file.
+fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> Result<()> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let file_name = path.file_name().ok_or_else(|| {
         Error::io(
@@ -709,9 +712,7 @@ fn write_atomic_parts(path: &Path, parts: &[&[u8]]) -> Result<()> {
     let tmp = path.with_file_name(tmp_name);
     let result = (|| {
         let mut file = std::fs::File::create(&tmp)?;
-        for part in parts {
-            file.write_all(part)?;
-        }
+        write(&mut file)?;
         file.flush()?;
         drop(file);
         std::fs::rename(&tmp, path)

@@ -37,10 +37,10 @@
 
 use std::io::Write as _;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use super::writer::Sink;
-use super::{write_atomic, write_atomic_parts, zlib, Array, Compression, Geometry};
+use super::{write_atomic, write_atomic_with, zlib, Array, Compression, Geometry};
 use crate::Result;
 
 /// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
@@ -60,34 +60,137 @@ pub(super) struct Vtu {
     pub cell_data: Vec<Array>,
 }
 
+/// Where the appended data go: memory (the static arrays, encoded once per run) or a frame's
+/// file ([`FileTail`]). Positions count from the start of the appended data.
+trait Appended {
+    /// Appends `bytes`.
+    fn put(&mut self, bytes: &[u8]) -> std::io::Result<()>;
+    /// Appends the zlib stream of `block` made by `deflate`.
+    fn deflate(&mut self, block: &[u8], deflate: fn(&[u8], &mut Vec<u8>)) -> std::io::Result<()>;
+    /// The position of the end.
+    fn len(&self) -> u64;
+    /// Overwrites what was appended at `at`.
+    fn patch(&mut self, at: u64, bytes: &[u8]) -> std::io::Result<()>;
+}
+
+impl Appended for Vec<u8> {
+    fn put(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.extend_from_slice(bytes);
+        Ok(())
+    }
+
+    fn deflate(&mut self, block: &[u8], deflate: fn(&[u8], &mut Vec<u8>)) -> std::io::Result<()> {
+        deflate(block, self);
+        Ok(())
+    }
+
+    fn len(&self) -> u64 {
+        Vec::len(self) as u64
+    }
+
+    fn patch(&mut self, at: u64, bytes: &[u8]) -> std::io::Result<()> {
+        self[at as usize..at as usize + bytes.len()].copy_from_slice(bytes);
+        Ok(())
+    }
+}
+
 /// Appends the header and data of one array holding `raw` to `out` in the appended layout
 /// (see the module doc); `deflate` makes a zlib stream of a block (`zlib::compress` for
-/// fields, `zlib::compress_once` for the mesh).
+/// fields, `zlib::compress_once` for the mesh). The block sizes are patched in after the
+/// blocks.
 fn append(
     compression: Compression,
-    out: &mut Vec<u8>,
+    out: &mut impl Appended,
     raw: &[u8],
     deflate: fn(&[u8], &mut Vec<u8>),
-) {
+) -> std::io::Result<()> {
     match compression {
         Compression::None => {
-            out.extend_from_slice(&(raw.len() as u64).to_le_bytes());
-            out.extend_from_slice(raw);
+            out.put(&(raw.len() as u64).to_le_bytes())?;
+            out.put(raw)
         }
         Compression::Zlib => {
             let blocks = raw.len().div_ceil(BLOCK);
-            let header = out.len();
-            for word in [blocks, BLOCK, raw.len() % BLOCK] {
-                out.extend_from_slice(&(word as u64).to_le_bytes());
-            }
-            out.resize(out.len() + 8 * blocks, 0);
-            for (b, chunk) in raw.chunks(BLOCK).enumerate() {
+            let words = |w: &[usize]| w.iter().flat_map(|&w| (w as u64).to_le_bytes()).collect();
+            let header: Vec<u8> = words(&[blocks, BLOCK, raw.len() % BLOCK]);
+            out.put(&header)?;
+            let sizes_at = out.len();
+            out.put(&vec![0; 8 * blocks])?;
+            let mut sizes = Vec::with_capacity(blocks);
+            for chunk in raw.chunks(BLOCK) {
                 let start = out.len();
-                deflate(chunk, out);
-                let size = (out.len() - start) as u64;
-                let at = header + 24 + 8 * b;
-                out[at..at + 8].copy_from_slice(&size.to_le_bytes());
+                out.deflate(chunk, deflate)?;
+                sizes.push((out.len() - start) as usize);
             }
+            out.patch(sizes_at, &words(&sizes))
+        }
+    }
+}
+
+/// The appended data of a frame's file after its static arrays, through a buffer of at most
+/// [`FileTail::FLUSH`] bytes: a frame's compressed fields (1.85 MB at h = 1/128) never sit
+/// in memory whole. The writer thread shares the last-level cache with the time loop, whose
+/// factor about fills it at h = 1/128, and each byte it touches evicts one of the factor's.
+struct FileTail<'a> {
+    file: &'a std::fs::File,
+    buf: &'a mut Vec<u8>,
+    /// The file offset of the appended data, and how many of their bytes are in the file.
+    base: u64,
+    flushed: u64,
+}
+
+impl FileTail<'_> {
+    /// Bytes kept before they go to the file.
+    const FLUSH: usize = 1 << 17;
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        std::io::Write::write_all(&mut self.file, self.buf)?;
+        self.flushed += self.buf.len() as u64;
+        self.buf.clear();
+        Ok(())
+    }
+
+    fn flush_if_full(&mut self) -> std::io::Result<()> {
+        if self.buf.len() >= Self::FLUSH {
+            self.flush()?;
+        }
+        Ok(())
+    }
+}
+
+impl Appended for FileTail<'_> {
+    fn put(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        if bytes.len() < Self::FLUSH {
+            self.buf.extend_from_slice(bytes);
+            return self.flush_if_full();
+        }
+        // Raw values go to the file from where they are.
+        self.flush()?;
+        std::io::Write::write_all(&mut self.file, bytes)?;
+        self.flushed += bytes.len() as u64;
+        Ok(())
+    }
+
+    fn deflate(&mut self, block: &[u8], deflate: fn(&[u8], &mut Vec<u8>)) -> std::io::Result<()> {
+        deflate(block, self.buf);
+        self.flush_if_full()
+    }
+
+    fn len(&self) -> u64 {
+        self.flushed + self.buf.len() as u64
+    }
+
+    /// Overwritten in the buffer if it is still there, else in the file with a positioned
+    /// write (the file's own position stays at its end). A flush takes the whole buffer, so
+    /// what one `put` appended is all in one of them.
+    fn patch(&mut self, at: u64, bytes: &[u8]) -> std::io::Result<()> {
+        match at.checked_sub(self.flushed) {
+            Some(from) => {
+                let from = from as usize;
+                self.buf[from..from + bytes.len()].copy_from_slice(bytes);
+                Ok(())
+            }
+            None => std::os::unix::fs::FileExt::write_all_at(self.file, bytes, self.base + at),
         }
     }
 }
@@ -117,7 +220,8 @@ pub(super) struct Grid {
     statics: Vec<u8>,
     /// The file being written (kept to reuse its allocation).
     out: Vec<u8>,
-    appended: Vec<u8>,
+    /// The buffer of [`FileTail`] (kept likewise).
+    buf: Vec<u8>,
 }
 
 fn le<T, const N: usize>(items: impl Iterator<Item = T>, f: impl Fn(T) -> [u8; N]) -> Vec<u8> {
@@ -184,18 +288,60 @@ impl Grid {
             region,
             statics: Vec::new(),
             out: Vec::new(),
-            appended: Vec::new(),
+            buf: Vec::new(),
         })
     }
 
-    /// The whole `.vtu` file for these fields in four parts (valid until the next call): the
-    /// XML up to the appended data, the mesh, the fields, the end. Sizes were checked by the
+    /// Writes the `.vtu` of these fields to `path` ([`write_atomic_with`]): the XML up to the
+    /// appended data, the mesh, the fields as they are compressed ([`FileTail`]), the end,
+    /// and the XML once more with the fields' offsets, which are known only then (they are
+    /// padded to a fixed width, so the XML keeps its length). Sizes were checked by the
     /// caller.
-    pub(super) fn encode(&mut self, point_data: &[Array], cell_data: &[Array]) -> [&[u8]; 4] {
+    fn write_frame(
+        &mut self,
+        path: &Path,
+        point_data: &[Array],
+        cell_data: &[Array],
+    ) -> Result<()> {
         self.prepare();
-        let (out, appended) = (&mut self.out, &mut self.appended);
-        out.clear();
-        appended.clear();
+        let (mut out, mut buf) = (std::mem::take(&mut self.out), std::mem::take(&mut self.buf));
+        // The appended data hold the static arrays, then the fields in reverse document
+        // order: meshio's raw appended reader walks the arrays by offset and looks each one
+        // up by its offset attribute after rewriting those of the arrays before it, so the
+        // array it looks for must come first in the document among equal offsets.
+        let arrays: Vec<&Array> = point_data.iter().chain(cell_data).collect();
+        let mut offsets = vec![0; arrays.len()];
+        let written = write_atomic_with(path, |file| {
+            out.clear();
+            self.xml(&arrays, point_data.len(), &offsets, &mut out);
+            file.write_all(&out)?;
+            file.write_all(&self.statics)?;
+            buf.clear();
+            let mut tail = FileTail {
+                file,
+                buf: &mut buf,
+                base: out.len() as u64,
+                flushed: self.statics.len() as u64,
+            };
+            for (k, a) in arrays.iter().enumerate().rev() {
+                offsets[k] = tail.len();
+                append(self.compression, &mut tail, &a.le_bytes(), zlib::compress)?;
+            }
+            tail.put(b"\n  </AppendedData>\n</VTKFile>\n")?;
+            tail.flush()?;
+            let length = out.len();
+            out.clear();
+            self.xml(&arrays, point_data.len(), &offsets, &mut out);
+            debug_assert_eq!(out.len(), length, "the XML changed its length");
+            std::os::unix::fs::FileExt::write_all_at(&*file, &out, 0)
+        });
+        (self.out, self.buf) = (out, buf);
+        written
+    }
+
+    /// The XML of a frame up to its appended data, `offsets` those of `arrays` (the first
+    /// `n_point` of them point fields).
+    fn xml(&self, arrays: &[&Array], n_point: usize, offsets: &[u64], out: &mut Vec<u8>) {
         let compressor = match self.compression {
             Compression::None => "",
             Compression::Zlib => " compressor=\"vtkZLibDataCompressor\"",
@@ -209,35 +355,27 @@ impl Grid {
              <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n",
             self.field_data, self.num_points, self.num_cells
         );
-        // The appended data hold the static arrays, then the fields in reverse document
-        // order: meshio's raw appended reader walks the arrays by offset and looks each one
-        // up by its offset attribute after rewriting those of the arrays before it, so the
-        // array it looks for must come first in the document among equal offsets.
-        let base = self.statics.len();
-        let arrays: Vec<&Array> = point_data.iter().chain(cell_data).collect();
-        let mut offsets = vec![0; arrays.len()];
-        for (k, a) in arrays.iter().enumerate().rev() {
-            offsets[k] = base + appended.len();
-            append(self.compression, appended, &a.le_bytes(), zlib::compress);
-        }
-        for (k, a) in arrays.iter().enumerate() {
+        for (k, (a, offset)) in arrays.iter().zip(offsets).enumerate() {
             if k == 0 {
                 out.extend_from_slice(b"      <PointData>\n");
             }
-            if k == point_data.len() {
+            if k == n_point {
                 out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
             }
+            // Blanks before `/>` keep the width of any u64 offset.
+            let offset = offset.to_string();
             let _ = writeln!(
                 out,
-                "{} offset=\"{}\"/>",
+                "{} offset=\"{offset}\"{:pad$}/>",
                 array_open(a.vtk_type(), &a.name, a.components),
-                offsets[k]
+                "",
+                pad = 20 - offset.len()
             );
         }
         if arrays.is_empty() {
             out.extend_from_slice(b"      <PointData>\n");
         }
-        if point_data.len() == arrays.len() {
+        if n_point == arrays.len() {
             out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
         }
         let put = |s: &Static, out: &mut Vec<u8>| {
@@ -255,12 +393,6 @@ impl Grid {
         out.extend_from_slice(
             b"      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _",
         );
-        [
-            &self.out,
-            &self.statics,
-            &self.appended,
-            b"\n  </AppendedData>\n</VTKFile>\n",
-        ]
     }
 }
 
@@ -270,7 +402,7 @@ impl Sink for Grid {
     /// The `.vtu` (temporary file + rename), then the `.pvd` (likewise).
     fn write(&mut self, job: Job) -> Result<()> {
         if let Some(v) = job.vtu {
-            write_atomic_parts(&v.path, &self.encode(&v.point_data, &v.cell_data))?;
+            self.write_frame(&v.path, &v.point_data, &v.cell_data)?;
         }
         match job.pvd {
             Some((path, text)) => write_atomic(&path, text.as_bytes()),
@@ -284,7 +416,7 @@ impl Sink for Grid {
         if !self.statics.is_empty() {
             return;
         }
-        // In reverse document order (see `encode`): types, offsets, connectivity, points,
+        // In reverse document order (see `write_frame`): types, offsets, connectivity, points,
         // region.
         let [conn, offsets, types] = &mut self.cells;
         let order = [types, offsets, conn, &mut self.points]
@@ -297,7 +429,8 @@ impl Sink for Grid {
                 &mut self.statics,
                 &std::mem::take(&mut s.raw),
                 zlib::compress_once,
-            );
+            )
+            .expect("appending to memory cannot fail");
         }
     }
 
@@ -354,7 +487,7 @@ mod tests {
     fn zlib_blocks_follow_vtk_header() {
         let raw: Vec<u8> = (0..(BLOCK * 2 + 100)).map(|i| (i % 7) as u8).collect();
         let mut out = Vec::new();
-        append(Compression::Zlib, &mut out, &raw, zlib::compress);
+        append(Compression::Zlib, &mut out, &raw, zlib::compress).unwrap();
         let word = |k: usize| u64::from_le_bytes(out[8 * k..8 * k + 8].try_into().unwrap());
         assert_eq!(word(0), 3);
         assert_eq!(word(1), BLOCK as u64);
@@ -370,6 +503,37 @@ mod tests {
             at += n;
         }
         assert_eq!(back, raw);
+    }
+
+    /// An array streamed to a file through a buffer that is flushed before its block sizes
+    /// are known (they are patched in the file) is the array appended in memory.
+    #[test]
+    fn file_tail_writes_what_memory_holds() {
+        // Bytes without repeats: every block is stored, 5 blocks exceed FileTail::FLUSH.
+        let raw: Vec<u8> = (0u64..(5 * BLOCK as u64 + 3) / 8 + 1)
+            .flat_map(|i| i.wrapping_mul(0x9e37_79b9_7f4a_7c15).to_le_bytes())
+            .collect();
+        assert!(raw.len() > FileTail::FLUSH);
+        for compression in [Compression::Zlib, Compression::None] {
+            let mut memory = b"static".to_vec();
+            append(compression, &mut memory, &raw, zlib::compress).unwrap();
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("a");
+            let mut file = std::fs::File::create(&path).unwrap();
+            file.write_all(b"xmlstatic").unwrap();
+            let mut buf = Vec::new();
+            let mut tail = FileTail {
+                file: &file,
+                buf: &mut buf,
+                base: 3,
+                flushed: 6,
+            };
+            append(compression, &mut tail, &raw, zlib::compress).unwrap();
+            assert!(tail.flushed > 6, "the buffer was flushed");
+            tail.flush().unwrap();
+            drop(file);
+            assert_eq!(std::fs::read(&path).unwrap()[3..], memory[..]);
+        }
     }
 
     #[test]
