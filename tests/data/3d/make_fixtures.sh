@@ -8,6 +8,8 @@
 #                                                                        (unsupported elements)
 #   slab_t0008.msh      meshes/3d/slab.geo, n = 16, t = 0.008 (1/250 of the width): flat
 #                       tetrahedra that once stalled the dual solver (tests/robustness.rs)
+#   slab_t0004.msh      the same, t = 0.004 (1/500 of the width): steps that needed up to
+#                       2 811 dual iterations, more than the limit then (tests/robustness.rs)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 GMSH=${GMSH:-gmsh}
@@ -21,3 +23,4 @@ mesh() {
 mesh patch_box.geo -o patch_box.msh
 mesh patch_box.geo -setnumber lc 2 -order 2 -o quadratic_tets.msh
 mesh ../../../meshes/3d/slab.geo -setnumber n 16 -setnumber t 0.008 -o slab_t0008.msh
+mesh ../../../meshes/3d/slab.geo -setnumber n 16 -setnumber t 0.004 -o slab_t0004.msh
