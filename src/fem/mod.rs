@@ -377,31 +377,14 @@ impl Discretization {
         m: Option<&[f64]>,
         model: Model,
     ) -> (Vec<f64>, Vec<f64>) {
-        let d = self.dim;
-        let nn = self.nodes.len();
-        let (mut p, mut q) = (vec![[0.0; 3]; nn], vec![[0.0; 3]; nn]);
-        let b = self.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
-        let (a, r) = (self.a, self.r);
-        for (n, (pn, qn)) in p.iter_mut().zip(&mut q).enumerate() {
-            for c in 0..d {
-                if let Some(dof) = self.free[d * n + c] {
-                    let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
-                    pn[c] = a.a * w + b.a * u + r.a * m;
-                    qn[c] = a.b * w + b.b * u + r.b * m;
-                }
-            }
-        }
         let packed = self
             .stress_cells
             .get_or_init(|| PackedCells::new(&self.cells));
-        let n_cells = self.cells.len();
-        let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
         let plane_stress = model == Model::PlaneStress;
-        match d {
-            2 => packed.stresses::<2>(&p, &q, plane_stress, &mut s6, &mut vm),
-            _ => packed.stresses::<3>(&p, &q, plane_stress, &mut s6, &mut vm),
+        match self.dim {
+            2 => packed.stresses::<2, 3>(self, [w, u], m, plane_stress),
+            _ => packed.stresses::<3, 4>(self, [w, u], m, plane_stress),
         }
-        (s6, vm)
     }
 
     /// K_A + k K_B + k² r(0) K_R: the step matrix of the implicit variant (the three share
@@ -452,28 +435,48 @@ impl PackedCells {
         PackedCells { nodes, grad }
     }
 
-    /// σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I of every cell (XX YY ZZ XY YZ
-    /// XZ appended to `s6`, σ_zz = 0 under plane stress) and its von Mises stress (appended
-    /// to `vm`), for cells of dimension D: the z entries of ∇φ_i and of p_i, q_i are zero in
-    /// 2D, so only D × D products are formed.
-    fn stresses<const D: usize>(
+    /// [`Discretization::stress`] for cells of dimension D with N = D + 1 vertices: the
+    /// nodal p and q of w, u, m, then σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I
+    /// of every cell (XX YY ZZ XY YZ XZ, σ_zz = 0 under plane stress) and its von Mises
+    /// stress. The z entries of ∇φ_i and of p_i, q_i are zero in 2D, so only D × D products
+    /// are formed.
+    fn stresses<const D: usize, const N: usize>(
         &self,
-        p: &[[f64; 3]],
-        q: &[[f64; 3]],
+        disc: &Discretization,
+        [w, u]: [&[f64]; 2],
+        m: Option<&[f64]>,
         plane_stress: bool,
-        s6: &mut Vec<f64>,
-        vm: &mut Vec<f64>,
-    ) {
+    ) -> (Vec<f64>, Vec<f64>) {
+        let b = disc.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
+        let (a, r) = (disc.a, disc.r);
+        // [p_n, q_n] of every node (D components: 32 bytes a node in 2D).
+        let pq: Vec<[[f64; D]; 2]> = disc
+            .free
+            .as_chunks::<D>()
+            .0
+            .iter()
+            .map(|dofs| {
+                let mut pq = [[0.0; D]; 2];
+                for (c, dof) in dofs.iter().enumerate() {
+                    if let Some(dof) = *dof {
+                        let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
+                        pq[0][c] = a.a * w + b.a * u + r.a * m;
+                        pq[1][c] = a.b * w + b.b * u + r.b * m;
+                    }
+                }
+                pq
+            })
+            .collect();
+        let n_cells = self.nodes.len() / N;
+        let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
         let (grads, _) = self.grad.as_chunks::<D>();
-        for (nodes, grad) in self
-            .nodes
-            .chunks_exact(D + 1)
-            .zip(grads.chunks_exact(D + 1))
-        {
+        let (grads, _) = grads.as_chunks::<N>();
+        let (cells, _) = self.nodes.as_chunks::<N>();
+        for (nodes, grad) in cells.iter().zip(grads) {
             let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
             let mut tr = 0.0;
             for (g, &n) in grad.iter().zip(nodes) {
-                let (p, q) = (&p[n as usize], &q[n as usize]);
+                let [p, q] = &pq[n as usize];
                 for a in 0..D {
                     for b in 0..D {
                         g_p[a][b] += g[a] * p[b];
@@ -494,8 +497,9 @@ impl PackedCells {
             let (dx, dy, dz) = (s[0] - s[1], s[1] - s[2], s[2] - s[0]);
             let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
             vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt());
-            s6.extend_from_slice(&s);
+            s6.extend(s);
         }
+        (s6, vm)
     }
 }
 
