@@ -127,9 +127,9 @@ fn append(
     }
 }
 
-/// The appended data of a frame's file after its static arrays, through a buffer of at most
-/// [`FileTail::FLUSH`] bytes: a frame's compressed fields (1.85 MB at h = 1/128) never sit
-/// in memory whole. The writer thread shares the last-level cache with the time loop, whose
+/// The appended data of a frame's file after its static arrays, through a buffer that goes
+/// to the file whenever it holds [`FileTail::FLUSH`] bytes: a frame's compressed fields
+/// (1.85 MB at h = 1/128) never sit in memory whole. The writer thread shares the last-level cache with the time loop, whose
 /// factor about fills it at h = 1/128, and each byte it touches evicts one of the factor's.
 struct FileTail<'a> {
     file: &'a std::fs::File,
