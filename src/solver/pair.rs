@@ -8,11 +8,28 @@
 //! `PROBE`th call the other one, to follow the load. Callers split their work so that the
 //! arithmetic does not depend on the way.
 
-use std::sync::Mutex;
+use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
 /// Every PROBE-th call takes the way that was slower lately.
 const PROBE: usize = 16;
+
+/// The thread that takes the second halves of every `Pair`: one rayon worker, started by the
+/// first pass on two threads and kept. A thread started per pass (`std::thread::scope`) cost
+/// 55–72 µs here, two per time step; waking the worker costs a fraction of that. None if
+/// the thread cannot be started: then the passes run on one thread.
+fn worker() -> Option<&'static rayon::ThreadPool> {
+    static WORKER: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
+    WORKER
+        .get_or_init(|| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .thread_name(|_| "viscontact-pair".to_string())
+                .build()
+                .ok()
+        })
+        .as_ref()
+}
 
 /// Runs pairs of closures of one kind of pass, on two threads or one after the other.
 pub struct Pair {
@@ -74,13 +91,11 @@ impl Pair {
             (w.two <= w.one) != w.calls.is_multiple_of(PROBE)
         };
         let start = Instant::now();
-        if two {
-            std::thread::scope(|scope| {
-                let second = scope.spawn(b);
+        if let (true, Some(worker)) = (two, worker()) {
+            // b on the worker, a here; the scope waits for b (and passes on a panic).
+            worker.in_place_scope(|scope| {
+                scope.spawn(|_| b());
                 a();
-                if let Err(panic) = second.join() {
-                    std::panic::resume_unwind(panic);
-                }
             });
         } else {
             a();
