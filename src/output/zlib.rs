@@ -223,6 +223,10 @@ impl Bits<'_> {
         }
         if after_zero {
             self.repeat(r);
+        } else if r <= 3 + MATCHES.len() {
+            // The literal 0 (code 0, eight bits) and one match, in one put.
+            let m = MATCHES[r - 1 - 3];
+            self.put((m & 0xffff_ffff) << 8, 8 + (m >> 32) as u32);
         } else {
             self.literals([0]);
             self.repeat(r - 1);
