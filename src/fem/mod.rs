@@ -377,14 +377,80 @@ impl Discretization {
         m: Option<&[f64]>,
         model: Model,
     ) -> (Vec<f64>, Vec<f64>) {
+        let plane_stress = model == Model::PlaneStress;
+        match self.dim {
+            2 => self.stresses::<2, 3>([w, u], m, plane_stress),
+            _ => self.stresses::<3, 4>([w, u], m, plane_stress),
+        }
+    }
+
+    /// [`Discretization::stress`] for cells of dimension D with N = D + 1 vertices: the
+    /// nodal p and q of w, u, m, then σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I
+    /// of every cell (XX YY ZZ XY YZ XZ, σ_zz = 0 under plane stress) and its von Mises
+    /// stress. The z entries of ∇φ_i and of p_i, q_i are zero in 2D, so only D × D products
+    /// are formed.
+    fn stresses<const D: usize, const N: usize>(
+        &self,
+        [w, u]: [&[f64]; 2],
+        m: Option<&[f64]>,
+        plane_stress: bool,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let b = self.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
+        let (a, r) = (self.a, self.r);
+        // [p_n, q_n] of every node (D components: 32 bytes a node in 2D).
+        let pq: Vec<[[f64; D]; 2]> = self
+            .free
+            .as_chunks::<D>()
+            .0
+            .iter()
+            .map(|dofs| {
+                let mut pq = [[0.0; D]; 2];
+                for (c, dof) in dofs.iter().enumerate() {
+                    if let Some(dof) = *dof {
+                        let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
+                        pq[0][c] = a.a * w + b.a * u + r.a * m;
+                        pq[1][c] = a.b * w + b.b * u + r.b * m;
+                    }
+                }
+                pq
+            })
+            .collect();
         let packed = self
             .stress_cells
             .get_or_init(|| PackedCells::new(&self.cells));
-        let plane_stress = model == Model::PlaneStress;
-        match self.dim {
-            2 => packed.stresses::<2, 3>(self, [w, u], m, plane_stress),
-            _ => packed.stresses::<3, 4>(self, [w, u], m, plane_stress),
+        let n_cells = self.cells.len();
+        let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
+        let (grads, _) = packed.grad.as_chunks::<D>();
+        let (grads, _) = grads.as_chunks::<N>();
+        let (cells, _) = packed.nodes.as_chunks::<N>();
+        for (nodes, grad) in cells.iter().zip(grads) {
+            let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
+            let mut tr = 0.0;
+            for (g, &n) in grad.iter().zip(nodes) {
+                let [p, q] = &pq[n as usize];
+                for a in 0..D {
+                    for b in 0..D {
+                        g_p[a][b] += g[a] * p[b];
+                    }
+                    tr += g[a] * q[a];
+                }
+            }
+            let sym = |a: usize, b: usize| g_p[a][b] + g_p[b][a];
+            let zz = if plane_stress { 0.0 } else { sym(2, 2) + tr };
+            let s = [
+                sym(0, 0) + tr,
+                sym(1, 1) + tr,
+                zz,
+                sym(0, 1),
+                sym(1, 2),
+                sym(0, 2),
+            ];
+            let (dx, dy, dz) = (s[0] - s[1], s[1] - s[2], s[2] - s[0]);
+            let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
+            vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt());
+            s6.extend(s);
         }
+        (s6, vm)
     }
 
     /// K_A + k K_B + k² r(0) K_R: the step matrix of the implicit variant (the three share
@@ -433,73 +499,6 @@ impl PackedCells {
             }
         }
         PackedCells { nodes, grad }
-    }
-
-    /// [`Discretization::stress`] for cells of dimension D with N = D + 1 vertices: the
-    /// nodal p and q of w, u, m, then σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I
-    /// of every cell (XX YY ZZ XY YZ XZ, σ_zz = 0 under plane stress) and its von Mises
-    /// stress. The z entries of ∇φ_i and of p_i, q_i are zero in 2D, so only D × D products
-    /// are formed.
-    fn stresses<const D: usize, const N: usize>(
-        &self,
-        disc: &Discretization,
-        [w, u]: [&[f64]; 2],
-        m: Option<&[f64]>,
-        plane_stress: bool,
-    ) -> (Vec<f64>, Vec<f64>) {
-        let b = disc.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
-        let (a, r) = (disc.a, disc.r);
-        // [p_n, q_n] of every node (D components: 32 bytes a node in 2D).
-        let pq: Vec<[[f64; D]; 2]> = disc
-            .free
-            .as_chunks::<D>()
-            .0
-            .iter()
-            .map(|dofs| {
-                let mut pq = [[0.0; D]; 2];
-                for (c, dof) in dofs.iter().enumerate() {
-                    if let Some(dof) = *dof {
-                        let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
-                        pq[0][c] = a.a * w + b.a * u + r.a * m;
-                        pq[1][c] = a.b * w + b.b * u + r.b * m;
-                    }
-                }
-                pq
-            })
-            .collect();
-        let n_cells = self.nodes.len() / N;
-        let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
-        let (grads, _) = self.grad.as_chunks::<D>();
-        let (grads, _) = grads.as_chunks::<N>();
-        let (cells, _) = self.nodes.as_chunks::<N>();
-        for (nodes, grad) in cells.iter().zip(grads) {
-            let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
-            let mut tr = 0.0;
-            for (g, &n) in grad.iter().zip(nodes) {
-                let [p, q] = &pq[n as usize];
-                for a in 0..D {
-                    for b in 0..D {
-                        g_p[a][b] += g[a] * p[b];
-                    }
-                    tr += g[a] * q[a];
-                }
-            }
-            let sym = |a: usize, b: usize| g_p[a][b] + g_p[b][a];
-            let zz = if plane_stress { 0.0 } else { sym(2, 2) + tr };
-            let s = [
-                sym(0, 0) + tr,
-                sym(1, 1) + tr,
-                zz,
-                sym(0, 1),
-                sym(1, 2),
-                sym(0, 2),
-            ];
-            let (dx, dy, dz) = (s[0] - s[1], s[1] - s[2], s[2] - s[0]);
-            let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
-            vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt());
-            s6.extend(s);
-        }
-        (s6, vm)
     }
 }
 

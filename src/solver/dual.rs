@@ -799,7 +799,7 @@ struct Delassus {
 }
 
 /// Below this many rows (columns of a Newton matrix) a pass over D, G or the Newton matrix
-/// takes less time than starting a thread.
+/// takes less time than handing half of it to `Pair`'s worker thread.
 const SPLIT_ROWS: usize = 512;
 
 impl Delassus {

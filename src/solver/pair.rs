@@ -56,7 +56,7 @@ impl Default for Pair {
 }
 
 impl Pair {
-    /// A pair that never starts a thread.
+    /// A pair that never uses the worker thread.
     #[cfg(test)]
     pub fn one_thread() -> Self {
         Pair {
@@ -66,7 +66,7 @@ impl Pair {
     }
 
     /// As [`Pair::both`] for a pass that is `large`, else `a` then `b` on this thread (a small
-    /// pass takes less time than starting a thread).
+    /// pass takes less time than handing half of it to the worker).
     pub fn both_if(&self, large: bool, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
         if large {
             self.both(a, b);
@@ -79,11 +79,11 @@ impl Pair {
     /// Runs `a` and `b`: on two threads when there are two cores and that was the faster
     /// way lately, else one after the other.
     pub fn both(&self, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
-        if !self.threads {
+        let Some(worker) = self.threads.then(worker).flatten() else {
             a();
             b();
             return;
-        }
+        };
         let ways = || self.ways.lock().unwrap_or_else(|e| e.into_inner());
         let two = {
             let mut w = ways();
@@ -91,7 +91,7 @@ impl Pair {
             (w.two <= w.one) != w.calls.is_multiple_of(PROBE)
         };
         let start = Instant::now();
-        if let (true, Some(worker)) = (two, worker()) {
+        if two {
             // b on the worker, a here; the scope waits for b (and passes on a panic).
             worker.in_place_scope(|scope| {
                 scope.spawn(|_| b());
