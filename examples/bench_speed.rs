@@ -10,7 +10,10 @@
 //! Then, in this process: the time per step (setup excluded, all of `solve_step` and
 //! `advance`), the time of one forward + backward solve with the stored factor, and the
 //! streaming bound: two passes (sums with eight partial sums) over an array of nnz(L) f64,
-//! the least a step that reads the factor forward and backward can cost. Medians throughout.
+//! the least a step that reads the factor forward and backward can cost (issue 15's bound;
+//! run on their own, the passes find the array in the last-level cache), and the same
+//! streaming of all the data a step must read (L forward and backward, K_B and K_R, six
+//! vectors), whose working set does not stay in that cache. Medians throughout.
 //!
 //!   cargo build --release && cargo run --release --example bench_speed -- BASELINE [n] [repeat]
 //!
@@ -185,6 +188,39 @@ fn main() {
         })
         .collect();
     let bound = median(passes);
+    // The data a step cannot avoid reading, streamed in the order a step reads it: L's
+    // values forward, the same backward, the lower triangles of K_B and K_R (two values and
+    // a u32 row per entry: 20 bytes) and six vectors of n values (b, u, m, w, y and the
+    // memory term). Unlike the two passes above, which stay in the last-level cache when run
+    // on their own, this touches the step's whole working set, as the time loop does.
+    let k_r = disc.k_r.as_ref();
+    let lower = (k_r.compute_nnz() - k_r.nrows()) / 2;
+    let other: Vec<f64> = (0..(lower * 20).div_ceil(8) + 6 * factor.dim())
+        .map(|i| (i % 11) as f64)
+        .collect();
+    let sum = |x: &[f64], acc: &mut [f64; 8]| {
+        for c in std::hint::black_box(x).chunks_exact(8) {
+            for (a, v) in acc.iter_mut().zip(c) {
+                *a += v;
+            }
+        }
+    };
+    let data: Vec<f64> = (0..40)
+        .map(|_| {
+            let start = Instant::now();
+            let mut acc = [0.0; 8];
+            sum(&l, &mut acc);
+            for c in std::hint::black_box(&l).rchunks_exact(8) {
+                for (a, v) in acc.iter_mut().zip(c) {
+                    *a += v;
+                }
+            }
+            sum(&other, &mut acc);
+            std::hint::black_box(acc);
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    let step_data = median(data[10..].to_vec());
     println!(
         "per step (setup excluded, medians of {repeat} runs of {} steps): {:.2} ms",
         scene.steps + 1,
@@ -202,5 +238,12 @@ fn main() {
         "  per step / two passes = {:.2}; solve / two passes = {:.2}",
         per_step / bound,
         solve / bound
+    );
+    println!(
+        "  the step's data streamed (L twice, K_B and K_R once, six vectors: {:.1} MB): \
+         {:.2} ms; per step / that = {:.2}",
+        (2 * nnz * 8 + other.len() * 8) as f64 * 1e-6,
+        step_data * 1e3,
+        per_step / step_data
     );
 }
