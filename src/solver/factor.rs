@@ -725,6 +725,12 @@ mod tests {
             ..Factor::with_split(&k, &last, 0).unwrap()
         };
         assert!(factor.split.is_none());
+        // Every kernel is exercised: supernodes of one to four columns and wider ones.
+        let layout = &factor.layout;
+        let widths: std::collections::BTreeSet<usize> = (0..layout.n_supernodes())
+            .map(|s| (layout.begin[s + 1] - layout.begin[s]).min(5))
+            .collect();
+        assert_eq!(widths, (1..=5).collect(), "supernode widths (5 = wider)");
         let solved = [&factor, &split, &one_thread].map(|f| {
             let mut x = b.clone();
             f.solve(&mut x);
