@@ -58,9 +58,22 @@ Line(5) = {5, 1};   // left
 Curve Loop(1) = {1, 2, 3, 4, 5};   // counter-clockwise: triangles come out counter-clockwise
 Plane Surface(1) = {1};
 
-Transfinite Curve{1, 2} = n/2 + 1;   // number of nodes on the curve
-Transfinite Curve{3, 4, 5} = n + 1;
-Transfinite Surface{1} = {1, 3, 4, 5} Right;   // the 4 corners; P2 lies on the bottom side
+// -setnumber unstructured 1: gmsh's own triangles of size about h = 1/n instead (not
+// nested, no common diagonals), for timings and checks on a mesh that is not structured:
+// `-setnumber n 8 -setnumber unstructured 1 -setnumber Mesh.Algorithm 6
+// -setnumber Mesh.MeshSizeMax 0.0085` gives 32 491 nodes (the structured n = 128 has 16 641).
+If (!Exists(unstructured))
+  unstructured = 0;
+EndIf
+If (unstructured)
+  If (Mesh.MeshSizeMax > 2)
+    Mesh.MeshSizeMax = 1 / n;
+  EndIf
+Else
+  Transfinite Curve{1, 2} = n/2 + 1;   // number of nodes on the curve
+  Transfinite Curve{3, 4, 5} = n + 1;
+  Transfinite Surface{1} = {1, 3, 4, 5} Right;   // the 4 corners; P2 lies on the bottom side
+EndIf
 
 Physical Curve("Γ1", 1) = {5};
 Physical Curve("Γ2", 2) = {4, 3};
