@@ -144,4 +144,13 @@ fn fast_solver_agrees_with_clarabel_on_unstructured_scenes() {
         println!("{scene}: |u_N fast − clarabel| / |u_N| = {d:e}");
         assert!(d <= 1e-7, "{scene}: {d:e}");
     }
+    // The 3D block (contact, friction, memory) on gmsh's own
+    // tetrahedra (tests/data/3d/block_unstructured.msh).
+    let mesh = repo().join("tests/data/3d/block_unstructured.msh");
+    let d = fast_vs_clarabel(
+        &repo().join("examples/block.toml"),
+        &[&format!("mesh.file={}", mesh.display()), "time.steps=16"],
+    );
+    println!("unstructured block: |u_N fast − clarabel| / |u_N| = {d:e}");
+    assert!(d <= 1e-7, "unstructured block: {d:e}");
 }

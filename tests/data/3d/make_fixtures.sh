@@ -10,6 +10,8 @@
 #                       tetrahedra that once stalled the dual solver (tests/robustness.rs)
 #   slab_t0004.msh      the same, t = 0.004 (1/500 of the width): steps that needed up to
 #                       2 811 dual iterations, more than the limit then (tests/robustness.rs)
+#   block_unstructured.msh  meshes/3d/block.geo, n = 4, unstructured: gmsh's own tetrahedra
+#                       for the block scene (tests/contact.rs: fast solver against clarabel)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 GMSH=${GMSH:-gmsh}
@@ -24,3 +26,4 @@ mesh patch_box.geo -o patch_box.msh
 mesh patch_box.geo -setnumber lc 2 -order 2 -o quadratic_tets.msh
 mesh ../../../meshes/3d/slab.geo -setnumber n 16 -setnumber t 0.008 -o slab_t0008.msh
 mesh ../../../meshes/3d/slab.geo -setnumber n 16 -setnumber t 0.004 -o slab_t0004.msh
+mesh ../../../meshes/3d/block.geo -setnumber n 4 -setnumber unstructured 1 -o block_unstructured.msh
