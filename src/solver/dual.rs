@@ -143,16 +143,24 @@ const MAX_WIDEN: f64 = 1e8;
 /// Which groups the step takes as free, at zero or on the rim depends on η: with η large a
 /// group at the boundary of Z_j leaves it in the step's prediction v = z − g/(ηδ) only if
 /// its gradient pulls it inward, and a free group is predicted outside Z_j only when it is
-/// close to the boundary. With η = 1 the prediction reached far from z: in the loading steps of the 3D block
-/// (gmsh's unstructured tetrahedra, 728 friction nodes, of which ~450 stick at the
-/// solution) it put all 728 on their rims iteration after iteration, the Newton points were
-/// rejected and each iteration paid a second factorization for the projected Newton step
-/// (159 such fallbacks; up to 37 iterations in a step). With η large the prediction follows
-/// the iterate, and on a rim the shift κ = ηδ(|v| − c)/c tends to μ/c, its value at the
-/// solution. Measured (iterations over the run, projected Newton fallbacks): that block,
-/// 100 steps, η = 1: 728 and 159; 4: 658 and 23; 16: 621 and 0; 64: 578 and 0; 256 and
-/// 4096: 583 and 0 (wall 21.3 → 15.0 s); the paper scene at 1/128: 330 and 36 → 259 and 0.
-/// The answer does not depend on η (the same fixed point; u_N within 1.5e-15).
+/// close to the boundary. With η = 1 the prediction reached far from z: in the loading steps
+/// of the 3D block (gmsh's unstructured tetrahedra, 728 friction nodes, of which ~450 stick
+/// at the solution) it put all 728 on their rims iteration after iteration, the Newton
+/// points were rejected and each iteration paid a second factorization for the projected
+/// Newton step (159 such fallbacks; up to 37 iterations in a step). With η large the
+/// prediction follows the iterate, and on a rim the shift κ = ηδ(|v| − c)/c tends to μ/c,
+/// its value at the solution. Measured (iterations over the run, projected Newton
+/// fallbacks): that block, 100 steps, η = 1: 728 and 159; 4: 658 and 23; 16: 621 and 0;
+/// 64: 578 and 0; 256 and 4096: 583 and 0 (wall 21.3 → 15.0 s); the paper scene at 1/128:
+/// 330 and 36 → 259 and 0. The answer does not depend on η (the same fixed point; u_N within
+/// 1.5e-15).
+///
+/// After a rejected Newton point the next iteration predicts with η = 1: on the thin slabs
+/// (meshes/3d/slab.geo, D ill-conditioned, most iterations are projected Newton steps) η =
+/// 64 throughout raised the most iterations of a step from 792 to 1 608 (t = 0.002, 64
+/// steps; the limit is `MAX_ITERATIONS`), where the far prediction after a rejection keeps
+/// them at 414 (and 912 against 928 over 32 steps; t = 0.004: 407 and 417 against 871 and
+/// 228). Runs whose Newton points are accepted, like the block's, are unchanged by it.
 const ETA: f64 = 64.0;
 /// The shortest damped Newton step tried before the projected Newton step.
 const MIN_DAMPING: f64 = 0.25;
@@ -613,6 +621,8 @@ impl DualSolver {
         let mut iterations = 0;
         // The factor of ε (`WIDEN`).
         let mut widen = 1.0;
+        // Whether the last iteration's Newton point was rejected (`ETA`).
+        let mut rejected = false;
         let residual = |z: &[f64], g: &[f64]| {
             groups
                 .iter()
@@ -637,7 +647,7 @@ impl DualSolver {
             coords.clear();
             for grp in groups.iter() {
                 let r = grp.rows();
-                let eta_delta = ETA * grp.scale;
+                let eta_delta = if rejected { 1.0 } else { ETA } * grp.scale;
                 for i in r.clone() {
                     trial[i] = z[i] - g[i] / eta_delta;
                 }
@@ -690,6 +700,7 @@ impl DualSolver {
                 }
                 alpha *= 0.5;
             };
+            rejected = !accepted;
             if accepted {
                 widen = 1.0;
                 z.copy_from_slice(trial);
