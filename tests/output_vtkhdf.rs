@@ -369,7 +369,11 @@ fn resume_refuses_foreign_damaged_and_mismatched_files() {
 
 /// kill -9 at a random moment of a run writing a frame every step and a checkpoint every 7
 /// steps, then `resume`: the file holds what the uninterrupted run's holds. The kill comes
-/// once the file has grown past a size that differs from try to try.
+/// once the file has grown past a size that differs from try to try and the first
+/// checkpoint is on disk: checkpoints are written by a thread of their own, and with the
+/// tests of this file loading both cores the frames of a 0.2 s run could reach a third of
+/// the file before the first checkpoint's fsync returned (a run killed before it has no
+/// checkpoint to resume from, and `resume` says so).
 #[test]
 fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
     if !python_available() {
@@ -400,8 +404,11 @@ fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
         }
         let (status, stderr) = common::signal_when(
             &args,
-            || std::fs::metadata(&file).is_ok_and(|m| m.len() >= at),
-            &format!("{} of {at} bytes", file.display()),
+            || {
+                std::fs::metadata(&file).is_ok_and(|m| m.len() >= at)
+                    && dir.join("checkpoint.h5").exists()
+            },
+            &format!("{} of {at} bytes and a checkpoint", file.display()),
             "KILL",
         );
         assert_eq!(status.code(), None, "killed: {stderr}");
