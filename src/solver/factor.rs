@@ -436,11 +436,32 @@ fn wide_backward(
 /// pass takes about 0.2 ms and a thread's start and join are a small part of it.
 const MIN_SPLIT: usize = 1 << 18;
 
-/// The numeric factorization runs on one thread: its supernodes are small (2D: mostly ≤ 16
-/// columns), and faer's parallel factorization was slower on the two cores of the
-/// benchmark machine (h = 1/128: 80 ms against 100 ms; the 3D block at h = 1/8: 39 against
-/// 47 ms, side by side in one process).
-const PAR: Par = Par::Seq;
+/// The numeric factorization runs on faer's global parallelism (both cores) when its
+/// supernodes hold at least this many flops (`factorization_flops`), else on one thread.
+/// Measured side by side on the 2-core machine, one thread against two, full problem
+/// (C last) unless said: 2D h = 1/128 (3.5e8) 47 against 101–105 ms, 1/256 (2.8e9) 220
+/// against 373 ms, 1/512 (2.4e10) 1.07–1.12 against 1.71–1.78 s; 3D block h = 1/8 (2.4e8)
+/// 15 against 24–39 ms, 1/16 (1.5e10) 0.38 against 0.41–0.44 s, 1/24 (1.7e11) 3.12–3.18
+/// against 2.61–2.69 s (linear only, 1.2e11: 2.37–2.48 against 2.10–2.12 s); gmsh's
+/// unstructured blocks of size 0.042 (1.2e11) 2.22 against 1.91 s (linear only, 7.0e10:
+/// 1.44–1.46 against 1.36–1.40 s) and 0.035 (3.6e11) 6.7–7.2 against 4.9–5.0 s. Two
+/// threads pay where a large share of the work is in the few widest supernodes of a 3D
+/// factor (3 500–5 400 columns), not on the 2D factors of as many flops.
+const PARALLEL_FLOPS: f64 = 5e10;
+
+/// The flops of the numeric factorization, counted per supernode of k columns and r rows
+/// below them: k³/3 for its diagonal block, k²r for the block below, k r² for its update
+/// of the later columns (multiply-adds; a measure to compare factors, not a count of
+/// instructions).
+fn factorization_flops(sym: &SymbolicSupernodalCholesky<usize>) -> f64 {
+    (0..sym.n_supernodes())
+        .map(|s| {
+            let k = (sym.supernode_end()[s] - sym.supernode_begin()[s]) as f64;
+            let r = sym.supernode(s).pattern().len() as f64;
+            k * k * k / 3.0 + k * k * r + k * r * r
+        })
+        .sum()
+}
 
 impl Factor {
     /// Factors `a`, with the dofs in `last` ordered last.
@@ -471,9 +492,15 @@ impl Factor {
         )
         .map_err(|e| Error::solve(format!("symbolic analysis of K_A failed: {e:?}")))?;
         let mut values = vec![0.0; symbolic.len_val()];
+        let par = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) if factorization_flops(s) >= PARALLEL_FLOPS => {
+                faer::get_global_parallelism()
+            }
+            _ => Par::Seq,
+        };
         {
             let mut mem = MemBuffer::new(
-                symbolic.factorize_numeric_llt_scratch::<f64>(PAR, Default::default()),
+                symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
             );
             symbolic
                 .factorize_numeric_llt(
@@ -481,7 +508,7 @@ impl Factor {
                     a.as_ref(),
                     Side::Lower,
                     LltRegularization::default(),
-                    PAR,
+                    par,
                     MemStack::new(&mut mem),
                     Default::default(),
                 )
