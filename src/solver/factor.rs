@@ -466,12 +466,18 @@ fn factorization_flops(sym: &SymbolicSupernodalCholesky<usize>) -> f64 {
 impl Factor {
     /// Factors `a`, with the dofs in `last` ordered last.
     pub fn new(a: &Sparse, last: &[usize]) -> Result<Self> {
-        Self::with_split(a, last, MIN_SPLIT)
+        Self::with_split(a, last, MIN_SPLIT, PARALLEL_FLOPS)
     }
 
     /// `new`, with the solves split in two groups (`Split`) if the factor stores at least
-    /// `min_split` values.
-    fn with_split(a: &Sparse, last: &[usize], min_split: usize) -> Result<Self> {
+    /// `min_split` values, and the numeric factorization on both cores from
+    /// `parallel_flops` flops.
+    fn with_split(
+        a: &Sparse,
+        last: &[usize],
+        min_split: usize,
+        parallel_flops: f64,
+    ) -> Result<Self> {
         let n = a.nrows();
         // Nested dissection of the other dofs, then C (ordering.rs).
         let fwd = super::ordering::constrained_last(a, last)?;
@@ -493,7 +499,7 @@ impl Factor {
         .map_err(|e| Error::solve(format!("symbolic analysis of K_A failed: {e:?}")))?;
         let mut values = vec![0.0; symbolic.len_val()];
         let par = match symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) if factorization_flops(s) >= PARALLEL_FLOPS => {
+            SymbolicCholeskyRaw::Supernodal(s) if factorization_flops(s) >= parallel_flops => {
                 faer::get_global_parallelism()
             }
             _ => Par::Seq,
@@ -738,7 +744,7 @@ mod tests {
         let expected = dense.solve(faer::Mat::from_fn(n, 1, |i, _| b[i]));
         let scale = (0..n).fold(0.0f64, |a, i| a.max(expected[(i, 0)].abs()));
         // Unsplit (too small for MIN_SPLIT), then split in two groups, on one thread and two.
-        let split = Factor::with_split(&k, &last, 0).unwrap();
+        let split = Factor::with_split(&k, &last, 0, PARALLEL_FLOPS).unwrap();
         let groups = split
             .split
             .as_ref()
@@ -749,7 +755,7 @@ mod tests {
         let one_thread = Factor {
             forward_pair: Pair::one_thread(),
             backward_pair: Pair::one_thread(),
-            ..Factor::with_split(&k, &last, 0).unwrap()
+            ..Factor::with_split(&k, &last, 0, PARALLEL_FLOPS).unwrap()
         };
         assert!(factor.split.is_none());
         // Every kernel is exercised: supernodes of one to four columns and wider ones.
@@ -785,5 +791,51 @@ mod tests {
             }
         }
         assert_eq!(c, factor.last());
+    }
+
+    /// The numeric factorization on both cores (`PARALLEL_FLOPS`: large 3D factors) gives
+    /// the same values every time, so that a resumed run factors K_A to the bits of the
+    /// uninterrupted one, and solves as the one-thread factor does. A 3D grid (7-point
+    /// couplings, weights varying per edge) with one face ordered last, as the Γ3 dofs are:
+    /// supernodes of hundreds of columns, where faer's parallel kernels split the work.
+    #[test]
+    fn parallel_factorization_is_deterministic() {
+        let side = 20;
+        let n = side * side * side;
+        let mut t = Vec::new();
+        for i in 0..n {
+            t.push(Triplet::new(i, i, 0.01));
+            let (x, y, z) = (i % side, (i / side) % side, i / (side * side));
+            for (dx, dy, dz) in [(1, 0, 0), (0, 1, 0), (0, 0, 1)] {
+                let (x2, y2, z2) = (x + dx, y + dy, z + dz);
+                if x2 < side && y2 < side && z2 < side {
+                    let j = (z2 * side + y2) * side + x2;
+                    let w = 1.0 + ((i * 31 + j * 17) % 11) as f64 / 10.0;
+                    t.extend([
+                        Triplet::new(i, i, w),
+                        Triplet::new(j, j, w),
+                        Triplet::new(i, j, -w),
+                        Triplet::new(j, i, -w),
+                    ]);
+                }
+            }
+        }
+        let k = SparseColMat::try_new_from_triplets(n, n, &t).unwrap();
+        let last: Vec<usize> = (0..side * side).collect();
+        let one = Factor::with_split(&k, &last, MIN_SPLIT, f64::INFINITY).unwrap();
+        let both = [0, 1, 2].map(|_| Factor::with_split(&k, &last, MIN_SPLIT, 0.0).unwrap());
+        assert!(both.iter().all(|f| f.values == both[0].values));
+        let b: Vec<f64> = (0..n).map(|i| ((i * 7919) % 101) as f64 - 50.0).collect();
+        let [x1, x2] = [&one, &both[0]].map(|f| {
+            let mut x = b.clone();
+            f.solve(&mut x);
+            x
+        });
+        let scale = x1.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let err = x1
+            .iter()
+            .zip(&x2)
+            .fold(0.0f64, |a, (p, q)| a.max((p - q).abs()));
+        assert!(err <= 1e-12 * scale, "{err:e} against {scale:e}");
     }
 }
