@@ -645,9 +645,10 @@ impl DualSolver {
             // 1. The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`,
             // the columns of Q in `coords`; then trial = Π(z₀ + Q x).
             coords.clear();
+            let eta = if rejected { 1.0 } else { ETA };
             for grp in groups.iter() {
                 let r = grp.rows();
-                let eta_delta = if rejected { 1.0 } else { ETA } * grp.scale;
+                let eta_delta = eta * grp.scale;
                 for i in r.clone() {
                     trial[i] = z[i] - g[i] / eta_delta;
                 }

@@ -709,6 +709,26 @@ mod tests {
     use faer::linalg::solvers::{DenseSolveCore, Solve};
     use faer::sparse::{SparseColMat, Triplet};
 
+    /// The SPD matrix Σ_edges w_ij (e_i − e_j)(e_i − e_j)ᵀ + diag(shift(i)) of a grid, with
+    /// weights varying per edge: w_ij = 1 + ((31 i + 17 j) mod 11)/10.
+    fn grid_matrix(
+        n: usize,
+        shift: impl Fn(usize) -> f64,
+        edges: impl Iterator<Item = (usize, usize)>,
+    ) -> SparseColMat<usize, f64> {
+        let mut t: Vec<_> = (0..n).map(|i| Triplet::new(i, i, shift(i))).collect();
+        for (i, j) in edges {
+            let w = 1.0 + ((i * 31 + j * 17) % 11) as f64 / 10.0;
+            t.extend([
+                Triplet::new(i, i, w),
+                Triplet::new(j, j, w),
+                Triplet::new(i, j, -w),
+                Triplet::new(j, i, -w),
+            ]);
+        }
+        SparseColMat::try_new_from_triplets(n, n, &t).unwrap()
+    }
+
     /// The supernodal solves against a dense Cholesky solve of the same matrix: a 2D grid
     /// (5-point couplings, weights varying per edge, plus a diagonal shift) with a boundary
     /// row of dofs ordered last, big enough for supernodes of many widths.
@@ -716,25 +736,14 @@ mod tests {
     fn solve_matches_dense_cholesky() {
         let side = 30;
         let n = side * side;
-        let mut t = Vec::new();
-        for i in 0..n {
-            t.push(Triplet::new(i, i, 0.01 + (i % 7) as f64 * 1e-3));
+        let edges = (0..n).flat_map(|i| {
             let (x, y) = (i % side, i / side);
-            for (dx, dy) in [(1, 0), (0, 1), (1, 1)] {
-                let (x2, y2) = (x + dx, y + dy);
-                if x2 < side && y2 < side {
-                    let j = y2 * side + x2;
-                    let w = 1.0 + ((i * 31 + j * 17) % 11) as f64 / 10.0;
-                    t.extend([
-                        Triplet::new(i, i, w),
-                        Triplet::new(j, j, w),
-                        Triplet::new(i, j, -w),
-                        Triplet::new(j, i, -w),
-                    ]);
-                }
-            }
-        }
-        let k = SparseColMat::try_new_from_triplets(n, n, &t).unwrap();
+            [(1, 0), (0, 1), (1, 1)]
+                .into_iter()
+                .filter(move |(dx, dy)| x + dx < side && y + dy < side)
+                .map(move |(dx, dy)| (i, (y + dy) * side + x + dx))
+        });
+        let k = grid_matrix(n, |i| 0.01 + (i % 7) as f64 * 1e-3, edges);
         let last: Vec<usize> = (0..side).collect();
         let factor = Factor::new(&k, &last).unwrap();
         let b: Vec<f64> = (0..n)
@@ -802,25 +811,14 @@ mod tests {
     fn parallel_factorization_is_deterministic() {
         let side = 20;
         let n = side * side * side;
-        let mut t = Vec::new();
-        for i in 0..n {
-            t.push(Triplet::new(i, i, 0.01));
+        let edges = (0..n).flat_map(|i| {
             let (x, y, z) = (i % side, (i / side) % side, i / (side * side));
-            for (dx, dy, dz) in [(1, 0, 0), (0, 1, 0), (0, 0, 1)] {
-                let (x2, y2, z2) = (x + dx, y + dy, z + dz);
-                if x2 < side && y2 < side && z2 < side {
-                    let j = (z2 * side + y2) * side + x2;
-                    let w = 1.0 + ((i * 31 + j * 17) % 11) as f64 / 10.0;
-                    t.extend([
-                        Triplet::new(i, i, w),
-                        Triplet::new(j, j, w),
-                        Triplet::new(i, j, -w),
-                        Triplet::new(j, i, -w),
-                    ]);
-                }
-            }
-        }
-        let k = SparseColMat::try_new_from_triplets(n, n, &t).unwrap();
+            [(1, 0, 0), (0, 1, 0), (0, 0, 1)]
+                .into_iter()
+                .filter(move |(dx, dy, dz)| x + dx < side && y + dy < side && z + dz < side)
+                .map(move |(dx, dy, dz)| (i, ((z + dz) * side + y + dy) * side + x + dx))
+        });
+        let k = grid_matrix(n, |_| 0.01, edges);
         let last: Vec<usize> = (0..side * side).collect();
         let one = Factor::with_split(&k, &last, MIN_SPLIT, f64::INFINITY).unwrap();
         let both = [0, 1, 2].map(|_| Factor::with_split(&k, &last, MIN_SPLIT, 0.0).unwrap());
