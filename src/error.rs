@@ -12,6 +12,14 @@ pub enum Error {
     /// A solve or run that failed although its input was accepted. Exit status 1.
     #[error("{0}")]
     Solve(String),
+    /// SIGINT/SIGTERM (the signal's number) came during a run's or a resume's setup, which
+    /// then stopped before it changed anything on disk. Exit status 128 + the signal.
+    #[error(
+        "interrupted by {} during setup, before the first step: nothing on disk was changed \
+         (the output directory holds what it held before)",
+        crate::run::signal_name(*.0)
+    )]
+    Interrupted(i32),
     /// An operating-system error while reading or writing a file. Exit status 1.
     #[error("{path}: {source}")]
     Io {
@@ -38,10 +46,13 @@ impl Error {
         }
     }
 
-    /// The process exit status for this error (DESIGN.md: 2 for bad input, 1 otherwise).
+    /// The process exit status for this error (DESIGN.md: 2 for bad input, 1 otherwise;
+    /// 128 + the signal for a setup that a signal stopped, as a shell reports a process the
+    /// signal ended).
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Input(_) => 2,
+            Error::Interrupted(signal) => 128 + signal,
             Error::Solve(_) | Error::Io { .. } => 1,
         }
     }

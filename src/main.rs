@@ -100,7 +100,9 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // SIGINT/SIGTERM stop a run or resume after its current step (exit 130 / 143).
+    // SIGINT/SIGTERM stop a run or resume after its current step, or its setup before it
+    // changes anything (exit 130 / 143). First, before any thread is started (see
+    // run/interrupt.rs).
     let interrupt = match cli.command {
         Command::Run { .. } | Command::Resume { .. } => match Interrupt::on_signals() {
             Ok(i) => i,
@@ -187,7 +189,11 @@ fn main() -> ExitCode {
         // 128 + the signal: what a shell reports for a process the signal ended.
         Ok(Some(signal)) => ExitCode::from((128 + signal) as u8),
         Err(e) => {
-            eprintln!("error: {e}");
+            match e {
+                // Not an error of the user's or of the solve: what they asked for.
+                viscontact::Error::Interrupted(_) => eprintln!("{e}"),
+                _ => eprintln!("error: {e}"),
+            }
             ExitCode::from(e.exit_code() as u8)
         }
     }

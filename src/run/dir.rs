@@ -107,13 +107,21 @@ pub fn check_out_dir(out: &Path, force: bool) -> Result<()> {
 
 /// Exclusive ownership of a run directory for the life of this value (or of the process).
 ///
-/// The lock file is removed when the owner is done, while still locked; a process that
-/// opened the old file just before finds, once it holds the lock, that the path names
-/// another file (or none) and tries again, so two owners never hold locks on different
-/// files of one name.
+/// Two locks, both `flock`, both released by the kernel however the process ends:
+/// - on the directory itself, the guard: deleting `.viscontact.lock` while a run holds the
+///   directory cannot let a second run in (it used to: both exited 0 and the directory held
+///   frames of one run beside the .pvd and summary of the other);
+/// - on `.viscontact.lock`, which says who holds the directory (and keeps out a viscontact
+///   that only knows this lock). The lock file is removed when the owner is done, while
+///   still locked; a process that opened the old file just before finds, once it holds the
+///   lock, that the path names another file (or none) and tries again, so two owners never
+///   hold locks on different files of one name. The directory's identity is checked the
+///   same way.
 #[derive(Debug)]
 pub struct DirLock {
     file: File,
+    /// Held open for its lock.
+    _dir: File,
     path: PathBuf,
     /// The directory did not exist before this run created it.
     created: bool,
@@ -123,7 +131,6 @@ impl DirLock {
     /// Creates `dir` if missing and locks it for `command` ("run" or "resume"), or refuses
     /// (exit 2) naming the process that holds it.
     pub fn acquire(dir: &Path, command: &str) -> Result<DirLock> {
-        use std::os::unix::fs::MetadataExt;
         let created = !dir.exists();
         std::fs::create_dir_all(dir).map_err(|e| {
             Error::input(format!(
@@ -132,42 +139,43 @@ impl DirLock {
             ))
         })?;
         let path = dir.join(LOCK_NAME);
-        let file = loop {
-            let file = OpenOptions::new()
+        let in_use = || {
+            let holder = std::fs::read_to_string(&path).unwrap_or_default();
+            let holder = holder.trim();
+            Error::input(format!(
+                "output directory '{}' is in use by another viscontact process ({}); wait \
+                 until it ends, or choose another --out",
+                dir.display(),
+                if holder.is_empty() {
+                    format!("which has not yet said who it is, or whose {LOCK_NAME} was deleted")
+                } else {
+                    holder.replace('\n', ", ")
+                }
+            ))
+        };
+        let locked = |p: &Path, open: &dyn Fn() -> std::io::Result<File>| loop {
+            let file = open().map_err(|e| Error::io(p, e))?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => return Err(in_use()),
+                Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(p, e)),
+            }
+            if same_file(&file, p) {
+                return Ok(file);
+            }
+        };
+        let dir_file = locked(dir, &|| File::open(dir))?;
+        let file = locked(&path, &|| {
+            OpenOptions::new()
                 .read(true)
                 .write(true)
                 .create(true)
                 .truncate(false)
                 .open(&path)
-                .map_err(|e| Error::io(&path, e))?;
-            match file.try_lock() {
-                Ok(()) => {}
-                Err(std::fs::TryLockError::WouldBlock) => {
-                    let holder = std::fs::read_to_string(&path).unwrap_or_default();
-                    let holder = holder.trim();
-                    return Err(Error::input(format!(
-                        "output directory '{}' is in use by another viscontact process ({}); \
-                         wait until it ends, or choose another --out",
-                        dir.display(),
-                        if holder.is_empty() {
-                            "which has not yet said who it is".to_string()
-                        } else {
-                            holder.replace('\n', ", ")
-                        }
-                    )));
-                }
-                Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(&path, e)),
-            }
-            let same = match (file.metadata(), std::fs::metadata(&path)) {
-                (Ok(a), Ok(b)) => a.ino() == b.ino() && a.dev() == b.dev(),
-                _ => false,
-            };
-            if same {
-                break file;
-            }
-        };
+        })?;
         let mut lock = DirLock {
             file,
+            _dir: dir_file,
             path,
             created,
         };
@@ -203,6 +211,15 @@ impl Drop for DirLock {
         if let (true, Some(dir)) = (self.created, self.path.parent()) {
             let _ = std::fs::remove_dir(dir);
         }
+    }
+}
+
+/// Whether `path` names the open file `file` (not a file that replaced it, nor nothing).
+fn same_file(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.ino() == b.ino() && a.dev() == b.dev(),
+        _ => false,
     }
 }
 
@@ -356,5 +373,22 @@ mod tests {
         drop(DirLock::acquire(&dir, "run").unwrap());
         assert!(!dir.join(LOCK_NAME).exists());
         assert!(dir.exists(), "a directory the lock did not create stays");
+    }
+
+    #[test]
+    fn a_deleted_lock_file_does_not_let_a_second_run_in() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("d");
+        let first = DirLock::acquire(&dir, "run").unwrap();
+        std::fs::remove_file(dir.join(LOCK_NAME)).unwrap();
+        let err = DirLock::acquire(&dir, "run").unwrap_err();
+        assert_eq!(err.exit_code(), 2);
+        assert!(err.to_string().contains("was deleted"), "{err}");
+        assert!(
+            !dir.join(LOCK_NAME).exists(),
+            "the refused process writes no lock file of its own"
+        );
+        drop(first);
+        drop(DirLock::acquire(&dir, "run").unwrap());
     }
 }

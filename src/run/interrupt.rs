@@ -1,34 +1,77 @@
 //! SIGINT and SIGTERM (what Ctrl-C and a batch scheduler's time limit send) end a run after
 //! the step being solved: the run writes a checkpoint and summary.json (status
 //! "interrupted") and the command exits 130 / 143, the shell's codes for death by these
-//! signals. A second signal ends the process at once, by the signal's default action, for a
-//! run stuck in a long step; the checkpoint on disk is then the previous one (it is written
-//! through a temporary file and a rename, so it is never half-written).
+//! signals. During setup (scene, mesh, discretization, ordering, factorization) they end
+//! the command at the next stage boundary with the same codes, before the directory's
+//! earlier run is touched. A second signal ends the process at once, by the signal's
+//! default action, for a run stuck in a long step; the checkpoint on disk is then the
+//! previous one (it is written through a temporary file and a rename, so it is never
+//! half-written).
+//!
+//! # How the signals are received
+//!
+//! No handler is installed. [`Interrupt::on_signals`] blocks SIGINT and SIGTERM in the
+//! calling thread before any other thread exists, so every thread the process starts
+//! inherits the mask, and one thread of ours takes them with `sigwait`. A library that
+//! installs handlers of its own therefore never sees them: the bundled METIS calls
+//! `signal(SIGTERM, …)` around every ordering and `longjmp`s out of its handler, which
+//! turned a SIGTERM during setup into "METIS could not order K_A" (exit 1), and once into
+//! a process hung on glibc's malloc lock. With the signal blocked everywhere, METIS's
+//! handler is never run, and `sigwait` takes the signal whatever its disposition. Child
+//! processes start with an empty mask (std's `Command` resets it).
+//!
+//! # Setup is atomic
+//!
+//! A new run replaces the directory's earlier run in one step, [`Interrupt::unless_signalled`]:
+//! under a lock that the signal thread also takes before it records a signal, the run
+//! checks that no signal came and then removes the earlier run. A signal therefore either
+//! came first (the run stops, the earlier run is intact) or after the replacement (the run
+//! is past setup and stops after its first step, with a checkpoint to resume from).
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
-/// The signal that asked a run to stop, if one came; shared with the signal handlers.
+/// The signal that asked a run to stop, if one came; shared with the signal thread.
 #[derive(Clone, Debug, Default)]
 pub struct Interrupt {
     signal: Arc<AtomicUsize>,
+    /// Held while a signal is recorded and while setup commits (see the module doc).
+    commit: Arc<Mutex<()>>,
 }
 
 impl Interrupt {
-    /// Makes SIGINT and SIGTERM set this flag instead of killing the process; a second one
-    /// of either kills it as if no handler were installed.
+    /// Takes SIGINT and SIGTERM from now on: the first sets this flag, a second one of
+    /// either kills the process as if nothing had taken them. Call it before the process
+    /// starts any thread (the mask it sets is inherited by threads started later).
     pub fn on_signals() -> std::io::Result<Interrupt> {
-        use signal_hook::consts::{SIGINT, SIGTERM};
-        use signal_hook::flag;
-        let interrupt = Interrupt::default();
-        let armed = Arc::new(AtomicBool::new(false));
-        for sig in [SIGINT, SIGTERM] {
-            // Registered first, so it sees `armed` as the previous signal left it.
-            flag::register_conditional_default(sig, armed.clone())?;
-            flag::register(sig, armed.clone())?;
-            flag::register_usize(sig, interrupt.signal.clone(), sig as usize)?;
+        let set = stop_signals();
+        // SAFETY: `set` is an initialized signal set; pthread_sigmask only reads it.
+        let rc = unsafe { libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) };
+        if rc != 0 {
+            return Err(std::io::Error::from_raw_os_error(rc));
         }
+        let interrupt = Interrupt::default();
+        let taker = interrupt.clone();
+        std::thread::Builder::new()
+            .name("signals".into())
+            .spawn(move || taker.take_signals(set))?;
         Ok(interrupt)
+    }
+
+    /// The signal thread: waits for SIGINT/SIGTERM; records the first, dies by the second.
+    fn take_signals(&self, set: libc::sigset_t) {
+        loop {
+            let mut sig: libc::c_int = 0;
+            // SAFETY: `set` is initialized and `sig` a valid place for the result.
+            if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
+                continue;
+            }
+            if self.signal().is_some() {
+                die_by(sig);
+            }
+            let _commit = self.commit.lock().unwrap_or_else(|p| p.into_inner());
+            self.raise(sig);
+        }
     }
 
     /// Asks the run to stop as `signal` would (for library callers and tests).
@@ -43,13 +86,59 @@ impl Interrupt {
             s => Some(s as i32),
         }
     }
+
+    /// A stage boundary of setup: [`crate::Error::Interrupted`] once a signal has come.
+    pub fn between_setup_stages(&self) -> crate::Result<()> {
+        match self.signal() {
+            Some(s) => Err(crate::Error::Interrupted(s)),
+            None => Ok(()),
+        }
+    }
+
+    /// Runs `commit` unless a signal has come, and so that no signal is recorded while it
+    /// runs: `Err(signal)` when one came first.
+    pub fn unless_signalled<T>(&self, commit: impl FnOnce() -> T) -> Result<T, i32> {
+        let _commit = self.commit.lock().unwrap_or_else(|p| p.into_inner());
+        match self.signal() {
+            Some(s) => Err(s),
+            None => Ok(commit()),
+        }
+    }
+}
+
+/// {SIGINT, SIGTERM}.
+fn stop_signals() -> libc::sigset_t {
+    // SAFETY: sigemptyset initializes the set before sigaddset reads it.
+    unsafe {
+        let mut set = std::mem::zeroed::<libc::sigset_t>();
+        libc::sigemptyset(&mut set);
+        libc::sigaddset(&mut set, libc::SIGINT);
+        libc::sigaddset(&mut set, libc::SIGTERM);
+        set
+    }
+}
+
+/// Ends the process by `sig`'s default action (the exit status a shell reports as 128 +
+/// sig), from the signal thread.
+fn die_by(sig: libc::c_int) -> ! {
+    // SAFETY: plain libc calls on this thread's own mask and a signal number we received.
+    unsafe {
+        libc::signal(sig, libc::SIG_DFL);
+        let mut only = std::mem::zeroed::<libc::sigset_t>();
+        libc::sigemptyset(&mut only);
+        libc::sigaddset(&mut only, sig);
+        libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
+        libc::raise(sig);
+    }
+    // The default action of SIGINT/SIGTERM ends the process; should it ever return here:
+    std::process::exit(128 + sig)
 }
 
 /// "SIGINT" / "SIGTERM" / "signal N".
 pub fn signal_name(signal: i32) -> String {
     match signal {
-        signal_hook::consts::SIGINT => "SIGINT".into(),
-        signal_hook::consts::SIGTERM => "SIGTERM".into(),
+        libc::SIGINT => "SIGINT".into(),
+        libc::SIGTERM => "SIGTERM".into(),
         s => format!("signal {s}"),
     }
 }

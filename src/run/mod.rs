@@ -47,7 +47,7 @@ pub struct RunOptions {
     /// Write into a directory that holds files viscontact did not write (never touching them).
     pub force: bool,
     /// Set by SIGINT/SIGTERM (see [`Interrupt::on_signals`]): stop like `stop_after` after
-    /// the step being solved.
+    /// the step being solved, or (during setup) before the directory is changed.
     pub interrupt: Interrupt,
 }
 
@@ -116,23 +116,33 @@ fn read_mesh(scene: &Scene) -> Result<Mesh> {
 /// checkpoints and summary.json into the output directory, which then holds this run alone.
 pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
+    // A signal between two stages ends setup with the directory as it was.
+    let stage = || opts.interrupt.between_setup_stages();
     let scene = load_scene(scene_path, &opts.overrides)?;
     let out = match &opts.out {
         Some(out) => out.clone(),
         None => default_out(&scene)?,
     };
     dir::check_out_dir(&out, opts.force)?;
+    stage()?;
     let lock = DirLock::acquire(&out, "run")?;
+    stage()?;
     let mesh = read_mesh(&scene)?;
+    stage()?;
     // Shared with the frame writer's thread (output::frame).
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
+    stage()?;
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(&out, &mesh, &identity.run_id, &scene.output, None)?;
+    stage()?;
     let tl = TimeLoop::new(&scene, &disc)?;
-    // Setup succeeded: the run the directory held goes, before the first new frame.
-    dir::remove_run(&out)?;
+    // Setup succeeded: the run the directory held goes, before the first new frame, unless
+    // a signal came first (then it stays as it was).
+    opts.interrupt
+        .unless_signalled(|| dir::remove_run(&out))
+        .map_err(Error::Interrupted)??;
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
     drive(Drive {
@@ -165,9 +175,11 @@ pub type ResumeOptions = RunOptions;
 /// that holds another run is refused.
 pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let start = Instant::now();
+    let stage = || opts.interrupt.between_setup_stages();
     // What is wrong with the checkpoint itself is said first, then the directory.
     let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
     let scene = cp.scene(&opts.overrides)?;
+    stage()?;
     let mesh = read_mesh(&scene).map_err(|e| {
         Error::input(format!(
             "{}: the run's mesh cannot be read: {e} (a run moved to another place: give its \
@@ -175,7 +187,9 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
             checkpoint_path.display()
         ))
     })?;
+    stage()?;
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
+    stage()?;
     cp.check(&scene, &mesh, &disc)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     crate::resources::Estimate::new(&scene, &disc, cp.n).check(&out)?;
@@ -191,8 +205,11 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         &scene.output,
         cp.n.checked_sub(1),
     )?;
+    stage()?;
     let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
     cp.restore(&mut tl)?;
+    // The last moment a signal ends the resume unchanged; after it, it stops after a step.
+    stage()?;
     dir::remove_temporaries(&out);
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);

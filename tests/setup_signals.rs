@@ -1,0 +1,144 @@
+//! SIGINT and SIGTERM at random moments of a run's and a resume's setup (scene, mesh,
+//! discretization, METIS ordering, factorization) on the 33k-dof paper mesh, with an
+//! earlier run in the directory: every process exits 130 / 143 within 5 s of the signal
+//! and leaves the directory byte for byte as it was. A signal that lands after setup (the
+//! moments are drawn from the measured setup time, which varies) must end the run as an
+//! interrupted run that can be resumed; such draws are counted, and most draws must land
+//! in setup for the test to mean something.
+//!
+//! `VISCONTACT_SETUP_SIGNALS=N` sets the number of signals of each kind (default 4 in CI;
+//! the acceptance run used 50), `VISCONTACT_SEED` the seed (printed).
+
+mod common;
+
+use common::{SplitMix, BIN};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Every file of `dir` with its bytes.
+fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            (name, std::fs::read(e.path()).unwrap())
+        })
+        .collect()
+}
+
+/// Starts `viscontact ARGS`, sends `signal` after `delay`, and waits at most 5 s after the
+/// signal: the exit status (a hang fails the test, after killing the process).
+fn signalled(args: &[&str], delay: Duration, signal: i32) -> i32 {
+    let mut child = Command::new(BIN)
+        .args(args)
+        .current_dir(common::repo())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(delay);
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(child.id() as i32, signal) };
+    let sent = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code().unwrap_or(-1);
+        }
+        if sent.elapsed() > Duration::from_secs(5) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{args:?}: no exit within 5 s of signal {signal} sent after {delay:?}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// The setup time the summary of a run in `dir` reports.
+fn setup_seconds(dir: &Path) -> f64 {
+    common::summary(dir)["timing"]["setup_s"].as_f64().unwrap()
+}
+
+#[test]
+fn signals_during_setup_exit_at_once_and_leave_the_earlier_run_intact() {
+    let count: usize = std::env::var("VISCONTACT_SETUP_SIGNALS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(4);
+    let seed: u64 = std::env::var("VISCONTACT_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(26);
+    println!("seed {seed}, {count} signals of each kind, for run and for resume");
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = common::paper_scene(tmp.path(), "big.toml", "paper/rect_128.msh", false);
+    let scene = scene.to_str().unwrap();
+    let out = tmp.path().join("out");
+    let out_s = out.to_str().unwrap();
+    let earlier = |stop: &str| {
+        let args = [
+            "run",
+            scene,
+            "--out",
+            out_s,
+            "--quiet",
+            "--set",
+            "time.steps=64",
+        ];
+        let (code, text) = common::cli(&[&args[..], &["--stop-after", stop]].concat());
+        assert_eq!(code, 0, "{text}");
+    };
+    let mut rng = SplitMix(seed);
+    let mut in_setup = 0;
+    let mut after = 0;
+    for command in ["run", "resume"] {
+        earlier("1");
+        let setup = setup_seconds(&out);
+        let checkpoint = out.join("checkpoint.h5");
+        let cp = checkpoint.to_str().unwrap();
+        let args: Vec<&str> = match command {
+            "run" => vec![
+                "run",
+                scene,
+                "--out",
+                out_s,
+                "--quiet",
+                "--set",
+                "time.steps=64",
+            ],
+            _ => vec!["resume", cp, "--quiet"],
+        };
+        for i in 0..2 * count {
+            let signal = if i % 2 == 0 {
+                libc::SIGTERM
+            } else {
+                libc::SIGINT
+            };
+            let before = snapshot(&out);
+            let delay = Duration::from_secs_f64(setup * (rng.next() >> 11) as f64 / 2f64.powi(53));
+            let code = signalled(&args, delay, signal);
+            assert_eq!(code, 128 + signal, "{command} after {delay:?}");
+            if snapshot(&out) == before {
+                in_setup += 1;
+                continue;
+            }
+            // Past setup: an interrupted run with a checkpoint (the next draws start from it).
+            after += 1;
+            let summary = common::summary(&out);
+            assert_eq!(
+                summary["status"], "interrupted",
+                "{command} after {delay:?}"
+            );
+            assert!(checkpoint.exists());
+            earlier("1");
+        }
+    }
+    println!("{in_setup} signals landed in setup, {after} after it");
+    assert!(
+        in_setup >= 2 * count,
+        "only {in_setup} of {} signals landed in setup",
+        4 * count
+    );
+}
