@@ -1,0 +1,212 @@
+//! Golden regression values: numbers from known-good runs, stored in
+//! `tests/data/golden.json` and checked bit for bit.
+//!
+//! Each case runs a scene with the command-line tool (every `examples/*.toml`, variants of
+//! the paper's scene — friction, memory kernels, schemes, solvers, meshes —, 3D blocks and a
+//! thin slab, a 2D corner) and compares what summary.json says of it: the norms of u_N, the
+//! step solver's iterations (total and most in a step), the largest KKT residual and
+//! normal-velocity violation, the active and sticking nodes at the end. The build is
+//! deterministic (the same bits whatever the thread count and across stop/resume), so the
+//! comparison is exact: any change of a result shows, with the relative difference.
+//!
+//! A change that is meant to change results stores new values with
+//! `VISCONTACT_GOLDEN=bless cargo test --release --test golden` and says why in its commit.
+
+mod common;
+
+use common::repo;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// A scene: `base` (relative to the repository) with `replace` applied to its text, run
+/// with `set` overrides.
+struct Case {
+    name: &'static str,
+    base: &'static str,
+    replace: &'static [(&'static str, &'static str)],
+    set: &'static [&'static str],
+}
+
+const PAPER: &str = "examples/paper.toml";
+const BLOCK: &str = "examples/block.toml";
+const PRONY: &str = "prony = [[1.0, 10.0]]";
+
+const CASES: &[Case] = &[
+    case("paper", PAPER, &[], &[]),
+    case("bracket", "examples/bracket.toml", &[], &[]),
+    case("plate_hole", "examples/plate_hole.toml", &[], &[]),
+    case("block", BLOCK, &[], &[]),
+    case("paper_064", PAPER, &[("rect_032", "rect_064")], &[]),
+    case("paper_F0.1", PAPER, &[], &["friction.normal_stress=0.1"]),
+    case("paper_mu5", PAPER, &[], &["friction.coefficient=5"]),
+    case("paper_implicit", PAPER, &[], &["scheme.history=\"implicit\""]),
+    case("paper_clarabel", PAPER, &[], &["solver.contact=\"clarabel\""]),
+    case(
+        "paper_linear",
+        PAPER,
+        &[],
+        &["contact.enabled=false", "friction.enabled=false"],
+    ),
+    case(
+        "paper_power_law_compressed",
+        PAPER,
+        &[(PRONY, "expr = \"0.2*(s+0.01)^(-0.5)\"")],
+        &[],
+    ),
+    case(
+        "paper_power_law_exact",
+        PAPER,
+        &[(PRONY, "expr = \"0.2*(s+0.01)^(-0.5)\"\nmemory = \"exact\"")],
+        &[],
+    ),
+    case(
+        "paper_table",
+        PAPER,
+        &[(PRONY, "table = { s = [0, 0.5, 1], r = [1, 0.3, 0.1] }")],
+        &[],
+    ),
+    case("block_mu5", BLOCK, &[], &["friction.coefficient=5"]),
+    case(
+        "block_unstructured",
+        BLOCK,
+        &[(
+            "../meshes/3d/block_008.msh",
+            "../tests/data/3d/block_unstructured.msh",
+        )],
+        &["time.steps=16"],
+    ),
+    case(
+        "slab_t0008",
+        PAPER,
+        &[
+            ("../meshes/paper/rect_032.msh", "../tests/data/3d/slab_t0008.msh"),
+            ("plane_stress", "3d"),
+        ],
+        &[
+            "time.steps=8",
+            "time.end=0.25",
+            "load.traction=[{on = \"top\", value = [\"0\", \"-0.1*x*(2-x)*min(t, 0.2)\", \"0\"]}, \
+             {on = \"right\", value = [\"if(t <= 0.5, 0.01*(1-y)*t, 0.01*(1-y)*0.2)\", \"0\", \"0\"]}]",
+        ],
+    ),
+];
+
+const fn case(
+    name: &'static str,
+    base: &'static str,
+    replace: &'static [(&'static str, &'static str)],
+    set: &'static [&'static str],
+) -> Case {
+    Case {
+        name,
+        base,
+        replace,
+        set,
+    }
+}
+
+/// The values a case is checked by, as summary.json gives them (floats in Rust's shortest
+/// round-trip form, which parses back to the same bits).
+fn values(dir: &Path) -> BTreeMap<String, String> {
+    let s = common::summary(dir);
+    let float = |v: &serde_json::Value| format!("{:?}", v.as_f64().unwrap());
+    let mut out = BTreeMap::new();
+    for key in ["u_l2", "u_h1", "u_max"] {
+        out.insert(key.to_string(), float(&s["final"][key]));
+    }
+    for key in ["max_kkt_residual", "max_violation"] {
+        out.insert(key.to_string(), float(&s["contact"][key]));
+    }
+    for key in ["active_at_end", "stick_at_end"] {
+        out.insert(key.to_string(), s["contact"][key].to_string());
+    }
+    for key in ["total", "max"] {
+        out.insert(
+            format!("iterations_{key}"),
+            s["iterations"][key].to_string(),
+        );
+    }
+    out.insert("status".into(), s["status"].to_string());
+    out
+}
+
+/// Runs `case` into a directory of `tmp`: its values.
+fn run(case: &Case, tmp: &Path) -> BTreeMap<String, String> {
+    let mut text = std::fs::read_to_string(repo().join(case.base)).unwrap();
+    for (from, to) in case.replace {
+        assert!(
+            text.contains(from),
+            "{}: {from:?} not in {}",
+            case.name,
+            case.base
+        );
+        text = text.replace(from, to);
+    }
+    // Mesh paths are relative to the scene file: made absolute for the copy in `tmp`.
+    let examples = repo().join("examples");
+    let text = text.replace(
+        "file = \"../",
+        &format!("file = \"{}/../", examples.display()),
+    );
+    let scene = common::write(tmp, &format!("{}.toml", case.name), &text);
+    let out = tmp.join(case.name);
+    let mut args = vec![
+        "run".to_string(),
+        scene.display().to_string(),
+        "--out".into(),
+        out.display().to_string(),
+        "--quiet".into(),
+    ];
+    for s in case.set {
+        args.extend(["--set".to_string(), s.to_string()]);
+    }
+    let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    let (code, text) = common::cli(&args);
+    assert_eq!(code, 0, "{}: {text}", case.name);
+    values(&out)
+}
+
+/// The relative difference of two stored values, for the message (None: not numbers).
+fn relative(a: &str, b: &str) -> Option<f64> {
+    let (a, b) = (a.parse::<f64>().ok()?, b.parse::<f64>().ok()?);
+    Some((a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE))
+}
+
+#[test]
+fn results_equal_the_stored_golden_values() {
+    let path = repo().join("tests/data/golden.json");
+    let tmp = tempfile::tempdir().unwrap();
+    let got: BTreeMap<String, BTreeMap<String, String>> = CASES
+        .iter()
+        .map(|c| (c.name.to_string(), run(c, tmp.path())))
+        .collect();
+    if std::env::var("VISCONTACT_GOLDEN").as_deref() == Ok("bless") {
+        let text = serde_json::to_string_pretty(&got).unwrap() + "\n";
+        std::fs::write(&path, text).unwrap();
+        return;
+    }
+    let stored: BTreeMap<String, BTreeMap<String, String>> =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let mut changes = Vec::new();
+    for (name, values) in &got {
+        let Some(want) = stored.get(name) else {
+            changes.push(format!("{name}: no stored values (bless them)"));
+            continue;
+        };
+        for (key, value) in values {
+            let expected = want.get(key).map(String::as_str).unwrap_or("missing");
+            if value != expected {
+                let rel = relative(value, expected)
+                    .map(|r| format!(" (relative {r:.1e})"))
+                    .unwrap_or_default();
+                changes.push(format!("{name}.{key}: {value}, stored {expected}{rel}"));
+            }
+        }
+    }
+    assert_eq!(stored.len(), got.len(), "stored cases: {:?}", stored.keys());
+    assert!(
+        changes.is_empty(),
+        "results differ from tests/data/golden.json:\n{}",
+        changes.join("\n")
+    );
+}
