@@ -148,6 +148,15 @@ fn a_directory_in_use_is_refused_naming_its_owner() {
             "{stderr}"
         );
     }
+    // Deleting the lock file does not let a run of other physics in (issue 26, finding 4):
+    // the directory itself is locked too.
+    std::fs::remove_file(dir.join(viscontact::run::LOCK_NAME)).unwrap();
+    let mut other = args.clone();
+    other.extend(["--set", "friction.coefficient=1"]);
+    let out = common::viscontact(&other);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("was deleted"), "{stderr}");
     // The owner was still running (a run of 10^5 steps); stop it and look at what it wrote.
     let term = std::process::Command::new("kill")
         .args(["-s", "TERM", &owner.id().to_string()])
