@@ -32,8 +32,8 @@
 //! matching the leading bytes of neighbouring values of smooth fields, which is the search
 //! that costs it seven times the time.
 //!
-//! Measured by examples/bench_output.rs on the last frame of its run (figures in the README's
-//! output section).
+//! Measured by examples/bench_output.rs on the last frame of its run (figures in docs/output.md,
+//! "Output of run").
 
 use std::io::Write as _;
 

@@ -9,7 +9,7 @@
 //!
 //! Why not AMD, as faer offers: ordering the whole matrix by AMD and then moving C to the end
 //! adds 41–43% fill in 3D, and nested dissection with C left out of the graph cuts nnz(L) by
-//! 29–35% against that (measured on the block meshes; see the README's performance section).
+//! 29–35% against that (measured on the block meshes; see docs/performance.md).
 //! METIS is deterministic (fixed seed; calls are serialized, see `dissect`), so a resumed run
 //! orders and factors K_A exactly as the uninterrupted run did.
 
