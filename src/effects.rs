@@ -4,6 +4,7 @@
 //! is one solve with the stored factorization and no optimization solver is built.
 
 use crate::fem::{Discretization, Sparse};
+use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::{ContactSolver, Scene};
 use crate::solver::{conic::ConicSolver, dual::DualSolver, Factor, Rows, StepSolver};
 use crate::Result;
@@ -65,9 +66,15 @@ impl Effects {
     }
 }
 
+/// |n·ν| at or below which Γ3,1 and Γ3,2 meet at a right angle: the nodal normals come from
+/// coordinates rounded to ~1e-16 relative, so a right angle gives |n·ν| ~ 1e-15.
+pub const RIGHT_ANGLE_COSINE: f64 = 1e-9;
+
 /// Things a user should know about a scene that runs: nearly incompressible plane strain or
-/// 3D (P1 elements lock) and a contact boundary that is not straight at a node (the nodal
-/// normal there is an average of the facet normals).
+/// 3D (P1 elements lock); a contact or friction boundary that is not straight at a node (the
+/// nodal normal there is an average of the facet normals); nodes where Γ3,1 meets Γ3,2 at a
+/// right angle, the only place where the split of the constraint force into contact
+/// pressure and friction traction is not unique (see `Rows::corner_cosines`).
 pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
     let mut w = Vec::new();
     use crate::scene::Model;
@@ -83,29 +90,42 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             ));
         }
     }
-    if disc.contact_kink_deg > 1.0 {
-        w.push(format!(
-            "the contact boundary bends by up to {:.2}° at a node; the nodal normal there \
-             averages the facet normals, so n·w ≤ 0 is only approximately the contact of \
-             each facet",
-            disc.contact_kink_deg
-        ));
+    for (kink, group, what) in [
+        (
+            disc.contact_kink_deg,
+            &scene.groups.contact,
+            "n·w ≤ 0 is only approximately the contact of each facet",
+        ),
+        (
+            disc.friction_kink_deg,
+            &scene.groups.friction,
+            "the slip |w_τ| is only approximately the slip along each facet",
+        ),
+    ] {
+        if kink > 1.0 {
+            w.push(format!(
+                "the boundary '{group}' bends by up to {kink:.2}° at a node; the nodal normal \
+                 there averages the facet normals, so {what}"
+            ));
+        }
     }
-    let dependent = Rows::new(&disc.contact, &disc.friction, disc.dim - 1).dependent_nodes();
-    if !dependent.is_empty() {
+    let right = Rows::new(&disc.contact, &disc.friction, disc.dim - 1)
+        .corner_cosines()
+        .into_iter()
+        .filter(|(_, cos)| cos.abs() <= RIGHT_ANGLE_COSINE)
+        .collect::<Vec<_>>();
+    if let Some(&(first, cos)) = right.first() {
         w.push(format!(
-            "{} node(s) where Γ3,1 meets Γ3,2 at a corner (the first at ({})) carry a contact \
-             row and friction rows that are (nearly) dependent: the velocity is unique, the \
-             split of the force there between contact pressure and friction traction is not; \
-             the fast solver regularizes its Newton steps at these nodes and still stops at \
-             the exact optimality conditions",
-            dependent.len(),
-            disc.nodes[dependent[0]]
-                .iter()
-                .take(disc.dim)
-                .map(|c| format!("{c}"))
-                .collect::<Vec<_>>()
-                .join(", ")
+            "{} node(s) where '{}' meets '{}' at a right angle (the first at {}; n·ν = {} for \
+             the contact normal n and the friction boundary's normal ν): n lies in the \
+             friction's tangent space, so the constraint force λ n + γ·τ there does not tell \
+             contact pressure λ from friction traction γ, and their split is not unique (the \
+             velocity and the force are); where the two meet at any other angle it is unique",
+            right.len(),
+            scene.groups.contact,
+            scene.groups.friction,
+            fmt_point(disc.nodes[first], disc.dim),
+            fmt_num(cos)
         ));
     }
     w

@@ -363,7 +363,10 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
             })
         })
         .collect();
+    let parts = mesh.parts();
+    let coincident = mesh.coincident_nodes();
     if json {
+        let point = |p: [f64; 3]| p[..mesh.dim].to_vec();
         let v = serde_json::json!({
             "file": path.display().to_string(),
             "dim": mesh.dim,
@@ -371,6 +374,18 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
             cells_key: mesh.n_cells(),
             "reoriented": mesh.flipped,
             "groups": groups,
+            "parts": parts.iter().map(|p| serde_json::json!({
+                cells_key: p.cells.len(),
+                "nodes": p.nodes.len(),
+                "entities": p.entities,
+                "min": point(p.min),
+                "max": point(p.max),
+            })).collect::<Vec<_>>(),
+            "coincident_nodes": coincident.iter().map(|c| serde_json::json!({
+                "at": point(mesh.nodes[c.nodes[0]]),
+                "nodes": c.nodes.len(),
+                "entities": c.entities,
+            })).collect::<Vec<_>>(),
             "quality": {
                 "min_angle_deg": q.min_angle_deg,
                 "max_aspect_ratio": q.max_aspect_ratio,
@@ -413,6 +428,25 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
         "  quality: min {angle} {:.2}°, max aspect ratio {:.3}, {size} {:.3e} .. {:.3e}",
         q.min_angle_deg, q.max_aspect_ratio, q.min_area, q.max_area
     );
+    println!(
+        "  parts: {} (cells connected through shared nodes)",
+        parts.len()
+    );
+    if parts.len() > 1 {
+        for (k, p) in parts.iter().enumerate() {
+            println!("    part {}: {}", k + 1, mesh.describe_part(p));
+        }
+    }
+    for note in overlapping_cell_groups(&mesh) {
+        println!("  note: {note}");
+    }
+    if !coincident.is_empty() {
+        println!(
+            "  warning: {}: a forgotten BooleanFragments (OpenCASCADE) or Coherence (built-in \
+             kernel)? `check` and `run` refuse it unless [mesh] separate_parts = true",
+            mesh.describe_coincident(&coincident)
+        );
+    }
     for (dim, tag, name) in &mesh.other_groups {
         let kind = ["point", "curve", "surface", "volume"][(*dim).min(3)];
         println!(
@@ -425,6 +459,36 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
         println!("  warning: {g} (refused only where a scene uses it as a boundary group)");
     }
     Ok(())
+}
+
+/// Cell groups that share cells, with the tag the output's `region` holds there (the first
+/// group in file order; docs/meshes.md).
+fn overlapping_cell_groups(mesh: &Mesh) -> Vec<String> {
+    let cell_groups: Vec<&viscontact::mesh::Group> =
+        mesh.groups.iter().filter(|g| g.dim == mesh.dim).collect();
+    let mut first: Vec<Option<usize>> = vec![None; mesh.n_cells()];
+    let mut shared = std::collections::BTreeMap::new();
+    for (k, g) in cell_groups.iter().enumerate() {
+        for &c in &g.cells {
+            match first[c] {
+                None => first[c] = Some(k),
+                Some(f) => *shared.entry((f, k)).or_insert(0) += 1,
+            }
+        }
+    }
+    let name = |g: &viscontact::mesh::Group| format!("'{}' (tag {})", Mesh::display_name(g), g.tag);
+    shared
+        .into_iter()
+        .map(|((a, b), n)| {
+            format!(
+                "cell groups {} and {} share {n} cells; the output's `region` holds {} there \
+                 (the first group in file order)",
+                name(cell_groups[a]),
+                name(cell_groups[b]),
+                cell_groups[a].tag
+            )
+        })
+        .collect()
 }
 
 #[derive(clap::Args)]

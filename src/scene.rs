@@ -63,6 +63,10 @@ pub struct MeshSection {
     pub model: Model,
     #[serde(default)]
     pub groups: Groups,
+    /// The mesh may hold separate bodies that touch (coincident nodes no cell shares);
+    /// docs/meshes.md.
+    #[serde(default)]
+    pub separate_parts: bool,
 }
 
 /// The model: 2D (how the elasticity tensor B is reduced to the plane) or 3D.
@@ -639,6 +643,8 @@ pub struct Scene {
     pub mesh_file: PathBuf,
     pub model: Model,
     pub groups: Groups,
+    /// `mesh.separate_parts`: coincident nodes that no cell shares are allowed.
+    pub separate_parts: bool,
     pub end: f64,
     pub steps: usize,
     /// θ, ζ of (4.1).
@@ -939,6 +945,7 @@ impl Scene {
             mesh_file: dir.join(&f.mesh.file),
             model,
             groups: f.mesh.groups.clone(),
+            separate_parts: f.mesh.separate_parts,
             end,
             steps: f.time.steps,
             theta,

@@ -6,7 +6,7 @@
 
 use super::Cell;
 use crate::expr::{Point, Scalar};
-use crate::mesh::Mesh;
+use crate::mesh::{fmt_point, Mesh};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -40,10 +40,10 @@ impl Loads {
     pub fn new(mesh: &Mesh, scene: &Scene, cells: &[Cell]) -> Result<Self> {
         let mut loads = Vec::new();
         // The traction boundary Γ2, for the check that every load group lies inside it.
-        let gamma2: Option<std::collections::HashSet<Vec<usize>>> = mesh
+        let gamma2: std::result::Result<std::collections::HashSet<Vec<usize>>, String> = mesh
             .boundary_group(&scene.groups.traction)
-            .ok()
-            .map(|g| mesh.boundary_facets(g).iter().map(sorted).collect());
+            .map(|g| mesh.boundary_facets(g).iter().map(sorted).collect())
+            .map_err(|e| e.to_string());
         for (i, t) in scene.tractions.iter().enumerate() {
             let g = mesh.boundary_group(&t.on).map_err(|e| {
                 Error::input(format!(
@@ -52,19 +52,13 @@ impl Loads {
                 ))
             })?;
             match &gamma2 {
-                Some(g2) => {
+                Ok(g2) => {
                     let facets = mesh.boundary_facets(g);
                     if let Some(f) = facets.iter().find(|f| !g2.contains(&sorted(f))) {
                         let corners: Vec<String> = f
                             .nodes()
                             .iter()
-                            .map(|&n| {
-                                let p = mesh.nodes[n];
-                                match mesh.dim {
-                                    2 => format!("({}, {})", p[0], p[1]),
-                                    _ => format!("({}, {}, {})", p[0], p[1], p[2]),
-                                }
-                            })
+                            .map(|&n| fmt_point(mesh.nodes[n], mesh.dim))
                             .collect();
                         let (what, entity) = match mesh.dim {
                             2 => ("edge", "curve"),
@@ -81,12 +75,11 @@ impl Loads {
                         )));
                     }
                 }
-                None => {
+                Err(why) => {
                     return Err(Error::input(format!(
-                        "{}: key 'mesh.groups.traction': mesh '{}' has no group '{}', \
-                         but load.traction[{i}] needs it",
+                        "{}: key 'mesh.groups.traction': load.traction[{i}] needs the traction \
+                         boundary '{}' (its group must lie inside it): {why}",
                         scene.path.display(),
-                        mesh.path.display(),
                         scene.groups.traction
                     )))
                 }
@@ -203,7 +196,8 @@ impl Loads {
     }
 }
 
-fn sorted(f: &crate::mesh::Facet) -> Vec<usize> {
+/// A facet's nodes, sorted: the same key for either orientation.
+pub(crate) fn sorted(f: &crate::mesh::Facet) -> Vec<usize> {
     let mut v = f.nodes().to_vec();
     v.sort_unstable();
     v

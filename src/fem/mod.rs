@@ -178,8 +178,11 @@ pub struct Discretization {
     /// Rows τ_i (2D) or τ_i1, τ_i2 (3D, consecutive) at the Γ3,2 nodes with c_i > 0 (empty
     /// when friction is off or μF = 0).
     pub friction: Vec<NodalRow>,
-    /// The largest kink (degrees) between facet normals at a node of Γ3,1 or Γ3,2.
+    /// The largest kink (degrees) between facet normals at a node of Γ3,1 (0 when contact
+    /// is off).
     pub contact_kink_deg: f64,
+    /// The same for Γ3,2 (0 when friction is off).
+    pub friction_kink_deg: f64,
     /// The cells as [`Discretization::stress`] reads them, once it is called.
     stress_cells: std::sync::OnceLock<PackedCells>,
 }
@@ -194,6 +197,8 @@ impl Discretization {
         check_model(mesh, scene)?;
         let (nn, d) = (mesh.nodes.len(), mesh.dim);
         let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.groups.fixed)?;
+        mesh.check_parts(fixed, scene.separate_parts)
+            .map_err(|e| Error::input(format!("{}: {e}", scene.path.display())))?;
         let mut clamped = vec![false; nn];
         for n in mesh.group_nodes(fixed) {
             clamped[n] = true;
@@ -261,11 +266,11 @@ impl Discretization {
 
         // Γ3,1: one row n_i per free node.
         let mut contact = Vec::new();
-        let mut kink: f64 = 0.0;
+        let mut contact_kink = 0.0;
         if scene.contact {
             let g = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
             let (normals, k) = mesh.nodal_normals(g);
-            kink = kink.max(k);
+            contact_kink = k;
             let area = lumped_area(mesh, g);
             for (node, n) in normals {
                 if let Some(dofs) = node_dofs(node) {
@@ -284,8 +289,13 @@ impl Discretization {
         // Γ3,2: g_F and the friction rows τ_i with c_i = ∫ μF φ_i da (facet quadrature).
         let mut g_f = Vec::new();
         let mut friction = Vec::new();
+        let mut friction_kink = 0.0;
         if let Some(fr) = &scene.friction {
             let g = group(mesh, scene, "mesh.groups.friction", &scene.groups.friction)?;
+            if scene.contact {
+                let c = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+                check_overlap(mesh, scene, c, g)?;
+            }
             let mut gf = vec![0.0; n_free];
             let mut c = vec![0.0; nn];
             for f in mesh.boundary_facets(g) {
@@ -322,7 +332,7 @@ impl Discretization {
                     "[friction]",
                 ));
             }
-            kink = kink.max(k);
+            friction_kink = k;
             let area = lumped_area(mesh, g);
             for (node, n) in normals {
                 // μF may vanish on parts of Γ3,2: nodes with c_i = 0 carry no friction.
@@ -350,7 +360,8 @@ impl Discretization {
             g_f,
             contact,
             friction,
-            contact_kink_deg: kink,
+            contact_kink_deg: contact_kink,
+            friction_kink_deg: friction_kink,
             stress_cells: std::sync::OnceLock::new(),
         })
     }
@@ -644,9 +655,50 @@ pub(crate) fn check_data(
 /// "(x, y) = (…, …)" in 2D, "(x, y, z) = (…, …, …)" in 3D, for messages.
 pub(crate) fn fmt_at(p: [f64; 3], model: Model) -> String {
     match model {
-        Model::ThreeD => format!("(x, y, z) = ({}, {}, {})", p[0], p[1], p[2]),
-        _ => format!("(x, y) = ({}, {})", p[0], p[1]),
+        Model::ThreeD => format!("(x, y, z) = {}", crate::mesh::fmt_point(p, 3)),
+        _ => format!("(x, y) = {}", crate::mesh::fmt_point(p, 2)),
     }
+}
+
+/// Refuses a contact group and a friction group that share a boundary facet (an edge in 2D,
+/// a face in 3D): that facet would carry both conditions. Sharing nodes (where the two meet)
+/// is normal.
+fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) -> Result<()> {
+    let of_contact: std::collections::HashSet<Vec<usize>> = mesh
+        .boundary_facets(contact)
+        .iter()
+        .map(loads::sorted)
+        .collect();
+    let shared: Vec<crate::mesh::Facet> = mesh
+        .boundary_facets(friction)
+        .into_iter()
+        .filter(|f| of_contact.contains(&loads::sorted(f)))
+        .collect();
+    let Some(first) = shared.first() else {
+        return Ok(());
+    };
+    let (facets, entity) = match mesh.dim {
+        2 => ("edges", "curve"),
+        _ => ("faces", "surface"),
+    };
+    let corners: Vec<String> = first
+        .nodes()
+        .iter()
+        .map(|&n| crate::mesh::fmt_point(mesh.nodes[n], mesh.dim))
+        .collect();
+    Err(Error::input(format!(
+        "{}: keys 'mesh.groups.contact' and 'mesh.groups.friction': the contact group '{}' and \
+         the friction group '{}' of mesh '{}' share {} {facets} (the first {}): a boundary \
+         {entity} carries either unilateral contact or the given normal stress with friction, \
+         not both; put each {entity} into one of the two groups in gmsh (sharing the nodes \
+         where they meet is fine), or disable one of [contact], [friction]",
+        scene.path.display(),
+        scene.groups.contact,
+        scene.groups.friction,
+        mesh.path.display(),
+        shared.len(),
+        corners.join("–")
+    )))
 }
 
 /// Assembles K_A, K_B, K_R over all cells in free-dof numbering (Γ1 rows and columns

@@ -28,6 +28,7 @@
 //! [`Mesh::boundary_facets`]: edges in 2D, triangles in 3D, with normal and measure.
 
 mod msh;
+mod parts;
 mod physical_names;
 mod quality;
 mod solid;
@@ -35,6 +36,7 @@ mod solid;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
+pub use parts::{Coincident, Part, COINCIDENT_TOLERANCE};
 pub use quality::Quality;
 pub(crate) use solid::{cross, dot, norm, sub};
 
@@ -67,6 +69,8 @@ pub struct Mesh {
     /// Physical groups of the other dimensions (points; curves in 3D), which carry no
     /// condition: (dimension, tag, name). Kept to say so when a scene names one.
     pub other_groups: Vec<(usize, i32, Option<String>)>,
+    /// The gmsh entity (surface in 2D, volume in 3D) of each cell.
+    pub cell_entity: Vec<i32>,
 }
 
 /// A boundary facet of either dimension: an edge in 2D, a triangle in 3D, its nodes ordered
@@ -469,8 +473,39 @@ fn or_none(list: &[String]) -> String {
     }
 }
 
-fn fmt_point(p: [f64; 3]) -> String {
-    format!("({}, {})", p[0], p[1])
+/// A number for a message: 6 significant digits, trailing zeros dropped (`0.5`, `1.98097`,
+/// `6.12323e-17`, `1.5e+06`): like C's `%g`. Every message that prints a coordinate uses it.
+pub fn fmt_num(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{}", x + 0.0);
+    }
+    let exp = x.abs().log10().floor() as i32;
+    // Rounding to 6 digits may carry into the next power of ten (999999.7 → 1e+06).
+    let rounded: f64 = format!("{x:.5e}").parse().unwrap_or(x);
+    let exp = exp.max(rounded.abs().log10().floor() as i32);
+    let trim = |s: String| match s.contains('.') {
+        true => s.trim_end_matches('0').trim_end_matches('.').to_string(),
+        false => s,
+    };
+    if (-4..6).contains(&exp) {
+        trim(format!("{:.*}", (5 - exp) as usize, x))
+    } else {
+        let s = format!("{x:.5e}");
+        let (mantissa, e) = s.split_once('e').unwrap_or((&s, "0"));
+        let e: i32 = e.parse().unwrap_or(0);
+        format!(
+            "{}e{}{:02}",
+            trim(mantissa.to_string()),
+            if e < 0 { '-' } else { '+' },
+            e.abs()
+        )
+    }
+}
+
+/// A point for a message: `(x, y)` in 2D, `(x, y, z)` in 3D, each by [`fmt_num`].
+pub fn fmt_point(p: [f64; 3], dim: usize) -> String {
+    let c: Vec<String> = p[..dim.clamp(1, 3)].iter().map(|&x| fmt_num(x)).collect();
+    format!("({})", c.join(", "))
 }
 
 /// Geometry, topology and groups from the raw file content.
@@ -502,9 +537,9 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
     check_finite(&file, &nodes)?;
     if let Some(p) = nodes.iter().find(|p| p[2].abs() > 1e-12 * diag.max(scale)) {
         return Err(Error::input(format!(
-            "mesh file '{file}' is not a 2D mesh in the xy-plane: node ({}, {}, {}) has z ≠ 0; \
+            "mesh file '{file}' is not a 2D mesh in the xy-plane: node {} has z ≠ 0; \
              viscontact reads 2D meshes (z = 0)",
-            p[0], p[1], p[2]
+            fmt_point(*p, 3)
         )));
     }
     for p in &mut nodes {
@@ -534,7 +569,11 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         triangles.push(tri);
     }
     if let Some(t) = degenerate.first() {
-        let pts: Vec<String> = t.nodes.iter().map(|&n| fmt_point(raw.nodes[n])).collect();
+        let pts: Vec<String> = t
+            .nodes
+            .iter()
+            .map(|&n| fmt_point(raw.nodes[n], 2))
+            .collect();
         let more = match degenerate.len() {
             1 => String::new(),
             n => format!(" ({} more triangles are degenerate)", n - 1),
@@ -565,7 +604,13 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
                 count: 0,
             });
             e.count += 1;
-            let edge_at = || format!("{}–{}", fmt_point(nodes[key[0]]), fmt_point(nodes[key[1]]));
+            let edge_at = || {
+                format!(
+                    "{}–{}",
+                    fmt_point(nodes[key[0]], 2),
+                    fmt_point(nodes[key[1]], 2)
+                )
+            };
             if e.count == 2 && e.dir == dir {
                 return Err(Error::input(format!(
                     "mesh file '{file}' folds over itself: triangles {} and {} (gmsh element \
@@ -619,6 +664,7 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
         groups,
         flipped,
         other_groups: other_groups(&raw, names, 2),
+        cell_entity: raw.triangles.iter().map(|t| t.entity.1).collect(),
     })
 }
 
@@ -663,6 +709,7 @@ fn fill_groups<const C: usize, const F: usize>(
         f
     };
     let mut seen: Vec<HashSet<[usize; F]>> = vec![HashSet::new(); groups.len()];
+    let mut misfits = vec![Misfits::default(); groups.len()];
     for el in facets.iter().filter(|e| e.entity.0 == facet_dim) {
         let member = groups_of(el.entity);
         if member.is_empty() {
@@ -670,50 +717,25 @@ fn fill_groups<const C: usize, const F: usize>(
         }
         let f = el.nodes.map(|n| new_index[n]);
         let found = if f.contains(&UNUSED) { None } else { lookup(f) };
+        for &g in &member {
+            misfits[g].elements += 1;
+        }
         let dir = match found {
             Some((dir, 1)) => dir,
             other => {
-                if member.iter().all(|&g| groups[g].defect.is_some()) {
-                    continue;
-                }
-                let g = &groups[member[0]];
-                let group = match &g.name {
-                    Some(n) => format!("\"{n}\" (tag {})", g.tag),
-                    None => format!("with tag {} (no name)", g.tag),
-                };
-                let Words {
-                    element,
-                    mesh,
-                    cells,
-                    cell,
-                    facet,
-                    a_facet,
-                    boundary,
-                } = words;
-                let why = match other {
-                    Some(_) => format!("it is shared by two {cells} (an interior {facet})"),
-                    None => format!("it is not {a_facet} of any {cell}"),
-                };
                 let pts: Vec<String> = el
                     .nodes
                     .iter()
-                    .map(|&n| {
-                        let p = raw.nodes[n];
-                        match F {
-                            2 => fmt_point(p),
-                            _ => format!("({}, {}, {})", p[0], p[1], p[2]),
-                        }
-                    })
+                    .map(|&n| fmt_point(raw.nodes[n], F))
                     .collect();
-                let defect = format!(
-                    "mesh file '{file}': physical group {group} contains the {element} {} (gmsh \
-                     element {}), which is not on the boundary of the {mesh}: {why}; a boundary \
-                     group must consist of boundary {boundary}",
-                    pts.join("–"),
-                    el.tag
-                );
+                let example = format!("{} (gmsh element {})", pts.join("–"), el.tag);
                 for &g in &member {
-                    groups[g].defect.get_or_insert_with(|| defect.clone());
+                    let m = &mut misfits[g];
+                    match other {
+                        Some(_) => m.interior += 1,
+                        None => m.off += 1,
+                    }
+                    m.example.get_or_insert_with(|| example.clone());
                 }
                 continue;
             }
@@ -724,7 +746,80 @@ fn fill_groups<const C: usize, const F: usize>(
             }
         }
     }
+    for (g, m) in groups.iter_mut().zip(&misfits) {
+        if m.off + m.interior > 0 {
+            g.defect = Some(m.message(file, g, words));
+        }
+    }
     Ok(groups)
+}
+
+/// The facet elements of one boundary group that are not boundary facets of the cells.
+#[derive(Clone, Default)]
+struct Misfits {
+    /// All facet elements of the group.
+    elements: usize,
+    /// Facets of no cell (a curve or surface outside the meshed body's boundary).
+    off: usize,
+    /// Facets of two cells (an embedded curve or surface inside the body).
+    interior: usize,
+    /// The first misfit, as its corner points and gmsh element tag.
+    example: Option<String>,
+}
+
+impl Misfits {
+    /// The group's `defect`: it exists, how many of its elements are not boundary facets and
+    /// why, an example, and the gmsh fix.
+    fn message(&self, file: &impl std::fmt::Display, g: &Group, words: &Words) -> String {
+        let Words {
+            element,
+            mesh,
+            cells,
+            cell,
+            facet,
+            a_facet,
+            boundary,
+        } = words;
+        let group = match &g.name {
+            Some(n) => format!("\"{n}\" (tag {})", g.tag),
+            None => format!("with tag {} (no name)", g.tag),
+        };
+        let bad = self.off + self.interior;
+        let how_many = match (bad == self.elements, bad) {
+            (true, 1) => format!("it is not a boundary {facet} of the {mesh}"),
+            (true, _) => format!("none of them is a boundary {facet} of the {mesh}"),
+            (false, 1) => format!("1 of them is not a boundary {facet} of the {mesh}"),
+            (false, _) => format!("{bad} of them are not boundary {facet}s of the {mesh}"),
+        };
+        let is = |n: usize| {
+            if n == 1 {
+                "1 is".to_string()
+            } else {
+                format!("{n} are")
+            }
+        };
+        let mut why = Vec::new();
+        if self.off > 0 {
+            why.push(format!("{} not {a_facet} of any {cell}", is(self.off)));
+        }
+        if self.interior > 0 {
+            why.push(format!(
+                "{} an interior {facet} shared by two {cells} (an embedded {element})",
+                is(self.interior)
+            ));
+        }
+        let plural = if self.elements == 1 { "" } else { "s" };
+        format!(
+            "mesh file '{file}': physical group {group} exists, with {} {element} element{plural}, \
+             but {how_many} (not on the boundary: {}; e.g. the {element} {}), so it cannot \
+             carry a boundary condition: a boundary group must consist of boundary {boundary}. \
+             In gmsh, make them part of that boundary (build the body from them, or fragment: \
+             BooleanFragments in OpenCASCADE, Coherence in the built-in kernel) and mesh again",
+            self.elements,
+            why.join(", "),
+            self.example.as_deref().unwrap_or("?")
+        )
+    }
 }
 
 /// The index of a node no cell uses.
@@ -755,9 +850,9 @@ fn renumber<const N: usize>(
 fn check_finite(file: &impl std::fmt::Display, nodes: &[[f64; 3]]) -> Result<()> {
     match nodes.iter().find(|p| p.iter().any(|c| !c.is_finite())) {
         Some(p) => Err(Error::input(format!(
-            "mesh file '{file}' has a node with a non-finite coordinate ({}, {}, {}); the file \
+            "mesh file '{file}' has a node with a non-finite coordinate {}; the file \
              looks corrupt, regenerate it with gmsh",
-            p[0], p[1], p[2]
+            fmt_point(*p, 3)
         ))),
         None => Ok(()),
     }
@@ -829,7 +924,30 @@ fn group_table<'r>(
 
 #[cfg(test)]
 mod tests {
-    use super::normalize_name;
+    use super::{fmt_num, fmt_point, normalize_name};
+
+    #[test]
+    fn numbers_in_messages_have_six_significant_digits() {
+        for (x, text) in [
+            (6.123233995736766e-17, "6.12323e-17"),
+            (0.5, "0.5"),
+            (1.980969883096585, "1.98097"),
+            (2.0, "2"),
+            (-0.75, "-0.75"),
+            (-0.0, "0"),
+            (123456.7, "123457"),
+            (999999.7, "1e+06"),
+            (1.5e6, "1.5e+06"),
+            (0.0001234, "0.0001234"),
+            (1e-5, "1e-05"),
+            (0.1 + 0.2, "0.3"),
+            (f64::NAN, "NaN"),
+        ] {
+            assert_eq!(fmt_num(x), text, "{x:e}");
+        }
+        assert_eq!(fmt_point([1.0, 0.5, 7.0], 2), "(1, 0.5)");
+        assert_eq!(fmt_point([1.0, 0.5, 1.0 / 3.0], 3), "(1, 0.5, 0.333333)");
+    }
 
     #[test]
     fn aliases_normalize_alike() {

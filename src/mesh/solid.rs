@@ -12,7 +12,9 @@ use std::path::Path;
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::{check_finite, fill_groups, group_table, other_groups, renumber, Mesh, Words};
+use super::{
+    check_finite, fill_groups, fmt_point, group_table, other_groups, renumber, Mesh, Words,
+};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -43,10 +45,6 @@ pub(crate) fn volume6(p: [[f64; 3]; 4]) -> f64 {
 /// The faces of a positively oriented tetrahedron, each ordered so that its right-hand
 /// normal points out of the tetrahedron; face k is opposite vertex k.
 pub(crate) const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
-
-fn fmt_point(p: [f64; 3]) -> String {
-    format!("({}, {}, {})", p[0], p[1], p[2])
-}
 
 /// Geometry, topology and groups of a 3D mesh from the raw file content.
 pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
@@ -86,7 +84,11 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         tetrahedra.push(tet);
     }
     if let Some(t) = flat.first() {
-        let pts: Vec<String> = t.nodes.iter().map(|&n| fmt_point(raw.nodes[n])).collect();
+        let pts: Vec<String> = t
+            .nodes
+            .iter()
+            .map(|&n| fmt_point(raw.nodes[n], 3))
+            .collect();
         let more = match flat.len() {
             1 => String::new(),
             n => format!(" ({} more tetrahedra are flat)", n - 1),
@@ -122,7 +124,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
             });
             e.count += 1;
             let face_at = || {
-                let pts: Vec<String> = dir.iter().map(|&n| fmt_point(nodes[n])).collect();
+                let pts: Vec<String> = dir.iter().map(|&n| fmt_point(nodes[n], 3)).collect();
                 pts.join("–")
             };
             // The same face seen from the other side is an even permutation of the reverse.
@@ -180,6 +182,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         groups,
         flipped,
         other_groups: other_groups(&raw, names, 3),
+        cell_entity: raw.tetrahedra.iter().map(|t| t.entity.1).collect(),
     })
 }
 

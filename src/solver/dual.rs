@@ -1231,10 +1231,13 @@ fn solve_cached(
         MemStack::new(&mut mem),
         Default::default(),
     )
-    .map_err(|e| {
-        Error::solve(format!(
-            "the condensed contact matrix is not positive definite ({e:?})"
-        ))
+    .map_err(|_| {
+        Error::solve(
+            "the fast contact solver's Newton matrix (the constraint rows condensed through \
+             K_A⁻¹) is not positive definite to working precision, so a Newton step cannot \
+             be solved; set `[solver] contact = \"clarabel\"` to solve the step problem \
+             without it, and report the scene",
+        )
     })?;
     f.form = Some(form);
     f.coords.clear();

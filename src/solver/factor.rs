@@ -496,7 +496,15 @@ impl Factor {
             SymmetricOrdering::Custom(perm),
             params,
         )
-        .map_err(|e| Error::solve(format!("symbolic analysis of K_A failed: {e:?}")))?;
+        .map_err(|e| {
+            let why = match e {
+                faer::sparse::FaerError::OutOfMemory => "not enough memory for the factor",
+                _ => "the factor has more entries than its index type can count",
+            };
+            Error::solve(format!(
+                "K_A ({n} free dofs) could not be factored: {why}; use a coarser mesh"
+            ))
+        })?;
         let mut values = vec![0.0; symbolic.len_val()];
         let par = match symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) if factorization_flops(s) >= parallel_flops => {
@@ -518,11 +526,15 @@ impl Factor {
                     MemStack::new(&mut mem),
                     Default::default(),
                 )
-                .map_err(|e| {
-                    Error::solve(format!(
-                        "K_A is not positive definite ({e:?}): is the clamped group Γ1 empty \
-                         or is part of the mesh not connected to it?"
-                    ))
+                .map_err(|_| {
+                    Error::solve(
+                        "K_A (the viscosity stiffness on the free nodes) could not be \
+                         factored: it is not positive definite to working precision. `check` \
+                         refuses parts of the mesh that Γ1 does not hold; what is left is a \
+                         matrix too ill-conditioned to factor: very distorted elements (see \
+                         `viscontact mesh-info` for the quality) or viscosity coefficients θ, \
+                         ζ many orders of magnitude apart",
+                    )
                 })?;
         }
         let layout = match symbolic.raw() {

@@ -74,9 +74,7 @@ impl Rows {
     /// 90° corner makes n_i = ±τ_i exactly, so D = P K_A⁻¹ Pᵀ is singular). Where the two
     /// sides continue each other (the paper's x = 1) n_i ⊥ τ_i and the node is not listed.
     pub fn dependent_nodes(&self) -> Vec<usize> {
-        let friction: std::collections::HashMap<usize, usize> = (0..self.n_friction_nodes())
-            .map(|j| (self.rows[self.friction_block(j).start].node, j))
-            .collect();
+        let friction = self.friction_blocks_by_node();
         self.rows[..self.n_contact]
             .iter()
             .filter(|r| {
@@ -96,6 +94,34 @@ impl Rows {
                 })
             })
             .map(|r| r.node)
+            .collect()
+    }
+
+    /// Node → index of its friction block.
+    fn friction_blocks_by_node(&self) -> std::collections::HashMap<usize, usize> {
+        (0..self.n_friction_nodes())
+            .map(|j| (self.rows[self.friction_block(j).start].node, j))
+            .collect()
+    }
+
+    /// At each node with a contact row and friction rows: (node, n_i·ν_i), the cosine between
+    /// the contact normal n_i and the normal ν_i of the friction tangent space (ν_i = (τ_y,
+    /// −τ_x) in 2D, τ_i1 × τ_i2 in 3D). The constraint force at the node, λ_i n_i + Σ_k γ_ik
+    /// τ_ik, is split uniquely into λ_i and γ_i exactly when the d vectors n_i, τ_ik are
+    /// independent, that is when n_i·ν_i ≠ 0; the split's sensitivity grows as 1/|n_i·ν_i|.
+    pub fn corner_cosines(&self) -> Vec<(usize, f64)> {
+        let friction = self.friction_blocks_by_node();
+        self.rows[..self.n_contact]
+            .iter()
+            .filter_map(|r| {
+                let t = &self.rows[self.friction_block(*friction.get(&r.node)?)];
+                let nu = match t {
+                    [t] => [t.dir[1], -t.dir[0], 0.0],
+                    [t1, t2, ..] => crate::mesh::cross(t1.dir, t2.dir),
+                    [] => return None,
+                };
+                Some((r.node, crate::mesh::dot(r.dir, nu)))
+            })
             .collect()
     }
 

@@ -12,6 +12,9 @@
 #   zero_area.msh         hand-written, (0,2)x(0,1), 6 triangles + 1 triangle with 3
 #                         collinear nodes (element 10), all groups present; otherwise a
 #                         conforming mesh                                     (degenerate element)
+#   mesh_checks/*.msh     from the .geo files beside them (issue 26: two halves not
+#                         fragmented in 2D and 3D, a Γ2 arc off the mesh, Γ3,1 overlapping
+#                         Γ3,2, overlapping physical surfaces)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 GMSH=${GMSH:-gmsh}
@@ -124,3 +127,9 @@ $Elements
 12 4 6 7
 $EndElements
 MSH
+
+# mesh_checks/: meshes that are not one body, a group off the mesh, overlapping Γ3,1/Γ3,2
+for g in unfragmented fillet overlap regions; do
+    mesh "mesh_checks/$g.geo" -format msh41 -o "mesh_checks/$g.msh"
+done
+mesh -3 mesh_checks/unfragmented_3d.geo -format msh41 -o mesh_checks/unfragmented_3d.msh
