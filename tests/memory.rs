@@ -478,7 +478,9 @@ fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
         let (code, text) = cli_on(command, &scene, &set);
         assert_eq!(code, 2, "{command}: {text}");
         assert!(
-            text.contains("material.relaxation.horizon") && text.contains("1e7"),
+            text.contains("material.relaxation.horizon")
+                && text.contains("1e7")
+                && text.contains("at most 3.125e5"),
             "{command}: {text}"
         );
         assert!(start.elapsed().as_secs_f64() < 10.0, "{command}: slow");
