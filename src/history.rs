@@ -9,8 +9,10 @@
 //! m^(i)_{n+1} = e^{−b_i k} (m^(i)_n + k u_n); m_n = Σ a_i m^(i)_n. Any other kernel (an
 //! expression or a table) is by default compressed to a certified sum of exponentials
 //! (`kernel_fit`) and then runs the same recursion; with `memory = "exact"`, or when it
-//! cannot be fitted within its tolerance, it keeps u_0..u_{n−1} and evaluates the direct sum,
-//! O(n) per step. t_n − t_j is taken as (n − j)·k exactly.
+//! cannot be fitted within its tolerance and the run has at most `kernel_fit::EXACT_STEPS`
+//! steps, it keeps u_0..u_{n−1} and evaluates the direct sum, O(n) per step. A longer run
+//! whose kernel misses its tolerance is refused (bad input naming the tolerance the fit
+//! reached), never silently run in O(N²). t_n − t_j is taken as (n − j)·k exactly.
 
 use crate::kernel_fit::{self, Fit, Lags};
 use crate::scene::{self, Kernel, Scene};
@@ -73,6 +75,18 @@ impl Plan {
             None => Self::exact(lags, scene, None),
             Some(tolerance) => match kernel_fit::fit(&lags, tolerance) {
                 Ok(fit) => Plan::Compressed(fit),
+                Err(why) if scene.steps > kernel_fit::EXACT_STEPS => {
+                    return Err(crate::Error::input(format!(
+                        "{}: key 'material.relaxation.tolerance': the kernel cannot be \
+                         compressed within {tolerance:e}: {why}. It is not run by the direct \
+                         sum instead: its time.steps = {} exceed {} (the direct sum keeps \
+                         every step's displacement, 8·dofs·N bytes, and takes O(N²·dofs) \
+                         time); memory = \"exact\" runs it anyway",
+                        scene.path.display(),
+                        scene.steps,
+                        kernel_fit::EXACT_STEPS
+                    )))
+                }
                 Err(why) => Self::exact(lags, scene, Some(why)),
             },
         })

@@ -7,8 +7,10 @@
 //!
 //! and then run the exact O(1) Prony recursion of `history` with r̃. The fit is **certified**:
 //! after fitting, r̃ − r is evaluated on every lag and the maximum, relative to max_l |r(s_l)|,
-//! is the error reported; a fit whose certified error exceeds the tolerance is not used (the
-//! run falls back to the direct sum and says why). A compressed run is therefore exactly the
+//! is the error reported; a fit whose certified error exceeds the tolerance is not used: a
+//! run of at most [`EXACT_STEPS`] steps falls back to the direct sum and says why, a longer
+//! one is refused (`history::Plan::new`), since the direct sum would cost O(N²·dofs) time
+//! and 8·dofs·N bytes behind the user's back. A compressed run is therefore exactly the
 //! scheme (3.1) with the kernel r̃, which agrees with r within ε·max|r| at every value the
 //! scheme reads.
 //!
@@ -121,6 +123,15 @@ pub struct Fit {
     /// Wall time of the fit and its certificate.
     pub seconds: f64,
 }
+
+/// The most lags a fit is evaluated and certified on (max(N, horizon/k)): the fit keeps r
+/// and its deviation on every lag, 16 bytes each (160 MB here), and each certificate is
+/// O(lags · terms). A scene asking for more is refused when it is read (`scene.rs`).
+pub const MAX_LAGS: usize = 10_000_000;
+
+/// The most steps a compressed kernel whose fit misses its tolerance may run by the direct
+/// sum instead: beyond, its O(N²·dofs) time and 8·dofs·N bytes are refused, not spent.
+pub const EXACT_STEPS: usize = 10_000;
 
 /// Refinement rounds after the first fit.
 const ROUNDS: usize = 16;

@@ -8,7 +8,10 @@
 //!
 //! - memory: a general kernel's direct sum keeps u_0..u_N (8 d (N+1) bytes) and r at every
 //!   lag (8 (N+1)), and the checkpoint writer may copy all rows once more; every kernel keeps
-//!   the per-step iteration counts (8 N);
+//!   the per-step iteration counts (8 N). A compressed kernel (expr or table, `memory =
+//!   "compressed"`) counts its fit, 16 bytes per lag up to max(N, horizon/k) (r and the
+//!   certificate's deviation, `kernel_fit`), and the direct sum's rows only when its run may
+//!   fall back to it (N ≤ `kernel_fit::EXACT_STEPS`; a longer one is refused instead);
 //! - disk: a frame every `output.every` steps (≈ 320 n + 24 c bytes each in the base64 VTU
 //!   of `output/vtu.rs`, measured: 384 kB for n = 1089, c = 2048), and for a general kernel
 //!   the history file (8 d (N+1) bytes).
@@ -19,6 +22,7 @@
 //! other programs of the machine.
 
 use crate::fem::Discretization;
+use crate::kernel_fit::EXACT_STEPS;
 use crate::scene::{Kernel, Scene};
 use crate::{Error, Result};
 use std::path::Path;
@@ -41,10 +45,18 @@ impl Estimate {
     pub fn new(scene: &Scene, disc: &Discretization, from: usize) -> Estimate {
         let steps = scene.steps as f64;
         let d = disc.n_free as f64;
-        let direct = matches!(scene.relaxation, Some(Kernel::Expr(_) | Kernel::Table(..)));
+        let general = matches!(scene.relaxation, Some(Kernel::Expr(_) | Kernel::Table(..)));
+        let compressed = general && scene.compression.is_some();
+        let direct = general && (!compressed || scene.steps <= EXACT_STEPS);
+        let fit = match (compressed, scene.horizon) {
+            (false, _) => 0.0,
+            (true, None) => 16.0 * (steps + 1.0),
+            (true, Some(h)) => 16.0 * ((h / scene.k()).ceil().max(steps) + 1.0),
+        };
         let rows = if direct { 8.0 * d * (steps + 1.0) } else { 0.0 };
         let copies = if scene.checkpoint { 2.0 } else { 1.0 };
-        let memory = copies * rows + if direct { 8.0 * (steps + 1.0) } else { 0.0 } + 8.0 * steps;
+        let memory =
+            copies * rows + if direct { 8.0 * (steps + 1.0) } else { 0.0 } + fit + 8.0 * steps;
         let remaining = (scene.steps.saturating_sub(from) + 1) as f64;
         let frames = (remaining / scene.output_every as f64).ceil() + 1.0;
         let frame = 320.0 * disc.nodes.len() as f64 + 24.0 * disc.cells.len() as f64;

@@ -825,6 +825,36 @@ impl Scene {
             }
             h => h,
         };
+        if compression.is_some() {
+            // The fit's lags, max(N, horizon/k), bounded (kernel_fit::MAX_LAGS).
+            let steps = f.time.steps as f64;
+            let lags = horizon.map_or(steps, |h| (h * steps / end).ceil().max(steps));
+            if lags > crate::kernel_fit::MAX_LAGS as f64 {
+                let max = crate::kernel_fit::MAX_LAGS as f64;
+                let (key, fix) = match horizon {
+                    Some(h) if lags > steps => (
+                        "material.relaxation.horizon",
+                        format!("is {h}: lower it to at most {:e}", max * end / steps),
+                    ),
+                    _ => (
+                        "time.steps",
+                        format!(
+                            "is {}: lower it, or set material.relaxation.memory = \"exact\"",
+                            f.time.steps
+                        ),
+                    ),
+                };
+                return bad(
+                    key,
+                    &format!(
+                        "{fix} (the compressed kernel would be fitted and certified on \
+                         {lags:.3e} lags, max(time.steps, horizon/k) with k = \
+                         time.end/time.steps, more than the {max:e} the fit may take: 16 bytes \
+                         and O(terms) work per lag)"
+                    ),
+                );
+            }
+        }
         let friction = match &f.friction {
             Some(fr) if fr.enabled => {
                 let normal_stress =

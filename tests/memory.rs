@@ -387,3 +387,124 @@ fn study_of_tolerances_tracks_the_direct_sum() {
     assert_eq!(e.exit_code(), 2);
     assert!(e.to_string().contains("[material.relaxation]"));
 }
+
+/// `viscontact check` (or `run` into `dir/out`) on `scene` with `set`: (exit status, output).
+fn cli_on(command: &str, scene: &Path, set: &[&str]) -> (i32, String) {
+    let scene = scene.to_str().unwrap().to_string();
+    let out = scene.replace(".toml", "_out");
+    let mut args = vec![command, &scene];
+    if command == "run" {
+        args.extend(["--out", &out]);
+    }
+    for s in set {
+        args.extend(["--set", s]);
+    }
+    common::cli(&args)
+}
+
+#[test]
+fn long_run_whose_kernel_misses_its_tolerance_is_refused_not_run_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    // A kinked table: piecewise linear, no sum of exponentials follows it to 1e-6.
+    let table = "table = { s = [0.0, 1.0, 2.0, 4.0], r = [1.0, 0.5, 0.3, 0.2] }";
+    let scene = paper_scene(
+        dir.path(),
+        "kink.toml",
+        "paper/rect_008.msh",
+        &format!("{table}\ntolerance = 1e-6"),
+    );
+    let long = ["time.steps=20000", "time.end=200"];
+    for command in ["check", "run"] {
+        let (code, text) = cli_on(command, &scene, &long);
+        assert_eq!(code, 2, "{command}: {text}");
+        for what in [
+            "material.relaxation.tolerance",
+            "reaches a relative error of",
+            "memory = \"exact\"",
+            "10000",
+        ] {
+            assert!(text.contains(what), "{command}: no {what:?} in {text}");
+        }
+    }
+    // A short run still falls back to the direct sum and says why.
+    let (code, text) = cli_on("check", &scene, &["time.steps=64", "time.end=0.64"]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("runs exact (direct sum), not compressed"),
+        "{text}"
+    );
+    // Asked for explicitly, the direct sum runs however long the run is.
+    let mut exact = long.to_vec();
+    exact.push("material.relaxation.memory=\"exact\"");
+    let (code, text) = cli_on("check", &scene, &exact);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("runs exact (direct sum): memory = \"exact\""),
+        "{text}"
+    );
+}
+
+#[test]
+fn power_law_of_1e5_steps_is_never_run_by_the_direct_sum() {
+    // Issue 26, finding 10: 0.2(s + 0.01)^(−1/2), T = 10, 10^5 steps used to fall back to
+    // the direct sum (3.4 GB, ~2 hours at h = 1/32) with a line in check's output.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = power_law(dir.path(), "");
+    let set = ["time.steps=100000", "time.end=10"];
+    let (code, text) = cli_on("check", &scene, &set);
+    assert!(!text.contains("runs exact"), "{text}");
+    match code {
+        0 => assert!(text.contains("kernel     compressed"), "{text}"),
+        _ => {
+            assert_eq!(code, 2, "{text}");
+            assert!(
+                text.contains("material.relaxation.tolerance") && text.contains("tolerance ≥"),
+                "{text}"
+            );
+        }
+    }
+    println!("{text}");
+}
+
+#[test]
+fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
+    // Issue 26, finding 3: horizon = 1e8 with end = 100 made check and run allocate 12.8 GB
+    // and abort. 3200 steps of k = 1/32: 3.2e9 lags.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = power_law(dir.path(), "horizon = 1e8");
+    let set = ["time.steps=3200", "time.end=100"];
+    for command in ["check", "run"] {
+        let start = std::time::Instant::now();
+        let (code, text) = cli_on(command, &scene, &set);
+        assert_eq!(code, 2, "{command}: {text}");
+        assert!(
+            text.contains("material.relaxation.horizon")
+                && text.contains("1e7")
+                && text.contains("at most 3.125e5"),
+            "{command}: {text}"
+        );
+        assert!(start.elapsed().as_secs_f64() < 10.0, "{command}: slow");
+    }
+    // So is a run whose own steps exceed the limit, naming time.steps.
+    let scene = power_law(dir.path(), "");
+    let (code, text) = cli_on("check", &scene, &["time.steps=20000000", "time.end=100"]);
+    assert_eq!(code, 2, "{text}");
+    assert!(
+        text.contains("time.steps") && text.contains("1e7"),
+        "{text}"
+    );
+    // A horizon within the limit is fitted and its memory counted in the estimate.
+    let scene = power_law(dir.path(), "horizon = 3e4");
+    let (code, text) = cli_on("check", &scene, &set);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("kernel     compressed"), "{text}");
+    // 16 bytes on each of its 3e4·32 = 960 000 lags (and the direct sum's rows: 3200 steps
+    // may fall back).
+    let mb: f64 = text
+        .split("resources  ≈ ")
+        .nth(1)
+        .and_then(|t| t.split(" MB of memory").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no estimate in {text}"));
+    assert!(mb >= 15.36, "{text}");
+}
