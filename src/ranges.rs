@@ -140,7 +140,12 @@ pub const RANGES: &[Range] = &[
         "required in [friction]",
         "μ ≥ 0; the scale rule (an expression is checked where it is evaluated)",
     ),
-    row("load.traction[].on", GROUP, "mesh.groups.traction", GROUP_WHY),
+    row(
+        "load.traction[].on",
+        GROUP,
+        "mesh.groups.traction",
+        GROUP_WHY,
+    ),
     row(
         "load.traction[].value[]",
         "a number: 0 or 1e-100 ≤ |f| ≤ 1e100; or an expression of x, y, z, t",
@@ -209,7 +214,10 @@ pub fn range_of(key: &str) -> Option<&'static Range> {
 /// `detail` (what in this scene the value breaks, may be empty) and why.
 pub fn refuse(file: &Path, key: &str, value: impl std::fmt::Debug, detail: &str) -> Error {
     let range = range_of(key).map_or(String::new(), |row| {
-        format!("; it must be finite and in its range: {} ({})", row.range, row.why)
+        format!(
+            "; it must be finite and in its range: {} ({})",
+            row.range, row.why
+        )
     });
     Error::input(format!(
         "{}: key '{key}' is {value:?}{detail}{range}; see docs/scene_ranges.md",

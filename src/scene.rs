@@ -680,7 +680,10 @@ fn time_range(t: &TimeSection, path: &Path) -> Result<(f64, usize)> {
     }
     let k = end / t.steps as f64;
     if k < ranges::SCALE_MIN {
-        let detail = format!(" with time.steps = {}: the step k = {k:e} is too small", t.steps);
+        let detail = format!(
+            " with time.steps = {}: the step k = {k:e} is too small",
+            t.steps
+        );
         return Err(ranges::refuse(path, "time.end", end, &detail));
     }
     Ok((end, t.steps))
@@ -724,17 +727,25 @@ impl Scene {
             path,
             true,
         )?;
-        let zeta =
-            ranges::scaled_sign(f.material.viscosity.zeta, "material.viscosity.zeta", path, false)?;
+        let zeta = ranges::scaled_sign(
+            f.material.viscosity.zeta,
+            "material.viscosity.zeta",
+            path,
+            false,
+        )?;
         if zeta > ranges::MAX_BULK_RATIO * theta {
             let detail = format!(", {:e} times θ = {theta:?}", zeta / theta);
-            return Err(ranges::refuse(path, "material.viscosity.zeta", zeta, &detail));
+            return Err(ranges::refuse(
+                path,
+                "material.viscosity.zeta",
+                zeta,
+                &detail,
+            ));
         }
         let model = f.mesh.model;
         let elasticity = match &f.material.elasticity {
             Some(e) if e.enabled => {
-                let young =
-                    ranges::scaled_sign(e.young, "material.elasticity.young", path, false)?;
+                let young = ranges::scaled_sign(e.young, "material.elasticity.young", path, false)?;
                 let nu = ranges::scaled(e.poisson, "material.elasticity.poisson", path)?;
                 let ok = match model {
                     Model::PlaneStress => nu > -1.0 && nu <= 0.5,
@@ -867,7 +878,12 @@ impl Scene {
             body_forces.push(vector(&b.value, &format!("load.body[{i}].value"))?);
         }
         if f.output.every == 0 {
-            return Err(ranges::refuse(path, "output.every", 0, " (write every n ≥ 1 steps)"));
+            return Err(ranges::refuse(
+                path,
+                "output.every",
+                0,
+                " (write every n ≥ 1 steps)",
+            ));
         }
         if let Some(unknown) = f
             .output
