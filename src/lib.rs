@@ -16,6 +16,7 @@ pub mod kernel_fit;
 pub mod mesh;
 pub mod output;
 pub mod plot;
+pub mod ranges;
 pub mod resources;
 pub mod run;
 pub mod scene;

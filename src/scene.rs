@@ -5,7 +5,7 @@
 //! override is checked exactly like a key written in the file.
 
 use crate::expr::{Expr, Scalar};
-use crate::{Error, Result};
+use crate::{ranges, Error, Result};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -259,7 +259,7 @@ pub struct VectorLoad {
 }
 
 #[derive(Deserialize, Debug, Clone)]
-#[serde(untagged)]
+#[serde(untagged, expecting = "a number or an expression (a string)")]
 pub enum NumOrExpr {
     Num(f64),
     Expr(String),
@@ -339,7 +339,7 @@ pub struct CheckpointSection {
 
 /// `[checkpoint] every_seconds`: a number of seconds, or true / false.
 #[derive(Deserialize, Debug, Clone, Copy)]
-#[serde(untagged)]
+#[serde(untagged, expecting = "a number of seconds, or true or false")]
 pub enum Seconds {
     Switch(bool),
     Seconds(f64),
@@ -678,24 +678,30 @@ pub struct Scene {
     pub checkpoint_every_seconds: Option<f64>,
 }
 
-fn finite(v: f64, key: &str, file: &Path) -> Result<f64> {
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(Error::input(format!(
-            "{}: key '{key}' is {v}; it must be a finite number",
-            file.display()
-        )))
+/// `time.end` and `time.steps` in their ranges, the step k = T/N too.
+fn time_range(t: &TimeSection, path: &Path) -> Result<(f64, usize)> {
+    let end = ranges::scaled_sign(t.end, "time.end", path, true)?;
+    if !(1..=ranges::MAX_STEPS).contains(&t.steps) {
+        return Err(ranges::refuse(path, "time.steps", t.steps, ""));
     }
+    let k = end / t.steps as f64;
+    if k < ranges::SCALE_MIN {
+        let detail = format!(
+            " with time.steps = {}: the step k = {k:e} is too small",
+            t.steps
+        );
+        return Err(ranges::refuse(path, "time.end", end, &detail));
+    }
+    Ok((end, t.steps))
 }
 
 fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Scalar> {
     match v {
-        NumOrExpr::Num(x) => Ok(Scalar::Const(finite(*x, key, file)?)),
+        NumOrExpr::Num(x) => Ok(Scalar::Const(ranges::scaled(*x, key, file)?)),
         NumOrExpr::Expr(s) => {
             // A plain number written as a string is a constant too.
             if let Ok(x) = s.trim().parse::<f64>() {
-                return Ok(Scalar::Const(finite(x, key, file)?));
+                return Ok(Scalar::Const(ranges::scaled(x, key, file)?));
             }
             Expr::parse(s, allowed, &format!("{}: key '{key}'", file.display()))
                 .map(|e| Scalar::Expr(Box::new(e)))
@@ -720,38 +726,33 @@ impl Scene {
                 path.display()
             )))
         };
-        let end = finite(f.time.end, "time.end", path)?;
-        if end <= 0.0 {
-            return bad("time.end", &format!("is {end}; the end time T must be > 0"));
-        }
-        if f.time.steps == 0 {
-            return bad("time.steps", "is 0; the number of steps N must be ≥ 1");
-        }
-        let theta = finite(f.material.viscosity.theta, "material.viscosity.theta", path)?;
-        if theta <= 0.0 {
-            return bad(
-                "material.viscosity.theta",
-                &format!("is {theta}; the viscosity θ must be > 0 (H(A) needs A coercive)"),
-            );
-        }
-        let zeta = finite(f.material.viscosity.zeta, "material.viscosity.zeta", path)?;
-        if zeta < 0.0 {
-            return bad(
+        let (end, steps) = time_range(&f.time, path)?;
+        let theta = ranges::scaled_sign(
+            f.material.viscosity.theta,
+            "material.viscosity.theta",
+            path,
+            true,
+        )?;
+        let zeta = ranges::scaled_sign(
+            f.material.viscosity.zeta,
+            "material.viscosity.zeta",
+            path,
+            false,
+        )?;
+        if zeta > ranges::MAX_BULK_RATIO * theta {
+            let detail = format!(", {:e} times θ = {theta:?}", zeta / theta);
+            return Err(ranges::refuse(
+                path,
                 "material.viscosity.zeta",
-                &format!("is {zeta}; the bulk viscosity ζ must be ≥ 0"),
-            );
+                zeta,
+                &detail,
+            ));
         }
         let model = f.mesh.model;
         let elasticity = match &f.material.elasticity {
             Some(e) if e.enabled => {
-                let young = finite(e.young, "material.elasticity.young", path)?;
-                if young < 0.0 {
-                    return bad(
-                        "material.elasticity.young",
-                        &format!("is {young}; Young's modulus E must be ≥ 0"),
-                    );
-                }
-                let nu = finite(e.poisson, "material.elasticity.poisson", path)?;
+                let young = ranges::scaled_sign(e.young, "material.elasticity.young", path, false)?;
+                let nu = ranges::scaled(e.poisson, "material.elasticity.poisson", path)?;
                 let ok = match model {
                     Model::PlaneStress => nu > -1.0 && nu <= 0.5,
                     Model::PlaneStrain | Model::ThreeD => nu > -1.0 && nu < 0.5,
@@ -787,15 +788,10 @@ impl Scene {
                 )
             }
             (Some(Kernel::Expr(_) | Kernel::Table(..)), Some(r)) => {
-                let tolerance = r.tolerance.unwrap_or(1e-10);
-                if !(tolerance > 0.0 && tolerance < 1.0) {
-                    return bad(
-                        "material.relaxation.tolerance",
-                        &format!(
-                            "is {tolerance}; the relative error of the compressed kernel must \
-                             lie in (0, 1), e.g. 1e-10"
-                        ),
-                    );
+                let key = "material.relaxation.tolerance";
+                let tolerance = ranges::scaled_sign(r.tolerance.unwrap_or(1e-10), key, path, true)?;
+                if tolerance >= 1.0 {
+                    return Err(ranges::refuse(path, key, tolerance, ""));
                 }
                 match r.memory.unwrap_or(MemoryMode::Compressed) {
                     MemoryMode::Compressed => Some(tolerance),
@@ -814,14 +810,17 @@ impl Scene {
                     ),
                 )
             }
-            Some(h) if !(h.is_finite() && h > 0.0 && h <= 1e6 * end) => {
-                return bad(
+            Some(h) if !(ranges::in_scale(h) && h > 0.0 && h <= 1e6 * end) => {
+                return Err(ranges::refuse(
+                    path,
                     "material.relaxation.horizon",
+                    h,
                     &format!(
-                        "is {h}; the fit's horizon is the latest time.end a resume may set, a \
-                         time up to 10^6 times time.end = {end}"
+                        " (the latest time.end a resume may set; here time.end = {end:?}, so at \
+                         most {:e})",
+                        1e6 * end
                     ),
-                )
+                ))
             }
             h => h,
         };
@@ -860,20 +859,12 @@ impl Scene {
                 let normal_stress =
                     scalar(&fr.normal_stress, SPACE, "friction.normal_stress", path)?;
                 let coefficient = scalar(&fr.coefficient, SPACE, "friction.coefficient", path)?;
-                if let Scalar::Const(v) = normal_stress {
-                    if v < 0.0 {
-                        return bad(
-                            "friction.normal_stress",
-                            &format!("is {v}; the normal stress F must be ≥ 0 (H(C))"),
-                        );
-                    }
-                }
-                if let Scalar::Const(v) = coefficient {
-                    if v < 0.0 {
-                        return bad(
-                            "friction.coefficient",
-                            &format!("is {v}; the friction coefficient μ must be ≥ 0"),
-                        );
+                for (value, key) in [
+                    (&normal_stress, "friction.normal_stress"),
+                    (&coefficient, "friction.coefficient"),
+                ] {
+                    if let Scalar::Const(v) = value {
+                        ranges::scaled_sign(*v, key, path, false)?;
                     }
                 }
                 Some(Friction {
@@ -923,7 +914,12 @@ impl Scene {
             body_forces.push(vector(&b.value, &format!("load.body[{i}].value"))?);
         }
         if f.output.every == 0 {
-            return bad("output.every", "is 0; write every n ≥ 1 steps");
+            return Err(ranges::refuse(
+                path,
+                "output.every",
+                0,
+                " (write every n ≥ 1 steps)",
+            ));
         }
         if let Some(unknown) = f
             .output
@@ -941,25 +937,25 @@ impl Scene {
             );
         }
         if f.checkpoint.as_ref().and_then(|c| c.every) == Some(0) {
-            return bad(
+            return Err(ranges::refuse(
+                path,
                 "checkpoint.every",
-                "is 0; write a checkpoint every n ≥ 1 steps, or leave 'every' out for only the \
-                 final checkpoint (enabled = false for none)",
-            );
+                0,
+                " (leave 'every' out for only the final checkpoint, enabled = false for none)",
+            ));
         }
         let checkpoint_every_seconds = match f.checkpoint.as_ref().and_then(|c| c.every_seconds) {
             None | Some(Seconds::Switch(true)) => Some(DEFAULT_CHECKPOINT_SECONDS),
             Some(Seconds::Switch(false)) => None,
             Some(Seconds::Seconds(0.0)) => None,
-            Some(Seconds::Seconds(s)) if s.is_finite() && s > 0.0 => Some(s),
+            Some(Seconds::Seconds(s)) if s > 0.0 && s <= ranges::MAX_CHECKPOINT_SECONDS => Some(s),
             Some(Seconds::Seconds(s)) => {
-                return bad(
+                return Err(ranges::refuse(
+                    path,
                     "checkpoint.every_seconds",
-                    &format!(
-                        "is {s}; give the wall time between checkpoints in seconds (> 0), or 0 \
-                         or false to write them by step count only"
-                    ),
-                )
+                    s,
+                    " (the wall time between checkpoints in seconds)",
+                ))
             }
         };
         let dir = path.parent().unwrap_or(Path::new("."));
@@ -977,7 +973,7 @@ impl Scene {
             groups: f.mesh.groups.clone(),
             separate_parts: f.mesh.separate_parts,
             end,
-            steps: f.time.steps,
+            steps,
             theta,
             zeta,
             elasticity,
@@ -1049,13 +1045,8 @@ fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
         let mut terms = Vec::new();
         for (i, [a, b]) in p.iter().enumerate() {
             let key = format!("material.relaxation.prony[{i}]");
-            let (a, b) = (finite(*a, &key, path)?, finite(*b, &key, path)?);
-            if b < 0.0 {
-                return Err(Error::input(format!(
-                    "{}: key '{key}': rate b = {b} < 0 makes exp(−b s) grow; give b ≥ 0",
-                    path.display()
-                )));
-            }
+            let a = ranges::scaled(*a, &format!("{key}[0]"), path)?;
+            let b = ranges::scaled_sign(*b, &format!("{key}[1]"), path, false)?;
             terms.push((a, b));
         }
         return Ok(Kernel::Prony(terms));
@@ -1074,8 +1065,10 @@ fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
             t.r.len()
         )));
     }
-    for (i, v) in t.s.iter().chain(&t.r).enumerate() {
-        finite(*v, &format!("{key}[{i}]"), path)?;
+    for (name, values) in [("s", &t.s), ("r", &t.r)] {
+        for (i, v) in values.iter().enumerate() {
+            ranges::scaled(*v, &format!("{key}.{name}[{i}]"), path)?;
+        }
     }
     if t.s.windows(2).any(|w| w[1] <= w[0]) {
         return Err(Error::input(format!(

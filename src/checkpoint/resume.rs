@@ -70,8 +70,17 @@ impl Checkpoint {
                         value.trim()
                     ))
                 })?;
+                let end = crate::ranges::scaled_sign(end, "time.end", &self.path, true)?;
                 let ratio = end / self.k;
                 let steps = ratio.round();
+                if steps > crate::ranges::MAX_STEPS as f64 {
+                    let detail = format!(
+                        " (--set): {ratio:e} steps of the run's k = {}, more than time.steps may \
+                         have",
+                        self.k
+                    );
+                    return Err(crate::ranges::refuse(&self.path, "time.end", end, &detail));
+                }
                 if !(ratio.is_finite() && (ratio - steps).abs() <= 1e-9 * steps.max(1.0)) {
                     return Err(Error::input(format!(
                         "--set time.end={end}: T2/k = {ratio} is not a whole number of steps of \
