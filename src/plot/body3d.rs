@@ -286,7 +286,7 @@ impl Marks {
             .map(|g| (CONTACT_NAMES[g].to_string(), CONTACT_COLOURS[g], false))
             .collect();
         if self.dots.iter().any(|d| *d) {
-            legend.push(("contact_state = 1 (active / stick)".into(), BLACK, true));
+            legend.push(("contact_state = 1".into(), BLACK, true));
         }
         for g in (0..2).filter(|&g| self.tractions[g].iter().any(|t| *t)) {
             legend.push((TRACTION_LABELS[g].to_string(), CONTACT_COLOURS[g], true));
