@@ -95,6 +95,13 @@ enum Command {
         /// The PNG to write (default: DIR/<field>_t<time>.png).
         #[arg(short = 'o', long = "output")]
         output: Option<PathBuf>,
+        /// 3D runs: the direction from the body towards the eye (default 1,-1.5,-1:
+        /// front, right, below, where the examples touch their foundation).
+        #[arg(long, value_name = "X,Y,Z", value_parser = viscontact::plot::parse_view, allow_hyphen_values = true)]
+        view: Option<[f64; 3]>,
+        /// Width of the figure in pixels.
+        #[arg(long, default_value_t = 1400, value_parser = clap::value_parser!(u32).range(600..=10000))]
+        width: u32,
     },
 }
 
@@ -161,6 +168,8 @@ fn main() -> ExitCode {
             field,
             scale,
             output,
+            view,
+            width,
         } => viscontact::plot::plot_run(
             &dir,
             &viscontact::plot::PlotOptions {
@@ -168,18 +177,21 @@ fn main() -> ExitCode {
                 field,
                 scale,
                 output,
-                ..Default::default()
+                view,
+                width,
             },
         )
         .map(|i| {
+            let view = i.view.map(|v| format!(", seen from {v:?}"));
             println!(
-                "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e})",
+                "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e}{})",
                 i.output.display(),
                 i.time,
                 i.scale,
                 i.frame.display(),
                 i.range.0,
-                i.range.1
+                i.range.1,
+                view.unwrap_or_default()
             );
             None
         }),

@@ -12,6 +12,9 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::{Path, PathBuf};
 
+mod body3d;
+mod surface;
+
 /// The font family every text of a figure uses.
 const FONT: &str = "sans-serif";
 
@@ -266,6 +269,9 @@ pub struct PlotOptions {
     pub output: Option<PathBuf>,
     /// Width of the figure in pixels.
     pub width: u32,
+    /// A 3D run is seen from this direction, from the body towards the eye (default
+    /// [`DEFAULT_VIEW`]); refused for a 2D run.
+    pub view: Option<[f64; 3]>,
 }
 
 impl Default for PlotOptions {
@@ -276,7 +282,32 @@ impl Default for PlotOptions {
             scale: None,
             output: None,
             width: 1400,
+            view: None,
         }
+    }
+}
+
+/// The view of a 3D run unless `--view` says otherwise: from the front (−y), the right
+/// (+x) and below (−z), so that the bottom face, where the examples' bodies touch their
+/// foundation (Γ3), is seen together with the front and the loaded right side.
+pub const DEFAULT_VIEW: [f64; 3] = [1.0, -1.5, -1.0];
+
+/// Parses `--view X,Y,Z`: three finite numbers, not all zero.
+pub fn parse_view(text: &str) -> std::result::Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let numbers: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
+    match numbers[..] {
+        [x, y, z] if parts.len() == 3 && numbers.iter().all(|v| v.is_finite()) => {
+            if x == 0.0 && y == 0.0 && z == 0.0 {
+                Err("the view direction 0,0,0 has no direction; give e.g. 1,-2,1".into())
+            } else {
+                Ok([x, y, z])
+            }
+        }
+        _ => Err(format!(
+            "'{text}' is not a direction X,Y,Z of three numbers (e.g. 1,-2,1: from the \
+             right, the front and above)"
+        )),
     }
 }
 
@@ -289,6 +320,8 @@ pub struct PlotInfo {
     pub scale: f64,
     pub range: (f64, f64),
     pub contact_marked: bool,
+    /// The view direction of a 3D run (None: a 2D run).
+    pub view: Option<[f64; 3]>,
 }
 
 /// The values of `field` at points or cells (one scalar each), and whether per point.
@@ -342,12 +375,16 @@ fn field_values(v: &Vtu, field: &str) -> Result<(Vec<f64>, bool)> {
     )))
 }
 
-/// Γ3,1 and Γ3,2 edges of the run's mesh, from its summary.json and scene (None when they
-/// cannot be found, e.g. the run was made from another directory).
-/// Γ3,1 and Γ3,2 facets (node pairs).
-type ContactEdges = (Vec<[usize; 2]>, Vec<[usize; 2]>);
+/// The facets of Γ3,1 and Γ3,2 in the run's mesh: edges (2D) and faces (3D).
+#[derive(Clone, Debug, Default)]
+struct ContactGroups {
+    edges: [Vec<[usize; 2]>; 2],
+    faces: [Vec<[usize; 3]>; 2],
+}
 
-fn contact_edges(dir: &Path, nodes: usize) -> Option<ContactEdges> {
+/// Γ3,1 and Γ3,2 of the run's mesh, from its summary.json and scene (None when they
+/// cannot be found, e.g. the run was made from another directory).
+fn contact_groups(dir: &Path, nodes: usize) -> Option<ContactGroups> {
     let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
     let mesh = crate::mesh::Mesh::read(Path::new(v["mesh"].as_str()?)).ok()?;
@@ -357,17 +394,26 @@ fn contact_edges(dir: &Path, nodes: usize) -> Option<ContactEdges> {
     let groups = crate::scene::read_scene_file(Path::new(v["scene"].as_str()?), &[])
         .map(|(_, f)| f.mesh.groups)
         .unwrap_or_default();
-    let facets = |name: &str| {
-        mesh.boundary_group(name)
-            .map(|g| g.facets.clone())
-            .unwrap_or_default()
-    };
-    Some((facets(&groups.contact), facets(&groups.friction)))
+    let group = |name: &str| mesh.boundary_group(name).ok();
+    let [contact, friction] = [&groups.contact, &groups.friction].map(|n| group(n));
+    let edges = |g: Option<&crate::mesh::Group>| g.map(|g| g.facets.clone()).unwrap_or_default();
+    let faces = |g: Option<&crate::mesh::Group>| g.map(|g| g.faces.clone()).unwrap_or_default();
+    Some(ContactGroups {
+        edges: [edges(contact), edges(friction)],
+        faces: [faces(contact), faces(friction)],
+    })
 }
 
-/// Draws the deformed body of a run at one time, coloured by a field (the paper's Fig. 3).
-pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
-    register_fonts();
+/// The frame `plot` draws: the run's directory, the frame's time and file, its content.
+struct Loaded {
+    dir: PathBuf,
+    time: f64,
+    frame: PathBuf,
+    v: Vtu,
+}
+
+/// Reads the frame of the run at `dir` nearest to `time` (default: the last).
+fn load_frame(dir: &Path, time: Option<f64>) -> Result<Loaded> {
     if !dir.exists() {
         return Err(Error::input(format!(
             "plot: {} does not exist; give the output directory of a run (viscontact run … --out DIR)",
@@ -383,7 +429,7 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
     } else {
         dir.parent().unwrap_or(Path::new(".")).to_path_buf()
     };
-    let (time, frame) = match opts.time {
+    let (time, frame) = match time {
         None => entries.last(),
         Some(t) => entries
             .iter()
@@ -393,63 +439,91 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
     .ok_or_else(|| Error::input(format!("plot: {} lists no frames", series.display())))?;
     let v = read_frame(&frame)?;
     let frame = frame.path().to_path_buf();
-    let disp = v
-        .point_field("displacement")
-        .filter(|a| a.components == 3)
-        .ok_or_else(|| {
-            Error::input(format!(
-                "plot: {} has no 3-component point field 'displacement'",
-                frame.display()
-            ))
-        })?;
-    let (values, per_point) = field_values(&v, &opts.field)?;
-    let tris: Vec<[usize; 3]> = v
-        .cells
-        .iter()
-        .filter(|c| c.len() == 3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
-    if tris.len() != v.cells.len() {
-        return Err(Error::input(format!(
-            "plot: {} holds cells other than triangles; only 2D runs can be plotted",
-            frame.display()
-        )));
+    Ok(Loaded {
+        dir,
+        time,
+        frame,
+        v,
+    })
+}
+
+/// The cells of a frame: a 2D run's triangles or a 3D run's tetrahedra.
+enum Cells {
+    Triangles(Vec<[usize; 3]>),
+    Tetrahedra(Vec<[usize; 4]>),
+}
+
+fn cells(run: &Loaded) -> Result<Cells> {
+    let cells = &run.v.cells;
+    if cells.iter().all(|c| c.len() == 3) {
+        Ok(Cells::Triangles(
+            cells.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+        ))
+    } else if cells.iter().all(|c| c.len() == 4) {
+        Ok(Cells::Tetrahedra(
+            cells.iter().map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+        ))
+    } else {
+        Err(Error::input(format!(
+            "plot: {} holds cells that are neither all triangles (a 2D run) nor all \
+             tetrahedra (a 3D run); plot draws the frames that viscontact run writes",
+            run.frame.display()
+        )))
+    }
+}
+
+/// What a figure is coloured by: one value per point or per cell, and the colour bar's range.
+struct Colouring {
+    name: String,
+    values: Vec<f64>,
+    per_point: bool,
+    range: (f64, f64),
+}
+
+impl Colouring {
+    /// `t` ∈ [0, 1] of a value on the colour bar.
+    fn norm(&self, x: f64) -> f64 {
+        (x - self.range.0) / (self.range.1 - self.range.0)
     }
 
-    // Scale: the largest displacement drawn as 10 % of the body size.
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in &v.points {
-        for c in 0..2 {
-            lo[c] = lo[c].min(p[c]);
-            hi[c] = hi[c].max(p[c]);
+    /// The coloured pieces of a cell drawn as the triangle `p` (its corners' nodes `nodes`):
+    /// the cell's value, or a point field on 4 sub-triangles, each with the mean of its
+    /// corners' values (linear along the edges).
+    fn pieces(
+        &self,
+        cell: usize,
+        nodes: [usize; 3],
+        p: [(f64, f64); 3],
+        out: &mut Vec<([(f64, f64); 3], f64)>,
+    ) {
+        if !self.per_point {
+            out.push((p, self.values[cell]));
+            return;
         }
+        let f = nodes.map(|n| self.values[n]);
+        let mid = |a: usize, b: usize| {
+            (
+                ((p[a].0 + p[b].0) / 2.0, (p[a].1 + p[b].1) / 2.0),
+                (f[a] + f[b]) / 2.0,
+            )
+        };
+        let (m01, m12, m20) = (mid(0, 1), mid(1, 2), mid(2, 0));
+        out.push(([p[0], m01.0, m20.0], (f[0] + m01.1 + m20.1) / 3.0));
+        out.push(([m01.0, p[1], m12.0], (m01.1 + f[1] + m12.1) / 3.0));
+        out.push(([m20.0, m12.0, p[2]], (m20.1 + m12.1 + f[2]) / 3.0));
+        out.push(([m01.0, m12.0, m20.0], (m01.1 + m12.1 + m20.1) / 3.0));
     }
-    let size = (hi[0] - lo[0]).max(hi[1] - lo[1]);
-    let umax = disp
-        .values
-        .chunks_exact(3)
-        .map(|u| (u[0] * u[0] + u[1] * u[1]).sqrt())
-        .fold(0.0f64, f64::max);
-    let scale = opts
-        .scale
-        .unwrap_or(if umax > 0.0 { 0.1 * size / umax } else { 1.0 });
-    let def: Vec<(f64, f64)> = v
-        .points
-        .iter()
-        .zip(disp.values.chunks_exact(3))
-        .map(|(p, u)| (p[0] + scale * u[0], p[1] + scale * u[1]))
-        .collect();
-    for &(x, y) in &def {
-        lo = [lo[0].min(x), lo[1].min(y)];
-        hi = [hi[0].max(x), hi[1].max(y)];
-    }
+}
+
+/// The colour bar's range of `values`: their finite extremes, widened around a constant.
+fn value_range(values: &[f64]) -> (f64, f64) {
     let (vmin, vmax) = values
         .iter()
         .filter(|x| x.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
             (a.min(x), b.max(x))
         });
-    let (vmin, vmax) = if !vmin.is_finite() {
+    if !vmin.is_finite() {
         (0.0, 1.0)
     } else if vmax - vmin <= 1e-300 + 1e-12 * vmax.abs() {
         (
@@ -458,217 +532,387 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
         )
     } else {
         (vmin, vmax)
-    };
-    let norm = |x: f64| (x - vmin) / (vmax - vmin);
-
-    // Layout: the body keeps its aspect ratio; a colour bar on the right.
-    let bar_w = 190u32;
-    let (caption, xl, yl, margin, legend_h) = (44u32, 45u32, 65u32, 20u32, 36u32);
-    let pad = 0.04 * size;
-    let (dx, dy) = (hi[0] - lo[0] + 2.0 * pad, hi[1] - lo[1] + 2.0 * pad);
-    let mut pw = (opts.width.max(600) - bar_w - yl - 2 * margin) as f64;
-    let mut ph = pw * dy / dx;
-    if ph > 1400.0 {
-        ph = 1400.0;
-        pw = ph * dx / dy;
     }
-    let width = pw as u32 + bar_w + yl + 2 * margin;
-    let height = ph as u32 + caption + xl + 2 * margin + legend_h;
-    let output = opts.output.clone().unwrap_or_else(|| {
-        dir.join(format!(
-            "{}_t{}.png",
-            opts.field,
-            format!("{time}").replace('.', "_")
-        ))
-    });
-    let err = draw_err(&output);
-    let root = BitMapBackend::new(&output, (width, height)).into_drawing_area();
+}
+
+/// The run's 3-component point field `displacement`.
+fn displacement(run: &Loaded) -> Result<&[f64]> {
+    run.v
+        .point_field("displacement")
+        .filter(|a| a.components == 3)
+        .map(|a| &a.values[..])
+        .ok_or_else(|| {
+            Error::input(format!(
+                "plot: {} has no 3-component point field 'displacement'",
+                run.frame.display()
+            ))
+        })
+}
+
+/// The displacement scale and the body's size (its largest extent over the first `dim`
+/// coordinates): `given`, else the largest displacement drawn as 10 % of the size.
+fn auto_scale(points: &[[f64; 3]], disp: &[f64], dim: usize, given: Option<f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in points {
+        for c in 0..dim {
+            lo[c] = lo[c].min(p[c]);
+            hi[c] = hi[c].max(p[c]);
+        }
+    }
+    let size = (0..dim).fold(f64::NEG_INFINITY, |s, c| s.max(hi[c] - lo[c]));
+    let umax = disp
+        .chunks_exact(3)
+        .map(|u| u[..dim].iter().map(|x| x * x).sum::<f64>().sqrt())
+        .fold(0.0f64, f64::max);
+    let scale = given.unwrap_or(if umax > 0.0 { 0.1 * size / umax } else { 1.0 });
+    (scale, size)
+}
+
+/// The nodes at which a point field is nonzero (any component).
+fn nonzero_nodes(v: &Vtu, name: &str) -> Vec<bool> {
+    match v.point_field(name) {
+        Some(a) => a
+            .values
+            .chunks_exact(a.components)
+            .map(|c| c.iter().any(|x| *x != 0.0))
+            .collect(),
+        None => vec![false; v.points.len()],
+    }
+}
+
+/// One entry of a figure's legend: label, colour, drawn as a dot (else a line).
+type LegendItem = (String, RGBColor, bool);
+
+/// Colours of Γ3,1 (contact) and Γ3,2 (friction).
+const CONTACT_COLOURS: [RGBColor; 2] = [RGBColor(220, 30, 30), RGBColor(240, 150, 0)];
+const CONTACT_NAMES: [&str; 2] = ["Γ3,1 (contact)", "Γ3,2 (friction)"];
+/// The undeformed body's lines.
+const GHOST: RGBColor = RGBColor(150, 150, 150);
+
+/// Pixel layout of a body figure: the body's plot area keeps its aspect ratio; a title
+/// above, a legend below, the colour bar on the right; axes around the body in 2D only.
+#[derive(Clone, Copy, Debug)]
+struct Layout {
+    width: u32,
+    height: u32,
+    bar_w: u32,
+    caption: u32,
+    xl: u32,
+    yl: u32,
+    margin: u32,
+    legend_h: u32,
+    /// Free space below the colour bar (3D: the axes' directions).
+    bar_bottom: u32,
+}
+
+impl Layout {
+    /// For a body of extent `dx` × `dy` and a figure `width` pixels wide (at least 600).
+    fn new(width: u32, dx: f64, dy: f64, axes: bool) -> Layout {
+        let (bar_w, caption, margin, legend_h) = (190u32, 44u32, 20u32, 36u32);
+        let (xl, yl) = if axes { (45u32, 65u32) } else { (0, 0) };
+        let mut pw = (width.max(600) - bar_w - yl - 2 * margin) as f64;
+        let mut ph = pw * dy / dx;
+        if ph > 1400.0 {
+            ph = 1400.0;
+            pw = ph * dx / dy;
+        }
+        Layout {
+            width: pw as u32 + bar_w + yl + 2 * margin,
+            height: ph as u32 + caption + xl + 2 * margin + legend_h,
+            bar_w,
+            caption,
+            xl,
+            yl,
+            margin,
+            legend_h,
+            bar_bottom: if axes { xl + margin } else { 150 },
+        }
+    }
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+type DrawError = DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
+
+/// Draws a body figure at `output`: title, the body (`body` draws it into its area and
+/// returns the legend's entries), legend and colour bar; `bar_extra` draws into the colour
+/// bar's column.
+fn render(
+    output: &Path,
+    lay: &Layout,
+    title: &str,
+    colouring: &Colouring,
+    body: impl FnOnce(&Area) -> std::result::Result<Vec<LegendItem>, DrawError>,
+    bar_extra: impl FnOnce(&Area) -> DrawResult,
+) -> Result<()> {
+    let err = draw_err(output);
+    let root = BitMapBackend::new(output, (lay.width, lay.height)).into_drawing_area();
     root.fill(&WHITE).map_err(&err)?;
-    let (body_area, rest) = root.split_horizontally(width - bar_w);
-    let (body_area, legend_area) = body_area.split_vertically(height - legend_h);
-    let (title_area, body_area) = body_area.split_vertically(caption);
-    let title = format!(
-        "{} at t = {} — displacement × {}",
-        opts.field,
-        trim_float(time),
-        sig3(scale)
-    );
-    let (x0, y0) = (lo[0] - pad, lo[1] - pad);
+    let (body_area, rest) = root.split_horizontally(lay.width - lay.bar_w);
+    let (body_area, legend_area) = body_area.split_vertically(lay.height - lay.legend_h);
+    let (title_area, body_area) = body_area.split_vertically(lay.caption);
     let title_style =
         TextStyle::from((FONT, 24).into_font()).pos(Pos::new(HPos::Center, VPos::Bottom));
     title_area
         .draw(&Text::new(
-            title,
-            (((width - bar_w) / 2) as i32, caption as i32 - 6),
+            title.to_string(),
+            (((lay.width - lay.bar_w) / 2) as i32, lay.caption as i32 - 6),
             title_style,
         ))
         .map_err(&err)?;
-    let mut chart = ChartBuilder::on(&body_area)
-        .margin(margin)
-        .x_label_area_size(xl)
-        .y_label_area_size(yl)
-        .build_cartesian_2d(x0..x0 + dx, y0..y0 + dy)
-        .map_err(&err)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .x_desc("x")
-        .y_desc("y")
-        .label_style((FONT, 15))
-        .axis_desc_style((FONT, 17))
-        .draw()
-        .map_err(&err)?;
+    let legend = body(&body_area).map_err(&err)?;
+    draw_legend(&legend_area, &legend, lay.yl + lay.margin).map_err(&err)?;
+    let (vmin, vmax) = colouring.range;
+    let top = lay.caption + lay.margin;
+    draw_colorbar(&rest, &colouring.name, vmin, vmax, top, lay.bar_bottom).map_err(&err)?;
+    bar_extra(&rest).map_err(&err)?;
+    root.present().map_err(&err)?;
+    Ok(())
+}
 
-    // Filled triangles; a point field is drawn on 4 sub-triangles per cell.
-    let mut polys: Vec<([(f64, f64); 3], f64)> = Vec::with_capacity(4 * tris.len());
-    for (c, t) in tris.iter().enumerate() {
-        let p = t.map(|n| def[n]);
-        if per_point {
-            let f = t.map(|n| values[n]);
-            let mid = |a: usize, b: usize| {
-                (
-                    ((p[a].0 + p[b].0) / 2.0, (p[a].1 + p[b].1) / 2.0),
-                    (f[a] + f[b]) / 2.0,
-                )
-            };
-            let (m01, m12, m20) = (mid(0, 1), mid(1, 2), mid(2, 0));
-            polys.push(([p[0], m01.0, m20.0], (f[0] + m01.1 + m20.1) / 3.0));
-            polys.push(([m01.0, p[1], m12.0], (m01.1 + f[1] + m12.1) / 3.0));
-            polys.push(([m20.0, m12.0, p[2]], (m20.1 + m12.1 + f[2]) / 3.0));
-            polys.push(([m01.0, m12.0, m20.0], (m01.1 + m12.1 + m20.1) / 3.0));
-        } else {
-            polys.push((p, values[c]));
+/// The title of a body figure.
+fn title(field: &str, time: f64, scale: f64) -> String {
+    format!(
+        "{} at t = {} — displacement × {}",
+        field,
+        trim_float(time),
+        sig3(scale)
+    )
+}
+
+/// Draws the deformed body of a run at one time, coloured by a field (the paper's Fig. 3):
+/// a 2D run in its plane, a 3D run's boundary surface seen from `opts.view`
+/// (`plot/body3d.rs`).
+pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
+    register_fonts();
+    let run = load_frame(dir, opts.time)?;
+    let disp = displacement(&run)?;
+    let (values, per_point) = field_values(&run.v, &opts.field)?;
+    let colouring = Colouring {
+        name: opts.field.clone(),
+        range: value_range(&values),
+        values,
+        per_point,
+    };
+    let output = opts.output.clone().unwrap_or_else(|| {
+        run.dir.join(format!(
+            "{}_t{}.png",
+            opts.field,
+            format!("{}", run.time).replace('.', "_")
+        ))
+    });
+    let contact = contact_groups(&run.dir, run.v.points.len());
+    let (scale, view) = match cells(&run)? {
+        Cells::Triangles(tris) => {
+            if opts.view.is_some() {
+                return Err(Error::input(format!(
+                    "plot: --view is for 3D runs; {} is a 2D run (triangles): leave --view out",
+                    run.frame.display()
+                )));
+            }
+            let body = Body2d::new(&run, &tris, disp, opts.scale);
+            body.draw(&output, &colouring, contact.as_ref(), opts.width)?;
+            (body.scale, None)
+        }
+        Cells::Tetrahedra(tets) => {
+            let view = opts.view.unwrap_or(DEFAULT_VIEW);
+            let body = body3d::Body3d::new(&run, &tets, disp, opts.scale, view)?;
+            body.draw(&output, &colouring, contact.as_ref(), opts.width)?;
+            (body.scale, Some(view))
+        }
+    };
+    Ok(PlotInfo {
+        output,
+        time: run.time,
+        frame: run.frame,
+        scale,
+        range: colouring.range,
+        contact_marked: contact.is_some(),
+        view,
+    })
+}
+
+/// A 2D run's body: the frame, its triangles, their deformed positions.
+struct Body2d<'a> {
+    run: &'a Loaded,
+    tris: &'a [[usize; 3]],
+    def: Vec<(f64, f64)>,
+    scale: f64,
+    size: f64,
+}
+
+impl<'a> Body2d<'a> {
+    fn new(run: &'a Loaded, tris: &'a [[usize; 3]], disp: &[f64], scale: Option<f64>) -> Self {
+        let (scale, size) = auto_scale(&run.v.points, disp, 2, scale);
+        let def = run
+            .v
+            .points
+            .iter()
+            .zip(disp.chunks_exact(3))
+            .map(|(p, u)| (p[0] + scale * u[0], p[1] + scale * u[1]))
+            .collect();
+        Body2d {
+            run,
+            tris,
+            def,
+            scale,
+            size,
         }
     }
-    chart
-        .draw_series(
+
+    /// The undeformed position of node `n`.
+    fn undeformed(&self, n: usize) -> (f64, f64) {
+        (self.run.v.points[n][0], self.run.v.points[n][1])
+    }
+
+    /// The figure: the body keeps its aspect ratio, with axes.
+    fn draw(
+        &self,
+        output: &Path,
+        colouring: &Colouring,
+        contact: Option<&ContactGroups>,
+        width: u32,
+    ) -> Result<()> {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let undeformed = (0..self.def.len()).map(|n| self.undeformed(n));
+        for (x, y) in undeformed.chain(self.def.iter().copied()) {
+            lo = [lo[0].min(x), lo[1].min(y)];
+            hi = [hi[0].max(x), hi[1].max(y)];
+        }
+        let pad = 0.04 * self.size;
+        let (dx, dy) = (hi[0] - lo[0] + 2.0 * pad, hi[1] - lo[1] + 2.0 * pad);
+        let (x0, y0) = (lo[0] - pad, lo[1] - pad);
+        let lay = Layout::new(width, dx, dy, true);
+        let title = title(&colouring.name, self.run.time, self.scale);
+        let body = |area: &Area| {
+            let mut chart = ChartBuilder::on(area)
+                .margin(lay.margin)
+                .x_label_area_size(lay.xl)
+                .y_label_area_size(lay.yl)
+                .build_cartesian_2d(x0..x0 + dx, y0..y0 + dy)?;
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc("x")
+                .y_desc("y")
+                .label_style((FONT, 15))
+                .axis_desc_style((FONT, 17))
+                .draw()?;
+            self.draw_cells(&mut chart, colouring)?;
+            self.draw_boundary(&mut chart)?;
+            self.draw_contact(&mut chart, contact)
+        };
+        render(output, &lay, &title, colouring, body, |_| Ok(()))
+    }
+
+    /// Filled triangles, and the mesh when it is coarse enough to see.
+    fn draw_cells(&self, chart: &mut Chart, colouring: &Colouring) -> DrawResult {
+        let mut polys: Vec<([(f64, f64); 3], f64)> = Vec::with_capacity(4 * self.tris.len());
+        for (c, t) in self.tris.iter().enumerate() {
+            colouring.pieces(c, *t, t.map(|n| self.def[n]), &mut polys);
+        }
+        chart.draw_series(
             polys
                 .iter()
-                .map(|(p, f)| Polygon::new(p.to_vec(), colormap(norm(*f)).filled())),
-        )
-        .map_err(&err)?;
-    // The mesh, when it is coarse enough to see.
-    if tris.len() <= 20_000 {
-        chart
-            .draw_series(tris.iter().map(|t| {
-                let p = t.map(|n| def[n]);
+                .map(|(p, f)| Polygon::new(p.to_vec(), colormap(colouring.norm(*f)).filled())),
+        )?;
+        if self.tris.len() <= 20_000 {
+            chart.draw_series(self.tris.iter().map(|t| {
+                let p = t.map(|n| self.def[n]);
                 PathElement::new(vec![p[0], p[1], p[2], p[0]], BLACK.mix(0.22))
-            }))
-            .map_err(&err)?;
-    }
-    // Boundary edges: undeformed (grey) and deformed (black).
-    let mut edges: std::collections::HashMap<(usize, usize), usize> = Default::default();
-    for t in &tris {
-        for i in 0..3 {
-            let (a, b) = (t[i], t[(i + 1) % 3]);
-            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+            }))?;
         }
+        Ok(())
     }
-    let boundary: Vec<(usize, usize)> = edges
-        .into_iter()
-        .filter(|(_, c)| *c == 1)
-        .map(|(e, _)| e)
-        .collect();
-    let undeformed = |n: usize| (v.points[n][0], v.points[n][1]);
-    chart
-        .draw_series(boundary.iter().map(|&(a, b)| {
-            PathElement::new(
-                vec![undeformed(a), undeformed(b)],
-                RGBColor(150, 150, 150).stroke_width(1),
-            )
-        }))
-        .map_err(&err)?;
-    chart
-        .draw_series(
-            boundary
-                .iter()
-                .map(|&(a, b)| PathElement::new(vec![def[a], def[b]], BLACK.stroke_width(2))),
-        )
-        .map_err(&err)?;
 
-    // The contact boundary: Γ3,1 red, Γ3,2 orange; nodes in contact or sticking as dots.
-    let red = RGBColor(220, 30, 30);
-    let orange = RGBColor(240, 150, 0);
-    let edges3 = contact_edges(&dir, v.points.len());
-    let mut legend: Vec<(String, RGBColor, bool)> = Vec::new();
-    if let Some((c31, c32)) = &edges3 {
-        for (list, color, name) in [
-            (c31, red, "Γ3,1 (contact)"),
-            (c32, orange, "Γ3,2 (friction)"),
-        ] {
-            if list.is_empty() {
-                continue;
+    /// Boundary edges: undeformed (grey) and deformed (black).
+    fn draw_boundary(&self, chart: &mut Chart) -> DrawResult {
+        let mut edges: std::collections::HashMap<(usize, usize), usize> = Default::default();
+        for t in self.tris {
+            for i in 0..3 {
+                let (a, b) = (t[i], t[(i + 1) % 3]);
+                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
             }
-            chart
-                .draw_series(
-                    list.iter().map(|f| {
-                        PathElement::new(vec![def[f[0]], def[f[1]]], color.stroke_width(5))
-                    }),
-                )
-                .map_err(&err)?;
-            legend.push((name.to_string(), color, false));
         }
+        let mut boundary: Vec<(usize, usize)> = edges
+            .into_iter()
+            .filter(|(_, c)| *c == 1)
+            .map(|(e, _)| e)
+            .collect();
+        // In one order, so that the figure is the same pixel for pixel at every plot.
+        boundary.sort_unstable();
+        chart.draw_series(boundary.iter().map(|&(a, b)| {
+            PathElement::new(
+                vec![self.undeformed(a), self.undeformed(b)],
+                GHOST.stroke_width(1),
+            )
+        }))?;
+        chart.draw_series(boundary.iter().map(|&(a, b)| {
+            PathElement::new(vec![self.def[a], self.def[b]], BLACK.stroke_width(2))
+        }))?;
+        Ok(())
     }
-    let state = v.point_field("contact_state").map(|a| &a.values);
-    let pressure = v.point_field("contact_pressure").map(|a| &a.values);
-    let friction = v.point_field("friction_traction").map(|a| &a.values);
-    if let Some(state) = state {
-        let active: Vec<usize> = (0..v.points.len()).filter(|&i| state[i] > 0.5).collect();
-        if !active.is_empty() {
-            chart
-                .draw_series(
+
+    /// The contact boundary: Γ3,1 red, Γ3,2 orange; nodes in contact or sticking as dots.
+    /// Without the mesh's groups, the nodes that carry a contact or friction traction.
+    fn draw_contact(
+        &self,
+        chart: &mut Chart,
+        contact: Option<&ContactGroups>,
+    ) -> std::result::Result<Vec<LegendItem>, DrawError> {
+        let v = &self.run.v;
+        let mut legend: Vec<LegendItem> = Vec::new();
+        if let Some(groups) = contact {
+            for ((list, color), name) in groups.edges.iter().zip(CONTACT_COLOURS).zip(CONTACT_NAMES)
+            {
+                if list.is_empty() {
+                    continue;
+                }
+                chart.draw_series(list.iter().map(|f| {
+                    PathElement::new(vec![self.def[f[0]], self.def[f[1]]], color.stroke_width(5))
+                }))?;
+                legend.push((name.to_string(), color, false));
+            }
+        }
+        if let Some(state) = v.point_field("contact_state") {
+            let active: Vec<usize> = (0..v.points.len())
+                .filter(|&i| state.values[i] > 0.5)
+                .collect();
+            if !active.is_empty() {
+                chart.draw_series(
                     active
                         .iter()
-                        .map(|&i| Circle::new(def[i], 4, BLACK.filled())),
-                )
-                .map_err(&err)?;
-            legend.push(("contact_state = 1 (active / stick)".into(), BLACK, true));
+                        .map(|&i| Circle::new(self.def[i], 4, BLACK.filled())),
+                )?;
+                legend.push(("contact_state = 1 (active / stick)".into(), BLACK, true));
+            }
         }
-    }
-    if edges3.is_none() {
-        // Without the mesh groups: mark the nodes that carry a contact or friction traction.
-        for (vals, color, name) in [
-            (pressure, red, "contact pressure > 0"),
-            (friction, orange, "friction traction ≠ 0"),
-        ] {
-            if let Some(vals) = vals {
-                let marked: Vec<usize> = (0..v.points.len()).filter(|&i| vals[i] != 0.0).collect();
-                if !marked.is_empty() {
-                    chart
-                        .draw_series(
-                            marked
-                                .iter()
-                                .map(|&i| Circle::new(def[i], 5, color.stroke_width(2))),
-                        )
-                        .map_err(&err)?;
-                    legend.push((name.to_string(), color, true));
+        if contact.is_none() {
+            for ((name, color), label) in TRACTIONS.iter().zip(CONTACT_COLOURS).zip(TRACTION_LABELS)
+            {
+                let marked = nonzero_nodes(v, name);
+                if marked.iter().any(|m| *m) {
+                    chart.draw_series(
+                        (0..v.points.len())
+                            .filter(|&i| marked[i])
+                            .map(|i| Circle::new(self.def[i], 5, color.stroke_width(2))),
+                    )?;
+                    legend.push((label.to_string(), color, true));
                 }
             }
         }
+        legend.push(("undeformed boundary".into(), GHOST, false));
+        Ok(legend)
     }
-    legend.push(("undeformed boundary".into(), RGBColor(150, 150, 150), false));
-    draw_legend(&legend_area, &legend, yl + margin).map_err(&err)?;
-    draw_colorbar(
-        &rest,
-        &opts.field,
-        vmin,
-        vmax,
-        caption + margin,
-        xl + margin,
-    )
-    .map_err(&err)?;
-    root.present().map_err(&err)?;
-    drop(chart);
-    drop(root);
-    Ok(PlotInfo {
-        output: output.clone(),
-        time,
-        frame,
-        scale,
-        range: (vmin, vmax),
-        contact_marked: edges3.is_some(),
-    })
 }
+
+/// The point fields that mark the contact nodes when the mesh's groups cannot be found.
+const TRACTIONS: [&str; 2] = ["contact_pressure", "friction_traction"];
+const TRACTION_LABELS: [&str; 2] = ["contact pressure > 0", "friction traction ≠ 0"];
 
 type DrawResult = std::result::Result<
     (),
