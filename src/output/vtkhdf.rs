@@ -120,11 +120,14 @@ struct Open {
 fn h5_open(path: &Path, mode: OpenMode) -> hdf5::Result<hdf5::File> {
     // File locking off, as for checkpoints (checkpoint/h5.rs): a child process inherits
     // HDF5's flock and would keep the file locked for as long as it lives. A new file gets
-    // the latest format, whose metadata all carry checksums (see the module doc).
-    let latest = mode == OpenMode::Create;
+    // the format of HDF5 1.8 or later: superblock 2 and object headers 2, which carry
+    // checksums, so that damaged metadata is an error of the library, not a crash. Not the
+    // 1.10 format (superblock 3): it marks the file open for write in its superblock, and
+    // the file of a killed run would not open again without `h5clear`.
+    let checksummed = mode == OpenMode::Create;
     hdf5::File::with_options()
-        .with_fapl(|p| match latest {
-            true => p.file_locking(false).libver_latest(),
+        .with_fapl(|p| match checksummed {
+            true => p.file_locking(false).libver_v18(),
             false => p.file_locking(false),
         })
         .open_as(path, mode)
