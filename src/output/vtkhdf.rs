@@ -938,22 +938,21 @@ fn check_steps(
 ) -> std::result::Result<(), String> {
     let read = || -> hdf5::Result<Option<String>> {
         let steps = file.group("VTKHDF/Steps")?;
-        let mut expected: Vec<(String, Box<dyn Fn(usize) -> i64>)> = Vec::new();
+        // (array, value at frame 0, increment per frame)
+        let mut expected: Vec<(String, i64, i64)> = Vec::new();
         for (name, v) in MESH_OFFSETS {
-            expected.push((name.to_string(), Box::new(move |_| v)));
+            expected.push((name.to_string(), v, 0));
         }
-        expected.push(("FieldDataOffsets/run_id".into(), Box::new(|_| 0)));
+        expected.push(("FieldDataOffsets/run_id".into(), 0, 0));
         for (group, rows) in [("PointDataOffsets", n), ("CellDataOffsets", c)] {
             for ds in steps.group(group)?.datasets()? {
                 let name = ds.name().rsplit('/').next().unwrap_or_default().to_string();
                 let rows = if name == "region" { 0 } else { rows };
-                expected.push((
-                    format!("{group}/{name}"),
-                    Box::new(move |k| (k * rows) as i64),
-                ));
+                expected.push((format!("{group}/{name}"), 0, rows as i64));
             }
         }
-        for (name, want) in &expected {
+        for (name, base, step) in &expected {
+            let want = |k: usize| base + k as i64 * step;
             let got = steps.dataset(name)?.read_slice_1d::<i64, _>(0..frames)?;
             if let Some(k) = (0..frames).find(|&k| got[k] != want(k)) {
                 return Ok(Some(format!(
