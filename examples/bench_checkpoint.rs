@@ -101,7 +101,9 @@ fn main() {
         let active = vec![false; tl.rows.len()];
         tl.advance();
         let t = Instant::now();
-        writer.write(&tl, &log, &active).expect("checkpoint");
+        writer
+            .write(&tl, &log, &active, Vec::new())
+            .expect("checkpoint");
         writer.flush().expect("checkpoint");
         latency.push((tl.n(), t.elapsed().as_secs_f64()));
     }

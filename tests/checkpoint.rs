@@ -305,7 +305,7 @@ import sys, h5py, numpy as np
 path, kind = sys.argv[1], sys.argv[2]
 f = h5py.File(path, "r")
 assert f.attrs["format"] == "viscontact checkpoint", f.attrs["format"]
-assert int(f.attrs["format_version"]) == 2
+assert int(f.attrs["format_version"]) == 3
 assert open(path, "rb").read(22) == b"viscontact checkpoint\n", "the integrity header"
 for a in ("writer", "description", "run_id"):
     assert a in f.attrs, a

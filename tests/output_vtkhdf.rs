@@ -314,7 +314,7 @@ fn resume_refuses_foreign_damaged_and_mismatched_files() {
     std::fs::write(&file, &good[..good.len() / 3]).unwrap();
     refused(
         "a damaged file",
-        &["solution.vtkhdf", "cannot be read", "move it aside"],
+        &["solution.vtkhdf", "cannot be read", "--out NEW"],
     );
     std::fs::write(&file, b"not HDF5 at all").unwrap();
     refused("not HDF5", &["solution.vtkhdf", "cannot be read"]);

@@ -18,7 +18,10 @@
 
 use super::h5::{describe, fsync_dir, fsync_file, h5_create_sealed, h5err, str_attr};
 use super::seal;
-use super::{Hash64, Identity, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
+use super::{Hash64, Identity, HISTORY_DATASET, HISTORY_FILE_NAME};
+
+/// The history file's layout version (unchanged since checkpoint format version 2).
+const FORMAT_VERSION: u32 = 2;
 use crate::{Error, Result};
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};

@@ -5,6 +5,7 @@ use super::h5::{h5_create_sealed, scalar, str_attr, string_dataset, vector};
 use super::history_file::HistoryFile;
 use super::writer::{Snapshot, SnapshotMemory};
 use super::{Identity, RunLog, FORMAT, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
+use crate::output::FrameSum;
 use hdf5_metno as hdf5;
 use std::path::Path;
 
@@ -39,6 +40,15 @@ pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Ve
             s.log.max_kkt_residual.to_le_bytes().to_vec(),
         ),
     ];
+    let series = series_columns(&s.frames);
+    out.push((
+        "series/frames",
+        (s.frames.len() as u64).to_le_bytes().to_vec(),
+    ));
+    out.push(("series/step", le(&series.step)));
+    out.push(("series/time", le(&series.time)));
+    out.push(("series/crc32", le(&series.crc32)));
+    out.push(("series/bytes", le(&series.bytes)));
     match &s.memory {
         SnapshotMemory::None => {}
         SnapshotMemory::Prony(terms) => {
@@ -50,6 +60,51 @@ pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Ve
         }
     }
     out
+}
+
+/// Little-endian bytes of numbers.
+fn le<T: Copy + bytemuck::Pod>(v: &[T]) -> Vec<u8> {
+    if cfg!(target_endian = "little") {
+        return bytemuck::cast_slice(v).to_vec();
+    }
+    let size = std::mem::size_of::<T>();
+    bytemuck::cast_slice::<T, u8>(v)
+        .chunks(size)
+        .flat_map(|c| c.iter().rev().copied())
+        .collect()
+}
+
+/// The `/series` arrays: one entry per frame, then padding (step −1, the rest 0) up to a
+/// power of two ≥ frames + 1, at least 64, so that their size, and with it the `Template`,
+/// changes only log₂ F times in a run of F frames.
+pub(super) struct SeriesColumns {
+    pub(super) step: Vec<i64>,
+    pub(super) time: Vec<f64>,
+    pub(super) crc32: Vec<u32>,
+    pub(super) bytes: Vec<u64>,
+}
+
+pub(super) fn series_columns(frames: &[FrameSum]) -> SeriesColumns {
+    let len = (frames.len() + 1).next_power_of_two().max(64);
+    let column = |f: &dyn Fn(&FrameSum) -> u64| -> Vec<u64> {
+        let mut v: Vec<u64> = frames.iter().map(f).collect();
+        v.resize(len, 0);
+        v
+    };
+    let mut step: Vec<i64> = frames.iter().map(|f| f.step as i64).collect();
+    step.resize(len, -1);
+    SeriesColumns {
+        step,
+        time: column(&|f| f.time.to_bits())
+            .into_iter()
+            .map(f64::from_bits)
+            .collect(),
+        crc32: column(&|f| f.crc32 as u64)
+            .into_iter()
+            .map(|c| c as u32)
+            .collect(),
+        bytes: column(&|f| f.bytes),
+    }
 }
 
 /// Iterations of steps 0..n, then −1 up to a length that grows with n: the run's `steps` + 1
@@ -245,6 +300,7 @@ pub(super) fn write_checkpoint(
         }
     }
 
+    write_series(&f, &s.frames)?;
     let run = f.create_group("run")?;
     let iterations = iterations(&s.log, steps);
     vector(
@@ -333,4 +389,51 @@ pub(super) fn write_checkpoint(
     }
     f.close()?;
     Ok(())
+}
+
+/// The group `/series`: the frames written before step n and their checksums.
+fn write_series(f: &hdf5::File, frames: &[FrameSum]) -> hdf5::Result<()> {
+    let g = f.create_group("series")?;
+    str_attr(
+        &g,
+        "description",
+        "the frames of the series written before step `step`, entries 0..frames-1 of each \
+         array (the rest is padding); resume checks that each is on disk with these bytes \
+         (docs/restart.md, 'What resume verifies')",
+    )?;
+    scalar(
+        &g,
+        "frames",
+        frames.len() as u64,
+        "number of frames recorded",
+        "1",
+    )?;
+    let c = series_columns(frames);
+    let len = [c.step.len()];
+    vector(
+        &g,
+        "step",
+        &len,
+        &c.step,
+        "step n of each frame (-1: padding)",
+        "1",
+    )?;
+    vector(&g, "time", &len, &c.time, "t_n of each frame", "s")?;
+    vector(
+        &g,
+        "crc32",
+        &len,
+        &c.crc32,
+        "CRC-32 of the frame: of its whole .vtu file, or for solution.vtkhdf of its field \
+         values as stored (little-endian; point fields by name, then cell fields by name)",
+        "1",
+    )?;
+    vector(
+        &g,
+        "bytes",
+        &len,
+        &c.bytes,
+        "number of bytes the CRC-32 covers",
+        "1",
+    )
 }

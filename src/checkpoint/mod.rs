@@ -14,6 +14,8 @@
 //!   (the contact/stick flags are stored as well, for people);
 //! - the per-step solver iteration counts and the running maxima of summary.json, so that
 //!   the summary of a resumed run equals the uninterrupted one;
+//! - the frames of the series written before step n: step, time, CRC-32 and length of each
+//!   (`/series`, since format version 3), which resume verifies (`output/verify.rs`);
 //! - the effective scene text (after `--set`), the scene's path, and fingerprints of the mesh
 //!   (node coordinate bits + connectivity) and of its physical groups; a flattened copy of
 //!   every physics key of the scene (`/physics`), to tell what differs.
@@ -98,7 +100,10 @@ use std::path::PathBuf;
 pub const FORMAT: &str = "viscontact checkpoint";
 /// The layout version written (root attribute `format_version`); files of a newer version
 /// are refused.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
+/// Version 2 recorded no checksums of the series' frames (`/series`, version 3): it is still
+/// resumed, with its series continued unverified.
+pub const UNVERIFIED_VERSION: u32 = 2;
 /// The checkpoint's file name in a run directory.
 pub const FILE_NAME: &str = "checkpoint.h5";
 /// The append-only history file of a general (direct-sum) kernel, beside the checkpoint.
@@ -230,4 +235,7 @@ pub struct Checkpoint {
     pub z: Vec<f64>,
     pub memory: StoredMemory,
     pub log: RunLog,
+    /// The frames of steps < n the run wrote, with their checksums (`/series`); None for a
+    /// checkpoint of format version 2.
+    pub frames: Option<Vec<crate::output::FrameSum>>,
 }

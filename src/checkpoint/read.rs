@@ -198,6 +198,10 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
         z: vec("state/z")?,
         memory,
         log,
+        frames: match version {
+            super::UNVERIFIED_VERSION => None,
+            _ => Some(read_series(f, n)?),
+        },
     };
     if cp.log.iterations.len() != cp.n {
         return Err(format!(
@@ -211,4 +215,33 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
         return Err(format!("step_size {} is not a positive number", cp.k).into());
     }
     Ok(cp)
+}
+
+/// The frames `/series` records: steps increasing and below the checkpoint's step `n`.
+fn read_series(f: &hdf5::File, n: usize) -> hdf5::Result<Vec<crate::output::FrameSum>> {
+    let g = f.group("series")?;
+    let frames = g.dataset("frames")?.read_scalar::<u64>()? as usize;
+    let step = g.dataset("step")?.read_raw::<i64>()?;
+    let time = g.dataset("time")?.read_raw::<f64>()?;
+    let crc32 = g.dataset("crc32")?.read_raw::<u32>()?;
+    let bytes = g.dataset("bytes")?.read_raw::<u64>()?;
+    if [step.len(), time.len(), crc32.len(), bytes.len()]
+        .iter()
+        .any(|&l| l < frames)
+    {
+        return Err(format!("/series has fewer entries than its {frames} frames").into());
+    }
+    let out: Vec<_> = (0..frames)
+        .map(|k| crate::output::FrameSum {
+            step: step[k].max(0) as usize,
+            time: time[k],
+            crc32: crc32[k],
+            bytes: bytes[k],
+        })
+        .collect();
+    let increasing = step[..frames].windows(2).all(|w| w[0] < w[1]);
+    if !increasing || step[..frames].iter().any(|&s| s < 0 || s as usize >= n) {
+        return Err(format!("/series/step is not a list of steps before step {n}").into());
+    }
+    Ok(out)
 }

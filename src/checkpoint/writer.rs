@@ -8,6 +8,7 @@ use super::seal;
 use super::template::Template;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
 use crate::history::{Memory, PronyTerm};
+use crate::output::FrameSum;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -25,6 +26,8 @@ pub(super) struct Snapshot {
     pub(super) active: Vec<bool>,
     pub(super) memory: SnapshotMemory,
     pub(super) log: RunLog,
+    /// The frames written before step n, with their checksums.
+    pub(super) frames: Vec<FrameSum>,
 }
 
 pub(super) enum SnapshotMemory {
@@ -63,6 +66,7 @@ impl Snapshot {
                     z,
                     active,
                     log,
+                    frames,
                 },
             ) => {
                 rows.extend(more);
@@ -77,6 +81,7 @@ impl Snapshot {
                     active,
                     memory: SnapshotMemory::Direct { from, rows },
                     log,
+                    frames,
                 }
             }
             (_, newer) => newer,
@@ -228,9 +233,16 @@ impl Writer {
     }
 
     /// Hands the checkpoint of `tl` (at step n = `tl.n()`, before solving it) to the writer
-    /// thread. `active`: the contact/stick flags of the last solved step's rows. Returns the
-    /// error of an earlier checkpoint that failed.
-    pub fn write(&mut self, tl: &TimeLoop, log: &RunLog, active: &[bool]) -> Result<()> {
+    /// thread. `active`: the contact/stick flags of the last solved step's rows; `frames`:
+    /// the frames of the series written so far (all on disk). Returns the error of an earlier
+    /// checkpoint that failed.
+    pub fn write(
+        &mut self,
+        tl: &TimeLoop,
+        log: &RunLog,
+        active: &[bool],
+        frames: Vec<FrameSum>,
+    ) -> Result<()> {
         let h = &tl.history;
         let memory = match &h.memory {
             Memory::None => SnapshotMemory::None,
@@ -255,6 +267,7 @@ impl Writer {
             active: active.to_vec(),
             memory,
             log: log.clone(),
+            frames,
         };
         let mut mb = self.shared.mailbox.lock().expect("checkpoint mailbox");
         if let Some(e) = mb.error.take() {

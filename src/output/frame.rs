@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use super::{Geometry, Options, OwnedField, Series};
+use super::{Geometry, Options, OwnedField, Resumed, Series};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::scene::Model;
@@ -13,14 +13,13 @@ use crate::time_loop::Step;
 use crate::Result;
 
 /// The series of a run on `mesh` in `out`: a new one, or for a resume from a checkpoint of
-/// step n ≥ 1 the existing one continued after step `keep_until` = n − 1
-/// ([`Series::reopen`]).
+/// step n ≥ 1 the existing one, verified and continued after step n − 1 ([`Series::resume`]).
 pub fn open_series(
     out: &Path,
     mesh: &Mesh,
     run_id: &str,
     options: &Options,
-    keep_until: Option<usize>,
+    resumed: Option<&Resumed>,
 ) -> Result<Series> {
     let (cells, nodes_per_cell) = mesh.cell_nodes();
     let region = region(mesh);
@@ -30,9 +29,9 @@ pub fn open_series(
         nodes_per_cell,
         region: &region,
     };
-    match keep_until {
-        None => Series::create(out, &geometry, run_id, options),
-        Some(step) => Series::reopen(out, &geometry, run_id, options, step),
+    match resumed {
+        Some(r) if r.step > 0 => Series::resume(out, &geometry, run_id, options, r),
+        _ => Series::create(out, &geometry, run_id, options),
     }
 }
 

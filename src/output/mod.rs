@@ -40,6 +40,7 @@
 pub mod frame;
 mod pvd;
 pub mod read;
+mod verify;
 mod vtkhdf;
 mod vtu;
 mod writer;
@@ -52,6 +53,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::{Error, Result};
+pub use verify::{FrameSum, Resumed};
 
 /// Name of the collection file in a run's directory.
 pub const PVD_NAME: &str = "solution.pvd";
@@ -281,6 +283,9 @@ pub struct Series {
     pvd_written: Option<Instant>,
     pvd_stale: bool,
     sink: Sink,
+    /// CRC-32 and length of the frame of each step written (or kept and verified), for the
+    /// checkpoints (`verify.rs`).
+    sums: std::collections::HashMap<usize, (u32, u64)>,
 }
 
 /// The writer thread of each format.
@@ -357,6 +362,7 @@ impl Series {
             pvd_written: None,
             pvd_stale: false,
             sink,
+            sums: Default::default(),
         })
     }
 
@@ -389,7 +395,9 @@ impl Series {
                 .into_iter()
                 .filter(|&(s, _)| s <= last_step)
                 .collect();
-            return Series::start(dir, geometry, run_id, options, kept);
+            let mut series = Series::start(dir, geometry, run_id, options, kept)?;
+            series.checksum_kept(geometry)?;
+            return Ok(series);
         }
         let pvd_path = dir.join(PVD_NAME);
         let text = match std::fs::read_to_string(&pvd_path) {
@@ -415,6 +423,7 @@ impl Series {
             .into_iter()
             .filter(|(_, file)| step_of(file).is_some_and(|s| s <= last_step))
             .collect();
+        series.checksum_kept(geometry)?;
         Ok(series)
     }
 
@@ -553,6 +562,7 @@ impl Series {
                     let (point_data, cell_data) = arrays()?;
                     Ok(vtu::Job {
                         vtu: Some(vtu::Vtu {
+                            step,
                             path: file,
                             point_data,
                             cell_data,
@@ -593,9 +603,43 @@ impl Series {
                 writer.send(Box::new(move || Ok(vtu::Job { vtu: None, pvd })))?;
             }
         }
-        match &mut self.sink {
-            Sink::Vtu(writer) => writer.finish(),
-            Sink::Vtkhdf { writer, .. } => writer.finish(),
+        let (finished, written) = match &mut self.sink {
+            Sink::Vtu(writer) => (writer.finish(), writer.take_written()),
+            Sink::Vtkhdf { writer, .. } => (writer.finish(), writer.take_written()),
+        };
+        for w in written {
+            self.sums.insert(w.step, (w.crc32, w.bytes));
+        }
+        finished
+    }
+
+    /// The checksums of the frames the series lists, in order (complete after
+    /// [`Series::finish`]: what a checkpoint records, `verify.rs`).
+    pub fn checksums(&self) -> Vec<FrameSum> {
+        let steps: Vec<Option<usize>> = match &self.sink {
+            Sink::Vtu(_) => self.files.iter().map(|(_, f)| step_of(f)).collect(),
+            Sink::Vtkhdf { steps, .. } => steps.iter().map(|&s| Some(s)).collect(),
+        };
+        steps
+            .into_iter()
+            .zip(&self.files)
+            .filter_map(|(step, &(time, _))| {
+                let step = step?;
+                let &(crc32, bytes) = self.sums.get(&step)?;
+                Some(FrameSum {
+                    step,
+                    time,
+                    crc32,
+                    bytes,
+                })
+            })
+            .collect()
+    }
+
+    /// Takes the checksums of frames kept from an earlier run of the series.
+    fn remember(&mut self, frames: &[FrameSum]) {
+        for f in frames {
+            self.sums.insert(f.step, (f.crc32, f.bytes));
         }
     }
 
@@ -679,6 +723,25 @@ fn step_of(file: &str) -> Option<usize> {
         .strip_suffix(".vtu")?
         .parse()
         .ok()
+}
+
+/// The CRC-32 and length of the file at `path`, read in blocks.
+pub(crate) fn crc32_of_file(path: &Path) -> std::io::Result<(u32, u64)> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let mut buf = vec![0u8; 1 << 18];
+    let (mut h, mut len) = (crc32fast::Hasher::new(), 0u64);
+    loop {
+        match file.read(&mut buf) {
+            Ok(0) => return Ok((h.finalize(), len)),
+            Ok(k) => {
+                h.update(&buf[..k]);
+                len += k as u64;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
 }
 
 /// Writes bytes to `path` through a temporary file in the same directory and a rename, so a

@@ -58,6 +58,7 @@
 //! arrays were not all extended is not counted. `resume` keeps the frames up to the
 //! checkpoint's step; its first new frame cuts every array back to them and appends.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use hdf5::types::FixedAscii;
@@ -65,6 +66,7 @@ use hdf5::{Dataset, Extent, Group, H5Type, OpenMode, SimpleExtents};
 use hdf5_metno as hdf5;
 use hdf5_metno_sys as hdf5_sys;
 
+use super::writer::Written;
 use super::{zlib, Array, Compression, Geometry, Precision, Values};
 use crate::checkpoint::h5::h5err;
 use crate::{Error, Result};
@@ -117,9 +119,17 @@ struct Open {
 
 fn h5_open(path: &Path, mode: OpenMode) -> hdf5::Result<hdf5::File> {
     // File locking off, as for checkpoints (checkpoint/h5.rs): a child process inherits
-    // HDF5's flock and would keep the file locked for as long as it lives.
+    // HDF5's flock and would keep the file locked for as long as it lives. A new file gets
+    // the format of HDF5 1.8 or later: superblock 2 and object headers 2, which carry
+    // checksums, so that damaged metadata is an error of the library, not a crash. Not the
+    // 1.10 format (superblock 3): it marks the file open for write in its superblock, and
+    // the file of a killed run would not open again without `h5clear`.
+    let checksummed = mode == OpenMode::Create;
     hdf5::File::with_options()
-        .with_fapl(|p| p.file_locking(false))
+        .with_fapl(|p| match checksummed {
+            true => p.file_locking(false).libver_v18(),
+            false => p.file_locking(false),
+        })
         .open_as(path, mode)
 }
 
@@ -395,12 +405,24 @@ impl Sink {
 impl super::writer::Sink for Sink {
     type Job = Job;
 
-    fn write(&mut self, job: Job) -> Result<()> {
+    /// Appends the frame; its CRC-32 is that of its field values ([`frame_crc`]).
+    fn write(&mut self, job: Job) -> Result<Option<Written>> {
         self.file_at(&job)?;
         let open = self.open.as_ref().expect("file_at opened it");
         self.append(&open.file, &job)?;
         self.open.as_mut().expect("open").frames = job.index + 1;
-        Ok(())
+        fn bytes(arrays: &[Array]) -> Vec<(String, Cow<'_, [u8]>)> {
+            arrays
+                .iter()
+                .map(|a| (a.name.clone(), a.le_bytes()))
+                .collect()
+        }
+        let (crc32, bytes) = frame_crc(bytes(&job.point_data), bytes(&job.cell_data));
+        Ok(Some(Written {
+            step: job.step,
+            crc32,
+            bytes,
+        }))
     }
 
     /// Closes the file (every frame was flushed when it was written).
@@ -410,6 +432,24 @@ impl super::writer::Sink for Sink {
             None => Ok(()),
         }
     }
+}
+
+/// CRC-32 and length of a frame's field values as stored: the little-endian bytes of its
+/// point fields in name order, then of its cell fields likewise (the static `region` is
+/// the mesh's, not a frame's).
+fn frame_crc(
+    mut point: Vec<(String, Cow<'_, [u8]>)>,
+    mut cell: Vec<(String, Cow<'_, [u8]>)>,
+) -> (u32, u64) {
+    point.sort_by(|a, b| a.0.cmp(&b.0));
+    cell.sort_by(|a, b| a.0.cmp(&b.0));
+    let mut h = crc32fast::Hasher::new();
+    let mut len = 0;
+    for (_, bytes) in point.iter().chain(&cell) {
+        h.update(bytes);
+        len += bytes.len() as u64;
+    }
+    (h.finalize(), len)
 }
 
 /// A 1-D dataset of `T` that grows by one entry a frame, uncompressed.
@@ -729,4 +769,203 @@ fn read_frame_h5(path: &Path, index: usize) -> hdf5::Result<super::read::Vtu> {
         point_data,
         cell_data,
     })
+}
+
+/// What frames `0..limit` of a `solution.vtkhdf` hold, read back in full and checked entry by
+/// entry against what [`Sink`] writes for the mesh `g` and run `run_id`: the file's format
+/// (the checksummed one this module creates: superblock version ≥ 2), the run id, the mesh
+/// arrays bit for bit, every `Steps` array, and the CRC-32 of each frame's field values
+/// ([`frame_crc`], read through HDF5, so every chunk is inflated). Fewer frames than `limit`
+/// are returned when the file holds fewer; anything else wrong is the error (what, where).
+/// `checksummed`: require the checksummed format (a file an older viscontact wrote has
+/// none; it is read as it is only for an unverified resume).
+pub(super) fn stored_sums(
+    path: &Path,
+    g: &Geometry,
+    run_id: &str,
+    limit: usize,
+    checksummed: bool,
+) -> std::result::Result<Vec<super::FrameSum>, String> {
+    let mut head = [0u8; 9];
+    std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head))
+        .map_err(|e| format!("cannot be read ({e})"))?;
+    if checksummed && (head[..8] != *b"\x89HDF\r\n\x1a\n" || head[8] < 2) {
+        return Err("its HDF5 superblock is damaged or of a format without checksums".into());
+    }
+    let file = h5_open(path, OpenMode::Read).map_err(|e| e.to_string())?;
+    check_static(&file, g, run_id)?;
+    let (n, c) = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
+    let frames = frames_in(&file, n, c)
+        .map_err(|e| e.to_string())?
+        .min(limit);
+    check_steps(&file, frames, n, c)?;
+    let read = || -> hdf5::Result<Vec<super::FrameSum>> {
+        let root = file.group("VTKHDF")?;
+        let steps = file
+            .group("viscontact")?
+            .dataset("step")?
+            .read_raw::<i64>()?;
+        let times = root.group("Steps")?.dataset("Values")?.read_raw::<f64>()?;
+        let fields = |group: &str| -> hdf5::Result<Vec<(String, Dataset)>> {
+            let mut v = Vec::new();
+            for ds in root.group(group)?.datasets()? {
+                if ds.is_resizable() {
+                    let name = ds.name().rsplit('/').next().unwrap_or_default().to_string();
+                    v.push((name, ds));
+                }
+            }
+            Ok(v)
+        };
+        let (point, cell) = (fields("PointData")?, fields("CellData")?);
+        let mut sums = Vec::with_capacity(frames);
+        for k in 0..frames {
+            let rows = |v: &[(String, Dataset)], r| -> hdf5::Result<Vec<_>> {
+                v.iter()
+                    .map(|(name, ds)| Ok((name.clone(), Cow::Owned(rows_le(ds, k * r, r)?))))
+                    .collect()
+            };
+            let (crc32, bytes) = frame_crc(rows(&point, n)?, rows(&cell, c)?);
+            sums.push(super::FrameSum {
+                step: steps[k] as usize,
+                time: times[k],
+                crc32,
+                bytes,
+            });
+        }
+        Ok(sums)
+    };
+    read().map_err(|e| e.to_string())
+}
+
+/// Rows `from..from + rows` of a field dataset, as the little-endian bytes of its type.
+fn rows_le(ds: &Dataset, from: usize, rows: usize) -> hdf5::Result<Vec<u8>> {
+    fn read<T: H5Type + Copy, const B: usize>(
+        ds: &Dataset,
+        from: usize,
+        rows: usize,
+        le: fn(T) -> [u8; B],
+    ) -> hdf5::Result<Vec<u8>> {
+        let values: Vec<T> = if ds.ndim() == 1 {
+            ds.read_slice_1d::<T, _>(from..from + rows)?.to_vec()
+        } else {
+            ds.read_slice_2d::<T, _>(ndarray::s![from..from + rows, ..])?
+                .iter()
+                .copied()
+                .collect()
+        };
+        Ok(values.into_iter().flat_map(le).collect())
+    }
+    match ds.dtype()?.size() {
+        4 => read(ds, from, rows, f32::to_le_bytes),
+        _ => read(ds, from, rows, f64::to_le_bytes),
+    }
+}
+
+/// The mesh arrays and the run id hold exactly what [`Sink::create`] writes for `g`.
+fn check_static(file: &hdf5::File, g: &Geometry, run_id: &str) -> std::result::Result<(), String> {
+    let (n, c, p) = (
+        g.points.len(),
+        g.cells.len() / g.nodes_per_cell.max(1),
+        g.nodes_per_cell,
+    );
+    let cell_type = g.cell_type().map_err(|e| e.to_string())?;
+    let read = || -> hdf5::Result<Vec<(&'static str, bool)>> {
+        let root = file.group("VTKHDF")?;
+        let i64s = |name: &str| root.dataset(name).and_then(|d| d.read_raw::<i64>());
+        let points = root.dataset("Points")?.read_raw::<f64>()?;
+        let region = match g.region.is_empty() {
+            true => true,
+            false => root.dataset("CellData/region")?.read_raw::<i32>()? == g.region,
+        };
+        Ok(vec![
+            ("NumberOfPoints", i64s("NumberOfPoints")? == [n as i64]),
+            ("NumberOfCells", i64s("NumberOfCells")? == [c as i64]),
+            (
+                "NumberOfConnectivityIds",
+                i64s("NumberOfConnectivityIds")? == [(c * p) as i64],
+            ),
+            (
+                "Points",
+                points.len() == 3 * n
+                    && points
+                        .iter()
+                        .zip(g.points.as_flattened())
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+            ),
+            (
+                "Connectivity",
+                i64s("Connectivity")?
+                    .iter()
+                    .map(|&i| i as usize)
+                    .eq(g.cells.iter().copied()),
+            ),
+            (
+                "Offsets",
+                i64s("Offsets")?
+                    .iter()
+                    .map(|&o| o as usize)
+                    .eq((0..=c).map(|k| k * p)),
+            ),
+            (
+                "Types",
+                root.dataset("Types")?.read_raw::<u8>()? == vec![cell_type; c],
+            ),
+            ("CellData/region", region),
+            (
+                "FieldData/run_id",
+                root.dataset("FieldData/run_id")?.read_raw::<u8>()? == run_id.as_bytes(),
+            ),
+        ])
+    };
+    let checks = read().map_err(|e| e.to_string())?;
+    match checks.iter().find(|(_, ok)| !ok) {
+        Some((name, _)) => Err(format!(
+            "/VTKHDF/{name} differs from what this run wrote (damaged, or the file of another \
+             run or mesh)"
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Every `Steps` entry of frames `0..frames` is what [`Sink::append`] writes (N points, C
+/// cells): the mesh offsets, the field offsets k·N and k·C (region: 0), the run id's 0.
+fn check_steps(
+    file: &hdf5::File,
+    frames: usize,
+    n: usize,
+    c: usize,
+) -> std::result::Result<(), String> {
+    let read = || -> hdf5::Result<Option<String>> {
+        let steps = file.group("VTKHDF/Steps")?;
+        // (array, value at frame 0, increment per frame)
+        let mut expected: Vec<(String, i64, i64)> = Vec::new();
+        for (name, v) in MESH_OFFSETS {
+            expected.push((name.to_string(), v, 0));
+        }
+        expected.push(("FieldDataOffsets/run_id".into(), 0, 0));
+        for (group, rows) in [("PointDataOffsets", n), ("CellDataOffsets", c)] {
+            for ds in steps.group(group)?.datasets()? {
+                let name = ds.name().rsplit('/').next().unwrap_or_default().to_string();
+                let rows = if name == "region" { 0 } else { rows };
+                expected.push((format!("{group}/{name}"), 0, rows as i64));
+            }
+        }
+        for (name, base, step) in &expected {
+            let want = |k: usize| base + k as i64 * step;
+            let got = steps.dataset(name)?.read_slice_1d::<i64, _>(0..frames)?;
+            if let Some(k) = (0..frames).find(|&k| got[k] != want(k)) {
+                return Ok(Some(format!(
+                    "/VTKHDF/Steps/{name}[{k}] is {}, this run wrote {}",
+                    got[k],
+                    want(k)
+                )));
+            }
+        }
+        Ok(None)
+    };
+    match read().map_err(|e| e.to_string())? {
+        Some(why) => Err(why),
+        None => Ok(()),
+    }
 }

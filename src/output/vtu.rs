@@ -39,8 +39,8 @@ use std::io::Write as _;
 
 use std::path::{Path, PathBuf};
 
-use super::writer::Sink;
-use super::{write_atomic, write_atomic_with, zlib, Array, Compression, Geometry};
+use super::writer::{Sink, Written};
+use super::{crc32_of_file, write_atomic, write_atomic_with, zlib, Array, Compression, Geometry};
 use crate::Result;
 
 /// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
@@ -55,6 +55,7 @@ pub(super) struct Job {
 
 /// One frame's file and fields.
 pub(super) struct Vtu {
+    pub step: usize,
     pub path: PathBuf,
     pub point_data: Vec<Array>,
     pub cell_data: Vec<Array>,
@@ -399,15 +400,27 @@ impl Grid {
 impl Sink for Grid {
     type Job = Job;
 
-    /// The `.vtu` (temporary file + rename), then the `.pvd` (likewise).
-    fn write(&mut self, job: Job) -> Result<()> {
-        if let Some(v) = job.vtu {
-            self.write_frame(&v.path, &v.point_data, &v.cell_data)?;
+    /// The `.vtu` (temporary file + rename) and its CRC-32 (read back: the file is in the
+    /// page cache, and its block sizes were patched in after the blocks), then the `.pvd`
+    /// (likewise).
+    fn write(&mut self, job: Job) -> Result<Option<Written>> {
+        let written = match job.vtu {
+            Some(v) => {
+                self.write_frame(&v.path, &v.point_data, &v.cell_data)?;
+                let (crc32, bytes) =
+                    crc32_of_file(&v.path).map_err(|e| crate::Error::io(&v.path, e))?;
+                Some(Written {
+                    step: v.step,
+                    crc32,
+                    bytes,
+                })
+            }
+            None => None,
+        };
+        if let Some((path, text)) = job.pvd {
+            write_atomic(&path, text.as_bytes())?;
         }
-        match job.pvd {
-            Some((path, text)) => write_atomic(&path, text.as_bytes()),
-            None => Ok(()),
-        }
+        Ok(written)
     }
 
     /// Compresses the static arrays (once; zlib's search at level 6 takes about 20 ms at

@@ -9,12 +9,24 @@
 //! replacement of waiting snapshots: every frame is kept.
 //!
 //! What a frame becomes on disk is the [`Sink`]'s business: `.vtu` + `.pvd` (`vtu.rs`) or
-//! one more step of `solution.vtkhdf` (`vtkhdf.rs`).
+//! one more step of `solution.vtkhdf` (`vtkhdf.rs`). A sink reports the CRC-32 of each frame
+//! it wrote ([`Written`]); the series collects them when the thread ends
+//! ([`Writer::finish`]), which is also what a checkpoint waits for, so a checkpoint records
+//! the checksums of exactly the frames written before it (`docs/restart.md`).
 
 use std::sync::mpsc::{sync_channel, SyncSender};
 use std::thread::JoinHandle;
 
 use crate::{Error, Result};
+
+/// A frame on disk: its step, the CRC-32 and length of the bytes it is checked by (the whole
+/// `.vtu` file; for `solution.vtkhdf` the frame's field values as stored).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Written {
+    pub step: usize,
+    pub crc32: u32,
+    pub bytes: u64,
+}
 
 /// Frames waiting for the writer thread at most, besides the one it works on.
 const QUEUE: usize = 2;
@@ -25,8 +37,8 @@ pub(super) trait Sink: Send + 'static {
     type Job: Send + 'static;
     /// What can be done before the first frame (the thread starts with the series).
     fn prepare(&mut self) {}
-    /// Writes one frame; an error names the file.
-    fn write(&mut self, job: Self::Job) -> Result<()>;
+    /// Writes one frame (and says what it wrote, if a frame); an error names the file.
+    fn write(&mut self, job: Self::Job) -> Result<Option<Written>>;
     /// The thread ends (the queue was drained by [`Writer::finish`]): let go of open files.
     fn close(&mut self) -> Result<()>;
 }
@@ -37,13 +49,15 @@ pub(super) type Make<J> = Box<dyn FnOnce() -> Result<J> + Send>;
 
 /// The thread hands the sink back when it ends, so that a finished series can be written to
 /// again (the thread is started on demand).
-type Thread<S> = JoinHandle<(Box<S>, Result<()>)>;
+type Thread<S> = JoinHandle<(Box<S>, Vec<Written>, Result<()>)>;
 
 pub(super) struct Writer<S: Sink> {
     /// The sink while no thread runs (boxed: a sink holds the mesh).
     sink: Option<Box<S>>,
     tx: Option<SyncSender<Make<S::Job>>>,
     thread: Option<Thread<S>>,
+    /// The frames written by threads that ended, in order, until [`Writer::take_written`].
+    written: Vec<Written>,
 }
 
 impl<S: Sink> Writer<S> {
@@ -53,6 +67,7 @@ impl<S: Sink> Writer<S> {
             sink: Some(Box::new(sink)),
             tx: None,
             thread: None,
+            written: Vec::new(),
         };
         writer.start();
         writer
@@ -65,9 +80,13 @@ impl<S: Sink> Writer<S> {
             self.tx = Some(tx);
             self.thread = Some(std::thread::spawn(move || {
                 sink.prepare();
-                let written = rx.iter().try_for_each(|make| sink.write(make()?));
+                let mut written = Vec::new();
+                let result = rx.iter().try_for_each(|make| {
+                    written.extend(sink.write(make()?)?);
+                    Ok(())
+                });
                 let closed = sink.close();
-                (sink, written.and(closed))
+                (sink, written, result.and(closed))
             }));
         }
     }
@@ -93,12 +112,21 @@ impl<S: Sink> Writer<S> {
             return Ok(());
         };
         match thread.join() {
-            Ok((sink, result)) => {
+            Ok((sink, written, result)) => {
                 self.sink = Some(sink);
+                self.written.extend(written);
                 result
             }
             Err(_) => Err(Error::solve("output: the writer thread panicked")),
         }
+    }
+}
+
+impl<S: Sink> Writer<S> {
+    /// The frames written since the last call, in the order written (complete once
+    /// [`Writer::finish`] returned).
+    pub(super) fn take_written(&mut self) -> Vec<Written> {
+        std::mem::take(&mut self.written)
     }
 }
 

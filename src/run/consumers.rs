@@ -54,10 +54,12 @@ impl Consumers<'_> {
         // A checkpoint of step n + 1 may reach the disk only after the frames of steps ≤ n
         // have: the frame writer runs on its own thread, and a resume keeps the frames
         // before its step (a kill -9 in between lost a frame for good).
+        // The checkpoint records the checksums of those frames (output/verify.rs).
         if self.checkpoints.due.is_some() {
             self.frames.series.finish()?;
         }
-        self.checkpoints.advanced(tl, &self.statistics.log)
+        self.checkpoints
+            .advanced(tl, &self.statistics.log, &self.frames.series)
     }
 }
 
@@ -162,9 +164,9 @@ impl Checkpoints {
         self.due = due.then(|| state_flags(s.rows, &s.step));
     }
 
-    fn advanced(&mut self, tl: &TimeLoop, log: &RunLog) -> Result<()> {
+    fn advanced(&mut self, tl: &TimeLoop, log: &RunLog, series: &Series) -> Result<()> {
         match self.due.take() {
-            Some(flags) => self.writer.write(tl, log, &flags),
+            Some(flags) => self.writer.write(tl, log, &flags, series.checksums()),
             None => Ok(()),
         }
     }

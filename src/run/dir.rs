@@ -293,6 +293,28 @@ pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()>
     Ok(())
 }
 
+/// Whether `dir` is the directory of `checkpoint` (both exist and are the same).
+pub fn is_checkpoint_dir(dir: &Path, checkpoint: &Path) -> bool {
+    let parent = checkpoint
+        .canonicalize()
+        .ok()
+        .and_then(|c| c.parent().map(Path::to_path_buf));
+    parent.is_some() && dir.canonicalize().ok() == parent
+}
+
+/// Whether `dir` holds any file of a series (`.vtu` frames, `solution.pvd`,
+/// `solution.vtkhdf`).
+pub fn holds_series(dir: &Path) -> bool {
+    !entries(dir, |n| {
+        run_file(n)
+            && !matches!(
+                n,
+                "summary.json" | "checkpoint.h5" | "checkpoint_history.h5"
+            )
+    })
+    .is_empty()
+}
+
 /// After a resume: frames of steps ≥ `from` left by the interrupted run that the finished
 /// series does not list (a run extended past its old end no longer has a frame at the old
 /// end, or one at a step beyond the new end) are removed, so the directory holds what an

@@ -24,7 +24,7 @@ use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::frame::open_series;
-use crate::output::{write_atomic, Series};
+use crate::output::{write_atomic, Resumed, Series};
 use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
@@ -197,13 +197,30 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, Some(&cp));
+    // The series is verified against the frames the checkpoint recorded, unless the run
+    // continues in another directory that holds no series (without the old frames).
+    let resumed = (dir::is_checkpoint_dir(&out, checkpoint_path) || dir::holds_series(&out))
+        .then_some(Resumed {
+            checkpoint: checkpoint_path,
+            step: cp.n,
+            frames: cp.frames.as_deref(),
+        });
+    if cp.frames.is_none() {
+        eprintln!(
+            "warning: {}: checkpoint format version {} records no checksums of the frames \
+             before it; the series in {} is continued without verifying it",
+            checkpoint_path.display(),
+            cp.version,
+            out.display()
+        );
+    }
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(
         &out,
         &mesh,
         &identity.run_id,
         &scene.output,
-        cp.n.checked_sub(1),
+        resumed.as_ref(),
     )?;
     stage()?;
     let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
