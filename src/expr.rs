@@ -391,22 +391,21 @@ impl<'a> Parser<'a> {
                 });
         self.height = self.height + 1 - n;
         self.max_height = self.max_height.max(self.height);
-        match constant {
-            true => {
-                let v = apply(op, &args[..n]);
-                if !v.is_finite() {
-                    return Err((
-                        format!(
-                            "a part without variables evaluates to {v} (a division by zero, a \
-                             function outside its domain or an overflow); write a finite value"
-                        ),
-                        self.pos,
-                    ));
-                }
-                self.code.truncate(start);
-                self.code.push(Op::Const(v));
+        if constant {
+            let v = apply(op, &args[..n]);
+            if !v.is_finite() {
+                return Err((
+                    format!(
+                        "a part without variables evaluates to {v} (a division by zero, a \
+                         function outside its domain or an overflow); write a finite value"
+                    ),
+                    self.pos,
+                ));
             }
-            false => self.code.push(op),
+            self.code.truncate(start);
+            self.code.push(Op::Const(v));
+        } else {
+            self.code.push(op);
         }
         Ok(())
     }

@@ -10,8 +10,6 @@ pub mod checkpoint;
 pub mod effects;
 pub mod error;
 pub mod expr;
-#[doc(hidden)]
-pub mod expr_old;
 pub mod fem;
 pub mod history;
 pub mod kernel_fit;
