@@ -62,13 +62,17 @@ pub struct Point {
     pub s: f64,
 }
 
+/// A function of one value, and of two.
+type F1 = fn(f64) -> f64;
+type F2 = fn(f64, f64) -> f64;
+
 /// One instruction of the postfix program.
 #[derive(Clone, Copy, Debug)]
 enum Op {
     Const(f64),
     Var(u8),
-    Unary(fn(f64) -> f64),
-    Binary(fn(f64, f64) -> f64),
+    Unary(F1),
+    Binary(F2),
     If,
 }
 
@@ -184,7 +188,7 @@ fn if_(c: f64, a: f64, b: f64) -> f64 {
 }
 
 /// The functions of one argument.
-const UNARY: [(&str, fn(f64) -> f64); 20] = [
+const UNARY: [(&str, F1); 20] = [
     ("abs", f64::abs),
     ("sqrt", f64::sqrt),
     ("exp", f64::exp),
@@ -208,7 +212,7 @@ const UNARY: [(&str, fn(f64) -> f64); 20] = [
 ];
 
 /// The functions of two arguments; min and max take two or more.
-const BINARY: [(&str, fn(f64, f64) -> f64); 4] = [
+const BINARY: [(&str, F2); 4] = [
     ("pow", pow),
     ("atan2", f64::atan2),
     ("min", min),
@@ -441,8 +445,8 @@ impl Parser<'_> {
         Ok(())
     }
 
-    fn comparison(&mut self) -> std::result::Result<Option<fn(f64, f64) -> f64>, Fail> {
-        let ops: [(&str, fn(f64, f64) -> f64); 6] = [
+    fn comparison(&mut self) -> std::result::Result<Option<F2>, Fail> {
+        let ops: [(&str, F2); 6] = [
             ("<", lt),
             ("<=", le),
             (">", gt),
@@ -475,7 +479,7 @@ impl Parser<'_> {
     fn sum(&mut self) -> std::result::Result<(), Fail> {
         self.product()?;
         loop {
-            let f: fn(f64, f64) -> f64 = match self.peek()? {
+            let f: F2 = match self.peek()? {
                 Tok::Sym("+") => add,
                 Tok::Sym("-") => sub,
                 _ => return Ok(()),
@@ -489,7 +493,7 @@ impl Parser<'_> {
     fn product(&mut self) -> std::result::Result<(), Fail> {
         self.unary()?;
         loop {
-            let f: fn(f64, f64) -> f64 = match self.peek()? {
+            let f: F2 = match self.peek()? {
                 Tok::Sym("*") => mul,
                 Tok::Sym("/") => div,
                 Tok::Sym("%") => rem,
@@ -502,7 +506,7 @@ impl Parser<'_> {
     }
 
     fn unary(&mut self) -> std::result::Result<(), Fail> {
-        let f: Option<fn(f64) -> f64> = match self.peek()? {
+        let f: Option<F1> = match self.peek()? {
             Tok::Sym("-") => Some(neg),
             Tok::Sym("!") => Some(not),
             Tok::Sym("+") => None,

@@ -38,8 +38,8 @@ impl Rng {
     fn unit(&mut self) -> f64 {
         (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
-    fn pick<'a, T>(&mut self, from: &'a [T]) -> &'a T {
-        &from[self.below(from.len())]
+    fn pick<T: Copy>(&mut self, from: &[T]) -> T {
+        from[self.below(from.len())]
     }
 }
 
@@ -88,12 +88,12 @@ const FUNCS: [(&str, usize); 26] = [
 fn tree(r: &mut Rng, depth: usize) -> Node {
     if depth == 0 || r.unit() < 0.25 {
         return match r.below(10) {
-            0..=3 => Node::Num(*r.pick(&[
+            0..=3 => Node::Num(r.pick(&[
                 0.0, 1.0, 2.0, 0.5, 3.0, 10.0, 0.1, 1e-3, 2.5, 7.0, 1e-15, 1e10, 0.2, 4.0,
             ])),
             4 => Node::Num((r.unit() * 1000.0).round() / 100.0),
-            5 => Node::Name(*r.pick(&["pi", "e"])),
-            _ => Node::Name(*r.pick(&VARS)),
+            5 => Node::Name(r.pick(&["pi", "e"])),
+            _ => Node::Name(r.pick(&VARS)),
         };
     }
     let d = depth - 1;
@@ -101,12 +101,12 @@ fn tree(r: &mut Rng, depth: usize) -> Node {
         0..=4 => {
             // The arithmetic operators (the first 6) more often than the others.
             let ops = 6.max(r.below(BINARY.len() + 1));
-            let op = *r.pick(&BINARY[..ops]);
+            let op = r.pick(&BINARY[..ops]);
             Node::Bin(op, Box::new(tree(r, d)), Box::new(tree(r, d)))
         }
-        5 => Node::Un(*r.pick(&["-", "-", "!"]), Box::new(tree(r, d))),
+        5 => Node::Un(r.pick(&["-", "-", "!"]), Box::new(tree(r, d))),
         _ => {
-            let (f, n) = *r.pick(&FUNCS);
+            let (f, n) = r.pick(&FUNCS);
             Node::Call(f, (0..n).map(|_| tree(r, d)).collect())
         }
     }
@@ -151,7 +151,7 @@ fn scene(n: &Node, r: &mut Rng) -> String {
                 7 => (level(a) < 8, level(b) < 6),
                 _ => (level(a) < l, level(b) <= l),
             };
-            let sp = *r.pick(&["", " "]);
+            let sp = r.pick(&["", " "]);
             format!("{}{sp}{op}{sp}{}", wrap(a, need_a, r), wrap(b, need_b, r))
         }
         Node::Call(f, args) => {
@@ -270,8 +270,8 @@ for (f, consts, points) in CASES:
 fn point(r: &mut Rng) -> [f64; 5] {
     std::array::from_fn(|_| match r.below(8) {
         0 => 0.0,
-        1 => *r.pick(&[1.0, -1.0, 0.5, 2.0]),
-        2 => *r.pick(&[1e3, -1e-3, 1e-300, 30.0]),
+        1 => r.pick(&[1.0, -1.0, 0.5, 2.0]),
+        2 => r.pick(&[1e3, -1e-3, 1e-300, 30.0]),
         _ => ((r.unit() * 6.0 - 3.0) * 1e4).round() / 1e4,
     })
 }
