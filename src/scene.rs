@@ -709,8 +709,15 @@ fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Sca
     }
 }
 
-const SPACE_TIME: &[&str] = &["x", "y", "z", "t"];
-const SPACE: &[&str] = &["x", "y", "z"];
+/// The variables of loads (space and time) and of F, μ (space): a 2D model has no z.
+fn variables(model: Model, time: bool) -> &'static [&'static str] {
+    match (model.dim(), time) {
+        (2, true) => &["x", "y", "t"],
+        (2, false) => &["x", "y"],
+        (_, true) => &["x", "y", "z", "t"],
+        (_, false) => &["x", "y", "z"],
+    }
+}
 
 impl Scene {
     /// Reads, overrides and checks a scene file.
@@ -856,9 +863,10 @@ impl Scene {
         }
         let friction = match &f.friction {
             Some(fr) if fr.enabled => {
+                let space = variables(model, false);
                 let normal_stress =
-                    scalar(&fr.normal_stress, SPACE, "friction.normal_stress", path)?;
-                let coefficient = scalar(&fr.coefficient, SPACE, "friction.coefficient", path)?;
+                    scalar(&fr.normal_stress, space, "friction.normal_stress", path)?;
+                let coefficient = scalar(&fr.coefficient, space, "friction.coefficient", path)?;
                 for (value, key) in [
                     (&normal_stress, "friction.normal_stress"),
                     (&coefficient, "friction.coefficient"),
@@ -889,7 +897,7 @@ impl Scene {
             }
             v.iter()
                 .enumerate()
-                .map(|(i, c)| scalar(c, SPACE_TIME, &format!("{key}[{i}]"), path))
+                .map(|(i, c)| scalar(c, variables(model, true), &format!("{key}[{i}]"), path))
                 .collect()
         };
         let mut tractions = Vec::new();

@@ -446,6 +446,20 @@ fn expression_unknown_function() {
 }
 
 #[test]
+fn expression_z_in_a_2d_scene_and_log() {
+    run_edit_fails(
+        "z in 2D",
+        &[(TOP_LOAD, r#""-0.1*z*t""#)],
+        &["load.traction", "variable 'z'", "a 2D model has no z"],
+    );
+    run_edit_fails(
+        "log",
+        &[(TOP_LOAD, r#""log(1 + t)""#)],
+        &["load.traction", "ln(x)", "log10(x)"],
+    );
+}
+
+#[test]
 fn relaxation_expression_unknown_variable() {
     // s is the variable of a relaxation expression; t is not.
     run_edit_fails(
