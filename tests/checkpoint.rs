@@ -500,7 +500,7 @@ fn resume_refuses_broken_and_mismatched_checkpoints() {
         ),
         (
             "contact = \"Γ3,1\"",
-            "contact = \"Γ3,2\"",
+            "contact = \"top\"",
             "mesh.groups.contact",
         ),
         ("steps = 16", "steps = 20", "step size"),
