@@ -8,22 +8,9 @@ mod common;
 
 use common::{assert_same_series, copy_dir, paper_scene, viscontact, SplitMix};
 use hdf5_metno as hdf5;
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 const VTKHDF: &str = "output.format=\"vtkhdf\"";
-
-/// Every file of a directory with its bytes.
-fn contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            (name, std::fs::read(e.path()).unwrap())
-        })
-        .collect()
-}
 
 /// `viscontact ARGS` from the repository root with `--set` overrides: (exit code, stderr).
 fn cli(args: &[&str], set: &[&str]) -> (Option<i32>, String) {
@@ -58,7 +45,7 @@ fn runs(tmp: &Path, set: &[&str], stop: usize) -> (PathBuf, PathBuf, PathBuf) {
 /// Resumes `dir`'s checkpoint and expects exit 2 with every needle in the message and the
 /// directory as it was.
 fn refused(case: &str, dir: &Path, needles: &[&str]) {
-    let before = contents(dir);
+    let before = common::dir_contents(dir);
     let cp = dir.join("checkpoint.h5");
     let (code, err) = cli(&["resume", cp.to_str().unwrap()], &[]);
     assert_eq!(code, Some(2), "[{case}] {err}");
@@ -66,7 +53,7 @@ fn refused(case: &str, dir: &Path, needles: &[&str]) {
         assert!(err.contains(n), "[{case}] message lacks {n:?}: {err}");
     }
     assert!(
-        contents(dir) == before,
+        common::dir_contents(dir) == before,
         "[{case}] resume changed the directory"
     );
 }

@@ -6,26 +6,11 @@
 
 mod common;
 
-use std::collections::BTreeMap;
 use std::path::Path;
-
-/// Every file of a directory with its bytes.
-fn contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .map(|e| {
-            (
-                e.file_name().to_string_lossy().into_owned(),
-                std::fs::read(e.path()).unwrap(),
-            )
-        })
-        .collect()
-}
 
 /// The .vtu files of a directory, sorted.
 fn vtus(dir: &Path) -> Vec<String> {
-    contents(dir)
+    common::dir_contents(dir)
         .into_keys()
         .filter(|n| n.ends_with(".vtu"))
         .collect()
@@ -53,7 +38,7 @@ fn a_rerun_that_fails_in_setup_leaves_the_old_run_untouched() {
     let (scene, dir) = (scene.to_str().unwrap(), tmp.path().join("o"));
     let dir_s = dir.to_str().unwrap();
     run_ok(&["run", scene, "--out", dir_s, "--quiet"]);
-    let before = contents(&dir);
+    let before = common::dir_contents(&dir);
     let out = common::viscontact(&[
         "run",
         scene,
@@ -64,7 +49,7 @@ fn a_rerun_that_fails_in_setup_leaves_the_old_run_untouched() {
         "mesh.file=missing.msh",
     ]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(contents(&dir) == before, "the old run changed");
+    assert!(common::dir_contents(&dir) == before, "the old run changed");
 }
 
 /// A load that turns infinite at t = 0.53: the rerun fails at step 17 of 32 (exit 1), and
@@ -221,22 +206,22 @@ fn resume_does_not_mix_runs() {
     run_ok(&["run", scene, "--out", b.to_str().unwrap(), "--quiet"]);
     let cp = a.join("checkpoint.h5");
     let cp_s = cp.to_str().unwrap();
-    let before = contents(&b);
+    let before = common::dir_contents(&b);
     let out = common::viscontact(&["resume", cp_s, "--out", b.to_str().unwrap(), "--quiet"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("holds another run"), "{stderr}");
-    assert!(contents(&b) == before, "the other run changed");
+    assert!(common::dir_contents(&b) == before, "the other run changed");
 
     // A copy of b's checkpoint resumed beside a's run.
     let copy = a.join("copy.h5");
     std::fs::copy(b.join("checkpoint.h5"), &copy).unwrap();
-    let a_before = contents(&a);
+    let a_before = common::dir_contents(&a);
     let out = common::viscontact(&["resume", copy.to_str().unwrap(), "--force", "--quiet"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("holds another run"), "{stderr}");
-    assert!(contents(&a) == a_before, "a's run changed");
+    assert!(common::dir_contents(&a) == a_before, "a's run changed");
     std::fs::remove_file(&copy).unwrap();
 
     // Frames with nothing that names their run.

@@ -14,22 +14,9 @@
 mod common;
 
 use common::{SplitMix, BIN};
-use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// Every file of `dir` with its bytes.
-fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            (name, std::fs::read(e.path()).unwrap())
-        })
-        .collect()
-}
 
 /// Starts `viscontact ARGS`, sends `signal` after `delay`, and waits at most 5 s after the
 /// signal: the exit status (a hang fails the test, after killing the process).
@@ -84,17 +71,17 @@ fn signals_during_setup_exit_at_once_and_leave_the_earlier_run_intact() {
     let scene = scene.to_str().unwrap();
     let out = tmp.path().join("out");
     let out_s = out.to_str().unwrap();
+    let run = [
+        "run",
+        scene,
+        "--out",
+        out_s,
+        "--quiet",
+        "--set",
+        "time.steps=64",
+    ];
     let earlier = |stop: &str| {
-        let args = [
-            "run",
-            scene,
-            "--out",
-            out_s,
-            "--quiet",
-            "--set",
-            "time.steps=64",
-        ];
-        let (code, text) = common::cli(&[&args[..], &["--stop-after", stop]].concat());
+        let (code, text) = common::cli(&[&run[..], &["--stop-after", stop]].concat());
         assert_eq!(code, 0, "{text}");
     };
     let mut rng = SplitMix(seed);
@@ -107,15 +94,7 @@ fn signals_during_setup_exit_at_once_and_leave_the_earlier_run_intact() {
         let checkpoint = out.join("checkpoint.h5");
         let cp = checkpoint.to_str().unwrap();
         let args: Vec<&str> = match command {
-            "run" => vec![
-                "run",
-                scene,
-                "--out",
-                out_s,
-                "--quiet",
-                "--set",
-                "time.steps=64",
-            ],
+            "run" => run.to_vec(),
             _ => vec!["resume", cp, "--quiet"],
         };
         for i in 0..2 * count {
@@ -124,16 +103,20 @@ fn signals_during_setup_exit_at_once_and_leave_the_earlier_run_intact() {
             } else {
                 libc::SIGINT
             };
-            let before = snapshot(&out);
+            let before = common::dir_contents(&out);
             let delay = Duration::from_secs_f64(setup * (rng.next() >> 11) as f64 / 2f64.powi(53));
             let code = signalled(&args, delay, signal);
             if code == -signal {
                 before_main += 1;
-                assert_eq!(snapshot(&out), before, "{command} after {delay:?}");
+                assert_eq!(
+                    common::dir_contents(&out),
+                    before,
+                    "{command} after {delay:?}"
+                );
                 continue;
             }
             assert_eq!(code, 128 + signal, "{command} after {delay:?}");
-            if snapshot(&out) == before {
+            if common::dir_contents(&out) == before {
                 in_setup += 1;
                 continue;
             }

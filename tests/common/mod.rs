@@ -365,3 +365,15 @@ pub fn finished(o: viscontact::run::Outcome) -> viscontact::run::Summary {
         viscontact::run::Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
     }
 }
+
+/// Every file of a directory with its bytes (not recursive), by name.
+pub fn dir_contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            (name, std::fs::read(e.path()).unwrap())
+        })
+        .collect()
+}
