@@ -674,6 +674,16 @@ fn render(
     Ok(())
 }
 
+/// The smallest box `(lo, hi)` holding every point.
+fn bounds(points: impl Iterator<Item = (f64, f64)>) -> ([f64; 2], [f64; 2]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for (x, y) in points {
+        lo = [lo[0].min(x), lo[1].min(y)];
+        hi = [hi[0].max(x), hi[1].max(y)];
+    }
+    (lo, hi)
+}
+
 /// The title of a body figure.
 fn title(field: &str, time: f64, scale: f64) -> String {
     format!(
@@ -777,12 +787,8 @@ impl<'a> Body2d<'a> {
         contact: Option<&ContactGroups>,
         width: u32,
     ) -> Result<()> {
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         let undeformed = (0..self.def.len()).map(|n| self.undeformed(n));
-        for (x, y) in undeformed.chain(self.def.iter().copied()) {
-            lo = [lo[0].min(x), lo[1].min(y)];
-            hi = [hi[0].max(x), hi[1].max(y)];
-        }
+        let (lo, hi) = bounds(undeformed.chain(self.def.iter().copied()));
         let pad = 0.04 * self.size;
         let (dx, dy) = (hi[0] - lo[0] + 2.0 * pad, hi[1] - lo[1] + 2.0 * pad);
         let (x0, y0) = (lo[0] - pad, lo[1] - pad);

@@ -15,42 +15,9 @@ use viscontact::run::run;
 
 const VTKHDF: &str = "output.format=\"vtkhdf\"";
 
-/// Whether python3 imports vtk and h5py; a loud note when not (a failure with CI set).
-fn python_available() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import vtk, h5py"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI is set but python3 cannot import vtk and h5py"
-        );
-        eprintln!("\n!!!!!!!! SKIPPED: python3 with vtk and h5py is not available\n");
-    }
-    ok
-}
-
-/// scripts/check_vtkhdf.py FILE ARGS: its JSON report (the test fails if the script does).
-fn check(file: &Path, args: &[&str]) -> serde_json::Value {
-    let out = Command::new("python3")
-        .arg(common::repo().join("scripts/check_vtkhdf.py"))
-        .arg(file)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "check_vtkhdf.py {} {args:?}: {}",
-        file.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
 /// The h5py digest of every dataset but the run id (see the script).
 fn digest(file: &Path) -> serde_json::Value {
-    check(file, &["--digest"])["digest"].clone()
+    common::check_vtkhdf(file, &["--digest"])["digest"].clone()
 }
 
 /// Runs the paper scene on `mesh` into `out` with `set` (the CLI, as users run it).
@@ -75,7 +42,7 @@ fn cli_run(scene: &Path, out: &Path, set: &[&str]) {
 /// fields.
 #[test]
 fn vtk_reads_the_vtkhdf_series_as_the_vtu_one() {
-    if !python_available() {
+    if !common::python_available() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -106,7 +73,7 @@ fn vtk_reads_the_vtkhdf_series_as_the_vtu_one() {
             args.insert(args.len() - 2, "--compare".into());
         }
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let report = check(&file, &args);
+        let report = common::check_vtkhdf(&file, &args);
         assert_eq!(report["compared"], 3, "{report}");
         let times: Vec<f64> = report["times"]
             .as_array()
@@ -133,7 +100,7 @@ fn vtk_reads_the_vtkhdf_series_as_the_vtu_one() {
 /// values of a frame; `plot` draws the frame nearest to --time from the .vtkhdf.
 #[test]
 fn our_reader_and_h5py_agree_and_plot_reads_the_file() {
-    if !python_available() {
+    if !common::python_available() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -222,7 +189,7 @@ print("u", *[repr(float(x)) for x in f["VTKHDF/PointData/displacement"][o:o + n]
 /// aside), after frames past the checkpoint were cut away.
 #[test]
 fn resume_appends_to_the_same_file() {
-    if !python_available() {
+    if !common::python_available() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -376,7 +343,7 @@ fn resume_refuses_foreign_damaged_and_mismatched_files() {
 /// checkpoint to resume from, and `resume` says so).
 #[test]
 fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
-    if !python_available() {
+    if !common::python_available() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();

@@ -178,35 +178,8 @@ fn a_missing_pvd_is_rebuilt_and_a_format_2_checkpoint_resumes_unverified() {
 /// python3 scripts/check_vtkhdf.py FILE --digest: VTK's vtkHDFReader reads the steps and h5py
 /// every dataset; (steps, digest of every dataset but the run id).
 fn read_in_full(file: &Path) -> (serde_json::Value, serde_json::Value) {
-    let out = std::process::Command::new("python3")
-        .arg(common::repo().join("scripts/check_vtkhdf.py"))
-        .arg(file)
-        .arg("--digest")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "check_vtkhdf.py {}: {}",
-        file.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = common::check_vtkhdf(file, &["--digest"]);
     (v["steps"].clone(), v["digest"].clone())
-}
-
-fn python_available() -> bool {
-    let ok = std::process::Command::new("python3")
-        .args(["-c", "import vtk, h5py"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI needs python3 with vtk, h5py"
-        );
-        eprintln!("\n!!!!!!!! SKIPPED: python3 with vtk and h5py is not available\n");
-    }
-    ok
 }
 
 #[test]
@@ -245,7 +218,7 @@ fn an_older_vtkhdf_of_the_same_run_is_refused() {
 #[test]
 #[ignore = "known gap: unchecksummed B-tree 1 chunk index of the HDF5 1.8 format"]
 fn flipped_bits_in_a_vtkhdf_are_refused_or_harmless() {
-    if !python_available() {
+    if !common::python_available() {
         return;
     }
     let tmp = tempfile::tempdir().unwrap();

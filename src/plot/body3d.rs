@@ -87,15 +87,8 @@ impl<'a> Body3d<'a> {
         contact: Option<&ContactGroups>,
         width: u32,
     ) -> Result<()> {
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for f in &self.faces {
-            for &n in &f.nodes {
-                for (x, y) in [self.screen[n], self.ghost(n)] {
-                    lo = [lo[0].min(x), lo[1].min(y)];
-                    hi = [hi[0].max(x), hi[1].max(y)];
-                }
-            }
-        }
+        let corners = self.faces.iter().flat_map(|f| f.nodes.iter());
+        let (lo, hi) = bounds(corners.flat_map(|&n| [self.screen[n], self.ghost(n)]));
         let pad = 0.04 * self.size;
         let dx = hi[0] - lo[0] + 2.0 * pad;
         let dy = (hi[1] - lo[1] + 2.0 * pad).max(0.5 * dx);

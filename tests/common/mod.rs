@@ -377,3 +377,36 @@ pub fn dir_contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         })
         .collect()
 }
+
+/// Whether python3 imports vtk and h5py; a loud note when not (a failure with CI set).
+pub fn python_available() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import vtk, h5py"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI is set but python3 cannot import vtk and h5py"
+        );
+        eprintln!("\n!!!!!!!! SKIPPED: python3 with vtk and h5py is not available\n");
+    }
+    ok
+}
+
+/// scripts/check_vtkhdf.py FILE ARGS: its JSON report (the test fails if the script does).
+pub fn check_vtkhdf(file: &Path, args: &[&str]) -> serde_json::Value {
+    let out = Command::new("python3")
+        .arg(repo().join("scripts/check_vtkhdf.py"))
+        .arg(file)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "check_vtkhdf.py {} {args:?}: {}",
+        file.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
