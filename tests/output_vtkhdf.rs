@@ -360,6 +360,7 @@ fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
         .subsec_nanos() as u64;
+    let mut refused = 0;
     for attempt in 0..3u64 {
         let dir = tmp.path().join(format!("killed{attempt}"));
         // Somewhere between 15% and 75% of the whole file.
@@ -383,16 +384,30 @@ fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
             !dir.join("summary.json").exists(),
             "the run finished before it was killed"
         );
+        let before = common::dir_contents(&dir);
         let o = viscontact(&[
             "resume",
             dir.join("checkpoint.h5").to_str().unwrap(),
             "--quiet",
         ]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        if o.status.code() == Some(2) && stderr.contains("Nothing was changed") {
+            // A kill within a flush can leave metadata that HDF5 refuses (docs/restart.md):
+            // the refusal must then change nothing.
+            assert_eq!(
+                common::dir_contents(&dir),
+                before,
+                "refused at {at}: {stderr}"
+            );
+            refused += 1;
+            continue;
+        }
         assert!(
             o.status.success(),
-            "resume after kill -9 at {at} bytes: {}",
-            String::from_utf8_lossy(&o.stderr)
+            "resume after kill -9 at {at} bytes: {stderr}"
         );
         assert_eq!(digest(&file), want, "kill -9 at {at} bytes");
     }
+    // About 1 kill in 450 lands within a flush; three in a row means resume is broken.
+    assert!(refused < 3, "every resume after kill -9 was refused");
 }

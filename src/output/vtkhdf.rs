@@ -48,8 +48,10 @@
 //! below the metadata cache), and the new chunks go to space past the end the file on disk
 //! records; a process killed there (kill -9, out of memory) leaves the file as the last flush
 //! wrote it, which HDF5 opens with every frame flushed before. A kill during the flush itself
-//! (well under a millisecond of each frame) can leave metadata half written; HDF5 may then
-//! refuse the file. `resume` never overwrites a file it cannot read: it stops (exit 2) naming
+//! (well under a millisecond of each frame) can leave metadata half written: chunk indexes
+//! that point past the end of allocated space the superblock records (written last), which
+//! every open mends (`cover_written_space`), or rarer, other half-written metadata that HDF5
+//! may refuse. `resume` never overwrites a file it cannot read: it stops (exit 2) naming
 //! the file, and moving the file aside lets the resumed run write a new one from the
 //! checkpoint's step on.
 //!
@@ -125,12 +127,43 @@ fn h5_open(path: &Path, mode: OpenMode) -> hdf5::Result<hdf5::File> {
     // 1.10 format (superblock 3): it marks the file open for write in its superblock, and
     // the file of a killed run would not open again without `h5clear`.
     let checksummed = mode == OpenMode::Create;
-    hdf5::File::with_options()
+    let file = hdf5::File::with_options()
         .with_fapl(|p| match checksummed {
             true => p.file_locking(false).libver_v18(),
             false => p.file_locking(false),
         })
-        .open_as(path, mode)
+        .open_as(path, mode)?;
+    if mode != OpenMode::Create {
+        cover_written_space(&file)?;
+    }
+    Ok(file)
+}
+
+extern "C" {
+    /// HDF5 ≥ 1.10.2 (`H5Fpublic.h`), not bound by hdf5-metno-sys: sets the file's end of
+    /// allocated space to the larger of it and the file's size, plus `increment`.
+    fn H5Fincrement_filesize(
+        file_id: hdf5_sys::h5i::hid_t,
+        increment: hdf5_sys::h5::hsize_t,
+    ) -> hdf5_sys::h5::herr_t;
+}
+
+/// Lets HDF5 read everything the file holds, as `h5clear --increment=0` would. A flush
+/// writes the superblock, which records where the file's allocated space ends, after the
+/// other metadata; a process killed within a flush can leave chunk indexes on disk that
+/// point at chunks past that recorded end (written before the flush), and HDF5 then refuses
+/// to read them ("addr overflow") although every byte is in the file. The recorded end is
+/// moved to the file's size: in memory only for a file opened to read, written with the next
+/// flush for one opened to append. Whether the frames so read are intact is then for the
+/// checkpoint's checksums to say (`output::verify`).
+fn cover_written_space(file: &hdf5::File) -> hdf5::Result<()> {
+    // SAFETY: `file` is an open file; the call holds hdf5-metno's library lock like every
+    // other HDF5 call of the process.
+    let status = hdf5::sync::sync(|| unsafe { H5Fincrement_filesize(file.id(), 0) });
+    match status < 0 {
+        true => Err("H5Fincrement_filesize failed".into()),
+        false => Ok(()),
+    }
 }
 
 impl Sink {
