@@ -17,7 +17,7 @@ pub enum Error {
     #[error(
         "interrupted by {} during setup, before the first step: nothing on disk was changed \
          (the output directory holds what it held before)",
-        crate::run::signal_name(*.0)
+        signal_name(*.0)
     )]
     Interrupted(i32),
     /// An operating-system error while reading or writing a file. Exit status 1.
@@ -38,6 +38,11 @@ impl Error {
         Error::Solve(msg.into())
     }
 
+    /// An HDF5 error while reading or writing `path` (an I/O error of that file).
+    pub fn hdf5(path: &Path, e: hdf5_metno::Error) -> Self {
+        Error::io(path, std::io::Error::other(format!("HDF5: {e}")))
+    }
+
     /// Wraps an I/O error with the path it concerns.
     pub fn io(path: &Path, source: std::io::Error) -> Self {
         Error::Io {
@@ -55,6 +60,15 @@ impl Error {
             Error::Interrupted(signal) => 128 + signal,
             Error::Solve(_) | Error::Io { .. } => 1,
         }
+    }
+}
+
+/// "SIGINT" / "SIGTERM" / "signal N".
+pub fn signal_name(signal: i32) -> String {
+    match signal {
+        libc::SIGINT => "SIGINT".into(),
+        libc::SIGTERM => "SIGTERM".into(),
+        s => format!("signal {s}"),
     }
 }
 

@@ -28,10 +28,6 @@ pub(super) fn h5_create_sealed<P: AsRef<Path>>(path: P) -> hdf5::Result<hdf5::Fi
         .create(path)
 }
 
-pub(crate) fn h5err(path: &Path, e: hdf5::Error) -> Error {
-    Error::io(path, std::io::Error::other(format!("HDF5: {e}")))
-}
-
 pub(super) fn fsync_file(path: &Path) -> Result<()> {
     std::fs::File::open(path)
         .and_then(|f| f.sync_all())

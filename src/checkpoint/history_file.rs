@@ -16,7 +16,7 @@
 //! once asked for a 631 GB sparse file), and the copies cost O(1) per row amortized. The old
 //! checkpoint stays valid against the new file (same rows, same hash, same run id).
 
-use super::h5::{describe, fsync_dir, fsync_file, h5_create_sealed, h5err, str_attr};
+use super::h5::{describe, fsync_dir, fsync_file, h5_create_sealed, str_attr};
 use super::seal;
 use super::{Hash64, Identity, HISTORY_DATASET, HISTORY_FILE_NAME};
 
@@ -105,7 +105,7 @@ impl HistoryFile {
             let _ = std::fs::remove_file(&tmp);
             e
         };
-        let offset = write().map_err(|e| failed(h5err(path, e)))?;
+        let offset = write().map_err(|e| failed(Error::hdf5(path, e)))?;
         let mut file = HistoryFile {
             path: tmp.clone(),
             capacity,

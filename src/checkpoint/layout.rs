@@ -3,7 +3,7 @@
 
 use super::h5::{h5_create_sealed, scalar, str_attr, string_dataset, vector};
 use super::history_file::HistoryFile;
-use super::writer::{Snapshot, SnapshotMemory};
+use super::snapshot::{Snapshot, SnapshotMemory};
 use super::{Identity, RunLog, FORMAT, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
 use crate::output::FrameSum;
 use hdf5_metno as hdf5;

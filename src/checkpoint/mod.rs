@@ -71,6 +71,7 @@ mod layout;
 mod read;
 mod resume;
 mod seal;
+mod snapshot;
 mod template;
 mod writer;
 

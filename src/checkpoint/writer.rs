@@ -1,93 +1,18 @@
 //! The background writer: snapshots handed over by the run, coalesced, and written by a
 //! thread (history rows, `checkpoint.h5.tmp`, fsync, rename).
 
-use super::h5::{fsync_dir, fsync_file, h5err};
+use super::h5::{fsync_dir, fsync_file};
 use super::history_file::{grown_capacity, HistoryFile};
 use super::layout::{variable_data, write_checkpoint};
 use super::seal;
+use super::snapshot::{Snapshot, SnapshotMemory};
 use super::template::Template;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
-use crate::history::{Memory, PronyTerm};
+use crate::history::Memory;
 use crate::output::FrameSum;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
-
-/// The state saved at one checkpoint, copied out of the time loop (so that the run goes on
-/// while a background thread writes it).
-pub(super) struct Snapshot {
-    pub(super) n: usize,
-    pub(super) k: f64,
-    pub(super) u: Vec<f64>,
-    pub(super) u_sum: Vec<f64>,
-    pub(super) u_comp: Vec<f64>,
-    pub(super) w: Vec<f64>,
-    pub(super) z: Vec<f64>,
-    pub(super) active: Vec<bool>,
-    pub(super) memory: SnapshotMemory,
-    pub(super) log: RunLog,
-    /// The frames written before step n, with their checksums.
-    pub(super) frames: Vec<FrameSum>,
-}
-
-pub(super) enum SnapshotMemory {
-    None,
-    Prony(Vec<PronyTerm>),
-    /// The past displacements not yet sent to the writer: rows `from..from + rows.len()`.
-    Direct {
-        from: usize,
-        rows: Vec<Vec<f64>>,
-    },
-}
-
-impl Snapshot {
-    /// Folds a newer snapshot into this unwritten one: the newer state wins, history rows
-    /// accumulate.
-    fn absorb(&mut self, newer: Snapshot) {
-        let older_rows = match &mut self.memory {
-            SnapshotMemory::Direct { rows, .. } => Some(std::mem::take(rows)),
-            _ => None,
-        };
-        let from = match &self.memory {
-            SnapshotMemory::Direct { from, .. } => *from,
-            _ => 0,
-        };
-        *self = match (older_rows, newer) {
-            (
-                Some(mut rows),
-                Snapshot {
-                    memory: SnapshotMemory::Direct { rows: more, .. },
-                    n,
-                    k,
-                    u,
-                    u_sum,
-                    u_comp,
-                    w,
-                    z,
-                    active,
-                    log,
-                    frames,
-                },
-            ) => {
-                rows.extend(more);
-                Snapshot {
-                    n,
-                    k,
-                    u,
-                    u_sum,
-                    u_comp,
-                    w,
-                    z,
-                    active,
-                    memory: SnapshotMemory::Direct { from, rows },
-                    log,
-                    frames,
-                }
-            }
-            (_, newer) => newer,
-        };
-    }
-}
 
 /// What the background writer and the run share.
 #[derive(Default)]
@@ -375,7 +300,7 @@ impl Disk {
                 )
                 .map_err(|e| {
                     let _ = std::fs::remove_file(&tmp);
-                    h5err(&path, e)
+                    Error::hdf5(&path, e)
                 })?;
                 let mut bytes = std::fs::read(&tmp).map_err(|e| Error::io(&tmp, e))?;
                 seal::seal_checkpoint(&mut bytes);

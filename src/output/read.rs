@@ -71,7 +71,7 @@ pub fn read_series(path: &Path) -> Result<(PathBuf, Vec<(f64, FrameRef)>)> {
 pub fn read_frame(frame: &FrameRef) -> Result<Vtu> {
     match frame {
         FrameRef::Vtu(path) => read_vtu(path),
-        FrameRef::Vtkhdf { path, index } => vtkhdf::read_frame(path, *index),
+        FrameRef::Vtkhdf { path, index } => read_vtkhdf_frame(path, *index),
     }
 }
 
@@ -382,6 +382,81 @@ fn base64_decode(s: &str) -> Option<Vec<u8>> {
         out.extend_from_slice(&[(n >> 16) as u8, (n >> 8) as u8, n as u8][..take]);
     }
     Some(out)
+}
+
+/// Frame `index` of a `solution.vtkhdf`, as [`Vtu`] (for `plot`).
+fn read_vtkhdf_frame(path: &Path, index: usize) -> Result<Vtu> {
+    read_frame_h5(path, index).map_err(|e| {
+        Error::input(format!(
+            "{}: frame {index} cannot be read ({e})",
+            path.display()
+        ))
+    })
+}
+
+fn read_frame_h5(path: &Path, index: usize) -> hdf5_metno::Result<Vtu> {
+    let file = vtkhdf::h5_open(path, hdf5_metno::OpenMode::Read)?;
+    let root = file.group("VTKHDF")?;
+    let points: Vec<f64> = root.dataset("Points")?.read_raw()?;
+    let conn: Vec<i64> = root.dataset("Connectivity")?.read_raw()?;
+    let offsets: Vec<i64> = root.dataset("Offsets")?.read_raw()?;
+    let n = points.len() / 3;
+    let mut cells = Vec::with_capacity(offsets.len().saturating_sub(1));
+    for w in offsets.windows(2) {
+        let (a, b) = (w[0] as usize, w[1] as usize);
+        let cell = conn
+            .get(a..b)
+            .ok_or("Offsets point past Connectivity")?
+            .iter()
+            .map(|&i| i as usize)
+            .collect::<Vec<_>>();
+        if cell.iter().any(|&i| i >= n) {
+            return Err("a cell refers to a missing point".into());
+        }
+        cells.push(cell);
+    }
+    let steps = root.group("Steps")?;
+    let read = |data: &str, offsets: &str, rows: usize| -> hdf5_metno::Result<Vec<Array>> {
+        let mut out = Vec::new();
+        for ds in root.group(data)?.datasets()? {
+            let full = ds.name();
+            let name = full.rsplit('/').next().unwrap_or_default().to_string();
+            let shape = ds.shape();
+            let components = shape.get(1).copied().unwrap_or(1);
+            let from = steps
+                .group(offsets)?
+                .dataset(&name)
+                .and_then(|o| o.read_raw::<i64>())
+                .ok()
+                .and_then(|o| o.get(index).copied())
+                .unwrap_or(0) as usize;
+            if from + rows > shape[0] {
+                return Err(format!("{full}: frame {index} lies past its end").into());
+            }
+            let values: Vec<f64> = if components == 1 {
+                ds.read_slice_1d::<f64, _>(from..from + rows)?.to_vec()
+            } else {
+                ds.read_slice_2d::<f64, _>(ndarray::s![from..from + rows, ..])?
+                    .iter()
+                    .copied()
+                    .collect()
+            };
+            out.push(Array {
+                name,
+                components,
+                values,
+            });
+        }
+        Ok(out)
+    };
+    let point_data = read("PointData", "PointDataOffsets", n)?;
+    let cell_data = read("CellData", "CellDataOffsets", cells.len())?;
+    Ok(Vtu {
+        points: points.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(),
+        cells,
+        point_data,
+        cell_data,
+    })
 }
 
 #[cfg(test)]

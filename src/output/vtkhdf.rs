@@ -70,7 +70,6 @@ use hdf5_metno_sys as hdf5_sys;
 
 use super::writer::Written;
 use super::{zlib, Array, Compression, Geometry, Precision, Values};
-use crate::checkpoint::h5::h5err;
 use crate::{Error, Result};
 
 /// Level of HDF5's deflate filter: it compresses the mesh (once); the fields' chunks come
@@ -119,7 +118,7 @@ struct Open {
     frames: usize,
 }
 
-fn h5_open(path: &Path, mode: OpenMode) -> hdf5::Result<hdf5::File> {
+pub(super) fn h5_open(path: &Path, mode: OpenMode) -> hdf5::Result<hdf5::File> {
     // File locking off, as for checkpoints (checkpoint/h5.rs): a child process inherits
     // HDF5's flock and would keep the file locked for as long as it lives. A new file gets
     // the format of HDF5 1.8 or later: superblock 2 and object headers 2, which carry
@@ -302,7 +301,7 @@ impl Sink {
     /// The file, open, holding exactly `index` frames: created at frame 0, else opened (if
     /// the thread just started) and cut back to `index` frames.
     fn file_at(&mut self, job: &Job) -> Result<&hdf5::File> {
-        let h5 = |e| h5err(&self.path, e);
+        let h5 = |e| Error::hdf5(&self.path, e);
         if job.index == 0 {
             self.open = None;
             let file = self.create(job).map_err(h5)?;
@@ -329,7 +328,7 @@ impl Sink {
         }
         if job.index < open.frames {
             let (n, c) = (self.points.len(), self.cells.len() / self.nodes_per_cell);
-            truncate(&open.file, job.index, n, c).map_err(|e| h5err(&self.path, e))?;
+            truncate(&open.file, job.index, n, c).map_err(|e| Error::hdf5(&self.path, e))?;
             open.frames = job.index;
         }
         Ok(&open.file)
@@ -337,7 +336,7 @@ impl Sink {
 
     /// Appends the frame to the open file that holds `job.index` frames, then flushes.
     fn append(&self, file: &hdf5::File, job: &Job) -> Result<()> {
-        let h5 = |e| h5err(&self.path, e);
+        let h5 = |e| Error::hdf5(&self.path, e);
         let root = file.group("VTKHDF").map_err(h5)?;
         let steps = root.group("Steps").map_err(h5)?;
         let k = job.index;
@@ -393,7 +392,7 @@ impl Sink {
     /// The growing datasets of `data` must be the fields of the frame, with their
     /// components and precision: a resumed run must write what the file holds.
     fn check_fields(&self, data: &Group, arrays: &[Array]) -> Result<()> {
-        let h5 = |e| h5err(&self.path, e);
+        let h5 = |e| Error::hdf5(&self.path, e);
         let mut stored = Vec::new();
         for ds in data.datasets().map_err(h5)? {
             if ds.is_resizable() {
@@ -461,7 +460,7 @@ impl super::writer::Sink for Sink {
     /// Closes the file (every frame was flushed when it was written).
     fn close(&mut self) -> Result<()> {
         match self.open.take() {
-            Some(open) => open.file.close().map_err(|e| h5err(&self.path, e)),
+            Some(open) => open.file.close().map_err(|e| Error::hdf5(&self.path, e)),
             None => Ok(()),
         }
     }
@@ -726,82 +725,6 @@ impl Stored {
         }
         Ok(())
     }
-}
-
-/// Frame `index` of a `solution.vtkhdf`, as [`super::read::Vtu`] (for `plot`).
-pub(super) fn read_frame(path: &Path, index: usize) -> Result<super::read::Vtu> {
-    read_frame_h5(path, index).map_err(|e| {
-        Error::input(format!(
-            "{}: frame {index} cannot be read ({e})",
-            path.display()
-        ))
-    })
-}
-
-fn read_frame_h5(path: &Path, index: usize) -> hdf5::Result<super::read::Vtu> {
-    use super::read::{Array as RArray, Vtu};
-    let file = h5_open(path, OpenMode::Read)?;
-    let root = file.group("VTKHDF")?;
-    let points: Vec<f64> = root.dataset("Points")?.read_raw()?;
-    let conn: Vec<i64> = root.dataset("Connectivity")?.read_raw()?;
-    let offsets: Vec<i64> = root.dataset("Offsets")?.read_raw()?;
-    let n = points.len() / 3;
-    let mut cells = Vec::with_capacity(offsets.len().saturating_sub(1));
-    for w in offsets.windows(2) {
-        let (a, b) = (w[0] as usize, w[1] as usize);
-        let cell = conn
-            .get(a..b)
-            .ok_or("Offsets point past Connectivity")?
-            .iter()
-            .map(|&i| i as usize)
-            .collect::<Vec<_>>();
-        if cell.iter().any(|&i| i >= n) {
-            return Err("a cell refers to a missing point".into());
-        }
-        cells.push(cell);
-    }
-    let steps = root.group("Steps")?;
-    let read = |data: &str, offsets: &str, rows: usize| -> hdf5::Result<Vec<RArray>> {
-        let mut out = Vec::new();
-        for ds in root.group(data)?.datasets()? {
-            let full = ds.name();
-            let name = full.rsplit('/').next().unwrap_or_default().to_string();
-            let shape = ds.shape();
-            let components = shape.get(1).copied().unwrap_or(1);
-            let from = steps
-                .group(offsets)?
-                .dataset(&name)
-                .and_then(|o| o.read_raw::<i64>())
-                .ok()
-                .and_then(|o| o.get(index).copied())
-                .unwrap_or(0) as usize;
-            if from + rows > shape[0] {
-                return Err(format!("{full}: frame {index} lies past its end").into());
-            }
-            let values: Vec<f64> = if components == 1 {
-                ds.read_slice_1d::<f64, _>(from..from + rows)?.to_vec()
-            } else {
-                ds.read_slice_2d::<f64, _>(ndarray::s![from..from + rows, ..])?
-                    .iter()
-                    .copied()
-                    .collect()
-            };
-            out.push(RArray {
-                name,
-                components,
-                values,
-            });
-        }
-        Ok(out)
-    };
-    let point_data = read("PointData", "PointDataOffsets", n)?;
-    let cell_data = read("CellData", "CellDataOffsets", cells.len())?;
-    Ok(Vtu {
-        points: points.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(),
-        cells,
-        point_data,
-        cell_data,
-    })
 }
 
 /// What frames `0..limit` of a `solution.vtkhdf` hold, read back in full and checked entry by

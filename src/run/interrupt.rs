@@ -133,12 +133,3 @@ fn die_by(sig: libc::c_int) -> ! {
     // The default action of SIGINT/SIGTERM ends the process; should it ever return here:
     std::process::exit(128 + sig)
 }
-
-/// "SIGINT" / "SIGTERM" / "signal N".
-pub fn signal_name(signal: i32) -> String {
-    match signal {
-        libc::SIGINT => "SIGINT".into(),
-        libc::SIGTERM => "SIGTERM".into(),
-        s => format!("signal {s}"),
-    }
-}

@@ -16,8 +16,9 @@ mod dir;
 mod interrupt;
 mod summary;
 
+pub use crate::error::signal_name;
 pub use dir::LOCK_NAME;
-pub use interrupt::{signal_name, Interrupt};
+pub use interrupt::Interrupt;
 pub use summary::{ContactSummary, Final, Iterations, OutputSummary, Status, Summary, Timing};
 
 use crate::checkpoint::{self, RunLog};

@@ -1,0 +1,82 @@
+//! A checkpoint's state in memory: copied out of the time loop by the run, folded with a newer
+//! one while the writer thread is busy, laid out by `layout` and written by `writer`.
+
+use super::RunLog;
+use crate::history::PronyTerm;
+use crate::output::FrameSum;
+
+/// The state saved at one checkpoint, copied out of the time loop (so that the run goes on
+/// while a background thread writes it).
+pub(super) struct Snapshot {
+    pub(super) n: usize,
+    pub(super) k: f64,
+    pub(super) u: Vec<f64>,
+    pub(super) u_sum: Vec<f64>,
+    pub(super) u_comp: Vec<f64>,
+    pub(super) w: Vec<f64>,
+    pub(super) z: Vec<f64>,
+    pub(super) active: Vec<bool>,
+    pub(super) memory: SnapshotMemory,
+    pub(super) log: RunLog,
+    /// The frames written before step n, with their checksums.
+    pub(super) frames: Vec<FrameSum>,
+}
+
+pub(super) enum SnapshotMemory {
+    None,
+    Prony(Vec<PronyTerm>),
+    /// The past displacements not yet sent to the writer: rows `from..from + rows.len()`.
+    Direct {
+        from: usize,
+        rows: Vec<Vec<f64>>,
+    },
+}
+
+impl Snapshot {
+    /// Folds a newer snapshot into this unwritten one: the newer state wins, history rows
+    /// accumulate.
+    pub(super) fn absorb(&mut self, newer: Snapshot) {
+        let older_rows = match &mut self.memory {
+            SnapshotMemory::Direct { rows, .. } => Some(std::mem::take(rows)),
+            _ => None,
+        };
+        let from = match &self.memory {
+            SnapshotMemory::Direct { from, .. } => *from,
+            _ => 0,
+        };
+        *self = match (older_rows, newer) {
+            (
+                Some(mut rows),
+                Snapshot {
+                    memory: SnapshotMemory::Direct { rows: more, .. },
+                    n,
+                    k,
+                    u,
+                    u_sum,
+                    u_comp,
+                    w,
+                    z,
+                    active,
+                    log,
+                    frames,
+                },
+            ) => {
+                rows.extend(more);
+                Snapshot {
+                    n,
+                    k,
+                    u,
+                    u_sum,
+                    u_comp,
+                    w,
+                    z,
+                    active,
+                    memory: SnapshotMemory::Direct { from, rows },
+                    log,
+                    frames,
+                }
+            }
+            (_, newer) => newer,
+        };
+    }
+}
