@@ -18,7 +18,7 @@ use std::path::Path;
 use std::time::Instant;
 use viscontact::checkpoint::{Identity, RunLog, Writer};
 use viscontact::run::{run, setup, Outcome, RunOptions};
-use viscontact::time_loop::TimeLoop;
+use viscontact::time_loop::{Observer, Solved, TimeLoop};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -87,26 +87,48 @@ fn main() {
     let dir = tmp.join("general");
     std::fs::create_dir_all(&dir).expect("dir");
     let mut tl = TimeLoop::new(&scene, &disc).expect("time loop");
-    let mut writer = Writer::new(
+    let writer = Writer::new(
         &dir,
         Identity::new(&scene, &mesh, &disc, None),
         scene.steps,
-        &tl,
+        tl.rows(),
     );
-    let mut log = RunLog::default();
-    let mut latency = Vec::new();
-    while tl.n() < scene.steps {
-        let step = tl.solve_step().expect("step");
-        log.iterations.push(step.report.iterations);
-        let active = vec![false; tl.rows.len()];
-        tl.advance();
-        let t = Instant::now();
-        writer
-            .write(&tl, &log, &active, Vec::new())
-            .expect("checkpoint");
-        writer.flush().expect("checkpoint");
-        latency.push((tl.n(), t.elapsed().as_secs_f64()));
+    // Steps 0..N-1, a checkpoint after each, waited for.
+    struct EveryStep {
+        writer: Writer,
+        log: RunLog,
+        active: Vec<bool>,
+        latency: Vec<(usize, f64)>,
+        stop: usize,
     }
+    impl Observer for EveryStep {
+        fn stop_after(&mut self, n: usize) -> bool {
+            n == self.stop
+        }
+        fn solved(&mut self, s: &Solved) -> viscontact::Result<()> {
+            self.log.iterations.push(s.step.report.iterations);
+            Ok(())
+        }
+        fn advanced(&mut self, tl: &TimeLoop) -> viscontact::Result<()> {
+            let t = Instant::now();
+            self.writer
+                .write(tl.state(), &self.log, &self.active, Vec::new())?;
+            self.writer.flush()?;
+            self.latency.push((tl.n(), t.elapsed().as_secs_f64()));
+            Ok(())
+        }
+    }
+    let mut every = EveryStep {
+        writer,
+        log: RunLog::default(),
+        active: vec![false; tl.rows().len()],
+        latency: Vec::new(),
+        stop: scene.steps - 1,
+    };
+    tl.run(scene.steps, &mut every).expect("steps");
+    let EveryStep {
+        writer, latency, ..
+    } = every;
     writer.finish().expect("checkpoint");
     // 3. The integrity check's own cost: the CRC-32 over a checkpoint's bytes, which every
     //    checkpoint computes once and resume once more (src/checkpoint/seal.rs).

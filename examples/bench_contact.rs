@@ -17,7 +17,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use viscontact::run::setup;
-use viscontact::time_loop::TimeLoop;
+use viscontact::time_loop::{Solved, TimeLoop};
 
 const REPEAT: usize = 3;
 
@@ -74,15 +74,12 @@ fn time_run(scene: &Path, overrides: &[String]) -> (f64, f64, usize) {
     let (scene, _mesh, disc) = setup(scene, overrides).expect("scene");
     let mut tl = TimeLoop::new(&scene, &disc).expect("setup");
     let mut iterations = 0;
-    loop {
-        let n = tl.n();
-        iterations += tl.solve_step().expect("step").report.iterations;
-        if n == scene.steps {
-            break;
-        }
-        tl.advance();
-    }
-    let umax = tl.history.u.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let mut count = |s: &Solved| {
+        iterations += s.step.report.iterations;
+        Ok(())
+    };
+    tl.run(scene.steps, &mut count).expect("steps");
+    let umax = tl.u().iter().fold(0.0f64, |a, v| a.max(v.abs()));
     (start.elapsed().as_secs_f64(), umax, iterations)
 }
 

@@ -16,7 +16,7 @@ fn u_final(scene: &std::path::Path, set: &[String]) -> (Vec<f64>, f64) {
     let start = Instant::now();
     let mut tl = TimeLoop::new(&scene, &disc).unwrap();
     viscontact::study::solve_to_end(&mut tl, scene.steps).unwrap();
-    (tl.history.u.clone(), start.elapsed().as_secs_f64())
+    (tl.u().to_vec(), start.elapsed().as_secs_f64())
 }
 
 fn max(v: &[f64]) -> f64 {

@@ -25,7 +25,7 @@ use std::process::Command;
 use std::time::Instant;
 use viscontact::output::read::read_vtu;
 use viscontact::run::setup;
-use viscontact::time_loop::TimeLoop;
+use viscontact::time_loop::{Solved, TimeLoop};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -146,18 +146,12 @@ fn main() {
     for _ in 0..repeat {
         tl = TimeLoop::new(&scene, &disc).expect("setup");
         let start = Instant::now();
-        loop {
-            let last = tl.n() == scene.steps;
-            tl.solve_step().expect("step");
-            if last {
-                break;
-            }
-            tl.advance();
-        }
+        tl.run(scene.steps, &mut |_: &Solved| Ok(()))
+            .expect("steps");
         step_times.push(start.elapsed().as_secs_f64() / (scene.steps + 1) as f64);
     }
     let per_step = median(step_times);
-    let factor = &tl.factor;
+    let factor = tl.factor();
     let mut y: Vec<f64> = (0..factor.dim()).map(|i| (i % 7) as f64 - 3.0).collect();
     let solves: Vec<f64> = (0..20)
         .map(|_| {

@@ -201,6 +201,41 @@ impl Plan {
     }
 }
 
+/// A time loop at t_n, before step n is solved: its history and the last solved step's w
+/// and multipliers (the next solve's warm start). What a checkpoint saves
+/// (`TimeLoop::state`); everything else of the loop is rebuilt from the scene.
+pub struct LoopState<'a> {
+    pub history: &'a History,
+    pub w: &'a [f64],
+    pub z: &'a [f64],
+}
+
+/// A [`LoopState`] as a checkpoint gives it back (`TimeLoop::restore`).
+pub struct SavedLoop {
+    pub history: SavedHistory,
+    pub w: Vec<f64>,
+    pub z: Vec<f64>,
+}
+
+/// A history as a checkpoint saved it, for [`History::restore`].
+pub struct SavedHistory {
+    pub n: usize,
+    pub k: f64,
+    pub u: Vec<f64>,
+    pub u_sum: Vec<f64>,
+    pub u_comp: Vec<f64>,
+    pub memory: SavedMemory,
+}
+
+/// The memory state a checkpoint saved.
+pub enum SavedMemory {
+    None,
+    /// The Prony terms with their weights, one-step decays and states.
+    Prony(Vec<PronyTerm>),
+    /// The past displacements u_0..u_{n−1} of the direct sum.
+    Direct(Vec<Vec<f64>>),
+}
+
 /// The state carried from step to step: n, u_n (compensated) and the memory.
 #[derive(Clone, Debug)]
 pub struct History {
@@ -281,6 +316,56 @@ impl History {
                 true
             }
         }
+    }
+
+    /// Takes back a saved history into this one, freshly built from the same scene (a
+    /// resume): the memory must be of the kind this one plans, with the same Prony weights
+    /// and, up to the rounding of e^{−b k}, the same decays.
+    pub fn restore(&mut self, saved: SavedHistory) -> Result<()> {
+        let mismatch = |what: &str| {
+            crate::Error::input(format!(
+                "the stored memory is {what}, which the scene's relaxation kernel does not \
+                 match: the checkpoint does not belong to this scene"
+            ))
+        };
+        match (&mut self.memory, saved.memory) {
+            (Memory::None, SavedMemory::None) => {}
+            (Memory::Prony(terms), SavedMemory::Prony(stored)) => {
+                if terms.len() != stored.len() {
+                    return Err(mismatch(&format!("{} Prony terms", stored.len())));
+                }
+                for (i, (t, s)) in terms.iter_mut().zip(stored).enumerate() {
+                    // decay = exp(−b k) is recomputed by History::new from the scene's b and
+                    // the same k: equal bits unless the kernel changed.
+                    let expected = (t.decay.ln() / self.k) * saved.k;
+                    if t.a.to_bits() != s.a.to_bits()
+                        || (expected.exp() - s.decay).abs() > 1e-12 * s.decay.abs()
+                    {
+                        return Err(mismatch(&format!(
+                            "term {i}: a = {}, exp(-b k) = {}",
+                            s.a, s.decay
+                        )));
+                    }
+                    if s.m.len() != t.m.len() {
+                        return Err(mismatch(&format!("term {i} of the wrong size")));
+                    }
+                    *t = s;
+                }
+            }
+            (Memory::Direct { past, r_lag }, SavedMemory::Direct(rows)) => {
+                *past = rows;
+                r_lag.clear();
+            }
+            (_, SavedMemory::None) => return Err(mismatch("absent (no relaxation)")),
+            (_, SavedMemory::Prony(_)) => return Err(mismatch("a Prony series")),
+            (_, SavedMemory::Direct(_)) => return Err(mismatch("a general kernel's direct sum")),
+        }
+        self.k = saved.k;
+        self.n = saved.n;
+        self.u = saved.u;
+        self.u_sum = saved.u_sum;
+        self.u_comp = saved.u_comp;
+        Ok(())
     }
 
     /// n → n + 1 with the velocity w_n: u_{n+1} = u_n + k w_n, and the memory update.

@@ -320,7 +320,7 @@ pub fn solve_once(
     let u = {
         let mut tl = TimeLoop::new(&scene, &disc)?;
         solve_to_end(&mut tl, scene.steps)?;
-        tl.history.u.clone()
+        tl.u().to_vec()
     };
     let steps_s = steps_start.elapsed().as_secs_f64();
     let wall_s = start.elapsed().as_secs_f64();
@@ -341,17 +341,11 @@ pub fn solve_once(
     ))
 }
 
-/// Solves the steps of a time loop up to n = N, without output: then `tl.history.u` is
+/// Solves the steps of a time loop up to n = N, without output: then `tl.u()` is
 /// u_N = u_0 + kΣ_{j<N} w_j.
 pub fn solve_to_end(tl: &mut TimeLoop, steps: usize) -> Result<()> {
-    loop {
-        let n = tl.n();
-        tl.solve_step()?;
-        if n == steps {
-            return Ok(());
-        }
-        tl.advance();
-    }
+    tl.run(steps, &mut |_: &crate::time_loop::Solved| Ok(()))
+        .map(|_| ())
 }
 
 /// Runs a case `repeat` times (None: 3 when the first run takes under a second) and keeps

@@ -1,7 +1,9 @@
 //! The time loop of Problem 3.1: for n = 0, 1, …, N form b_n from the history and solve the
 //! step problem for w_n, then advance u and m. A run is `TimeLoop::new` (setup: factor K_A
-//! once, build the step solver) followed by `solve_step` / `advance` pairs; whoever drives
-//! it (the `run` command, a test, an example) consumes each solved step.
+//! once, build the step solver) followed by [`TimeLoop::run`], the one driver of the steps:
+//! it hands each solved step to an [`Observer`] (the `run` command's consumers, a study, a
+//! test, a benchmark) and asks it whether to stop. [`TimeLoop::state`] and
+//! [`TimeLoop::restore`] are the only way a checkpoint sees the loop.
 //!
 //! # The implicit variant (`[scheme] history = "implicit"`)
 //!
@@ -23,28 +25,28 @@
 
 use crate::effects::{self, Effects};
 use crate::fem::{mul_add, Discretization, SymmetricPair};
-use crate::history::{History, Plan};
+use crate::history::{History, LoopState, Plan, SavedLoop};
 use crate::scene::{self, Scene};
 use crate::solver::{Factor, Rows, StepReport, StepSolver};
 use crate::stability::Verdict;
 use crate::{Error, Result};
 
 pub struct TimeLoop<'p> {
-    pub scene: &'p Scene,
-    pub disc: &'p Discretization,
-    pub effects: Effects,
-    pub factor: Factor,
-    pub solver: StepSolver,
-    pub rows: Rows,
-    pub history: History,
+    scene: &'p Scene,
+    disc: &'p Discretization,
+    effects: Effects,
+    factor: Factor,
+    solver: StepSolver,
+    rows: Rows,
+    history: History,
     /// How the memory sum is computed (the compressed kernel's fit, if any).
-    pub plan: Plan,
+    plan: Plan,
     /// w_n of the last solved step.
-    pub w: Vec<f64>,
+    w: Vec<f64>,
     /// Multipliers of the last solved step: λ on contact rows, γ on friction rows.
-    pub z: Vec<f64>,
+    z: Vec<f64>,
     /// m_n of the last solved step (empty without memory).
-    pub m: Vec<f64>,
+    m: Vec<f64>,
     b: Vec<f64>,
     growth: Growth,
     /// K_B and K_R (when both are used and share their pattern): K_B u_n + K_R m_n in one
@@ -106,7 +108,8 @@ impl Growth {
 /// 1.3e-15 with max|w_n| = 1.3e-7 and max|u_n|/t_n = 1.3e-5).
 const VIOLATION_TOLERANCE: f64 = 1e-8;
 
-/// A solved step n: t_n, u_n (displacement), w_n (velocity), m_n, multipliers.
+/// A solved step n: t_n, u_n (displacement), w_n (velocity), m_n, the multipliers and the
+/// rows of Γ3 they belong to.
 pub struct Step<'a> {
     pub n: usize,
     pub t: f64,
@@ -114,7 +117,52 @@ pub struct Step<'a> {
     pub w: &'a [f64],
     pub m: Option<&'a [f64]>,
     pub z: &'a [f64],
+    pub rows: &'a Rows,
     pub report: StepReport,
+}
+
+/// A solved step as [`TimeLoop::run`] hands it to its observer.
+pub struct Solved<'s> {
+    pub step: Step<'s>,
+    /// n = the last step of the run: the loop ends with it.
+    pub last: bool,
+    /// The loop stops after this step ([`Observer::stop_after`]); a resume continues it.
+    pub stop: bool,
+}
+
+/// Whoever consumes the solved steps of [`TimeLoop::run`]. A closure `FnMut(&Solved) ->
+/// Result<()>` is an observer that never stops the loop early.
+pub trait Observer {
+    /// Whether the loop stops after step n, asked once step n is solved (`--stop-after`, a
+    /// signal). Not asked of the last step.
+    fn stop_after(&mut self, n: usize) -> bool {
+        let _ = n;
+        false
+    }
+
+    /// Step n is solved.
+    fn solved(&mut self, s: &Solved) -> Result<()>;
+
+    /// The loop advanced to t_{n+1}: `tl.state()` is what a checkpoint of step n + 1 saves.
+    fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
+        let _ = tl;
+        Ok(())
+    }
+}
+
+impl<F: FnMut(&Solved) -> Result<()>> Observer for F {
+    fn solved(&mut self, s: &Solved) -> Result<()> {
+        self(s)
+    }
+}
+
+/// How [`TimeLoop::run`] ended, when no step failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunEnd {
+    /// The last step was solved.
+    Completed,
+    /// After a step the observer stopped at; the loop stands at the next step.
+    Stopped,
 }
 
 impl<'p> TimeLoop<'p> {
@@ -168,9 +216,91 @@ impl<'p> TimeLoop<'p> {
         })
     }
 
+    /// Solves the steps from the current n to `last` (inclusive), each handed to `observer`:
+    /// solve step n; unless it is the last or the observer stops after it, advance to
+    /// t_{n+1} and tell the observer. The only caller of the step function.
+    pub fn run(&mut self, last: usize, observer: &mut impl Observer) -> Result<RunEnd> {
+        loop {
+            let n = self.n();
+            let is_last = n >= last;
+            let step = self.solve_step()?;
+            // Asked after the solve: a signal that came while the last step was solved lets
+            // the run complete (nothing would be left to resume).
+            let stop = !is_last && observer.stop_after(n);
+            let solved = Solved {
+                step,
+                last: is_last,
+                stop,
+            };
+            observer.solved(&solved)?;
+            if is_last {
+                return Ok(RunEnd::Completed);
+            }
+            self.advance();
+            observer.advanced(self)?;
+            if stop {
+                return Ok(RunEnd::Stopped);
+            }
+        }
+    }
+
+    /// What a checkpoint saves of the loop at t_n, before step n is solved.
+    pub fn state(&self) -> LoopState<'_> {
+        LoopState {
+            history: &self.history,
+            w: &self.w,
+            z: &self.z,
+        }
+    }
+
+    /// Takes back the state a checkpoint saved (a resume), into this loop built from the
+    /// same scene; the sizes were checked by the checkpoint, the memory's kind and terms
+    /// are checked here.
+    pub fn restore(&mut self, saved: SavedLoop) -> Result<()> {
+        self.history.restore(saved.history)?;
+        self.w = saved.w;
+        self.z = saved.z;
+        Ok(())
+    }
+
+    /// The rows of Γ3: contact rows, then friction rows.
+    pub fn rows(&self) -> &Rows {
+        &self.rows
+    }
+
+    /// The effects of Remark 2.5 the run keeps.
+    pub fn effects(&self) -> &Effects {
+        &self.effects
+    }
+
+    /// The contact solver of the steps.
+    pub fn solver(&self) -> &StepSolver {
+        &self.solver
+    }
+
+    /// The factor of the step matrix (K_A, or its implicit variant).
+    pub fn factor(&self) -> &Factor {
+        &self.factor
+    }
+
+    /// How the memory sum is computed.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
     /// The index n of the next step to solve.
     pub fn n(&self) -> usize {
         self.history.n
+    }
+
+    /// u_n of the current n (after the last step of a completed run: u_N).
+    pub fn u(&self) -> &[f64] {
+        &self.history.u
+    }
+
+    /// The step size k.
+    pub fn k(&self) -> f64 {
+        self.history.k
     }
 
     /// t_n = n k.
@@ -179,7 +309,7 @@ impl<'p> TimeLoop<'p> {
     }
 
     /// Solves (3.1) at the current n: b_n = f_n − K_B u_n − K_R m_n − g_F, then w_n.
-    pub fn solve_step(&mut self) -> Result<Step<'_>> {
+    fn solve_step(&mut self) -> Result<Step<'_>> {
         let t = self.time();
         let h = &mut self.history;
         self.b.fill(0.0);
@@ -257,12 +387,13 @@ impl<'p> TimeLoop<'p> {
                 Some(&self.m)
             },
             z: &self.z,
+            rows: &self.rows,
             report,
         })
     }
 
     /// n → n + 1: u_{n+1} = u_n + k w_n and the memory update.
-    pub fn advance(&mut self) {
+    fn advance(&mut self) {
         self.history.advance(&self.w);
     }
 }

@@ -245,7 +245,7 @@ fn bend_warning_names_the_group_that_bends() {
 fn region_holds_the_first_group_in_file_order_and_overlaps_are_noted() {
     let path = data("regions.msh");
     let mesh = viscontact::mesh::Mesh::read(std::path::Path::new(&path)).unwrap();
-    let region = viscontact::output::frame::region(&mesh);
+    let region = viscontact::run::region(&mesh);
     for (c, &tag) in region.iter().enumerate() {
         let expected = match mesh.cell_entity[c] {
             1 => 10,

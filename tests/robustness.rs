@@ -4,7 +4,7 @@
 
 mod common;
 use common::*;
-use viscontact::time_loop::TimeLoop;
+use viscontact::time_loop::{Solved, TimeLoop};
 use viscontact::Error;
 
 const THETA: f64 = 0.1;
@@ -86,12 +86,9 @@ fn divergence_is_detected() {
     // k = 2.4 = 3 × the limit: |1 − kE/2θ| = 5 per step.
     let (s, _m, d) = load(&path, &["time.end=480", "time.steps=200"]);
     let mut tl = TimeLoop::new(&s, &d).unwrap();
-    let err = loop {
-        match tl.solve_step() {
-            Ok(_) => tl.advance(),
-            Err(e) => break e,
-        }
-    };
+    let err = tl
+        .run(s.steps, &mut |_: &Solved| Ok(()))
+        .expect_err("stopped");
     assert!(matches!(err, Error::Solve(_)), "{err}");
     assert!(err.to_string().contains("grows without bound"), "{err}");
     assert!(tl.n() < 100, "detected at step {}", tl.n());
@@ -248,12 +245,9 @@ fn load_that_becomes_infinite_during_the_run_stops_it_with_the_place() {
     let bad = "load.traction=[{on = \"top\", value = [\"0\", \"-0.01/(t - 0.5)\"]}]";
     let (s, _m, d) = load(&paper(), &[&rect, "time.steps=8", bad]);
     let mut tl = TimeLoop::new(&s, &d).unwrap();
-    let err = loop {
-        match tl.solve_step() {
-            Ok(_) => tl.advance(),
-            Err(e) => break e,
-        }
-    };
+    let err = tl
+        .run(s.steps, &mut |_: &Solved| Ok(()))
+        .expect_err("stopped");
     assert!(matches!(err, Error::Solve(_)), "{err}");
     let msg = err.to_string();
     assert!(

@@ -1,13 +1,12 @@
 //! Resuming: the scene of a resumed run, the checks that it continues the same physics on
-//! the same mesh, and the state put back into a time loop.
+//! the same mesh, and the saved state of the loop.
 
 use super::history_file::read_history;
 use super::{groups_fingerprint, mesh_fingerprint, physics_signature, Checkpoint, StoredMemory};
 use crate::fem::Discretization;
-use crate::history::{Memory, Plan, PronyTerm, Stored};
+use crate::history::{Plan, PronyTerm, SavedHistory, SavedLoop, SavedMemory, Stored};
 use crate::mesh::Mesh;
 use crate::scene::{self, Scene};
-use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use std::path::PathBuf;
 
@@ -232,19 +231,17 @@ impl Checkpoint {
             .map_err(|e| Error::input(format!("{}: {e}", self.path.display())))
     }
 
-    /// Puts the saved state into a freshly built time loop (of the scene from
-    /// [`Checkpoint::scene`]): n, k, u with its compensation, the memory, w and z. For a
-    /// general kernel the past displacements are read from the history file and their hash
-    /// checked.
-    pub fn restore(&self, tl: &mut TimeLoop) -> Result<()> {
+    /// The saved state of the loop, checked against the sizes of the scene's discretization
+    /// (`n_free` dofs, `n_rows` contact and friction rows); for a general kernel the past
+    /// displacements are read from the history file and their hash checked.
+    pub fn saved(&self, n_free: usize, n_rows: usize) -> Result<SavedLoop> {
         let shown = self.path.display();
-        let n_free = tl.disc.n_free;
         let sizes = [
             ("state/u", self.u.len(), n_free),
             ("state/u_sum", self.u_sum.len(), n_free),
             ("state/u_comp", self.u_comp.len(), n_free),
             ("state/w", self.w.len(), n_free),
-            ("state/z", self.z.len(), tl.rows.len()),
+            ("state/z", self.z.len(), n_rows),
         ];
         for (name, have, want) in sizes {
             if have != want {
@@ -254,66 +251,43 @@ impl Checkpoint {
                 )));
             }
         }
-        let h = &mut tl.history;
-        let mismatch = |what: &str| {
-            Error::input(format!(
-                "{shown}: the stored memory is {what}, which the scene's relaxation kernel \
-                 does not match: the checkpoint does not belong to this scene"
-            ))
-        };
-        match (&mut h.memory, &self.memory) {
-            (Memory::None, StoredMemory::None) => {}
-            (Memory::Prony(terms), StoredMemory::Prony { a, decay, m }) => {
-                if terms.len() != a.len() {
-                    return Err(mismatch(&format!("{} Prony terms", a.len())));
-                }
-                for (i, t) in terms.iter_mut().enumerate() {
-                    // decay = exp(−b k) is recomputed by History::new from the scene's b and
-                    // the same k: equal bits unless the kernel changed.
-                    let expected = (t.decay.ln() / h.k) * self.k;
-                    if t.a.to_bits() != a[i].to_bits()
-                        || (expected.exp() - decay[i]).abs() > 1e-12 * decay[i].abs()
-                    {
-                        return Err(mismatch(&format!(
-                            "term {i}: a = {}, exp(-b k) = {}",
-                            a[i], decay[i]
-                        )));
-                    }
-                    if m[i].len() != n_free {
-                        return Err(mismatch(&format!("term {i} of the wrong size")));
-                    }
-                    *t = PronyTerm {
+        let memory = match &self.memory {
+            StoredMemory::None => SavedMemory::None,
+            StoredMemory::Prony { a, decay, m } => SavedMemory::Prony(
+                (0..a.len())
+                    .map(|i| PronyTerm {
                         a: a[i],
                         decay: decay[i],
                         m: m[i].clone(),
-                    };
-                }
-            }
-            (
-                Memory::Direct { past, r_lag },
-                StoredMemory::Direct {
-                    file, rows, hash, ..
-                },
-            ) => {
+                    })
+                    .collect(),
+            ),
+            StoredMemory::Direct {
+                file, rows, hash, ..
+            } => {
                 if *rows != self.n {
-                    return Err(mismatch(&format!("{rows} history rows at step {}", self.n)));
+                    return Err(Error::input(format!(
+                        "{shown}: the stored memory is {rows} history rows at step {}, which \
+                         the scene's relaxation kernel does not match: the checkpoint does not \
+                         belong to this scene",
+                        self.n
+                    )));
                 }
-                *past = read_history(&self.dir().join(file), *rows, *hash, n_free, &self.id)?;
-                r_lag.clear();
+                let past = read_history(&self.dir().join(file), *rows, *hash, n_free, &self.id)?;
+                SavedMemory::Direct(past)
             }
-            (_, StoredMemory::None) => return Err(mismatch("absent (no relaxation)")),
-            (_, StoredMemory::Prony { .. }) => return Err(mismatch("a Prony series")),
-            (_, StoredMemory::Direct { .. }) => {
-                return Err(mismatch("a general kernel's direct sum"))
-            }
-        }
-        h.k = self.k;
-        h.n = self.n;
-        h.u.clone_from(&self.u);
-        h.u_sum.clone_from(&self.u_sum);
-        h.u_comp.clone_from(&self.u_comp);
-        tl.w.clone_from(&self.w);
-        tl.z.clone_from(&self.z);
-        Ok(())
+        };
+        Ok(SavedLoop {
+            history: SavedHistory {
+                n: self.n,
+                k: self.k,
+                u: self.u.clone(),
+                u_sum: self.u_sum.clone(),
+                u_comp: self.u_comp.clone(),
+                memory,
+            },
+            w: self.w.clone(),
+            z: self.z.clone(),
+        })
     }
 }

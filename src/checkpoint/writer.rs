@@ -8,9 +8,10 @@ use super::seal;
 use super::snapshot::{Snapshot, SnapshotMemory};
 use super::template::Template;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
+use crate::history::LoopState;
 use crate::history::Memory;
 use crate::output::FrameSum;
-use crate::time_loop::TimeLoop;
+use crate::solver::Rows;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -63,35 +64,29 @@ pub(super) struct Disk {
 
 impl Disk {
     /// The disk side of a run of `steps` steps into `dir`, no history file yet.
-    fn new(dir: &Path, id: Identity, steps: usize, tl: &TimeLoop) -> Disk {
+    fn new(dir: &Path, id: Identity, steps: usize, rows: &Rows) -> Disk {
         Disk {
             dir: dir.to_path_buf(),
             id,
             steps,
             history: None,
-            row_node: tl.rows.rows.iter().map(|r| r.node as u64).collect(),
+            row_node: rows.rows.iter().map(|r| r.node as u64).collect(),
             template: None,
         }
     }
 }
 
 impl Writer {
-    /// A writer for a run of `steps` steps into `dir`; `tl` gives the sizes.
-    pub fn new(dir: &Path, id: Identity, steps: usize, tl: &TimeLoop) -> Writer {
-        Writer::start(Disk::new(dir, id, steps, tl), 0)
+    /// A writer for a run of `steps` steps into `dir` whose Γ3 has `rows`.
+    pub fn new(dir: &Path, id: Identity, steps: usize, rows: &Rows) -> Writer {
+        Writer::start(Disk::new(dir, id, steps, rows), 0)
     }
 
     /// A writer that continues `cp` in `dir` for a run of `steps` steps. The history file is
     /// appended to in place when it is the checkpoint's own (grown when full); otherwise the
     /// first checkpoint writes a new one with all rows (once).
-    pub fn resume(
-        dir: &Path,
-        id: Identity,
-        steps: usize,
-        tl: &TimeLoop,
-        cp: &Checkpoint,
-    ) -> Writer {
-        let mut disk = Disk::new(dir, id, steps, tl);
+    pub fn resume(dir: &Path, id: Identity, steps: usize, rows: &Rows, cp: &Checkpoint) -> Writer {
+        let mut disk = Disk::new(dir, id, steps, rows);
         let mut rows_sent = 0;
         if let StoredMemory::Direct { rows, hash, .. } = &cp.memory {
             let same_dir = match (std::fs::canonicalize(dir), cp.dir().canonicalize()) {
@@ -157,18 +152,18 @@ impl Writer {
         self.path.clone()
     }
 
-    /// Hands the checkpoint of `tl` (at step n = `tl.n()`, before solving it) to the writer
+    /// Hands the checkpoint of the loop's `state` (at step n, before solving it) to the writer
     /// thread. `active`: the contact/stick flags of the last solved step's rows; `frames`:
     /// the frames of the series written so far (all on disk). Returns the error of an earlier
     /// checkpoint that failed.
     pub fn write(
         &mut self,
-        tl: &TimeLoop,
+        state: LoopState,
         log: &RunLog,
         active: &[bool],
         frames: Vec<FrameSum>,
     ) -> Result<()> {
-        let h = &tl.history;
+        let h = state.history;
         let memory = match &h.memory {
             Memory::None => SnapshotMemory::None,
             Memory::Prony(terms) => SnapshotMemory::Prony(terms.clone()),
@@ -187,8 +182,8 @@ impl Writer {
             u: h.u.clone(),
             u_sum: h.u_sum.clone(),
             u_comp: h.u_comp.clone(),
-            w: tl.w.clone(),
-            z: tl.z.clone(),
+            w: state.w.to_vec(),
+            z: state.z.to_vec(),
             active: active.to_vec(),
             memory,
             log: log.clone(),

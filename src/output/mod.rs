@@ -37,7 +37,6 @@
 //! `run_id`) and in the `.pvd` (a comment), and [`Series::reopen`] refuses a series of
 //! another run.
 
-pub mod frame;
 mod pvd;
 pub mod read;
 mod verify;

@@ -11,37 +11,40 @@
 //!   and where the run stops;
 //! - [`Progress`]: the progress bar on a terminal, a progress line every 10 s in a log.
 
+use super::frame::write_step;
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::output::Series;
 use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
-use crate::time_loop::{Step, TimeLoop};
+use crate::time_loop::{Observer, Solved, Step, TimeLoop};
 use crate::Result;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// A solved step n as the consumers see it.
-pub(super) struct Solved<'s> {
-    pub step: Step<'s>,
-    pub rows: &'s Rows,
-    /// n = N: the run ends with this step.
-    pub last: bool,
-    /// The run stops after this step (`--stop-after`, a signal) and continues by resume.
-    pub stop: bool,
-}
-
-/// Everything that consumes the solved steps, in the order they see them.
+/// Everything that consumes the solved steps, in the order they see them, and when the run
+/// stops early.
 pub(super) struct Consumers<'a> {
     pub statistics: Statistics,
     pub frames: Frames<'a>,
     pub checkpoints: Checkpoints,
     pub progress: Progress,
+    pub stop: StopRule,
 }
 
-impl Consumers<'_> {
-    /// Step n is solved.
-    pub fn solved(&mut self, s: &Solved) -> Result<()> {
+/// When a run stops before its last step: after step `after` (`--stop-after`) or after the
+/// step being solved when a signal came.
+pub(super) struct StopRule {
+    pub after: Option<usize>,
+    pub interrupt: super::Interrupt,
+}
+
+impl Observer for Consumers<'_> {
+    fn stop_after(&mut self, n: usize) -> bool {
+        self.stop.after == Some(n) || self.stop.interrupt.signal().is_some()
+    }
+
+    fn solved(&mut self, s: &Solved) -> Result<()> {
         self.statistics.solved(s);
         self.frames.solved(s)?;
         self.checkpoints.solved(s);
@@ -49,8 +52,7 @@ impl Consumers<'_> {
         Ok(())
     }
 
-    /// The loop advanced to t_{n+1}.
-    pub fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
+    fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
         // A checkpoint of step n + 1 may reach the disk only after the frames of steps ≤ n
         // have: the frame writer runs on its own thread, and a resume keeps the frames
         // before its step (a kill -9 in between lost a frame for good).
@@ -87,11 +89,11 @@ impl Statistics {
     fn solved(&mut self, s: &Solved) {
         let log = &mut self.log;
         log.iterations.push(s.step.report.iterations);
-        let (viol, kkt) = step_checks(s.rows, &s.step);
+        let (viol, kkt) = step_checks(&s.step);
         log.max_violation = log.max_violation.max(viol);
         log.max_kkt_residual = log.max_kkt_residual.max(kkt);
         // At every step: a run that fails or stops reports the last one it solved.
-        (self.active, self.stick) = state_counts(s.rows, &s.step);
+        (self.active, self.stick) = state_counts(&s.step);
         self.last = Some(s.step.n);
     }
 }
@@ -108,9 +110,16 @@ pub(super) struct Frames<'a> {
 impl Frames<'_> {
     fn solved(&mut self, s: &Solved) -> Result<()> {
         if s.step.n.is_multiple_of(self.scene.output_every) || s.last {
-            let flags = state_flags(s.rows, &s.step);
-            self.series
-                .write_step(&self.disc, self.scene.model, &self.rows, &s.step, &flags)?;
+            let flags = state_flags(&s.step);
+            let (disc, rows) = (&self.disc, &self.rows);
+            write_step(
+                &mut self.series,
+                disc,
+                self.scene.model,
+                rows,
+                &s.step,
+                &flags,
+            )?;
         }
         Ok(())
     }
@@ -161,12 +170,14 @@ impl Checkpoints {
         if due {
             self.last_written = Instant::now();
         }
-        self.due = due.then(|| state_flags(s.rows, &s.step));
+        self.due = due.then(|| state_flags(&s.step));
     }
 
     fn advanced(&mut self, tl: &TimeLoop, log: &RunLog, series: &Series) -> Result<()> {
         match self.due.take() {
-            Some(flags) => self.writer.write(tl, log, &flags, series.checksums()),
+            Some(flags) => self
+                .writer
+                .write(tl.state(), log, &flags, series.checksums()),
             None => Ok(()),
         }
     }
@@ -281,7 +292,8 @@ fn scales(step: &Step) -> (f64, f64) {
 }
 
 /// The largest n·w on Γ3,1 and the relative KKT residual of a solved step.
-fn step_checks(rows: &Rows, step: &Step) -> (f64, f64) {
+fn step_checks(step: &Step) -> (f64, f64) {
+    let rows = step.rows;
     let viol = rows.rows[..rows.n_contact]
         .iter()
         .map(|r| r.apply(step.w))
@@ -292,7 +304,8 @@ fn step_checks(rows: &Rows, step: &Step) -> (f64, f64) {
 
 /// Γ3,1 rows with an active constraint and Γ3,2 rows whose node sticks (|w_τ| of the
 /// node's block), up to 1e-9 of the largest velocity.
-fn state_flags(rows: &Rows, step: &Step) -> Vec<bool> {
+fn state_flags(step: &Step) -> Vec<bool> {
+    let rows = step.rows;
     let (ws, _) = scales(step);
     let tol = 1e-9 * ws.max(f64::MIN_POSITIVE);
     let mut flags: Vec<bool> = rows.rows[..rows.n_contact]
@@ -313,8 +326,9 @@ fn state_flags(rows: &Rows, step: &Step) -> Vec<bool> {
 }
 
 /// (active Γ3,1 nodes, sticking Γ3,2 nodes).
-fn state_counts(rows: &Rows, step: &Step) -> (usize, usize) {
-    let flags = state_flags(rows, step);
+fn state_counts(step: &Step) -> (usize, usize) {
+    let rows = step.rows;
+    let flags = state_flags(step);
     let active = flags[..rows.n_contact].iter().filter(|&&f| f).count();
     let stick = flags[rows.n_contact..].iter().filter(|&&f| f).count();
     (active, stick / rows.block.max(1))

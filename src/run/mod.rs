@@ -13,24 +13,26 @@
 
 mod consumers;
 mod dir;
+mod frame;
 mod interrupt;
 mod summary;
 
 pub use crate::error::signal_name;
 pub use dir::LOCK_NAME;
+pub use frame::region;
 pub use interrupt::Interrupt;
 pub use summary::{ContactSummary, Final, Iterations, OutputSummary, Status, Summary, Timing};
 
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
-use crate::output::frame::open_series;
 use crate::output::{write_atomic, Resumed, Series};
 use crate::scene::Scene;
-use crate::time_loop::TimeLoop;
+use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
-use consumers::{Checkpoints, Consumers, Frames, Progress, Solved, Statistics};
+use consumers::{Checkpoints, Consumers, Frames, Progress, Statistics, StopRule};
 use dir::DirLock;
+use frame::open_series;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -130,7 +132,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     stage()?;
     let mesh = read_mesh(&scene)?;
     stage()?;
-    // Shared with the frame writer's thread (output::frame).
+    // Shared with the frame writer's thread (run/frame.rs).
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     stage()?;
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
@@ -145,7 +147,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
         .unless_signalled(|| dir::remove_run(&out))
         .map_err(Error::Interrupted)??;
     let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
+    let writer = checkpoint::Writer::new(&out, identity, scene.steps, tl.rows());
     drive(Drive {
         scene: &scene,
         mesh: &mesh,
@@ -225,12 +227,14 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     )?;
     stage()?;
     let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
-    cp.restore(&mut tl)?;
+    let saved = cp.saved(disc.n_free, tl.rows().len())?;
+    tl.restore(saved)
+        .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
     // The last moment a signal ends the resume unchanged; after it, it stops after a step.
     stage()?;
     dir::remove_temporaries(&out);
     let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
+    let writer = checkpoint::Writer::resume(&out, identity, scene.steps, tl.rows(), &cp);
     drive(Drive {
         scene: &scene,
         mesh: &mesh,
@@ -269,17 +273,10 @@ struct Drive<'a> {
     resumed_from: Option<usize>,
 }
 
-/// How the loop of [`drive`] ended, when no step failed.
-enum End {
-    Completed,
-    /// After a step: `--stop-after` or a signal.
-    Stopped,
-}
-
 /// The time loop of a run with its consumers, then summary.json however the run ended.
 fn drive(d: Drive) -> Result<Outcome> {
     let mut tl = d.tl;
-    let rows = Arc::new(tl.rows.clone());
+    let rows = Arc::new(tl.rows().clone());
     let mut consumers = Consumers {
         statistics: Statistics::new(d.log),
         frames: Frames {
@@ -290,14 +287,19 @@ fn drive(d: Drive) -> Result<Outcome> {
         },
         checkpoints: Checkpoints::new(d.writer, d.scene),
         progress: Progress::new(d.opts.progress, tl.n(), d.scene.steps),
+        stop: StopRule {
+            after: d.opts.stop_after,
+            interrupt: d.opts.interrupt.clone(),
+        },
     };
     let steps_start = Instant::now();
-    let ended = steps(&mut tl, &rows, &mut consumers, d.opts);
+    let ended = tl.run(d.scene.steps, &mut consumers);
     let Consumers {
         statistics,
         mut frames,
         checkpoints,
         progress,
+        ..
     } = consumers;
     progress.finish();
     let checkpoint = checkpoints.path();
@@ -309,17 +311,17 @@ fn drive(d: Drive) -> Result<Outcome> {
         .and_then(|()| frames.series.finish());
     let ended = ended.and_then(|end| flushed.map(|()| end));
     let steps_s = steps_start.elapsed().as_secs_f64();
-    if let Ok(End::Completed) = ended {
+    if let Ok(RunEnd::Completed) = ended {
         // Frames an earlier (or the interrupted) run left that this series does not list.
         dir::remove_stale_frames(&frames.series, d.resumed_from.unwrap_or(0));
     }
     let last = statistics.last.unwrap_or(0);
     let signal = d.opts.interrupt.signal();
     let message = match &ended {
-        Ok(End::Completed) => None,
-        Ok(End::Stopped) => Some(stopped_message(
+        Ok(RunEnd::Completed) => None,
+        Ok(RunEnd::Stopped) => Some(stopped_message(
             last,
-            last as f64 * tl.history.k,
+            last as f64 * tl.k(),
             signal,
             checkpoint.as_deref(),
             d.opts.force,
@@ -328,8 +330,8 @@ fn drive(d: Drive) -> Result<Outcome> {
     };
     let ending = Ending {
         status: match &ended {
-            Ok(End::Completed) => Status::Completed,
-            Ok(End::Stopped) => Status::Interrupted,
+            Ok(RunEnd::Completed) => Status::Completed,
+            Ok(RunEnd::Stopped) => Status::Interrupted,
             Err(_) => Status::Failed,
         },
         message: message.clone(),
@@ -351,45 +353,14 @@ fn drive(d: Drive) -> Result<Outcome> {
     match ended {
         // The failure is what the run reports; its summary is written if the disk allows.
         Err(e) => Err(e),
-        Ok(End::Completed) => written.map(|()| Outcome::Finished(Box::new(summary))),
-        Ok(End::Stopped) => written.map(|()| Outcome::Stopped {
+        Ok(RunEnd::Completed) => written.map(|()| Outcome::Finished(Box::new(summary))),
+        Ok(RunEnd::Stopped) => written.map(|()| Outcome::Stopped {
             step: last,
-            time: last as f64 * tl.history.k,
+            time: last as f64 * tl.k(),
             checkpoint,
             signal,
             message: message.unwrap_or_default(),
         }),
-    }
-}
-
-/// The stream of solved steps: solve step n, hand it to the consumers; unless it is the last
-/// or the run stops after it, advance to t_{n+1} and tell them. A signal that comes while
-/// the last step is solved lets the run complete: nothing would be left to resume.
-fn steps(
-    tl: &mut TimeLoop,
-    rows: &crate::solver::Rows,
-    consumers: &mut Consumers,
-    opts: &RunOptions,
-) -> Result<End> {
-    let end = tl.scene.steps;
-    loop {
-        let n = tl.n();
-        let solved = Solved {
-            step: tl.solve_step()?,
-            rows,
-            last: n == end,
-            stop: opts.stop_after == Some(n) || opts.interrupt.signal().is_some(),
-        };
-        consumers.solved(&solved)?;
-        let (last, stop) = (solved.last, solved.stop);
-        if last {
-            return Ok(End::Completed);
-        }
-        tl.advance();
-        consumers.advanced(tl)?;
-        if stop {
-            return Ok(End::Stopped);
-        }
     }
 }
 

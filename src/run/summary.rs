@@ -131,7 +131,7 @@ impl Summary {
         tl: &TimeLoop,
         stats: Statistics,
     ) -> Summary {
-        let u_n = &tl.history.u;
+        let u_n = tl.u();
         let (l2, semi) = disc.norms(u_n);
         let Statistics {
             log,
@@ -139,7 +139,7 @@ impl Summary {
             stick,
             last,
         } = stats;
-        let rows = &tl.rows;
+        let rows = tl.rows();
         let per_step = log.iterations;
         let completed = ending.status == Status::Completed;
         Summary {
@@ -154,10 +154,10 @@ impl Summary {
             elements: mesh.n_cells(),
             dofs: disc.n_free,
             steps: scene.steps,
-            step_size: tl.history.k,
+            step_size: tl.k(),
             end_time: scene.end,
-            effects: tl.effects.names().iter().map(|s| s.to_string()).collect(),
-            solver: tl.solver.name().to_string(),
+            effects: tl.effects().names().iter().map(|s| s.to_string()).collect(),
+            solver: tl.solver().name().to_string(),
             timing: ending.timing,
             final_: Final {
                 time: if completed { scene.end } else { tl.time() },
@@ -184,7 +184,7 @@ impl Summary {
             },
             output: ending.output,
             warnings: crate::effects::warnings(scene, disc),
-            memory: MemorySummary::new(&tl.plan, tl.history.k),
+            memory: MemorySummary::new(tl.plan(), tl.k()),
         }
     }
 }

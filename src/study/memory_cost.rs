@@ -160,7 +160,7 @@ fn solve(scene_path: &Path, overrides: &[String], direct: bool) -> Result<(Optio
     let mut tl = TimeLoop::with_plan(&scene, &disc, plan)?;
     super::solve_to_end(&mut tl, scene.steps)?;
     row.wall_s = Some(start.elapsed().as_secs_f64());
-    Ok((Some(tl.history.u.clone()), row))
+    Ok((Some(tl.u().to_vec()), row))
 }
 
 fn relative_max(u: &[f64], exact: &[f64]) -> f64 {

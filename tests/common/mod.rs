@@ -7,7 +7,7 @@ use std::process::{Command, Output};
 use viscontact::fem::Discretization;
 use viscontact::mesh::Mesh;
 use viscontact::scene::Scene;
-use viscontact::time_loop::TimeLoop;
+use viscontact::time_loop::{Solved, TimeLoop};
 
 /// The viscontact binary.
 pub const BIN: &str = env!("CARGO_BIN_EXE_viscontact");
@@ -49,24 +49,20 @@ pub struct Trace {
 pub fn trace(scene: &Scene, disc: &Discretization) -> Trace {
     let mut tl = TimeLoop::new(scene, disc).unwrap();
     let (mut u, mut w, mut z) = (Vec::new(), Vec::new(), Vec::new());
-    loop {
-        let n = tl.n();
-        let step = tl.solve_step().unwrap();
-        u.push(step.u.to_vec());
-        w.push(step.w.to_vec());
-        z.push(step.z.to_vec());
-        if n == scene.steps {
-            break;
-        }
-        tl.advance();
-    }
+    let mut record = |s: &Solved| {
+        u.push(s.step.u.to_vec());
+        w.push(s.step.w.to_vec());
+        z.push(s.step.z.to_vec());
+        Ok(())
+    };
+    tl.run(scene.steps, &mut record).unwrap();
     Trace {
         u,
         w,
         z,
-        u_final: tl.history.u.clone(),
-        effects: tl.effects.names(),
-        solver: tl.solver.name(),
+        u_final: tl.u().to_vec(),
+        effects: tl.effects().names(),
+        solver: tl.solver().name(),
     }
 }
 

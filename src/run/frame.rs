@@ -1,12 +1,13 @@
 //! The frame of a solved step: the fields of DESIGN.md "Output of run" computed from the
-//! step's velocity w_n, displacement u_n, memory m_n and multipliers z_n.
+//! step's velocity w_n, displacement u_n, memory m_n and multipliers z_n, handed to the
+//! series (`output`), which knows files, not the model.
 
 use std::path::Path;
 use std::sync::Arc;
 
-use super::{Geometry, Options, OwnedField, Resumed, Series};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
+use crate::output::{Geometry, Options, OwnedField, Resumed, Series};
 use crate::scene::Model;
 use crate::solver::Rows;
 use crate::time_loop::Step;
@@ -14,7 +15,7 @@ use crate::Result;
 
 /// The series of a run on `mesh` in `out`: a new one, or for a resume from a checkpoint of
 /// step n ≥ 1 the existing one, verified and continued after step n − 1 ([`Series::resume`]).
-pub fn open_series(
+pub(super) fn open_series(
     out: &Path,
     mesh: &Mesh,
     run_id: &str,
@@ -47,42 +48,40 @@ pub fn region(mesh: &Mesh) -> Vec<i32> {
     tags
 }
 
-impl Series {
-    /// Hands the frame of step `step` to the writer thread; `active[i]` says whether
-    /// contact/friction row block `i` is active (the run's state flags). The time loop only
-    /// copies the step's state (w, u, m, z: a few hundred kB at h = 1/128); the fields are
-    /// computed on the writer thread, which shares `disc` and `rows`. Fields not chosen are
-    /// not computed.
-    pub fn write_step(
-        &mut self,
-        disc: &Arc<Discretization>,
-        model: Model,
-        rows: &Arc<Rows>,
-        step: &Step,
-        active: &[bool],
-    ) -> Result<()> {
-        let (disc, rows) = (Arc::clone(disc), Arc::clone(rows));
-        let (w, u, m, z) = (
-            step.w.to_vec(),
-            step.u.to_vec(),
-            step.m.map(<[f64]>::to_vec),
-            step.z.to_vec(),
-        );
-        let active = active.to_vec();
-        let stress = self.options().wants("stress") || self.options().wants("von_mises");
-        self.write_with(step.n, step.t, move || {
-            fields(
-                &disc,
-                model,
-                &rows,
-                &active,
-                stress,
-                [&w, &u, &z],
-                m.as_deref(),
-            )
-        })?;
-        Ok(())
-    }
+/// Hands the frame of step `step` to the writer thread; `active[i]` says whether
+/// contact/friction row block `i` is active (the run's state flags). The time loop only
+/// copies the step's state (w, u, m, z: a few hundred kB at h = 1/128); the fields are
+/// computed on the writer thread, which shares `disc` and `rows`. Fields not chosen are
+/// not computed.
+pub(super) fn write_step(
+    series: &mut Series,
+    disc: &Arc<Discretization>,
+    model: Model,
+    rows: &Arc<Rows>,
+    step: &Step,
+    active: &[bool],
+) -> Result<()> {
+    let (disc, rows) = (Arc::clone(disc), Arc::clone(rows));
+    let (w, u, m, z) = (
+        step.w.to_vec(),
+        step.u.to_vec(),
+        step.m.map(<[f64]>::to_vec),
+        step.z.to_vec(),
+    );
+    let active = active.to_vec();
+    let stress = series.options().wants("stress") || series.options().wants("von_mises");
+    series.write_with(step.n, step.t, move || {
+        fields(
+            &disc,
+            model,
+            &rows,
+            &active,
+            stress,
+            [&w, &u, &z],
+            m.as_deref(),
+        )
+    })?;
+    Ok(())
 }
 
 /// The fields of a step's frame (DESIGN.md "Output of run"): point fields, then cell fields
