@@ -123,6 +123,9 @@ pub(super) fn iterations(log: &RunLog, steps: usize) -> Vec<i32> {
     v
 }
 
+/// Writes the checkpoint of snapshot `s` of a run of `steps` steps to `path`: a new sealed
+/// HDF5 file, group by group (DESIGN.md "Checkpoint (HDF5)"). The order of the calls fixes
+/// the file's layout, which later checkpoints patch in place (`Template`).
 pub(super) fn write_checkpoint(
     path: &Path,
     id: &Identity,
@@ -131,36 +134,55 @@ pub(super) fn write_checkpoint(
     steps: usize,
     history: Option<&HistoryFile>,
 ) -> hdf5::Result<()> {
-    let n_free = s.u.len();
     let f = h5_create_sealed(path)?;
-    str_attr(&f, "format", FORMAT)?;
+    write_header(&f, id, s)?;
+    write_state(&f, row_node, s)?;
+    write_memory(&f, s, history)?;
+    write_series(&f, &s.frames)?;
+    write_run_log(&f, s, steps)?;
+    write_scene(&f, id)?;
+    write_mesh(&f, id)?;
+    write_physics(&f, id)?;
+    f.close()?;
+    Ok(())
+}
+
+/// The root's attributes, the step, its time and the step size.
+fn write_header(f: &hdf5::File, id: &Identity, s: &Snapshot) -> hdf5::Result<()> {
+    str_attr(f, "format", FORMAT)?;
     f.new_attr::<u32>()
         .shape(())
         .create("format_version")?
         .write_scalar(&FORMAT_VERSION)?;
     str_attr(
-        &f,
+        f,
         "writer",
         concat!("viscontact ", env!("CARGO_PKG_VERSION")),
     )?;
     str_attr(
-        &f,
+        f,
         "description",
         "restart state of a viscontact run (Problem 3.1 of Xu et al. 2021) before step \
          `step` is solved; continue it with `viscontact resume THIS_FILE`",
     )?;
-    str_attr(&f, "run_id", &id.run_id)?;
+    str_attr(f, "run_id", &id.run_id)?;
 
     scalar(
-        &f,
+        f,
         "step",
         s.n as u64,
         "n: the next step to solve; steps 0..n-1 are done",
         "1",
     )?;
-    scalar(&f, "time", s.n as f64 * s.k, "t_n = n k", "s")?;
-    scalar(&f, "step_size", s.k, "k = T/N, the time step", "s")?;
+    scalar(f, "time", s.n as f64 * s.k, "t_n = n k", "s")?;
+    scalar(f, "step_size", s.k, "k = T/N, the time step", "s")?;
 
+    Ok(())
+}
+
+/// `/state`: u_n with its compensated sum, w and the multipliers of the last solved step.
+fn write_state(f: &hdf5::File, row_node: &[u64], s: &Snapshot) -> hdf5::Result<()> {
+    let n_free = s.u.len();
     let state = f.create_group("state")?;
     let nf = [n_free];
     vector(
@@ -223,7 +245,12 @@ pub(super) fn write_checkpoint(
         "mesh node of each row of z (contact rows first, then friction rows)",
         "1",
     )?;
+    Ok(())
+}
 
+/// `/memory`: the Prony terms' states, or where the direct sum's past displacements lie.
+fn write_memory(f: &hdf5::File, s: &Snapshot, history: Option<&HistoryFile>) -> hdf5::Result<()> {
+    let n_free = s.u.len();
     let memory = f.create_group("memory")?;
     match &s.memory {
         SnapshotMemory::None => str_attr(&memory, "kind", "none")?,
@@ -299,8 +326,11 @@ pub(super) fn write_checkpoint(
             memory.link_external(HISTORY_FILE_NAME, HISTORY_DATASET, "past_displacements")?;
         }
     }
+    Ok(())
+}
 
-    write_series(&f, &s.frames)?;
+/// `/run`: the iterations of the steps so far and the running maxima of summary.json.
+fn write_run_log(f: &hdf5::File, s: &Snapshot, steps: usize) -> hdf5::Result<()> {
     let run = f.create_group("run")?;
     let iterations = iterations(&s.log, steps);
     vector(
@@ -326,7 +356,11 @@ pub(super) fn write_checkpoint(
         "largest relative KKT residual over steps 0..n-1",
         "1",
     )?;
+    Ok(())
+}
 
+/// `/scene`: the scene text that ran and where it was.
+fn write_scene(f: &hdf5::File, id: &Identity) -> hdf5::Result<()> {
     let sc = f.create_group("scene")?;
     string_dataset(
         &sc,
@@ -341,7 +375,11 @@ pub(super) fn write_checkpoint(
         "description",
         "mesh.file in text is relative to the directory of absolute_path",
     )?;
+    Ok(())
+}
 
+/// `/mesh`: its file, sizes, fingerprints and the dof of each node.
+fn write_mesh(f: &hdf5::File, id: &Identity) -> hdf5::Result<()> {
     let mesh = f.create_group("mesh")?;
     str_attr(&mesh, "file", &id.mesh_path)?;
     mesh.new_attr::<u64>()
@@ -376,7 +414,11 @@ pub(super) fn write_checkpoint(
          (w = 0)",
         "1",
     )?;
+    Ok(())
+}
 
+/// `/physics`: every physics key of the scene, which resume compares.
+fn write_physics(f: &hdf5::File, id: &Identity) -> hdf5::Result<()> {
     let physics = f.create_group("physics")?;
     str_attr(
         &physics,
@@ -387,7 +429,6 @@ pub(super) fn write_checkpoint(
     for (k, v) in &id.physics {
         str_attr(&physics, k, v)?;
     }
-    f.close()?;
     Ok(())
 }
 
