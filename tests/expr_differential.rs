@@ -21,27 +21,8 @@ use std::fmt::Write as _;
 use std::process::Command;
 use viscontact::expr::{Expr, Point};
 
-/// splitmix64.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn pick<T: Copy>(&mut self, from: &[T]) -> T {
-        from[self.below(from.len())]
-    }
-}
+mod common;
+use common::SplitMix;
 
 /// An expression tree; `Bin` and `Un` carry the scene operator.
 enum Node {
@@ -85,7 +66,7 @@ const FUNCS: [(&str, usize); 26] = [
     ("min", 3),
 ];
 
-fn tree(r: &mut Rng, depth: usize) -> Node {
+fn tree(r: &mut SplitMix, depth: usize) -> Node {
     if depth == 0 || r.unit() < 0.25 {
         return match r.below(10) {
             0..=3 => Node::Num(r.pick(&[
@@ -131,8 +112,8 @@ fn level(n: &Node) -> u8 {
 
 /// The scene syntax, with parentheses where the precedence table needs them (and now and
 /// then where it does not).
-fn scene(n: &Node, r: &mut Rng) -> String {
-    let wrap = |c: &Node, need: bool, r: &mut Rng| {
+fn scene(n: &Node, r: &mut SplitMix) -> String {
+    let wrap = |c: &Node, need: bool, r: &mut SplitMix| {
         let s = scene(c, r);
         if need || r.below(20) == 0 {
             format!("({s})")
@@ -267,7 +248,7 @@ for (f, consts, points) in CASES:
 "#;
 
 /// Values of the variables: ordinary, zero, ±1, large and small.
-fn point(r: &mut Rng) -> [f64; 5] {
+fn point(r: &mut SplitMix) -> [f64; 5] {
     std::array::from_fn(|_| match r.below(8) {
         0 => 0.0,
         1 => r.pick(&[1.0, -1.0, 0.5, 2.0]),
@@ -347,7 +328,7 @@ fn expressions_agree_with_python() {
     });
     let count = env_or("EXPR_DIFF_COUNT", 300) as usize;
     println!("expr_differential: EXPR_DIFF_SEED={seed} EXPR_DIFF_COUNT={count}");
-    let mut r = Rng(seed);
+    let mut r = SplitMix(seed);
     let key = "load.traction[0].value[1]";
     let mut cases = String::from("CASES = [\n");
     let mut ours = Vec::new();

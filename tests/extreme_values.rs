@@ -244,7 +244,7 @@ fn draw(rng: &mut SplitMix) -> String {
         1 => toml::Value::Float(sign * 10f64.powi(rng.below(661) as i32 - 330)),
         2 => toml::Value::Integer(rng.next() as i64),
         3 => toml::Value::Integer(rng.below(24) as i64 - 3),
-        _ => toml::Value::Float(sign * 2.0 * (rng.next() >> 11) as f64 / (1u64 << 53) as f64),
+        _ => toml::Value::Float(sign * 2.0 * rng.unit()),
     };
     v.to_string()
 }

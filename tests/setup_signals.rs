@@ -104,7 +104,7 @@ fn signals_during_setup_exit_at_once_and_leave_the_earlier_run_intact() {
                 libc::SIGINT
             };
             let before = common::dir_contents(&out);
-            let delay = Duration::from_secs_f64(setup * (rng.next() >> 11) as f64 / 2f64.powi(53));
+            let delay = Duration::from_secs_f64(setup * rng.unit());
             let code = signalled(&args, delay, signal);
             if code == -signal {
                 before_main += 1;

@@ -122,20 +122,6 @@ pub fn map_msh_nodes(text: &str, f: impl Fn([f64; 3]) -> [f64; 3]) -> String {
     out
 }
 
-/// Deterministic pseudo-random numbers in [0, 1) (a 64-bit LCG): "random" angles, bit
-/// positions and the like that are the same in every run of a test.
-pub struct Lcg(pub u64);
-
-impl Lcg {
-    pub fn next_f64(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Runs the binary from the repository root: (exit status, stdout + stderr).
 pub fn cli(args: &[&str]) -> (i32, String) {
     let out = viscontact(args);
@@ -316,7 +302,9 @@ pub fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
-/// A seeded pseudo-random sequence (splitmix64), for reproducible random trials.
+/// The tests' one pseudo-random sequence (splitmix64): seeded, so that "random" angles, bit
+/// positions, values and moments are the same in every run of a test (and a failing seed
+/// can be given back).
 pub struct SplitMix(pub u64);
 
 impl SplitMix {
@@ -331,6 +319,16 @@ impl SplitMix {
     /// Uniform in 0..n.
     pub fn below(&mut self, n: usize) -> usize {
         (self.next() % n as u64) as usize
+    }
+
+    /// Uniform in [0, 1), 53 bits.
+    pub fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// One of `from`, uniformly.
+    pub fn pick<T: Copy>(&mut self, from: &[T]) -> T {
+        from[self.below(from.len())]
     }
 }
 
