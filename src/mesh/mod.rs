@@ -519,22 +519,61 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
              only elements of physical groups)"
         )));
     }
-
     let (new_index, mut nodes) = renumber(&raw.nodes, &raw.triangles);
-    // Planarity and the coordinate scale for the zero-area test.
+    let scale = flatten_onto_xy_plane(&file, &mut nodes)?;
+    let (triangles, flipped) = orient_triangles(&file, &raw, &new_index, &nodes, scale)?;
+    let edges = edge_uses(&file, &raw, &triangles, &nodes)?;
+
+    let words = Words {
+        element: "line",
+        mesh: "triangle mesh",
+        cells: "triangles",
+        cell: "triangle",
+        facet: "edge",
+        a_facet: "an edge",
+        boundary: "curves of the meshed surface",
+    };
+    let lookup = |[a, b]: [usize; 2]| edges.get(&[a.min(b), a.max(b)]).map(|e| (e.dir, e.count));
+    let groups = fill_groups(
+        &file,
+        &raw,
+        (&raw.triangles, &raw.lines),
+        group_table(&raw, names, 2),
+        &new_index,
+        lookup,
+        &words,
+        |g, f| g.facets.push(f),
+    )?;
+
+    Ok(Mesh {
+        path: path.to_path_buf(),
+        dim: 2,
+        nodes,
+        triangles,
+        tetrahedra: Vec::new(),
+        groups,
+        flipped,
+        other_groups: other_groups(&raw, names, 2),
+        cell_entity: raw.triangles.iter().map(|t| t.entity.1).collect(),
+    })
+}
+
+/// Checks that the nodes are finite and lie in the xy-plane, and sets their z to 0: the
+/// coordinate scale (the largest |x| or |y|) for the zero-area test.
+fn flatten_onto_xy_plane(file: &impl std::fmt::Display, nodes: &mut [[f64; 3]]) -> Result<f64> {
     let scale = nodes
         .iter()
         .map(|p| p[0].abs().max(p[1].abs()))
         .fold(0.0_f64, f64::max);
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in &nodes {
+    for p in nodes.iter() {
         for k in 0..2 {
             lo[k] = lo[k].min(p[k]);
             hi[k] = hi[k].max(p[k]);
         }
     }
     let diag = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
-    check_finite(&file, &nodes)?;
+    check_finite(file, nodes)?;
     if let Some(p) = nodes.iter().find(|p| p[2].abs() > 1e-12 * diag.max(scale)) {
         return Err(Error::input(format!(
             "mesh file '{file}' is not a 2D mesh in the xy-plane: node {} has z ≠ 0; \
@@ -542,13 +581,25 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
             fmt_point(*p, 3)
         )));
     }
-    for p in &mut nodes {
+    for p in nodes.iter_mut() {
         p[2] = 0.0;
     }
+    Ok(scale)
+}
 
-    // Orientation and degeneracy. A triangle is degenerate if the altitude onto its longest
-    // edge is at most 1e-12 of that edge (its smallest angle is below ~1e-10 rad) or at most
-    // 1e-13 of the largest coordinate (the precision at which coordinates are stored).
+/// The triangles in the new numbering, counter-clockwise, and how many were reoriented;
+/// a degenerate triangle is refused.
+///
+/// A triangle is degenerate if the altitude onto its longest edge is at most 1e-12 of that
+/// edge (its smallest angle is below ~1e-10 rad) or at most 1e-13 of the largest coordinate
+/// `scale` (the precision at which coordinates are stored).
+fn orient_triangles(
+    file: &impl std::fmt::Display,
+    raw: &RawMesh,
+    new_index: &[usize],
+    nodes: &[[f64; 3]],
+    scale: f64,
+) -> Result<(Vec<[usize; 3]>, usize)> {
     let mut triangles = Vec::with_capacity(raw.triangles.len());
     let mut flipped = 0;
     let mut degenerate = Vec::new();
@@ -585,22 +636,34 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
             pts.join(", ")
         )));
     }
+    Ok((triangles, flipped))
+}
 
-    // Edges: each is used by one triangle (boundary) or by two in opposite directions.
-    struct EdgeUse {
-        dir: [usize; 2],
-        tri: usize,
-        count: u32,
-    }
-    let mut edges: HashMap<[usize; 2], EdgeUse> = HashMap::with_capacity(triangles.len() * 2);
+/// How the cells use a facet (an edge in 2D, a face in 3D): its orientation in the first
+/// cell that has it, that cell, and how many cells have it.
+struct FacetUse<const F: usize> {
+    dir: [usize; F],
+    cell: usize,
+    count: u32,
+}
+
+/// The edges by their sorted nodes: each is used by one triangle (boundary) or by two in
+/// opposite directions; a fold or an edge of three triangles is refused.
+fn edge_uses(
+    file: &impl std::fmt::Display,
+    raw: &RawMesh,
+    triangles: &[[usize; 3]],
+    nodes: &[[f64; 3]],
+) -> Result<HashMap<[usize; 2], FacetUse<2>>> {
+    let mut edges: HashMap<[usize; 2], FacetUse<2>> = HashMap::with_capacity(triangles.len() * 2);
     let tri_tag = |k: usize| raw.triangles[k].tag;
     for (k, tri) in triangles.iter().enumerate() {
         for i in 0..3 {
             let dir = [tri[i], tri[(i + 1) % 3]];
             let key = [dir[0].min(dir[1]), dir[0].max(dir[1])];
-            let e = edges.entry(key).or_insert(EdgeUse {
+            let e = edges.entry(key).or_insert(FacetUse {
                 dir,
-                tri: k,
+                cell: k,
                 count: 0,
             });
             e.count += 1;
@@ -616,7 +679,7 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
                     "mesh file '{file}' folds over itself: triangles {} and {} (gmsh element \
                      tags) overlap at the edge {}; an inverted element in the middle of the mesh \
                      cannot be repaired by reorienting it: fix the geometry or remesh",
-                    tri_tag(e.tri),
+                    tri_tag(e.cell),
                     tri_tag(k),
                     edge_at()
                 )));
@@ -627,45 +690,13 @@ fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
                      {} and {}, gmsh element tags); the mesh is not a valid 2D domain \
                      (overlapping surfaces?): fix the geometry or remesh",
                     edge_at(),
-                    tri_tag(e.tri),
+                    tri_tag(e.cell),
                     tri_tag(k)
                 )));
             }
         }
     }
-
-    let words = Words {
-        element: "line",
-        mesh: "triangle mesh",
-        cells: "triangles",
-        cell: "triangle",
-        facet: "edge",
-        a_facet: "an edge",
-        boundary: "curves of the meshed surface",
-    };
-    let lookup = |[a, b]: [usize; 2]| edges.get(&[a.min(b), a.max(b)]).map(|e| (e.dir, e.count));
-    let groups = fill_groups(
-        &file,
-        &raw,
-        (&raw.triangles, &raw.lines),
-        group_table(&raw, names, 2),
-        &new_index,
-        lookup,
-        &words,
-        |g, f| g.facets.push(f),
-    )?;
-
-    Ok(Mesh {
-        path: path.to_path_buf(),
-        dim: 2,
-        nodes,
-        triangles,
-        tetrahedra: Vec::new(),
-        groups,
-        flipped,
-        other_groups: other_groups(&raw, names, 2),
-        cell_entity: raw.triangles.iter().map(|t| t.entity.1).collect(),
-    })
+    Ok(edges)
 }
 
 /// The words of `fill_groups`' messages for one dimension.
