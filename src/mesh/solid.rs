@@ -9,13 +9,11 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::{
-    check_finite, fill_groups, fmt_point, group_table, other_groups, renumber, FacetUse, Mesh,
-    Words,
-};
+use super::{check_finite, fmt_point, renumber, FacetUse, Mesh};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
