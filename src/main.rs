@@ -107,20 +107,29 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // SIGINT/SIGTERM stop a run or resume after its current step, or its setup before it
-    // changes anything (exit 130 / 143). First, before any thread is started (see
-    // run/interrupt.rs).
-    let interrupt = match cli.command {
-        Command::Run { .. } | Command::Resume { .. } => match Interrupt::on_signals() {
-            Ok(i) => i,
-            Err(e) => {
-                eprintln!("error: cannot handle SIGINT/SIGTERM: {e}");
-                return ExitCode::FAILURE;
-            }
-        },
-        _ => Interrupt::default(),
+    let interrupt = match interrupt_for(&cli.command) {
+        Ok(i) => i,
+        Err(code) => return code,
     };
-    let result = match cli.command {
+    exit_code(dispatch(cli.command, interrupt))
+}
+
+/// SIGINT/SIGTERM stop a run or resume after its current step, or its setup before it
+/// changes anything (exit 130 / 143). Set up first, before any thread is started (see
+/// run/interrupt.rs).
+fn interrupt_for(command: &Command) -> std::result::Result<Interrupt, ExitCode> {
+    match command {
+        Command::Run { .. } | Command::Resume { .. } => Interrupt::on_signals().map_err(|e| {
+            eprintln!("error: cannot handle SIGINT/SIGTERM: {e}");
+            ExitCode::FAILURE
+        }),
+        _ => Ok(Interrupt::default()),
+    }
+}
+
+/// Runs the command: the signal that stopped a run, if one did.
+fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
+    match command {
         Command::Run {
             scene,
             out,
@@ -170,7 +179,7 @@ fn main() -> ExitCode {
             output,
             view,
             width,
-        } => viscontact::plot::plot_run(
+        } => plot(
             &dir,
             &viscontact::plot::PlotOptions {
                 time,
@@ -181,21 +190,30 @@ fn main() -> ExitCode {
                 width,
             },
         )
-        .map(|i| {
-            let view = i.view.map(|v| format!(", seen from {v:?}"));
-            println!(
-                "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e}{})",
-                i.output.display(),
-                i.time,
-                i.scale,
-                i.frame.display(),
-                i.range.0,
-                i.range.1,
-                view.unwrap_or_default()
-            );
-            None
-        }),
-    };
+        .map(|()| None),
+    }
+}
+
+/// Draws the figure and says what it shows.
+fn plot(dir: &std::path::Path, options: &viscontact::plot::PlotOptions) -> Result<()> {
+    let i = viscontact::plot::plot_run(dir, options)?;
+    let view = i.view.map(|v| format!(", seen from {v:?}"));
+    println!(
+        "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e}{})",
+        i.output.display(),
+        i.time,
+        i.scale,
+        i.frame.display(),
+        i.range.0,
+        i.range.1,
+        view.unwrap_or_default()
+    );
+    Ok(())
+}
+
+/// The process's exit status: 0, 128 + the signal that stopped a run, or the error's code
+/// (the error printed on stderr).
+fn exit_code(result: Result<Option<i32>>) -> ExitCode {
     match result {
         Ok(None) => ExitCode::SUCCESS,
         // 128 + the signal: what a shell reports for a process the signal ended.
@@ -344,15 +362,39 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
 
 fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
     let mesh = Mesh::read(path)?;
-    let q = mesh.quality();
-    let (cells_key, angle, orientation) = match mesh.dim {
-        2 => ("triangles", "angle", "counter-clockwise"),
-        _ => ("tetrahedra", "dihedral angle", "positive volume"),
-    };
-    let size = if mesh.dim == 2 { "area" } else { "volume" };
-    let size_key = |which: &str| format!("{which}_{size}");
-    let groups: Vec<serde_json::Value> = mesh
-        .groups
+    let groups = group_summaries(&mesh);
+    if json {
+        let v = mesh_json(path, &mesh, groups);
+        println!("{}", serde_json::to_string_pretty(&v).expect("json"));
+        return Ok(());
+    }
+    print_mesh_summary(path, &mesh, &groups);
+    print_mesh_notes(&mesh);
+    Ok(())
+}
+
+/// The name of the cells of a mesh of dimension `dim`.
+fn cells_key(dim: usize) -> &'static str {
+    if dim == 2 {
+        "triangles"
+    } else {
+        "tetrahedra"
+    }
+}
+
+/// The measure of a cell of a mesh of dimension `dim`.
+fn cell_size(dim: usize) -> &'static str {
+    if dim == 2 {
+        "area"
+    } else {
+        "volume"
+    }
+}
+
+/// Each physical group as mesh-info reports it: name, tag, dimension, elements, nodes, the
+/// measure of a boundary group (length in 2D, area in 3D) and its defect.
+fn group_summaries(mesh: &Mesh) -> Vec<serde_json::Value> {
+    mesh.groups
         .iter()
         .map(|g| {
             // The measure of a boundary group: length (2D) or area (3D).
@@ -374,50 +416,66 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
                 "defect": g.defect,
             })
         })
-        .collect();
-    let parts = mesh.parts();
-    let coincident = mesh.coincident_nodes();
-    if json {
-        let point = |p: [f64; 3]| p[..mesh.dim].to_vec();
-        let v = serde_json::json!({
-            "file": path.display().to_string(),
-            "dim": mesh.dim,
-            "nodes": mesh.nodes.len(),
-            cells_key: mesh.n_cells(),
-            "reoriented": mesh.flipped,
-            "groups": groups,
-            "parts": parts.iter().map(|p| serde_json::json!({
-                cells_key: p.cells.len(),
-                "nodes": p.nodes.len(),
-                "entities": p.entities,
-                "min": point(p.min),
-                "max": point(p.max),
-            })).collect::<Vec<_>>(),
-            "coincident_nodes": coincident.iter().map(|c| serde_json::json!({
-                "at": point(mesh.nodes[c.nodes[0]]),
-                "nodes": c.nodes.len(),
-                "entities": c.entities,
-            })).collect::<Vec<_>>(),
-            "quality": {
-                "min_angle_deg": q.min_angle_deg,
-                "max_aspect_ratio": q.max_aspect_ratio,
-                size_key("min"): q.min_area,
-                size_key("max"): q.max_area,
-            }
-        });
-        println!("{}", serde_json::to_string_pretty(&v).expect("json"));
-        return Ok(());
-    }
+        .collect()
+}
+
+/// `mesh-info --json`: sizes, groups, parts, coincident nodes and quality.
+fn mesh_json(
+    path: &std::path::Path,
+    mesh: &Mesh,
+    groups: Vec<serde_json::Value>,
+) -> serde_json::Value {
+    let q = mesh.quality();
+    let cells_key = cells_key(mesh.dim);
+    let size = cell_size(mesh.dim);
+    let size_key = |which: &str| format!("{which}_{size}");
+    let point = |p: [f64; 3]| p[..mesh.dim].to_vec();
+    serde_json::json!({
+        "file": path.display().to_string(),
+        "dim": mesh.dim,
+        "nodes": mesh.nodes.len(),
+        cells_key: mesh.n_cells(),
+        "reoriented": mesh.flipped,
+        "groups": groups,
+        "parts": mesh.parts().iter().map(|p| serde_json::json!({
+            cells_key: p.cells.len(),
+            "nodes": p.nodes.len(),
+            "entities": p.entities,
+            "min": point(p.min),
+            "max": point(p.max),
+        })).collect::<Vec<_>>(),
+        "coincident_nodes": mesh.coincident_nodes().iter().map(|c| serde_json::json!({
+            "at": point(mesh.nodes[c.nodes[0]]),
+            "nodes": c.nodes.len(),
+            "entities": c.entities,
+        })).collect::<Vec<_>>(),
+        "quality": {
+            "min_angle_deg": q.min_angle_deg,
+            "max_aspect_ratio": q.max_aspect_ratio,
+            size_key("min"): q.min_area,
+            size_key("max"): q.max_area,
+        }
+    })
+}
+
+/// mesh-info as text: sizes, the groups, quality and parts.
+fn print_mesh_summary(path: &std::path::Path, mesh: &Mesh, groups: &[serde_json::Value]) {
+    let q = mesh.quality();
+    let (angle, orientation) = match mesh.dim {
+        2 => ("angle", "counter-clockwise"),
+        _ => ("dihedral angle", "positive volume"),
+    };
     println!("{}", path.display());
     println!(
-        "  {}D: {} nodes, {} {cells_key} ({} reoriented to {orientation})",
+        "  {}D: {} nodes, {} {} ({} reoriented to {orientation})",
         mesh.dim,
         mesh.nodes.len(),
         mesh.n_cells(),
+        cells_key(mesh.dim),
         mesh.flipped
     );
     println!("  physical groups:");
-    for g in &groups {
+    for g in groups {
         println!(
             "    {:<10} tag {:<4} dim {}  {:>7} {}  {:>7} nodes{}",
             g["name"].as_str().unwrap_or(""),
@@ -437,9 +495,14 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
         );
     }
     println!(
-        "  quality: min {angle} {:.2}°, max aspect ratio {:.3}, {size} {:.3e} .. {:.3e}",
-        q.min_angle_deg, q.max_aspect_ratio, q.min_area, q.max_area
+        "  quality: min {angle} {:.2}°, max aspect ratio {:.3}, {} {:.3e} .. {:.3e}",
+        q.min_angle_deg,
+        q.max_aspect_ratio,
+        cell_size(mesh.dim),
+        q.min_area,
+        q.max_area
     );
+    let parts = mesh.parts();
     println!(
         "  parts: {} (cells connected through shared nodes)",
         parts.len()
@@ -449,9 +512,15 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
             println!("    part {}: {}", k + 1, mesh.describe_part(p));
         }
     }
-    for note in overlapping_cell_groups(&mesh) {
+}
+
+/// mesh-info's notes and warnings: overlapping cell groups, coincident nodes, groups that
+/// carry no condition, boundary groups with a defect.
+fn print_mesh_notes(mesh: &Mesh) {
+    for note in overlapping_cell_groups(mesh) {
         println!("  note: {note}");
     }
+    let coincident = mesh.coincident_nodes();
     if !coincident.is_empty() {
         println!(
             "  warning: {}: a forgotten BooleanFragments (OpenCASCADE) or Coherence (built-in \
@@ -470,7 +539,6 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
     for g in mesh.groups.iter().filter_map(|g| g.defect.as_ref()) {
         println!("  warning: {g} (refused only where a scene uses it as a boundary group)");
     }
-    Ok(())
 }
 
 /// Cell groups that share cells, with the tag the output's `region` holds there (the first

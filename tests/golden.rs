@@ -9,6 +9,10 @@
 //! deterministic (the same bits whatever the thread count and across stop/resume), so the
 //! comparison is exact: any change of a result shows, with the relative difference.
 //!
+//! The errors of the paper's Tables 1–3 (h = k, k fixed, h fixed; u_N against a reference
+//! at h = k = 1/128) are stored under the key `study_tables` for levels 8, 16, 32: the
+//! study's numbers, not only its orders, are checked the same way.
+//!
 //! A change that is meant to change results stores new values with
 //! `VISCONTACT_GOLDEN=bless cargo test --release --test golden` and says why in its commit.
 
@@ -17,6 +21,17 @@ mod common;
 use common::repo;
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Mutex;
+use viscontact::study::{self, StudyOptions, Vary};
+
+/// A case's (or a table's) values by name.
+type Values = BTreeMap<String, String>;
+
+/// The stored file: sections of values by name.
+type Golden = BTreeMap<String, Values>;
+
+/// The section that holds the study's tables; every other section is a scene case.
+const TABLES: &str = "study_tables";
 
 /// A scene: `base` (relative to the repository) with `replace` applied to its text, run
 /// with `set` overrides.
@@ -107,15 +122,15 @@ const fn case(
 
 /// The values a case is checked by, as summary.json gives them (floats in Rust's shortest
 /// round-trip form, which parses back to the same bits).
-fn values(dir: &Path) -> BTreeMap<String, String> {
+fn values(dir: &Path) -> Values {
     let s = common::summary(dir);
-    let float = |v: &serde_json::Value| format!("{:?}", v.as_f64().unwrap());
+    let number = |v: &serde_json::Value| float(v.as_f64().unwrap());
     let mut out = BTreeMap::new();
     for key in ["u_l2", "u_h1", "u_max"] {
-        out.insert(key.to_string(), float(&s["final"][key]));
+        out.insert(key.to_string(), number(&s["final"][key]));
     }
     for key in ["max_kkt_residual", "max_violation"] {
-        out.insert(key.to_string(), float(&s["contact"][key]));
+        out.insert(key.to_string(), number(&s["contact"][key]));
     }
     for key in ["active_at_end", "stick_at_end"] {
         out.insert(key.to_string(), s["contact"][key].to_string());
@@ -131,7 +146,7 @@ fn values(dir: &Path) -> BTreeMap<String, String> {
 }
 
 /// Runs `case` into a directory of `tmp`: its values.
-fn run(case: &Case, tmp: &Path) -> BTreeMap<String, String> {
+fn run(case: &Case, tmp: &Path) -> Values {
     let mut text = std::fs::read_to_string(repo().join(case.base)).unwrap();
     for (from, to) in case.replace {
         assert!(
@@ -172,21 +187,59 @@ fn relative(a: &str, b: &str) -> Option<f64> {
     Some((a - b).abs() / a.abs().max(b.abs()).max(f64::MIN_POSITIVE))
 }
 
-#[test]
-fn results_equal_the_stored_golden_values() {
+/// The float's shortest round-trip form (parses back to the same bits).
+fn float(x: f64) -> String {
+    format!("{x:?}")
+}
+
+/// The paper's Tables 1–3 at levels 8, 16, 32 against h = k = 1/128 (one reference run
+/// serves the three): for each table, the reference's norms and each level's errors.
+fn study_tables() -> Values {
+    let opts = StudyOptions {
+        levels: vec![8, 16, 32],
+        reference: 128,
+        vary: vec![Vary::Both, Vary::H, Vary::K],
+        repeat: Some(1),
+        ..Default::default()
+    };
+    let report = study::run_study(&repo().join(PAPER), &opts).unwrap();
+    let mut out = Values::new();
+    for f in &report.families {
+        let table = match f.vary {
+            Vary::Both => "table_1",
+            Vary::H => "table_2",
+            Vary::K => "table_3",
+        };
+        out.insert(format!("{table}.reference.u_l2"), float(f.reference.u_l2));
+        out.insert(format!("{table}.reference.u_h1"), float(f.reference.u_h1));
+        for r in &f.rows {
+            let level = format!("{table}.level_{:03}", r.level);
+            out.insert(format!("{level}.err_l2"), float(r.err_l2));
+            out.insert(format!("{level}.err_h1_semi"), float(r.err_h1_semi));
+            out.insert(format!("{level}.err_h1"), float(r.err_h1));
+        }
+    }
+    out
+}
+
+/// Serializes the read-modify-write of the stored file between the tests of this binary.
+static STORE: Mutex<()> = Mutex::new(());
+
+/// Compares `got` with the stored sections that `owns` names, bit for bit; with
+/// `VISCONTACT_GOLDEN=bless`, stores `got` in their place and keeps the other sections.
+fn check_or_bless(got: Golden, owns: impl Fn(&str) -> bool) {
     let path = repo().join("tests/data/golden.json");
-    let tmp = tempfile::tempdir().unwrap();
-    let got: BTreeMap<String, BTreeMap<String, String>> = CASES
-        .iter()
-        .map(|c| (c.name.to_string(), run(c, tmp.path())))
-        .collect();
+    let _store = STORE.lock().unwrap_or_else(|e| e.into_inner());
+    let mut stored: Golden =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
     if std::env::var("VISCONTACT_GOLDEN").as_deref() == Ok("bless") {
-        let text = serde_json::to_string_pretty(&got).unwrap() + "\n";
+        stored.retain(|name, _| !owns(name));
+        stored.extend(got);
+        let text = serde_json::to_string_pretty(&stored).unwrap() + "\n";
         std::fs::write(&path, text).unwrap();
         return;
     }
-    let stored: BTreeMap<String, BTreeMap<String, String>> =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    stored.retain(|name, _| owns(name));
     let mut changes = Vec::new();
     for (name, values) in &got {
         let Some(want) = stored.get(name) else {
@@ -203,10 +256,31 @@ fn results_equal_the_stored_golden_values() {
             }
         }
     }
-    assert_eq!(stored.len(), got.len(), "stored cases: {:?}", stored.keys());
+    assert_eq!(
+        stored.len(),
+        got.len(),
+        "stored sections: {:?}",
+        stored.keys()
+    );
     assert!(
         changes.is_empty(),
         "results differ from tests/data/golden.json:\n{}",
         changes.join("\n")
     );
+}
+
+#[test]
+fn results_equal_the_stored_golden_values() {
+    let tmp = tempfile::tempdir().unwrap();
+    let got: Golden = CASES
+        .iter()
+        .map(|c| (c.name.to_string(), run(c, tmp.path())))
+        .collect();
+    check_or_bless(got, |name| name != TABLES);
+}
+
+#[test]
+fn study_tables_equal_the_stored_golden_values() {
+    let got = Golden::from([(TABLES.to_string(), study_tables())]);
+    check_or_bless(got, |name| name == TABLES);
 }

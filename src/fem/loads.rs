@@ -3,6 +3,8 @@
 //! [`Facet::quadrature`] (exact for a quadratic traction times P1, e.g. the paper's x(2−x));
 //! body forces a degree-2 rule (exact for a linear force times P1): the edge midpoints of a
 //! triangle, the 4-point rule of a tetrahedron.
+//!
+//! [`Facet::quadrature`]: crate::mesh::Facet::quadrature
 
 use super::Cell;
 use crate::expr::{Point, Scalar};

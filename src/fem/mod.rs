@@ -8,7 +8,7 @@ pub mod loads;
 
 use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
-use crate::scene::{Model, Scene};
+use crate::scene::{Friction, Model, Scene};
 use crate::{Error, Result};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
@@ -192,48 +192,202 @@ fn group<'m>(mesh: &'m Mesh, scene: &Scene, key: &str, value: &str) -> Result<&'
         .map_err(|e| Error::input(format!("{}: key '{key}': {e}", scene.path.display())))
 }
 
-impl Discretization {
-    pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
-        check_model(mesh, scene)?;
-        let (nn, d) = (mesh.nodes.len(), mesh.dim);
-        let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.groups.fixed)?;
-        mesh.check_parts(fixed, scene.separate_parts)
-            .map_err(|e| Error::input(format!("{}: {e}", scene.path.display())))?;
-        let mut clamped = vec![false; nn];
-        for n in mesh.group_nodes(fixed) {
-            clamped[n] = true;
-        }
-        let mut free = vec![None; d * nn];
-        let mut n_free = 0;
-        for (i, c) in clamped.iter().enumerate() {
-            if !c {
-                for slot in &mut free[d * i..d * (i + 1)] {
-                    *slot = Some(n_free);
-                    n_free += 1;
-                }
+/// The free index of every global dof d·node + component (None on the clamped group Γ1,
+/// which clamps whole nodes) and the number of free dofs; nothing free is refused.
+fn free_dofs(mesh: &Mesh, scene: &Scene) -> Result<(Vec<Option<usize>>, usize)> {
+    let (nn, d) = (mesh.nodes.len(), mesh.dim);
+    let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.groups.fixed)?;
+    mesh.check_parts(fixed, scene.separate_parts)
+        .map_err(|e| Error::input(format!("{}: {e}", scene.path.display())))?;
+    let mut clamped = vec![false; nn];
+    for n in mesh.group_nodes(fixed) {
+        clamped[n] = true;
+    }
+    let mut free = vec![None; d * nn];
+    let mut n_free = 0;
+    for (i, c) in clamped.iter().enumerate() {
+        if !c {
+            for slot in &mut free[d * i..d * (i + 1)] {
+                *slot = Some(n_free);
+                n_free += 1;
             }
         }
-        if n_free == 0 {
-            return Err(Error::input(format!(
-                "{}: every node of '{}' is on the clamped group '{}'; nothing can move",
-                scene.path.display(),
-                mesh.path.display(),
-                scene.groups.fixed
-            )));
+    }
+    if n_free == 0 {
+        return Err(Error::input(format!(
+            "{}: every node of '{}' is on the clamped group '{}'; nothing can move",
+            scene.path.display(),
+            mesh.path.display(),
+            scene.groups.fixed
+        )));
+    }
+    Ok((free, n_free))
+}
+
+/// The mesh's triangles (2D) or tetrahedra (3D) as cells.
+fn cells(mesh: &Mesh) -> Vec<Cell> {
+    let xy = |i: usize| [mesh.nodes[i][0], mesh.nodes[i][1]];
+    match mesh.dim {
+        2 => mesh
+            .triangles
+            .iter()
+            .map(|t| Cell::triangle(*t, t.map(xy)))
+            .collect(),
+        _ => mesh
+            .tetrahedra
+            .iter()
+            .map(|t| Cell::tetrahedron(*t, t.map(|i| mesh.nodes[i])))
+            .collect(),
+    }
+}
+
+/// Makes the nodal constraint rows from the free-dof numbering.
+struct RowMaker<'f> {
+    free: &'f [Option<usize>],
+    dim: usize,
+}
+
+impl RowMaker<'_> {
+    /// The free dofs of a node, if none is clamped (Γ1 wins over every other part).
+    fn node_dofs(&self, node: usize) -> Option<[usize; 3]> {
+        let d = self.dim;
+        let mut out = [0; 3];
+        for (c, o) in out.iter_mut().enumerate().take(d) {
+            *o = self.free[d * node + c]?;
         }
-        let xy = |i: usize| [mesh.nodes[i][0], mesh.nodes[i][1]];
-        let cells: Vec<Cell> = match d {
-            2 => mesh
-                .triangles
-                .iter()
-                .map(|t| Cell::triangle(*t, t.map(xy)))
-                .collect(),
-            _ => mesh
-                .tetrahedra
-                .iter()
-                .map(|t| Cell::tetrahedron(*t, t.map(|i| mesh.nodes[i])))
-                .collect(),
-        };
+        Some(out)
+    }
+
+    fn row(&self, node: usize, dofs: [usize; 3], dir: [f64; 3], bound: f64, area: f64) -> NodalRow {
+        NodalRow {
+            node,
+            dofs,
+            dir,
+            dim: self.dim,
+            bound,
+            area,
+        }
+    }
+}
+
+/// Γ3,1: one row n_i per free node, and the largest kink of the normals (empty and 0 when
+/// contact is off); a group with every node clamped is refused.
+fn contact_rows(mesh: &Mesh, scene: &Scene, rows: &RowMaker) -> Result<(Vec<NodalRow>, f64)> {
+    let mut contact = Vec::new();
+    let mut contact_kink = 0.0;
+    if scene.contact {
+        let g = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+        let (normals, k) = mesh.nodal_normals(g);
+        contact_kink = k;
+        let area = lumped_area(mesh, g);
+        for (node, n) in normals {
+            if let Some(dofs) = rows.node_dofs(node) {
+                contact.push(rows.row(node, dofs, n, f64::INFINITY, area[node]));
+            }
+        }
+        if contact.is_empty() {
+            return Err(on_fixed(
+                scene,
+                "contact",
+                &scene.groups.contact,
+                "[contact]",
+            ));
+        }
+    }
+    Ok((contact, contact_kink))
+}
+
+/// Γ3,2: g_F (empty when it vanishes), the friction rows τ_i with c_i = ∫ μF φ_i da, and
+/// the largest kink of the normals; a group with every node clamped is refused.
+fn friction_rows(
+    mesh: &Mesh,
+    scene: &Scene,
+    fr: &Friction,
+    rows: &RowMaker,
+    n_free: usize,
+) -> Result<(Vec<f64>, Vec<NodalRow>, f64)> {
+    let g = group(mesh, scene, "mesh.groups.friction", &scene.groups.friction)?;
+    if scene.contact {
+        let c = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+        check_overlap(mesh, scene, c, g)?;
+    }
+    let (gf, c) = friction_integrals(mesh, scene, fr, g, rows, n_free)?;
+    let g_f = if gf.iter().any(|&v| v != 0.0) {
+        gf
+    } else {
+        Vec::new()
+    };
+    let (normals, k) = mesh.nodal_normals(g);
+    if normals
+        .iter()
+        .all(|&(node, _)| rows.node_dofs(node).is_none())
+    {
+        return Err(on_fixed(
+            scene,
+            "friction",
+            &scene.groups.friction,
+            "[friction]",
+        ));
+    }
+    let area = lumped_area(mesh, g);
+    let mut friction = Vec::new();
+    for (node, n) in normals {
+        // μF may vanish on parts of Γ3,2: nodes with c_i = 0 carry no friction.
+        if let (Some(dofs), true) = (rows.node_dofs(node), c[node] > 0.0) {
+            for t in tangents(n, rows.dim) {
+                friction.push(rows.row(node, dofs, t, c[node], area[node]));
+            }
+        }
+    }
+    Ok((g_f, friction, k))
+}
+
+/// By facet quadrature over the friction group `g`: g_F_i = ∫ F φ_i ν da (free numbering)
+/// and c_i = ∫ μF φ_i da per node.
+fn friction_integrals(
+    mesh: &Mesh,
+    scene: &Scene,
+    fr: &Friction,
+    g: &Group,
+    rows: &RowMaker,
+    n_free: usize,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let (d, free) = (rows.dim, rows.free);
+    let mut gf = vec![0.0; n_free];
+    let mut c = vec![0.0; mesh.nodes.len()];
+    for f in mesh.boundary_facets(g) {
+        for (p, w, phi) in f.quadrature(mesh) {
+            let pt = Point {
+                x: p[0],
+                y: p[1],
+                z: p[2],
+                ..Default::default()
+            };
+            let big_f = fr.normal_stress.eval(&pt);
+            let mu = fr.coefficient.eval(&pt);
+            check_data(big_f, "friction.normal_stress", scene, p, true)?;
+            check_data(mu, "friction.coefficient", scene, p, true)?;
+            for (&node, ph) in f.nodes().iter().zip(phi) {
+                for comp in 0..d {
+                    if let Some(dof) = free[d * node + comp] {
+                        gf[dof] += w * ph * big_f * f.normal[comp];
+                    }
+                }
+                c[node] += w * ph * mu * big_f;
+            }
+        }
+    }
+    Ok((gf, c))
+}
+
+impl Discretization {
+    /// The discretization of `scene` on `mesh`: the free dofs (Γ1 clamped), the cells, the
+    /// stiffness matrices, the loads and the constraint rows on Γ3,1 and Γ3,2.
+    pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
+        check_model(mesh, scene)?;
+        let d = mesh.dim;
+        let (free, n_free) = free_dofs(mesh, scene)?;
+        let cells = cells(mesh);
 
         let a = Isotropic::viscosity(scene.theta, scene.zeta);
         let b = scene
@@ -247,102 +401,15 @@ impl Discretization {
         let (k_a, k_b, k_r) = assemble(&cells, d, &free, n_free, a, b, r);
 
         let loads = Loads::new(mesh, scene, &cells)?;
-        // The free dofs of a node, if none is clamped (Γ1 wins over every other part).
-        let node_dofs = |node: usize| -> Option<[usize; 3]> {
-            let mut out = [0; 3];
-            for (c, o) in out.iter_mut().enumerate().take(d) {
-                *o = free[d * node + c]?;
-            }
-            Some(out)
-        };
-        let row = |node: usize, dofs: [usize; 3], dir: [f64; 3], bound: f64, area: f64| NodalRow {
-            node,
-            dofs,
-            dir,
+        let rows = RowMaker {
+            free: &free,
             dim: d,
-            bound,
-            area,
         };
-
-        // Γ3,1: one row n_i per free node.
-        let mut contact = Vec::new();
-        let mut contact_kink = 0.0;
-        if scene.contact {
-            let g = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
-            let (normals, k) = mesh.nodal_normals(g);
-            contact_kink = k;
-            let area = lumped_area(mesh, g);
-            for (node, n) in normals {
-                if let Some(dofs) = node_dofs(node) {
-                    contact.push(row(node, dofs, n, f64::INFINITY, area[node]));
-                }
-            }
-            if contact.is_empty() {
-                return Err(on_fixed(
-                    scene,
-                    "contact",
-                    &scene.groups.contact,
-                    "[contact]",
-                ));
-            }
-        }
-        // Γ3,2: g_F and the friction rows τ_i with c_i = ∫ μF φ_i da (facet quadrature).
-        let mut g_f = Vec::new();
-        let mut friction = Vec::new();
-        let mut friction_kink = 0.0;
-        if let Some(fr) = &scene.friction {
-            let g = group(mesh, scene, "mesh.groups.friction", &scene.groups.friction)?;
-            if scene.contact {
-                let c = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
-                check_overlap(mesh, scene, c, g)?;
-            }
-            let mut gf = vec![0.0; n_free];
-            let mut c = vec![0.0; nn];
-            for f in mesh.boundary_facets(g) {
-                for (p, w, phi) in f.quadrature(mesh) {
-                    let pt = Point {
-                        x: p[0],
-                        y: p[1],
-                        z: p[2],
-                        ..Default::default()
-                    };
-                    let big_f = fr.normal_stress.eval(&pt);
-                    let mu = fr.coefficient.eval(&pt);
-                    check_data(big_f, "friction.normal_stress", scene, p, true)?;
-                    check_data(mu, "friction.coefficient", scene, p, true)?;
-                    for (&node, ph) in f.nodes().iter().zip(phi) {
-                        for comp in 0..d {
-                            if let Some(dof) = free[d * node + comp] {
-                                gf[dof] += w * ph * big_f * f.normal[comp];
-                            }
-                        }
-                        c[node] += w * ph * mu * big_f;
-                    }
-                }
-            }
-            if gf.iter().any(|&v| v != 0.0) {
-                g_f = gf;
-            }
-            let (normals, k) = mesh.nodal_normals(g);
-            if normals.iter().all(|&(node, _)| node_dofs(node).is_none()) {
-                return Err(on_fixed(
-                    scene,
-                    "friction",
-                    &scene.groups.friction,
-                    "[friction]",
-                ));
-            }
-            friction_kink = k;
-            let area = lumped_area(mesh, g);
-            for (node, n) in normals {
-                // μF may vanish on parts of Γ3,2: nodes with c_i = 0 carry no friction.
-                if let (Some(dofs), true) = (node_dofs(node), c[node] > 0.0) {
-                    for t in tangents(n, d) {
-                        friction.push(row(node, dofs, t, c[node], area[node]));
-                    }
-                }
-            }
-        }
+        let (contact, contact_kink) = contact_rows(mesh, scene, &rows)?;
+        let (g_f, friction, friction_kink) = match &scene.friction {
+            Some(fr) => friction_rows(mesh, scene, fr, &rows, n_free)?,
+            None => (Vec::new(), Vec::new(), 0.0),
+        };
 
         Ok(Discretization {
             dim: d,

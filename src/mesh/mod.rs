@@ -6,7 +6,7 @@
 //! type 4), 3-node triangles (type 2), 2-node lines (type 1) and points (type 15); anything
 //! else is refused with a message naming the type and how to remesh. A file with tetrahedra
 //! is a 3D mesh (its triangles are boundary faces), one without is a 2D mesh in the
-//! xy-plane. For a 2D mesh:
+//! xy-plane. For a 2D mesh (`plane.rs`):
 //!
 //! - triangles given clockwise are reoriented (counted in [`Mesh::flipped`]); triangles of
 //!   zero area, and meshes that fold over themselves or have an edge shared by three or more
@@ -27,13 +27,15 @@
 //! ([`Mesh::group`]). The code downstream sees the boundary of either dimension through
 //! [`Mesh::boundary_facets`]: edges in 2D, triangles in 3D, with normal and measure.
 
+mod groups;
 mod msh;
 mod parts;
 mod physical_names;
+mod plane;
 mod quality;
 mod solid;
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 pub use parts::{Coincident, Part, COINCIDENT_TOLERANCE};
@@ -41,9 +43,6 @@ pub use quality::Quality;
 pub(crate) use solid::{cross, dot, norm, sub};
 
 use crate::{Error, Result};
-use msh::RawMesh;
-use physical_names::PhysicalName;
-use quality::signed_area;
 
 /// A P1 simplex mesh (triangles in 2D, tetrahedra in 3D) with its physical groups.
 #[derive(Debug, Clone, PartialEq)]
@@ -176,7 +175,7 @@ impl Mesh {
         let names = physical_names::read_physical_names(&bytes)
             .map_err(|m| Error::input(format!("mesh file '{}': {m}", path.display())))?;
         if raw.tetrahedra.is_empty() {
-            build(path, raw, &names)
+            plane::build(path, raw, &names)
         } else {
             solid::build(path, raw, &names)
         }
@@ -508,318 +507,14 @@ pub fn fmt_point(p: [f64; 3], dim: usize) -> String {
     format!("({})", c.join(", "))
 }
 
-/// Geometry, topology and groups from the raw file content.
-fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
-    let file = path.display();
-    if raw.triangles.is_empty() {
-        return Err(Error::input(format!(
-            "mesh file '{file}' contains no triangles (gmsh element type 2) and no tetrahedra \
-             (type 4); viscontact needs a 2D triangle mesh (`gmsh -2`) or a 3D tetrahedral \
-             mesh (`gmsh -3`) with the cells in a physical surface or volume group (gmsh saves \
-             only elements of physical groups)"
-        )));
-    }
+// What the 2D and 3D builders (`plane.rs`, `solid.rs`) share besides the groups.
 
-    let (new_index, mut nodes) = renumber(&raw.nodes, &raw.triangles);
-    // Planarity and the coordinate scale for the zero-area test.
-    let scale = nodes
-        .iter()
-        .map(|p| p[0].abs().max(p[1].abs()))
-        .fold(0.0_f64, f64::max);
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in &nodes {
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let diag = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
-    check_finite(&file, &nodes)?;
-    if let Some(p) = nodes.iter().find(|p| p[2].abs() > 1e-12 * diag.max(scale)) {
-        return Err(Error::input(format!(
-            "mesh file '{file}' is not a 2D mesh in the xy-plane: node {} has z ≠ 0; \
-             viscontact reads 2D meshes (z = 0)",
-            fmt_point(*p, 3)
-        )));
-    }
-    for p in &mut nodes {
-        p[2] = 0.0;
-    }
-
-    // Orientation and degeneracy. A triangle is degenerate if the altitude onto its longest
-    // edge is at most 1e-12 of that edge (its smallest angle is below ~1e-10 rad) or at most
-    // 1e-13 of the largest coordinate (the precision at which coordinates are stored).
-    let mut triangles = Vec::with_capacity(raw.triangles.len());
-    let mut flipped = 0;
-    let mut degenerate = Vec::new();
-    for t in &raw.triangles {
-        let mut tri = t.nodes.map(|n| new_index[n]);
-        let [a, b, c] = tri.map(|n| nodes[n]);
-        let area2 = 2.0 * signed_area(a, b, c);
-        let lmax = [(a, b), (b, c), (c, a)]
-            .iter()
-            .map(|(p, q)| (q[0] - p[0]).hypot(q[1] - p[1]))
-            .fold(0.0_f64, f64::max);
-        if area2.abs() <= lmax * (1e-12 * lmax + 1e-13 * scale) {
-            degenerate.push(t);
-        } else if area2 < 0.0 {
-            tri.swap(1, 2);
-            flipped += 1;
-        }
-        triangles.push(tri);
-    }
-    if let Some(t) = degenerate.first() {
-        let pts: Vec<String> = t
-            .nodes
-            .iter()
-            .map(|&n| fmt_point(raw.nodes[n], 2))
-            .collect();
-        let more = match degenerate.len() {
-            1 => String::new(),
-            n => format!(" ({} more triangles are degenerate)", n - 1),
-        };
-        return Err(Error::input(format!(
-            "mesh file '{file}': triangle {} (gmsh element tag) has zero area: its nodes {} are \
-             collinear or coincide{more}; fix the geometry or remesh",
-            t.tag,
-            pts.join(", ")
-        )));
-    }
-
-    // Edges: each is used by one triangle (boundary) or by two in opposite directions.
-    struct EdgeUse {
-        dir: [usize; 2],
-        tri: usize,
-        count: u32,
-    }
-    let mut edges: HashMap<[usize; 2], EdgeUse> = HashMap::with_capacity(triangles.len() * 2);
-    let tri_tag = |k: usize| raw.triangles[k].tag;
-    for (k, tri) in triangles.iter().enumerate() {
-        for i in 0..3 {
-            let dir = [tri[i], tri[(i + 1) % 3]];
-            let key = [dir[0].min(dir[1]), dir[0].max(dir[1])];
-            let e = edges.entry(key).or_insert(EdgeUse {
-                dir,
-                tri: k,
-                count: 0,
-            });
-            e.count += 1;
-            let edge_at = || {
-                format!(
-                    "{}–{}",
-                    fmt_point(nodes[key[0]], 2),
-                    fmt_point(nodes[key[1]], 2)
-                )
-            };
-            if e.count == 2 && e.dir == dir {
-                return Err(Error::input(format!(
-                    "mesh file '{file}' folds over itself: triangles {} and {} (gmsh element \
-                     tags) overlap at the edge {}; an inverted element in the middle of the mesh \
-                     cannot be repaired by reorienting it: fix the geometry or remesh",
-                    tri_tag(e.tri),
-                    tri_tag(k),
-                    edge_at()
-                )));
-            }
-            if e.count == 3 {
-                return Err(Error::input(format!(
-                    "mesh file '{file}': the edge {} is shared by three or more triangles (e.g. \
-                     {} and {}, gmsh element tags); the mesh is not a valid 2D domain \
-                     (overlapping surfaces?): fix the geometry or remesh",
-                    edge_at(),
-                    tri_tag(e.tri),
-                    tri_tag(k)
-                )));
-            }
-        }
-    }
-
-    let words = Words {
-        element: "line",
-        mesh: "triangle mesh",
-        cells: "triangles",
-        cell: "triangle",
-        facet: "edge",
-        a_facet: "an edge",
-        boundary: "curves of the meshed surface",
-    };
-    let lookup = |[a, b]: [usize; 2]| edges.get(&[a.min(b), a.max(b)]).map(|e| (e.dir, e.count));
-    let groups = fill_groups(
-        &file,
-        &raw,
-        (&raw.triangles, &raw.lines),
-        group_table(&raw, names, 2),
-        &new_index,
-        lookup,
-        &words,
-        |g, f| g.facets.push(f),
-    )?;
-
-    Ok(Mesh {
-        path: path.to_path_buf(),
-        dim: 2,
-        nodes,
-        triangles,
-        tetrahedra: Vec::new(),
-        groups,
-        flipped,
-        other_groups: other_groups(&raw, names, 2),
-        cell_entity: raw.triangles.iter().map(|t| t.entity.1).collect(),
-    })
-}
-
-/// The words of `fill_groups`' messages for one dimension.
-struct Words {
-    element: &'static str,
-    mesh: &'static str,
-    cells: &'static str,
-    cell: &'static str,
-    facet: &'static str,
-    a_facet: &'static str,
-    boundary: &'static str,
-}
-
-/// Fills the groups of `group_table` (dimension D of the cells, D − 1 of the facets): each
-/// cell element goes into the cell groups of its entity, each facet element (a line in 2D, a
-/// triangle in 3D) into the boundary groups of its entity, once, as the oriented boundary
-/// facet that `lookup` finds for its nodes (`(oriented nodes, number of cells using it)`). A
-/// facet element that is not a boundary facet of the cells (an embedded curve or surface)
-/// marks its groups with a `defect`: refused where a scene uses the group as a boundary.
-#[allow(clippy::too_many_arguments)]
-fn fill_groups<const C: usize, const F: usize>(
-    file: &impl std::fmt::Display,
-    raw: &RawMesh,
-    (cells, facets): (&[msh::RawElement<C>], &[msh::RawElement<F>]),
-    (mut groups, groups_of): (Vec<Group>, impl Fn((i32, i32)) -> Vec<usize>),
-    new_index: &[usize],
-    lookup: impl Fn([usize; F]) -> Option<([usize; F], u32)>,
-    words: &Words,
-    store: impl Fn(&mut Group, [usize; F]),
-) -> Result<Vec<Group>> {
-    let (cell_dim, facet_dim) = (C as i32 - 1, F as i32 - 1);
-    for (k, t) in cells.iter().enumerate() {
-        if t.entity.0 == cell_dim {
-            for g in groups_of(t.entity) {
-                groups[g].cells.push(k);
-            }
-        }
-    }
-    let sorted = |mut f: [usize; F]| {
-        f.sort_unstable();
-        f
-    };
-    let mut seen: Vec<HashSet<[usize; F]>> = vec![HashSet::new(); groups.len()];
-    let mut misfits = vec![Misfits::default(); groups.len()];
-    for el in facets.iter().filter(|e| e.entity.0 == facet_dim) {
-        let member = groups_of(el.entity);
-        if member.is_empty() {
-            continue;
-        }
-        let f = el.nodes.map(|n| new_index[n]);
-        let found = if f.contains(&UNUSED) { None } else { lookup(f) };
-        for &g in &member {
-            misfits[g].elements += 1;
-        }
-        let dir = match found {
-            Some((dir, 1)) => dir,
-            other => {
-                let pts: Vec<String> = el
-                    .nodes
-                    .iter()
-                    .map(|&n| fmt_point(raw.nodes[n], F))
-                    .collect();
-                let example = format!("{} (gmsh element {})", pts.join("–"), el.tag);
-                for &g in &member {
-                    let m = &mut misfits[g];
-                    match other {
-                        Some(_) => m.interior += 1,
-                        None => m.off += 1,
-                    }
-                    m.example.get_or_insert_with(|| example.clone());
-                }
-                continue;
-            }
-        };
-        for g in member {
-            if seen[g].insert(sorted(dir)) {
-                store(&mut groups[g], dir);
-            }
-        }
-    }
-    for (g, m) in groups.iter_mut().zip(&misfits) {
-        if m.off + m.interior > 0 {
-            g.defect = Some(m.message(file, g, words));
-        }
-    }
-    Ok(groups)
-}
-
-/// The facet elements of one boundary group that are not boundary facets of the cells.
-#[derive(Clone, Default)]
-struct Misfits {
-    /// All facet elements of the group.
-    elements: usize,
-    /// Facets of no cell (a curve or surface outside the meshed body's boundary).
-    off: usize,
-    /// Facets of two cells (an embedded curve or surface inside the body).
-    interior: usize,
-    /// The first misfit, as its corner points and gmsh element tag.
-    example: Option<String>,
-}
-
-impl Misfits {
-    /// The group's `defect`: it exists, how many of its elements are not boundary facets and
-    /// why, an example, and the gmsh fix.
-    fn message(&self, file: &impl std::fmt::Display, g: &Group, words: &Words) -> String {
-        let Words {
-            element,
-            mesh,
-            cells,
-            cell,
-            facet,
-            a_facet,
-            boundary,
-        } = words;
-        let group = match &g.name {
-            Some(n) => format!("\"{n}\" (tag {})", g.tag),
-            None => format!("with tag {} (no name)", g.tag),
-        };
-        let bad = self.off + self.interior;
-        let how_many = match (bad == self.elements, bad) {
-            (true, 1) => format!("it is not a boundary {facet} of the {mesh}"),
-            (true, _) => format!("none of them is a boundary {facet} of the {mesh}"),
-            (false, 1) => format!("1 of them is not a boundary {facet} of the {mesh}"),
-            (false, _) => format!("{bad} of them are not boundary {facet}s of the {mesh}"),
-        };
-        let is = |n: usize| {
-            if n == 1 {
-                "1 is".to_string()
-            } else {
-                format!("{n} are")
-            }
-        };
-        let mut why = Vec::new();
-        if self.off > 0 {
-            why.push(format!("{} not {a_facet} of any {cell}", is(self.off)));
-        }
-        if self.interior > 0 {
-            why.push(format!(
-                "{} an interior {facet} shared by two {cells} (an embedded {element})",
-                is(self.interior)
-            ));
-        }
-        let plural = if self.elements == 1 { "" } else { "s" };
-        format!(
-            "mesh file '{file}': physical group {group} exists, with {} {element} element{plural}, \
-             but {how_many} (not on the boundary: {}; e.g. the {element} {}), so it cannot \
-             carry a boundary condition: a boundary group must consist of boundary {boundary}. \
-             In gmsh, make them part of that boundary (build the body from them, or fragment: \
-             BooleanFragments in OpenCASCADE, Coherence in the built-in kernel) and mesh again",
-            self.elements,
-            why.join(", "),
-            self.example.as_deref().unwrap_or("?")
-        )
-    }
+/// How the cells use a facet (an edge in 2D, a face in 3D): its orientation in the first
+/// cell that has it, that cell, and how many cells have it.
+struct FacetUse<const F: usize> {
+    dir: [usize; F],
+    cell: usize,
+    count: u32,
 }
 
 /// The index of a node no cell uses.
@@ -856,70 +551,6 @@ fn check_finite(file: &impl std::fmt::Display, nodes: &[[f64; 3]]) -> Result<()>
         ))),
         None => Ok(()),
     }
-}
-
-/// The physical groups of the file whose dimension is neither `dim − 1` nor `dim`.
-fn other_groups(
-    raw: &RawMesh,
-    names: &[PhysicalName],
-    dim: i32,
-) -> Vec<(usize, i32, Option<String>)> {
-    let mut out: Vec<(usize, i32, Option<String>)> = names
-        .iter()
-        .filter(|n| n.dim != dim && n.dim != dim - 1)
-        .map(|n| (n.dim as usize, n.tag, Some(n.name.clone())))
-        .collect();
-    for &(d, tag) in &raw.physical_order {
-        if d != dim && d != dim - 1 && !out.iter().any(|o| (o.0, o.1) == (d as usize, tag)) {
-            out.push((d as usize, tag, None));
-        }
-    }
-    out
-}
-
-/// The physical groups of dimensions `dim − 1` and `dim` (named ones in `$PhysicalNames`
-/// order, then unnamed ones from `$Entities`), still empty, and a map from an entity
-/// `(dim, tag)` to the indices of the groups it belongs to.
-fn group_table<'r>(
-    raw: &'r RawMesh,
-    names: &[PhysicalName],
-    dim: i32,
-) -> (Vec<Group>, impl Fn((i32, i32)) -> Vec<usize> + 'r) {
-    let mut groups: Vec<Group> = Vec::new();
-    let mut slot: HashMap<(i32, i32), usize> = HashMap::new();
-    let mut add_group = |d: i32, tag: i32, name: Option<String>| {
-        if (d == dim - 1 || d == dim) && !slot.contains_key(&(d, tag)) {
-            slot.insert((d, tag), groups.len());
-            groups.push(Group {
-                dim: d as usize,
-                tag,
-                name,
-                facets: Vec::new(),
-                faces: Vec::new(),
-                cells: Vec::new(),
-                defect: None,
-            });
-        }
-    };
-    for n in names {
-        add_group(n.dim, n.tag, Some(n.name.clone()));
-    }
-    for &(d, tag) in &raw.physical_order {
-        add_group(d, tag, None);
-    }
-    let groups_of = move |entity: (i32, i32)| -> Vec<usize> {
-        let mut out: Vec<usize> = raw
-            .physical
-            .get(&entity)
-            .into_iter()
-            .flatten()
-            .filter_map(|p| slot.get(&(entity.0, p.wrapping_abs())).copied())
-            .collect();
-        out.sort_unstable();
-        out.dedup();
-        out
-    };
-    (groups, groups_of)
 }
 
 #[cfg(test)]

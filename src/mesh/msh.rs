@@ -416,10 +416,49 @@ fn describe_element_type(t: ElementType) -> (String, &'static str) {
 
 /// Reads the file content `bytes` of `path` into a [`RawMesh`].
 pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
-    let file = path.display();
     let fmt = check_format(path, bytes)?;
+    check_section_headers(path, bytes, fmt)?;
+    check_options_mshio_reads(path, bytes, fmt)?;
+    let msh = mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(path, bytes, fmt, &e))?;
+    let data = msh.data;
 
-    // Headers that would make mshio panic (or mean an empty mesh).
+    let mut raw = RawMesh::default();
+    if let Some(ent) = &data.entities {
+        add_entities(&mut raw, ent);
+    }
+    let nodes = data.nodes.ok_or_else(|| {
+        Error::input(format!(
+            "mesh file '{}' has no $Nodes section; it looks truncated, regenerate it with gmsh",
+            path.display()
+        ))
+    })?;
+    let index = add_nodes(path, bytes, fmt, &nodes, &mut raw)?;
+    let elements = data.elements.ok_or_else(|| {
+        Error::input(format!(
+            "mesh file '{}' has no $Elements section; it looks truncated, regenerate it with \
+             gmsh",
+            path.display()
+        ))
+    })?;
+    check_element_types(path, &elements)?;
+    add_elements(path, &elements, &index, &mut raw)?;
+    if data.entities.is_some() {
+        check_element_entities(path, &elements, &raw)?;
+    }
+    Ok(raw)
+}
+
+/// The error for a file whose sections contradict each other.
+fn corrupt(path: &Path, what: String) -> Error {
+    Error::input(format!(
+        "mesh file '{}' is inconsistent: {what}; the file looks corrupt, regenerate it with gmsh",
+        path.display()
+    ))
+}
+
+/// Refuses `$Nodes` and `$Elements` headers that would make mshio panic (or mean an empty
+/// mesh).
+fn check_section_headers(path: &Path, bytes: &[u8], fmt: Format) -> crate::Result<()> {
     for (name, what) in [(&b"$Nodes"[..], "nodes"), (&b"$Elements"[..], "elements")] {
         for [_, count, min, max] in section_headers(bytes, fmt, name) {
             if count == 0 || min == 0 || max < min {
@@ -435,14 +474,19 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
                     )
                 };
                 return Err(Error::input(format!(
-                    "mesh file '{file}' {problem}; mesh the geometry with `gmsh -2` and save it \
-                     with its physical groups"
+                    "mesh file '{}' {problem}; mesh the geometry with `gmsh -2` and save it \
+                     with its physical groups",
+                    path.display()
                 )));
             }
         }
     }
+    Ok(())
+}
 
-    // Two legal gmsh options that mshio cannot read: say which option to change.
+/// Refuses two legal gmsh options that mshio cannot read, saying which option to change.
+fn check_options_mshio_reads(path: &Path, bytes: &[u8], fmt: Format) -> crate::Result<()> {
+    let file = path.display();
     if find_section(bytes, b"$PartitionedEntities").is_some() {
         return Err(Error::input(format!(
             "mesh file '{file}' was saved partitioned (`gmsh -part N`, or Mesh.NbPartitions > \
@@ -457,81 +501,85 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
              again with `-setnumber Mesh.SaveParametric 0` (the default)"
         )));
     }
-    let msh = mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(path, bytes, fmt, &e))?;
-    let data = msh.data;
+    Ok(())
+}
 
-    let corrupt = |what: String| {
-        Error::input(format!(
-            "mesh file '{file}' is inconsistent: {what}; the file looks corrupt, regenerate it \
-             with gmsh"
-        ))
-    };
-
-    // Entities and their physical tags.
-    let mut raw = RawMesh::default();
-    if let Some(ent) = &data.entities {
-        let mut seen = std::collections::HashSet::new();
-        let mut add = |dim: i32, tag: i32, phys: &[i32]| {
-            raw.physical.insert((dim, tag), phys.to_vec());
-            for &p in phys {
-                // gmsh may write negative physical tags for entities of reversed orientation
-                let p = p.wrapping_abs();
-                if dim > 0 && seen.insert((dim, p)) {
-                    raw.physical_order.push((dim, p));
-                }
+/// Records the physical tags of every entity, and each `(dim, physical tag)` in file order.
+fn add_entities(raw: &mut RawMesh, ent: &mshio::Entities<i32, f64>) {
+    let mut seen = std::collections::HashSet::new();
+    let mut add = |dim: i32, tag: i32, phys: &[i32]| {
+        raw.physical.insert((dim, tag), phys.to_vec());
+        for &p in phys {
+            // gmsh may write negative physical tags for entities of reversed orientation
+            let p = p.wrapping_abs();
+            if dim > 0 && seen.insert((dim, p)) {
+                raw.physical_order.push((dim, p));
             }
-        };
-        for p in &ent.points {
-            add(0, p.tag, &p.physical_tags);
         }
-        for c in &ent.curves {
-            add(1, c.tag, &c.physical_tags);
-        }
-        for s in &ent.surfaces {
-            add(2, s.tag, &s.physical_tags);
-        }
-        for v in &ent.volumes {
-            add(3, v.tag, &v.physical_tags);
-        }
+    };
+    for p in &ent.points {
+        add(0, p.tag, &p.physical_tags);
     }
+    for c in &ent.curves {
+        add(1, c.tag, &c.physical_tags);
+    }
+    for s in &ent.surfaces {
+        add(2, s.tag, &s.physical_tags);
+    }
+    for v in &ent.volumes {
+        add(3, v.tag, &v.physical_tags);
+    }
+}
 
-    // Nodes, mapped by their real tags.
-    let nodes = data.nodes.ok_or_else(|| {
-        Error::input(format!(
-            "mesh file '{file}' has no $Nodes section; it looks truncated, regenerate it with gmsh"
-        ))
+/// Appends the nodes to `raw`, mapped by their real tags (scanned here, see the module
+/// docs): the index of each tag in `raw.nodes`.
+fn add_nodes(
+    path: &Path,
+    bytes: &[u8],
+    fmt: Format,
+    nodes: &mshio::Nodes<u64, i32, f64>,
+    raw: &mut RawMesh,
+) -> crate::Result<HashMap<u64, usize>> {
+    let tags = scan_node_tags(bytes, fmt).ok_or_else(|| {
+        corrupt(
+            path,
+            "the $Nodes section cannot be scanned for node tags".into(),
+        )
     })?;
-    let tags = scan_node_tags(bytes, fmt)
-        .ok_or_else(|| corrupt("the $Nodes section cannot be scanned for node tags".into()))?;
     if tags.len() != nodes.node_blocks.len() {
-        return Err(corrupt(format!(
-            "$Nodes has {} blocks but {} were scanned",
-            nodes.node_blocks.len(),
-            tags.len()
-        )));
+        return Err(corrupt(
+            path,
+            format!(
+                "$Nodes has {} blocks but {} were scanned",
+                nodes.node_blocks.len(),
+                tags.len()
+            ),
+        ));
     }
     let mut index: HashMap<u64, usize> = HashMap::new();
     for (block, tags) in nodes.node_blocks.iter().zip(&tags) {
         if block.nodes.len() != tags.len() {
             return Err(corrupt(
+                path,
                 "a $Nodes block has a wrong number of node tags".into(),
             ));
         }
         for (node, &tag) in block.nodes.iter().zip(tags) {
             if index.insert(tag, raw.nodes.len()).is_some() {
-                return Err(corrupt(format!("node tag {tag} appears twice in $Nodes")));
+                return Err(corrupt(
+                    path,
+                    format!("node tag {tag} appears twice in $Nodes"),
+                ));
             }
             raw.nodes.push([node.x, node.y, node.z]);
         }
     }
+    Ok(index)
+}
 
-    // Elements: only P1 tetrahedra and triangles, 2-node lines and points.
-    let elements = data.elements.ok_or_else(|| {
-        Error::input(format!(
-            "mesh file '{file}' has no $Elements section; it looks truncated, regenerate it with \
-             gmsh"
-        ))
-    })?;
+/// Refuses every element type but P1 tetrahedra and triangles, 2-node lines and points,
+/// naming the types found and how to remesh.
+fn check_element_types(path: &Path, elements: &mshio::Elements<u64, i32>) -> crate::Result<()> {
     let mut unsupported: Vec<ElementType> = Vec::new();
     for block in &elements.element_blocks {
         let t = block.element_type;
@@ -543,63 +591,59 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
             unsupported.push(t);
         }
     }
-    if !unsupported.is_empty() {
-        // Report the highest-dimensional elements first: they are the cells and decide the
-        // remedy (in a 3D file the triangles are only boundary faces).
-        let rank = |t: ElementType| {
-            let text = describe_element_type(t).0;
-            let has = |fams: &[&str]| fams.iter().any(|f| text.contains(f));
-            if has(&["tetrahedra", "hexahedra", "prisms", "pyramids"]) {
-                0
-            } else if has(&["triangles", "quadrangles"]) {
-                1
-            } else {
-                2
-            }
-        };
-        unsupported.sort_by_key(|&t| rank(t));
-        let top = rank(unsupported[0]);
-        let texts: Vec<String> = unsupported
-            .iter()
-            .map(|&t| describe_element_type(t).0)
-            .collect();
-        let mut hints: Vec<&str> = Vec::new();
-        for &t in unsupported.iter().filter(|&&t| rank(t) == top) {
-            let h = describe_element_type(t).1;
-            if !hints.contains(&h) {
-                hints.push(h);
-            }
-        }
-        return Err(Error::input(format!(
-            "mesh file '{file}' contains {}; {}",
-            texts.join(" and "),
-            hints.join("; ")
-        )));
+    if unsupported.is_empty() {
+        return Ok(());
     }
+    // Report the highest-dimensional elements first: they are the cells and decide the
+    // remedy (in a 3D file the triangles are only boundary faces).
+    let rank = |t: ElementType| {
+        let text = describe_element_type(t).0;
+        let has = |fams: &[&str]| fams.iter().any(|f| text.contains(f));
+        if has(&["tetrahedra", "hexahedra", "prisms", "pyramids"]) {
+            0
+        } else if has(&["triangles", "quadrangles"]) {
+            1
+        } else {
+            2
+        }
+    };
+    unsupported.sort_by_key(|&t| rank(t));
+    let top = rank(unsupported[0]);
+    let texts: Vec<String> = unsupported
+        .iter()
+        .map(|&t| describe_element_type(t).0)
+        .collect();
+    let mut hints: Vec<&str> = Vec::new();
+    for &t in unsupported.iter().filter(|&&t| rank(t) == top) {
+        let h = describe_element_type(t).1;
+        if !hints.contains(&h) {
+            hints.push(h);
+        }
+    }
+    Err(Error::input(format!(
+        "mesh file '{}' contains {}; {}",
+        path.display(),
+        texts.join(" and "),
+        hints.join("; ")
+    )))
+}
+
+/// Appends the triangles, tetrahedra and lines to `raw`, their nodes as indices into
+/// `raw.nodes` (points are skipped).
+fn add_elements(
+    path: &Path,
+    elements: &mshio::Elements<u64, i32>,
+    index: &HashMap<u64, usize>,
+    raw: &mut RawMesh,
+) -> crate::Result<()> {
     let node_of = |elem: u64, tag: u64| {
         index.get(&tag).copied().ok_or_else(|| {
-            corrupt(format!(
-                "element {elem} refers to node {tag}, which is not in the $Nodes section"
-            ))
+            corrupt(
+                path,
+                format!("element {elem} refers to node {tag}, which is not in the $Nodes section"),
+            )
         })
     };
-    // The element's first N nodes as indices into `raw.nodes`.
-    fn element<const N: usize>(
-        e: &mshio::Element<u64>,
-        entity: (i32, i32),
-        node_of: &dyn Fn(u64, u64) -> crate::Result<usize>,
-    ) -> crate::Result<RawElement<N>> {
-        // mshio reads exactly the type's node count (N for the types used here).
-        let mut nodes = [0; N];
-        for (slot, &tag) in nodes.iter_mut().zip(&e.nodes) {
-            *slot = node_of(e.element_tag, tag)?;
-        }
-        Ok(RawElement {
-            tag: e.element_tag,
-            nodes,
-            entity,
-        })
-    }
     for block in &elements.element_blocks {
         let entity = (block.entity_dim, block.entity_tag);
         for e in &block.elements {
@@ -611,19 +655,47 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
             }
         }
     }
-    if data.entities.is_some() {
-        for b in &elements.element_blocks {
-            let key = (b.entity_dim, b.entity_tag);
-            if b.element_type != ElementType::Pnt && !raw.physical.contains_key(&key) {
-                return Err(corrupt(format!(
+    Ok(())
+}
+
+/// The element's first N nodes as indices into `raw.nodes`.
+fn element<const N: usize>(
+    e: &mshio::Element<u64>,
+    entity: (i32, i32),
+    node_of: &dyn Fn(u64, u64) -> crate::Result<usize>,
+) -> crate::Result<RawElement<N>> {
+    // mshio reads exactly the type's node count (N for the types used here).
+    let mut nodes = [0; N];
+    for (slot, &tag) in nodes.iter_mut().zip(&e.nodes) {
+        *slot = node_of(e.element_tag, tag)?;
+    }
+    Ok(RawElement {
+        tag: e.element_tag,
+        nodes,
+        entity,
+    })
+}
+
+/// Refuses an element block (other than points) whose entity `$Entities` does not list.
+fn check_element_entities(
+    path: &Path,
+    elements: &mshio::Elements<u64, i32>,
+    raw: &RawMesh,
+) -> crate::Result<()> {
+    for b in &elements.element_blocks {
+        let key = (b.entity_dim, b.entity_tag);
+        if b.element_type != ElementType::Pnt && !raw.physical.contains_key(&key) {
+            return Err(corrupt(
+                path,
+                format!(
                     "an element block belongs to entity (dim {}, tag {}), which is not in \
                      $Entities",
                     key.0, key.1
-                )));
-            }
+                ),
+            ));
         }
     }
-    Ok(raw)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -9,12 +9,11 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::{
-    check_finite, fill_groups, fmt_point, group_table, other_groups, renumber, Mesh, Words,
-};
+use super::{check_finite, fmt_point, renumber, FacetUse, Mesh};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -55,9 +54,55 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         .iter()
         .map(|p| p.iter().fold(0.0_f64, |a, c| a.max(c.abs())))
         .fold(0.0_f64, f64::max);
+    let (tetrahedra, flipped) = orient_tetrahedra(&file, &raw, &new_index, &nodes, scale)?;
+    let faces = face_uses(&file, &raw, &tetrahedra, &nodes)?;
 
-    // Orientation and degeneracy: a tetrahedron is flat if its height over the largest face
-    // is at most 1e-12 of its longest edge, or at most 1e-13 of the largest coordinate.
+    let words = Words {
+        element: "triangle",
+        mesh: "tetrahedral mesh",
+        cells: "tetrahedra",
+        cell: "tetrahedron",
+        facet: "face",
+        a_facet: "a face",
+        boundary: "surfaces of the meshed volume",
+    };
+    let lookup = |f: [usize; 3]| faces.get(&face_key(f)).map(|e| (e.dir, e.count));
+    let groups = fill_groups(
+        &file,
+        &raw,
+        (&raw.tetrahedra, &raw.triangles),
+        group_table(&raw, names, 3),
+        &new_index,
+        lookup,
+        &words,
+        |g, f| g.faces.push(f),
+    )?;
+
+    Ok(Mesh {
+        path: path.to_path_buf(),
+        dim: 3,
+        nodes,
+        triangles: Vec::new(),
+        tetrahedra,
+        groups,
+        flipped,
+        other_groups: other_groups(&raw, names, 3),
+        cell_entity: raw.tetrahedra.iter().map(|t| t.entity.1).collect(),
+    })
+}
+
+/// The tetrahedra in the new numbering, positively oriented, and how many were reoriented;
+/// a flat tetrahedron is refused.
+///
+/// A tetrahedron is flat if its height over the largest face is at most 1e-12 of its longest
+/// edge, or at most 1e-13 of the largest coordinate `scale`.
+fn orient_tetrahedra(
+    file: &impl std::fmt::Display,
+    raw: &RawMesh,
+    new_index: &[usize],
+    nodes: &[[f64; 3]],
+    scale: f64,
+) -> Result<(Vec<[usize; 4]>, usize)> {
     let mut tetrahedra = Vec::with_capacity(raw.tetrahedra.len());
     let mut flipped = 0;
     let mut flat = Vec::new();
@@ -100,26 +145,32 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
             pts.join(", ")
         )));
     }
+    Ok((tetrahedra, flipped))
+}
 
-    // Faces: each is used by one tetrahedron (boundary) or by two in opposite orientations.
-    struct FaceUse {
-        dir: [usize; 3],
-        tet: usize,
-        count: u32,
-    }
-    let key = |f: [usize; 3]| {
-        let mut k = f;
-        k.sort_unstable();
-        k
-    };
-    let mut faces: HashMap<[usize; 3], FaceUse> = HashMap::with_capacity(tetrahedra.len() * 3);
+/// A face by its sorted nodes.
+fn face_key(f: [usize; 3]) -> [usize; 3] {
+    let mut k = f;
+    k.sort_unstable();
+    k
+}
+
+/// The faces by [`face_key`]: each is used by one tetrahedron (boundary) or by two in
+/// opposite orientations; a fold or a face of three tetrahedra is refused.
+fn face_uses(
+    file: &impl std::fmt::Display,
+    raw: &RawMesh,
+    tetrahedra: &[[usize; 4]],
+    nodes: &[[f64; 3]],
+) -> Result<HashMap<[usize; 3], FacetUse<3>>> {
+    let mut faces: HashMap<[usize; 3], FacetUse<3>> = HashMap::with_capacity(tetrahedra.len() * 3);
     let tet_tag = |k: usize| raw.tetrahedra[k].tag;
     for (k, tet) in tetrahedra.iter().enumerate() {
         for local in FACES {
             let dir = local.map(|i| tet[i]);
-            let e = faces.entry(key(dir)).or_insert(FaceUse {
+            let e = faces.entry(face_key(dir)).or_insert(FacetUse {
                 dir,
-                tet: k,
+                cell: k,
                 count: 0,
             });
             e.count += 1;
@@ -134,7 +185,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
                 return Err(Error::input(format!(
                     "mesh file '{file}' folds over itself: tetrahedra {} and {} (gmsh element \
                      tags) overlap at the face {}; fix the geometry or remesh",
-                    tet_tag(e.tet),
+                    tet_tag(e.cell),
                     tet_tag(k),
                     face_at()
                 )));
@@ -145,45 +196,13 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
                      (e.g. {} and {}, gmsh element tags); the mesh is not a valid 3D domain \
                      (overlapping volumes?): fix the geometry or remesh",
                     face_at(),
-                    tet_tag(e.tet),
+                    tet_tag(e.cell),
                     tet_tag(k)
                 )));
             }
         }
     }
-
-    let words = Words {
-        element: "triangle",
-        mesh: "tetrahedral mesh",
-        cells: "tetrahedra",
-        cell: "tetrahedron",
-        facet: "face",
-        a_facet: "a face",
-        boundary: "surfaces of the meshed volume",
-    };
-    let lookup = |f: [usize; 3]| faces.get(&key(f)).map(|e| (e.dir, e.count));
-    let groups = fill_groups(
-        &file,
-        &raw,
-        (&raw.tetrahedra, &raw.triangles),
-        group_table(&raw, names, 3),
-        &new_index,
-        lookup,
-        &words,
-        |g, f| g.faces.push(f),
-    )?;
-
-    Ok(Mesh {
-        path: path.to_path_buf(),
-        dim: 3,
-        nodes,
-        triangles: Vec::new(),
-        tetrahedra,
-        groups,
-        flipped,
-        other_groups: other_groups(&raw, names, 3),
-        cell_entity: raw.tetrahedra.iter().map(|t| t.entity.1).collect(),
-    })
+    Ok(faces)
 }
 
 /// Quality of a tetrahedral mesh: the smallest dihedral angle (70.53° for a regular
