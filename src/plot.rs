@@ -265,7 +265,7 @@ pub struct PlotOptions {
     pub field: String,
     /// Displacement scale (default: the largest displacement drawn as 10 % of the body size).
     pub scale: Option<f64>,
-    /// The PNG to write (default: DIR/<field>_t<time>.png).
+    /// The PNG to write (default: `DIR/<field>_t<time>.png`).
     pub output: Option<PathBuf>,
     /// Width of the figure in pixels.
     pub width: u32,

@@ -16,7 +16,7 @@
 //! [`Series`] owns either: [`Series::create`] takes the mesh once; the checks of a frame, the
 //! choice of fields and precision and the writer thread are shared, only the sink differs.
 //!
-//! Frames are encoded and written on a background thread ([`writer`]): the time loop hands
+//! Frames are encoded and written on a background thread (`writer`): the time loop hands
 //! over a frame's values and goes on; it waits only when two frames are already queued. A
 //! run's frames are computed there too ([`Series::write_with`], `frame.rs`): the time loop
 //! copies the step's state (w, u, m, z), the thread makes the fields (nodal values, stress,

@@ -18,7 +18,7 @@
 //! byte a literal, except the zero words — the data are read as 8-byte words, and a run of
 //! words that are zero goes out as matches at distance 1 (≤ 258 bytes a match), after a
 //! literal 0 unless the byte before is a zero. The block's Huffman code is its own (a
-//! dynamic block, the same header in every stream, see [`code`]): the literals 0..=253 take
+//! dynamic block, the same header in every stream, see `code`): the literals 0..=253 take
 //! 8 bits with the code of a byte its own value, so a word without a 254 or 255 — almost
 //! every non-zero double — goes out as its bytes with their bits reversed, one store and no
 //! table, whatever zero bytes it holds; 254, 255, the end of block and the lengths take 12

@@ -6,7 +6,7 @@
 //!    directory, the mesh, the discretization and the step solver); a failure here leaves
 //!    the directory as it was (`dir`);
 //! 2. replace the run the directory holds (`run`) or continue it (`resume`);
-//! 3. [`drive`] the time loop: each solved step goes to the consumers (`consumers`:
+//! 3. `drive` the time loop: each solved step goes to the consumers (`consumers`:
 //!    statistics, frames, checkpoints, progress) until the last step, a `--stop-after` step,
 //!    a signal (`interrupt`) or a failure;
 //! 4. write summary.json however the run ended (`summary`).
