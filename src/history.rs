@@ -14,8 +14,9 @@
 //! whose kernel misses its tolerance is refused (bad input naming the tolerance the fit
 //! reached), never silently run in O(N²). t_n − t_j is taken as (n − j)·k exactly.
 
+use crate::kernel::Kernel;
 use crate::kernel_fit::{self, Fit, Lags};
-use crate::scene::{self, Kernel, Scene};
+use crate::scene::{self, Scene};
 use crate::Result;
 
 /// One Prony term a e^{−b s}: its weight, its one-step decay e^{−b k}, its state m^(i)_n.

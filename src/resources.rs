@@ -22,8 +22,9 @@
 //! other programs of the machine.
 
 use crate::fem::Discretization;
+use crate::kernel::Kernel;
 use crate::kernel_fit::EXACT_STEPS;
-use crate::scene::{Kernel, Scene};
+use crate::scene::Scene;
 use crate::{Error, Result};
 use std::path::Path;
 

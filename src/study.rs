@@ -55,8 +55,9 @@ pub mod memory_cost;
 pub mod transfer;
 
 use crate::fem::Discretization;
+use crate::kernel::Kernel;
 use crate::run::setup;
-use crate::scene::{read_scene_file, Kernel};
+use crate::scene::read_scene_file;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use serde::Serialize;

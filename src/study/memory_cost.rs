@@ -25,8 +25,8 @@ use serde::Serialize;
 
 use super::say;
 use crate::history::Plan;
+use crate::kernel::Kernel;
 use crate::run::setup;
-use crate::scene::Kernel;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 
