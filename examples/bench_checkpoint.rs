@@ -90,12 +90,12 @@ fn main() {
     let mut writer = Writer::new(
         &dir,
         Identity::new(&scene, &mesh, &disc, None),
-        scene.steps,
+        scene.time.steps,
         &tl,
     );
     let mut log = RunLog::default();
     let mut latency = Vec::new();
-    while tl.n() < scene.steps {
+    while tl.n() < scene.time.steps {
         let step = tl.solve_step().expect("step");
         log.iterations.push(step.report.iterations);
         let active = vec![false; tl.rows.len()];

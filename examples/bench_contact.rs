@@ -77,7 +77,7 @@ fn time_run(scene: &Path, overrides: &[String]) -> (f64, f64, usize) {
     loop {
         let n = tl.n();
         iterations += tl.solve_step().expect("step").report.iterations;
-        if n == scene.steps {
+        if n == scene.time.steps {
             break;
         }
         tl.advance();

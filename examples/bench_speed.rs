@@ -147,14 +147,14 @@ fn main() {
         tl = TimeLoop::new(&scene, &disc).expect("setup");
         let start = Instant::now();
         loop {
-            let last = tl.n() == scene.steps;
+            let last = tl.n() == scene.time.steps;
             tl.solve_step().expect("step");
             if last {
                 break;
             }
             tl.advance();
         }
-        step_times.push(start.elapsed().as_secs_f64() / (scene.steps + 1) as f64);
+        step_times.push(start.elapsed().as_secs_f64() / (scene.time.steps + 1) as f64);
     }
     let per_step = median(step_times);
     let factor = &tl.factor;
@@ -223,7 +223,7 @@ fn main() {
     let step_data = median(data[10..].to_vec());
     println!(
         "per step (setup excluded, medians of {repeat} runs of {} steps): {:.2} ms",
-        scene.steps + 1,
+        scene.time.steps + 1,
         per_step * 1e3
     );
     println!(

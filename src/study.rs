@@ -311,16 +311,16 @@ pub fn solve_once(
 ) -> Result<(Solved, &'static str)> {
     let start = Instant::now();
     let (mut scene, mesh, disc) = setup(scene_path, overrides)?;
-    let given = kernel_name(scene.relaxation.as_ref());
+    let given = kernel_name(scene.physics.relaxation.as_ref());
     if form == KernelForm::Expression {
-        scene.relaxation = Some(prony_as_expression(scene.relaxation.as_ref())?);
+        scene.physics.relaxation = Some(prony_as_expression(scene.physics.relaxation.as_ref())?);
         // The reference form is the direct sum, not a fit of it.
-        scene.compression = None;
+        scene.physics.compression = None;
     }
     let steps_start = Instant::now();
     let u = {
         let mut tl = TimeLoop::new(&scene, &disc)?;
-        solve_to_end(&mut tl, scene.steps)?;
+        solve_to_end(&mut tl, scene.time.steps)?;
         tl.history.u.clone()
     };
     let steps_s = steps_start.elapsed().as_secs_f64();
@@ -330,9 +330,9 @@ pub fn solve_once(
         Solved {
             disc,
             u,
-            steps: scene.steps,
-            k: scene.k(),
-            end: scene.end,
+            steps: scene.time.steps,
+            k: scene.time.k(),
+            end: scene.time.end,
             mesh: mesh.path.display().to_string(),
             wall_s,
             steps_s,

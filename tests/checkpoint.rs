@@ -635,7 +635,7 @@ fn displacement_sum_does_not_drift_over_1e5_steps() {
     let (scene, _mesh, disc) = common::load(&scene, &[]);
     let mut tl = viscontact::time_loop::TimeLoop::new(&scene, &disc).unwrap();
     assert_eq!(tl.effects.names(), ["viscosity", "tractions"]);
-    let k = scene.k();
+    let k = scene.time.k();
     let mut plain = vec![0.0; disc.n_free];
     let mut w0 = None;
     loop {
@@ -646,7 +646,7 @@ fn displacement_sum_does_not_drift_over_1e5_steps() {
             None => w0 = Some(w.clone()),
             Some(w0) => assert!(w == *w0, "the velocity is constant"),
         }
-        if n == scene.steps {
+        if n == scene.time.steps {
             break;
         }
         for (p, wi) in plain.iter_mut().zip(&w) {
@@ -655,10 +655,10 @@ fn displacement_sum_does_not_drift_over_1e5_steps() {
         tl.advance();
     }
     let w = w0.unwrap();
-    let scale = common::max_abs(&w) * scene.end;
+    let scale = common::max_abs(&w) * scene.time.end;
     let (mut compensated, mut naive) = (0.0f64, 0.0f64);
     for ((u, p), wi) in tl.history.u.iter().zip(&plain).zip(&w) {
-        let exact = scene.end * wi;
+        let exact = scene.time.end * wi;
         compensated = compensated.max((u - exact).abs() / scale);
         naive = naive.max((p - exact).abs() / scale);
     }

@@ -175,7 +175,7 @@ fn run_a_little(scene: &Path, overrides: &[String]) -> Result<(), String> {
             }
         }
         count(|r| r.steps += 1);
-        if tl.n() == s.steps {
+        if tl.n() == s.time.steps {
             break;
         }
         tl.advance();

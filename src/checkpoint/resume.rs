@@ -106,7 +106,7 @@ impl Checkpoint {
         let scene_path = self.scene_path();
         let (text, file) = scene::parse_scene_text(&scene_path, self.id.scene_text.clone(), &all)
             .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
-        let scene = Scene::from_file(&scene_path, text, file)
+        let scene = Scene::from_file(&scene_path, text, &file)
             .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
         // One run, one series: frames in two formats would split its time series.
         let stored_format = self
@@ -116,7 +116,7 @@ impl Checkpoint {
             .ok()
             .and_then(|t| t.get("output")?.get("format")?.as_str().map(str::to_string))
             .unwrap_or_else(|| "vtu".into());
-        let format = match scene.output.format {
+        let format = match scene.output.options.format {
             crate::output::Format::Vtu => "vtu",
             crate::output::Format::Vtkhdf => "vtkhdf",
         };
@@ -127,11 +127,11 @@ impl Checkpoint {
                  formats would split it): resume without changing output.format"
             )));
         }
-        if scene.steps < self.n {
+        if scene.time.steps < self.n {
             return Err(Error::input(format!(
                 "{shown}: the stored scene has {} steps but the checkpoint is at step {}: \
                  the file is inconsistent",
-                scene.steps, self.n
+                scene.time.steps, self.n
             )));
         }
         Ok(scene)
@@ -190,11 +190,11 @@ impl Checkpoint {
                 diffs.push(format!("{k}: the run had no such key, the scene says {v}"));
             }
         }
-        let k_scene = scene.k();
+        let k_scene = scene.time.k();
         if (k_scene - self.k).abs() > 1e-9 * self.k {
             diffs.push(format!(
                 "step size: the run had k = {}, the scene gives k = {} / {} = {k_scene}",
-                self.k, scene.end, scene.steps
+                self.k, scene.time.end, scene.time.steps
             ));
         }
         let dof_of: Vec<i64> = disc

@@ -196,8 +196,8 @@ impl Discretization {
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
         check_model(mesh, scene)?;
         let (nn, d) = (mesh.nodes.len(), mesh.dim);
-        let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.groups.fixed)?;
-        mesh.check_parts(fixed, scene.separate_parts)
+        let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.mesh.groups.fixed)?;
+        mesh.check_parts(fixed, scene.mesh.separate_parts)
             .map_err(|e| Error::input(format!("{}: {e}", scene.path.display())))?;
         let mut clamped = vec![false; nn];
         for n in mesh.group_nodes(fixed) {
@@ -218,7 +218,7 @@ impl Discretization {
                 "{}: every node of '{}' is on the clamped group '{}'; nothing can move",
                 scene.path.display(),
                 mesh.path.display(),
-                scene.groups.fixed
+                scene.mesh.groups.fixed
             )));
         }
         let xy = |i: usize| [mesh.nodes[i][0], mesh.nodes[i][1]];
@@ -235,11 +235,12 @@ impl Discretization {
                 .collect(),
         };
 
-        let a = Isotropic::viscosity(scene.theta, scene.zeta);
+        let a = Isotropic::viscosity(scene.physics.theta, scene.physics.zeta);
         let b = scene
+            .physics
             .elasticity
             .filter(|(e, _)| *e > 0.0)
-            .map(|(e, nu)| match scene.model {
+            .map(|(e, nu)| match scene.mesh.model {
                 Model::PlaneStress => Isotropic::plane_stress(e, nu),
                 Model::PlaneStrain | Model::ThreeD => Isotropic::lame(e, nu),
             });
@@ -267,8 +268,13 @@ impl Discretization {
         // Γ3,1: one row n_i per free node.
         let mut contact = Vec::new();
         let mut contact_kink = 0.0;
-        if scene.contact {
-            let g = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+        if scene.physics.contact {
+            let g = group(
+                mesh,
+                scene,
+                "mesh.groups.contact",
+                &scene.mesh.groups.contact,
+            )?;
             let (normals, k) = mesh.nodal_normals(g);
             contact_kink = k;
             let area = lumped_area(mesh, g);
@@ -281,7 +287,7 @@ impl Discretization {
                 return Err(on_fixed(
                     scene,
                     "contact",
-                    &scene.groups.contact,
+                    &scene.mesh.groups.contact,
                     "[contact]",
                 ));
             }
@@ -290,10 +296,20 @@ impl Discretization {
         let mut g_f = Vec::new();
         let mut friction = Vec::new();
         let mut friction_kink = 0.0;
-        if let Some(fr) = &scene.friction {
-            let g = group(mesh, scene, "mesh.groups.friction", &scene.groups.friction)?;
-            if scene.contact {
-                let c = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+        if let Some(fr) = &scene.physics.friction {
+            let g = group(
+                mesh,
+                scene,
+                "mesh.groups.friction",
+                &scene.mesh.groups.friction,
+            )?;
+            if scene.physics.contact {
+                let c = group(
+                    mesh,
+                    scene,
+                    "mesh.groups.contact",
+                    &scene.mesh.groups.contact,
+                )?;
                 check_overlap(mesh, scene, c, g)?;
             }
             let mut gf = vec![0.0; n_free];
@@ -328,7 +344,7 @@ impl Discretization {
                 return Err(on_fixed(
                     scene,
                     "friction",
-                    &scene.groups.friction,
+                    &scene.mesh.groups.friction,
                     "[friction]",
                 ));
             }
@@ -593,12 +609,12 @@ fn on_fixed(scene: &Scene, role: &str, value: &str, table: &str) -> Error {
          group '{}', so its condition would have no effect; name the right group, or remove \
          {table} (or set enabled = false)",
         scene.path.display(),
-        scene.groups.fixed
+        scene.mesh.groups.fixed
     ))
 }
 
 fn check_model(mesh: &Mesh, scene: &Scene) -> Result<()> {
-    model_fits(mesh, scene.model, &scene.path)
+    model_fits(mesh, scene.mesh.model, &scene.path)
 }
 
 /// For a scene that failed its checks: the mesh.model error if the model does not fit the
@@ -645,7 +661,7 @@ pub(crate) fn check_data(
         return Err(Error::input(format!(
             "{}: key '{key}' evaluates to {v} at {}; it must be finite{}",
             scene.path.display(),
-            fmt_at(p, scene.model),
+            fmt_at(p, scene.mesh.model),
             if nonnegative { " and ≥ 0" } else { "" }
         )));
     }
@@ -693,8 +709,8 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
          not both; put each {entity} into one of the two groups in gmsh (sharing the nodes \
          where they meet is fine), or disable one of [contact], [friction]",
         scene.path.display(),
-        scene.groups.contact,
-        scene.groups.friction,
+        scene.mesh.groups.contact,
+        scene.mesh.groups.friction,
         mesh.path.display(),
         shared.len(),
         corners.join("–")

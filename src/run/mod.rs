@@ -103,7 +103,7 @@ fn load_scene(scene_path: &Path, overrides: &[String]) -> Result<Scene> {
 }
 
 fn read_mesh(scene: &Scene) -> Result<Mesh> {
-    Mesh::read(&scene.mesh_file).map_err(|e| match e {
+    Mesh::read(&scene.mesh.file).map_err(|e| match e {
         Error::Input(m) => Error::input(format!(
             "{}: key 'mesh.file': {m} (mesh.file is relative to the scene file)",
             scene.path.display()
@@ -135,7 +135,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let series = open_series(&out, &mesh, &identity.run_id, &scene.output, None)?;
+    let series = open_series(&out, &mesh, &identity.run_id, &scene.output.options, None)?;
     stage()?;
     let tl = TimeLoop::new(&scene, &disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
@@ -144,7 +144,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
         .unless_signalled(|| dir::remove_run(&out))
         .map_err(Error::Interrupted)??;
     let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::new(&out, identity, scene.steps, &tl);
+    let writer = checkpoint::Writer::new(&out, identity, scene.time.steps, &tl);
     drive(Drive {
         scene: &scene,
         mesh: &mesh,
@@ -219,7 +219,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         &out,
         &mesh,
         &identity.run_id,
-        &scene.output,
+        &scene.output.options,
         resumed.as_ref(),
     )?;
     stage()?;
@@ -229,7 +229,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     stage()?;
     dir::remove_temporaries(&out);
     let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::resume(&out, identity, scene.steps, &tl, &cp);
+    let writer = checkpoint::Writer::resume(&out, identity, scene.time.steps, &tl, &cp);
     drive(Drive {
         scene: &scene,
         mesh: &mesh,
@@ -288,7 +288,7 @@ fn drive(d: Drive) -> Result<Outcome> {
             scene: d.scene,
         },
         checkpoints: Checkpoints::new(d.writer, d.scene),
-        progress: Progress::new(d.opts.progress, tl.n(), d.scene.steps),
+        progress: Progress::new(d.opts.progress, tl.n(), d.scene.time.steps),
     };
     let steps_start = Instant::now();
     let ended = steps(&mut tl, &rows, &mut consumers, d.opts);
@@ -370,7 +370,7 @@ fn steps(
     consumers: &mut Consumers,
     opts: &RunOptions,
 ) -> Result<End> {
-    let end = tl.scene.steps;
+    let end = tl.scene.time.steps;
     loop {
         let n = tl.n();
         let solved = Solved {

@@ -22,22 +22,48 @@ pub fn apply_override(root: &mut toml::Table, assignment: &str) -> Result<()> {
             "--set {assignment:?}: '{key}' is not a dotted key path"
         )));
     }
+    insert(root, &parts, value).map_err(|part| {
+        Error::input(format!(
+            "--set {assignment:?}: '{part}' is a value, not a table"
+        ))
+    })
+}
+
+/// Sets the dotted key `parts` of a TOML tree to `value`, making the tables on the way;
+/// Err names a part on the way that is a value, not a table.
+fn insert(
+    root: &mut toml::Table,
+    parts: &[&str],
+    value: toml::Value,
+) -> std::result::Result<(), String> {
+    let (last, path) = parts.split_last().expect("a key has at least one part");
     let mut table = root;
-    for part in &parts[..parts.len() - 1] {
+    for part in path {
         let entry = table
             .entry(part.to_string())
             .or_insert_with(|| toml::Value::Table(toml::Table::new()));
         table = match entry {
             toml::Value::Table(t) => t,
-            _ => {
-                return Err(Error::input(format!(
-                    "--set {assignment:?}: '{part}' is a value, not a table"
-                )))
-            }
+            _ => return Err(part.to_string()),
         };
     }
-    table.insert(parts[parts.len() - 1].to_string(), value);
+    table.insert(last.to_string(), value);
     Ok(())
+}
+
+/// A scene's TOML text with the dotted key `parts` set to `value` (a typed change of a
+/// checked scene, e.g. `Scene::with_time`); `path` names the scene in messages.
+pub(super) fn set_key(
+    text: &str,
+    parts: &[&str],
+    value: toml::Value,
+    path: &Path,
+) -> Result<String> {
+    let fail = |why: String| Error::input(format!("{}: {why}", path.display()));
+    let mut root: toml::Table = text.parse().map_err(|e| fail(format!("{e}")))?;
+    insert(&mut root, parts, value)
+        .map_err(|part| fail(format!("'{part}' is a value, not a table")))?;
+    toml::to_string(&root).map_err(|e| fail(format!("{e}")))
 }
 
 /// serde's messages in the scene's terms: no Rust type names, no repeated key line.

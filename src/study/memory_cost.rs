@@ -70,7 +70,7 @@ pub struct Report {
 /// Runs the study; the scene's kernel must be an expression or a table.
 pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
     let scene = crate::scene::Scene::load(scene_path, &opts.overrides)?;
-    let kernel = match &scene.relaxation {
+    let kernel = match &scene.physics.relaxation {
         Some(Kernel::Expr(e)) => format!("expr {}", e.source()),
         Some(Kernel::Table(..)) => "table".into(),
         _ => {
@@ -90,7 +90,7 @@ pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
     if opts.steps.contains(&0) {
         return Err(Error::input("--steps: a number of steps is at least 1"));
     }
-    let k = scene.k();
+    let k = scene.time.k();
     let mut rows = Vec::new();
     for &n in &opts.steps {
         let base = [
@@ -145,7 +145,7 @@ fn solve(scene_path: &Path, overrides: &[String], direct: bool) -> Result<(Optio
         Plan::None | Plan::Prony(_) => unreachable!("the study checked for expr or table"),
     };
     let mut row = Row {
-        steps: scene.steps,
+        steps: scene.time.steps,
         tolerance: None,
         method,
         terms,
@@ -158,7 +158,7 @@ fn solve(scene_path: &Path, overrides: &[String], direct: bool) -> Result<(Optio
         return Ok((None, row));
     }
     let mut tl = TimeLoop::with_plan(&scene, &disc, plan)?;
-    super::solve_to_end(&mut tl, scene.steps)?;
+    super::solve_to_end(&mut tl, scene.time.steps)?;
     row.wall_s = Some(start.elapsed().as_secs_f64());
     Ok((Some(tl.history.u.clone()), row))
 }

@@ -55,7 +55,7 @@ pub fn trace(scene: &Scene, disc: &Discretization) -> Trace {
         u.push(step.u.to_vec());
         w.push(step.w.to_vec());
         z.push(step.z.to_vec());
-        if n == scene.steps {
+        if n == scene.time.steps {
             break;
         }
         tl.advance();
