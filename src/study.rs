@@ -56,8 +56,8 @@ pub mod transfer;
 
 use crate::fem::Discretization;
 use crate::kernel::Kernel;
-use crate::run::setup;
-use crate::scene::read_scene_file;
+use crate::run::{discretize, load_scene};
+use crate::scene::{read_scene_file, Scene};
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use serde::Serialize;
@@ -309,8 +309,28 @@ pub fn solve_once(
     overrides: &[String],
     form: KernelForm,
 ) -> Result<(Solved, &'static str)> {
+    solve_case(scene_path, overrides, Ok, form)
+}
+
+/// A study's case of a scene: on `mesh` (written as `mesh.file` is, relative to the scene
+/// file) in `steps` steps to the scene's end time.
+fn case(mesh: &str, steps: usize) -> impl Fn(Scene) -> Result<Scene> + '_ {
+    move |scene| {
+        let end = scene.time.end;
+        scene.with_mesh(Path::new(mesh))?.with_time(end, steps)
+    }
+}
+
+/// [`solve_once`] for the scene as `case` changes it; the wall time runs from reading the
+/// scene file.
+fn solve_case(
+    scene_path: &Path,
+    overrides: &[String],
+    case: impl FnOnce(Scene) -> Result<Scene>,
+    form: KernelForm,
+) -> Result<(Solved, &'static str)> {
     let start = Instant::now();
-    let (mut scene, mesh, disc) = setup(scene_path, overrides)?;
+    let (mut scene, mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
     let given = kernel_name(scene.physics.relaxation.as_ref());
     if form == KernelForm::Expression {
         scene.physics.relaxation = Some(prony_as_expression(scene.physics.relaxation.as_ref())?);
@@ -357,19 +377,20 @@ pub fn solve_to_end(tl: &mut TimeLoop, steps: usize) -> Result<()> {
 
 /// Runs a case `repeat` times (None: 3 when the first run takes under a second) and keeps
 /// the median times.
-pub fn solve_timed(
+fn solve_timed(
     scene_path: &Path,
     overrides: &[String],
+    case: impl Fn(Scene) -> Result<Scene>,
     form: KernelForm,
     repeat: Option<usize>,
 ) -> Result<(Solved, &'static str)> {
-    let (mut first, given) = solve_once(scene_path, overrides, form)?;
+    let (mut first, given) = solve_case(scene_path, overrides, &case, form)?;
     let runs = repeat
         .unwrap_or(if first.wall_s < 1.0 { 3 } else { 1 })
         .max(1);
     let (mut walls, mut steps) = (vec![first.wall_s], vec![first.steps_s]);
     for _ in 1..runs {
-        let (again, _) = solve_once(scene_path, overrides, form)?;
+        let (again, _) = solve_case(scene_path, overrides, &case, form)?;
         walls.push(again.wall_s);
         steps.push(again.steps_s);
     }
@@ -480,11 +501,6 @@ pub fn derive_pattern(mesh_file: &str) -> Option<String> {
     let digits = stem.len() - stem.trim_end_matches(|c: char| c.is_ascii_digit()).len();
     let head = &stem[..stem.len() - digits];
     (digits > 0 && head.ends_with('_')).then(|| format!("{head}{{n:0{digits}}}.msh"))
-}
-
-/// A TOML string value for a `--set` override.
-fn toml_string(s: &str) -> String {
-    toml::Value::String(s.to_string()).to_string()
 }
 
 /// The mesh of each level.
@@ -661,12 +677,6 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
     } else {
         &[KernelForm::AsGiven]
     };
-    let overrides_for = |mesh: &str, steps: usize| {
-        let mut o = opts.overrides.clone();
-        o.push(format!("mesh.file={}", toml_string(mesh)));
-        o.push(format!("time.steps={steps}"));
-        o
-    };
 
     let mut refs: Vec<((String, usize), Solved)> = Vec::new();
     let mut families = Vec::new();
@@ -683,7 +693,8 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
             );
             let (s, _) = solve_timed(
                 scene_path,
-                &overrides_for(&ref_mesh, ref_steps),
+                &opts.overrides,
+                case(&ref_mesh, ref_steps),
                 KernelForm::AsGiven,
                 Some(1),
             )?;
@@ -716,8 +727,13 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
                     opts.progress,
                     &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
                 );
-                let (s, given) =
-                    solve_timed(scene_path, &overrides_for(&mesh, steps), form, opts.repeat)?;
+                let (s, given) = solve_timed(
+                    scene_path,
+                    &opts.overrides,
+                    case(&mesh, steps),
+                    form,
+                    opts.repeat,
+                )?;
                 kernel = form.label(given);
                 let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
                 let h_max = max_edge(&s.disc.nodes, &s.disc.cells);

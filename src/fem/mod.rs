@@ -8,7 +8,7 @@ pub mod loads;
 
 use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
-use crate::scene::{Model, Scene};
+use crate::scene::{MeshChoice, Model, Scene};
 use crate::{Error, Result};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
@@ -617,14 +617,12 @@ fn check_model(mesh: &Mesh, scene: &Scene) -> Result<()> {
     model_fits(mesh, scene.mesh.model, &scene.path)
 }
 
-/// For a scene that failed its checks: the mesh.model error if the model does not fit the
-/// mesh. A 3D mesh run with a 2D model fails first on its three-component loads; the model
-/// is what to fix, so that is reported.
-pub fn model_mismatch(scene_path: &Path, overrides: &[String]) -> Option<Error> {
-    let (_, f) = crate::scene::read_scene_file(scene_path, overrides).ok()?;
-    let dir = scene_path.parent().unwrap_or(Path::new("."));
-    let mesh = Mesh::read(&dir.join(&f.mesh.file)).ok()?;
-    model_fits(&mesh, f.mesh.model, scene_path).err()
+/// For a scene that failed its checks, given its `[mesh]` as read: the mesh.model error if
+/// the model does not fit the mesh. A 3D mesh run with a 2D model fails first on its
+/// three-component loads; the model is what to fix, so that is reported.
+pub fn model_mismatch(scene_path: &Path, mesh: &MeshChoice) -> Option<Error> {
+    let read = Mesh::read(&mesh.file).ok()?;
+    model_fits(&read, mesh.model, scene_path).err()
 }
 
 fn model_fits(mesh: &Mesh, model: Model, scene_path: &Path) -> Result<()> {

@@ -25,7 +25,7 @@ use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::frame::open_series;
 use crate::output::{write_atomic, Resumed, Series};
-use crate::scene::Scene;
+use crate::scene::{read_scene_file, MeshChoice, Scene};
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Frames, Progress, Solved, Statistics};
@@ -89,7 +89,11 @@ pub fn default_out(scene: &Scene) -> Result<PathBuf> {
 
 /// Loads everything a run needs and checks it: scene, mesh, discretization.
 pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
-    let scene = load_scene(scene_path, overrides)?;
+    discretize(load_scene(scene_path, overrides)?)
+}
+
+/// The mesh and the discretization of a checked scene (a study's case of one, say).
+pub fn discretize(scene: Scene) -> Result<(Scene, Mesh, Discretization)> {
     let mesh = read_mesh(&scene)?;
     let disc = Discretization::new(&mesh, &scene)?;
     Ok((scene, mesh, disc))
@@ -97,9 +101,12 @@ pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Di
 
 /// The scene; when it fails its checks because its model does not fit the mesh, that is
 /// what is reported (see `fem::model_mismatch`).
-fn load_scene(scene_path: &Path, overrides: &[String]) -> Result<Scene> {
-    Scene::load(scene_path, overrides)
-        .map_err(|e| crate::fem::model_mismatch(scene_path, overrides).unwrap_or(e))
+pub fn load_scene(scene_path: &Path, overrides: &[String]) -> Result<Scene> {
+    let (text, file) = read_scene_file(scene_path, overrides)?;
+    Scene::from_file(scene_path, text, &file).map_err(|e| {
+        let mesh = MeshChoice::from_section(&file.mesh, scene_path);
+        crate::fem::model_mismatch(scene_path, &mesh).unwrap_or(e)
+    })
 }
 
 fn read_mesh(scene: &Scene) -> Result<Mesh> {

@@ -22,7 +22,8 @@ pub struct MeshChoice {
 }
 
 impl MeshChoice {
-    pub(super) fn from_section(m: &MeshSection, scene_path: &Path) -> MeshChoice {
+    /// `[mesh]` of a scene file read from `scene_path`.
+    pub fn from_section(m: &MeshSection, scene_path: &Path) -> MeshChoice {
         MeshChoice {
             file: resolve(scene_path, Path::new(&m.file)),
             model: m.model,

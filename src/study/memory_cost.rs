@@ -26,7 +26,8 @@ use serde::Serialize;
 use super::say;
 use crate::history::Plan;
 use crate::kernel::Kernel;
-use crate::run::setup;
+use crate::run::{discretize, load_scene};
+use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 
@@ -93,21 +94,12 @@ pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
     let k = scene.time.k();
     let mut rows = Vec::new();
     for &n in &opts.steps {
-        let base = [
-            format!("time.steps={n}"),
-            format!("time.end={:?}", n as f64 * k),
-        ];
-        let with = |extra: String| -> Vec<String> {
-            let mut set = opts.overrides.clone();
-            set.extend(base.iter().cloned());
-            set.push(extra);
-            set
-        };
+        let end = n as f64 * k;
         let direct = n <= opts.exact_up_to;
         let exact = if direct {
             say(opts.progress, &format!("N = {n}: exact (direct sum)"));
-            let set = with("material.relaxation.memory=\"exact\"".into());
-            let (u, row) = solve(scene_path, &set, true)?;
+            let exact = |s: Scene| s.with_exact_memory()?.with_time(end, n);
+            let (u, row) = solve(scene_path, &opts.overrides, exact, true)?;
             rows.push(row);
             u
         } else {
@@ -115,8 +107,8 @@ pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
         };
         for &tol in &opts.tolerances {
             say(opts.progress, &format!("N = {n}: tolerance {tol:e}"));
-            let set = with(format!("material.relaxation.tolerance={tol:e}"));
-            let (u, row) = solve(scene_path, &set, direct)?;
+            let at_tol = |s: Scene| s.with_tolerance(tol)?.with_time(end, n);
+            let (u, row) = solve(scene_path, &opts.overrides, at_tol, direct)?;
             rows.push(Row {
                 tolerance: Some(tol),
                 error_u: u.zip(exact.as_ref()).map(|(u, e)| relative_max(&u, e)),
@@ -132,12 +124,17 @@ pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
     })
 }
 
-/// One run to t_N: u_N and its row (steps, tolerance and error_u left for the caller). A
-/// fit that misses its tolerance falls back to the direct sum, which runs only when
-/// `direct` allows it (u_N is then None and so is the wall time).
-fn solve(scene_path: &Path, overrides: &[String], direct: bool) -> Result<(Option<Vec<f64>>, Row)> {
+/// One run to t_N of the scene as `case` changes it: u_N and its row (steps, tolerance and
+/// error_u left for the caller). A fit that misses its tolerance falls back to the direct
+/// sum, which runs only when `direct` allows it (u_N is then None and so is the wall time).
+fn solve(
+    scene_path: &Path,
+    overrides: &[String],
+    case: impl FnOnce(Scene) -> Result<Scene>,
+    direct: bool,
+) -> Result<(Option<Vec<f64>>, Row)> {
     let start = Instant::now();
-    let (scene, _mesh, disc) = setup(scene_path, overrides)?;
+    let (scene, _mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
     let plan = Plan::new(&scene)?;
     let (method, terms, certified_error, fallback) = match &plan {
         Plan::Compressed(fit) => ("compressed", fit.terms.len(), Some(fit.error), None),
