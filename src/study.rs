@@ -56,6 +56,7 @@ pub mod transfer;
 
 use crate::fem::Discretization;
 use crate::kernel::Kernel;
+use crate::plot::{log_log_chart, Curve};
 use crate::run::{discretize, load_scene};
 use crate::scene::{read_scene_file, Scene};
 use crate::time_loop::TimeLoop;
@@ -513,6 +514,26 @@ struct Meshes {
 }
 
 impl Meshes {
+    /// The meshes of a study: from `--meshes`, `--mesh-pattern` or the pattern of the scene's
+    /// `mesh.file`. Every mesh is there before anything runs: a missing mesh fails at once.
+    fn for_study(scene_path: &Path, opts: &StudyOptions) -> Result<Meshes> {
+        let (_, file) = read_scene_file(scene_path, &opts.overrides)?;
+        let meshes = Meshes {
+            family: mesh_family(scene_path, opts, &file.mesh.file)?,
+            dir: scene_path.parent().unwrap_or(Path::new("")).to_path_buf(),
+            dim: file.mesh.model.dim(),
+        };
+        let reference = opts.reference;
+        let fixed = opts.fixed.unwrap_or(reference);
+        for &vary in &opts.vary {
+            meshes.case(vary, reference, None, fixed)?;
+            for (i, &n) in opts.levels.iter().enumerate() {
+                meshes.case(vary, n, Some(i), fixed)?;
+            }
+        }
+        Ok(meshes)
+    }
+
     /// The mesh file of level `n` (a pattern) or of entry `index` of a list (None: the
     /// reference mesh, the last of the list); an input error when it does not exist.
     fn file(&self, n: usize, index: Option<usize>) -> Result<String> {
@@ -570,6 +591,43 @@ impl Meshes {
     }
 }
 
+/// Where a study's meshes come from: the options' list or pattern, else the pattern derived
+/// from the scene's `mesh.file` (as written in the scene).
+fn mesh_family(scene_path: &Path, opts: &StudyOptions, mesh_file: &str) -> Result<MeshFamily> {
+    Ok(match &opts.meshes {
+        Some(MeshFamily::List(list)) => {
+            let needs_levels = opts.vary.iter().any(|v| *v != Vary::K);
+            if list.is_empty() || (needs_levels && list.len() != opts.levels.len() + 1) {
+                return Err(Error::input(format!(
+                    "study: --meshes has {} files; give one mesh per level ({}) and then the \
+                     reference mesh",
+                    list.len(),
+                    opts.levels.len()
+                )));
+            }
+            if opts.fixed.is_some() && opts.vary.contains(&Vary::K) {
+                return Err(Error::input(
+                    "study: with --meshes, --vary k runs on the last (reference) mesh; \
+                     --fixed picks a mesh level only with a pattern",
+                ));
+            }
+            MeshFamily::List(list.clone())
+        }
+        Some(MeshFamily::Pattern(p)) => {
+            expand_pattern(p, 1).map_err(Error::input)?;
+            MeshFamily::Pattern(p.clone())
+        }
+        None => MeshFamily::Pattern(derive_pattern(mesh_file).ok_or_else(|| {
+            Error::input(format!(
+                "{}: key 'mesh.file' = '{}' has no level number (name_NNN.msh); give \
+                 --mesh-pattern 'name_{{n:03}}.msh' or --meshes a.msh,b.msh,…,reference.msh",
+                scene_path.display(),
+                mesh_file
+            ))
+        })?),
+    })
+}
+
 /// How to make the missing mesh `dir/NAME_NNN.msh` of level n: with the generator script
 /// in `dir` or up to two directories above it when its text offers `generate.sh NAME N`
 /// (meshes too big to commit, e.g. `meshes/generate.sh block 16`), else with gmsh from
@@ -614,6 +672,46 @@ fn say(progress: bool, msg: &str) {
 
 /// Runs a study (no files written; see [`write_report`]).
 pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> {
+    check_levels(opts)?;
+    let meshes = Meshes::for_study(scene_path, opts)?;
+    let forms: &[KernelForm] = if opts.kernel_compare {
+        &[KernelForm::AsGiven, KernelForm::Expression]
+    } else {
+        &[KernelForm::AsGiven]
+    };
+    let mut refs: Vec<((String, usize), Solved)> = Vec::new();
+    let mut families = Vec::new();
+    let mut kernel_cost = Vec::new();
+    let mut end_time = 0.0;
+    for &vary in &opts.vary {
+        let (r, reference) = solve_reference(scene_path, opts, &meshes, vary, &mut refs)?;
+        end_time = r.end;
+        let mut solved_by_form: Vec<Vec<Solved>> = Vec::new();
+        for &form in forms {
+            let family = FamilyCase {
+                vary,
+                form,
+                reference: &reference,
+                ref_run: r,
+            };
+            let (family, solved) = solve_family(scene_path, opts, &meshes, family)?;
+            families.push(family);
+            solved_by_form.push(solved);
+        }
+        if let [prony, expr] = &solved_by_form[..] {
+            kernel_cost.extend(cost_rows(vary, &opts.levels, prony, expr));
+        }
+    }
+    Ok(StudyReport {
+        scene: scene_path.display().to_string(),
+        end_time,
+        families,
+        kernel_cost,
+    })
+}
+
+/// The levels and families a study asks for are there, and levels are ≥ 1.
+fn check_levels(opts: &StudyOptions) -> Result<()> {
     if opts.levels.is_empty() {
         return Err(Error::input(
             "study: --levels is empty; give e.g. --levels 8,16,32,64",
@@ -625,199 +723,186 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
     if opts.vary.is_empty() {
         return Err(Error::input("study: --vary is empty; give both, h or k"));
     }
-    let (_, file) = read_scene_file(scene_path, &opts.overrides)?;
-    let family = match &opts.meshes {
-        Some(MeshFamily::List(list)) => {
-            let needs_levels = opts.vary.iter().any(|v| *v != Vary::K);
-            if list.is_empty() || (needs_levels && list.len() != opts.levels.len() + 1) {
-                return Err(Error::input(format!(
-                    "study: --meshes has {} files; give one mesh per level ({}) and then the \
-                     reference mesh",
-                    list.len(),
-                    opts.levels.len()
-                )));
-            }
-            if opts.fixed.is_some() && opts.vary.contains(&Vary::K) {
-                return Err(Error::input(
-                    "study: with --meshes, --vary k runs on the last (reference) mesh; \
-                     --fixed picks a mesh level only with a pattern",
-                ));
-            }
-            MeshFamily::List(list.clone())
-        }
-        Some(MeshFamily::Pattern(p)) => {
-            expand_pattern(p, 1).map_err(Error::input)?;
-            MeshFamily::Pattern(p.clone())
-        }
-        None => MeshFamily::Pattern(derive_pattern(&file.mesh.file).ok_or_else(|| {
-            Error::input(format!(
-                "{}: key 'mesh.file' = '{}' has no level number (name_NNN.msh); give \
-                 --mesh-pattern 'name_{{n:03}}.msh' or --meshes a.msh,b.msh,…,reference.msh",
-                scene_path.display(),
-                file.mesh.file
-            ))
-        })?),
-    };
-    let meshes = Meshes {
-        family,
-        dir: scene_path.parent().unwrap_or(Path::new("")).to_path_buf(),
-        dim: file.mesh.model.dim(),
-    };
+    Ok(())
+}
+
+/// The reference run of family `vary` (computed once for the families that share it, kept
+/// in `refs`) and what the report says of it.
+fn solve_reference<'r>(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    meshes: &Meshes,
+    vary: Vary,
+    refs: &'r mut Vec<((String, usize), Solved)>,
+) -> Result<(&'r Solved, ReferenceInfo)> {
+    // The reference keeps the fixed parameter (module docs).
     let reference = opts.reference;
     let fixed = opts.fixed.unwrap_or(reference);
-    // Every mesh is there before anything runs: a missing mesh fails at once.
-    for &vary in &opts.vary {
-        meshes.case(vary, reference, None, fixed)?;
-        for (i, &n) in opts.levels.iter().enumerate() {
-            meshes.case(vary, n, Some(i), fixed)?;
-        }
+    let (ref_mesh, ref_steps, ref_n) = meshes.case(vary, reference, None, fixed)?;
+    let key = (ref_mesh.clone(), ref_steps);
+    if !refs.iter().any(|(k, _)| *k == key) {
+        say(
+            opts.progress,
+            &format!("study: reference {ref_mesh}, N = {ref_steps} …"),
+        );
+        let (s, _) = solve_timed(
+            scene_path,
+            &opts.overrides,
+            case(&ref_mesh, ref_steps),
+            KernelForm::AsGiven,
+            Some(1),
+        )?;
+        refs.push((key.clone(), s));
     }
-    let forms: &[KernelForm] = if opts.kernel_compare {
-        &[KernelForm::AsGiven, KernelForm::Expression]
-    } else {
-        &[KernelForm::AsGiven]
+    let r = &refs.iter().find(|(k, _)| *k == key).expect("just added").1;
+    let (ref_l2, ref_semi) = p1_norms(&r.disc.cells, &r.u);
+    let ref_hmax = max_edge(&r.disc.nodes, &r.disc.cells);
+    let info = ReferenceInfo {
+        mesh: r.mesh.clone(),
+        h: meshes.nominal_h(ref_n, ref_hmax),
+        h_max: ref_hmax,
+        k: r.k,
+        steps: r.steps,
+        dofs: r.disc.n_free,
+        u_l2: ref_l2,
+        u_h1: (ref_l2 * ref_l2 + ref_semi * ref_semi).sqrt(),
+        wall_s: r.wall_s,
     };
+    Ok((r, info))
+}
 
-    let mut refs: Vec<((String, usize), Solved)> = Vec::new();
-    let mut families = Vec::new();
-    let mut kernel_cost = Vec::new();
-    let mut end_time = 0.0;
-    for &vary in &opts.vary {
-        // The reference keeps the fixed parameter (module docs).
-        let (ref_mesh, ref_steps, ref_n) = meshes.case(vary, reference, None, fixed)?;
-        let key = (ref_mesh.clone(), ref_steps);
-        if !refs.iter().any(|(k, _)| *k == key) {
-            say(
-                opts.progress,
-                &format!("study: reference {ref_mesh}, N = {ref_steps} …"),
-            );
-            let (s, _) = solve_timed(
-                scene_path,
-                &opts.overrides,
-                case(&ref_mesh, ref_steps),
-                KernelForm::AsGiven,
-                Some(1),
-            )?;
-            refs.push((key.clone(), s));
-        }
-        let r = &refs.iter().find(|(k, _)| *k == key).expect("just added").1;
-        end_time = r.end;
-        let (ref_l2, ref_semi) = p1_norms(&r.disc.cells, &r.u);
-        let ref_h1 = (ref_l2 * ref_l2 + ref_semi * ref_semi).sqrt();
-        let ref_hmax = max_edge(&r.disc.nodes, &r.disc.cells);
-        let reference_info = ReferenceInfo {
-            mesh: r.mesh.clone(),
-            h: meshes.nominal_h(ref_n, ref_hmax),
-            h_max: ref_hmax,
-            k: r.k,
-            steps: r.steps,
-            dofs: r.disc.n_free,
-            u_l2: ref_l2,
-            u_h1: ref_h1,
-            wall_s: r.wall_s,
-        };
-        let mut solved_by_form: Vec<Vec<Solved>> = Vec::new();
-        for &form in forms {
-            let mut rows: Vec<Row> = Vec::new();
-            let mut solved = Vec::new();
-            let mut kernel = String::new();
-            for (i, &n) in opts.levels.iter().enumerate() {
-                let (mesh, steps, mesh_n) = meshes.case(vary, n, Some(i), fixed)?;
-                say(
-                    opts.progress,
-                    &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
-                );
-                let (s, given) = solve_timed(
-                    scene_path,
-                    &opts.overrides,
-                    case(&mesh, steps),
-                    form,
-                    opts.repeat,
-                )?;
-                kernel = form.label(given);
-                let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
-                let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
-                let h = meshes.nominal_h(mesh_n, h_max);
-                let (order_h1, order_l2) = match rows.last() {
-                    Some(prev) => {
-                        let (p0, p1) = match vary {
-                            Vary::H => (prev.h, h),
-                            Vary::K | Vary::Both => (prev.k, s.k),
-                        };
-                        (
-                            observed_order(prev.err_h1, e.h1, p0, p1),
-                            observed_order(prev.err_l2, e.l2, p0, p1),
-                        )
-                    }
-                    None => (None, None),
-                };
-                rows.push(Row {
-                    family: vary,
-                    kernel: kernel.clone(),
-                    level: n,
-                    h,
-                    h_max,
-                    k: s.k,
-                    steps: s.steps,
-                    nodes: s.disc.nodes.len(),
-                    dofs: s.disc.n_free,
-                    err_h1: e.h1,
-                    err_h1_semi: e.h1_semi,
-                    err_l2: e.l2,
-                    rel_h1: e.h1 / ref_h1,
-                    rel_l2: e.l2 / ref_l2,
-                    order_h1,
-                    order_l2,
-                    wall_s: s.wall_s,
-                    steps_s: s.steps_s,
-                    per_step_s: s.steps_s / (s.steps + 1) as f64,
-                    runs: s.runs,
-                    nested: e.nested,
-                    mesh: s.mesh.clone(),
-                });
-                solved.push(s);
-            }
-            families.push(Family {
-                vary,
-                kernel,
-                form,
-                reference: reference_info.clone(),
-                rows,
-            });
-            solved_by_form.push(solved);
-        }
-        if let [prony, expr] = &solved_by_form[..] {
-            for (i, (p, x)) in prony.iter().zip(expr).enumerate() {
-                let scale =
-                    p.u.iter()
-                        .flatten()
-                        .fold(0.0f64, |a, v| a.max(v.abs()))
-                        .max(f64::MIN_POSITIVE);
-                let diff =
-                    p.u.iter()
-                        .flatten()
-                        .zip(x.u.iter().flatten())
-                        .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
-                kernel_cost.push(CostRow {
-                    family: vary,
-                    level: opts.levels[i],
-                    steps: p.steps,
-                    dofs: p.disc.n_free,
-                    prony_steps_s: p.steps_s,
-                    expression_steps_s: x.steps_s,
-                    prony_wall_s: p.wall_s,
-                    expression_wall_s: x.wall_s,
-                    max_rel_diff: diff / scale,
-                });
-            }
-        }
+/// One family of a study: what it varies, the kernel's form and its reference.
+#[derive(Clone, Copy)]
+struct FamilyCase<'a> {
+    vary: Vary,
+    form: KernelForm,
+    reference: &'a ReferenceInfo,
+    /// The reference run's solution.
+    ref_run: &'a Solved,
+}
+
+/// Runs the levels of one family: its table, and the solutions (for the cost of memory).
+fn solve_family(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    meshes: &Meshes,
+    family: FamilyCase,
+) -> Result<(Family, Vec<Solved>)> {
+    let FamilyCase { vary, form, .. } = family;
+    let fixed = opts.fixed.unwrap_or(opts.reference);
+    let mut rows: Vec<Row> = Vec::new();
+    let mut solved = Vec::new();
+    let mut kernel = String::new();
+    for (i, &n) in opts.levels.iter().enumerate() {
+        let (mesh, steps, mesh_n) = meshes.case(vary, n, Some(i), fixed)?;
+        say(
+            opts.progress,
+            &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
+        );
+        let (s, given) = solve_timed(
+            scene_path,
+            &opts.overrides,
+            case(&mesh, steps),
+            form,
+            opts.repeat,
+        )?;
+        kernel = form.label(given);
+        let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
+        let h = [meshes.nominal_h(mesh_n, h_max), h_max];
+        rows.push(row(family, n, h, &kernel, &s, rows.last()));
+        solved.push(s);
     }
-    Ok(StudyReport {
-        scene: scene_path.display().to_string(),
-        end_time,
-        families,
-        kernel_cost,
-    })
+    let family = Family {
+        vary,
+        kernel,
+        form,
+        reference: family.reference.clone(),
+        rows,
+    };
+    Ok((family, solved))
+}
+
+/// The row of level n of a family, solved as `s` on a mesh of nominal size h and longest
+/// edge h_max; `prev` is the row before it (for the observed orders).
+fn row(
+    family: FamilyCase,
+    n: usize,
+    [h, h_max]: [f64; 2],
+    kernel: &str,
+    s: &Solved,
+    prev: Option<&Row>,
+) -> Row {
+    let (vary, r, reference) = (family.vary, family.ref_run, family.reference);
+    let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
+    let (order_h1, order_l2) = match prev {
+        Some(prev) => {
+            let (p0, p1) = match vary {
+                Vary::H => (prev.h, h),
+                Vary::K | Vary::Both => (prev.k, s.k),
+            };
+            (
+                observed_order(prev.err_h1, e.h1, p0, p1),
+                observed_order(prev.err_l2, e.l2, p0, p1),
+            )
+        }
+        None => (None, None),
+    };
+    Row {
+        family: vary,
+        kernel: kernel.to_string(),
+        level: n,
+        h,
+        h_max,
+        k: s.k,
+        steps: s.steps,
+        nodes: s.disc.nodes.len(),
+        dofs: s.disc.n_free,
+        err_h1: e.h1,
+        err_h1_semi: e.h1_semi,
+        err_l2: e.l2,
+        rel_h1: e.h1 / reference.u_h1,
+        rel_l2: e.l2 / reference.u_l2,
+        order_h1,
+        order_l2,
+        wall_s: s.wall_s,
+        steps_s: s.steps_s,
+        per_step_s: s.steps_s / (s.steps + 1) as f64,
+        runs: s.runs,
+        nested: e.nested,
+        mesh: s.mesh.clone(),
+    }
+}
+
+/// Prony against expression at each level of a family (`--kernel-compare`).
+fn cost_rows(vary: Vary, levels: &[usize], prony: &[Solved], expr: &[Solved]) -> Vec<CostRow> {
+    prony
+        .iter()
+        .zip(expr)
+        .enumerate()
+        .map(|(i, (p, x))| {
+            let scale =
+                p.u.iter()
+                    .flatten()
+                    .fold(0.0f64, |a, v| a.max(v.abs()))
+                    .max(f64::MIN_POSITIVE);
+            let diff =
+                p.u.iter()
+                    .flatten()
+                    .zip(x.u.iter().flatten())
+                    .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
+            CostRow {
+                family: vary,
+                level: levels[i],
+                steps: p.steps,
+                dofs: p.disc.n_free,
+                prony_steps_s: p.steps_s,
+                expression_steps_s: x.steps_s,
+                prony_wall_s: p.wall_s,
+                expression_wall_s: x.wall_s,
+                max_rel_diff: diff / scale,
+            }
+        })
+        .collect()
 }
 
 // ---------------------------------------------------------------------------------------
@@ -996,7 +1081,6 @@ pub fn default_out(scene_path: &Path, opts: &StudyOptions) -> Result<PathBuf> {
 /// returns the paths written.
 pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
     use crate::output::write_atomic;
-    use crate::plot::{log_log_chart, Curve};
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut written = Vec::new();
     let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
@@ -1012,15 +1096,25 @@ pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
     if !report.kernel_cost.is_empty() {
         put("kernel_cost.csv", kernel_cost_csv(report).as_bytes())?;
     }
+    written.push(plot_error_vs_time(report, dir)?);
+    written.extend(plot_error_vs_h_and_k(report, dir)?);
+    if !report.kernel_cost.is_empty() {
+        written.push(plot_kernel_cost(report, dir)?);
+    }
+    Ok(written)
+}
 
-    let label = |f: &Family| {
-        if report.kernel_cost.is_empty() {
-            f.vary.title().to_string()
-        } else {
-            format!("{} [{}]", f.vary.title(), f.kernel)
-        }
-    };
-    // Error against wall time: which refinement buys accuracy most cheaply.
+/// A family's name in the plots (with its kernel when the kernels are compared).
+fn family_label(report: &StudyReport, f: &Family) -> String {
+    if report.kernel_cost.is_empty() {
+        f.vary.title().to_string()
+    } else {
+        format!("{} [{}]", f.vary.title(), f.kernel)
+    }
+}
+
+/// Error against wall time: which refinement buys accuracy most cheaply.
+fn plot_error_vs_time(report: &StudyReport, dir: &Path) -> Result<PathBuf> {
     let curves: Vec<Curve> = report
         .families
         .iter()
@@ -1028,7 +1122,7 @@ pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
         .map(|(i, f)| {
             Curve::data(
                 i,
-                label(f),
+                family_label(report, f),
                 f.rows.iter().map(|r| (r.wall_s, r.err_h1)).collect(),
             )
             .with_point_labels(
@@ -1051,8 +1145,13 @@ pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
         "‖u_N − u_ref(T)‖₁",
         &curves,
     )?;
-    written.push(p);
-    // Error against h and against k, with slope-1 reference lines.
+    Ok(p)
+}
+
+/// Error against h and against k, with slope-1 reference lines (a plot only where a
+/// family varies that parameter).
+fn plot_error_vs_h_and_k(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut written = Vec::new();
     for (name, axis, x_of, varies) in [
         (
             "error_vs_h.png",
@@ -1083,7 +1182,7 @@ pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
                 ));
             }
             let labels = pts.iter().map(|p| fraction(p.0)).collect();
-            curves.push(Curve::data(i, label(f), pts).with_point_labels(labels));
+            curves.push(Curve::data(i, family_label(report, f), pts).with_point_labels(labels));
         }
         if curves.is_empty() {
             continue;
@@ -1098,58 +1197,60 @@ pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
         )?;
         written.push(p);
     }
-    // The cost of memory: time of the steps against N.
-    if !report.kernel_cost.is_empty() {
-        let mut curves = Vec::new();
-        let mut varies: Vec<Vary> = report.kernel_cost.iter().map(|c| c.family).collect();
-        varies.dedup();
-        for (i, v) in varies.iter().enumerate() {
-            let rows: Vec<&CostRow> = report
-                .kernel_cost
-                .iter()
-                .filter(|c| c.family == *v)
-                .collect();
-            let pts = |f: fn(&CostRow) -> f64| -> Vec<(f64, f64)> {
-                rows.iter().map(|c| (c.steps as f64, f(c))).collect()
-            };
-            curves.push(Curve::data(
-                2 * i,
-                format!("Prony, O(1) per step (vary {v})"),
-                pts(|c| c.prony_steps_s),
-            ));
-            curves.push(Curve::data(
-                2 * i + 1,
-                format!("expression, O(n) per step (vary {v})"),
-                pts(|c| c.expression_steps_s),
-            ));
-        }
-        if let (Some(first), Some(last)) = (report.kernel_cost.first(), report.kernel_cost.last()) {
-            let (n0, n1) = (first.steps as f64, last.steps as f64);
-            let t0 = first.prony_steps_s.min(first.expression_steps_s);
-            if n1 > n0 {
-                curves.push(Curve::reference(
-                    "slope 1".into(),
-                    vec![(n0, t0), (n1, t0 * n1 / n0)],
-                ));
-                let mut slope2 = Curve::reference(
-                    "slope 2".into(),
-                    vec![(n0, t0), (n1, t0 * (n1 / n0).powi(2))],
-                );
-                slope2.color = 1;
-                curves.push(slope2);
-            }
-        }
-        let p = dir.join("kernel_cost.png");
-        log_log_chart(
-            &p,
-            "The cost of memory: time of the N + 1 steps",
-            "N (number of time steps)",
-            "time of all steps [s]",
-            &curves,
-        )?;
-        written.push(p);
-    }
     Ok(written)
+}
+
+/// The cost of memory: time of the steps against N, Prony and expression per family, with
+/// slope-1 and slope-2 reference lines.
+fn plot_kernel_cost(report: &StudyReport, dir: &Path) -> Result<PathBuf> {
+    let mut curves = Vec::new();
+    let mut varies: Vec<Vary> = report.kernel_cost.iter().map(|c| c.family).collect();
+    varies.dedup();
+    for (i, v) in varies.iter().enumerate() {
+        let rows: Vec<&CostRow> = report
+            .kernel_cost
+            .iter()
+            .filter(|c| c.family == *v)
+            .collect();
+        let pts = |f: fn(&CostRow) -> f64| -> Vec<(f64, f64)> {
+            rows.iter().map(|c| (c.steps as f64, f(c))).collect()
+        };
+        curves.push(Curve::data(
+            2 * i,
+            format!("Prony, O(1) per step (vary {v})"),
+            pts(|c| c.prony_steps_s),
+        ));
+        curves.push(Curve::data(
+            2 * i + 1,
+            format!("expression, O(n) per step (vary {v})"),
+            pts(|c| c.expression_steps_s),
+        ));
+    }
+    if let (Some(first), Some(last)) = (report.kernel_cost.first(), report.kernel_cost.last()) {
+        let (n0, n1) = (first.steps as f64, last.steps as f64);
+        let t0 = first.prony_steps_s.min(first.expression_steps_s);
+        if n1 > n0 {
+            curves.push(Curve::reference(
+                "slope 1".into(),
+                vec![(n0, t0), (n1, t0 * n1 / n0)],
+            ));
+            let mut slope2 = Curve::reference(
+                "slope 2".into(),
+                vec![(n0, t0), (n1, t0 * (n1 / n0).powi(2))],
+            );
+            slope2.color = 1;
+            curves.push(slope2);
+        }
+    }
+    let p = dir.join("kernel_cost.png");
+    log_log_chart(
+        &p,
+        "The cost of memory: time of the N + 1 steps",
+        "N (number of time steps)",
+        "time of all steps [s]",
+        &curves,
+    )?;
+    Ok(p)
 }
 
 #[cfg(test)]
