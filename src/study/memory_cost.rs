@@ -26,6 +26,7 @@ use serde::Serialize;
 use super::say;
 use crate::history::Plan;
 use crate::kernel::Kernel;
+use crate::plot::{log_log_chart, Curve};
 use crate::run::{discretize, load_scene};
 use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
@@ -252,7 +253,6 @@ pub fn csv(report: &Report) -> String {
 /// Writes memory_cost.{md,csv,json} and the plots into `dir`; returns the paths.
 pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
     use crate::output::write_atomic;
-    use crate::plot::{log_log_chart, Curve};
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut written = Vec::new();
     for (name, bytes) in [
@@ -267,9 +267,16 @@ pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
         write_atomic(&p, bytes.as_bytes())?;
         written.push(p);
     }
+    written.extend(plot_error(report, dir)?);
+    written.push(plot_time(report, dir)?);
+    Ok(written)
+}
+
+/// The error of u_N against the tolerance, one curve per N where the direct sum ran, with
+/// the line error = ε; None when the direct sum ran nowhere.
+fn plot_error(report: &Report, dir: &Path) -> Result<Option<PathBuf>> {
     let mut steps: Vec<usize> = report.rows.iter().map(|r| r.steps).collect();
     steps.dedup();
-    // The error of u_N against the tolerance, where the direct sum ran.
     let mut curves: Vec<Curve> = steps
         .iter()
         .enumerate()
@@ -283,27 +290,31 @@ pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
             (!pts.is_empty()).then(|| Curve::data(i, format!("N = {n}"), pts))
         })
         .collect();
-    if !curves.is_empty() {
-        let (t0, t1) = report
-            .rows
-            .iter()
-            .filter_map(|r| r.tolerance)
-            .fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
-        curves.push(Curve::reference(
-            "error = tolerance".into(),
-            vec![(t0, t0), (t1, t1)],
-        ));
-        let p = dir.join("memory_cost_error.png");
-        log_log_chart(
-            &p,
-            "Compressed memory: error of u_N against the tolerance",
-            "tolerance ε of the fit",
-            "max|u_N − u_N^exact| / max|u_N^exact|",
-            &curves,
-        )?;
-        written.push(p);
+    if curves.is_empty() {
+        return Ok(None);
     }
-    // The wall time against N: one curve per tolerance and the direct sum.
+    let (t0, t1) = report
+        .rows
+        .iter()
+        .filter_map(|r| r.tolerance)
+        .fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
+    curves.push(Curve::reference(
+        "error = tolerance".into(),
+        vec![(t0, t0), (t1, t1)],
+    ));
+    let p = dir.join("memory_cost_error.png");
+    log_log_chart(
+        &p,
+        "Compressed memory: error of u_N against the tolerance",
+        "tolerance ε of the fit",
+        "max|u_N − u_N^exact| / max|u_N^exact|",
+        &curves,
+    )?;
+    Ok(Some(p))
+}
+
+/// The wall time against N: one curve per tolerance and the direct sum.
+fn plot_time(report: &Report, dir: &Path) -> Result<PathBuf> {
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for r in &report.rows {
         let label = match r.tolerance {
@@ -330,6 +341,5 @@ pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
         "wall time [s]",
         &curves,
     )?;
-    written.push(p);
-    Ok(written)
+    Ok(p)
 }

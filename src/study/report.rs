@@ -32,78 +32,88 @@ pub fn markdown(report: &StudyReport) -> String {
          steps, no output).\n"
     );
     for f in &report.families {
-        let r = &f.reference;
-        let _ = writeln!(
-            s,
-            "## {} — kernel: {}\n\nReference: h = {}, k = {} (N = {}, {} dofs, ‖u_ref‖_1 = {:.4e}, {:.2} s), {}\n",
-            f.vary.title(),
-            f.kernel,
-            fraction(r.h),
-            fraction(r.k),
-            r.steps,
-            r.dofs,
-            r.u_h1,
-            r.wall_s,
-            r.mesh
-        );
-        let _ = writeln!(
-            s,
-            "| h | k | dofs | steps | ‖e‖_1 | ‖e‖_1/‖u‖_1 | ‖e‖_L² | order ‖·‖_1 | order L² | wall [s] | per step [ms] | nested |"
-        );
-        let _ = writeln!(
-            s,
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|"
-        );
-        for row in &f.rows {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {} | {:.4e} | {:.3e} | {:.4e} | {} | {} | {:.3} | {:.3} | {} |",
-                fraction(row.h),
-                fraction(row.k),
-                row.dofs,
-                row.steps,
-                row.err_h1,
-                row.rel_h1,
-                row.err_l2,
-                opt(row.order_h1),
-                opt(row.order_l2),
-                row.wall_s,
-                row.per_step_s * 1e3,
-                if row.nested { "yes" } else { "no" }
-            );
-        }
-        s.push('\n');
+        family_table(&mut s, f);
     }
     if !report.kernel_cost.is_empty() {
-        let _ = writeln!(
-            s,
-            "## The cost of memory: Prony recursion (O(1) per step) against the direct sum \
-             (O(n) per step)\n"
-        );
-        let _ = writeln!(
-            s,
-            "| vary | N | dofs | Prony steps [s] | expression steps [s] | ratio | Prony per step [ms] | expression per step [ms] | rel. max difference of u_N |"
-        );
-        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
-        for c in &report.kernel_cost {
-            let n1 = (c.steps + 1) as f64;
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.3} | {:.3} | {:.1e} |",
-                c.family,
-                c.steps,
-                c.dofs,
-                c.prony_steps_s,
-                c.expression_steps_s,
-                c.expression_steps_s / c.prony_steps_s,
-                c.prony_steps_s / n1 * 1e3,
-                c.expression_steps_s / n1 * 1e3,
-                c.max_rel_diff
-            );
-        }
-        s.push('\n');
+        kernel_cost_table(&mut s, report);
     }
     s
+}
+
+/// The table of one family, under a heading that names it and its reference.
+fn family_table(s: &mut String, f: &Family) {
+    let r = &f.reference;
+    let _ = writeln!(
+        s,
+        "## {} — kernel: {}\n\nReference: h = {}, k = {} (N = {}, {} dofs, ‖u_ref‖_1 = {:.4e}, {:.2} s), {}\n",
+        f.vary.title(),
+        f.kernel,
+        fraction(r.h),
+        fraction(r.k),
+        r.steps,
+        r.dofs,
+        r.u_h1,
+        r.wall_s,
+        r.mesh
+    );
+    let _ = writeln!(
+        s,
+        "| h | k | dofs | steps | ‖e‖_1 | ‖e‖_1/‖u‖_1 | ‖e‖_L² | order ‖·‖_1 | order L² | wall [s] | per step [ms] | nested |"
+    );
+    let _ = writeln!(
+        s,
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|"
+    );
+    for row in &f.rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {:.4e} | {:.3e} | {:.4e} | {} | {} | {:.3} | {:.3} | {} |",
+            fraction(row.h),
+            fraction(row.k),
+            row.dofs,
+            row.steps,
+            row.err_h1,
+            row.rel_h1,
+            row.err_l2,
+            opt(row.order_h1),
+            opt(row.order_l2),
+            row.wall_s,
+            row.per_step_s * 1e3,
+            if row.nested { "yes" } else { "no" }
+        );
+    }
+    s.push('\n');
+}
+
+/// The cost of memory: Prony against expression at each level (`--kernel-compare`).
+fn kernel_cost_table(s: &mut String, report: &StudyReport) {
+    let _ = writeln!(
+        s,
+        "## The cost of memory: Prony recursion (O(1) per step) against the direct sum \
+         (O(n) per step)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| vary | N | dofs | Prony steps [s] | expression steps [s] | ratio | Prony per step [ms] | expression per step [ms] | rel. max difference of u_N |"
+    );
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for c in &report.kernel_cost {
+        let n1 = (c.steps + 1) as f64;
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.3} | {:.3} | {:.1e} |",
+            c.family,
+            c.steps,
+            c.dofs,
+            c.prony_steps_s,
+            c.expression_steps_s,
+            c.expression_steps_s / c.prony_steps_s,
+            c.prony_steps_s / n1 * 1e3,
+            c.expression_steps_s / n1 * 1e3,
+            c.max_rel_diff
+        );
+    }
+    s.push('\n');
 }
 
 /// The rows of every family as CSV.
