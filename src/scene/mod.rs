@@ -114,3 +114,51 @@ impl Scene {
         Ok(self)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TEXT: &str = "[mesh]\nfile = \"rect_008.msh\"\n[time]\nend = 1.0\nsteps = 8\n\
+                        [material.viscosity]\ntheta = 1.0\n\
+                        [material.relaxation]\nexpr = \"exp(-s)\"\nhorizon = 4.0\n";
+
+    fn scene() -> Scene {
+        let path = Path::new("scenes/paper.toml");
+        let (text, file) = parse_scene_text(path, TEXT.into(), &[]).unwrap();
+        Scene::from_file(path, text, &file).unwrap()
+    }
+
+    #[test]
+    fn typed_changes_are_checked_and_kept_in_the_text() {
+        let s = scene().with_time(2.0, 16).unwrap();
+        assert_eq!((s.time.end, s.time.steps, s.time.k()), (2.0, 16, 0.125));
+        let s = s.with_mesh(Path::new("rect_016.msh")).unwrap();
+        assert_eq!(s.mesh.file, Path::new("scenes/rect_016.msh"));
+        let s = s.with_tolerance(1e-6).unwrap();
+        assert_eq!(s.physics.compression, Some(1e-6));
+        let stored: toml::Table = s.text.parse().unwrap();
+        assert_eq!(stored["time"]["steps"].as_integer(), Some(16));
+        assert_eq!(stored["time"]["end"].as_float(), Some(2.0));
+        assert_eq!(stored["mesh"]["file"].as_str(), Some("rect_016.msh"));
+        let reread = parse_scene_text(&s.path, s.text.clone(), &[]).unwrap();
+        assert_eq!(
+            Scene::from_file(&s.path, reread.0, &reread.1)
+                .unwrap()
+                .time
+                .steps,
+            16
+        );
+    }
+
+    #[test]
+    fn typed_changes_refuse_what_the_file_would() {
+        let e = scene().with_time(1.0, 0).unwrap_err().to_string();
+        assert!(e.contains("time.steps"), "{e}");
+        // A horizon needs a compressed kernel.
+        let e = scene().with_exact_memory().unwrap_err().to_string();
+        assert!(e.contains("material.relaxation.horizon"), "{e}");
+        let e = scene().with_tolerance(2.0).unwrap_err().to_string();
+        assert!(e.contains("material.relaxation.tolerance"), "{e}");
+    }
+}

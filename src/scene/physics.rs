@@ -36,6 +36,7 @@ pub struct Physics {
     pub zeta: f64,
     /// E, ν of (4.2); None when the elasticity term is disabled.
     pub elasticity: Option<(f64, f64)>,
+    /// r(s) of the memory term; None when relaxation is disabled.
     pub relaxation: Option<Kernel>,
     /// For an expression or table kernel: compressed with this tolerance, or exact (None).
     /// Always None for a Prony series (already O(1)).
@@ -43,9 +44,13 @@ pub struct Physics {
     /// `material.relaxation.horizon`: the fit of a compressed kernel covers the lags up to
     /// max(time.end, horizon).
     pub horizon: Option<f64>,
+    /// The unilateral contact constraint on Γ3,1 (`[contact] enabled`).
     pub contact: bool,
+    /// Friction on Γ3,2; None when disabled.
     pub friction: Option<Friction>,
+    /// f_2: the tractions on Γ2.
     pub tractions: Vec<Traction>,
+    /// f_0: the body forces, one vector each.
     pub body_forces: Vec<Vec<Scalar>>,
 }
 
