@@ -90,7 +90,7 @@ fn main() {
     let writer = Writer::new(
         &dir,
         Identity::new(&scene, &mesh, &disc, None),
-        scene.steps,
+        scene.time.steps,
         tl.rows(),
     );
     // Steps 0..N-1, a checkpoint after each, waited for.
@@ -123,9 +123,9 @@ fn main() {
         log: RunLog::default(),
         active: vec![false; tl.rows().len()],
         latency: Vec::new(),
-        stop: scene.steps - 1,
+        stop: scene.time.steps - 1,
     };
-    tl.run(scene.steps, &mut every).expect("steps");
+    tl.run(scene.time.steps, &mut every).expect("steps");
     let EveryStep {
         writer, latency, ..
     } = every;

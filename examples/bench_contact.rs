@@ -78,7 +78,7 @@ fn time_run(scene: &Path, overrides: &[String]) -> (f64, f64, usize) {
         iterations += s.step.report.iterations;
         Ok(())
     };
-    tl.run(scene.steps, &mut count).expect("steps");
+    tl.run(scene.time.steps, &mut count).expect("steps");
     let umax = tl.u().iter().fold(0.0f64, |a, v| a.max(v.abs()));
     (start.elapsed().as_secs_f64(), umax, iterations)
 }

@@ -15,7 +15,7 @@ fn u_final(scene: &std::path::Path, set: &[String]) -> (Vec<f64>, f64) {
     let (scene, _mesh, disc) = viscontact::run::setup(scene, set).unwrap();
     let start = Instant::now();
     let mut tl = TimeLoop::new(&scene, &disc).unwrap();
-    viscontact::study::solve_to_end(&mut tl, scene.steps).unwrap();
+    viscontact::study::solve_to_end(&mut tl, scene.time.steps).unwrap();
     (tl.u().to_vec(), start.elapsed().as_secs_f64())
 }
 

@@ -146,9 +146,9 @@ fn main() {
     for _ in 0..repeat {
         tl = TimeLoop::new(&scene, &disc).expect("setup");
         let start = Instant::now();
-        tl.run(scene.steps, &mut |_: &Solved| Ok(()))
+        tl.run(scene.time.steps, &mut |_: &Solved| Ok(()))
             .expect("steps");
-        step_times.push(start.elapsed().as_secs_f64() / (scene.steps + 1) as f64);
+        step_times.push(start.elapsed().as_secs_f64() / (scene.time.steps + 1) as f64);
     }
     let per_step = median(step_times);
     let factor = tl.factor();
@@ -217,7 +217,7 @@ fn main() {
     let step_data = median(data[10..].to_vec());
     println!(
         "per step (setup excluded, medians of {repeat} runs of {} steps): {:.2} ms",
-        scene.steps + 1,
+        scene.time.steps + 1,
         per_step * 1e3
     );
     println!(

@@ -33,12 +33,12 @@ impl Effects {
         Effects {
             viscosity: true,
             elasticity: disc.k_b.is_some(),
-            memory: scene.relaxation.is_some(),
+            memory: scene.physics.relaxation.is_some(),
             contact: !disc.contact.is_empty(),
             friction: !disc.friction.is_empty(),
             normal_stress: !disc.g_f.is_empty(),
-            tractions: !scene.tractions.is_empty(),
-            body_force: !scene.body_forces.is_empty(),
+            tractions: !scene.physics.tractions.is_empty(),
+            body_force: !scene.physics.body_forces.is_empty(),
         }
     }
 
@@ -78,9 +78,11 @@ pub const RIGHT_ANGLE_COSINE: f64 = 1e-9;
 pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
     let mut w = Vec::new();
     use crate::scene::Model;
-    if let (Model::PlaneStrain | Model::ThreeD, Some((_, nu))) = (scene.model, scene.elasticity) {
+    if let (Model::PlaneStrain | Model::ThreeD, Some((_, nu))) =
+        (scene.mesh.model, scene.physics.elasticity)
+    {
         if nu > 0.45 {
-            let (model, elements, remedy) = match scene.model {
+            let (model, elements, remedy) = match scene.mesh.model {
                 Model::PlaneStrain => ("plane strain", "triangles", "a smaller ν or plane stress"),
                 _ => ("3D", "tetrahedra", "a smaller ν"),
             };
@@ -93,12 +95,12 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
     for (kink, group, what) in [
         (
             disc.contact_kink_deg,
-            &scene.groups.contact,
+            &scene.mesh.groups.contact,
             "n·w ≤ 0 is only approximately the contact of each facet",
         ),
         (
             disc.friction_kink_deg,
-            &scene.groups.friction,
+            &scene.mesh.groups.friction,
             "the slip |w_τ| is only approximately the slip along each facet",
         ),
     ] {
@@ -122,8 +124,8 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
              contact pressure λ from friction traction γ, and their split is not unique (the \
              velocity and the force are); where the two meet at any other angle it is unique",
             right.len(),
-            scene.groups.contact,
-            scene.groups.friction,
+            scene.mesh.groups.contact,
+            scene.mesh.groups.friction,
             fmt_point(disc.nodes[first], disc.dim),
             fmt_num(cos)
         ));
@@ -144,7 +146,7 @@ pub fn step_solver(
     if effects.linear() {
         return Ok(StepSolver::Linear);
     }
-    Ok(match scene.contact_solver {
+    Ok(match scene.solver.contact {
         ContactSolver::Fast => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
         ContactSolver::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
     })

@@ -14,8 +14,9 @@
 //! whose kernel misses its tolerance is refused (bad input naming the tolerance the fit
 //! reached), never silently run in O(N²). t_n − t_j is taken as (n − j)·k exactly.
 
+use crate::kernel::Kernel;
 use crate::kernel_fit::{self, Fit, Lags};
-use crate::scene::{self, Kernel, Scene};
+use crate::scene::{self, Scene};
 use crate::Result;
 
 /// One Prony term a e^{−b s}: its weight, its one-step decay e^{−b k}, its state m^(i)_n.
@@ -75,7 +76,7 @@ impl Plan {
             None => Self::exact(lags, scene, None),
             Some(tolerance) => match kernel_fit::fit(&lags, tolerance) {
                 Ok(fit) => Plan::Compressed(fit),
-                Err(why) if scene.steps > kernel_fit::EXACT_STEPS => {
+                Err(why) if scene.time.steps > kernel_fit::EXACT_STEPS => {
                     return Err(crate::Error::input(format!(
                         "{}: key 'material.relaxation.tolerance': the kernel cannot be \
                          compressed within {tolerance:e}: {why}. It is not run by the direct \
@@ -83,7 +84,7 @@ impl Plan {
                          every step's displacement, 8·dofs·N bytes, and takes O(N²·dofs) \
                          time); memory = \"exact\" runs it anyway",
                         scene.path.display(),
-                        scene.steps,
+                        scene.time.steps,
                         kernel_fit::EXACT_STEPS
                     )))
                 }
@@ -117,9 +118,9 @@ impl Plan {
                          holds up to t = {t_ok}: resume with --set time.end ≤ {t_ok}, or run \
                          the scene again from the start with [material.relaxation] horizon = \
                          {} (the latest end time its fit must cover)",
-                        scene.end,
+                        scene.time.end,
                         terms.len(),
-                        scene.end
+                        scene.time.end
                     )));
                 }
                 Plan::Compressed(Fit {
@@ -147,13 +148,13 @@ impl Plan {
 
     /// The direct sum on the run's own lags (`lags` may reach further, to a fit's horizon).
     fn exact(mut lags: Lags, scene: &Scene, fallback: Option<String>) -> Plan {
-        lags.truncate(scene.steps);
+        lags.truncate(scene.time.steps);
         Plan::Exact { lags, fallback }
     }
 
     /// The plan of a scene without relaxation or with its own Prony series.
     fn fixed(scene: &Scene) -> Plan {
-        match &scene.relaxation {
+        match &scene.physics.relaxation {
             Some(Kernel::Prony(terms)) => Plan::Prony(terms.clone()),
             _ => Plan::None,
         }
@@ -162,7 +163,7 @@ impl Plan {
     /// For an expression or table kernel: r on every lag the run reads, and the tolerance of
     /// its compression (None: `memory = "exact"`); None for the other kernels.
     fn lags(scene: &Scene) -> Result<Option<(Lags, Option<f64>)>> {
-        let kernel = match &scene.relaxation {
+        let kernel = match &scene.physics.relaxation {
             None | Some(Kernel::Prony(_)) => return Ok(None),
             Some(kernel) => kernel,
         };
@@ -170,16 +171,19 @@ impl Plan {
             Kernel::Table(..) => "material.relaxation.table",
             _ => "material.relaxation.expr",
         };
-        let implicit = scene.history == scene::History::Implicit;
+        let implicit = scene.solver.history == scene::History::Implicit;
         // A compressed kernel is fitted up to its horizon, which a resume may extend the run
         // to (the scene checks horizon ≥ time.end).
-        let steps = match (scene.compression, scene.horizon) {
-            (Some(_), Some(h)) => scene.steps.max((h / scene.k() - 1e-9).ceil() as usize),
-            _ => scene.steps,
+        let steps = match (scene.physics.compression, scene.physics.horizon) {
+            (Some(_), Some(h)) => scene
+                .time
+                .steps
+                .max((h / scene.time.k() - 1e-9).ceil() as usize),
+            _ => scene.time.steps,
         };
-        let lags = Lags::new(kernel, scene.k(), steps, implicit, key)
+        let lags = Lags::new(kernel, scene.time.k(), steps, implicit, key)
             .map_err(|e| crate::Error::input(format!("{}: {e}", scene.path.display())))?;
-        Ok(Some((lags, scene.compression)))
+        Ok(Some((lags, scene.physics.compression)))
     }
 
     /// The Prony series the recursion runs, if any.

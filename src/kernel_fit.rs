@@ -43,7 +43,7 @@
 //! sequential and deterministic: the same kernel, lags and tolerance give the same bits (a
 //! resumed run recomputes the fit and the checkpoint check compares it bit for bit).
 
-use crate::scene::Kernel;
+use crate::kernel::Kernel;
 use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::qr::no_pivoting::{factor, solve};

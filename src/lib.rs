@@ -12,6 +12,8 @@ pub mod error;
 pub mod expr;
 pub mod fem;
 pub mod history;
+mod input_file;
+pub mod kernel;
 pub mod kernel_fit;
 pub mod mesh;
 pub mod output;

@@ -280,9 +280,9 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     );
     println!(
         "time       T = {}, N = {}, k = {}",
-        scene.end,
-        scene.steps,
-        scene.k()
+        scene.time.end,
+        scene.time.steps,
+        scene.time.k()
     );
     println!("effects    {}", effects.names().join(", "));
     let solver = if effects.linear() {
@@ -290,7 +290,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     } else {
         format!(
             "{} contact solver on {} Γ3,1 rows + {} Γ3,2 rows (nodes × tangents)",
-            match scene.contact_solver {
+            match scene.solver.contact {
                 viscontact::scene::ContactSolver::Fast => "fast (condensed dual active set)",
                 viscontact::scene::ContactSolver::Clarabel => "clarabel",
             },
@@ -309,7 +309,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let limit_line = |l: &StepLimit, what: &str| match l.k_max {
         Some(k) => format!(
             "left endpoint scheme stable for k ≤ {k:.6e} (k/limit = {:.3}{what})",
-            scene.k() / k
+            scene.time.k() / k
         ),
         None => "no explicit elastic or memory term: no step limit".to_string(),
     };
@@ -320,11 +320,11 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
             "stability  {}; direct-sum memory: response to a unit state peaks at {a:.3} over \
              the run's {} steps (stable: ≤ {})",
             limit_line(&l, ", elastic term"),
-            scene.steps,
+            scene.time.steps,
             viscontact::stability::MAX_AMPLIFICATION
         ),
     }
-    let direct_bytes = (scene.steps + 1) * disc.n_free * 8;
+    let direct_bytes = (scene.time.steps + 1) * disc.n_free * 8;
     let history_bytes = match &plan {
         Plan::None => 0,
         Plan::Exact { .. } => direct_bytes,

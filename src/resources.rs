@@ -22,8 +22,9 @@
 //! other programs of the machine.
 
 use crate::fem::Discretization;
+use crate::kernel::Kernel;
 use crate::kernel_fit::EXACT_STEPS;
-use crate::scene::{Kernel, Scene};
+use crate::scene::Scene;
 use crate::{Error, Result};
 use std::path::Path;
 
@@ -43,24 +44,27 @@ impl Estimate {
     /// The estimate for a run of `scene` (its `time.steps` N) continuing from step `from`
     /// (0 for a new run; a resumed run writes only the rest).
     pub fn new(scene: &Scene, disc: &Discretization, from: usize) -> Estimate {
-        let steps = scene.steps as f64;
+        let steps = scene.time.steps as f64;
         let d = disc.n_free as f64;
-        let general = matches!(scene.relaxation, Some(Kernel::Expr(_) | Kernel::Table(..)));
-        let compressed = general && scene.compression.is_some();
-        let direct = general && (!compressed || scene.steps <= EXACT_STEPS);
-        let fit = match (compressed, scene.horizon) {
+        let general = matches!(
+            scene.physics.relaxation,
+            Some(Kernel::Expr(_) | Kernel::Table(..))
+        );
+        let compressed = general && scene.physics.compression.is_some();
+        let direct = general && (!compressed || scene.time.steps <= EXACT_STEPS);
+        let fit = match (compressed, scene.physics.horizon) {
             (false, _) => 0.0,
             (true, None) => 16.0 * (steps + 1.0),
-            (true, Some(h)) => 16.0 * ((h / scene.k()).ceil().max(steps) + 1.0),
+            (true, Some(h)) => 16.0 * ((h / scene.time.k()).ceil().max(steps) + 1.0),
         };
         let rows = if direct { 8.0 * d * (steps + 1.0) } else { 0.0 };
-        let copies = if scene.checkpoint { 2.0 } else { 1.0 };
+        let copies = if scene.checkpoint.enabled { 2.0 } else { 1.0 };
         let memory =
             copies * rows + if direct { 8.0 * (steps + 1.0) } else { 0.0 } + fit + 8.0 * steps;
-        let remaining = (scene.steps.saturating_sub(from) + 1) as f64;
-        let frames = (remaining / scene.output_every as f64).ceil() + 1.0;
+        let remaining = (scene.time.steps.saturating_sub(from) + 1) as f64;
+        let frames = (remaining / scene.output.every as f64).ceil() + 1.0;
         let frame = 320.0 * disc.nodes.len() as f64 + 24.0 * disc.cells.len() as f64;
-        let history = if scene.checkpoint { rows } else { 0.0 };
+        let history = if scene.checkpoint.enabled { rows } else { 0.0 };
         Estimate {
             memory,
             disk: frames * frame + history,

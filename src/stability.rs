@@ -187,7 +187,7 @@ pub enum Verdict {
 
 impl Verdict {
     pub fn new(scene: &Scene, disc: &Discretization, plan: &Plan) -> Verdict {
-        if scene.history == scene::History::Implicit {
+        if scene.solver.history == scene::History::Implicit {
             return Verdict::Implicit;
         }
         let limit = step_limit(disc, plan);
@@ -199,10 +199,10 @@ impl Verdict {
 
     /// Refuses a step the scheme cannot take (exit 2), unless `[scheme] allow_unstable`.
     pub fn check(&self, scene: &Scene) -> Result<()> {
-        if scene.allow_unstable {
+        if scene.solver.allow_unstable {
             return Ok(());
         }
-        let k = scene.k();
+        let k = scene.time.k();
         let advice = "set [scheme] history = \"implicit\" (unconditionally stable, first \
                       order); [scheme] allow_unstable = true runs it anyway";
         match *self {
@@ -224,7 +224,7 @@ impl Verdict {
                 } else {
                     ""
                 },
-                (scene.end / k_max).ceil() as u64
+                (scene.time.end / k_max).ceil() as u64
             ))),
             Verdict::Amplification(a, _) if a.is_nan() || a > MAX_AMPLIFICATION => {
                 Err(Error::input(format!(
@@ -233,7 +233,7 @@ impl Verdict {
                      response to a unit state grows to {a:.1e} within the run's {} steps \
                      (stable: ≤ {MAX_AMPLIFICATION}). Use more time steps, or {advice}",
                     scene.path.display(),
-                    scene.steps
+                    scene.time.steps
                 )))
             }
             _ => Ok(()),

@@ -52,19 +52,25 @@
 //! directly (O(n) per step); the table and plot show how the time grows with N for each.
 
 pub mod memory_cost;
+mod meshes;
+mod report;
 pub mod transfer;
 
 use crate::fem::Discretization;
-use crate::run::setup;
-use crate::scene::{read_scene_file, Kernel};
+use crate::kernel::Kernel;
+use crate::run::{discretize, load_scene};
+use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use serde::Serialize;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Instant;
 use transfer::{max_edge, nodal_vectors, p1_norms, Transfer};
+
+use meshes::Meshes;
+pub use meshes::{derive_pattern, expand_pattern};
+pub use report::{csv, default_out, fraction, markdown, write_report};
 
 /// Which parameter a family of runs varies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -308,18 +314,38 @@ pub fn solve_once(
     overrides: &[String],
     form: KernelForm,
 ) -> Result<(Solved, &'static str)> {
+    solve_case(scene_path, overrides, Ok, form)
+}
+
+/// A study's case of a scene: on `mesh` (written as `mesh.file` is, relative to the scene
+/// file) in `steps` steps to the scene's end time.
+fn case(mesh: &str, steps: usize) -> impl Fn(Scene) -> Result<Scene> + '_ {
+    move |scene| {
+        let end = scene.time.end;
+        scene.with_mesh(Path::new(mesh))?.with_time(end, steps)
+    }
+}
+
+/// [`solve_once`] for the scene as `case` changes it; the wall time runs from reading the
+/// scene file.
+fn solve_case(
+    scene_path: &Path,
+    overrides: &[String],
+    case: impl FnOnce(Scene) -> Result<Scene>,
+    form: KernelForm,
+) -> Result<(Solved, &'static str)> {
     let start = Instant::now();
-    let (mut scene, mesh, disc) = setup(scene_path, overrides)?;
-    let given = kernel_name(scene.relaxation.as_ref());
+    let (mut scene, mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
+    let given = kernel_name(scene.physics.relaxation.as_ref());
     if form == KernelForm::Expression {
-        scene.relaxation = Some(prony_as_expression(scene.relaxation.as_ref())?);
+        scene.physics.relaxation = Some(prony_as_expression(scene.physics.relaxation.as_ref())?);
         // The reference form is the direct sum, not a fit of it.
-        scene.compression = None;
+        scene.physics.compression = None;
     }
     let steps_start = Instant::now();
     let u = {
         let mut tl = TimeLoop::new(&scene, &disc)?;
-        solve_to_end(&mut tl, scene.steps)?;
+        solve_to_end(&mut tl, scene.time.steps)?;
         tl.u().to_vec()
     };
     let steps_s = steps_start.elapsed().as_secs_f64();
@@ -329,9 +355,9 @@ pub fn solve_once(
         Solved {
             disc,
             u,
-            steps: scene.steps,
-            k: scene.k(),
-            end: scene.end,
+            steps: scene.time.steps,
+            k: scene.time.k(),
+            end: scene.time.end,
             mesh: mesh.path.display().to_string(),
             wall_s,
             steps_s,
@@ -350,19 +376,20 @@ pub fn solve_to_end(tl: &mut TimeLoop, steps: usize) -> Result<()> {
 
 /// Runs a case `repeat` times (None: 3 when the first run takes under a second) and keeps
 /// the median times.
-pub fn solve_timed(
+fn solve_timed(
     scene_path: &Path,
     overrides: &[String],
+    case: impl Fn(Scene) -> Result<Scene>,
     form: KernelForm,
     repeat: Option<usize>,
 ) -> Result<(Solved, &'static str)> {
-    let (mut first, given) = solve_once(scene_path, overrides, form)?;
+    let (mut first, given) = solve_case(scene_path, overrides, &case, form)?;
     let runs = repeat
         .unwrap_or(if first.wall_s < 1.0 { 3 } else { 1 })
         .max(1);
     let (mut walls, mut steps) = (vec![first.wall_s], vec![first.steps_s]);
     for _ in 1..runs {
-        let (again, _) = solve_once(scene_path, overrides, form)?;
+        let (again, _) = solve_case(scene_path, overrides, &case, form)?;
         walls.push(again.wall_s);
         steps.push(again.steps_s);
     }
@@ -429,159 +456,6 @@ pub fn observed_order(e0: f64, e1: f64, p0: f64, p1: f64) -> Option<f64> {
 // The study
 // ---------------------------------------------------------------------------------------
 
-/// Expands `{n}` and `{n:0W}` in a mesh pattern.
-pub fn expand_pattern(pattern: &str, n: usize) -> std::result::Result<String, String> {
-    let mut out = String::new();
-    let mut rest = pattern;
-    let mut found = false;
-    while let Some(i) = rest.find('{') {
-        out.push_str(&rest[..i]);
-        let j = rest[i..]
-            .find('}')
-            .ok_or_else(|| format!("mesh pattern '{pattern}': unclosed '{{'"))?;
-        let spec = &rest[i + 1..i + j];
-        match spec {
-            "n" => write!(out, "{n}").expect("string"),
-            _ => {
-                let width = spec
-                    .strip_prefix("n:0")
-                    .and_then(|w| w.parse::<usize>().ok())
-                    .ok_or_else(|| {
-                        format!(
-                            "mesh pattern '{pattern}': '{{{spec}}}' is not {{n}} or {{n:0W}} \
-                             (e.g. {{n:03}})"
-                        )
-                    })?;
-                write!(out, "{n:0width$}").expect("string");
-            }
-        }
-        found = true;
-        rest = &rest[i + j + 1..];
-    }
-    out.push_str(rest);
-    if !found {
-        return Err(format!(
-            "mesh pattern '{pattern}' has no {{n}} or {{n:03}} for the level"
-        ));
-    }
-    Ok(out)
-}
-
-/// `dir/name_032.msh` → `dir/name_{n:03}.msh`.
-pub fn derive_pattern(mesh_file: &str) -> Option<String> {
-    let stem = mesh_file.strip_suffix(".msh")?;
-    let digits = stem.len() - stem.trim_end_matches(|c: char| c.is_ascii_digit()).len();
-    let head = &stem[..stem.len() - digits];
-    (digits > 0 && head.ends_with('_')).then(|| format!("{head}{{n:0{digits}}}.msh"))
-}
-
-/// A TOML string value for a `--set` override.
-fn toml_string(s: &str) -> String {
-    toml::Value::String(s.to_string()).to_string()
-}
-
-/// The mesh of each level.
-struct Meshes {
-    family: MeshFamily,
-    /// The scene file's directory (a pattern is relative to it).
-    dir: PathBuf,
-    /// The scene's spatial dimension.
-    dim: usize,
-}
-
-impl Meshes {
-    /// The mesh file of level `n` (a pattern) or of entry `index` of a list (None: the
-    /// reference mesh, the last of the list); an input error when it does not exist.
-    fn file(&self, n: usize, index: Option<usize>) -> Result<String> {
-        let file = match &self.family {
-            MeshFamily::Pattern(p) => expand_pattern(p, n).map_err(Error::input)?,
-            MeshFamily::List(list) => {
-                let p = match index {
-                    Some(i) => &list[i],
-                    None => list.last().expect("checked non-empty"),
-                };
-                let abs = std::path::absolute(p).map_err(|e| Error::io(p, e))?;
-                abs.display().to_string()
-            }
-        };
-        let path = self.dir.join(&file);
-        if !path.exists() {
-            let (what, make) = match self.family {
-                MeshFamily::Pattern(_) => (
-                    format!("the mesh of level {n}"),
-                    how_to_make(&path, n, self.dim)
-                        .map_or(String::new(), |m| format!("; make it with `{m}`")),
-                ),
-                MeshFamily::List(_) => ("a mesh of --meshes".into(), String::new()),
-            };
-            return Err(Error::input(format!(
-                "study: {what}, {}, does not exist{make}",
-                path.display()
-            )));
-        }
-        Ok(file)
-    }
-
-    /// The mesh file, number of steps and mesh level of a run of family `vary` at level n
-    /// (`index` in a list; None: the reference run at n = the reference level): the level
-    /// sets what varies, `fixed` the other.
-    fn case(
-        &self,
-        vary: Vary,
-        n: usize,
-        index: Option<usize>,
-        fixed: usize,
-    ) -> Result<(String, usize, usize)> {
-        Ok(match vary {
-            Vary::Both => (self.file(n, index)?, n, n),
-            Vary::H => (self.file(n, index)?, fixed, n),
-            Vary::K => (self.file(fixed, None)?, n, fixed),
-        })
-    }
-
-    fn nominal_h(&self, n: usize, h_max: f64) -> f64 {
-        match self.family {
-            MeshFamily::Pattern(_) => 1.0 / n as f64,
-            MeshFamily::List(_) => h_max,
-        }
-    }
-}
-
-/// How to make the missing mesh `dir/NAME_NNN.msh` of level n: with the generator script
-/// in `dir` or up to two directories above it when its text offers `generate.sh NAME N`
-/// (meshes too big to commit, e.g. `meshes/generate.sh block 16`), else with gmsh from
-/// `dir/NAME.geo` when there is one.
-fn how_to_make(path: &Path, n: usize, dim: usize) -> Option<String> {
-    let name = path.file_name()?.to_str()?.strip_suffix(".msh")?;
-    let stem = name
-        .trim_end_matches(|c: char| c.is_ascii_digit())
-        .strip_suffix('_')?;
-    let dir = path.parent()?.canonicalize().ok()?;
-    let shown = |p: &Path| {
-        let cwd = std::env::current_dir().and_then(|d| d.canonicalize());
-        cwd.ok()
-            .and_then(|cwd| p.strip_prefix(cwd).ok().map(Path::to_path_buf))
-            .unwrap_or_else(|| p.to_path_buf())
-            .display()
-            .to_string()
-    };
-    let offer = format!("generate.sh {stem} N");
-    for d in dir.ancestors().take(3) {
-        let script = d.join("generate.sh");
-        if std::fs::read_to_string(&script).is_ok_and(|text| text.contains(&offer)) {
-            return Some(format!("{} {stem} {n}", shown(&script)));
-        }
-    }
-    let geo = dir.join(format!("{stem}.geo"));
-    geo.exists().then(|| {
-        format!(
-            "gmsh -{dim} {} -setnumber n {n} -format msh41 -o {}",
-            shown(&geo),
-            shown(&dir.join(format!("{name}.msh")))
-        )
-    })
-}
-
 fn say(progress: bool, msg: &str) {
     use std::io::IsTerminal;
     if progress && std::io::stderr().is_terminal() {
@@ -591,6 +465,46 @@ fn say(progress: bool, msg: &str) {
 
 /// Runs a study (no files written; see [`write_report`]).
 pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> {
+    check_levels(opts)?;
+    let meshes = Meshes::for_study(scene_path, opts)?;
+    let forms: &[KernelForm] = if opts.kernel_compare {
+        &[KernelForm::AsGiven, KernelForm::Expression]
+    } else {
+        &[KernelForm::AsGiven]
+    };
+    let mut refs: Vec<((String, usize), Solved)> = Vec::new();
+    let mut families = Vec::new();
+    let mut kernel_cost = Vec::new();
+    let mut end_time = 0.0;
+    for &vary in &opts.vary {
+        let (r, reference) = solve_reference(scene_path, opts, &meshes, vary, &mut refs)?;
+        end_time = r.end;
+        let mut solved_by_form: Vec<Vec<Solved>> = Vec::new();
+        for &form in forms {
+            let family = FamilyCase {
+                vary,
+                form,
+                reference: &reference,
+                ref_run: r,
+            };
+            let (family, solved) = solve_family(scene_path, opts, &meshes, family)?;
+            families.push(family);
+            solved_by_form.push(solved);
+        }
+        if let [prony, expr] = &solved_by_form[..] {
+            kernel_cost.extend(cost_rows(vary, &opts.levels, prony, expr));
+        }
+    }
+    Ok(StudyReport {
+        scene: scene_path.display().to_string(),
+        end_time,
+        families,
+        kernel_cost,
+    })
+}
+
+/// The levels and families a study asks for are there, and levels are ≥ 1.
+fn check_levels(opts: &StudyOptions) -> Result<()> {
     if opts.levels.is_empty() {
         return Err(Error::input(
             "study: --levels is empty; give e.g. --levels 8,16,32,64",
@@ -602,531 +516,186 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
     if opts.vary.is_empty() {
         return Err(Error::input("study: --vary is empty; give both, h or k"));
     }
-    let (_, file) = read_scene_file(scene_path, &opts.overrides)?;
-    let family = match &opts.meshes {
-        Some(MeshFamily::List(list)) => {
-            let needs_levels = opts.vary.iter().any(|v| *v != Vary::K);
-            if list.is_empty() || (needs_levels && list.len() != opts.levels.len() + 1) {
-                return Err(Error::input(format!(
-                    "study: --meshes has {} files; give one mesh per level ({}) and then the \
-                     reference mesh",
-                    list.len(),
-                    opts.levels.len()
-                )));
-            }
-            if opts.fixed.is_some() && opts.vary.contains(&Vary::K) {
-                return Err(Error::input(
-                    "study: with --meshes, --vary k runs on the last (reference) mesh; \
-                     --fixed picks a mesh level only with a pattern",
-                ));
-            }
-            MeshFamily::List(list.clone())
-        }
-        Some(MeshFamily::Pattern(p)) => {
-            expand_pattern(p, 1).map_err(Error::input)?;
-            MeshFamily::Pattern(p.clone())
-        }
-        None => MeshFamily::Pattern(derive_pattern(&file.mesh.file).ok_or_else(|| {
-            Error::input(format!(
-                "{}: key 'mesh.file' = '{}' has no level number (name_NNN.msh); give \
-                 --mesh-pattern 'name_{{n:03}}.msh' or --meshes a.msh,b.msh,…,reference.msh",
-                scene_path.display(),
-                file.mesh.file
-            ))
-        })?),
-    };
-    let meshes = Meshes {
-        family,
-        dir: scene_path.parent().unwrap_or(Path::new("")).to_path_buf(),
-        dim: file.mesh.model.dim(),
-    };
+    Ok(())
+}
+
+/// The reference run of family `vary` (computed once for the families that share it, kept
+/// in `refs`) and what the report says of it.
+fn solve_reference<'r>(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    meshes: &Meshes,
+    vary: Vary,
+    refs: &'r mut Vec<((String, usize), Solved)>,
+) -> Result<(&'r Solved, ReferenceInfo)> {
+    // The reference keeps the fixed parameter (module docs).
     let reference = opts.reference;
     let fixed = opts.fixed.unwrap_or(reference);
-    // Every mesh is there before anything runs: a missing mesh fails at once.
-    for &vary in &opts.vary {
-        meshes.case(vary, reference, None, fixed)?;
-        for (i, &n) in opts.levels.iter().enumerate() {
-            meshes.case(vary, n, Some(i), fixed)?;
-        }
-    }
-    let forms: &[KernelForm] = if opts.kernel_compare {
-        &[KernelForm::AsGiven, KernelForm::Expression]
-    } else {
-        &[KernelForm::AsGiven]
-    };
-    let overrides_for = |mesh: &str, steps: usize| {
-        let mut o = opts.overrides.clone();
-        o.push(format!("mesh.file={}", toml_string(mesh)));
-        o.push(format!("time.steps={steps}"));
-        o
-    };
-
-    let mut refs: Vec<((String, usize), Solved)> = Vec::new();
-    let mut families = Vec::new();
-    let mut kernel_cost = Vec::new();
-    let mut end_time = 0.0;
-    for &vary in &opts.vary {
-        // The reference keeps the fixed parameter (module docs).
-        let (ref_mesh, ref_steps, ref_n) = meshes.case(vary, reference, None, fixed)?;
-        let key = (ref_mesh.clone(), ref_steps);
-        if !refs.iter().any(|(k, _)| *k == key) {
-            say(
-                opts.progress,
-                &format!("study: reference {ref_mesh}, N = {ref_steps} …"),
-            );
-            let (s, _) = solve_timed(
-                scene_path,
-                &overrides_for(&ref_mesh, ref_steps),
-                KernelForm::AsGiven,
-                Some(1),
-            )?;
-            refs.push((key.clone(), s));
-        }
-        let r = &refs.iter().find(|(k, _)| *k == key).expect("just added").1;
-        end_time = r.end;
-        let (ref_l2, ref_semi) = p1_norms(&r.disc.cells, &r.u);
-        let ref_h1 = (ref_l2 * ref_l2 + ref_semi * ref_semi).sqrt();
-        let ref_hmax = max_edge(&r.disc.nodes, &r.disc.cells);
-        let reference_info = ReferenceInfo {
-            mesh: r.mesh.clone(),
-            h: meshes.nominal_h(ref_n, ref_hmax),
-            h_max: ref_hmax,
-            k: r.k,
-            steps: r.steps,
-            dofs: r.disc.n_free,
-            u_l2: ref_l2,
-            u_h1: ref_h1,
-            wall_s: r.wall_s,
-        };
-        let mut solved_by_form: Vec<Vec<Solved>> = Vec::new();
-        for &form in forms {
-            let mut rows: Vec<Row> = Vec::new();
-            let mut solved = Vec::new();
-            let mut kernel = String::new();
-            for (i, &n) in opts.levels.iter().enumerate() {
-                let (mesh, steps, mesh_n) = meshes.case(vary, n, Some(i), fixed)?;
-                say(
-                    opts.progress,
-                    &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
-                );
-                let (s, given) =
-                    solve_timed(scene_path, &overrides_for(&mesh, steps), form, opts.repeat)?;
-                kernel = form.label(given);
-                let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
-                let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
-                let h = meshes.nominal_h(mesh_n, h_max);
-                let (order_h1, order_l2) = match rows.last() {
-                    Some(prev) => {
-                        let (p0, p1) = match vary {
-                            Vary::H => (prev.h, h),
-                            Vary::K | Vary::Both => (prev.k, s.k),
-                        };
-                        (
-                            observed_order(prev.err_h1, e.h1, p0, p1),
-                            observed_order(prev.err_l2, e.l2, p0, p1),
-                        )
-                    }
-                    None => (None, None),
-                };
-                rows.push(Row {
-                    family: vary,
-                    kernel: kernel.clone(),
-                    level: n,
-                    h,
-                    h_max,
-                    k: s.k,
-                    steps: s.steps,
-                    nodes: s.disc.nodes.len(),
-                    dofs: s.disc.n_free,
-                    err_h1: e.h1,
-                    err_h1_semi: e.h1_semi,
-                    err_l2: e.l2,
-                    rel_h1: e.h1 / ref_h1,
-                    rel_l2: e.l2 / ref_l2,
-                    order_h1,
-                    order_l2,
-                    wall_s: s.wall_s,
-                    steps_s: s.steps_s,
-                    per_step_s: s.steps_s / (s.steps + 1) as f64,
-                    runs: s.runs,
-                    nested: e.nested,
-                    mesh: s.mesh.clone(),
-                });
-                solved.push(s);
-            }
-            families.push(Family {
-                vary,
-                kernel,
-                form,
-                reference: reference_info.clone(),
-                rows,
-            });
-            solved_by_form.push(solved);
-        }
-        if let [prony, expr] = &solved_by_form[..] {
-            for (i, (p, x)) in prony.iter().zip(expr).enumerate() {
-                let scale =
-                    p.u.iter()
-                        .flatten()
-                        .fold(0.0f64, |a, v| a.max(v.abs()))
-                        .max(f64::MIN_POSITIVE);
-                let diff =
-                    p.u.iter()
-                        .flatten()
-                        .zip(x.u.iter().flatten())
-                        .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
-                kernel_cost.push(CostRow {
-                    family: vary,
-                    level: opts.levels[i],
-                    steps: p.steps,
-                    dofs: p.disc.n_free,
-                    prony_steps_s: p.steps_s,
-                    expression_steps_s: x.steps_s,
-                    prony_wall_s: p.wall_s,
-                    expression_wall_s: x.wall_s,
-                    max_rel_diff: diff / scale,
-                });
-            }
-        }
-    }
-    Ok(StudyReport {
-        scene: scene_path.display().to_string(),
-        end_time,
-        families,
-        kernel_cost,
-    })
-}
-
-// ---------------------------------------------------------------------------------------
-// Tables and plots
-// ---------------------------------------------------------------------------------------
-
-/// `1/n` when x is the reciprocal of an integer (up to rounding), else x in short form.
-pub fn fraction(x: f64) -> String {
-    let n = (1.0 / x).round();
-    if n >= 1.0 && ((1.0 / n) - x).abs() <= 1e-12 * x {
-        format!("1/{n}")
-    } else {
-        format!("{x:.4}")
-    }
-}
-
-fn opt(v: Option<f64>) -> String {
-    v.map_or("–".into(), |x| format!("{x:.4}"))
-}
-
-/// The study as Markdown: one table per family, then the cost of memory.
-pub fn markdown(report: &StudyReport) -> String {
-    let mut s = String::new();
-    let _ = writeln!(s, "# Study of {} (T = {})\n", report.scene, report.end_time);
-    let _ = writeln!(
-        s,
-        "Error e = u_N − u_ref(T) on the reference mesh; ‖·‖_1 is the full H¹ norm \
-         (‖e‖²_L² + |e|²_H¹)^½. Wall time: median over runs of the whole run (setup + all \
-         steps, no output).\n"
-    );
-    for f in &report.families {
-        let r = &f.reference;
-        let _ = writeln!(
-            s,
-            "## {} — kernel: {}\n\nReference: h = {}, k = {} (N = {}, {} dofs, ‖u_ref‖_1 = {:.4e}, {:.2} s), {}\n",
-            f.vary.title(),
-            f.kernel,
-            fraction(r.h),
-            fraction(r.k),
-            r.steps,
-            r.dofs,
-            r.u_h1,
-            r.wall_s,
-            r.mesh
+    let (ref_mesh, ref_steps, ref_n) = meshes.case(vary, reference, None, fixed)?;
+    let key = (ref_mesh.clone(), ref_steps);
+    if !refs.iter().any(|(k, _)| *k == key) {
+        say(
+            opts.progress,
+            &format!("study: reference {ref_mesh}, N = {ref_steps} …"),
         );
-        let _ = writeln!(
-            s,
-            "| h | k | dofs | steps | ‖e‖_1 | ‖e‖_1/‖u‖_1 | ‖e‖_L² | order ‖·‖_1 | order L² | wall [s] | per step [ms] | nested |"
-        );
-        let _ = writeln!(
-            s,
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|"
-        );
-        for row in &f.rows {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {} | {:.4e} | {:.3e} | {:.4e} | {} | {} | {:.3} | {:.3} | {} |",
-                fraction(row.h),
-                fraction(row.k),
-                row.dofs,
-                row.steps,
-                row.err_h1,
-                row.rel_h1,
-                row.err_l2,
-                opt(row.order_h1),
-                opt(row.order_l2),
-                row.wall_s,
-                row.per_step_s * 1e3,
-                if row.nested { "yes" } else { "no" }
-            );
-        }
-        s.push('\n');
-    }
-    if !report.kernel_cost.is_empty() {
-        let _ = writeln!(
-            s,
-            "## The cost of memory: Prony recursion (O(1) per step) against the direct sum \
-             (O(n) per step)\n"
-        );
-        let _ = writeln!(
-            s,
-            "| vary | N | dofs | Prony steps [s] | expression steps [s] | ratio | Prony per step [ms] | expression per step [ms] | rel. max difference of u_N |"
-        );
-        let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
-        for c in &report.kernel_cost {
-            let n1 = (c.steps + 1) as f64;
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.3} | {:.3} | {:.1e} |",
-                c.family,
-                c.steps,
-                c.dofs,
-                c.prony_steps_s,
-                c.expression_steps_s,
-                c.expression_steps_s / c.prony_steps_s,
-                c.prony_steps_s / n1 * 1e3,
-                c.expression_steps_s / n1 * 1e3,
-                c.max_rel_diff
-            );
-        }
-        s.push('\n');
-    }
-    s
-}
-
-/// The rows of every family as CSV.
-pub fn csv(report: &StudyReport) -> String {
-    let mut s = String::from(
-        "family,kernel,level,h,h_max,k,steps,nodes,dofs,err_h1,err_h1_semi,err_l2,rel_h1,rel_l2,\
-         order_h1,order_l2,wall_s,steps_s,per_step_s,runs,nested,mesh\n",
-    );
-    let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x}"));
-    for f in &report.families {
-        for r in &f.rows {
-            let _ = writeln!(
-                s,
-                "{},{},{},{},{},{},{},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{},{},{},{},{},\"{}\"",
-                r.family,
-                r.kernel,
-                r.level,
-                r.h,
-                r.h_max,
-                r.k,
-                r.steps,
-                r.nodes,
-                r.dofs,
-                r.err_h1,
-                r.err_h1_semi,
-                r.err_l2,
-                r.rel_h1,
-                r.rel_l2,
-                o(r.order_h1),
-                o(r.order_l2),
-                r.wall_s,
-                r.steps_s,
-                r.per_step_s,
-                r.runs,
-                r.nested,
-                r.mesh.replace('"', "\"\"")
-            );
-        }
-    }
-    s
-}
-
-fn kernel_cost_csv(report: &StudyReport) -> String {
-    let mut s = String::from(
-        "family,level,steps,dofs,prony_steps_s,expression_steps_s,prony_wall_s,expression_wall_s,max_rel_diff\n",
-    );
-    for c in &report.kernel_cost {
-        let _ = writeln!(
-            s,
-            "{},{},{},{},{},{},{},{},{:e}",
-            c.family,
-            c.level,
-            c.steps,
-            c.dofs,
-            c.prony_steps_s,
-            c.expression_steps_s,
-            c.prony_wall_s,
-            c.expression_wall_s,
-            c.max_rel_diff
-        );
-    }
-    s
-}
-
-/// The default output directory: `out/<scene name>-study-<vary>/`.
-pub fn default_out(scene_path: &Path, opts: &StudyOptions) -> Result<PathBuf> {
-    let scene = crate::scene::Scene::load(scene_path, &opts.overrides)?;
-    let vary: Vec<String> = opts.vary.iter().map(|v| v.to_string()).collect();
-    Ok(Path::new("out").join(format!("{}-study-{}", scene.name, vary.join("-"))))
-}
-
-/// Writes study.md, study.csv, study.json, the PNG plots (and kernel_cost.csv) into `dir`;
-/// returns the paths written.
-pub fn write_report(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>> {
-    use crate::output::write_atomic;
-    use crate::plot::{log_log_chart, Curve};
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let mut written = Vec::new();
-    let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
-        let p = dir.join(name);
-        write_atomic(&p, bytes)?;
-        written.push(p);
-        Ok(())
-    };
-    put("study.md", markdown(report).as_bytes())?;
-    put("study.csv", csv(report).as_bytes())?;
-    let json = serde_json::to_string_pretty(report).expect("report serializes") + "\n";
-    put("study.json", json.as_bytes())?;
-    if !report.kernel_cost.is_empty() {
-        put("kernel_cost.csv", kernel_cost_csv(report).as_bytes())?;
-    }
-
-    let label = |f: &Family| {
-        if report.kernel_cost.is_empty() {
-            f.vary.title().to_string()
-        } else {
-            format!("{} [{}]", f.vary.title(), f.kernel)
-        }
-    };
-    // Error against wall time: which refinement buys accuracy most cheaply.
-    let curves: Vec<Curve> = report
-        .families
-        .iter()
-        .enumerate()
-        .map(|(i, f)| {
-            Curve::data(
-                i,
-                label(f),
-                f.rows.iter().map(|r| (r.wall_s, r.err_h1)).collect(),
-            )
-            .with_point_labels(
-                f.rows
-                    .iter()
-                    .map(|r| match f.vary {
-                        Vary::Both => format!("h=k={}", fraction(r.k)),
-                        Vary::H => format!("h={}", fraction(r.h)),
-                        Vary::K => format!("k={}", fraction(r.k)),
-                    })
-                    .collect(),
-            )
-        })
-        .collect();
-    let p = dir.join("error_vs_time.png");
-    log_log_chart(
-        &p,
-        "Error at T against wall time",
-        "wall time of a run [s]",
-        "‖u_N − u_ref(T)‖₁",
-        &curves,
-    )?;
-    written.push(p);
-    // Error against h and against k, with slope-1 reference lines.
-    for (name, axis, x_of, varies) in [
-        (
-            "error_vs_h.png",
-            "h",
-            (|r: &Row| r.h) as fn(&Row) -> f64,
-            [Vary::Both, Vary::H],
-        ),
-        (
-            "error_vs_k.png",
-            "k",
-            (|r: &Row| r.k) as fn(&Row) -> f64,
-            [Vary::Both, Vary::K],
-        ),
-    ] {
-        let mut curves = Vec::new();
-        for (i, f) in report.families.iter().enumerate() {
-            if !varies.contains(&f.vary) || f.rows.is_empty() {
-                continue;
-            }
-            let pts: Vec<(f64, f64)> = f.rows.iter().map(|r| (x_of(r), r.err_h1)).collect();
-            let (x0, e0) = pts[0];
-            let x1 = pts[pts.len() - 1].0;
-            if curves.is_empty() {
-                // One slope-1 line, through the first point of the first family.
-                curves.push(Curve::reference(
-                    "slope 1".into(),
-                    vec![(x0, e0), (x1, e0 * x1 / x0)],
-                ));
-            }
-            let labels = pts.iter().map(|p| fraction(p.0)).collect();
-            curves.push(Curve::data(i, label(f), pts).with_point_labels(labels));
-        }
-        if curves.is_empty() {
-            continue;
-        }
-        let p = dir.join(name);
-        log_log_chart(
-            &p,
-            &format!("Error at T against {axis}"),
-            axis,
-            "‖u_N − u_ref(T)‖₁",
-            &curves,
+        let (s, _) = solve_timed(
+            scene_path,
+            &opts.overrides,
+            case(&ref_mesh, ref_steps),
+            KernelForm::AsGiven,
+            Some(1),
         )?;
-        written.push(p);
+        refs.push((key.clone(), s));
     }
-    // The cost of memory: time of the steps against N.
-    if !report.kernel_cost.is_empty() {
-        let mut curves = Vec::new();
-        let mut varies: Vec<Vary> = report.kernel_cost.iter().map(|c| c.family).collect();
-        varies.dedup();
-        for (i, v) in varies.iter().enumerate() {
-            let rows: Vec<&CostRow> = report
-                .kernel_cost
-                .iter()
-                .filter(|c| c.family == *v)
-                .collect();
-            let pts = |f: fn(&CostRow) -> f64| -> Vec<(f64, f64)> {
-                rows.iter().map(|c| (c.steps as f64, f(c))).collect()
+    let r = &refs.iter().find(|(k, _)| *k == key).expect("just added").1;
+    let (ref_l2, ref_semi) = p1_norms(&r.disc.cells, &r.u);
+    let ref_hmax = max_edge(&r.disc.nodes, &r.disc.cells);
+    let info = ReferenceInfo {
+        mesh: r.mesh.clone(),
+        h: meshes.nominal_h(ref_n, ref_hmax),
+        h_max: ref_hmax,
+        k: r.k,
+        steps: r.steps,
+        dofs: r.disc.n_free,
+        u_l2: ref_l2,
+        u_h1: (ref_l2 * ref_l2 + ref_semi * ref_semi).sqrt(),
+        wall_s: r.wall_s,
+    };
+    Ok((r, info))
+}
+
+/// One family of a study: what it varies, the kernel's form and its reference.
+#[derive(Clone, Copy)]
+struct FamilyCase<'a> {
+    vary: Vary,
+    form: KernelForm,
+    reference: &'a ReferenceInfo,
+    /// The reference run's solution.
+    ref_run: &'a Solved,
+}
+
+/// Runs the levels of one family: its table, and the solutions (for the cost of memory).
+fn solve_family(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    meshes: &Meshes,
+    family: FamilyCase,
+) -> Result<(Family, Vec<Solved>)> {
+    let FamilyCase { vary, form, .. } = family;
+    let fixed = opts.fixed.unwrap_or(opts.reference);
+    let mut rows: Vec<Row> = Vec::new();
+    let mut solved = Vec::new();
+    let mut kernel = String::new();
+    for (i, &n) in opts.levels.iter().enumerate() {
+        let (mesh, steps, mesh_n) = meshes.case(vary, n, Some(i), fixed)?;
+        say(
+            opts.progress,
+            &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
+        );
+        let (s, given) = solve_timed(
+            scene_path,
+            &opts.overrides,
+            case(&mesh, steps),
+            form,
+            opts.repeat,
+        )?;
+        kernel = form.label(given);
+        let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
+        let h = [meshes.nominal_h(mesh_n, h_max), h_max];
+        rows.push(row(family, n, h, &kernel, &s, rows.last()));
+        solved.push(s);
+    }
+    let family = Family {
+        vary,
+        kernel,
+        form,
+        reference: family.reference.clone(),
+        rows,
+    };
+    Ok((family, solved))
+}
+
+/// The row of level n of a family, solved as `s` on a mesh of nominal size h and longest
+/// edge h_max; `prev` is the row before it (for the observed orders).
+fn row(
+    family: FamilyCase,
+    n: usize,
+    [h, h_max]: [f64; 2],
+    kernel: &str,
+    s: &Solved,
+    prev: Option<&Row>,
+) -> Row {
+    let (vary, r, reference) = (family.vary, family.ref_run, family.reference);
+    let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
+    let (order_h1, order_l2) = match prev {
+        Some(prev) => {
+            let (p0, p1) = match vary {
+                Vary::H => (prev.h, h),
+                Vary::K | Vary::Both => (prev.k, s.k),
             };
-            curves.push(Curve::data(
-                2 * i,
-                format!("Prony, O(1) per step (vary {v})"),
-                pts(|c| c.prony_steps_s),
-            ));
-            curves.push(Curve::data(
-                2 * i + 1,
-                format!("expression, O(n) per step (vary {v})"),
-                pts(|c| c.expression_steps_s),
-            ));
+            (
+                observed_order(prev.err_h1, e.h1, p0, p1),
+                observed_order(prev.err_l2, e.l2, p0, p1),
+            )
         }
-        if let (Some(first), Some(last)) = (report.kernel_cost.first(), report.kernel_cost.last()) {
-            let (n0, n1) = (first.steps as f64, last.steps as f64);
-            let t0 = first.prony_steps_s.min(first.expression_steps_s);
-            if n1 > n0 {
-                curves.push(Curve::reference(
-                    "slope 1".into(),
-                    vec![(n0, t0), (n1, t0 * n1 / n0)],
-                ));
-                let mut slope2 = Curve::reference(
-                    "slope 2".into(),
-                    vec![(n0, t0), (n1, t0 * (n1 / n0).powi(2))],
-                );
-                slope2.color = 1;
-                curves.push(slope2);
-            }
-        }
-        let p = dir.join("kernel_cost.png");
-        log_log_chart(
-            &p,
-            "The cost of memory: time of the N + 1 steps",
-            "N (number of time steps)",
-            "time of all steps [s]",
-            &curves,
-        )?;
-        written.push(p);
+        None => (None, None),
+    };
+    Row {
+        family: vary,
+        kernel: kernel.to_string(),
+        level: n,
+        h,
+        h_max,
+        k: s.k,
+        steps: s.steps,
+        nodes: s.disc.nodes.len(),
+        dofs: s.disc.n_free,
+        err_h1: e.h1,
+        err_h1_semi: e.h1_semi,
+        err_l2: e.l2,
+        rel_h1: e.h1 / reference.u_h1,
+        rel_l2: e.l2 / reference.u_l2,
+        order_h1,
+        order_l2,
+        wall_s: s.wall_s,
+        steps_s: s.steps_s,
+        per_step_s: s.steps_s / (s.steps + 1) as f64,
+        runs: s.runs,
+        nested: e.nested,
+        mesh: s.mesh.clone(),
     }
-    Ok(written)
+}
+
+/// Prony against expression at each level of a family (`--kernel-compare`).
+fn cost_rows(vary: Vary, levels: &[usize], prony: &[Solved], expr: &[Solved]) -> Vec<CostRow> {
+    prony
+        .iter()
+        .zip(expr)
+        .enumerate()
+        .map(|(i, (p, x))| {
+            let scale =
+                p.u.iter()
+                    .flatten()
+                    .fold(0.0f64, |a, v| a.max(v.abs()))
+                    .max(f64::MIN_POSITIVE);
+            let diff =
+                p.u.iter()
+                    .flatten()
+                    .zip(x.u.iter().flatten())
+                    .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
+            CostRow {
+                family: vary,
+                level: levels[i],
+                steps: p.steps,
+                dofs: p.disc.n_free,
+                prony_steps_s: p.steps_s,
+                expression_steps_s: x.steps_s,
+                prony_wall_s: p.wall_s,
+                expression_wall_s: x.wall_s,
+                max_rel_diff: diff / scale,
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -176,18 +176,18 @@ impl<'p> TimeLoop<'p> {
         refusals(scene, disc, &plan)?;
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-        let implicit = match scene.history {
+        let implicit = match scene.solver.history {
             scene::History::Left => None,
-            scene::History::Implicit => {
-                Some(disc.implicit_matrix(scene.k(), plan.r0(scene.relaxation.as_ref())))
-            }
+            scene::History::Implicit => Some(
+                disc.implicit_matrix(scene.time.k(), plan.r0(scene.physics.relaxation.as_ref())),
+            ),
         };
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
         // The step matrix is factored once, with the constrained boundary dofs ordered last.
         let factor = Factor::new(matrix, &rows.dofs())?;
         let solver = effects::step_solver(&effects, scene, matrix, &factor, &rows)?;
         let n = disc.n_free;
-        let history = History::new(n, scene.k(), &plan);
+        let history = History::new(n, scene.time.k(), &plan);
         let paired = disc
             .k_b
             .as_ref()
@@ -318,7 +318,7 @@ impl<'p> TimeLoop<'p> {
             .add(t, &self.disc.free, self.scene, &mut self.b)?;
         // max|f_n − g_F| (g_F is empty without friction).
         let load_max = max_abs_diff(&self.b, &self.disc.g_f);
-        let memory = h.memory_into(self.scene.relaxation.as_ref(), &mut self.m);
+        let memory = h.memory_into(self.scene.physics.relaxation.as_ref(), &mut self.m);
         match (&self.paired, &self.disc.k_b) {
             (Some(pair), _) if memory => pair.mul_add(&h.u, &self.m, -1.0, &mut self.b),
             (_, k_b) => {
@@ -370,7 +370,7 @@ impl<'p> TimeLoop<'p> {
                 violation.0,
                 violation.1,
                 h.n,
-                match self.scene.contact_solver {
+                match self.scene.solver.contact {
                     scene::ContactSolver::Fast => "clarabel",
                     scene::ContactSolver::Clarabel => "fast",
                 }
@@ -458,7 +458,7 @@ fn remedy(k: f64) -> String {
 /// kernel as it will run (`Verdict`), loads that are not finite at t = 0. `viscontact check`
 /// calls it with the plan it prints, so that `check` fails wherever `run` would.
 pub fn refusals(scene: &Scene, disc: &Discretization, plan: &Plan) -> Result<()> {
-    if scene.history == scene::History::Left {
+    if scene.solver.history == scene::History::Left {
         Verdict::new(scene, disc, plan).check(scene)?;
     }
     disc.loads

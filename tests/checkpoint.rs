@@ -635,7 +635,7 @@ fn displacement_sum_does_not_drift_over_1e5_steps() {
     let (scene, _mesh, disc) = common::load(&scene, &[]);
     let mut tl = viscontact::time_loop::TimeLoop::new(&scene, &disc).unwrap();
     assert_eq!(tl.effects().names(), ["viscosity", "tractions"]);
-    let k = scene.k();
+    let k = scene.time.k();
     let mut plain = vec![0.0; disc.n_free];
     let mut w0: Option<Vec<f64>> = None;
     let mut sum = |s: &viscontact::time_loop::Solved| {
@@ -651,12 +651,12 @@ fn displacement_sum_does_not_drift_over_1e5_steps() {
         }
         Ok(())
     };
-    tl.run(scene.steps, &mut sum).unwrap();
+    tl.run(scene.time.steps, &mut sum).unwrap();
     let w = w0.unwrap();
-    let scale = common::max_abs(&w) * scene.end;
+    let scale = common::max_abs(&w) * scene.time.end;
     let (mut compensated, mut naive) = (0.0f64, 0.0f64);
     for ((u, p), wi) in tl.u().iter().zip(&plain).zip(&w) {
-        let exact = scene.end * wi;
+        let exact = scene.time.end * wi;
         compensated = compensated.max((u - exact).abs() / scale);
         naive = naive.max((p - exact).abs() / scale);
     }

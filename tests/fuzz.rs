@@ -174,7 +174,7 @@ fn run_a_little(scene: &Path, overrides: &[String]) -> Result<(), String> {
         Ok(())
     };
     // Errors are fine; steps 0 and 1 at most.
-    let _ = tl.run(s.steps.min(1), &mut check);
+    let _ = tl.run(s.time.steps.min(1), &mut check);
     match non_finite {
         Some(n) => Err(format!("step {n} succeeded with a non-finite u or w")),
         None => Ok(()),

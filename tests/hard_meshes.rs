@@ -155,7 +155,7 @@ fn nodes_where_boundary_parts_meet_get_every_row_of_their_parts_and_gamma1_wins(
             "time.steps=8",
         ],
     );
-    let fr = scene.friction.as_ref().unwrap();
+    let fr = scene.physics.friction.as_ref().unwrap();
     let p = viscontact::expr::Point::default();
     let mu_f = fr.normal_stress.eval(&p) * fr.coefficient.eval(&p);
     assert_eq!(mu_f, 0.01 * 0.5);
@@ -238,8 +238,11 @@ fn plane_strain_with_poisson_ratio_0_4999_runs_and_stays_finite() {
         "time.steps=40",
     ];
     let (s, _m, d) = load(&scene, &base);
-    assert!(matches!(s.model, viscontact::scene::Model::PlaneStrain));
-    assert_eq!(s.elasticity, Some((0.2, 0.4999)));
+    assert!(matches!(
+        s.mesh.model,
+        viscontact::scene::Model::PlaneStrain
+    ));
+    assert_eq!(s.physics.elasticity, Some((0.2, 0.4999)));
     // The run warns that P1 triangles lock.
     let warnings = viscontact::effects::warnings(&s, &d);
     assert!(warnings.iter().any(|w| w.contains("lock")), "{warnings:?}");

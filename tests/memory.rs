@@ -9,9 +9,9 @@ mod common;
 use common::{finished, resume_quiet, run_options as opts, without_run_id};
 use std::path::{Path, PathBuf};
 use viscontact::expr::Expr;
+use viscontact::kernel::Kernel;
 use viscontact::kernel_fit::{fit, Lags};
 use viscontact::run::{run, Outcome};
-use viscontact::scene::Kernel;
 
 /// examples/paper.toml on `mesh` with the relaxation lines replaced by `relaxation`.
 fn paper_scene(dir: &Path, name: &str, mesh: &str, relaxation: &str) -> PathBuf {

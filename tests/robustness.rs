@@ -87,7 +87,7 @@ fn divergence_is_detected() {
     let (s, _m, d) = load(&path, &["time.end=480", "time.steps=200"]);
     let mut tl = TimeLoop::new(&s, &d).unwrap();
     let err = tl
-        .run(s.steps, &mut |_: &Solved| Ok(()))
+        .run(s.time.steps, &mut |_: &Solved| Ok(()))
         .expect_err("stopped");
     assert!(matches!(err, Error::Solve(_)), "{err}");
     assert!(err.to_string().contains("grows without bound"), "{err}");
@@ -246,7 +246,7 @@ fn load_that_becomes_infinite_during_the_run_stops_it_with_the_place() {
     let (s, _m, d) = load(&paper(), &[&rect, "time.steps=8", bad]);
     let mut tl = TimeLoop::new(&s, &d).unwrap();
     let err = tl
-        .run(s.steps, &mut |_: &Solved| Ok(()))
+        .run(s.time.steps, &mut |_: &Solved| Ok(()))
         .expect_err("stopped");
     assert!(matches!(err, Error::Solve(_)), "{err}");
     let msg = err.to_string();

@@ -30,7 +30,7 @@ impl Checkpoint {
     /// recorded fingerprints.
     pub fn scene(&self, overrides: &[String]) -> Result<Scene> {
         let shown = self.path.display();
-        let mut all = Vec::new();
+        let (mut plain, mut mesh, mut time) = (Vec::new(), None, None);
         for o in overrides {
             let (key, value) = o.split_once('=').ok_or_else(|| {
                 Error::input(format!(
@@ -45,68 +45,23 @@ impl Checkpoint {
                      checkpoint.*; to change {key}, start a new run with `viscontact run`"
                 )));
             }
-            if key == "mesh.file" {
-                // Given on the command line, so relative to the working directory (not to the
-                // stored scene's directory, which may not exist on this machine).
-                let value = value.trim();
-                let value = value
-                    .strip_prefix('"')
-                    .and_then(|v| v.strip_suffix('"'))
-                    .unwrap_or(value);
-                let new = std::path::absolute(value).map_err(|e| {
-                    Error::input(format!(
-                        "--set mesh.file={value}: {e}; give the mesh's path"
-                    ))
-                })?;
-                let new = toml::Value::String(new.display().to_string());
-                all.push(format!("mesh.file={new}"));
-                continue;
-            }
-            if key == "time.end" {
-                let end: f64 = value.trim().parse().map_err(|_| {
-                    Error::input(format!(
-                        "--set time.end={}: not a number; give the new end time T2 in seconds",
-                        value.trim()
-                    ))
-                })?;
-                let end = crate::ranges::scaled_sign(end, "time.end", &self.path, true)?;
-                let ratio = end / self.k;
-                let steps = ratio.round();
-                if steps > crate::ranges::MAX_STEPS as f64 {
-                    let detail = format!(
-                        " (--set): {ratio:e} steps of the run's k = {}, more than time.steps may \
-                         have",
-                        self.k
-                    );
-                    return Err(crate::ranges::refuse(&self.path, "time.end", end, &detail));
-                }
-                if !(ratio.is_finite() && (ratio - steps).abs() <= 1e-9 * steps.max(1.0)) {
-                    return Err(Error::input(format!(
-                        "--set time.end={end}: T2/k = {ratio} is not a whole number of steps of \
-                         the run's step size k = {} ({shown}); choose T2 = N·k, e.g. {}",
-                        self.k,
-                        (ratio.ceil().max(1.0)) * self.k
-                    )));
-                }
-                let steps = steps as usize;
-                if steps < self.n {
-                    return Err(Error::input(format!(
-                        "--set time.end={end}: ends before the checkpoint's time t = {} (step \
-                         {}) of {shown}; choose T2 ≥ {}",
-                        self.time, self.n, self.time
-                    )));
-                }
-                all.push(format!("time.end={end:?}"));
-                all.push(format!("time.steps={steps}"));
-            } else {
-                all.push(o.clone());
+            match key {
+                "mesh.file" => mesh = Some(Self::moved_mesh(value)?),
+                "time.end" => time = Some(self.new_end(value)?),
+                _ => plain.push(o.clone()),
             }
         }
+        let stored = |e: Error| Error::input(format!("{shown}: the stored scene: {e}"));
         let scene_path = self.scene_path();
-        let (text, file) = scene::parse_scene_text(&scene_path, self.id.scene_text.clone(), &all)
-            .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
-        let scene = Scene::from_file(&scene_path, text, file)
-            .map_err(|e| Error::input(format!("{shown}: the stored scene: {e}")))?;
+        let text = self.id.scene_text.clone();
+        let (text, file) = scene::parse_scene_text(&scene_path, text, &plain).map_err(stored)?;
+        let mut scene = Scene::from_file(&scene_path, text, &file).map_err(stored)?;
+        if let Some(mesh) = mesh {
+            scene = scene.with_mesh(&mesh).map_err(stored)?;
+        }
+        if let Some((end, steps)) = time {
+            scene = scene.with_time(end, steps).map_err(stored)?;
+        }
         // One run, one series: frames in two formats would split its time series.
         let stored_format = self
             .id
@@ -115,7 +70,7 @@ impl Checkpoint {
             .ok()
             .and_then(|t| t.get("output")?.get("format")?.as_str().map(str::to_string))
             .unwrap_or_else(|| "vtu".into());
-        let format = match scene.output.format {
+        let format = match scene.output.options.format {
             crate::output::Format::Vtu => "vtu",
             crate::output::Format::Vtkhdf => "vtkhdf",
         };
@@ -126,14 +81,71 @@ impl Checkpoint {
                  formats would split it): resume without changing output.format"
             )));
         }
-        if scene.steps < self.n {
+        if scene.time.steps < self.n {
             return Err(Error::input(format!(
                 "{shown}: the stored scene has {} steps but the checkpoint is at step {}: \
                  the file is inconsistent",
-                scene.steps, self.n
+                scene.time.steps, self.n
             )));
         }
         Ok(scene)
+    }
+
+    /// `--set time.end=T2`: T2 and the number of steps T2/k of the run's step size k, a whole
+    /// number not below the checkpoint's step.
+    fn new_end(&self, value: &str) -> Result<(f64, usize)> {
+        let shown = self.path.display();
+        let end: f64 = value.trim().parse().map_err(|_| {
+            Error::input(format!(
+                "--set time.end={}: not a number; give the new end time T2 in seconds",
+                value.trim()
+            ))
+        })?;
+        let end = crate::ranges::scaled_sign(end, "time.end", &self.path, true)?;
+        let ratio = end / self.k;
+        let steps = ratio.round();
+        if steps > crate::ranges::MAX_STEPS as f64 {
+            let detail = format!(
+                " (--set): {ratio:e} steps of the run's k = {}, more than time.steps may \
+                 have",
+                self.k
+            );
+            return Err(crate::ranges::refuse(&self.path, "time.end", end, &detail));
+        }
+        if !(ratio.is_finite() && (ratio - steps).abs() <= 1e-9 * steps.max(1.0)) {
+            return Err(Error::input(format!(
+                "--set time.end={end}: T2/k = {ratio} is not a whole number of steps of \
+                 the run's step size k = {} ({shown}); choose T2 = N·k, e.g. {}",
+                self.k,
+                (ratio.ceil().max(1.0)) * self.k
+            )));
+        }
+        let steps = steps as usize;
+        if steps < self.n {
+            return Err(Error::input(format!(
+                "--set time.end={end}: ends before the checkpoint's time t = {} (step \
+                 {}) of {shown}; choose T2 ≥ {}",
+                self.time, self.n, self.time
+            )));
+        }
+        Ok((end, steps))
+    }
+
+    /// `--set mesh.file=PATH`: the mesh's new place. Given on the command line, so relative to the
+    /// working directory (not to the stored scene's directory, which may not exist on this
+    /// machine).
+    fn moved_mesh(value: &str) -> Result<PathBuf> {
+        let value = value.trim();
+        let value = value
+            .strip_prefix('"')
+            .and_then(|v| v.strip_suffix('"'))
+            .unwrap_or(value);
+        let new = std::path::absolute(value).map_err(|e| {
+            Error::input(format!(
+                "--set mesh.file={value}: {e}; give the mesh's path"
+            ))
+        })?;
+        Ok(new)
     }
 
     /// The scene path to use: the path as the run was given it when that still names the
@@ -189,11 +201,11 @@ impl Checkpoint {
                 diffs.push(format!("{k}: the run had no such key, the scene says {v}"));
             }
         }
-        let k_scene = scene.k();
+        let k_scene = scene.time.k();
         if (k_scene - self.k).abs() > 1e-9 * self.k {
             diffs.push(format!(
                 "step size: the run had k = {}, the scene gives k = {} / {} = {k_scene}",
-                self.k, scene.end, scene.steps
+                self.k, scene.time.end, scene.time.steps
             ));
         }
         let dof_of: Vec<i64> = disc

@@ -43,10 +43,10 @@ impl Loads {
         let mut loads = Vec::new();
         // The traction boundary Γ2, for the check that every load group lies inside it.
         let gamma2: std::result::Result<std::collections::HashSet<Vec<usize>>, String> = mesh
-            .boundary_group(&scene.groups.traction)
+            .boundary_group(&scene.mesh.groups.traction)
             .map(|g| mesh.boundary_facets(g).iter().map(sorted).collect())
             .map_err(|e| e.to_string());
-        for (i, t) in scene.tractions.iter().enumerate() {
+        for (i, t) in scene.physics.tractions.iter().enumerate() {
             let g = mesh.boundary_group(&t.on).map_err(|e| {
                 Error::input(format!(
                     "{}: key 'load.traction[{i}].on': {e}",
@@ -73,7 +73,7 @@ impl Loads {
                             scene.path.display(),
                             t.on,
                             corners.join("–"),
-                            scene.groups.traction
+                            scene.mesh.groups.traction
                         )));
                     }
                 }
@@ -82,7 +82,7 @@ impl Loads {
                         "{}: key 'mesh.groups.traction': load.traction[{i}] needs the traction \
                          boundary '{}' (its group must lie inside it): {why}",
                         scene.path.display(),
-                        scene.groups.traction
+                        scene.mesh.groups.traction
                     )))
                 }
             }
@@ -104,7 +104,7 @@ impl Loads {
                 qps,
             });
         }
-        for i in 0..scene.body_forces.len() {
+        for i in 0..scene.physics.body_forces.len() {
             let mut qps = Vec::new();
             for t in cells {
                 for (phi, weight) in body_rule(t) {
@@ -148,8 +148,8 @@ impl Loads {
     ) -> Result<()> {
         for load in &self.loads {
             let value: &[Scalar] = match load.source {
-                Source::Traction(i) => &scene.tractions[i].value,
-                Source::Body(i) => &scene.body_forces[i],
+                Source::Traction(i) => &scene.physics.tractions[i].value,
+                Source::Body(i) => &scene.physics.body_forces[i],
             };
             for q in &load.qps {
                 let pt = Point {
@@ -169,7 +169,7 @@ impl Loads {
                         let what = format!(
                             "{}: key '{key}[{c}]' evaluates to {val} at {} at t = {t}",
                             scene.path.display(),
-                            super::fmt_at(q.p, scene.model)
+                            super::fmt_at(q.p, scene.mesh.model)
                         );
                         // At t = 0 it is known before any step (`TimeLoop::new` evaluates
                         // the loads there): bad input.

@@ -8,7 +8,7 @@ pub mod loads;
 
 use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
-use crate::scene::{Friction, Model, Scene};
+use crate::scene::{Friction, MeshChoice, Model, Scene};
 use crate::{Error, Result};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
@@ -196,8 +196,8 @@ fn group<'m>(mesh: &'m Mesh, scene: &Scene, key: &str, value: &str) -> Result<&'
 /// which clamps whole nodes) and the number of free dofs; nothing free is refused.
 fn free_dofs(mesh: &Mesh, scene: &Scene) -> Result<(Vec<Option<usize>>, usize)> {
     let (nn, d) = (mesh.nodes.len(), mesh.dim);
-    let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.groups.fixed)?;
-    mesh.check_parts(fixed, scene.separate_parts)
+    let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.mesh.groups.fixed)?;
+    mesh.check_parts(fixed, scene.mesh.separate_parts)
         .map_err(|e| Error::input(format!("{}: {e}", scene.path.display())))?;
     let mut clamped = vec![false; nn];
     for n in mesh.group_nodes(fixed) {
@@ -218,7 +218,7 @@ fn free_dofs(mesh: &Mesh, scene: &Scene) -> Result<(Vec<Option<usize>>, usize)> 
             "{}: every node of '{}' is on the clamped group '{}'; nothing can move",
             scene.path.display(),
             mesh.path.display(),
-            scene.groups.fixed
+            scene.mesh.groups.fixed
         )));
     }
     Ok((free, n_free))
@@ -275,8 +275,13 @@ impl RowMaker<'_> {
 fn contact_rows(mesh: &Mesh, scene: &Scene, rows: &RowMaker) -> Result<(Vec<NodalRow>, f64)> {
     let mut contact = Vec::new();
     let mut contact_kink = 0.0;
-    if scene.contact {
-        let g = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+    if scene.physics.contact {
+        let g = group(
+            mesh,
+            scene,
+            "mesh.groups.contact",
+            &scene.mesh.groups.contact,
+        )?;
         let (normals, k) = mesh.nodal_normals(g);
         contact_kink = k;
         let area = lumped_area(mesh, g);
@@ -289,7 +294,7 @@ fn contact_rows(mesh: &Mesh, scene: &Scene, rows: &RowMaker) -> Result<(Vec<Noda
             return Err(on_fixed(
                 scene,
                 "contact",
-                &scene.groups.contact,
+                &scene.mesh.groups.contact,
                 "[contact]",
             ));
         }
@@ -306,9 +311,19 @@ fn friction_rows(
     rows: &RowMaker,
     n_free: usize,
 ) -> Result<(Vec<f64>, Vec<NodalRow>, f64)> {
-    let g = group(mesh, scene, "mesh.groups.friction", &scene.groups.friction)?;
-    if scene.contact {
-        let c = group(mesh, scene, "mesh.groups.contact", &scene.groups.contact)?;
+    let g = group(
+        mesh,
+        scene,
+        "mesh.groups.friction",
+        &scene.mesh.groups.friction,
+    )?;
+    if scene.physics.contact {
+        let c = group(
+            mesh,
+            scene,
+            "mesh.groups.contact",
+            &scene.mesh.groups.contact,
+        )?;
         check_overlap(mesh, scene, c, g)?;
     }
     let (gf, c) = friction_integrals(mesh, scene, fr, g, rows, n_free)?;
@@ -325,7 +340,7 @@ fn friction_rows(
         return Err(on_fixed(
             scene,
             "friction",
-            &scene.groups.friction,
+            &scene.mesh.groups.friction,
             "[friction]",
         ));
     }
@@ -389,11 +404,12 @@ impl Discretization {
         let (free, n_free) = free_dofs(mesh, scene)?;
         let cells = cells(mesh);
 
-        let a = Isotropic::viscosity(scene.theta, scene.zeta);
+        let a = Isotropic::viscosity(scene.physics.theta, scene.physics.zeta);
         let b = scene
+            .physics
             .elasticity
             .filter(|(e, _)| *e > 0.0)
-            .map(|(e, nu)| match scene.model {
+            .map(|(e, nu)| match scene.mesh.model {
                 Model::PlaneStress => Isotropic::plane_stress(e, nu),
                 Model::PlaneStrain | Model::ThreeD => Isotropic::lame(e, nu),
             });
@@ -406,7 +422,7 @@ impl Discretization {
             dim: d,
         };
         let (contact, contact_kink) = contact_rows(mesh, scene, &rows)?;
-        let (g_f, friction, friction_kink) = match &scene.friction {
+        let (g_f, friction, friction_kink) = match &scene.physics.friction {
             Some(fr) => friction_rows(mesh, scene, fr, &rows, n_free)?,
             None => (Vec::new(), Vec::new(), 0.0),
         };
@@ -660,22 +676,20 @@ fn on_fixed(scene: &Scene, role: &str, value: &str, table: &str) -> Error {
          group '{}', so its condition would have no effect; name the right group, or remove \
          {table} (or set enabled = false)",
         scene.path.display(),
-        scene.groups.fixed
+        scene.mesh.groups.fixed
     ))
 }
 
 fn check_model(mesh: &Mesh, scene: &Scene) -> Result<()> {
-    model_fits(mesh, scene.model, &scene.path)
+    model_fits(mesh, scene.mesh.model, &scene.path)
 }
 
-/// For a scene that failed its checks: the mesh.model error if the model does not fit the
-/// mesh. A 3D mesh run with a 2D model fails first on its three-component loads; the model
-/// is what to fix, so that is reported.
-pub fn model_mismatch(scene_path: &Path, overrides: &[String]) -> Option<Error> {
-    let (_, f) = crate::scene::read_scene_file(scene_path, overrides).ok()?;
-    let dir = scene_path.parent().unwrap_or(Path::new("."));
-    let mesh = Mesh::read(&dir.join(&f.mesh.file)).ok()?;
-    model_fits(&mesh, f.mesh.model, scene_path).err()
+/// For a scene that failed its checks, given its `[mesh]` as read: the mesh.model error if
+/// the model does not fit the mesh. A 3D mesh run with a 2D model fails first on its
+/// three-component loads; the model is what to fix, so that is reported.
+pub fn model_mismatch(scene_path: &Path, mesh: &MeshChoice) -> Option<Error> {
+    let read = Mesh::read(&mesh.file).ok()?;
+    model_fits(&read, mesh.model, scene_path).err()
 }
 
 fn model_fits(mesh: &Mesh, model: Model, scene_path: &Path) -> Result<()> {
@@ -712,7 +726,7 @@ pub(crate) fn check_data(
         return Err(Error::input(format!(
             "{}: key '{key}' evaluates to {v} at {}; it must be finite{}",
             scene.path.display(),
-            fmt_at(p, scene.model),
+            fmt_at(p, scene.mesh.model),
             if nonnegative { " and ≥ 0" } else { "" }
         )));
     }
@@ -760,8 +774,8 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
          not both; put each {entity} into one of the two groups in gmsh (sharing the nodes \
          where they meet is fine), or disable one of [contact], [friction]",
         scene.path.display(),
-        scene.groups.contact,
-        scene.groups.friction,
+        scene.mesh.groups.contact,
+        scene.mesh.groups.friction,
         mesh.path.display(),
         shared.len(),
         corners.join("–")

@@ -170,7 +170,7 @@ impl Mesh {
     /// wrong version, unsupported elements, truncated, degenerate or folded elements, boundary
     /// groups off the boundary) is an [`Error::Input`] naming the file and the culprit.
     pub fn read(path: &Path) -> Result<Mesh> {
-        let bytes = crate::scene::read_input_file(path, "mesh file", None)?;
+        let bytes = crate::input_file::read_input_file(path, "mesh file", None)?;
         let raw = msh::read_raw(path, &bytes)?;
         let names = physical_names::read_physical_names(&bytes)
             .map_err(|m| Error::input(format!("mesh file '{}': {m}", path.display())))?;

@@ -109,13 +109,13 @@ pub(super) struct Frames<'a> {
 
 impl Frames<'_> {
     fn solved(&mut self, s: &Solved) -> Result<()> {
-        if s.step.n.is_multiple_of(self.scene.output_every) || s.last {
+        if s.step.n.is_multiple_of(self.scene.output.every) || s.last {
             let flags = state_flags(&s.step);
             let (disc, rows) = (&self.disc, &self.rows);
             write_step(
                 &mut self.series,
                 disc,
-                self.scene.model,
+                self.scene.mesh.model,
                 rows,
                 &s.step,
                 &flags,
@@ -146,10 +146,10 @@ impl Checkpoints {
     pub fn new(writer: checkpoint::Writer, scene: &Scene) -> Checkpoints {
         Checkpoints {
             writer,
-            enabled: scene.checkpoint,
-            every: scene.checkpoint_every,
-            every_seconds: scene.checkpoint_every_seconds.map(Duration::from_secs_f64),
-            steps: scene.steps,
+            enabled: scene.checkpoint.enabled,
+            every: scene.checkpoint.every,
+            every_seconds: scene.checkpoint.every_seconds.map(Duration::from_secs_f64),
+            steps: scene.time.steps,
             last_written: Instant::now(),
             due: None,
         }

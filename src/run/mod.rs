@@ -27,7 +27,7 @@ use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::{write_atomic, Resumed, Series};
-use crate::scene::Scene;
+use crate::scene::{read_scene_file, MeshChoice, Scene};
 use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Frames, Progress, Statistics, StopRule};
@@ -92,7 +92,11 @@ pub fn default_out(scene: &Scene) -> Result<PathBuf> {
 
 /// Loads everything a run needs and checks it: scene, mesh, discretization.
 pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
-    let scene = load_scene(scene_path, overrides)?;
+    discretize(load_scene(scene_path, overrides)?)
+}
+
+/// The mesh and the discretization of a checked scene (a study's case of one, say).
+pub fn discretize(scene: Scene) -> Result<(Scene, Mesh, Discretization)> {
     let mesh = read_mesh(&scene)?;
     let disc = Discretization::new(&mesh, &scene)?;
     Ok((scene, mesh, disc))
@@ -100,13 +104,16 @@ pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Di
 
 /// The scene; when it fails its checks because its model does not fit the mesh, that is
 /// what is reported (see `fem::model_mismatch`).
-fn load_scene(scene_path: &Path, overrides: &[String]) -> Result<Scene> {
-    Scene::load(scene_path, overrides)
-        .map_err(|e| crate::fem::model_mismatch(scene_path, overrides).unwrap_or(e))
+pub fn load_scene(scene_path: &Path, overrides: &[String]) -> Result<Scene> {
+    let (text, file) = read_scene_file(scene_path, overrides)?;
+    Scene::from_file(scene_path, text, &file).map_err(|e| {
+        let mesh = MeshChoice::from_section(&file.mesh, scene_path);
+        crate::fem::model_mismatch(scene_path, &mesh).unwrap_or(e)
+    })
 }
 
 fn read_mesh(scene: &Scene) -> Result<Mesh> {
-    Mesh::read(&scene.mesh_file).map_err(|e| match e {
+    Mesh::read(&scene.mesh.file).map_err(|e| match e {
         Error::Input(m) => Error::input(format!(
             "{}: key 'mesh.file': {m} (mesh.file is relative to the scene file)",
             scene.path.display()
@@ -138,7 +145,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let series = open_series(&out, &mesh, &identity.run_id, &scene.output, None)?;
+    let series = open_series(&out, &mesh, &identity.run_id, &scene.output.options, None)?;
     stage()?;
     let tl = TimeLoop::new(&scene, &disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
@@ -147,7 +154,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
         .unless_signalled(|| dir::remove_run(&out))
         .map_err(Error::Interrupted)??;
     let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::new(&out, identity, scene.steps, tl.rows());
+    let writer = checkpoint::Writer::new(&out, identity, scene.time.steps, tl.rows());
     drive(Drive {
         scene: &scene,
         mesh: &mesh,
@@ -222,7 +229,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         &out,
         &mesh,
         &identity.run_id,
-        &scene.output,
+        &scene.output.options,
         resumed.as_ref(),
     )?;
     stage()?;
@@ -234,7 +241,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     stage()?;
     dir::remove_temporaries(&out);
     let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::resume(&out, identity, scene.steps, tl.rows(), &cp);
+    let writer = checkpoint::Writer::resume(&out, identity, scene.time.steps, tl.rows(), &cp);
     drive(Drive {
         scene: &scene,
         mesh: &mesh,
@@ -286,14 +293,14 @@ fn drive(d: Drive) -> Result<Outcome> {
             scene: d.scene,
         },
         checkpoints: Checkpoints::new(d.writer, d.scene),
-        progress: Progress::new(d.opts.progress, tl.n(), d.scene.steps),
+        progress: Progress::new(d.opts.progress, tl.n(), d.scene.time.steps),
         stop: StopRule {
             after: d.opts.stop_after,
             interrupt: d.opts.interrupt.clone(),
         },
     };
     let steps_start = Instant::now();
-    let ended = tl.run(d.scene.steps, &mut consumers);
+    let ended = tl.run(d.scene.time.steps, &mut consumers);
     let Consumers {
         statistics,
         mut frames,

@@ -25,8 +25,10 @@ use serde::Serialize;
 
 use super::say;
 use crate::history::Plan;
-use crate::run::setup;
-use crate::scene::Kernel;
+use crate::kernel::Kernel;
+use crate::plot::{log_log_chart, Curve};
+use crate::run::{discretize, load_scene};
+use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 
@@ -70,7 +72,7 @@ pub struct Report {
 /// Runs the study; the scene's kernel must be an expression or a table.
 pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
     let scene = crate::scene::Scene::load(scene_path, &opts.overrides)?;
-    let kernel = match &scene.relaxation {
+    let kernel = match &scene.physics.relaxation {
         Some(Kernel::Expr(e)) => format!("expr {}", e.source()),
         Some(Kernel::Table(..)) => "table".into(),
         _ => {
@@ -90,24 +92,15 @@ pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
     if opts.steps.contains(&0) {
         return Err(Error::input("--steps: a number of steps is at least 1"));
     }
-    let k = scene.k();
+    let k = scene.time.k();
     let mut rows = Vec::new();
     for &n in &opts.steps {
-        let base = [
-            format!("time.steps={n}"),
-            format!("time.end={:?}", n as f64 * k),
-        ];
-        let with = |extra: String| -> Vec<String> {
-            let mut set = opts.overrides.clone();
-            set.extend(base.iter().cloned());
-            set.push(extra);
-            set
-        };
+        let end = n as f64 * k;
         let direct = n <= opts.exact_up_to;
         let exact = if direct {
             say(opts.progress, &format!("N = {n}: exact (direct sum)"));
-            let set = with("material.relaxation.memory=\"exact\"".into());
-            let (u, row) = solve(scene_path, &set, true)?;
+            let exact = |s: Scene| s.with_exact_memory()?.with_time(end, n);
+            let (u, row) = solve(scene_path, &opts.overrides, exact, true)?;
             rows.push(row);
             u
         } else {
@@ -115,8 +108,8 @@ pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
         };
         for &tol in &opts.tolerances {
             say(opts.progress, &format!("N = {n}: tolerance {tol:e}"));
-            let set = with(format!("material.relaxation.tolerance={tol:e}"));
-            let (u, row) = solve(scene_path, &set, direct)?;
+            let at_tol = |s: Scene| s.with_tolerance(tol)?.with_time(end, n);
+            let (u, row) = solve(scene_path, &opts.overrides, at_tol, direct)?;
             rows.push(Row {
                 tolerance: Some(tol),
                 error_u: u.zip(exact.as_ref()).map(|(u, e)| relative_max(&u, e)),
@@ -132,12 +125,17 @@ pub fn run_memory_cost(scene_path: &Path, opts: &Options) -> Result<Report> {
     })
 }
 
-/// One run to t_N: u_N and its row (steps, tolerance and error_u left for the caller). A
-/// fit that misses its tolerance falls back to the direct sum, which runs only when
-/// `direct` allows it (u_N is then None and so is the wall time).
-fn solve(scene_path: &Path, overrides: &[String], direct: bool) -> Result<(Option<Vec<f64>>, Row)> {
+/// One run to t_N of the scene as `case` changes it: u_N and its row (steps, tolerance and
+/// error_u left for the caller). A fit that misses its tolerance falls back to the direct
+/// sum, which runs only when `direct` allows it (u_N is then None and so is the wall time).
+fn solve(
+    scene_path: &Path,
+    overrides: &[String],
+    case: impl FnOnce(Scene) -> Result<Scene>,
+    direct: bool,
+) -> Result<(Option<Vec<f64>>, Row)> {
     let start = Instant::now();
-    let (scene, _mesh, disc) = setup(scene_path, overrides)?;
+    let (scene, _mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
     let plan = Plan::new(&scene)?;
     let (method, terms, certified_error, fallback) = match &plan {
         Plan::Compressed(fit) => ("compressed", fit.terms.len(), Some(fit.error), None),
@@ -145,7 +143,7 @@ fn solve(scene_path: &Path, overrides: &[String], direct: bool) -> Result<(Optio
         Plan::None | Plan::Prony(_) => unreachable!("the study checked for expr or table"),
     };
     let mut row = Row {
-        steps: scene.steps,
+        steps: scene.time.steps,
         tolerance: None,
         method,
         terms,
@@ -158,7 +156,7 @@ fn solve(scene_path: &Path, overrides: &[String], direct: bool) -> Result<(Optio
         return Ok((None, row));
     }
     let mut tl = TimeLoop::with_plan(&scene, &disc, plan)?;
-    super::solve_to_end(&mut tl, scene.steps)?;
+    super::solve_to_end(&mut tl, scene.time.steps)?;
     row.wall_s = Some(start.elapsed().as_secs_f64());
     Ok((Some(tl.u().to_vec()), row))
 }
@@ -255,7 +253,6 @@ pub fn csv(report: &Report) -> String {
 /// Writes memory_cost.{md,csv,json} and the plots into `dir`; returns the paths.
 pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
     use crate::output::write_atomic;
-    use crate::plot::{log_log_chart, Curve};
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut written = Vec::new();
     for (name, bytes) in [
@@ -270,9 +267,16 @@ pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
         write_atomic(&p, bytes.as_bytes())?;
         written.push(p);
     }
+    written.extend(plot_error(report, dir)?);
+    written.push(plot_time(report, dir)?);
+    Ok(written)
+}
+
+/// The error of u_N against the tolerance, one curve per N where the direct sum ran, with
+/// the line error = ε; None when the direct sum ran nowhere.
+fn plot_error(report: &Report, dir: &Path) -> Result<Option<PathBuf>> {
     let mut steps: Vec<usize> = report.rows.iter().map(|r| r.steps).collect();
     steps.dedup();
-    // The error of u_N against the tolerance, where the direct sum ran.
     let mut curves: Vec<Curve> = steps
         .iter()
         .enumerate()
@@ -286,27 +290,31 @@ pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
             (!pts.is_empty()).then(|| Curve::data(i, format!("N = {n}"), pts))
         })
         .collect();
-    if !curves.is_empty() {
-        let (t0, t1) = report
-            .rows
-            .iter()
-            .filter_map(|r| r.tolerance)
-            .fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
-        curves.push(Curve::reference(
-            "error = tolerance".into(),
-            vec![(t0, t0), (t1, t1)],
-        ));
-        let p = dir.join("memory_cost_error.png");
-        log_log_chart(
-            &p,
-            "Compressed memory: error of u_N against the tolerance",
-            "tolerance ε of the fit",
-            "max|u_N − u_N^exact| / max|u_N^exact|",
-            &curves,
-        )?;
-        written.push(p);
+    if curves.is_empty() {
+        return Ok(None);
     }
-    // The wall time against N: one curve per tolerance and the direct sum.
+    let (t0, t1) = report
+        .rows
+        .iter()
+        .filter_map(|r| r.tolerance)
+        .fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
+    curves.push(Curve::reference(
+        "error = tolerance".into(),
+        vec![(t0, t0), (t1, t1)],
+    ));
+    let p = dir.join("memory_cost_error.png");
+    log_log_chart(
+        &p,
+        "Compressed memory: error of u_N against the tolerance",
+        "tolerance ε of the fit",
+        "max|u_N − u_N^exact| / max|u_N^exact|",
+        &curves,
+    )?;
+    Ok(Some(p))
+}
+
+/// The wall time against N: one curve per tolerance and the direct sum.
+fn plot_time(report: &Report, dir: &Path) -> Result<PathBuf> {
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for r in &report.rows {
         let label = match r.tolerance {
@@ -333,6 +341,5 @@ pub fn write_report(report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
         "wall time [s]",
         &curves,
     )?;
-    written.push(p);
-    Ok(written)
+    Ok(p)
 }

@@ -55,7 +55,7 @@ pub fn trace(scene: &Scene, disc: &Discretization) -> Trace {
         z.push(s.step.z.to_vec());
         Ok(())
     };
-    tl.run(scene.steps, &mut record).unwrap();
+    tl.run(scene.time.steps, &mut record).unwrap();
     Trace {
         u,
         w,
