@@ -488,13 +488,21 @@ mod tests {
     /// is really taken when forced and never in the direct form.
     #[test]
     fn newton_forms_agree_in_3d() {
-        use dual::{DualSolver, NewtonForm};
+        use dual::{DualSettings, DualSolver, NewtonForm};
         for seed in [1, 2, 3] {
             let p = lattice(3, 6, 3, seed);
             let mut s = Solvers::new(&p);
             let mut forms = [NewtonForm::Woodbury, NewtonForm::Direct].map(|form| {
                 (
-                    DualSolver::with_form(&s.factor, &p.rows, form),
+                    DualSolver::with_settings(
+                        &s.factor,
+                        &p.rows,
+                        DualSettings {
+                            newton_form: form,
+                            ..Default::default()
+                        },
+                    )
+                    .unwrap(),
                     vec![0.0; p.rows.len()],
                 )
             });

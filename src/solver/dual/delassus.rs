@@ -8,11 +8,9 @@ use std::ops::Range;
 pub(super) struct Delassus {
     pub(super) mat: Mat<f64>,
     pub(super) pair: Pair,
+    /// `DualSettings::split_rows`.
+    pub(super) split_rows: usize,
 }
-
-/// Below this many rows (columns of a Newton matrix) a pass over D, G or the Newton matrix
-/// takes less time than handing half of it to `Pair`'s worker thread.
-pub(super) const SPLIT_ROWS: usize = 512;
 
 impl Delassus {
     /// g = D z − d from the lower triangle of D alone: the entry D_ij below the diagonal of
@@ -38,8 +36,11 @@ impl Delassus {
         }
         let mut tail = vec![0.0; m - c];
         let (head, t) = (&mut *g, &mut tail);
-        self.pair
-            .both_if(m >= SPLIT_ROWS, || part(0..c, head, 0), || part(c..m, t, c));
+        self.pair.both_if(
+            m >= self.split_rows,
+            || part(0..c, head, 0),
+            || part(c..m, t, c),
+        );
         for (gi, ti) in g[c..].iter_mut().zip(&tail) {
             *gi += ti;
         }

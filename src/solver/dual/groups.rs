@@ -1,7 +1,6 @@
 //! The multiplier groups and their sets Z_j: projection, the rim of a disc, the stopping
 //! residual; and the Newton coordinates (columns of Q) built from them.
 
-use super::RIM;
 use std::ops::Range;
 
 /// The set Z_j of a group of multipliers.
@@ -92,14 +91,15 @@ impl Group {
         })
     }
 
-    /// The group's part of the optimality residual (see the module doc); z in Z_j.
-    pub(super) fn residual(&self, z: &[f64], g: &[f64]) -> f64 {
+    /// The group's part of the optimality residual (see the module doc); z in Z_j, a disc
+    /// multiplier on the rim where |z| ≥ `rim` c (`DualSettings::rim`).
+    pub(super) fn residual(&self, z: &[f64], g: &[f64], rim: f64) -> f64 {
         match self.set {
             Set::HalfLine if z[0] > 0.0 => g[0].abs(),
             Set::HalfLine => (-g[0]).max(0.0),
             Set::Ball(c) => {
                 let nz = norm(z);
-                if nz < RIM * c {
+                if nz < rim * c {
                     norm(g)
                 } else if nz == 0.0 {
                     0.0 // c = 0: Z_j = {0}, every g is balanced

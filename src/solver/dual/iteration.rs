@@ -2,9 +2,8 @@
 //! Newton and projected gradient fallbacks with their Armijo searches.
 
 use super::groups::{dot, norm, Coord, Set};
-use super::newton::{axpy_columns, newton_step, Gradient, Operators, Scratch, NEWTON_ACCURACY};
-use super::{DualSolver, ETA, INTERPOLATED, MAX_ITERATIONS, MAX_WIDEN, MIN_DAMPING, PG_SWITCH};
-use super::{TOLERANCE, WIDEN};
+use super::newton::{axpy_columns, newton_step, Gradient, Operators, Scratch};
+use super::DualSolver;
 use crate::{Error, Result};
 
 /// Vectors of a solve, kept between steps so that the iterations do not allocate them.
@@ -36,7 +35,7 @@ impl DualSolver {
         let DualSolver {
             d,
             inverse,
-            form,
+            settings,
             groups,
             work,
             ..
@@ -59,7 +58,7 @@ impl DualSolver {
         // for bit.
         newton.factor.form = None;
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        let tol = TOLERANCE * scale.max(f64::MIN_POSITIVE);
+        let tol = settings.tolerance * scale.max(f64::MIN_POSITIVE);
         if let Some(b) = inverse {
             // z_u = B d (B symmetric: column j of B is its row j).
             z_u.fill(0.0);
@@ -69,8 +68,8 @@ impl DualSolver {
             d,
             dvec,
             woodbury: inverse.as_ref().map(|b| (b, &z_u[..])),
-            form: *form,
-            accuracy: NEWTON_ACCURACY * tol,
+            settings,
+            accuracy: settings.newton_accuracy * tol,
         };
         let project = |v: &mut [f64]| {
             for grp in groups.iter() {
@@ -81,14 +80,14 @@ impl DualSolver {
         project(z);
         d.gradient(z, dvec, g);
         let mut iterations = 0;
-        // The factor of ε (`WIDEN`).
+        // The factor of ε (`DualSettings::widen`).
         let mut widen = 1.0;
-        // Whether the last iteration's Newton point was rejected (`ETA`).
+        // Whether the last iteration's Newton point was rejected (`DualSettings::eta`).
         let mut rejected = false;
         let residual = |z: &[f64], g: &[f64]| {
             groups
                 .iter()
-                .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()]))
+                .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()], settings.rim))
                 .fold(0.0f64, f64::max)
         };
         loop {
@@ -96,9 +95,10 @@ impl DualSolver {
             if res <= tol {
                 return Ok(iterations);
             }
-            if iterations == MAX_ITERATIONS {
+            if iterations == settings.max_iterations {
+                let limit = settings.max_iterations;
                 return Err(Error::solve(format!(
-                    "the dual semismooth Newton method did not converge in {MAX_ITERATIONS} \
+                    "the dual semismooth Newton method did not converge in {limit} \
                      iterations (residual {res:e} relative to {scale:e}); \
                      try [solver] contact = \"clarabel\""
                 )));
@@ -107,7 +107,7 @@ impl DualSolver {
             // 1. The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`,
             // the columns of Q in `coords`; then trial = Π(z₀ + Q x).
             coords.clear();
-            let eta = if rejected { 1.0 } else { ETA };
+            let eta = if rejected { 1.0 } else { settings.eta };
             for grp in groups.iter() {
                 let r = grp.rows();
                 let eta_delta = eta * grp.scale;
@@ -158,7 +158,7 @@ impl DualSolver {
                 if dq < -noise || (alpha == 1.0 && dq <= noise && residual(trial, g_trial) < res) {
                     break true;
                 }
-                if alpha <= MIN_DAMPING {
+                if alpha <= settings.min_damping {
                     break false;
                 }
                 alpha *= 0.5;
@@ -171,7 +171,7 @@ impl DualSolver {
                 continue;
             }
             // 2. Otherwise the projected Newton step. ε: the length of the projected gradient
-            // step z − Π(z − g/δ), widened after a short step (`WIDEN`).
+            // step z − Π(z − g/δ), widened after a short step (`DualSettings::widen`).
             let mut eps: f64 = 0.0;
             for grp in groups.iter() {
                 let r = grp.rows();
@@ -244,10 +244,10 @@ impl DualSolver {
                 if -dq >= 1e-4 * predicted || alpha < 1e-12 {
                     break;
                 }
-                alpha *= backtrack(dq, predicted, iterations);
+                alpha *= backtrack(dq, predicted, iterations <= settings.interpolated);
             }
-            widen = if alpha < PG_SWITCH {
-                (widen * WIDEN).min(MAX_WIDEN)
+            widen = if alpha < settings.pg_switch {
+                (widen * settings.widen).min(settings.max_widen)
             } else {
                 1.0
             };
@@ -255,7 +255,7 @@ impl DualSolver {
             // ill-conditioned D (thin slabs: flat tetrahedra), zigzagging at the edge of its
             // binding set. Then the projected gradient step z(β) = Π(z − β g/δ) with Armijo,
             // which decreases q in proportion to the residual, is taken when it does better.
-            if alpha < PG_SWITCH {
+            if alpha < settings.pg_switch {
                 let mut beta = 1.0;
                 loop {
                     for grp in groups.iter() {
@@ -270,7 +270,7 @@ impl DualSolver {
                     if -dq >= 1e-4 * predicted || beta < 1e-12 {
                         break;
                     }
-                    beta *= backtrack(dq, predicted, iterations);
+                    beta *= backtrack(dq, predicted, iterations <= settings.interpolated);
                 }
                 if change(z, alt, g, g_alt) < change(z, trial, g, g_trial) {
                     trial.copy_from_slice(alt);
@@ -283,19 +283,17 @@ impl DualSolver {
     }
 }
 
-/// The next trial of an Armijo search in the step's iteration `iteration`, as a fraction of
-/// the last trial's step α: after `INTERPOLATED` iterations ½, before them the minimizer
+/// The next trial of an Armijo search as a fraction of the last trial's step α: ½, or if
+/// `interpolate` (the first `DualSettings::interpolated` iterations of a step) the minimizer
 /// of the quadratic in α through q at the start, with slope −`predicted`/α there (the
 /// first-order decrease the search compares with), and through the change `dq` of q at α
 /// (Nocedal & Wright, Numerical Optimization, (3.58)), kept within [0.1, 0.5]; ½ if that
 /// quadratic has no minimizer. q is quadratic, so along a stretch of the arc where the
-/// projection leaves the same groups fixed this lands at the minimizer at once: on the 3D
-/// block h = 1/24 halving took 7.2 trials (products with D) per projected Newton step, and
-/// the steps' products fell from 3966 to 2479, their iterations from 796 to 688 (see
-/// `INTERPOLATED` for why it halves later).
-fn backtrack(dq: f64, predicted: f64, iteration: usize) -> f64 {
+/// projection leaves the same groups fixed this lands at the minimizer at once, where
+/// halving takes several products with D.
+fn backtrack(dq: f64, predicted: f64, interpolate: bool) -> f64 {
     let t = predicted / (2.0 * (dq + predicted));
-    if iteration <= INTERPOLATED && t > 0.0 {
+    if interpolate && t > 0.0 {
         t.clamp(0.1, 0.5)
     } else {
         0.5

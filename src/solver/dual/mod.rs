@@ -32,8 +32,8 @@
 //!
 //! z solves the dual iff z = Π(z − g/δ), δ_j > 0 a scale per group (the mean of diag D over
 //! its rows), and as well iff z = Π(z − g/(ηδ)) for any η > 0. The method is a semismooth
-//! Newton method on the second fixed-point equation with η = `ETA` (why 64 and not 1: see
-//! there), warm started from the previous step's multipliers, globalized by descent of q.
+//! Newton method on the second fixed-point equation with η = `DualSettings::eta` (why 64 and
+//! not 1: see there), warm started from the previous step's multipliers, globalized by descent of q.
 //!
 //! Newton step. At v = z − g/(ηδ) each group is
 //!  - free (v_j ∈ Z_j; Π' = I): the Newton equations are g_j(z⁺) = 0;
@@ -76,7 +76,7 @@
 //! its normal n_i and friction rows whose tangents span n_i (a 90° corner: τ_i = ±n_i), so
 //! P has dependent rows and D is singular: w is unique (K_A is SPD), the split of the force
 //! Pᵀz between λ_i and γ_i is not. The Newton matrices of such nodes' groups get the shift
-//! ρ δ_j (ρ = `DEPENDENT_SHIFT`) on their coordinates: (QᵀDQ + diag κ + ρ diag δ) x = −Qᵀg
+//! ρ δ_j (ρ = `DualSettings::dependent_shift`) on their coordinates: (QᵀDQ + diag κ + ρ diag δ) x = −Qᵀg
 //! is solvable whatever the sets are, and since Qᵀg lies in the range of QᵀDQ its solution
 //! differs from an exact Newton step only by O(ρ) along the near-null directions: a
 //! Levenberg–Marquardt step, which contracts the error in the range by ρδ/(ρδ + σ) per
@@ -96,90 +96,28 @@
 //! contact row |g| if λ > 0 and max(0, −g) if λ = 0 (n·w ≤ 0); for a friction node |g_j|
 //! inside the disc, and on its rim |T g_j| + max(0, g_j·γ̂_j) (there −g_j = w_τ,j must be a
 //! nonnegative multiple of γ_j: the node slides along its friction force, or sticks) — at
-//! most TOLERANCE · max|d|, in units of the velocities P w.
+//! most `DualSettings::tolerance` · max|d|, in units of the velocities P w.
 
 mod delassus;
 mod groups;
 mod iteration;
 mod newton;
+mod settings;
 #[cfg(test)]
 mod tests;
 
 use super::pair::Pair;
 use super::{Factor, Rows, StepReport};
 use crate::Result;
-use delassus::{column, Delassus, SPLIT_ROWS};
+use delassus::{column, Delassus};
 use faer::linalg::solvers::DenseSolveCore;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Side};
 use groups::{dot, Group, Set};
 use iteration::Work;
 use newton::{NewtonFactor, Scratch};
+pub use settings::{DualSettings, NewtonForm};
 use std::ops::Range;
-
-/// Relative tolerance of the dual optimality conditions (in units of the velocities P w).
-pub const TOLERANCE: f64 = 1e-12;
-/// A step's iterations at most. Thin plates take many (flat tetrahedra make D
-/// ill-conditioned): slabs 1/500 and 1/1000 of their width thick need up to 776 in a step
-/// (`WIDEN`), and converge to the same multipliers whatever the limit; reaching it is a
-/// failed solve (exit 1), so the limit only bounds how long a failing step takes.
-const MAX_ITERATIONS: usize = 2000;
-/// A projected Newton step shorter than this also tries the projected gradient step.
-const PG_SWITCH: f64 = 1e-3;
-/// The backtracking of the Armijo searches interpolates (`backtrack`) in the first this many
-/// iterations of a step and halves after them. Interpolation lands near the minimizer of q
-/// along the arc, and on the thin slab's ill-conditioned D (tests/robustness.rs) such steps
-/// zigzag at the edge of the binding set as exact line searches do: interpolating
-/// throughout stalled it (residual 4e-3 after 500 iterations), and so did halving only
-/// after 50 (the iterate was already caught), while after 10, 20 or 30 it converged. The
-/// 3D block's steps take at most 35 iterations and mostly far fewer.
-const INTERPOLATED: usize = 20;
-/// After a projected Newton step shorter than `PG_SWITCH`, the next one takes a binding set
-/// this many times wider (ε ← WIDEN·ε, up to `MAX_WIDEN`, back to 1 after a longer step or
-/// an accepted Newton step). A short step means that free groups near the boundary left Z
-/// at once along the face's Newton direction; with ε the length of the projected gradient
-/// step alone (Bertsekas' choice), the thin slabs' steps zigzagged at α ≈ 1e-4 for hundreds
-/// of iterations. Measured on slabs of thickness t (meshes/3d/slab.geo, n = 16, the paper's
-/// scene over 32 and 64 steps), the most iterations of a step: t = 0.012 300 → 202 and
-/// 261 → 171, t = 0.008 482 → 190 and 451 → 271; at t = 0.004 and 0.002 the runs failed at
-/// the old limit of 500 (without a limit two of them needed 2 811 and 2 345) and now take
-/// 229–776; u_N is the same to 1e-13. A factor of 10 did about as well (at most 1 513).
-/// Runs whose projected Newton steps are never that short are unchanged bit for bit (the
-/// paper's scenes, the bracket, the plate with a hole, the block, the slabs t ≥ 0.04).
-const WIDEN: f64 = 3.0;
-const MAX_WIDEN: f64 = 1e8;
-/// η: the semismooth Newton step's fixed-point map is z = Π(z − g/(ηδ)) (module doc).
-/// Which groups the step takes as free, at zero or on the rim depends on η: with η large a
-/// group at the boundary of Z_j leaves it in the step's prediction v = z − g/(ηδ) only if
-/// its gradient pulls it inward, and a free group is predicted outside Z_j only when it is
-/// close to the boundary. With η = 1 the prediction reached far from z: in the loading steps
-/// of the 3D block (gmsh's unstructured tetrahedra, 728 friction nodes, of which ~450 stick
-/// at the solution) it put all 728 on their rims iteration after iteration, the Newton
-/// points were rejected and each iteration paid a second factorization for the projected
-/// Newton step (159 such fallbacks; up to 37 iterations in a step). With η large the
-/// prediction follows the iterate, and on a rim the shift κ = ηδ(|v| − c)/c tends to μ/c,
-/// its value at the solution. Measured (iterations over the run, projected Newton
-/// fallbacks): that block, 100 steps, η = 1: 728 and 159; 4: 658 and 23; 16: 621 and 0;
-/// 64: 578 and 0; 256 and 4096: 583 and 0 (wall 21.3 → 15.0 s); the paper scene at 1/128:
-/// 330 and 36 → 259 and 0. The answer does not depend on η (the same fixed point; u_N within
-/// 1.5e-15).
-///
-/// After a rejected Newton point the next iteration predicts with η = 1: on the thin slabs
-/// (meshes/3d/slab.geo, D ill-conditioned, most iterations are projected Newton steps) η =
-/// 64 throughout raised the most iterations of a step from 792 to 1 608 (t = 0.002, 64
-/// steps; the limit is `MAX_ITERATIONS`), where the far prediction after a rejection keeps
-/// them at 414 (and 912 against 928 over 32 steps; t = 0.004: 407 and 417 against 871 and
-/// 228). Runs whose Newton points are accepted, like the block's, are unchanged by it.
-const ETA: f64 = 64.0;
-/// The shortest damped Newton step tried before the projected Newton step.
-const MIN_DAMPING: f64 = 0.25;
-/// |γ_j| ≥ RIM · c_j counts as on the rim: a projected disc multiplier c v̂ has norm c only
-/// up to a few roundings.
-const RIM: f64 = 1.0 - 8.0 * f64::EPSILON;
-/// ρ: the relative Newton shift of the groups at nodes with dependent rows (see the module
-/// doc): far above the rounding level of the factorizations and of g, far below the
-/// curvature of independent rows.
-const DEPENDENT_SHIFT: f64 = 1e-8;
 
 /// How many Newton systems a solver solved in each form (cumulative over its steps).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -190,18 +128,6 @@ pub struct NewtonCounts {
     pub refinements: usize,
     /// Woodbury solves not accurate enough after refinement, solved directly instead.
     pub fallbacks: usize,
-}
-
-/// Which form the Newton systems are solved in (see `newton_step`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum NewtonForm {
-    /// In 3D, whichever form the flop estimate finds cheaper, iteration by iteration; in 2D
-    /// the direct form (the default).
-    Cheaper,
-    /// Always the direct form.
-    Direct,
-    /// The Woodbury form whenever B exists (tests).
-    Woodbury,
 }
 
 pub struct DualSolver {
@@ -215,7 +141,7 @@ pub struct DualSolver {
     /// B = D⁻¹ for the Woodbury form of the Newton steps, when it is used: D definite (no
     /// dependent rows) and the form allowed.
     inverse: Option<Mat<f64>>,
-    form: NewtonForm,
+    settings: DualSettings,
     /// The multiplier groups, in row order; fixed per run.
     groups: Vec<Group>,
     work: Box<Work>,
@@ -224,13 +150,19 @@ pub struct DualSolver {
 }
 
 impl DualSolver {
-    /// `factor` must have been built with the rows' dofs ordered last.
+    /// The solver with the default settings; `factor` must have been built with the rows'
+    /// dofs ordered last.
     pub fn new(factor: &Factor, rows: &Rows) -> Self {
-        Self::with_form(factor, rows, NewtonForm::Cheaper)
+        Self::build(factor, rows, DualSettings::default())
     }
 
-    /// As `new`, with the form of the Newton systems chosen.
-    pub fn with_form(factor: &Factor, rows: &Rows, form: NewtonForm) -> Self {
+    /// As `new`, with other settings, which are validated first.
+    pub fn with_settings(factor: &Factor, rows: &Rows, settings: DualSettings) -> Result<Self> {
+        settings.validate()?;
+        Ok(Self::build(factor, rows, settings))
+    }
+
+    fn build(factor: &Factor, rows: &Rows, settings: DualSettings) -> Self {
         let (n, c, m) = (factor.dim(), factor.last(), rows.len());
         let first = n - c;
         let mut g = Mat::<f64>::zeros(c, m);
@@ -271,7 +203,7 @@ impl DualSolver {
                     set,
                     scale,
                     shift: if at_dependent {
-                        DEPENDENT_SHIFT * scale
+                        settings.dependent_shift * scale
                     } else {
                         0.0
                     },
@@ -300,6 +232,8 @@ impl DualSolver {
                     l: Mat::new(),
                     form: None,
                     coords: Vec::with_capacity(m),
+                    par_min: settings.par_min,
+                    pcg_max: settings.pcg_max,
                 },
                 gram_pair: Pair::default(),
                 counts: NewtonCounts::default(),
@@ -308,7 +242,7 @@ impl DualSolver {
         // B = D⁻¹ (m³ flops once) where the Woodbury form may be used: 3D, where the rim
         // tangents of sliding nodes make U small, and D definite. In 2D the direct form stays:
         // its systems are at most one boundary line's rows.
-        let woodbury = match form {
+        let woodbury = match settings.newton_form {
             NewtonForm::Direct => false,
             NewtonForm::Cheaper => rows.block == 2,
             NewtonForm::Woodbury => true,
@@ -322,9 +256,10 @@ impl DualSolver {
             d: Delassus {
                 mat: d,
                 pair: Pair::default(),
+                split_rows: settings.split_rows,
             },
             inverse,
-            form,
+            settings,
             groups,
             work,
             y: vec![0.0; n],
@@ -359,7 +294,7 @@ impl DualSolver {
         };
         let m = z.len();
         let (d0, d1) = self.work.d.split_at_mut(m / 2);
-        let large = m >= SPLIT_ROWS;
+        let large = m >= self.settings.split_rows;
         self.g_pair
             .both_if(large, || d_of(0..m / 2, d0), || d_of(m / 2..m, d1));
         let iterations = self.dual_solve(z)?;

@@ -1,9 +1,9 @@
 //! The Newton systems (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d): the direct and the Woodbury
 //! form, the reuse of a step's factor, the dense Cholesky solves.
 
-use super::delassus::{column, Delassus, SPLIT_ROWS};
+use super::delassus::{column, Delassus};
 use super::groups::{Coord, Group};
-use super::{NewtonCounts, NewtonForm, Pair};
+use super::{DualSettings, NewtonCounts, NewtonForm, Pair};
 use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
@@ -46,13 +46,10 @@ pub(super) struct NewtonFactor {
     /// The form of the matrix factored in `l`; None while `l` holds no valid factor.
     pub(super) form: Option<Form>,
     pub(super) coords: Vec<Coord>,
+    /// `DualSettings::par_min` and `DualSettings::pcg_max`.
+    pub(super) par_min: usize,
+    pub(super) pcg_max: usize,
 }
-
-/// A Woodbury solve is accepted when its Newton equations hold to this fraction of the
-/// dual's tolerance (so its inexactness cannot reach the stopping test); it is refined at
-/// most `REFINEMENTS` times, then the system is solved in the direct form.
-pub(super) const NEWTON_ACCURACY: f64 = 1e-2;
-const REFINEMENTS: usize = 2;
 
 /// What the Newton steps are solved with.
 pub(super) struct Operators<'a> {
@@ -61,8 +58,9 @@ pub(super) struct Operators<'a> {
     pub(super) dvec: &'a [f64],
     /// B = D⁻¹ and z_u = B d, when the Woodbury form is available.
     pub(super) woodbury: Option<(&'a Mat<f64>, &'a [f64])>,
-    pub(super) form: NewtonForm,
-    /// The Newton residual a Woodbury solve must reach (absolute).
+    pub(super) settings: &'a DualSettings,
+    /// The Newton residual a Woodbury solve must reach (absolute): `newton_accuracy` times
+    /// the dual's tolerance, so that its inexactness cannot reach the stopping test.
     pub(super) accuracy: f64,
 }
 
@@ -100,7 +98,7 @@ pub(super) enum Gradient<'a> {
 /// only the rims' tangents and shifts slightly, so the step's last factor, when its
 /// structure matches, preconditions conjugate gradients on the new matrix (O(nq²) per
 /// iteration) to the accuracy of a direct solve; only a new structure, or CG not converging
-/// in `PCG_MAX` iterations, costs a new factorization. For an unchanged matrix the first
+/// in `pcg_max` iterations, costs a new factorization. For an unchanged matrix the first
 /// preconditioned solve is already the direct solution.
 pub(super) fn newton_step(
     ops: &Operators,
@@ -117,7 +115,9 @@ pub(super) fn newton_step(
     }
     if let Some((b, z_u)) = ops.woodbury {
         complement(groups, coords, &mut s.u);
-        if ops.form == NewtonForm::Woodbury || woodbury_cost(nq, s.u.len()) < direct_cost(nq) {
+        if ops.settings.newton_form == NewtonForm::Woodbury
+            || woodbury_cost(nq, s.u.len()) < direct_cost(nq)
+        {
             if let Some(x) = woodbury_step(ops, b, z_u, coords, z0, s)? {
                 s.counts.woodbury += 1;
                 add_columns(coords, &x, out);
@@ -134,7 +134,7 @@ pub(super) fn newton_step(
             &*buf
         }
     };
-    gram(&ops.d.mat, coords, &mut s.h, &s.gram_pair);
+    gram(&ops.d.mat, coords, &mut s.h, &s.gram_pair, ops.d.split_rows);
     let rhs = Mat::<f64>::from_fn(nq, 1, |a, _| -coords[a].dot(grad));
     let x = solve_cached(Form::Direct, &rhs, coords, &s.h, &mut s.factor)?;
     add_columns(coords, &x, out);
@@ -142,7 +142,7 @@ pub(super) fn newton_step(
 }
 
 /// The Woodbury form of `newton_step`: x, or None if it is not accurate to
-/// `ops.accuracy` after `REFINEMENTS` refinements.
+/// `ops.accuracy` after `refinements` refinements (`DualSettings`).
 fn woodbury_step(
     ops: &Operators,
     b: &Mat<f64>,
@@ -151,14 +151,15 @@ fn woodbury_step(
     z0: &[f64],
     s: &mut Scratch,
 ) -> Result<Option<Mat<f64>>> {
-    gram(b, &s.u, &mut s.h, &s.gram_pair);
+    gram(b, &s.u, &mut s.h, &s.gram_pair, ops.d.split_rows);
     let mut x = Mat::<f64>::zeros(coords.len(), 1);
     // In y = z − z₀: y⁺ = s − B U c, (UᵀBU + diag) c = Uᵀ s, x = Qᵀ y⁺, with s = z_u − z₀;
     // a refinement solves for the residual r the same way with s = −B Q r.
     for ((t, zu), z) in s.sv.iter_mut().zip(z_u).zip(z0) {
         *t = zu - z;
     }
-    for refinement in 0..=REFINEMENTS {
+    let refinements = ops.settings.refinements;
+    for refinement in 0..=refinements {
         s.bv.copy_from_slice(&s.sv);
         if !s.u.is_empty() {
             let rhs = Mat::<f64>::from_fn(s.u.len(), 1, |a, _| s.u[a].dot(&s.sv));
@@ -186,7 +187,7 @@ fn woodbury_step(
         if r.norm_max() <= ops.accuracy {
             return Ok(Some(x));
         }
-        if refinement == REFINEMENTS {
+        if refinement == refinements {
             break;
         }
         counts.refinements += 1;
@@ -275,7 +276,14 @@ fn woodbury_cost(nq: usize, nu: usize) -> f64 {
 
 /// h = CᵀMC + diag(shift) for the columns C given by `coords`, column by column from M's
 /// contiguous columns (M symmetric). Every entry is written: h's buffer is reused as it is.
-pub(super) fn gram(mat: &Mat<f64>, coords: &[Coord], h: &mut Mat<f64>, pair: &Pair) {
+/// From `split_rows` columns on, the columns are split over two threads.
+pub(super) fn gram(
+    mat: &Mat<f64>,
+    coords: &[Coord],
+    h: &mut Mat<f64>,
+    pair: &Pair,
+    split_rows: usize,
+) {
     let n = coords.len();
     h.resize_with(n, n, |_, _| 0.0);
     // The columns `cols` of h, in `part` (each column alike on either thread).
@@ -304,7 +312,7 @@ pub(super) fn gram(mat: &Mat<f64>, coords: &[Coord], h: &mut Mat<f64>, pair: &Pa
     };
     let (h0, h1) = h.as_mut().split_at_col_mut(n / 2);
     pair.both_if(
-        n >= SPLIT_ROWS,
+        n >= split_rows,
         || fill(0..n / 2, h0),
         || fill(n / 2..n, h1),
     );
@@ -331,14 +339,14 @@ fn solve_cached(
             .zip(coords)
             .all(|(a, b)| a.start == b.start && a.len == b.len);
     if same_structure {
-        if let Some(x) = pcg(h, rhs, &f.l) {
+        if let Some(x) = pcg(h, rhs, f) {
             return Ok(x);
         }
     }
     f.form = None;
     f.l.resize_with(h.nrows(), h.ncols(), |_, _| 0.0);
     f.l.copy_from_triangular_lower(h);
-    let par = dense_par(f.l.nrows());
+    let par = dense_par(f.l.nrows(), f.par_min);
     let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
         f.l.nrows(),
         par,
@@ -362,57 +370,47 @@ fn solve_cached(
     f.form = Some(form);
     f.coords.clear();
     f.coords.extend_from_slice(coords);
-    Ok(llt_solve(&f.l, rhs))
+    Ok(llt_solve(&f.l, rhs, f.par_min))
 }
 
-/// The parallelism of dense work on an n × n Newton matrix: one thread below `PAR_MIN`,
-/// faer's global parallelism (all cores) above. Handing a small factorization to the
-/// thread pool costs more than it saves: a Cholesky factorization took, one thread against
-/// two (medians of 15 in one process, this 2-core machine), 0.031 against 0.069 ms at
-/// n = 128, 1.16 against 1.62 ms at 512, 7.9 against 7.6 ms at 1024, 64 against 37 ms at
-/// 2048; in the 2D paper scene at 1/128 (2.7 factorizations of n ≈ 100 per step) the
-/// factorizations took 0.085 instead of 0.32 ms per step.
-fn dense_par(n: usize) -> Par {
-    if n < PAR_MIN {
+/// The parallelism of dense work on an n × n Newton matrix: one thread below `par_min`,
+/// faer's global parallelism (all cores) above (`DualSettings::par_min`).
+fn dense_par(n: usize, par_min: usize) -> Par {
+    if n < par_min {
         Par::Seq
     } else {
         faer::get_global_parallelism()
     }
 }
 
-/// See `dense_par`.
-const PAR_MIN: usize = 1024;
-
 /// x = (L Lᵀ)⁻¹ rhs for L in the lower triangle of `l`.
-fn llt_solve(l: &Mat<f64>, rhs: &Mat<f64>) -> Mat<f64> {
+fn llt_solve(l: &Mat<f64>, rhs: &Mat<f64>, par_min: usize) -> Mat<f64> {
     let mut x = rhs.clone();
     llt::solve::solve_in_place_with_conj(
         l.as_ref(),
         faer::Conj::No,
         x.as_mut(),
-        dense_par(l.nrows()),
+        dense_par(l.nrows(), par_min),
         MemStack::new(&mut MemBuffer::new(StackReq::EMPTY)),
     );
     x
 }
 
-/// Most conjugate gradient iterations with a reused factor before a new factorization.
-const PCG_MAX: usize = 30;
-
-/// Solves H x = rhs by conjugate gradients preconditioned with the factor `l` of a nearby
-/// matrix, to a relative residual of 1e-14; None if that takes more than `PCG_MAX`
+/// Solves H x = rhs by conjugate gradients preconditioned with the factor `f` of a nearby
+/// matrix, to a relative residual of 1e-14; None if that takes more than `f.pcg_max`
 /// iterations.
-fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, l: &Mat<f64>) -> Option<Mat<f64>> {
+fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
+    let (l, par_min) = (&f.l, f.par_min);
     let target = 1e-14 * rhs.norm_l2();
-    let mut x = llt_solve(l, rhs);
+    let mut x = llt_solve(l, rhs, par_min);
     let mut r = rhs - h * &x;
     if r.norm_l2() <= target {
         return Some(x);
     }
-    let mut z = llt_solve(l, &r);
+    let mut z = llt_solve(l, &r, par_min);
     let mut p = z.clone();
     let mut rz = (r.transpose() * &z)[(0, 0)];
-    for _ in 0..PCG_MAX {
+    for _ in 0..f.pcg_max {
         let hp = h * &p;
         let php = (p.transpose() * &hp)[(0, 0)];
         if php.is_nan() || php <= 0.0 {
@@ -424,7 +422,7 @@ fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, l: &Mat<f64>) -> Option<Mat<f64>> {
         if r.norm_l2() <= target {
             return Some(x);
         }
-        z = llt_solve(l, &r);
+        z = llt_solve(l, &r, par_min);
         let rz_new = (r.transpose() * &z)[(0, 0)];
         p = &z + (rz_new / rz) * &p;
         rz = rz_new;

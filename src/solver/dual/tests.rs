@@ -3,7 +3,7 @@
 use super::delassus::Delassus;
 use super::groups::Coord;
 use super::newton::gram;
-use super::Pair;
+use super::{DualSettings, Pair};
 use faer::Mat;
 
 /// A symmetric m×m matrix with entries of both signs.
@@ -38,6 +38,7 @@ fn gradient_from_the_lower_triangle() {
             let op = Delassus {
                 mat: mat.clone(),
                 pair,
+                split_rows: DualSettings::default().split_rows,
             };
             op.gradient(&z, &d, g);
         }
@@ -94,7 +95,7 @@ fn gram_is_the_dense_product() {
             .into_iter()
             .zip(&mut got)
         {
-            gram(&mat, &coords, h, &pair);
+            gram(&mat, &coords, h, &pair, DualSettings::default().split_rows);
         }
         for a in 0..n {
             for b in 0..n {
