@@ -1,6 +1,8 @@
 //! The multiplier groups and their sets Z_j: projection, the rim of a disc, the stopping
 //! residual; and the Newton coordinates (columns of Q) built from them.
 
+use crate::solver::Rows;
+use faer::Mat;
 use std::ops::Range;
 
 /// The set Z_j of a group of multipliers.
@@ -22,6 +24,38 @@ pub(super) struct Group {
     pub(super) scale: f64,
     /// The Newton shift ρ δ_j of a group at a node with dependent rows, else 0.
     pub(super) shift: f64,
+}
+
+/// The groups of the rows, in row order: each contact row, then each friction node's block;
+/// δ_j the mean of D's diagonal over the group's rows, and the Newton shift ρ δ_j
+/// (ρ = `dependent_shift`) at the nodes with dependent rows.
+pub(super) fn groups(rows: &Rows, d: &Mat<f64>, dependent_shift: f64) -> Vec<Group> {
+    debug_assert!(rows.block <= 2, "friction blocks span a tangent plane");
+    let contact = (0..rows.n_contact).map(|i| (i..i + 1, Set::HalfLine));
+    let dependent = rows.dependent_nodes();
+    let friction = (0..rows.n_friction_nodes()).map(|j| {
+        let r = rows.friction_block(j);
+        let c = rows.rows[r.start].bound;
+        (r, Set::Ball(c))
+    });
+    contact
+        .chain(friction)
+        .map(|(r, set)| {
+            let scale = r.clone().map(|i| d[(i, i)]).sum::<f64>() / r.len() as f64;
+            let at_dependent = dependent.contains(&rows.rows[r.start].node);
+            Group {
+                start: r.start,
+                len: r.len(),
+                set,
+                scale,
+                shift: if at_dependent {
+                    dependent_shift * scale
+                } else {
+                    0.0
+                },
+            }
+        })
+        .collect()
 }
 
 pub(super) fn norm(v: &[f64]) -> f64 {

@@ -1,20 +1,30 @@
-//! The iteration of the dual solve: semismooth Newton steps, their damping, the projected
-//! Newton and projected gradient fallbacks with their Armijo searches.
+//! The iteration of the dual solve (the module doc's method), as a loop over its phases:
+//! the stopping test, the semismooth Newton point and its damping (`newton_point`), else the
+//! projected Newton step with its Armijo search along the projection arc
+//! (`projected_newton`), and after a short one the projected gradient step
+//! (`projected_gradient`).
 
-use super::groups::{dot, norm, Coord, Set};
+use super::groups::{dot, norm, Coord, Group, Set};
 use super::newton::{axpy_columns, newton_step, Gradient, Operators, Scratch};
-use super::DualSolver;
+use super::{DualSettings, DualSolver};
 use crate::{Error, Result};
 
 /// Vectors of a solve, kept between steps so that the iterations do not allocate them.
 pub(super) struct Work {
     /// d = P K_A⁻¹ b.
     pub(super) d: Vec<f64>,
+    /// z_u = B d, the unconstrained minimizer of q, when B = D⁻¹ is kept.
+    pub(super) z_u: Vec<f64>,
+    pub(super) buffers: Buffers,
+}
+
+/// The vectors the phases of an iteration fill.
+pub(super) struct Buffers {
     /// g = D z − d at the iterate, and at the trial point.
     pub(super) grad: Vec<f64>,
     pub(super) trial: Vec<f64>,
     pub(super) grad_trial: Vec<f64>,
-    /// The projected Newton direction.
+    /// The Newton point, or the projected Newton direction.
     pub(super) p: Vec<f64>,
     /// The projected gradient trial point and its gradient.
     pub(super) alt: Vec<f64>,
@@ -22,15 +32,34 @@ pub(super) struct Work {
     pub(super) coords: Vec<Coord>,
     /// Per group: binding (moving along −g/δ) in the projected Newton step.
     pub(super) binding: Vec<bool>,
-    /// z_u = B d, the unconstrained minimizer of q, when B = D⁻¹ is kept.
-    pub(super) z_u: Vec<f64>,
     /// What the Newton steps need besides D: see `newton_step`.
     pub(super) newton: Scratch,
 }
 
+impl Work {
+    /// The buffers of a solve of m multipliers in `groups` groups.
+    pub(super) fn new(m: usize, groups: usize, settings: &DualSettings) -> Work {
+        Work {
+            d: vec![0.0; m],
+            z_u: vec![0.0; m],
+            buffers: Buffers {
+                grad: vec![0.0; m],
+                trial: vec![0.0; m],
+                grad_trial: vec![0.0; m],
+                p: vec![0.0; m],
+                alt: vec![0.0; m],
+                grad_alt: vec![0.0; m],
+                coords: Vec::with_capacity(m),
+                binding: vec![false; groups],
+                newton: Scratch::new(m, settings),
+            },
+        }
+    }
+}
+
 impl DualSolver {
     /// Minimizes ½ zᵀDz − dᵀz over Z (d in `work.d`), from z (the warm start); returns the
-    /// number of iterations.
+    /// number of iterations. Each iteration leaves its next iterate in `trial`.
     pub(super) fn dual_solve(&mut self, z: &mut [f64]) -> Result<usize> {
         let DualSolver {
             d,
@@ -42,61 +71,65 @@ impl DualSolver {
         } = self;
         let Work {
             d: dvec,
-            grad: g,
-            trial,
-            grad_trial: g_trial,
-            p,
-            alt,
-            grad_alt: g_alt,
-            coords,
-            binding,
             z_u,
-            newton,
+            buffers: b,
         } = &mut **work;
         // A factorization is reused within the step only, so that a run resumed from a
         // checkpoint (which starts with no factor) repeats the uninterrupted run bit
         // for bit.
-        newton.factor.form = None;
+        b.newton.factor.form = None;
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = settings.tolerance * scale.max(f64::MIN_POSITIVE);
-        if let Some(b) = inverse {
+        if let Some(inverse) = inverse {
             // z_u = B d (B symmetric: column j of B is its row j).
             z_u.fill(0.0);
-            axpy_columns(b, dvec.iter().copied().enumerate(), z_u);
+            axpy_columns(inverse, dvec.iter().copied().enumerate(), z_u);
         }
-        let ops = Operators {
-            d,
-            dvec,
-            woodbury: inverse.as_ref().map(|b| (b, &z_u[..])),
-            settings,
-            accuracy: settings.newton_accuracy * tol,
+        let it = Iteration {
+            ops: Operators {
+                d,
+                dvec,
+                woodbury: inverse.as_ref().map(|b| (b, &z_u[..])),
+                settings,
+                accuracy: settings.newton_accuracy * tol,
+            },
+            groups,
+            scale,
+            tol,
         };
-        let project = |v: &mut [f64]| {
-            for grp in groups.iter() {
-                grp.project(&mut v[grp.rows()]);
-            }
-        };
+        it.run(z, b)
+    }
+}
+
+/// What stays fixed over a step's iterations.
+struct Iteration<'a> {
+    ops: Operators<'a>,
+    groups: &'a [Group],
+    /// max|d|, and the residual at which the iteration stops.
+    scale: f64,
+    tol: f64,
+}
+
+impl Iteration<'_> {
+    /// The iterations from the warm start z to a point whose residual is at most `tol`;
+    /// their number.
+    fn run(&self, z: &mut [f64], b: &mut Buffers) -> Result<usize> {
+        let settings = self.ops.settings;
         // Warm start: the previous multipliers, projected onto Z.
-        project(z);
-        d.gradient(z, dvec, g);
+        self.project(z);
+        self.gradient(z, &mut b.grad);
         let mut iterations = 0;
         // The factor of ε (`DualSettings::widen`).
         let mut widen = 1.0;
         // Whether the last iteration's Newton point was rejected (`DualSettings::eta`).
         let mut rejected = false;
-        let residual = |z: &[f64], g: &[f64]| {
-            groups
-                .iter()
-                .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()], settings.rim))
-                .fold(0.0f64, f64::max)
-        };
         loop {
-            let res = residual(z, g);
-            if res <= tol {
+            let res = self.residual(z, &b.grad);
+            if res <= self.tol {
                 return Ok(iterations);
             }
             if iterations == settings.max_iterations {
-                let limit = settings.max_iterations;
+                let (limit, scale) = (settings.max_iterations, self.scale);
                 return Err(Error::solve(format!(
                     "the dual semismooth Newton method did not converge in {limit} \
                      iterations (residual {res:e} relative to {scale:e}); \
@@ -104,181 +137,293 @@ impl DualSolver {
                 )));
             }
             iterations += 1;
-            // 1. The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`,
-            // the columns of Q in `coords`; then trial = Π(z₀ + Q x).
-            coords.clear();
             let eta = if rejected { 1.0 } else { settings.eta };
-            for grp in groups.iter() {
-                let r = grp.rows();
-                let eta_delta = eta * grp.scale;
-                for i in r.clone() {
-                    trial[i] = z[i] - g[i] / eta_delta;
-                }
-                match grp.project(&mut trial[r.clone()]) {
-                    None => {
-                        trial[r.clone()].fill(0.0);
-                        coords.extend(grp.free());
-                    }
-                    // On the rim of a disc: radial part fixed at c v̂, the tangent t̂ ⊥ v̂ free
-                    // with κ = ηδ (|v| − c)/c = ηδ (1/ρ − 1). (ρ = 0: a contact row at 0.)
-                    Some(rho) if rho > 0.0 => {
-                        let shift = eta_delta * (1.0 / rho - 1.0);
-                        coords.extend(grp.tangent(&trial[r], shift));
-                    }
-                    Some(_) => {}
-                }
-            }
-            p.copy_from_slice(trial);
-            newton_step(
-                &ops,
-                groups,
-                coords,
-                trial,
-                Gradient::Unknown(g_trial),
-                p,
-                newton,
-            )?;
-            // The Newton point z⁺ (in p), then damped: trial = Π(z + α(z⁺ − z)) for
-            // α = 1, ½, ¼ (a damped trial costs one product with D, no factorization).
-            let mut alpha = 1.0;
-            let accepted = loop {
-                if alpha < 1.0 {
-                    for i in 0..z.len() {
-                        trial[i] = z[i] + alpha * (p[i] - z[i]);
-                    }
-                } else {
-                    trial.copy_from_slice(p);
-                }
-                project(trial);
-                d.gradient(trial, dvec, g_trial);
-                // Near the solution the change of q sinks below its rounding level (a
-                // multiplier on a disc's rim has the norm c only to a few ulps, and g is large
-                // along it); there the residual decides.
-                let (dq, noise) = (change(z, trial, g, g_trial), rounding(z, trial, g, g_trial));
-                if dq < -noise || (alpha == 1.0 && dq <= noise && residual(trial, g_trial) < res) {
-                    break true;
-                }
-                if alpha <= settings.min_damping {
-                    break false;
-                }
-                alpha *= 0.5;
-            };
-            rejected = !accepted;
-            if accepted {
-                widen = 1.0;
-                z.copy_from_slice(trial);
-                g.copy_from_slice(g_trial);
-                continue;
-            }
-            // 2. Otherwise the projected Newton step. ε: the length of the projected gradient
-            // step z − Π(z − g/δ), widened after a short step (`DualSettings::widen`).
-            let mut eps: f64 = 0.0;
-            for grp in groups.iter() {
-                let r = grp.rows();
-                for i in r.clone() {
-                    trial[i] = z[i] - g[i] / grp.scale;
-                }
-                grp.project(&mut trial[r.clone()]);
-                eps = eps.max(r.fold(0.0, |a, i| a.hypot(z[i] - trial[i])));
-            }
-            eps *= widen;
-            coords.clear();
-            for (grp, bind) in groups.iter().zip(binding.iter_mut()) {
-                let r = grp.rows();
-                let gn = norm(&g[r.clone()]);
-                *bind = gn > 0.0 && {
-                    for i in r.clone() {
-                        trial[i] = z[i] - eps * g[i] / gn;
-                    }
-                    grp.not_interior(&trial[r.clone()])
-                };
-                // A binding disc multiplier pushed outward (μ = −g·ẑ > 0) goes to the rim
-                // radially and along it by Newton, with the curvature shift κ = μ/c.
-                let to_rim = match grp.set {
-                    Set::Ball(c) if *bind && grp.len == 2 => {
-                        let nz = norm(&z[r.clone()]);
-                        let mu = -dot(&g[r.clone()], &z[r.clone()]) / nz;
-                        (mu > 0.0).then_some((c, nz, mu))
-                    }
-                    _ => None,
-                };
-                if let Some((c, nz, mu)) = to_rim {
-                    for i in r.clone() {
-                        p[i] = (c / nz - 1.0) * z[i];
-                    }
-                    coords.extend(grp.tangent(&z[r], mu / c));
-                } else if *bind {
-                    for i in r {
-                        p[i] = -g[i] / grp.scale;
-                    }
-                } else {
-                    p[r.clone()].fill(0.0);
-                    coords.extend(grp.free());
-                }
-            }
-            newton_step(&ops, groups, coords, z, Gradient::Known(g), p, newton)?;
-            // Armijo search along the projection arc z(α) = Π(z + α p).
-            let mut alpha = 1.0;
-            loop {
-                for i in 0..z.len() {
-                    trial[i] = z[i] + alpha * p[i];
-                }
-                project(trial);
-                d.gradient(trial, dvec, g_trial);
-                let predicted: f64 = groups
-                    .iter()
-                    .zip(binding.iter())
-                    .map(|(grp, &bind)| {
-                        grp.rows()
-                            .map(|i| {
-                                if bind {
-                                    g[i] * (z[i] - trial[i])
-                                } else {
-                                    -alpha * g[i] * p[i]
-                                }
-                            })
-                            .sum::<f64>()
-                    })
-                    .sum();
-                let dq = change(z, trial, g, g_trial);
-                if -dq >= 1e-4 * predicted || alpha < 1e-12 {
-                    break;
-                }
-                alpha *= backtrack(dq, predicted, iterations <= settings.interpolated);
-            }
-            widen = if alpha < settings.pg_switch {
+            rejected = !self.newton_point(z, eta, res, b)?;
+            let interpolate = iterations <= settings.interpolated;
+            widen = if !rejected {
+                1.0
+            } else if self.projected_newton(z, widen, interpolate, b)? < settings.pg_switch {
+                self.projected_gradient(z, interpolate, b);
                 (widen * settings.widen).min(settings.max_widen)
             } else {
                 1.0
             };
-            // 3. A projected Newton direction that needed a short step can stall on an
-            // ill-conditioned D (thin slabs: flat tetrahedra), zigzagging at the edge of its
-            // binding set. Then the projected gradient step z(β) = Π(z − β g/δ) with Armijo,
-            // which decreases q in proportion to the residual, is taken when it does better.
-            if alpha < settings.pg_switch {
-                let mut beta = 1.0;
-                loop {
-                    for grp in groups.iter() {
-                        for i in grp.rows() {
-                            alt[i] = z[i] - beta * g[i] / grp.scale;
-                        }
-                    }
-                    project(alt);
-                    d.gradient(alt, dvec, g_alt);
-                    let predicted: f64 = (0..z.len()).map(|i| g[i] * (z[i] - alt[i])).sum();
-                    let dq = change(z, alt, g, g_alt);
-                    if -dq >= 1e-4 * predicted || beta < 1e-12 {
-                        break;
-                    }
-                    beta *= backtrack(dq, predicted, iterations <= settings.interpolated);
+            z.copy_from_slice(&b.trial);
+            b.grad.copy_from_slice(&b.grad_trial);
+        }
+    }
+
+    /// v ← Π(v), group by group.
+    fn project(&self, v: &mut [f64]) {
+        for grp in self.groups {
+            grp.project(&mut v[grp.rows()]);
+        }
+    }
+
+    /// g = D z − d.
+    fn gradient(&self, z: &[f64], g: &mut [f64]) {
+        self.ops.d.gradient(z, self.ops.dvec, g);
+    }
+
+    /// The stopping test's residual at z (the module doc).
+    fn residual(&self, z: &[f64], g: &[f64]) -> f64 {
+        self.groups
+            .iter()
+            .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()], self.ops.settings.rim))
+            .fold(0.0f64, f64::max)
+    }
+
+    /// The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`, the
+    /// columns of Q in `coords`, the Newton point z⁺ in `p`; then damped, trial =
+    /// Π(z + α(z⁺ − z)) for α = 1, ½, … down to `min_damping` (a damped trial costs one
+    /// product with D, no factorization). True if a trial was accepted; it is in `trial`,
+    /// its gradient in `grad_trial`. `res` is the residual at z.
+    fn newton_point(&self, z: &[f64], eta: f64, res: f64, b: &mut Buffers) -> Result<bool> {
+        self.prediction(z, eta, b);
+        let Buffers {
+            grad: g,
+            trial,
+            grad_trial: g_trial,
+            p,
+            coords,
+            newton,
+            ..
+        } = b;
+        p.copy_from_slice(trial);
+        newton_step(
+            &self.ops,
+            self.groups,
+            coords,
+            trial,
+            Gradient::Unknown(g_trial),
+            p,
+            newton,
+        )?;
+        let mut alpha = 1.0;
+        Ok(loop {
+            if alpha < 1.0 {
+                for i in 0..z.len() {
+                    trial[i] = z[i] + alpha * (p[i] - z[i]);
                 }
-                if change(z, alt, g, g_alt) < change(z, trial, g, g_trial) {
-                    trial.copy_from_slice(alt);
-                    g_trial.copy_from_slice(g_alt);
+            } else {
+                trial.copy_from_slice(p);
+            }
+            self.project(trial);
+            self.gradient(trial, g_trial);
+            // Near the solution the change of q sinks below its rounding level (a
+            // multiplier on a disc's rim has the norm c only to a few ulps, and g is large
+            // along it); there the residual decides.
+            let (dq, noise) = (change(z, trial, g, g_trial), rounding(z, trial, g, g_trial));
+            if dq < -noise || (alpha == 1.0 && dq <= noise && self.residual(trial, g_trial) < res) {
+                break true;
+            }
+            if alpha <= self.ops.settings.min_damping {
+                break false;
+            }
+            alpha *= 0.5;
+        })
+    }
+
+    /// The Newton step's prediction v = z − g/(ηδ), group by group: free (z₀ = 0, its rows
+    /// in Q), at zero (z₀ = 0), or on the rim of a disc (z₀ = c v̂ fixed, the tangent
+    /// t̂ ⊥ v̂ in Q with κ = ηδ (|v| − c)/c = ηδ (1/ρ − 1)).
+    fn prediction(&self, z: &[f64], eta: f64, b: &mut Buffers) {
+        let Buffers {
+            grad: g,
+            trial,
+            coords,
+            ..
+        } = b;
+        coords.clear();
+        for grp in self.groups {
+            let r = grp.rows();
+            let eta_delta = eta * grp.scale;
+            for i in r.clone() {
+                trial[i] = z[i] - g[i] / eta_delta;
+            }
+            match grp.project(&mut trial[r.clone()]) {
+                None => {
+                    trial[r.clone()].fill(0.0);
+                    coords.extend(grp.free());
+                }
+                // ρ = 0: a contact row at 0.
+                Some(rho) if rho > 0.0 => {
+                    let shift = eta_delta * (1.0 / rho - 1.0);
+                    coords.extend(grp.tangent(&trial[r], shift));
+                }
+                Some(_) => {}
+            }
+        }
+    }
+
+    /// The projected Newton step (Bertsekas 1982) from z: the binding groups move along
+    /// −g/δ (`binding_set`), the others take the face's Newton step; then the Armijo search
+    /// along the projection arc. Leaves the point in `trial` and returns its step α.
+    fn projected_newton(
+        &self,
+        z: &[f64],
+        widen: f64,
+        interpolate: bool,
+        b: &mut Buffers,
+    ) -> Result<f64> {
+        self.binding_set(z, widen, b);
+        let Buffers {
+            grad: g,
+            p,
+            coords,
+            newton,
+            ..
+        } = b;
+        newton_step(
+            &self.ops,
+            self.groups,
+            coords,
+            z,
+            Gradient::Known(g),
+            p,
+            newton,
+        )?;
+        Ok(self.arc_search(z, interpolate, b))
+    }
+
+    /// ε, the length of the projected gradient step z − Π(z − g/δ) (in `trial`), times
+    /// `widen`.
+    fn binding_width(&self, z: &[f64], widen: f64, b: &mut Buffers) -> f64 {
+        let mut eps: f64 = 0.0;
+        for grp in self.groups {
+            let r = grp.rows();
+            for i in r.clone() {
+                b.trial[i] = z[i] - b.grad[i] / grp.scale;
+            }
+            grp.project(&mut b.trial[r.clone()]);
+            eps = eps.max(r.fold(0.0, |a, i| a.hypot(z[i] - b.trial[i])));
+        }
+        eps * widen
+    }
+
+    /// The binding groups (within ε of the boundary in the direction the gradient pushes
+    /// them) and the projected Newton direction: `p` on the binding groups, the free
+    /// groups' rows and the rims' tangents in `coords`.
+    fn binding_set(&self, z: &[f64], widen: f64, b: &mut Buffers) {
+        let eps = self.binding_width(z, widen, b);
+        let Buffers {
+            grad: g,
+            trial,
+            p,
+            coords,
+            binding,
+            ..
+        } = b;
+        coords.clear();
+        for (grp, bind) in self.groups.iter().zip(binding.iter_mut()) {
+            let r = grp.rows();
+            let gn = norm(&g[r.clone()]);
+            *bind = gn > 0.0 && {
+                for i in r.clone() {
+                    trial[i] = z[i] - eps * g[i] / gn;
+                }
+                grp.not_interior(&trial[r.clone()])
+            };
+            // A binding disc multiplier pushed outward (μ = −g·ẑ > 0) goes to the rim
+            // radially and along it by Newton, with the curvature shift κ = μ/c.
+            let to_rim = match grp.set {
+                Set::Ball(c) if *bind && grp.len == 2 => {
+                    let nz = norm(&z[r.clone()]);
+                    let mu = -dot(&g[r.clone()], &z[r.clone()]) / nz;
+                    (mu > 0.0).then_some((c, nz, mu))
+                }
+                _ => None,
+            };
+            if let Some((c, nz, mu)) = to_rim {
+                for i in r.clone() {
+                    p[i] = (c / nz - 1.0) * z[i];
+                }
+                coords.extend(grp.tangent(&z[r], mu / c));
+            } else if *bind {
+                for i in r {
+                    p[i] = -g[i] / grp.scale;
+                }
+            } else {
+                p[r.clone()].fill(0.0);
+                coords.extend(grp.free());
+            }
+        }
+    }
+
+    /// The Armijo search along the projection arc z(α) = Π(z + α p): the point in `trial`,
+    /// its gradient in `grad_trial`; returns α.
+    fn arc_search(&self, z: &[f64], interpolate: bool, b: &mut Buffers) -> f64 {
+        let Buffers {
+            grad: g,
+            trial,
+            grad_trial: g_trial,
+            p,
+            binding,
+            ..
+        } = b;
+        let mut alpha = 1.0;
+        loop {
+            for i in 0..z.len() {
+                trial[i] = z[i] + alpha * p[i];
+            }
+            self.project(trial);
+            self.gradient(trial, g_trial);
+            let predicted: f64 = self
+                .groups
+                .iter()
+                .zip(binding.iter())
+                .map(|(grp, &bind)| {
+                    grp.rows()
+                        .map(|i| {
+                            if bind {
+                                g[i] * (z[i] - trial[i])
+                            } else {
+                                -alpha * g[i] * p[i]
+                            }
+                        })
+                        .sum::<f64>()
+                })
+                .sum();
+            let dq = change(z, trial, g, g_trial);
+            if -dq >= 1e-4 * predicted || alpha < 1e-12 {
+                return alpha;
+            }
+            alpha *= backtrack(dq, predicted, interpolate);
+        }
+    }
+
+    /// A projected Newton direction that needed a short step can stall on an
+    /// ill-conditioned D (thin slabs: flat tetrahedra), zigzagging at the edge of its
+    /// binding set. Then the projected gradient step z(β) = Π(z − β g/δ) with Armijo, which
+    /// decreases q in proportion to the residual, replaces `trial` when it does better.
+    fn projected_gradient(&self, z: &[f64], interpolate: bool, b: &mut Buffers) {
+        let Buffers {
+            grad: g,
+            trial,
+            grad_trial: g_trial,
+            alt,
+            grad_alt: g_alt,
+            ..
+        } = b;
+        let mut beta = 1.0;
+        loop {
+            for grp in self.groups {
+                for i in grp.rows() {
+                    alt[i] = z[i] - beta * g[i] / grp.scale;
                 }
             }
-            z.copy_from_slice(trial);
-            g.copy_from_slice(g_trial);
+            self.project(alt);
+            self.gradient(alt, g_alt);
+            let predicted: f64 = (0..z.len()).map(|i| g[i] * (z[i] - alt[i])).sum();
+            let dq = change(z, alt, g, g_alt);
+            if -dq >= 1e-4 * predicted || beta < 1e-12 {
+                break;
+            }
+            beta *= backtrack(dq, predicted, interpolate);
+        }
+        if change(z, alt, g, g_alt) < change(z, trial, g, g_trial) {
+            trial.copy_from_slice(alt);
+            g_trial.copy_from_slice(g_alt);
         }
     }
 }

@@ -113,9 +113,8 @@ use delassus::{column, Delassus};
 use faer::linalg::solvers::DenseSolveCore;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Side};
-use groups::{dot, Group, Set};
+use groups::{dot, Group};
 use iteration::Work;
-use newton::{NewtonFactor, Scratch};
 pub use settings::{DualSettings, NewtonForm};
 use std::ops::Range;
 
@@ -163,82 +162,10 @@ impl DualSolver {
     }
 
     fn build(factor: &Factor, rows: &Rows, settings: DualSettings) -> Self {
-        let (n, c, m) = (factor.dim(), factor.last(), rows.len());
-        let first = n - c;
-        let mut g = Mat::<f64>::zeros(c, m);
-        for (r, row) in rows.rows.iter().enumerate() {
-            for (dof, coef) in row.entries() {
-                let pos = factor.position(dof);
-                debug_assert!(pos >= first, "constrained dofs are ordered last");
-                g[(pos - first, r)] = coef;
-            }
-        }
-        let l_cc = factor.trailing_block();
-        solve_lower_triangular_in_place(l_cc.as_ref(), g.as_mut(), faer::get_global_parallelism());
-        let mut d = Mat::<f64>::zeros(m, m);
-        faer::linalg::matmul::matmul(
-            d.as_mut(),
-            Accum::Replace,
-            g.transpose(),
-            g.as_ref(),
-            1.0,
-            faer::get_global_parallelism(),
-        );
-        debug_assert!(rows.block <= 2, "friction blocks span a tangent plane");
-        let contact = (0..rows.n_contact).map(|i| (i..i + 1, Set::HalfLine));
-        let dependent = rows.dependent_nodes();
-        let friction = (0..rows.n_friction_nodes()).map(|j| {
-            let r = rows.friction_block(j);
-            let c = rows.rows[r.start].bound;
-            (r, Set::Ball(c))
-        });
-        let groups = contact
-            .chain(friction)
-            .map(|(r, set)| {
-                let scale = r.clone().map(|i| d[(i, i)]).sum::<f64>() / r.len() as f64;
-                let at_dependent = dependent.contains(&rows.rows[r.start].node);
-                Group {
-                    start: r.start,
-                    len: r.len(),
-                    set,
-                    scale,
-                    shift: if at_dependent {
-                        settings.dependent_shift * scale
-                    } else {
-                        0.0
-                    },
-                }
-            })
-            .collect::<Vec<_>>();
-        let work = Box::new(Work {
-            d: vec![0.0; m],
-            grad: vec![0.0; m],
-            trial: vec![0.0; m],
-            grad_trial: vec![0.0; m],
-            p: vec![0.0; m],
-            alt: vec![0.0; m],
-            grad_alt: vec![0.0; m],
-            coords: Vec::with_capacity(m),
-            binding: vec![false; groups.len()],
-            z_u: vec![0.0; m],
-            newton: Scratch {
-                u: Vec::with_capacity(m),
-                point: vec![0.0; m],
-                grad: vec![0.0; m],
-                sv: vec![0.0; m],
-                bv: vec![0.0; m],
-                h: Mat::new(),
-                factor: NewtonFactor {
-                    l: Mat::new(),
-                    form: None,
-                    coords: Vec::with_capacity(m),
-                    par_min: settings.par_min,
-                    pcg_max: settings.pcg_max,
-                },
-                gram_pair: Pair::default(),
-                counts: NewtonCounts::default(),
-            },
-        });
+        let (g, d) = condense(factor, rows);
+        let groups = groups::groups(rows, &d, settings.dependent_shift);
+        let m = rows.len();
+        let work = Box::new(Work::new(m, groups.len(), &settings));
         // B = D⁻¹ (m³ flops once) where the Woodbury form may be used: 3D, where the rim
         // tangents of sliding nodes make U small, and D definite. In 2D the direct form stays:
         // its systems are at most one boundary line's rows.
@@ -262,13 +189,13 @@ impl DualSolver {
             settings,
             groups,
             work,
-            y: vec![0.0; n],
+            y: vec![0.0; factor.dim()],
         }
     }
 
     /// The Newton systems solved so far, by form.
     pub fn newton_counts(&self) -> NewtonCounts {
-        self.work.newton.counts
+        self.work.buffers.newton.counts
     }
 
     pub fn solve(
@@ -317,4 +244,30 @@ impl DualSolver {
         factor.unpermute(&self.y, w);
         Ok(StepReport { iterations })
     }
+}
+
+/// G = L_CC⁻¹ E (|C|×m, E the rows' C-block in the factor's ordering) and D = GᵀG.
+fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
+    let (n, c, m) = (factor.dim(), factor.last(), rows.len());
+    let first = n - c;
+    let mut g = Mat::<f64>::zeros(c, m);
+    for (r, row) in rows.rows.iter().enumerate() {
+        for (dof, coef) in row.entries() {
+            let pos = factor.position(dof);
+            debug_assert!(pos >= first, "constrained dofs are ordered last");
+            g[(pos - first, r)] = coef;
+        }
+    }
+    let l_cc = factor.trailing_block();
+    solve_lower_triangular_in_place(l_cc.as_ref(), g.as_mut(), faer::get_global_parallelism());
+    let mut d = Mat::<f64>::zeros(m, m);
+    faer::linalg::matmul::matmul(
+        d.as_mut(),
+        Accum::Replace,
+        g.transpose(),
+        g.as_ref(),
+        1.0,
+        faer::get_global_parallelism(),
+    );
+    (g, d)
 }

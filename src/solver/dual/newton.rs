@@ -30,6 +30,29 @@ pub(super) struct Scratch {
     pub(super) counts: NewtonCounts,
 }
 
+impl Scratch {
+    /// The buffers for m multipliers.
+    pub(super) fn new(m: usize, settings: &DualSettings) -> Scratch {
+        Scratch {
+            u: Vec::with_capacity(m),
+            point: vec![0.0; m],
+            grad: vec![0.0; m],
+            sv: vec![0.0; m],
+            bv: vec![0.0; m],
+            h: Mat::new(),
+            factor: NewtonFactor {
+                l: Mat::new(),
+                form: None,
+                coords: Vec::with_capacity(m),
+                par_min: settings.par_min,
+                pcg_max: settings.pcg_max,
+            },
+            gram_pair: Pair::default(),
+            counts: NewtonCounts::default(),
+        }
+    }
+}
+
 /// Which matrix a cached factor belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Form {
