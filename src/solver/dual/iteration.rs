@@ -5,9 +5,9 @@
 //! (`projected_gradient`).
 
 use super::groups::{dot, norm, Coord, Group, Set};
-use super::newton::{axpy_columns, newton_step, Gradient, Operators, Scratch};
+use super::newton::{axpy_columns, newton_step, Gradient, Indefinite, Operators, Scratch};
 use super::{DualSettings, DualSolver};
-use crate::{Error, Result};
+use crate::solver::{StepReport, StepStatus};
 
 /// Vectors of a solve, kept between steps so that the iterations do not allocate them.
 pub(super) struct Work {
@@ -58,9 +58,9 @@ impl Work {
 }
 
 impl DualSolver {
-    /// Minimizes ½ zᵀDz − dᵀz over Z (d in `work.d`), from z (the warm start); returns the
-    /// number of iterations. Each iteration leaves its next iterate in `trial`.
-    pub(super) fn dual_solve(&mut self, z: &mut [f64]) -> Result<usize> {
+    /// Minimizes ½ zᵀDz − dᵀz over Z (d in `work.d`), from z (the warm start). Each
+    /// iteration leaves its next iterate in `trial`.
+    pub(super) fn dual_solve(&mut self, z: &mut [f64]) -> StepReport {
         let DualSolver {
             d,
             inverse,
@@ -101,6 +101,14 @@ impl DualSolver {
     }
 }
 
+/// What one iteration hands to the next.
+struct Carried {
+    /// The factor of ε (`DualSettings::widen`).
+    widen: f64,
+    /// Whether the Newton point was rejected (`DualSettings::eta`).
+    rejected: bool,
+}
+
 /// What stays fixed over a step's iterations.
 struct Iteration<'a> {
     ops: Operators<'a>,
@@ -111,46 +119,69 @@ struct Iteration<'a> {
 }
 
 impl Iteration<'_> {
-    /// The iterations from the warm start z to a point whose residual is at most `tol`;
-    /// their number.
-    fn run(&self, z: &mut [f64], b: &mut Buffers) -> Result<usize> {
-        let settings = self.ops.settings;
+    /// The iterations from the warm start z until the residual is at most `tol`, the
+    /// iteration limit is reached or a Newton matrix is indefinite.
+    fn run(&self, z: &mut [f64], b: &mut Buffers) -> StepReport {
+        let max_iterations = self.ops.settings.max_iterations;
         // Warm start: the previous multipliers, projected onto Z.
         self.project(z);
         self.gradient(z, &mut b.grad);
+        let mut carried = Carried {
+            widen: 1.0,
+            rejected: false,
+        };
         let mut iterations = 0;
-        // The factor of ε (`DualSettings::widen`).
-        let mut widen = 1.0;
-        // Whether the last iteration's Newton point was rejected (`DualSettings::eta`).
-        let mut rejected = false;
         loop {
             let res = self.residual(z, &b.grad);
-            if res <= self.tol {
-                return Ok(iterations);
-            }
-            if iterations == settings.max_iterations {
-                let (limit, scale) = (settings.max_iterations, self.scale);
-                return Err(Error::solve(format!(
-                    "the dual semismooth Newton method did not converge in {limit} \
-                     iterations (residual {res:e} relative to {scale:e}); \
-                     try [solver] contact = \"clarabel\""
-                )));
-            }
-            iterations += 1;
-            let eta = if rejected { 1.0 } else { settings.eta };
-            rejected = !self.newton_point(z, eta, res, b)?;
-            let interpolate = iterations <= settings.interpolated;
-            widen = if !rejected {
-                1.0
-            } else if self.projected_newton(z, widen, interpolate, b)? < settings.pg_switch {
-                self.projected_gradient(z, interpolate, b);
-                (widen * settings.widen).min(settings.max_widen)
+            let status = if res <= self.tol {
+                Some(StepStatus::Solved)
+            } else if iterations == max_iterations {
+                Some(StepStatus::MaxIterations {
+                    limit: max_iterations,
+                    residual: res,
+                    scale: self.scale,
+                })
             } else {
-                1.0
+                iterations += 1;
+                let step = self.iteration(z, res, iterations, &mut carried, b);
+                step.err().map(|Indefinite| StepStatus::NewtonIndefinite)
             };
+            if let Some(status) = status {
+                return StepReport {
+                    status,
+                    iterations,
+                    residual: res / self.scale.max(f64::MIN_POSITIVE),
+                };
+            }
             z.copy_from_slice(&b.trial);
             b.grad.copy_from_slice(&b.grad_trial);
         }
+    }
+
+    /// Iteration number `iteration` from z (residual `res`): the semismooth Newton point if
+    /// it is accepted, else the projected Newton step, and after a short one the projected
+    /// gradient step if that does better. The next iterate is left in `trial`.
+    fn iteration(
+        &self,
+        z: &[f64],
+        res: f64,
+        iteration: usize,
+        carried: &mut Carried,
+        b: &mut Buffers,
+    ) -> Result<(), Indefinite> {
+        let settings = self.ops.settings;
+        let eta = if carried.rejected { 1.0 } else { settings.eta };
+        carried.rejected = !self.newton_point(z, eta, res, b)?;
+        let interpolate = iteration <= settings.interpolated;
+        carried.widen = if !carried.rejected {
+            1.0
+        } else if self.projected_newton(z, carried.widen, interpolate, b)? < settings.pg_switch {
+            self.projected_gradient(z, interpolate, b);
+            (carried.widen * settings.widen).min(settings.max_widen)
+        } else {
+            1.0
+        };
+        Ok(())
     }
 
     /// v ← Π(v), group by group.
@@ -178,7 +209,13 @@ impl Iteration<'_> {
     /// Π(z + α(z⁺ − z)) for α = 1, ½, … down to `min_damping` (a damped trial costs one
     /// product with D, no factorization). True if a trial was accepted; it is in `trial`,
     /// its gradient in `grad_trial`. `res` is the residual at z.
-    fn newton_point(&self, z: &[f64], eta: f64, res: f64, b: &mut Buffers) -> Result<bool> {
+    fn newton_point(
+        &self,
+        z: &[f64],
+        eta: f64,
+        res: f64,
+        b: &mut Buffers,
+    ) -> Result<bool, Indefinite> {
         self.prediction(z, eta, b);
         let Buffers {
             grad: g,
@@ -265,7 +302,7 @@ impl Iteration<'_> {
         widen: f64,
         interpolate: bool,
         b: &mut Buffers,
-    ) -> Result<f64> {
+    ) -> Result<f64, Indefinite> {
         self.binding_set(z, widen, b);
         let Buffers {
             grad: g,

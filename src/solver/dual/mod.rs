@@ -107,7 +107,7 @@ mod settings;
 mod tests;
 
 use super::pair::Pair;
-use super::{Factor, Rows, StepReport};
+use super::{Factor, Rows, StepReport, StepStatus};
 use crate::Result;
 use delassus::{column, Delassus};
 use faer::linalg::solvers::DenseSolveCore;
@@ -205,7 +205,7 @@ impl DualSolver {
         b: &[f64],
         w: &mut [f64],
         z: &mut [f64],
-    ) -> Result<StepReport> {
+    ) -> StepReport {
         debug_assert_eq!(z.len(), rows.len());
         let (n, c) = (factor.dim(), factor.last());
         // Forward solve L y = b; d = Gᵀ y_C.
@@ -224,7 +224,10 @@ impl DualSolver {
         let large = m >= self.settings.split_rows;
         self.g_pair
             .both_if(large, || d_of(0..m / 2, d0), || d_of(m / 2..m, d1));
-        let iterations = self.dual_solve(z)?;
+        let report = self.dual_solve(z);
+        if report.status != StepStatus::Solved {
+            return report;
+        }
         // y_C ← y_C − G z (the two halves of y_C on two threads, each row's sum in column
         // order either way), then the backward solve Lᵀ w = y.
         let g = &self.g;
@@ -242,7 +245,7 @@ impl DualSolver {
             .both_if(large, || update(0..c / 2, y0), || update(c / 2..c, y1));
         factor.backward(&mut self.y);
         factor.unpermute(&self.y, w);
-        Ok(StepReport { iterations })
+        report
     }
 }
 

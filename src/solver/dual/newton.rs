@@ -4,7 +4,6 @@
 use super::delassus::{column, Delassus};
 use super::groups::{Coord, Group};
 use super::{DualSettings, NewtonCounts, NewtonForm, Pair};
-use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::{Mat, MatMut, Par};
@@ -74,6 +73,10 @@ pub(super) struct NewtonFactor {
     pub(super) pcg_max: usize,
 }
 
+/// A Newton matrix that is not positive definite to working precision
+/// (`StepStatus::NewtonIndefinite`).
+pub(super) struct Indefinite;
+
 /// What the Newton steps are solved with.
 pub(super) struct Operators<'a> {
     pub(super) d: &'a Delassus,
@@ -131,7 +134,7 @@ pub(super) fn newton_step(
     grad: Gradient,
     out: &mut [f64],
     s: &mut Scratch,
-) -> Result<()> {
+) -> Result<(), Indefinite> {
     let nq = coords.len();
     if nq == 0 {
         return Ok(());
@@ -173,7 +176,7 @@ fn woodbury_step(
     coords: &[Coord],
     z0: &[f64],
     s: &mut Scratch,
-) -> Result<Option<Mat<f64>>> {
+) -> Result<Option<Mat<f64>>, Indefinite> {
     gram(b, &s.u, &mut s.h, &s.gram_pair, ops.d.split_rows);
     let mut x = Mat::<f64>::zeros(coords.len(), 1);
     // In y = z − z₀: y⁺ = s − B U c, (UᵀBU + diag) c = Uᵀ s, x = Qᵀ y⁺, with s = z_u − z₀;
@@ -354,7 +357,7 @@ fn solve_cached(
     coords: &[Coord],
     h: &Mat<f64>,
     f: &mut NewtonFactor,
-) -> Result<Mat<f64>> {
+) -> Result<Mat<f64>, Indefinite> {
     let same_structure = f.form == Some(form)
         && f.coords.len() == coords.len()
         && f.coords
@@ -382,14 +385,7 @@ fn solve_cached(
         MemStack::new(&mut mem),
         Default::default(),
     )
-    .map_err(|_| {
-        Error::solve(
-            "the fast contact solver's Newton matrix (the constraint rows condensed through \
-             K_A⁻¹) is not positive definite to working precision, so a Newton step cannot \
-             be solved; set `[solver] contact = \"clarabel\"` to solve the step problem \
-             without it, and report the scene",
-        )
-    })?;
+    .map_err(|_| Indefinite)?;
     f.form = Some(form);
     f.coords.clear();
     f.coords.extend_from_slice(coords);
