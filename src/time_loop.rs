@@ -27,9 +27,9 @@ use crate::effects::{self, Effects};
 use crate::fem::{mul_add, Discretization, SymmetricPair};
 use crate::history::{History, LoopState, Plan, SavedLoop};
 use crate::scene::{self, Scene};
-use crate::solver::{Factor, Rows, StepReport, StepSolver};
+use crate::solver::{Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
 use crate::stability::Verdict;
-use crate::{Error, Result};
+use crate::Result;
 
 pub struct TimeLoop<'p> {
     scene: &'p Scene,
@@ -333,49 +333,51 @@ impl<'p> TimeLoop<'p> {
         for (b, g) in self.b.iter_mut().zip(&self.disc.g_f) {
             *b -= g;
         }
-        let report =
+        let mut report =
             self.solver
-                .solve(&self.factor, &self.rows, &self.b, &mut self.w, &mut self.z)?;
+                .solve(&self.factor, &self.rows, &self.b, &mut self.w, &mut self.z);
         // A solved step is trusted only if it is finite, bounded by its loads (`Growth`)
         // and keeps n·w ≤ 0 on Γ3,1 to the solver's tolerance.
         let u_max = max_abs(&h.u);
         let w_max = max_abs(&self.w);
-        if !(u_max.is_finite() && w_max.is_finite()) {
-            return Err(Error::solve(format!(
-                "the solution is not finite at step {}, t = {t} (max|u_n| = {u_max:e}, \
-                 max|w_n| = {w_max:e}); {}",
-                h.n,
-                remedy(h.k)
-            )));
-        }
-        if let Some(factor) = self.growth.record(h.n, u_max, load_max) {
-            return Err(Error::solve(format!(
-                "the solution grows without bound at step {}, t = {t}: max|u| = {u_max:e}, \
-                 {factor:.1e} times its size per unit load at t = {}; {}",
-                h.n,
-                ((h.n / 2).max(1).ilog2() as f64).exp2() * h.k,
-                remedy(h.k)
-            )));
-        }
-        let violation = self.rows.rows[..self.rows.n_contact]
-            .iter()
-            .map(|r| (r.apply(&self.w), r.node))
-            .fold((f64::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
         let mean_velocity = u_max / t.max(h.k);
-        if violation.0 > VIOLATION_TOLERANCE * w_max.max(mean_velocity) {
-            return Err(Error::solve(format!(
-                "the contact solver's answer violates n·w ≤ 0 on Γ3,1 by {:e} (max|w| = \
-                 {w_max:e}, max|u|/t = {mean_velocity:e}) at node {} at step {}, t = {t}; the results \
-                 cannot be trusted: try [solver] contact = \"{}\"",
-                violation.0,
-                violation.1,
-                h.n,
-                match self.scene.solver.contact {
-                    scene::ContactSolver::Fast => "clarabel",
-                    scene::ContactSolver::Clarabel => "fast",
+        if report.status == StepStatus::Solved {
+            report.status = if !(u_max.is_finite() && w_max.is_finite()) {
+                StepStatus::NotFinite { u_max, w_max }
+            } else if let Some(factor) = self.growth.record(h.n, u_max, load_max) {
+                let since = ((h.n / 2).max(1).ilog2() as f64).exp2() * h.k;
+                StepStatus::Diverged {
+                    u_max,
+                    factor,
+                    since,
                 }
-            )));
+            } else {
+                let (amount, node) = self.rows.rows[..self.rows.n_contact]
+                    .iter()
+                    .map(|r| (r.apply(&self.w), r.node))
+                    .fold((f64::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
+                if amount > VIOLATION_TOLERANCE * w_max.max(mean_velocity) {
+                    StepStatus::Violation {
+                        amount,
+                        node,
+                        w_max,
+                        mean_velocity,
+                    }
+                } else {
+                    StepStatus::Solved
+                }
+            };
         }
+        let other_solver = match self.scene.solver.contact {
+            scene::ContactSolver::Fast => "clarabel",
+            scene::ContactSolver::Clarabel => "fast",
+        };
+        report.check(&StepAt {
+            n: h.n,
+            t,
+            k: h.k,
+            other_solver,
+        })?;
         Ok(Step {
             n: h.n,
             t,
@@ -441,15 +443,6 @@ fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
     } else {
         m.into_iter().fold(0.0, f64::max)
     }
-}
-
-/// What to do about a run that blows up.
-fn remedy(k: f64) -> String {
-    format!(
-        "the step k = {k} may be too large for the explicit scheme (use more time steps or \
-         [scheme] history = \"implicit\"), or the data make the problem unstable (a \
-         relaxation kernel that amplifies, loads that grow without bound)"
-    )
 }
 
 /// What a run refuses before it factors anything (exit 2), for the memory plan it will run

@@ -16,7 +16,7 @@
 //! K_A w = b − Pᵀ(λ, γ) of `dual`: λ_i = y_i, γ_j = the tail (y_j1, …) of node j's SOC dual,
 //! whose head is y_j0 = c_j (the s_j column of the stationarity), so |γ_j| ≤ c_j.
 
-use super::{Rows, StepReport};
+use super::{Rows, StepReport, StepStatus};
 use crate::fem::Sparse;
 use crate::{Error, Result};
 use clarabel::algebra::CscMatrix;
@@ -102,13 +102,7 @@ impl ConicSolver {
         Ok(ConicSolver { solver, n, q })
     }
 
-    pub fn solve(
-        &mut self,
-        rows: &Rows,
-        b: &[f64],
-        w: &mut [f64],
-        z: &mut [f64],
-    ) -> Result<StepReport> {
+    pub fn solve(&mut self, rows: &Rows, b: &[f64], w: &mut [f64], z: &mut [f64]) -> StepReport {
         // The step problem is positively homogeneous in (b, c): solve it for (b, c)/σ with
         // σ = max|b| so that clarabel's tolerances see O(1) data, then scale back.
         let sigma = b.iter().fold(0.0f64, |a, v| a.max(v.abs()));
@@ -122,17 +116,20 @@ impl ConicSolver {
         }
         self.solver
             .update_q(&self.q)
-            .map_err(|e| Error::solve(format!("clarabel update failed: {e:?}")))?;
+            .expect("q keeps the length it was built with, and presolve is off");
         self.solver.solve();
         let sol = &self.solver.solution;
+        let mut report = StepReport {
+            status: StepStatus::Solved,
+            iterations: sol.iterations as usize,
+            residual: sol.r_prim.max(sol.r_dual),
+        };
         if !matches!(
             sol.status,
             SolverStatus::Solved | SolverStatus::AlmostSolved
         ) {
-            return Err(Error::solve(format!(
-                "clarabel did not solve the step problem: status {:?} after {} iterations",
-                sol.status, sol.iterations
-            )));
+            report.status = StepStatus::Unsolved(sol.status);
+            return report;
         }
         for (wi, x) in w.iter_mut().zip(&sol.x[..self.n]) {
             *wi = sigma * x;
@@ -148,8 +145,6 @@ impl ConicSolver {
                 *gk = sigma * yk;
             }
         }
-        Ok(StepReport {
-            iterations: sol.iterations as usize,
-        })
+        report
     }
 }

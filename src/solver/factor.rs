@@ -580,14 +580,14 @@ impl Factor {
         self.inv[dof]
     }
 
-    /// out[i] = x[fwd[i]]: into the factor's ordering.
+    /// `out[i] = x[fwd[i]]`: into the factor's ordering.
     pub fn permute(&self, x: &[f64], out: &mut [f64]) {
         for (o, &d) in out.iter_mut().zip(&self.fwd) {
             *o = x[d];
         }
     }
 
-    /// out[d] = x[inv[d]]: back to the original ordering.
+    /// `out[d] = x[inv[d]]`: back to the original ordering.
     pub fn unpermute(&self, x: &[f64], out: &mut [f64]) {
         for (o, &i) in out.iter_mut().zip(&self.inv) {
             *o = x[i];

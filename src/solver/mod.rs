@@ -13,16 +13,40 @@
 //! stored factor per step, no optimization solver built); otherwise the condensed dual
 //! semismooth Newton method (`dual`, default) or clarabel on the whole problem (`conic`, the
 //! cross-check).
+//!
+//! # Solvers, statuses and how a new one plugs in
+//!
+//! The time loop calls `StepSolver::solve` once per step and gets a `StepReport`: a
+//! `StepStatus` (solved, the iteration limit, an indefinite Newton matrix, clarabel's
+//! failure), the iterations and the final residual. It adds what its own checks of the
+//! answer find (not finite, growing without bound, n·w > 0 on Γ3,1) to the status and
+//! hands the report to `StepReport::check`, the one place where a status becomes an error.
+//!
+//! A second contact solver (a matrix-free dual for large contact boundaries, say) is a
+//! type in its own module, built from the run's `Factor` and `Rows`, with its settings as a
+//! struct with documented defaults and `validate` (as `dual::DualSettings`), and
+//! `solve(&mut self, factor, rows, b, w, z) -> StepReport` that warm starts from z. It
+//! becomes a variant of `StepSolver` (its `name` and its arm in `solve`), and
+//! `effects::step_solver` picks it; an outcome no `StepStatus` covers is a new variant with
+//! its message in `status.rs`. The time loop does not change.
+//!
+//! The linear backend is `Factor`: the time loop builds it (`Factor::new`) and passes it to
+//! `solve`. `Linear` needs only its solves with K_A, `Conic` none; the dual condenses
+//! through its structure (the forward and backward solves with the constrained dofs last,
+//! the trailing block L_CC). A second backend (an iterative or a distributed K_A solve)
+//! turns `Factor` into an enum over the backends with the same `new` and `solve`, which the
+//! time loop keeps calling; the solvers that need a triangular factor ask it for one.
 
 pub mod conic;
 pub mod dual;
 pub mod factor;
 mod ordering;
 mod pair;
+mod status;
 
 use crate::fem::NodalRow;
-use crate::Result;
 pub use factor::Factor;
+pub use status::{StepAt, StepReport, StepStatus};
 
 /// The constraint rows of a run: contact rows (multiplier λ_i ≥ 0) first, then friction
 /// rows in blocks of `block` = d − 1 consecutive rows per node (the tangents τ_i1, …), whose
@@ -138,13 +162,6 @@ impl Rows {
     }
 }
 
-/// What a step's solve did.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct StepReport {
-    /// Newton iterations (dual) or interior-point iterations (clarabel); 0 for linear.
-    pub iterations: usize,
-}
-
 /// The solver of a run, picked by its effects.
 pub enum StepSolver {
     /// w = K_A⁻¹ b: no contact and no friction.
@@ -168,7 +185,8 @@ impl StepSolver {
     }
 
     /// Solves step n: `b` is b_n, `w` receives w_n, `z` the multipliers (λ on contact rows,
-    /// γ on friction rows; in: the previous step's, used as a warm start).
+    /// γ on friction rows; in: the previous step's, used as a warm start). w and z are the
+    /// step's solution only where the report's status is `Solved`.
     pub fn solve(
         &mut self,
         factor: &Factor,
@@ -176,12 +194,12 @@ impl StepSolver {
         b: &[f64],
         w: &mut [f64],
         z: &mut [f64],
-    ) -> Result<StepReport> {
+    ) -> StepReport {
         match self {
             StepSolver::Linear => {
                 w.copy_from_slice(b);
                 factor.solve(w);
-                Ok(StepReport::default())
+                StepReport::default()
             }
             StepSolver::Dual(d) => d.solve(factor, rows, b, w, z),
             StepSolver::Conic(c) => c.solve(rows, b, w, z),
@@ -399,16 +417,16 @@ mod tests {
         /// The dual solution (w, z) from the warm start z, and its iterations.
         fn dual(&mut self, p: &Problem, b: &[f64], z: &mut [f64]) -> (Vec<f64>, usize) {
             let mut w = vec![0.0; b.len()];
-            let report = self
-                .dual
-                .solve(&self.factor, &p.rows, b, &mut w, z)
-                .unwrap();
+            let report = self.dual.solve(&self.factor, &p.rows, b, &mut w, z);
+            assert_eq!(report.status, StepStatus::Solved);
+            assert!(report.residual <= 1e-12, "{report:?}");
             (w, report.iterations)
         }
 
         fn conic(&mut self, p: &Problem, b: &[f64]) -> (Vec<f64>, Vec<f64>) {
             let (mut w, mut z) = (vec![0.0; b.len()], vec![0.0; p.rows.len()]);
-            self.conic.solve(&p.rows, b, &mut w, &mut z).unwrap();
+            let report = self.conic.solve(&p.rows, b, &mut w, &mut z);
+            assert_eq!(report.status, StepStatus::Solved);
             (w, z)
         }
     }
@@ -488,13 +506,21 @@ mod tests {
     /// is really taken when forced and never in the direct form.
     #[test]
     fn newton_forms_agree_in_3d() {
-        use dual::{DualSolver, NewtonForm};
+        use dual::{DualSettings, DualSolver, NewtonForm};
         for seed in [1, 2, 3] {
             let p = lattice(3, 6, 3, seed);
             let mut s = Solvers::new(&p);
             let mut forms = [NewtonForm::Woodbury, NewtonForm::Direct].map(|form| {
                 (
-                    DualSolver::with_form(&s.factor, &p.rows, form),
+                    DualSolver::with_settings(
+                        &s.factor,
+                        &p.rows,
+                        DualSettings {
+                            newton_form: form,
+                            ..Default::default()
+                        },
+                    )
+                    .unwrap(),
                     vec![0.0; p.rows.len()],
                 )
             });
@@ -511,7 +537,8 @@ mod tests {
                 let (wc, zc) = s.conic(&p, &b);
                 let solved = forms.each_mut().map(|(dual, z)| {
                     let mut w = vec![0.0; b.len()];
-                    dual.solve(&s.factor, &p.rows, &b, &mut w, z).unwrap();
+                    let report = dual.solve(&s.factor, &p.rows, &b, &mut w, z);
+                    assert_eq!(report.status, StepStatus::Solved);
                     w
                 });
                 for (w, (_, z)) in solved.iter().zip(&forms) {
@@ -577,6 +604,41 @@ mod tests {
             assert!(dw <= 1e-14 && dz <= 1e-14, "{dw:e} {dz:e}");
             assert!(rel_diff(&w_exact, &wc) <= 1e-8 && rel_diff(&g_exact, &zc) <= 1e-8);
         }
+    }
+
+    /// A dual solve that reaches its iteration limit reports it as a status with its
+    /// residual, and the status becomes the run's error (exit 1) that names the limit.
+    #[test]
+    fn the_iteration_limit_is_a_status() {
+        let p = lattice(3, 5, 3, 1);
+        let factor = Factor::new(&p.k, &p.rows.dofs()).unwrap();
+        let settings = dual::DualSettings {
+            max_iterations: 1,
+            ..Default::default()
+        };
+        let mut dual = dual::DualSolver::with_settings(&factor, &p.rows, settings).unwrap();
+        let (mut w, mut z) = (vec![0.0; p.b.len()], vec![0.0; p.rows.len()]);
+        let report = dual.solve(&factor, &p.rows, &p.b, &mut w, &mut z);
+        let StepStatus::MaxIterations {
+            limit, residual, ..
+        } = report.status
+        else {
+            panic!("{report:?}");
+        };
+        assert_eq!((limit, report.iterations), (1, 1));
+        assert!(residual > 0.0 && report.residual > 1e-12, "{report:?}");
+        let at = StepAt {
+            n: 3,
+            t: 0.5,
+            k: 0.125,
+            other_solver: "clarabel",
+        };
+        let err = report.check(&at).unwrap_err();
+        assert_eq!(err.exit_code(), 1);
+        assert!(
+            err.to_string().contains("did not converge in 1 iterations"),
+            "{err}"
+        );
     }
 
     /// Turns every tangential load of the top layer by `angle` about the z axis

@@ -1,0 +1,505 @@
+//! The iteration of the dual solve (the module doc's method), as a loop over its phases:
+//! the stopping test, the semismooth Newton point and its damping (`newton_point`), else the
+//! projected Newton step with its Armijo search along the projection arc
+//! (`projected_newton`), and after a short one the projected gradient step
+//! (`projected_gradient`).
+
+use super::groups::{dot, norm, Coord, Group, Set};
+use super::newton::{axpy_columns, newton_step, Gradient, Indefinite, Operators, Scratch};
+use super::{DualSettings, DualSolver};
+use crate::solver::{StepReport, StepStatus};
+
+/// Vectors of a solve, kept between steps so that the iterations do not allocate them.
+pub(super) struct Work {
+    /// d = P K_A⁻¹ b.
+    pub(super) d: Vec<f64>,
+    /// z_u = B d, the unconstrained minimizer of q, when B = D⁻¹ is kept.
+    pub(super) z_u: Vec<f64>,
+    pub(super) buffers: Buffers,
+}
+
+/// The vectors the phases of an iteration fill.
+pub(super) struct Buffers {
+    /// g = D z − d at the iterate, and at the trial point.
+    pub(super) grad: Vec<f64>,
+    pub(super) trial: Vec<f64>,
+    pub(super) grad_trial: Vec<f64>,
+    /// The Newton point, or the projected Newton direction.
+    pub(super) p: Vec<f64>,
+    /// The projected gradient trial point and its gradient.
+    pub(super) alt: Vec<f64>,
+    pub(super) grad_alt: Vec<f64>,
+    pub(super) coords: Vec<Coord>,
+    /// Per group: binding (moving along −g/δ) in the projected Newton step.
+    pub(super) binding: Vec<bool>,
+    /// What the Newton steps need besides D: see `newton_step`.
+    pub(super) newton: Scratch,
+}
+
+impl Work {
+    /// The buffers of a solve of m multipliers in `groups` groups.
+    pub(super) fn new(m: usize, groups: usize, settings: &DualSettings) -> Work {
+        Work {
+            d: vec![0.0; m],
+            z_u: vec![0.0; m],
+            buffers: Buffers {
+                grad: vec![0.0; m],
+                trial: vec![0.0; m],
+                grad_trial: vec![0.0; m],
+                p: vec![0.0; m],
+                alt: vec![0.0; m],
+                grad_alt: vec![0.0; m],
+                coords: Vec::with_capacity(m),
+                binding: vec![false; groups],
+                newton: Scratch::new(m, settings),
+            },
+        }
+    }
+}
+
+impl DualSolver {
+    /// Minimizes ½ zᵀDz − dᵀz over Z (d in `work.d`), from z (the warm start). Each
+    /// iteration leaves its next iterate in `trial`.
+    pub(super) fn dual_solve(&mut self, z: &mut [f64]) -> StepReport {
+        let DualSolver {
+            d,
+            inverse,
+            settings,
+            groups,
+            work,
+            ..
+        } = self;
+        let Work {
+            d: dvec,
+            z_u,
+            buffers: b,
+        } = &mut **work;
+        // A factorization is reused within the step only, so that a run resumed from a
+        // checkpoint (which starts with no factor) repeats the uninterrupted run bit
+        // for bit.
+        b.newton.factor.form = None;
+        let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let tol = settings.tolerance * scale.max(f64::MIN_POSITIVE);
+        if let Some(inverse) = inverse {
+            // z_u = B d (B symmetric: column j of B is its row j).
+            z_u.fill(0.0);
+            axpy_columns(inverse, dvec.iter().copied().enumerate(), z_u);
+        }
+        let it = Iteration {
+            ops: Operators {
+                d,
+                dvec,
+                woodbury: inverse.as_ref().map(|b| (b, &z_u[..])),
+                settings,
+                accuracy: settings.newton_accuracy * tol,
+            },
+            groups,
+            scale,
+            tol,
+        };
+        it.run(z, b)
+    }
+}
+
+/// What one iteration hands to the next.
+struct Carried {
+    /// The factor of ε (`DualSettings::widen`).
+    widen: f64,
+    /// Whether the Newton point was rejected (`DualSettings::eta`).
+    rejected: bool,
+}
+
+/// What stays fixed over a step's iterations.
+struct Iteration<'a> {
+    ops: Operators<'a>,
+    groups: &'a [Group],
+    /// max|d|, and the residual at which the iteration stops.
+    scale: f64,
+    tol: f64,
+}
+
+impl Iteration<'_> {
+    /// The iterations from the warm start z until the residual is at most `tol`, the
+    /// iteration limit is reached or a Newton matrix is indefinite.
+    fn run(&self, z: &mut [f64], b: &mut Buffers) -> StepReport {
+        let max_iterations = self.ops.settings.max_iterations;
+        // Warm start: the previous multipliers, projected onto Z.
+        self.project(z);
+        self.gradient(z, &mut b.grad);
+        let mut carried = Carried {
+            widen: 1.0,
+            rejected: false,
+        };
+        let mut iterations = 0;
+        loop {
+            let res = self.residual(z, &b.grad);
+            let status = if res <= self.tol {
+                Some(StepStatus::Solved)
+            } else if iterations == max_iterations {
+                Some(StepStatus::MaxIterations {
+                    limit: max_iterations,
+                    residual: res,
+                    scale: self.scale,
+                })
+            } else {
+                iterations += 1;
+                let step = self.iteration(z, res, iterations, &mut carried, b);
+                step.err().map(|Indefinite| StepStatus::NewtonIndefinite)
+            };
+            if let Some(status) = status {
+                return StepReport {
+                    status,
+                    iterations,
+                    residual: res / self.scale.max(f64::MIN_POSITIVE),
+                };
+            }
+            z.copy_from_slice(&b.trial);
+            b.grad.copy_from_slice(&b.grad_trial);
+        }
+    }
+
+    /// Iteration number `iteration` from z (residual `res`): the semismooth Newton point if
+    /// it is accepted, else the projected Newton step, and after a short one the projected
+    /// gradient step if that does better. The next iterate is left in `trial`.
+    fn iteration(
+        &self,
+        z: &[f64],
+        res: f64,
+        iteration: usize,
+        carried: &mut Carried,
+        b: &mut Buffers,
+    ) -> Result<(), Indefinite> {
+        let settings = self.ops.settings;
+        let eta = if carried.rejected { 1.0 } else { settings.eta };
+        carried.rejected = !self.newton_point(z, eta, res, b)?;
+        let interpolate = iteration <= settings.interpolated;
+        carried.widen = if !carried.rejected {
+            1.0
+        } else if self.projected_newton(z, carried.widen, interpolate, b)? < settings.pg_switch {
+            self.projected_gradient(z, interpolate, b);
+            (carried.widen * settings.widen).min(settings.max_widen)
+        } else {
+            1.0
+        };
+        Ok(())
+    }
+
+    /// v ← Π(v), group by group.
+    fn project(&self, v: &mut [f64]) {
+        for grp in self.groups {
+            grp.project(&mut v[grp.rows()]);
+        }
+    }
+
+    /// g = D z − d.
+    fn gradient(&self, z: &[f64], g: &mut [f64]) {
+        self.ops.d.gradient(z, self.ops.dvec, g);
+    }
+
+    /// The stopping test's residual at z (the module doc).
+    fn residual(&self, z: &[f64], g: &[f64]) -> f64 {
+        self.groups
+            .iter()
+            .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()], self.ops.settings.rim))
+            .fold(0.0f64, f64::max)
+    }
+
+    /// The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`, the
+    /// columns of Q in `coords`, the Newton point z⁺ in `p`; then damped, trial =
+    /// Π(z + α(z⁺ − z)) for α = 1, ½, … down to `min_damping` (a damped trial costs one
+    /// product with D, no factorization). True if a trial was accepted; it is in `trial`,
+    /// its gradient in `grad_trial`. `res` is the residual at z.
+    fn newton_point(
+        &self,
+        z: &[f64],
+        eta: f64,
+        res: f64,
+        b: &mut Buffers,
+    ) -> Result<bool, Indefinite> {
+        self.prediction(z, eta, b);
+        let Buffers {
+            grad: g,
+            trial,
+            grad_trial: g_trial,
+            p,
+            coords,
+            newton,
+            ..
+        } = b;
+        p.copy_from_slice(trial);
+        newton_step(
+            &self.ops,
+            self.groups,
+            coords,
+            trial,
+            Gradient::Unknown(g_trial),
+            p,
+            newton,
+        )?;
+        let mut alpha = 1.0;
+        Ok(loop {
+            if alpha < 1.0 {
+                for i in 0..z.len() {
+                    trial[i] = z[i] + alpha * (p[i] - z[i]);
+                }
+            } else {
+                trial.copy_from_slice(p);
+            }
+            self.project(trial);
+            self.gradient(trial, g_trial);
+            // Near the solution the change of q sinks below its rounding level (a
+            // multiplier on a disc's rim has the norm c only to a few ulps, and g is large
+            // along it); there the residual decides.
+            let (dq, noise) = (change(z, trial, g, g_trial), rounding(z, trial, g, g_trial));
+            if dq < -noise || (alpha == 1.0 && dq <= noise && self.residual(trial, g_trial) < res) {
+                break true;
+            }
+            if alpha <= self.ops.settings.min_damping {
+                break false;
+            }
+            alpha *= 0.5;
+        })
+    }
+
+    /// The Newton step's prediction v = z − g/(ηδ), group by group: free (z₀ = 0, its rows
+    /// in Q), at zero (z₀ = 0), or on the rim of a disc (z₀ = c v̂ fixed, the tangent
+    /// t̂ ⊥ v̂ in Q with κ = ηδ (|v| − c)/c = ηδ (1/ρ − 1)).
+    fn prediction(&self, z: &[f64], eta: f64, b: &mut Buffers) {
+        let Buffers {
+            grad: g,
+            trial,
+            coords,
+            ..
+        } = b;
+        coords.clear();
+        for grp in self.groups {
+            let r = grp.rows();
+            let eta_delta = eta * grp.scale;
+            for i in r.clone() {
+                trial[i] = z[i] - g[i] / eta_delta;
+            }
+            match grp.project(&mut trial[r.clone()]) {
+                None => {
+                    trial[r.clone()].fill(0.0);
+                    coords.extend(grp.free());
+                }
+                // ρ = 0: a contact row at 0.
+                Some(rho) if rho > 0.0 => {
+                    let shift = eta_delta * (1.0 / rho - 1.0);
+                    coords.extend(grp.tangent(&trial[r], shift));
+                }
+                Some(_) => {}
+            }
+        }
+    }
+
+    /// The projected Newton step (Bertsekas 1982) from z: the binding groups move along
+    /// −g/δ (`binding_set`), the others take the face's Newton step; then the Armijo search
+    /// along the projection arc. Leaves the point in `trial` and returns its step α.
+    fn projected_newton(
+        &self,
+        z: &[f64],
+        widen: f64,
+        interpolate: bool,
+        b: &mut Buffers,
+    ) -> Result<f64, Indefinite> {
+        self.binding_set(z, widen, b);
+        let Buffers {
+            grad: g,
+            p,
+            coords,
+            newton,
+            ..
+        } = b;
+        newton_step(
+            &self.ops,
+            self.groups,
+            coords,
+            z,
+            Gradient::Known(g),
+            p,
+            newton,
+        )?;
+        Ok(self.arc_search(z, interpolate, b))
+    }
+
+    /// ε, the length of the projected gradient step z − Π(z − g/δ) (in `trial`), times
+    /// `widen`.
+    fn binding_width(&self, z: &[f64], widen: f64, b: &mut Buffers) -> f64 {
+        let mut eps: f64 = 0.0;
+        for grp in self.groups {
+            let r = grp.rows();
+            for i in r.clone() {
+                b.trial[i] = z[i] - b.grad[i] / grp.scale;
+            }
+            grp.project(&mut b.trial[r.clone()]);
+            eps = eps.max(r.fold(0.0, |a, i| a.hypot(z[i] - b.trial[i])));
+        }
+        eps * widen
+    }
+
+    /// The binding groups (within ε of the boundary in the direction the gradient pushes
+    /// them) and the projected Newton direction: `p` on the binding groups, the free
+    /// groups' rows and the rims' tangents in `coords`.
+    fn binding_set(&self, z: &[f64], widen: f64, b: &mut Buffers) {
+        let eps = self.binding_width(z, widen, b);
+        let Buffers {
+            grad: g,
+            trial,
+            p,
+            coords,
+            binding,
+            ..
+        } = b;
+        coords.clear();
+        for (grp, bind) in self.groups.iter().zip(binding.iter_mut()) {
+            let r = grp.rows();
+            let gn = norm(&g[r.clone()]);
+            *bind = gn > 0.0 && {
+                for i in r.clone() {
+                    trial[i] = z[i] - eps * g[i] / gn;
+                }
+                grp.not_interior(&trial[r.clone()])
+            };
+            // A binding disc multiplier pushed outward (μ = −g·ẑ > 0) goes to the rim
+            // radially and along it by Newton, with the curvature shift κ = μ/c.
+            let to_rim = match grp.set {
+                Set::Ball(c) if *bind && grp.len == 2 => {
+                    let nz = norm(&z[r.clone()]);
+                    let mu = -dot(&g[r.clone()], &z[r.clone()]) / nz;
+                    (mu > 0.0).then_some((c, nz, mu))
+                }
+                _ => None,
+            };
+            if let Some((c, nz, mu)) = to_rim {
+                for i in r.clone() {
+                    p[i] = (c / nz - 1.0) * z[i];
+                }
+                coords.extend(grp.tangent(&z[r], mu / c));
+            } else if *bind {
+                for i in r {
+                    p[i] = -g[i] / grp.scale;
+                }
+            } else {
+                p[r.clone()].fill(0.0);
+                coords.extend(grp.free());
+            }
+        }
+    }
+
+    /// The Armijo search along the projection arc z(α) = Π(z + α p): the point in `trial`,
+    /// its gradient in `grad_trial`; returns α.
+    fn arc_search(&self, z: &[f64], interpolate: bool, b: &mut Buffers) -> f64 {
+        let Buffers {
+            grad: g,
+            trial,
+            grad_trial: g_trial,
+            p,
+            binding,
+            ..
+        } = b;
+        let mut alpha = 1.0;
+        loop {
+            for i in 0..z.len() {
+                trial[i] = z[i] + alpha * p[i];
+            }
+            self.project(trial);
+            self.gradient(trial, g_trial);
+            let predicted: f64 = self
+                .groups
+                .iter()
+                .zip(binding.iter())
+                .map(|(grp, &bind)| {
+                    grp.rows()
+                        .map(|i| {
+                            if bind {
+                                g[i] * (z[i] - trial[i])
+                            } else {
+                                -alpha * g[i] * p[i]
+                            }
+                        })
+                        .sum::<f64>()
+                })
+                .sum();
+            let dq = change(z, trial, g, g_trial);
+            if -dq >= 1e-4 * predicted || alpha < 1e-12 {
+                return alpha;
+            }
+            alpha *= backtrack(dq, predicted, interpolate);
+        }
+    }
+
+    /// A projected Newton direction that needed a short step can stall on an
+    /// ill-conditioned D (thin slabs: flat tetrahedra), zigzagging at the edge of its
+    /// binding set. Then the projected gradient step z(β) = Π(z − β g/δ) with Armijo, which
+    /// decreases q in proportion to the residual, replaces `trial` when it does better.
+    fn projected_gradient(&self, z: &[f64], interpolate: bool, b: &mut Buffers) {
+        let Buffers {
+            grad: g,
+            trial,
+            grad_trial: g_trial,
+            alt,
+            grad_alt: g_alt,
+            ..
+        } = b;
+        let mut beta = 1.0;
+        loop {
+            for grp in self.groups {
+                for i in grp.rows() {
+                    alt[i] = z[i] - beta * g[i] / grp.scale;
+                }
+            }
+            self.project(alt);
+            self.gradient(alt, g_alt);
+            let predicted: f64 = (0..z.len()).map(|i| g[i] * (z[i] - alt[i])).sum();
+            let dq = change(z, alt, g, g_alt);
+            if -dq >= 1e-4 * predicted || beta < 1e-12 {
+                break;
+            }
+            beta *= backtrack(dq, predicted, interpolate);
+        }
+        if change(z, alt, g, g_alt) < change(z, trial, g, g_trial) {
+            trial.copy_from_slice(alt);
+            g_trial.copy_from_slice(g_alt);
+        }
+    }
+}
+
+/// The next trial of an Armijo search as a fraction of the last trial's step α: ½, or if
+/// `interpolate` (the first `DualSettings::interpolated` iterations of a step) the minimizer
+/// of the quadratic in α through q at the start, with slope −`predicted`/α there (the
+/// first-order decrease the search compares with), and through the change `dq` of q at α
+/// (Nocedal & Wright, Numerical Optimization, (3.58)), kept within [0.1, 0.5]; ½ if that
+/// quadratic has no minimizer. q is quadratic, so along a stretch of the arc where the
+/// projection leaves the same groups fixed this lands at the minimizer at once, where
+/// halving takes several products with D.
+fn backtrack(dq: f64, predicted: f64, interpolate: bool) -> f64 {
+    let t = predicted / (2.0 * (dq + predicted));
+    if interpolate && t > 0.0 {
+        t.clamp(0.1, 0.5)
+    } else {
+        0.5
+    }
+}
+
+/// q(t) − q(z) = (t − z)·(g(z) + g(t))/2 for the quadratic q: exact up to the rounding of
+/// the gradients, where the difference of two objective values would lose it to cancellation.
+fn change(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
+    0.5 * z
+        .iter()
+        .zip(t)
+        .zip(g.iter().zip(g_t))
+        .map(|((z, t), (g, g_t))| (t - z) * (g + g_t))
+        .sum::<f64>()
+}
+
+/// The rounding level of `change`: 8 ε Σ (|z_i| + |t_i|)(|g_i| + |g_t,i|), for errors of
+/// relative size ε in z and t.
+fn rounding(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
+    8.0 * f64::EPSILON
+        * z.iter()
+            .zip(t)
+            .zip(g.iter().zip(g_t))
+            .map(|((z, t), (g, g_t))| (z.abs() + t.abs()) * (g.abs() + g_t.abs()))
+            .sum::<f64>()
+}

@@ -1,0 +1,187 @@
+//! The tuning of the dual method, one typed value per choice the method makes (Clarabel's
+//! `DefaultSettings` is the model). No scene key sets them (DESIGN.md is the contract): a run
+//! uses `DualSettings::default()`, whose values are the ones `tests/golden.rs` pins bit for
+//! bit; tests pick others. The measurements behind each default are in docs/performance.md,
+//! "Contact solver tuning".
+
+use crate::{Error, Result};
+
+/// Which form the Newton systems are solved in (see `newton::newton_step`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NewtonForm {
+    /// In 3D, whichever form the flop estimate finds cheaper, iteration by iteration; in 2D
+    /// the direct form (the default).
+    Cheaper,
+    /// Always the direct form.
+    Direct,
+    /// The Woodbury form whenever B exists (tests).
+    Woodbury,
+}
+
+/// The settings of a `DualSolver`; `validate` checks the ranges given with each field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DualSettings {
+    /// Relative tolerance of the dual optimality conditions, in units of the velocities P w:
+    /// a step is solved when the residual of the module doc's stopping test is at most
+    /// `tolerance` · max|d|. Default 1e-12; in (0, 1).
+    pub tolerance: f64,
+    /// A step's iterations at most; reaching it fails the step (exit 1), so the limit only
+    /// bounds how long a failing step takes (thin plates need up to 776). Default 2000; ≥ 1.
+    pub max_iterations: usize,
+    /// η of the Newton step's prediction v = z − g/(ηδ): large, so that the prediction
+    /// follows the iterate and few groups are predicted off their set; the iteration after
+    /// a rejected Newton point predicts with η = 1. The answer does not depend on it.
+    /// Default 64; > 0.
+    pub eta: f64,
+    /// The shortest damped Newton step Π(z + α(z⁺ − z)) tried before the projected Newton
+    /// step (α = 1, ½, … down to it). Default 0.25; in (0, 1].
+    pub min_damping: f64,
+    /// A projected Newton step α shorter than this also tries the projected gradient step
+    /// and widens the next binding set (`widen`). Default 1e-3; in (0, 1).
+    pub pg_switch: f64,
+    /// After a projected Newton step shorter than `pg_switch`, the next binding set is this
+    /// many times wider (ε ← widen·ε), so that groups near the boundary that stopped the step
+    /// are held: the thin slabs' steps zigzagged without it. Default 3; ≥ 1.
+    pub widen: f64,
+    /// The largest factor of ε (`widen`). Default 1e8; ≥ 1.
+    pub max_widen: f64,
+    /// The Armijo searches interpolate (`iteration::backtrack`) in the first this many
+    /// iterations of a step and halve after them: interpolation throughout zigzags on an
+    /// ill-conditioned D as exact line searches do. Default 20.
+    pub interpolated: usize,
+    /// |γ_j| ≥ `rim` · c_j counts as on the rim: a projected disc multiplier c v̂ has the
+    /// norm c only up to a few roundings. Default 1 − 8ε; in (0, 1].
+    pub rim: f64,
+    /// ρ: the relative Newton shift ρ δ_j of the groups at nodes with dependent rows (the
+    /// module doc): far above the rounding level of the factorizations and of g, far below
+    /// the curvature of independent rows. Default 1e-8; in (0, 1).
+    pub dependent_shift: f64,
+    /// A Woodbury solve is accepted when its Newton equations hold to this fraction of the
+    /// dual's tolerance, so that its inexactness cannot reach the stopping test. Default
+    /// 1e-2; in (0, 1].
+    pub newton_accuracy: f64,
+    /// Refinements of a Woodbury solve at most before the system is solved in the direct
+    /// form instead. Default 2.
+    pub refinements: usize,
+    /// Conjugate gradient iterations at most with the step's last Newton factor as the
+    /// preconditioner before a new factorization. Default 30.
+    pub pcg_max: usize,
+    /// Below this many rows (columns of a Newton matrix) a pass over D, G or the Newton
+    /// matrix runs on one thread: handing half of it to `Pair`'s worker costs more. The
+    /// arithmetic is the same either way. Default 512; ≥ 2.
+    pub split_rows: usize,
+    /// Dense factorizations and solves of an n × n Newton matrix run on one thread for
+    /// n below this and on faer's global parallelism above: handing a small factorization
+    /// to the thread pool costs more than it saves. Default 1024.
+    pub par_min: usize,
+    /// The form of the Newton systems. Default `NewtonForm::Cheaper`.
+    pub newton_form: NewtonForm,
+}
+
+impl Default for DualSettings {
+    fn default() -> Self {
+        DualSettings {
+            tolerance: 1e-12,
+            max_iterations: 2000,
+            eta: 64.0,
+            min_damping: 0.25,
+            pg_switch: 1e-3,
+            widen: 3.0,
+            max_widen: 1e8,
+            interpolated: 20,
+            rim: 1.0 - 8.0 * f64::EPSILON,
+            dependent_shift: 1e-8,
+            newton_accuracy: 1e-2,
+            refinements: 2,
+            pcg_max: 30,
+            split_rows: 512,
+            par_min: 1024,
+            newton_form: NewtonForm::Cheaper,
+        }
+    }
+}
+
+impl DualSettings {
+    /// Checks every field against its range; the error names the first field out of it.
+    pub fn validate(&self) -> Result<()> {
+        let open = |x: f64, hi: f64| x > 0.0 && x < hi;
+        let checks = [
+            ("tolerance", open(self.tolerance, 1.0), "in (0, 1)"),
+            ("max_iterations", self.max_iterations >= 1, "at least 1"),
+            ("eta", open(self.eta, f64::INFINITY), "positive and finite"),
+            (
+                "min_damping",
+                open(self.min_damping, 1.0) || self.min_damping == 1.0,
+                "in (0, 1]",
+            ),
+            ("pg_switch", open(self.pg_switch, 1.0), "in (0, 1)"),
+            (
+                "widen",
+                self.widen >= 1.0 && self.widen.is_finite(),
+                "at least 1 and finite",
+            ),
+            (
+                "max_widen",
+                self.max_widen >= 1.0 && self.max_widen.is_finite(),
+                "at least 1 and finite",
+            ),
+            ("rim", open(self.rim, 1.0) || self.rim == 1.0, "in (0, 1]"),
+            (
+                "dependent_shift",
+                open(self.dependent_shift, 1.0),
+                "in (0, 1)",
+            ),
+            (
+                "newton_accuracy",
+                open(self.newton_accuracy, 1.0) || self.newton_accuracy == 1.0,
+                "in (0, 1]",
+            ),
+            ("split_rows", self.split_rows >= 2, "at least 2"),
+        ];
+        match checks.into_iter().find(|(_, ok, _)| !ok) {
+            None => Ok(()),
+            Some((field, _, range)) => Err(Error::input(format!(
+                "the dual contact solver's setting `{field}` must be {range} ({self:?})"
+            ))),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::DualSettings;
+
+    #[test]
+    fn defaults_are_valid_and_ranges_are_checked() {
+        DualSettings::default().validate().unwrap();
+        let bad = [
+            DualSettings {
+                tolerance: 0.0,
+                ..Default::default()
+            },
+            DualSettings {
+                eta: f64::NAN,
+                ..Default::default()
+            },
+            DualSettings {
+                min_damping: 1.5,
+                ..Default::default()
+            },
+            DualSettings {
+                rim: 1.0 + f64::EPSILON,
+                ..Default::default()
+            },
+            DualSettings {
+                max_iterations: 0,
+                ..Default::default()
+            },
+        ];
+        for (s, field) in
+            bad.iter()
+                .zip(["tolerance", "eta", "min_damping", "rim", "max_iterations"])
+        {
+            let err = s.validate().unwrap_err().to_string();
+            assert!(err.contains(&format!("`{field}`")), "{err}");
+        }
+    }
+}
