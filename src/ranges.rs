@@ -52,7 +52,7 @@ const GROUP: &str = "a name (string) or any integer tag";
 const GROUP_WHY: &str = "a tag is looked up in the mesh's physical groups; no number is computed \
                          from it";
 
-/// Every numeric key the scene parser knows (tests/extreme_values.rs checks that the parser
+/// Every numeric key the scene parser knows (tests/cli/extreme_values.rs checks that the parser
 /// has no other), in the order of DESIGN.md's scene file.
 pub const RANGES: &[Range] = &[
     row("mesh.groups.fixed", GROUP, "\"Γ1\"", GROUP_WHY),

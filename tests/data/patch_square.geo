@@ -1,5 +1,5 @@
 // patch_square.geo -- an unstructured unit square for the constant-strain patch test
-// (tests/patch.rs): "Γ1" = left edge x = 0 (clamped), "Γ2" = bottom, right and top edges.
+// (tests/solutions/patch.rs): "Γ1" = left edge x = 0 (clamped), "Γ2" = bottom, right and top edges.
 //   gmsh -2 patch_square.geo -format msh41 -o patch_square.msh
 SetFactory("Built-in");
 lc = 0.23;

@@ -83,7 +83,7 @@
 //! iteration (σ the curvature there: σ/δ ≈ 1 − cos 0.1° = 1.5e-6 at an 89.9° corner, so
 //! 7e-3 per iteration) and leaves the non-unique direction alone. ρ is not smaller because
 //! the rounding of g along the null direction is amplified by 1/ρ in x: at ρ = 1e-10 those
-//! steps wandered by 1e-6 |z| and the 3D edge case (tests/corner.rs) stalled at 5× the
+//! steps wandered by 1e-6 |z| and the 3D edge case (tests/solutions/corner.rs) stalled at 5× the
 //! tolerance. The stopping test below is the unregularized one, so the iteration still
 //! ends at the exact KKT point; only which of the equivalent multipliers it reports depends
 //! on the path. Nodes whose rows are far from dependent (the paper's x = 1, n_i ⊥ τ_i) get

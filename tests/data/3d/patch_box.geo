@@ -1,5 +1,5 @@
 // patch_box.geo -- a small unstructured tetrahedral mesh of a box for the 3D patch tests
-// of tests/three_d.rs: Omega = (0,1) x (0,0.8) x (0,0.6), clamped on x = 0, every other face
+// of tests/solutions/three_d.rs: Omega = (0,1) x (0,0.8) x (0,0.6), clamped on x = 0, every other face
 // in the traction boundary, with one load group per face so that a test can put the exact
 // traction sigma.n of any constant stress on it.
 //

@@ -8,7 +8,7 @@
 // P10 and P13/P14 give needle triangles with smallest angles of 0.008° to 0.2° and aspect
 // ratios up to 4·10^3, two of them at the Γ3,1 node (0.5, 0); around P11/P12 gmsh grades
 // the mesh down to the pair's distance (tiny, well-shaped triangles next to coarse ones).
-// tests/hard_meshes.rs checks min angle < 1° and aspect ratio >= 10^3 with
+// tests/cli/hard_meshes.rs checks min angle < 1° and aspect ratio >= 10^3 with
 // `viscontact mesh-info --json`.
 //
 //   gmsh -2 sliver.geo -format msh41 -o sliver.msh        (gmsh 4.15.2)

@@ -2,7 +2,7 @@
 //! the divergence detector, scale invariance with contact and friction, extreme kernels and
 //! friction bounds.
 
-mod common;
+use crate::common;
 use common::*;
 use viscontact::time_loop::{Solved, TimeLoop};
 use viscontact::Error;
@@ -11,7 +11,7 @@ const THETA: f64 = 0.1;
 const E: f64 = 0.5;
 const F: f64 = 0.02;
 
-/// The uniaxial bar of tests/uniaxial_bar.rs with a constant traction F on the right end.
+/// The uniaxial bar of tests/solutions/uniaxial_bar.rs with a constant traction F on the right end.
 fn bar(dir: &std::path::Path, extra: &str) -> std::path::PathBuf {
     write(
         dir,

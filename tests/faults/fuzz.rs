@@ -9,13 +9,13 @@
 //!
 //! Bounded: 300 cases per property by default (the whole file takes a few seconds in
 //! release). For a longer session set `VISCONTACT_FUZZ_CASES`, e.g.
-//! `VISCONTACT_FUZZ_CASES=20000 cargo test --release --test fuzz`. Seeds are random on every
+//! `VISCONTACT_FUZZ_CASES=20000 cargo test --release --test faults fuzz::`. Seeds are random on every
 //! run (proptest prints the minimal failing input when one is found); failures are not
 //! persisted to files: a panic that is found gets its own regression test at the end of this
-//! file. Run it in debug builds too (`cargo test --test fuzz`): integer overflow panics there
+//! file. Run it in debug builds too (`cargo test --test faults fuzz::`): integer overflow panics there
 //! and wraps silently in release.
 
-mod common;
+use crate::common;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;

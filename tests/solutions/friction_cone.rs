@@ -4,7 +4,7 @@
 //! opposite its slip, |γ_i| = c_i, sticking nodes have |γ_i| ≤ c_i, the bottom slides on average in
 //! the direction of the force, and the fast solver agrees with clarabel.
 
-mod common;
+use crate::common;
 use common::*;
 use viscontact::fem::Discretization;
 

@@ -4,7 +4,7 @@
 //! constraint groups on Γ1, gmsh's parametric and partitioned files, devices and FIFOs as
 //! inputs, huge lines in a scene.
 
-mod common;
+use crate::common;
 use common::*;
 use std::path::Path;
 

@@ -3,7 +3,7 @@
 //! and mismatched checkpoints (exit status 2, a message saying what differs, the file left
 //! alone), and the displacement sum does not drift over 10^5 steps.
 
-mod common;
+use crate::common;
 
 use common::{
     assert_same_series, finished, frames, paper_scene, resume_quiet, run_options as opts,

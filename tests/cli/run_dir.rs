@@ -4,7 +4,7 @@
 //! recognised and removed; resume does not mix another run's frames into its series; files
 //! viscontact did not write are never touched.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

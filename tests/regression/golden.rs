@@ -14,9 +14,9 @@
 //! study's numbers, not only its orders, are checked the same way.
 //!
 //! A change that is meant to change results stores new values with
-//! `VISCONTACT_GOLDEN=bless cargo test --release --test golden` and says why in its commit.
+//! `VISCONTACT_GOLDEN=bless cargo test --release --test regression golden::` and says why in its commit.
 
-mod common;
+use crate::common;
 
 use common::repo;
 use std::collections::BTreeMap;

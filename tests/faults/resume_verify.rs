@@ -4,7 +4,7 @@
 //! rebuilt from the verified frames; a `solution.vtkhdf` with damaged metadata or frames is
 //! refused before anything is appended, and a resumed one is read in full by h5py and VTK.
 
-mod common;
+use crate::common;
 
 use common::{assert_same_series, copy_dir, paper_scene, viscontact, SplitMix};
 use hdf5_metno as hdf5;

@@ -4,7 +4,7 @@
 //! parts meet get the rows DESIGN.md states (a node belongs to every part whose closure holds
 //! it, Γ1 wins); plane strain with ν = 0.4999 runs and stays finite.
 
-mod common;
+use crate::common;
 use common::*;
 use viscontact::fem::{Discretization, NodalRow};
 use viscontact::time_loop::TimeLoop;

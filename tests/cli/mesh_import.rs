@@ -202,7 +202,7 @@ fn every_shipped_mesh_reads_and_its_boundary_is_partitioned() {
     for path in &files {
         let m = Mesh::read(path).unwrap_or_else(|e| panic!("{e}"));
         if m.dim == 3 {
-            continue; // the 3D meshes are checked in tests/three_d.rs
+            continue; // the 3D meshes are checked in tests/solutions/three_d.rs
         }
         let name = path.display();
         assert_eq!(m.flipped, 0, "{name}");

@@ -21,7 +21,7 @@ use std::fmt::Write as _;
 use std::process::Command;
 use viscontact::expr::{Expr, Point};
 
-mod common;
+use crate::common;
 use common::SplitMix;
 
 /// An expression tree; `Bin` and `Un` carry the scene operator.

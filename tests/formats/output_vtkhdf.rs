@@ -5,7 +5,7 @@
 //!
 //! Needs python3 with `vtk` and `h5py` (`.ci/run` installs them); skipped loudly without.
 
-mod common;
+use crate::common;
 
 use common::{finished, paper_scene, resume_quiet, run_options as opts, viscontact};
 use std::path::{Path, PathBuf};

@@ -10,7 +10,7 @@
 //! Without meshio (`python3 -c "import meshio"` fails) the tests print a loud note and
 //! pass, unless the environment variable CI is set: CI installs meshio, so there they fail.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::io::Write as _;

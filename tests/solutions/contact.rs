@@ -2,7 +2,7 @@
 //! holds at every Γ3,1 node and is active somewhere, complementarity holds, large μF sticks,
 //! μF = 0 is the frictionless run, and the fast solver agrees with clarabel.
 
-mod common;
+use crate::common;
 use common::*;
 use viscontact::solver::StepSolver;
 

@@ -8,7 +8,7 @@
 //! `mesh.file` made absolute (it is relative to the scene file), or the example itself with
 //! `--set` overrides. A few positive cases check that good input is accepted.
 
-mod common;
+use crate::common;
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};

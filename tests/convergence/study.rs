@@ -1,7 +1,7 @@
 //! The study (issue 5): transfer between meshes, observed orders on the paper's scene, and
 //! the time convergence of the scheme to the exact solution of the uniaxial bar.
 
-mod common;
+use crate::common;
 use common::*;
 
 use viscontact::fem::Cell;

@@ -7,7 +7,7 @@
 //! at every step, for a Prony kernel (O(1) recursion) and for the same kernel given as an
 //! expression (direct sum).
 
-mod common;
+use crate::common;
 use common::*;
 
 const THETA: f64 = 0.1;

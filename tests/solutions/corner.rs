@@ -6,7 +6,7 @@
 //! (edge_box.geo), and the outcome does not depend on round-off: the same meshes rotated by
 //! random angles give the rotated answer.
 
-mod common;
+use crate::common;
 use common::*;
 use std::path::Path;
 

@@ -21,10 +21,10 @@
 //!   read back; `mesh-info` and `check` on 3D input.
 //!
 //! Expected values are derived here from geometry and mechanics, never copied from a run.
-//! `cargo test --release --test three_d -- --nocapture` prints the measured errors and the
+//! `cargo test --release --test solutions three_d:: -- --nocapture` prints the measured errors and the
 //! slab differences.
 
-mod common;
+use crate::common;
 
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -1492,7 +1492,7 @@ fn three_d_run_writes_tetra_frames() {
     let path = out.join(format!("solution_{steps:06}.vtu"));
     // The frames are raw appended zlib data, which vtkio's parser cannot read (it stops at a
     // `<` byte in the binary); the crate's reader (also `plot`'s) reads them, and
-    // tests/output_format.rs reads every layout with VTK's own reader.
+    // tests/formats/output_format.rs reads every layout with VTK's own reader.
     let vtu = viscontact::output::read::read_vtu(&path).unwrap();
     // block_004: 9·5·5 nodes, 12·4³ tetrahedra.
     let points: Vec<f64> = vtu.points.iter().flatten().copied().collect();

@@ -11,7 +11,7 @@
 //! `VISCONTACT_SETUP_SIGNALS=N` sets the number of signals of each kind (default 4 in CI;
 //! the acceptance run used 50), `VISCONTACT_SEED` the seed (printed).
 
-mod common;
+use crate::common;
 
 use common::{SplitMix, BIN};
 use std::path::Path;

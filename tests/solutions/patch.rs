@@ -7,7 +7,7 @@
 //! vanish exactly and boundary rows carry the traction integral. And the scheme's first step
 //! (u_0 = 0, so only A acts) reproduces w_0 = v exactly from that traction.
 
-mod common;
+use crate::common;
 use common::*;
 use viscontact::fem::{mul_add, Isotropic, Sparse};
 

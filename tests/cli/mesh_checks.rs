@@ -2,7 +2,7 @@
 //! edges, overlapping Γ3,1/Γ3,2, and warnings that say only what is true. The fixtures are in
 //! tests/data/mesh_checks/, made by gmsh from the .geo files beside them.
 
-mod common;
+use crate::common;
 
 use common::{cli, load, repo};
 use std::path::PathBuf;

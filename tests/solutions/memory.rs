@@ -4,7 +4,7 @@
 //! equals the uninterrupted one bit for bit; an unfittable kernel runs exact and says why;
 //! the stability guard and the non-finite check cover expression kernels.
 
-mod common;
+use crate::common;
 
 use common::{finished, resume_quiet, run_options as opts, without_run_id};
 use std::path::{Path, PathBuf};

@@ -15,7 +15,7 @@
 //! earlier run's files are byte for byte what they were. The keys a resume may change get
 //! the same through `viscontact resume --set`.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::collections::{BTreeMap, BTreeSet};

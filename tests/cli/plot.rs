@@ -2,7 +2,7 @@
 //! seen from two directions, with its contact boundary marked; unknown fields refused; the
 //! 2D figure still drawn.
 
-mod common;
+use crate::common;
 use common::*;
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,13 @@
+//! The command line as a user meets it: bad input and its messages, extreme values, expressions, meshes, directories, plots.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod cli_errors;
+mod expr_differential;
+mod extreme_values;
+mod hard_meshes;
+mod mesh_checks;
+mod mesh_import;
+mod plot;
+mod run_dir;

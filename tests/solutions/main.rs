@@ -1,0 +1,12 @@
+//! Exact solutions, patch tests, the fast contact solver against clarabel, compressed kernels against exact sums.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod contact;
+mod corner;
+mod friction_cone;
+mod memory;
+mod patch;
+mod three_d;
+mod uniaxial_bar;
