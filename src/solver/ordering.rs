@@ -1,6 +1,6 @@
 //! The fill-reducing ordering of K_A with the constrained dofs C (the Γ3 rows' dofs) last.
 //!
-//! The step solver needs C last (`dual.rs`: G = L_CC⁻¹ E), so the ordering is one of the
+//! The step solver needs C last (`dual/`: G = L_CC⁻¹ E), so the ordering is one of the
 //! other dofs followed by C. It is METIS's nested dissection (`METIS_NodeND`) of the graph
 //! of the other dofs' nodes: dofs of one node have the same sparsity (consecutive columns
 //! with equal patterns, found here from the matrix alone), so the graph has one vertex per
