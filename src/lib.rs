@@ -27,4 +27,7 @@ pub mod stability;
 pub mod study;
 pub mod time_loop;
 
+#[cfg(test)]
+mod testing;
+
 pub use error::{Error, Result};

@@ -251,25 +251,8 @@ mod tests {
     //! whose top layer carries contact rows, friction blocks or both.
     use super::*;
     use crate::fem::Sparse;
+    use crate::testing::SplitMix;
     use faer::sparse::{SparseColMat, Triplet};
-
-    /// A deterministic pseudo-random sequence in [0, 1) (splitmix64).
-    struct Noise(u64);
-
-    impl Noise {
-        fn next(&mut self) -> f64 {
-            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-            let mut x = self.0;
-            x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            x ^= x >> 31;
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        }
-
-        fn range(&mut self, lo: f64, hi: f64) -> f64 {
-            lo + (hi - lo) * self.next()
-        }
-    }
 
     fn unit(v: [f64; 3]) -> [f64; 3] {
         let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -285,7 +268,7 @@ mod tests {
     }
 
     /// A normal n tilted from the last axis and its unit tangents, orthonormal (d − 1 of them).
-    fn frame(dim: usize, noise: &mut Noise) -> ([f64; 3], Vec<[f64; 3]>) {
+    fn frame(dim: usize, noise: &mut SplitMix) -> ([f64; 3], Vec<[f64; 3]>) {
         let (a, b) = (noise.range(-0.3, 0.3), noise.range(-0.3, 0.3));
         if dim == 2 {
             let n = unit([a, 1.0, 0.0]);
@@ -323,7 +306,7 @@ mod tests {
     /// layer node t gets a contact row (t % 3 ≠ 1), a friction block (t % 3 ≠ 0) or both, and
     /// a load: a random normal part (pressing or pulling) and a random tangential part.
     fn lattice(dim: usize, side: usize, layers: usize, seed: u64) -> Problem {
-        let mut noise = Noise(seed);
+        let mut noise = SplitMix(seed);
         let per_layer = if dim == 2 { side } else { side * side };
         let nn = per_layer * layers;
         let coords = |i: usize| -> [f64; 3] {
@@ -694,7 +677,7 @@ mod tests {
     fn scrambled(mut p: Problem, seed: u64) -> Problem {
         let n = p.b.len();
         let band = 13;
-        let mut noise = Noise(seed);
+        let mut noise = SplitMix(seed);
         let mut t: Vec<_> = (0..n).map(|i| Triplet::new(i, i, 0.01)).collect();
         for k in 0..n {
             let row: Vec<f64> = (0..band).map(|_| noise.range(-1.0, 1.0)).collect();
