@@ -240,6 +240,14 @@ pub enum SavedMemory {
     Direct(Vec<Vec<f64>>),
 }
 
+/// Why a checkpoint's stored memory (`what` it is) cannot continue this scene's.
+pub fn memory_mismatch(what: &str) -> String {
+    format!(
+        "the stored memory is {what}, which the scene's relaxation kernel does not match: \
+         the checkpoint does not belong to this scene"
+    )
+}
+
 /// The state carried from step to step: n, u_n (compensated) and the memory.
 #[derive(Clone, Debug)]
 pub struct History {
@@ -326,12 +334,7 @@ impl History {
     /// resume): the memory must be of the kind this one plans, with the same Prony weights
     /// and, up to the rounding of e^{−b k}, the same decays.
     pub fn restore(&mut self, saved: SavedHistory) -> Result<()> {
-        let mismatch = |what: &str| {
-            crate::Error::input(format!(
-                "the stored memory is {what}, which the scene's relaxation kernel does not \
-                 match: the checkpoint does not belong to this scene"
-            ))
-        };
+        let mismatch = |what: &str| crate::Error::input(memory_mismatch(what));
         match (&mut self.memory, saved.memory) {
             (Memory::None, SavedMemory::None) => {}
             (Memory::Prony(terms), SavedMemory::Prony(stored)) => {

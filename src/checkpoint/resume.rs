@@ -4,7 +4,9 @@
 use super::history_file::read_history;
 use super::{groups_fingerprint, mesh_fingerprint, physics_signature, Checkpoint, StoredMemory};
 use crate::fem::Discretization;
-use crate::history::{Plan, PronyTerm, SavedHistory, SavedLoop, SavedMemory, Stored};
+use crate::history::{
+    memory_mismatch, Plan, PronyTerm, SavedHistory, SavedLoop, SavedMemory, Stored,
+};
 use crate::mesh::Mesh;
 use crate::scene::{self, Scene};
 use crate::{Error, Result};
@@ -278,12 +280,8 @@ impl Checkpoint {
                 file, rows, hash, ..
             } => {
                 if *rows != self.n {
-                    return Err(Error::input(format!(
-                        "{shown}: the stored memory is {rows} history rows at step {}, which \
-                         the scene's relaxation kernel does not match: the checkpoint does not \
-                         belong to this scene",
-                        self.n
-                    )));
+                    let what = format!("{rows} history rows at step {}", self.n);
+                    return Err(Error::input(format!("{shown}: {}", memory_mismatch(&what))));
                 }
                 let past = read_history(&self.dir().join(file), *rows, *hash, n_free, &self.id)?;
                 SavedMemory::Direct(past)
