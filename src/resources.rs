@@ -14,28 +14,40 @@
 //!   fall back to it (N ≤ `kernel_fit::EXACT_STEPS`; a longer one is refused instead);
 //! - disk: a frame every `output.every` steps (≈ 320 n + 24 c bytes each in the base64 VTU
 //!   of `output/vtu.rs`, measured: 384 kB for n = 1089, c = 2048), and for a general kernel
-//!   the history file (8 d (N+1) bytes).
+//!   the history file (8 d (N+1) bytes);
+//! - files: a `.vtu` series writes one file per frame and its `.pvd`, a `.vtkhdf` series one
+//!   file; the run directory's own files (summary, lock, checkpoint, history file and their
+//!   temporaries) are covered by a margin of [`SPARE_FILES`].
 //!
-//! A run is refused when the memory estimate exceeds 80 % of `MemAvailable` (/proc/meminfo)
-//! or the disk estimate exceeds 80 % of the space free to this user on the output
-//! directory's file system (statvfs): the margin covers what the estimate leaves out and the
-//! other programs of the machine.
+//! A run is refused when the memory estimate exceeds 80 % of `MemAvailable` (/proc/meminfo),
+//! the disk estimate exceeds 80 % of the space free to this user on the output directory's
+//! file system, or the file count exceeds 80 % of the inodes free to this user there
+//! (statvfs): the margin covers what the estimate leaves out and the other programs of the
+//! machine. A file system that reports no inodes at all (0 in total: some network and
+//! overlay file systems) does not count them and is not refused for them.
 
 use crate::fem::Discretization;
 use crate::kernel::Kernel;
 use crate::kernel_fit::EXACT_STEPS;
+use crate::output::Format;
 use crate::scene::Scene;
 use crate::{Error, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-/// The share of available memory or free disk a run may plan to use.
+/// The share of available memory, free disk or free inodes a run may plan to use.
 const MARGIN: f64 = 0.8;
 
-/// A run's estimated memory and disk use, in bytes, for its steps from `from` on.
+/// The files a run directory holds besides its series: summary.json, the lock, the
+/// checkpoint and history files and their temporaries, with room to spare.
+const SPARE_FILES: f64 = 16.0;
+
+/// A run's estimated memory and disk use, in bytes, and the files it creates, for its steps
+/// from `from` on.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Estimate {
     pub memory: f64,
     pub disk: f64,
+    pub files: f64,
     /// The key to change when the memory does not fit.
     memory_key: &'static str,
 }
@@ -65,9 +77,14 @@ impl Estimate {
         let frames = (remaining / scene.output.every as f64).ceil() + 1.0;
         let frame = 320.0 * disc.nodes.len() as f64 + 24.0 * disc.cells.len() as f64;
         let history = if scene.checkpoint.enabled { rows } else { 0.0 };
+        let series = match scene.output.options.format {
+            Format::Vtu => frames + 1.0,
+            Format::Vtkhdf => 1.0,
+        };
         Estimate {
             memory,
             disk: frames * frame + history,
+            files: series + SPARE_FILES,
             memory_key: if direct {
                 "time.steps (a general kernel keeps every step's displacement; a Prony kernel, \
                  material.relaxation.prony, keeps O(1) per step)"
@@ -93,17 +110,35 @@ impl Estimate {
                 )));
             }
         }
-        if let Some((free, fs)) = free_disk(out) {
-            if self.disk > MARGIN * free {
-                return Err(Error::input(format!(
-                    "the run would write ≈ {} but {} has {} free (a run may plan {:.0} % of \
-                     it): lower time.steps, raise output.every, or give --out on a larger disk",
-                    human(self.disk),
-                    fs.display(),
-                    human(free),
-                    100.0 * MARGIN
-                )));
-            }
+        if let Some(fs) = FileSystem::of(out) {
+            self.check_file_system(&fs)?;
+        }
+        Ok(())
+    }
+
+    /// Refuses (exit 2) a run whose frames and history exceed 80 % of the bytes free on `fs`,
+    /// or whose files exceed 80 % of its free inodes (not counted where it reports none).
+    fn check_file_system(&self, fs: &FileSystem) -> Result<()> {
+        if self.disk > MARGIN * fs.bytes_free {
+            return Err(Error::input(format!(
+                "the run would write ≈ {} but {} has {} free (a run may plan {:.0} % of \
+                 it): lower time.steps, raise output.every, or give --out on a larger disk",
+                human(self.disk),
+                fs.dir.display(),
+                human(fs.bytes_free),
+                100.0 * MARGIN
+            )));
+        }
+        if fs.inodes_total > 0.0 && self.files > MARGIN * fs.inodes_free {
+            return Err(Error::input(format!(
+                "the run would create ≈ {:.0} files but {} has {:.0} free inodes (a run may \
+                 plan {:.0} % of them): raise output.every, write output.format = \"vtkhdf\" \
+                 (one file), or give --out on another file system",
+                self.files,
+                fs.dir.display(),
+                fs.inodes_free,
+                100.0 * MARGIN
+            )));
         }
         Ok(())
     }
@@ -136,18 +171,35 @@ fn available_memory() -> Option<f64> {
     Some(kb * 1024.0)
 }
 
-/// Bytes free to this user on the file system of `dir` or of its nearest existing parent,
-/// and that directory.
-fn free_disk(dir: &Path) -> Option<(f64, std::path::PathBuf)> {
-    let abs = std::path::absolute(dir).ok()?;
-    let existing = abs.ancestors().find(|p| p.exists())?.to_path_buf();
-    let c = std::ffi::CString::new(existing.as_os_str().as_encoded_bytes()).ok()?;
-    let mut s: libc::statvfs = unsafe { std::mem::zeroed() };
-    // SAFETY: `c` is a NUL-terminated path and `s` a statvfs the call fills in.
-    if unsafe { libc::statvfs(c.as_ptr(), &mut s) } != 0 {
-        return None;
+/// What the file system of a directory has free to this user: bytes, and inodes out of its
+/// total (0 where it does not count them).
+#[derive(Clone, Debug, PartialEq)]
+struct FileSystem {
+    /// The directory asked about or its nearest existing parent.
+    dir: PathBuf,
+    bytes_free: f64,
+    inodes_free: f64,
+    inodes_total: f64,
+}
+
+impl FileSystem {
+    /// statvfs of `dir` or of its nearest existing parent.
+    fn of(dir: &Path) -> Option<FileSystem> {
+        let abs = std::path::absolute(dir).ok()?;
+        let existing = abs.ancestors().find(|p| p.exists())?.to_path_buf();
+        let c = std::ffi::CString::new(existing.as_os_str().as_encoded_bytes()).ok()?;
+        let mut s: libc::statvfs = unsafe { std::mem::zeroed() };
+        // SAFETY: `c` is a NUL-terminated path and `s` a statvfs the call fills in.
+        if unsafe { libc::statvfs(c.as_ptr(), &mut s) } != 0 {
+            return None;
+        }
+        Some(FileSystem {
+            dir: existing,
+            bytes_free: s.f_bavail as f64 * s.f_frsize as f64,
+            inodes_free: s.f_favail as f64,
+            inodes_total: s.f_files as f64,
+        })
     }
-    Some((s.f_bavail as f64 * s.f_frsize as f64, existing))
 }
 
 #[cfg(test)]
@@ -159,6 +211,7 @@ mod tests {
         let e = Estimate {
             memory: 1e30,
             disk: 0.0,
+            files: 1.0,
             memory_key: "time.steps",
         };
         if available_memory().is_some() {
@@ -171,6 +224,7 @@ mod tests {
         let e = Estimate {
             memory: 0.0,
             disk: 1e30,
+            files: 1.0,
             memory_key: "time.steps",
         };
         let err = e.check(Path::new("no/such/dir")).unwrap_err().to_string();
@@ -181,8 +235,41 @@ mod tests {
         let fits = Estimate {
             memory: 1.0,
             disk: 1.0,
+            files: 1.0,
             memory_key: "time.steps",
         };
         fits.check(Path::new(".")).unwrap();
+    }
+
+    #[test]
+    fn a_series_of_more_files_than_free_inodes_is_refused_unless_inodes_are_not_counted() {
+        let fs = |inodes_free: f64, inodes_total: f64| FileSystem {
+            dir: PathBuf::from("/out"),
+            bytes_free: 1e12,
+            inodes_free,
+            inodes_total,
+        };
+        let e = Estimate {
+            memory: 0.0,
+            disk: 1e6,
+            files: 1001.0 + SPARE_FILES,
+            memory_key: "time.steps",
+        };
+        let err = e
+            .check_file_system(&fs(1000.0, 1e6))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("1017 files")
+                && err.contains("/out has 1000 free inodes")
+                && err.contains("output.every")
+                && err.contains("output.format = \"vtkhdf\""),
+            "{err}"
+        );
+        // 1017 files fit into 80 % of 1272 free inodes, not of 1270.
+        e.check_file_system(&fs(1272.0, 1e6)).unwrap();
+        assert!(e.check_file_system(&fs(1270.0, 1e6)).is_err());
+        // A file system that counts no inodes (f_files = 0) reports none free either.
+        e.check_file_system(&fs(0.0, 0.0)).unwrap();
     }
 }
