@@ -1,6 +1,9 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod scene;
+pub use scene::SceneText;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -133,25 +136,24 @@ pub fn cli(args: &[&str]) -> (i32, String) {
     (out.status.code().unwrap_or(-1), text)
 }
 
-/// examples/paper.toml (contact on Γ3,1, friction on Γ3,2, Prony memory) with its mesh
-/// path made absolute, written into `dir`; `expr` switches the kernel to the same function
-/// as an expression (the direct-sum path).
-pub fn paper_scene(dir: &Path, name: &str, mesh: &str, expr: bool) -> PathBuf {
-    let text = std::fs::read_to_string(repo().join("examples/paper.toml")).unwrap();
-    let text = text.replace(
-        "file = \"../meshes/paper/rect_032.msh\"",
-        &format!("file = {:?}", mesh_path(mesh)),
-    );
-    let text = if expr {
-        text.replace(
-            "prony = [[1.0, 10.0]]",
+/// examples/paper.toml (contact on Γ3,1, friction on Γ3,2, Prony memory) on the shipped
+/// `mesh`; `expr` switches the kernel to the same function as an expression (the direct-sum
+/// path).
+pub fn paper(mesh: &str, expr: bool) -> SceneText {
+    let scene = SceneText::paper().mesh(mesh_path(mesh));
+    if expr {
+        scene.table(
+            "material.relaxation",
             "expr = \"exp(-10*s)\"\nmemory = \"exact\"",
         )
     } else {
-        text
-    };
-    assert!(text.contains(&mesh_path(mesh)));
-    write(dir, name, &text)
+        scene
+    }
+}
+
+/// [`paper`] written as `name` into `dir`.
+pub fn paper_scene(dir: &Path, name: &str, mesh: &str, expr: bool) -> PathBuf {
+    paper(mesh, expr).write(dir, name)
 }
 
 /// summary.json of a run directory.
