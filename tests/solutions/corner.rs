@@ -15,74 +15,35 @@ use std::path::Path;
 fn scene_2d(dir: &Path, mesh: &Path, a: f64, solver: &str) -> std::path::PathBuf {
     let rot = |x: &str, y: &str| {
         let (c, s) = (a.cos(), a.sin());
-        format!("\"{c:e}*({x}) - {s:e}*({y})\", \"{s:e}*({x}) + {c:e}*({y})\"")
+        vec![
+            format!("{c:e}*({x}) - {s:e}*({y})"),
+            format!("{s:e}*({x}) + {c:e}*({y})"),
+        ]
     };
-    let corner = Corner {
-        name: "corner",
-        mesh,
-        model: "plane_stress",
-        steps: 16,
-        extra: "[material.relaxation]\nprony = [[1.0, 10.0]]",
-        loads: [rot("0.02*t", "-0.01*t"), rot("0.01*sin(3*t)", "-0.05*t")],
-    };
-    corner.write(dir, solver)
+    let loads = [rot("0.02*t", "-0.01*t"), rot("0.01*sin(3*t)", "-0.05*t")];
+    corner("corner", mesh, "plane_stress", 16, &loads)
+        .literal("material.relaxation.prony", "[[1.0, 10.0]]")
+        .set("solver.contact", solver)
+        .write(dir, &format!("corner_{solver}.toml"))
 }
 
-/// A scene pressing a body onto Γ3,1 and along Γ3,2: the traction and the body force are
-/// `loads` (TOML vector bodies), `extra` is more TOML (a relaxation kernel).
-struct Corner<'a> {
-    name: &'a str,
-    mesh: &'a Path,
-    model: &'a str,
-    steps: usize,
-    extra: &'a str,
-    loads: [String; 2],
-}
-
-impl Corner<'_> {
-    fn write(&self, dir: &Path, solver: &str) -> std::path::PathBuf {
-        let Corner {
-            name,
-            mesh,
-            model,
-            steps,
-            extra,
-            loads: [traction, body],
-        } = self;
-        write(
-            dir,
-            &format!("{name}_{solver}.toml"),
-            &format!(
-                r#"
-name = "{name}"
-[mesh]
-file = "{}"
-model = "{model}"
-[time]
-end = 1.0
-steps = {steps}
-[material.viscosity]
-theta = 0.1
-zeta = 0.1
-[material.elasticity]
-young = 0.1
-poisson = 0.3
-{extra}
-[contact]
-[friction]
-normal_stress = 0.01
-coefficient = 0.5
-[[load.traction]]
-value = [{traction}]
-[[load.body]]
-value = [{body}]
-[solver]
-contact = "{solver}"
-"#,
-                mesh.display(),
-            ),
-        )
-    }
+/// A scene `name` pressing a body onto Γ3,1 and along Γ3,2: the traction and the body
+/// force are `loads` (their components), no memory.
+fn corner(name: &str, mesh: &Path, model: &str, steps: i64, loads: &[Vec<String>; 2]) -> SceneText {
+    SceneText::on(mesh)
+        .set("name", name)
+        .set("mesh.model", model)
+        .set("time.end", 1.0)
+        .set("time.steps", steps)
+        .set("material.viscosity.theta", 0.1)
+        .set("material.viscosity.zeta", 0.1)
+        .set("material.elasticity.young", 0.1)
+        .set("material.elasticity.poisson", 0.3)
+        .section("contact")
+        .set("friction.normal_stress", 0.01)
+        .set("friction.coefficient", 0.5)
+        .traction(None, &loads[0])
+        .body(&loads[1])
 }
 
 fn rotate_z(a: f64) -> impl Fn([f64; 3]) -> [f64; 3] {
@@ -170,19 +131,13 @@ fn edge_3d_fast_equals_clarabel_at_any_rotation() {
             [0, 1, 2].map(|i| x[i] * c + cr[i] * s + k[i] * kx * (1.0 - c))
         };
         let mesh = write(dir.path(), "edge.msh", &map_msh_nodes(&text, rot));
-        let load = |v: [f64; 3]| {
-            let r = rot(v);
-            format!("\"{:e}*t\", \"{:e}*t\", \"{:e}*t\"", r[0], r[1], r[2])
+        let load = |v: [f64; 3]| rot(v).iter().map(|x| format!("{x:e}*t")).collect();
+        let loads = [load([0.02, 0.01, -0.01]), load([0.01, 0.02, -0.05])];
+        let make = |solver: &str| {
+            corner("edge", &mesh, "3d", 8, &loads)
+                .set("solver.contact", solver)
+                .write(dir.path(), &format!("edge_{solver}.toml"))
         };
-        let edge = Corner {
-            name: "edge",
-            mesh: &mesh,
-            model: "3d",
-            steps: 8,
-            extra: "",
-            loads: [load([0.02, 0.01, -0.01]), load([0.01, 0.02, -0.05])],
-        };
-        let make = |solver: &str| edge.write(dir.path(), solver);
         let (fast, clarabel, dep) = both(make);
         let d = rel_diff(&fast, &clarabel);
         assert!(d <= 1e-7, "edge box rotated by {a}: fast vs clarabel {d:e}");

@@ -14,38 +14,21 @@ const ANGLE_DEG: f64 = 30.0;
 /// of unit size at 30°; `mu` is the friction coefficient (an expression of x, y).
 fn scene(dir: &std::path::Path, mu: &str, solver: &str) -> std::path::PathBuf {
     let a = ANGLE_DEG.to_radians();
-    write(
-        dir,
-        &format!("slider_{solver}.toml"),
-        &format!(
-            r#"
-name = "slider"
-[mesh]
-file = "{}"
-model = "3d"
-[mesh.groups]
-fixed = "Γ1"
-traction = "Γ2"
-friction = "Γ3,2"
-[time]
-end = 1.0
-steps = 1
-[material.viscosity]
-theta = 1.0
-zeta = 0.5
-[friction]
-normal_stress = 1.0
-coefficient = "{mu}"
-[[load.body]]
-value = ["{}", "{}", "0"]
-[solver]
-contact = "{solver}"
-"#,
-            mesh_path("3d/slider.msh"),
-            a.cos(),
-            a.sin()
-        ),
-    )
+    SceneText::on(mesh_path("3d/slider.msh"))
+        .set("name", "slider")
+        .set("mesh.model", "3d")
+        .set("mesh.groups.fixed", "Γ1")
+        .set("mesh.groups.traction", "Γ2")
+        .set("mesh.groups.friction", "Γ3,2")
+        .set("time.end", 1.0)
+        .set("time.steps", 1)
+        .set("material.viscosity.theta", 1.0)
+        .set("material.viscosity.zeta", 0.5)
+        .set("friction.normal_stress", 1.0)
+        .set("friction.coefficient", mu)
+        .body(&[&a.cos().to_string(), &a.sin().to_string(), "0"])
+        .set("solver.contact", solver)
+        .write(dir, &format!("slider_{solver}.toml"))
 }
 
 /// One friction node: its c_i, w_τ and γ_i in its tangent frame, and w_τ in x, y, z.

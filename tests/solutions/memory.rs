@@ -6,24 +6,19 @@
 
 use crate::common;
 
-use common::{finished, resume_quiet, run_options as opts, without_run_id};
+use common::{finished, resume_quiet, run_options as opts, without_run_id, SceneText};
 use std::path::{Path, PathBuf};
 use viscontact::expr::Expr;
 use viscontact::kernel::Kernel;
 use viscontact::kernel_fit::{fit, Lags};
 use viscontact::run::{run, Outcome};
 
-/// examples/paper.toml on `mesh` with the relaxation lines replaced by `relaxation`.
+/// examples/paper.toml on `mesh` with the relaxation section `relaxation` (its lines).
 fn paper_scene(dir: &Path, name: &str, mesh: &str, relaxation: &str) -> PathBuf {
-    let text = std::fs::read_to_string(common::repo().join("examples/paper.toml")).unwrap();
-    let text = text
-        .replace(
-            "file = \"../meshes/paper/rect_032.msh\"",
-            &format!("file = {:?}", common::mesh_path(mesh)),
-        )
-        .replace("prony = [[1.0, 10.0]]", relaxation);
-    assert!(text.contains(relaxation));
-    common::write(dir, name, &text)
+    SceneText::paper()
+        .mesh(common::mesh_path(mesh))
+        .table("material.relaxation", relaxation)
+        .write(dir, name)
 }
 
 /// The frames of `steps` in two run directories are the same bytes (but for the run id).
@@ -35,11 +30,11 @@ fn assert_same_frames(a: &Path, b: &Path, steps: &[usize]) {
     }
 }
 
-/// The paper scene on rect_008 with r(s) = 0.2(s + 0.01)^(−1/2) and the relaxation keys
-/// `extra`.
-fn power_law(dir: &Path, extra: &str) -> PathBuf {
-    let kernel = format!("expr = \"0.2*(s+0.01)^(-0.5)\"\n{extra}");
-    paper_scene(dir, "pl.toml", "paper/rect_008.msh", &kernel)
+/// The paper scene on rect_008 with r(s) = 0.2(s + 0.01)^(−1/2), compressed.
+fn power_law() -> SceneText {
+    SceneText::paper()
+        .mesh(common::mesh_path("paper/rect_008.msh"))
+        .table("material.relaxation", r#"expr = "0.2*(s+0.01)^(-0.5)""#)
 }
 
 fn expr(e: &str) -> Kernel {
@@ -119,7 +114,7 @@ fn certified_error_holds_on_every_lag() {
 #[test]
 fn compressed_agrees_with_exact_to_the_order_of_the_tolerance() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = power_law(dir.path(), "");
+    let scene = power_law().write(dir.path(), "pl.toml");
     let set = ["time.steps=256", "time.end=8"];
     let u_n = |extra: &str| {
         let mut o: Vec<&str> = set.to_vec();
@@ -149,7 +144,9 @@ fn compressed_agrees_with_exact_to_the_order_of_the_tolerance() {
 #[test]
 fn compressed_run_resumed_equals_uninterrupted_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = power_law(dir.path(), "tolerance = 1e-8");
+    let scene = power_law()
+        .set("material.relaxation.tolerance", 1e-8)
+        .write(dir.path(), "pl.toml");
     let set = ["time.steps=16", "checkpoint.every=3"];
     let full = dir.path().join("full");
     let part = dir.path().join("part");
@@ -259,13 +256,11 @@ fn non_finite_kernel_is_bad_input_naming_its_key() {
 #[test]
 fn compressed_run_extends_to_its_horizon_and_no_further() {
     let dir = tempfile::tempdir().unwrap();
-    let kernel = "expr = \"0.2*(s+0.01)^(-0.5)\"\ntolerance = 1e-8";
-    let with_horizon = paper_scene(
-        dir.path(),
-        "h.toml",
-        "paper/rect_008.msh",
-        &format!("{kernel}\nhorizon = 2.0"),
-    );
+    let kernel = power_law().set("material.relaxation.tolerance", 1e-8);
+    let with_horizon = kernel
+        .clone()
+        .set("material.relaxation.horizon", 2.0)
+        .write(dir.path(), "h.toml");
     let extend = |cp: &Path, end: &str| {
         viscontact::run::resume(
             cp,
@@ -305,7 +300,7 @@ fn compressed_run_extends_to_its_horizon_and_no_further() {
         "{msg}"
     );
     assert_eq!(before, std::fs::read(part.join("checkpoint.h5")).unwrap());
-    let plain = paper_scene(dir.path(), "p.toml", "paper/rect_008.msh", kernel);
+    let plain = kernel.write(dir.path(), "p.toml");
     let short = dir.path().join("short");
     finished(run(&plain, &opts(&short, &["time.steps=16"], None)).unwrap());
     let msg = extend(&short.join("checkpoint.h5"), "1.5")
@@ -313,18 +308,22 @@ fn compressed_run_extends_to_its_horizon_and_no_further() {
         .to_string();
     assert!(msg.contains("holds up to t = 1:"), "{msg}");
     // The key is checked: only a compressed kernel has a fit, and a horizon is a positive time.
+    let prony = SceneText::paper().mesh(common::mesh_path("paper/rect_008.msh"));
     for (relaxation, why) in [
         (
-            "prony = [[1.0, 10.0]]\nhorizon = 2.0",
+            prony.set("material.relaxation.horizon", 2.0),
             "apply to 'expr' and 'table'",
         ),
         (
-            &format!("{kernel}\nmemory = \"exact\"\nhorizon = 2.0") as &str,
+            kernel
+                .clone()
+                .set("material.relaxation.memory", "exact")
+                .set("material.relaxation.horizon", 2.0),
             "only a compressed",
         ),
-        (&format!("{kernel}\nhorizon = -1.0"), "is -1"),
+        (kernel.set("material.relaxation.horizon", -1.0), "is -1"),
     ] {
-        let scene = paper_scene(dir.path(), "bad.toml", "paper/rect_008.msh", relaxation);
+        let scene = relaxation.write(dir.path(), "bad.toml");
         let e =
             viscontact::run::run(&scene, &opts(&dir.path().join("bad"), &[], None)).unwrap_err();
         assert_eq!(e.exit_code(), 2);
@@ -340,7 +339,7 @@ fn compressed_run_extends_to_its_horizon_and_no_further() {
 fn study_of_tolerances_tracks_the_direct_sum() {
     use viscontact::study::memory_cost::{markdown, run_memory_cost, write_report, Options};
     let dir = tempfile::tempdir().unwrap();
-    let scene = power_law(dir.path(), "");
+    let scene = power_law().write(dir.path(), "pl.toml");
     let opts = Options {
         tolerances: vec![1e-4, 1e-7, 1e-10, 1e-14],
         steps: vec![48, 96],
@@ -407,12 +406,11 @@ fn long_run_whose_kernel_misses_its_tolerance_is_refused_not_run_exact() {
     let dir = tempfile::tempdir().unwrap();
     // A kinked table: piecewise linear, no sum of exponentials follows it to 1e-6.
     let table = "table = { s = [0.0, 1.0, 2.0, 4.0], r = [1.0, 0.5, 0.3, 0.2] }";
-    let scene = paper_scene(
-        dir.path(),
-        "kink.toml",
-        "paper/rect_008.msh",
-        &format!("{table}\ntolerance = 1e-6"),
-    );
+    let scene = SceneText::paper()
+        .mesh(common::mesh_path("paper/rect_008.msh"))
+        .table("material.relaxation", table)
+        .set("material.relaxation.tolerance", 1e-6)
+        .write(dir.path(), "kink.toml");
     let long = ["time.steps=20000", "time.end=200"];
     for command in ["check", "run"] {
         let (code, text) = cli_on(command, &scene, &long);
@@ -449,7 +447,7 @@ fn power_law_of_1e5_steps_is_never_run_by_the_direct_sum() {
     // Issue 26, finding 10: 0.2(s + 0.01)^(−1/2), T = 10, 10^5 steps used to fall back to
     // the direct sum (3.4 GB, ~2 hours at h = 1/32) with a line in check's output.
     let dir = tempfile::tempdir().unwrap();
-    let scene = power_law(dir.path(), "");
+    let scene = power_law().write(dir.path(), "pl.toml");
     let set = ["time.steps=100000", "time.end=10"];
     let (code, text) = cli_on("check", &scene, &set);
     assert!(!text.contains("runs exact"), "{text}");
@@ -471,7 +469,9 @@ fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
     // Issue 26, finding 3: horizon = 1e8 with end = 100 made check and run allocate 12.8 GB
     // and abort. 3200 steps of k = 1/32: 3.2e9 lags.
     let dir = tempfile::tempdir().unwrap();
-    let scene = power_law(dir.path(), "horizon = 1e8");
+    let scene = power_law()
+        .set("material.relaxation.horizon", 1e8)
+        .write(dir.path(), "pl.toml");
     let set = ["time.steps=3200", "time.end=100"];
     for command in ["check", "run"] {
         let start = std::time::Instant::now();
@@ -486,7 +486,7 @@ fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
         assert!(start.elapsed().as_secs_f64() < 10.0, "{command}: slow");
     }
     // So is a run whose own steps exceed the limit, naming time.steps.
-    let scene = power_law(dir.path(), "");
+    let scene = power_law().write(dir.path(), "pl.toml");
     let (code, text) = cli_on("check", &scene, &["time.steps=20000000", "time.end=100"]);
     assert_eq!(code, 2, "{text}");
     assert!(
@@ -494,7 +494,9 @@ fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
         "{text}"
     );
     // A horizon within the limit is fitted and its memory counted in the estimate.
-    let scene = power_law(dir.path(), "horizon = 3e4");
+    let scene = power_law()
+        .set("material.relaxation.horizon", 3e4)
+        .write(dir.path(), "pl.toml");
     let (code, text) = cli_on("check", &scene, &set);
     assert_eq!(code, 0, "{text}");
     assert!(text.contains("kernel     compressed"), "{text}");

@@ -27,34 +27,17 @@ fn traction(c: Isotropic) -> [String; 2] {
 }
 
 fn scene(dir: &std::path::Path, model: &str, t: &[String; 2]) -> std::path::PathBuf {
-    let mesh = repo().join("tests/data/patch_square.msh");
-    write(
-        dir,
-        "patch.toml",
-        &format!(
-            r#"
-[mesh]
-file = "{}"
-model = "{model}"
-[time]
-end = 0.01
-steps = 1
-[material.viscosity]
-theta = 0.3
-zeta = 0.2
-[material.elasticity]
-young = 2.0
-poisson = 0.3
-[material.relaxation]
-prony = [[1.0, 1.0]]
-[[load.traction]]
-value = ["{}", "{}"]
-"#,
-            mesh.display(),
-            t[0],
-            t[1]
-        ),
-    )
+    SceneText::on(repo().join("tests/data/patch_square.msh"))
+        .set("mesh.model", model)
+        .set("time.end", 0.01)
+        .set("time.steps", 1)
+        .set("material.viscosity.theta", 0.3)
+        .set("material.viscosity.zeta", 0.2)
+        .set("material.elasticity.young", 2.0)
+        .set("material.elasticity.poisson", 0.3)
+        .literal("material.relaxation.prony", "[[1.0, 1.0]]")
+        .traction(None, &[&t[0], &t[1]])
+        .write(dir, "patch.toml")
 }
 
 /// The free-dof vector of the linear field (p x, q x).

@@ -38,29 +38,20 @@ fn scalar_recursion() -> Vec<(f64, f64)> {
     out
 }
 
+/// The bar on `mesh` (clamped on Γ1, f(t) on the group "right", no contact) with the
+/// relaxation section `relaxation`.
 fn bar_scene(dir: &std::path::Path, mesh: &str, relaxation: &str) -> std::path::PathBuf {
-    let text = format!(
-        r#"
-name = "bar"
-[mesh]
-file = "{mesh}"
-[time]
-end = {END}
-steps = {STEPS}
-[material.viscosity]
-theta = {THETA}
-zeta = 0.0
-[material.elasticity]
-young = {E}
-poisson = 0.0
-[material.relaxation]
-{relaxation}
-[[load.traction]]
-on = "right"
-value = ["0.01 + 0.02*t + 0.01*sin(3*t)", "0"]
-"#
-    );
-    write(dir, "bar.toml", &text)
+    SceneText::on(mesh)
+        .set("name", "bar")
+        .set("time.end", END)
+        .set("time.steps", STEPS as i64)
+        .set("material.viscosity.theta", THETA)
+        .set("material.viscosity.zeta", 0.0)
+        .set("material.elasticity.young", E)
+        .set("material.elasticity.poisson", 0.0)
+        .table("material.relaxation", relaxation)
+        .traction(Some("right"), &["0.01 + 0.02*t + 0.01*sin(3*t)", "0"])
+        .write(dir, "bar.toml")
 }
 
 fn check_bar(mesh: &str, relaxation: &str) -> f64 {
