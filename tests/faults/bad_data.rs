@@ -8,31 +8,22 @@ use crate::common;
 use common::*;
 use std::path::Path;
 
-/// The paper scene with `extra` appended (TOML) and `mesh` as its mesh.
-fn scene(dir: &Path, mesh: &str, extra: &str) -> String {
-    write(
-        dir,
-        "s.toml",
-        &format!(
-            r#"
-name = "s"
-[mesh]
-file = "{mesh}"
-[time]
-end = 1.0
-steps = 8
-[material.viscosity]
-theta = 0.1
-zeta = 0.1
-[material.elasticity]
-young = 0.1
-poisson = 0.3
-{extra}
-"#
-        ),
-    )
-    .display()
-    .to_string()
+/// The paper's material on `mesh`, 8 steps, without loads, contact or memory: the base the
+/// tests add to.
+fn base(mesh: &str) -> SceneText {
+    SceneText::on(mesh)
+        .set("name", "s")
+        .set("time.end", 1.0)
+        .set("time.steps", 8)
+        .set("material.viscosity.theta", 0.1)
+        .set("material.viscosity.zeta", 0.1)
+        .set("material.elasticity.young", 0.1)
+        .set("material.elasticity.poisson", 0.3)
+}
+
+/// `scene` written as s.toml into `dir`: its path.
+fn written(dir: &Path, scene: SceneText) -> String {
+    scene.write(dir, "s.toml").display().to_string()
 }
 
 /// `check` and `run` of a scene both fail with exit 2 and `needle` in the message, and `run`
@@ -63,18 +54,13 @@ fn nan_constants_in_loads_are_refused_naming_the_key() {
         "x + 0/0",
         "ln(0)*t",
     ] {
-        let s = scene(
-            dir.path(),
-            &rect,
-            &format!("[[load.traction]]\non = \"top\"\nvalue = [\"0\", \"{value}\"]"),
-        );
+        let s = written(dir.path(), base(&rect).traction(Some("top"), &["0", value]));
         refused(dir.path(), &s, "load.traction[0].value[1]");
     }
     // The same load with a finite constant runs.
-    let s = scene(
+    let s = written(
         dir.path(),
-        &rect,
-        "[[load.traction]]\non = \"top\"\nvalue = [\"0\", \"-(0/1) - 0.01\"]",
+        base(&rect).traction(Some("top"), &["0", "-(0/1) - 0.01"]),
     );
     let (code, text) = cli(&["run", &s, "--out", dir.path().join("ok").to_str().unwrap()]);
     assert_eq!(code, 0, "{text}");
@@ -84,10 +70,9 @@ fn nan_constants_in_loads_are_refused_naming_the_key() {
 fn check_refuses_what_run_refuses() {
     // k = 1 with θ = 0.001: far above the left endpoint scheme's limit.
     let dir = tempfile::tempdir().unwrap();
-    let s = scene(
+    let s = written(
         dir.path(),
-        &mesh_path("paper/rect_008.msh"),
-        "[[load.traction]]\non = \"top\"\nvalue = [\"0\", \"-0.01\"]",
+        base(&mesh_path("paper/rect_008.msh")).traction(Some("top"), &["0", "-0.01"]),
     );
     let (code, text) = cli(&[
         "check",
@@ -104,10 +89,12 @@ fn check_refuses_what_run_refuses() {
 #[test]
 fn group_tags_may_be_toml_integers() {
     let dir = tempfile::tempdir().unwrap();
-    let s = scene(
+    let s = written(
         dir.path(),
-        &mesh_path("paper/rect_008.msh"),
-        "[contact]\n[[load.traction]]\non = 5\nvalue = [\"0\", \"-0.01*t\"]",
+        base(&mesh_path("paper/rect_008.msh"))
+            .section("contact")
+            .traction(None, &["0", "-0.01*t"])
+            .set("load.traction[0].on", 5),
     );
     let run = |name: &str, sets: &[&str]| {
         let out = dir.path().join(name);
@@ -142,10 +129,11 @@ fn unused_groups_do_not_matter_and_used_ones_are_explained() {
     assert!(text.contains("warning") && text.contains("crack"), "{text}");
     assert!(text.contains("physical point corner"), "{text}");
     // A scene that does not use the embedded curve runs.
-    let s = scene(
+    let s = written(
         dir.path(),
-        mesh,
-        "[contact]\n[[load.traction]]\nvalue = [\"0.01\", \"-0.01*t\"]",
+        base(mesh)
+            .section("contact")
+            .traction(None, &["0.01", "-0.01*t"]),
     );
     let (code, text) = cli(&["run", &s, "--out", dir.path().join("o").to_str().unwrap()]);
     assert_eq!(code, 0, "{text}");
@@ -185,7 +173,7 @@ fn devices_fifos_and_huge_lines_are_bounded() {
     let (code, text) = cli(&["check", "/dev/zero"]);
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("not a regular file"), "{text}");
-    let s = scene(dir.path(), "/dev/zero", "");
+    let s = written(dir.path(), base("/dev/zero"));
     let (code, text) = cli(&["check", &s]);
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("not a regular file"), "{text}");
@@ -195,11 +183,11 @@ fn devices_fifos_and_huge_lines_are_bounded() {
         .status()
         .unwrap()
         .success());
-    let s = scene(dir.path(), fifo.to_str().unwrap(), "");
+    let s = written(dir.path(), base(fifo.to_str().unwrap()));
     let (code, text) = cli(&["check", &s]);
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("not a regular file"), "{text}");
-    // A 2 MB line is quoted by a short excerpt.
+    // A 2 MB line (not TOML: a bare word) is quoted by a short excerpt.
     let long = write(
         dir.path(),
         "long.toml",
@@ -238,16 +226,15 @@ fn an_interior_face_group_is_refused_only_where_it_is_used() {
         "{text}"
     );
     let dir = tempfile::tempdir().unwrap();
-    let s = write(
-        dir.path(),
-        "s.toml",
-        &format!(
-            "[mesh]\nfile = \"{mesh}\"\nmodel = \"3d\"\n[mesh.groups]\ntraction = \"inner\"\n\
-             [time]\nend = 1.0\nsteps = 2\n[material.viscosity]\ntheta = 0.1\n\
-             [[load.traction]]\nvalue = [\"0\", \"0\", \"-1\"]\n"
-        ),
-    );
-    let (code, text) = cli(&["check", s.to_str().unwrap()]);
+    let s = SceneText::on(mesh)
+        .set("mesh.model", "3d")
+        .set("mesh.groups.traction", "inner")
+        .set("time.end", 1.0)
+        .set("time.steps", 2)
+        .set("material.viscosity.theta", 0.1)
+        .traction(None, &["0", "0", "-1"]);
+    let s = written(dir.path(), s);
+    let (code, text) = cli(&["check", &s]);
     assert_eq!(code, 2, "{text}");
     for needle in ["load.traction[0].on", "\"inner\"", "interior face"] {
         assert!(text.contains(needle), "{text}");

@@ -417,12 +417,9 @@ fn refused(case: &str, checkpoint: &Path, extra: &[&str], needles: &[&str]) {
 fn stopped_run(dir: &Path, name: &str, expr: bool) -> PathBuf {
     let mesh = dir.join(format!("{name}.msh"));
     std::fs::copy(common::mesh_path("paper/rect_008.msh"), &mesh).unwrap();
-    let scene = common::paper_scene(dir, &format!("{name}.toml"), "paper/rect_008.msh", expr);
-    let text = std::fs::read_to_string(&scene).unwrap().replace(
-        &common::mesh_path("paper/rect_008.msh"),
-        &format!("{name}.msh"),
-    );
-    std::fs::write(&scene, text).unwrap();
+    let scene = common::paper("paper/rect_008.msh", expr)
+        .mesh(format!("{name}.msh"))
+        .write(dir, &format!("{name}.toml"));
     let out = dir.join(name);
     run(&scene, &opts(&out, &["time.steps=16"], Some(7))).unwrap();
     out.join("checkpoint.h5")
@@ -618,20 +615,14 @@ fn checkpoint_section_is_checked() {
 #[test]
 fn displacement_sum_does_not_drift_over_1e5_steps() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = common::write(
-        tmp.path(),
-        "drift.toml",
-        &format!(
-            "[mesh]\nfile = {:?}\n[time]\nend = 1.0\nsteps = 100000\n\
-             [material.viscosity]\ntheta = 0.1\nzeta = 0.1\n\
-             [[load.traction]]\non = \"top\"\nvalue = [\"0.01\", \"-0.1\"]\n\
-             [checkpoint]\nenabled = false\n",
-            common::repo()
-                .join("tests/data/rect_004.msh")
-                .display()
-                .to_string()
-        ),
-    );
+    let scene = common::SceneText::on(common::repo().join("tests/data/rect_004.msh"))
+        .set("time.end", 1.0)
+        .set("time.steps", 100000)
+        .set("material.viscosity.theta", 0.1)
+        .set("material.viscosity.zeta", 0.1)
+        .traction(Some("top"), &["0.01", "-0.1"])
+        .set("checkpoint.enabled", false)
+        .write(tmp.path(), "drift.toml");
     let (scene, _mesh, disc) = common::load(&scene, &[]);
     let mut tl = viscontact::time_loop::TimeLoop::new(&scene, &disc).unwrap();
     assert_eq!(tl.effects().names(), ["viscosity", "tractions"]);

@@ -12,31 +12,15 @@ const E: f64 = 0.5;
 const F: f64 = 0.02;
 
 /// The uniaxial bar of tests/solutions/uniaxial_bar.rs with a constant traction F on the right end.
-fn bar(dir: &std::path::Path, extra: &str) -> std::path::PathBuf {
-    write(
-        dir,
-        "bar.toml",
-        &format!(
-            r#"
-[mesh]
-file = "{}"
-[time]
-end = 8.0
-steps = 100
-[material.viscosity]
-theta = {THETA}
-zeta = 0.0
-[material.elasticity]
-young = {E}
-poisson = 0.0
-[[load.traction]]
-on = "right"
-value = ["{F}", "0"]
-{extra}
-"#,
-            mesh_path("paper/rect_008.msh")
-        ),
-    )
+fn bar() -> SceneText {
+    SceneText::on(mesh_path("paper/rect_008.msh"))
+        .set("time.end", 8.0)
+        .set("time.steps", 100)
+        .set("material.viscosity.theta", THETA)
+        .set("material.viscosity.zeta", 0.0)
+        .set("material.elasticity.young", E)
+        .set("material.elasticity.poisson", 0.0)
+        .traction(Some("right"), &[F.to_string().as_str(), "0"])
 }
 
 /// ε_N of the bar (u_x / x at the right end).
@@ -56,7 +40,7 @@ fn bar_strain(scene: &viscontact::scene::Scene, disc: &viscontact::fem::Discreti
 fn left_scheme_refuses_a_step_above_its_limit_and_is_bounded_below_it() {
     // 2θε' + Eε: the limit is 4θ/E = 0.8; T = 8.
     let dir = tempfile::tempdir().unwrap();
-    let path = bar(dir.path(), "");
+    let path = bar().write(dir.path(), "bar.toml");
     let (s, _m, d) = load(&path, &["time.steps=9"]); // k = 0.889
     let err = TimeLoop::new(&s, &d).err().expect("refused");
     assert!(matches!(err, Error::Input(_)), "{err}");
@@ -82,7 +66,9 @@ fn left_scheme_refuses_a_step_above_its_limit_and_is_bounded_below_it() {
 #[test]
 fn divergence_is_detected() {
     let dir = tempfile::tempdir().unwrap();
-    let path = bar(dir.path(), "[scheme]\nallow_unstable = true");
+    let path = bar()
+        .set("scheme.allow_unstable", true)
+        .write(dir.path(), "bar.toml");
     // k = 2.4 = 3 × the limit: |1 − kE/2θ| = 5 per step.
     let (s, _m, d) = load(&path, &["time.end=480", "time.steps=200"]);
     let mut tl = TimeLoop::new(&s, &d).unwrap();
@@ -106,7 +92,9 @@ fn implicit_recursion(k: f64, n: usize) -> f64 {
 #[test]
 fn implicit_variant_equals_its_recursion_and_is_first_order() {
     let dir = tempfile::tempdir().unwrap();
-    let path = bar(dir.path(), "[scheme]\nhistory = \"implicit\"");
+    let path = bar()
+        .set("scheme.history", "implicit")
+        .write(dir.path(), "bar.toml");
     let t_end: f64 = 1.0;
     let exact = F / E * (1.0 - (-E * t_end / (2.0 * THETA)).exp());
     let mut errors = Vec::new();
@@ -134,7 +122,9 @@ fn implicit_variant_is_stable_for_vanishing_viscosity() {
     // θ = 1e-6: the left scheme's limit is 8e-6; the implicit one runs with k = 0.1 and
     // approaches the elastic response F/E.
     let dir = tempfile::tempdir().unwrap();
-    let path = bar(dir.path(), "[scheme]\nhistory = \"implicit\"");
+    let path = bar()
+        .set("scheme.history", "implicit")
+        .write(dir.path(), "bar.toml");
     let (s, _m, d) = load(
         &path,
         &[
