@@ -9,6 +9,7 @@
 //! `--set` overrides. A few positive cases check that good input is accepted.
 
 use crate::common;
+use common::scene::{strings, SceneText};
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -95,7 +96,7 @@ fn assert_no_output(case: &str, out_dir: &Path) {
     assert!(!out_dir.join("summary.json").exists());
 }
 
-/// A temporary directory holding a variant of examples/paper.toml.
+/// A temporary directory holding a variant of a scene.
 struct Fixture {
     dir: tempfile::TempDir,
 }
@@ -115,19 +116,9 @@ impl Fixture {
         self.path("out")
     }
 
-    /// examples/paper.toml with `mesh.file` made absolute and each `(old, new)` replacement
-    /// applied (each `old` must occur exactly once), written as `scene.toml`.
-    fn scene(&self, edits: &[(&str, &str)]) -> PathBuf {
-        let mut s = paper_text();
-        for (old, new) in edits {
-            assert_eq!(
-                s.matches(old).count(),
-                1,
-                "{old:?} should occur once in examples/paper.toml"
-            );
-            s = s.replacen(old, new, 1);
-        }
-        common::write(self.dir.path(), "scene.toml", &s)
+    /// `scene` written as `scene.toml`.
+    fn scene(&self, scene: SceneText) -> PathBuf {
+        scene.write(self.dir.path(), "scene.toml")
     }
 
     /// Runs `viscontact run SCENE --out OUT ARGS...` and checks the bad-input contract and that
@@ -140,19 +131,6 @@ impl Fixture {
         assert_no_output(case, &self.out());
         stderr
     }
-}
-
-/// examples/paper.toml with its mesh path made absolute.
-fn paper_text() -> String {
-    let examples = common::repo().join("examples");
-    let s = std::fs::read_to_string(examples.join("paper.toml")).unwrap();
-    let line = s
-        .lines()
-        .find(|l| l.trim_start().starts_with("file = "))
-        .expect("examples/paper.toml has a mesh.file line");
-    let rel = line.split('"').nth(1).expect("mesh.file is a string");
-    let abs = examples.join(rel).canonicalize().unwrap();
-    s.replacen(line, &format!("file = {:?}", abs.display().to_string()), 1)
 }
 
 fn data(name: &str) -> String {
@@ -171,7 +149,7 @@ fn set_mesh(name: &str) -> String {
 /// bad input.
 fn run_set_fails(case: &str, sets: &[&str], needles: &[&str]) -> String {
     let f = Fixture::new();
-    let scene = f.scene(&[]);
+    let scene = f.scene(SceneText::paper());
     let mut extra = Vec::new();
     for s in sets {
         extra.push("--set");
@@ -180,10 +158,10 @@ fn run_set_fails(case: &str, sets: &[&str], needles: &[&str]) -> String {
     f.run_fails(case, &scene, &extra, needles)
 }
 
-/// Edits examples/paper.toml and expects bad input from `run`; the scene path must be named.
-fn run_edit_fails(case: &str, edits: &[(&str, &str)], needles: &[&str]) -> String {
+/// Runs an edited examples/paper.toml and expects bad input; the scene path must be named.
+fn run_edit_fails(case: &str, scene: SceneText, needles: &[&str]) -> String {
     let f = Fixture::new();
-    let scene = f.scene(edits);
+    let scene = f.scene(scene);
     let name = scene.display().to_string();
     let mut all = vec![name.as_str()];
     all.extend_from_slice(needles);
@@ -208,7 +186,7 @@ fn missing_scene_file() {
 #[test]
 fn missing_mesh_file() {
     let f = Fixture::new();
-    let scene = f.scene(&[]);
+    let scene = f.scene(SceneText::paper());
     let mesh = f.path("no_such_mesh.msh").display().to_string();
     let set = format!("mesh.file={mesh}");
     f.run_fails(
@@ -223,14 +201,7 @@ fn missing_mesh_file() {
 fn missing_mesh_file_relative_to_scene() {
     // mesh.file is relative to the scene file: the message must show where it looked.
     let f = Fixture::new();
-    let scene = f.scene(&[]);
-    let s = std::fs::read_to_string(&scene).unwrap();
-    let line = s.lines().find(|l| l.starts_with("file = ")).unwrap();
-    let scene = common::write(
-        f.dir.path(),
-        "scene.toml",
-        &s.replacen(line, "file = \"meshes/gone.msh\"", 1),
-    );
+    let scene = f.scene(SceneText::paper().mesh("meshes/gone.msh"));
     f.run_fails(
         "missing relative mesh",
         &scene,
@@ -268,7 +239,7 @@ fn misspelled_group_name() {
 fn misspelled_load_group() {
     run_edit_fails(
         "misspelled traction group",
-        &[(r#"on = "top""#, r#"on = "tpo""#)],
+        SceneText::paper().set("load.traction[0].on", "tpo"),
         &["tpo", "load.traction"],
     );
 }
@@ -277,7 +248,7 @@ fn misspelled_load_group() {
 fn traction_outside_gamma2() {
     run_edit_fails(
         "traction on Γ3,1",
-        &[(r#"on = "top""#, r#"on = "Γ3,1""#)],
+        SceneText::paper().set("load.traction[0].on", "Γ3,1"),
         &["Γ3,1", "load.traction", "Γ2"],
     );
 }
@@ -288,7 +259,7 @@ fn traction_outside_gamma2() {
 fn unknown_top_level_key() {
     run_edit_fails(
         "unknown top-level key",
-        &[("name = \"paper\"", "name = \"paper\"\nbogus = 3")],
+        SceneText::paper().set("bogus", 3),
         &["bogus", "unknown"],
     );
 }
@@ -297,7 +268,9 @@ fn unknown_top_level_key() {
 fn unknown_nested_key() {
     run_edit_fails(
         "unknown nested key",
-        &[("theta = 0.1", "thetaa = 0.1")],
+        SceneText::paper()
+            .remove("material.viscosity.theta")
+            .set("material.viscosity.thetaa", 0.1),
         &["material.viscosity.thetaa", "unknown"],
     );
 }
@@ -306,7 +279,7 @@ fn unknown_nested_key() {
 fn unknown_key_in_array_of_tables() {
     run_edit_fails(
         "unknown key in [[load.traction]]",
-        &[(r#"on = "top""#, "on = \"top\"\nscale = 2.0")],
+        SceneText::paper().set("load.traction[0].scale", 2.0),
         &["load.traction", "scale", "unknown"],
     );
 }
@@ -360,7 +333,7 @@ fn theta_not_positive() {
     );
     run_edit_fails(
         "θ < 0",
-        &[("theta = 0.1", "theta = -0.1")],
+        SceneText::paper().set("material.viscosity.theta", -0.1),
         &["material.viscosity.theta", "must"],
     );
 }
@@ -403,7 +376,7 @@ fn end_not_positive() {
 fn nan_and_inf_in_scene() {
     run_edit_fails(
         "θ = nan",
-        &[("theta = 0.1", "theta = nan")],
+        SceneText::paper().set("material.viscosity.theta", f64::NAN),
         &["material.viscosity.theta", "NaN"],
     );
     run_set_fails("T = nan", &["time.end=nan"], &["time.end", "NaN"]);
@@ -416,13 +389,17 @@ fn nan_and_inf_in_scene() {
 
 // ---- expressions -------------------------------------------------------------------------
 
-const TOP_LOAD: &str = r#""-0.1*x*(2-x)*min(t, 0.2)""#;
+/// examples/paper.toml with `expr` as the y component of its top traction (in place of
+/// "-0.1*x*(2-x)*min(t, 0.2)").
+fn top_load(expr: &str) -> SceneText {
+    SceneText::paper().set("load.traction[0].value", strings(&["0", expr]))
+}
 
 #[test]
 fn expression_does_not_parse() {
     run_edit_fails(
         "unparsable expression",
-        &[(TOP_LOAD, r#""-0.1*x*(2-""#)],
+        top_load("-0.1*x*(2-"),
         &["load.traction", "-0.1*x*(2-", "parse"],
     );
 }
@@ -431,7 +408,7 @@ fn expression_does_not_parse() {
 fn expression_unknown_variable() {
     run_edit_fails(
         "unknown variable",
-        &[(TOP_LOAD, r#""q*t""#)],
+        top_load("q*t"),
         &["load.traction", "q*t", "unknown variable", "'q'"],
     );
 }
@@ -440,7 +417,7 @@ fn expression_unknown_variable() {
 fn expression_unknown_function() {
     run_edit_fails(
         "unknown function",
-        &[(TOP_LOAD, r#""foo(t)""#)],
+        top_load("foo(t)"),
         &["load.traction", "foo(t)", "unknown function", "foo"],
     );
 }
@@ -449,12 +426,12 @@ fn expression_unknown_function() {
 fn expression_z_in_a_2d_scene_and_log() {
     run_edit_fails(
         "z in 2D",
-        &[(TOP_LOAD, r#""-0.1*z*t""#)],
+        top_load("-0.1*z*t"),
         &["load.traction", "variable 'z'", "a 2D model has no z"],
     );
     run_edit_fails(
         "log",
-        &[(TOP_LOAD, r#""log(1 + t)""#)],
+        top_load("log(1 + t)"),
         &["load.traction", "ln(x)", "log10(x)"],
     );
 }
@@ -464,7 +441,7 @@ fn relaxation_expression_unknown_variable() {
     // s is the variable of a relaxation expression; t is not.
     run_edit_fails(
         "relaxation expr with t",
-        &[("prony = [[1.0, 10.0]]", r#"expr = "exp(-10*t)""#)],
+        SceneText::paper().table("material.relaxation", r#"expr = "exp(-10*t)""#),
         &["material.relaxation", "exp(-10*t)", "'t'"],
     );
 }
@@ -473,18 +450,15 @@ fn relaxation_expression_unknown_variable() {
 fn relaxation_with_two_kernels() {
     run_edit_fails(
         "prony + expr",
-        &[(
-            "prony = [[1.0, 10.0]]",
-            "prony = [[1.0, 10.0]]\nexpr = \"exp(-10*s)\"",
-        )],
+        SceneText::paper().set("material.relaxation.expr", "exp(-10*s)"),
         &["material.relaxation", "exactly one"],
     );
     run_edit_fails(
         "expr + table",
-        &[(
-            "prony = [[1.0, 10.0]]",
+        SceneText::paper().table(
+            "material.relaxation",
             "expr = \"exp(-10*s)\"\ntable = { s = [0, 1], r = [1, 0.1] }",
-        )],
+        ),
         &["material.relaxation", "exactly one"],
     );
 }
@@ -536,7 +510,7 @@ fn not_a_mesh_file() {
     let f = Fixture::new();
     let garbage = common::write(f.dir.path(), "garbage.msh", "this is not a gmsh file\n");
     let set = format!("mesh.file={}", garbage.display());
-    let scene = f.scene(&[]);
+    let scene = f.scene(SceneText::paper());
     f.run_fails(
         "garbage .msh",
         &scene,
@@ -550,7 +524,7 @@ fn not_a_mesh_file() {
 #[test]
 fn check_rejects_bad_scenes() {
     let f = Fixture::new();
-    let scene = f.scene(&[("theta = 0.1", "theta = 0")]);
+    let scene = f.scene(SceneText::paper().set("material.viscosity.theta", 0));
     let p = scene.display().to_string();
     expect_input_error(
         "check: θ = 0",
@@ -618,7 +592,7 @@ fn failed_run_keeps_earlier_output() {
     for (name, body) in earlier {
         common::write(&out, name, body);
     }
-    let scene = f.scene(&[("steps = 32", "steps = 0")]);
+    let scene = f.scene(SceneText::paper().set("time.steps", 0));
     let args: Vec<OsString> = vec![
         "run".into(),
         scene.into(),
@@ -797,26 +771,9 @@ fn curved_contact_boundary_is_warned_about_with_its_worst_angle() {
 
 // ---- 3D input ------------------------------------------------------------------------------
 
-/// examples/block.toml (the 3D scene) with its mesh path made absolute and each `(old, new)`
-/// replacement applied (each `old` must occur exactly once), written as `block.toml`.
-fn block_scene(f: &Fixture, edits: &[(&str, &str)]) -> PathBuf {
-    let examples = common::repo().join("examples");
-    let mut s = std::fs::read_to_string(examples.join("block.toml")).unwrap();
-    let line = s
-        .lines()
-        .find(|l| l.trim_start().starts_with("file = "))
-        .expect("examples/block.toml has a mesh.file line")
-        .to_string();
-    let abs = examples
-        .join(line.split('"').nth(1).unwrap())
-        .canonicalize()
-        .unwrap();
-    s = s.replacen(&line, &format!("file = {:?}", abs.display().to_string()), 1);
-    for (old, new) in edits {
-        assert_eq!(s.matches(old).count(), 1, "{old:?} in examples/block.toml");
-        s = s.replacen(old, new, 1);
-    }
-    common::write(f.dir.path(), "block.toml", &s)
+/// `scene` (a variant of examples/block.toml, the 3D scene) written as `block.toml`.
+fn block_scene(f: &Fixture, scene: SceneText) -> PathBuf {
+    scene.write(f.dir.path(), "block.toml")
 }
 
 fn data3d(name: &str) -> String {
@@ -830,7 +787,7 @@ fn data3d(name: &str) -> String {
 #[test]
 fn three_d_model_on_a_2d_mesh() {
     let f = Fixture::new();
-    let scene = block_scene(&f, &[]);
+    let scene = block_scene(&f, SceneText::block());
     let set = format!("mesh.file={}", common::mesh_path("paper/rect_008.msh"));
     let p = scene.display().to_string();
     f.run_fails(
@@ -844,7 +801,7 @@ fn three_d_model_on_a_2d_mesh() {
 #[test]
 fn two_d_model_on_a_3d_mesh() {
     let f = Fixture::new();
-    let scene = f.scene(&[]);
+    let scene = f.scene(SceneText::paper());
     let set = format!("mesh.file={}", common::mesh_path("3d/block_004.msh"));
     let p = scene.display().to_string();
     f.run_fails(
@@ -860,10 +817,10 @@ fn three_d_load_with_two_components() {
     let f = Fixture::new();
     let scene = block_scene(
         &f,
-        &[(
-            r#"value = ["0", "0", "-0.1*x*(2-x)*min(t, 0.2)"]"#,
-            r#"value = ["0", "-0.1*x*(2-x)*min(t, 0.2)"]"#,
-        )],
+        SceneText::block().set(
+            "load.traction[0].value",
+            strings(&["0", "-0.1*x*(2-x)*min(t, 0.2)"]),
+        ),
     );
     let p = scene.display().to_string();
     f.run_fails(
@@ -882,7 +839,7 @@ fn three_d_load_with_two_components() {
 #[test]
 fn three_d_volume_group_as_a_boundary_condition() {
     let f = Fixture::new();
-    let scene = block_scene(&f, &[]);
+    let scene = block_scene(&f, SceneText::block());
     f.run_fails(
         "volume group as Γ1",
         &scene,
@@ -898,10 +855,9 @@ fn three_d_mesh_without_contact_group() {
     let f = Fixture::new();
     let scene = block_scene(
         &f,
-        &[
-            ("on = \"top\"", "on = \"sides\""),
-            ("on = \"right\"", "on = \"sides\""),
-        ],
+        SceneText::block()
+            .set("load.traction[0].on", "sides")
+            .set("load.traction[1].on", "sides"),
     );
     let set = format!("mesh.file={}", common::mesh_path("3d/slider.msh"));
     f.run_fails(
@@ -924,7 +880,7 @@ const BAD_TET_MESHES: [(&str, &[&str]); 5] = [
 fn bad_tetrahedral_meshes_are_refused_by_run() {
     for (name, needles) in BAD_TET_MESHES {
         let f = Fixture::new();
-        let scene = block_scene(&f, &[]);
+        let scene = block_scene(&f, SceneText::block());
         let set = format!("mesh.file={}", data3d(name));
         let mut all = vec![name, "mesh.file"];
         all.extend_from_slice(needles);
@@ -987,7 +943,7 @@ fn scene_name_that_is_a_path() {
         ("name with ..", "../../escaped".to_string()),
         ("name with a separator", "a/b".to_string()),
     ] {
-        let scene = f.scene(&[("name = \"paper\"", &format!("name = {name:?}"))]);
+        let scene = f.scene(SceneText::paper().set("name", name));
         let args: Vec<OsString> = vec!["run".into(), scene.into()];
         expect_input_error(case, &args, &["scene.toml", "key 'name'", "--out"]);
         assert!(!target.exists(), "[{case}] wrote outside out/");
@@ -999,7 +955,7 @@ fn scene_name_that_is_a_path() {
 #[test]
 fn out_is_a_file() {
     let f = Fixture::new();
-    let scene = f.scene(&[]);
+    let scene = f.scene(SceneText::paper());
     let file = common::write(f.dir.path(), "taken", "mine\n");
     let args: Vec<OsString> = vec![
         "run".into(),

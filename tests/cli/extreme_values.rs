@@ -29,12 +29,10 @@ use std::time::{Duration, Instant};
 const LIMIT: Duration = Duration::from_secs(20);
 
 /// A scene with every section and every numeric key present (relaxation given three ways:
-/// the parser does not check that only one is).
-fn full_scene(mesh: &str) -> String {
-    format!(
+/// the parser does not check that only one is), on the mesh `mesh`.
+fn full_scene(mesh: &str) -> SceneText {
+    SceneText::parse(
         r#"name = "extreme"
-[mesh]
-file = {mesh:?}
 [mesh.groups]
 fixed = "Γ1"
 traction = "Γ2"
@@ -52,7 +50,7 @@ poisson = 0.3
 [material.relaxation]
 prony = [[1.0, 10.0]]
 expr = "exp(-10*s)"
-table = {{ s = [0.0, 0.5, 1.0], r = [1.0, 0.3, 0.1] }}
+table = { s = [0.0, 0.5, 1.0], r = [1.0, 0.3, 0.1] }
 tolerance = 1e-10
 horizon = 2.0
 [friction]
@@ -69,15 +67,20 @@ every = 1
 [checkpoint]
 every = 2
 every_seconds = 600
-"#
+"#,
     )
+    .mesh(mesh)
 }
 
 /// The scene a key is drawn in: the full scene with one relaxation kernel, the one the key
 /// belongs to (a Prony series for the keys outside [material.relaxation]).
-fn scene_for(key: &str, mesh: &str) -> toml::Table {
-    let mut t: toml::Table = full_scene(mesh).parse().unwrap();
-    let relax = t["material"]["relaxation"].as_table().unwrap().clone();
+fn scene_for(key: &str, mesh: &str) -> SceneText {
+    let scene = full_scene(mesh);
+    let relax = scene
+        .get("material.relaxation")
+        .unwrap()
+        .as_table()
+        .unwrap();
     let keep: &[&str] = if key.starts_with("material.relaxation.table") {
         &["table"]
     } else if key.starts_with("material.relaxation.tolerance")
@@ -88,70 +91,21 @@ fn scene_for(key: &str, mesh: &str) -> toml::Table {
         &["prony"]
     };
     let kept: toml::Table = relax
-        .into_iter()
+        .iter()
         .filter(|(k, _)| keep.contains(&k.as_str()))
+        .map(|(k, v)| (k.clone(), v.clone()))
         .collect();
-    t["material"]["relaxation"] = toml::Value::Table(kept);
-    t
+    scene.set("material.relaxation", kept)
 }
 
 // ---------------------------------------------------------------------------------------
 // The numeric keys, as the parser knows them
 // ---------------------------------------------------------------------------------------
 
-/// One step of a key path: a table key, or an array element (`[]`, element `usize`).
-#[derive(Clone)]
-enum Seg {
-    Key(String),
-    Index(usize),
-}
-
-fn pattern(path: &[Seg]) -> String {
-    let mut s = String::new();
-    for p in path {
-        match p {
-            Seg::Key(k) if s.is_empty() => s.push_str(k),
-            Seg::Key(k) => s.push_str(&format!(".{k}")),
-            Seg::Index(_) => s.push_str("[]"),
-        }
-    }
-    s
-}
-
-/// Sets `value` at `path`, making the tables and arrays on the way.
-fn set(root: &mut toml::Value, path: &[Seg], value: toml::Value) {
-    let Some((first, rest)) = path.split_first() else {
-        *root = value;
-        return;
-    };
-    let child = match first {
-        Seg::Key(k) => {
-            if !root.is_table() {
-                *root = toml::Value::Table(toml::Table::new());
-            }
-            let t = root.as_table_mut().unwrap();
-            t.entry(k.clone())
-                .or_insert(toml::Value::Table(toml::Table::new()))
-        }
-        Seg::Index(i) => {
-            if !root.is_array() {
-                *root = toml::Value::Array(Vec::new());
-            }
-            let a = root.as_array_mut().unwrap();
-            while a.len() <= *i {
-                a.push(toml::Value::Table(toml::Table::new()));
-            }
-            &mut a[*i]
-        }
-    };
-    set(child, rest, value);
-}
-
-/// The parser's message for the full scene with `value` at `path`.
-fn parse_error(path: &[Seg], value: toml::Value) -> String {
-    let mut root = toml::Value::Table(full_scene("m.msh").parse().unwrap());
-    set(&mut root, path, value);
-    let text = toml::to_string(&root).unwrap();
+/// The parser's message for the full scene with `value` at `path` (a key of
+/// [`SceneText::set`]).
+fn parse_error(path: &str, value: toml::Value) -> String {
+    let text = full_scene("m.msh").set(path, value).text();
     match viscontact::scene::parse_scene_text(Path::new("s.toml"), text, &[]) {
         Ok(_) => String::new(),
         Err(e) => e.to_string(),
@@ -168,30 +122,32 @@ fn expected_fields(msg: &str) -> Vec<String> {
         .collect()
 }
 
-/// The numeric keys at or below `path`, found by asking the parser.
-fn numeric_keys(path: Vec<Seg>, out: &mut BTreeSet<String>) {
+/// The numeric keys at or below `path` (with `[0]` for an array's element), found by asking
+/// the parser; each as its row of RANGES names it (with `[]`).
+fn numeric_keys(path: String, out: &mut BTreeSet<String>) {
     let mut probe = toml::Table::new();
     probe.insert("zzz_probe".into(), toml::Value::Integer(1));
     let msg = parse_error(&path, toml::Value::Table(probe));
     if msg.contains("unknown field `zzz_probe`") {
         for f in expected_fields(&msg) {
-            let mut p = path.clone();
-            p.push(Seg::Key(f));
+            let p = if path.is_empty() {
+                f
+            } else {
+                format!("{path}.{f}")
+            };
             numeric_keys(p, out);
         }
     } else if msg.contains("expected a sequence") || msg.contains("expected an array") {
-        let mut p = path;
-        p.push(Seg::Index(0));
-        numeric_keys(p, out);
+        numeric_keys(format!("{path}[0]"), out);
     } else if msg.contains("number") || msg.contains("integer") {
-        out.insert(pattern(&path));
+        out.insert(path.replace("[0]", "[]"));
     }
 }
 
 #[test]
 fn the_ranges_cover_every_numeric_key_of_the_parser() {
     let mut found = BTreeSet::new();
-    numeric_keys(Vec::new(), &mut found);
+    numeric_keys(String::new(), &mut found);
     let listed: BTreeSet<String> = viscontact::ranges::RANGES
         .iter()
         .map(|r| r.key.to_string())
@@ -251,32 +207,21 @@ fn draw(rng: &mut SplitMix) -> String {
 
 /// The path of `key` (a row of RANGES) with each `[]` an element: the first, or for the
 /// pair of a Prony term, either.
-fn path_of(key: &str, rng: &mut SplitMix) -> Vec<Seg> {
-    let mut path = Vec::new();
-    for part in key.split('.') {
-        let name = part.trim_end_matches("[]");
-        path.push(Seg::Key(name.to_string()));
-        for _ in 0..(part.len() - name.len()) / 2 {
-            path.push(Seg::Index(0));
-        }
-    }
+fn path_of(key: &str, rng: &mut SplitMix) -> String {
     if key == "material.relaxation.prony[][]" {
-        *path.last_mut().unwrap() = Seg::Index(rng.below(2));
+        format!("material.relaxation.prony[0][{}]", rng.below(2))
+    } else {
+        key.replace("[]", "[0]")
     }
-    path
 }
 
-/// The scene text with `value` (TOML text) at `key`.
+/// The scene text with `value` (TOML text, which may be no TOML value: an integer beyond
+/// i64) at `key`.
 fn scene_text(key: &str, value: &str, mesh: &str, rng: &mut SplitMix) -> String {
     const MARK: &str = "@@value@@";
-    let mut root = toml::Value::Table(scene_for(key, mesh));
-    set(
-        &mut root,
-        &path_of(key, rng),
-        toml::Value::String(MARK.into()),
-    );
-    toml::to_string(&root)
-        .unwrap()
+    scene_for(key, mesh)
+        .set(&path_of(key, rng), MARK)
+        .text()
         .replace(&format!("{MARK:?}"), value)
 }
 
@@ -397,7 +342,7 @@ fn earlier_run(dir: &Path, mesh: &str) -> PathBuf {
 }
 
 fn scene_text_plain(mesh: &str) -> String {
-    toml::to_string(&scene_for("", mesh)).unwrap()
+    scene_for("", mesh).text()
 }
 
 /// Runs `cases` (key, value) on two threads; returns the failures and the count of each

@@ -58,11 +58,12 @@ fn a_rerun_that_fails_in_setup_leaves_the_old_run_untouched() {
 #[test]
 fn a_rerun_that_fails_later_replaces_the_old_run() {
     let (tmp, scene) = paper("rect_008");
-    let text = std::fs::read_to_string(&scene).unwrap().replace(
-        "\"-0.1*x*(2-x)*min(t, 0.2)\"",
-        "\"if(t > 0.53, 1/(t-t), -0.1*x*(2-x)*min(t, 0.2))\"",
-    );
-    let bad = common::write(tmp.path(), "bad.toml", &text);
+    let bad = common::paper("paper/rect_008.msh", false)
+        .set(
+            "load.traction[0].value",
+            common::scene::strings(&["0", "if(t > 0.53, 1/(t-t), -0.1*x*(2-x)*min(t, 0.2))"]),
+        )
+        .write(tmp.path(), "bad.toml");
     let dir = tmp.path().join("o");
     let dir_s = dir.to_str().unwrap();
     run_ok(&["run", scene.to_str().unwrap(), "--out", dir_s, "--quiet"]);
