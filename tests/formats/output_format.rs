@@ -967,19 +967,18 @@ fn vtk_reads_zlib_frames_of_a_refined_user_mesh_as_the_raw_ones() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let scene = dir.path().join("s.toml");
-    std::fs::write(
-        &scene,
-        format!(
-            "name = \"s\"\n[mesh]\nfile = {:?}\n[time]\nend = 1.0\nsteps = 3\n\
-             [material.viscosity]\ntheta = 0.1\nzeta = 0.1\n\
-             [material.elasticity]\nyoung = 0.1\npoisson = 0.3\n\
-             [material.relaxation]\nprony = [[1.0, 10.0]]\n[contact]\n\
-             [[load.traction]]\nvalue = [\"0.01\", \"-0.02*t\"]\n",
-            msh.display()
-        ),
-    )
-    .unwrap();
+    let scene = crate::common::SceneText::on(&msh)
+        .set("name", "s")
+        .set("time.end", 1.0)
+        .set("time.steps", 3)
+        .set("material.viscosity.theta", 0.1)
+        .set("material.viscosity.zeta", 0.1)
+        .set("material.elasticity.young", 0.1)
+        .set("material.elasticity.poisson", 0.3)
+        .literal("material.relaxation.prony", "[[1.0, 10.0]]")
+        .section("contact")
+        .traction(None, &["0.01", "-0.02*t"])
+        .write(dir.path(), "s.toml");
     let script = r#"
 import sys, vtk
 from vtk.util.numpy_support import vtk_to_numpy
