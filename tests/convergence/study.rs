@@ -384,30 +384,20 @@ fn the_closed_form_solves_the_bar_equation() {
     assert!(rel < 1e-5, "{rel:e}");
 }
 
+/// The bar (clamped on Γ1, the constant traction F0 on the group "right", the kernel
+/// A e^{−B s}) on rect_008 with `steps` steps up to T.
 fn bar_scene(dir: &std::path::Path, steps: usize) -> std::path::PathBuf {
-    let text = format!(
-        r#"
-name = "bar-exact"
-[mesh]
-file = "{}"
-[time]
-end = {T}
-steps = {steps}
-[material.viscosity]
-theta = {THETA}
-zeta = 0.0
-[material.elasticity]
-young = {E}
-poisson = 0.0
-[material.relaxation]
-prony = [[{A}, {B}]]
-[[load.traction]]
-on = "right"
-value = ["{F0}", "0"]
-"#,
-        mesh_path("paper/rect_008.msh")
-    );
-    write(dir, "bar.toml", &text)
+    SceneText::on(mesh_path("paper/rect_008.msh"))
+        .set("name", "bar-exact")
+        .set("time.end", T)
+        .set("time.steps", steps as i64)
+        .set("material.viscosity.theta", THETA)
+        .set("material.viscosity.zeta", 0.0)
+        .set("material.elasticity.young", E)
+        .set("material.elasticity.poisson", 0.0)
+        .set("material.relaxation.prony", vec![vec![A, B]])
+        .traction(Some("right"), &[F0.to_string().as_str(), "0"])
+        .write(dir, "bar.toml")
 }
 
 #[test]
