@@ -18,7 +18,7 @@
 
 use crate::common;
 
-use common::repo;
+use common::{repo, SceneText};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Mutex;
@@ -33,25 +33,26 @@ type Golden = BTreeMap<String, Values>;
 /// The section that holds the study's tables; every other section is a scene case.
 const TABLES: &str = "study_tables";
 
-/// A scene: `base` (relative to the repository) with `replace` applied to its text, run
-/// with `set` overrides.
+/// A scene: `base` (an example) on `mesh` (relative to the repository; `None`: its own)
+/// with the keys `edit` set (each to a TOML value), run with `set` overrides.
 struct Case {
     name: &'static str,
     base: &'static str,
-    replace: &'static [(&'static str, &'static str)],
+    mesh: Option<&'static str>,
+    edit: &'static [(&'static str, &'static str)],
     set: &'static [&'static str],
 }
 
-const PAPER: &str = "examples/paper.toml";
-const BLOCK: &str = "examples/block.toml";
-const PRONY: &str = "prony = [[1.0, 10.0]]";
+const PAPER: &str = "paper.toml";
+const BLOCK: &str = "block.toml";
+const RELAXATION: &str = "material.relaxation";
 
 const CASES: &[Case] = &[
     case("paper", PAPER, &[], &[]),
-    case("bracket", "examples/bracket.toml", &[], &[]),
-    case("plate_hole", "examples/plate_hole.toml", &[], &[]),
+    case("bracket", "bracket.toml", &[], &[]),
+    case("plate_hole", "plate_hole.toml", &[], &[]),
     case("block", BLOCK, &[], &[]),
-    case("paper_064", PAPER, &[("rect_032", "rect_064")], &[]),
+    case("paper_064", PAPER, &[], &[]).on("meshes/paper/rect_064.msh"),
     case("paper_F0.1", PAPER, &[], &["friction.normal_stress=0.1"]),
     case("paper_mu5", PAPER, &[], &["friction.coefficient=5"]),
     case("paper_implicit", PAPER, &[], &["scheme.history=\"implicit\""]),
@@ -65,58 +66,63 @@ const CASES: &[Case] = &[
     case(
         "paper_power_law_compressed",
         PAPER,
-        &[(PRONY, "expr = \"0.2*(s+0.01)^(-0.5)\"")],
+        &[(RELAXATION, r#"{ expr = "0.2*(s+0.01)^(-0.5)" }"#)],
         &[],
     ),
     case(
         "paper_power_law_exact",
         PAPER,
-        &[(PRONY, "expr = \"0.2*(s+0.01)^(-0.5)\"\nmemory = \"exact\"")],
+        &[(
+            RELAXATION,
+            r#"{ expr = "0.2*(s+0.01)^(-0.5)", memory = "exact" }"#,
+        )],
         &[],
     ),
     case(
         "paper_table",
         PAPER,
-        &[(PRONY, "table = { s = [0, 0.5, 1], r = [1, 0.3, 0.1] }")],
+        &[(RELAXATION, "{ table = { s = [0, 0.5, 1], r = [1, 0.3, 0.1] } }")],
         &[],
     ),
     case("block_mu5", BLOCK, &[], &["friction.coefficient=5"]),
-    case(
-        "block_unstructured",
-        BLOCK,
-        &[(
-            "../meshes/3d/block_008.msh",
-            "../tests/data/3d/block_unstructured.msh",
-        )],
-        &["time.steps=16"],
-    ),
+    case("block_unstructured", BLOCK, &[], &["time.steps=16"])
+        .on("tests/data/3d/block_unstructured.msh"),
     case(
         "slab_t0008",
         PAPER,
-        &[
-            ("../meshes/paper/rect_032.msh", "../tests/data/3d/slab_t0008.msh"),
-            ("plane_stress", "3d"),
-        ],
+        &[("mesh.model", r#""3d""#)],
         &[
             "time.steps=8",
             "time.end=0.25",
             "load.traction=[{on = \"top\", value = [\"0\", \"-0.1*x*(2-x)*min(t, 0.2)\", \"0\"]}, \
              {on = \"right\", value = [\"if(t <= 0.5, 0.01*(1-y)*t, 0.01*(1-y)*0.2)\", \"0\", \"0\"]}]",
         ],
-    ),
+    )
+    .on("tests/data/3d/slab_t0008.msh"),
 ];
 
 const fn case(
     name: &'static str,
     base: &'static str,
-    replace: &'static [(&'static str, &'static str)],
+    edit: &'static [(&'static str, &'static str)],
     set: &'static [&'static str],
 ) -> Case {
     Case {
         name,
         base,
-        replace,
+        mesh: None,
+        edit,
         set,
+    }
+}
+
+impl Case {
+    /// The case on `mesh` (relative to the repository) in place of its example's mesh.
+    const fn on(self, mesh: &'static str) -> Case {
+        Case {
+            mesh: Some(mesh),
+            ..self
+        }
     }
 }
 
@@ -147,23 +153,15 @@ fn values(dir: &Path) -> Values {
 
 /// Runs `case` into a directory of `tmp`: its values.
 fn run(case: &Case, tmp: &Path) -> Values {
-    let mut text = std::fs::read_to_string(repo().join(case.base)).unwrap();
-    for (from, to) in case.replace {
-        assert!(
-            text.contains(from),
-            "{}: {from:?} not in {}",
-            case.name,
-            case.base
-        );
-        text = text.replace(from, to);
+    let mut scene = SceneText::example(case.base);
+    if let Some(mesh) = case.mesh {
+        scene = scene.mesh(repo().join(mesh));
     }
-    // Mesh paths are relative to the scene file: made absolute for the copy in `tmp`.
-    let examples = repo().join("examples");
-    let text = text.replace(
-        "file = \"../",
-        &format!("file = \"{}/../", examples.display()),
-    );
-    let scene = common::write(tmp, &format!("{}.toml", case.name), &text);
+    let scene = case
+        .edit
+        .iter()
+        .fold(scene, |scene, (key, value)| scene.literal(key, value))
+        .write(tmp, &format!("{}.toml", case.name));
     let out = tmp.join(case.name);
     let mut args = vec![
         "run".to_string(),
@@ -202,7 +200,7 @@ fn study_tables() -> Values {
         repeat: Some(1),
         ..Default::default()
     };
-    let report = study::run_study(&repo().join(PAPER), &opts).unwrap();
+    let report = study::run_study(&repo().join("examples").join(PAPER), &opts).unwrap();
     let mut out = Values::new();
     for f in &report.families {
         let table = match f.vary {
