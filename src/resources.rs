@@ -17,7 +17,7 @@
 //!   the history file (8 d (N+1) bytes);
 //! - files: a `.vtu` series writes one file per frame and its `.pvd`, a `.vtkhdf` series one
 //!   file; the run directory's own files (summary, lock, checkpoint, history file and their
-//!   temporaries) are covered by a margin of [`SPARE_FILES`].
+//!   temporaries) are covered by a margin of 16 files.
 //!
 //! A run is refused when the memory estimate exceeds 80 % of `MemAvailable` (/proc/meminfo),
 //! the disk estimate exceeds 80 % of the space free to this user on the output directory's
