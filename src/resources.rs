@@ -29,7 +29,7 @@ use crate::{Error, Result};
 use std::path::Path;
 
 /// The share of available memory or free disk a run may plan to use.
-const MARGIN: f64 = 0.8;
+pub const MARGIN: f64 = 0.8;
 
 /// A run's estimated memory and disk use, in bytes, for its steps from `from` on.
 #[derive(Clone, Debug, PartialEq)]
@@ -129,7 +129,7 @@ fn human(bytes: f64) -> String {
 }
 
 /// `MemAvailable` of /proc/meminfo, in bytes.
-fn available_memory() -> Option<f64> {
+pub fn available_memory() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
