@@ -79,6 +79,10 @@ enum Command {
     /// Accuracy against cost: errors at T against a reference, orders, wall times (tables
     /// like the paper's Tables 1–3, CSV, Markdown, PNG plots).
     Study(StudyArgs),
+    /// One case of a study, for `study --jobs`: solved as the study solves it, its u_N and
+    /// times written to RESULT (internal: the arguments may change).
+    #[command(hide = true)]
+    StudyCase(StudyCaseArgs),
     /// Draw the deformed body of a run coloured by a field (the paper's Fig. 3) as a PNG.
     Plot {
         /// The output directory of a run (or its solution.pvd).
@@ -171,6 +175,7 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
         Command::Check { scene, set } => check(&scene, &set).map(|()| None),
         Command::MeshInfo { mesh, json } => mesh_info(&mesh, json).map(|()| None),
         Command::Study(args) => study(args).map(|()| None),
+        Command::StudyCase(args) => study_case(args).map(|()| None),
         Command::Plot {
             dir,
             time,
@@ -573,7 +578,8 @@ fn overlapping_cell_groups(mesh: &Mesh) -> Vec<String> {
 
 #[derive(clap::Args)]
 struct StudyArgs {
-    scene: PathBuf,
+    #[arg(required_unless_present = "collect")]
+    scene: Option<PathBuf>,
     /// Levels n: h = 1/n (the mesh of level n) and N = n steps (k = T/n).
     #[arg(long, value_delimiter = ',', default_value = "8,16,32,64")]
     levels: Vec<usize>,
@@ -602,9 +608,25 @@ struct StudyArgs {
     /// Also run every level with the Prony kernel written as an expression (direct sum).
     #[arg(long)]
     kernel_compare: bool,
+    /// Run up to N cases side by side, each in a process of its own with its share of the
+    /// cores, as many as fit in memory; the numbers are those of --jobs 1, the wall times
+    /// are measured concurrently.
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    jobs: usize,
+    /// Write the study as a Slurm job array into DIR instead of running it: runs.tsv,
+    /// array.sh, collect.sh, submit.sh (--jobs N: at most N tasks at once).
+    #[arg(long, num_args = 2, value_names = ["slurm", "DIR"], conflicts_with = "kernel_compare")]
+    emit: Vec<String>,
+    /// With --emit slurm: the cores of each task (its --cpus-per-task and threads).
+    #[arg(long, default_value_t = 4, requires = "emit")]
+    cpus_per_task: usize,
+    /// Make the tables and plots of a job array written by --emit slurm once its runs are
+    /// complete (into DIR).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["emit", "tolerances", "jobs"])]
+    collect: Option<PathBuf>,
     /// What accuracy costs instead of convergence: the scene's expression or table kernel
     /// compressed at each tolerance, against the direct sum (e.g. 1e-4,1e-6,1e-8,1e-10,1e-12).
-    #[arg(long, value_delimiter = ',', conflicts_with_all = ["levels", "vary", "kernel_compare"])]
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["levels", "vary", "kernel_compare", "jobs"])]
     tolerances: Vec<f64>,
     /// With --tolerances: the numbers of steps N, at the scene's step size k.
     #[arg(
@@ -621,29 +643,51 @@ struct StudyArgs {
     set: Vec<String>,
 }
 
+#[derive(clap::Args)]
+struct StudyCaseArgs {
+    scene: PathBuf,
+    #[arg(long)]
+    mesh: String,
+    #[arg(long)]
+    steps: usize,
+    /// The Prony kernel written as an expression (`study --kernel-compare`).
+    #[arg(long)]
+    expression: bool,
+    #[arg(long)]
+    repeat: Option<usize>,
+    #[arg(long)]
+    result: PathBuf,
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+}
+
+/// One case of `study --jobs` in this process (see viscontact::study::jobs).
+fn study_case(a: StudyCaseArgs) -> Result<()> {
+    use viscontact::study::{jobs, Case, KernelForm};
+    let case = Case {
+        mesh: a.mesh,
+        steps: a.steps,
+        form: if a.expression {
+            KernelForm::Expression
+        } else {
+            KernelForm::AsGiven
+        },
+        repeat: a.repeat,
+    };
+    jobs::run_case(&a.scene, &a.set, &case, &a.result)
+}
+
 fn study(a: StudyArgs) -> Result<()> {
-    use viscontact::study::{self, memory_cost, MeshFamily, StudyOptions};
+    use viscontact::study::{self, slurm, MeshFamily, StudyOptions};
+    if let Some(dir) = &a.collect {
+        return print_study(&slurm::collect(dir)?, dir);
+    }
+    let scene = a
+        .scene
+        .clone()
+        .expect("clap requires a scene without --collect");
     if !a.tolerances.is_empty() {
-        let opts = memory_cost::Options {
-            tolerances: a.tolerances,
-            steps: a.steps,
-            exact_up_to: a.exact_up_to,
-            overrides: a.set,
-            progress: true,
-        };
-        let out = match a.out {
-            Some(o) => o,
-            None => {
-                let scene = viscontact::scene::Scene::load(&a.scene, &opts.overrides)?;
-                PathBuf::from("out").join(format!("{}-study-memory", scene.name))
-            }
-        };
-        let report = memory_cost::run_memory_cost(&a.scene, &opts)?;
-        print!("{}", memory_cost::markdown(&report));
-        for p in memory_cost::write_report(&report, &out)? {
-            println!("wrote {}", p.display());
-        }
-        return Ok(());
+        return memory_study(a, &scene);
     }
     let opts = StudyOptions {
         levels: a.levels,
@@ -659,14 +703,62 @@ fn study(a: StudyArgs) -> Result<()> {
         overrides: a.set,
         kernel_compare: a.kernel_compare,
         progress: true,
+        jobs: a.jobs,
+    };
+    if let [kind, dir] = &a.emit[..] {
+        if kind != "slurm" {
+            return Err(viscontact::Error::input(format!(
+                "study: --emit {kind}: the one kind is 'slurm' (--emit slurm DIR)"
+            )));
+        }
+        let slurm = slurm::SlurmOptions {
+            dir: PathBuf::from(dir),
+            at_once: (a.jobs > 1).then_some(a.jobs),
+            cpus_per_task: a.cpus_per_task,
+        };
+        for p in slurm::emit(&scene, &opts, &slurm)? {
+            println!("wrote {}", p.display());
+        }
+        println!("submit with {}", slurm.dir.join("submit.sh").display());
+        return Ok(());
+    }
+    let out = match a.out {
+        Some(o) => o,
+        None => study::default_out(&scene, &opts)?,
+    };
+    print_study(&study::run_study(&scene, &opts)?, &out)
+}
+
+/// Prints a study's tables and writes its files into `out`.
+fn print_study(report: &viscontact::study::StudyReport, out: &std::path::Path) -> Result<()> {
+    use viscontact::study;
+    print!("{}", study::markdown(report));
+    for p in study::write_report(report, out)? {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// `study --tolerances`: what accuracy costs (viscontact::study::memory_cost).
+fn memory_study(a: StudyArgs, scene: &std::path::Path) -> Result<()> {
+    use viscontact::study::memory_cost;
+    let opts = memory_cost::Options {
+        tolerances: a.tolerances,
+        steps: a.steps,
+        exact_up_to: a.exact_up_to,
+        overrides: a.set,
+        progress: true,
     };
     let out = match a.out {
         Some(o) => o,
-        None => study::default_out(&a.scene, &opts)?,
+        None => {
+            let scene = viscontact::scene::Scene::load(scene, &opts.overrides)?;
+            PathBuf::from("out").join(format!("{}-study-memory", scene.name))
+        }
     };
-    let report = study::run_study(&a.scene, &opts)?;
-    print!("{}", study::markdown(&report));
-    for p in study::write_report(&report, &out)? {
+    let report = memory_cost::run_memory_cost(scene, &opts)?;
+    print!("{}", memory_cost::markdown(&report));
+    for p in memory_cost::write_report(&report, &out)? {
         println!("wrote {}", p.display());
     }
     Ok(())

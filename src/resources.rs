@@ -35,7 +35,7 @@ use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// The share of available memory, free disk or free inodes a run may plan to use.
-const MARGIN: f64 = 0.8;
+pub const MARGIN: f64 = 0.8;
 
 /// The files a run directory holds besides its series: summary.json, the lock, the
 /// checkpoint and history files and their temporaries, with room to spare.
@@ -164,7 +164,7 @@ fn human(bytes: f64) -> String {
 }
 
 /// `MemAvailable` of /proc/meminfo, in bytes.
-fn available_memory() -> Option<f64> {
+pub fn available_memory() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;

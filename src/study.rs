@@ -50,10 +50,21 @@
 //! `--kernel-compare` every level runs twice: with the scene's Prony kernel (O(1) memory
 //! update per step) and with the same kernel written as an expression, which the scheme sums
 //! directly (O(n) per step); the table and plot show how the time grows with N for each.
+//!
+//! # Cases
+//!
+//! A study is planned first as a list of distinct cases (`plan`: each reference and level
+//! run once); they are solved one after another in this process, side by side in processes
+//! of their own (`--jobs N`, [`jobs`]) or as the runs of a Slurm job array (`--emit slurm`,
+//! then `--collect`, [`slurm`]), and the report is made from their solutions alone: the
+//! numbers do not depend on how, only the wall times ([`Timed`]).
 
+pub mod jobs;
 pub mod memory_cost;
 mod meshes;
+mod plan;
 mod report;
+pub mod slurm;
 pub mod transfer;
 
 use crate::fem::Discretization;
@@ -70,10 +81,12 @@ use transfer::{max_edge, nodal_vectors, p1_norms, Transfer};
 
 use meshes::Meshes;
 pub use meshes::{derive_pattern, expand_pattern};
+pub use plan::Case;
+use plan::{Level, Plan};
 pub use report::{csv, default_out, fraction, markdown, write_report};
 
 /// Which parameter a family of runs varies.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Vary {
     /// h = k = 1/n (the paper's Table 1).
@@ -162,6 +175,9 @@ pub struct StudyOptions {
     pub kernel_compare: bool,
     /// Progress lines on stderr.
     pub progress: bool,
+    /// Cases solved side by side, each in a process of its own ([`jobs`]); 1 (the default):
+    /// one after another in this process. The numbers are the same.
+    pub jobs: usize,
 }
 
 impl Default for StudyOptions {
@@ -176,6 +192,7 @@ impl Default for StudyOptions {
             overrides: Vec::new(),
             kernel_compare: false,
             progress: false,
+            jobs: 1,
         }
     }
 }
@@ -255,11 +272,27 @@ pub struct CostRow {
     pub max_rel_diff: f64,
 }
 
+/// How the cases of a study ran, and so what their wall times measure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Timed {
+    /// One after another in the study's process.
+    InTurn,
+    /// Up to this many side by side, each in a process of its own (`--jobs`): measured
+    /// concurrently, sharing the machine's cores and memory bandwidth.
+    SideBySide(usize),
+    /// As the runs of a Slurm job array (`--collect`): each a whole `run` on a cluster
+    /// node, its output included.
+    SlurmArray,
+}
+
 /// Everything a study found.
 #[derive(Clone, Debug, Serialize)]
 pub struct StudyReport {
     pub scene: String,
     pub end_time: f64,
+    /// How the wall times were measured.
+    pub timed: Timed,
     pub families: Vec<Family>,
     pub kernel_cost: Vec<CostRow>,
 }
@@ -326,6 +359,73 @@ fn case(mesh: &str, steps: usize) -> impl Fn(Scene) -> Result<Scene> + '_ {
     }
 }
 
+/// Memory a run holds besides what grows with its steps (the mesh, the matrices and the
+/// factor of K_A), which `check`'s estimate leaves out: counted for each case that `--jobs`
+/// packs and in the `--mem` of `--emit slurm`. Large 3D meshes need more.
+pub const SETUP_MEMORY: f64 = 1024.0 * 1024.0 * 1024.0;
+
+/// A case read and discretized with its kernel in the form asked for: all of a run but its
+/// steps, and the name of the kernel the scene gives.
+pub(crate) struct Prepared {
+    scene: Scene,
+    mesh: String,
+    disc: Discretization,
+    given: &'static str,
+}
+
+impl Prepared {
+    /// The scene as `case` changes it, discretized; for [`KernelForm::Expression`] with its
+    /// Prony kernel written as an expression.
+    fn new(
+        scene_path: &Path,
+        overrides: &[String],
+        case: impl FnOnce(Scene) -> Result<Scene>,
+        form: KernelForm,
+    ) -> Result<Prepared> {
+        let (mut scene, mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
+        let given = kernel_name(scene.physics.relaxation.as_ref());
+        if form == KernelForm::Expression {
+            scene.physics.relaxation =
+                Some(prony_as_expression(scene.physics.relaxation.as_ref())?);
+            // The reference form is the direct sum, not a fit of it.
+            scene.physics.compression = None;
+        }
+        Ok(Prepared {
+            scene,
+            mesh: mesh.path.display().to_string(),
+            disc,
+            given,
+        })
+    }
+
+    /// The case of a study, prepared.
+    fn of_case(scene_path: &Path, overrides: &[String], c: &Case) -> Result<Prepared> {
+        Prepared::new(scene_path, overrides, case(&c.mesh, c.steps), c.form)
+    }
+
+    /// The memory a run of the case may take, in bytes: what `check` estimates its steps
+    /// hold, plus [`SETUP_MEMORY`].
+    fn memory(&self) -> f64 {
+        crate::resources::Estimate::new(&self.scene, &self.disc, 0).memory + SETUP_MEMORY
+    }
+
+    /// The case solved: u_N per node and the times of one run.
+    fn solved(self, u: Vec<[f64; 3]>, wall_s: f64, steps_s: f64) -> (Solved, &'static str) {
+        let solved = Solved {
+            disc: self.disc,
+            u,
+            steps: self.scene.time.steps,
+            k: self.scene.time.k(),
+            end: self.scene.time.end,
+            mesh: self.mesh,
+            wall_s,
+            steps_s,
+            runs: 1,
+        };
+        (solved, self.given)
+    }
+}
+
 /// [`solve_once`] for the scene as `case` changes it; the wall time runs from reading the
 /// scene file.
 fn solve_case(
@@ -335,36 +435,17 @@ fn solve_case(
     form: KernelForm,
 ) -> Result<(Solved, &'static str)> {
     let start = Instant::now();
-    let (mut scene, mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
-    let given = kernel_name(scene.physics.relaxation.as_ref());
-    if form == KernelForm::Expression {
-        scene.physics.relaxation = Some(prony_as_expression(scene.physics.relaxation.as_ref())?);
-        // The reference form is the direct sum, not a fit of it.
-        scene.physics.compression = None;
-    }
+    let prepared = Prepared::new(scene_path, overrides, case, form)?;
     let steps_start = Instant::now();
     let u = {
-        let mut tl = TimeLoop::new(&scene, &disc)?;
-        solve_to_end(&mut tl, scene.time.steps)?;
+        let mut tl = TimeLoop::new(&prepared.scene, &prepared.disc)?;
+        solve_to_end(&mut tl, prepared.scene.time.steps)?;
         tl.u().to_vec()
     };
     let steps_s = steps_start.elapsed().as_secs_f64();
     let wall_s = start.elapsed().as_secs_f64();
-    let u = nodal_vectors::<3>(&disc, &u);
-    Ok((
-        Solved {
-            disc,
-            u,
-            steps: scene.time.steps,
-            k: scene.time.k(),
-            end: scene.time.end,
-            mesh: mesh.path.display().to_string(),
-            wall_s,
-            steps_s,
-            runs: 1,
-        },
-        given,
-    ))
+    let u = nodal_vectors::<3>(&prepared.disc, &u);
+    Ok(prepared.solved(u, wall_s, steps_s))
 }
 
 /// Solves the steps of a time loop up to n = N, without output: then `tl.u()` is
@@ -463,44 +544,92 @@ fn say(progress: bool, msg: &str) {
     }
 }
 
-/// Runs a study (no files written; see [`write_report`]).
+/// Runs a study (no files written; see [`write_report`]): plans its cases, solves them (one
+/// after another, or `opts.jobs` side by side in processes of their own: the same numbers)
+/// and makes the tables of their solutions.
 pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> {
     check_levels(opts)?;
     let meshes = Meshes::for_study(scene_path, opts)?;
-    let forms: &[KernelForm] = if opts.kernel_compare {
-        &[KernelForm::AsGiven, KernelForm::Expression]
+    let plan = Plan::new(opts, &meshes)?;
+    let solved = if opts.jobs > 1 {
+        jobs::solve_side_by_side(scene_path, opts, &plan.cases)?
     } else {
-        &[KernelForm::AsGiven]
+        solve_in_turn(scene_path, opts, &plan.cases)?
     };
-    let mut refs: Vec<((String, usize), Solved)> = Vec::new();
+    Ok(assemble(scene_path, opts, &meshes, &plan, &solved))
+}
+
+/// Solves the cases one after another in this process.
+fn solve_in_turn(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    cases: &[Case],
+) -> Result<Vec<(Solved, &'static str)>> {
+    cases
+        .iter()
+        .map(|c| {
+            say(opts.progress, &format!("study: {c} …"));
+            solve_case_timed(scene_path, &opts.overrides, c)
+        })
+        .collect()
+}
+
+/// A case solved and timed as a study times it.
+pub fn solve_case_timed(
+    scene_path: &Path,
+    overrides: &[String],
+    c: &Case,
+) -> Result<(Solved, &'static str)> {
+    solve_timed(
+        scene_path,
+        overrides,
+        case(&c.mesh, c.steps),
+        c.form,
+        c.repeat,
+    )
+}
+
+/// The report of a study from the solutions of its cases (`solved[i]` solves
+/// `plan.cases[i]`).
+fn assemble(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    meshes: &Meshes,
+    plan: &Plan,
+    solved: &[(Solved, &'static str)],
+) -> StudyReport {
     let mut families = Vec::new();
     let mut kernel_cost = Vec::new();
     let mut end_time = 0.0;
-    for &vary in &opts.vary {
-        let (r, reference) = solve_reference(scene_path, opts, &meshes, vary, &mut refs)?;
+    for v in &plan.varies {
+        let r = &solved[v.reference.case].0;
         end_time = r.end;
-        let mut solved_by_form: Vec<Vec<Solved>> = Vec::new();
-        for &form in forms {
+        let reference = reference_info(meshes, r, v.reference.mesh_n);
+        let mut solved_by_form: Vec<Vec<&Solved>> = Vec::new();
+        for (form, levels) in &v.forms {
             let family = FamilyCase {
-                vary,
-                form,
+                vary: v.vary,
+                form: *form,
                 reference: &reference,
                 ref_run: r,
             };
-            let (family, solved) = solve_family(scene_path, opts, &meshes, family)?;
-            families.push(family);
-            solved_by_form.push(solved);
+            families.push(family_of(family, meshes, levels, solved));
+            solved_by_form.push(levels.iter().map(|l| &solved[l.case].0).collect());
         }
         if let [prony, expr] = &solved_by_form[..] {
-            kernel_cost.extend(cost_rows(vary, &opts.levels, prony, expr));
+            kernel_cost.extend(cost_rows(v.vary, &opts.levels, prony, expr));
         }
     }
-    Ok(StudyReport {
+    StudyReport {
         scene: scene_path.display().to_string(),
         end_time,
+        timed: match opts.jobs {
+            0 | 1 => Timed::InTurn,
+            n => Timed::SideBySide(n),
+        },
         families,
         kernel_cost,
-    })
+    }
 }
 
 /// The levels and families a study asks for are there, and levels are ≥ 1.
@@ -519,38 +648,11 @@ fn check_levels(opts: &StudyOptions) -> Result<()> {
     Ok(())
 }
 
-/// The reference run of family `vary` (computed once for the families that share it, kept
-/// in `refs`) and what the report says of it.
-fn solve_reference<'r>(
-    scene_path: &Path,
-    opts: &StudyOptions,
-    meshes: &Meshes,
-    vary: Vary,
-    refs: &'r mut Vec<((String, usize), Solved)>,
-) -> Result<(&'r Solved, ReferenceInfo)> {
-    // The reference keeps the fixed parameter (module docs).
-    let reference = opts.reference;
-    let fixed = opts.fixed.unwrap_or(reference);
-    let (ref_mesh, ref_steps, ref_n) = meshes.case(vary, reference, None, fixed)?;
-    let key = (ref_mesh.clone(), ref_steps);
-    if !refs.iter().any(|(k, _)| *k == key) {
-        say(
-            opts.progress,
-            &format!("study: reference {ref_mesh}, N = {ref_steps} …"),
-        );
-        let (s, _) = solve_timed(
-            scene_path,
-            &opts.overrides,
-            case(&ref_mesh, ref_steps),
-            KernelForm::AsGiven,
-            Some(1),
-        )?;
-        refs.push((key.clone(), s));
-    }
-    let r = &refs.iter().find(|(k, _)| *k == key).expect("just added").1;
+/// What the report says of the reference run `r` (on the mesh of level `ref_n`).
+fn reference_info(meshes: &Meshes, r: &Solved, ref_n: usize) -> ReferenceInfo {
     let (ref_l2, ref_semi) = p1_norms(&r.disc.cells, &r.u);
     let ref_hmax = max_edge(&r.disc.nodes, &r.disc.cells);
-    let info = ReferenceInfo {
+    ReferenceInfo {
         mesh: r.mesh.clone(),
         h: meshes.nominal_h(ref_n, ref_hmax),
         h_max: ref_hmax,
@@ -560,8 +662,7 @@ fn solve_reference<'r>(
         u_l2: ref_l2,
         u_h1: (ref_l2 * ref_l2 + ref_semi * ref_semi).sqrt(),
         wall_s: r.wall_s,
-    };
-    Ok((r, info))
+    }
 }
 
 /// One family of a study: what it varies, the kernel's form and its reference.
@@ -574,45 +675,29 @@ struct FamilyCase<'a> {
     ref_run: &'a Solved,
 }
 
-/// Runs the levels of one family: its table, and the solutions (for the cost of memory).
-fn solve_family(
-    scene_path: &Path,
-    opts: &StudyOptions,
-    meshes: &Meshes,
+/// The table of one family from the solutions of its levels.
+fn family_of(
     family: FamilyCase,
-) -> Result<(Family, Vec<Solved>)> {
-    let FamilyCase { vary, form, .. } = family;
-    let fixed = opts.fixed.unwrap_or(opts.reference);
+    meshes: &Meshes,
+    levels: &[Level],
+    solved: &[(Solved, &'static str)],
+) -> Family {
     let mut rows: Vec<Row> = Vec::new();
-    let mut solved = Vec::new();
     let mut kernel = String::new();
-    for (i, &n) in opts.levels.iter().enumerate() {
-        let (mesh, steps, mesh_n) = meshes.case(vary, n, Some(i), fixed)?;
-        say(
-            opts.progress,
-            &format!("study: vary {vary}, {mesh}, N = {steps} ({form:?}) …"),
-        );
-        let (s, given) = solve_timed(
-            scene_path,
-            &opts.overrides,
-            case(&mesh, steps),
-            form,
-            opts.repeat,
-        )?;
-        kernel = form.label(given);
+    for l in levels {
+        let (s, given) = &solved[l.case];
+        kernel = family.form.label(given);
         let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
-        let h = [meshes.nominal_h(mesh_n, h_max), h_max];
-        rows.push(row(family, n, h, &kernel, &s, rows.last()));
-        solved.push(s);
+        let h = [meshes.nominal_h(l.mesh_n, h_max), h_max];
+        rows.push(row(family, l.n, h, &kernel, s, rows.last()));
     }
-    let family = Family {
-        vary,
+    Family {
+        vary: family.vary,
         kernel,
-        form,
+        form: family.form,
         reference: family.reference.clone(),
         rows,
-    };
-    Ok((family, solved))
+    }
 }
 
 /// The row of level n of a family, solved as `s` on a mesh of nominal size h and longest
@@ -667,7 +752,7 @@ fn row(
 }
 
 /// Prony against expression at each level of a family (`--kernel-compare`).
-fn cost_rows(vary: Vary, levels: &[usize], prony: &[Solved], expr: &[Solved]) -> Vec<CostRow> {
+fn cost_rows(vary: Vary, levels: &[usize], prony: &[&Solved], expr: &[&Solved]) -> Vec<CostRow> {
     prony
         .iter()
         .zip(expr)

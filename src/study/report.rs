@@ -1,7 +1,7 @@
 //! A study's report: the tables (Markdown, CSV, JSON) and the plots of error against h,
 //! k and wall time, and of the cost of memory.
 
-use super::{CostRow, Family, Row, StudyOptions, StudyReport, Vary};
+use super::{CostRow, Family, Row, StudyOptions, StudyReport, Timed, Vary};
 use crate::plot::{log_log_chart, Curve};
 use crate::{Error, Result};
 use std::fmt::Write as _;
@@ -31,6 +31,24 @@ pub fn markdown(report: &StudyReport) -> String {
          (‖e‖²_L² + |e|²_H¹)^½. Wall time: median over runs of the whole run (setup + all \
          steps, no output).\n"
     );
+    match report.timed {
+        Timed::InTurn => {}
+        Timed::SideBySide(n) => {
+            let _ = writeln!(
+                s,
+                "The cases ran up to {n} side by side (--jobs {n}), each with its share of the \
+                 cores: their wall times were measured concurrently and are longer than a \
+                 case's alone.\n"
+            );
+        }
+        Timed::SlurmArray => {
+            let _ = writeln!(
+                s,
+                "The cases ran as the tasks of a Slurm job array: their wall times are those \
+                 of the runs (summary.json, output included) on the cluster's nodes.\n"
+            );
+        }
+    }
     for f in &report.families {
         family_table(&mut s, f);
     }

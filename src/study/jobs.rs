@@ -1,0 +1,207 @@
+//! A study's cases side by side: `study … --jobs N` (issue 28).
+//!
+//! Each case runs in a process of its own: the current executable's hidden command
+//! `study-case` ([`run_case`]), not `run` into a case directory, because a study needs more
+//! of a case than a run directory gives: its wall time without output, the median of
+//! `--repeat` runs, and the kernel handed over as an expression (`--kernel-compare`). The
+//! process writes u_N per node as the bits of its f64 values, with its times, into a result
+//! file; this process reads and discretizes the same case (which is deterministic) for the
+//! error norms. The numbers of the report are therefore those of `--jobs 1`, bit for bit.
+//!
+//! - Packing: the cases start in the order of the study; a case starts while fewer than N
+//!   run and the memory of its run and of the running ones fits in the share of the
+//!   available memory a run may plan: `check`'s estimate of what the steps hold
+//!   ([`crate::resources::Estimate`]) plus [`super::SETUP_MEMORY`] each; a case that does
+//!   not fit waits, unless nothing runs.
+//! - Threads: each process gets cores / N of them (at least 1) through
+//!   `VISCONTACT_THREADS`.
+//! - Failure: a case whose process fails or is killed stops the study: the other processes
+//!   are stopped and the error names the case (the process's own message is on stderr
+//!   above). Ctrl-C reaches the processes of the terminal's foreground group alike: the
+//!   study stops with them and is run again from the start, as a study run one case after
+//!   another is.
+
+use super::{solve_case_timed, Case, KernelForm, Prepared, Solved, StudyOptions};
+use crate::resources::{available_memory, MARGIN};
+use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+/// What a case's process hands back: u_N per node as f64 bits, and its times.
+#[derive(Serialize, Deserialize)]
+struct CaseResult {
+    u_bits: Vec<[u64; 3]>,
+    wall_s: f64,
+    steps_s: f64,
+    runs: usize,
+}
+
+/// The hidden command `study-case`: solves one case of a study as a study does and writes
+/// its result to `result`.
+pub fn run_case(scene_path: &Path, overrides: &[String], c: &Case, result: &Path) -> Result<()> {
+    let (s, _) = solve_case_timed(scene_path, overrides, c)?;
+    let out = CaseResult {
+        u_bits: s.u.iter().map(|v| v.map(f64::to_bits)).collect(),
+        wall_s: s.wall_s,
+        steps_s: s.steps_s,
+        runs: s.runs,
+    };
+    let json = serde_json::to_vec(&out).map_err(|e| Error::solve(e.to_string()))?;
+    crate::output::write_atomic(result, &json)
+}
+
+/// A case's process and what it needs when it ends.
+struct Job {
+    index: usize,
+    child: Child,
+    prepared: Prepared,
+    memory: f64,
+    result: PathBuf,
+}
+
+/// The processes running; those still running when it is dropped (a failed study) are
+/// stopped and reaped.
+struct Running(Vec<Job>);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        for mut r in self.0.drain(..) {
+            let _ = r.child.kill();
+            let _ = r.child.wait();
+        }
+    }
+}
+
+/// A directory for the result files, removed with what it holds when dropped.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Solves the cases in up to `opts.jobs` processes at a time; `solved[i]` solves `cases[i]`.
+pub(super) fn solve_side_by_side(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    cases: &[Case],
+) -> Result<Vec<(Solved, &'static str)>> {
+    let scratch =
+        Scratch(std::env::temp_dir().join(format!("viscontact-study-{}", std::process::id())));
+    std::fs::create_dir_all(&scratch.0).map_err(|e| Error::io(&scratch.0, e))?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = (cores / opts.jobs).max(1);
+    let budget = available_memory().map(|m| MARGIN * m);
+    let mut solved: Vec<Option<(Solved, &'static str)>> = cases.iter().map(|_| None).collect();
+    let mut running = Running(Vec::new());
+    let mut next: Option<(usize, Prepared)> = None;
+    let mut started = 0;
+    loop {
+        if next.is_none() && started < cases.len() {
+            let p = Prepared::of_case(scene_path, &opts.overrides, &cases[started])?;
+            next = Some((started, p));
+            started += 1;
+        }
+        let in_use: f64 = running.0.iter().map(|r| r.memory).sum();
+        let fits = |p: &Prepared| budget.is_none_or(|b| in_use + p.memory() <= b);
+        match next.take() {
+            Some((i, p)) if running.0.is_empty() || (running.0.len() < opts.jobs && fits(&p)) => {
+                let job = start(scene_path, opts, &cases[i], (i, p), (&scratch.0, threads))?;
+                running.0.push(job);
+            }
+            waiting => {
+                next = waiting;
+                if running.0.is_empty() {
+                    break;
+                }
+                let (i, s) = wait_any(&mut running, cases)?;
+                solved[i] = Some(s);
+            }
+        }
+    }
+    Ok(solved
+        .into_iter()
+        .map(|s| s.expect("every case ran"))
+        .collect())
+}
+
+/// Starts the process of case `i` (prepared as `p`), writing its result into `dir`, with
+/// `threads` threads.
+fn start(
+    scene_path: &Path,
+    opts: &StudyOptions,
+    c: &Case,
+    (index, prepared): (usize, Prepared),
+    (dir, threads): (&Path, usize),
+) -> Result<Job> {
+    super::say(
+        opts.progress,
+        &format!("study: {c} … (a process of its own)"),
+    );
+    let exe = std::env::current_exe().map_err(|e| Error::io(Path::new("current_exe"), e))?;
+    let result = dir.join(format!("case_{index}.json"));
+    let mut cmd = Command::new(&exe);
+    cmd.arg("study-case")
+        .arg(scene_path)
+        .args(["--mesh", &c.mesh, "--steps", &c.steps.to_string()])
+        .arg("--result")
+        .arg(&result)
+        .env("VISCONTACT_THREADS", threads.to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null());
+    if c.form == KernelForm::Expression {
+        cmd.arg("--expression");
+    }
+    if let Some(r) = c.repeat {
+        cmd.args(["--repeat", &r.to_string()]);
+    }
+    for o in &opts.overrides {
+        cmd.arg(format!("--set={o}"));
+    }
+    let child = cmd.spawn().map_err(|e| Error::io(&exe, e))?;
+    let memory = prepared.memory();
+    Ok(Job {
+        index,
+        child,
+        prepared,
+        memory,
+        result,
+    })
+}
+
+/// Waits until a process ends and returns its case's solution; a process that failed fails
+/// the study, naming its case.
+fn wait_any(running: &mut Running, cases: &[Case]) -> Result<(usize, (Solved, &'static str))> {
+    loop {
+        for j in 0..running.0.len() {
+            let status = match running.0[j].child.try_wait() {
+                Ok(None) => continue,
+                Ok(Some(status)) => status,
+                Err(e) => return Err(Error::io(Path::new("study-case"), e)),
+            };
+            let job = running.0.swap_remove(j);
+            if !status.success() {
+                return Err(Error::solve(format!(
+                    "study: the case {} failed ({status}); its process's message is above",
+                    cases[job.index]
+                )));
+            }
+            return read_result(job);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The solution of a case whose process succeeded.
+fn read_result(r: Job) -> Result<(usize, (Solved, &'static str))> {
+    let bytes = std::fs::read(&r.result).map_err(|e| Error::io(&r.result, e))?;
+    let out: CaseResult = serde_json::from_slice(&bytes)
+        .map_err(|e| Error::solve(format!("{}: {e}", r.result.display())))?;
+    let u = out.u_bits.iter().map(|v| v.map(f64::from_bits)).collect();
+    let (mut s, given) = r.prepared.solved(u, out.wall_s, out.steps_s);
+    s.runs = out.runs;
+    Ok((r.index, (s, given)))
+}
