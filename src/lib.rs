@@ -25,6 +25,7 @@ pub mod scene;
 pub mod solver;
 pub mod stability;
 pub mod study;
+pub mod threads;
 pub mod time_loop;
 
 #[cfg(test)]

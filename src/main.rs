@@ -1,6 +1,7 @@
 //! The `viscontact` command line (DESIGN.md "Command line").
 
 use clap::{Parser, Subcommand};
+use std::num::NonZeroUsize;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use viscontact::run::{resume, run, setup, Interrupt, Outcome, ResumeOptions, RunOptions};
@@ -39,6 +40,10 @@ enum Command {
         /// (they are left alone).
         #[arg(long)]
         force: bool,
+        /// Threads for the steps (default: VISCONTACT_THREADS, else the cores this process
+        /// may use); the results are the same bit for bit for every count.
+        #[arg(long, value_name = "N")]
+        threads: Option<NonZeroUsize>,
     },
     /// Continue a run from its checkpoint: same results as if it had never stopped.
     Resume {
@@ -62,6 +67,10 @@ enum Command {
         /// (they are left alone).
         #[arg(long)]
         force: bool,
+        /// Threads for the steps (default: VISCONTACT_THREADS, else the cores this process
+        /// may use); the results are the same bit for bit for every count.
+        #[arg(long, value_name = "N")]
+        threads: Option<NonZeroUsize>,
     },
     /// Validate a scene and print its effects, sizes and solver path; runs nothing.
     Check {
@@ -115,6 +124,15 @@ fn main() -> ExitCode {
         Ok(i) => i,
         Err(code) => return code,
     };
+    let threads = match &cli.command {
+        Command::Run { threads, .. } | Command::Resume { threads, .. } => *threads,
+        Command::Study(a) => a.threads,
+        _ => None,
+    };
+    // After the signal handling (which must come before any thread is started).
+    if let Err(e) = viscontact::threads::init(threads) {
+        return exit_code(Err(e));
+    }
     exit_code(dispatch(cli.command, interrupt))
 }
 
@@ -141,6 +159,7 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
             quiet,
             stop_after,
             force,
+            threads: _,
         } => run(
             &scene,
             &RunOptions {
@@ -160,6 +179,7 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
             quiet,
             stop_after,
             force,
+            threads: _,
         } => resume(
             &checkpoint,
             &ResumeOptions {
@@ -242,8 +262,15 @@ fn report(outcome: Outcome) -> Option<i32> {
                 eprintln!("warning: {w}");
             }
             println!(
-                "{}: {} steps, {} dofs, {:.2} s; ‖u_N‖_H1 = {:.6e}; wrote {}",
-                s.name, s.steps, s.dofs, s.timing.total_s, s.final_.u_h1, s.output.directory
+                "{}: {} steps, {} dofs, {:.2} s on {} thread{}; ‖u_N‖_H1 = {:.6e}; wrote {}",
+                s.name,
+                s.steps,
+                s.dofs,
+                s.timing.total_s,
+                s.threads,
+                if s.threads == 1 { "" } else { "s" },
+                s.final_.u_h1,
+                s.output.directory
             );
             None
         }
@@ -641,6 +668,10 @@ struct StudyArgs {
     exact_up_to: usize,
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Threads for the steps (default: VISCONTACT_THREADS, else the cores this process
+    /// may use); the results are the same bit for bit for every count.
+    #[arg(long, value_name = "N")]
+    threads: Option<NonZeroUsize>,
 }
 
 #[derive(clap::Args)]

@@ -29,6 +29,9 @@ pub struct Summary {
     pub end_time: f64,
     pub effects: Vec<String>,
     pub solver: String,
+    /// The threads the run used (`threads::count`: `--threads`, `VISCONTACT_THREADS`, else
+    /// the cores the process may use); the results do not depend on it.
+    pub threads: usize,
     pub timing: Timing,
     pub final_: Final,
     pub contact: ContactSummary,
@@ -158,6 +161,7 @@ impl Summary {
             end_time: scene.time.end,
             effects: tl.effects().names().iter().map(|s| s.to_string()).collect(),
             solver: tl.solver().name().to_string(),
+            threads: crate::threads::count(),
             timing: ending.timing,
             final_: Final {
                 time: if completed { scene.time.end } else { tl.time() },

@@ -33,7 +33,8 @@ fn worker() -> Option<&'static rayon::ThreadPool> {
 
 /// Runs pairs of closures of one kind of pass, on two threads or one after the other.
 pub struct Pair {
-    /// Whether a second thread may take the second half (two cores or more).
+    /// Whether a second thread may take the second half (the process has two threads or
+    /// more, `threads::count`).
     threads: bool,
     ways: Mutex<Ways>,
 }
@@ -49,7 +50,7 @@ struct Ways {
 impl Default for Pair {
     fn default() -> Self {
         Pair {
-            threads: std::thread::available_parallelism().is_ok_and(|p| p.get() >= 2),
+            threads: crate::threads::count() >= 2,
             ways: Mutex::default(),
         }
     }
@@ -76,7 +77,7 @@ impl Pair {
         }
     }
 
-    /// Runs `a` and `b`: on two threads when there are two cores and that was the faster
+    /// Runs `a` and `b`: on two threads when the process has two and that was the faster
     /// way lately, else one after the other.
     pub fn both(&self, a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
         let Some(worker) = self.threads.then(worker).flatten() else {

@@ -112,7 +112,7 @@ use crate::Result;
 use delassus::{column, Delassus};
 use faer::linalg::solvers::DenseSolveCore;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
-use faer::{Accum, Mat, Side};
+use faer::{Accum, Mat, Par, Side};
 use groups::{dot, Group};
 use iteration::Work;
 pub use settings::{DualSettings, NewtonForm};
@@ -249,7 +249,10 @@ impl DualSolver {
     }
 }
 
-/// G = L_CC⁻¹ E (|C|×m, E the rows' C-block in the factor's ordering) and D = GᵀG.
+/// G = L_CC⁻¹ E (|C|×m, E the rows' C-block in the factor's ordering) and D = GᵀG, on all
+/// the process's threads: faer's parallel products and solves with more than one column
+/// give the same bits for every thread count; with one column they split their sums by it
+/// (`threads`), so a single row is condensed on one thread.
 fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
     let (n, c, m) = (factor.dim(), factor.last(), rows.len());
     let first = n - c;
@@ -261,8 +264,13 @@ fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
             g[(pos - first, r)] = coef;
         }
     }
+    let par = if m >= 2 {
+        crate::threads::par()
+    } else {
+        Par::Seq
+    };
     let l_cc = factor.trailing_block();
-    solve_lower_triangular_in_place(l_cc.as_ref(), g.as_mut(), faer::get_global_parallelism());
+    solve_lower_triangular_in_place(l_cc.as_ref(), g.as_mut(), par);
     let mut d = Mat::<f64>::zeros(m, m);
     faer::linalg::matmul::matmul(
         d.as_mut(),
@@ -270,7 +278,7 @@ fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
         g.transpose(),
         g.as_ref(),
         1.0,
-        faer::get_global_parallelism(),
+        par,
     );
     (g, d)
 }

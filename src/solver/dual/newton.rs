@@ -389,48 +389,58 @@ fn solve_cached(
     f.form = Some(form);
     f.coords.clear();
     f.coords.extend_from_slice(coords);
-    Ok(llt_solve(&f.l, rhs, f.par_min))
+    Ok(llt_solve(&f.l, rhs))
 }
 
-/// The parallelism of dense work on an n × n Newton matrix: one thread below `par_min`,
-/// faer's global parallelism (all cores) above (`DualSettings::par_min`).
+/// The parallelism of the factorization of an n × n Newton matrix: one thread below
+/// `par_min`, all the process's threads above (`DualSettings::par_min`). faer's parallel
+/// factorization gives the same bits for every thread count (`threads`).
 fn dense_par(n: usize, par_min: usize) -> Par {
     if n < par_min {
         Par::Seq
     } else {
-        faer::get_global_parallelism()
+        crate::threads::par()
     }
 }
 
-/// x = (L Lᵀ)⁻¹ rhs for L in the lower triangle of `l`.
-fn llt_solve(l: &Mat<f64>, rhs: &Mat<f64>, par_min: usize) -> Mat<f64> {
+/// x = (L Lᵀ)⁻¹ rhs for L in the lower triangle of `l`, on one thread: faer's parallel
+/// solve of a single right side splits its sums by the thread count (`threads`).
+fn llt_solve(l: &Mat<f64>, rhs: &Mat<f64>) -> Mat<f64> {
     let mut x = rhs.clone();
     llt::solve::solve_in_place_with_conj(
         l.as_ref(),
         faer::Conj::No,
         x.as_mut(),
-        dense_par(l.nrows(), par_min),
+        Par::Seq,
         MemStack::new(&mut MemBuffer::new(StackReq::EMPTY)),
     );
     x
+}
+
+/// H x on one thread, for the same reason as `llt_solve` (`h * &x` would use faer's
+/// global parallelism).
+fn mat_vec(h: &Mat<f64>, x: &Mat<f64>) -> Mat<f64> {
+    let mut y = Mat::zeros(h.nrows(), x.ncols());
+    faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, h, x, 1.0, Par::Seq);
+    y
 }
 
 /// Solves H x = rhs by conjugate gradients preconditioned with the factor `f` of a nearby
 /// matrix, to a relative residual of 1e-14; None if that takes more than `f.pcg_max`
 /// iterations.
 fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
-    let (l, par_min) = (&f.l, f.par_min);
+    let l = &f.l;
     let target = 1e-14 * rhs.norm_l2();
-    let mut x = llt_solve(l, rhs, par_min);
-    let mut r = rhs - h * &x;
+    let mut x = llt_solve(l, rhs);
+    let mut r = rhs - mat_vec(h, &x);
     if r.norm_l2() <= target {
         return Some(x);
     }
-    let mut z = llt_solve(l, &r, par_min);
+    let mut z = llt_solve(l, &r);
     let mut p = z.clone();
     let mut rz = (r.transpose() * &z)[(0, 0)];
     for _ in 0..f.pcg_max {
-        let hp = h * &p;
+        let hp = mat_vec(h, &p);
         let php = (p.transpose() * &hp)[(0, 0)];
         if php.is_nan() || php <= 0.0 {
             return None;
@@ -441,7 +451,7 @@ fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
         if r.norm_l2() <= target {
             return Some(x);
         }
-        z = llt_solve(l, &r, par_min);
+        z = llt_solve(l, &r);
         let rz_new = (r.transpose() * &z)[(0, 0)];
         p = &z + (rz_new / rz) * &p;
         rz = rz_new;

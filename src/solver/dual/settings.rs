@@ -70,9 +70,10 @@ pub struct DualSettings {
     /// matrix runs on one thread: handing half of it to `Pair`'s worker costs more. The
     /// arithmetic is the same either way. Default 512; ≥ 2.
     pub split_rows: usize,
-    /// Dense factorizations and solves of an n × n Newton matrix run on one thread for
-    /// n below this and on faer's global parallelism above: handing a small factorization
-    /// to the thread pool costs more than it saves. Default 1024.
+    /// The dense factorization of an n × n Newton matrix runs on one thread for n below
+    /// this and on all the process's threads above (`threads`): handing a small
+    /// factorization to the thread pool costs more than it saves. (Its solves, of one
+    /// vector, run on one thread.) Default 1024.
     pub par_min: usize,
     /// The form of the Newton systems. Default `NewtonForm::Cheaper`.
     pub newton_form: NewtonForm,

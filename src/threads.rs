@@ -1,0 +1,181 @@
+//! The threads of the process: one count, decided once before any work starts.
+//!
+//! The count is `--threads N` (`run`, `resume`, `study`), else the environment variable
+//! `VISCONTACT_THREADS`, else the cores the process may use
+//! (`std::thread::available_parallelism`, which on Linux obeys the CPU affinity that
+//! `taskset` or Slurm's `--cpus-per-task` set, and a cgroup's CPU quota). Everything that
+//! hands work to other threads asks here:
+//! - rayon's global pool, on which faer's parallel kernels run, holds that many threads;
+//! - faer's parallelism is `Par::rayon(N)`, `Par::Seq` for one thread ([`par`]);
+//! - the solves' and the dual's second thread (`solver::pair::Pair`) is used only from two.
+//!
+//! With one thread nothing runs on a second thread. Results do not depend on the count:
+//! every split of the step's work is decided by the matrix (the subtrees of the factor's
+//! elimination tree, the column blocks of D), never by the thread count or by timing.
+//! faer's sparse Cholesky factorization and its dense kernels on matrices of several
+//! columns (factorizations, triangular solves, products, inverses) give the same bits for
+//! every `Par` (this module's tests, and `solver::factor`'s for the sparse factorization);
+//! its products and solves of a single vector do not (they split their sums by the thread
+//! count), so they always run with `Par::Seq`.
+
+use crate::{Error, Result};
+use faer::Par;
+use std::num::NonZeroUsize;
+use std::sync::OnceLock;
+
+/// The environment variable read when `--threads` is not given.
+pub const ENV: &str = "VISCONTACT_THREADS";
+
+/// The count, once [`init`] or [`count`] has decided it.
+static COUNT: OnceLock<usize> = OnceLock::new();
+
+/// Decides the process's thread count (`flag`, else `VISCONTACT_THREADS`, else the cores it
+/// may use), sizes rayon's global pool and faer's parallelism by it, and returns it. Call it
+/// once, before any work: a second call, or one after [`count`], keeps the first count.
+/// A `VISCONTACT_THREADS` that is not a whole number ≥ 1 is bad input.
+pub fn init(flag: Option<NonZeroUsize>) -> Result<usize> {
+    let n = match flag {
+        Some(n) => n.get(),
+        None => match std::env::var(ENV) {
+            Ok(text) => parse(&text).ok_or_else(|| {
+                Error::input(format!(
+                    "{ENV}={text:?}: expected the number of threads, a whole number ≥ 1"
+                ))
+            })?,
+            Err(std::env::VarError::NotPresent) => available(),
+            Err(std::env::VarError::NotUnicode(_)) => {
+                return Err(Error::input(format!("{ENV} is not valid UTF-8")));
+            }
+        },
+    };
+    let n = *COUNT.get_or_init(|| n);
+    // Fails only if the pool was started already (a second call): it keeps its size then.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .thread_name(|i| format!("viscontact-{i}"))
+        .build_global();
+    faer::set_global_parallelism(par());
+    Ok(n)
+}
+
+/// A thread count as `VISCONTACT_THREADS` writes it: a whole number ≥ 1.
+fn parse(text: &str) -> Option<usize> {
+    text.trim().parse().ok().filter(|&n| n >= 1)
+}
+
+/// The cores the process may use (1 if the system cannot say).
+fn available() -> usize {
+    std::thread::available_parallelism().map_or(1, NonZeroUsize::get)
+}
+
+/// The process's thread count: [`init`]'s, or the cores it may use where nothing called
+/// `init` (the library used from a test or a benchmark).
+pub fn count() -> usize {
+    *COUNT.get_or_init(available)
+}
+
+/// faer's parallelism for work that is large enough to share: all [`count`] threads.
+pub fn par() -> Par {
+    match count() {
+        1 => Par::Seq,
+        n => Par::rayon(n),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::SplitMix;
+    use faer::linalg::cholesky::llt;
+    use faer::linalg::matmul::matmul;
+    use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+    use faer::{Accum, Mat};
+
+    #[test]
+    fn counts_are_whole_numbers_from_one() {
+        assert_eq!(parse("3"), Some(3));
+        assert_eq!(parse(" 16\n"), Some(16));
+        for bad in ["0", "-1", "", "two", "1.5"] {
+            assert_eq!(parse(bad), None, "{bad}");
+        }
+        assert!(available() >= 1);
+    }
+
+    /// A matrix of uniform entries in [−1, 1) from `seed`.
+    fn random(rows: usize, cols: usize, seed: u64) -> Mat<f64> {
+        let mut rng = SplitMix(seed);
+        Mat::from_fn(rows, cols, |_, _| rng.range(-1.0, 1.0))
+    }
+
+    /// The dense kernels the dual runs on all threads (G = L⁻¹E, D = GᵀG, the Cholesky
+    /// factorization of a Newton matrix, the inverse of D) give the same bits on one thread
+    /// and on 2, 3 or 4: with more than one column their parallel versions split the output,
+    /// never a sum. (A product or solve of a single vector splits its sum by the thread
+    /// count: the dual runs those on one thread.) Sizes past faer's thresholds for going
+    /// parallel, with sums long enough that another order would show.
+    #[test]
+    fn faer_dense_kernels_are_identical_for_every_par() {
+        let (n, m) = (1100, 300);
+        let a = random(n, n, 1);
+        let run = |par: Par| {
+            // An SPD matrix A Aᵀ/n + I, its factor, a solve with it, and GᵀG.
+            let mut spd = Mat::<f64>::identity(n, n);
+            matmul(
+                spd.as_mut(),
+                Accum::Add,
+                a.as_ref(),
+                a.transpose(),
+                1.0 / n as f64,
+                par,
+            );
+            let mut l = spd.clone();
+            let mut mem = faer::dyn_stack::MemBuffer::new(
+                llt::factor::cholesky_in_place_scratch::<f64>(n, par, Default::default()),
+            );
+            llt::factor::cholesky_in_place(
+                l.as_mut(),
+                Default::default(),
+                par,
+                faer::dyn_stack::MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .unwrap();
+            let mut g = random(n, m, 2);
+            solve_lower_triangular_in_place(l.as_ref(), g.as_mut(), par);
+            let mut d = Mat::<f64>::zeros(m, m);
+            matmul(
+                d.as_mut(),
+                Accum::Replace,
+                g.transpose(),
+                g.as_ref(),
+                1.0,
+                par,
+            );
+            let bits = |v: &Mat<f64>| {
+                (0..v.ncols())
+                    .flat_map(|j| (0..v.nrows()).map(move |i| v[(i, j)].to_bits()))
+                    .collect::<Vec<_>>()
+            };
+            let mut inv = Mat::<f64>::zeros(n, n);
+            llt::inverse::inverse(
+                inv.as_mut(),
+                l.as_ref(),
+                par,
+                faer::dyn_stack::MemStack::new(&mut faer::dyn_stack::MemBuffer::new(
+                    llt::inverse::inverse_scratch::<f64>(n, par),
+                )),
+            );
+            [&spd, &l, &g, &d, &inv].map(bits)
+        };
+        let one = run(Par::Seq);
+        for threads in [2, 3, 4] {
+            let many = run(Par::rayon(threads));
+            for (what, (a, b)) in ["A", "L", "G", "D", "A⁻¹"]
+                .iter()
+                .zip(one.iter().zip(&many))
+            {
+                assert!(a == b, "{what} differs with {threads} threads");
+            }
+        }
+    }
+}
