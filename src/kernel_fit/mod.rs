@@ -43,11 +43,14 @@
 //! sequential and deterministic: the same kernel, lags and tolerance give the same bits (a
 //! resumed run recomputes the fit and the checkpoint check compares it bit for bit).
 
+mod nnls;
+mod polish;
+
 use crate::kernel::Kernel;
 use crate::{Error, Result};
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::qr::no_pivoting::{factor, solve};
-use faer::{Conj, Mat, Par};
+use faer::Mat;
+use nnls::nnls;
+use polish::polish;
 use std::time::Instant;
 
 /// r on the lags the scheme reads: `r[0]` = r(0) when `with_zero`, then r(k), r(2k), …,
@@ -251,83 +254,6 @@ fn polished(
     best
 }
 
-/// Levenberg–Marquardt on min Σ_rows (r(s_l) − Σ a_i e^{−b_i s_l})² over the weights a_i and
-/// the logarithms of the positive rates θ_i = ln b_i (a constant term keeps b = 0), with
-/// Marquardt's column scaling; a step is taken only if it lowers the sum and keeps every
-/// a_i > 0, so the fit stays a positive sum of exponentials.
-fn polish(lags: &Lags, rows: &[usize], terms: &[(f64, f64)]) -> Vec<(f64, f64)> {
-    let y = values(lags, rows);
-    let m = rows.len();
-    let model = |terms: &[(f64, f64)]| -> (Mat<f64>, f64) {
-        let rates: Vec<f64> = terms.iter().map(|t| t.1).collect();
-        let e = design(lags, rows, &rates);
-        let res = (0..m)
-            .map(|i| {
-                y[i] - (0..terms.len())
-                    .map(|j| terms[j].0 * e[(i, j)])
-                    .sum::<f64>()
-            })
-            .map(|r| r * r)
-            .sum();
-        (e, res)
-    };
-    let mut cur = terms.to_vec();
-    let (mut e, mut cost) = model(&cur);
-    let mut lambda: f64 = 1e-3;
-    for _ in 0..200 {
-        let free: Vec<usize> = (0..cur.len()).filter(|&j| cur[j].1 > 0.0).collect();
-        let n = cur.len() + free.len();
-        let mut jac = Mat::<f64>::zeros(m + n, n);
-        let mut rhs = vec![0.0; m + n];
-        for i in 0..m {
-            let s = lags.lag(rows[i]) as f64 * lags.k;
-            let mut fit = 0.0;
-            for (j, t) in cur.iter().enumerate() {
-                jac[(i, j)] = e[(i, j)];
-                fit += t.0 * e[(i, j)];
-            }
-            for (c, &j) in free.iter().enumerate() {
-                jac[(i, cur.len() + c)] = -cur[j].0 * cur[j].1 * s * e[(i, j)];
-            }
-            rhs[i] = y[i] - fit;
-        }
-        for c in 0..n {
-            let norm = (0..m).map(|i| jac[(i, c)].powi(2)).sum::<f64>().sqrt();
-            jac[(m + c, c)] = lambda.sqrt() * norm.max(f64::MIN_POSITIVE);
-        }
-        let step = lstsq(&jac, &(0..n).collect::<Vec<_>>(), &rhs);
-        let mut next = cur.clone();
-        for (j, t) in next.iter_mut().enumerate() {
-            t.0 += step[j];
-        }
-        for (c, &j) in free.iter().enumerate() {
-            next[j].1 *= step[cur.len() + c].exp();
-        }
-        let trial = next
-            .iter()
-            .all(|t| t.0 > 0.0 && t.1.is_finite())
-            .then(|| model(&next));
-        match trial {
-            Some((e_next, c_next)) if c_next < cost => {
-                let done = cost - c_next <= 1e-12 * cost;
-                (cur, e, cost) = (next, e_next, c_next);
-                lambda = (lambda / 3.0).max(1e-12);
-                if done {
-                    break;
-                }
-            }
-            _ => {
-                lambda *= 4.0;
-                if lambda > 1e12 {
-                    break;
-                }
-            }
-        }
-    }
-    cur.sort_by(|p, q| q.1.total_cmp(&p.1));
-    cur
-}
-
 /// The shape no positive sum of exponentials can follow: a sign change or growth beyond the
 /// tolerance `abs_tol` (absolute).
 fn shape(lags: &Lags, abs_tol: f64) -> std::result::Result<(), String> {
@@ -473,116 +399,6 @@ pub fn deviation(lags: &Lags, terms: &[(f64, f64)]) -> Vec<f64> {
         out.push((fit - r).abs());
     }
     out
-}
-
-/// Non-negative least squares min ‖A x − y‖₂, x ≥ 0, by Lawson and Hanson's active set
-/// method (Solving Least Squares Problems, 1974, ch. 23). No maintained Rust crate offers it
-/// on faer matrices; each passive-set subproblem is a dense least squares solve by faer's
-/// Householder QR (sequential, hence deterministic).
-fn nnls(a: &Mat<f64>, y: &[f64]) -> Vec<f64> {
-    let (m, n) = (a.nrows(), a.ncols());
-    let mut x = vec![0.0; n];
-    let mut passive = vec![false; n];
-    // w = Aᵀ(y − A x): the negative gradient, with the residual y − A x in double-double
-    // arithmetic. The columns are nearly dependent, so near the optimum the gradient of a
-    // residual of 1e-9 is ~1e-17: a residual rounded to double (error ~1e-16 per row) would
-    // drown it and stop the active set method early (measured: 2e-9 instead of 1e-11 on
-    // s^(−0.2), T/k = 10^6). A gradient within the rounding of its dot products (tol) is
-    // taken as zero.
-    let gradient = |x: &[f64]| -> (Vec<f64>, f64) {
-        let res: Vec<f64> = (0..m)
-            .map(|i| {
-                let (mut hi, mut lo) = (y[i], 0.0);
-                for j in 0..n {
-                    // TwoProduct and TwoSum: −a_ij x_j added without rounding error.
-                    let p = -a[(i, j)] * x[j];
-                    let p_err = (-a[(i, j)]).mul_add(x[j], -p);
-                    let s = hi + p;
-                    let bb = s - hi;
-                    lo += (hi - (s - bb)) + (p - bb) + p_err;
-                    hi = s;
-                }
-                hi + lo
-            })
-            .collect();
-        let w = (0..n)
-            .map(|j| (0..m).map(|i| a[(i, j)] * res[i]).sum())
-            .collect();
-        let tol = 16.0 * f64::EPSILON * m as f64 * res.iter().fold(0.0f64, |t, r| t.max(r.abs()));
-        (w, tol)
-    };
-    for _ in 0..3 * n {
-        // A passive set as large as the number of rows already interpolates y (and a larger
-        // one would make the least squares problem underdetermined: few lags, many rates).
-        if passive.iter().filter(|&&p| p).count() >= m {
-            break;
-        }
-        let (w, tol) = gradient(&x);
-        let Some(j) = (0..n)
-            .filter(|&j| !passive[j] && w[j] > tol)
-            .max_by(|&p, &q| w[p].total_cmp(&w[q]))
-        else {
-            break;
-        };
-        passive[j] = true;
-        loop {
-            let cols: Vec<usize> = (0..n).filter(|&j| passive[j]).collect();
-            let z = lstsq(a, &cols, y);
-            if z.iter().all(|&v| v > 0.0) {
-                for (&c, &v) in cols.iter().zip(&z) {
-                    x[c] = v;
-                }
-                break;
-            }
-            // Step from x towards z until the first passive weight reaches zero.
-            let alpha = cols
-                .iter()
-                .zip(&z)
-                .filter(|(_, &v)| v <= 0.0)
-                .map(|(&c, &v)| x[c] / (x[c] - v))
-                .fold(f64::INFINITY, f64::min);
-            for (&c, &v) in cols.iter().zip(&z) {
-                let blocking = v <= 0.0 && x[c] / (x[c] - v) <= alpha;
-                x[c] += alpha * (v - x[c]);
-                if blocking || x[c] <= 0.0 {
-                    x[c] = 0.0;
-                    passive[c] = false;
-                }
-            }
-            if !passive.iter().any(|&p| p) {
-                break;
-            }
-        }
-    }
-    x
-}
-
-/// The least squares solution on the columns `cols` of `a`.
-fn lstsq(a: &Mat<f64>, cols: &[usize], y: &[f64]) -> Vec<f64> {
-    let m = a.nrows();
-    let p = cols.len();
-    let mut qr = Mat::from_fn(m, p, |i, j| a[(i, cols[j])]);
-    let block = factor::recommended_block_size::<f64>(m, p);
-    let mut coeff = Mat::<f64>::zeros(block, p.min(m));
-    let par = Par::Seq;
-    let mut buf = MemBuffer::new(
-        factor::qr_in_place_scratch::<f64>(m, p, block, par, Default::default()).or(
-            solve::solve_lstsq_in_place_scratch::<f64>(m, p, block, 1, par),
-        ),
-    );
-    let stack = MemStack::new(&mut buf);
-    factor::qr_in_place(qr.as_mut(), coeff.as_mut(), par, stack, Default::default());
-    let mut rhs = Mat::from_fn(m, 1, |i, _| y[i]);
-    solve::solve_lstsq_in_place_with_conj(
-        qr.as_ref(),
-        coeff.as_ref(),
-        qr.as_ref(),
-        Conj::No,
-        rhs.as_mut(),
-        par,
-        stack,
-    );
-    (0..p).map(|i| rhs[(i, 0)]).collect()
 }
 
 #[cfg(test)]
