@@ -84,7 +84,7 @@ pub(super) fn polish(lags: &Lags, rows: &[usize], terms: &[(f64, f64)]) -> Vec<(
 }
 
 /// The least squares solution on the columns `cols` of `a`.
-pub(super) fn lstsq(a: &Mat<f64>, cols: &[usize], y: &[f64]) -> Vec<f64> {
+fn lstsq(a: &Mat<f64>, cols: &[usize], y: &[f64]) -> Vec<f64> {
     let m = a.nrows();
     let p = cols.len();
     let mut qr = Mat::from_fn(m, p, |i, j| a[(i, cols[j])]);
