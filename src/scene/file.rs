@@ -187,7 +187,8 @@ pub struct RelaxationSection {
     pub table: Option<TableSection>,
     /// "compressed" (default) or "exact"; for `expr` and `table` only.
     pub memory: Option<MemoryMode>,
-    /// Certified max relative error of the compressed kernel on the lags (default 1e-10).
+    /// Certified max relative error of the compressed kernel on the lags (default 1e-12,
+    /// `kernel_fit::DEFAULT_TOLERANCE`).
     pub tolerance: Option<f64>,
     /// The latest end time the compressed kernel's fit covers (default time.end): a run
     /// resumed with a later `time.end` keeps its fit, so it must already hold there.

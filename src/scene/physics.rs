@@ -200,7 +200,10 @@ fn compression(kernel: &Kernel, r: &RelaxationSection, path: &Path) -> Result<Op
         }
         return Ok(None);
     }
-    let tolerance = tolerance_range(r.tolerance.unwrap_or(1e-10), path)?;
+    let tolerance = tolerance_range(
+        r.tolerance.unwrap_or(crate::kernel_fit::DEFAULT_TOLERANCE),
+        path,
+    )?;
     Ok(match r.memory.unwrap_or(MemoryMode::Compressed) {
         MemoryMode::Compressed => Some(tolerance),
         MemoryMode::Exact => None,
