@@ -143,7 +143,9 @@ fn main() {
                 }
             },
             None => {
-                let n: usize = arg.parse().expect("levels are integers, block:<n> or plate:<size>");
+                let n: usize = arg
+                    .parse()
+                    .expect("levels are integers, block:<n> or plate:<size>");
                 ("paper", format!("1/{n}"), mesh_for(n), n)
             }
         };
