@@ -5,7 +5,9 @@
 
 use crate::fem::{Discretization, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
-use crate::scene::{ContactSolver, Scene};
+use crate::scene::Scene;
+use crate::solver::choice::{Contact, ContactPlan};
+use crate::solver::matrix_free::MatrixFreeSolver;
 use crate::solver::{conic::ConicSolver, dual::DualSolver, Factor, Rows, StepSolver};
 use crate::Result;
 
@@ -134,7 +136,8 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
 }
 
 /// Picks and builds the step solver (Remark 2.5): `Linear` without constraint rows,
-/// otherwise the scene's choice of the fast dual method or clarabel. `matrix` is the step
+/// otherwise the scene's choice (`solver.contact`; `auto` by the memory available, see
+/// `solver::choice`) of the dense dual, the matrix-free dual or clarabel. `matrix` is the step
 /// matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor` holds.
 pub fn step_solver(
     effects: &Effects,
@@ -146,8 +149,13 @@ pub fn step_solver(
     if effects.linear() {
         return Ok(StepSolver::Linear);
     }
-    Ok(match scene.solver.contact {
-        ContactSolver::Fast => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
-        ContactSolver::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
+    let available = crate::resources::available_memory();
+    let plan = ContactPlan::new(scene.solver.contact, rows, factor.dim(), available);
+    Ok(match plan.solver {
+        Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
+        Contact::MatrixFree => {
+            StepSolver::MatrixFree(Box::new(MatrixFreeSolver::new(factor, rows)))
+        }
+        Contact::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
     })
 }

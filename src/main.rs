@@ -321,16 +321,24 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         "linear (one solve with the stored Cholesky factor of K_A per step)".to_string()
     } else {
         format!(
-            "{} contact solver on {} Γ3,1 rows + {} Γ3,2 rows (nodes × tangents)",
-            match scene.solver.contact {
-                viscontact::scene::ContactSolver::Fast => "fast (condensed dual active set)",
-                viscontact::scene::ContactSolver::Clarabel => "clarabel",
-            },
+            "contact solver on {} Γ3,1 rows + {} Γ3,2 rows (nodes × tangents)",
             disc.contact.len(),
             disc.friction.len()
         )
     };
     println!("solver     {solver}");
+    if !effects.linear() {
+        let rows = viscontact::solver::Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+        let available = viscontact::resources::available_memory();
+        let plan = viscontact::solver::choice::ContactPlan::new(
+            scene.solver.contact,
+            &rows,
+            disc.n_free,
+            available,
+        );
+        println!("contact    {plan}");
+        plan.check()?;
+    }
     use viscontact::history::Plan;
     use viscontact::stability::{StepLimit, Verdict};
     // Sizes first: a hostile time.steps is refused before anything is allocated per step.

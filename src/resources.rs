@@ -155,12 +155,29 @@ impl std::fmt::Display for Estimate {
     }
 }
 
-fn human(bytes: f64) -> String {
+pub fn human(bytes: f64) -> String {
     match bytes {
         b if b >= 1e12 => format!("{:.1} TB", b / 1e12),
         b if b >= 1e9 => format!("{:.1} GB", b / 1e9),
         b => format!("{:.1} MB", b / 1e6),
     }
+}
+
+/// The memory of the dense condensed dual (`solver::dual`) on m constraint rows touching c
+/// dofs, in bytes: while it condenses, the trailing block L_CC (c²), G = L_CC⁻¹ E (c m) and
+/// D (m²); then G, D, B = D⁻¹ in 3D (`block` = 2) and the Newton matrix with its factor
+/// (up to m² each); 8 bytes a value.
+pub fn dense_dual_bytes(m: usize, c: usize, block: usize) -> f64 {
+    let (m, c) = (m as f64, c as f64);
+    let inverse = if block == 2 { 1.0 } else { 0.0 };
+    8.0 * (c * c + c * m + m * m).max(c * m + (3.0 + inverse) * m * m)
+}
+
+/// The memory of the matrix-free dual (`solver::matrix_free`) on m rows of a problem with n
+/// dofs, in bytes: three n-vectors for its solves and about twenty m-vectors, besides the
+/// factor of K_A that every solver holds.
+pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
+    8.0 * (3.0 * n as f64 + 20.0 * m as f64)
 }
 
 /// `MemAvailable` of /proc/meminfo, in bytes.

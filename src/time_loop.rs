@@ -368,10 +368,7 @@ impl<'p> TimeLoop<'p> {
                 }
             };
         }
-        let other_solver = match self.scene.solver.contact {
-            scene::ContactSolver::Fast => "clarabel",
-            scene::ContactSolver::Clarabel => "fast",
-        };
+        let other_solver = self.solver.other();
         report.check(&StepAt {
             n: h.n,
             t,

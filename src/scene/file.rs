@@ -347,13 +347,20 @@ pub struct SolverSection {
     pub contact: ContactSolver,
 }
 
-/// How a step with contact or friction is solved.
+/// How a step with contact or friction is solved (`solver::choice`).
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum ContactSolver {
-    /// Condensed onto the constrained boundary dofs, primal-dual active set (the default).
+    /// The dense dual while its m × m matrices fit comfortably in the memory available,
+    /// else the matrix-free dual (the default).
     #[default]
-    Fast,
+    Auto,
+    /// Condensed onto the constrained boundary dofs, the dense dual active set method
+    /// (`"fast"` is its old name).
+    #[serde(alias = "fast")]
+    Dense,
+    /// The same dual with D applied through solves with the factor of K_A: no m × m matrix.
+    MatrixFree,
     /// The whole per-step problem handed to clarabel (the cross-check).
     Clarabel,
 }

@@ -10,9 +10,11 @@
 //!
 //! K_A never changes, so it is factored once per run (`Factor`). Which solver a run uses is
 //! decided by its effects (Remark 2.5): no constraint rows → `Linear` (one solve with the
-//! stored factor per step, no optimization solver built); otherwise the condensed dual
-//! semismooth Newton method (`dual`, default) or clarabel on the whole problem (`conic`, the
-//! cross-check).
+//! stored factor per step, no optimization solver built); otherwise, by `[solver] contact`
+//! (`choice`: `auto` picks by the memory the dense dual would need), the condensed dual
+//! semismooth Newton method (`dual`, with the dense m × m matrix D), the same dual with D
+//! applied through solves with the factor (`matrix_free`, for contact boundaries whose D
+//! does not fit) or clarabel on the whole problem (`conic`, the cross-check).
 //!
 //! # Solvers, statuses and how a new one plugs in
 //!
@@ -22,12 +24,12 @@
 //! answer find (not finite, growing without bound, n·w > 0 on Γ3,1) to the status and
 //! hands the report to `StepReport::check`, the one place where a status becomes an error.
 //!
-//! A second contact solver (a matrix-free dual for large contact boundaries, say) is a
-//! type in its own module, built from the run's `Factor` and `Rows`, with its settings as a
+//! A contact solver (`matrix_free` is one) is a type in its own module, built from the run's `Factor` and `Rows`, with its settings as a
 //! struct with documented defaults and `validate` (as `dual::DualSettings`), and
 //! `solve(&mut self, factor, rows, b, w, z) -> StepReport` that warm starts from z. It
-//! becomes a variant of `StepSolver` (its `name` and its arm in `solve`), and
-//! `effects::step_solver` picks it; an outcome no `StepStatus` covers is a new variant with
+//! becomes a variant of `StepSolver` (its `name`, its arm in `solve`), of `choice::Contact`
+//! (its memory and cost) and of the scene's `ContactSolver`, and `effects::step_solver`
+//! builds it; an outcome no `StepStatus` covers is a new variant with
 //! its message in `status.rs`. The time loop does not change.
 //!
 //! The linear backend is `Factor`: the time loop builds it (`Factor::new`) and passes it to
@@ -37,9 +39,11 @@
 //! turns `Factor` into an enum over the backends with the same `new` and `solve`, which the
 //! time loop keeps calling; the solvers that need a triangular factor ask it for one.
 
+pub mod choice;
 pub mod conic;
 pub mod dual;
 pub mod factor;
+pub mod matrix_free;
 mod ordering;
 mod pair;
 mod status;
@@ -168,6 +172,8 @@ pub enum StepSolver {
     Linear,
     /// Condensed onto the constrained boundary dofs; see `dual`.
     Dual(Box<dual::DualSolver>),
+    /// The same dual without the m × m matrix; see `matrix_free`.
+    MatrixFree(Box<matrix_free::MatrixFreeSolver>),
     /// The whole problem in clarabel; see `conic`.
     Conic(Box<conic::ConicSolver>),
 }
@@ -180,7 +186,19 @@ impl StepSolver {
             StepSolver::Dual(_) => {
                 "dual active set (condensed on Γ3 rows, stored Cholesky factor of K_A)"
             }
+            StepSolver::MatrixFree(_) => {
+                "matrix-free dual (condensed on Γ3 rows through solves with the stored Cholesky \
+                 factor of K_A)"
+            }
             StepSolver::Conic(_) => "clarabel (interior point on the whole step problem)",
+        }
+    }
+
+    /// The `solver.contact` value to try when this solver's answer cannot be trusted.
+    pub fn other(&self) -> &'static str {
+        match self {
+            StepSolver::Conic(_) => "dense",
+            _ => "clarabel",
         }
     }
 
@@ -202,6 +220,7 @@ impl StepSolver {
                 StepReport::default()
             }
             StepSolver::Dual(d) => d.solve(factor, rows, b, w, z),
+            StepSolver::MatrixFree(d) => d.solve(factor, rows, b, w, z),
             StepSolver::Conic(c) => c.solve(rows, b, w, z),
         }
     }

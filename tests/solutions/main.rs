@@ -6,6 +6,7 @@ mod common;
 mod contact;
 mod corner;
 mod friction_cone;
+mod matrix_free;
 mod memory;
 mod patch;
 mod three_d;

@@ -2,12 +2,11 @@
 //! residual; and the Newton coordinates (columns of Q) built from them.
 
 use crate::solver::Rows;
-use faer::Mat;
 use std::ops::Range;
 
 /// The set Z_j of a group of multipliers.
 #[derive(Clone, Copy, Debug)]
-pub(super) enum Set {
+pub(in crate::solver) enum Set {
     /// λ ≥ 0: a contact row.
     HalfLine,
     /// |γ| ≤ c: a friction node's block (an interval in 2D, a disc in 3D).
@@ -16,20 +15,20 @@ pub(super) enum Set {
 
 /// One group of multipliers: a contact row or a friction node's block of rows.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Group {
-    pub(super) start: usize,
-    pub(super) len: usize,
-    pub(super) set: Set,
+pub(in crate::solver) struct Group {
+    pub(in crate::solver) start: usize,
+    pub(in crate::solver) len: usize,
+    pub(in crate::solver) set: Set,
     /// δ_j: the mean of diag(D) over the group's rows.
-    pub(super) scale: f64,
+    pub(in crate::solver) scale: f64,
     /// The Newton shift ρ δ_j of a group at a node with dependent rows, else 0.
-    pub(super) shift: f64,
+    pub(in crate::solver) shift: f64,
 }
 
 /// The groups of the rows, in row order: each contact row, then each friction node's block;
-/// δ_j the mean of D's diagonal over the group's rows, and the Newton shift ρ δ_j
-/// (ρ = `dependent_shift`) at the nodes with dependent rows.
-pub(super) fn groups(rows: &Rows, d: &Mat<f64>, dependent_shift: f64) -> Vec<Group> {
+/// δ_j the mean of `diag` (D's diagonal, or an estimate of it) over the group's rows, and
+/// the Newton shift ρ δ_j (ρ = `dependent_shift`) at the nodes with dependent rows.
+pub(in crate::solver) fn groups(rows: &Rows, diag: &[f64], dependent_shift: f64) -> Vec<Group> {
     debug_assert!(rows.block <= 2, "friction blocks span a tangent plane");
     let contact = (0..rows.n_contact).map(|i| (i..i + 1, Set::HalfLine));
     let dependent = rows.dependent_nodes();
@@ -41,7 +40,7 @@ pub(super) fn groups(rows: &Rows, d: &Mat<f64>, dependent_shift: f64) -> Vec<Gro
     contact
         .chain(friction)
         .map(|(r, set)| {
-            let scale = r.clone().map(|i| d[(i, i)]).sum::<f64>() / r.len() as f64;
+            let scale = r.clone().map(|i| diag[i]).sum::<f64>() / r.len() as f64;
             let at_dependent = dependent.contains(&rows.rows[r.start].node);
             Group {
                 start: r.start,
@@ -58,23 +57,23 @@ pub(super) fn groups(rows: &Rows, d: &Mat<f64>, dependent_shift: f64) -> Vec<Gro
         .collect()
 }
 
-pub(super) fn norm(v: &[f64]) -> f64 {
+pub(in crate::solver) fn norm(v: &[f64]) -> f64 {
     v.iter().fold(0.0f64, |a, x| a.hypot(*x))
 }
 
-pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(in crate::solver) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a * b).sum()
 }
 
 impl Group {
-    pub(super) fn rows(&self) -> Range<usize> {
+    pub(in crate::solver) fn rows(&self) -> Range<usize> {
         self.start..self.start + self.len
     }
 
     /// Projects v (the group's entries) onto Z_j in place. Returns None if v was in Z_j,
     /// otherwise Some(ρ): 0 for a contact row set to 0, c/|v| for a friction block scaled
     /// onto the rim.
-    pub(super) fn project(&self, v: &mut [f64]) -> Option<f64> {
+    pub(in crate::solver) fn project(&self, v: &mut [f64]) -> Option<f64> {
         match self.set {
             Set::HalfLine => (v[0] < 0.0).then(|| {
                 v[0] = 0.0;
@@ -94,7 +93,7 @@ impl Group {
     }
 
     /// True when v lies on the boundary of Z_j or outside.
-    pub(super) fn not_interior(&self, v: &[f64]) -> bool {
+    pub(in crate::solver) fn not_interior(&self, v: &[f64]) -> bool {
         match self.set {
             Set::HalfLine => v[0] <= 0.0,
             Set::Ball(c) => norm(v) >= c,
@@ -103,7 +102,7 @@ impl Group {
 
     /// The unit tangent t̂ ⊥ n of a disc block (the rim's direction at n ≠ 0) as a Newton
     /// coordinate with diagonal shift κ; None for 1-row groups (their rim is two points).
-    pub(super) fn tangent(&self, n: &[f64], kappa: f64) -> Option<Coord> {
+    pub(in crate::solver) fn tangent(&self, n: &[f64], kappa: f64) -> Option<Coord> {
         (self.len == 2).then(|| {
             let nn = norm(n);
             Coord {
@@ -116,7 +115,7 @@ impl Group {
     }
 
     /// The group's rows as free Newton coordinates.
-    pub(super) fn free(&self) -> impl Iterator<Item = Coord> + '_ {
+    pub(in crate::solver) fn free(&self) -> impl Iterator<Item = Coord> + '_ {
         self.rows().map(|i| Coord {
             start: i,
             len: 1,
@@ -127,7 +126,7 @@ impl Group {
 
     /// The group's part of the optimality residual (see the module doc); z in Z_j, a disc
     /// multiplier on the rim where |z| ≥ `rim` c (`DualSettings::rim`).
-    pub(super) fn residual(&self, z: &[f64], g: &[f64], rim: f64) -> f64 {
+    pub(in crate::solver) fn residual(&self, z: &[f64], g: &[f64], rim: f64) -> f64 {
         match self.set {
             Set::HalfLine if z[0] > 0.0 => g[0].abs(),
             Set::HalfLine => (-g[0]).max(0.0),
@@ -154,20 +153,20 @@ impl Group {
 /// A column of Q in the Newton systems: a unit vector in the rows of one group (a free
 /// multiplier, or the tangent of a disc multiplier on its rim) and its diagonal shift κ.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Coord {
-    pub(super) start: usize,
-    pub(super) len: usize,
-    pub(super) dir: [f64; 2],
-    pub(super) shift: f64,
+pub(in crate::solver) struct Coord {
+    pub(in crate::solver) start: usize,
+    pub(in crate::solver) len: usize,
+    pub(in crate::solver) dir: [f64; 2],
+    pub(in crate::solver) shift: f64,
 }
 
 impl Coord {
-    pub(super) fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+    pub(in crate::solver) fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         (self.start..self.start + self.len).zip(self.dir.iter().copied())
     }
 
     /// qᵀ v.
-    pub(super) fn dot(&self, v: &[f64]) -> f64 {
+    pub(in crate::solver) fn dot(&self, v: &[f64]) -> f64 {
         self.entries().map(|(i, x)| x * v[i]).sum()
     }
 }

@@ -186,9 +186,7 @@ impl Iteration<'_> {
 
     /// v ← Π(v), group by group.
     fn project(&self, v: &mut [f64]) {
-        for grp in self.groups {
-            grp.project(&mut v[grp.rows()]);
-        }
+        project(self.groups, v);
     }
 
     /// g = D z − d.
@@ -198,10 +196,7 @@ impl Iteration<'_> {
 
     /// The stopping test's residual at z (the module doc).
     fn residual(&self, z: &[f64], g: &[f64]) -> f64 {
-        self.groups
-            .iter()
-            .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()], self.ops.settings.rim))
-            .fold(0.0f64, f64::max)
+        residual(self.groups, z, g, self.ops.settings.rim)
     }
 
     /// The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`, the
@@ -261,36 +256,10 @@ impl Iteration<'_> {
         })
     }
 
-    /// The Newton step's prediction v = z − g/(ηδ), group by group: free (z₀ = 0, its rows
-    /// in Q), at zero (z₀ = 0), or on the rim of a disc (z₀ = c v̂ fixed, the tangent
-    /// t̂ ⊥ v̂ in Q with κ = ηδ (|v| − c)/c = ηδ (1/ρ − 1)).
+    /// The Newton step's prediction (`prediction`) at z from `grad` into `trial` and
+    /// `coords`.
     fn prediction(&self, z: &[f64], eta: f64, b: &mut Buffers) {
-        let Buffers {
-            grad: g,
-            trial,
-            coords,
-            ..
-        } = b;
-        coords.clear();
-        for grp in self.groups {
-            let r = grp.rows();
-            let eta_delta = eta * grp.scale;
-            for i in r.clone() {
-                trial[i] = z[i] - g[i] / eta_delta;
-            }
-            match grp.project(&mut trial[r.clone()]) {
-                None => {
-                    trial[r.clone()].fill(0.0);
-                    coords.extend(grp.free());
-                }
-                // ρ = 0: a contact row at 0.
-                Some(rho) if rho > 0.0 => {
-                    let shift = eta_delta * (1.0 / rho - 1.0);
-                    coords.extend(grp.tangent(&trial[r], shift));
-                }
-                Some(_) => {}
-            }
-        }
+        prediction(self.groups, z, &b.grad, eta, &mut b.trial, &mut b.coords);
     }
 
     /// The projected Newton step (Bertsekas 1982) from z: the binding groups move along
@@ -465,6 +434,55 @@ impl Iteration<'_> {
     }
 }
 
+/// v ← Π(v), group by group.
+pub(in crate::solver) fn project(groups: &[Group], v: &mut [f64]) {
+    for grp in groups {
+        grp.project(&mut v[grp.rows()]);
+    }
+}
+
+/// The stopping test's residual at z (the module doc), a disc multiplier on its rim where
+/// |γ_j| ≥ `rim` c_j.
+pub(in crate::solver) fn residual(groups: &[Group], z: &[f64], g: &[f64], rim: f64) -> f64 {
+    groups
+        .iter()
+        .map(|grp| grp.residual(&z[grp.rows()], &g[grp.rows()], rim))
+        .fold(0.0f64, f64::max)
+}
+
+/// The Newton step's prediction v = z − g/(ηδ), group by group: free (z₀ = 0, its rows in
+/// Q), at zero (z₀ = 0), or on the rim of a disc (z₀ = c v̂ fixed, the tangent t̂ ⊥ v̂ in Q
+/// with κ = ηδ (|v| − c)/c = ηδ (1/ρ − 1)); z₀ in `trial`, the columns of Q in `coords`.
+pub(in crate::solver) fn prediction(
+    groups: &[Group],
+    z: &[f64],
+    g: &[f64],
+    eta: f64,
+    trial: &mut [f64],
+    coords: &mut Vec<Coord>,
+) {
+    coords.clear();
+    for grp in groups {
+        let r = grp.rows();
+        let eta_delta = eta * grp.scale;
+        for i in r.clone() {
+            trial[i] = z[i] - g[i] / eta_delta;
+        }
+        match grp.project(&mut trial[r.clone()]) {
+            None => {
+                trial[r.clone()].fill(0.0);
+                coords.extend(grp.free());
+            }
+            // ρ = 0: a contact row at 0.
+            Some(rho) if rho > 0.0 => {
+                let shift = eta_delta * (1.0 / rho - 1.0);
+                coords.extend(grp.tangent(&trial[r], shift));
+            }
+            Some(_) => {}
+        }
+    }
+}
+
 /// The next trial of an Armijo search as a fraction of the last trial's step α: ½, or if
 /// `interpolate` (the first `DualSettings::interpolated` iterations of a step) the minimizer
 /// of the quadratic in α through q at the start, with slope −`predicted`/α there (the
@@ -473,7 +491,7 @@ impl Iteration<'_> {
 /// quadratic has no minimizer. q is quadratic, so along a stretch of the arc where the
 /// projection leaves the same groups fixed this lands at the minimizer at once, where
 /// halving takes several products with D.
-fn backtrack(dq: f64, predicted: f64, interpolate: bool) -> f64 {
+pub(in crate::solver) fn backtrack(dq: f64, predicted: f64, interpolate: bool) -> f64 {
     let t = predicted / (2.0 * (dq + predicted));
     if interpolate && t > 0.0 {
         t.clamp(0.1, 0.5)
@@ -484,7 +502,7 @@ fn backtrack(dq: f64, predicted: f64, interpolate: bool) -> f64 {
 
 /// q(t) − q(z) = (t − z)·(g(z) + g(t))/2 for the quadratic q: exact up to the rounding of
 /// the gradients, where the difference of two objective values would lose it to cancellation.
-fn change(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
+pub(in crate::solver) fn change(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
     0.5 * z
         .iter()
         .zip(t)
@@ -495,7 +513,7 @@ fn change(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
 
 /// The rounding level of `change`: 8 ε Σ (|z_i| + |t_i|)(|g_i| + |g_t,i|), for errors of
 /// relative size ε in z and t.
-fn rounding(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
+pub(in crate::solver) fn rounding(z: &[f64], t: &[f64], g: &[f64], g_t: &[f64]) -> f64 {
     8.0 * f64::EPSILON
         * z.iter()
             .zip(t)

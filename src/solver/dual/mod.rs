@@ -99,8 +99,8 @@
 //! most `DualSettings::tolerance` · max|d|, in units of the velocities P w.
 
 mod delassus;
-mod groups;
-mod iteration;
+pub(super) mod groups;
+pub(super) mod iteration;
 mod newton;
 mod settings;
 #[cfg(test)]
@@ -163,7 +163,8 @@ impl DualSolver {
 
     fn build(factor: &Factor, rows: &Rows, settings: DualSettings) -> Self {
         let (g, d) = condense(factor, rows);
-        let groups = groups::groups(rows, &d, settings.dependent_shift);
+        let diag: Vec<f64> = (0..rows.len()).map(|i| d[(i, i)]).collect();
+        let groups = groups::groups(rows, &diag, settings.dependent_shift);
         let m = rows.len();
         let work = Box::new(Work::new(m, groups.len(), &settings));
         // B = D⁻¹ (m³ flops once) where the Woodbury form may be used: 3D, where the rim

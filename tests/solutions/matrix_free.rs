@@ -1,0 +1,117 @@
+//! The matrix-free contact solver (`solver.contact = "matrix_free"`) against the dense dual
+//! and clarabel: the paper's scene (2D), the unstructured block (3D, contact, friction and
+//! memory), and a block sliding under a traction that turns (contact and friction nodes
+//! change state from step to step); `auto` keeps the dense dual on every such boundary, and
+//! the memory plan names the matrix-free solver where the dense one would not fit.
+
+use crate::common;
+use common::*;
+use viscontact::scene::ContactSolver;
+use viscontact::solver::choice::{Contact, ContactPlan};
+use viscontact::solver::Rows;
+
+/// u_N of a scene with each of `solvers` (values of solver.contact), and the solver names.
+fn finals(scene: &std::path::Path, overrides: &[&str], solvers: &[&str]) -> Vec<Trace> {
+    solvers
+        .iter()
+        .map(|s| {
+            let mut o = overrides.to_vec();
+            let key = format!("solver.contact={s}");
+            o.push(&key);
+            let (scene, _m, disc) = load(scene, &o);
+            trace(&scene, &disc)
+        })
+        .collect()
+}
+
+/// The largest relative difference of w over the steps of two traces.
+fn max_step_diff(a: &Trace, b: &Trace) -> f64 {
+    a.w.iter()
+        .zip(&b.w)
+        .map(|(x, y)| rel_diff(x, y))
+        .fold(0.0, f64::max)
+}
+
+/// Matrix-free against dense (both at the dual's KKT tolerance) and against clarabel.
+fn agree(scene: &std::path::Path, overrides: &[&str], what: &str) {
+    let t = finals(
+        scene,
+        overrides,
+        &["matrix_free", "dense", "clarabel", "auto"],
+    );
+    assert!(t[0].solver.starts_with("matrix-free") && t[1].solver.starts_with("dual"));
+    assert_eq!(t[3].solver, t[1].solver, "auto takes the dense dual");
+    assert_eq!(
+        t[3].u_final, t[1].u_final,
+        "auto is the dense dual bit for bit"
+    );
+    let (dense, clarabel) = (
+        rel_diff(&t[1].u_final, &t[0].u_final),
+        rel_diff(&t[2].u_final, &t[0].u_final),
+    );
+    let steps = max_step_diff(&t[1], &t[0]);
+    println!("{what}: |u_N mf − dense| {dense:.1e}, |u_N mf − clarabel| {clarabel:.1e}, max over steps |w mf − dense| {steps:.1e}");
+    assert!(
+        dense <= 1e-9 && steps <= 1e-8,
+        "{what}: {dense:e} {steps:e}"
+    );
+    assert!(clarabel <= 1e-7, "{what}: {clarabel:e}");
+}
+
+#[test]
+fn matrix_free_agrees_on_the_paper_scene() {
+    let mesh = format!("mesh.file={}", mesh_path("paper/rect_008.msh"));
+    agree(
+        &repo().join("examples/paper.toml"),
+        &[&mesh, "time.steps=8"],
+        "paper 1/8",
+    );
+}
+
+#[test]
+fn matrix_free_agrees_on_the_unstructured_block() {
+    let mesh = repo().join("tests/data/3d/block_unstructured.msh");
+    agree(
+        &repo().join("examples/block.toml"),
+        &[&format!("mesh.file={}", mesh.display()), "time.steps=16"],
+        "unstructured block",
+    );
+}
+
+/// The block at h = 1/4 under a top traction whose tangential part turns once around over
+/// the run and whose normal part pulsates: contact and friction nodes change state from
+/// step to step; u_N agrees with clarabel to 1e-7 over 64 steps.
+#[test]
+fn matrix_free_agrees_under_a_rotating_traction() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(repo().join("examples/block.toml")).unwrap();
+    let cut = base.find("[[load.traction]]").unwrap();
+    let text = format!(
+        "{}[[load.traction]]\non = \"top\"\nvalue = [\"0.05*cos(2*pi*t)\", \"0.05*sin(2*pi*t)\", \
+         \"-0.03*sin(6*pi*t)\"]\n",
+        base[..cut].replace("../meshes/3d/block_008.msh", &mesh_path("3d/block_004.msh"))
+    );
+    let scene = write(dir.path(), "rotating.toml", &text);
+    agree(&scene, &["time.steps=64"], "rotating traction");
+}
+
+/// `auto` takes the dense dual while its matrices fit comfortably and the matrix-free one
+/// otherwise; the plan of a dense dual that does not fit is refused, naming matrix_free.
+#[test]
+fn the_plan_names_the_solver_that_fits() {
+    // The block at h = 1/8: 243 rows, D and its kin 3.3 MB, the matrix-free vectors 0.1 MB.
+    let (_s, _m, disc) = load(&repo().join("examples/block.toml"), &[]);
+    let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+    let plan = |choice, avail| ContactPlan::new(choice, &rows, disc.n_free, Some(avail));
+    assert_eq!(plan(ContactSolver::Auto, 1e12).solver, Contact::Dense);
+    let dense = plan(ContactSolver::Dense, 1e12).memory.unwrap();
+    let tight = plan(ContactSolver::Auto, 1.5 * dense);
+    assert_eq!(tight.solver, Contact::MatrixFree);
+    tight.check().unwrap();
+    let err = plan(ContactSolver::Dense, 1.1 * dense).check().unwrap_err();
+    assert_eq!(err.exit_code(), 2);
+    assert!(
+        err.to_string().contains("solver.contact = \"matrix_free\""),
+        "{err}"
+    );
+}
