@@ -87,7 +87,7 @@ enum Command {
     },
     /// Accuracy against cost: errors at T against a reference, orders, wall times (tables
     /// like the paper's Tables 1–3, CSV, Markdown, PNG plots).
-    Study(StudyArgs),
+    Study(Box<StudyArgs>),
     /// One case of a study, for `study --jobs`: solved as the study solves it, its u_N and
     /// times written to RESULT (internal: the arguments may change).
     #[command(hide = true)]
@@ -194,7 +194,7 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
         .map(report),
         Command::Check { scene, set } => check(&scene, &set).map(|()| None),
         Command::MeshInfo { mesh, json } => mesh_info(&mesh, json).map(|()| None),
-        Command::Study(args) => study(args).map(|()| None),
+        Command::Study(args) => study(*args).map(|()| None),
         Command::StudyCase(args) => study_case(args).map(|()| None),
         Command::Plot {
             dir,

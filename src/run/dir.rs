@@ -105,6 +105,14 @@ pub fn check_out_dir(out: &Path, force: bool) -> Result<()> {
     )))
 }
 
+/// A lock found held is tried again BUSY_RETRIES times, BUSY_WAIT apart, before the
+/// directory counts as in use. A lock released by this process can stay held for a moment:
+/// a child that another thread is starting shares the lock's open file until it has
+/// executed its program (seen once in the test suite under a load of 14: a resume right
+/// after a run in the same process was refused). A real owner is refused 0.5 s later.
+const BUSY_RETRIES: usize = 10;
+const BUSY_WAIT: std::time::Duration = std::time::Duration::from_millis(50);
+
 /// Exclusive ownership of a run directory for the life of this value (or of the process).
 ///
 /// Two locks, both `flock`, both released by the kernel however the process ends:
@@ -153,15 +161,20 @@ impl DirLock {
                 }
             ))
         };
-        let locked = |p: &Path, open: &dyn Fn() -> std::io::Result<File>| loop {
-            let file = open().map_err(|e| Error::io(p, e))?;
-            match file.try_lock() {
-                Ok(()) => {}
-                Err(std::fs::TryLockError::WouldBlock) => return Err(in_use()),
-                Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(p, e)),
-            }
-            if same_file(&file, p) {
-                return Ok(file);
+        let locked = |p: &Path, open: &dyn Fn() -> std::io::Result<File>| {
+            let mut busy = 0;
+            loop {
+                let file = open().map_err(|e| Error::io(p, e))?;
+                match file.try_lock() {
+                    Ok(()) if same_file(&file, p) => return Ok(file),
+                    Ok(()) => {}
+                    Err(std::fs::TryLockError::WouldBlock) if busy < BUSY_RETRIES => {
+                        busy += 1;
+                        std::thread::sleep(BUSY_WAIT);
+                    }
+                    Err(std::fs::TryLockError::WouldBlock) => return Err(in_use()),
+                    Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(p, e)),
+                }
             }
         };
         let dir_file = locked(dir, &|| File::open(dir))?;
