@@ -149,8 +149,7 @@ pub fn step_solver(
     if effects.linear() {
         return Ok(StepSolver::Linear);
     }
-    let available = crate::resources::available_memory();
-    let plan = ContactPlan::new(scene.solver.contact, rows, factor.dim(), available);
+    let plan = ContactPlan::here(scene.solver.contact, rows, factor.dim());
     Ok(match plan.solver {
         Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
         Contact::MatrixFree => {

@@ -329,13 +329,8 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     println!("solver     {solver}");
     if !effects.linear() {
         let rows = viscontact::solver::Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-        let available = viscontact::resources::available_memory();
-        let plan = viscontact::solver::choice::ContactPlan::new(
-            scene.solver.contact,
-            &rows,
-            disc.n_free,
-            available,
-        );
+        let plan =
+            viscontact::solver::choice::ContactPlan::here(scene.solver.contact, &rows, disc.n_free);
         println!("contact    {plan}");
         plan.check()?;
     }

@@ -49,6 +49,12 @@ pub struct ContactPlan {
 }
 
 impl ContactPlan {
+    /// The plan for the scene's `choice` on `rows` of a problem with n dofs on this machine
+    /// (its available memory now, `resources::available_memory`).
+    pub fn here(choice: ContactSolver, rows: &Rows, n: usize) -> Self {
+        Self::new(choice, rows, n, resources::available_memory())
+    }
+
     /// The plan for the scene's `choice` on `rows` of a problem with n dofs, with `available`
     /// bytes of memory (None: unknown, and `auto` takes the dense dual).
     pub fn new(choice: ContactSolver, rows: &Rows, n: usize, available: Option<f64>) -> Self {

@@ -13,8 +13,8 @@
 //!   available memory a run may plan: `check`'s estimate of what the steps hold
 //!   ([`crate::resources::Estimate`]) plus [`super::SETUP_MEMORY`] each; a case that does
 //!   not fit waits, unless nothing runs.
-//! - Threads: each process gets cores / N of them (at least 1) through
-//!   `VISCONTACT_THREADS`.
+//! - Threads: each process gets the study's threads (`--threads`, else the cores it may
+//!   use: `threads::count`) / N of them (at least 1) through `VISCONTACT_THREADS`.
 //! - Failure: a case whose process fails or is killed stops the study: the other processes
 //!   are stopped and the error names the case (the process's own message is on stderr
 //!   above). Ctrl-C reaches the processes of the terminal's foreground group alike: the
@@ -92,8 +92,7 @@ pub(super) fn solve_side_by_side(
     let scratch =
         Scratch(std::env::temp_dir().join(format!("viscontact-study-{}", std::process::id())));
     std::fs::create_dir_all(&scratch.0).map_err(|e| Error::io(&scratch.0, e))?;
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = (cores / opts.jobs).max(1);
+    let threads = (crate::threads::count() / opts.jobs).max(1);
     let budget = available_memory().map(|m| MARGIN * m);
     let mut solved: Vec<Option<(Solved, &'static str)>> = cases.iter().map(|_| None).collect();
     let mut running = Running(Vec::new());
@@ -149,7 +148,7 @@ fn start(
         .args(["--mesh", &c.mesh, "--steps", &c.steps.to_string()])
         .arg("--result")
         .arg(&result)
-        .env("VISCONTACT_THREADS", threads.to_string())
+        .env(crate::threads::ENV, threads.to_string())
         .stdin(Stdio::null())
         .stdout(Stdio::null());
     if c.form == KernelForm::Expression {
