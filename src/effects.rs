@@ -136,7 +136,7 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
 }
 
 /// Picks and builds the step solver (Remark 2.5): `Linear` without constraint rows,
-/// otherwise the scene's choice (`solver.contact`; `auto` by the memory available, see
+/// otherwise the scene's choice (`solver.contact`; `auto` by the size of the dense dual, see
 /// `solver::choice`) of the dense dual, the matrix-free dual or clarabel. `matrix` is the step
 /// matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor` holds.
 pub fn step_solver(
@@ -149,7 +149,7 @@ pub fn step_solver(
     if effects.linear() {
         return Ok(StepSolver::Linear);
     }
-    let plan = ContactPlan::here(scene.solver.contact, rows, factor.dim());
+    let plan = ContactPlan::new(scene.solver.contact, rows, factor.dim());
     Ok(match plan.solver {
         Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
         Contact::MatrixFree => {

@@ -327,10 +327,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         )
     };
     println!("solver     {solver}");
-    if !effects.linear() {
-        let rows = viscontact::solver::Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-        let plan =
-            viscontact::solver::choice::ContactPlan::here(scene.solver.contact, &rows, disc.n_free);
+    if let Some(plan) = viscontact::solver::choice::ContactPlan::of_run(&scene, &disc) {
         println!("contact    {plan}");
         plan.check()?;
     }

@@ -19,7 +19,8 @@
 //!   file; the run directory's own files (summary, lock, checkpoint, history file and their
 //!   temporaries) are covered by a margin of 16 files.
 //!
-//! A run is refused when the memory estimate exceeds 80 % of `MemAvailable` (/proc/meminfo),
+//! A run is refused when the memory estimate exceeds 80 % of the memory available
+//! (`available_memory`: `VISCONTACT_MEMORY` where set, else `MemAvailable` of /proc/meminfo),
 //! the disk estimate exceeds 80 % of the space free to this user on the output directory's
 //! file system, or the file count exceeds 80 % of the inodes free to this user there
 //! (statvfs): the margin covers what the estimate leaves out and the other programs of the
@@ -98,7 +99,7 @@ impl Estimate {
     /// memory beyond 80 % of what is available, disk beyond 80 % of what is free where `out`
     /// (or its nearest existing parent) is. Unknown capacities (no /proc/meminfo) pass.
     pub fn check(&self, out: &Path) -> Result<()> {
-        if let Some(avail) = available_memory() {
+        if let Some(avail) = available_memory()? {
             if self.memory > MARGIN * avail {
                 return Err(Error::input(format!(
                     "the run would need ≈ {} of memory for its steps but this machine has {} \
@@ -180,8 +181,38 @@ pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
     8.0 * (3.0 * n as f64 + 20.0 * m as f64)
 }
 
+/// The environment variable that gives the memory a run may plan with, in bytes, instead of
+/// `MemAvailable`: a share of a machine that others use too, or a batch job's memory limit.
+pub const MEMORY_ENV: &str = "VISCONTACT_MEMORY";
+
+/// The memory available to a run, in bytes: `VISCONTACT_MEMORY` where set, else
+/// `MemAvailable` of /proc/meminfo (None where neither says). A `VISCONTACT_MEMORY` that is
+/// not a number of bytes > 0 is bad input.
+pub fn available_memory() -> Result<Option<f64>> {
+    match std::env::var(MEMORY_ENV) {
+        Ok(text) => parse_bytes(&text).map(Some).ok_or_else(|| {
+            Error::input(format!(
+                "{MEMORY_ENV}={text:?}: expected the memory available to a run in bytes, a \
+                 number > 0 (8e9 for 8 GB)"
+            ))
+        }),
+        Err(std::env::VarError::NotPresent) => Ok(mem_available()),
+        Err(std::env::VarError::NotUnicode(_)) => {
+            Err(Error::input(format!("{MEMORY_ENV} is not valid UTF-8")))
+        }
+    }
+}
+
+/// A byte count as `VISCONTACT_MEMORY` writes it: a finite number > 0.
+fn parse_bytes(text: &str) -> Option<f64> {
+    text.trim()
+        .parse()
+        .ok()
+        .filter(|b: &f64| b.is_finite() && *b > 0.0)
+}
+
 /// `MemAvailable` of /proc/meminfo, in bytes.
-pub fn available_memory() -> Option<f64> {
+fn mem_available() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
@@ -231,7 +262,7 @@ mod tests {
             files: 1.0,
             memory_key: "time.steps",
         };
-        if available_memory().is_some() {
+        if available_memory().unwrap().is_some() {
             let err = e.check(Path::new(".")).unwrap_err().to_string();
             assert!(
                 err.contains("time.steps") && err.contains("memory"),
@@ -256,6 +287,15 @@ mod tests {
             memory_key: "time.steps",
         };
         fits.check(Path::new(".")).unwrap();
+    }
+
+    #[test]
+    fn a_memory_is_a_number_of_bytes_above_zero() {
+        assert_eq!(parse_bytes("8e9"), Some(8e9));
+        assert_eq!(parse_bytes(" 1048576 "), Some(1048576.0));
+        for bad in ["", "8 GB", "0", "-1", "inf", "NaN"] {
+            assert_eq!(parse_bytes(bad), None, "{bad:?}");
+        }
     }
 
     #[test]

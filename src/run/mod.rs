@@ -28,6 +28,7 @@ use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::{write_atomic, Resumed, Series};
 use crate::scene::{read_scene_file, MeshChoice, Scene};
+use crate::solver::choice::ContactPlan;
 use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Frames, Progress, Statistics, StopRule};
@@ -143,6 +144,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     stage()?;
     crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
+    check_contact_plan(&scene, &disc, None)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(&out, &mesh, &identity.run_id, &scene.output.options, None)?;
@@ -203,6 +205,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     cp.check(&scene, &mesh, &disc)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     crate::resources::Estimate::new(&scene, &disc, cp.n).check(&out)?;
+    check_contact_plan(&scene, &disc, Some(checkpoint_path))?;
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
@@ -257,6 +260,27 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         setup_s: start.elapsed().as_secs_f64(),
         opts,
         resumed_from: Some(cp.n),
+    })
+}
+
+/// Refuses (exit 2) a run whose contact solver would not fit the memory available
+/// (`ContactPlan::check`). A resume of `checkpoint` cannot change `solver.contact`, the
+/// run's physics: its message says so.
+fn check_contact_plan(
+    scene: &Scene,
+    disc: &Discretization,
+    checkpoint: Option<&Path>,
+) -> Result<()> {
+    let Some(plan) = ContactPlan::of_run(scene, disc) else {
+        return Ok(());
+    };
+    plan.check().map_err(|e| match checkpoint {
+        Some(cp) => Error::input(format!(
+            "{}: {e}; a resume keeps the run's solver.contact: resume it where more memory \
+             is available, or start a new run with `viscontact run`",
+            cp.display()
+        )),
+        None => e,
     })
 }
 

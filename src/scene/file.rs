@@ -351,7 +351,7 @@ pub struct SolverSection {
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum ContactSolver {
-    /// The dense dual while its m × m matrices fit comfortably in the memory available,
+    /// The dense dual while its m × m matrices take at most `solver::choice::DENSE_LIMIT`,
     /// else the matrix-free dual (the default).
     #[default]
     Auto,

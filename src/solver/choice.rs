@@ -4,18 +4,30 @@
 //! The dense condensed dual (`dual`) holds m × m matrices (D, B = D⁻¹ in 3D, the Newton
 //! matrices) and factors a Newton matrix of up to m rows per iteration (m³/3 flops); the
 //! matrix-free dual (`matrix_free`) holds O(m) besides the factor of K_A that every solver
-//! holds, and pays a solve with that factor per product with D. `auto` takes the dense dual
-//! while its memory (`resources::dense_dual_bytes`) is at most `COMFORT` of the memory
-//! available, the matrix-free one otherwise: every contact boundary small enough for the
-//! dense dual gets it, with the results it has always given.
+//! holds, and pays a solve with that factor per product with D.
+//!
+//! `auto` decides from the problem alone, never from the machine: the dense dual while its
+//! memory (`resources::dense_dual_bytes`) is at most `DENSE_LIMIT`, the matrix-free one
+//! otherwise. So a scene runs the same solver, and gives the same bits, on every machine and
+//! at every resume; every contact boundary small enough for the dense dual gets it, with the
+//! results it has always given. Whether the plan fits this machine is a separate question,
+//! asked by `ContactPlan::check` before a run touches its directory: a plan that does not
+//! fit is refused (exit 2), naming the key that would, never silently changed.
 
+use super::matrix_free::MatrixFreeSettings;
 use super::Rows;
+use crate::fem::Discretization;
 use crate::resources::{self, human, MARGIN};
-use crate::scene::ContactSolver;
+use crate::scene::{ContactSolver, Scene};
 use crate::{Error, Result};
 
-/// The share of available memory up to which `auto` takes the dense dual.
-pub const COMFORT: f64 = 0.5;
+/// The dense dual's memory (bytes) up to which `auto` takes it: 4 GB, m ≈ 10 000 rows in 3D
+/// (8·5m² bytes where c ≈ m). The coarse plate of issue 29 (m = 4 274, 0.73 GB) and the block
+/// at h = 1/48 (m ≈ 7 400, ≈ 2.2 GB) stay dense; the finer plate (m = 16 055: D alone 2.1
+/// GB, with B = D⁻¹ and the Newton matrices ≈ 10 GB) goes matrix-free. 4 GB leaves room for
+/// the factor of K_A and the run's own state on a 16 GB workstation; a larger dense dual
+/// needs a large machine, where `solver.contact = "dense"` asks for it.
+pub const DENSE_LIMIT: f64 = 4e9;
 
 /// The solver a run uses with contact or friction.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -34,6 +46,16 @@ impl Contact {
             Contact::Clarabel => "clarabel",
         }
     }
+
+    /// What `auto` takes on m rows touching c dofs with `block` multipliers per friction
+    /// node: the dense dual while its memory is at most `DENSE_LIMIT`, else the matrix-free.
+    pub fn auto(m: usize, c: usize, block: usize) -> Contact {
+        if resources::dense_dual_bytes(m, c, block) <= DENSE_LIMIT {
+            Contact::Dense
+        } else {
+            Contact::MatrixFree
+        }
+    }
 }
 
 /// A run's contact solver, its memory (bytes; None where not estimated) and cost per step.
@@ -43,21 +65,24 @@ pub struct ContactPlan {
     pub memory: Option<f64>,
     /// The predicted cost of a step, in words.
     pub cost: String,
+    /// The scene's `solver.contact`, which `auto` resolved to `solver`.
+    choice: ContactSolver,
+    /// The dense dual's memory, which `auto` decided by.
+    dense: f64,
     /// The matrix-free dual's memory, named when the chosen solver does not fit.
     matrix_free: f64,
-    available: Option<f64>,
 }
 
 impl ContactPlan {
-    /// The plan for the scene's `choice` on `rows` of a problem with n dofs on this machine
-    /// (its available memory now, `resources::available_memory`).
-    pub fn here(choice: ContactSolver, rows: &Rows, n: usize) -> Self {
-        Self::new(choice, rows, n, resources::available_memory())
+    /// The plan of a run of `scene` on `disc`; None where it has no contact or friction rows
+    /// (every step is a linear solve).
+    pub fn of_run(scene: &Scene, disc: &Discretization) -> Option<Self> {
+        let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+        (!rows.is_empty()).then(|| Self::new(scene.solver.contact, &rows, disc.n_free))
     }
 
-    /// The plan for the scene's `choice` on `rows` of a problem with n dofs, with `available`
-    /// bytes of memory (None: unknown, and `auto` takes the dense dual).
-    pub fn new(choice: ContactSolver, rows: &Rows, n: usize, available: Option<f64>) -> Self {
+    /// The plan for the scene's `choice` on `rows` of a problem with n dofs.
+    pub fn new(choice: ContactSolver, rows: &Rows, n: usize) -> Self {
         let (m, c) = (rows.len(), rows.dofs().len());
         let dense = resources::dense_dual_bytes(m, c, rows.block);
         let matrix_free = resources::matrix_free_bytes(m, n);
@@ -65,28 +90,29 @@ impl ContactPlan {
             ContactSolver::Dense => Contact::Dense,
             ContactSolver::MatrixFree => Contact::MatrixFree,
             ContactSolver::Clarabel => Contact::Clarabel,
-            ContactSolver::Auto => match available {
-                Some(avail) if dense > COMFORT * avail => Contact::MatrixFree,
-                _ => Contact::Dense,
-            },
+            ContactSolver::Auto => Contact::auto(m, c, rows.block),
         };
-        let cube = (m as f64).powi(3) / 3.0;
+        let (m_f, products) = (m as f64, MatrixFreeSettings::default().cg_max + 2);
         let (memory, cost) = match solver {
             Contact::Dense => (
                 Some(dense),
                 format!(
-                    "per Newton iteration at most a dense factorization of {m} rows \
-                     ({cube:.1e} flops) and products with D ({:.1e} flops); a few to tens \
-                     of iterations a step",
-                    (m * m) as f64
+                    "per Newton iteration at most one dense Cholesky factorization of ≤ {m} \
+                     rows (m³/3 = {:.1e} flops) and products with D (2m² = {:.1e} flops \
+                     each); a step takes a few to tens of iterations",
+                    m_f.powi(3) / 3.0,
+                    2.0 * m_f * m_f
                 ),
             ),
             Contact::MatrixFree => (
                 Some(matrix_free),
-                "per Newton iteration tens to hundreds of products with D, each a forward \
-                 and a backward solve with the factor of K_A; a few to tens of iterations a \
-                 step"
-                    .to_string(),
+                format!(
+                    "per Newton iteration {products} products with D at most (two gradients \
+                     and the conjugate gradient iterations; a rejected Newton point adds a \
+                     projected gradient search), each a forward and a backward solve with the \
+                     factor of K_A (≈ 4 nnz(L) flops); a step takes a few to tens of \
+                     iterations"
+                ),
             ),
             Contact::Clarabel => (
                 None,
@@ -97,15 +123,25 @@ impl ContactPlan {
             solver,
             memory,
             cost,
+            choice,
+            dense,
             matrix_free,
-            available,
         }
     }
 
     /// Refuses (exit 2) a solver whose memory exceeds `resources::MARGIN` of the memory
-    /// available, naming `solver.contact = "matrix_free"` where that would fit.
+    /// available (`resources::available_memory`; unknown: it passes), naming
+    /// `solver.contact = "matrix_free"` where that would fit.
     pub fn check(&self) -> Result<()> {
-        let (Some(memory), Some(avail)) = (self.memory, self.available) else {
+        match resources::available_memory()? {
+            Some(avail) => self.fits(avail),
+            None => Ok(()),
+        }
+    }
+
+    /// `check` with `avail` bytes of memory available.
+    fn fits(&self, avail: f64) -> Result<()> {
+        let Some(memory) = self.memory else {
             return Ok(());
         };
         if memory <= MARGIN * avail {
@@ -128,13 +164,81 @@ impl ContactPlan {
             100.0 * MARGIN
         )))
     }
+
+    /// Why this solver: the key that forced it, or `auto`'s rule.
+    fn reason(&self) -> String {
+        match (self.choice, self.solver) {
+            (ContactSolver::Auto, Contact::Dense) => format!(
+                "auto: its matrices ≈ {}, at most {}",
+                human(self.dense),
+                human(DENSE_LIMIT)
+            ),
+            (ContactSolver::Auto, _) => format!(
+                "auto: the dense dual would need ≈ {}, over {}",
+                human(self.dense),
+                human(DENSE_LIMIT)
+            ),
+            _ => format!("solver.contact = \"{}\"", self.solver.key()),
+        }
+    }
 }
 
 impl std::fmt::Display for ContactPlan {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        let memory = self
-            .memory
-            .map_or("not estimated".to_string(), |b| format!("≈ {}", human(b)));
-        write!(f, "{}: memory {memory}; {}", self.solver.key(), self.cost)
+        let memory = match (self.memory, self.solver) {
+            (None, _) => "not estimated".to_string(),
+            (Some(b), Contact::MatrixFree) => format!("≈ {} besides the factor of K_A", human(b)),
+            (Some(b), _) => format!("≈ {}", human(b)),
+        };
+        write!(
+            f,
+            "{} ({}): memory {memory}; {}",
+            self.solver.key(),
+            self.reason(),
+            self.cost
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With c = m, the 3D dense dual holds 8·5m² bytes: 4e9 at m = 10 000 exactly; the 2D one
+    /// 8·4m² bytes, 4e9 between m = 11 180 and 11 181.
+    #[test]
+    fn auto_is_dense_up_to_the_limit_and_matrix_free_beyond() {
+        assert_eq!(Contact::auto(10_000, 10_000, 2), Contact::Dense);
+        assert_eq!(Contact::auto(10_001, 10_001, 2), Contact::MatrixFree);
+        assert_eq!(Contact::auto(11_180, 11_180, 1), Contact::Dense);
+        assert_eq!(Contact::auto(11_181, 11_181, 1), Contact::MatrixFree);
+        // Issue 29's plates: the coarse one stays dense, the finer one has D alone of 2.1 GB.
+        assert_eq!(Contact::auto(4_274, 4_274, 2), Contact::Dense);
+        assert_eq!(Contact::auto(16_055, 16_055, 2), Contact::MatrixFree);
+    }
+
+    #[test]
+    fn a_plan_that_does_not_fit_is_refused_naming_the_key_that_would() {
+        let plan = |choice| ContactPlan {
+            solver: Contact::Dense,
+            memory: Some(1e9),
+            cost: String::new(),
+            choice,
+            dense: 1e9,
+            matrix_free: 1e6,
+        };
+        let forced = plan(ContactSolver::Dense);
+        forced.fits(1.25e9).unwrap();
+        let err = forced.fits(1.2e9).unwrap_err();
+        assert_eq!(err.exit_code(), 2);
+        assert!(
+            err.to_string().contains("solver.contact = \"matrix_free\""),
+            "{err}"
+        );
+        let err = forced.fits(1e6).unwrap_err().to_string();
+        assert!(err.contains("coarser mesh"), "{err}");
+        assert!(plan(ContactSolver::Auto)
+            .to_string()
+            .starts_with("dense (auto: "));
     }
 }

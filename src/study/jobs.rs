@@ -93,7 +93,7 @@ pub(super) fn solve_side_by_side(
         Scratch(std::env::temp_dir().join(format!("viscontact-study-{}", std::process::id())));
     std::fs::create_dir_all(&scratch.0).map_err(|e| Error::io(&scratch.0, e))?;
     let threads = (crate::threads::count() / opts.jobs).max(1);
-    let budget = available_memory().map(|m| MARGIN * m);
+    let budget = available_memory()?.map(|m| MARGIN * m);
     let mut solved: Vec<Option<(Solved, &'static str)>> = cases.iter().map(|_| None).collect();
     let mut running = Running(Vec::new());
     let mut next: Option<(usize, Prepared)> = None;

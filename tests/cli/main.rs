@@ -4,6 +4,7 @@
 mod common;
 
 mod cli_errors;
+mod contact_plan;
 mod expr_differential;
 mod extreme_values;
 mod hard_meshes;

@@ -1,13 +1,14 @@
 //! The matrix-free contact solver (`solver.contact = "matrix_free"`) against the dense dual
 //! and clarabel: the paper's scene (2D), the unstructured block (3D, contact, friction and
 //! memory), and a block sliding under a traction that turns (contact and friction nodes
-//! change state from step to step); `auto` keeps the dense dual on every such boundary, and
-//! the memory plan names the matrix-free solver where the dense one would not fit.
+//! change state from step to step); `auto` takes the dense dual on every such boundary, by
+//! its size alone, and the plan names the solver, its memory and its cost. (The refusal of a
+//! plan that does not fit the machine: tests/cli/contact_plan.rs.)
 
 use crate::common;
 use common::*;
 use viscontact::scene::ContactSolver;
-use viscontact::solver::choice::{Contact, ContactPlan};
+use viscontact::solver::choice::{Contact, ContactPlan, DENSE_LIMIT};
 use viscontact::solver::Rows;
 
 /// u_N of a scene with each of `solvers` (values of solver.contact), and the solver names.
@@ -95,23 +96,36 @@ fn matrix_free_agrees_under_a_rotating_traction() {
     agree(&scene, &["time.steps=64"], "rotating traction");
 }
 
-/// `auto` takes the dense dual while its matrices fit comfortably and the matrix-free one
-/// otherwise; the plan of a dense dual that does not fit is refused, naming matrix_free.
+/// `auto` takes the dense dual while its matrices stay under `DENSE_LIMIT`, whatever the
+/// machine, and the matrix-free one beyond; a forced key is obeyed; the plan says which.
 #[test]
 fn the_plan_names_the_solver_that_fits() {
-    // The block at h = 1/8: 243 rows, D and its kin 3.3 MB, the matrix-free vectors 0.1 MB.
-    let (_s, _m, disc) = load(&repo().join("examples/block.toml"), &[]);
+    // The block at h = 1/8: 234 rows, D and its kin 2.2 MB, the matrix-free vectors 0.1 MB.
+    let (scene, _m, disc) = load(&repo().join("examples/block.toml"), &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-    let plan = |choice, avail| ContactPlan::new(choice, &rows, disc.n_free, Some(avail));
-    assert_eq!(plan(ContactSolver::Auto, 1e12).solver, Contact::Dense);
-    let dense = plan(ContactSolver::Dense, 1e12).memory.unwrap();
-    let tight = plan(ContactSolver::Auto, 1.5 * dense);
-    assert_eq!(tight.solver, Contact::MatrixFree);
-    tight.check().unwrap();
-    let err = plan(ContactSolver::Dense, 1.1 * dense).check().unwrap_err();
-    assert_eq!(err.exit_code(), 2);
-    assert!(
-        err.to_string().contains("solver.contact = \"matrix_free\""),
-        "{err}"
+    let plan = ContactPlan::of_run(&scene, &disc).unwrap();
+    assert_eq!(plan.solver, Contact::Dense);
+    assert_eq!(
+        plan.solver,
+        Contact::auto(rows.len(), rows.dofs().len(), rows.block)
     );
+    let dense = plan.memory.unwrap();
+    assert!(dense < DENSE_LIMIT, "{dense}");
+    assert!(
+        plan.to_string()
+            .starts_with("dense (auto: its matrices ≈ 2.2 MB, at most 4.0 GB)"),
+        "{plan}"
+    );
+    let forced = ContactPlan::new(ContactSolver::MatrixFree, &rows, disc.n_free);
+    assert_eq!(forced.solver, Contact::MatrixFree);
+    assert!(forced.memory.unwrap() < dense);
+    assert!(
+        forced
+            .to_string()
+            .starts_with("matrix_free (solver.contact = \"matrix_free\")"),
+        "{forced}"
+    );
+    // A boundary of 50 times the rows and dofs would hold a dense dual over the limit.
+    let (m, c) = (50 * rows.len(), 50 * rows.dofs().len());
+    assert_eq!(Contact::auto(m, c, rows.block), Contact::MatrixFree);
 }

@@ -1,0 +1,117 @@
+//! The contact solver's plan at the command line (issue 29): `auto` decides by the problem
+//! alone, `check` prints the solver, its memory and its cost, and `check`, `run` and `resume`
+//! refuse (exit 2) a plan that does not fit the memory available, naming the key that would,
+//! before the run directory is touched. `VISCONTACT_MEMORY` stands for a smaller machine.
+
+use crate::common::{self, SceneText};
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use viscontact::resources::{MARGIN, MEMORY_ENV};
+use viscontact::scene::ContactSolver;
+use viscontact::solver::choice::ContactPlan;
+use viscontact::solver::Rows;
+
+/// The block at h = 1/4 over 4 steps, written into `dir`, and a memory (bytes) in which its
+/// matrix-free plan fits and its dense one does not.
+fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64) {
+    let scene = SceneText::block()
+        .mesh(common::mesh_path("3d/block_004.msh"))
+        .set("time.steps", 4)
+        .write(dir, "s.toml");
+    let (_s, _m, disc) = common::load(&scene, &[]);
+    let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+    let memory = |choice| ContactPlan::new(choice, &rows, disc.n_free).memory.unwrap();
+    let (dense, matrix_free) = (
+        memory(ContactSolver::Dense),
+        memory(ContactSolver::MatrixFree),
+    );
+    assert!(matrix_free < dense, "{matrix_free} {dense}");
+    (scene, (dense * matrix_free).sqrt() / MARGIN)
+}
+
+/// `viscontact ARGS` with `VISCONTACT_MEMORY` = `memory` bytes.
+fn with_memory(memory: f64, args: &[&str]) -> Output {
+    std::process::Command::new(common::BIN)
+        .args(args)
+        .env(MEMORY_ENV, format!("{memory}"))
+        .current_dir(common::repo())
+        .output()
+        .unwrap()
+}
+
+/// Exit 2 and a message holding every one of `parts`.
+fn refused(o: &Output, parts: &[&str]) {
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    for p in parts {
+        assert!(stderr.contains(p), "{p:?} not in: {stderr}");
+    }
+}
+
+#[test]
+fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, tight) = scene_and_tight_memory(tmp.path());
+    let scene = scene.to_str().unwrap();
+    let (code, text) = common::cli(&["check", scene]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("contact    dense (auto: its matrices ≈ ") && text.contains("m³/3 = "),
+        "{text}"
+    );
+    // auto is still the dense dual on a smaller machine, and refused there.
+    let o = with_memory(tight, &["check", scene]);
+    refused(
+        &o,
+        &[
+            "the dense contact solver would need",
+            "solver.contact = \"matrix_free\"",
+        ],
+    );
+    let forced = ["check", scene, "--set", "solver.contact=matrix_free"];
+    let o = with_memory(tight, &forced);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains("contact    matrix_free (solver.contact = \"matrix_free\"): memory ≈ "),
+        "{stdout}"
+    );
+    refused(&with_memory(tight / 100.0, &forced), &["coarser mesh"]);
+    refused(
+        &with_memory(-1.0, &["check", scene]),
+        &[MEMORY_ENV, "bytes"],
+    );
+}
+
+#[test]
+fn run_and_resume_refuse_a_plan_that_does_not_fit_and_leave_the_directory_as_it_was() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (scene, tight) = scene_and_tight_memory(tmp.path());
+    let (scene, dir) = (scene.to_str().unwrap(), tmp.path().join("o"));
+    let dir_s = dir.to_str().unwrap();
+    let (code, text) = common::cli(&["run", scene, "--out", dir_s, "--quiet", "--stop-after", "2"]);
+    assert_eq!(code, 0, "{text}");
+    let before = common::dir_contents(&dir);
+    let checkpoint = dir.join("checkpoint.h5");
+    let checkpoint = checkpoint.to_str().unwrap();
+    let rerun = with_memory(tight, &["run", scene, "--out", dir_s, "--quiet"]);
+    refused(&rerun, &["solver.contact = \"matrix_free\""]);
+    assert!(
+        common::dir_contents(&dir) == before,
+        "a refused run changed the directory"
+    );
+    let resume = with_memory(tight, &["resume", checkpoint, "--quiet"]);
+    refused(
+        &resume,
+        &["solver.contact = \"matrix_free\"", "a resume keeps"],
+    );
+    assert!(
+        common::dir_contents(&dir) == before,
+        "a refused resume changed the directory"
+    );
+    // The run the refusals left continues where more memory is available.
+    let (code, text) = common::cli(&["resume", checkpoint, "--quiet"]);
+    assert_eq!(code, 0, "{text}");
+    assert_eq!(common::summary(&dir)["status"], "completed");
+}
