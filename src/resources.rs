@@ -102,10 +102,10 @@ impl Estimate {
         if let Some(avail) = available_memory()? {
             if self.memory > MARGIN * avail {
                 return Err(Error::input(format!(
-                    "the run would need ≈ {} of memory for its steps but this machine has {} \
-                     available (a run may plan {:.0} % of it): lower {}",
+                    "the run would need ≈ {} of memory for its steps but {} (a run may plan \
+                     {:.0} % of it): lower {}",
                     human(self.memory),
-                    human(avail),
+                    memory_phrase(avail),
                     100.0 * MARGIN,
                     self.memory_key
                 )));
@@ -200,6 +200,15 @@ pub fn available_memory() -> Result<Option<f64>> {
         Err(std::env::VarError::NotUnicode(_)) => {
             Err(Error::input(format!("{MEMORY_ENV} is not valid UTF-8")))
         }
+    }
+}
+
+/// "this machine has X available", or where `VISCONTACT_MEMORY` set the figure, that it did.
+pub fn memory_phrase(avail: f64) -> String {
+    if std::env::var_os(MEMORY_ENV).is_some() {
+        format!("{MEMORY_ENV} makes {} available", human(avail))
+    } else {
+        format!("this machine has {} available", human(avail))
     }
 }
 

@@ -156,11 +156,11 @@ impl ContactPlan {
             "use a coarser mesh on the contact boundary".to_string()
         };
         Err(Error::input(format!(
-            "the {} contact solver would need ≈ {} of memory but this machine has {} \
-             available (a run may plan {:.0} % of it): {remedy}",
+            "the {} contact solver would need ≈ {} of memory but {} (a run may plan {:.0} % \
+             of it): {remedy}",
             self.solver.key(),
             human(memory),
-            human(avail),
+            resources::memory_phrase(avail),
             100.0 * MARGIN
         )))
     }
