@@ -69,12 +69,15 @@
 //! below the metadata cache), and the new chunks go to space past the end the file on disk
 //! records; a process killed there (kill -9, out of memory) leaves the file as the last flush
 //! wrote it, which HDF5 opens with every frame flushed before. A kill during the flush itself
-//! (well under a millisecond of each frame) can leave metadata half written: chunk indexes
-//! that point past the end of allocated space the superblock records (written last), which
-//! every open mends (`cover_written_space`), or rarer, other half-written metadata that HDF5
-//! may refuse. `resume` never overwrites a file it cannot read: it stops (exit 2) naming
-//! the file, and moving the file aside lets the resumed run write a new one from the
-//! checkpoint's step on.
+//! (well under a millisecond of each frame) can leave some of the frame's metadata written
+//! and some not: chunk indexes that point past the end of allocated space the superblock
+//! records (written last), which every open mends (`cover_written_space`). Each piece of
+//! metadata is written whole, with its checksum, and what the frames before the checkpoint
+//! need was flushed before it: runs killed just before one of their writes to the file (each
+//! write of the flushes that add index blocks, a sample of the others) all resumed
+//! (docs/restart.md). Should HDF5 still refuse a file, `resume` never overwrites it: it stops
+//! (exit 2) naming the file, and moving the file aside lets the resumed run write a new one
+//! from the checkpoint's step on.
 //!
 //! The number of frames a file holds is the smallest count that every array agrees on
 //! (`NSteps`, `Values`, every offset array, every field's rows ÷ N or C), so a frame whose
