@@ -16,8 +16,8 @@
 //! # What resume checks, before anything is written
 //!
 //! Every recorded frame must be there and carry those bytes: `.vtu` files are read whole;
-//! `solution.vtkhdf` is opened read only (it is created in HDF5's 1.8 format, whose
-//! superblock and object headers carry checksums, so damaged metadata is an error of the
+//! `solution.vtkhdf` is opened read only (its superblock, object headers and chunk indexes
+//! carry checksums, `vtkhdf.rs` "File format", so damaged metadata is an error of the
 //! library, not a crash or a silent answer), its mesh arrays and run id are
 //! compared bit for bit, every `Steps` entry is checked, and every recorded frame is read
 //! back (each chunk inflated) and its CRC-32 compared. A frame of another run differs in its

@@ -38,6 +38,27 @@
 //! examples/paper.toml at h = 1/64 (31.3 MB of raw field values) deflate alone gave 16.1 MB,
 //! shuffle + deflate 16.8 MB in a third more time (only von_mises shrank with it).
 //!
+//! # File format
+//!
+//! Every object is in the format of HDF5 1.10, in which all metadata carry a checksum
+//! (Jenkins' lookup3): object headers of version 2 and chunk indexes of layout version 4, a
+//! single chunk's address in the layout message (the mesh arrays) or an extensible array
+//! (every growing dataset). The superblock is of version 2, also checksummed. So a flipped
+//! bit in the metadata is an error of HDF5 when `resume` reads the file (`output::verify`),
+//! not a file that it continues and that other HDF5 versions then fail on; in the format of
+//! HDF5 1.8 the chunk index is a B-tree of version 1, without a checksum.
+//!
+//! Bounds: the file is created with low = 1.8, high = 1.10 (which gives superblock 2), and
+//! then every object with low = high = 1.10 (`H5Fset_libver_bounds`). Not low = 1.10 at
+//! creation: that gives superblock 3, which carries a mark "open for writing" while the file
+//! is open, and HDF5 refuses to open a marked file, even to read it (short of SWMR): ParaView
+//! could not show the series of a running run, and the file of a killed run could not be
+//! opened again until `h5clear -s` unmarked it. High = 1.10 rather than the linked library's
+//! latest: the file is the same whichever HDF5 viscontact is built with. Reading it takes
+//! HDF5 ≥ 1.10 (1.8 cannot read layout version 4); `vtkHDFReader` (VTK ≥ 9.3, ParaView ≥
+//! 5.12) and h5py ship a newer one. A file written by viscontact before this format has the
+//! B-tree 1 chunk index; it is read and continued as it is.
+//!
 //! # Writing, flushing, and what a crash leaves
 //!
 //! The file is created at the first frame (a run whose setup fails leaves the old one as it
@@ -48,12 +69,15 @@
 //! below the metadata cache), and the new chunks go to space past the end the file on disk
 //! records; a process killed there (kill -9, out of memory) leaves the file as the last flush
 //! wrote it, which HDF5 opens with every frame flushed before. A kill during the flush itself
-//! (well under a millisecond of each frame) can leave metadata half written: chunk indexes
-//! that point past the end of allocated space the superblock records (written last), which
-//! every open mends (`cover_written_space`), or rarer, other half-written metadata that HDF5
-//! may refuse. `resume` never overwrites a file it cannot read: it stops (exit 2) naming
-//! the file, and moving the file aside lets the resumed run write a new one from the
-//! checkpoint's step on.
+//! (well under a millisecond of each frame) can leave some of the frame's metadata written
+//! and some not: chunk indexes that point past the end of allocated space the superblock
+//! records (written last), which every open mends (`cover_written_space`). Each piece of
+//! metadata is written whole, with its checksum, and what the frames before the checkpoint
+//! need was flushed before it: runs killed just before one of their writes to the file (each
+//! write of the flushes that add index blocks, a sample of the others) all resumed
+//! (docs/restart.md). Should HDF5 still refuse a file, `resume` never overwrites it: it stops
+//! (exit 2) naming the file, and moving the file aside lets the resumed run write a new one
+//! from the checkpoint's step on.
 //!
 //! The number of frames a file holds is the smallest count that every array agrees on
 //! (`NSteps`, `Values`, every offset array, every field's rows ÷ N or C), so a frame whose
@@ -63,6 +87,7 @@
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
+use hdf5::file::LibraryVersion::{self, V110, V18};
 use hdf5::types::FixedAscii;
 use hdf5::{Dataset, Extent, Group, H5Type, OpenMode, SimpleExtents};
 use hdf5_metno as hdf5;
@@ -120,21 +145,18 @@ struct Open {
 
 pub(super) fn h5_open(path: &Path, mode: OpenMode) -> hdf5::Result<hdf5::File> {
     // File locking off, as for checkpoints (checkpoint/h5.rs): a child process inherits
-    // HDF5's flock and would keep the file locked for as long as it lives. A new file gets
-    // the format of HDF5 1.8 or later: superblock 2 and object headers 2, which carry
-    // checksums, so that damaged metadata is an error of the library, not a crash. Not the
-    // 1.10 format (superblock 3): it marks the file open for write in its superblock, and
-    // the file of a killed run would not open again without `h5clear`.
-    let checksummed = mode == OpenMode::Create;
+    // HDF5's flock and would keep the file locked for as long as it lives. The format of a
+    // new file: module doc, "File format".
     let file = hdf5::File::with_options()
-        .with_fapl(|p| match checksummed {
-            true => p.file_locking(false).libver_v18(),
-            false => p.file_locking(false),
+        .with_fapl(|p| match mode {
+            OpenMode::Create => p.file_locking(false).libver_bounds(V18, V110),
+            _ => p.file_locking(false),
         })
         .open_as(path, mode)?;
-    if mode != OpenMode::Create {
-        cover_written_space(&file)?;
-    }
+    match mode {
+        OpenMode::Create => create_objects_as(&file, V110),
+        _ => cover_written_space(&file),
+    }?;
     Ok(file)
 }
 
@@ -145,6 +167,28 @@ extern "C" {
         file_id: hdf5_sys::h5i::hid_t,
         increment: hdf5_sys::h5::hsize_t,
     ) -> hdf5_sys::h5::herr_t;
+
+    /// HDF5 ≥ 1.10.2 (`H5Fpublic.h`), not bound by hdf5-metno-sys: the format versions of
+    /// the objects created in the open file from now on.
+    fn H5Fset_libver_bounds(
+        file_id: hdf5_sys::h5i::hid_t,
+        low: hdf5_sys::h5f::H5F_libver_t,
+        high: hdf5_sys::h5f::H5F_libver_t,
+    ) -> hdf5_sys::h5::herr_t;
+}
+
+/// The objects created in `file` from now on take the format of library `version` exactly
+/// (as low and high bound); the superblock keeps the version it was created with.
+fn create_objects_as(file: &hdf5::File, version: LibraryVersion) -> hdf5::Result<()> {
+    // SAFETY: `file` is an open file; the call holds hdf5-metno's library lock like every
+    // other HDF5 call of the process.
+    let status = hdf5::sync::sync(|| unsafe {
+        H5Fset_libver_bounds(file.id(), version.into(), version.into())
+    });
+    match status < 0 {
+        true => Err("H5Fset_libver_bounds failed".into()),
+        false => Ok(()),
+    }
 }
 
 /// Lets HDF5 read everything the file holds, as `h5clear --increment=0` would. A flush
@@ -729,9 +773,10 @@ impl Stored {
 
 /// What frames `0..limit` of a `solution.vtkhdf` hold, read back in full and checked entry by
 /// entry against what [`Sink`] writes for the mesh `g` and run `run_id`: the file's format
-/// (the checksummed one this module creates: superblock version ≥ 2), the run id, the mesh
-/// arrays bit for bit, every `Steps` array, and the CRC-32 of each frame's field values
-/// ([`frame_crc`], read through HDF5, so every chunk is inflated). Fewer frames than `limit`
+/// (superblock version ≥ 2, whose superblock and object headers are checksummed; module
+/// doc, "File format"), the run id, the mesh arrays bit for bit, every `Steps` array, and
+/// the CRC-32 of each frame's field values ([`frame_crc`], read through HDF5, so every chunk
+/// is inflated). Fewer frames than `limit`
 /// are returned when the file holds fewer; anything else wrong is the error (what, where).
 /// `checksummed`: require the checksummed format (a file an older viscontact wrote has
 /// none; it is read as it is only for an unverified resume).
@@ -750,6 +795,7 @@ pub(super) fn stored_sums(
         return Err("its HDF5 superblock is damaged or of a format without checksums".into());
     }
     let file = h5_open(path, OpenMode::Read).map_err(|e| e.to_string())?;
+    visit_every_object(&file).map_err(|e| e.to_string())?;
     check_static(&file, g, run_id)?;
     let (n, c) = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
     let frames = frames_in(&file, n, c)
@@ -792,6 +838,41 @@ pub(super) fn stored_sums(
         Ok(sums)
     };
     read().map_err(|e| e.to_string())
+}
+
+/// Reads the metadata of every object in `file` as h5py's `visititems` does: each object
+/// header, and the B-trees, heaps and free-space headers that hold a group's links or index
+/// a dataset's chunks (`H5Ovisit` with every field of the object info). HDF5 checks each
+/// one's checksum as it reads it; reading the frames alone would not touch all of them (a
+/// flipped bit in the free-space header of a group's link heap passed resume and then made
+/// h5py's `visititems` fail).
+fn visit_every_object(file: &hdf5::File) -> hdf5::Result<()> {
+    use hdf5_sys::h5::{H5_index_t, H5_iter_order_t};
+    use hdf5_sys::h5o::{H5O_info1_t, H5Ovisit2, H5O_INFO_ALL};
+    extern "C" fn each(
+        _: hdf5_sys::h5i::hid_t,
+        _: *const std::ffi::c_char,
+        _: *const H5O_info1_t,
+        _: *mut std::ffi::c_void,
+    ) -> hdf5_sys::h5::herr_t {
+        0
+    }
+    // SAFETY: `file` is an open file and `each` ignores its arguments; the call holds
+    // hdf5-metno's library lock like every other HDF5 call of the process. `h5check` turns
+    // a failure into HDF5's own message (what was damaged), as hdf5-metno's calls do.
+    hdf5::sync::sync(|| {
+        hdf5::h5check(unsafe {
+            H5Ovisit2(
+                file.id(),
+                H5_index_t::H5_INDEX_NAME,
+                H5_iter_order_t::H5_ITER_NATIVE,
+                Some(each),
+                std::ptr::null_mut(),
+                H5O_INFO_ALL,
+            )
+        })
+    })
+    .map(|_| ())
 }
 
 /// Rows `from..from + rows` of a field dataset, as the little-endian bytes of its type.

@@ -392,8 +392,8 @@ fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
         ]);
         let stderr = String::from_utf8_lossy(&o.stderr);
         if o.status.code() == Some(2) && stderr.contains("Nothing was changed") {
-            // A kill within a flush can leave metadata that HDF5 refuses (docs/restart.md):
-            // the refusal must then change nothing.
+            // Should a kill within a flush leave metadata that HDF5 refuses (none did since
+            // the 1.10 format's objects, docs/restart.md), the refusal must change nothing.
             assert_eq!(
                 common::dir_contents(&dir),
                 before,
@@ -408,6 +408,7 @@ fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
         );
         assert_eq!(digest(&file), want, "kill -9 at {at} bytes");
     }
-    // About 1 kill in 450 lands within a flush; three in a row means resume is broken.
+    // With the 1.8 format's objects 1 kill in 447 was refused; three in a row means resume
+    // is broken.
     assert!(refused < 3, "every resume after kill -9 was refused");
 }
