@@ -303,13 +303,37 @@ fn narrow_backward<const K: usize>(
     let cols = columns::<K>(vals, r);
     let below: [&[f64]; K] = std::array::from_fn(|j| &cols[j][K - j..]);
     let own = r - ext.len();
-    let value = |i: usize| {
-        if i < own {
-            y[rows[i] as usize - base]
-        } else {
-            ext[i - own]
-        }
+    // Without records (most supernodes) y_R is read without asking where each row is.
+    let acc = if ext.is_empty() {
+        below_sums(&below, r, |i| y[rows[i] as usize - base])
+    } else {
+        below_sums(&below, r, |i| match i < own {
+            true => y[rows[i] as usize - base],
+            false => ext[i - own],
+        })
     };
+    let c0 = c0 - base;
+    let mut x = [0.0; K];
+    for j in 0..K {
+        x[j] = y[c0 + j] - (acc[0][j] + acc[1][j]);
+    }
+    for j in (0..K).rev() {
+        for i in j + 1..K {
+            x[j] -= cols[j][i - j] * x[i];
+        }
+        x[j] /= cols[j][0];
+    }
+    y[c0..c0 + K].copy_from_slice(&x);
+}
+
+/// (Σ_i below_j[i] value(i))_j for K columns over r rows, in two partial sums per column
+/// (even and odd rows): `narrow_backward`'s L_Rsᵀ y_R.
+#[inline(always)]
+fn below_sums<const K: usize>(
+    below: &[&[f64]; K],
+    r: usize,
+    value: impl Fn(usize) -> f64,
+) -> [[f64; K]; 2] {
     let mut acc = [[0.0; K]; 2];
     for p in 0..r / 2 {
         let (g0, g1) = (value(2 * p), value(2 * p + 1));
@@ -324,18 +348,7 @@ fn narrow_backward<const K: usize>(
             acc[0][j] += below[j][r - 1] * g;
         }
     }
-    let c0 = c0 - base;
-    let mut x = [0.0; K];
-    for j in 0..K {
-        x[j] = y[c0 + j] - (acc[0][j] + acc[1][j]);
-    }
-    for j in (0..K).rev() {
-        for i in j + 1..K {
-            x[j] -= cols[j][i - j] * x[i];
-        }
-        x[j] /= cols[j][0];
-    }
-    y[c0..c0 + K].copy_from_slice(&x);
+    acc
 }
 
 /// The backward pass over a wider supernode: y_R gathered once into `g`, y_s − L_Rsᵀ y_R
