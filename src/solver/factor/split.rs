@@ -302,7 +302,8 @@ impl Schedule {
         (&mut record[at], to_z)
     }
 
-    /// The units' rows of `y` and parts of `record`, dealt to the bins.
+    /// The units' rows of `y` and parts of `record`, dealt to the bins (the bins that hold
+    /// units).
     pub(super) fn pieces<'a>(
         &'a self,
         y: &'a mut [f64],
@@ -319,6 +320,8 @@ impl Schedule {
             (rec, rec_at) = (rest, unit.record.end);
             bins[unit.bin].push((unit, ys, rs));
         }
+        // A bin without units (more threads than units) would only wake a thread.
+        bins.retain(|units| !units.is_empty());
         bins
     }
 
