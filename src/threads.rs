@@ -7,11 +7,15 @@
 //! hands work to other threads asks here:
 //! - rayon's global pool, on which faer's parallel kernels run, holds that many threads;
 //! - faer's parallelism is `Par::rayon(N)`, `Par::Seq` for one thread ([`par`]);
-//! - the solves' and the dual's second thread (`solver::pair::Pair`) is used only from two.
+//! - the step's passes (`solver::team::Team`) cut their work in as many pieces and run
+//!   them on that many threads (the factor's solves on 16 at most).
 //!
 //! With one thread nothing runs on a second thread. Results do not depend on the count:
-//! every split of the step's work is decided by the matrix (the subtrees of the factor's
-//! elimination tree, the column blocks of D), never by the thread count or by timing.
+//! the step's arithmetic is decided by the matrix (the factor's two groups of subtrees,
+//! the two column parts of D), never by the thread count or by timing; where the pieces
+//! follow the thread count, each row's arithmetic is the same in any piece (the blocks of
+//! G's and the Newton matrices' rows or columns; the factor's subtrees, whose updates of
+//! other rows are recorded and applied in the serial order: `solver::factor`).
 //! faer's sparse Cholesky factorization and its dense kernels on matrices of several
 //! columns (factorizations, triangular solves, products, inverses) give the same bits for
 //! every `Par` (this module's tests, and `solver::factor`'s for the sparse factorization);

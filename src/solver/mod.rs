@@ -45,8 +45,8 @@ pub mod dual;
 pub mod factor;
 pub mod matrix_free;
 mod ordering;
-mod pair;
 mod status;
+mod team;
 
 use crate::fem::NodalRow;
 pub use factor::Factor;

@@ -1,13 +1,13 @@
 //! The products with D = P K_A⁻¹ Pᵀ: the gradient g = D z − d from D's lower triangle.
 
-use super::Pair;
+use super::Team;
 use faer::Mat;
 use std::ops::Range;
 
-/// D, with its products split over two threads where it is large (`Pair`).
+/// D, with its products split over two threads where it is large (`Team`).
 pub(super) struct Delassus {
     pub(super) mat: Mat<f64>,
-    pub(super) pair: Pair,
+    pub(super) team: Team,
     /// `DualSettings::split_rows`.
     pub(super) split_rows: usize,
 }
@@ -19,11 +19,14 @@ impl Delassus {
     /// columns of the whole D read more). The columns are split into [0, c) and [c, m) with
     /// about as many entries each, c = m(1 − 1/√2); the second part's sums (rows ≥ c) are
     /// added to the first's at the end, so the arithmetic is the same on one thread or two.
+    /// (Not more: each entry serves two rows, so every further cut of the columns would
+    /// add a partial sum to the rows below it and change their bits, and a cut by rows
+    /// would read D twice.)
     pub(super) fn gradient(&self, z: &[f64], d: &[f64], g: &mut [f64]) {
         let m = g.len();
         let c = m - (m as f64 / std::f64::consts::SQRT_2) as usize;
         // The columns `cols`' share of D z, accumulated into y (rows first.. of D z).
-        let part = |cols: Range<usize>, y: &mut [f64], first: usize| {
+        let part = |(cols, y, first): (Range<usize>, &mut [f64], usize)| {
             for j in cols {
                 let col = &column(&self.mat, j)[j..];
                 let (y_j, y_below) = y[j - first..].split_first_mut().unwrap();
@@ -35,12 +38,8 @@ impl Delassus {
             *gi = -di;
         }
         let mut tail = vec![0.0; m - c];
-        let (head, t) = (&mut *g, &mut tail);
-        self.pair.both_if(
-            m >= self.split_rows,
-            || part(0..c, head, 0),
-            || part(c..m, t, c),
-        );
+        let parts = vec![(0..c, &mut *g, 0), (c..m, &mut tail[..], c)];
+        self.team.each_if(m >= self.split_rows, parts, part);
         for (gi, ti) in g[c..].iter_mut().zip(&tail) {
             *gi += ti;
         }

@@ -106,7 +106,7 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
-use super::pair::Pair;
+use super::team::{blocks, Team};
 use super::{Factor, Rows, StepReport, StepStatus};
 use crate::Result;
 use delassus::{column, Delassus};
@@ -133,8 +133,8 @@ pub struct DualSolver {
     /// G = L_CC⁻¹ E (|C|×m).
     g: Mat<f64>,
     /// The passes over G (d = Gᵀ y_C and y_C − G z: 27 MB each on the 3D block at h = 1/24),
-    /// split over two threads where that pays.
-    g_pair: Pair,
+    /// cut in blocks over the process's threads where that pays.
+    g_team: Team,
     /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
     d: Delassus,
     /// B = D⁻¹ for the Woodbury form of the Newton steps, when it is used: D definite (no
@@ -180,10 +180,10 @@ impl DualSolver {
             .flatten();
         DualSolver {
             g,
-            g_pair: Pair::default(),
+            g_team: Team::default(),
             d: Delassus {
                 mat: d,
-                pair: Pair::default(),
+                team: Team::default(),
                 split_rows: settings.split_rows,
             },
             inverse,
@@ -214,26 +214,24 @@ impl DualSolver {
         factor.forward(&mut self.y);
         let y_c = &self.y[n - c..];
         let g = &self.g;
-        // The two halves of d on two threads (each entry is one dot product either way).
-        let d_of = |rows: Range<usize>, d: &mut [f64]| {
+        // d in blocks of entries, one per thread (each entry is one dot product either way).
+        let m = z.len();
+        let pieces = self.g_team.pieces(m >= self.settings.split_rows);
+        let d_blocks = cut(&mut self.work.d[..m], pieces);
+        self.g_team.each(d_blocks, |(rows, d)| {
             for (r, dr) in rows.zip(d) {
                 *dr = dot(column(g, r), y_c);
             }
-        };
-        let m = z.len();
-        let (d0, d1) = self.work.d.split_at_mut(m / 2);
-        let large = m >= self.settings.split_rows;
-        self.g_pair
-            .both_if(large, || d_of(0..m / 2, d0), || d_of(m / 2..m, d1));
+        });
         let report = self.dual_solve(z);
         if report.status != StepStatus::Solved {
             return report;
         }
-        // y_C ← y_C − G z (the two halves of y_C on two threads, each row's sum in column
+        // y_C ← y_C − G z (y_C in blocks of rows, one per thread, each row's sum in column
         // order either way), then the backward solve Lᵀ w = y.
         let g = &self.g;
-        let (y0, y1) = self.y[n - c..].split_at_mut(c / 2);
-        let update = |rows: Range<usize>, y: &mut [f64]| {
+        let y_blocks = cut(&mut self.y[n - c..], pieces);
+        self.g_team.each(y_blocks, |(rows, y)| {
             for (r, &zr) in z.iter().enumerate() {
                 if zr != 0.0 {
                     for (yi, gi) in y.iter_mut().zip(&column(g, r)[rows.clone()]) {
@@ -241,13 +239,23 @@ impl DualSolver {
                     }
                 }
             }
-        };
-        self.g_pair
-            .both_if(large, || update(0..c / 2, y0), || update(c / 2..c, y1));
+        });
         factor.backward(&mut self.y);
         factor.unpermute(&self.y, w);
         report
     }
+}
+
+/// `v` cut in `pieces` consecutive blocks (`team::blocks`), each with its index range.
+fn cut(v: &mut [f64], pieces: usize) -> Vec<(Range<usize>, &mut [f64])> {
+    let mut rest = v;
+    blocks(rest.len(), pieces)
+        .map(|range| {
+            let (block, next) = std::mem::take(&mut rest).split_at_mut(range.len());
+            rest = next;
+            (range, block)
+        })
+        .collect()
 }
 
 /// G = L_CC⁻¹ E (|C|×m, E the rows' C-block in the factor's ordering) and D = GᵀG, on all

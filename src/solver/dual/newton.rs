@@ -3,7 +3,7 @@
 
 use super::delassus::{column, Delassus};
 use super::groups::{Coord, Group};
-use super::{DualSettings, NewtonCounts, NewtonForm, Pair};
+use super::{blocks, DualSettings, NewtonCounts, NewtonForm, Team};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::{Mat, MatMut, Par};
@@ -24,8 +24,8 @@ pub(super) struct Scratch {
     /// 14.6 MB; fresh ones cost the 3D block's run 4% of its samples in zeroing pages).
     pub(super) h: Mat<f64>,
     pub(super) factor: NewtonFactor,
-    /// Building a Newton matrix, split over two threads where that pays.
-    pub(super) gram_pair: Pair,
+    /// Building a Newton matrix, cut in blocks of columns over the threads where that pays.
+    pub(super) gram_team: Team,
     pub(super) counts: NewtonCounts,
 }
 
@@ -46,7 +46,7 @@ impl Scratch {
                 par_min: settings.par_min,
                 pcg_max: settings.pcg_max,
             },
-            gram_pair: Pair::default(),
+            gram_team: Team::default(),
             counts: NewtonCounts::default(),
         }
     }
@@ -160,7 +160,7 @@ pub(super) fn newton_step(
             &*buf
         }
     };
-    gram(&ops.d.mat, coords, &mut s.h, &s.gram_pair, ops.d.split_rows);
+    gram(&ops.d.mat, coords, &mut s.h, &s.gram_team, ops.d.split_rows);
     let rhs = Mat::<f64>::from_fn(nq, 1, |a, _| -coords[a].dot(grad));
     let x = solve_cached(Form::Direct, &rhs, coords, &s.h, &mut s.factor)?;
     add_columns(coords, &x, out);
@@ -177,7 +177,7 @@ fn woodbury_step(
     z0: &[f64],
     s: &mut Scratch,
 ) -> Result<Option<Mat<f64>>, Indefinite> {
-    gram(b, &s.u, &mut s.h, &s.gram_pair, ops.d.split_rows);
+    gram(b, &s.u, &mut s.h, &s.gram_team, ops.d.split_rows);
     let mut x = Mat::<f64>::zeros(coords.len(), 1);
     // In y = z − z₀: y⁺ = s − B U c, (UᵀBU + diag) c = Uᵀ s, x = Qᵀ y⁺, with s = z_u − z₀;
     // a refinement solves for the residual r the same way with s = −B Q r.
@@ -302,18 +302,19 @@ fn woodbury_cost(nq: usize, nu: usize) -> f64 {
 
 /// h = CᵀMC + diag(shift) for the columns C given by `coords`, column by column from M's
 /// contiguous columns (M symmetric). Every entry is written: h's buffer is reused as it is.
-/// From `split_rows` columns on, the columns are split over two threads.
+/// From `split_rows` columns on, the columns are cut in blocks over the team's threads
+/// (each column's arithmetic is the same in any block).
 pub(super) fn gram(
     mat: &Mat<f64>,
     coords: &[Coord],
     h: &mut Mat<f64>,
-    pair: &Pair,
+    team: &Team,
     split_rows: usize,
 ) {
     let n = coords.len();
     h.resize_with(n, n, |_, _| 0.0);
-    // The columns `cols` of h, in `part` (each column alike on either thread).
-    let fill = |cols: Range<usize>, mut part: MatMut<f64>| {
+    // The columns `cols` of h, in `part`.
+    let fill = |(cols, mut part): (Range<usize>, MatMut<f64>)| {
         for (k, b) in cols.enumerate() {
             let qb = &coords[b];
             // (M q_b)_i = Σ_j y_j M_ij, gathered at the rows of the other columns only.
@@ -336,12 +337,13 @@ pub(super) fn gram(
             hb[b] += qb.shift;
         }
     };
-    let (h0, h1) = h.as_mut().split_at_col_mut(n / 2);
-    pair.both_if(
-        n >= split_rows,
-        || fill(0..n / 2, h0),
-        || fill(n / 2..n, h1),
-    );
+    let (mut parts, mut rest) = (Vec::new(), h.as_mut());
+    for cols in blocks(n, team.pieces(n >= split_rows)) {
+        let (part, next) = rest.split_at_col_mut(cols.len());
+        parts.push((cols, part));
+        rest = next;
+    }
+    team.each(parts, fill);
 }
 
 /// Solves H x = rhs by the step's last factor `f` (conjugate gradients preconditioned with

@@ -67,7 +67,7 @@ pub struct DualSettings {
     /// preconditioner before a new factorization. Default 30.
     pub pcg_max: usize,
     /// Below this many rows (columns of a Newton matrix) a pass over D, G or the Newton
-    /// matrix runs on one thread: handing half of it to `Pair`'s worker costs more. The
+    /// matrix runs on one thread: handing pieces of it to `Team`'s workers costs more. The
     /// arithmetic is the same either way. Default 512; ≥ 2.
     pub split_rows: usize,
     /// The dense factorization of an n × n Newton matrix runs on one thread for n below

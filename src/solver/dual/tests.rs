@@ -3,7 +3,7 @@
 use super::delassus::Delassus;
 use super::groups::Coord;
 use super::newton::gram;
-use super::{DualSettings, Pair};
+use super::{DualSettings, Team};
 use faer::Mat;
 
 /// A symmetric m×m matrix with entries of both signs.
@@ -16,7 +16,7 @@ fn symmetric(m: usize) -> Mat<f64> {
 
 /// D z − d from the lower triangle equals the full product to rounding, below and above
 /// the size where it splits over two threads, and is the same bit for bit on one thread
-/// or two.
+/// or several.
 #[test]
 fn gradient_from_the_lower_triangle() {
     for m in [1, 5, 37, 700] {
@@ -30,14 +30,14 @@ fn gradient_from_the_lower_triangle() {
             .map(|i| (0..m).map(|j| mat[(i, j)] * z[j]).sum::<f64>() - d[i])
             .collect();
         let scale = m as f64 * 3.0;
-        let mut got = [vec![0.0; m], vec![0.0; m]];
-        for (pair, g) in [Pair::default(), Pair::one_thread()]
+        let mut got = [vec![0.0; m], vec![0.0; m], vec![0.0; m]];
+        for (team, g) in [Team::default(), Team::of(1), Team::of(5)]
             .into_iter()
             .zip(&mut got)
         {
             let op = Delassus {
                 mat: mat.clone(),
-                pair,
+                team,
                 split_rows: DualSettings::default().split_rows,
             };
             op.gradient(&z, &d, g);
@@ -45,18 +45,21 @@ fn gradient_from_the_lower_triangle() {
         for (a, b) in got[0].iter().zip(&expected) {
             assert!((a - b).abs() <= 1e-14 * scale, "m = {m}: {a} against {b}");
         }
-        assert!(
-            got[0]
-                .iter()
-                .zip(&got[1])
-                .all(|(a, b)| a.to_bits() == b.to_bits()),
-            "m = {m}: two threads and one differ"
-        );
+        for other in &got[1..] {
+            assert!(
+                got[0]
+                    .iter()
+                    .zip(other)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "m = {m}: the thread counts differ"
+            );
+        }
     }
 }
 
 /// The Newton matrix CᵀMC + diag(shift) equals its dense product, for single rows and
-/// two-row (disc) coordinates, and is the same bit for bit on one thread or two.
+/// two-row (disc) coordinates, and is the same bit for bit on one to eight threads (as
+/// many blocks of columns).
 #[test]
 fn gram_is_the_dense_product() {
     for (m, n) in [(9, 4), (1400, 700)] {
@@ -90,13 +93,14 @@ fn gram_is_the_dense_product() {
                 .map_or(0.0, |(_, x)| x)
         });
         let dense = c.transpose() * &mat * &c;
-        let mut got = [Mat::new(), Mat::new()];
-        for (pair, h) in [Pair::default(), Pair::one_thread()]
-            .into_iter()
-            .zip(&mut got)
-        {
-            gram(&mat, &coords, h, &pair, DualSettings::default().split_rows);
-        }
+        let got: Vec<_> = (1..=8)
+            .map(|threads| {
+                let mut h = Mat::new();
+                let split_rows = DualSettings::default().split_rows;
+                gram(&mat, &coords, &mut h, &Team::of(threads), split_rows);
+                h
+            })
+            .collect();
         for a in 0..n {
             for b in 0..n {
                 let mut expected = dense[(a, b)];
@@ -108,11 +112,14 @@ fn gram_is_the_dense_product() {
                     (h - expected).abs() <= 1e-12,
                     "n = {n}: ({a}, {b}) {h} against {expected}"
                 );
-                assert_eq!(
-                    h.to_bits(),
-                    got[1][(a, b)].to_bits(),
-                    "n = {n}: one thread and two differ"
-                );
+                for (threads, other) in got.iter().enumerate().skip(1) {
+                    assert_eq!(
+                        h.to_bits(),
+                        other[(a, b)].to_bits(),
+                        "n = {n}: one thread and {} differ",
+                        threads + 1
+                    );
+                }
             }
         }
     }

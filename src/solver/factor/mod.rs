@@ -15,13 +15,15 @@
 //! R) is the block [L_ss; L_Rs], column by column; the forward pass, in supernode order, does
 //! y_s ← L_ss⁻¹ y_s and y_R ← y_R − L_Rs y_s; the backward pass, in reverse order,
 //! y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R). A single right side is memory-bound, so a big factor's
-//! passes run on two threads: two groups of disjoint subtrees of the elimination tree,
-//! each on its own thread, and the rest (`Split`; nested dissection's top separator splits
-//! the tree into two such halves).
+//! passes run on all the process's threads: disjoint subtrees of the elimination tree on
+//! different threads, the rest on one, with the same arithmetic for every thread count
+//! (`split`).
 //! faer's default amalgamation may merge a supernode across the boundary between the
 //! interior dofs and C; `trailing_block` reads L_CC column by column and does not care.
 
-use super::pair::Pair;
+mod split;
+
+use super::team::Team;
 use crate::fem::Sparse;
 use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -33,6 +35,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::{Mat, Par, Side};
+use split::{Schedule, MAX_BINS};
 
 pub struct Factor {
     /// L's values in the packed layout of `Layout`.
@@ -44,11 +47,11 @@ pub struct Factor {
     /// The number of dofs ordered last (the block C).
     last: usize,
     layout: Layout,
-    /// The solves' two groups of subtrees, for factors big enough to gain from them.
-    split: Option<Split>,
-    /// The forward and the backward pass's two groups, on two threads when that pays.
-    forward_pair: Pair,
-    backward_pair: Pair,
+    /// The solves' units of subtrees, for factors big enough to gain from them.
+    schedule: Option<Schedule>,
+    /// The forward and the backward pass's units, on all threads when that pays.
+    forward_team: Team,
+    backward_team: Team,
 }
 
 /// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
@@ -114,6 +117,11 @@ impl Layout {
         self.begin.len() - 1
     }
 
+    /// Supernode s's off-diagonal rows.
+    fn pattern(&self, s: usize) -> &[u32] {
+        &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
+    }
+
     /// Supernode s: its columns, its off-diagonal rows and its packed values.
     fn supernode<'a>(
         &'a self,
@@ -122,102 +130,9 @@ impl Layout {
     ) -> (std::ops::Range<usize>, &'a [u32], &'a [f64]) {
         (
             self.begin[s]..self.begin[s + 1],
-            &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]],
+            self.pattern(s),
             &values[self.val_ptr[s]..self.val_ptr[s + 1]],
         )
-    }
-}
-
-/// Supernodes that the solves may treat on two threads: two groups, each a union of whole
-/// subtrees of the supernodal elimination tree (so the rows a group's supernodes update
-/// lie in the group or in `top`), and `top`, the rest (every ancestor of both groups).
-/// The forward pass does both groups, then `top`; the backward pass `top`, then both
-/// groups. The second group works in a vector of its own, merged in a fixed way, so the
-/// arithmetic is the same with one thread or two.
-#[derive(Clone, Debug)]
-struct Split {
-    /// The supernodes of each group and of `top`, increasing.
-    groups: [Vec<usize>; 2],
-    top: Vec<usize>,
-}
-
-impl Split {
-    /// The split whose longest path, top + max(group), is shortest, counted in stored values;
-    /// None when it would not save a fifth of a pass or the factor is smaller than `min`.
-    fn new(layout: &Layout, min: usize) -> Option<Split> {
-        let ns = layout.n_supernodes();
-        let total = *layout.val_ptr.last()?;
-        if total < min || ns < 2 {
-            return None;
-        }
-        let mut owner = vec![0; *layout.begin.last()?];
-        for s in 0..ns {
-            owner[layout.begin[s]..layout.begin[s + 1]].fill(s);
-        }
-        // Children of each supernode (a parent's index exceeds its children's).
-        let mut children = vec![Vec::new(); ns];
-        let mut roots = Vec::new();
-        for s in 0..ns {
-            match layout.rows[layout.row_ptr[s]..layout.row_ptr[s + 1]].first() {
-                Some(&r) => children[owner[r as usize]].push(s),
-                None => roots.push(s),
-            }
-        }
-        let mut weight: Vec<usize> = (0..ns)
-            .map(|s| layout.val_ptr[s + 1] - layout.val_ptr[s])
-            .collect();
-        for s in 0..ns {
-            if let Some(&r) = layout.rows[layout.row_ptr[s]..layout.row_ptr[s + 1]].first() {
-                weight[owner[r as usize]] += weight[s];
-            }
-        }
-        // Open the heaviest subtree of the frontier into its children, one at a time; each
-        // frontier is dealt to two bins, heaviest first, into the lighter bin.
-        let deal = |frontier: &[usize]| {
-            let mut sorted = frontier.to_vec();
-            sorted.sort_by_key(|&s| std::cmp::Reverse(weight[s]));
-            let mut bins = [(0, Vec::new()), (0, Vec::new())];
-            for s in sorted {
-                let b = usize::from(bins[1].0 < bins[0].0);
-                bins[b].0 += weight[s];
-                bins[b].1.push(s);
-            }
-            bins
-        };
-        let (mut frontier, mut top_weight) = (roots, 0);
-        let mut best: Option<(usize, Vec<usize>)> = None;
-        for _ in 0..256 {
-            let bins = deal(&frontier);
-            let path = top_weight + bins[0].0.max(bins[1].0);
-            if best.as_ref().is_none_or(|b| path < b.0) {
-                best = Some((path, frontier.clone()));
-            }
-            let Some(heaviest) = frontier.iter().copied().max_by_key(|&s| weight[s]) else {
-                break;
-            };
-            frontier.retain(|&s| s != heaviest);
-            frontier.extend_from_slice(&children[heaviest]);
-            top_weight += layout.val_ptr[heaviest + 1] - layout.val_ptr[heaviest];
-        }
-        let (path, frontier) = best?;
-        if path * 5 > total * 4 {
-            return None;
-        }
-        let mut label = vec![2u8; ns];
-        for (b, (_, subtrees)) in deal(&frontier).into_iter().enumerate() {
-            for root in subtrees {
-                let mut stack = vec![root];
-                while let Some(s) = stack.pop() {
-                    label[s] = b as u8;
-                    stack.extend_from_slice(&children[s]);
-                }
-            }
-        }
-        let members = |b: u8| (0..ns).filter(|&s| label[s] == b).collect::<Vec<_>>();
-        Some(Split {
-            groups: [members(0), members(1)],
-            top: members(2),
-        })
     }
 }
 
@@ -293,11 +208,20 @@ fn columns<const K: usize>(vals: &[f64], r: usize) -> [&[f64]; K] {
 /// The forward pass over a supernode of K ≤ 4 columns (77% of the supernodes at h = 1/128
 /// hold 2) starting at column c0: y_s ← L_ss⁻¹ y_s, then y_R ← y_R − L_Rs y_s row by row,
 /// each row's sum in column order as in `wide_forward` (the same arithmetic), without its
-/// buffer: the sums stay in registers.
+/// buffer: the sums stay in registers. `y[i]` holds row base + i; the sums of the last
+/// `ext.len()` rows of the pattern are stored in `ext` instead (`split`'s records).
 #[inline(always)]
-fn narrow_forward<const K: usize>(vals: &[f64], rows: &[u32], c0: usize, y: &mut [f64]) {
+fn narrow_forward<const K: usize>(
+    vals: &[f64],
+    rows: &[u32],
+    c0: usize,
+    y: &mut [f64],
+    base: usize,
+    ext: &mut [f64],
+) {
     let r = rows.len();
     let cols = columns::<K>(vals, r);
+    let c0 = c0 - base;
     let mut x = [0.0; K];
     x.copy_from_slice(&y[c0..c0 + K]);
     for j in 0..K {
@@ -308,29 +232,39 @@ fn narrow_forward<const K: usize>(vals: &[f64], rows: &[u32], c0: usize, y: &mut
     }
     y[c0..c0 + K].copy_from_slice(&x);
     let below: [&[f64]; K] = std::array::from_fn(|j| &cols[j][K - j..]);
-    for (i, &row) in rows.iter().enumerate() {
+    let sum = |i: usize| {
         let mut t = 0.0;
         for j in 0..K {
             t += below[j][i] * x[j];
         }
-        y[row as usize] -= t;
+        t
+    };
+    let own = r - ext.len();
+    for (i, &row) in rows[..own].iter().enumerate() {
+        y[row as usize - base] -= sum(i);
+    }
+    for (i, e) in ext.iter_mut().enumerate() {
+        *e = sum(own + i);
     }
 }
 
 /// The forward pass over a wider supernode: y_s ← L_ss⁻¹ y_s column by column, L_Rs y_s
 /// accumulated in the contiguous buffer `t` and subtracted from y_R once. (Accumulating four
-/// or eight columns per sweep of `t` measured 10–30% slower.)
+/// or eight columns per sweep of `t` measured 10–30% slower.) `y`, `base` and `ext` as in
+/// `narrow_forward`.
 fn wide_forward(
     vals: &[f64],
     rows: &[u32],
     cols: std::ops::Range<usize>,
     t: &mut [f64],
     y: &mut [f64],
+    base: usize,
+    ext: &mut [f64],
 ) {
     let size = cols.len();
     let t = &mut t[..rows.len()];
     t.fill(0.0);
-    let ys = &mut y[cols];
+    let ys = &mut y[cols.start - base..cols.end - base];
     let mut rest = vals;
     for j in 0..size {
         let (col, next) = rest.split_at(size - j + t.len());
@@ -345,35 +279,40 @@ fn wide_forward(
             *ti += l * yj;
         }
     }
-    for (&r, ti) in rows.iter().zip(t.iter()) {
-        y[r as usize] -= ti;
+    let own = rows.len() - ext.len();
+    for (&r, ti) in rows[..own].iter().zip(t.iter()) {
+        y[r as usize - base] -= ti;
     }
+    ext.copy_from_slice(&t[own..]);
 }
 
 /// The backward pass over a supernode of K ≤ 4 columns starting at column c0: y_s ←
 /// L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R), y_R read as it is used, two partial sums per column (one
-/// sum per column would wait on its additions).
+/// sum per column would wait on its additions). `y[i]` holds row base + i; the last
+/// `ext.len()` rows of the pattern are read from `ext` (`split`'s records).
 #[inline(always)]
-fn narrow_backward<const K: usize>(vals: &[f64], rows: &[u32], c0: usize, y: &mut [f64]) {
+fn narrow_backward<const K: usize>(
+    vals: &[f64],
+    rows: &[u32],
+    c0: usize,
+    y: &mut [f64],
+    base: usize,
+    ext: &[f64],
+) {
     let r = rows.len();
     let cols = columns::<K>(vals, r);
     let below: [&[f64]; K] = std::array::from_fn(|j| &cols[j][K - j..]);
-    let mut acc = [[0.0; K]; 2];
-    let pairs = rows.chunks_exact(2);
-    let odd = pairs.remainder();
-    for (p, pair) in pairs.enumerate() {
-        let (g0, g1) = (y[pair[0] as usize], y[pair[1] as usize]);
-        for j in 0..K {
-            acc[0][j] += below[j][2 * p] * g0;
-            acc[1][j] += below[j][2 * p + 1] * g1;
-        }
-    }
-    if let [last] = odd {
-        let g = y[*last as usize];
-        for j in 0..K {
-            acc[0][j] += below[j][r - 1] * g;
-        }
-    }
+    let own = r - ext.len();
+    // Without records (most supernodes) y_R is read without asking where each row is.
+    let acc = if ext.is_empty() {
+        below_sums(&below, r, |i| y[rows[i] as usize - base])
+    } else {
+        below_sums(&below, r, |i| match i < own {
+            true => y[rows[i] as usize - base],
+            false => ext[i - own],
+        })
+    };
+    let c0 = c0 - base;
     let mut x = [0.0; K];
     for j in 0..K {
         x[j] = y[c0 + j] - (acc[0][j] + acc[1][j]);
@@ -387,14 +326,42 @@ fn narrow_backward<const K: usize>(vals: &[f64], rows: &[u32], c0: usize, y: &mu
     y[c0..c0 + K].copy_from_slice(&x);
 }
 
+/// (Σ_i below_j[i] value(i))_j for K columns over r rows, in two partial sums per column
+/// (even and odd rows): `narrow_backward`'s L_Rsᵀ y_R.
+#[inline(always)]
+fn below_sums<const K: usize>(
+    below: &[&[f64]; K],
+    r: usize,
+    value: impl Fn(usize) -> f64,
+) -> [[f64; K]; 2] {
+    let mut acc = [[0.0; K]; 2];
+    for p in 0..r / 2 {
+        let (g0, g1) = (value(2 * p), value(2 * p + 1));
+        for j in 0..K {
+            acc[0][j] += below[j][2 * p] * g0;
+            acc[1][j] += below[j][2 * p + 1] * g1;
+        }
+    }
+    if r % 2 == 1 {
+        let g = value(r - 1);
+        for j in 0..K {
+            acc[0][j] += below[j][r - 1] * g;
+        }
+    }
+    acc
+}
+
 /// The backward pass over a wider supernode: y_R gathered once into `g`, y_s − L_Rsᵀ y_R
-/// four columns at a time in memory order, then L_ssᵀ⁻¹, the last column first.
+/// four columns at a time in memory order, then L_ssᵀ⁻¹, the last column first. `y`,
+/// `base` and `ext` as in `narrow_backward`.
 fn wide_backward(
     vals: &[f64],
     rows: &[u32],
     cols: std::ops::Range<usize>,
     g: &mut [f64],
     y: &mut [f64],
+    base: usize,
+    ext: &[f64],
 ) {
     // All loads of the block at once, before the dependent arithmetic needs them: the pass
     // runs from the factor's end to its start, a stream the hardware prefetchers follow
@@ -404,10 +371,12 @@ fn wide_backward(
     }
     let (size, r) = (cols.len(), rows.len());
     let g = &mut g[..r];
-    for (gi, &row) in g.iter_mut().zip(rows) {
-        *gi = y[row as usize];
+    let own = r - ext.len();
+    for (gi, &row) in g[..own].iter_mut().zip(rows) {
+        *gi = y[row as usize - base];
     }
-    let ys = &mut y[cols];
+    g[own..].copy_from_slice(ext);
+    let ys = &mut y[cols.start - base..cols.end - base];
     let (mut end, mut j) = (0, 0);
     while j + 4 <= size {
         let mut c = [&vals[..0]; 4];
@@ -432,8 +401,9 @@ fn wide_backward(
     }
 }
 
-/// The smallest factor (stored values) whose solves are split in two groups: 2 MB, where a
-/// pass takes about 0.2 ms and a thread's start and join are a small part of it.
+/// The smallest factor (stored values) whose solves are split in units (and whose
+/// arithmetic may take two groups, `split`): 2 MB, where a pass takes about 0.2 ms and a
+/// thread's start and join are a small part of it.
 const MIN_SPLIT: usize = 1 << 18;
 
 /// The numeric factorization runs on faer's global parallelism (both cores) when its
@@ -463,10 +433,25 @@ fn factorization_flops(sym: &SymbolicSupernodalCholesky<usize>) -> f64 {
         .sum()
 }
 
+/// How a factor's solves are split (`split::Schedule::new`).
+#[derive(Clone, Copy)]
+struct Splits {
+    /// The smallest factor (stored values) whose forward pass may take two groups.
+    two_groups: usize,
+    /// The smallest factor whose solves run in units, and the bins they are dealt to.
+    units: usize,
+    bins: usize,
+}
+
 impl Factor {
     /// Factors `a`, with the dofs in `last` ordered last.
     pub fn new(a: &Sparse, last: &[usize]) -> Result<Self> {
-        Self::with_split(a, last, MIN_SPLIT, |flops| {
+        let split = Splits {
+            two_groups: MIN_SPLIT,
+            units: MIN_SPLIT,
+            bins: crate::threads::count().min(MAX_BINS),
+        };
+        Self::with_split(a, last, split, |flops| {
             if flops >= PARALLEL_FLOPS {
                 crate::threads::par()
             } else {
@@ -475,13 +460,12 @@ impl Factor {
         })
     }
 
-    /// `new`, with the solves split in two groups (`Split`) if the factor stores at least
-    /// `min_split` values, and the numeric factorization's parallelism chosen by `par` from
-    /// its flops (`factorization_flops`).
+    /// `new`, with the solves' schedule from `split`, and the numeric factorization's
+    /// parallelism chosen by `par` from its flops (`factorization_flops`).
     fn with_split(
         a: &Sparse,
         last: &[usize],
-        min_split: usize,
+        split: Splits,
         par: impl FnOnce(f64) -> Par,
     ) -> Result<Self> {
         let n = a.nrows();
@@ -551,9 +535,9 @@ impl Factor {
             fwd,
             inv,
             last: last.len(),
-            split: Split::new(&layout, min_split),
-            forward_pair: Pair::default(),
-            backward_pair: Pair::default(),
+            schedule: Schedule::new(&layout, split.two_groups, split.units, split.bins),
+            forward_team: Team::default(),
+            backward_team: Team::default(),
             layout,
         })
     }
@@ -602,83 +586,125 @@ impl Factor {
     /// s (columns c₀..c₁, off-diagonal rows R) is the block [L_ss; L_Rs], its columns packed
     /// (`Layout`): y_s ← L_ss⁻¹ y_s, then y_R ← y_R − L_Rs y_s (`narrow_forward` for
     /// supernodes of at most four columns, `wide_forward` for the others). A factor with a
-    /// `Split` runs its two groups on two threads when that pays (`Pair`).
+    /// `Schedule` runs its units on all threads when that pays (`Team`), then the rest
+    /// (`split`).
     pub fn forward(&self, y: &mut [f64]) {
-        let Some(split) = &self.split else {
+        let Some(schedule) = &self.schedule else {
             return self.forward_over(0..self.layout.n_supernodes(), y);
         };
-        // The second group in a vector of its own: its columns, zeros elsewhere; it subtracts
-        // its updates of `top` rows from those zeros.
-        let mut z = vec![0.0; self.n];
-        let cols = |s: usize| self.layout.begin[s]..self.layout.begin[s + 1];
-        for &s in &split.groups[1] {
-            z[cols(s)].copy_from_slice(&y[cols(s)]);
-        }
-        self.forward_pair.both(
-            || self.forward_over(split.groups[0].iter().copied(), y),
-            || self.forward_over(split.groups[1].iter().copied(), &mut z),
-        );
-        for &s in &split.groups[1] {
-            y[cols(s)].copy_from_slice(&z[cols(s)]);
-        }
-        for &s in &split.top {
-            for c in cols(s) {
-                y[c] += z[c];
+        let widest = self.layout.widest_pattern;
+        let mut record = vec![0.0; schedule.record_len()];
+        self.forward_team
+            .each(schedule.pieces(y, &mut record), |units| {
+                let mut t = vec![0.0; widest];
+                for (unit, ys, rs) in units {
+                    for s in unit.supernodes.clone() {
+                        let ext = schedule.unit_records(unit, s, rs);
+                        self.forward_step(s, ys, unit.cols.start, ext, &mut t);
+                    }
+                }
+            });
+        // The records and the upper supernodes in supernode order, then `top`.
+        let z_from = schedule.z_from;
+        let mut z = vec![0.0; self.n - z_from];
+        let mut t = vec![0.0; widest];
+        for &(s, upper) in &schedule.replay {
+            let (ext, to_z) = schedule.records(s, &mut record);
+            if upper {
+                self.forward_step(s, y, 0, ext, &mut t);
+            }
+            let rows = self.layout.pattern(s);
+            let rows = &rows[rows.len() - ext.len()..];
+            for (i, (&r, v)) in rows.iter().zip(&*ext).enumerate() {
+                match i < to_z {
+                    true => y[r as usize] -= v,
+                    false => z[r as usize - z_from] -= v,
+                }
             }
         }
-        self.forward_over(split.top.iter().copied(), y);
+        for &s in &schedule.top {
+            for c in self.layout.begin[s]..self.layout.begin[s + 1] {
+                y[c] += z[c - z_from];
+            }
+        }
+        self.forward_over(schedule.top.iter().copied(), y);
     }
 
-    /// The forward pass over the supernodes `order` (increasing).
+    /// The forward pass over supernode s, `y[i]` holding row base + i, the updates of the
+    /// last `ext.len()` rows of its pattern stored in `ext`; `t` a buffer of
+    /// `widest_pattern` values.
+    fn forward_step(&self, s: usize, y: &mut [f64], base: usize, ext: &mut [f64], t: &mut [f64]) {
+        let (cols, rows, vals) = self.layout.supernode(s, &self.values);
+        match cols.len() {
+            1 => narrow_forward::<1>(vals, rows, cols.start, y, base, ext),
+            2 => narrow_forward::<2>(vals, rows, cols.start, y, base, ext),
+            3 => narrow_forward::<3>(vals, rows, cols.start, y, base, ext),
+            4 => narrow_forward::<4>(vals, rows, cols.start, y, base, ext),
+            _ => wide_forward(vals, rows, cols, t, y, base, ext),
+        }
+    }
+
+    /// The forward pass over the supernodes `order` (increasing) on the whole of y.
     fn forward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
-        let layout = &self.layout;
-        let mut t = vec![0.0; layout.widest_pattern];
+        let mut t = vec![0.0; self.layout.widest_pattern];
         for s in order {
-            let (cols, rows, vals) = layout.supernode(s, &self.values);
-            match cols.len() {
-                1 => narrow_forward::<1>(vals, rows, cols.start, y),
-                2 => narrow_forward::<2>(vals, rows, cols.start, y),
-                3 => narrow_forward::<3>(vals, rows, cols.start, y),
-                4 => narrow_forward::<4>(vals, rows, cols.start, y),
-                _ => wide_forward(vals, rows, cols, &mut t, y),
-            }
+            self.forward_step(s, y, 0, &mut [], &mut t);
         }
     }
 
     /// y ← L⁻ᵀ y in the factor's ordering: one pass over the supernodes in reverse. For
     /// supernode s, y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R), the last column first
     /// (`narrow_backward` for supernodes of at most four columns, `wide_backward` for the
-    /// others).
+    /// others). With a `Schedule`: `top` and the upper supernodes, then the units on all
+    /// threads when that pays, each reading the rows outside it from the record.
     pub fn backward(&self, y: &mut [f64]) {
-        let Some(split) = &self.split else {
+        let Some(schedule) = &self.schedule else {
             return self.backward_over((0..self.layout.n_supernodes()).rev(), y);
         };
-        self.backward_over(split.top.iter().rev().copied(), y);
-        // The second group reads `top` rows from a copy and writes its own columns there.
-        let mut z = y.to_vec();
-        self.backward_pair.both(
-            || self.backward_over(split.groups[0].iter().rev().copied(), y),
-            || self.backward_over(split.groups[1].iter().rev().copied(), &mut z),
-        );
-        for &s in &split.groups[1] {
-            let cols = self.layout.begin[s]..self.layout.begin[s + 1];
-            y[cols.clone()].copy_from_slice(&z[cols]);
+        self.backward_over(schedule.top.iter().rev().copied(), y);
+        let replay = schedule.replay.iter().rev();
+        self.backward_over(replay.clone().filter(|r| r.1).map(|r| r.0), y);
+        let mut record = vec![0.0; schedule.record_len()];
+        for &(s, _) in replay.filter(|r| !r.1) {
+            let (ext, _) = schedule.records(s, &mut record);
+            let rows = self.layout.pattern(s);
+            let rows = &rows[rows.len() - ext.len()..];
+            for (v, &r) in ext.iter_mut().zip(rows) {
+                *v = y[r as usize];
+            }
+        }
+        let widest = self.layout.widest_pattern;
+        self.backward_team
+            .each(schedule.pieces(y, &mut record), |units| {
+                let mut g = vec![0.0; widest];
+                for (unit, ys, rs) in units {
+                    for s in unit.supernodes.clone().rev() {
+                        let ext = schedule.unit_records(unit, s, rs);
+                        self.backward_step(s, ys, unit.cols.start, ext, &mut g);
+                    }
+                }
+            });
+    }
+
+    /// The backward pass over supernode s, `y[i]` holding row base + i, the last
+    /// `ext.len()` rows of its pattern read from `ext`; `g` a buffer of `widest_pattern`
+    /// values.
+    fn backward_step(&self, s: usize, y: &mut [f64], base: usize, ext: &[f64], g: &mut [f64]) {
+        let (cols, rows, vals) = self.layout.supernode(s, &self.values);
+        match cols.len() {
+            1 => narrow_backward::<1>(vals, rows, cols.start, y, base, ext),
+            2 => narrow_backward::<2>(vals, rows, cols.start, y, base, ext),
+            3 => narrow_backward::<3>(vals, rows, cols.start, y, base, ext),
+            4 => narrow_backward::<4>(vals, rows, cols.start, y, base, ext),
+            _ => wide_backward(vals, rows, cols, g, y, base, ext),
         }
     }
 
-    /// The backward pass over the supernodes `order` (decreasing).
+    /// The backward pass over the supernodes `order` (decreasing) on the whole of y.
     fn backward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
-        let layout = &self.layout;
-        let mut g = vec![0.0; layout.widest_pattern];
+        let mut g = vec![0.0; self.layout.widest_pattern];
         for s in order {
-            let (cols, rows, vals) = layout.supernode(s, &self.values);
-            match cols.len() {
-                1 => narrow_backward::<1>(vals, rows, cols.start, y),
-                2 => narrow_backward::<2>(vals, rows, cols.start, y),
-                3 => narrow_backward::<3>(vals, rows, cols.start, y),
-                4 => narrow_backward::<4>(vals, rows, cols.start, y),
-                _ => wide_backward(vals, rows, cols, &mut g, y),
-            }
+            self.backward_step(s, y, 0, &[], &mut g);
         }
     }
 
@@ -745,11 +771,10 @@ mod tests {
         SparseColMat::try_new_from_triplets(n, n, &t).unwrap()
     }
 
-    /// The supernodal solves against a dense Cholesky solve of the same matrix: a 2D grid
-    /// (5-point couplings, weights varying per edge, plus a diagonal shift) with a boundary
-    /// row of dofs ordered last, big enough for supernodes of many widths.
-    #[test]
-    fn solve_matches_dense_cholesky() {
+    /// A 2D grid's matrix (5-point couplings and one diagonal, weights varying per edge,
+    /// plus a diagonal shift), its first row of dofs (to order last) and a right side: big
+    /// enough for supernodes of many widths.
+    fn grid_2d() -> (SparseColMat<usize, f64>, Vec<usize>, Vec<f64>) {
         let side = 30;
         let n = side * side;
         let edges = (0..n).flat_map(|i| {
@@ -760,49 +785,93 @@ mod tests {
                 .map(move |(dx, dy)| (i, (y + dy) * side + x + dx))
         });
         let k = grid_matrix(n, |i| 0.01 + (i % 7) as f64 * 1e-3, edges);
-        let last: Vec<usize> = (0..side).collect();
-        let factor = Factor::new(&k, &last).unwrap();
-        let b: Vec<f64> = (0..n)
+        let b = (0..n)
             .map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0)
             .collect();
-        let dense = k.to_dense().llt(Side::Lower).unwrap();
-        let expected = dense.solve(faer::Mat::from_fn(n, 1, |i, _| b[i]));
-        let scale = (0..n).fold(0.0f64, |a, i| a.max(expected[(i, 0)].abs()));
-        // Unsplit (too small for MIN_SPLIT), then split in two groups, on one thread and two.
-        let split = Factor::with_split(&k, &last, 0, |_| Par::Seq).unwrap();
-        let groups = split
-            .split
-            .as_ref()
-            .expect("the grid's tree splits")
-            .groups
-            .clone();
-        assert!(groups.iter().all(|g| !g.is_empty()), "{groups:?}");
-        let one_thread = Factor {
-            forward_pair: Pair::one_thread(),
-            backward_pair: Pair::one_thread(),
-            ..Factor::with_split(&k, &last, 0, |_| Par::Seq).unwrap()
-        };
-        assert!(factor.split.is_none());
+        (k, (0..side).collect(), b)
+    }
+
+    /// K⁻¹ b by a dense Cholesky solve.
+    fn dense_solve(k: &SparseColMat<usize, f64>, b: &[f64]) -> Vec<f64> {
+        let rhs = Mat::from_fn(b.len(), 1, |i, _| b[i]);
+        let x = k.to_dense().llt(Side::Lower).unwrap().solve(rhs);
+        (0..b.len()).map(|i| x[(i, 0)]).collect()
+    }
+
+    /// `f.solve(b)`, checked against `expected` (`dense_solve`): its bits.
+    fn solve_checked(f: &Factor, b: &[f64], expected: &[f64]) -> Vec<u64> {
+        let scale = expected.iter().fold(0.0f64, |a, e| a.max(e.abs()));
+        let mut x = b.to_vec();
+        f.solve(&mut x);
+        let err = x
+            .iter()
+            .zip(expected)
+            .fold(0.0f64, |a, (x, e)| a.max((x - e).abs()));
+        assert!(err <= 1e-12 * scale, "{err:e} vs {scale:e}");
+        x.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// The split solves give the same bits for 1 to 8 threads (as many bins of units) and
+    /// on one thread or several, with the serial pass's arithmetic (then they equal the
+    /// serial pass) and with two groups.
+    #[test]
+    fn split_solves_are_identical_for_every_thread_count() {
+        let (k, last, b) = grid_2d();
+        let expected = dense_solve(&k, &b);
+        let serial = solve_checked(&Factor::new(&k, &last).unwrap(), &b, &expected);
+        for two_groups in [usize::MAX, 0] {
+            let mut reference = None;
+            for bins in 1..=8 {
+                let split = Splits {
+                    two_groups,
+                    units: 0,
+                    bins,
+                };
+                let f = Factor {
+                    forward_team: Team::of(bins),
+                    backward_team: Team::of(bins),
+                    ..Factor::with_split(&k, &last, split, |_| Par::Seq).unwrap()
+                };
+                if bins >= 3 {
+                    let units = f.schedule.as_ref().map_or(0, |s| s.units.len());
+                    assert!(units >= 3, "{bins} bins: {units} units");
+                }
+                // `Team` probes both ways: several solves.
+                for _ in 0..3 {
+                    let x = solve_checked(&f, &b, &expected);
+                    let reference = reference.get_or_insert_with(|| x.clone());
+                    assert!(x == *reference, "{bins} bins, two groups from {two_groups}");
+                }
+            }
+            if two_groups == usize::MAX {
+                assert!(
+                    reference == Some(serial.clone()),
+                    "not the serial pass's bits"
+                );
+            }
+        }
+    }
+
+    /// The supernodal solves against a dense Cholesky solve of the same matrix, with a
+    /// boundary row of dofs ordered last, and its trailing block.
+    #[test]
+    fn solve_matches_dense_cholesky() {
+        let (k, last, b) = grid_2d();
+        let n = b.len();
+        let factor = Factor::new(&k, &last).unwrap();
+        assert!(factor.schedule.is_none(), "too small for MIN_SPLIT");
         // Every kernel is exercised: supernodes of one to four columns and wider ones.
         let layout = &factor.layout;
         let widths: std::collections::BTreeSet<usize> = (0..layout.n_supernodes())
             .map(|s| (layout.begin[s + 1] - layout.begin[s]).min(5))
             .collect();
         assert_eq!(widths, (1..=5).collect(), "supernode widths (5 = wider)");
-        let solved = [&factor, &split, &one_thread].map(|f| {
-            let mut x = b.clone();
-            f.solve(&mut x);
-            let err = (0..n).fold(0.0f64, |a, i| a.max((x[i] - expected[(i, 0)]).abs()));
-            assert!(err <= 1e-12 * scale, "{err:e} vs {scale:e}");
-            x
-        });
-        // The split's arithmetic does not depend on the threads.
-        assert_eq!(solved[1], solved[2]);
+        solve_checked(&factor, &b, &dense_solve(&k, &b));
         // The constrained dofs are the last ones and L_CC L_CCᵀ is their Schur complement:
         // its inverse is the C block of K⁻¹ (in the factor's order of C).
         let c = last.len();
         let l_cc = factor.trailing_block();
-        let kinv = dense.inverse();
+        let kinv = k.to_dense().llt(Side::Lower).unwrap().inverse();
         let schur_inv = (l_cc.as_ref() * l_cc.transpose())
             .llt(Side::Lower)
             .unwrap()
@@ -837,9 +906,14 @@ mod tests {
         });
         let k = grid_matrix(n, |_| 0.01, edges);
         let last: Vec<usize> = (0..side * side).collect();
-        let one = Factor::with_split(&k, &last, MIN_SPLIT, |_| Par::Seq).unwrap();
+        let split = Splits {
+            two_groups: MIN_SPLIT,
+            units: MIN_SPLIT,
+            bins: 2,
+        };
+        let one = Factor::with_split(&k, &last, split, |_| Par::Seq).unwrap();
         for threads in [2, 3, 4] {
-            let many = Factor::with_split(&k, &last, MIN_SPLIT, |_| Par::rayon(threads)).unwrap();
+            let many = Factor::with_split(&k, &last, split, |_| Par::rayon(threads)).unwrap();
             assert!(many.values == one.values, "{threads} threads");
         }
     }
