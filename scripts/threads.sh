@@ -10,7 +10,7 @@
 # Cases: the 2D paper scene at h = k = 1/128 and 1/512 (full), the 3D block at h = 1/24
 # (full and linear only) and 1/32 (full), and, if PLATE_MESH names a gmsh mesh of the plate
 # on its foundation (meshes/3d/block.geo at height 1/4, gmsh tetrahedra of size 0.03),
-# that plate with 100 steps (full and linear only). Meshes that are not in the repository
+# that plate with PLATE_STEPS steps (default 100; full and linear only). Meshes that are not in the repository
 # are made with gmsh (out/meshes/, meshes/generate.sh). To run on another machine, copy the
 # binary with the shared libraries `ldd` lists and point LD_LIBRARY_PATH at them.
 set -euo pipefail
@@ -70,9 +70,9 @@ row "3D block 1/24, linear only" examples/block.toml \
     --set mesh.file=../meshes/3d/block_024.msh "${LINEAR[@]}"
 row "3D block 1/32, full" examples/block.toml --set mesh.file=../meshes/3d/block_032.msh
 if [ -n "${PLATE_MESH:-}" ]; then
-    plate=$(realpath "$PLATE_MESH")
+    plate=$(realpath "$PLATE_MESH") steps=${PLATE_STEPS:-100}
     row "3D plate on its foundation, full" examples/block.toml \
-        --set mesh.file="$plate" --set time.steps=100
+        --set mesh.file="$plate" --set time.steps="$steps"
     row "3D plate on its foundation, linear only" examples/block.toml \
-        --set mesh.file="$plate" --set time.steps=100 "${LINEAR[@]}"
+        --set mesh.file="$plate" --set time.steps="$steps" "${LINEAR[@]}"
 fi
