@@ -6,7 +6,7 @@
 use crate::fem::{Discretization, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::Scene;
-use crate::solver::choice::{Contact, ContactPlan};
+use crate::solver::choice::Contact;
 use crate::solver::matrix_free::MatrixFreeSolver;
 use crate::solver::{conic::ConicSolver, dual::DualSolver, Factor, Rows, StepSolver};
 use crate::Result;
@@ -149,8 +149,7 @@ pub fn step_solver(
     if effects.linear() {
         return Ok(StepSolver::Linear);
     }
-    let plan = ContactPlan::new(scene.solver.contact, rows, factor.dim());
-    Ok(match plan.solver {
+    Ok(match Contact::of(scene.solver.contact, rows) {
         Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
         Contact::MatrixFree => {
             StepSolver::MatrixFree(Box::new(MatrixFreeSolver::new(factor, rows)))

@@ -47,6 +47,16 @@ impl Contact {
         }
     }
 
+    /// The solver the scene's `choice` names on `rows`, `auto` resolved (`Contact::auto`).
+    pub fn of(choice: ContactSolver, rows: &Rows) -> Contact {
+        match choice {
+            ContactSolver::Dense => Contact::Dense,
+            ContactSolver::MatrixFree => Contact::MatrixFree,
+            ContactSolver::Clarabel => Contact::Clarabel,
+            ContactSolver::Auto => Contact::auto(rows.len(), rows.dofs().len(), rows.block),
+        }
+    }
+
     /// What `auto` takes on m rows touching c dofs with `block` multipliers per friction
     /// node: the dense dual while its memory is at most `DENSE_LIMIT`, else the matrix-free.
     pub fn auto(m: usize, c: usize, block: usize) -> Contact {
@@ -86,12 +96,7 @@ impl ContactPlan {
         let (m, c) = (rows.len(), rows.dofs().len());
         let dense = resources::dense_dual_bytes(m, c, rows.block);
         let matrix_free = resources::matrix_free_bytes(m, n);
-        let solver = match choice {
-            ContactSolver::Dense => Contact::Dense,
-            ContactSolver::MatrixFree => Contact::MatrixFree,
-            ContactSolver::Clarabel => Contact::Clarabel,
-            ContactSolver::Auto => Contact::auto(m, c, rows.block),
-        };
+        let solver = Contact::of(choice, rows);
         let (m_f, products) = (m as f64, MatrixFreeSettings::default().cg_max + 2);
         let (memory, cost) = match solver {
             Contact::Dense => (

@@ -132,9 +132,11 @@ pub struct NewtonCounts {
 pub struct DualSolver {
     /// G = L_CC⁻¹ E (|C|×m).
     g: Mat<f64>,
-    /// The passes over G (d = Gᵀ y_C and y_C − G z: 27 MB each on the 3D block at h = 1/24),
-    /// cut in blocks over the process's threads where that pays.
-    g_team: Team,
+    /// The two passes over G (d = Gᵀ y_C and y_C − G z: 27 MB each on the 3D block at
+    /// h = 1/24), cut in blocks over the process's threads where that pays; a team each, as
+    /// each kind of pass is timed on its own (`Team`).
+    d_team: Team,
+    y_team: Team,
     /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
     d: Delassus,
     /// B = D⁻¹ for the Woodbury form of the Newton steps, when it is used: D definite (no
@@ -180,7 +182,8 @@ impl DualSolver {
             .flatten();
         DualSolver {
             g,
-            g_team: Team::default(),
+            d_team: Team::default(),
+            y_team: Team::default(),
             d: Delassus {
                 mat: d,
                 team: Team::default(),
@@ -216,9 +219,9 @@ impl DualSolver {
         let g = &self.g;
         // d in blocks of entries, one per thread (each entry is one dot product either way).
         let m = z.len();
-        let pieces = self.g_team.pieces(m >= self.settings.split_rows);
+        let pieces = self.d_team.pieces(m >= self.settings.split_rows);
         let d_blocks = cut(&mut self.work.d[..m], pieces);
-        self.g_team.each(d_blocks, |(rows, d)| {
+        self.d_team.each(d_blocks, |(rows, d)| {
             for (r, dr) in rows.zip(d) {
                 *dr = dot(column(g, r), y_c);
             }
@@ -231,7 +234,7 @@ impl DualSolver {
         // order either way), then the backward solve Lᵀ w = y.
         let g = &self.g;
         let y_blocks = cut(&mut self.y[n - c..], pieces);
-        self.g_team.each(y_blocks, |(rows, y)| {
+        self.y_team.each(y_blocks, |(rows, y)| {
             for (r, &zr) in z.iter().enumerate() {
                 if zr != 0.0 {
                     for (yi, gi) in y.iter_mut().zip(&column(g, r)[rows.clone()]) {
