@@ -327,9 +327,9 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         )
     };
     println!("solver     {solver}");
-    if let Some(plan) = viscontact::solver::choice::ContactPlan::of_run(&scene, &disc) {
+    let contact = viscontact::solver::choice::ContactPlan::of_run(&scene, &disc);
+    if let Some(plan) = &contact {
         println!("contact    {plan}");
-        plan.check()?;
     }
     use viscontact::history::Plan;
     use viscontact::stability::{StepLimit, Verdict};
@@ -337,6 +337,9 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
     println!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
+    if let Some(plan) = &contact {
+        plan.check(estimate.memory)?;
+    }
     let plan = Plan::new(&scene)?;
     let limit_line = |l: &StepLimit, what: &str| match l.k_max {
         Some(k) => format!(

@@ -143,8 +143,9 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     // Shared with the frame writer's thread (run/frame.rs).
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     stage()?;
-    crate::resources::Estimate::new(&scene, &disc, 0).check(&out)?;
-    check_contact_plan(&scene, &disc, None)?;
+    let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
+    estimate.check(&out)?;
+    check_contact_plan(&scene, &disc, estimate.memory, None)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(&out, &mesh, &identity.run_id, &scene.output.options, None)?;
@@ -204,8 +205,9 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     stage()?;
     cp.check(&scene, &mesh, &disc)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
-    crate::resources::Estimate::new(&scene, &disc, cp.n).check(&out)?;
-    check_contact_plan(&scene, &disc, Some(checkpoint_path))?;
+    let estimate = crate::resources::Estimate::new(&scene, &disc, cp.n);
+    estimate.check(&out)?;
+    check_contact_plan(&scene, &disc, estimate.memory, Some(checkpoint_path))?;
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
@@ -263,18 +265,20 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     })
 }
 
-/// Refuses (exit 2) a run whose contact solver would not fit the memory available
-/// (`ContactPlan::check`). A resume of `checkpoint` cannot change `solver.contact`, the
-/// run's physics: its message says so.
+/// Refuses (exit 2) a run whose contact solver, with the `steps` bytes its steps hold
+/// (`Estimate::memory`), would not fit the memory available (`ContactPlan::check`). A
+/// resume of `checkpoint` cannot change `solver.contact`, the run's physics: its message
+/// says so.
 fn check_contact_plan(
     scene: &Scene,
     disc: &Discretization,
+    steps: f64,
     checkpoint: Option<&Path>,
 ) -> Result<()> {
     let Some(plan) = ContactPlan::of_run(scene, disc) else {
         return Ok(());
     };
-    plan.check().map_err(|e| match checkpoint {
+    plan.check(steps).map_err(|e| match checkpoint {
         Some(cp) => Error::input(format!(
             "{}: {e}; a resume keeps the run's solver.contact: resume it where more memory \
              is available, or start a new run with `viscontact run`",

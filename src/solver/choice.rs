@@ -134,35 +134,43 @@ impl ContactPlan {
         }
     }
 
-    /// Refuses (exit 2) a solver whose memory exceeds `resources::MARGIN` of the memory
-    /// available (`resources::available_memory`; unknown: it passes), naming
-    /// `solver.contact = "matrix_free"` where that would fit.
-    pub fn check(&self) -> Result<()> {
+    /// Refuses (exit 2) a solver whose memory, with the `steps` bytes that the run's steps
+    /// hold besides it (`resources::Estimate::memory`: both are held at once), exceeds
+    /// `resources::MARGIN` of the memory available (`resources::available_memory`; unknown:
+    /// it passes), naming `solver.contact = "matrix_free"` where that would fit.
+    pub fn check(&self, steps: f64) -> Result<()> {
         match resources::available_memory()? {
-            Some(avail) => self.fits(avail),
+            Some(avail) => self.fits(avail, steps),
             None => Ok(()),
         }
     }
 
     /// `check` with `avail` bytes of memory available.
-    fn fits(&self, avail: f64) -> Result<()> {
+    fn fits(&self, avail: f64, steps: f64) -> Result<()> {
         let Some(memory) = self.memory else {
             return Ok(());
         };
-        if memory <= MARGIN * avail {
+        if memory + steps <= MARGIN * avail {
             return Ok(());
         }
-        let remedy = if self.solver != Contact::MatrixFree && self.matrix_free <= MARGIN * avail {
+        let matrix_free_fits = self.matrix_free + steps <= MARGIN * avail;
+        let remedy = if self.solver != Contact::MatrixFree && matrix_free_fits {
             format!(
                 "set solver.contact = \"matrix_free\" (≈ {} besides the factor of K_A)",
                 human(self.matrix_free)
             )
+        } else if memory <= MARGIN * avail {
+            "lower time.steps, or use a Prony kernel, whose history is O(1) per step".to_string()
         } else {
             "use a coarser mesh on the contact boundary".to_string()
         };
+        let besides = match steps > 0.0 {
+            true => format!(" besides the ≈ {} that the steps hold", human(steps)),
+            false => String::new(),
+        };
         Err(Error::input(format!(
-            "the {} contact solver would need ≈ {} of memory but {} (a run may plan {:.0} % \
-             of it): {remedy}",
+            "the {} contact solver would need ≈ {} of memory{besides} but {} (a run may \
+             plan {:.0} % of it): {remedy}",
             self.solver.key(),
             human(memory),
             resources::memory_phrase(avail),
@@ -233,15 +241,24 @@ mod tests {
             matrix_free: 1e6,
         };
         let forced = plan(ContactSolver::Dense);
-        forced.fits(1.25e9).unwrap();
-        let err = forced.fits(1.2e9).unwrap_err();
+        forced.fits(1.25e9, 0.0).unwrap();
+        let err = forced.fits(1.2e9, 0.0).unwrap_err();
         assert_eq!(err.exit_code(), 2);
         assert!(
             err.to_string().contains("solver.contact = \"matrix_free\""),
             "{err}"
         );
-        let err = forced.fits(1e6).unwrap_err().to_string();
+        let err = forced.fits(1e6, 0.0).unwrap_err().to_string();
         assert!(err.contains("coarser mesh"), "{err}");
+        // The steps' memory counts as well: each part fits alone, the two together do not.
+        let err = forced.fits(1.25e9, 0.2e9).unwrap_err().to_string();
+        assert!(
+            err.contains("besides the ≈ 200.0 MB that the steps hold"),
+            "{err}"
+        );
+        assert!(err.contains("solver.contact = \"matrix_free\""), "{err}");
+        let err = forced.fits(1.25e9, 0.9999e9).unwrap_err().to_string();
+        assert!(err.contains("lower time.steps"), "{err}");
         assert!(plan(ContactSolver::Auto)
             .to_string()
             .starts_with("dense (auto: "));

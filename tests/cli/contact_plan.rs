@@ -115,3 +115,38 @@ fn run_and_resume_refuse_a_plan_that_does_not_fit_and_leave_the_directory_as_it_
     assert_eq!(code, 0, "{text}");
     assert_eq!(common::summary(&dir)["status"], "completed");
 }
+
+/// The solver's memory and the steps' (a general kernel's direct sum keeps every u_n) are
+/// held at once: a run is refused when each fits alone but the two together do not, by
+/// `check` and by `run` before the directory is made.
+#[test]
+fn the_contact_solver_and_the_steps_are_counted_together() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = SceneText::block()
+        .mesh(common::mesh_path("3d/block_004.msh"))
+        .set("time.steps", 20_000)
+        .table(
+            "material.relaxation",
+            "expr = \"0.2*(s+0.01)^(-0.5)\"\nmemory = \"exact\"",
+        )
+        .write(tmp.path(), "s.toml");
+    let (s, _m, disc) = common::load(&scene, &[]);
+    let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+    let solver = ContactPlan::new(ContactSolver::Auto, &rows, disc.n_free)
+        .memory
+        .unwrap();
+    let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory;
+    assert!(steps > solver, "{steps} {solver}");
+    // Room for the steps and half of the solver, in the share a run may plan.
+    let memory = (steps + 0.5 * solver) / MARGIN;
+    let scene = scene.to_str().unwrap();
+    let o = with_memory(memory, &["check", scene]);
+    refused(
+        &o,
+        &["that the steps hold", "solver.contact = \"matrix_free\""],
+    );
+    let dir = tmp.path().join("o");
+    let o = with_memory(memory, &["run", scene, "--out", dir.to_str().unwrap()]);
+    refused(&o, &["that the steps hold"]);
+    assert!(!dir.exists(), "a refused run made its directory");
+}
