@@ -19,9 +19,10 @@
 //! different threads, the rest on one, with the same arithmetic for every thread count
 //! (`split`).
 //! faer's default amalgamation may merge a supernode across the boundary between the
-//! interior dofs and C; `trailing_block` reads L_CC column by column and does not care.
+//! interior dofs and C; L_CC is read column by column (`trailing`).
 
 mod split;
+mod trailing;
 
 use super::team::Team;
 use crate::fem::Sparse;
@@ -34,7 +35,7 @@ use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
-use faer::{Mat, Par, Side};
+use faer::{Par, Side};
 use split::{Schedule, MAX_BINS};
 
 pub struct Factor {
@@ -52,6 +53,8 @@ pub struct Factor {
     /// The forward and the backward pass's units, on all threads when that pays.
     forward_team: Team,
     backward_team: Team,
+    /// The columns of L_CC and the threads of its passes (`trailing`).
+    trailing: trailing::Trailing,
 }
 
 /// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
@@ -529,7 +532,7 @@ impl Factor {
             SymbolicCholeskyRaw::Supernodal(s) => Layout::new(s, &mut values)?,
             SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodal was forced"),
         };
-        Ok(Factor {
+        let mut factor = Factor {
             values,
             n,
             fwd,
@@ -539,7 +542,10 @@ impl Factor {
             forward_team: Team::default(),
             backward_team: Team::default(),
             layout,
-        })
+            trailing: trailing::Trailing::default(),
+        };
+        factor.trailing = trailing::Trailing::new(&factor);
+        Ok(factor)
     }
 
     /// The number of dofs.
@@ -716,33 +722,6 @@ impl Factor {
         self.backward(&mut y);
         self.unpermute(&y, x);
     }
-
-    /// The trailing block L_CC (last × last, lower triangular) of L.
-    pub fn trailing_block(&self) -> Mat<f64> {
-        let first = self.n - self.last;
-        let mut out = Mat::zeros(self.last, self.last);
-        let layout = &self.layout;
-        for s in 0..layout.n_supernodes() {
-            let (cols, rows, vals) = layout.supernode(s, &self.values);
-            if cols.end <= first {
-                continue;
-            }
-            let mut rest = vals;
-            for col in cols.clone() {
-                let (values, next) = rest.split_at(cols.end - col + rows.len());
-                rest = next;
-                if col < first {
-                    continue;
-                }
-                // Rows of the diagonal block, then the pattern rows (all > col).
-                let at = (col..cols.end).chain(rows.iter().map(|&r| r as usize));
-                for (row, &v) in at.zip(values) {
-                    out[(row - first, col - first)] = v;
-                }
-            }
-        }
-        out
-    }
 }
 
 #[cfg(test)]
@@ -750,6 +729,7 @@ mod tests {
     use super::*;
     use faer::linalg::solvers::{DenseSolveCore, Solve};
     use faer::sparse::{SparseColMat, Triplet};
+    use faer::Mat;
 
     /// The SPD matrix Σ_edges w_ij (e_i − e_j)(e_i − e_j)ᵀ + diag(shift(i)) of a grid, with
     /// weights varying per edge: w_ij = 1 + ((31 i + 17 j) mod 11)/10.
@@ -789,6 +769,26 @@ mod tests {
             .map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0)
             .collect();
         (k, (0..side).collect(), b)
+    }
+
+    /// The 2D grid's matrix and its dofs ordered last.
+    fn grid_2d_with_last() -> (SparseColMat<usize, f64>, Vec<usize>) {
+        let (k, last, _) = grid_2d();
+        (k, last)
+    }
+
+    /// A 3D grid of side³ dofs (7-point couplings, weights varying per edge) and one face
+    /// to order last, as the Γ3 dofs are.
+    fn grid_3d_with_last(side: usize) -> (SparseColMat<usize, f64>, Vec<usize>) {
+        let n = side * side * side;
+        let edges = (0..n).flat_map(move |i| {
+            let (x, y, z) = (i % side, (i / side) % side, i / (side * side));
+            [(1, 0, 0), (0, 1, 0), (0, 0, 1)]
+                .into_iter()
+                .filter(move |(dx, dy, dz)| x + dx < side && y + dy < side && z + dz < side)
+                .map(move |(dx, dy, dz)| (i, ((z + dz) * side + y + dy) * side + x + dx))
+        });
+        (grid_matrix(n, |_| 0.01, edges), (0..side * side).collect())
     }
 
     /// K⁻¹ b by a dense Cholesky solve.
@@ -887,25 +887,82 @@ mod tests {
         assert_eq!(c, factor.last());
     }
 
+    /// The passes over L_CC alone (`trailing`) against the dense block: (K_A⁻¹)_CC v by
+    /// `trailing_solve` equals the C part of a whole solve, and `trailing_product` is
+    /// L_CC L_CCᵀ v. On the 2D grid, whose root supernode straddles the start of C, and on
+    /// a 3D grid with a face ordered last.
+    #[test]
+    fn trailing_passes_match_the_dense_block() {
+        for (k, last) in [grid_2d_with_last(), grid_3d_with_last(12)] {
+            let factor = Factor::new(&k, &last).unwrap();
+            let (n, c) = (factor.dim(), factor.last());
+            let first = n - c;
+            let v: Vec<f64> = (0..c)
+                .map(|i| ((i * 37) % 23) as f64 / 11.0 - 1.0)
+                .collect();
+            let mut whole = vec![0.0; n];
+            whole[first..].copy_from_slice(&v);
+            factor.forward(&mut whole);
+            factor.backward(&mut whole);
+            let mut y = v.clone();
+            factor.trailing_solve(&mut y);
+            let scale = whole.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            for (a, b) in y.iter().zip(&whole[first..]) {
+                assert!((a - b).abs() <= 1e-13 * scale, "{a} {b}");
+            }
+            let l = factor.trailing_block();
+            let expected = &l * (l.transpose() * Mat::from_fn(c, 1, |i, _| v[i]));
+            let mut out = vec![1.0; c];
+            factor.trailing_product(&v, &mut out);
+            let scale = expected.norm_max();
+            for (i, o) in out.iter().enumerate() {
+                assert!((o - expected[(i, 0)]).abs() <= 1e-13 * scale, "{o}");
+            }
+            // The two are inverse to each other.
+            let mut back = vec![0.0; c];
+            factor.trailing_product(&y, &mut back);
+            for (a, b) in back.iter().zip(&v) {
+                assert!((a - b).abs() <= 1e-11, "{a} {b}");
+            }
+        }
+    }
+
+    /// `trailing_solve` gives the same bits on 1 to 4 threads, its rows and columns shared
+    /// out below every panel (a face of 400 dofs: four panels).
+    #[test]
+    fn trailing_solve_is_identical_for_every_thread_count() {
+        let (k, last) = grid_3d_with_last(20);
+        let mut factor = Factor::new(&k, &last).unwrap();
+        let c = factor.last();
+        let v: Vec<f64> = (0..c)
+            .map(|i| ((i * 37) % 23) as f64 / 11.0 - 1.0)
+            .collect();
+        let mut reference = None;
+        for threads in 1..=4 {
+            factor.trailing.forward_team = Team::of(threads);
+            factor.trailing.backward_team = Team::of(threads);
+            factor.trailing.share_rows = 0;
+            // `Team` probes both ways: several solves.
+            for _ in 0..20 {
+                let mut y = v.clone();
+                factor.trailing_solve(&mut y);
+                let bits: Vec<u64> = y.iter().map(|x| x.to_bits()).collect();
+                assert!(
+                    *reference.get_or_insert(bits.clone()) == bits,
+                    "{threads} threads"
+                );
+            }
+        }
+    }
+
     /// The numeric factorization on several threads (`PARALLEL_FLOPS`: large 3D factors)
     /// gives the same values as on one, whatever the number of threads, so that the results
     /// do not depend on `--threads` and a resumed run factors K_A to the bits of the
-    /// uninterrupted one. A 3D grid (7-point couplings, weights varying per edge) with one
-    /// face ordered last, as the Γ3 dofs are: supernodes of hundreds of columns, where faer's
-    /// parallel kernels split the work.
+    /// uninterrupted one. A 3D grid with one face ordered last (`grid_3d_with_last`):
+    /// supernodes of hundreds of columns, where faer's parallel kernels split the work.
     #[test]
     fn parallel_factorization_is_identical_for_every_thread_count() {
-        let side = 20;
-        let n = side * side * side;
-        let edges = (0..n).flat_map(|i| {
-            let (x, y, z) = (i % side, (i / side) % side, i / (side * side));
-            [(1, 0, 0), (0, 1, 0), (0, 0, 1)]
-                .into_iter()
-                .filter(move |(dx, dy, dz)| x + dx < side && y + dy < side && z + dz < side)
-                .map(move |(dx, dy, dz)| (i, ((z + dz) * side + y + dy) * side + x + dx))
-        });
-        let k = grid_matrix(n, |_| 0.01, edges);
-        let last: Vec<usize> = (0..side * side).collect();
+        let (k, last) = grid_3d_with_last(20);
         let split = Splits {
             two_groups: MIN_SPLIT,
             units: MIN_SPLIT,
