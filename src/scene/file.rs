@@ -359,7 +359,8 @@ pub enum ContactSolver {
     /// (`"fast"` is its old name).
     #[serde(alias = "fast")]
     Dense,
-    /// The same dual with D applied through solves with the factor of K_A: no m × m matrix.
+    /// The same dual with D applied through the factor of K_A (its trailing block L_CC): no
+    /// m × m matrix.
     MatrixFree,
     /// The whole per-step problem handed to clarabel (the cross-check).
     Clarabel,

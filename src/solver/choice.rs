@@ -114,9 +114,10 @@ impl ContactPlan {
                 format!(
                     "per Newton iteration {products} products with D at most (two gradients \
                      and the conjugate gradient iterations; a rejected Newton point adds a \
-                     projected gradient search), each a forward and a backward solve with the \
-                     factor of K_A (≈ 4 nnz(L) flops); a step takes a few to tens of \
-                     iterations"
+                     damped or projected search) and as many with S = D⁻¹ for the \
+                     preconditioner, each a pass down and up over the factor's trailing block \
+                     L_CC (2c² = {:.1e} flops); a step takes a few to tens of iterations",
+                    2.0 * (c as f64).powi(2)
                 ),
             ),
             Contact::Clarabel => (

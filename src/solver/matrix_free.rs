@@ -6,46 +6,65 @@
 //!   minimize q(z) = ½ zᵀ D z − dᵀ z  over  z ∈ Z,   d = P K_A⁻¹ b,
 //!
 //! with the same multiplier groups, projections Π_j and stopping test (`dual::groups`, the
-//! module doc of `dual`), but never forms D: a product is one solve with the stored factor
-//! of K_A,
+//! module doc of `dual`), but never forms D: a product goes through the stored factor of
+//! K_A,
 //!
-//!   D v = P (K_A⁻¹ (Pᵀ v)),
+//!   D v = P (K_A⁻¹)_CC Pᵀ v = P L_CC⁻ᵀ L_CC⁻¹ Pᵀ v,
 //!
-//! Pᵀ v scattered onto the constrained dofs C in the factor's ordering, a forward and a
-//! backward pass, P gathered from C. Memory: the factor, three vectors of the dofs and a
-//! few of the m rows, O(nnz(L) + m).
+//! Pᵀ v scattered onto the constrained dofs C, ordered last in the factor, one pass down
+//! and one up over the trailing block L_CC alone (`Factor::trailing_solve`: the rest of L
+//! does not touch C's part of the solution), P gathered from C. A product reads
+//! |C|(|C| + 1)/2 values, as many as a product with the dense D's lower triangle would.
+//! Memory: the factor, two vectors of the dofs and a few of the m rows, O(nnz(L) + m).
 //!
-//! The method. The semismooth Newton step of `dual` on z = Π(z − g/(ηδ)) (the same
-//! prediction: free groups, contact rows at zero, discs on their rim with the tangent t̂ and
-//! the curvature shift κ) is the SPD system (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d), solved here
-//! by conjugate gradients, one product with D per iteration, preconditioned by the diagonal
-//! δ_j + κ_j (`cg`); inexactly, to a residual at most min(½, r/max|d|) r for the step's
-//! KKT residual r (an inexact Newton method: fast local convergence, no work wasted far from
-//! the solution) and never below a tenth of the tolerance. The Newton point Π(z₀ + Q x) is
-//! taken when it lowers q (or, at the rounding level of q, the KKT residual); otherwise the
-//! projected gradient step Π(z − β g/δ) with the Armijo search, which always descends, so
-//! the method converges from any start. δ is one number for all groups here: the mean of
-//! diag D, estimated from products with fixed ±1 vectors (Hutchinson's trace estimate),
-//! since the exact diagonal would cost m solves. The answer does not depend on δ.
+//! The method is the dense dual's iteration (`dual::iteration`: the semismooth Newton point,
+//! its damping, the projected Newton step with its arc search, the projected gradient step,
+//! the same stopping test), with D given by these products. Its Newton systems
+//! (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d) are solved by conjugate gradients, one product with D
+//! per iteration (`cg`), inexactly, to a residual at most min(½, r/max|d|) r for the
+//! iterate's KKT residual r (an inexact Newton method: fast local convergence, no work
+//! wasted far from the solution) and never below a tenth of the tolerance. The
+//! preconditioner (`Preconditioner`) is QᵀSQ with S = P S_C Pᵀ = P L_CC L_CCᵀ Pᵀ, the
+//! Dirichlet-type preconditioner of FETI (Farhat, Mandel, Roux 1994): on a flat contact
+//! boundary, where P only picks dofs of C, S = D⁻¹ exactly, and QᵀSQ differs from
+//! (QᵀDQ)⁻¹ only through the coupling of Q to the fixed directions; it costs as much as a
+//! product with D. δ_j, the groups' scale, is one number here: the mean of diag D,
+//! estimated from products with fixed ±1 vectors (Hutchinson's trace estimate), since the
+//! exact diagonal would cost m products. The answer does not depend on δ.
 
 use super::dual::groups::{self, Coord, Group};
-use super::dual::iteration::{backtrack, change, prediction, project, residual, rounding};
+use super::dual::iteration::{Buffers, Iteration, Operator};
+use super::dual::newton::{Gradient, Indefinite};
 use super::dual::DualSettings;
 use super::{Factor, Rows, StepReport, StepStatus};
 use crate::{Error, Result};
+use std::cell::RefCell;
+
+/// What preconditions the conjugate gradients of a Newton system (the module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preconditioner {
+    /// diag(δ + κ).
+    Diagonal,
+    /// Q_Fᵀ S Q_F on the coordinates without a shift (F: free rows and free discs), S =
+    /// P L_CC L_CCᵀ Pᵀ, and diag(δ + κ) on the rims' tangents (the module doc).
+    Dirichlet,
+}
 
 /// The settings of a `MatrixFreeSolver`; `validate` checks the ranges given with each field.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MatrixFreeSettings {
-    /// The dual's settings that this method shares: `tolerance` (the same stopping test),
-    /// `max_iterations` (Newton or projected gradient iterations per step), `eta`, `rim`
-    /// and `dependent_shift`. Default `DualSettings::default()`.
+    /// The dual's settings: the iteration's (`tolerance`, `max_iterations`, `eta`, `rim`,
+    /// the damping and search settings) and `dependent_shift`. Default
+    /// `DualSettings::default()`.
     pub dual: DualSettings,
     /// Conjugate gradient iterations per Newton system at most; a system not solved by then
-    /// gives its last iterate, which the descent test accepts or rejects. Default 400; ≥ 1.
+    /// gives its last iterate, which the iteration's descent tests accept or reject.
+    /// Default 400; ≥ 1.
     pub cg_max: usize,
     /// Products with ±1 vectors for the estimate of diag D's mean. Default 4; ≥ 1.
     pub probes: usize,
+    /// Default `Dirichlet`.
+    pub preconditioner: Preconditioner,
 }
 
 impl Default for MatrixFreeSettings {
@@ -54,6 +73,7 @@ impl Default for MatrixFreeSettings {
             dual: DualSettings::default(),
             cg_max: 400,
             probes: 4,
+            preconditioner: Preconditioner::Dirichlet,
         }
     }
 }
@@ -77,8 +97,9 @@ impl MatrixFreeSettings {
 /// The work of a solver so far (cumulative over its steps).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MatrixFreeCounts {
-    /// Products with D (solves with the factor of K_A).
+    /// Products with D (passes over L_CC), and with S for the preconditioner.
     pub products: usize,
+    pub preconditioner: usize,
     /// Newton systems, and their conjugate gradient iterations.
     pub newton: usize,
     pub cg_iterations: usize,
@@ -88,21 +109,25 @@ pub struct MatrixFreeSolver {
     settings: MatrixFreeSettings,
     /// The multiplier groups, in row order, with δ_j the estimated mean of diag D.
     groups: Vec<Group>,
-    /// Each row's (position in the factor's ordering, coefficient) pairs.
-    entries: Vec<Vec<(usize, f64)>>,
-    /// K_A⁻¹ b of the step in the factor's ordering, and a vector for the products.
+    /// P: each row's (index in C, coefficient) pairs, C in the factor's ordering from
+    /// position `first` on.
+    p: Vec<Vec<(usize, f64)>>,
+    first: usize,
+    /// K_A⁻¹ b of the step in the factor's ordering, and a vector of the dofs.
     x_b: Vec<f64>,
     y: Vec<f64>,
-    counts: MatrixFreeCounts,
+    /// d = P K_A⁻¹ b, and the iteration's vectors.
+    d: Vec<f64>,
+    buffers: Buffers,
+    /// Vectors on C for the products, and the counts.
+    work: RefCell<Work>,
 }
 
-/// The m-vectors of a step's iteration.
-struct Vectors {
-    d: Vec<f64>,
-    g: Vec<f64>,
-    trial: Vec<f64>,
-    g_trial: Vec<f64>,
-    coords: Vec<Coord>,
+/// The products' vectors on C, and the counts.
+struct Work {
+    y_c: Vec<f64>,
+    s_c: Vec<f64>,
+    counts: MatrixFreeCounts,
 }
 
 impl MatrixFreeSolver {
@@ -123,66 +148,42 @@ impl MatrixFreeSolver {
     }
 
     fn build(factor: &Factor, rows: &Rows, settings: MatrixFreeSettings) -> Self {
-        let entries = rows
+        let first = factor.dim() - factor.last();
+        let p = rows
             .rows
             .iter()
-            .map(|r| r.entries().map(|(d, c)| (factor.position(d), c)).collect())
+            .map(|r| {
+                r.entries()
+                    .map(|(d, c)| (factor.position(d) - first, c))
+                    .collect()
+            })
             .collect();
+        let m = rows.len();
         let mut solver = MatrixFreeSolver {
             settings,
             groups: Vec::new(),
-            entries,
+            p,
+            first,
             x_b: vec![0.0; factor.dim()],
             y: vec![0.0; factor.dim()],
-            counts: MatrixFreeCounts::default(),
+            d: vec![0.0; m],
+            buffers: Buffers::new(m, 0),
+            work: RefCell::new(Work {
+                y_c: vec![0.0; factor.last()],
+                s_c: vec![0.0; factor.last()],
+                counts: MatrixFreeCounts::default(),
+            }),
         };
-        let delta = solver.mean_diagonal(factor);
-        let diag = vec![delta; rows.len()];
+        let delta = Products::new(factor, &solver, 1.0).mean_diagonal(settings.probes);
+        let diag = vec![delta; m];
         solver.groups = groups::groups(rows, &diag, settings.dual.dependent_shift);
+        solver.buffers = Buffers::new(m, solver.groups.len());
         solver
     }
 
     /// The work so far.
     pub fn counts(&self) -> MatrixFreeCounts {
-        self.counts
-    }
-
-    /// tr(D)/m estimated as the mean of vᵀDv/m over `probes` vectors of ±1 entries (a fixed
-    /// pattern: the signs of a multiplicative hash of the row and the probe).
-    fn mean_diagonal(&mut self, factor: &Factor) -> f64 {
-        let m = self.entries.len();
-        let (mut v, mut dv) = (vec![0.0; m], vec![0.0; m]);
-        let mut sum = 0.0;
-        for probe in 0..self.settings.probes {
-            for (i, vi) in v.iter_mut().enumerate() {
-                let h = ((i * 4 + probe) as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                *vi = if h >> 63 == 0 { 1.0 } else { -1.0 };
-            }
-            self.product(factor, &v, &mut dv);
-            sum += groups::dot(&v, &dv);
-        }
-        (sum / (self.settings.probes * m.max(1)) as f64).max(f64::MIN_POSITIVE)
-    }
-
-    /// out = D v = P K_A⁻¹ Pᵀ v (one forward and one backward pass with the factor).
-    fn product(&mut self, factor: &Factor, v: &[f64], out: &mut [f64]) {
-        self.solve_transpose(factor, v);
-        for (row, o) in self.entries.iter().zip(out) {
-            *o = gather(row, &self.y);
-        }
-        self.counts.products += 1;
-    }
-
-    /// y = K_A⁻¹ Pᵀ v in the factor's ordering.
-    fn solve_transpose(&mut self, factor: &Factor, v: &[f64]) {
-        self.y.fill(0.0);
-        for (row, &x) in self.entries.iter().zip(v) {
-            for &(pos, c) in row {
-                self.y[pos] += c * x;
-            }
-        }
-        factor.forward(&mut self.y);
-        factor.backward(&mut self.y);
+        self.work.borrow().counts
     }
 
     /// Solves step n as `StepSolver::solve` does: `b` is b_n, `w` receives w_n, `z` the
@@ -195,23 +196,28 @@ impl MatrixFreeSolver {
         w: &mut [f64],
         z: &mut [f64],
     ) -> StepReport {
-        let m = rows.len();
-        debug_assert_eq!(z.len(), m);
+        debug_assert_eq!(z.len(), rows.len());
         // x_b = K_A⁻¹ b, d = P x_b.
         factor.permute(b, &mut self.x_b);
         factor.forward(&mut self.x_b);
         factor.backward(&mut self.x_b);
-        let mut v = Vectors {
-            d: self.entries.iter().map(|r| gather(r, &self.x_b)).collect(),
-            g: vec![0.0; m],
-            trial: vec![0.0; m],
-            g_trial: vec![0.0; m],
-            coords: Vec::with_capacity(m),
-        };
-        let report = self.iterate(factor, z, &mut v);
+        let x_c = &self.x_b[self.first..];
+        for (row, d) in self.p.iter().zip(&mut self.d) {
+            *d = gather(row, x_c);
+        }
+        let mut buffers = std::mem::replace(&mut self.buffers, Buffers::new(0, 0));
+        let delta = self.groups.first().map_or(1.0, |g| g.scale);
+        let ops = Products::new(factor, self, delta);
+        let (scale, tolerance) = (ops.scale, self.settings.dual.tolerance);
+        let tol = tolerance * scale.max(f64::MIN_POSITIVE);
+        let report = Iteration::new(ops, &self.groups, scale, tol).run(z, &mut buffers);
+        self.buffers = buffers;
         if report.status == StepStatus::Solved {
             // w = K_A⁻¹ (b − Pᵀ z) = x_b − K_A⁻¹ Pᵀ z.
-            self.solve_transpose(factor, z);
+            scatter(&self.p, z, &mut self.y[self.first..]);
+            self.y[..self.first].fill(0.0);
+            factor.forward(&mut self.y);
+            factor.backward(&mut self.y);
             for (y, x) in self.y.iter_mut().zip(&self.x_b) {
                 *y = x - *y;
             }
@@ -219,115 +225,118 @@ impl MatrixFreeSolver {
         }
         report
     }
+}
 
-    /// The iterations from the warm start z (the module doc) until the stopping test of
-    /// `dual` holds or the iteration limit is reached.
-    fn iterate(&mut self, factor: &Factor, z: &mut [f64], v: &mut Vectors) -> StepReport {
-        let settings = self.settings.dual;
-        let scale = v.d.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        let tol = settings.tolerance * scale.max(f64::MIN_POSITIVE);
-        project(&self.groups, z);
-        self.gradient(factor, z, &v.d, &mut v.g);
-        let mut iterations = 0;
-        loop {
-            let res = residual(&self.groups, z, &v.g, settings.rim);
-            let status = if res <= tol {
-                StepStatus::Solved
-            } else if iterations == settings.max_iterations {
-                StepStatus::MaxIterations {
-                    limit: settings.max_iterations,
-                    residual: res,
-                    scale,
-                }
-            } else {
-                iterations += 1;
-                if !self.newton_point(factor, z, res, scale, tol, v) {
-                    self.projected_gradient(factor, z, v);
-                }
-                z.copy_from_slice(&v.trial);
-                v.g.copy_from_slice(&v.g_trial);
-                continue;
-            };
-            return StepReport {
-                status,
-                iterations,
-                residual: res / scale.max(f64::MIN_POSITIVE),
-            };
+/// D = P L_CC⁻ᵀ L_CC⁻¹ Pᵀ and S = P L_CC L_CCᵀ Pᵀ through the factor: the `Operator` of the
+/// shared iteration.
+struct Products<'a> {
+    factor: &'a Factor,
+    p: &'a [Vec<(usize, f64)>],
+    d: &'a [f64],
+    settings: &'a MatrixFreeSettings,
+    /// max|d|, and δ.
+    scale: f64,
+    delta: f64,
+    work: &'a RefCell<Work>,
+}
+
+impl<'a> Products<'a> {
+    /// D through `factor` for `solver`'s rows, with its step's d, and δ = `delta`.
+    fn new(factor: &'a Factor, solver: &'a MatrixFreeSolver, delta: f64) -> Self {
+        Products {
+            factor,
+            p: &solver.p,
+            d: &solver.d,
+            settings: &solver.settings,
+            scale: solver.d.iter().fold(0.0f64, |a, x| a.max(x.abs())),
+            delta,
+            work: &solver.work,
         }
     }
 
-    /// g = D z − d.
-    fn gradient(&mut self, factor: &Factor, z: &[f64], d: &[f64], g: &mut [f64]) {
-        self.product(factor, z, g);
-        for (g, d) in g.iter_mut().zip(d) {
-            *g -= d;
+    /// out = D v = P (K_A⁻¹)_CC Pᵀ v (one pass each way over L_CC).
+    fn product(&self, v: &[f64], out: &mut [f64]) {
+        let mut work = self.work.borrow_mut();
+        scatter(self.p, v, &mut work.y_c);
+        self.factor.trailing_solve(&mut work.y_c);
+        for (row, o) in self.p.iter().zip(out) {
+            *o = gather(row, &work.y_c);
         }
+        work.counts.products += 1;
     }
 
-    /// The Newton point Π(z₀ + Q x) from z (KKT residual `res`) in `trial`, its gradient in
-    /// `g_trial`; true if it lowers q, or at q's rounding level the residual.
-    fn newton_point(
-        &mut self,
-        factor: &Factor,
-        z: &[f64],
-        res: f64,
-        scale: f64,
-        tol: f64,
-        v: &mut Vectors,
-    ) -> bool {
-        let eta = self.settings.dual.eta;
-        prediction(&self.groups, z, &v.g, eta, &mut v.trial, &mut v.coords);
-        // The right side −Qᵀ(D z₀ − d).
-        self.gradient(factor, &v.trial, &v.d, &mut v.g_trial);
-        let rhs: Vec<f64> = v.coords.iter().map(|q| -q.dot(&v.g_trial)).collect();
-        let forcing = (res / scale.max(f64::MIN_POSITIVE)).min(0.5);
-        let x = self.cg(factor, &v.coords, &rhs, (forcing * res).max(0.1 * tol));
-        for (q, xq) in v.coords.iter().zip(&x) {
-            for (i, e) in q.entries() {
-                v.trial[i] += e * xq;
+    /// tr(D)/m estimated as the mean of vᵀDv/m over `probes` vectors of ±1 entries (a fixed
+    /// pattern: the signs of a multiplicative hash of the row and the probe).
+    fn mean_diagonal(&self, probes: usize) -> f64 {
+        let m = self.p.len();
+        let (mut v, mut dv) = (vec![0.0; m], vec![0.0; m]);
+        let mut sum = 0.0;
+        for probe in 0..probes {
+            for (i, vi) in v.iter_mut().enumerate() {
+                let h = ((i * 4 + probe) as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                *vi = if h >> 63 == 0 { 1.0 } else { -1.0 };
+            }
+            self.product(&v, &mut dv);
+            sum += groups::dot(&v, &dv);
+        }
+        (sum / (probes * m.max(1)) as f64).max(f64::MIN_POSITIVE)
+    }
+
+    /// The preconditioner of `cg` applied to r (`Preconditioner`).
+    fn precondition(&self, coords: &[Coord], r: &[f64]) -> Vec<f64> {
+        match self.settings.preconditioner {
+            Preconditioner::Diagonal => coords
+                .iter()
+                .zip(r)
+                .map(|(q, ri)| ri / (self.delta + q.shift))
+                .collect(),
+            Preconditioner::Dirichlet => {
+                // Q_F r_F, with the rims' tangents (κ > 0) left out.
+                let mut t = vec![0.0; self.p.len()];
+                for (q, ri) in coords.iter().zip(r).filter(|(q, _)| q.shift == 0.0) {
+                    for (i, e) in q.entries() {
+                        t[i] += e * ri;
+                    }
+                }
+                let mut work = self.work.borrow_mut();
+                let Work { y_c, s_c, counts } = &mut *work;
+                scatter(self.p, &t, y_c);
+                self.factor.trailing_product(y_c, s_c);
+                counts.preconditioner += 1;
+                for (row, ti) in self.p.iter().zip(&mut t) {
+                    *ti = gather(row, s_c);
+                }
+                coords
+                    .iter()
+                    .zip(r)
+                    .map(|(q, ri)| match q.shift > 0.0 {
+                        true => ri / (self.delta + q.shift),
+                        false => q.dot(&t),
+                    })
+                    .collect()
             }
         }
-        project(&self.groups, &mut v.trial);
-        self.gradient(factor, &v.trial, &v.d, &mut v.g_trial);
-        let dq = change(z, &v.trial, &v.g, &v.g_trial);
-        let noise = rounding(z, &v.trial, &v.g, &v.g_trial);
-        dq < -noise
-            || (dq <= noise
-                && residual(&self.groups, &v.trial, &v.g_trial, self.settings.dual.rim) < res)
     }
 
     /// x with (QᵀDQ + diag κ) x = rhs to max|residual| ≤ `accuracy` (or after `cg_max`
-    /// iterations), by conjugate gradients preconditioned by diag(δ + κ).
-    fn cg(&mut self, factor: &Factor, coords: &[Coord], rhs: &[f64], accuracy: f64) -> Vec<f64> {
-        let nq = coords.len();
-        let m = self.entries.len();
+    /// iterations), by preconditioned conjugate gradients.
+    fn cg(&self, coords: &[Coord], rhs: &[f64], accuracy: f64) -> Vec<f64> {
+        let (nq, m) = (coords.len(), self.p.len());
         let mut x = vec![0.0; nq];
         let mut r = rhs.to_vec();
-        let delta = self.groups.first().map_or(1.0, |g| g.scale);
-        let precondition = |r: &[f64]| -> Vec<f64> {
-            coords
-                .iter()
-                .zip(r)
-                .map(|(q, ri)| ri / (delta + q.shift))
-                .collect()
-        };
-        let mut s = precondition(&r);
+        let mut s = self.precondition(coords, &r);
         let mut p = s.clone();
         let mut rs = groups::dot(&r, &s);
         let (mut full, mut dfull) = (vec![0.0; m], vec![0.0; m]);
-        self.counts.newton += 1;
+        self.work.borrow_mut().counts.newton += 1;
         for _ in 0..self.settings.cg_max {
             if r.iter().fold(0.0f64, |a, x| a.max(x.abs())) <= accuracy {
                 break;
             }
             // h = (QᵀDQ + diag κ) p.
             full.fill(0.0);
-            for (q, pq) in coords.iter().zip(&p) {
-                for (i, e) in q.entries() {
-                    full[i] += e * pq;
-                }
-            }
-            self.product(factor, &full, &mut dfull);
+            add_columns(coords, &p, &mut full);
+            self.product(&full, &mut dfull);
             let h: Vec<f64> = coords
                 .iter()
                 .zip(&p)
@@ -338,40 +347,79 @@ impl MatrixFreeSolver {
                 x[k] += alpha * p[k];
                 r[k] -= alpha * h[k];
             }
-            s = precondition(&r);
+            s = self.precondition(coords, &r);
             let rs_next = groups::dot(&r, &s);
             for k in 0..nq {
                 p[k] = s[k] + rs_next / rs * p[k];
             }
             rs = rs_next;
-            self.counts.cg_iterations += 1;
+            self.work.borrow_mut().counts.cg_iterations += 1;
         }
         x
     }
+}
 
-    /// The projected gradient step z(β) = Π(z − β g/δ), β = 1 backtracked by Armijo (the
-    /// same search as `dual`'s), into `trial` and `g_trial`.
-    fn projected_gradient(&mut self, factor: &Factor, z: &[f64], v: &mut Vectors) {
-        let mut beta = 1.0;
-        loop {
-            for grp in &self.groups {
-                for i in grp.rows() {
-                    v.trial[i] = z[i] - beta * v.g[i] / grp.scale;
-                }
+impl Operator for Products<'_> {
+    fn settings(&self) -> &DualSettings {
+        &self.settings.dual
+    }
+
+    fn gradient(&self, z: &[f64], g: &mut [f64]) {
+        self.product(z, g);
+        for (g, d) in g.iter_mut().zip(self.d) {
+            *g -= d;
+        }
+    }
+
+    fn newton_step(
+        &self,
+        _groups: &[Group],
+        coords: &[Coord],
+        z0: &[f64],
+        grad: Gradient,
+        out: &mut [f64],
+        res: f64,
+    ) -> std::result::Result<(), Indefinite> {
+        if coords.is_empty() {
+            return Ok(());
+        }
+        let grad = match grad {
+            Gradient::Known(g) => g,
+            Gradient::Unknown(buf) => {
+                self.gradient(z0, buf);
+                &*buf
             }
-            project(&self.groups, &mut v.trial);
-            self.gradient(factor, &v.trial, &v.d, &mut v.g_trial);
-            let predicted: f64 = (0..z.len()).map(|i| v.g[i] * (z[i] - v.trial[i])).sum();
-            let dq = change(z, &v.trial, &v.g, &v.g_trial);
-            if -dq >= 1e-4 * predicted || beta < 1e-12 {
-                return;
-            }
-            beta *= backtrack(dq, predicted, false);
+        };
+        let rhs: Vec<f64> = coords.iter().map(|q| -q.dot(grad)).collect();
+        let scale = self.scale.max(f64::MIN_POSITIVE);
+        let tol = self.settings.dual.tolerance * scale;
+        let forcing = (res / scale).min(0.5);
+        let x = self.cg(coords, &rhs, (forcing * res).max(0.1 * tol));
+        add_columns(coords, &x, out);
+        Ok(())
+    }
+}
+
+/// out += Q x for the columns of Q given by `coords`.
+fn add_columns(coords: &[Coord], x: &[f64], out: &mut [f64]) {
+    for (q, xq) in coords.iter().zip(x) {
+        for (i, e) in q.entries() {
+            out[i] += e * xq;
         }
     }
 }
 
-/// Σ c x_pos over a row's entries.
+/// Σ c x_i over a row's entries (i, c).
 fn gather(row: &[(usize, f64)], x: &[f64]) -> f64 {
-    row.iter().map(|&(pos, c)| c * x[pos]).sum()
+    row.iter().map(|&(i, c)| c * x[i]).sum()
+}
+
+/// y = Pᵀ v on C: each row's entries (i, c) add c v_row to y_i.
+fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
+    y.fill(0.0);
+    for (row, &x) in p.iter().zip(v) {
+        for &(i, c) in row {
+            y[i] += c * x;
+        }
+    }
 }

@@ -8,6 +8,58 @@ use super::groups::{dot, norm, Coord, Group, Set};
 use super::newton::{axpy_columns, newton_step, Gradient, Indefinite, Operators, Scratch};
 use super::{DualSettings, DualSolver};
 use crate::solver::{StepReport, StepStatus};
+use std::cell::RefCell;
+
+/// What the iteration needs of D: the gradient and the Newton steps. The dense dual's
+/// `Operators` (D stored, Newton systems by Cholesky) and the matrix-free dual's products
+/// through the factor (`solver::matrix_free`) share the iteration below.
+pub(in crate::solver) trait Operator {
+    fn settings(&self) -> &DualSettings;
+
+    /// g = D z − d.
+    fn gradient(&self, z: &[f64], g: &mut [f64]);
+
+    /// out += Q x, the Newton step from z₀ on the coordinates `coords` (`newton_step`);
+    /// `res` is the KKT residual at the iterate, for a solver that solves inexactly.
+    fn newton_step(
+        &self,
+        groups: &[Group],
+        coords: &[Coord],
+        z0: &[f64],
+        grad: Gradient,
+        out: &mut [f64],
+        res: f64,
+    ) -> Result<(), Indefinite>;
+}
+
+/// The dense dual's operator: D, and the Newton systems' buffers and factor.
+struct Dense<'a> {
+    ops: Operators<'a>,
+    newton: RefCell<&'a mut Scratch>,
+}
+
+impl Operator for Dense<'_> {
+    fn settings(&self) -> &DualSettings {
+        self.ops.settings
+    }
+
+    fn gradient(&self, z: &[f64], g: &mut [f64]) {
+        self.ops.d.gradient(z, self.ops.dvec, g);
+    }
+
+    fn newton_step(
+        &self,
+        groups: &[Group],
+        coords: &[Coord],
+        z0: &[f64],
+        grad: Gradient,
+        out: &mut [f64],
+        _res: f64,
+    ) -> Result<(), Indefinite> {
+        let mut newton = self.newton.borrow_mut();
+        newton_step(&self.ops, groups, coords, z0, grad, out, &mut newton)
+    }
+}
 
 /// Vectors of a solve, kept between steps so that the iterations do not allocate them.
 pub(super) struct Work {
@@ -16,10 +68,12 @@ pub(super) struct Work {
     /// z_u = B d, the unconstrained minimizer of q, when B = D⁻¹ is kept.
     pub(super) z_u: Vec<f64>,
     pub(super) buffers: Buffers,
+    /// What the Newton steps need besides D: see `newton_step`.
+    pub(super) newton: Scratch,
 }
 
 /// The vectors the phases of an iteration fill.
-pub(super) struct Buffers {
+pub(in crate::solver) struct Buffers {
     /// g = D z − d at the iterate, and at the trial point.
     pub(super) grad: Vec<f64>,
     pub(super) trial: Vec<f64>,
@@ -32,8 +86,22 @@ pub(super) struct Buffers {
     pub(super) coords: Vec<Coord>,
     /// Per group: binding (moving along −g/δ) in the projected Newton step.
     pub(super) binding: Vec<bool>,
-    /// What the Newton steps need besides D: see `newton_step`.
-    pub(super) newton: Scratch,
+}
+
+impl Buffers {
+    /// The buffers of a solve of m multipliers in `groups` groups.
+    pub(in crate::solver) fn new(m: usize, groups: usize) -> Buffers {
+        Buffers {
+            grad: vec![0.0; m],
+            trial: vec![0.0; m],
+            grad_trial: vec![0.0; m],
+            p: vec![0.0; m],
+            alt: vec![0.0; m],
+            grad_alt: vec![0.0; m],
+            coords: Vec::with_capacity(m),
+            binding: vec![false; groups],
+        }
+    }
 }
 
 impl Work {
@@ -42,17 +110,8 @@ impl Work {
         Work {
             d: vec![0.0; m],
             z_u: vec![0.0; m],
-            buffers: Buffers {
-                grad: vec![0.0; m],
-                trial: vec![0.0; m],
-                grad_trial: vec![0.0; m],
-                p: vec![0.0; m],
-                alt: vec![0.0; m],
-                grad_alt: vec![0.0; m],
-                coords: Vec::with_capacity(m),
-                binding: vec![false; groups],
-                newton: Scratch::new(m, settings),
-            },
+            buffers: Buffers::new(m, groups),
+            newton: Scratch::new(m, settings),
         }
     }
 }
@@ -73,11 +132,12 @@ impl DualSolver {
             d: dvec,
             z_u,
             buffers: b,
+            newton,
         } = &mut **work;
         // A factorization is reused within the step only, so that a run resumed from a
         // checkpoint (which starts with no factor) repeats the uninterrupted run bit
         // for bit.
-        b.newton.factor.form = None;
+        newton.factor.form = None;
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = settings.tolerance * scale.max(f64::MIN_POSITIVE);
         if let Some(inverse) = inverse {
@@ -85,7 +145,7 @@ impl DualSolver {
             z_u.fill(0.0);
             axpy_columns(inverse, dvec.iter().copied().enumerate(), z_u);
         }
-        let it = Iteration {
+        let ops = Dense {
             ops: Operators {
                 d,
                 dvec,
@@ -93,11 +153,9 @@ impl DualSolver {
                 settings,
                 accuracy: settings.newton_accuracy * tol,
             },
-            groups,
-            scale,
-            tol,
+            newton: RefCell::new(newton),
         };
-        it.run(z, b)
+        Iteration::new(ops, groups, scale, tol).run(z, b)
     }
 }
 
@@ -110,19 +168,30 @@ struct Carried {
 }
 
 /// What stays fixed over a step's iterations.
-struct Iteration<'a> {
-    ops: Operators<'a>,
+pub(in crate::solver) struct Iteration<'a, O: Operator> {
+    ops: O,
     groups: &'a [Group],
     /// max|d|, and the residual at which the iteration stops.
     scale: f64,
     tol: f64,
 }
 
-impl Iteration<'_> {
+impl<'a, O: Operator> Iteration<'a, O> {
+    /// The iteration of a step with D given by `ops`, max|d| = `scale`, stopping at the
+    /// residual `tol`.
+    pub(in crate::solver) fn new(ops: O, groups: &'a [Group], scale: f64, tol: f64) -> Self {
+        Iteration {
+            ops,
+            groups,
+            scale,
+            tol,
+        }
+    }
+
     /// The iterations from the warm start z until the residual is at most `tol`, the
     /// iteration limit is reached or a Newton matrix is indefinite.
-    fn run(&self, z: &mut [f64], b: &mut Buffers) -> StepReport {
-        let max_iterations = self.ops.settings.max_iterations;
+    pub(in crate::solver) fn run(&self, z: &mut [f64], b: &mut Buffers) -> StepReport {
+        let max_iterations = self.ops.settings().max_iterations;
         // Warm start: the previous multipliers, projected onto Z.
         self.project(z);
         self.gradient(z, &mut b.grad);
@@ -169,13 +238,14 @@ impl Iteration<'_> {
         carried: &mut Carried,
         b: &mut Buffers,
     ) -> Result<(), Indefinite> {
-        let settings = self.ops.settings;
+        let settings = self.ops.settings();
         let eta = if carried.rejected { 1.0 } else { settings.eta };
         carried.rejected = !self.newton_point(z, eta, res, b)?;
         let interpolate = iteration <= settings.interpolated;
         carried.widen = if !carried.rejected {
             1.0
-        } else if self.projected_newton(z, carried.widen, interpolate, b)? < settings.pg_switch {
+        } else if self.projected_newton(z, res, carried.widen, interpolate, b)? < settings.pg_switch
+        {
             self.projected_gradient(z, interpolate, b);
             (carried.widen * settings.widen).min(settings.max_widen)
         } else {
@@ -191,12 +261,12 @@ impl Iteration<'_> {
 
     /// g = D z − d.
     fn gradient(&self, z: &[f64], g: &mut [f64]) {
-        self.ops.d.gradient(z, self.ops.dvec, g);
+        self.ops.gradient(z, g);
     }
 
     /// The stopping test's residual at z (the module doc).
     fn residual(&self, z: &[f64], g: &[f64]) -> f64 {
-        residual(self.groups, z, g, self.ops.settings.rim)
+        residual(self.groups, z, g, self.ops.settings().rim)
     }
 
     /// The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`, the
@@ -218,18 +288,16 @@ impl Iteration<'_> {
             grad_trial: g_trial,
             p,
             coords,
-            newton,
             ..
         } = b;
         p.copy_from_slice(trial);
-        newton_step(
-            &self.ops,
+        self.ops.newton_step(
             self.groups,
             coords,
             trial,
             Gradient::Unknown(g_trial),
             p,
-            newton,
+            res,
         )?;
         let mut alpha = 1.0;
         Ok(loop {
@@ -249,7 +317,7 @@ impl Iteration<'_> {
             if dq < -noise || (alpha == 1.0 && dq <= noise && self.residual(trial, g_trial) < res) {
                 break true;
             }
-            if alpha <= self.ops.settings.min_damping {
+            if alpha <= self.ops.settings().min_damping {
                 break false;
             }
             alpha *= 0.5;
@@ -268,27 +336,17 @@ impl Iteration<'_> {
     fn projected_newton(
         &self,
         z: &[f64],
+        res: f64,
         widen: f64,
         interpolate: bool,
         b: &mut Buffers,
     ) -> Result<f64, Indefinite> {
         self.binding_set(z, widen, b);
         let Buffers {
-            grad: g,
-            p,
-            coords,
-            newton,
-            ..
+            grad: g, p, coords, ..
         } = b;
-        newton_step(
-            &self.ops,
-            self.groups,
-            coords,
-            z,
-            Gradient::Known(g),
-            p,
-            newton,
-        )?;
+        self.ops
+            .newton_step(self.groups, coords, z, Gradient::Known(g), p, res)?;
         Ok(self.arc_search(z, interpolate, b))
     }
 

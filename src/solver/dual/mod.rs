@@ -101,7 +101,7 @@
 mod delassus;
 pub(super) mod groups;
 pub(super) mod iteration;
-mod newton;
+pub(super) mod newton;
 mod settings;
 #[cfg(test)]
 mod tests;
@@ -199,7 +199,7 @@ impl DualSolver {
 
     /// The Newton systems solved so far, by form.
     pub fn newton_counts(&self) -> NewtonCounts {
-        self.work.buffers.newton.counts
+        self.work.newton.counts
     }
 
     pub fn solve(

@@ -75,7 +75,7 @@ pub(super) struct NewtonFactor {
 
 /// A Newton matrix that is not positive definite to working precision
 /// (`StepStatus::NewtonIndefinite`).
-pub(super) struct Indefinite;
+pub(in crate::solver) struct Indefinite;
 
 /// What the Newton steps are solved with.
 pub(super) struct Operators<'a> {
@@ -91,7 +91,7 @@ pub(super) struct Operators<'a> {
 }
 
 /// The gradient D z₀ − d at a Newton step's base point, if known; else a buffer for it.
-pub(super) enum Gradient<'a> {
+pub(in crate::solver) enum Gradient<'a> {
     Known(&'a [f64]),
     Unknown(&'a mut [f64]),
 }
