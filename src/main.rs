@@ -338,7 +338,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     println!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
     if let Some(plan) = &contact {
-        plan.check(estimate.memory)?;
+        plan.check(&estimate)?;
     }
     let plan = Plan::new(&scene)?;
     let limit_line = |l: &StepLimit, what: &str| match l.k_max {

@@ -54,6 +54,13 @@ pub struct Estimate {
 }
 
 impl Estimate {
+    /// The key to change when the memory does not fit (with why, for a general kernel).
+    pub fn memory_key(&self) -> &'static str {
+        self.memory_key
+    }
+}
+
+impl Estimate {
     /// The estimate for a run of `scene` (its `time.steps` N) continuing from step `from`
     /// (0 for a new run; a resumed run writes only the rest).
     pub fn new(scene: &Scene, disc: &Discretization, from: usize) -> Estimate {

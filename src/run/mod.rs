@@ -145,7 +145,7 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
-    check_contact_plan(&scene, &disc, estimate.memory, None)?;
+    check_contact_plan(&scene, &disc, &estimate, None)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(&out, &mesh, &identity.run_id, &scene.output.options, None)?;
@@ -207,7 +207,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     let estimate = crate::resources::Estimate::new(&scene, &disc, cp.n);
     estimate.check(&out)?;
-    check_contact_plan(&scene, &disc, estimate.memory, Some(checkpoint_path))?;
+    check_contact_plan(&scene, &disc, &estimate, Some(checkpoint_path))?;
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
@@ -265,14 +265,14 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     })
 }
 
-/// Refuses (exit 2) a run whose contact solver, with the `steps` bytes its steps hold
-/// (`Estimate::memory`), would not fit the memory available (`ContactPlan::check`). A
+/// Refuses (exit 2) a run whose contact solver, with what its steps hold (`steps`), would
+/// not fit the memory available (`ContactPlan::check`). A
 /// resume of `checkpoint` cannot change `solver.contact`, the run's physics: its message
 /// says so.
 fn check_contact_plan(
     scene: &Scene,
     disc: &Discretization,
-    steps: f64,
+    steps: &crate::resources::Estimate,
     checkpoint: Option<&Path>,
 ) -> Result<()> {
     let Some(plan) = ContactPlan::of_run(scene, disc) else {

@@ -17,7 +17,7 @@
 use super::matrix_free::MatrixFreeSettings;
 use super::Rows;
 use crate::fem::Discretization;
-use crate::resources::{self, human, MARGIN};
+use crate::resources::{self, human, Estimate, MARGIN};
 use crate::scene::{ContactSolver, Scene};
 use crate::{Error, Result};
 
@@ -135,19 +135,21 @@ impl ContactPlan {
         }
     }
 
-    /// Refuses (exit 2) a solver whose memory, with the `steps` bytes that the run's steps
-    /// hold besides it (`resources::Estimate::memory`: both are held at once), exceeds
-    /// `resources::MARGIN` of the memory available (`resources::available_memory`; unknown:
-    /// it passes), naming `solver.contact = "matrix_free"` where that would fit.
-    pub fn check(&self, steps: f64) -> Result<()> {
+    /// Refuses (exit 2) a solver whose memory, with what the run's steps hold besides it
+    /// (`steps`: both are held at once), exceeds `resources::MARGIN` of the memory available
+    /// (`resources::available_memory`; unknown: it passes), naming `solver.contact =
+    /// "matrix_free"` where that would fit, else the estimate's key where the solver alone
+    /// fits.
+    pub fn check(&self, steps: &Estimate) -> Result<()> {
         match resources::available_memory()? {
-            Some(avail) => self.fits(avail, steps),
+            Some(avail) => self.fits(avail, steps.memory, steps.memory_key()),
             None => Ok(()),
         }
     }
 
-    /// `check` with `avail` bytes of memory available.
-    fn fits(&self, avail: f64, steps: f64) -> Result<()> {
+    /// `check` with `avail` bytes of memory available and `steps` bytes held by the steps,
+    /// `key` the key that lowers them.
+    fn fits(&self, avail: f64, steps: f64, key: &str) -> Result<()> {
         let Some(memory) = self.memory else {
             return Ok(());
         };
@@ -161,7 +163,7 @@ impl ContactPlan {
                 human(self.matrix_free)
             )
         } else if memory <= MARGIN * avail {
-            "lower time.steps, or use a Prony kernel, whose history is O(1) per step".to_string()
+            format!("lower {key}")
         } else {
             "use a coarser mesh on the contact boundary".to_string()
         };
@@ -231,6 +233,9 @@ mod tests {
         assert_eq!(Contact::auto(16_055, 16_055, 2), Contact::MatrixFree);
     }
 
+    /// The key an estimate names for a run whose steps' memory does not fit.
+    const KEY: &str = "time.steps";
+
     #[test]
     fn a_plan_that_does_not_fit_is_refused_naming_the_key_that_would() {
         let plan = |choice| ContactPlan {
@@ -242,23 +247,23 @@ mod tests {
             matrix_free: 1e6,
         };
         let forced = plan(ContactSolver::Dense);
-        forced.fits(1.25e9, 0.0).unwrap();
-        let err = forced.fits(1.2e9, 0.0).unwrap_err();
+        forced.fits(1.25e9, 0.0, KEY).unwrap();
+        let err = forced.fits(1.2e9, 0.0, KEY).unwrap_err();
         assert_eq!(err.exit_code(), 2);
         assert!(
             err.to_string().contains("solver.contact = \"matrix_free\""),
             "{err}"
         );
-        let err = forced.fits(1e6, 0.0).unwrap_err().to_string();
+        let err = forced.fits(1e6, 0.0, KEY).unwrap_err().to_string();
         assert!(err.contains("coarser mesh"), "{err}");
         // The steps' memory counts as well: each part fits alone, the two together do not.
-        let err = forced.fits(1.25e9, 0.2e9).unwrap_err().to_string();
+        let err = forced.fits(1.25e9, 0.2e9, KEY).unwrap_err().to_string();
         assert!(
             err.contains("besides the ≈ 200.0 MB that the steps hold"),
             "{err}"
         );
         assert!(err.contains("solver.contact = \"matrix_free\""), "{err}");
-        let err = forced.fits(1.25e9, 0.9999e9).unwrap_err().to_string();
+        let err = forced.fits(1.25e9, 0.9999e9, KEY).unwrap_err().to_string();
         assert!(err.contains("lower time.steps"), "{err}");
         assert!(plan(ContactSolver::Auto)
             .to_string()

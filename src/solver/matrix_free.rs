@@ -24,11 +24,13 @@
 //! per iteration (`cg`), inexactly, to a residual at most min(½, r/max|d|) r for the
 //! iterate's KKT residual r (an inexact Newton method: fast local convergence, no work
 //! wasted far from the solution) and never below a tenth of the tolerance. The
-//! preconditioner (`Preconditioner`) is QᵀSQ with S = P S_C Pᵀ = P L_CC L_CCᵀ Pᵀ, the
-//! Dirichlet-type preconditioner of FETI (Farhat, Mandel, Roux 1994): on a flat contact
-//! boundary, where P only picks dofs of C, S = D⁻¹ exactly, and QᵀSQ differs from
-//! (QᵀDQ)⁻¹ only through the coupling of Q to the fixed directions; it costs as much as a
-//! product with D. δ_j, the groups' scale, is one number here: the mean of diag D,
+//! preconditioner (`Preconditioner::Dirichlet`) is Q_Fᵀ S Q_F on the coordinates F without
+//! a shift, with S = P S_C Pᵀ = P L_CC L_CCᵀ Pᵀ, the Dirichlet-type preconditioner of FETI
+//! (Farhat, Mandel, Roux 1994): on a flat contact boundary, where P only picks dofs of C,
+//! S = D⁻¹ exactly, and Q_Fᵀ S Q_F differs from (Q_Fᵀ D Q_F)⁻¹ only through the coupling
+//! of F to the fixed directions; it costs as much as a product with D. The rims' tangents
+//! (κ > 0) take diag(δ + κ): a sliding node's tangent is coupled to its radial direction,
+//! which the step keeps fixed, so S is far from the inverse there. δ_j, the groups' scale, is one number here: the mean of diag D,
 //! estimated from products with fixed ±1 vectors (Hutchinson's trace estimate), since the
 //! exact diagonal would cost m products. The answer does not depend on δ.
 
@@ -106,19 +108,26 @@ pub struct MatrixFreeCounts {
 }
 
 pub struct MatrixFreeSolver {
-    settings: MatrixFreeSettings,
+    /// What the products read (`Products`).
+    operands: Operands,
     /// The multiplier groups, in row order, with δ_j the estimated mean of diag D.
     groups: Vec<Group>,
-    /// P: each row's (index in C, coefficient) pairs, C in the factor's ordering from
-    /// position `first` on.
-    p: Vec<Vec<(usize, f64)>>,
+    /// C's first position in the factor's ordering.
     first: usize,
     /// K_A⁻¹ b of the step in the factor's ordering, and a vector of the dofs.
     x_b: Vec<f64>,
     y: Vec<f64>,
-    /// d = P K_A⁻¹ b, and the iteration's vectors.
-    d: Vec<f64>,
+    /// The iteration's vectors.
     buffers: Buffers,
+}
+
+/// The settings, P, the step's d and the products' vectors.
+struct Operands {
+    settings: MatrixFreeSettings,
+    /// P: each row's (index in C, coefficient) pairs, C in the factor's ordering.
+    p: Vec<Vec<(usize, f64)>>,
+    /// d = P K_A⁻¹ b.
+    d: Vec<f64>,
     /// Vectors on C for the products, and the counts.
     work: RefCell<Work>,
 }
@@ -159,31 +168,31 @@ impl MatrixFreeSolver {
             })
             .collect();
         let m = rows.len();
-        let mut solver = MatrixFreeSolver {
+        let operands = Operands {
             settings,
-            groups: Vec::new(),
             p,
-            first,
-            x_b: vec![0.0; factor.dim()],
-            y: vec![0.0; factor.dim()],
             d: vec![0.0; m],
-            buffers: Buffers::new(m, 0),
             work: RefCell::new(Work {
                 y_c: vec![0.0; factor.last()],
                 s_c: vec![0.0; factor.last()],
                 counts: MatrixFreeCounts::default(),
             }),
         };
-        let delta = Products::new(factor, &solver, 1.0).mean_diagonal(settings.probes);
-        let diag = vec![delta; m];
-        solver.groups = groups::groups(rows, &diag, settings.dual.dependent_shift);
-        solver.buffers = Buffers::new(m, solver.groups.len());
-        solver
+        let delta = Products::new(factor, &operands, 1.0).mean_diagonal(settings.probes);
+        let groups = groups::groups(rows, &vec![delta; m], settings.dual.dependent_shift);
+        MatrixFreeSolver {
+            operands,
+            buffers: Buffers::new(m, groups.len()),
+            groups,
+            first,
+            x_b: vec![0.0; factor.dim()],
+            y: vec![0.0; factor.dim()],
+        }
     }
 
     /// The work so far.
     pub fn counts(&self) -> MatrixFreeCounts {
-        self.work.borrow().counts
+        self.operands.work.borrow().counts
     }
 
     /// Solves step n as `StepSolver::solve` does: `b` is b_n, `w` receives w_n, `z` the
@@ -202,19 +211,18 @@ impl MatrixFreeSolver {
         factor.forward(&mut self.x_b);
         factor.backward(&mut self.x_b);
         let x_c = &self.x_b[self.first..];
-        for (row, d) in self.p.iter().zip(&mut self.d) {
+        let Operands { p, d, .. } = &mut self.operands;
+        for (row, d) in p.iter().zip(d) {
             *d = gather(row, x_c);
         }
-        let mut buffers = std::mem::replace(&mut self.buffers, Buffers::new(0, 0));
         let delta = self.groups.first().map_or(1.0, |g| g.scale);
-        let ops = Products::new(factor, self, delta);
-        let (scale, tolerance) = (ops.scale, self.settings.dual.tolerance);
-        let tol = tolerance * scale.max(f64::MIN_POSITIVE);
-        let report = Iteration::new(ops, &self.groups, scale, tol).run(z, &mut buffers);
-        self.buffers = buffers;
+        let ops = Products::new(factor, &self.operands, delta);
+        let scale = ops.scale;
+        let tol = self.operands.settings.dual.tolerance * scale.max(f64::MIN_POSITIVE);
+        let report = Iteration::new(ops, &self.groups, scale, tol).run(z, &mut self.buffers);
         if report.status == StepStatus::Solved {
             // w = K_A⁻¹ (b − Pᵀ z) = x_b − K_A⁻¹ Pᵀ z.
-            scatter(&self.p, z, &mut self.y[self.first..]);
+            scatter(&self.operands.p, z, &mut self.y[self.first..]);
             self.y[..self.first].fill(0.0);
             factor.forward(&mut self.y);
             factor.backward(&mut self.y);
@@ -241,16 +249,16 @@ struct Products<'a> {
 }
 
 impl<'a> Products<'a> {
-    /// D through `factor` for `solver`'s rows, with its step's d, and δ = `delta`.
-    fn new(factor: &'a Factor, solver: &'a MatrixFreeSolver, delta: f64) -> Self {
+    /// D through `factor` for the rows P of `operands`, with its step's d, and δ = `delta`.
+    fn new(factor: &'a Factor, operands: &'a Operands, delta: f64) -> Self {
         Products {
             factor,
-            p: &solver.p,
-            d: &solver.d,
-            settings: &solver.settings,
-            scale: solver.d.iter().fold(0.0f64, |a, x| a.max(x.abs())),
+            p: &operands.p,
+            d: &operands.d,
+            settings: &operands.settings,
+            scale: operands.d.iter().fold(0.0f64, |a, x| a.max(x.abs())),
             delta,
-            work: &solver.work,
+            work: &operands.work,
         }
     }
 
