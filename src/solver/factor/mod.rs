@@ -16,11 +16,12 @@
 //! y_s ← L_ss⁻¹ y_s and y_R ← y_R − L_Rs y_s; the backward pass, in reverse order,
 //! y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R). A single right side is memory-bound, so a big factor's
 //! passes run on all the process's threads: disjoint subtrees of the elimination tree on
-//! different threads, the rest on one, with the same arithmetic for every thread count
-//! (`split`).
+//! different threads (`split`), the wide supernodes above them with their rows or columns
+//! shared out (`shared`), with the same arithmetic for every thread count.
 //! faer's default amalgamation may merge a supernode across the boundary between the
 //! interior dofs and C; L_CC is read column by column (`trailing`).
 
+mod shared;
 mod split;
 mod trailing;
 
@@ -55,6 +56,8 @@ pub struct Factor {
     backward_team: Team,
     /// The columns of L_CC and the threads of its passes (`trailing`).
     trailing: trailing::Trailing,
+    /// The wide supernodes' threshold and the threads of their passes (`shared`).
+    shared: shared::Shared,
 }
 
 /// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
@@ -444,6 +447,8 @@ struct Splits {
     /// The smallest factor whose solves run in units, and the bins they are dealt to.
     units: usize,
     bins: usize,
+    /// The fewest values of a supernode whose passes share out its rows (`shared`).
+    shared: usize,
 }
 
 impl Factor {
@@ -453,6 +458,7 @@ impl Factor {
             two_groups: MIN_SPLIT,
             units: MIN_SPLIT,
             bins: crate::threads::count().min(MAX_BINS),
+            shared: shared::SHARED_MIN,
         };
         Self::with_split(a, last, split, |flops| {
             if flops >= PARALLEL_FLOPS {
@@ -538,12 +544,23 @@ impl Factor {
             fwd,
             inv,
             last: last.len(),
-            schedule: Schedule::new(&layout, split.two_groups, split.units, split.bins),
+            schedule: None,
             forward_team: Team::default(),
             backward_team: Team::default(),
             layout,
             trailing: trailing::Trailing::default(),
+            shared: shared::Shared {
+                min: split.shared,
+                ..Default::default()
+            },
         };
+        factor.schedule = Schedule::new(
+            &factor.layout,
+            split.two_groups,
+            split.units,
+            split.bins,
+            |s| factor.is_shared(s),
+        );
         factor.trailing = trailing::Trailing::new(&factor);
         Ok(factor)
     }
@@ -606,7 +623,7 @@ impl Factor {
                 for (unit, ys, rs) in units {
                     for s in unit.supernodes.clone() {
                         let ext = schedule.unit_records(unit, s, rs);
-                        self.forward_step(s, ys, unit.cols.start, ext, &mut t);
+                        self.forward_step(s, ys, unit.cols.start, ext, &mut t, false);
                     }
                 }
             });
@@ -617,7 +634,7 @@ impl Factor {
         for &(s, upper) in &schedule.replay {
             let (ext, to_z) = schedule.records(s, &mut record);
             if upper {
-                self.forward_step(s, y, 0, ext, &mut t);
+                self.forward_step(s, y, 0, ext, &mut t, true);
             }
             let rows = self.layout.pattern(s);
             let rows = &rows[rows.len() - ext.len()..];
@@ -638,8 +655,20 @@ impl Factor {
 
     /// The forward pass over supernode s, `y[i]` holding row base + i, the updates of the
     /// last `ext.len()` rows of its pattern stored in `ext`; `t` a buffer of
-    /// `widest_pattern` values.
-    fn forward_step(&self, s: usize, y: &mut [f64], base: usize, ext: &mut [f64], t: &mut [f64]) {
+    /// `widest_pattern` values; a wide supernode's rows shared out over the threads when
+    /// `share` (`shared`: outside the units).
+    fn forward_step(
+        &self,
+        s: usize,
+        y: &mut [f64],
+        base: usize,
+        ext: &mut [f64],
+        t: &mut [f64],
+        share: bool,
+    ) {
+        if self.is_shared(s) {
+            return self.shared_forward(s, y, base, ext, t, share);
+        }
         let (cols, rows, vals) = self.layout.supernode(s, &self.values);
         match cols.len() {
             1 => narrow_forward::<1>(vals, rows, cols.start, y, base, ext),
@@ -654,7 +683,7 @@ impl Factor {
     fn forward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
         let mut t = vec![0.0; self.layout.widest_pattern];
         for s in order {
-            self.forward_step(s, y, 0, &mut [], &mut t);
+            self.forward_step(s, y, 0, &mut [], &mut t, true);
         }
     }
 
@@ -686,7 +715,7 @@ impl Factor {
                 for (unit, ys, rs) in units {
                     for s in unit.supernodes.clone().rev() {
                         let ext = schedule.unit_records(unit, s, rs);
-                        self.backward_step(s, ys, unit.cols.start, ext, &mut g);
+                        self.backward_step(s, ys, unit.cols.start, ext, &mut g, false);
                     }
                 }
             });
@@ -694,8 +723,20 @@ impl Factor {
 
     /// The backward pass over supernode s, `y[i]` holding row base + i, the last
     /// `ext.len()` rows of its pattern read from `ext`; `g` a buffer of `widest_pattern`
-    /// values.
-    fn backward_step(&self, s: usize, y: &mut [f64], base: usize, ext: &[f64], g: &mut [f64]) {
+    /// values; a wide supernode's columns shared out over the threads when `share`
+    /// (`shared`: outside the units).
+    fn backward_step(
+        &self,
+        s: usize,
+        y: &mut [f64],
+        base: usize,
+        ext: &[f64],
+        g: &mut [f64],
+        share: bool,
+    ) {
+        if self.is_shared(s) {
+            return self.shared_backward(s, y, base, ext, g, share);
+        }
         let (cols, rows, vals) = self.layout.supernode(s, &self.values);
         match cols.len() {
             1 => narrow_backward::<1>(vals, rows, cols.start, y, base, ext),
@@ -710,7 +751,7 @@ impl Factor {
     fn backward_over(&self, order: impl Iterator<Item = usize>, y: &mut [f64]) {
         let mut g = vec![0.0; self.layout.widest_pattern];
         for s in order {
-            self.backward_step(s, y, 0, &[], &mut g);
+            self.backward_step(s, y, 0, &[], &mut g, true);
         }
     }
 
@@ -826,6 +867,7 @@ mod tests {
                     two_groups,
                     units: 0,
                     bins,
+                    shared: usize::MAX,
                 };
                 let f = Factor {
                     forward_team: Team::of(bins),
@@ -847,6 +889,69 @@ mod tests {
                 assert!(
                     reference == Some(serial.clone()),
                     "not the serial pass's bits"
+                );
+            }
+        }
+    }
+
+    /// The wide supernodes' passes (`shared`) on a 3D grid with a face ordered last, every
+    /// supernode of 20 000 values or more taking them, with panels shared out from 64 rows:
+    /// the forward pass has the bits of the serial pass, and the solves have the same bits
+    /// for 1 to 4 threads (as many bins of units), whichever supernodes run inside the
+    /// units, and agree with the serial pass's solve (`solve_matches_dense_cholesky` checks
+    /// that one) to 1e-12.
+    #[test]
+    fn shared_supernodes_are_identical_for_every_thread_count() {
+        let (k, last) = grid_3d_with_last(20);
+        let n = k.nrows();
+        let b: Vec<f64> = (0..n)
+            .map(|i| ((i * 37) % 23) as f64 / 11.0 - 1.0)
+            .collect();
+        let factor = |bins: usize, shared: usize| {
+            let split = Splits {
+                two_groups: MIN_SPLIT,
+                units: 0,
+                bins,
+                shared,
+            };
+            let mut f = Factor {
+                forward_team: Team::of(bins),
+                backward_team: Team::of(bins),
+                ..Factor::with_split(&k, &last, split, |_| Par::Seq).unwrap()
+            };
+            f.shared.share_rows = 64;
+            f.shared.forward_team = Team::of(bins);
+            f.shared.backward_team = Team::of(bins);
+            f
+        };
+        let serial = factor(1, usize::MAX);
+        let mut y = b.clone();
+        serial.forward(&mut y);
+        let serial_forward: Vec<u64> = y.iter().map(|v| v.to_bits()).collect();
+        let mut expected = b.clone();
+        serial.solve(&mut expected);
+        let mut reference = None;
+        for bins in 1..=4 {
+            let f = factor(bins, 20_000);
+            let ns = f.layout.n_supernodes();
+            let shared: Vec<usize> = (0..ns).filter(|&s| f.is_shared(s)).collect();
+            let widest = shared
+                .iter()
+                .map(|&s| f.layout.begin[s + 1] - f.layout.begin[s]);
+            assert!(
+                shared.len() >= 3 && widest.max() > Some(2 * 128),
+                "{shared:?}"
+            );
+            // `Team` probes both ways: several solves.
+            for _ in 0..3 {
+                let mut y = b.clone();
+                f.forward(&mut y);
+                let bits: Vec<u64> = y.iter().map(|v| v.to_bits()).collect();
+                assert!(bits == serial_forward, "forward, {bins} bins");
+                let x = solve_checked(&f, &b, &expected);
+                assert!(
+                    *reference.get_or_insert_with(|| x.clone()) == x,
+                    "{bins} bins"
                 );
             }
         }
@@ -967,6 +1072,7 @@ mod tests {
             two_groups: MIN_SPLIT,
             units: MIN_SPLIT,
             bins: 2,
+            shared: usize::MAX,
         };
         let one = Factor::with_split(&k, &last, split, |_| Par::Seq).unwrap();
         for threads in [2, 3, 4] {
