@@ -1,10 +1,10 @@
 //! The products with D = P K_A⁻¹ Pᵀ: the gradient g = D z − d from D's lower triangle.
 
-use super::Team;
+use super::{blocks, Team};
 use faer::Mat;
 use std::ops::Range;
 
-/// D, with its products split over two threads where it is large (`Team`).
+/// D, with its products split over the threads where it is large (`Team`).
 pub(super) struct Delassus {
     pub(super) mat: Mat<f64>,
     pub(super) team: Team,
@@ -12,21 +12,34 @@ pub(super) struct Delassus {
     pub(super) split_rows: usize,
 }
 
+/// From this many rows D's columns are cut into `MANY_PARTS` parts, below it into two: a
+/// property of the problem, not of the machine, so the bits do not depend on the threads.
+/// Two parts keep the bits of every scene below it as they were (the golden scenes' m are
+/// all smaller); eight let up to eight threads share a product (at m = 1 850, the block at
+/// h = 1/24, a product reads 13.7 MB).
+const MANY_FROM: usize = 1024;
+const MANY_PARTS: usize = 8;
+
 impl Delassus {
     /// g = D z − d from the lower triangle of D alone: the entry D_ij below the diagonal of
     /// column j serves both (D z)_i (with z_j) and (D z)_j (with z_i), so a product reads half
     /// of D (the multipliers are almost all non-zero: 97% on the 3D block, so skipping zero
-    /// columns of the whole D read more). The columns are split into [0, c) and [c, m) with
-    /// about as many entries each, c = m(1 − 1/√2); the second part's sums (rows ≥ c) are
-    /// added to the first's at the end, so the arithmetic is the same on one thread or two.
-    /// (Not more: each entry serves two rows, so every further cut of the columns would
-    /// add a partial sum to the rows below it and change their bits, and a cut by rows
-    /// would read D twice.)
+    /// columns of the whole D read more). The columns are cut into K parts [c_k, c_k+1)
+    /// with about as many entries each, c_k = m − m √((K − k)/K) (K = 2, or `MANY_PARTS` from
+    /// `MANY_FROM` rows); part k ≥ 1 sums its rows (≥ c_k) in a vector of its own, added to
+    /// g in the order of k at the end, so the arithmetic depends on m alone, not on how many
+    /// threads run the parts. (Each entry serves two rows, so a cut of the columns adds a
+    /// partial sum to the rows below it; a cut by rows would read D twice.)
     pub(super) fn gradient(&self, z: &[f64], d: &[f64], g: &mut [f64]) {
         let m = g.len();
-        let c = m - (m as f64 / std::f64::consts::SQRT_2) as usize;
+        let parts = if m >= MANY_FROM { MANY_PARTS } else { 2 };
+        let cut = |k: usize| match k {
+            0 => 0,
+            k if k == parts => m,
+            k => m - (m as f64 / (parts as f64 / (parts - k) as f64).sqrt()) as usize,
+        };
         // The columns `cols`' share of D z, accumulated into y (rows first.. of D z).
-        let part = |(cols, y, first): (Range<usize>, &mut [f64], usize)| {
+        let part = |cols: Range<usize>, y: &mut [f64], first: usize| {
             for j in cols {
                 let col = &column(&self.mat, j)[j..];
                 let (y_j, y_below) = y[j - first..].split_first_mut().unwrap();
@@ -37,11 +50,25 @@ impl Delassus {
         for (gi, di) in g.iter_mut().zip(d) {
             *gi = -di;
         }
-        let mut tail = vec![0.0; m - c];
-        let parts = vec![(0..c, &mut *g, 0), (c..m, &mut tail[..], c)];
-        self.team.each_if(m >= self.split_rows, parts, part);
-        for (gi, ti) in g[c..].iter_mut().zip(&tail) {
-            *gi += ti;
+        let mut tails: Vec<Vec<f64>> = (1..parts).map(|k| vec![0.0; m - cut(k)]).collect();
+        let mut ys: Vec<(usize, &mut [f64])> = vec![(0, &mut *g)];
+        ys.extend((1..parts).zip(tails.iter_mut().map(|t| &mut t[..])));
+        // The parts in as many consecutive groups as the team runs pieces.
+        let large = m >= self.split_rows;
+        let mut groups: Vec<Vec<(usize, &mut [f64])>> = Vec::new();
+        let mut ys = ys.into_iter();
+        for range in blocks(parts, self.team.pieces(large)) {
+            groups.push(ys.by_ref().take(range.len()).collect());
+        }
+        self.team.each_if(large, groups, |group| {
+            for (k, y) in group {
+                part(cut(k)..cut(k + 1), y, cut(k));
+            }
+        });
+        for (k, tail) in (1..parts).zip(&tails) {
+            for (gi, ti) in g[cut(k)..].iter_mut().zip(tail) {
+                *gi += ti;
+            }
         }
     }
 }

@@ -15,11 +15,11 @@ fn symmetric(m: usize) -> Mat<f64> {
 }
 
 /// D z − d from the lower triangle equals the full product to rounding, below and above
-/// the size where it splits over two threads, and is the same bit for bit on one thread
-/// or several.
+/// the size where it splits over the threads and where it cuts D in more parts, and is the
+/// same bit for bit on one thread or several.
 #[test]
 fn gradient_from_the_lower_triangle() {
-    for m in [1, 5, 37, 700] {
+    for m in [1, 5, 37, 700, 1100] {
         // z with zeros among its entries.
         let mat = symmetric(m);
         let z: Vec<f64> = (0..m)
@@ -30,8 +30,8 @@ fn gradient_from_the_lower_triangle() {
             .map(|i| (0..m).map(|j| mat[(i, j)] * z[j]).sum::<f64>() - d[i])
             .collect();
         let scale = m as f64 * 3.0;
-        let mut got = [vec![0.0; m], vec![0.0; m], vec![0.0; m]];
-        for (team, g) in [Team::default(), Team::of(1), Team::of(5)]
+        let mut got = [vec![0.0; m], vec![0.0; m], vec![0.0; m], vec![0.0; m]];
+        for (team, g) in [Team::default(), Team::of(1), Team::of(3), Team::of(5)]
             .into_iter()
             .zip(&mut got)
         {
