@@ -3,7 +3,9 @@
 //! the same frames byte for byte and the same checkpoint, apart from the run id. The scenes
 //! reach the threaded parts of a step: the 2D paper scene at h = 1/128 (memory and
 //! friction; its factor is large enough for the solves' two groups of subtrees), the 3D
-//! block (a dense dual with Newton steps) and a run written as one `.vtkhdf` file.
+//! block (a dense dual with Newton steps), the plate on its foundation (a root supernode
+//! large enough to share its rows, D z in eight parts) and a run written as one `.vtkhdf`
+//! file.
 
 use crate::common;
 
@@ -113,6 +115,14 @@ fn paper_with_memory_and_friction_is_the_same_for_every_thread_count() {
 fn block_3d_is_the_same_for_every_thread_count() {
     let scene = repo().join("examples/block.toml");
     same_for_every_count("block", &scene, &["time.steps=8"]);
+}
+
+#[test]
+fn plate_with_a_wide_root_is_the_same_for_every_thread_count() {
+    let scene = repo().join("examples/block.toml");
+    let mesh = repo().join("tests/data/3d/plate_005.msh");
+    let mesh = format!("mesh.file={:?}", mesh.to_str().unwrap());
+    same_for_every_count("plate", &scene, &["time.steps=6", &mesh]);
 }
 
 #[test]

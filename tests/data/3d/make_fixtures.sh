@@ -12,6 +12,9 @@
 #                       2 811 dual iterations, more than the limit then (tests/robustness.rs)
 #   block_unstructured.msh  meshes/3d/block.geo, n = 4, unstructured: gmsh's own tetrahedra
 #                       for the block scene (tests/contact.rs: fast solver against clarabel)
+#   plate_005.msh       meshes/3d/block.geo at height 1/4, unstructured, size 0.05, binary:
+#                       the plate on its foundation, m >= 1 024 contact rows and a root
+#                       supernode of 1.7 M values (tests/regression/threads.rs)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 GMSH=${GMSH:-gmsh}
@@ -27,3 +30,5 @@ mesh patch_box.geo -setnumber lc 2 -order 2 -o quadratic_tets.msh
 mesh ../../../meshes/3d/slab.geo -setnumber n 16 -setnumber t 0.008 -o slab_t0008.msh
 mesh ../../../meshes/3d/slab.geo -setnumber n 16 -setnumber t 0.004 -o slab_t0004.msh
 mesh ../../../meshes/3d/block.geo -setnumber n 4 -setnumber unstructured 1 -o block_unstructured.msh
+mesh ../../../meshes/3d/block.geo -setnumber height 0.25 -setnumber unstructured 1 \
+    -setnumber Mesh.MeshSizeMax 0.05 -bin -o plate_005.msh
