@@ -25,6 +25,7 @@
 
 use super::{dot, dot4, wide_forward, Factor};
 use crate::solver::team::{blocks, Team};
+use std::ops::Range;
 
 /// The fewest stored values of a supernode that takes these passes: 8 MB, a pass of about
 /// a millisecond, where a panel's hand-out to the threads (a few microseconds, one per
@@ -58,10 +59,44 @@ impl Default for Shared {
     }
 }
 
-/// Where column j of a supernode of `size` columns and r rows below starts in its packed
-/// values: Σ_{i<j} (size − i + r).
-fn column_start(size: usize, r: usize, j: usize) -> usize {
-    j * (2 * (size + r) + 1 - j) / 2
+/// A wide supernode's packed values: `size` columns, each holding the rows j..size of the
+/// diagonal block and then the r rows below (`Layout`).
+#[derive(Clone, Copy)]
+struct Wide<'a> {
+    vals: &'a [f64],
+    size: usize,
+    r: usize,
+}
+
+impl<'a> Wide<'a> {
+    /// Column j: rows j..size of the diagonal block, then the rows below.
+    fn column(&self, j: usize) -> &'a [f64] {
+        // Column j starts after Σ_{i<j} (size − i + r) values.
+        let start = |j: usize| j * (2 * (self.size + self.r) + 1 - j) / 2;
+        &self.vals[start(j)..start(j + 1)]
+    }
+}
+
+/// The threads a pass may hand its pieces to: the team, or none (inside a unit).
+#[derive(Clone, Copy)]
+struct Threads<'a> {
+    team: Option<&'a Team>,
+    share_rows: usize,
+}
+
+impl Threads<'_> {
+    /// The pieces for work over `rows` rows (or sums): the team's size from `share_rows` on.
+    fn pieces(&self, rows: usize) -> usize {
+        self.team.map_or(1, |t| t.pieces(rows >= self.share_rows))
+    }
+
+    /// Runs the parts on the team's threads when there are several, else here.
+    fn each<T: Send>(&self, parts: Vec<T>, work: impl Fn(T) + Sync) {
+        match self.team {
+            Some(team) if parts.len() > 1 => team.each(parts, work),
+            _ => parts.into_iter().for_each(work),
+        }
+    }
 }
 
 /// `v` cut into `pieces` consecutive blocks (some empty where `v` is shorter), each with
@@ -79,20 +114,27 @@ fn cut(v: &mut [f64], pieces: usize) -> Vec<(usize, &mut [f64])> {
     out
 }
 
-/// Runs the parts on the team's threads, else one after the other here.
-fn each<T: Send>(team: Option<&Team>, parts: Vec<T>, work: impl Fn(T) + Sync) {
-    match team {
-        Some(team) => team.each(parts, work),
-        None => parts.into_iter().for_each(work),
-    }
-}
-
 impl Factor {
     /// Whether supernode s takes this module's passes.
     pub(super) fn is_shared(&self, s: usize) -> bool {
         let values = self.layout.val_ptr[s + 1] - self.layout.val_ptr[s];
         let size = self.layout.begin[s + 1] - self.layout.begin[s];
         values >= self.shared.min && size > 4
+    }
+
+    /// Supernode s's values, and the threads of a pass of `team` when `share`.
+    fn wide_parts<'a>(&'a self, s: usize, team: &'a Team, share: bool) -> (Wide<'a>, Threads<'a>) {
+        let (cols, rows, vals) = self.layout.supernode(s, &self.values);
+        let wide = Wide {
+            vals,
+            size: cols.len(),
+            r: rows.len(),
+        };
+        let threads = Threads {
+            team: share.then_some(team),
+            share_rows: self.shared.share_rows,
+        };
+        (wide, threads)
     }
 
     /// `wide_forward` over supernode s (the same bits), in panels whose rows below are
@@ -111,46 +153,14 @@ impl Factor {
         if !share {
             return wide_forward(vals, rows, cols, t, y, base, ext);
         }
-        let (size, r) = (cols.len(), rows.len());
-        let column = |j: usize| &vals[column_start(size, r, j)..column_start(size, r, j + 1)];
-        let t = &mut t[..r];
+        let (w, threads) = self.wide_parts(s, &self.shared.forward_team, share);
+        let t = &mut t[..w.r];
         t.fill(0.0);
         let ys = &mut y[cols.start - base..cols.end - base];
-        for p in (0..size).step_by(PANEL) {
-            let q = (p + PANEL).min(size);
-            for j in p..q {
-                let col = column(j);
-                let yj = ys[j] / col[0];
-                ys[j] = yj;
-                for (yi, l) in ys[j + 1..q].iter_mut().zip(&col[1..]) {
-                    *yi -= l * yj;
-                }
-            }
-            let (head, low) = ys.split_at_mut(q);
-            let solved = &head[p..];
-            let large = size - q + r >= self.shared.share_rows;
-            let team = &self.shared.forward_team;
-            let pieces = team.pieces(large);
-            let parts: Vec<_> = cut(low, pieces).into_iter().zip(cut(t, pieces)).collect();
-            each(
-                large.then_some(team),
-                parts,
-                |((low_at, low), (t_at, t))| {
-                    for (k, j) in (p..q).enumerate() {
-                        let (col, yj) = (column(j), solved[k]);
-                        // Row q + low_at is entry q + low_at − j of column j; R's row t_at is
-                        // entry size − j + t_at.
-                        for (yi, l) in low.iter_mut().zip(&col[q + low_at - j..]) {
-                            *yi -= l * yj;
-                        }
-                        for (ti, l) in t.iter_mut().zip(&col[size - j + t_at..]) {
-                            *ti += l * yj;
-                        }
-                    }
-                },
-            );
+        for p in (0..w.size).step_by(PANEL) {
+            forward_panel(w, p..(p + PANEL).min(w.size), ys, t, threads);
         }
-        let own = r - ext.len();
+        let own = w.r - ext.len();
         for (&row, ti) in rows[..own].iter().zip(t.iter()) {
             y[row as usize - base] -= ti;
         }
@@ -169,76 +179,118 @@ impl Factor {
         g: &mut [f64],
         share: bool,
     ) {
-        let (cols, rows, vals) = self.layout.supernode(s, &self.values);
-        let (size, r) = (cols.len(), rows.len());
-        let column = |j: usize| &vals[column_start(size, r, j)..column_start(size, r, j + 1)];
-        let team = share.then_some(&self.shared.backward_team);
-        let pieces = |large: bool| team.map_or(1, |t| t.pieces(large));
-        let g = &mut g[..r];
-        let own = r - ext.len();
+        let (w, threads) = self.wide_parts(s, &self.shared.backward_team, share);
+        let (cols, rows, _) = self.layout.supernode(s, &self.values);
+        let g = &mut g[..w.r];
+        let own = w.r - ext.len();
         for (gi, &row) in g[..own].iter_mut().zip(rows) {
             *gi = y[row as usize - base];
         }
         g[own..].copy_from_slice(ext);
-        let g = &*g;
         let ys = &mut y[cols.start - base..cols.end - base];
-        // y_s − L_Rsᵀ y_R: `wide_backward`'s sums, four columns at a time from the first
-        // (blocks of whole fours, the last block with the columns after the last four).
-        let fours = size / 4;
-        let large = r >= self.shared.share_rows;
-        let mut parts = Vec::new();
-        let mut rest = &mut *ys;
-        for range in blocks(fours, pieces(large)) {
-            let end = if range.end == fours {
-                size
-            } else {
-                4 * range.end
-            };
-            let (piece, tail) = std::mem::take(&mut rest).split_at_mut(end - 4 * range.start);
-            parts.push((4 * range.start, piece));
-            rest = tail;
+        subtract_below(w, g, ys, threads);
+        let mut sums = vec![0.0; PANEL];
+        let panels: Vec<usize> = (0..w.size).step_by(PANEL).collect();
+        for &p in panels.iter().rev() {
+            backward_panel(w, p..(p + PANEL).min(w.size), ys, &mut sums, threads);
         }
-        each(team.filter(|_| large), parts, |(j0, piece)| {
-            let below = |j: usize| &column(j)[size - j..];
-            let mut k = 0;
-            while k + 4 <= piece.len() && j0 + k + 4 <= 4 * fours {
-                let c = std::array::from_fn(|i| below(j0 + k + i));
-                for (yj, d) in piece[k..k + 4].iter_mut().zip(dot4(c, g)) {
-                    *yj -= d;
-                }
-                k += 4;
+    }
+}
+
+/// The forward pass over the panel's columns p..q: their triangle here, then the rows
+/// below the panel (of the diagonal block in `ys`, of R summed into `t`) in blocks over
+/// the threads, each row's updates in column order.
+fn forward_panel(w: Wide, panel: Range<usize>, ys: &mut [f64], t: &mut [f64], threads: Threads) {
+    let (p, q) = (panel.start, panel.end);
+    for j in panel.clone() {
+        let col = w.column(j);
+        let yj = ys[j] / col[0];
+        ys[j] = yj;
+        for (yi, l) in ys[j + 1..q].iter_mut().zip(&col[1..]) {
+            *yi -= l * yj;
+        }
+    }
+    let (head, low) = ys.split_at_mut(q);
+    let solved = &head[p..];
+    let pieces = threads.pieces(w.size - q + w.r);
+    let parts: Vec<_> = cut(low, pieces).into_iter().zip(cut(t, pieces)).collect();
+    threads.each(parts, |((low_at, low), (t_at, t))| {
+        for (j, yj) in panel.clone().zip(solved) {
+            let col = w.column(j);
+            // Row q + low_at is entry q + low_at − j of column j; R's row t_at is entry
+            // size − j + t_at.
+            for (yi, l) in low.iter_mut().zip(&col[q + low_at - j..]) {
+                *yi -= l * yj;
             }
-            for (k, yj) in piece.iter_mut().enumerate().skip(k) {
-                *yj -= dot(below(j0 + k), g);
+            for (ti, l) in t.iter_mut().zip(&col[w.size - j + t_at..]) {
+                *ti += l * yj;
+            }
+        }
+    });
+}
+
+/// ys ← ys − L_Rsᵀ g: `wide_backward`'s sums, four columns at a time from the first, in
+/// blocks of whole fours over the threads (the last block also takes the columns after the
+/// last four).
+fn subtract_below(w: Wide, g: &[f64], ys: &mut [f64], threads: Threads) {
+    let fours = w.size / 4;
+    let mut parts = Vec::new();
+    let mut rest = ys;
+    for range in blocks(fours, threads.pieces(w.r)) {
+        let end = if range.end == fours {
+            w.size
+        } else {
+            4 * range.end
+        };
+        let (piece, tail) = std::mem::take(&mut rest).split_at_mut(end - 4 * range.start);
+        parts.push((4 * range.start, piece));
+        rest = tail;
+    }
+    threads.each(parts, |(j0, piece)| {
+        let below = |j: usize| &w.column(j)[w.size - j..];
+        let mut k = 0;
+        while k + 4 <= piece.len() && j0 + k + 4 <= 4 * fours {
+            let c = std::array::from_fn(|i| below(j0 + k + i));
+            for (yj, d) in piece[k..k + 4].iter_mut().zip(dot4(c, g)) {
+                *yj -= d;
+            }
+            k += 4;
+        }
+        for (k, yj) in piece.iter_mut().enumerate().skip(k) {
+            *yj -= dot(below(j0 + k), g);
+        }
+    });
+}
+
+/// L_ssᵀ⁻¹ on the panel's columns p..q, the rows below the panel solved: their sums over
+/// those rows in blocks of columns over the threads (into `sums`), then the panel's
+/// triangle here, the last column first.
+fn backward_panel(
+    w: Wide,
+    panel: Range<usize>,
+    ys: &mut [f64],
+    sums: &mut [f64],
+    threads: Threads,
+) {
+    let (p, q, size) = (panel.start, panel.end, w.size);
+    let (head, low) = ys.split_at_mut(q);
+    let low = &*low;
+    if q < size {
+        let parts = cut(&mut sums[..q - p], threads.pieces(size - q));
+        threads.each(parts, |(k0, piece)| {
+            for (j, sum) in (p + k0..).zip(piece.iter_mut()) {
+                *sum = dot(&w.column(j)[q - j..size - j], low);
             }
         });
-        // L_ssᵀ⁻¹ from the last panel up.
-        let panels: Vec<usize> = (0..size).step_by(PANEL).collect();
-        let mut sums = vec![0.0; PANEL];
-        for &p in panels.iter().rev() {
-            let q = (p + PANEL).min(size);
-            let (head, low) = ys.split_at_mut(q);
-            let low = &*low;
-            if q < size {
-                let large = size - q >= self.shared.share_rows;
-                let parts = cut(&mut sums[..q - p], pieces(large));
-                each(team.filter(|_| large), parts, |(k0, piece)| {
-                    for (k, sum) in piece.iter_mut().enumerate() {
-                        let j = p + k0 + k;
-                        *sum = dot(&column(j)[q - j..size - j], low);
-                    }
-                });
-            }
-            for j in (p..q).rev() {
-                let col = column(j);
-                let within = dot(&col[1..q - j], &head[j + 1..q]);
-                let sum = if q < size {
-                    sums[j - p] + within
-                } else {
-                    within
-                };
-                head[j] = (head[j] - sum) / col[0];
-            }
-        }
+    }
+    for j in panel.rev() {
+        let col = w.column(j);
+        let within = dot(&col[1..q - j], &head[j + 1..q]);
+        let sum = if q < size {
+            sums[j - p] + within
+        } else {
+            within
+        };
+        head[j] = (head[j] - sum) / col[0];
     }
 }
