@@ -33,11 +33,14 @@ impl Delassus {
     pub(super) fn gradient(&self, z: &[f64], d: &[f64], g: &mut [f64]) {
         let m = g.len();
         let parts = if m >= MANY_FROM { MANY_PARTS } else { 2 };
-        let cut = |k: usize| match k {
-            0 => 0,
-            k if k == parts => m,
-            k => m - (m as f64 / (parts as f64 / (parts - k) as f64).sqrt()) as usize,
-        };
+        let cuts: Vec<usize> = (0..=parts)
+            .map(|k| match k {
+                0 => 0,
+                k if k == parts => m,
+                k => m - (m as f64 / (parts as f64 / (parts - k) as f64).sqrt()) as usize,
+            })
+            .collect();
+        let cut = |k: usize| cuts[k];
         // The columns `cols`' share of D z, accumulated into y (rows first.. of D z).
         let part = |cols: Range<usize>, y: &mut [f64], first: usize| {
             for j in cols {

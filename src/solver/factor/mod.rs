@@ -285,11 +285,27 @@ fn wide_forward(
             *ti += l * yj;
         }
     }
+    subtract_below(rows, t, y, base, ext);
+}
+
+/// y_R ← y_R − t for the rows R of a supernode's pattern held in `y` (`y[i]` is row
+/// base + i), the last `ext.len()` of t stored in `ext` instead (`split`'s records).
+fn subtract_below(rows: &[u32], t: &[f64], y: &mut [f64], base: usize, ext: &mut [f64]) {
     let own = rows.len() - ext.len();
-    for (&r, ti) in rows[..own].iter().zip(t.iter()) {
+    for (&r, ti) in rows[..own].iter().zip(t) {
         y[r as usize - base] -= ti;
     }
     ext.copy_from_slice(&t[own..]);
+}
+
+/// g ← y_R for the rows R of a supernode's pattern, the last `ext.len()` read from `ext`
+/// (`split`'s records); `y[i]` is row base + i.
+fn gather_below(rows: &[u32], y: &[f64], base: usize, ext: &[f64], g: &mut [f64]) {
+    let own = rows.len() - ext.len();
+    for (gi, &row) in g[..own].iter_mut().zip(rows) {
+        *gi = y[row as usize - base];
+    }
+    g[own..].copy_from_slice(ext);
 }
 
 /// The backward pass over a supernode of K ≤ 4 columns starting at column c0: y_s ←
@@ -377,11 +393,7 @@ fn wide_backward(
     }
     let (size, r) = (cols.len(), rows.len());
     let g = &mut g[..r];
-    let own = r - ext.len();
-    for (gi, &row) in g[..own].iter_mut().zip(rows) {
-        *gi = y[row as usize - base];
-    }
-    g[own..].copy_from_slice(ext);
+    gather_below(rows, y, base, ext, g);
     let ys = &mut y[cols.start - base..cols.end - base];
     let (mut end, mut j) = (0, 0);
     while j + 4 <= size {
@@ -666,8 +678,10 @@ impl Factor {
         t: &mut [f64],
         share: bool,
     ) {
-        if self.is_shared(s) {
-            return self.shared_forward(s, y, base, ext, t, share);
+        // Inside a unit (`share` false) a wide supernode's forward pass is `wide_forward`:
+        // the shared pass has its bits.
+        if share && self.is_shared(s) {
+            return self.shared_forward(s, y, base, ext, t);
         }
         let (cols, rows, vals) = self.layout.supernode(s, &self.values);
         match cols.len() {

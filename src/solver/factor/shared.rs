@@ -21,9 +21,9 @@
 //!   arithmetic, wherever it runs.
 //!
 //! The units' threads run their own supernodes on one thread each (`share` false): there
-//! the others are busy.
+//! the others are busy, and the forward pass is `wide_forward` itself.
 
-use super::{dot, dot4, wide_forward, Factor};
+use super::{dot, dot4, gather_below, subtract_below, Factor};
 use crate::solver::team::{blocks, Team};
 use std::ops::Range;
 
@@ -138,8 +138,7 @@ impl Factor {
     }
 
     /// `wide_forward` over supernode s (the same bits), in panels whose rows below are
-    /// shared out over the threads when `share`. `y`, `base`, `ext` and `t` as in
-    /// `forward_step`.
+    /// shared out over the threads. `y`, `base`, `ext` and `t` as in `forward_step`.
     pub(super) fn shared_forward(
         &self,
         s: usize,
@@ -147,24 +146,16 @@ impl Factor {
         base: usize,
         ext: &mut [f64],
         t: &mut [f64],
-        share: bool,
     ) {
-        let (cols, rows, vals) = self.layout.supernode(s, &self.values);
-        if !share {
-            return wide_forward(vals, rows, cols, t, y, base, ext);
-        }
-        let (w, threads) = self.wide_parts(s, &self.shared.forward_team, share);
+        let (w, threads) = self.wide_parts(s, &self.shared.forward_team, true);
+        let (cols, rows, _) = self.layout.supernode(s, &self.values);
         let t = &mut t[..w.r];
         t.fill(0.0);
         let ys = &mut y[cols.start - base..cols.end - base];
         for p in (0..w.size).step_by(PANEL) {
             forward_panel(w, p..(p + PANEL).min(w.size), ys, t, threads);
         }
-        let own = w.r - ext.len();
-        for (&row, ti) in rows[..own].iter().zip(t.iter()) {
-            y[row as usize - base] -= ti;
-        }
-        ext.copy_from_slice(&t[own..]);
+        subtract_below(rows, t, y, base, ext);
     }
 
     /// y_s ← L_ssᵀ⁻¹ (y_s − L_Rsᵀ y_R) over supernode s in this module's arithmetic, its
@@ -182,13 +173,9 @@ impl Factor {
         let (w, threads) = self.wide_parts(s, &self.shared.backward_team, share);
         let (cols, rows, _) = self.layout.supernode(s, &self.values);
         let g = &mut g[..w.r];
-        let own = w.r - ext.len();
-        for (gi, &row) in g[..own].iter_mut().zip(rows) {
-            *gi = y[row as usize - base];
-        }
-        g[own..].copy_from_slice(ext);
+        gather_below(rows, y, base, ext, g);
         let ys = &mut y[cols.start - base..cols.end - base];
-        subtract_below(w, g, ys, threads);
+        subtract_sums(w, g, ys, threads);
         let mut sums = vec![0.0; PANEL];
         let panels: Vec<usize> = (0..w.size).step_by(PANEL).collect();
         for &p in panels.iter().rev() {
@@ -232,7 +219,7 @@ fn forward_panel(w: Wide, panel: Range<usize>, ys: &mut [f64], t: &mut [f64], th
 /// ys ← ys − L_Rsᵀ g: `wide_backward`'s sums, four columns at a time from the first, in
 /// blocks of whole fours over the threads (the last block also takes the columns after the
 /// last four).
-fn subtract_below(w: Wide, g: &[f64], ys: &mut [f64], threads: Threads) {
+fn subtract_sums(w: Wide, g: &[f64], ys: &mut [f64], threads: Threads) {
     let fours = w.size / 4;
     let mut parts = Vec::new();
     let mut rest = ys;
