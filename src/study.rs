@@ -64,6 +64,7 @@ pub mod memory_cost;
 mod meshes;
 mod plan;
 mod report;
+mod shared;
 pub mod slurm;
 pub mod transfer;
 
@@ -74,8 +75,10 @@ use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use crate::{Error, Result};
 use serde::Serialize;
+use shared::{Discretized, Discs, Transfers};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Instant;
 use transfer::{max_edge, nodal_vectors, p1_norms, Transfer};
 
@@ -303,7 +306,8 @@ pub struct StudyReport {
 
 /// The solution of one run at T and what it cost.
 pub struct Solved {
-    pub disc: Discretization,
+    /// Shared by the cases on one mesh where the study discretizes for them (`shared`).
+    pub disc: Arc<Discretization>,
     /// u_N per node (3 components, z = 0 in 2D; 0 on Γ1).
     pub u: Vec<[f64; 3]>,
     pub steps: usize,
@@ -369,7 +373,7 @@ pub const SETUP_MEMORY: f64 = 1024.0 * 1024.0 * 1024.0;
 pub(crate) struct Prepared {
     scene: Scene,
     mesh: String,
-    disc: Discretization,
+    disc: Arc<Discretization>,
     given: &'static str,
 }
 
@@ -382,7 +386,16 @@ impl Prepared {
         case: impl FnOnce(Scene) -> Result<Scene>,
         form: KernelForm,
     ) -> Result<Prepared> {
-        let (mut scene, mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
+        let (scene, mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
+        let d = Discretized {
+            mesh: mesh.path.display().to_string(),
+            disc: Arc::new(disc),
+        };
+        Prepared::of(scene, d, form)
+    }
+
+    /// The scene of a case and the discretization of its mesh, with its kernel in `form`.
+    fn of(mut scene: Scene, d: Discretized, form: KernelForm) -> Result<Prepared> {
         let given = kernel_name(scene.physics.relaxation.as_ref());
         if form == KernelForm::Expression {
             scene.physics.relaxation =
@@ -392,15 +405,29 @@ impl Prepared {
         }
         Ok(Prepared {
             scene,
-            mesh: mesh.path.display().to_string(),
-            disc,
+            mesh: d.mesh,
+            disc: d.disc,
             given,
         })
     }
 
-    /// The case of a study, prepared.
-    fn of_case(scene_path: &Path, overrides: &[String], c: &Case) -> Result<Prepared> {
-        Prepared::new(scene_path, overrides, case(&c.mesh, c.steps), c.form)
+    /// The case of a study, prepared with the discretization of its mesh from `discs`.
+    fn of_case(
+        scene_path: &Path,
+        overrides: &[String],
+        c: &Case,
+        discs: &mut Discs,
+    ) -> Result<Prepared> {
+        let (scene, d) = discs.prepare(scene_path, overrides, case(&c.mesh, c.steps))?;
+        Prepared::of(scene, d, c.form)
+    }
+
+    /// The mesh and its discretization.
+    fn discretized(&self) -> Discretized {
+        Discretized {
+            mesh: self.mesh.clone(),
+            disc: self.disc.clone(),
+        }
     }
 
     /// The memory a run of the case may take, in bytes: what `check` estimates its steps
@@ -504,15 +531,15 @@ pub struct ErrorNorms {
     pub nested: bool,
 }
 
-/// ‖u − u_ref‖ on the reference mesh: u is moved onto the reference nodes ([`Transfer`]) and
-/// the difference of the two P1 fields is integrated exactly.
+/// ‖u − u_ref‖ on the reference mesh: u is moved onto the reference nodes by `t` (a
+/// [`Transfer`] from u's mesh to the reference mesh) and the difference of the two P1
+/// fields is integrated exactly.
 pub fn error_norms(
-    disc: &Discretization,
+    t: &Transfer,
     u: &[[f64; 3]],
     reference: &Discretization,
     u_ref: &[[f64; 3]],
 ) -> ErrorNorms {
-    let t = Transfer::between(disc, reference);
     let on_ref = t.apply(u);
     let e: Vec<[f64; 3]> = on_ref
         .iter()
@@ -551,12 +578,19 @@ pub fn run_study(scene_path: &Path, opts: &StudyOptions) -> Result<StudyReport> 
     check_levels(opts)?;
     let meshes = Meshes::for_study(scene_path, opts)?;
     let plan = Plan::new(opts, &meshes)?;
+    let mut transfers = Transfers::default();
     let solved = if opts.jobs > 1 {
-        jobs::solve_side_by_side(scene_path, opts, &plan.cases)?
+        jobs::solve_side_by_side(scene_path, opts, &plan, &mut transfers)?
     } else {
         solve_in_turn(scene_path, opts, &plan.cases)?
     };
-    Ok(assemble(scene_path, opts, &meshes, &plan, &solved))
+    Ok(assemble(
+        scene_path,
+        opts,
+        (&meshes, &plan),
+        &solved,
+        &mut transfers,
+    ))
 }
 
 /// Solves the cases one after another in this process.
@@ -590,13 +624,13 @@ pub fn solve_case_timed(
 }
 
 /// The report of a study from the solutions of its cases (`solved[i]` solves
-/// `plan.cases[i]`).
+/// `plan.cases[i]`), with the transfers made so far.
 fn assemble(
     scene_path: &Path,
     opts: &StudyOptions,
-    meshes: &Meshes,
-    plan: &Plan,
+    (meshes, plan): (&Meshes, &Plan),
     solved: &[(Solved, &'static str)],
+    transfers: &mut Transfers,
 ) -> StudyReport {
     let mut families = Vec::new();
     let mut kernel_cost = Vec::new();
@@ -613,7 +647,7 @@ fn assemble(
                 reference: &reference,
                 ref_run: r,
             };
-            families.push(family_of(family, meshes, levels, solved));
+            families.push(family_of(family, meshes, levels, solved, transfers));
             solved_by_form.push(levels.iter().map(|l| &solved[l.case].0).collect());
         }
         if let [prony, expr] = &solved_by_form[..] {
@@ -681,6 +715,7 @@ fn family_of(
     meshes: &Meshes,
     levels: &[Level],
     solved: &[(Solved, &'static str)],
+    transfers: &mut Transfers,
 ) -> Family {
     let mut rows: Vec<Row> = Vec::new();
     let mut kernel = String::new();
@@ -689,7 +724,10 @@ fn family_of(
         kernel = family.form.label(given);
         let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
         let h = [meshes.nominal_h(l.mesh_n, h_max), h_max];
-        rows.push(row(family, l.n, h, &kernel, s, rows.last()));
+        let (r, ref_mesh) = (family.ref_run, &family.reference.mesh);
+        let t = transfers.between((&s.mesh, &s.disc), (ref_mesh, &r.disc));
+        let e = error_norms(t, &s.u, &r.disc, &r.u);
+        rows.push(row(family, (l.n, h), &kernel, (s, e), rows.last()));
     }
     Family {
         vary: family.vary,
@@ -700,18 +738,16 @@ fn family_of(
     }
 }
 
-/// The row of level n of a family, solved as `s` on a mesh of nominal size h and longest
-/// edge h_max; `prev` is the row before it (for the observed orders).
+/// The row of level n of a family, solved as `s` with the error `e` on a mesh of nominal
+/// size h and longest edge h_max; `prev` is the row before it (for the observed orders).
 fn row(
     family: FamilyCase,
-    n: usize,
-    [h, h_max]: [f64; 2],
+    (n, [h, h_max]): (usize, [f64; 2]),
     kernel: &str,
-    s: &Solved,
+    (s, e): (&Solved, ErrorNorms),
     prev: Option<&Row>,
 ) -> Row {
-    let (vary, r, reference) = (family.vary, family.ref_run, family.reference);
-    let e = error_norms(&s.disc, &s.u, &r.disc, &r.u);
+    let (vary, reference) = (family.vary, family.reference);
     let (order_h1, order_l2) = match prev {
         Some(prev) => {
             let (p0, p1) = match vary {

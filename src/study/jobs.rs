@@ -8,11 +8,16 @@
 //! file; this process reads and discretizes the same case (which is deterministic) for the
 //! error norms. The numbers of the report are therefore those of `--jobs 1`, bit for bit.
 //!
-//! - Packing: the cases start in the order of the study; a case starts while fewer than N
-//!   run and the memory of its run and of the running ones fits in the share of the
+//! - Order: the longest case first (the longest-processing-time rule: a long case started
+//!   last runs alone at the end), by the size of its mesh file times its steps, an estimate
+//!   that reads nothing; ties in the order of the study.
+//! - Packing: a case starts while fewer than N run and the memory of its run and of the running ones fits in the share of the
 //!   available memory a run may plan: `check`'s estimate of what the steps hold
 //!   ([`crate::resources::Estimate`]) plus [`super::SETUP_MEMORY`] each; a case that does
 //!   not fit waits, unless nothing runs.
+//! - This process, while it waits, makes the transfers of the cases' meshes onto their
+//!   references' meshes (`shared::Transfers`) for the error norms, which would otherwise
+//!   run alone after the last case.
 //! - Threads: each process gets the study's threads (`--threads`, else the cores it may
 //!   use: `threads::count`) / N of them (at least 1) through `VISCONTACT_THREADS`.
 //! - Failure: a case whose process fails or is killed stops the study: the other processes
@@ -21,6 +26,8 @@
 //!   study stops with them and is run again from the start, as a study run one case after
 //!   another is.
 
+use super::plan::Plan;
+use super::shared::{Discretized, Discs, Transfers};
 use super::{solve_case_timed, Case, KernelForm, Prepared, Solved, StudyOptions};
 use crate::resources::{available_memory, MARGIN};
 use crate::{Error, Result};
@@ -83,12 +90,16 @@ impl Drop for Scratch {
     }
 }
 
-/// Solves the cases in up to `opts.jobs` processes at a time; `solved[i]` solves `cases[i]`.
+/// Solves the cases of `plan` in up to `opts.jobs` processes at a time (`solved[i]` solves
+/// `plan.cases[i]`), and makes the transfers of their error norms meanwhile.
 pub(super) fn solve_side_by_side(
     scene_path: &Path,
     opts: &StudyOptions,
-    cases: &[Case],
+    plan: &Plan,
+    transfers: &mut Transfers,
 ) -> Result<Vec<(Solved, &'static str)>> {
+    let cases = &plan.cases;
+    let errors: Vec<(usize, usize)> = plan.errors().collect();
     let scratch =
         Scratch(std::env::temp_dir().join(format!("viscontact-study-{}", std::process::id())));
     std::fs::create_dir_all(&scratch.0).map_err(|e| Error::io(&scratch.0, e))?;
@@ -96,13 +107,16 @@ pub(super) fn solve_side_by_side(
     let budget = available_memory()?.map(|m| MARGIN * m);
     let mut solved: Vec<Option<(Solved, &'static str)>> = cases.iter().map(|_| None).collect();
     let mut running = Running(Vec::new());
+    let (mut discs, mut meshes) = (Discs::default(), vec![None; cases.len()]);
+    let mut order = longest_first(scene_path, cases).into_iter();
     let mut next: Option<(usize, Prepared)> = None;
-    let mut started = 0;
     loop {
-        if next.is_none() && started < cases.len() {
-            let p = Prepared::of_case(scene_path, &opts.overrides, &cases[started])?;
-            next = Some((started, p));
-            started += 1;
+        if next.is_none() {
+            if let Some(i) = order.next() {
+                let p = Prepared::of_case(scene_path, &opts.overrides, &cases[i], &mut discs)?;
+                meshes[i] = Some(p.discretized());
+                next = Some((i, p));
+            }
         }
         let in_use: f64 = running.0.iter().map(|r| r.memory).sum();
         let fits = |p: &Prepared| budget.is_none_or(|b| in_use + p.memory() <= b);
@@ -116,7 +130,9 @@ pub(super) fn solve_side_by_side(
                 if running.0.is_empty() {
                     break;
                 }
-                let (i, s) = wait_any(&mut running, cases)?;
+                let (i, s) = wait_any(&mut running, cases, || {
+                    transfer_one(&errors, &meshes, transfers)
+                })?;
                 solved[i] = Some(s);
             }
         }
@@ -125,6 +141,36 @@ pub(super) fn solve_side_by_side(
         .into_iter()
         .map(|s| s.expect("every case ran"))
         .collect())
+}
+
+/// The order in which the cases start (module docs).
+fn longest_first(scene_path: &Path, cases: &[Case]) -> Vec<usize> {
+    let dir = scene_path.parent().unwrap_or(Path::new(""));
+    let cost = |c: &Case| {
+        let bytes = std::fs::metadata(dir.join(&c.mesh)).map_or(0, |m| m.len());
+        u128::from(bytes) * (c.steps as u128 + 1)
+    };
+    let mut order: Vec<usize> = (0..cases.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(cost(&cases[i])));
+    order
+}
+
+/// Makes one transfer that an error norm needs and whose two meshes are discretized, if
+/// one is left; false if none is.
+fn transfer_one(
+    errors: &[(usize, usize)],
+    meshes: &[Option<Discretized>],
+    transfers: &mut Transfers,
+) -> bool {
+    for &(i, r) in errors {
+        if let (Some(s), Some(t)) = (&meshes[i], &meshes[r]) {
+            if !transfers.has(&s.mesh, &t.mesh) {
+                transfers.between((&s.mesh, &s.disc), (&t.mesh, &t.disc));
+                return true;
+            }
+        }
+    }
+    false
 }
 
 /// Starts the process of case `i` (prepared as `p`), writing its result into `dir`, with
@@ -172,8 +218,13 @@ fn start(
 }
 
 /// Waits until a process ends and returns its case's solution; a process that failed fails
-/// the study, naming its case.
-fn wait_any(running: &mut Running, cases: &[Case]) -> Result<(usize, (Solved, &'static str))> {
+/// the study, naming its case. Meanwhile it calls `idle` while that finds work (returns
+/// true), then sleeps between looks.
+fn wait_any(
+    running: &mut Running,
+    cases: &[Case],
+    mut idle: impl FnMut() -> bool,
+) -> Result<(usize, (Solved, &'static str))> {
     loop {
         for j in 0..running.0.len() {
             let status = match running.0[j].child.try_wait() {
@@ -190,7 +241,9 @@ fn wait_any(running: &mut Running, cases: &[Case]) -> Result<(usize, (Solved, &'
             }
             return read_result(job);
         }
-        std::thread::sleep(Duration::from_millis(20));
+        if !idle() {
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 }
 

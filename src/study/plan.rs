@@ -100,6 +100,16 @@ impl Plan {
         Ok(plan)
     }
 
+    /// The pairs (level's case, its reference's case) whose error the report measures: each
+    /// needs the transfer from the first's mesh to the second's.
+    pub fn errors(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.varies.iter().flat_map(|v| {
+            v.forms
+                .iter()
+                .flat_map(|(_, levels)| levels.iter().map(|l| (l.case, v.reference.case)))
+        })
+    }
+
     /// The index of `case`, added unless an equal one is there.
     fn add(&mut self, case: Case) -> usize {
         match self.cases.iter().position(|c| *c == case) {

@@ -26,6 +26,7 @@
 
 use super::meshes::Meshes;
 use super::plan::{Case, Plan};
+use super::shared::{Discs, Transfers};
 use super::{
     assemble, check_levels, MeshFamily, Prepared, Solved, StudyOptions, StudyReport, Timed, Vary,
 };
@@ -136,6 +137,7 @@ pub fn emit(scene_path: &Path, opts: &StudyOptions, slurm: &SlurmOptions) -> Res
     let plan = Plan::new(&opts, &Meshes::for_study(&saved.scene, &opts)?)?;
     let mut rows = String::from("id\tout\toverrides\n");
     let mut memory: f64 = 0.0;
+    let mut discs = Discs::default();
     for (id, c) in plan.cases.iter().enumerate() {
         let sets = run_overrides(&opts.overrides, c);
         if let Some(bad) = sets.iter().find(|s| s.contains(['\t', '\n'])) {
@@ -145,7 +147,8 @@ pub fn emit(scene_path: &Path, opts: &StudyOptions, slurm: &SlurmOptions) -> Res
             )));
         }
         let _ = writeln!(rows, "{id}\t{}\t{}", run_dir(id), sets.join("\t"));
-        memory = memory.max(Prepared::of_case(&saved.scene, &opts.overrides, c)?.memory());
+        let p = Prepared::of_case(&saved.scene, &opts.overrides, c, &mut discs)?;
+        memory = memory.max(p.memory());
     }
     let dir = absolute(&slurm.dir)?;
     std::fs::create_dir_all(dir.join("logs")).map_err(|e| Error::io(&dir, e))?;
@@ -277,19 +280,32 @@ pub fn collect(dir: &Path) -> Result<StudyReport> {
     let opts = saved.options();
     let meshes = Meshes::for_study(&saved.scene, &opts)?;
     let plan = Plan::new(&opts, &meshes)?;
+    let mut discs = Discs::default();
     let solved = plan
         .cases
         .iter()
         .enumerate()
-        .map(|(id, c)| collect_run(&saved, c, &dir.join(run_dir(id)), id))
+        .map(|(id, c)| collect_run(&saved, c, (&dir.join(run_dir(id)), id), &mut discs))
         .collect::<Result<Vec<_>>>()?;
-    let mut report = assemble(&saved.scene, &opts, &meshes, &plan, &solved);
+    let mut transfers = Transfers::default();
+    let mut report = assemble(
+        &saved.scene,
+        &opts,
+        (&meshes, &plan),
+        &solved,
+        &mut transfers,
+    );
     report.timed = Timed::SlurmArray;
     Ok(report)
 }
 
-/// The solution of case `c` from its complete run in `out`.
-fn collect_run(saved: &Saved, c: &Case, out: &Path, id: usize) -> Result<(Solved, &'static str)> {
+/// The solution of case `c` (run `id`) from its complete run in `out`.
+fn collect_run(
+    saved: &Saved,
+    c: &Case,
+    (out, id): (&Path, usize),
+    discs: &mut Discs,
+) -> Result<(Solved, &'static str)> {
     let summary = out.join("summary.json");
     let text = std::fs::read_to_string(&summary).unwrap_or_default();
     let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
@@ -315,6 +331,6 @@ fn collect_run(saved: &Saved, c: &Case, out: &Path, id: usize) -> Result<(Solved
         .map(|c| [c[0], c[1], c[2]])
         .collect();
     let time = |key: &str| v["timing"][key].as_f64().unwrap_or(f64::NAN);
-    let prepared = Prepared::of_case(&saved.scene, &saved.overrides, c)?;
+    let prepared = Prepared::of_case(&saved.scene, &saved.overrides, c, discs)?;
     Ok(prepared.solved(u, time("total_s"), time("steps_s")))
 }
