@@ -133,11 +133,29 @@ impl Tree {
             frontier.extend_from_slice(&self.children[s]);
             cost(s)
         };
+        // Opens every supernode of the frontier that must open, and those of its children
+        // that must, in one pass over a queue, linear in what it visits. It leaves the
+        // frontier (the kept supernodes in order, then the opened ones' children in the
+        // order they were opened) and the cost of opening the first one found, one at a
+        // time, until none is left.
+        let open_all = |frontier: &mut Vec<usize>| {
+            let (mut queue, mut cost_sum) = (std::mem::take(frontier), 0);
+            let mut i = 0;
+            while i < queue.len() {
+                let s = queue[i];
+                if must_open(s) {
+                    cost_sum += cost(s);
+                    queue.extend_from_slice(&self.children[s]);
+                } else {
+                    frontier.push(s);
+                }
+                i += 1;
+            }
+            cost_sum
+        };
         let mut best: Option<(usize, Vec<usize>)> = None;
         for _ in 0..256 {
-            while let Some(&s) = frontier.iter().find(|&&s| must_open(s)) {
-                opened += open(&mut frontier, s);
-            }
+            opened += open_all(&mut frontier);
             let heaviest_bin = self.deal(&frontier, bins).iter().map(|b| b.0).max();
             let path = opened + heaviest_bin.unwrap_or(0);
             if best.as_ref().is_none_or(|b| path < b.0) {
