@@ -5,16 +5,17 @@
 //! of a case than a run directory gives: its wall time without output, the median of
 //! `--repeat` runs, and the kernel handed over as an expression (`--kernel-compare`). The
 //! process writes u_N per node as the bits of its f64 values, with its times, into a result
-//! file; this process reads and discretizes the same case (which is deterministic) for the
-//! error norms. The numbers of the report are therefore those of `--jobs 1`, bit for bit.
+//! file; this process reads and discretizes the case's mesh (which is deterministic; once
+//! per mesh, `shared::Discs`) for the error norms. The numbers of the report are therefore
+//! those of `--jobs 1`, bit for bit.
 //!
 //! - Order: the longest case first (the longest-processing-time rule: a long case started
 //!   last runs alone at the end), by the size of its mesh file times its steps, an estimate
 //!   that reads nothing; ties in the order of the study.
-//! - Packing: a case starts while fewer than N run and the memory of its run and of the running ones fits in the share of the
-//!   available memory a run may plan: `check`'s estimate of what the steps hold
-//!   ([`crate::resources::Estimate`]) plus [`super::SETUP_MEMORY`] each; a case that does
-//!   not fit waits, unless nothing runs.
+//! - Packing: a case starts while fewer than N run and the memory of its run and of the
+//!   running ones fits in the share of the available memory a run may plan: `check`'s
+//!   estimate of what the steps hold ([`crate::resources::Estimate`]) plus
+//!   [`super::SETUP_MEMORY`] each; a case that does not fit waits, unless nothing runs.
 //! - This process, while it waits, makes the transfers of the cases' meshes onto their
 //!   references' meshes (`shared::Transfers`) for the error norms, which would otherwise
 //!   run alone after the last case.
