@@ -79,3 +79,46 @@ impl Transfers {
             .contains_key(&(source.to_string(), target.to_string()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The paper scene on the mesh `rect_NNN.msh` of level n with `steps` steps.
+    fn prepare(discs: &mut Discs, n: usize, steps: usize) -> (Scene, Discretized) {
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/paper.toml");
+        let mesh = format!("../meshes/paper/rect_{n:03}.msh");
+        discs
+            .prepare(&scene, &[], |s| {
+                let end = s.time.end;
+                s.with_mesh(Path::new(&mesh))?.with_time(end, steps)
+            })
+            .unwrap()
+    }
+
+    /// Cases on one mesh share its discretization whatever their steps; another mesh gets
+    /// its own. The transfers are those made directly, one per pair of meshes, the target
+    /// counted: two references give two transfers.
+    #[test]
+    fn discretizations_by_mesh_and_transfers_by_pair() {
+        let mut discs = Discs::default();
+        let (s8, a) = prepare(&mut discs, 8, 8);
+        let (s64, b) = prepare(&mut discs, 8, 64);
+        assert_eq!((s8.time.steps, s64.time.steps), (8, 64));
+        assert!(Arc::ptr_eq(&a.disc, &b.disc));
+        let (_, fine) = prepare(&mut discs, 16, 8);
+        let (_, finer) = prepare(&mut discs, 32, 8);
+        assert!(!Arc::ptr_eq(&a.disc, &fine.disc));
+        assert_eq!(discs.0.len(), 3);
+
+        let mut transfers = Transfers::default();
+        for target in [&fine, &finer, &fine] {
+            let t = transfers.between((&a.mesh, &a.disc), (&target.mesh, &target.disc));
+            let direct = Transfer::between(&a.disc, &target.disc);
+            assert_eq!(t.weights, direct.weights);
+            assert_eq!(t.weights.len(), target.disc.nodes.len());
+        }
+        assert_eq!(transfers.0.len(), 2);
+        assert!(transfers.has(&a.mesh, &fine.mesh) && !transfers.has(&fine.mesh, &a.mesh));
+    }
+}
