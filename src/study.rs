@@ -372,8 +372,8 @@ pub const SETUP_MEMORY: f64 = 1024.0 * 1024.0 * 1024.0;
 /// steps, and the name of the kernel the scene gives.
 pub(crate) struct Prepared {
     scene: Scene,
-    mesh: String,
-    disc: Arc<Discretization>,
+    /// The mesh and its discretization (shared by the cases on that mesh, `shared::Discs`).
+    mesh: Discretized,
     given: &'static str,
 }
 
@@ -405,8 +405,7 @@ impl Prepared {
         }
         Ok(Prepared {
             scene,
-            mesh: d.mesh,
-            disc: d.disc,
+            mesh: d,
             given,
         })
     }
@@ -422,29 +421,21 @@ impl Prepared {
         Prepared::of(scene, d, c.form)
     }
 
-    /// The mesh and its discretization.
-    fn discretized(&self) -> Discretized {
-        Discretized {
-            mesh: self.mesh.clone(),
-            disc: self.disc.clone(),
-        }
-    }
-
     /// The memory a run of the case may take, in bytes: what `check` estimates its steps
     /// hold, plus [`SETUP_MEMORY`].
     fn memory(&self) -> f64 {
-        crate::resources::Estimate::new(&self.scene, &self.disc, 0).memory + SETUP_MEMORY
+        crate::resources::Estimate::new(&self.scene, &self.mesh.disc, 0).memory + SETUP_MEMORY
     }
 
     /// The case solved: u_N per node and the times of one run.
     fn solved(self, u: Vec<[f64; 3]>, wall_s: f64, steps_s: f64) -> (Solved, &'static str) {
         let solved = Solved {
-            disc: self.disc,
+            disc: self.mesh.disc,
             u,
             steps: self.scene.time.steps,
             k: self.scene.time.k(),
             end: self.scene.time.end,
-            mesh: self.mesh,
+            mesh: self.mesh.mesh,
             wall_s,
             steps_s,
             runs: 1,
@@ -465,13 +456,13 @@ fn solve_case(
     let prepared = Prepared::new(scene_path, overrides, case, form)?;
     let steps_start = Instant::now();
     let u = {
-        let mut tl = TimeLoop::new(&prepared.scene, &prepared.disc)?;
+        let mut tl = TimeLoop::new(&prepared.scene, &prepared.mesh.disc)?;
         solve_to_end(&mut tl, prepared.scene.time.steps)?;
         tl.u().to_vec()
     };
     let steps_s = steps_start.elapsed().as_secs_f64();
     let wall_s = start.elapsed().as_secs_f64();
-    let u = nodal_vectors::<3>(&prepared.disc, &u);
+    let u = nodal_vectors::<3>(&prepared.mesh.disc, &u);
     Ok(prepared.solved(u, wall_s, steps_s))
 }
 

@@ -115,7 +115,7 @@ pub(super) fn solve_side_by_side(
         if next.is_none() {
             if let Some(i) = order.next() {
                 let p = Prepared::of_case(scene_path, &opts.overrides, &cases[i], &mut discs)?;
-                meshes[i] = Some(p.discretized());
+                meshes[i] = Some(p.mesh.clone());
                 next = Some((i, p));
             }
         }
