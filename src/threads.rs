@@ -7,7 +7,7 @@
 //! hands work to other threads asks here:
 //! - rayon's global pool, on which faer's parallel kernels run, holds that many threads;
 //! - faer's parallelism is `Par::rayon(N)`, `Par::Seq` for one thread ([`par`]);
-//! - the step's passes (`solver::team::Team`) cut their work in as many pieces and run
+//! - the step's passes (`team::Team`) cut their work in as many pieces and run
 //!   them on that many threads (the factor's solves on 16 at most).
 //!
 //! With one thread nothing runs on a second thread. Results do not depend on the count:
@@ -21,6 +21,8 @@
 //! every `Par` (this module's tests, and `solver::factor`'s for the sparse factorization);
 //! its products and solves of a single vector do not (they split their sums by the thread
 //! count), so they always run with `Par::Seq`.
+
+pub mod team;
 
 use crate::{Error, Result};
 use faer::Par;

@@ -46,7 +46,6 @@ pub mod factor;
 pub mod matrix_free;
 mod ordering;
 mod status;
-mod team;
 
 use crate::fem::NodalRow;
 pub use factor::Factor;

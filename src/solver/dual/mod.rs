@@ -106,8 +106,8 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
-use super::team::{blocks, Team};
 use super::{Factor, Rows, StepReport, StepStatus};
+use crate::threads::team::{blocks, Team};
 use crate::Result;
 use delassus::{column, Delassus};
 use faer::linalg::solvers::DenseSolveCore;

@@ -25,8 +25,8 @@ mod shared;
 mod split;
 mod trailing;
 
-use super::team::Team;
 use crate::fem::Sparse;
+use crate::threads::team::Team;
 use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;

@@ -24,7 +24,7 @@
 //! the others are busy, and the forward pass is `wide_forward` itself.
 
 use super::{dot, dot4, gather_below, subtract_below, Factor};
-use crate::solver::team::{blocks, Team};
+use crate::threads::team::{blocks, Team};
 use std::ops::Range;
 
 /// The fewest stored values of a supernode that takes these passes: 8 MB, a pass of about

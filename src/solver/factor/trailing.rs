@@ -25,7 +25,7 @@
 //! count.
 
 use super::{dot, Factor};
-use crate::solver::team::{blocks, Team};
+use crate::threads::team::{blocks, Team};
 use faer::Mat;
 
 /// The columns of a panel (`Trailing::forward`, `Trailing::backward`).
