@@ -6,7 +6,8 @@
 //! `taskset` or Slurm's `--cpus-per-task` set, and a cgroup's CPU quota). Everything that
 //! hands work to other threads asks here:
 //! - rayon's global pool, on which faer's parallel kernels run, holds that many threads;
-//! - faer's parallelism is `Par::rayon(N)`, `Par::Seq` for one thread ([`par`]);
+//! - faer's parallelism is `Par::rayon(N)`, no more than the cores the process may use,
+//!   `Par::Seq` for one thread ([`par`]);
 //! - the step's passes (`team::Team`) cut their work in as many pieces and run
 //!   them on that many threads (the factor's solves on 16 at most).
 //!
@@ -80,9 +81,14 @@ pub fn count() -> usize {
     *COUNT.get_or_init(available)
 }
 
-/// faer's parallelism for work that is large enough to share: all [`count`] threads.
+/// faer's parallelism for work that is large enough to share: all [`count`] threads, but
+/// no more than the cores the process may use. faer's parallel kernels wait for each other
+/// spinning, so more of them than cores is ruinous, where the step's passes (`team::Team`)
+/// merely lose their threaded way: on two cores here the block 1/24's setup took 9 s with
+/// two threads, 17.5 s with four and 64 s with eight. Their bits do not depend on the
+/// parallelism (this module's tests), so the cap changes no result.
 pub fn par() -> Par {
-    match count() {
+    match count().min(available()) {
         1 => Par::Seq,
         n => Par::rayon(n),
     }
@@ -105,6 +111,8 @@ mod tests {
             assert_eq!(parse(bad), None, "{bad}");
         }
         assert!(available() >= 1);
+        // However many threads the process runs, faer's kernels use no more than its cores.
+        assert!(par().degree() <= available());
     }
 
     /// A matrix of uniform entries in [−1, 1) from `seed`.
