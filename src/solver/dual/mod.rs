@@ -99,7 +99,6 @@
 //! most `DualSettings::tolerance` · max|d|, in units of the velocities P w.
 
 mod delassus;
-mod dense;
 pub(super) mod groups;
 pub(super) mod iteration;
 pub(super) mod newton;

@@ -2,10 +2,9 @@
 //! form, the reuse of a step's factor, the dense Cholesky solves.
 
 use super::delassus::{column, Delassus};
-use super::dense::Vectors;
 use super::groups::{Coord, Group};
 use super::{blocks, DualSettings, NewtonCounts, NewtonForm, Team};
-use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::{Mat, MatMut, Par};
 use std::ops::Range;
@@ -46,7 +45,6 @@ impl Scratch {
                 coords: Vec::with_capacity(m),
                 par_min: settings.par_min,
                 pcg_max: settings.pcg_max,
-                vectors: Vectors::new(settings.par_min),
             },
             gram_team: Team::default(),
             counts: NewtonCounts::default(),
@@ -73,8 +71,6 @@ pub(super) struct NewtonFactor {
     /// `DualSettings::par_min` and `DualSettings::pcg_max`.
     pub(super) par_min: usize,
     pub(super) pcg_max: usize,
-    /// Its solves and the conjugate gradients' products, of one vector.
-    pub(super) vectors: Vectors,
 }
 
 /// A Newton matrix that is not positive definite to working precision
@@ -395,7 +391,7 @@ fn solve_cached(
     f.form = Some(form);
     f.coords.clear();
     f.coords.extend_from_slice(coords);
-    Ok(f.vectors.llt_solve(&f.l, rhs))
+    Ok(llt_solve(&f.l, rhs))
 }
 
 /// The parallelism of the factorization of an n × n Newton matrix: one thread below
@@ -409,22 +405,44 @@ fn dense_par(n: usize, par_min: usize) -> Par {
     }
 }
 
+/// x = (L Lᵀ)⁻¹ rhs for L in the lower triangle of `l`, on one thread: faer's parallel
+/// solve of a single right side splits its sums by the thread count (`threads`).
+fn llt_solve(l: &Mat<f64>, rhs: &Mat<f64>) -> Mat<f64> {
+    let mut x = rhs.clone();
+    llt::solve::solve_in_place_with_conj(
+        l.as_ref(),
+        faer::Conj::No,
+        x.as_mut(),
+        Par::Seq,
+        MemStack::new(&mut MemBuffer::new(StackReq::EMPTY)),
+    );
+    x
+}
+
+/// H x on one thread, for the same reason as `llt_solve` (`h * &x` would use faer's
+/// global parallelism).
+fn mat_vec(h: &Mat<f64>, x: &Mat<f64>) -> Mat<f64> {
+    let mut y = Mat::zeros(h.nrows(), x.ncols());
+    faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, h, x, 1.0, Par::Seq);
+    y
+}
+
 /// Solves H x = rhs by conjugate gradients preconditioned with the factor `f` of a nearby
 /// matrix, to a relative residual of 1e-14; None if that takes more than `f.pcg_max`
 /// iterations.
 fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
-    let (l, v) = (&f.l, &f.vectors);
+    let l = &f.l;
     let target = 1e-14 * rhs.norm_l2();
-    let mut x = v.llt_solve(l, rhs);
-    let mut r = rhs - v.mat_vec(h, &x);
+    let mut x = llt_solve(l, rhs);
+    let mut r = rhs - mat_vec(h, &x);
     if r.norm_l2() <= target {
         return Some(x);
     }
-    let mut z = v.llt_solve(l, &r);
+    let mut z = llt_solve(l, &r);
     let mut p = z.clone();
     let mut rz = (r.transpose() * &z)[(0, 0)];
     for _ in 0..f.pcg_max {
-        let hp = v.mat_vec(h, &p);
+        let hp = mat_vec(h, &p);
         let php = (p.transpose() * &hp)[(0, 0)];
         if php.is_nan() || php <= 0.0 {
             return None;
@@ -435,7 +453,7 @@ fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
         if r.norm_l2() <= target {
             return Some(x);
         }
-        z = v.llt_solve(l, &r);
+        z = llt_solve(l, &r);
         let rz_new = (r.transpose() * &z)[(0, 0)];
         p = &z + (rz_new / rz) * &p;
         rz = rz_new;
