@@ -14,8 +14,10 @@
 //! the serial pass runs them, each tail entry gathered but not scattered. Every row thus
 //! receives the same terms in the same order as in the serial pass, and every sum is the
 //! same: the bits do not depend on the blocks, so neither on the threads. A finite element
-//! matrix couples nearby nodes, so few entries are recorded (the mesh generators number
-//! nodes by locality).
+//! matrix couples nearby nodes, so few entries are recorded where the nodes are numbered by
+//! locality (gmsh's structured meshes: 2 % of the entries with 16 blocks on the 2D 1/512,
+//! 23 % on the block 1/24); where they are not (gmsh's unstructured tetrahedra: 72 % on the
+//! plate 0.03) the serial pass stays (`RECORDED_AT_MOST`).
 
 use super::Sparse;
 use crate::threads::team::Team;
