@@ -70,9 +70,12 @@ fn parse(text: &str) -> Option<usize> {
     text.trim().parse().ok().filter(|&n| n >= 1)
 }
 
-/// The cores the process may use (1 if the system cannot say).
+/// The cores the process may use (1 if the system cannot say), asked once: the answer
+/// reads the CPU affinity and the cgroup's files, and [`par`] asks for every Newton
+/// factorization.
 fn available() -> usize {
-    std::thread::available_parallelism().map_or(1, NonZeroUsize::get)
+    static CORES: OnceLock<usize> = OnceLock::new();
+    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get))
 }
 
 /// The process's thread count: [`init`]'s, or the cores it may use where nothing called

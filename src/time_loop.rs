@@ -319,7 +319,7 @@ impl<'p> TimeLoop<'p> {
         // max|f_n − g_F| (g_F is empty without friction).
         let load_max = max_abs_diff(&self.b, &self.disc.g_f);
         let memory = h.memory_into(self.scene.physics.relaxation.as_ref(), &mut self.m);
-        match (&self.paired, &self.disc.k_b) {
+        match (&mut self.paired, &self.disc.k_b) {
             (Some(pair), _) if memory => pair.mul_add(&h.u, &self.m, -1.0, &mut self.b),
             (_, k_b) => {
                 if let Some(k_b) = k_b {

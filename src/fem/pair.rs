@@ -51,6 +51,8 @@ pub struct SymmetricPair {
     diag: Vec<[f64; 2]>,
     /// The columns in blocks for the threads.
     blocks: Blocks,
+    /// The recorded terms of a product (`Blocks::rec`), a buffer kept between products.
+    record: Vec<f64>,
     /// The threads of the two parts of a product: recording, then the blocks' rows.
     record_team: Team,
     rows_team: Team,
@@ -151,6 +153,7 @@ impl SymmetricPair {
             blocks = Blocks::new(&col_ptr, &rows, 1);
         }
         Some(SymmetricPair {
+            record: vec![0.0; blocks.recorded()],
             blocks,
             col_ptr,
             rows,
@@ -162,60 +165,56 @@ impl SymmetricPair {
     }
 
     /// y += alpha · (A x + B z), with the serial pass's bits (the module doc).
-    pub fn mul_add(&self, x: &[f64], z: &[f64], alpha: f64, y: &mut [f64]) {
-        let blocks = &self.blocks;
+    pub fn mul_add(&mut self, x: &[f64], z: &[f64], alpha: f64, y: &mut [f64]) {
+        let mut record = std::mem::take(&mut self.record);
+        let (pair, blocks) = (&*self, &self.blocks);
+        let count = blocks.count();
         // 1. The terms below each block, recorded.
-        let mut record = vec![0.0; blocks.recorded()];
-        let mut pieces = Vec::with_capacity(blocks.count());
-        let mut rest = &mut record[..];
-        for k in 0..blocks.count() {
+        let lengths = (0..count).map(|k| {
             let cols = blocks.columns(k);
-            let len = blocks.rec[cols.end] - blocks.rec[cols.start];
-            let (piece, tail) = std::mem::take(&mut rest).split_at_mut(len);
-            pieces.push((cols, piece));
-            rest = tail;
-        }
-        self.record_team.each(pieces, |(cols, piece)| {
+            blocks.rec[cols.end] - blocks.rec[cols.start]
+        });
+        let pieces = (0..count).map(|k| blocks.columns(k));
+        let pieces: Vec<_> = pieces.zip(consecutive(&mut record, lengths)).collect();
+        pair.record_team.each(pieces, |(cols, piece)| {
             let mut terms = piece.iter_mut();
             for j in cols {
                 let (ax, az) = (alpha * x[j], alpha * z[j]);
-                let tail = self.col_ptr[j + 1] - (blocks.rec[j + 1] - blocks.rec[j]);
-                for ([a, b], t) in self.values[tail..self.col_ptr[j + 1]]
-                    .iter()
-                    .zip(&mut terms)
-                {
+                let recorded = pair.tail(j)..pair.col_ptr[j + 1];
+                for ([a, b], t) in pair.values[recorded].iter().zip(&mut terms) {
                     *t = a * ax + b * az;
                 }
             }
         });
         // 2. Each block's rows: the earlier blocks' terms, then its own columns.
-        let mut pieces = Vec::with_capacity(blocks.count());
-        let mut rest = &mut y[..];
-        for k in 0..blocks.count() {
-            let (piece, tail) = std::mem::take(&mut rest).split_at_mut(blocks.columns(k).len());
-            pieces.push((k, piece));
-            rest = tail;
-        }
-        self.rows_team.each(pieces, |(k, y)| {
+        let lengths = (0..count).map(|k| blocks.columns(k).len());
+        let pieces: Vec<_> = consecutive(y, lengths).into_iter().enumerate().collect();
+        pair.rows_team.each(pieces, |(k, y)| {
             let first = blocks.start[k];
             for &(t, i) in &blocks.replay[k] {
                 y[i as usize - first] += record[t];
             }
-            self.columns(blocks.columns(k), x, z, alpha, y);
+            pair.columns(blocks.columns(k), x, z, alpha, y);
         });
+        self.record = record;
+    }
+
+    /// Where column j's recorded entries (the rows below its block) begin in `rows`.
+    fn tail(&self, j: usize) -> usize {
+        self.col_ptr[j + 1] - (self.blocks.rec[j + 1] - self.blocks.rec[j])
     }
 
     /// The serial pass over the columns `cols` into y (rows cols.start..), the terms of
     /// their tails (recorded) left out.
     fn columns(&self, cols: Range<usize>, x: &[f64], z: &[f64], alpha: f64, y: &mut [f64]) {
-        let (first, rec) = (cols.start, &self.blocks.rec);
+        let first = cols.start;
         for j in cols {
             let [da, db] = self.diag[j];
             let (xj, zj) = (x[j], z[j]);
             let (ax, az) = (alpha * xj, alpha * zj);
             let mut acc = da * xj + db * zj;
             let col = self.col_ptr[j]..self.col_ptr[j + 1];
-            let tail = col.end - (rec[j + 1] - rec[j]);
+            let tail = self.tail(j);
             for (&i, [a, b]) in self.rows[col.start..tail]
                 .iter()
                 .zip(&self.values[col.start..tail])
@@ -234,6 +233,18 @@ impl SymmetricPair {
             y[j - first] += alpha * acc;
         }
     }
+}
+
+/// `v` cut into consecutive pieces of the given lengths.
+fn consecutive(v: &mut [f64], lengths: impl Iterator<Item = usize>) -> Vec<&mut [f64]> {
+    let mut rest = v;
+    lengths
+        .map(|len| {
+            let (piece, tail) = std::mem::take(&mut rest).split_at_mut(len);
+            rest = tail;
+            piece
+        })
+        .collect()
 }
 
 /// True when two matrices have the same pattern.
@@ -318,7 +329,7 @@ mod tests {
         let mut want = y0.clone();
         serial(&one, &x, &z, -0.7, &mut want);
         for count in [1, 2, 3, 5, 16] {
-            let pair = SymmetricPair::with_blocks(&a, &b, count).unwrap();
+            let mut pair = SymmetricPair::with_blocks(&a, &b, count).unwrap();
             assert_eq!(pair.blocks.count(), count);
             if count == 16 {
                 assert!(pair.blocks.replay.iter().skip(2).all(|r| !r.is_empty()));
@@ -339,7 +350,7 @@ mod tests {
         let mut rng = SplitMix(31);
         let n = 30_000;
         let (a, b) = pair(n, true, &mut rng);
-        let pair = SymmetricPair::with_blocks(&a, &b, 16).unwrap();
+        let mut pair = SymmetricPair::with_blocks(&a, &b, 16).unwrap();
         assert_eq!(pair.blocks.count(), 1);
         let x: Vec<f64> = (0..n).map(|_| rng.range(-1.0, 1.0)).collect();
         let (mut want, mut y) = (vec![0.5; n], vec![0.5; n]);
