@@ -15,6 +15,7 @@ pub(super) struct Snapshot {
     pub(super) u_comp: Vec<f64>,
     pub(super) w: Vec<f64>,
     pub(super) z: Vec<f64>,
+    pub(super) z_before: Vec<f64>,
     pub(super) active: Vec<bool>,
     pub(super) memory: SnapshotMemory,
     pub(super) log: RunLog,
@@ -35,48 +36,16 @@ pub(super) enum SnapshotMemory {
 impl Snapshot {
     /// Folds a newer snapshot into this unwritten one: the newer state wins, history rows
     /// accumulate.
-    pub(super) fn absorb(&mut self, newer: Snapshot) {
-        let older_rows = match &mut self.memory {
-            SnapshotMemory::Direct { rows, .. } => Some(std::mem::take(rows)),
-            _ => None,
-        };
-        let from = match &self.memory {
-            SnapshotMemory::Direct { from, .. } => *from,
-            _ => 0,
-        };
-        *self = match (older_rows, newer) {
-            (
-                Some(mut rows),
-                Snapshot {
-                    memory: SnapshotMemory::Direct { rows: more, .. },
-                    n,
-                    k,
-                    u,
-                    u_sum,
-                    u_comp,
-                    w,
-                    z,
-                    active,
-                    log,
-                    frames,
-                },
-            ) => {
-                rows.extend(more);
-                Snapshot {
-                    n,
-                    k,
-                    u,
-                    u_sum,
-                    u_comp,
-                    w,
-                    z,
-                    active,
-                    memory: SnapshotMemory::Direct { from, rows },
-                    log,
-                    frames,
-                }
-            }
-            (_, newer) => newer,
-        };
+    pub(super) fn absorb(&mut self, mut newer: Snapshot) {
+        if let (SnapshotMemory::Direct { from, rows }, SnapshotMemory::Direct { rows: more, .. }) =
+            (&mut self.memory, &mut newer.memory)
+        {
+            rows.append(more);
+            newer.memory = SnapshotMemory::Direct {
+                from: *from,
+                rows: std::mem::take(rows),
+            };
+        }
+        *self = newer;
     }
 }
