@@ -211,7 +211,9 @@ impl Plan {
 pub struct LoopState<'a> {
     pub history: &'a History,
     pub w: &'a [f64],
+    /// The multipliers of the last solved step and of the step before it.
     pub z: &'a [f64],
+    pub z_before: &'a [f64],
 }
 
 /// A [`LoopState`] as a checkpoint gives it back (`TimeLoop::restore`).
@@ -219,6 +221,7 @@ pub struct SavedLoop {
     pub history: SavedHistory,
     pub w: Vec<f64>,
     pub z: Vec<f64>,
+    pub z_before: Vec<f64>,
 }
 
 /// A history as a checkpoint saved it, for [`History::restore`].

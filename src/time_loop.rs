@@ -43,8 +43,13 @@ pub struct TimeLoop<'p> {
     plan: Plan,
     /// w_n of the last solved step.
     w: Vec<f64>,
-    /// Multipliers of the last solved step: λ on contact rows, γ on friction rows.
+    /// Multipliers of the last solved step z_{n−1}: λ on contact rows, γ on friction rows;
+    /// and of the step before it, z_{n−2} (z_{n−1} itself before a second step), for the
+    /// warm start's extrapolation (`StepSolver::solve`); `spare` keeps z_{n−1} while step
+    /// n is solved into z.
     z: Vec<f64>,
+    z_before: Vec<f64>,
+    spare: Vec<f64>,
     /// m_n of the last solved step (empty without memory).
     m: Vec<f64>,
     b: Vec<f64>,
@@ -205,6 +210,8 @@ impl<'p> TimeLoop<'p> {
             factor,
             solver,
             z: vec![0.0; rows.len()],
+            z_before: vec![0.0; rows.len()],
+            spare: vec![0.0; rows.len()],
             rows,
             history,
             plan,
@@ -250,6 +257,7 @@ impl<'p> TimeLoop<'p> {
             history: &self.history,
             w: &self.w,
             z: &self.z,
+            z_before: &self.z_before,
         }
     }
 
@@ -260,6 +268,7 @@ impl<'p> TimeLoop<'p> {
         self.history.restore(saved.history)?;
         self.w = saved.w;
         self.z = saved.z;
+        self.z_before = saved.z_before;
         Ok(())
     }
 
@@ -333,9 +342,16 @@ impl<'p> TimeLoop<'p> {
         for (b, g) in self.b.iter_mut().zip(&self.disc.g_f) {
             *b -= g;
         }
-        let mut report =
-            self.solver
-                .solve(&self.factor, &self.rows, &self.b, &mut self.w, &mut self.z);
+        self.spare.copy_from_slice(&self.z);
+        let mut report = self.solver.solve(
+            &self.factor,
+            &self.rows,
+            &self.b,
+            &mut self.w,
+            &mut self.z,
+            Some(&self.z_before),
+        );
+        std::mem::swap(&mut self.z_before, &mut self.spare);
         // A solved step is trusted only if it is finite, bounded by its loads (`Growth`)
         // and keeps n·w ≤ 0 on Γ3,1 to the solver's tolerance.
         let u_max = max_abs(&h.u);

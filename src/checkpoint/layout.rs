@@ -23,6 +23,7 @@ pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Ve
         ("state/u_comp", f64s(&s.u_comp)),
         ("state/w", f64s(&s.w)),
         ("state/z", f64s(&s.z)),
+        ("state/z_before", f64s(&s.z_before)),
         ("state/active", s.active.iter().map(|&a| a as u8).collect()),
         (
             "run/iterations",
@@ -225,6 +226,15 @@ fn write_state(f: &hdf5::File, row_node: &[u64], s: &Snapshot) -> hdf5::Result<(
         &s.z,
         "multipliers of the last solved step: λ_i ≥ 0 on the Γ3,1 contact rows, then γ_i \
          (|γ_i| ≤ μF∫φ_i) on the Γ3,2 friction rows (nodal forces); the warm start of step n",
+        "N/m",
+    )?;
+    vector(
+        &state,
+        "z_before",
+        &[s.z_before.len()],
+        &s.z_before,
+        "multipliers of the step before the last solved one (z itself before a second \
+         step): with z, the extrapolated warm start 2z − z_before of step n",
         "N/m",
     )?;
     let flags: Vec<u8> = s.active.iter().map(|&a| a as u8).collect();

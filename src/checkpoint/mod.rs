@@ -9,9 +9,10 @@
 //! - u_n with its Neumaier running sum and compensation (`history.rs`), bit for bit;
 //! - the memory: each Prony term's (a_i, b_i, e^{−b_i k}, m^(i)_n), or for a general kernel
 //!   the past displacements u_0..u_{n−1} (below);
-//! - the velocity w_{n−1} and the multipliers z_{n−1} of the last solved step: the step
-//!   solver warm starts from z and recomputes its active set from it, so z is all it needs
-//!   (the contact/stick flags are stored as well, for people);
+//! - the velocity w_{n−1} and the multipliers z_{n−1} of the last solved step, and z_{n−2}
+//!   of the step before (since format version 4): the step solver warm starts from z and
+//!   its extrapolation 2z_{n−1} − z_{n−2} and recomputes its active set from them, so they
+//!   are all it needs (the contact/stick flags are stored as well, for people);
 //! - the per-step solver iteration counts and the running maxima of summary.json, so that
 //!   the summary of a resumed run equals the uninterrupted one;
 //! - the frames of the series written before step n: step, time, CRC-32 and length of each
@@ -101,10 +102,15 @@ use std::path::PathBuf;
 pub const FORMAT: &str = "viscontact checkpoint";
 /// The layout version written (root attribute `format_version`); files of a newer version
 /// are refused.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// Version 2 recorded no checksums of the series' frames (`/series`, version 3): it is still
 /// resumed, with its series continued unverified.
 pub const UNVERIFIED_VERSION: u32 = 2;
+/// Versions before 4 recorded only the last step's multipliers, not those of the step
+/// before (`/state/z_before`; read where such a file has it): they are still resumed, their
+/// first step warm started from z alone, so they continue the run to the solver's
+/// tolerance rather than bit for bit.
+pub const Z_BEFORE_VERSION: u32 = 4;
 /// The checkpoint's file name in a run directory.
 pub const FILE_NAME: &str = "checkpoint.h5";
 /// The append-only history file of a general (direct-sum) kernel, beside the checkpoint.
@@ -234,6 +240,8 @@ pub struct Checkpoint {
     pub u_comp: Vec<f64>,
     pub w: Vec<f64>,
     pub z: Vec<f64>,
+    /// z_{n−2}; z itself for a checkpoint of format version < 4 (`Z_BEFORE_VERSION`).
+    pub z_before: Vec<f64>,
     pub memory: StoredMemory,
     pub log: RunLog,
     /// The frames of steps < n the run wrote, with their checksums (`/series`); None for a

@@ -196,6 +196,11 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
         u_comp: vec("state/u_comp")?,
         w: vec("state/w")?,
         z: vec("state/z")?,
+        z_before: if version >= super::Z_BEFORE_VERSION || f.link_exists("state/z_before") {
+            vec("state/z_before")?
+        } else {
+            vec("state/z")?
+        },
         memory,
         log,
         frames: match version {

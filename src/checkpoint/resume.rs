@@ -256,6 +256,7 @@ impl Checkpoint {
             ("state/u_comp", self.u_comp.len(), n_free),
             ("state/w", self.w.len(), n_free),
             ("state/z", self.z.len(), n_rows),
+            ("state/z_before", self.z_before.len(), n_rows),
         ];
         for (name, have, want) in sizes {
             if have != want {
@@ -298,6 +299,7 @@ impl Checkpoint {
             },
             w: self.w.clone(),
             z: self.z.clone(),
+            z_before: self.z_before.clone(),
         })
     }
 }

@@ -184,6 +184,7 @@ impl Writer {
             u_comp: h.u_comp.clone(),
             w: state.w.to_vec(),
             z: state.z.to_vec(),
+            z_before: state.z_before.to_vec(),
             active: active.to_vec(),
             memory,
             log: log.clone(),

@@ -196,7 +196,7 @@ impl MatrixFreeSolver {
     }
 
     /// Solves step n as `StepSolver::solve` does: `b` is b_n, `w` receives w_n, `z` the
-    /// multipliers (in: the previous step's, the warm start).
+    /// multipliers (in: the previous step's, with `before` the warm start).
     pub fn solve(
         &mut self,
         factor: &Factor,
@@ -204,6 +204,7 @@ impl MatrixFreeSolver {
         b: &[f64],
         w: &mut [f64],
         z: &mut [f64],
+        before: Option<&[f64]>,
     ) -> StepReport {
         debug_assert_eq!(z.len(), rows.len());
         // x_b = K_A⁻¹ b, d = P x_b.
@@ -219,7 +220,8 @@ impl MatrixFreeSolver {
         let ops = Products::new(factor, &self.operands, delta);
         let scale = ops.scale;
         let tol = self.operands.settings.dual.tolerance * scale.max(f64::MIN_POSITIVE);
-        let report = Iteration::new(ops, &self.groups, scale, tol).run(z, &mut self.buffers);
+        let report =
+            Iteration::new(ops, &self.groups, scale, tol).run(z, before, &mut self.buffers);
         if report.status == StepStatus::Solved {
             // w = K_A⁻¹ (b − Pᵀ z) = x_b − K_A⁻¹ Pᵀ z.
             scatter(&self.operands.p, z, &mut self.y[self.first..]);
@@ -377,6 +379,10 @@ impl Operator for Products<'_> {
         for (g, d) in g.iter_mut().zip(self.d) {
             *g -= d;
         }
+    }
+
+    fn linear(&self) -> &[f64] {
+        self.d
     }
 
     fn newton_step(

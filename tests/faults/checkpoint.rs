@@ -305,14 +305,14 @@ import sys, h5py, numpy as np
 path, kind = sys.argv[1], sys.argv[2]
 f = h5py.File(path, "r")
 assert f.attrs["format"] == "viscontact checkpoint", f.attrs["format"]
-assert int(f.attrs["format_version"]) == 3
+assert int(f.attrs["format_version"]) == 4
 assert open(path, "rb").read(22) == b"viscontact checkpoint\n", "the integrity header"
 for a in ("writer", "description", "run_id"):
     assert a in f.attrs, a
 expected = ["step", "time", "step_size", "state/u", "state/u_sum", "state/u_comp", "state/w",
-            "state/z", "state/active", "state/row_node", "run/iterations", "run/max_violation",
-            "run/max_kkt_residual", "scene/text", "mesh/fingerprint", "mesh/groups_fingerprint",
-            "mesh/dof_of"]
+            "state/z", "state/z_before", "state/active", "state/row_node", "run/iterations",
+            "run/max_violation", "run/max_kkt_residual", "scene/text", "mesh/fingerprint",
+            "mesh/groups_fingerprint", "mesh/dof_of"]
 if kind == "prony":
     expected += ["memory/prony_a", "memory/prony_b", "memory/prony_decay", "memory/prony_state"]
 else:
@@ -328,7 +328,8 @@ u, s, c = f["state/u"][:], f["state/u_sum"][:], f["state/u_comp"][:]
 assert u.shape == s.shape == c.shape and np.array_equal(u, s + c)
 it = f["run/iterations"][:]
 assert it.shape == (17,) and (it[:n] >= 0).all() and (it[n:] == -1).all(), it
-assert f["state/z"].shape == f["state/active"].shape == f["state/row_node"].shape
+assert f["state/z"].shape == f["state/z_before"].shape == f["state/active"].shape
+assert f["state/z"].shape == f["state/row_node"].shape
 assert "viscosity" in f["scene/text"][()].decode()
 assert f["mesh/dof_of"].shape == (int(f["mesh"].attrs["nodes"]), 2)
 assert f["mesh/dof_of"][:].max() + 1 == u.shape[0]

@@ -33,7 +33,9 @@
 //! z solves the dual iff z = Π(z − g/δ), δ_j > 0 a scale per group (the mean of diag D over
 //! its rows), and as well iff z = Π(z − g/(ηδ)) for any η > 0. The method is a semismooth
 //! Newton method on the second fixed-point equation with η = `DualSettings::eta` (why 64 and
-//! not 1: see there), warm started from the previous step's multipliers, globalized by descent of q.
+//! not 1: see there), globalized by descent of q. It is warm started from the previous
+//! step's multipliers z_{n−1} or their extrapolation 2z_{n−1} − z_{n−2}, both projected
+//! onto Z, whichever has the lower q (`Iteration::start`).
 //!
 //! Newton step. At v = z − g/(ηδ) each group is
 //!  - free (v_j ∈ Z_j; Π' = I): the Newton equations are g_j(z⁺) = 0;
@@ -209,6 +211,7 @@ impl DualSolver {
         b: &[f64],
         w: &mut [f64],
         z: &mut [f64],
+        before: Option<&[f64]>,
     ) -> StepReport {
         debug_assert_eq!(z.len(), rows.len());
         let (n, c) = (factor.dim(), factor.last());
@@ -226,7 +229,7 @@ impl DualSolver {
                 *dr = dot(column(g, r), y_c);
             }
         });
-        let report = self.dual_solve(z);
+        let report = self.dual_solve(z, before);
         if report.status != StepStatus::Solved {
             return report;
         }
