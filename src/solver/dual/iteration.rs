@@ -269,19 +269,21 @@ impl<'a, O: Operator> Iteration<'a, O> {
     /// z_{n−1} and their linear extrapolation in time 2z_{n−1} − z_{n−2} (`before` holds
     /// z_{n−2}), each projected onto Z, the one with the lower q. Where the loads change
     /// smoothly so do the multipliers, and the extrapolation starts the Newton iteration
-    /// closer (the plates lying on their foundation took 25–30 % fewer iterations,
-    /// docs/performance.md); where a step changed course — a node began to slide, a load
+    /// closer (docs/performance.md: a third fewer iterations on the plates lying on their
+    /// foundation); where a step changed course — a node began to slide, a load
     /// turned — it can start farther, and q, which every iterate lowers, chooses. The
     /// choice costs one gradient per step.
     fn start(&self, z: &mut [f64], before: Option<&[f64]>, b: &mut Buffers) {
-        let predicted = before.filter(|zb| *zb != &z[..]).map(|zb| {
+        // Where z_{n−2} = z_{n−1} (the first step) both starts are the same.
+        let before = before.filter(|zb| *zb != &z[..]);
+        if let Some(zb) = before {
             for ((t, zi), zb) in b.trial.iter_mut().zip(&*z).zip(zb) {
                 *t = 2.0 * zi - zb;
             }
-        });
+        }
         self.project(z);
         self.gradient(z, &mut b.grad);
-        if predicted.is_some() {
+        if before.is_some() {
             self.project(&mut b.trial);
             self.gradient(&b.trial, &mut b.grad_trial);
             if self.q(&b.trial, &b.grad_trial) < self.q(z, &b.grad) {
