@@ -137,7 +137,7 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
 
 /// Picks and builds the step solver (Remark 2.5): `Linear` without constraint rows,
 /// otherwise the scene's choice (`solver.contact`; `auto` by the size of the dense dual, see
-/// `solver::choice`) of the dense dual, the matrix-free dual or clarabel. `matrix` is the step
+/// `solver::choice`) of the dense dual, a dual without D or clarabel. `matrix` is the step
 /// matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor` holds.
 pub fn step_solver(
     effects: &Effects,
@@ -151,8 +151,8 @@ pub fn step_solver(
     }
     Ok(match Contact::of(scene.solver.contact, rows) {
         Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
-        Contact::MatrixFree => {
-            StepSolver::MatrixFree(Box::new(MatrixFreeSolver::new(factor, rows)))
+        Contact::MatrixFree | Contact::Sparse => {
+            StepSolver::MatrixFree(Box::new(MatrixFreeSolver::new(factor, matrix, rows)))
         }
         Contact::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
     })

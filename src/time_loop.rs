@@ -27,6 +27,7 @@ use crate::effects::{self, Effects};
 use crate::fem::{mul_add, Discretization, SymmetricPair};
 use crate::history::{History, LoopState, Plan, SavedLoop};
 use crate::scene::{self, Scene};
+use crate::solver::choice::Contact;
 use crate::solver::{Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
 use crate::stability::Verdict;
 use crate::Result;
@@ -188,8 +189,13 @@ impl<'p> TimeLoop<'p> {
             ),
         };
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
-        // The step matrix is factored once, with the constrained boundary dofs ordered last.
-        let factor = Factor::new(matrix, &rows.dofs())?;
+        // The step matrix is factored once, with the constrained boundary dofs ordered last
+        // where the contact solver works on its trailing block.
+        let last = match Contact::of(scene.solver.contact, &rows).orders_last() {
+            true => rows.dofs(),
+            false => Vec::new(),
+        };
+        let factor = Factor::new(matrix, &last)?;
         let solver = effects::step_solver(&effects, scene, matrix, &factor, &rows)?;
         let n = disc.n_free;
         let history = History::new(n, scene.time.k(), &plan);

@@ -352,7 +352,7 @@ pub struct SolverSection {
 #[serde(rename_all = "snake_case")]
 pub enum ContactSolver {
     /// The dense dual while its m × m matrices take at most `solver::choice::DENSE_LIMIT`,
-    /// else the matrix-free dual (the default).
+    /// else the sparse dual (the default).
     #[default]
     Auto,
     /// Condensed onto the constrained boundary dofs, the dense dual active set method
@@ -360,8 +360,11 @@ pub enum ContactSolver {
     #[serde(alias = "fast")]
     Dense,
     /// The same dual with D applied through the factor of K_A (its trailing block L_CC): no
-    /// m × m matrix.
+    /// m × m matrix of the dual, but the factor holds the dense L_CC.
     MatrixFree,
+    /// The same dual with D applied through whole solves with the factor of a linear run:
+    /// nothing dense.
+    Sparse,
     /// The whole per-step problem handed to clarabel (the cross-check).
     Clarabel,
 }

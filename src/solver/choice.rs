@@ -2,17 +2,20 @@
 //! step costs, from the sizes alone (m constraint rows on c dofs, n dofs).
 //!
 //! The dense condensed dual (`dual`) holds m × m matrices (D, B = D⁻¹ in 3D, the Newton
-//! matrices) and factors a Newton matrix of up to m rows per iteration (m³/3 flops); the
-//! matrix-free dual (`matrix_free`) holds O(m) besides the factor of K_A that every solver
-//! holds, and pays a solve with that factor per product with D.
+//! matrices) and factors a Newton matrix of up to m rows per iteration (m³/3 flops). The
+//! two duals without D (`matrix_free`) pay a solve with the factor of K_A per product with
+//! D: `matrix_free` orders C last, and its factor then holds the dense trailing block L_CC
+//! (the Schur complement's factor, which also preconditions); `sparse` keeps the factor of a
+//! linear run and holds O(m) besides it.
 //!
 //! `auto` decides from the problem alone, never from the machine: the dense dual while its
-//! memory (`resources::dense_dual_bytes`) is at most `DENSE_LIMIT`, the matrix-free one
-//! otherwise. So a scene runs the same solver, and gives the same bits, on every machine and
-//! at every resume; every contact boundary small enough for the dense dual gets it, with the
-//! results it has always given. Whether the plan fits this machine is a separate question,
-//! asked by `ContactPlan::check` before a run touches its directory: a plan that does not
-//! fit is refused (exit 2), naming the key that would, never silently changed.
+//! memory (`resources::dense_dual_bytes`) is at most `DENSE_LIMIT`, the sparse one
+//! otherwise, so that no contact solver `auto` picks holds a dense block over the limit. So
+//! a scene runs the same solver, and gives the same bits, on every machine and at every
+//! resume; every contact boundary small enough for the dense dual gets it, with the results
+//! it has always given. Whether the plan fits this machine is a separate question, asked by
+//! `ContactPlan::check` before a run touches its directory: a plan that does not fit is
+//! refused (exit 2), naming the key that would, never silently changed.
 
 use super::matrix_free::MatrixFreeSettings;
 use super::Rows;
@@ -24,9 +27,9 @@ use crate::{Error, Result};
 /// The dense dual's memory (bytes) up to which `auto` takes it: 4 GB, m ≈ 10 000 rows in 3D
 /// (8·5m² bytes where c ≈ m). The coarse plate of issue 29 (m = 4 274, 0.73 GB) and the block
 /// at h = 1/48 (m ≈ 7 400, ≈ 2.2 GB) stay dense; the finer plate (m = 16 055: D alone 2.1
-/// GB, with B = D⁻¹ and the Newton matrices ≈ 10 GB) goes matrix-free. 4 GB leaves room for
-/// the factor of K_A and the run's own state on a 16 GB workstation; a larger dense dual
-/// needs a large machine, where `solver.contact = "dense"` asks for it.
+/// GB, with B = D⁻¹ and the Newton matrices ≈ 10 GB) goes sparse. 4 GB leaves room for the
+/// factor of K_A and the run's own state on a 16 GB workstation; a larger dense dual needs a
+/// large machine, where `solver.contact = "dense"` asks for it.
 pub const DENSE_LIMIT: f64 = 4e9;
 
 /// The solver a run uses with contact or friction.
@@ -34,6 +37,7 @@ pub const DENSE_LIMIT: f64 = 4e9;
 pub enum Contact {
     Dense,
     MatrixFree,
+    Sparse,
     Clarabel,
 }
 
@@ -43,8 +47,16 @@ impl Contact {
         match self {
             Contact::Dense => "dense",
             Contact::MatrixFree => "matrix_free",
+            Contact::Sparse => "sparse",
             Contact::Clarabel => "clarabel",
         }
+    }
+
+    /// Whether its factor of K_A orders the constrained dofs last (the dense dual condenses
+    /// through the trailing block, the matrix-free one multiplies by it); the others take
+    /// the fill-reducing order of a linear run.
+    pub fn orders_last(&self) -> bool {
+        matches!(self, Contact::Dense | Contact::MatrixFree)
     }
 
     /// The solver the scene's `choice` names on `rows`, `auto` resolved (`Contact::auto`).
@@ -52,21 +64,29 @@ impl Contact {
         match choice {
             ContactSolver::Dense => Contact::Dense,
             ContactSolver::MatrixFree => Contact::MatrixFree,
+            ContactSolver::Sparse => Contact::Sparse,
             ContactSolver::Clarabel => Contact::Clarabel,
             ContactSolver::Auto => Contact::auto(rows.len(), rows.dofs().len(), rows.block),
         }
     }
 
     /// What `auto` takes on m rows touching c dofs with `block` multipliers per friction
-    /// node: the dense dual while its memory is at most `DENSE_LIMIT`, else the matrix-free.
+    /// node: the dense dual while its memory is at most `DENSE_LIMIT`, else the sparse one.
     pub fn auto(m: usize, c: usize, block: usize) -> Contact {
         if resources::dense_dual_bytes(m, c, block) <= DENSE_LIMIT {
             Contact::Dense
         } else {
-            Contact::MatrixFree
+            Contact::Sparse
         }
     }
 }
+
+/// What the products with D of the duals without D are (`ContactPlan::cost`).
+const PRODUCTS: &str = "two gradients and the conjugate gradient iterations; a rejected Newton \
+                        point adds a damped or projected search";
+
+/// How many Newton iterations a step takes (`ContactPlan::cost`).
+const ITERATIONS: &str = "a step takes a few to tens of iterations";
 
 /// A run's contact solver, its memory (bytes; None where not estimated) and cost per step.
 #[derive(Clone, Debug, PartialEq)]
@@ -79,8 +99,8 @@ pub struct ContactPlan {
     choice: ContactSolver,
     /// The dense dual's memory, which `auto` decided by.
     dense: f64,
-    /// The matrix-free dual's memory, named when the chosen solver does not fit.
-    matrix_free: f64,
+    /// The sparse dual's memory, named when the chosen solver does not fit.
+    sparse: f64,
 }
 
 impl ContactPlan {
@@ -95,7 +115,7 @@ impl ContactPlan {
     pub fn new(choice: ContactSolver, rows: &Rows, n: usize) -> Self {
         let (m, c) = (rows.len(), rows.dofs().len());
         let dense = resources::dense_dual_bytes(m, c, rows.block);
-        let matrix_free = resources::matrix_free_bytes(m, n);
+        let sparse = resources::matrix_free_bytes(m, n);
         let solver = Contact::of(choice, rows);
         let (m_f, products) = (m as f64, MatrixFreeSettings::default().cg_max + 2);
         let (memory, cost) = match solver {
@@ -110,14 +130,20 @@ impl ContactPlan {
                 ),
             ),
             Contact::MatrixFree => (
-                Some(matrix_free),
+                Some(sparse + resources::trailing_bytes(c)),
                 format!(
-                    "per Newton iteration {products} products with D at most (two gradients \
-                     and the conjugate gradient iterations; a rejected Newton point adds a \
-                     damped or projected search) and as many with S = D⁻¹ for the \
-                     preconditioner, each a pass down and up over the factor's trailing block \
-                     L_CC (2c² = {:.1e} flops); a step takes a few to tens of iterations",
+                    "per Newton iteration {products} products with D at most ({PRODUCTS}) and \
+                     as many with S = D⁻¹ for the preconditioner, each a pass down and up over \
+                     the factor's trailing block L_CC (2c² = {:.1e} flops); {ITERATIONS}",
                     2.0 * (c as f64).powi(2)
+                ),
+            ),
+            Contact::Sparse => (
+                Some(sparse),
+                format!(
+                    "per Newton iteration {products} products with D at most ({PRODUCTS}), \
+                     each a forward and backward solve with the factor of K_A as a linear \
+                     step's; {ITERATIONS}"
                 ),
             ),
             Contact::Clarabel => (
@@ -131,15 +157,14 @@ impl ContactPlan {
             cost,
             choice,
             dense,
-            matrix_free,
+            sparse,
         }
     }
 
     /// Refuses (exit 2) a solver whose memory, with what the run's steps hold besides it
     /// (`steps`: both are held at once), exceeds `resources::MARGIN` of the memory available
     /// (`resources::available_memory`; unknown: it passes), naming `solver.contact =
-    /// "matrix_free"` where that would fit, else the estimate's key where the solver alone
-    /// fits.
+    /// "sparse"` where that would fit, else the estimate's key where the solver alone fits.
     pub fn check(&self, steps: &Estimate) -> Result<()> {
         match resources::available_memory()? {
             Some(avail) => self.fits(avail, steps.memory, steps.memory_key()),
@@ -156,11 +181,11 @@ impl ContactPlan {
         if memory + steps <= MARGIN * avail {
             return Ok(());
         }
-        let matrix_free_fits = self.matrix_free + steps <= MARGIN * avail;
-        let remedy = if self.solver != Contact::MatrixFree && matrix_free_fits {
+        let sparse_fits = self.sparse + steps <= MARGIN * avail;
+        let remedy = if self.solver != Contact::Sparse && sparse_fits {
             format!(
-                "set solver.contact = \"matrix_free\" (≈ {} besides the factor of K_A)",
-                human(self.matrix_free)
+                "set solver.contact = \"sparse\" (≈ {} besides the factor of K_A)",
+                human(self.sparse)
             )
         } else if memory <= MARGIN * avail {
             format!("lower {key}")
@@ -203,7 +228,12 @@ impl std::fmt::Display for ContactPlan {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         let memory = match (self.memory, self.solver) {
             (None, _) => "not estimated".to_string(),
-            (Some(b), Contact::MatrixFree) => format!("≈ {} besides the factor of K_A", human(b)),
+            (Some(b), Contact::MatrixFree) => format!(
+                "≈ {} besides the factor of a linear run (with the dense trailing block that \
+                 ordering C last adds to it)",
+                human(b)
+            ),
+            (Some(b), Contact::Sparse) => format!("≈ {} besides the factor of K_A", human(b)),
             (Some(b), _) => format!("≈ {}", human(b)),
         };
         write!(
@@ -223,14 +253,14 @@ mod tests {
     /// With c = m, the 3D dense dual holds 8·5m² bytes: 4e9 at m = 10 000 exactly; the 2D one
     /// 8·4m² bytes, 4e9 between m = 11 180 and 11 181.
     #[test]
-    fn auto_is_dense_up_to_the_limit_and_matrix_free_beyond() {
+    fn auto_is_dense_up_to_the_limit_and_sparse_beyond() {
         assert_eq!(Contact::auto(10_000, 10_000, 2), Contact::Dense);
-        assert_eq!(Contact::auto(10_001, 10_001, 2), Contact::MatrixFree);
+        assert_eq!(Contact::auto(10_001, 10_001, 2), Contact::Sparse);
         assert_eq!(Contact::auto(11_180, 11_180, 1), Contact::Dense);
-        assert_eq!(Contact::auto(11_181, 11_181, 1), Contact::MatrixFree);
+        assert_eq!(Contact::auto(11_181, 11_181, 1), Contact::Sparse);
         // Issue 29's plates: the coarse one stays dense, the finer one has D alone of 2.1 GB.
         assert_eq!(Contact::auto(4_274, 4_274, 2), Contact::Dense);
-        assert_eq!(Contact::auto(16_055, 16_055, 2), Contact::MatrixFree);
+        assert_eq!(Contact::auto(16_055, 16_055, 2), Contact::Sparse);
     }
 
     /// The key an estimate names for a run whose steps' memory does not fit.
@@ -244,14 +274,14 @@ mod tests {
             cost: String::new(),
             choice,
             dense: 1e9,
-            matrix_free: 1e6,
+            sparse: 1e6,
         };
         let forced = plan(ContactSolver::Dense);
         forced.fits(1.25e9, 0.0, KEY).unwrap();
         let err = forced.fits(1.2e9, 0.0, KEY).unwrap_err();
         assert_eq!(err.exit_code(), 2);
         assert!(
-            err.to_string().contains("solver.contact = \"matrix_free\""),
+            err.to_string().contains("solver.contact = \"sparse\""),
             "{err}"
         );
         let err = forced.fits(1e6, 0.0, KEY).unwrap_err().to_string();
@@ -262,7 +292,7 @@ mod tests {
             err.contains("besides the ≈ 200.0 MB that the steps hold"),
             "{err}"
         );
-        assert!(err.contains("solver.contact = \"matrix_free\""), "{err}");
+        assert!(err.contains("solver.contact = \"sparse\""), "{err}");
         let err = forced.fits(1.25e9, 0.9999e9, KEY).unwrap_err().to_string();
         assert!(err.contains("lower time.steps"), "{err}");
         assert!(plan(ContactSolver::Auto)

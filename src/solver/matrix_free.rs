@@ -1,21 +1,25 @@
-//! The contact solver with no m × m matrix, for contact boundaries whose condensed operator
-//! D = P K_A⁻¹ Pᵀ does not fit in memory (`[solver] contact = "matrix_free"`).
+//! The contact solvers with no m × m matrix, for contact boundaries whose condensed operator
+//! D = P K_A⁻¹ Pᵀ does not fit in memory (`[solver] contact = "matrix_free"` and
+//! `"sparse"`).
 //!
-//! It solves the dual of `dual` — the same problem
+//! Both solve the dual of `dual` — the same problem
 //!
 //!   minimize q(z) = ½ zᵀ D z − dᵀ z  over  z ∈ Z,   d = P K_A⁻¹ b,
 //!
 //! with the same multiplier groups, projections Π_j and stopping test (`dual::groups`, the
-//! module doc of `dual`), but never forms D: a product goes through the stored factor of
-//! K_A,
+//! module doc of `dual`), but never form D: a product goes through the stored factor of
+//! K_A, in one of two forms, decided by how the factor was ordered:
 //!
-//!   D v = P (K_A⁻¹)_CC Pᵀ v = P L_CC⁻ᵀ L_CC⁻¹ Pᵀ v,
-//!
-//! Pᵀ v scattered onto the constrained dofs C, ordered last in the factor, one pass down
-//! and one up over the trailing block L_CC alone (`Factor::trailing_solve`: the rest of L
-//! does not touch C's part of the solution), P gathered from C. A product reads
-//! |C|(|C| + 1)/2 values, as many as a product with the dense D's lower triangle would.
-//! Memory: the factor, two vectors of the dofs and a few of the m rows, O(nnz(L) + m).
+//! - `matrix_free`: the constrained dofs C ordered last, so that
+//!   D v = P (K_A⁻¹)_CC Pᵀ v = P L_CC⁻ᵀ L_CC⁻¹ Pᵀ v: Pᵀ v scattered onto C, one pass down
+//!   and one up over the trailing block L_CC alone (`Factor::trailing_solve`: the rest of L
+//!   does not touch C's part of the solution), P gathered from C. The Schur complement of
+//!   K_A on C is dense, and so is L_CC: |C|(|C| + 1)/2 values held in the factor, which a
+//!   product reads, as one with the dense D's lower triangle would.
+//! - `sparse`: the factor in the fill-reducing order of a linear run, and
+//!   D v = P L⁻ᵀ L⁻¹ Pᵀ v, a whole forward and backward solve per product. Memory: the
+//!   factor of a linear run, two vectors of the dofs and a few of the m rows,
+//!   O(nnz(L) + m); nothing dense.
 //!
 //! The method is the dense dual's iteration (`dual::iteration`: the semismooth Newton point,
 //! its damping, the projected Newton step with its arc search, the projected gradient step,
@@ -24,21 +28,29 @@
 //! per iteration (`cg`), inexactly, to a residual at most min(½, r/max|d|) r for the
 //! iterate's KKT residual r (an inexact Newton method: fast local convergence, no work
 //! wasted far from the solution) and never below a tenth of the tolerance. The
-//! preconditioner (`Preconditioner::Dirichlet`) is Q_Fᵀ S Q_F on the coordinates F without
-//! a shift, with S = P S_C Pᵀ = P L_CC L_CCᵀ Pᵀ, the Dirichlet-type preconditioner of FETI
-//! (Farhat, Mandel, Roux 1994): on a flat contact boundary, where P only picks dofs of C,
-//! S = D⁻¹ exactly, and Q_Fᵀ S Q_F differs from (Q_Fᵀ D Q_F)⁻¹ only through the coupling
-//! of F to the fixed directions; it costs as much as a product with D. The rims' tangents
-//! (κ > 0) take diag(δ + κ): a sliding node's tangent is coupled to its radial direction,
-//! which the step keeps fixed, so S is far from the inverse there. δ_j, the groups' scale, is one number here: the mean of diag D,
-//! estimated from products with fixed ±1 vectors (Hutchinson's trace estimate), since the
-//! exact diagonal would cost m products. The answer does not depend on δ.
+//! preconditioner is Q_Fᵀ S Q_F on the coordinates F without a shift, with S an
+//! approximation of D⁻¹ on C:
+//!
+//! - `Preconditioner::Dirichlet` (with the trailing block): S = P S_C Pᵀ = P L_CC L_CCᵀ Pᵀ,
+//!   the Schur complement K_CC − K_CI K_II⁻¹ K_IC, the Dirichlet preconditioner of FETI
+//!   (Farhat, Mandel, Roux 1994): on a flat contact boundary, where P only picks dofs of C,
+//!   S = D⁻¹ exactly, and Q_Fᵀ S Q_F differs from (Q_Fᵀ D Q_F)⁻¹ only through the coupling
+//!   of F to the fixed directions; it costs as much as a product with D.
+//! - `Preconditioner::Lumped` (without it): S = P K_CC Pᵀ, C's block of K_A, FETI's lumped
+//!   preconditioner, which drops K_CI K_II⁻¹ K_IC; a sparse product, nearly free.
+//!
+//! The rims' tangents (κ > 0) take diag(δ + κ): a sliding node's tangent is coupled to its
+//! radial direction, which the step keeps fixed, so S is far from the inverse there. δ_j,
+//! the groups' scale, is one number here: the mean of diag D, estimated from products with
+//! fixed ±1 vectors (Hutchinson's trace estimate), since the exact diagonal would cost m
+//! products. The answer does not depend on δ.
 
 use super::dual::groups::{self, Coord, Group};
 use super::dual::iteration::{Buffers, Iteration, Operator};
 use super::dual::newton::{Gradient, Indefinite};
 use super::dual::DualSettings;
 use super::{Factor, Rows, StepReport, StepStatus};
+use crate::fem::Sparse;
 use crate::{Error, Result};
 use std::cell::RefCell;
 
@@ -50,6 +62,9 @@ pub enum Preconditioner {
     /// Q_Fᵀ S Q_F on the coordinates without a shift (F: free rows and free discs), S =
     /// P L_CC L_CCᵀ Pᵀ, and diag(δ + κ) on the rims' tangents (the module doc).
     Dirichlet,
+    /// As `Dirichlet` with K_CC, C's block of K_A, in place of S_C = K_CC − K_CI K_II⁻¹ K_IC:
+    /// FETI's lumped preconditioner, the one a factor without the trailing block allows.
+    Lumped,
 }
 
 /// The settings of a `MatrixFreeSolver`; `validate` checks the ranges given with each field.
@@ -65,7 +80,8 @@ pub struct MatrixFreeSettings {
     pub cg_max: usize,
     /// Products with ±1 vectors for the estimate of diag D's mean. Default 4; ≥ 1.
     pub probes: usize,
-    /// Default `Dirichlet`.
+    /// Default `Dirichlet`; `Lumped` on a factor without the trailing block
+    /// (`for_factor`), which `Dirichlet` needs.
     pub preconditioner: Preconditioner,
 }
 
@@ -81,6 +97,19 @@ impl Default for MatrixFreeSettings {
 }
 
 impl MatrixFreeSettings {
+    /// The defaults for a solver on `factor`: `Dirichlet` where the factor orders C last
+    /// (the trailing block S_C = L_CC L_CCᵀ is at hand), `Lumped` where it does not.
+    pub fn for_factor(factor: &Factor) -> Self {
+        let preconditioner = match factor.last() {
+            0 => Preconditioner::Lumped,
+            _ => Preconditioner::Dirichlet,
+        };
+        MatrixFreeSettings {
+            preconditioner,
+            ..Default::default()
+        }
+    }
+
     /// Checks every field against its range; the error names the first field out of it.
     pub fn validate(&self) -> Result<()> {
         self.dual.validate()?;
@@ -99,7 +128,8 @@ impl MatrixFreeSettings {
 /// The work of a solver so far (cumulative over its steps).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MatrixFreeCounts {
-    /// Products with D (passes over L_CC), and with S for the preconditioner.
+    /// Products with D (passes over L_CC, or whole solves), and with S or K_CC for the
+    /// preconditioner.
     pub products: usize,
     pub preconditioner: usize,
     /// Newton systems, and their conjugate gradient iterations.
@@ -112,7 +142,8 @@ pub struct MatrixFreeSolver {
     operands: Operands,
     /// The multiplier groups, in row order, with δ_j the estimated mean of diag D.
     groups: Vec<Group>,
-    /// C's first position in the factor's ordering.
+    /// C's first position in the factor's ordering, where the products go through its
+    /// trailing block; 0 where they are whole solves (their vectors then hold every dof).
     first: usize,
     /// K_A⁻¹ b of the step in the factor's ordering, and a vector of the dofs.
     x_b: Vec<f64>,
@@ -124,15 +155,21 @@ pub struct MatrixFreeSolver {
 /// The settings, P, the step's d and the products' vectors.
 struct Operands {
     settings: MatrixFreeSettings,
-    /// P: each row's (index in C, coefficient) pairs, C in the factor's ordering.
+    /// P: each row's (index, coefficient) pairs, the index a dof's position in the factor
+    /// less `MatrixFreeSolver::first`: its entry in the products' vectors.
     p: Vec<Vec<(usize, f64)>>,
+    /// K_CC by rows for `Preconditioner::Lumped` (else empty): (row's index, its entries
+    /// (index, value)), indexed as P.
+    kcc: Vec<(usize, Vec<(usize, f64)>)>,
+    /// The products are whole solves: the factor has no trailing block.
+    solves: bool,
     /// d = P K_A⁻¹ b.
     d: Vec<f64>,
     /// Vectors on C for the products, and the counts.
     work: RefCell<Work>,
 }
 
-/// The products' vectors on C, and the counts.
+/// The products' vectors (on C, or on every dof for whole solves), and the counts.
 struct Work {
     y_c: Vec<f64>,
     s_c: Vec<f64>,
@@ -142,22 +179,41 @@ struct Work {
 impl MatrixFreeSolver {
     /// The solver with the default settings; `factor` must have been built with the rows'
     /// dofs ordered last.
-    pub fn new(factor: &Factor, rows: &Rows) -> Self {
-        Self::build(factor, rows, MatrixFreeSettings::default())
+    pub fn new(factor: &Factor, matrix: &Sparse, rows: &Rows) -> Self {
+        Self::build(factor, matrix, rows, MatrixFreeSettings::for_factor(factor))
     }
 
     /// As `new`, with other settings, which are validated first.
     pub fn with_settings(
         factor: &Factor,
+        matrix: &Sparse,
         rows: &Rows,
         settings: MatrixFreeSettings,
     ) -> Result<Self> {
         settings.validate()?;
-        Ok(Self::build(factor, rows, settings))
+        if factor.last() == 0 && settings.preconditioner == Preconditioner::Dirichlet {
+            return Err(Error::input(
+                "the matrix-free contact solver's Dirichlet preconditioner needs a factor with \
+                 the constrained dofs ordered last (solver.contact = \"matrix_free\")",
+            ));
+        }
+        Ok(Self::build(factor, matrix, rows, settings))
     }
 
-    fn build(factor: &Factor, rows: &Rows, settings: MatrixFreeSettings) -> Self {
-        let first = factor.dim() - factor.last();
+    /// `factor` holds `matrix`; with C ordered last the products go through its trailing
+    /// block, else through whole solves.
+    fn build(factor: &Factor, matrix: &Sparse, rows: &Rows, settings: MatrixFreeSettings) -> Self {
+        let solves = factor.last() == 0;
+        let first = if solves {
+            0
+        } else {
+            factor.dim() - factor.last()
+        };
+        let span = factor.dim() - first;
+        let kcc = match settings.preconditioner {
+            Preconditioner::Lumped => lumped(factor, matrix, &rows.dofs(), first),
+            _ => Vec::new(),
+        };
         let p = rows
             .rows
             .iter()
@@ -171,10 +227,12 @@ impl MatrixFreeSolver {
         let operands = Operands {
             settings,
             p,
+            kcc,
+            solves,
             d: vec![0.0; m],
             work: RefCell::new(Work {
-                y_c: vec![0.0; factor.last()],
-                s_c: vec![0.0; factor.last()],
+                y_c: vec![0.0; span],
+                s_c: vec![0.0; span],
                 counts: MatrixFreeCounts::default(),
             }),
         };
@@ -188,6 +246,12 @@ impl MatrixFreeSolver {
             x_b: vec![0.0; factor.dim()],
             y: vec![0.0; factor.dim()],
         }
+    }
+
+    /// Whether the products are whole solves (`sparse`; else passes over the trailing
+    /// block, `matrix_free`).
+    pub fn sparse(&self) -> bool {
+        self.operands.solves
     }
 
     /// The work so far.
@@ -237,11 +301,12 @@ impl MatrixFreeSolver {
     }
 }
 
-/// D = P L_CC⁻ᵀ L_CC⁻¹ Pᵀ and S = P L_CC L_CCᵀ Pᵀ through the factor: the `Operator` of the
-/// shared iteration.
+/// D and S through the factor (the module doc): the `Operator` of the shared iteration.
 struct Products<'a> {
     factor: &'a Factor,
     p: &'a [Vec<(usize, f64)>],
+    kcc: &'a [(usize, Vec<(usize, f64)>)],
+    solves: bool,
     d: &'a [f64],
     settings: &'a MatrixFreeSettings,
     /// max|d|, and δ.
@@ -256,6 +321,8 @@ impl<'a> Products<'a> {
         Products {
             factor,
             p: &operands.p,
+            kcc: &operands.kcc,
+            solves: operands.solves,
             d: &operands.d,
             settings: &operands.settings,
             scale: operands.d.iter().fold(0.0f64, |a, x| a.max(x.abs())),
@@ -264,11 +331,17 @@ impl<'a> Products<'a> {
         }
     }
 
-    /// out = D v = P (K_A⁻¹)_CC Pᵀ v (one pass each way over L_CC).
+    /// out = D v = P (K_A⁻¹)_CC Pᵀ v: one pass each way over L_CC, or a whole forward and
+    /// backward solve.
     fn product(&self, v: &[f64], out: &mut [f64]) {
         let mut work = self.work.borrow_mut();
         scatter(self.p, v, &mut work.y_c);
-        self.factor.trailing_solve(&mut work.y_c);
+        if self.solves {
+            self.factor.forward(&mut work.y_c);
+            self.factor.backward(&mut work.y_c);
+        } else {
+            self.factor.trailing_solve(&mut work.y_c);
+        }
         for (row, o) in self.p.iter().zip(out) {
             *o = gather(row, &work.y_c);
         }
@@ -300,7 +373,7 @@ impl<'a> Products<'a> {
                 .zip(r)
                 .map(|(q, ri)| ri / (self.delta + q.shift))
                 .collect(),
-            Preconditioner::Dirichlet => {
+            Preconditioner::Dirichlet | Preconditioner::Lumped => {
                 // Q_F r_F, with the rims' tangents (κ > 0) left out.
                 let mut t = vec![0.0; self.p.len()];
                 for (q, ri) in coords.iter().zip(r).filter(|(q, _)| q.shift == 0.0) {
@@ -311,7 +384,13 @@ impl<'a> Products<'a> {
                 let mut work = self.work.borrow_mut();
                 let Work { y_c, s_c, counts } = &mut *work;
                 scatter(self.p, &t, y_c);
-                self.factor.trailing_product(y_c, s_c);
+                if self.settings.preconditioner == Preconditioner::Lumped {
+                    for (i, row) in self.kcc {
+                        s_c[*i] = row.iter().map(|&(j, v)| v * y_c[j]).sum();
+                    }
+                } else {
+                    self.factor.trailing_product(y_c, s_c);
+                }
                 counts.preconditioner += 1;
                 for (row, ti) in self.p.iter().zip(&mut t) {
                     *ti = gather(row, s_c);
@@ -421,6 +500,29 @@ fn add_columns(coords: &[Coord], x: &[f64], out: &mut [f64]) {
             out[i] += e * xq;
         }
     }
+}
+
+/// K_CC by rows, C = `dofs` (sorted), each row's and column's index its position in the
+/// factor less `first`: what the products' vectors on C hold.
+fn lumped(
+    factor: &Factor,
+    matrix: &Sparse,
+    dofs: &[usize],
+    first: usize,
+) -> Vec<(usize, Vec<(usize, f64)>)> {
+    dofs.iter()
+        .map(|&d| {
+            // Column d of the symmetric K_A is its row d.
+            let col = matrix.col_range(d);
+            let entries = matrix.symbolic().row_idx()[col.clone()]
+                .iter()
+                .zip(&matrix.val()[col])
+                .filter(|(r, _)| dofs.binary_search(r).is_ok())
+                .map(|(&r, &v)| (factor.position(r) - first, v))
+                .collect();
+            (factor.position(d) - first, entries)
+        })
+        .collect()
 }
 
 /// Σ c x_i over a row's entries (i, c).

@@ -171,7 +171,8 @@ pub enum StepSolver {
     Linear,
     /// Condensed onto the constrained boundary dofs; see `dual`.
     Dual(Box<dual::DualSolver>),
-    /// The same dual without the m × m matrix; see `matrix_free`.
+    /// The same dual without the m × m matrix, `matrix_free` or `sparse`; see
+    /// `matrix_free`.
     MatrixFree(Box<matrix_free::MatrixFreeSolver>),
     /// The whole problem in clarabel; see `conic`.
     Conic(Box<conic::ConicSolver>),
@@ -185,9 +186,13 @@ impl StepSolver {
             StepSolver::Dual(_) => {
                 "dual active set (condensed on Γ3 rows, stored Cholesky factor of K_A)"
             }
+            StepSolver::MatrixFree(d) if d.sparse() => {
+                "sparse dual (condensed on Γ3 rows through whole solves with the stored \
+                 Cholesky factor of K_A)"
+            }
             StepSolver::MatrixFree(_) => {
-                "matrix-free dual (condensed on Γ3 rows through solves with the stored Cholesky \
-                 factor of K_A)"
+                "matrix-free dual (condensed on Γ3 rows through the trailing block of the \
+                 stored Cholesky factor of K_A)"
             }
             StepSolver::Conic(_) => "clarabel (interior point on the whole step problem)",
         }
@@ -581,36 +586,89 @@ mod tests {
         }
     }
 
-    /// The matrix-free dual with either preconditioner gives clarabel's solution over a
-    /// sequence of warm-started steps, and the two agree; the Dirichlet one really applies
-    /// S and needs fewer conjugate gradient iterations on this lattice.
+    /// The two preconditioners `kinds` of a dual without D on the factor ordered with `last`
+    /// last, over a sequence of warm-started steps of `lattice(3, 6, 3, seed)` for three
+    /// seeds: each gives clarabel's solution and the two agree (`over_steps`); their counts.
+    fn preconditioned(
+        last: bool,
+        kinds: [matrix_free::Preconditioner; 2],
+    ) -> Vec<[matrix_free::MatrixFreeCounts; 2]> {
+        use matrix_free::{MatrixFreeSettings, MatrixFreeSolver};
+        [1, 2, 3]
+            .map(|seed| {
+                let p = lattice(3, 6, 3, seed);
+                let mut s = Solvers::new(&p);
+                if !last {
+                    s.factor = Factor::new(&p.k, &[]).unwrap();
+                }
+                let mut solvers = kinds.map(|preconditioner| {
+                    let settings = MatrixFreeSettings {
+                        preconditioner,
+                        ..Default::default()
+                    };
+                    let solver =
+                        MatrixFreeSolver::with_settings(&s.factor, &p.k, &p.rows, settings);
+                    (solver.unwrap(), vec![0.0; p.rows.len()])
+                });
+                over_steps(&p, &mut s, seed, &mut solvers, |mf, f, rows, b, w, z| {
+                    mf.solve(f, rows, b, w, z, None)
+                });
+                let counts = solvers.map(|(solver, _)| solver.counts());
+                eprintln!("seed {seed}: {kinds:?} {counts:?}");
+                counts
+            })
+            .to_vec()
+    }
+
+    /// Conjugate gradient iterations per Newton system.
+    fn per_system(c: matrix_free::MatrixFreeCounts) -> f64 {
+        c.cg_iterations as f64 / c.newton as f64
+    }
+
+    /// The matrix-free dual (C last) with either preconditioner gives clarabel's solution;
+    /// the Dirichlet one really applies S and needs fewer conjugate gradient iterations on
+    /// this lattice.
     #[test]
     fn matrix_free_preconditioners_agree_with_clarabel_in_3d() {
-        use matrix_free::{MatrixFreeCounts, MatrixFreeSettings, MatrixFreeSolver, Preconditioner};
-        for seed in [1, 2, 3] {
-            let p = lattice(3, 6, 3, seed);
-            let mut s = Solvers::new(&p);
-            let kinds = [Preconditioner::Dirichlet, Preconditioner::Diagonal];
-            let mut solvers = kinds.map(|preconditioner| {
-                let settings = MatrixFreeSettings {
-                    preconditioner,
-                    ..Default::default()
-                };
-                let solver = MatrixFreeSolver::with_settings(&s.factor, &p.rows, settings);
-                (solver.unwrap(), vec![0.0; p.rows.len()])
-            });
-            over_steps(&p, &mut s, seed, &mut solvers, |mf, f, rows, b, w, z| {
-                mf.solve(f, rows, b, w, z, None)
-            });
-            let [dirichlet, diagonal] = solvers.map(|(solver, _)| solver.counts());
-            eprintln!("seed {seed}: Dirichlet {dirichlet:?}, diagonal {diagonal:?}");
+        use matrix_free::Preconditioner::{Diagonal, Dirichlet};
+        for [dirichlet, diagonal] in preconditioned(true, [Dirichlet, Diagonal]) {
             assert!(dirichlet.preconditioner > 0 && diagonal.preconditioner == 0);
-            let per_system = |c: MatrixFreeCounts| c.cg_iterations as f64 / c.newton as f64;
             assert!(
                 per_system(dirichlet) < per_system(diagonal),
                 "{dirichlet:?} {diagonal:?}"
             );
         }
+    }
+
+    /// The sparse dual (the factor in its fill-reducing order, whole solves) with the lumped
+    /// or the diagonal preconditioner gives clarabel's solution, and the lumped one really
+    /// applies K_CC (on this small lattice it takes as many conjugate gradient iterations
+    /// as the diagonal; on the plates of docs/performance.md fewer); the Dirichlet one,
+    /// which needs C last, is refused on such a factor, and is what the defaults pick where
+    /// C is last.
+    #[test]
+    fn sparse_preconditioners_agree_with_clarabel_in_3d() {
+        use matrix_free::Preconditioner::{Diagonal, Dirichlet, Lumped};
+        use matrix_free::{MatrixFreeSettings, MatrixFreeSolver};
+        for [lumped, diagonal] in preconditioned(false, [Lumped, Diagonal]) {
+            assert!(lumped.preconditioner > 0 && diagonal.preconditioner == 0);
+        }
+        let p = lattice(3, 6, 3, 1);
+        let (ordered, sparse) = (
+            Factor::new(&p.k, &p.rows.dofs()).unwrap(),
+            Factor::new(&p.k, &[]).unwrap(),
+        );
+        assert_eq!(
+            MatrixFreeSettings::for_factor(&ordered).preconditioner,
+            Dirichlet
+        );
+        assert_eq!(
+            MatrixFreeSettings::for_factor(&sparse).preconditioner,
+            Lumped
+        );
+        let dirichlet = MatrixFreeSettings::for_factor(&ordered);
+        let err = MatrixFreeSolver::with_settings(&sparse, &p.k, &p.rows, dirichlet);
+        assert!(err.is_err());
     }
 
     /// A free node with K = k I, one friction block in the plane z = 0 (tangents turned by

@@ -13,7 +13,7 @@ use viscontact::solver::choice::ContactPlan;
 use viscontact::solver::Rows;
 
 /// The block at h = 1/4 over 4 steps, written into `dir`, and a memory (bytes) in which its
-/// matrix-free plan fits and its dense one does not.
+/// sparse plan fits and its dense one does not.
 fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64) {
     let scene = SceneText::block()
         .mesh(common::mesh_path("3d/block_004.msh"))
@@ -22,12 +22,9 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64) {
     let (_s, _m, disc) = common::load(&scene, &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
     let memory = |choice| ContactPlan::new(choice, &rows, disc.n_free).memory.unwrap();
-    let (dense, matrix_free) = (
-        memory(ContactSolver::Dense),
-        memory(ContactSolver::MatrixFree),
-    );
-    assert!(matrix_free < dense, "{matrix_free} {dense}");
-    (scene, (dense * matrix_free).sqrt() / MARGIN)
+    let (dense, sparse) = (memory(ContactSolver::Dense), memory(ContactSolver::Sparse));
+    assert!(sparse < dense, "{sparse} {dense}");
+    (scene, (dense * sparse).sqrt() / MARGIN)
 }
 
 /// `viscontact ARGS` with `VISCONTACT_MEMORY` = `memory` bytes.
@@ -60,21 +57,28 @@ fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
         text.contains("contact    dense (auto: its matrices ≈ ") && text.contains("m³/3 = "),
         "{text}"
     );
+    let (code, text) = common::cli(&["check", scene, "--set", "solver.contact=matrix_free"]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("contact    matrix_free (solver.contact = \"matrix_free\"): memory ≈ ")
+            && text.contains("the dense trailing block"),
+        "{text}"
+    );
     // auto is still the dense dual on a smaller machine, and refused there.
     let o = with_memory(tight, &["check", scene]);
     refused(
         &o,
         &[
             "the dense contact solver would need",
-            "solver.contact = \"matrix_free\"",
+            "solver.contact = \"sparse\"",
         ],
     );
-    let forced = ["check", scene, "--set", "solver.contact=matrix_free"];
+    let forced = ["check", scene, "--set", "solver.contact=sparse"];
     let o = with_memory(tight, &forced);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(
-        stdout.contains("contact    matrix_free (solver.contact = \"matrix_free\"): memory ≈ "),
+        stdout.contains("contact    sparse (solver.contact = \"sparse\"): memory ≈ "),
         "{stdout}"
     );
     refused(&with_memory(tight / 100.0, &forced), &["coarser mesh"]);
@@ -96,16 +100,13 @@ fn run_and_resume_refuse_a_plan_that_does_not_fit_and_leave_the_directory_as_it_
     let checkpoint = dir.join("checkpoint.h5");
     let checkpoint = checkpoint.to_str().unwrap();
     let rerun = with_memory(tight, &["run", scene, "--out", dir_s, "--quiet"]);
-    refused(&rerun, &["solver.contact = \"matrix_free\""]);
+    refused(&rerun, &["solver.contact = \"sparse\""]);
     assert!(
         common::dir_contents(&dir) == before,
         "a refused run changed the directory"
     );
     let resume = with_memory(tight, &["resume", checkpoint, "--quiet"]);
-    refused(
-        &resume,
-        &["solver.contact = \"matrix_free\"", "a resume keeps"],
-    );
+    refused(&resume, &["solver.contact = \"sparse\"", "a resume keeps"]);
     assert!(
         common::dir_contents(&dir) == before,
         "a refused resume changed the directory"
@@ -141,10 +142,7 @@ fn the_contact_solver_and_the_steps_are_counted_together() {
     let memory = (steps + 0.5 * solver) / MARGIN;
     let scene = scene.to_str().unwrap();
     let o = with_memory(memory, &["check", scene]);
-    refused(
-        &o,
-        &["that the steps hold", "solver.contact = \"matrix_free\""],
-    );
+    refused(&o, &["that the steps hold", "solver.contact = \"sparse\""]);
     let dir = tmp.path().join("o");
     let o = with_memory(memory, &["run", scene, "--out", dir.to_str().unwrap()]);
     refused(&o, &["that the steps hold"]);

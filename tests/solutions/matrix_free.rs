@@ -1,9 +1,11 @@
-//! The matrix-free contact solver (`solver.contact = "matrix_free"`) against the dense dual
-//! and clarabel: the paper's scene (2D), the unstructured block (3D, contact, friction and
-//! memory), and a block sliding under a traction that turns (contact and friction nodes
-//! change state from step to step); `auto` takes the dense dual on every such boundary, by
-//! its size alone, and the plan names the solver, its memory and its cost. (The refusal of a
-//! plan that does not fit the machine: tests/cli/contact_plan.rs.)
+//! The contact solvers without D (`solver.contact = "matrix_free"`, through the trailing
+//! block of a factor with C last, and `"sparse"`, through whole solves with a linear run's
+//! factor) against the dense dual and clarabel: the paper's scene (2D), the unstructured
+//! block (3D, contact, friction and memory), and a block sliding under a traction that turns
+//! (contact and friction nodes change state from step to step); `auto` takes the dense dual
+//! on every such boundary, by its size alone, and the plan names the solver, its memory and
+//! its cost. (The refusal of a plan that does not fit the machine:
+//! tests/cli/contact_plan.rs.)
 
 use crate::common;
 use common::*;
@@ -33,34 +35,38 @@ fn max_step_diff(a: &Trace, b: &Trace) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Matrix-free against dense (both at the dual's KKT tolerance) and against clarabel.
+/// Each dual without D against dense (both at the dual's KKT tolerance) and against
+/// clarabel.
 fn agree(scene: &std::path::Path, overrides: &[&str], what: &str) {
     let t = finals(
         scene,
         overrides,
-        &["matrix_free", "dense", "clarabel", "auto"],
+        &["dense", "clarabel", "auto", "matrix_free", "sparse"],
     );
-    assert!(t[0].solver.starts_with("matrix-free") && t[1].solver.starts_with("dual"));
-    assert_eq!(t[3].solver, t[1].solver, "auto takes the dense dual");
+    assert!(t[0].solver.starts_with("dual"));
+    assert_eq!(t[2].solver, t[0].solver, "auto takes the dense dual");
     assert_eq!(
-        t[3].u_final, t[1].u_final,
+        t[2].u_final, t[0].u_final,
         "auto is the dense dual bit for bit"
     );
-    let (dense, clarabel) = (
-        rel_diff(&t[1].u_final, &t[0].u_final),
-        rel_diff(&t[2].u_final, &t[0].u_final),
-    );
-    let steps = max_step_diff(&t[1], &t[0]);
-    println!("{what}: |u_N mf − dense| {dense:.1e}, |u_N mf − clarabel| {clarabel:.1e}, max over steps |w mf − dense| {steps:.1e}");
-    assert!(
-        dense <= 1e-9 && steps <= 1e-8,
-        "{what}: {dense:e} {steps:e}"
-    );
-    assert!(clarabel <= 1e-7, "{what}: {clarabel:e}");
+    for (free, name) in t[3..].iter().zip(["matrix-free", "sparse"]) {
+        assert!(free.solver.starts_with(name), "{}", free.solver);
+        let (dense, clarabel) = (
+            rel_diff(&t[0].u_final, &free.u_final),
+            rel_diff(&t[1].u_final, &free.u_final),
+        );
+        let steps = max_step_diff(&t[0], free);
+        println!("{what}, {name}: |u_N − dense| {dense:.1e}, |u_N − clarabel| {clarabel:.1e}, max over steps |w − dense| {steps:.1e}");
+        assert!(
+            dense <= 1e-9 && steps <= 1e-8,
+            "{what}, {name}: {dense:e} {steps:e}"
+        );
+        assert!(clarabel <= 1e-7, "{what}, {name}: {clarabel:e}");
+    }
 }
 
 #[test]
-fn matrix_free_agrees_on_the_paper_scene() {
+fn duals_without_d_agree_on_the_paper_scene() {
     let mesh = format!("mesh.file={}", mesh_path("paper/rect_008.msh"));
     agree(
         &repo().join("examples/paper.toml"),
@@ -70,7 +76,7 @@ fn matrix_free_agrees_on_the_paper_scene() {
 }
 
 #[test]
-fn matrix_free_agrees_on_the_unstructured_block() {
+fn duals_without_d_agree_on_the_unstructured_block() {
     let mesh = repo().join("tests/data/3d/block_unstructured.msh");
     agree(
         &repo().join("examples/block.toml"),
@@ -83,7 +89,7 @@ fn matrix_free_agrees_on_the_unstructured_block() {
 /// the run and whose normal part pulsates: contact and friction nodes change state from
 /// step to step; u_N agrees with clarabel to 1e-7 over 64 steps.
 #[test]
-fn matrix_free_agrees_under_a_rotating_traction() {
+fn duals_without_d_agree_under_a_rotating_traction() {
     let dir = tempfile::tempdir().unwrap();
     let base = std::fs::read_to_string(repo().join("examples/block.toml")).unwrap();
     let cut = base.find("[[load.traction]]").unwrap();
@@ -97,7 +103,7 @@ fn matrix_free_agrees_under_a_rotating_traction() {
 }
 
 /// `auto` takes the dense dual while its matrices stay under `DENSE_LIMIT`, whatever the
-/// machine, and the matrix-free one beyond; a forced key is obeyed; the plan says which.
+/// machine, and the sparse one beyond; a forced key is obeyed; the plan says which.
 #[test]
 fn the_plan_names_the_solver_that_fits() {
     // The block at h = 1/8: 234 rows, D and its kin 2.2 MB, the matrix-free vectors 0.1 MB.
@@ -125,7 +131,10 @@ fn the_plan_names_the_solver_that_fits() {
             .starts_with("matrix_free (solver.contact = \"matrix_free\")"),
         "{forced}"
     );
+    let sparse = ContactPlan::new(ContactSolver::Sparse, &rows, disc.n_free);
+    assert_eq!(sparse.solver, Contact::Sparse);
+    assert!(sparse.memory.unwrap() < forced.memory.unwrap());
     // A boundary of 50 times the rows and dofs would hold a dense dual over the limit.
     let (m, c) = (50 * rows.len(), 50 * rows.dofs().len());
-    assert_eq!(Contact::auto(m, c, rows.block), Contact::MatrixFree);
+    assert_eq!(Contact::auto(m, c, rows.block), Contact::Sparse);
 }
