@@ -4,8 +4,8 @@
 //! reach the threaded parts of a step: the 2D paper scene at h = 1/128 (memory and
 //! friction; its factor is large enough for the solves' two groups of subtrees), the 3D
 //! block (a dense dual with Newton steps), the plate on its foundation (a root supernode
-//! large enough to share its rows, D z in eight parts) and a run written as one `.vtkhdf`
-//! file.
+//! large enough to share its rows, D z in eight parts; and with the two duals without D)
+//! and a run written as one `.vtkhdf` file.
 
 use crate::common;
 
@@ -123,6 +123,20 @@ fn plate_with_a_wide_root_is_the_same_for_every_thread_count() {
     let mesh = repo().join("tests/data/3d/plate_005.msh");
     let mesh = format!("mesh.file={:?}", mesh.to_str().unwrap());
     same_for_every_count("plate", &scene, &["time.steps=6", &mesh]);
+}
+
+/// The duals without D on the same plate: the sparse one (each product a whole solve with
+/// the factor, its solves split over the threads) and the matrix-free one (passes over the
+/// trailing block, its rows shared out over the threads).
+#[test]
+fn duals_without_d_are_the_same_for_every_thread_count() {
+    let scene = repo().join("examples/block.toml");
+    let mesh = repo().join("tests/data/3d/plate_005.msh");
+    let mesh = format!("mesh.file={:?}", mesh.to_str().unwrap());
+    for solver in ["sparse", "matrix_free"] {
+        let set = ["time.steps=4", &mesh, &format!("solver.contact={solver:?}")];
+        same_for_every_count(&format!("plate-{solver}"), &scene, &set);
+    }
 }
 
 #[test]
