@@ -191,8 +191,8 @@ pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
 /// What ordering c constrained dofs last adds to the factor of K_A, in bytes: their block of
 /// L is the factor of the Schur complement on C, dense, and faer factors the root supernode
 /// that holds it as a full square before it is repacked: 16c² bytes, two c × c matrices.
-/// (Measured on the plate of issue 29 at size 0.015, c = 16 125: 7.96 GB peak against 4.42 GB
-/// in the fill-reducing order, 13.6c².)
+/// (Measured on the plate of issue 29 at size 0.015, c = 16 125: 8.12 GB peak against 4.52 GB
+/// in the fill-reducing order, 13.8c².)
 pub fn trailing_bytes(c: usize) -> f64 {
     16.0 * (c as f64).powi(2)
 }
