@@ -188,11 +188,12 @@ pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
     8.0 * (3.0 * n as f64 + 20.0 * m as f64)
 }
 
-/// What ordering c constrained dofs last adds to the factor of K_A, in bytes: their block of
+/// What ordering c constrained dofs last adds to a run's peak memory, in bytes: their block of
 /// L is the factor of the Schur complement on C, dense, and faer factors the root supernode
-/// that holds it as a full square before it is repacked: 16c² bytes, two c × c matrices.
-/// (Measured on the plate of issue 29 at size 0.015, c = 16 125: 8.12 GB peak against 4.52 GB
-/// in the fill-reducing order, 13.8c².)
+/// that holds it as a full square (8c²) before it is repacked, with its factorization's
+/// workspace beside it. Measured above the fill-reducing order's peak: 13.8c² on the plate
+/// of issue 29 at size 0.015 (c = 16 125: 8.12 GB against 4.52 GB), about 14c² at size 0.03
+/// (c ≈ 4 300: 261 MB); 16c² bounds both.
 pub fn trailing_bytes(c: usize) -> f64 {
     16.0 * (c as f64).powi(2)
 }
