@@ -135,13 +135,14 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
     w
 }
 
-/// Picks and builds the step solver (Remark 2.5): `Linear` without constraint rows,
-/// otherwise the scene's choice (`solver.contact`; `auto` by the size of the dense dual, see
-/// `solver::choice`) of the dense dual, a dual without D or clarabel. `matrix` is the step
-/// matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor` holds.
+/// Builds the step solver (Remark 2.5): `Linear` without constraint rows, otherwise
+/// `contact`, the scene's choice resolved (`solver.contact`; `auto` by the size of the dense
+/// dual, see `solver::choice`): the dense dual, a dual without D or clarabel. `matrix` is the
+/// step matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor`
+/// holds, ordered as `contact` asks (`Contact::orders_last`).
 pub fn step_solver(
     effects: &Effects,
-    scene: &Scene,
+    contact: Contact,
     matrix: &Sparse,
     factor: &Factor,
     rows: &Rows,
@@ -149,7 +150,7 @@ pub fn step_solver(
     if effects.linear() {
         return Ok(StepSolver::Linear);
     }
-    Ok(match Contact::of(scene.solver.contact, rows) {
+    Ok(match contact {
         Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
         Contact::MatrixFree | Contact::Sparse => {
             StepSolver::MatrixFree(Box::new(MatrixFreeSolver::new(factor, matrix, rows)))

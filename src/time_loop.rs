@@ -191,12 +191,13 @@ impl<'p> TimeLoop<'p> {
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
         // The step matrix is factored once, with the constrained boundary dofs ordered last
         // where the contact solver works on its trailing block.
-        let last = match Contact::of(scene.solver.contact, &rows).orders_last() {
+        let contact = Contact::of(scene.solver.contact, &rows);
+        let last = match contact.orders_last() {
             true => rows.dofs(),
             false => Vec::new(),
         };
         let factor = Factor::new(matrix, &last)?;
-        let solver = effects::step_solver(&effects, scene, matrix, &factor, &rows)?;
+        let solver = effects::step_solver(&effects, contact, matrix, &factor, &rows)?;
         let n = disc.n_free;
         let history = History::new(n, scene.time.k(), &plan);
         let paired = disc

@@ -177,8 +177,9 @@ struct Work {
 }
 
 impl MatrixFreeSolver {
-    /// The solver with the default settings; `factor` must have been built with the rows'
-    /// dofs ordered last.
+    /// The solver with the default settings for `factor` (`MatrixFreeSettings::for_factor`),
+    /// which holds `matrix` with the rows' dofs ordered last (`matrix_free`) or in the
+    /// fill-reducing order of a linear run (`sparse`).
     pub fn new(factor: &Factor, matrix: &Sparse, rows: &Rows) -> Self {
         Self::build(factor, matrix, rows, MatrixFreeSettings::for_factor(factor))
     }
