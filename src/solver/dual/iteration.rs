@@ -345,7 +345,10 @@ impl<'a, O: Operator> Iteration<'a, O> {
             self.groups,
             coords,
             trial,
-            Gradient::Unknown(g_trial),
+            Gradient::Unknown {
+                buffer: g_trial,
+                near: z,
+            },
             p,
             res,
         )?;

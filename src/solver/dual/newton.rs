@@ -90,10 +90,15 @@ pub(super) struct Operators<'a> {
     pub(super) accuracy: f64,
 }
 
-/// The gradient D z₀ − d at a Newton step's base point, if known; else a buffer for it.
+/// The gradient D z₀ − d at a Newton step's base point, if known (the base point is the
+/// iterate); else a buffer for it and the iterate `near`, from whose coordinates an
+/// iterative solve starts (`solver::matrix_free`; a direct solve has no use for it).
 pub(in crate::solver) enum Gradient<'a> {
     Known(&'a [f64]),
-    Unknown(&'a mut [f64]),
+    Unknown {
+        buffer: &'a mut [f64],
+        near: &'a [f64],
+    },
 }
 
 /// out += Q x, where (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d) and Q, κ are given by `coords`: the
@@ -155,9 +160,9 @@ pub(super) fn newton_step(
     s.counts.direct += 1;
     let grad = match grad {
         Gradient::Known(g) => g,
-        Gradient::Unknown(buf) => {
-            ops.d.gradient(z0, ops.dvec, buf);
-            &*buf
+        Gradient::Unknown { buffer, .. } => {
+            ops.d.gradient(z0, ops.dvec, buffer);
+            &*buffer
         }
     };
     gram(&ops.d.mat, coords, &mut s.h, &s.gram_team, ops.d.split_rows);
