@@ -25,7 +25,7 @@
 //! its damping, the projected Newton step with its arc search, the projected gradient step,
 //! the same stopping test), with D given by these products. Its Newton systems
 //! (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d) are solved by conjugate gradients, one product with D
-//! per iteration (`cg`), inexactly, to a residual at most min(½, r/max|d|) r for the
+//! per iteration (`cg`), inexactly, to a residual at most min(1/100, r/max|d|) r for the
 //! iterate's KKT residual r (an inexact Newton method: fast local convergence, no work
 //! wasted far from the solution) and never below a tenth of the tolerance. They start
 //! from the iterate z, x₀ = Qᵀ(z − z₀), not from x = 0: the Newton point's z₀ holds only
@@ -82,6 +82,13 @@ pub struct MatrixFreeSettings {
     /// gives its last iterate, which the iteration's descent tests accept or reject.
     /// Default 400; ≥ 1.
     pub cg_max: usize,
+    /// The largest forcing term of the inexact Newton method: a Newton system is solved to
+    /// a residual of min(`forcing_max`, r/max|d|) · r for the iterate's KKT residual r.
+    /// Loose solves mislead the next prediction where many groups change state: on the
+    /// plate 0.03 the step where it starts to slide took 54 dual iterations with 0.5 (the
+    /// usual Eisenstat–Walker cap) and 25 with 0.01, the dense dual's exact solves 18
+    /// (docs/performance.md). Default 0.01; in (0, 1).
+    pub forcing_max: f64,
     /// Products with ±1 vectors for the estimate of diag D's mean. Default 4; ≥ 1.
     pub probes: usize,
     /// Default `Dirichlet`; `Lumped` on a factor without the trailing block
@@ -94,6 +101,7 @@ impl Default for MatrixFreeSettings {
         MatrixFreeSettings {
             dual: DualSettings::default(),
             cg_max: 400,
+            forcing_max: 0.01,
             probes: 4,
             preconditioner: Preconditioner::Dirichlet,
         }
@@ -117,15 +125,21 @@ impl MatrixFreeSettings {
     /// Checks every field against its range; the error names the first field out of it.
     pub fn validate(&self) -> Result<()> {
         self.dual.validate()?;
-        for (field, ok) in [("cg_max", self.cg_max >= 1), ("probes", self.probes >= 1)] {
-            if !ok {
-                return Err(Error::input(format!(
-                    "the matrix-free contact solver's setting `{field}` must be at least 1 \
-                     ({self:?})"
-                )));
-            }
+        let checks = [
+            ("cg_max", self.cg_max >= 1, "at least 1"),
+            ("probes", self.probes >= 1, "at least 1"),
+            (
+                "forcing_max",
+                self.forcing_max > 0.0 && self.forcing_max < 1.0,
+                "in (0, 1)",
+            ),
+        ];
+        match checks.into_iter().find(|(_, ok, _)| !ok) {
+            None => Ok(()),
+            Some((field, _, range)) => Err(Error::input(format!(
+                "the matrix-free contact solver's setting `{field}` must be {range} ({self:?})"
+            ))),
         }
-        Ok(())
     }
 }
 
@@ -505,7 +519,7 @@ impl Operator for Products<'_> {
         };
         let scale = self.scale.max(f64::MIN_POSITIVE);
         let tol = self.settings.dual.tolerance * scale;
-        let forcing = (res / scale).min(0.5);
+        let forcing = (res / scale).min(self.settings.forcing_max);
         let x = self.cg(coords, x0, r0, (forcing * res).max(0.1 * tol));
         add_columns(coords, &x, out);
         Ok(())
@@ -555,6 +569,50 @@ fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
     for (row, &x) in p.iter().zip(v) {
         for &(i, c) in row {
             y[i] += c * x;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::MatrixFreeSettings;
+
+    #[test]
+    fn defaults_are_valid_and_ranges_are_checked() {
+        MatrixFreeSettings::default().validate().unwrap();
+        let bad = [
+            (
+                MatrixFreeSettings {
+                    cg_max: 0,
+                    ..Default::default()
+                },
+                "cg_max",
+            ),
+            (
+                MatrixFreeSettings {
+                    probes: 0,
+                    ..Default::default()
+                },
+                "probes",
+            ),
+            (
+                MatrixFreeSettings {
+                    forcing_max: 1.0,
+                    ..Default::default()
+                },
+                "forcing_max",
+            ),
+            (
+                MatrixFreeSettings {
+                    forcing_max: f64::NAN,
+                    ..Default::default()
+                },
+                "forcing_max",
+            ),
+        ];
+        for (s, field) in bad {
+            let err = s.validate().unwrap_err().to_string();
+            assert!(err.contains(&format!("`{field}`")), "{err}");
         }
     }
 }
