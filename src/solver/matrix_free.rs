@@ -25,9 +25,10 @@
 //! its damping, the projected Newton step with its arc search, the projected gradient step,
 //! the same stopping test), with D given by these products. Its Newton systems
 //! (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d) are solved by conjugate gradients, one product with D
-//! per iteration (`cg`), inexactly, to a residual at most min(1/100, r/max|d|) r for the
-//! iterate's KKT residual r (an inexact Newton method: fast local convergence, no work
-//! wasted far from the solution) and never below a tenth of the tolerance. They start
+//! per iteration (`cg`), inexactly, to a residual at most min(f, r/max|d|) r for the
+//! iterate's KKT residual r and f = `MatrixFreeSettings::forcing_max` (an inexact Newton
+//! method: fast local convergence, no work wasted far from the solution) and never below a
+//! tenth of the tolerance. They start
 //! from the iterate z, x₀ = Qᵀ(z − z₀), not from x = 0: the Newton point's z₀ holds only
 //! the fixed parts (zeros, points on rims), so from 0 CG would rebuild every free
 //! multiplier, while from the iterate it only reduces the Newton residual there, which is
@@ -52,7 +53,7 @@
 use super::dual::groups::{self, Coord, Group};
 use super::dual::iteration::{Buffers, Iteration, Operator};
 use super::dual::newton::{Gradient, Indefinite};
-use super::dual::DualSettings;
+use super::dual::{self, DualSettings};
 use super::{Factor, Rows, StepReport, StepStatus};
 use crate::fem::Sparse;
 use crate::{Error, Result};
@@ -134,12 +135,7 @@ impl MatrixFreeSettings {
                 "in (0, 1)",
             ),
         ];
-        match checks.into_iter().find(|(_, ok, _)| !ok) {
-            None => Ok(()),
-            Some((field, _, range)) => Err(Error::input(format!(
-                "the matrix-free contact solver's setting `{field}` must be {range} ({self:?})"
-            ))),
-        }
+        dual::in_ranges("matrix-free", &checks, self)
     }
 }
 

@@ -117,6 +117,7 @@ use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Par, Side};
 use groups::{dot, Group};
 use iteration::Work;
+pub(super) use settings::in_ranges;
 pub use settings::{DualSettings, NewtonForm};
 use std::ops::Range;
 

@@ -139,12 +139,23 @@ impl DualSettings {
             ),
             ("split_rows", self.split_rows >= 2, "at least 2"),
         ];
-        match checks.into_iter().find(|(_, ok, _)| !ok) {
-            None => Ok(()),
-            Some((field, _, range)) => Err(Error::input(format!(
-                "the dual contact solver's setting `{field}` must be {range} ({self:?})"
-            ))),
-        }
+        in_ranges("dual", &checks, self)
+    }
+}
+
+/// Ok if every check holds, else the input error that names the first field out of its
+/// range: `checks` are (field, whether it is in range, the range), `solver` names the
+/// contact solver whose `settings` they are.
+pub(in crate::solver) fn in_ranges(
+    solver: &str,
+    checks: &[(&str, bool, &str)],
+    settings: &dyn std::fmt::Debug,
+) -> Result<()> {
+    match checks.iter().find(|(_, ok, _)| !ok) {
+        None => Ok(()),
+        Some((field, _, range)) => Err(Error::input(format!(
+            "the {solver} contact solver's setting `{field}` must be {range} ({settings:?})"
+        ))),
     }
 }
 
