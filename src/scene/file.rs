@@ -362,7 +362,7 @@ pub enum ContactSolver {
     /// The same dual with D applied through the factor of K_A (its trailing block L_CC): no
     /// m × m matrix of the dual, but the factor holds the dense L_CC.
     MatrixFree,
-    /// The same dual with D applied through whole solves with the factor of a linear run:
+    /// The same dual with D applied through solves with the factor of a linear run:
     /// nothing dense.
     Sparse,
     /// The whole per-step problem handed to clarabel (the cross-check).

@@ -142,8 +142,9 @@ impl ContactPlan {
                 Some(sparse),
                 format!(
                     "per Newton iteration {products} products with D at most ({PRODUCTS}), \
-                     each a forward and backward solve with the factor of K_A as a linear \
-                     step's; {ITERATIONS}"
+                     each a forward and backward solve with the factor of K_A over the \
+                     supernodes that hold C and their ancestors (at most a linear step's \
+                     solve); {ITERATIONS}"
                 ),
             ),
             Contact::Clarabel => (

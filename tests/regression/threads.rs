@@ -125,7 +125,7 @@ fn plate_with_a_wide_root_is_the_same_for_every_thread_count() {
     same_for_every_count("plate", &scene, &["time.steps=6", &mesh]);
 }
 
-/// The duals without D on the same plate: the sparse one (each product a whole solve with
+/// The duals without D on the same plate: the sparse one (each product a solve with
 /// the factor, its solves split over the threads) and the matrix-free one (passes over the
 /// trailing block, its rows shared out over the threads).
 #[test]

@@ -1,5 +1,5 @@
 //! The contact solvers without D (`solver.contact = "matrix_free"`, through the trailing
-//! block of a factor with C last, and `"sparse"`, through whole solves with a linear run's
+//! block of a factor with C last, and `"sparse"`, through solves with a linear run's
 //! factor) against the dense dual and clarabel: the paper's scene (2D), the unstructured
 //! block (3D, contact, friction and memory), and a block sliding under a traction that turns
 //! (contact and friction nodes change state from step to step); `auto` takes the dense dual

@@ -60,6 +60,9 @@ pub struct Factor {
     shared: shared::Shared,
 }
 
+/// A set of supernodes closed under taking parents (`Factor::reach`): one flag each.
+pub struct Reach(Vec<bool>);
+
 /// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
 /// their values: column j of a supernode with `size` columns and off-diagonal rows R holds
 /// the rows j..size of its diagonal block, then R (`size − j + |R|` values). faer stores the
@@ -624,8 +627,15 @@ impl Factor {
     /// `Schedule` runs its units on all threads when that pays (`Team`), then the rest
     /// (`split`).
     pub fn forward(&self, y: &mut [f64]) {
+        self.forward_in(y, None);
+    }
+
+    /// `forward` over the supernodes of `reach` alone (all of them for None): y must be 0
+    /// outside the reach's columns, and stays so.
+    fn forward_in(&self, y: &mut [f64], reach: Option<&Reach>) {
+        let kept = |s: &usize| reach.is_none_or(|r| r.0[*s]);
         let Some(schedule) = &self.schedule else {
-            return self.forward_over(0..self.layout.n_supernodes(), y);
+            return self.forward_over((0..self.layout.n_supernodes()).filter(kept), y);
         };
         let widest = self.layout.widest_pattern;
         let mut record = vec![0.0; schedule.record_len()];
@@ -633,7 +643,7 @@ impl Factor {
             .each(schedule.pieces(y, &mut record), |units| {
                 let mut t = vec![0.0; widest];
                 for (unit, ys, rs) in units {
-                    for s in unit.supernodes.clone() {
+                    for s in unit.supernodes.clone().filter(kept) {
                         let ext = schedule.unit_records(unit, s, rs);
                         self.forward_step(s, ys, unit.cols.start, ext, &mut t, false);
                     }
@@ -643,7 +653,7 @@ impl Factor {
         let z_from = schedule.z_from;
         let mut z = vec![0.0; self.n - z_from];
         let mut t = vec![0.0; widest];
-        for &(s, upper) in &schedule.replay {
+        for &(s, upper) in schedule.replay.iter().filter(|r| kept(&r.0)) {
             let (ext, to_z) = schedule.records(s, &mut record);
             if upper {
                 self.forward_step(s, y, 0, ext, &mut t, true);
@@ -657,12 +667,12 @@ impl Factor {
                 }
             }
         }
-        for &s in &schedule.top {
+        for &s in schedule.top.iter().filter(|s| kept(s)) {
             for c in self.layout.begin[s]..self.layout.begin[s + 1] {
                 y[c] += z[c - z_from];
             }
         }
-        self.forward_over(schedule.top.iter().copied(), y);
+        self.forward_over(schedule.top.iter().copied().filter(kept), y);
     }
 
     /// The forward pass over supernode s, `y[i]` holding row base + i, the updates of the
@@ -707,11 +717,18 @@ impl Factor {
     /// others). With a `Schedule`: `top` and the upper supernodes, then the units on all
     /// threads when that pays, each reading the rows outside it from the record.
     pub fn backward(&self, y: &mut [f64]) {
+        self.backward_in(y, None);
+    }
+
+    /// `backward` over the supernodes of `reach` alone (all of them for None): y is right
+    /// on the reach's columns only.
+    fn backward_in(&self, y: &mut [f64], reach: Option<&Reach>) {
+        let kept = |s: &usize| reach.is_none_or(|r| r.0[*s]);
         let Some(schedule) = &self.schedule else {
-            return self.backward_over((0..self.layout.n_supernodes()).rev(), y);
+            return self.backward_over((0..self.layout.n_supernodes()).rev().filter(kept), y);
         };
-        self.backward_over(schedule.top.iter().rev().copied(), y);
-        let replay = schedule.replay.iter().rev();
+        self.backward_over(schedule.top.iter().rev().copied().filter(kept), y);
+        let replay = schedule.replay.iter().rev().filter(|r| kept(&r.0));
         self.backward_over(replay.clone().filter(|r| r.1).map(|r| r.0), y);
         let mut record = vec![0.0; schedule.record_len()];
         for &(s, _) in replay.filter(|r| !r.1) {
@@ -727,7 +744,7 @@ impl Factor {
             .each(schedule.pieces(y, &mut record), |units| {
                 let mut g = vec![0.0; widest];
                 for (unit, ys, rs) in units {
-                    for s in unit.supernodes.clone().rev() {
+                    for s in unit.supernodes.clone().rev().filter(kept) {
                         let ext = schedule.unit_records(unit, s, rs);
                         self.backward_step(s, ys, unit.cols.start, ext, &mut g, false);
                     }
@@ -767,6 +784,36 @@ impl Factor {
         for s in order {
             self.backward_step(s, y, 0, &[], &mut g, true);
         }
+    }
+
+    /// The supernodes that hold one of the positions `at` (the factor's ordering) and
+    /// their ancestors in the elimination tree.
+    pub fn reach(&self, at: impl IntoIterator<Item = usize>) -> Reach {
+        let layout = &self.layout;
+        let owner = |p: usize| layout.begin.partition_point(|&b| b <= p) - 1;
+        let mut kept = vec![false; layout.n_supernodes()];
+        for p in at {
+            let mut s = owner(p);
+            while !kept[s] {
+                kept[s] = true;
+                match layout.pattern(s).first() {
+                    Some(&r) => s = owner(r as usize),
+                    None => break,
+                }
+            }
+        }
+        Reach(kept)
+    }
+
+    /// y ← (L Lᵀ)⁻¹ y on the positions of `reach` (`Factor::reach` of them), y holding 0
+    /// elsewhere: the forward and backward passes over the reach's supernodes alone. The
+    /// others' columns of y hold 0 in the forward pass, so their updates are zeros, and
+    /// the backward pass reads only ancestors; so the reach's entries are those of the
+    /// whole solve, and a product through the factor (the sparse dual's D v) skips the
+    /// supernodes that touch neither its right side nor its answer.
+    pub fn solve_within(&self, reach: &Reach, y: &mut [f64]) {
+        self.forward_in(y, Some(reach));
+        self.backward_in(y, Some(reach));
     }
 
     /// x ← K_A⁻¹ x (original ordering).
@@ -967,6 +1014,47 @@ mod tests {
                     *reference.get_or_insert_with(|| x.clone()) == x,
                     "{bins} bins"
                 );
+            }
+        }
+    }
+
+    /// `solve_within` on the reach of one face of a 3D grid in a linear run's order (the
+    /// sparse dual's products): on the face it gives the whole solve's values, with the
+    /// serial arithmetic and with two groups and units on 1 to 4 threads, and it skips
+    /// supernodes.
+    #[test]
+    fn solves_within_a_reach_match_the_whole_solve() {
+        let (k, face) = grid_3d_with_last(20);
+        for (two_groups, bins) in [(usize::MAX, 1), (0, 1), (0, 2), (0, 3), (0, 4)] {
+            let split = Splits {
+                two_groups,
+                units: 0,
+                bins,
+                shared: 20_000,
+            };
+            let f = Factor {
+                forward_team: Team::of(bins),
+                backward_team: Team::of(bins),
+                ..Factor::with_split(&k, &[], split, |_| Par::Seq).unwrap()
+            };
+            let at: Vec<usize> = face.iter().map(|&d| f.position(d)).collect();
+            let reach = f.reach(at.iter().copied());
+            let kept = reach.0.iter().filter(|&&k| k).count();
+            assert!(kept < f.layout.n_supernodes() / 2, "{kept} kept");
+            let mut rhs = vec![0.0; f.dim()];
+            for (i, &p) in at.iter().enumerate() {
+                rhs[p] = ((i * 37) % 23) as f64 / 11.0 - 1.0;
+            }
+            let mut whole = rhs.clone();
+            f.forward(&mut whole);
+            f.backward(&mut whole);
+            // Several solves: `Team` probes both ways.
+            for _ in 0..3 {
+                let mut y = rhs.clone();
+                f.solve_within(&reach, &mut y);
+                for &p in &at {
+                    assert!(y[p] == whole[p] && y[p] != 0.0, "{two_groups} {bins}: {p}");
+                }
             }
         }
     }
