@@ -63,6 +63,13 @@ pub struct Factor {
 /// A set of supernodes closed under taking parents (`Factor::reach`): one flag each.
 pub struct Reach(Vec<bool>);
 
+impl Reach {
+    /// Whether a pass over `reach` (every supernode for None) runs supernode s.
+    fn keeps(reach: Option<&Reach>) -> impl Fn(&usize) -> bool + Copy + '_ {
+        move |s| reach.is_none_or(|r| r.0[*s])
+    }
+}
+
 /// The supernodes of L as plain arrays, read by the step's solves, and the packed layout of
 /// their values: column j of a supernode with `size` columns and off-diagonal rows R holds
 /// the rows j..size of its diagonal block, then R (`size − j + |R|` values). faer stores the
@@ -129,6 +136,17 @@ impl Layout {
     /// Supernode s's off-diagonal rows.
     fn pattern(&self, s: usize) -> &[u32] {
         &self.rows[self.row_ptr[s]..self.row_ptr[s + 1]]
+    }
+
+    /// The supernode that holds column c.
+    fn owner(&self, c: usize) -> usize {
+        self.begin.partition_point(|&b| b <= c) - 1
+    }
+
+    /// Supernode s's parent in the elimination tree (the owner of its first off-diagonal
+    /// row), None for a root.
+    fn parent(&self, s: usize) -> Option<usize> {
+        self.pattern(s).first().map(|&r| self.owner(r as usize))
     }
 
     /// Supernode s: its columns, its off-diagonal rows and its packed values.
@@ -633,7 +651,7 @@ impl Factor {
     /// `forward` over the supernodes of `reach` alone (all of them for None): y must be 0
     /// outside the reach's columns, and stays so.
     fn forward_in(&self, y: &mut [f64], reach: Option<&Reach>) {
-        let kept = |s: &usize| reach.is_none_or(|r| r.0[*s]);
+        let kept = Reach::keeps(reach);
         let Some(schedule) = &self.schedule else {
             return self.forward_over((0..self.layout.n_supernodes()).filter(kept), y);
         };
@@ -723,7 +741,7 @@ impl Factor {
     /// `backward` over the supernodes of `reach` alone (all of them for None): y is right
     /// on the reach's columns only.
     fn backward_in(&self, y: &mut [f64], reach: Option<&Reach>) {
-        let kept = |s: &usize| reach.is_none_or(|r| r.0[*s]);
+        let kept = Reach::keeps(reach);
         let Some(schedule) = &self.schedule else {
             return self.backward_over((0..self.layout.n_supernodes()).rev().filter(kept), y);
         };
@@ -790,16 +808,12 @@ impl Factor {
     /// their ancestors in the elimination tree.
     pub fn reach(&self, at: impl IntoIterator<Item = usize>) -> Reach {
         let layout = &self.layout;
-        let owner = |p: usize| layout.begin.partition_point(|&b| b <= p) - 1;
         let mut kept = vec![false; layout.n_supernodes()];
         for p in at {
-            let mut s = owner(p);
-            while !kept[s] {
-                kept[s] = true;
-                match layout.pattern(s).first() {
-                    Some(&r) => s = owner(r as usize),
-                    None => break,
-                }
+            let mut s = Some(layout.owner(p));
+            while let Some(t) = s.filter(|&t| !kept[t]) {
+                kept[t] = true;
+                s = layout.parent(t);
             }
         }
         Reach(kept)

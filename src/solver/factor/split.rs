@@ -70,9 +70,8 @@ impl Tree {
             owner,
         };
         for s in 0..ns {
-            match layout.pattern(s).first() {
-                Some(&r) => {
-                    let p = tree.owner[r as usize];
+            match layout.parent(s) {
+                Some(p) => {
                     tree.children[p].push(s);
                     tree.weight[p] += tree.weight[s];
                     tree.first[p] = tree.first[p].min(tree.first[s]);
