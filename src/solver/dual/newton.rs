@@ -41,9 +41,12 @@ impl Scratch {
             h: Mat::new(),
             factor: NewtonFactor {
                 l: Mat::new(),
+                single: Mat::new(),
                 form: None,
+                precision: Precision::Double,
                 coords: Vec::with_capacity(m),
                 par_min: settings.par_min,
+                single_min: settings.single_min,
                 pcg_max: settings.pcg_max,
             },
             gram_team: Team::default(),
@@ -61,15 +64,28 @@ pub(super) enum Form {
     Woodbury,
 }
 
+/// Which of `NewtonFactor`'s buffers holds the factor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Precision {
+    /// `l`: the exact factor, whose solve is the direct solution.
+    Double,
+    /// `single`: a preconditioner (`DualSettings::single_min`).
+    Single,
+}
+
 /// A Cholesky factor of a Newton matrix, its form and the coordinates it was built from.
 pub(super) struct NewtonFactor {
-    /// L in the lower triangle (the upper one holds what the matrix had there).
+    /// L in the lower triangle (the upper one holds what the matrix had there), in double
+    /// or in single precision.
     pub(super) l: Mat<f64>,
-    /// The form of the matrix factored in `l`; None while `l` holds no valid factor.
+    pub(super) single: Mat<f32>,
+    /// The form of the matrix factored; None while neither buffer holds a valid factor.
     pub(super) form: Option<Form>,
+    pub(super) precision: Precision,
     pub(super) coords: Vec<Coord>,
-    /// `DualSettings::par_min` and `DualSettings::pcg_max`.
+    /// `DualSettings::par_min`, `single_min` and `pcg_max`.
     pub(super) par_min: usize,
+    pub(super) single_min: usize,
     pub(super) pcg_max: usize,
 }
 
@@ -353,12 +369,9 @@ pub(super) fn gram(
 
 /// Solves H x = rhs by the step's last factor `f` (conjugate gradients preconditioned with
 /// it, when it was built for the same form and structure) or a new factorization, which
-/// then replaces it in its buffer.
-///
-/// (A single-precision factorization refined by the same conjugate gradients was tried:
-/// twice as fast to factor, but its two to three CG iterations of O(nq²) each cost about
-/// as much again, and the 3D block ran 8% slower side by side.)
-fn solve_cached(
+/// then replaces it in its buffer: in single precision from `single_min` rows on, its
+/// system then solved by the same conjugate gradients (`DualSettings::single_min`).
+pub(super) fn solve_cached(
     form: Form,
     rhs: &Mat<f64>,
     coords: &[Coord],
@@ -377,26 +390,54 @@ fn solve_cached(
         }
     }
     f.form = None;
-    f.l.resize_with(h.nrows(), h.ncols(), |_, _| 0.0);
+    let n = h.nrows();
+    let par = dense_par(n, f.par_min);
+    f.coords.clear();
+    f.coords.extend_from_slice(coords);
+    if n >= f.single_min {
+        f.single.resize_with(n, n, |_, _| 0.0);
+        for j in 0..n {
+            for i in j..n {
+                f.single[(i, j)] = h[(i, j)] as f32;
+            }
+        }
+        // Not definite in single precision, or CG not converging: the double factor.
+        if cholesky(f.single.as_mut(), par).is_ok() {
+            f.form = Some(form);
+            f.precision = Precision::Single;
+            match pcg(h, rhs, f) {
+                Some(x) => return Ok(x),
+                None => f.form = None,
+            }
+        }
+    }
+    f.l.resize_with(n, n, |_, _| 0.0);
     f.l.copy_from_triangular_lower(h);
-    let par = dense_par(f.l.nrows(), f.par_min);
-    let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
-        f.l.nrows(),
+    cholesky(f.l.as_mut(), par)?;
+    f.form = Some(form);
+    f.precision = Precision::Double;
+    Ok(llt_solve(f, rhs))
+}
+
+/// The Cholesky factor of the matrix in the lower triangle of `l`, in place.
+pub(super) fn cholesky<T: faer::traits::ComplexField>(
+    l: MatMut<T>,
+    par: Par,
+) -> Result<(), Indefinite> {
+    let mut mem = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<T>(
+        l.nrows(),
         par,
         Default::default(),
     ));
     llt::factor::cholesky_in_place(
-        f.l.as_mut(),
+        l,
         Default::default(),
         par,
         MemStack::new(&mut mem),
         Default::default(),
     )
-    .map_err(|_| Indefinite)?;
-    f.form = Some(form);
-    f.coords.clear();
-    f.coords.extend_from_slice(coords);
-    Ok(llt_solve(&f.l, rhs))
+    .map(|_| ())
+    .map_err(|_| Indefinite)
 }
 
 /// The parallelism of the factorization of an n × n Newton matrix: one thread below
@@ -410,18 +451,33 @@ fn dense_par(n: usize, par_min: usize) -> Par {
     }
 }
 
-/// x = (L Lᵀ)⁻¹ rhs for L in the lower triangle of `l`, on one thread: faer's parallel
-/// solve of a single right side splits its sums by the thread count (`threads`).
-fn llt_solve(l: &Mat<f64>, rhs: &Mat<f64>) -> Mat<f64> {
-    let mut x = rhs.clone();
+/// x = (L Lᵀ)⁻¹ rhs for the factor L of `f` (in single precision: rhs rounded to f32,
+/// the solve in f32), on one thread: faer's parallel solve of a single right side splits
+/// its sums by the thread count (`threads`).
+fn llt_solve(f: &NewtonFactor, rhs: &Mat<f64>) -> Mat<f64> {
+    match f.precision {
+        Precision::Double => {
+            let mut x = rhs.clone();
+            lower_solve(&f.l, x.as_mut());
+            x
+        }
+        Precision::Single => {
+            let mut x = Mat::<f32>::from_fn(rhs.nrows(), 1, |i, _| rhs[(i, 0)] as f32);
+            lower_solve(&f.single, x.as_mut());
+            Mat::from_fn(rhs.nrows(), 1, |i, _| f64::from(x[(i, 0)]))
+        }
+    }
+}
+
+/// x ← (L Lᵀ)⁻¹ x for L in the lower triangle of `l`, on one thread.
+fn lower_solve<T: faer::traits::ComplexField>(l: &Mat<T>, x: MatMut<T>) {
     llt::solve::solve_in_place_with_conj(
         l.as_ref(),
         faer::Conj::No,
-        x.as_mut(),
+        x,
         Par::Seq,
         MemStack::new(&mut MemBuffer::new(StackReq::EMPTY)),
     );
-    x
 }
 
 /// H x on one thread, for the same reason as `llt_solve` (`h * &x` would use faer's
@@ -433,17 +489,16 @@ fn mat_vec(h: &Mat<f64>, x: &Mat<f64>) -> Mat<f64> {
 }
 
 /// Solves H x = rhs by conjugate gradients preconditioned with the factor `f` of a nearby
-/// matrix, to a relative residual of 1e-14; None if that takes more than `f.pcg_max`
-/// iterations.
+/// matrix, or with its single-precision factor, to a relative residual of 1e-14; None if
+/// that takes more than `f.pcg_max` iterations.
 fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
-    let l = &f.l;
     let target = 1e-14 * rhs.norm_l2();
-    let mut x = llt_solve(l, rhs);
+    let mut x = llt_solve(f, rhs);
     let mut r = rhs - mat_vec(h, &x);
     if r.norm_l2() <= target {
         return Some(x);
     }
-    let mut z = llt_solve(l, &r);
+    let mut z = llt_solve(f, &r);
     let mut p = z.clone();
     let mut rz = (r.transpose() * &z)[(0, 0)];
     for _ in 0..f.pcg_max {
@@ -458,7 +513,7 @@ fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
         if r.norm_l2() <= target {
             return Some(x);
         }
-        z = llt_solve(l, &r);
+        z = llt_solve(f, &r);
         let rz_new = (r.transpose() * &z)[(0, 0)];
         p = &z + (rz_new / rz) * &p;
         rz = rz_new;
