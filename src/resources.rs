@@ -174,7 +174,8 @@ pub fn human(bytes: f64) -> String {
 /// The memory of the dense condensed dual (`solver::dual`) on m constraint rows touching c
 /// dofs, in bytes: while it condenses, the trailing block L_CC (c²), G = L_CC⁻¹ E (c m) and
 /// D (m²); then G, D, B = D⁻¹ in 3D (`block` = 2) and the Newton matrix with its factor
-/// (up to m² each); 8 bytes a value.
+/// (up to m² each; the factor in f64, or in f32 from `DualSettings::single_min` rows on,
+/// never both large at once); 8 bytes a value.
 pub fn dense_dual_bytes(m: usize, c: usize, block: usize) -> f64 {
     let (m, c) = (m as f64, c as f64);
     let inverse = if block == 2 { 1.0 } else { 0.0 };

@@ -394,7 +394,13 @@ pub(super) fn solve_cached(
     let par = dense_par(n, f.par_min);
     f.coords.clear();
     f.coords.extend_from_slice(coords);
+    // The two buffers never both hold a large factor, so that the memory stays that of
+    // one f64 factor (`resources::dense_dual_bytes`): a large f64 buffer (left by a
+    // fallback below) is freed before a large f32 one is filled, and the other way round.
     if n >= f.single_min {
+        if f.l.nrows() >= f.single_min {
+            f.l = Mat::new();
+        }
         f.single.resize_with(n, n, |_, _| 0.0);
         for j in 0..n {
             for i in j..n {
@@ -410,6 +416,7 @@ pub(super) fn solve_cached(
                 None => f.form = None,
             }
         }
+        f.single = Mat::new();
     }
     f.l.resize_with(n, n, |_, _| 0.0);
     f.l.copy_from_triangular_lower(h);

@@ -180,3 +180,40 @@ fn single_precision_newton_factors_solve_as_the_double_ones() {
         "the thread counts differ"
     );
 }
+
+/// A Newton matrix that is definite in f64 but not in f32 (its off-diagonal 1 − 1e-9
+/// rounds to 1 in f32) is factored in double precision after the single factorization
+/// fails, with the double factor's answer bit for bit; its single buffer is freed.
+#[test]
+fn a_matrix_not_definite_in_single_precision_is_factored_in_double() {
+    let n = 4;
+    let h = Mat::from_fn(n, n, |i, j| match (i == j, i / 2 == j / 2) {
+        (true, _) => 1.0,
+        (false, true) => 1.0 - 1e-9,
+        _ => 0.0,
+    });
+    let rhs = Mat::from_fn(n, 1, |i, _| 1.0 + i as f64);
+    let coords: Vec<Coord> = (0..n)
+        .map(|a| Coord {
+            start: a,
+            len: 1,
+            dir: [1.0, 0.0],
+            shift: 0.0,
+        })
+        .collect();
+    let solve = |single_min| {
+        let settings = DualSettings {
+            single_min,
+            ..Default::default()
+        };
+        let mut f = Scratch::new(n, &settings).factor;
+        let x = solve_cached(Form::Direct, &rhs, &coords, &h, &mut f)
+            .ok()
+            .unwrap();
+        assert_eq!(f.precision, Precision::Double);
+        assert_eq!(f.single.nrows(), 0);
+        x
+    };
+    let (tried, direct) = (solve(1), solve(usize::MAX));
+    assert!((0..n).all(|i| tried[(i, 0)].to_bits() == direct[(i, 0)].to_bits()));
+}
