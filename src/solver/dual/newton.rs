@@ -394,29 +394,10 @@ pub(super) fn solve_cached(
     let par = dense_par(n, f.par_min);
     f.coords.clear();
     f.coords.extend_from_slice(coords);
-    // The two buffers never both hold a large factor, so that the memory stays that of
-    // one f64 factor (`resources::dense_dual_bytes`): a large f64 buffer (left by a
-    // fallback below) is freed before a large f32 one is filled, and the other way round.
     if n >= f.single_min {
-        if f.l.nrows() >= f.single_min {
-            f.l = Mat::new();
+        if let Some(x) = single_solve(form, rhs, h, f, par) {
+            return Ok(x);
         }
-        f.single.resize_with(n, n, |_, _| 0.0);
-        for j in 0..n {
-            for i in j..n {
-                f.single[(i, j)] = h[(i, j)] as f32;
-            }
-        }
-        // Not definite in single precision, or CG not converging: the double factor.
-        if cholesky(f.single.as_mut(), par).is_ok() {
-            f.form = Some(form);
-            f.precision = Precision::Single;
-            match pcg(h, rhs, f) {
-                Some(x) => return Ok(x),
-                None => f.form = None,
-            }
-        }
-        f.single = Mat::new();
     }
     f.l.resize_with(n, n, |_, _| 0.0);
     f.l.copy_from_triangular_lower(h);
@@ -424,6 +405,41 @@ pub(super) fn solve_cached(
     f.form = Some(form);
     f.precision = Precision::Double;
     Ok(llt_solve(f, rhs))
+}
+
+/// `solve_cached`'s new factorization in single precision: H's lower triangle rounded to
+/// f32 and factored into `f.single`, the system solved by `pcg` with it. None (and the f32
+/// buffer freed) where H is not definite in f32 or CG does not converge: the caller
+/// factors in f64. The two buffers never both hold a large factor, so that the memory stays
+/// that of one f64 factor (`resources::dense_dual_bytes`): a large f64 buffer (left by such
+/// a fallback) is freed first.
+fn single_solve(
+    form: Form,
+    rhs: &Mat<f64>,
+    h: &Mat<f64>,
+    f: &mut NewtonFactor,
+    par: Par,
+) -> Option<Mat<f64>> {
+    let n = h.nrows();
+    if f.l.nrows() >= f.single_min {
+        f.l = Mat::new();
+    }
+    f.single.resize_with(n, n, |_, _| 0.0);
+    for j in 0..n {
+        for i in j..n {
+            f.single[(i, j)] = h[(i, j)] as f32;
+        }
+    }
+    if cholesky(f.single.as_mut(), par).is_ok() {
+        f.form = Some(form);
+        f.precision = Precision::Single;
+        if let Some(x) = pcg(h, rhs, f) {
+            return Some(x);
+        }
+        f.form = None;
+    }
+    f.single = Mat::new();
+    None
 }
 
 /// The Cholesky factor of the matrix in the lower triangle of `l`, in place.
