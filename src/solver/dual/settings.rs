@@ -78,11 +78,11 @@ pub struct DualSettings {
     /// A Newton matrix of this many rows or more is factored in single precision (twice as
     /// fast as in double at these sizes), and its system solved by the conjugate gradients
     /// that a kept factor preconditions (`pcg`), to the same relative residual of 1e-14;
-    /// if they do not converge, it is factored in double precision after all. Below it
-    /// the factorization is double and its solve direct: there the few CG iterations
-    /// cost about what the factorization saves (the 3D block ran 8% slower with every
-    /// size single). Measured: the plate 0.03 of issue 29 (systems of 1 400–2 800 rows)
-    /// 0.88× (docs/performance.md). Default 1024.
+    /// where it is not definite in f32 or they do not converge, it is factored in double
+    /// precision after all. Below it the factorization is double and its solve direct:
+    /// there the few CG iterations cost about what the factorization saves (the 3D block
+    /// ran 8% slower with every size single). Measured: the plate 0.03 of issue 29 (systems
+    /// of 1 400–2 800 rows) 0.87× over 100 steps (docs/performance.md). Default 1024.
     pub single_min: usize,
     /// The form of the Newton systems. Default `NewtonForm::Cheaper`.
     pub newton_form: NewtonForm,

@@ -2,7 +2,7 @@
 
 use super::delassus::Delassus;
 use super::groups::Coord;
-use super::newton::{cholesky, gram, solve_cached, Form, Precision, Scratch};
+use super::newton::{cholesky, gram, solve_cached, Form, NewtonFactor, Precision, Scratch};
 use super::{DualSettings, Team};
 use faer::{Mat, Par};
 
@@ -125,6 +125,29 @@ fn gram_is_the_dense_product() {
     }
 }
 
+/// H x = rhs solved as a new Newton system in the direct form, each row a coordinate of
+/// its own, with `DualSettings::single_min` = `single_min`; and the factor it left.
+fn newton_solve(h: &Mat<f64>, rhs: &Mat<f64>, single_min: usize) -> (Mat<f64>, NewtonFactor) {
+    let n = h.nrows();
+    let coords: Vec<Coord> = (0..n)
+        .map(|a| Coord {
+            start: a,
+            len: 1,
+            dir: [1.0, 0.0],
+            shift: 0.0,
+        })
+        .collect();
+    let settings = DualSettings {
+        single_min,
+        ..Default::default()
+    };
+    let mut f = Scratch::new(n, &settings).factor;
+    let x = solve_cached(Form::Direct, rhs, &coords, h, &mut f)
+        .ok()
+        .unwrap();
+    (x, f)
+}
+
 /// A Newton matrix of `single_min` rows or more is factored in single precision and its
 /// system solved by the conjugate gradients that factor preconditions: the answer is the
 /// double factor's direct solution to 1e-12 (the CG stop at 1e-14 relative residual, and
@@ -139,29 +162,10 @@ fn single_precision_newton_factors_solve_as_the_double_ones() {
         _ => 0.0,
     });
     let rhs = Mat::from_fn(n, 1, |i, _| ((i * 37) % 23) as f64 / 11.0 - 1.0);
-    let coords: Vec<Coord> = (0..n)
-        .map(|a| Coord {
-            start: a,
-            len: 1,
-            dir: [1.0, 0.0],
-            shift: 0.0,
-        })
-        .collect();
-    let solve = |single_min| {
-        let settings = DualSettings {
-            single_min,
-            ..Default::default()
-        };
-        let mut f = Scratch::new(n, &settings).factor;
-        let x = solve_cached(Form::Direct, &rhs, &coords, &h, &mut f)
-            .ok()
-            .unwrap();
-        (x, f.precision)
-    };
-    let (exact, precision) = solve(usize::MAX);
-    assert_eq!(precision, Precision::Double);
-    let (single, precision) = solve(n);
-    assert_eq!(precision, Precision::Single);
+    let (exact, f) = newton_solve(&h, &rhs, usize::MAX);
+    assert_eq!(f.precision, Precision::Double);
+    let (single, f) = newton_solve(&h, &rhs, n);
+    assert_eq!(f.precision, Precision::Single);
     let error = (&single - &exact).norm_l2() / exact.norm_l2();
     assert!(error < 1e-12 && error > 0.0, "{error:e}");
     let factors: Vec<Vec<u32>> = [1, 2, 4]
@@ -193,23 +197,8 @@ fn a_matrix_not_definite_in_single_precision_is_factored_in_double() {
         _ => 0.0,
     });
     let rhs = Mat::from_fn(n, 1, |i, _| 1.0 + i as f64);
-    let coords: Vec<Coord> = (0..n)
-        .map(|a| Coord {
-            start: a,
-            len: 1,
-            dir: [1.0, 0.0],
-            shift: 0.0,
-        })
-        .collect();
     let solve = |single_min| {
-        let settings = DualSettings {
-            single_min,
-            ..Default::default()
-        };
-        let mut f = Scratch::new(n, &settings).factor;
-        let x = solve_cached(Form::Direct, &rhs, &coords, &h, &mut f)
-            .ok()
-            .unwrap();
+        let (x, f) = newton_solve(&h, &rhs, single_min);
         assert_eq!(f.precision, Precision::Double);
         assert_eq!(f.single.nrows(), 0);
         x
