@@ -5,6 +5,9 @@
 //! test, a benchmark) and asks it whether to stop. [`TimeLoop::state`] and
 //! [`TimeLoop::restore`] are the only way a checkpoint sees the loop.
 //!
+//! A step being solved can be given up ([`TimeLoop::abandon_on`], `solver::abandon`): the
+//! loop then stands where it stood before the step, as after a stop after the previous one.
+//!
 //! # The implicit variant (`[scheme] history = "implicit"`)
 //!
 //! The paper's scheme (3.1) treats the elastic and memory terms explicitly: they act on
@@ -28,7 +31,7 @@ use crate::fem::{mul_add, Discretization, SymmetricPair};
 use crate::history::{History, LoopState, Plan, SavedLoop};
 use crate::scene::{self, Scene};
 use crate::solver::choice::Contact;
-use crate::solver::{Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
+use crate::solver::{Abandon, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
 use crate::stability::Verdict;
 use crate::Result;
 
@@ -58,6 +61,12 @@ pub struct TimeLoop<'p> {
     /// K_B and K_R (when both are used and share their pattern): K_B u_n + K_R m_n in one
     /// pass over their lower triangles.
     paired: Option<SymmetricPair>,
+    /// The request that gives up a step, where the step solver honours one.
+    abandon: Option<Abandon>,
+    /// Whether the state at t_n is one a stop could leave: a restored checkpoint's, or
+    /// after a step this loop solved. Only then is a step given up (there would be nothing
+    /// to resume a new run from).
+    can_stop: bool,
 }
 
 /// The divergence detector. A stable run's displacement is bounded by its loads: with
@@ -149,6 +158,13 @@ pub trait Observer {
     /// Step n is solved.
     fn solved(&mut self, s: &Solved) -> Result<()>;
 
+    /// Step n was given up ([`TimeLoop::abandon_on`]): the loop stands at t_n as before it,
+    /// `tl.state()` is what a checkpoint saves, and the run stops.
+    fn abandoned(&mut self, tl: &TimeLoop) -> Result<()> {
+        let _ = tl;
+        Ok(())
+    }
+
     /// The loop advanced to t_{n+1}: `tl.state()` is what a checkpoint of step n + 1 saves.
     fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
         let _ = tl;
@@ -167,7 +183,8 @@ impl<F: FnMut(&Solved) -> Result<()>> Observer for F {
 pub enum RunEnd {
     /// The last step was solved.
     Completed,
-    /// After a step the observer stopped at; the loop stands at the next step.
+    /// After a step the observer stopped at, or within a step given up; the loop stands at
+    /// the step that comes next.
     Stopped,
 }
 
@@ -227,6 +244,8 @@ impl<'p> TimeLoop<'p> {
             b: vec![0.0; n],
             growth: Growth::default(),
             paired,
+            abandon: None,
+            can_stop: false,
         })
     }
 
@@ -237,7 +256,10 @@ impl<'p> TimeLoop<'p> {
         loop {
             let n = self.n();
             let is_last = n >= last;
-            let step = self.solve_step()?;
+            let Some(step) = self.solve_step()? else {
+                observer.abandoned(self)?;
+                return Ok(RunEnd::Stopped);
+            };
             // Asked after the solve: a signal that came while the last step was solved lets
             // the run complete (nothing would be left to resume).
             let stop = !is_last && observer.stop_after(n);
@@ -251,6 +273,7 @@ impl<'p> TimeLoop<'p> {
                 return Ok(RunEnd::Completed);
             }
             self.advance();
+            self.can_stop = true;
             observer.advanced(self)?;
             if stop {
                 return Ok(RunEnd::Stopped);
@@ -276,7 +299,19 @@ impl<'p> TimeLoop<'p> {
         self.w = saved.w;
         self.z = saved.z;
         self.z_before = saved.z_before;
+        self.can_stop = true;
         Ok(())
+    }
+
+    /// From now on a request on `abandon` gives up the step being solved, where the step
+    /// solver honours it (the dual methods) and the loop's state before the step is one a
+    /// stop leaves (after a step solved by this loop, or restored): `run` then tells its
+    /// observer ([`Observer::abandoned`]) and ends with [`RunEnd::Stopped`] at that step.
+    pub fn abandon_on(&mut self, abandon: &Abandon) {
+        self.abandon = self
+            .solver
+            .abandon_on(abandon.clone())
+            .then(|| abandon.clone());
     }
 
     /// The rows of Γ3: contact rows, then friction rows.
@@ -325,7 +360,8 @@ impl<'p> TimeLoop<'p> {
     }
 
     /// Solves (3.1) at the current n: b_n = f_n − K_B u_n − K_R m_n − g_F, then w_n.
-    fn solve_step(&mut self) -> Result<Step<'_>> {
+    /// Step n, or None when it was given up (the loop's state is then as before it).
+    fn solve_step(&mut self) -> Result<Option<Step<'_>>> {
         let t = self.time();
         let h = &mut self.history;
         self.b.fill(0.0);
@@ -350,6 +386,9 @@ impl<'p> TimeLoop<'p> {
             *b -= g;
         }
         self.spare.copy_from_slice(&self.z);
+        let armed = (self.abandon.as_ref())
+            .filter(|_| self.can_stop)
+            .map(Abandon::arm);
         let mut report = self.solver.solve(
             &self.factor,
             &self.rows,
@@ -358,6 +397,12 @@ impl<'p> TimeLoop<'p> {
             &mut self.z,
             Some(&self.z_before),
         );
+        drop(armed);
+        if report.status == StepStatus::Abandoned {
+            // The solvers write w only for a solved step; z held the iterate.
+            self.z.copy_from_slice(&self.spare);
+            return Ok(None);
+        }
         std::mem::swap(&mut self.z_before, &mut self.spare);
         // A solved step is trusted only if it is finite, bounded by its loads (`Growth`)
         // and keeps n·w ≤ 0 on Γ3,1 to the solver's tolerance.
@@ -398,7 +443,7 @@ impl<'p> TimeLoop<'p> {
             k: h.k,
             other_solver,
         })?;
-        Ok(Step {
+        Ok(Some(Step {
             n: h.n,
             t,
             u: &h.u,
@@ -411,7 +456,7 @@ impl<'p> TimeLoop<'p> {
             z: &self.z,
             rows: &self.rows,
             report,
-        })
+        }))
     }
 
     /// n → n + 1: u_{n+1} = u_n + k w_n and the memory update.

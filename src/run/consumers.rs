@@ -52,6 +52,13 @@ impl Observer for Consumers<'_> {
         Ok(())
     }
 
+    fn abandoned(&mut self, tl: &TimeLoop) -> Result<()> {
+        // The state before the step given up: the last solved step's, saved unless its
+        // checkpoint is on disk already.
+        self.checkpoints.due = self.checkpoints.unsaved.take();
+        self.advanced(tl)
+    }
+
     fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
         // A checkpoint of step n + 1 may reach the disk only after the frames of steps ≤ n
         // have: the frame writer runs on its own thread, and a resume keeps the frames
@@ -140,6 +147,9 @@ pub(super) struct Checkpoints {
     last_written: Instant,
     /// The contact/stick flags of the step just solved, when its checkpoint is due.
     due: Option<Vec<bool>>,
+    /// Else (checkpoints enabled, not the last step) the same flags: a step given up next
+    /// saves the state after this one with them (`Observer::abandoned`).
+    unsaved: Option<Vec<bool>>,
 }
 
 impl Checkpoints {
@@ -152,6 +162,7 @@ impl Checkpoints {
             steps: scene.time.steps,
             last_written: Instant::now(),
             due: None,
+            unsaved: None,
         }
     }
 
@@ -170,7 +181,11 @@ impl Checkpoints {
         if due {
             self.last_written = Instant::now();
         }
-        self.due = due.then(|| state_flags(&s.step));
+        let flags = (self.enabled && !s.last).then(|| state_flags(&s.step));
+        (self.due, self.unsaved) = match due {
+            true => (flags, None),
+            false => (None, flags),
+        };
     }
 
     fn advanced(&mut self, tl: &TimeLoop, log: &RunLog, series: &Series) -> Result<()> {

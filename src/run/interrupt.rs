@@ -3,8 +3,17 @@
 //! "interrupted") and the command exits 130 / 143, the shell's codes for death by these
 //! signals. During setup (scene, mesh, discretization, ordering, factorization) they end
 //! the command at the next stage boundary with the same codes, before the directory's
-//! earlier run is touched. A second signal ends the process at once, by the signal's
-//! default action, for a run stuck in a long step; the checkpoint on disk is then the
+//! earlier run is touched.
+//!
+//! A second signal is for a step that takes too long to wait for. While a dual method
+//! solves a step that a stop could be made before (any step after the first one the
+//! process solved), it gives that step up (`solver::abandon`, within one Newton iteration
+//! or one product of the matrix-free conjugate gradients): the run stops as if the first
+//! signal had come just before the step, with the checkpoint of the state at its start
+//! (written now if the last one is older), summary.json and the same exit codes; the
+//! resumed run solves the step from its start, bit for bit the uninterrupted one. Any other
+//! time (setup, clarabel, the first step, writing) a second signal ends the process at once
+//! by the signal's default action, as does a third; the checkpoint on disk is then the
 //! previous one (it is written through a temporary file and a rename, so it is never
 //! half-written).
 //!
@@ -28,6 +37,7 @@
 //! came first (the run stops, the earlier run is intact) or after the replacement (the run
 //! is past setup and stops after its first step, with a checkpoint to resume from).
 
+use crate::solver::Abandon;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -37,11 +47,14 @@ pub struct Interrupt {
     signal: Arc<AtomicUsize>,
     /// Held while a signal is recorded and while setup commits (see the module doc).
     commit: Arc<Mutex<()>>,
+    /// What a second signal asks of the step being solved.
+    abandon: Abandon,
 }
 
 impl Interrupt {
     /// Takes SIGINT and SIGTERM from now on: the first sets this flag, a second one of
-    /// either kills the process as if nothing had taken them. Call it before the process
+    /// either gives up the step being solved where it can be (`abandon`), else kills the
+    /// process as if nothing had taken them. Call it before the process
     /// starts any thread (the mask it sets is inherited by threads started later).
     pub fn on_signals() -> std::io::Result<Interrupt> {
         let set = stop_signals();
@@ -58,7 +71,8 @@ impl Interrupt {
         Ok(interrupt)
     }
 
-    /// The signal thread: waits for SIGINT/SIGTERM; records the first, dies by the second.
+    /// The signal thread: waits for SIGINT/SIGTERM; records the first; gives up the step by
+    /// the second where the step allows, else dies by it.
     fn take_signals(&self, set: libc::sigset_t) {
         loop {
             let mut sig: libc::c_int = 0;
@@ -67,6 +81,9 @@ impl Interrupt {
                 continue;
             }
             if self.signal().is_some() {
+                if self.abandon.request() {
+                    continue;
+                }
                 die_by(sig);
             }
             let _commit = self.commit.lock().unwrap_or_else(|p| p.into_inner());
@@ -77,6 +94,11 @@ impl Interrupt {
     /// Asks the run to stop as `signal` would (for library callers and tests).
     pub fn raise(&self, signal: i32) {
         self.signal.store(signal as usize, Ordering::SeqCst);
+    }
+
+    /// The request a second signal makes of the step being solved.
+    pub fn abandon(&self) -> &Abandon {
+        &self.abandon
     }
 
     /// The signal that arrived, if any.

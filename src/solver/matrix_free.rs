@@ -57,7 +57,7 @@ use super::dual::iteration::{Buffers, Iteration, Operator};
 use super::dual::newton::{Gradient, Indefinite};
 use super::dual::{self, DualSettings};
 use super::factor::Reach;
-use super::{Factor, Rows, StepReport, StepStatus};
+use super::{Abandon, Factor, Rows, StepReport, StepStatus};
 use crate::fem::Sparse;
 use crate::{Error, Result};
 use std::cell::RefCell;
@@ -183,6 +183,8 @@ struct Operands {
     reach: Option<Reach>,
     /// d = P K_A⁻¹ b.
     d: Vec<f64>,
+    /// A request to give the step up (`solver::abandon`); none by default.
+    abandon: Abandon,
     /// Vectors on C for the products, and the counts.
     work: RefCell<Work>,
 }
@@ -250,6 +252,7 @@ impl MatrixFreeSolver {
             kcc,
             reach,
             d: vec![0.0; m],
+            abandon: Abandon::default(),
             work: RefCell::new(Work {
                 y_c: vec![0.0; span],
                 s_c: vec![0.0; span],
@@ -272,6 +275,11 @@ impl MatrixFreeSolver {
     /// trailing block, `matrix_free`).
     pub fn sparse(&self) -> bool {
         self.operands.reach.is_some()
+    }
+
+    /// Gives up a step when `abandon` is requested (`solver::abandon`).
+    pub fn abandon_on(&mut self, abandon: Abandon) {
+        self.operands.abandon = abandon;
     }
 
     /// The work so far.
@@ -328,6 +336,7 @@ struct Products<'a> {
     kcc: &'a [(usize, Vec<(usize, f64)>)],
     reach: Option<&'a Reach>,
     d: &'a [f64],
+    abandon: &'a Abandon,
     settings: &'a MatrixFreeSettings,
     /// max|d|, and δ.
     scale: f64,
@@ -344,6 +353,7 @@ impl<'a> Products<'a> {
             kcc: &operands.kcc,
             reach: operands.reach.as_ref(),
             d: &operands.d,
+            abandon: &operands.abandon,
             settings: &operands.settings,
             scale: operands.d.iter().fold(0.0f64, |a, x| a.max(x.abs())),
             delta,
@@ -426,7 +436,8 @@ impl<'a> Products<'a> {
     }
 
     /// x with (QᵀDQ + diag κ) x = rhs to max|residual| ≤ `accuracy` (or after `cg_max`
-    /// iterations), by preconditioned conjugate gradients from x₀ (`r0` = rhs − H x₀).
+    /// iterations, or at once when the step is given up: the iteration then ends before it
+    /// uses x), by preconditioned conjugate gradients from x₀ (`r0` = rhs − H x₀).
     fn cg(&self, coords: &[Coord], x0: Vec<f64>, r0: Vec<f64>, accuracy: f64) -> Vec<f64> {
         let (nq, m) = (coords.len(), self.p.len());
         let (mut x, mut r) = (x0, r0);
@@ -436,7 +447,7 @@ impl<'a> Products<'a> {
         let (mut full, mut dfull) = (vec![0.0; m], vec![0.0; m]);
         self.work.borrow_mut().counts.newton += 1;
         for _ in 0..self.settings.cg_max {
-            if r.iter().fold(0.0f64, |a, x| a.max(x.abs())) <= accuracy {
+            if r.iter().fold(0.0f64, |a, x| a.max(x.abs())) <= accuracy || self.abandoned() {
                 break;
             }
             // h = (QᵀDQ + diag κ) p.
@@ -479,6 +490,10 @@ impl Operator for Products<'_> {
 
     fn linear(&self) -> &[f64] {
         self.d
+    }
+
+    fn abandoned(&self) -> bool {
+        self.abandon.requested()
     }
 
     fn newton_step(

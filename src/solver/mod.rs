@@ -30,7 +30,10 @@
 //! becomes a variant of `StepSolver` (its `name`, its arm in `solve`), of `choice::Contact`
 //! (its memory and cost) and of the scene's `ContactSolver`, and `effects::step_solver`
 //! builds it; an outcome no `StepStatus` covers is a new variant with
-//! its message in `status.rs`. The time loop does not change.
+//! its message in `status.rs`. A solver whose steps can take minutes honours a request to
+//! give a step up (`abandon`, `StepSolver::abandon_on`): it looks at the request between
+//! its iterations and ends with `StepStatus::Abandoned`, writing no w. The time loop does
+//! not change.
 //!
 //! The linear backend is `Factor`: the time loop builds it (`Factor::new`) and passes it to
 //! `solve`. `Linear` needs only its solves with K_A, `Conic` none; the dual condenses
@@ -39,6 +42,7 @@
 //! turns `Factor` into an enum over the backends with the same `new` and `solve`, which the
 //! time loop keeps calling; the solvers that need a triangular factor ask it for one.
 
+mod abandon;
 pub mod choice;
 pub mod conic;
 pub mod dual;
@@ -48,6 +52,7 @@ mod ordering;
 mod status;
 
 use crate::fem::NodalRow;
+pub use abandon::{Abandon, Armed};
 pub use factor::Factor;
 pub use status::{StepAt, StepReport, StepStatus};
 
@@ -196,6 +201,17 @@ impl StepSolver {
             }
             StepSolver::Conic(_) => "clarabel (interior point on the whole step problem)",
         }
+    }
+
+    /// Gives up the dual methods' steps when `abandon` is requested (`abandon`); clarabel's
+    /// and the linear steps are always finished. Whether a step honours it.
+    pub fn abandon_on(&mut self, abandon: Abandon) -> bool {
+        match self {
+            StepSolver::Dual(d) => d.abandon_on(abandon),
+            StepSolver::MatrixFree(d) => d.abandon_on(abandon),
+            StepSolver::Linear | StepSolver::Conic(_) => return false,
+        }
+        true
     }
 
     /// The `solver.contact` value to try when this solver's answer cannot be trusted.

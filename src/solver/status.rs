@@ -21,6 +21,8 @@ pub enum StepStatus {
     },
     /// A Newton matrix of the dual method was not positive definite to working precision.
     NewtonIndefinite,
+    /// Given up on request before it was solved (`solver::abandon`); z holds an iterate.
+    Abandoned,
     /// Clarabel stopped with another status than solved or almost solved.
     Unsolved(SolverStatus),
     /// u_n or w_n has an entry that is not finite.
@@ -73,6 +75,9 @@ impl StepReport {
                  (residual {residual:e} relative to {scale:e}); try [solver] contact = \
                  \"clarabel\""
             ),
+            StepStatus::Abandoned => {
+                format!("step {n} at t = {t} was given up before it was solved")
+            }
             StepStatus::NewtonIndefinite => "the fast contact solver's Newton matrix (the \
                  constraint rows condensed through K_A⁻¹) is not positive definite to working \
                  precision, so a Newton step cannot be solved; set `[solver] contact = \

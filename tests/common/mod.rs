@@ -237,31 +237,32 @@ pub fn viscontact(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// Spawns `viscontact ARGS`, waits until `dir` holds the frame of step `at`, sends `signal`
-/// (`kill -s SIGNAL`) and waits for the process: its exit status and stderr.
+/// Spawns `viscontact ARGS`, waits until `dir` holds the frame of step `at`, sends
+/// `signals` (`kill -s SIGNAL` each, in order) and waits for the process: its exit status
+/// and stderr.
 pub fn signal_at_frame(
     args: &[&str],
     dir: &Path,
     at: usize,
-    signal: &str,
+    signals: &[&str],
 ) -> (std::process::ExitStatus, String) {
     let frame = dir.join(format!("solution_{at:06}.vtu"));
     signal_when(
         args,
         || frame.exists(),
         &frame.display().to_string(),
-        signal,
+        signals,
     )
 }
 
 /// Spawns `viscontact ARGS`, waits until `ready()` (polled every 2 ms; `what` names what is
-/// awaited in the panic after 120 s), sends `signal` (`kill -s SIGNAL`) and waits for the
-/// process: its exit status and stderr.
+/// awaited in the panic after 120 s), sends `signals` (`kill -s SIGNAL` each, in order) and
+/// waits for the process: its exit status and stderr.
 pub fn signal_when(
     args: &[&str],
     ready: impl Fn() -> bool,
     what: &str,
-    signal: &str,
+    signals: &[&str],
 ) -> (std::process::ExitStatus, String) {
     use std::io::Read;
     let mut child = Command::new(BIN)
@@ -278,11 +279,13 @@ pub fn signal_when(
         );
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
-    let kill = Command::new("kill")
-        .args(["-s", signal, &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success(), "kill -s {signal} failed");
+    for signal in signals {
+        let kill = Command::new("kill")
+            .args(["-s", signal, &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(kill.success(), "kill -s {signal} failed");
+    }
     let mut stderr = String::new();
     child
         .stderr

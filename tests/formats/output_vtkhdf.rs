@@ -377,7 +377,7 @@ fn killed_with_sigkill_and_resumed_equals_uninterrupted() {
                     && dir.join("checkpoint.h5").exists()
             },
             &format!("{} of {at} bytes and a checkpoint", file.display()),
-            "KILL",
+            &["KILL"],
         );
         assert_eq!(status.code(), None, "killed: {stderr}");
         assert!(

@@ -7,7 +7,7 @@
 use super::groups::{dot, norm, Coord, Group, Set};
 use super::newton::{axpy_columns, newton_step, Gradient, Indefinite, Operators, Scratch};
 use super::{DualSettings, DualSolver};
-use crate::solver::{StepReport, StepStatus};
+use crate::solver::{Abandon, StepReport, StepStatus};
 use std::cell::RefCell;
 
 /// What the iteration needs of D: the gradient and the Newton steps. The dense dual's
@@ -21,6 +21,9 @@ pub(in crate::solver) trait Operator {
 
     /// d, the linear term of q.
     fn linear(&self) -> &[f64];
+
+    /// Whether the step is to be given up (`solver::abandon`).
+    fn abandoned(&self) -> bool;
 
     /// out += Q x, the Newton step from z₀ on the coordinates `coords` (`newton_step`);
     /// `res` is the KKT residual at the iterate, for a solver that solves inexactly.
@@ -39,6 +42,7 @@ pub(in crate::solver) trait Operator {
 struct Dense<'a> {
     ops: Operators<'a>,
     newton: RefCell<&'a mut Scratch>,
+    abandon: &'a Abandon,
 }
 
 impl Operator for Dense<'_> {
@@ -52,6 +56,10 @@ impl Operator for Dense<'_> {
 
     fn linear(&self) -> &[f64] {
         self.ops.dvec
+    }
+
+    fn abandoned(&self) -> bool {
+        self.abandon.requested()
     }
 
     fn newton_step(
@@ -133,6 +141,7 @@ impl DualSolver {
             settings,
             groups,
             work,
+            abandon,
             ..
         } = self;
         let Work {
@@ -161,6 +170,7 @@ impl DualSolver {
                 accuracy: settings.newton_accuracy * tol,
             },
             newton: RefCell::new(newton),
+            abandon,
         };
         Iteration::new(ops, groups, scale, tol).run(z, before, b)
     }
@@ -197,7 +207,8 @@ impl<'a, O: Operator> Iteration<'a, O> {
 
     /// The iterations from the warm start (`start`: z holds the last step's multipliers,
     /// `before` those of the step before it) until the residual is at most `tol`, the
-    /// iteration limit is reached or a Newton matrix is indefinite.
+    /// iteration limit is reached, a Newton matrix is indefinite or the step is given up
+    /// (z then holds an iterate, which the time loop replaces).
     pub(in crate::solver) fn run(
         &self,
         z: &mut [f64],
@@ -215,6 +226,8 @@ impl<'a, O: Operator> Iteration<'a, O> {
             let res = self.residual(z, &b.grad);
             let status = if res <= self.tol {
                 Some(StepStatus::Solved)
+            } else if self.ops.abandoned() {
+                Some(StepStatus::Abandoned)
             } else if iterations == max_iterations {
                 Some(StepStatus::MaxIterations {
                     limit: max_iterations,
@@ -253,7 +266,8 @@ impl<'a, O: Operator> Iteration<'a, O> {
         let eta = if carried.rejected { 1.0 } else { settings.eta };
         carried.rejected = !self.newton_point(z, eta, res, b)?;
         let interpolate = iteration <= settings.interpolated;
-        carried.widen = if !carried.rejected {
+        carried.widen = if !carried.rejected || self.ops.abandoned() {
+            // A step given up ends at the next test (`run`), whatever `trial` holds.
             1.0
         } else if self.projected_newton(z, res, carried.widen, interpolate, b)? < settings.pg_switch
         {

@@ -108,7 +108,7 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
-use super::{Factor, Rows, StepReport, StepStatus};
+use super::{Abandon, Factor, Rows, StepReport, StepStatus};
 use crate::threads::team::{blocks, Team};
 use crate::Result;
 use delassus::{column, Delassus};
@@ -151,6 +151,8 @@ pub struct DualSolver {
     work: Box<Work>,
     /// The step's forward-solved right side, in the factor's ordering.
     y: Vec<f64>,
+    /// A request to give the step up (`solver::abandon`); none by default.
+    abandon: Abandon,
 }
 
 impl DualSolver {
@@ -197,7 +199,13 @@ impl DualSolver {
             groups,
             work,
             y: vec![0.0; factor.dim()],
+            abandon: Abandon::default(),
         }
+    }
+
+    /// Gives up a step when `abandon` is requested (`solver::abandon`).
+    pub fn abandon_on(&mut self, abandon: Abandon) {
+        self.abandon = abandon;
     }
 
     /// The Newton systems solved so far, by form.
