@@ -1,4 +1,5 @@
-//! The products with D = P K_A⁻¹ Pᵀ: the gradient g = D z − d from D's lower triangle.
+//! The products with D = P K_A⁻¹ Pᵀ: the gradient g = D z − d from D's lower triangle; the
+//! same product serves the large Newton matrices' conjugate gradients (`newton::pcg`).
 
 use super::{blocks, Team};
 use faer::Mat;
@@ -31,47 +32,60 @@ impl Delassus {
     /// threads run the parts. (Each entry serves two rows, so a cut of the columns adds a
     /// partial sum to the rows below it; a cut by rows would read D twice.)
     pub(super) fn gradient(&self, z: &[f64], d: &[f64], g: &mut [f64]) {
-        let m = g.len();
-        let parts = if m >= MANY_FROM { MANY_PARTS } else { 2 };
-        let cuts: Vec<usize> = (0..=parts)
-            .map(|k| match k {
-                0 => 0,
-                k if k == parts => m,
-                k => m - (m as f64 / (parts as f64 / (parts - k) as f64).sqrt()) as usize,
-            })
-            .collect();
-        let cut = |k: usize| cuts[k];
-        // The columns `cols`' share of D z, accumulated into y (rows first.. of D z).
-        let part = |cols: Range<usize>, y: &mut [f64], first: usize| {
-            for j in cols {
-                let col = &column(&self.mat, j)[j..];
-                let (y_j, y_below) = y[j - first..].split_first_mut().unwrap();
-                let below = axpy_dot(&col[1..], z[j], &z[j + 1..], y_below);
-                *y_j += col[0] * z[j] + below;
-            }
-        };
-        for (gi, di) in g.iter_mut().zip(d) {
-            *gi = -di;
+        lower_product(&self.mat, &self.team, self.split_rows, z, d, g);
+    }
+}
+
+/// g = M z − d for the symmetric M in `mat`'s lower triangle, as `Delassus::gradient` says,
+/// on `team`'s threads from `split_rows` rows on.
+pub(super) fn lower_product(
+    mat: &Mat<f64>,
+    team: &Team,
+    split_rows: usize,
+    z: &[f64],
+    d: &[f64],
+    g: &mut [f64],
+) {
+    let m = g.len();
+    let parts = if m >= MANY_FROM { MANY_PARTS } else { 2 };
+    let cuts: Vec<usize> = (0..=parts)
+        .map(|k| match k {
+            0 => 0,
+            k if k == parts => m,
+            k => m - (m as f64 / (parts as f64 / (parts - k) as f64).sqrt()) as usize,
+        })
+        .collect();
+    let cut = |k: usize| cuts[k];
+    // The columns `cols`' share of M z, accumulated into y (rows first.. of M z).
+    let part = |cols: Range<usize>, y: &mut [f64], first: usize| {
+        for j in cols {
+            let col = &column(mat, j)[j..];
+            let (y_j, y_below) = y[j - first..].split_first_mut().unwrap();
+            let below = axpy_dot(&col[1..], z[j], &z[j + 1..], y_below);
+            *y_j += col[0] * z[j] + below;
         }
-        let mut tails: Vec<Vec<f64>> = (1..parts).map(|k| vec![0.0; m - cut(k)]).collect();
-        let mut ys: Vec<(usize, &mut [f64])> = vec![(0, &mut *g)];
-        ys.extend((1..parts).zip(tails.iter_mut().map(|t| &mut t[..])));
-        // The parts in as many consecutive groups as the team runs pieces.
-        let large = m >= self.split_rows;
-        let mut groups: Vec<Vec<(usize, &mut [f64])>> = Vec::new();
-        let mut ys = ys.into_iter();
-        for range in blocks(parts, self.team.pieces(large)) {
-            groups.push(ys.by_ref().take(range.len()).collect());
+    };
+    for (gi, di) in g.iter_mut().zip(d) {
+        *gi = -di;
+    }
+    let mut tails: Vec<Vec<f64>> = (1..parts).map(|k| vec![0.0; m - cut(k)]).collect();
+    let mut ys: Vec<(usize, &mut [f64])> = vec![(0, &mut *g)];
+    ys.extend((1..parts).zip(tails.iter_mut().map(|t| &mut t[..])));
+    // The parts in as many consecutive groups as the team runs pieces.
+    let large = m >= split_rows;
+    let mut groups: Vec<Vec<(usize, &mut [f64])>> = Vec::new();
+    let mut ys = ys.into_iter();
+    for range in blocks(parts, team.pieces(large)) {
+        groups.push(ys.by_ref().take(range.len()).collect());
+    }
+    team.each_if(large, groups, |group| {
+        for (k, y) in group {
+            part(cut(k)..cut(k + 1), y, cut(k));
         }
-        self.team.each_if(large, groups, |group| {
-            for (k, y) in group {
-                part(cut(k)..cut(k + 1), y, cut(k));
-            }
-        });
-        for (k, tail) in (1..parts).zip(&tails) {
-            for (gi, ti) in g[cut(k)..].iter_mut().zip(tail) {
-                *gi += ti;
-            }
+    });
+    for (k, tail) in (1..parts).zip(&tails) {
+        for (gi, ti) in g[cut(k)..].iter_mut().zip(tail) {
+            *gi += ti;
         }
     }
 }
