@@ -1,7 +1,7 @@
 //! The Newton systems (QᵀDQ + diag κ) x = −Qᵀ(D z₀ − d): the direct and the Woodbury
 //! form, the reuse of a step's factor, the dense Cholesky solves.
 
-use super::delassus::{column, Delassus};
+use super::delassus::{column, lower_product, Delassus};
 use super::groups::{Coord, Group};
 use super::{blocks, DualSettings, NewtonCounts, NewtonForm, Team};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
@@ -46,6 +46,8 @@ impl Scratch {
                 precision: Precision::Double,
                 coords: Vec::with_capacity(m),
                 par_min: settings.par_min,
+                split_rows: settings.split_rows,
+                team: Team::default(),
                 single_min: settings.single_min,
                 pcg_max: settings.pcg_max,
             },
@@ -85,6 +87,9 @@ pub(super) struct NewtonFactor {
     pub(super) coords: Vec<Coord>,
     /// `DualSettings::par_min`, `single_min` and `pcg_max`.
     pub(super) par_min: usize,
+    /// `DualSettings::split_rows`, and the threads of the conjugate gradients' products.
+    pub(super) split_rows: usize,
+    pub(super) team: Team,
     pub(super) single_min: usize,
     pub(super) pcg_max: usize,
 }
@@ -503,11 +508,22 @@ fn lower_solve<T: faer::traits::ComplexField>(l: &Mat<T>, x: MatMut<T>) {
     );
 }
 
-/// H x on one thread, for the same reason as `llt_solve` (`h * &x` would use faer's
-/// global parallelism).
-fn mat_vec(h: &Mat<f64>, x: &Mat<f64>) -> Mat<f64> {
-    let mut y = Mat::zeros(h.nrows(), x.ncols());
-    faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, h, x, 1.0, Par::Seq);
+/// H x. From `single_min` rows on (the matrices factored in single precision, whose
+/// conjugate gradients take a product or more per system) from H's lower triangle
+/// (`delassus::lower_product`, on the factor's team: the same bits on any number of
+/// threads), which reads half of H: on the plate 0.03 (2 730 rows on average) faer's
+/// product of the whole H on one thread took most of those gradients' time. Below, faer's
+/// product on one thread, for the same reason as `llt_solve` (`h * &x` would use faer's
+/// global parallelism); the golden scenes' systems are all smaller, and keep their bits.
+fn mat_vec(h: &Mat<f64>, x: &Mat<f64>, f: &NewtonFactor) -> Mat<f64> {
+    let n = h.nrows();
+    let mut y = Mat::zeros(n, 1);
+    if n >= f.single_min {
+        let out = y.col_mut(0).try_as_col_major_mut().unwrap().as_slice_mut();
+        lower_product(h, &f.team, f.split_rows, column(x, 0), &vec![0.0; n], out);
+    } else {
+        faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, h, x, 1.0, Par::Seq);
+    }
     y
 }
 
@@ -517,7 +533,7 @@ fn mat_vec(h: &Mat<f64>, x: &Mat<f64>) -> Mat<f64> {
 fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
     let target = 1e-14 * rhs.norm_l2();
     let mut x = llt_solve(f, rhs);
-    let mut r = rhs - mat_vec(h, &x);
+    let mut r = rhs - mat_vec(h, &x, f);
     if r.norm_l2() <= target {
         return Some(x);
     }
@@ -525,7 +541,7 @@ fn pcg(h: &Mat<f64>, rhs: &Mat<f64>, f: &NewtonFactor) -> Option<Mat<f64>> {
     let mut p = z.clone();
     let mut rz = (r.transpose() * &z)[(0, 0)];
     for _ in 0..f.pcg_max {
-        let hp = mat_vec(h, &p);
+        let hp = mat_vec(h, &p, f);
         let php = (p.transpose() * &hp)[(0, 0)];
         if php.is_nan() || php <= 0.0 {
             return None;

@@ -127,7 +127,12 @@ fn gram_is_the_dense_product() {
 
 /// H x = rhs solved as a new Newton system in the direct form, each row a coordinate of
 /// its own, with `DualSettings::single_min` = `single_min`; and the factor it left.
-fn newton_solve(h: &Mat<f64>, rhs: &Mat<f64>, single_min: usize) -> (Mat<f64>, NewtonFactor) {
+fn newton_solve(
+    h: &Mat<f64>,
+    rhs: &Mat<f64>,
+    single_min: usize,
+    threads: usize,
+) -> (Mat<f64>, NewtonFactor) {
     let n = h.nrows();
     let coords: Vec<Coord> = (0..n)
         .map(|a| Coord {
@@ -142,6 +147,7 @@ fn newton_solve(h: &Mat<f64>, rhs: &Mat<f64>, single_min: usize) -> (Mat<f64>, N
         ..Default::default()
     };
     let mut f = Scratch::new(n, &settings).factor;
+    f.team = Team::of(threads);
     let x = solve_cached(Form::Direct, rhs, &coords, h, &mut f)
         .ok()
         .unwrap();
@@ -151,8 +157,9 @@ fn newton_solve(h: &Mat<f64>, rhs: &Mat<f64>, single_min: usize) -> (Mat<f64>, N
 /// A Newton matrix of `single_min` rows or more is factored in single precision and its
 /// system solved by the conjugate gradients that factor preconditions: the answer is the
 /// double factor's direct solution to 1e-12 (the CG stop at 1e-14 relative residual, and
-/// this matrix's condition number is about 4 000), and the single factor has the same
-/// bits on one to four threads.
+/// this matrix's condition number is about 4 000); the single factor, and the answer (the
+/// CG's products with H are cut over the threads), have the same bits on one to four
+/// threads.
 #[test]
 fn single_precision_newton_factors_solve_as_the_double_ones() {
     let n = 1100;
@@ -162,12 +169,18 @@ fn single_precision_newton_factors_solve_as_the_double_ones() {
         _ => 0.0,
     });
     let rhs = Mat::from_fn(n, 1, |i, _| ((i * 37) % 23) as f64 / 11.0 - 1.0);
-    let (exact, f) = newton_solve(&h, &rhs, usize::MAX);
+    let (exact, f) = newton_solve(&h, &rhs, usize::MAX, 2);
     assert_eq!(f.precision, Precision::Double);
-    let (single, f) = newton_solve(&h, &rhs, n);
+    let (single, f) = newton_solve(&h, &rhs, n, 2);
     assert_eq!(f.precision, Precision::Single);
     let error = (&single - &exact).norm_l2() / exact.norm_l2();
     assert!(error < 1e-12 && error > 0.0, "{error:e}");
+    for threads in [1, 4] {
+        assert!(
+            newton_solve(&h, &rhs, n, threads).0 == single,
+            "{threads} threads"
+        );
+    }
     let factors: Vec<Vec<u32>> = [1, 2, 4]
         .into_iter()
         .map(|threads| {
@@ -198,7 +211,7 @@ fn a_matrix_not_definite_in_single_precision_is_factored_in_double() {
     });
     let rhs = Mat::from_fn(n, 1, |i, _| 1.0 + i as f64);
     let solve = |single_min| {
-        let (x, f) = newton_solve(&h, &rhs, single_min);
+        let (x, f) = newton_solve(&h, &rhs, single_min, 2);
         assert_eq!(f.precision, Precision::Double);
         assert_eq!(f.single.nrows(), 0);
         x
