@@ -143,7 +143,8 @@ pub(in crate::solver) enum Gradient<'a> {
 /// grow with the conditioning of D, so the Newton residual Qᵀ(D z⁺ − d) + K x is checked
 /// (one product with D, which the direct form spends on D z₀ − d) and refined by the same
 /// formula (x' = Qᵀ(s − B U c'), s = B Q r, for the residual r). The form is chosen per
-/// system by its flop estimate.
+/// system by its flop estimate, the Woodbury form only where it is well below the direct
+/// one's (`WOODBURY_SHARE`).
 ///
 /// Either form's factor is reused within a step: consecutive iterations mostly keep the
 /// same coordinate structure (which rows are free, which discs on their rim) and change
@@ -168,7 +169,7 @@ pub(super) fn newton_step(
     if let Some((b, z_u)) = ops.woodbury {
         complement(groups, coords, &mut s.u);
         if ops.settings.newton_form == NewtonForm::Woodbury
-            || woodbury_cost(nq, s.u.len()) < direct_cost(nq)
+            || woodbury_cost(nq, s.u.len()) < WOODBURY_SHARE * direct_cost(nq)
         {
             if let Some(x) = woodbury_step(ops, b, z_u, coords, z0, s)? {
                 s.counts.woodbury += 1;
@@ -313,6 +314,15 @@ fn complement(groups: &[Group], coords: &[Coord], u: &mut Vec<Coord>) {
     }
     debug_assert_eq!(k, coords.len());
 }
+
+/// The Woodbury form is taken where its flops are at most this share of the direct form's.
+/// It also reads D once (its residual) and |U| columns of B: memory-bound passes that the
+/// flop counts leave out. Timed both ways on the plate 0.03's onset of sliding (steps
+/// 10–25, the same 315 systems): where |U| ≥ 0.7 nq (144 of them) the Woodbury systems took
+/// 25.2 s against the direct ones' 16.6 s; below, 0.2–0.8 times the direct ones. A share of
+/// 0.4 takes it up to |U| ≈ 0.73 nq. (With the flop counts alone, 1, it was taken up to
+/// |U| ≈ nq: the plate 0.03 ran 1.3 times as long as with the direct form everywhere.)
+const WOODBURY_SHARE: f64 = 0.4;
 
 /// Flops of a Newton system in the direct form: the factorization (building H and the
 /// product D z₀ are about the same in both forms).
