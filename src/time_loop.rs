@@ -63,9 +63,10 @@ pub struct TimeLoop<'p> {
     paired: Option<SymmetricPair>,
     /// The request that gives up a step, where the step solver honours one.
     abandon: Option<Abandon>,
-    /// Whether the state at t_n is one a stop could leave: a restored checkpoint's, or
-    /// after a step this loop solved. Only then is a step given up (there would be nothing
-    /// to resume a new run from).
+    /// Whether the state at t_n follows a step this loop solved, so that a stop can save it
+    /// (the last step's flags are the consumers'). Only then is a step given up: a new run
+    /// would have nothing to resume from, and a resumed one, written into another directory,
+    /// no checkpoint there.
     can_stop: bool,
 }
 
@@ -299,13 +300,12 @@ impl<'p> TimeLoop<'p> {
         self.w = saved.w;
         self.z = saved.z;
         self.z_before = saved.z_before;
-        self.can_stop = true;
         Ok(())
     }
 
     /// From now on a request on `abandon` gives up the step being solved, where the step
     /// solver honours it (the dual methods) and the loop's state before the step is one a
-    /// stop leaves (after a step solved by this loop, or restored): `run` then tells its
+    /// stop leaves (after a step solved by this loop): `run` then tells its
     /// observer ([`Observer::abandoned`]) and ends with [`RunEnd::Stopped`] at that step.
     pub fn abandon_on(&mut self, abandon: &Abandon) {
         self.abandon = self
