@@ -45,9 +45,11 @@ impl Observer for Consumers<'_> {
     }
 
     fn solved(&mut self, s: &Solved) -> Result<()> {
-        self.statistics.solved(s);
-        self.frames.solved(s)?;
-        self.checkpoints.solved(s);
+        // The step's contact/stick flags, which three of the consumers use.
+        let flags = state_flags(&s.step);
+        self.statistics.solved(s, &flags);
+        self.frames.solved(s, &flags)?;
+        self.checkpoints.solved(s, flags);
         self.progress.solved(s);
         Ok(())
     }
@@ -93,14 +95,14 @@ impl Statistics {
         }
     }
 
-    fn solved(&mut self, s: &Solved) {
+    fn solved(&mut self, s: &Solved, flags: &[bool]) {
         let log = &mut self.log;
         log.iterations.push(s.step.report.iterations);
         let (viol, kkt) = step_checks(&s.step);
         log.max_violation = log.max_violation.max(viol);
         log.max_kkt_residual = log.max_kkt_residual.max(kkt);
         // At every step: a run that fails or stops reports the last one it solved.
-        (self.active, self.stick) = state_counts(&s.step);
+        (self.active, self.stick) = state_counts(s.step.rows, flags);
         self.last = Some(s.step.n);
     }
 }
@@ -115,9 +117,8 @@ pub(super) struct Frames<'a> {
 }
 
 impl Frames<'_> {
-    fn solved(&mut self, s: &Solved) -> Result<()> {
+    fn solved(&mut self, s: &Solved, flags: &[bool]) -> Result<()> {
         if s.step.n.is_multiple_of(self.scene.output.every) || s.last {
-            let flags = state_flags(&s.step);
             let (disc, rows) = (&self.disc, &self.rows);
             write_step(
                 &mut self.series,
@@ -125,7 +126,7 @@ impl Frames<'_> {
                 self.scene.mesh.model,
                 rows,
                 &s.step,
-                &flags,
+                flags,
             )?;
         }
         Ok(())
@@ -166,8 +167,8 @@ impl Checkpoints {
         }
     }
 
-    /// Decides whether the state after step n is saved; the flags are the solved step's.
-    fn solved(&mut self, s: &Solved) {
+    /// Decides whether the state after step n is saved; `flags` are the solved step's.
+    fn solved(&mut self, s: &Solved, flags: Vec<bool>) {
         let next = s.step.n + 1;
         let clock = self
             .every_seconds
@@ -181,7 +182,7 @@ impl Checkpoints {
         if due {
             self.last_written = Instant::now();
         }
-        let flags = (self.enabled && !s.last).then(|| state_flags(&s.step));
+        let flags = (self.enabled && !s.last).then_some(flags);
         (self.due, self.unsaved) = match due {
             true => (flags, None),
             false => (None, flags),
@@ -340,10 +341,8 @@ fn state_flags(step: &Step) -> Vec<bool> {
     flags
 }
 
-/// (active Γ3,1 nodes, sticking Γ3,2 nodes).
-fn state_counts(step: &Step) -> (usize, usize) {
-    let rows = step.rows;
-    let flags = state_flags(step);
+/// (active Γ3,1 nodes, sticking Γ3,2 nodes) of a step's flags (`state_flags`).
+fn state_counts(rows: &Rows, flags: &[bool]) -> (usize, usize) {
     let active = flags[..rows.n_contact].iter().filter(|&&f| f).count();
     let stick = flags[rows.n_contact..].iter().filter(|&&f| f).count();
     (active, stick / rows.block.max(1))

@@ -351,9 +351,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         // Frames an earlier (or the interrupted) run left that this series does not list.
         dir::remove_stale_frames(&frames.series, d.resumed_from.unwrap_or(0));
     }
-    // A stopped loop stands at the step after the last one solved (by this process or the
-    // run it resumed: a step given up may be the first the resume took on).
-    let last = tl.n().saturating_sub(1);
+    let last = statistics.last.unwrap_or(0);
     let signal = d.opts.interrupt.signal();
     let message = match &ended {
         Ok(RunEnd::Completed) => None,

@@ -46,10 +46,10 @@ impl Scratch {
                 precision: Precision::Double,
                 coords: Vec::with_capacity(m),
                 par_min: settings.par_min,
-                split_rows: settings.split_rows,
-                team: Team::default(),
                 single_min: settings.single_min,
                 pcg_max: settings.pcg_max,
+                split_rows: settings.split_rows,
+                team: Team::default(),
             },
             gram_team: Team::default(),
             counts: NewtonCounts::default(),
@@ -87,11 +87,11 @@ pub(super) struct NewtonFactor {
     pub(super) coords: Vec<Coord>,
     /// `DualSettings::par_min`, `single_min` and `pcg_max`.
     pub(super) par_min: usize,
+    pub(super) single_min: usize,
+    pub(super) pcg_max: usize,
     /// `DualSettings::split_rows`, and the threads of the conjugate gradients' products.
     pub(super) split_rows: usize,
     pub(super) team: Team,
-    pub(super) single_min: usize,
-    pub(super) pcg_max: usize,
 }
 
 /// A Newton matrix that is not positive definite to working precision
