@@ -335,9 +335,12 @@ impl<'a, O: Operator> Iteration<'a, O> {
 
     /// The semismooth Newton step at v = z − g/(ηδ): z₀ (the fixed parts) in `trial`, the
     /// columns of Q in `coords`, the Newton point z⁺ in `p`; then damped, trial =
-    /// Π(z + α(z⁺ − z)) for α = 1, ½, … down to `min_damping` (a damped trial costs one
-    /// product with D, no factorization). True if a trial was accepted; it is in `trial`,
-    /// its gradient in `grad_trial`. `res` is the residual at z.
+    /// Π(z + α(z⁺ − z)) from α = 1 down to `min_damping`, each α the last one times
+    /// `backtrack`'s interpolated fraction (a damped trial costs one product with D, no
+    /// factorization). The Newton point is accepted where it lowers q, a damped trial where
+    /// it lowers q by at least `damped_decrease` of its first-order prediction g·(z − trial),
+    /// so that it lands near the minimizer along the path, not past it. True if a trial was
+    /// accepted; it is in `trial`, its gradient in `grad_trial`. `res` is the residual at z.
     fn newton_point(
         &self,
         z: &[f64],
@@ -366,6 +369,7 @@ impl<'a, O: Operator> Iteration<'a, O> {
             p,
             res,
         )?;
+        let settings = self.ops.settings();
         let mut alpha = 1.0;
         Ok(loop {
             if alpha < 1.0 {
@@ -381,13 +385,25 @@ impl<'a, O: Operator> Iteration<'a, O> {
             // multiplier on a disc's rim has the norm c only to a few ulps, and g is large
             // along it); there the residual decides.
             let (dq, noise) = (change(z, trial, g, g_trial), rounding(z, trial, g, g_trial));
-            if dq < -noise || (alpha == 1.0 && dq <= noise && self.residual(trial, g_trial) < res) {
+            let predicted = first_order(z, trial, g);
+            let accepted = if alpha == 1.0 {
+                dq < -noise || (dq <= noise && self.residual(trial, g_trial) < res)
+            } else {
+                dq < -noise && -dq >= settings.damped_decrease * predicted
+            };
+            if accepted {
                 break true;
             }
-            if alpha <= self.ops.settings().min_damping {
+            if alpha <= settings.min_damping {
                 break false;
             }
-            alpha *= 0.5;
+            // Along a direction that does not descend, halving.
+            let fraction = if predicted > 0.0 {
+                backtrack(dq, predicted, true)
+            } else {
+                0.5
+            };
+            alpha = (alpha * fraction).max(settings.min_damping);
         })
     }
 
@@ -545,7 +561,7 @@ impl<'a, O: Operator> Iteration<'a, O> {
             }
             self.project(alt);
             self.gradient(alt, g_alt);
-            let predicted: f64 = (0..z.len()).map(|i| g[i] * (z[i] - alt[i])).sum();
+            let predicted = first_order(z, alt, g);
             let dq = change(z, alt, g, g_alt);
             if -dq >= 1e-4 * predicted || beta < 1e-12 {
                 break;
@@ -623,6 +639,11 @@ pub(in crate::solver) fn backtrack(dq: f64, predicted: f64, interpolate: bool) -
     } else {
         0.5
     }
+}
+
+/// g·(z − t): the decrease of q from z to t to first order (g the gradient at z).
+fn first_order(z: &[f64], t: &[f64], g: &[f64]) -> f64 {
+    (0..z.len()).map(|i| g[i] * (z[i] - t[i])).sum()
 }
 
 /// q(t) − q(z) = (t − z)·(g(z) + g(t))/2 for the quadratic q: exact up to the rounding of

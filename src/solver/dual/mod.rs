@@ -59,16 +59,17 @@
 //! answer is exact up to rounding. In 3D it converges quadratically near the solution.
 //!
 //! Globalization. The Newton point is taken if it lowers q, else the damped point
-//! Π(z + α(z⁺ − z)), α = ½ or ¼, if that does. Otherwise (a plain active set iteration can
-//! cycle: D is not an M-matrix) the iteration takes a projected Newton step (Bertsekas
-//! 1982), which always descends. A group is binding when it lies within ε of the boundary in
-//! the direction the gradient pushes it (z_j − ε ĝ_j ∉ int Z_j, ε the length of the
-//! projected gradient step); it moves along −g_j/δ_j, except a binding disc multiplier
-//! pushed outward (μ_j = −g_j·ẑ_j > 0), which moves radially onto the rim and along the rim
-//! as a Newton coordinate (tangent t̂ ⊥ ẑ, shift κ_j = μ_j/c_j as above). The other (free)
-//! rows F and these tangents take the Newton step of the face, (QᵀDQ + diag κ) x = −Qᵀg;
-//! then an Armijo search along the projection arc z(α) = Π(z + α p), backtracking by
-//! quadratic interpolation (`backtrack`). So the method converges
+//! Π(z + α(z⁺ − z)) if that lowers q by at least 0.3 of its first-order prediction, α
+//! backtracking by quadratic interpolation (`backtrack`) down to 0.02. Otherwise (a plain
+//! active set iteration can cycle: D is not an M-matrix) the iteration takes a projected
+//! Newton step (Bertsekas 1982), which always descends. A group is binding when it lies
+//! within ε of the boundary in the direction the gradient pushes it (z_j − ε ĝ_j ∉ int Z_j,
+//! ε the length of the projected gradient step); it moves along −g_j/δ_j, except a binding
+//! disc multiplier pushed outward (μ_j = −g_j·ẑ_j > 0), which moves radially onto the rim
+//! and along the rim as a Newton coordinate (tangent t̂ ⊥ ẑ, shift κ_j = μ_j/c_j as above).
+//! The other (free) rows F and these tangents take the Newton step of the face,
+//! (QᵀDQ + diag κ) x = −Qᵀg; then an Armijo search along the projection arc
+//! z(α) = Π(z + α p), backtracking by quadratic interpolation. So the method converges
 //! from any start; in 2D the fallback is Bertsekas' method for bound constraints as it
 //! stands. Near the solution the decrease of q sinks below its rounding level (a disc
 //! multiplier c v̂ has the norm c only to a few ulps, and g is large along it); there the

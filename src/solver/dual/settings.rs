@@ -34,8 +34,13 @@ pub struct DualSettings {
     /// Default 64; > 0.
     pub eta: f64,
     /// The shortest damped Newton step Π(z + α(z⁺ − z)) tried before the projected Newton
-    /// step (α = 1, ½, … down to it). Default 0.25; in (0, 1].
+    /// step (α = 1, then interpolated fractions down to it). Default 0.02; in (0, 1].
     pub min_damping: f64,
+    /// A damped Newton step is accepted where q falls by at least this fraction of its
+    /// first-order prediction g·(z − trial): near the minimizer along the path, not past it
+    /// (without it, short steps that barely lower q replace projected Newton steps that do
+    /// better). Default 0.3; in (0, 1).
+    pub damped_decrease: f64,
     /// A projected Newton step α shorter than this also tries the projected gradient step
     /// and widens the next binding set (`widen`). Default 1e-3; in (0, 1).
     pub pg_switch: f64,
@@ -94,7 +99,8 @@ impl Default for DualSettings {
             tolerance: 1e-12,
             max_iterations: 2000,
             eta: 64.0,
-            min_damping: 0.25,
+            min_damping: 0.02,
+            damped_decrease: 0.3,
             pg_switch: 1e-3,
             widen: 3.0,
             max_widen: 1e8,
@@ -124,6 +130,11 @@ impl DualSettings {
                 "min_damping",
                 open(self.min_damping, 1.0) || self.min_damping == 1.0,
                 "in (0, 1]",
+            ),
+            (
+                "damped_decrease",
+                open(self.damped_decrease, 1.0),
+                "in (0, 1)",
             ),
             ("pg_switch", open(self.pg_switch, 1.0), "in (0, 1)"),
             (
@@ -190,6 +201,10 @@ mod tests {
                 ..Default::default()
             },
             DualSettings {
+                damped_decrease: 1.0,
+                ..Default::default()
+            },
+            DualSettings {
                 rim: 1.0 + f64::EPSILON,
                 ..Default::default()
             },
@@ -198,10 +213,14 @@ mod tests {
                 ..Default::default()
             },
         ];
-        for (s, field) in
-            bad.iter()
-                .zip(["tolerance", "eta", "min_damping", "rim", "max_iterations"])
-        {
+        for (s, field) in bad.iter().zip([
+            "tolerance",
+            "eta",
+            "min_damping",
+            "damped_decrease",
+            "rim",
+            "max_iterations",
+        ]) {
             let err = s.validate().unwrap_err().to_string();
             assert!(err.contains(&format!("`{field}`")), "{err}");
         }
