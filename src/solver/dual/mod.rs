@@ -59,10 +59,11 @@
 //! answer is exact up to rounding. In 3D it converges quadratically near the solution.
 //!
 //! Globalization. The Newton point is taken if it lowers q, else the damped point
-//! Π(z + α(z⁺ − z)) if that lowers q by at least 0.3 of its first-order prediction, α
-//! backtracking by quadratic interpolation (`backtrack`) down to 0.02. Otherwise (a plain
-//! active set iteration can cycle: D is not an M-matrix) the iteration takes a projected
-//! Newton step (Bertsekas 1982), which always descends. A group is binding when it lies
+//! Π(z + α(z⁺ − z)) if that lowers q by at least `damped_decrease` of its first-order
+//! prediction, α backtracking by quadratic interpolation (`backtrack`) down to
+//! `min_damping` (`DualSettings`). Otherwise (a plain active set iteration can cycle: D
+//! is not an M-matrix) the iteration takes a projected Newton step (Bertsekas 1982), which
+//! always descends. A group is binding when it lies
 //! within ε of the boundary in the direction the gradient pushes it (z_j − ε ĝ_j ∉ int Z_j,
 //! ε the length of the projected gradient step); it moves along −g_j/δ_j, except a binding
 //! disc multiplier pushed outward (μ_j = −g_j·ẑ_j > 0), which moves radially onto the rim

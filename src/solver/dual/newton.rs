@@ -315,13 +315,11 @@ fn complement(groups: &[Group], coords: &[Coord], u: &mut Vec<Coord>) {
     debug_assert_eq!(k, coords.len());
 }
 
-/// The Woodbury form is taken where its flops are at most this share of the direct form's.
-/// It also reads D once (its residual) and |U| columns of B: memory-bound passes that the
-/// flop counts leave out. Timed both ways on the plate 0.03's onset of sliding (steps
-/// 10–25, the same 315 systems): where |U| ≥ 0.7 nq (144 of them) the Woodbury systems took
-/// 25.2 s against the direct ones' 16.6 s; below, 0.2–0.8 times the direct ones. A share of
-/// 0.4 takes it up to |U| ≈ 0.73 nq. (With the flop counts alone, 1, it was taken up to
-/// |U| ≈ nq: the plate 0.03 ran 1.3 times as long as with the direct form everywhere.)
+/// The Woodbury form is taken where its flops are at most this share of the direct form's
+/// (up to |U| ≈ 0.73 nq): it also reads D once (its residual) and |U| columns of B,
+/// memory-bound passes that the flop counts leave out, so near |U| = nq it is the slower
+/// form (timed system by system in docs/performance.md, "The Woodbury form only where it
+/// is well below the direct one").
 const WOODBURY_SHARE: f64 = 0.4;
 
 /// Flops of a Newton system in the direct form: the factorization (building H and the
