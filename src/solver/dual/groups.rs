@@ -114,6 +114,31 @@ impl Group {
         })
     }
 
+    /// For a 3D disc multiplier z on its rim (|z| ≥ `rim` c, z ≠ 0): the point c ẑ held on
+    /// the rim and the shift κ = max(μ, 0)/c of its tangent, μ = −g·ẑ the radial multiplier
+    /// (`DualSettings::held_rims`); None for a contact row, a 2D friction row or z off the
+    /// rim. In 2D the rim is two points, so holding would fix the multiplier outright
+    /// instead of letting its tangent follow the loads (measured: the bracket 180 → 193
+    /// iterations, the paper's scenes ±2; 2D runs keep their bits without it).
+    pub(in crate::solver) fn held_on_rim(
+        &self,
+        z: &[f64],
+        g: &[f64],
+        rim: f64,
+    ) -> Option<([f64; 2], f64)> {
+        let (Set::Ball(c), 2) = (self.set, self.len) else {
+            return None;
+        };
+        let nz = norm(z);
+        (nz > 0.0 && nz >= rim * c).then(|| {
+            let mut z0 = [0.0; 2];
+            for (o, x) in z0.iter_mut().zip(z) {
+                *o = x / nz * c;
+            }
+            (z0, (-dot(g, z) / nz).max(0.0) / c)
+        })
+    }
+
     /// The group's rows as free Newton coordinates.
     pub(in crate::solver) fn free(&self) -> impl Iterator<Item = Coord> + '_ {
         self.rows().map(|i| Coord {

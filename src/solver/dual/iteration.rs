@@ -264,7 +264,8 @@ impl<'a, O: Operator> Iteration<'a, O> {
     ) -> Result<(), Indefinite> {
         let settings = self.ops.settings();
         let eta = if carried.rejected { 1.0 } else { settings.eta };
-        carried.rejected = !self.newton_point(z, eta, res, b)?;
+        let hold = (iteration <= settings.held_rims).then_some(settings.rim);
+        carried.rejected = !self.newton_point(z, eta, hold, res, b)?;
         let interpolate = iteration <= settings.interpolated;
         carried.widen = if !carried.rejected || self.ops.abandoned() {
             // A step given up ends at the next test (`run`), whatever `trial` holds.
@@ -345,10 +346,11 @@ impl<'a, O: Operator> Iteration<'a, O> {
         &self,
         z: &[f64],
         eta: f64,
+        hold: Option<f64>,
         res: f64,
         b: &mut Buffers,
     ) -> Result<bool, Indefinite> {
-        self.prediction(z, eta, b);
+        self.prediction(z, eta, hold, b);
         let Buffers {
             grad: g,
             trial,
@@ -409,8 +411,16 @@ impl<'a, O: Operator> Iteration<'a, O> {
 
     /// The Newton step's prediction (`prediction`) at z from `grad` into `trial` and
     /// `coords`.
-    fn prediction(&self, z: &[f64], eta: f64, b: &mut Buffers) {
-        prediction(self.groups, z, &b.grad, eta, &mut b.trial, &mut b.coords);
+    fn prediction(&self, z: &[f64], eta: f64, hold: Option<f64>, b: &mut Buffers) {
+        prediction(
+            self.groups,
+            z,
+            &b.grad,
+            eta,
+            hold,
+            &mut b.trial,
+            &mut b.coords,
+        );
     }
 
     /// The projected Newton step (Bertsekas 1982) from z: the binding groups move along
@@ -594,11 +604,14 @@ pub(in crate::solver) fn residual(groups: &[Group], z: &[f64], g: &[f64], rim: f
 /// The Newton step's prediction v = z − g/(ηδ), group by group: free (z₀ = 0, its rows in
 /// Q), at zero (z₀ = 0), or on the rim of a disc (z₀ = c v̂ fixed, the tangent t̂ ⊥ v̂ in Q
 /// with κ = ηδ (|v| − c)/c = ηδ (1/ρ − 1)); z₀ in `trial`, the columns of Q in `coords`.
+/// With `hold` = Some(rim), a disc multiplier on its rim at z that v would free stays on
+/// it (`Group::held_on_rim`, `DualSettings::held_rims`).
 pub(in crate::solver) fn prediction(
     groups: &[Group],
     z: &[f64],
     g: &[f64],
     eta: f64,
+    hold: Option<f64>,
     trial: &mut [f64],
     coords: &mut Vec<Coord>,
 ) {
@@ -609,17 +622,26 @@ pub(in crate::solver) fn prediction(
         for i in r.clone() {
             trial[i] = z[i] - g[i] / eta_delta;
         }
-        match grp.project(&mut trial[r.clone()]) {
-            None => {
+        let projected = grp.project(&mut trial[r.clone()]);
+        let held = match (projected, hold) {
+            (None, Some(rim)) => grp.held_on_rim(&z[r.clone()], &g[r.clone()], rim),
+            _ => None,
+        };
+        match (projected, held) {
+            (_, Some((z0, kappa))) => {
+                trial[r.clone()].copy_from_slice(&z0[..grp.len]);
+                coords.extend(grp.tangent(&z0[..grp.len], kappa));
+            }
+            (None, None) => {
                 trial[r.clone()].fill(0.0);
                 coords.extend(grp.free());
             }
             // ρ = 0: a contact row at 0.
-            Some(rho) if rho > 0.0 => {
+            (Some(rho), None) if rho > 0.0 => {
                 let shift = eta_delta * (1.0 / rho - 1.0);
                 coords.extend(grp.tangent(&trial[r], shift));
             }
-            Some(_) => {}
+            (Some(_), None) => {}
         }
     }
 }

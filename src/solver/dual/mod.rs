@@ -47,6 +47,11 @@
 //!    the radial multiplier, the second-order term of the constraint |γ_j| ≤ c_j. In 2D
 //!    T = 0 and the multiplier is simply fixed at ±c_j.
 //!
+//! In a step's first iteration a 3D disc multiplier that lies on its rim at the warm start
+//! stays on it where v_j falls inside the disc, with κ_j = max(μ_j, 0)/c_j
+//! (`DualSettings::held_rims`): the warm start's gradient is the new loads', and at nodes
+//! that go on sliding it can point inward.
+//!
 //! With z⁺ = z₀ + Q x — z₀ holds the fixed parts (c_j v̂_j, zeros), the columns of Q are the
 //! free rows' unit vectors and the rims' unit tangents — the step is one SPD system
 //!

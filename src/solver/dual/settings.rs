@@ -33,6 +33,19 @@ pub struct DualSettings {
     /// a rejected Newton point predicts with η = 1. The answer does not depend on it.
     /// Default 64; > 0.
     pub eta: f64,
+    /// In a step's first this many iterations the Newton prediction holds a 3D disc
+    /// multiplier that lies on its rim there (|z_j| ≥ `rim` c_j) on the rim, with the shift
+    /// κ_j = max(μ_j, 0)/c_j of its tangent (μ_j = −g_j·ẑ_j), where v_j = z_j − g_j/(ηδ_j)
+    /// falls inside the disc. The warm start carries the last step's friction forces, but
+    /// its gradient is that of the new loads: at nodes that go on sliding it can point into
+    /// the disc, and the prediction then frees them, the Newton point leaves them far
+    /// outside the disc, and the next Newton point is rejected (the plate of issue 29:
+    /// 4–14 such nodes in each of its middle steps, over a thousand where it starts to
+    /// slide). Holding them lets the first Newton step follow the new loads with the last
+    /// step's sliding nodes; the iterations after it predict as the module doc says, so the
+    /// answer does not depend on it. Default 1 (measured: 2 is worse; docs/performance.md);
+    /// 0 never.
+    pub held_rims: usize,
     /// The shortest damped Newton step Π(z + α(z⁺ − z)) tried before the projected Newton
     /// step (α = 1, then interpolated fractions down to it). Default 0.02; in (0, 1].
     pub min_damping: f64,
@@ -99,6 +112,7 @@ impl Default for DualSettings {
             tolerance: 1e-12,
             max_iterations: 2000,
             eta: 64.0,
+            held_rims: 1,
             min_damping: 0.02,
             damped_decrease: 0.3,
             pg_switch: 1e-3,

@@ -219,3 +219,60 @@ fn a_matrix_not_definite_in_single_precision_is_factored_in_double() {
     let (tried, direct) = (solve(1), solve(usize::MAX));
     assert!((0..n).all(|i| tried[(i, 0)].to_bits() == direct[(i, 0)].to_bits()));
 }
+
+/// `held_on_rim` holds a 3D disc multiplier on its rim with κ = max(μ, 0)/c and nothing
+/// else; the prediction with it keeps such a group on the rim where v = z − g/(ηδ) falls
+/// inside the disc, and predicts every other group as without it.
+#[test]
+fn held_rims_keep_a_disc_on_its_rim_for_the_first_prediction() {
+    use super::groups::{Group, Set};
+    use super::iteration::prediction;
+    let disc = |start, len, c| Group {
+        start,
+        len,
+        set: Set::Ball(c),
+        scale: 2.0,
+        shift: 0.0,
+    };
+    let rim = DualSettings::default().rim;
+    let d3 = disc(0, 2, 0.5);
+    // On the rim (0.3, 0.4), the gradient pointing inward (μ = −g·ẑ = −1) or outward (μ = 2).
+    let z = [0.3, 0.4];
+    let (z0, kappa) = d3.held_on_rim(&z, &[0.6, 0.8], rim).unwrap();
+    assert_eq!((z0, kappa), ([0.3, 0.4], 0.0));
+    let (_, kappa) = d3.held_on_rim(&z, &[-1.2, -1.6], rim).unwrap();
+    assert!((kappa - 4.0).abs() < 1e-15, "κ = μ/c = 2/0.5, got {kappa}");
+    // Inside the disc, a 2D friction row (its rim two points), a contact row, c = 0: none.
+    assert!(d3.held_on_rim(&[0.3, 0.3], &[0.6, 0.8], rim).is_none());
+    assert!(disc(0, 1, 0.5).held_on_rim(&[0.5], &[1.0], rim).is_none());
+    let contact = Group {
+        set: Set::HalfLine,
+        ..disc(0, 1, 0.0)
+    };
+    assert!(contact.held_on_rim(&[0.5], &[1.0], rim).is_none());
+    assert!(disc(0, 2, 0.0)
+        .held_on_rim(&[0.0, 0.0], &[1.0, 0.0], rim)
+        .is_none());
+
+    // The prediction: the disc at rows 0..2 on its rim with v inside (η = 64), a free
+    // contact row at row 2, a disc inside its rim at rows 3..5.
+    let groups = [
+        d3,
+        Group {
+            set: Set::HalfLine,
+            ..disc(2, 1, 0.0)
+        },
+        disc(3, 2, 0.5),
+    ];
+    let (z, g) = ([0.3, 0.4, 1.0, 0.1, 0.1], [0.6, 0.8, 0.5, 0.1, 0.0]);
+    let (mut trial, mut coords) = (vec![0.0; 5], Vec::new());
+    let columns = |coords: &Vec<Coord>| -> Vec<(usize, usize)> {
+        coords.iter().map(|c| (c.start, c.len)).collect()
+    };
+    prediction(&groups, &z, &g, 64.0, None, &mut trial, &mut coords);
+    assert_eq!(columns(&coords), [(0, 1), (1, 1), (2, 1), (3, 1), (4, 1)]);
+    prediction(&groups, &z, &g, 64.0, Some(rim), &mut trial, &mut coords);
+    assert_eq!(columns(&coords), [(0, 2), (2, 1), (3, 1), (4, 1)]);
+    assert_eq!(&trial[..2], &[0.3, 0.4]);
+    assert_eq!((coords[0].dir, coords[0].shift), ([-0.8, 0.6], 0.0));
+}
