@@ -180,8 +180,21 @@ impl DualSolver {
 struct Carried {
     /// The factor of ε (`DualSettings::widen`).
     widen: f64,
-    /// Whether the Newton point was rejected (`DualSettings::eta`).
-    rejected: bool,
+    /// How the last iteration's Newton point went.
+    newton: Taken,
+}
+
+/// How much of a Newton step the iteration took (`Iteration::newton_point`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Taken {
+    /// The Newton point itself: the next iteration predicts with η = `DualSettings::eta`.
+    Full,
+    /// A damped point Π(z + α(z⁺ − z)), α < 1: the prediction was wrong for the groups the
+    /// step overshot, so the next one reaches far (η = 1) and holds the rims
+    /// (`DualSettings::held_rims`).
+    Damped,
+    /// Neither: the projected Newton step was taken; the next prediction reaches far.
+    Rejected,
 }
 
 /// What stays fixed over a step's iterations.
@@ -219,7 +232,7 @@ impl<'a, O: Operator> Iteration<'a, O> {
         self.start(z, before, b);
         let mut carried = Carried {
             widen: 1.0,
-            rejected: false,
+            newton: Taken::Full,
         };
         let mut iterations = 0;
         loop {
@@ -263,11 +276,15 @@ impl<'a, O: Operator> Iteration<'a, O> {
         b: &mut Buffers,
     ) -> Result<(), Indefinite> {
         let settings = self.ops.settings();
-        let eta = if carried.rejected { 1.0 } else { settings.eta };
-        let hold = (iteration <= settings.held_rims).then_some(settings.rim);
-        carried.rejected = !self.newton_point(z, eta, hold, res, b)?;
+        let eta = match carried.newton {
+            Taken::Full => settings.eta,
+            Taken::Damped | Taken::Rejected => 1.0,
+        };
+        let hold = (iteration <= settings.held_rims || carried.newton == Taken::Damped)
+            .then_some(settings.rim);
+        carried.newton = self.newton_point(z, eta, hold, res, b)?;
         let interpolate = iteration <= settings.interpolated;
-        carried.widen = if !carried.rejected || self.ops.abandoned() {
+        carried.widen = if carried.newton != Taken::Rejected || self.ops.abandoned() {
             // A step given up ends at the next test (`run`), whatever `trial` holds.
             1.0
         } else if self.projected_newton(z, res, carried.widen, interpolate, b)? < settings.pg_switch
@@ -340,8 +357,9 @@ impl<'a, O: Operator> Iteration<'a, O> {
     /// `backtrack`'s interpolated fraction (a damped trial costs one product with D, no
     /// factorization). The Newton point is accepted where it lowers q, a damped trial where
     /// it lowers q by at least `damped_decrease` of its first-order prediction g·(z − trial),
-    /// so that it lands near the minimizer along the path, not past it. True if a trial was
-    /// accepted; it is in `trial`, its gradient in `grad_trial`. `res` is the residual at z.
+    /// so that it lands near the minimizer along the path, not past it. Returns which trial was
+    /// taken, if any; it is in `trial`, its gradient in `grad_trial`. `res` is the residual
+    /// at z.
     fn newton_point(
         &self,
         z: &[f64],
@@ -349,7 +367,7 @@ impl<'a, O: Operator> Iteration<'a, O> {
         hold: Option<f64>,
         res: f64,
         b: &mut Buffers,
-    ) -> Result<bool, Indefinite> {
+    ) -> Result<Taken, Indefinite> {
         self.prediction(z, eta, hold, b);
         let Buffers {
             grad: g,
@@ -394,10 +412,14 @@ impl<'a, O: Operator> Iteration<'a, O> {
                 dq < -noise && -dq >= settings.damped_decrease * predicted
             };
             if accepted {
-                break true;
+                break if alpha == 1.0 {
+                    Taken::Full
+                } else {
+                    Taken::Damped
+                };
             }
             if alpha <= settings.min_damping {
-                break false;
+                break Taken::Rejected;
             }
             // Along a direction that does not descend, halving.
             let fraction = if predicted > 0.0 {

@@ -47,10 +47,10 @@
 //!    the radial multiplier, the second-order term of the constraint |γ_j| ≤ c_j. In 2D
 //!    T = 0 and the multiplier is simply fixed at ±c_j.
 //!
-//! In a step's first iteration a 3D disc multiplier that lies on its rim at the warm start
-//! stays on it where v_j falls inside the disc, with κ_j = max(μ_j, 0)/c_j
-//! (`DualSettings::held_rims`): the warm start's gradient is the new loads', and at nodes
-//! that go on sliding it can point inward.
+//! In a step's first iteration, and after a damped Newton point (below), a 3D disc
+//! multiplier that lies on its rim stays on it where v_j falls inside the disc, with
+//! κ_j = max(μ_j, 0)/c_j (`DualSettings::held_rims`): the warm start's gradient is the new
+//! loads', and at nodes that go on sliding it can point inward.
 //!
 //! With z⁺ = z₀ + Q x — z₀ holds the fixed parts (c_j v̂_j, zeros), the columns of Q are the
 //! free rows' unit vectors and the rims' unit tangents — the step is one SPD system
@@ -66,7 +66,8 @@
 //! Globalization. The Newton point is taken if it lowers q, else the damped point
 //! Π(z + α(z⁺ − z)) if that lowers q by at least `damped_decrease` of its first-order
 //! prediction, α backtracking by quadratic interpolation (`backtrack`) down to
-//! `min_damping` (`DualSettings`). Otherwise (a plain active set iteration can cycle: D
+//! `min_damping` (`DualSettings`); after a damped point the next prediction takes η = 1
+//! and holds the rims. Otherwise (a plain active set iteration can cycle: D
 //! is not an M-matrix) the iteration takes a projected Newton step (Bertsekas 1982), which
 //! always descends. A group is binding when it lies
 //! within ε of the boundary in the direction the gradient pushes it (z_j − ε ĝ_j ∉ int Z_j,

@@ -30,7 +30,8 @@ pub struct DualSettings {
     pub max_iterations: usize,
     /// η of the Newton step's prediction v = z − g/(ηδ): large, so that the prediction
     /// follows the iterate and few groups are predicted off their set; the iteration after
-    /// a rejected Newton point predicts with η = 1. The answer does not depend on it.
+    /// a rejected or a damped Newton point predicts with η = 1. The answer does not depend
+    /// on it.
     /// Default 64; > 0.
     pub eta: f64,
     /// In a step's first this many iterations the Newton prediction holds a 3D disc
@@ -42,9 +43,10 @@ pub struct DualSettings {
     /// outside the disc, and the next Newton point is rejected (the plate of issue 29:
     /// 4–14 such nodes in each of its middle steps, over a thousand where it starts to
     /// slide). Holding them lets the first Newton step follow the new loads with the last
-    /// step's sliding nodes; the iterations after it predict as the module doc says, so the
-    /// answer does not depend on it. Default 1 (measured: 2 is worse; docs/performance.md);
-    /// 0 never.
+    /// step's sliding nodes. The iteration after a damped Newton point holds them too (it
+    /// overshot: `iteration::Taken::Damped`); the others predict as the module doc says, so
+    /// the answer does not depend on it. Default 1 (measured: 2 is worse;
+    /// docs/performance.md); 0 only after damped points.
     pub held_rims: usize,
     /// The shortest damped Newton step Π(z + α(z⁺ − z)) tried before the projected Newton
     /// step (α = 1, then interpolated fractions down to it). Default 0.02; in (0, 1].
