@@ -80,7 +80,9 @@ pub enum Preconditioner {
 pub struct MatrixFreeSettings {
     /// The dual's settings: the iteration's (`tolerance`, `max_iterations`, `eta`, `rim`,
     /// the damping and search settings) and `dependent_shift`. Default
-    /// `DualSettings::default()`.
+    /// `DualSettings::default()` but `far_after_damped` false: on the fine plate of issue 29
+    /// its steps 6 and 7 took the same 30 dual iterations with it and without, but 660 s
+    /// against 531 s (two steps only: docs/performance.md).
     pub dual: DualSettings,
     /// Conjugate gradient iterations per Newton system at most; a system not solved by then
     /// gives its last iterate, which the iteration's descent tests accept or reject.
@@ -103,7 +105,10 @@ pub struct MatrixFreeSettings {
 impl Default for MatrixFreeSettings {
     fn default() -> Self {
         MatrixFreeSettings {
-            dual: DualSettings::default(),
+            dual: DualSettings {
+                far_after_damped: false,
+                ..DualSettings::default()
+            },
             cg_max: 400,
             forcing_max: 0.01,
             probes: 4,

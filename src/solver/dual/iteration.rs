@@ -191,7 +191,7 @@ enum Taken {
     Full,
     /// A damped point Π(z + α(z⁺ − z)), α < 1: the prediction was wrong for the groups the
     /// step overshot, so the next one reaches far (η = 1) and holds the rims
-    /// (`DualSettings::held_rims`).
+    /// (`DualSettings::far_after_damped`).
     Damped,
     /// Neither: the projected Newton step was taken; the next prediction reaches far.
     Rejected,
@@ -276,12 +276,14 @@ impl<'a, O: Operator> Iteration<'a, O> {
         b: &mut Buffers,
     ) -> Result<(), Indefinite> {
         let settings = self.ops.settings();
-        let eta = match carried.newton {
-            Taken::Full => settings.eta,
-            Taken::Damped | Taken::Rejected => 1.0,
+        let far = match carried.newton {
+            Taken::Full => false,
+            Taken::Damped => settings.far_after_damped,
+            Taken::Rejected => true,
         };
-        let hold = (iteration <= settings.held_rims || carried.newton == Taken::Damped)
-            .then_some(settings.rim);
+        let eta = if far { 1.0 } else { settings.eta };
+        let held = iteration <= settings.held_rims || (far && carried.newton == Taken::Damped);
+        let hold = held.then_some(settings.rim);
         carried.newton = self.newton_point(z, eta, hold, res, b)?;
         let interpolate = iteration <= settings.interpolated;
         carried.widen = if carried.newton != Taken::Rejected || self.ops.abandoned() {

@@ -30,8 +30,8 @@ pub struct DualSettings {
     pub max_iterations: usize,
     /// η of the Newton step's prediction v = z − g/(ηδ): large, so that the prediction
     /// follows the iterate and few groups are predicted off their set; the iteration after
-    /// a rejected or a damped Newton point predicts with η = 1. The answer does not depend
-    /// on it.
+    /// a rejected Newton point, and with `far_after_damped` a damped one, predicts with
+    /// η = 1. The answer does not depend on it.
     /// Default 64; > 0.
     pub eta: f64,
     /// In a step's first this many iterations the Newton prediction holds a 3D disc
@@ -43,11 +43,17 @@ pub struct DualSettings {
     /// outside the disc, and the next Newton point is rejected (the plate of issue 29:
     /// 4–14 such nodes in each of its middle steps, over a thousand where it starts to
     /// slide). Holding them lets the first Newton step follow the new loads with the last
-    /// step's sliding nodes. The iteration after a damped Newton point holds them too (it
-    /// overshot: `iteration::Taken::Damped`); the others predict as the module doc says, so
-    /// the answer does not depend on it. Default 1 (measured: 2 is worse;
-    /// docs/performance.md); 0 only after damped points.
+    /// step's sliding nodes. With `far_after_damped` the iteration after a damped Newton
+    /// point holds them too; the others predict as the module doc says, so the answer does
+    /// not depend on it. Default 1 (measured: 2 is worse; docs/performance.md); 0 never
+    /// but after damped points.
     pub held_rims: usize,
+    /// After a damped Newton point the next prediction takes η = 1 and holds the rims
+    /// (`held_rims`), as after a rejected one: the damped point stopped short because the
+    /// Newton point overshot, so the prediction that chose it was wrong for the groups it
+    /// moved. Default true (the dense dual's golden scenes and plates: docs/performance.md);
+    /// the matrix-free dual's default is false (`MatrixFreeSettings`).
+    pub far_after_damped: bool,
     /// The shortest damped Newton step Π(z + α(z⁺ − z)) tried before the projected Newton
     /// step (α = 1, then interpolated fractions down to it). Default 0.02; in (0, 1].
     pub min_damping: f64,
@@ -115,6 +121,7 @@ impl Default for DualSettings {
             max_iterations: 2000,
             eta: 64.0,
             held_rims: 1,
+            far_after_damped: true,
             min_damping: 0.02,
             damped_decrease: 0.3,
             pg_switch: 1e-3,
