@@ -359,9 +359,9 @@ impl<'a, O: Operator> Iteration<'a, O> {
     /// `backtrack`'s interpolated fraction (a damped trial costs one product with D, no
     /// factorization). The Newton point is accepted where it lowers q, a damped trial where
     /// it lowers q by at least `damped_decrease` of its first-order prediction g·(z − trial),
-    /// so that it lands near the minimizer along the path, not past it. Returns which trial was
-    /// taken, if any; it is in `trial`, its gradient in `grad_trial`. `res` is the residual
-    /// at z.
+    /// so that it lands near the minimizer along the path, not past it. Returns which trial
+    /// was taken, if any; it is in `trial`, its gradient in `grad_trial`. `res` is the
+    /// residual at z.
     fn newton_point(
         &self,
         z: &[f64],
