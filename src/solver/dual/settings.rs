@@ -39,8 +39,8 @@ pub struct DualSettings {
     /// κ_j = max(μ_j, 0)/c_j of its tangent (μ_j = −g_j·ẑ_j), where v_j = z_j − g_j/(ηδ_j)
     /// falls inside the disc. The warm start carries the last step's friction forces, but
     /// its gradient is that of the new loads: at nodes that go on sliding it can point into
-    /// the disc, and the prediction then frees them, the Newton point leaves them far
-    /// outside the disc, and the next Newton point is rejected (the plate of issue 29:
+    /// the disc, and the prediction then frees them: the first Newton step takes them as
+    /// sticking, and the next Newton point is rejected (the plate of issue 29:
     /// 4–14 such nodes in each of its middle steps, over a thousand where it starts to
     /// slide). Holding them lets the first Newton step follow the new loads with the last
     /// step's sliding nodes. With `far_after_damped` the iteration after a damped Newton
