@@ -646,26 +646,23 @@ pub(in crate::solver) fn prediction(
         for i in r.clone() {
             trial[i] = z[i] - g[i] / eta_delta;
         }
-        let projected = grp.project(&mut trial[r.clone()]);
-        let held = match (projected, hold) {
-            (None, Some(rim)) => grp.held_on_rim(&z[r.clone()], &g[r.clone()], rim),
-            _ => None,
-        };
-        match (projected, held) {
-            (_, Some((z0, kappa))) => {
-                trial[r.clone()].copy_from_slice(&z0[..grp.len]);
-                coords.extend(grp.tangent(&z0[..grp.len], kappa));
-            }
-            (None, None) => {
-                trial[r.clone()].fill(0.0);
-                coords.extend(grp.free());
+        match grp.project(&mut trial[r.clone()]) {
+            None => {
+                let held = hold.and_then(|rim| grp.held_on_rim(&z[r.clone()], &g[r.clone()], rim));
+                if let Some((z0, kappa)) = held {
+                    trial[r].copy_from_slice(&z0);
+                    coords.extend(grp.tangent(&z0, kappa));
+                } else {
+                    trial[r].fill(0.0);
+                    coords.extend(grp.free());
+                }
             }
             // ρ = 0: a contact row at 0.
-            (Some(rho), None) if rho > 0.0 => {
+            Some(rho) if rho > 0.0 => {
                 let shift = eta_delta * (1.0 / rho - 1.0);
                 coords.extend(grp.tangent(&trial[r], shift));
             }
-            (Some(_), None) => {}
+            Some(_) => {}
         }
     }
 }

@@ -67,11 +67,11 @@
 //! Π(z + α(z⁺ − z)) if that lowers q by at least `damped_decrease` of its first-order
 //! prediction, α backtracking by quadratic interpolation (`backtrack`) down to
 //! `min_damping` (`DualSettings`); after a damped point the next prediction takes η = 1
-//! and holds the rims. Otherwise (a plain active set iteration can cycle: D
-//! is not an M-matrix) the iteration takes a projected Newton step (Bertsekas 1982), which
-//! always descends. A group is binding when it lies
-//! within ε of the boundary in the direction the gradient pushes it (z_j − ε ĝ_j ∉ int Z_j,
-//! ε the length of the projected gradient step); it moves along −g_j/δ_j, except a binding
+//! and holds the rims (`far_after_damped`). Otherwise (a plain active set iteration can
+//! cycle: D is not an M-matrix) the iteration takes a projected Newton step (Bertsekas
+//! 1982), which always descends. A group is binding when it lies within ε of the boundary
+//! in the direction the gradient pushes it (z_j − ε ĝ_j ∉ int Z_j, ε the length of the
+//! projected gradient step); it moves along −g_j/δ_j, except a binding
 //! disc multiplier pushed outward (μ_j = −g_j·ẑ_j > 0), which moves radially onto the rim
 //! and along the rim as a Newton coordinate (tangent t̂ ⊥ ẑ, shift κ_j = μ_j/c_j as above).
 //! The other (free) rows F and these tangents take the Newton step of the face,
