@@ -120,7 +120,9 @@ use super::{Abandon, Factor, Rows, StepReport, StepStatus};
 use crate::threads::team::{blocks, Team};
 use crate::Result;
 use delassus::{column, Delassus};
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::solvers::DenseSolveCore;
+use faer::linalg::triangular_inverse::invert_lower_triangular;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Par, Side};
 use groups::{dot, Group};
@@ -191,7 +193,7 @@ impl DualSolver {
             NewtonForm::Woodbury => true,
         };
         let inverse = (woodbury && m > 0 && groups.iter().all(|g| g.shift == 0.0))
-            .then(|| d.llt(Side::Lower).ok().map(|llt| llt.inverse()))
+            .then(|| inverse(factor, rows, &d))
             .flatten();
         DualSolver {
             g,
@@ -284,8 +286,51 @@ fn cut(v: &mut [f64], pieces: usize) -> Vec<(Range<usize>, &mut [f64])> {
 /// G = L_CC⁻¹ E (|C|×m, E the rows' C-block in the factor's ordering) and D = GᵀG, on all
 /// the process's threads: faer's parallel products and solves with more than one column
 /// give the same bits for every thread count; with one column they split their sums by it
-/// (`threads`), so a single row is condensed on one thread.
+/// (`threads`), so a single row is condensed on one thread. Where E selects (`selection`)
+/// by two triangles (`condense_selected`), else by a solve and a product (`condense_solved`).
 fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
+    let par = if rows.len() >= 2 {
+        crate::threads::par()
+    } else {
+        Par::Seq
+    };
+    match selection(factor, rows) {
+        Some(sel) => condense_selected(factor, &sel, par),
+        None => condense_solved(factor, rows, par),
+    }
+}
+
+/// `condense` where E = Π diag(s) selects (`selection`): G is L_CC⁻¹'s columns scaled, and
+/// D = Eᵀ L_CC⁻ᵀ L_CC⁻¹ E a product of two triangles. c³/3 flops for the inverse and c³/3
+/// for the product, against c³ for the solve and 2c³ for the full product GᵀG (the plate
+/// 0.03's setup 6.4 → 4.8 s: docs/performance.md).
+fn condense_selected(factor: &Factor, sel: &[(usize, f64)], par: Par) -> (Mat<f64>, Mat<f64>) {
+    let (c, m) = (factor.last(), sel.len());
+    let l_cc = factor.trailing_block();
+    let mut linv = Mat::<f64>::zeros(c, c);
+    invert_lower_triangular(linv.as_mut(), l_cc.as_ref(), par);
+    drop(l_cc);
+    // L_CC⁻ᵀ L_CC⁻¹, its lower triangle.
+    let mut inner = Mat::<f64>::zeros(c, c);
+    triangular::matmul(
+        inner.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        linv.transpose(),
+        BlockStructure::TriangularUpper,
+        linv.as_ref(),
+        BlockStructure::TriangularLower,
+        1.0,
+        par,
+    );
+    let d = selected(&inner, sel, |sa, sb| sa * sb);
+    drop(inner);
+    let g = Mat::from_fn(c, m, |i, r| sel[r].1 * linv[(i, sel[r].0)]);
+    (g, d)
+}
+
+/// `condense` for any E: G by a triangular solve with the m columns of E, D = GᵀG.
+fn condense_solved(factor: &Factor, rows: &Rows, par: Par) -> (Mat<f64>, Mat<f64>) {
     let (n, c, m) = (factor.dim(), factor.last(), rows.len());
     let first = n - c;
     let mut g = Mat::<f64>::zeros(c, m);
@@ -296,11 +341,6 @@ fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
             g[(pos - first, r)] = coef;
         }
     }
-    let par = if m >= 2 {
-        crate::threads::par()
-    } else {
-        Par::Seq
-    };
     let l_cc = factor.trailing_block();
     solve_lower_triangular_in_place(l_cc.as_ref(), g.as_mut(), par);
     let mut d = Mat::<f64>::zeros(m, m);
@@ -313,4 +353,60 @@ fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
         par,
     );
     (g, d)
+}
+
+/// B = D⁻¹ for the Woodbury form, None where D is not definite. Where E selects
+/// (`selection`), D⁻¹ = E⁻¹ L_CC L_CCᵀ E⁻ᵀ: the Schur complement of K_A on C, a product
+/// of two triangles (c³/3 flops, exact to rounding, where a Cholesky factorization and
+/// inverse of D cost m³ and carry D's conditioning); else from D's Cholesky factor.
+fn inverse(factor: &Factor, rows: &Rows, d: &Mat<f64>) -> Option<Mat<f64>> {
+    let Some(sel) = selection(factor, rows) else {
+        return d.llt(Side::Lower).ok().map(|llt| llt.inverse());
+    };
+    let l_cc = factor.trailing_block();
+    let mut schur = Mat::<f64>::zeros(l_cc.nrows(), l_cc.ncols());
+    triangular::matmul(
+        schur.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        l_cc.as_ref(),
+        BlockStructure::TriangularLower,
+        l_cc.transpose(),
+        BlockStructure::TriangularUpper,
+        1.0,
+        crate::threads::par(),
+    );
+    drop(l_cc);
+    Some(selected(&schur, &sel, |sa, sb| 1.0 / (sa * sb)))
+}
+
+/// Where every row is one dof of C, a dof no other row has, and every dof of C has a row
+/// (c = m): each row's (position in C, coefficient). E is then a scaled permutation. So it
+/// is on a flat boundary along the coordinate axes, whose normal and tangents
+/// (`fem::tangents`) are coordinate directions.
+fn selection(factor: &Factor, rows: &Rows) -> Option<Vec<(usize, f64)>> {
+    let first = factor.dim() - factor.last();
+    if factor.last() != rows.len() {
+        return None;
+    }
+    let mut seen = vec![false; rows.len()];
+    rows.rows
+        .iter()
+        .map(|row| {
+            let mut entries = row.entries();
+            let (dof, coef) = entries.next()?;
+            let pos = factor.position(dof).checked_sub(first)?;
+            let fresh = entries.next().is_none() && !std::mem::replace(&mut seen[pos], true);
+            fresh.then_some((pos, coef))
+        })
+        .collect()
+}
+
+/// The symmetric m×m matrix with entries f(s_a, s_b) M_{p_a p_b} for the rows' (p, s) in
+/// `sel`, from M's lower triangle.
+fn selected(inner: &Mat<f64>, sel: &[(usize, f64)], f: impl Fn(f64, f64) -> f64) -> Mat<f64> {
+    Mat::from_fn(sel.len(), sel.len(), |a, b| {
+        let ((pa, sa), (pb, sb)) = (sel[a], sel[b]);
+        f(sa, sb) * inner[(pa.max(pb), pa.min(pb))]
+    })
 }

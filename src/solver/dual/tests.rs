@@ -3,7 +3,10 @@
 use super::delassus::Delassus;
 use super::groups::Coord;
 use super::newton::{cholesky, gram, solve_cached, Form, NewtonFactor, Precision, Scratch};
-use super::{DualSettings, Team};
+use super::{condense_selected, condense_solved, inverse, selection, DualSettings, Team};
+use crate::fem::{NodalRow, Sparse};
+use crate::solver::{Factor, Rows};
+use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, Par};
 
 /// A symmetric m×m matrix with entries of both signs.
@@ -275,4 +278,66 @@ fn held_rims_keep_a_disc_on_its_rim_for_the_first_prediction() {
     assert_eq!(columns(&coords), [(0, 2), (2, 1), (3, 1), (4, 1)]);
     assert_eq!(&trial[..2], &[0.3, 0.4]);
     assert_eq!((coords[0].dir, coords[0].shift), ([-0.8, 0.6], 0.0));
+}
+
+/// A chain of `nodes` 3D nodes, each tied to the next two by springs of varied stiffness
+/// (diagonally dominant: SPD), and rows along the axes on the first half of the nodes: a
+/// contact row −e_z (a coefficient −1) on the even ones, the friction tangents e_y, e_x on
+/// the others. So E selects, as on a flat boundary along the axes.
+fn axis_rows(nodes: usize) -> (Sparse, Rows) {
+    let n = 3 * nodes;
+    let mut t = Vec::new();
+    for i in 0..n {
+        t.push(Triplet::new(i, i, 5.0 + (i % 7) as f64 / 7.0));
+        for j in [i + 1, i + 3, i + 5].into_iter().filter(|&j| j < n) {
+            let v = -0.4 - ((i * 5 + j) % 11) as f64 / 20.0;
+            t.push(Triplet::new(i, j, v));
+            t.push(Triplet::new(j, i, v));
+        }
+    }
+    let k = SparseColMat::try_new_from_triplets(n, n, &t).unwrap();
+    let row = |node: usize, dir: [f64; 3], bound: f64| NodalRow {
+        node,
+        dofs: [3 * node, 3 * node + 1, 3 * node + 2],
+        dir,
+        dim: 3,
+        bound,
+        area: 1.0,
+    };
+    let top = 0..nodes / 2;
+    let contact: Vec<_> = top
+        .clone()
+        .filter(|i| i % 2 == 0)
+        .map(|i| row(i, [0.0, 0.0, -1.0], f64::INFINITY))
+        .collect();
+    let friction: Vec<_> = top
+        .filter(|i| i % 2 == 1)
+        .flat_map(|i| [row(i, [0.0, 1.0, 0.0], 0.5), row(i, [1.0, 0.0, 0.0], 0.5)])
+        .collect();
+    (k, Rows::new(&contact, &friction, 2))
+}
+
+/// Where E selects, G and D by two triangles (`condense_selected`) equal those of the
+/// solve and the full product (`condense_solved`) to rounding, with the same bits on one
+/// to three threads, and B by the Schur complement (`inverse`) is D's inverse.
+#[test]
+fn selected_rows_condense_as_solved_ones() {
+    let (k, rows) = axis_rows(600);
+    let factor = Factor::new(&k, &rows.dofs()).unwrap();
+    let sel = selection(&factor, &rows).expect("the rows select");
+    let (g, d) = condense_selected(&factor, &sel, Par::Seq);
+    let (g_solved, d_solved) = condense_solved(&factor, &rows, Par::Seq);
+    let close = |a: &Mat<f64>, b: &Mat<f64>| (a - b).norm_max() <= 1e-14 * b.norm_max();
+    assert!(close(&g, &g_solved) && close(&d, &d_solved));
+    for threads in [2, 3] {
+        let (g_par, d_par) = condense_selected(&factor, &sel, Par::rayon(threads));
+        assert!(g_par == g && d_par == d, "{threads} threads differ");
+    }
+    let b = inverse(&factor, &rows, &d).unwrap();
+    let m = rows.len();
+    assert!((&b * &d - Mat::<f64>::identity(m, m)).norm_max() <= 1e-12);
+    // A row of two entries: E does not select.
+    let (_, mut turned) = axis_rows(600);
+    turned.rows[0].dir = [0.6, 0.0, -0.8];
+    assert!(selection(&factor, &turned).is_none());
 }
