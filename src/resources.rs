@@ -172,14 +172,15 @@ pub fn human(bytes: f64) -> String {
 }
 
 /// The memory of the dense condensed dual (`solver::dual`) on m constraint rows touching c
-/// dofs, in bytes: while it condenses, the trailing block L_CC (c²), G = L_CC⁻¹ E (c m) and
-/// D (m²); then G, D, B = D⁻¹ in 3D (`block` = 2) and the Newton matrix with its factor
-/// (up to m² each; the factor in f64, or in f32 from `DualSettings::single_min` rows on,
-/// never both large at once); 8 bytes a value.
+/// dofs, in bytes: while it condenses, at most the trailing block L_CC (c²), G = L_CC⁻¹ E
+/// (c m) and D (m²); then D, B = D⁻¹ in 3D (`block` = 2) and the Newton matrix with its
+/// factor (up to m² each; the factor in f64, or in f32 from `DualSettings::single_min` rows
+/// on, never both large at once); 8 bytes a value. G is not kept: a step applies it by
+/// passes over L_CC (`Factor::trailing_forward`, `trailing_backward`).
 pub fn dense_dual_bytes(m: usize, c: usize, block: usize) -> f64 {
     let (m, c) = (m as f64, c as f64);
     let inverse = if block == 2 { 1.0 } else { 0.0 };
-    8.0 * (c * c + c * m + m * m).max(c * m + (3.0 + inverse) * m * m)
+    8.0 * (c * c + c * m + m * m).max((3.0 + inverse) * m * m)
 }
 
 /// The memory of the duals without D (`solver::matrix_free`) on m rows of a problem with n

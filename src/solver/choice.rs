@@ -24,10 +24,10 @@ use crate::resources::{self, human, Estimate, MARGIN};
 use crate::scene::{ContactSolver, Scene};
 use crate::{Error, Result};
 
-/// The dense dual's memory (bytes) up to which `auto` takes it: 4 GB, m ≈ 10 000 rows in 3D
-/// (8·5m² bytes where c ≈ m). The coarse plate of issue 29 (m = 4 274, 0.73 GB) and the block
-/// at h = 1/48 (m ≈ 7 400, ≈ 2.2 GB) stay dense; the finer plate (m = 16 055: D alone 2.1
-/// GB, with B = D⁻¹ and the Newton matrices ≈ 10 GB) goes sparse. 4 GB leaves room for the
+/// The dense dual's memory (bytes) up to which `auto` takes it: 4 GB, m ≈ 11 180 rows in 3D
+/// (8·4m² bytes where c ≈ m). The coarse plate of issue 29 (m = 4 274, 0.58 GB) and the block
+/// at h = 1/48 (m ≈ 7 400, ≈ 1.8 GB) stay dense; the finer plate (m = 16 055: D alone 2.1
+/// GB, with B = D⁻¹ and the Newton matrices ≈ 8 GB) goes sparse. 4 GB leaves room for the
 /// factor of K_A and the run's own state on a 16 GB workstation; a larger dense dual needs a
 /// large machine, where `solver.contact = "dense"` asks for it.
 pub const DENSE_LIMIT: f64 = 4e9;
@@ -251,14 +251,14 @@ impl std::fmt::Display for ContactPlan {
 mod tests {
     use super::*;
 
-    /// With c = m, the 3D dense dual holds 8·5m² bytes: 4e9 at m = 10 000 exactly; the 2D one
-    /// 8·4m² bytes, 4e9 between m = 11 180 and 11 181.
+    /// With c = m, the 3D dense dual holds 8·4m² bytes: 4e9 between m = 11 180 and 11 181;
+    /// the 2D one 8·3m² bytes, 4e9 between m = 12 909 and 12 910.
     #[test]
     fn auto_is_dense_up_to_the_limit_and_sparse_beyond() {
-        assert_eq!(Contact::auto(10_000, 10_000, 2), Contact::Dense);
-        assert_eq!(Contact::auto(10_001, 10_001, 2), Contact::Sparse);
-        assert_eq!(Contact::auto(11_180, 11_180, 1), Contact::Dense);
-        assert_eq!(Contact::auto(11_181, 11_181, 1), Contact::Sparse);
+        assert_eq!(Contact::auto(11_180, 11_180, 2), Contact::Dense);
+        assert_eq!(Contact::auto(11_181, 11_181, 2), Contact::Sparse);
+        assert_eq!(Contact::auto(12_909, 12_909, 1), Contact::Dense);
+        assert_eq!(Contact::auto(12_910, 12_910, 1), Contact::Sparse);
         // Issue 29's plates: the coarse one stays dense, the finer one has D alone of 2.1 GB.
         assert_eq!(Contact::auto(4_274, 4_274, 2), Contact::Dense);
         assert_eq!(Contact::auto(16_055, 16_055, 2), Contact::Sparse);

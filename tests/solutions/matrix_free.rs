@@ -106,7 +106,7 @@ fn duals_without_d_agree_under_a_rotating_traction() {
 /// machine, and the sparse one beyond; a forced key is obeyed; the plan says which.
 #[test]
 fn the_plan_names_the_solver_that_fits() {
-    // The block at h = 1/8: 234 rows, D and its kin 2.2 MB, the matrix-free vectors 0.1 MB.
+    // The block at h = 1/8: 234 rows, D and its kin 1.8 MB, the matrix-free vectors 0.1 MB.
     let (scene, _m, disc) = load(&repo().join("examples/block.toml"), &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
     let plan = ContactPlan::of_run(&scene, &disc).unwrap();
@@ -119,7 +119,7 @@ fn the_plan_names_the_solver_that_fits() {
     assert!(dense < DENSE_LIMIT, "{dense}");
     assert!(
         plan.to_string()
-            .starts_with("dense (auto: its matrices ≈ 2.2 MB, at most 4.0 GB)"),
+            .starts_with("dense (auto: its matrices ≈ 1.8 MB, at most 4.0 GB)"),
         "{plan}"
     );
     let forced = ContactPlan::new(ContactSolver::MatrixFree, &rows, disc.n_free);

@@ -119,17 +119,16 @@ mod tests;
 use super::{Abandon, Factor, Rows, StepReport, StepStatus};
 use crate::threads::team::{blocks, Team};
 use crate::Result;
-use delassus::{column, Delassus};
+use delassus::Delassus;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::solvers::DenseSolveCore;
 use faer::linalg::triangular_inverse::invert_lower_triangular;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Mat, Par, Side};
-use groups::{dot, Group};
+use groups::Group;
 use iteration::Work;
 pub(super) use settings::in_ranges;
 pub use settings::{DualSettings, NewtonForm};
-use std::ops::Range;
 
 /// How many Newton systems a solver solved in each form (cumulative over its steps).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -143,13 +142,6 @@ pub struct NewtonCounts {
 }
 
 pub struct DualSolver {
-    /// G = L_CC⁻¹ E (|C|×m).
-    g: Mat<f64>,
-    /// The two passes over G (d = Gᵀ y_C and y_C − G z: 27 MB each on the 3D block at
-    /// h = 1/24), cut in blocks over the process's threads where that pays; a team each, as
-    /// each kind of pass is timed on its own (`Team`).
-    d_team: Team,
-    y_team: Team,
     /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
     d: Delassus,
     /// B = D⁻¹ for the Woodbury form of the Newton steps, when it is used: D definite (no
@@ -159,8 +151,9 @@ pub struct DualSolver {
     /// The multiplier groups, in row order; fixed per run.
     groups: Vec<Group>,
     work: Box<Work>,
-    /// The step's forward-solved right side, in the factor's ordering.
+    /// The step's forward-solved right side, in the factor's ordering, and a vector on C.
     y: Vec<f64>,
+    y_c: Vec<f64>,
     /// A request to give the step up (`solver::abandon`); none by default.
     abandon: Abandon,
 }
@@ -179,7 +172,7 @@ impl DualSolver {
     }
 
     fn build(factor: &Factor, rows: &Rows, settings: DualSettings) -> Self {
-        let (g, d) = condense(factor, rows);
+        let d = condense(factor, rows);
         let diag: Vec<f64> = (0..rows.len()).map(|i| d[(i, i)]).collect();
         let groups = groups::groups(rows, &diag, settings.dependent_shift);
         let m = rows.len();
@@ -196,9 +189,6 @@ impl DualSolver {
             .then(|| inverse(factor, rows, &d))
             .flatten();
         DualSolver {
-            g,
-            d_team: Team::default(),
-            y_team: Team::default(),
             d: Delassus {
                 mat: d,
                 team: Team::default(),
@@ -209,6 +199,7 @@ impl DualSolver {
             groups,
             work,
             y: vec![0.0; factor.dim()],
+            y_c: vec![0.0; factor.last()],
             abandon: Abandon::default(),
         }
     }
@@ -233,62 +224,45 @@ impl DualSolver {
         before: Option<&[f64]>,
     ) -> StepReport {
         debug_assert_eq!(z.len(), rows.len());
-        let (n, c) = (factor.dim(), factor.last());
-        // Forward solve L y = b; d = Gᵀ y_C.
+        let first = factor.dim() - factor.last();
+        // Forward solve L y = b; d = Gᵀ y_C = Eᵀ L_CC⁻ᵀ y_C.
         factor.permute(b, &mut self.y);
         factor.forward(&mut self.y);
-        let y_c = &self.y[n - c..];
-        let g = &self.g;
-        // d in blocks of entries, one per thread (each entry is one dot product either way).
-        let m = z.len();
-        let pieces = self.d_team.pieces(m >= self.settings.split_rows);
-        let d_blocks = cut(&mut self.work.d[..m], pieces);
-        self.d_team.each(d_blocks, |(rows, d)| {
-            for (r, dr) in rows.zip(d) {
-                *dr = dot(column(g, r), y_c);
-            }
-        });
+        self.y_c.copy_from_slice(&self.y[first..]);
+        factor.trailing_backward(&mut self.y_c);
+        for (row, d) in rows.rows.iter().zip(&mut self.work.d) {
+            *d = row
+                .entries()
+                .map(|(dof, coef)| coef * self.y_c[factor.position(dof) - first])
+                .sum();
+        }
         let report = self.dual_solve(z, before);
         if report.status != StepStatus::Solved {
             return report;
         }
-        // y_C ← y_C − G z (y_C in blocks of rows, one per thread, each row's sum in column
-        // order either way), then the backward solve Lᵀ w = y.
-        let g = &self.g;
-        let y_blocks = cut(&mut self.y[n - c..], pieces);
-        self.y_team.each(y_blocks, |(rows, y)| {
-            for (r, &zr) in z.iter().enumerate() {
-                if zr != 0.0 {
-                    for (yi, gi) in y.iter_mut().zip(&column(g, r)[rows.clone()]) {
-                        *yi -= gi * zr;
-                    }
-                }
+        // y_C ← y_C − G z = y_C − L_CC⁻¹ E z, then the backward solve Lᵀ w = y.
+        self.y_c.fill(0.0);
+        for (row, &zr) in rows.rows.iter().zip(&*z) {
+            for (dof, coef) in row.entries() {
+                self.y_c[factor.position(dof) - first] += coef * zr;
             }
-        });
+        }
+        factor.trailing_forward(&mut self.y_c);
+        for (y, t) in self.y[first..].iter_mut().zip(&self.y_c) {
+            *y -= t;
+        }
         factor.backward(&mut self.y);
         factor.unpermute(&self.y, w);
         report
     }
 }
 
-/// `v` cut in `pieces` consecutive blocks (`team::blocks`), each with its index range.
-fn cut(v: &mut [f64], pieces: usize) -> Vec<(Range<usize>, &mut [f64])> {
-    let mut rest = v;
-    blocks(rest.len(), pieces)
-        .map(|range| {
-            let (block, next) = std::mem::take(&mut rest).split_at_mut(range.len());
-            rest = next;
-            (range, block)
-        })
-        .collect()
-}
-
-/// G = L_CC⁻¹ E (|C|×m, E the rows' C-block in the factor's ordering) and D = GᵀG, on all
+/// D = GᵀG = Eᵀ L_CC⁻ᵀ L_CC⁻¹ E (E the rows' C-block in the factor's ordering), on all
 /// the process's threads: faer's parallel products and solves with more than one column
 /// give the same bits for every thread count; with one column they split their sums by it
 /// (`threads`), so a single row is condensed on one thread. Where E selects (`selection`)
 /// by two triangles (`condense_selected`), else by a solve and a product (`condense_solved`).
-fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
+fn condense(factor: &Factor, rows: &Rows) -> Mat<f64> {
     let par = if rows.len() >= 2 {
         crate::threads::par()
     } else {
@@ -300,12 +274,12 @@ fn condense(factor: &Factor, rows: &Rows) -> (Mat<f64>, Mat<f64>) {
     }
 }
 
-/// `condense` where E = Π diag(s) selects (`selection`): G is L_CC⁻¹'s columns scaled, and
-/// D = Eᵀ L_CC⁻ᵀ L_CC⁻¹ E a product of two triangles. c³/3 flops for the inverse and c³/3
-/// for the product, against c³ for the solve and 2c³ for the full product GᵀG (the plate
-/// 0.03's setup 6.4 → 4.8 s: docs/performance.md).
-fn condense_selected(factor: &Factor, sel: &[(usize, f64)], par: Par) -> (Mat<f64>, Mat<f64>) {
-    let (c, m) = (factor.last(), sel.len());
+/// `condense` where E = Π diag(s) selects (`selection`): D = Eᵀ L_CC⁻ᵀ L_CC⁻¹ E, a product
+/// of two triangles. c³/3 flops for the inverse and c³/3 for the product, against c³ for
+/// the solve with E and 2c³ for the full product GᵀG (the plate 0.03's setup 6.6 → 5.0 s:
+/// docs/performance.md).
+fn condense_selected(factor: &Factor, sel: &[(usize, f64)], par: Par) -> Mat<f64> {
+    let c = factor.last();
     let l_cc = factor.trailing_block();
     let mut linv = Mat::<f64>::zeros(c, c);
     invert_lower_triangular(linv.as_mut(), l_cc.as_ref(), par);
@@ -323,14 +297,13 @@ fn condense_selected(factor: &Factor, sel: &[(usize, f64)], par: Par) -> (Mat<f6
         1.0,
         par,
     );
-    let d = selected(&inner, sel, |sa, sb| sa * sb);
-    drop(inner);
-    let g = Mat::from_fn(c, m, |i, r| sel[r].1 * linv[(i, sel[r].0)]);
-    (g, d)
+    drop(linv);
+    selected(&inner, sel, |sa, sb| sa * sb)
 }
 
-/// `condense` for any E: G by a triangular solve with the m columns of E, D = GᵀG.
-fn condense_solved(factor: &Factor, rows: &Rows, par: Par) -> (Mat<f64>, Mat<f64>) {
+/// `condense` for any E: G = L_CC⁻¹ E by a triangular solve with the m columns of E,
+/// D = GᵀG.
+fn condense_solved(factor: &Factor, rows: &Rows, par: Par) -> Mat<f64> {
     let (n, c, m) = (factor.dim(), factor.last(), rows.len());
     let first = n - c;
     let mut g = Mat::<f64>::zeros(c, m);
@@ -343,6 +316,7 @@ fn condense_solved(factor: &Factor, rows: &Rows, par: Par) -> (Mat<f64>, Mat<f64
     }
     let l_cc = factor.trailing_block();
     solve_lower_triangular_in_place(l_cc.as_ref(), g.as_mut(), par);
+    drop(l_cc);
     let mut d = Mat::<f64>::zeros(m, m);
     faer::linalg::matmul::matmul(
         d.as_mut(),
@@ -352,7 +326,7 @@ fn condense_solved(factor: &Factor, rows: &Rows, par: Par) -> (Mat<f64>, Mat<f64
         1.0,
         par,
     );
-    (g, d)
+    d
 }
 
 /// B = D⁻¹ for the Woodbury form, None where D is not definite. Where E selects

@@ -102,12 +102,23 @@ impl Factor {
 
     /// y ← L_CC⁻ᵀ L_CC⁻¹ y = (K_A⁻¹)_CC y for y on C (the module doc).
     pub fn trailing_solve(&self, y: &mut [f64]) {
+        self.trailing_forward(y);
+        self.trailing_backward(y);
+    }
+
+    /// y ← L_CC⁻¹ y for y on C.
+    pub fn trailing_forward(&self, y: &mut [f64]) {
         debug_assert_eq!(y.len(), self.last);
         for run in &self.trailing.runs {
             for p0 in run.clone().step_by(PANEL) {
                 self.forward_panel(p0..(p0 + PANEL).min(run.end), run.end, y);
             }
         }
+    }
+
+    /// y ← L_CC⁻ᵀ y for y on C.
+    pub fn trailing_backward(&self, y: &mut [f64]) {
+        debug_assert_eq!(y.len(), self.last);
         for run in self.trailing.runs.iter().rev() {
             let panels: Vec<usize> = run.clone().step_by(PANEL).collect();
             for &p0 in panels.iter().rev() {
