@@ -5,10 +5,10 @@
 //! (`projected_gradient`).
 
 use super::groups::{dot, norm, Coord, Group, Set};
-use super::newton::{axpy_columns, newton_step, Gradient, Indefinite, Operators, Scratch};
+use super::newton::{newton_step, Gradient, Indefinite, Operators, Scratch};
 use super::{DualSettings, DualSolver};
 use crate::solver::{Abandon, StepReport, StepStatus};
-use std::cell::RefCell;
+use std::cell::{OnceCell, RefCell};
 
 /// What the iteration needs of D: the gradient and the Newton steps. The dense dual's
 /// `Operators` (D stored, Newton systems by Cholesky) and the matrix-free dual's products
@@ -80,8 +80,10 @@ impl Operator for Dense<'_> {
 pub(super) struct Work {
     /// d = P K_A⁻¹ b.
     pub(super) d: Vec<f64>,
-    /// z_u = B d, the unconstrained minimizer of q, when B = D⁻¹ is kept.
-    pub(super) z_u: Vec<f64>,
+    /// z_u = B d, the unconstrained minimizer of q, when B = D⁻¹ is kept and a step takes
+    /// the Woodbury form (`newton::unconstrained`): a pass over B, which the plates'
+    /// steps, all in the direct form, do not pay.
+    pub(super) z_u: OnceCell<Vec<f64>>,
     pub(super) buffers: Buffers,
     /// What the Newton steps need besides D: see `newton_step`.
     pub(super) newton: Scratch,
@@ -124,7 +126,7 @@ impl Work {
     pub(super) fn new(m: usize, groups: usize, settings: &DualSettings) -> Work {
         Work {
             d: vec![0.0; m],
-            z_u: vec![0.0; m],
+            z_u: OnceCell::new(),
             buffers: Buffers::new(m, groups),
             newton: Scratch::new(m, settings),
         }
@@ -156,16 +158,12 @@ impl DualSolver {
         newton.factor.form = None;
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = settings.tolerance * scale.max(f64::MIN_POSITIVE);
-        if let Some(inverse) = inverse {
-            // z_u = B d (B symmetric: column j of B is its row j).
-            z_u.fill(0.0);
-            axpy_columns(inverse, dvec.iter().copied().enumerate(), z_u);
-        }
+        z_u.take();
         let ops = Dense {
             ops: Operators {
                 d,
                 dvec,
-                woodbury: inverse.as_ref().map(|b| (b, &z_u[..])),
+                woodbury: inverse.as_ref().map(|b| (b, &*z_u)),
                 settings,
                 accuracy: settings.newton_accuracy * tol,
             },

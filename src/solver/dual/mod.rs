@@ -17,11 +17,13 @@
 //! whose gradient is g = D z − d = −P w.
 //!
 //! The factor of K_A orders the constrained dofs C last (`Factor`): P K_A Pᵀ = L Lᵀ with
-//! trailing block L_CC, and P touches only C (E: its C-block, |C|×m). With G = L_CC⁻¹ E
-//! (dense, once per run): D = GᵀG, and for a step with forward solve L y = b,
+//! trailing block L_CC, and P touches only C (E: its C-block, |C|×m). With G = L_CC⁻¹ E:
+//! D = GᵀG (dense, once per run: `condense`), and for a step with forward solve L y = b,
 //! d = Gᵀ y_C; the multipliers enter only through y_C ← y_C − G z; one backward solve
-//! Lᵀ w = y gives w. So a step costs one solve with the stored factor — the same as a step
-//! without contact — plus O(|C|·m) for G and the small problem below.
+//! Lᵀ w = y gives w. G itself is not kept: Gᵀ y_C = Eᵀ L_CC⁻ᵀ y_C and G z = L_CC⁻¹ E z are
+//! one pass each over L_CC, which the factor holds. So a step costs one solve with the
+//! stored factor — the same as a step without contact — plus O(|C|²) for these passes and
+//! the small problem below.
 //!
 //! # The dual solve
 //!

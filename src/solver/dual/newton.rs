@@ -7,6 +7,7 @@ use super::{blocks, DualSettings, NewtonCounts, NewtonForm, Team};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::{Mat, MatMut, Par};
+use std::cell::OnceCell;
 use std::ops::Range;
 
 /// The buffers of `newton_step`, and its counts.
@@ -103,8 +104,9 @@ pub(super) struct Operators<'a> {
     pub(super) d: &'a Delassus,
     /// d = P K_A⁻¹ b.
     pub(super) dvec: &'a [f64],
-    /// B = D⁻¹ and z_u = B d, when the Woodbury form is available.
-    pub(super) woodbury: Option<(&'a Mat<f64>, &'a [f64])>,
+    /// B = D⁻¹ and z_u = B d (computed at the step's first Woodbury system), when the
+    /// Woodbury form is available.
+    pub(super) woodbury: Option<(&'a Mat<f64>, &'a OnceCell<Vec<f64>>)>,
     pub(super) settings: &'a DualSettings,
     /// The Newton residual a Woodbury solve must reach (absolute): `newton_accuracy` times
     /// the dual's tolerance, so that its inexactness cannot reach the stopping test.
@@ -171,6 +173,7 @@ pub(super) fn newton_step(
         if ops.settings.newton_form == NewtonForm::Woodbury
             || woodbury_cost(nq, s.u.len()) < WOODBURY_SHARE * direct_cost(nq)
         {
+            let z_u = z_u.get_or_init(|| unconstrained(b, ops.dvec));
             if let Some(x) = woodbury_step(ops, b, z_u, coords, z0, s)? {
                 s.counts.woodbury += 1;
                 add_columns(coords, &x, out);
@@ -250,6 +253,13 @@ fn woodbury_step(
     Ok(None)
 }
 
+/// z_u = B d, the unconstrained minimizer of q (B symmetric: column j of B is its row j).
+fn unconstrained(b: &Mat<f64>, d: &[f64]) -> Vec<f64> {
+    let mut z_u = vec![0.0; d.len()];
+    axpy_columns(b, d.iter().copied().enumerate(), &mut z_u);
+    z_u
+}
+
 /// The entries (i, f(a) v) of the columns a of Q (or U) scaled by f(a).
 fn scaled_entries<'a>(
     coords: &'a [Coord],
@@ -262,11 +272,7 @@ fn scaled_entries<'a>(
 }
 
 /// out += Σ y_j M e_j over the pairs (j, y_j): columns of M scaled and summed.
-pub(super) fn axpy_columns(
-    mat: &Mat<f64>,
-    pairs: impl Iterator<Item = (usize, f64)>,
-    out: &mut [f64],
-) {
+fn axpy_columns(mat: &Mat<f64>, pairs: impl Iterator<Item = (usize, f64)>, out: &mut [f64]) {
     for (j, y) in pairs {
         if y != 0.0 {
             for (o, mij) in out.iter_mut().zip(column(mat, j)) {
