@@ -158,6 +158,7 @@ impl DualSolver {
         newton.factor.form = None;
         let scale = dvec.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = settings.tolerance * scale.max(f64::MIN_POSITIVE);
+        // z_u = B d belongs to the step's d: computed again if a system of this step wants it.
         z_u.take();
         let ops = Dense {
             ops: Operators {
