@@ -92,7 +92,7 @@ pub struct DualSettings {
     /// Conjugate gradient iterations at most with the step's last Newton factor as the
     /// preconditioner before a new factorization. Default 30.
     pub pcg_max: usize,
-    /// Below this many rows (columns of a Newton matrix) a pass over D, G or the Newton
+    /// Below this many rows (columns of a Newton matrix) a pass over D or the Newton
     /// matrix runs on one thread: handing pieces of it to `Team`'s workers costs more. The
     /// arithmetic is the same either way. Default 512; ≥ 2.
     pub split_rows: usize,
