@@ -57,7 +57,7 @@ use super::dual::iteration::{Buffers, Iteration, Operator};
 use super::dual::newton::{Gradient, Indefinite};
 use super::dual::{self, DualSettings};
 use super::factor::Reach;
-use super::{Abandon, Factor, Rows, StepReport, StepStatus};
+use super::{gather, scatter, Abandon, Factor, Rows, StepReport, StepStatus};
 use crate::fem::Sparse;
 use crate::{Error, Result};
 use std::cell::RefCell;
@@ -240,15 +240,7 @@ impl MatrixFreeSolver {
             Preconditioner::Lumped => lumped(factor, matrix, &rows.dofs(), first),
             _ => Vec::new(),
         };
-        let p: Vec<Vec<_>> = rows
-            .rows
-            .iter()
-            .map(|r| {
-                r.entries()
-                    .map(|(d, c)| (factor.position(d) - first, c))
-                    .collect()
-            })
-            .collect();
+        let p = rows.in_factor(factor, first);
         let m = rows.len();
         let reach = solves.then(|| factor.reach(p.iter().flatten().map(|&(i, _)| i)));
         let operands = Operands {
@@ -575,21 +567,6 @@ fn lumped(
             (factor.position(d) - first, entries)
         })
         .collect()
-}
-
-/// Σ c x_i over a row's entries (i, c).
-fn gather(row: &[(usize, f64)], x: &[f64]) -> f64 {
-    row.iter().map(|&(i, c)| c * x[i]).sum()
-}
-
-/// y = Pᵀ v on C: each row's entries (i, c) add c v_row to y_i.
-fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
-    y.fill(0.0);
-    for (row, &x) in p.iter().zip(v) {
-        for &(i, c) in row {
-            y[i] += c * x;
-        }
-    }
 }
 
 #[cfg(test)]

@@ -168,6 +168,35 @@ impl Rows {
         d.dedup();
         d
     }
+
+    /// P in `factor`'s ordering: each row's entries (i, c), i the dof's position less
+    /// `first`, its index in the vectors on C of the solvers that order C last from `first`
+    /// (`dual`, `matrix_free`; 0 where the vectors hold every dof).
+    pub(super) fn in_factor(&self, factor: &Factor, first: usize) -> Vec<Vec<(usize, f64)>> {
+        self.rows
+            .iter()
+            .map(|r| {
+                r.entries()
+                    .map(|(d, c)| (factor.position(d) - first, c))
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// Σ c x_i over a row's entries (i, c) (`Rows::in_factor`): (P x)_row.
+fn gather(row: &[(usize, f64)], x: &[f64]) -> f64 {
+    row.iter().map(|&(i, c)| c * x[i]).sum()
+}
+
+/// y = Pᵀ v: each row's entries (i, c) (`Rows::in_factor`) add c v_row to y_i.
+fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
+    y.fill(0.0);
+    for (row, &x) in p.iter().zip(v) {
+        for &(i, c) in row {
+            y[i] += c * x;
+        }
+    }
 }
 
 /// The solver of a run, picked by its effects.

@@ -118,7 +118,7 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
-use super::{Abandon, Factor, Rows, StepReport, StepStatus};
+use super::{gather, scatter, Abandon, Factor, Rows, StepReport, StepStatus};
 use crate::threads::team::{blocks, Team};
 use crate::Result;
 use delassus::Delassus;
@@ -144,6 +144,8 @@ pub struct NewtonCounts {
 }
 
 pub struct DualSolver {
+    /// P on C (`Rows::in_factor`): E, the rows' C-block.
+    p: Vec<Vec<(usize, f64)>>,
     /// D = GᵀG = P K_A⁻¹ Pᵀ (m×m).
     d: Delassus,
     /// B = D⁻¹ for the Woodbury form of the Newton steps, when it is used: D definite (no
@@ -174,7 +176,9 @@ impl DualSolver {
     }
 
     fn build(factor: &Factor, rows: &Rows, settings: DualSettings) -> Self {
-        let d = condense(factor, rows);
+        let p = rows.in_factor(factor, factor.dim() - factor.last());
+        let sel = selection(factor.last(), &p);
+        let d = condense(factor, &p, sel.as_deref());
         let diag: Vec<f64> = (0..rows.len()).map(|i| d[(i, i)]).collect();
         let groups = groups::groups(rows, &diag, settings.dependent_shift);
         let m = rows.len();
@@ -188,9 +192,10 @@ impl DualSolver {
             NewtonForm::Woodbury => true,
         };
         let inverse = (woodbury && m > 0 && groups.iter().all(|g| g.shift == 0.0))
-            .then(|| inverse(factor, rows, &d))
+            .then(|| inverse(factor, sel.as_deref(), &d))
             .flatten();
         DualSolver {
+            p,
             d: Delassus {
                 mat: d,
                 team: Team::default(),
@@ -232,23 +237,15 @@ impl DualSolver {
         factor.forward(&mut self.y);
         self.y_c.copy_from_slice(&self.y[first..]);
         factor.trailing_backward(&mut self.y_c);
-        for (row, d) in rows.rows.iter().zip(&mut self.work.d) {
-            *d = row
-                .entries()
-                .map(|(dof, coef)| coef * self.y_c[factor.position(dof) - first])
-                .sum();
+        for (row, d) in self.p.iter().zip(&mut self.work.d) {
+            *d = gather(row, &self.y_c);
         }
         let report = self.dual_solve(z, before);
         if report.status != StepStatus::Solved {
             return report;
         }
         // y_C ← y_C − G z = y_C − L_CC⁻¹ E z, then the backward solve Lᵀ w = y.
-        self.y_c.fill(0.0);
-        for (row, &zr) in rows.rows.iter().zip(&*z) {
-            for (dof, coef) in row.entries() {
-                self.y_c[factor.position(dof) - first] += coef * zr;
-            }
-        }
+        scatter(&self.p, z, &mut self.y_c);
         factor.trailing_forward(&mut self.y_c);
         for (y, t) in self.y[first..].iter_mut().zip(&self.y_c) {
             *y -= t;
@@ -264,15 +261,15 @@ impl DualSolver {
 /// give the same bits for every thread count; with one column they split their sums by it
 /// (`threads`), so a single row is condensed on one thread. Where E selects (`selection`)
 /// by two triangles (`condense_selected`), else by a solve and a product (`condense_solved`).
-fn condense(factor: &Factor, rows: &Rows) -> Mat<f64> {
-    let par = if rows.len() >= 2 {
+fn condense(factor: &Factor, p: &[Vec<(usize, f64)>], sel: Option<&[(usize, f64)]>) -> Mat<f64> {
+    let par = if p.len() >= 2 {
         crate::threads::par()
     } else {
         Par::Seq
     };
-    match selection(factor, rows) {
-        Some(sel) => condense_selected(factor, &sel, par),
-        None => condense_solved(factor, rows, par),
+    match sel {
+        Some(sel) => condense_selected(factor, sel, par),
+        None => condense_solved(factor, p, par),
     }
 }
 
@@ -305,15 +302,12 @@ fn condense_selected(factor: &Factor, sel: &[(usize, f64)], par: Par) -> Mat<f64
 
 /// `condense` for any E: G = L_CC⁻¹ E by a triangular solve with the m columns of E,
 /// D = GᵀG.
-fn condense_solved(factor: &Factor, rows: &Rows, par: Par) -> Mat<f64> {
-    let (n, c, m) = (factor.dim(), factor.last(), rows.len());
-    let first = n - c;
+fn condense_solved(factor: &Factor, p: &[Vec<(usize, f64)>], par: Par) -> Mat<f64> {
+    let (c, m) = (factor.last(), p.len());
     let mut g = Mat::<f64>::zeros(c, m);
-    for (r, row) in rows.rows.iter().enumerate() {
-        for (dof, coef) in row.entries() {
-            let pos = factor.position(dof);
-            debug_assert!(pos >= first, "constrained dofs are ordered last");
-            g[(pos - first, r)] = coef;
+    for (r, row) in p.iter().enumerate() {
+        for &(i, coef) in row {
+            g[(i, r)] = coef;
         }
     }
     let l_cc = factor.trailing_block();
@@ -335,8 +329,8 @@ fn condense_solved(factor: &Factor, rows: &Rows, par: Par) -> Mat<f64> {
 /// (`selection`), D⁻¹ = E⁻¹ L_CC L_CCᵀ E⁻ᵀ: the Schur complement of K_A on C, a product
 /// of two triangles (c³/3 flops, exact to rounding, where a Cholesky factorization and
 /// inverse of D cost m³ and carry D's conditioning); else from D's Cholesky factor.
-fn inverse(factor: &Factor, rows: &Rows, d: &Mat<f64>) -> Option<Mat<f64>> {
-    let Some(sel) = selection(factor, rows) else {
+fn inverse(factor: &Factor, sel: Option<&[(usize, f64)]>, d: &Mat<f64>) -> Option<Mat<f64>> {
+    let Some(sel) = sel else {
         return d.llt(Side::Lower).ok().map(|llt| llt.inverse());
     };
     let l_cc = factor.trailing_block();
@@ -353,27 +347,22 @@ fn inverse(factor: &Factor, rows: &Rows, d: &Mat<f64>) -> Option<Mat<f64>> {
         crate::threads::par(),
     );
     drop(l_cc);
-    Some(selected(&schur, &sel, |sa, sb| 1.0 / (sa * sb)))
+    Some(selected(&schur, sel, |sa, sb| 1.0 / (sa * sb)))
 }
 
-/// Where every row is one dof of C, a dof no other row has, and every dof of C has a row
-/// (c = m): each row's (position in C, coefficient). E is then a scaled permutation. So it
-/// is on a flat boundary along the coordinate axes, whose normal and tangents
-/// (`fem::tangents`) are coordinate directions.
-fn selection(factor: &Factor, rows: &Rows) -> Option<Vec<(usize, f64)>> {
-    let first = factor.dim() - factor.last();
-    if factor.last() != rows.len() {
+/// Where every row of P on C (`p`, C's c dofs) is one dof, a dof no other row has, and
+/// every dof of C has a row (c = m): each row's (position in C, coefficient). E is then a
+/// scaled permutation. So it is on a flat boundary along the coordinate axes, whose normal
+/// and tangents (`fem::tangents`) are coordinate directions.
+fn selection(c: usize, p: &[Vec<(usize, f64)>]) -> Option<Vec<(usize, f64)>> {
+    if c != p.len() {
         return None;
     }
-    let mut seen = vec![false; rows.len()];
-    rows.rows
-        .iter()
-        .map(|row| {
-            let mut entries = row.entries();
-            let (dof, coef) = entries.next()?;
-            let pos = factor.position(dof).checked_sub(first)?;
-            let fresh = entries.next().is_none() && !std::mem::replace(&mut seen[pos], true);
-            fresh.then_some((pos, coef))
+    let mut seen = vec![false; c];
+    p.iter()
+        .map(|row| match row[..] {
+            [(i, coef)] => (!std::mem::replace(&mut seen[i], true)).then_some((i, coef)),
+            _ => None,
         })
         .collect()
 }
