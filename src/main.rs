@@ -4,7 +4,7 @@ use clap::{Parser, Subcommand};
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use viscontact::run::{resume, run, setup, Interrupt, Outcome, ResumeOptions, RunOptions};
+use viscontact::run::{resume, run, setup, Interrupt, Outcome, RunOptions};
 use viscontact::{effects::Effects, mesh::Mesh, Result};
 
 #[derive(Parser)]
@@ -29,21 +29,8 @@ enum Command {
         /// Override a scene key by its dotted path, e.g. --set time.steps=64 (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
-        /// Do not show a progress bar even on a terminal.
-        #[arg(long)]
-        quiet: bool,
-        /// Stop after step N (solved and written), leaving the checkpoint of the state at
-        /// t_{N+1}; `viscontact resume DIR/checkpoint.h5` continues the run.
-        #[arg(long, value_name = "N")]
-        stop_after: Option<usize>,
-        /// Write into an output directory that also holds files viscontact did not write
-        /// (they are left alone).
-        #[arg(long)]
-        force: bool,
-        /// Threads for the steps (default: VISCONTACT_THREADS, else the cores this process
-        /// may use); the results are the same bit for bit for every count.
-        #[arg(long, value_name = "N")]
-        threads: Option<NonZeroUsize>,
+        #[command(flatten)]
+        steps: StepFlags,
     },
     /// Continue a run from its checkpoint: same results as if it had never stopped.
     Resume {
@@ -57,20 +44,8 @@ enum Command {
         /// overridden, e.g. --set time.end=2.0.
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
-        /// Do not show a progress bar even on a terminal.
-        #[arg(long)]
-        quiet: bool,
-        /// Stop again after step N (see `run --stop-after`).
-        #[arg(long, value_name = "N")]
-        stop_after: Option<usize>,
-        /// Write into an output directory that also holds files viscontact did not write
-        /// (they are left alone).
-        #[arg(long)]
-        force: bool,
-        /// Threads for the steps (default: VISCONTACT_THREADS, else the cores this process
-        /// may use); the results are the same bit for bit for every count.
-        #[arg(long, value_name = "N")]
-        threads: Option<NonZeroUsize>,
+        #[command(flatten)]
+        steps: StepFlags,
     },
     /// Validate a scene and print its effects, sizes and solver path; runs nothing.
     Check {
@@ -118,6 +93,45 @@ enum Command {
     },
 }
 
+/// The flags that `run` and `resume` share: how the steps run and where they stop.
+#[derive(clap::Args)]
+struct StepFlags {
+    /// Do not show a progress bar even on a terminal.
+    #[arg(long)]
+    quiet: bool,
+    /// Stop after step N (solved and written), leaving the checkpoint of the state at
+    /// t_{N+1}; `viscontact resume DIR/checkpoint.h5` continues the run.
+    #[arg(long, value_name = "N")]
+    stop_after: Option<usize>,
+    /// Write into an output directory that also holds files viscontact did not write
+    /// (they are left alone).
+    #[arg(long)]
+    force: bool,
+    /// Threads for the steps (default: VISCONTACT_THREADS, else the cores this process
+    /// may use); the results are the same bit for bit for every count.
+    #[arg(long, value_name = "N")]
+    threads: Option<NonZeroUsize>,
+}
+
+impl StepFlags {
+    /// The options of `run` or `resume` (`threads` is set for the process in `main`).
+    fn options(
+        self,
+        out: Option<PathBuf>,
+        overrides: Vec<String>,
+        interrupt: Interrupt,
+    ) -> RunOptions {
+        RunOptions {
+            out,
+            overrides,
+            progress: !self.quiet,
+            stop_after: self.stop_after,
+            force: self.force,
+            interrupt,
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let interrupt = match interrupt_for(&cli.command) {
@@ -125,7 +139,7 @@ fn main() -> ExitCode {
         Err(code) => return code,
     };
     let threads = match &cli.command {
-        Command::Run { threads, .. } | Command::Resume { threads, .. } => *threads,
+        Command::Run { steps, .. } | Command::Resume { steps, .. } => steps.threads,
         Command::Study(a) => a.threads,
         _ => None,
     };
@@ -156,42 +170,14 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
             scene,
             out,
             set,
-            quiet,
-            stop_after,
-            force,
-            threads: _,
-        } => run(
-            &scene,
-            &RunOptions {
-                out,
-                overrides: set,
-                progress: !quiet,
-                stop_after,
-                force,
-                interrupt,
-            },
-        )
-        .map(report),
+            steps,
+        } => run(&scene, &steps.options(out, set, interrupt)).map(report),
         Command::Resume {
             checkpoint,
             out,
             set,
-            quiet,
-            stop_after,
-            force,
-            threads: _,
-        } => resume(
-            &checkpoint,
-            &ResumeOptions {
-                out,
-                overrides: set,
-                progress: !quiet,
-                stop_after,
-                force,
-                interrupt,
-            },
-        )
-        .map(report),
+            steps,
+        } => resume(&checkpoint, &steps.options(out, set, interrupt)).map(report),
         Command::Check { scene, set } => check(&scene, &set).map(|()| None),
         Command::MeshInfo { mesh, json } => mesh_info(&mesh, json).map(|()| None),
         Command::Study(args) => study(*args).map(|()| None),
