@@ -363,6 +363,56 @@ impl<'p> TimeLoop<'p> {
     /// Step n, or None when it was given up (the loop's state is then as before it).
     fn solve_step(&mut self) -> Result<Option<Step<'_>>> {
         let t = self.time();
+        let load_max = self.right_side(t)?;
+        self.spare.copy_from_slice(&self.z);
+        let armed = (self.abandon.as_ref())
+            .filter(|_| self.can_stop)
+            .map(Abandon::arm);
+        let mut report = self.solver.solve(
+            &self.factor,
+            &self.rows,
+            &self.b,
+            &mut self.w,
+            &mut self.z,
+            Some(&self.z_before),
+        );
+        drop(armed);
+        if report.status == StepStatus::Abandoned {
+            // The solvers write w only for a solved step; z held the iterate.
+            self.z.copy_from_slice(&self.spare);
+            return Ok(None);
+        }
+        std::mem::swap(&mut self.z_before, &mut self.spare);
+        if report.status == StepStatus::Solved {
+            report.status = self.trust(t, load_max);
+        }
+        let h = &self.history;
+        let other_solver = self.solver.other();
+        report.check(&StepAt {
+            n: h.n,
+            t,
+            k: h.k,
+            other_solver,
+        })?;
+        Ok(Some(Step {
+            n: h.n,
+            t,
+            u: &h.u,
+            w: &self.w,
+            m: if self.m.is_empty() {
+                None
+            } else {
+                Some(&self.m)
+            },
+            z: &self.z,
+            rows: &self.rows,
+            report,
+        }))
+    }
+
+    /// b_n = f_n − K_B u_n − K_R m_n − g_F into `b` (m_n into `m` on the way); returns
+    /// max|f_n − g_F|, the step's load for the divergence detector.
+    fn right_side(&mut self, t: f64) -> Result<f64> {
         let h = &mut self.history;
         self.b.fill(0.0);
         self.disc
@@ -385,78 +435,41 @@ impl<'p> TimeLoop<'p> {
         for (b, g) in self.b.iter_mut().zip(&self.disc.g_f) {
             *b -= g;
         }
-        self.spare.copy_from_slice(&self.z);
-        let armed = (self.abandon.as_ref())
-            .filter(|_| self.can_stop)
-            .map(Abandon::arm);
-        let mut report = self.solver.solve(
-            &self.factor,
-            &self.rows,
-            &self.b,
-            &mut self.w,
-            &mut self.z,
-            Some(&self.z_before),
-        );
-        drop(armed);
-        if report.status == StepStatus::Abandoned {
-            // The solvers write w only for a solved step; z held the iterate.
-            self.z.copy_from_slice(&self.spare);
-            return Ok(None);
-        }
-        std::mem::swap(&mut self.z_before, &mut self.spare);
-        // A solved step is trusted only if it is finite, bounded by its loads (`Growth`)
-        // and keeps n·w ≤ 0 on Γ3,1 to the solver's tolerance.
+        Ok(load_max)
+    }
+
+    /// Whether a step the solver calls solved is trusted: finite, bounded by its loads
+    /// (`Growth`) and keeping n·w ≤ 0 on Γ3,1 to the solver's tolerance.
+    fn trust(&mut self, t: f64, load_max: f64) -> StepStatus {
+        let h = &self.history;
         let u_max = max_abs(&h.u);
         let w_max = max_abs(&self.w);
         let mean_velocity = u_max / t.max(h.k);
-        if report.status == StepStatus::Solved {
-            report.status = if !(u_max.is_finite() && w_max.is_finite()) {
-                StepStatus::NotFinite { u_max, w_max }
-            } else if let Some(factor) = self.growth.record(h.n, u_max, load_max) {
-                let since = ((h.n / 2).max(1).ilog2() as f64).exp2() * h.k;
-                StepStatus::Diverged {
-                    u_max,
-                    factor,
-                    since,
-                }
-            } else {
-                let (amount, node) = self.rows.rows[..self.rows.n_contact]
-                    .iter()
-                    .map(|r| (r.apply(&self.w), r.node))
-                    .fold((f64::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
-                if amount > VIOLATION_TOLERANCE * w_max.max(mean_velocity) {
-                    StepStatus::Violation {
-                        amount,
-                        node,
-                        w_max,
-                        mean_velocity,
-                    }
-                } else {
-                    StepStatus::Solved
-                }
+        if !(u_max.is_finite() && w_max.is_finite()) {
+            return StepStatus::NotFinite { u_max, w_max };
+        }
+        if let Some(factor) = self.growth.record(h.n, u_max, load_max) {
+            let since = ((h.n / 2).max(1).ilog2() as f64).exp2() * h.k;
+            return StepStatus::Diverged {
+                u_max,
+                factor,
+                since,
             };
         }
-        let other_solver = self.solver.other();
-        report.check(&StepAt {
-            n: h.n,
-            t,
-            k: h.k,
-            other_solver,
-        })?;
-        Ok(Some(Step {
-            n: h.n,
-            t,
-            u: &h.u,
-            w: &self.w,
-            m: if self.m.is_empty() {
-                None
-            } else {
-                Some(&self.m)
-            },
-            z: &self.z,
-            rows: &self.rows,
-            report,
-        }))
+        let (amount, node) = self.rows.rows[..self.rows.n_contact]
+            .iter()
+            .map(|r| (r.apply(&self.w), r.node))
+            .fold((f64::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
+        if amount > VIOLATION_TOLERANCE * w_max.max(mean_velocity) {
+            StepStatus::Violation {
+                amount,
+                node,
+                w_max,
+                mean_velocity,
+            }
+        } else {
+            StepStatus::Solved
+        }
     }
 
     /// n → n + 1: u_{n+1} = u_n + k w_n and the memory update.
