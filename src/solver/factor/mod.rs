@@ -33,7 +33,8 @@ use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
+    SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::{Par, Side};
@@ -473,6 +474,59 @@ fn factorization_flops(sym: &SymbolicSupernodalCholesky<usize>) -> f64 {
 }
 
 /// How a factor's solves are split (`split::Schedule::new`).
+/// The symbolic analysis of `a` in the ordering `fwd` (`inv` its inverse), supernodal.
+fn symbolic(a: &Sparse, fwd: &[usize], inv: &[usize]) -> Result<SymbolicCholesky<usize>> {
+    let n = a.nrows();
+    let params = CholeskySymbolicParams {
+        supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+        ..Default::default()
+    };
+    let perm = PermRef::new_checked(fwd, inv, n);
+    factorize_symbolic_cholesky(
+        a.symbolic(),
+        Side::Lower,
+        SymmetricOrdering::Custom(perm),
+        params,
+    )
+    .map_err(|e| {
+        let why = match e {
+            faer::sparse::FaerError::OutOfMemory => "not enough memory for the factor",
+            _ => "the factor has more entries than its index type can count",
+        };
+        Error::solve(format!(
+            "K_A ({n} free dofs) could not be factored: {why}; use a coarser mesh"
+        ))
+    })
+}
+
+/// The values of L for `symbolic`, by faer's numeric factorization with parallelism `par`.
+fn numeric(a: &Sparse, symbolic: &SymbolicCholesky<usize>, par: Par) -> Result<Vec<f64>> {
+    let mut values = vec![0.0; symbolic.len_val()];
+    let mut mem =
+        MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
+    symbolic
+        .factorize_numeric_llt(
+            &mut values,
+            a.as_ref(),
+            Side::Lower,
+            LltRegularization::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .map_err(|_| {
+            Error::solve(
+                "K_A (the viscosity stiffness on the free nodes) could not be \
+                 factored: it is not positive definite to working precision. `check` \
+                 refuses parts of the mesh that Γ1 does not hold; what is left is a \
+                 matrix too ill-conditioned to factor: very distorted elements (see \
+                 `viscontact mesh-info` for the quality) or viscosity coefficients θ, \
+                 ζ many orders of magnitude apart",
+            )
+        })?;
+    Ok(values)
+}
+
 #[derive(Clone, Copy)]
 struct Splits {
     /// The smallest factor (stored values) whose forward pass may take two groups.
@@ -517,56 +571,12 @@ impl Factor {
         for (i, &d) in fwd.iter().enumerate() {
             inv[d] = i;
         }
-        let params = CholeskySymbolicParams {
-            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-            ..Default::default()
-        };
-        let perm = PermRef::new_checked(&fwd, &inv, n);
-        let symbolic = factorize_symbolic_cholesky(
-            a.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Custom(perm),
-            params,
-        )
-        .map_err(|e| {
-            let why = match e {
-                faer::sparse::FaerError::OutOfMemory => "not enough memory for the factor",
-                _ => "the factor has more entries than its index type can count",
-            };
-            Error::solve(format!(
-                "K_A ({n} free dofs) could not be factored: {why}; use a coarser mesh"
-            ))
-        })?;
-        let mut values = vec![0.0; symbolic.len_val()];
+        let symbolic = symbolic(a, &fwd, &inv)?;
         let par = match symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) => par(factorization_flops(s)),
             SymbolicCholeskyRaw::Simplicial(_) => Par::Seq,
         };
-        {
-            let mut mem = MemBuffer::new(
-                symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-            );
-            symbolic
-                .factorize_numeric_llt(
-                    &mut values,
-                    a.as_ref(),
-                    Side::Lower,
-                    LltRegularization::default(),
-                    par,
-                    MemStack::new(&mut mem),
-                    Default::default(),
-                )
-                .map_err(|_| {
-                    Error::solve(
-                        "K_A (the viscosity stiffness on the free nodes) could not be \
-                         factored: it is not positive definite to working precision. `check` \
-                         refuses parts of the mesh that Γ1 does not hold; what is left is a \
-                         matrix too ill-conditioned to factor: very distorted elements (see \
-                         `viscontact mesh-info` for the quality) or viscosity coefficients θ, \
-                         ζ many orders of magnitude apart",
-                    )
-                })?;
-        }
+        let mut values = numeric(a, &symbolic, par)?;
         let layout = match symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) => Layout::new(s, &mut values)?,
             SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodal was forced"),
