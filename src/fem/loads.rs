@@ -11,6 +11,7 @@ use crate::expr::{Point, Scalar};
 use crate::mesh::{fmt_point, Mesh};
 use crate::scene::Scene;
 use crate::{Error, Result};
+use std::collections::HashSet;
 
 /// A quadrature point of a load: where, how much weight, which nodes with which φ.
 struct Qp {
@@ -40,92 +41,17 @@ pub struct Loads {
 
 impl Loads {
     pub fn new(mesh: &Mesh, scene: &Scene, cells: &[Cell]) -> Result<Self> {
-        let mut loads = Vec::new();
         // The traction boundary Γ2, for the check that every load group lies inside it.
-        let gamma2: std::result::Result<std::collections::HashSet<Vec<usize>>, String> = mesh
+        let gamma2: std::result::Result<HashSet<Vec<usize>>, String> = mesh
             .boundary_group(&scene.mesh.groups.traction)
             .map(|g| mesh.boundary_facets(g).iter().map(sorted).collect())
             .map_err(|e| e.to_string());
-        for (i, t) in scene.physics.tractions.iter().enumerate() {
-            let g = mesh.boundary_group(&t.on).map_err(|e| {
-                Error::input(format!(
-                    "{}: key 'load.traction[{i}].on': {e}",
-                    scene.path.display()
-                ))
-            })?;
-            match &gamma2 {
-                Ok(g2) => {
-                    let facets = mesh.boundary_facets(g);
-                    if let Some(f) = facets.iter().find(|f| !g2.contains(&sorted(f))) {
-                        let corners: Vec<String> = f
-                            .nodes()
-                            .iter()
-                            .map(|&n| fmt_point(mesh.nodes[n], mesh.dim))
-                            .collect();
-                        let (what, entity) = match mesh.dim {
-                            2 => ("edge", "curve"),
-                            _ => ("face", "surface"),
-                        };
-                        return Err(Error::input(format!(
-                            "{}: key 'load.traction[{i}].on': group '{}' has the {what} {} \
-                             outside the traction boundary '{}' (Γ2); tractions act on Γ2 \
-                             only: add the {entity} to Γ2 in gmsh",
-                            scene.path.display(),
-                            t.on,
-                            corners.join("–"),
-                            scene.mesh.groups.traction
-                        )));
-                    }
-                }
-                Err(why) => {
-                    return Err(Error::input(format!(
-                        "{}: key 'mesh.groups.traction': load.traction[{i}] needs the traction \
-                         boundary '{}' (its group must lie inside it): {why}",
-                        scene.path.display(),
-                        scene.mesh.groups.traction
-                    )))
-                }
-            }
-            let mut qps = Vec::new();
-            for f in mesh.boundary_facets(g) {
-                let fnodes = f.nodes();
-                let nodes = [0, 1, 2, 3].map(|k| fnodes[k.min(fnodes.len() - 1)]);
-                for (p, weight, phi) in f.quadrature(mesh) {
-                    qps.push(Qp {
-                        p,
-                        weight,
-                        nodes,
-                        phi: [phi[0], phi[1], phi[2], 0.0],
-                    });
-                }
-            }
-            loads.push(VectorLoad {
-                source: Source::Traction(i),
-                qps,
-            });
+        let mut loads = Vec::new();
+        for i in 0..scene.physics.tractions.len() {
+            loads.push(traction(mesh, scene, i, &gamma2)?);
         }
         for i in 0..scene.physics.body_forces.len() {
-            let mut qps = Vec::new();
-            for t in cells {
-                for (phi, weight) in body_rule(t) {
-                    let mut p = [0.0; 3];
-                    for (k, pk) in p.iter_mut().enumerate() {
-                        *pk = (0..=t.dim)
-                            .map(|i| phi[i] * mesh.nodes[t.nodes[i]][k])
-                            .sum();
-                    }
-                    qps.push(Qp {
-                        p,
-                        weight,
-                        nodes: t.nodes,
-                        phi,
-                    });
-                }
-            }
-            loads.push(VectorLoad {
-                source: Source::Body(i),
-                qps,
-            });
+            loads.push(body_force(mesh, cells, i));
         }
         Ok(Loads {
             loads,
@@ -195,6 +121,86 @@ impl Loads {
             }
         }
         Ok(())
+    }
+}
+
+/// Traction i on its group, which must lie inside Γ2 (`gamma2`: its facets' sorted nodes,
+/// or why the group could not be read).
+fn traction(
+    mesh: &Mesh,
+    scene: &Scene,
+    i: usize,
+    gamma2: &std::result::Result<HashSet<Vec<usize>>, String>,
+) -> Result<VectorLoad> {
+    let t = &scene.physics.tractions[i];
+    let key = format!("{}: key 'load.traction[{i}].on'", scene.path.display());
+    let g = (mesh.boundary_group(&t.on)).map_err(|e| Error::input(format!("{key}: {e}")))?;
+    let facets = mesh.boundary_facets(g);
+    let g2 = gamma2.as_ref().map_err(|why| {
+        Error::input(format!(
+            "{}: key 'mesh.groups.traction': load.traction[{i}] needs the traction \
+             boundary '{}' (its group must lie inside it): {why}",
+            scene.path.display(),
+            scene.mesh.groups.traction
+        ))
+    })?;
+    if let Some(f) = facets.iter().find(|f| !g2.contains(&sorted(f))) {
+        let corners: Vec<String> = (f.nodes().iter())
+            .map(|&n| fmt_point(mesh.nodes[n], mesh.dim))
+            .collect();
+        let (what, entity) = match mesh.dim {
+            2 => ("edge", "curve"),
+            _ => ("face", "surface"),
+        };
+        return Err(Error::input(format!(
+            "{key}: group '{}' has the {what} {} outside the traction boundary '{}' (Γ2); \
+             tractions act on Γ2 only: add the {entity} to Γ2 in gmsh",
+            t.on,
+            corners.join("–"),
+            scene.mesh.groups.traction
+        )));
+    }
+    let mut qps = Vec::new();
+    for f in facets {
+        let fnodes = f.nodes();
+        let nodes = [0, 1, 2, 3].map(|k| fnodes[k.min(fnodes.len() - 1)]);
+        for (p, weight, phi) in f.quadrature(mesh) {
+            qps.push(Qp {
+                p,
+                weight,
+                nodes,
+                phi: [phi[0], phi[1], phi[2], 0.0],
+            });
+        }
+    }
+    Ok(VectorLoad {
+        source: Source::Traction(i),
+        qps,
+    })
+}
+
+/// Body force i over every cell, by `body_rule`.
+fn body_force(mesh: &Mesh, cells: &[Cell], i: usize) -> VectorLoad {
+    let mut qps = Vec::new();
+    for t in cells {
+        for (phi, weight) in body_rule(t) {
+            let mut p = [0.0; 3];
+            for (k, pk) in p.iter_mut().enumerate() {
+                *pk = (0..=t.dim)
+                    .map(|i| phi[i] * mesh.nodes[t.nodes[i]][k])
+                    .sum();
+            }
+            qps.push(Qp {
+                p,
+                weight,
+                nodes: t.nodes,
+                phi,
+            });
+        }
+    }
+    VectorLoad {
+        source: Source::Body(i),
+        qps,
     }
 }
 
