@@ -24,40 +24,7 @@ impl Checkpoint {
     /// this one.
     pub fn read(path: &Path) -> Result<Checkpoint> {
         let shown = path.display();
-        let cannot = |e: String| {
-            Error::input(format!(
-                "cannot read checkpoint '{shown}': {e}; give the checkpoint.h5 of a run \
-                 directory"
-            ))
-        };
-        match std::fs::metadata(path) {
-            Ok(m) if m.is_file() => {}
-            Ok(_) => return Err(cannot("not a regular file".into())),
-            Err(e) => return Err(cannot(e.to_string())),
-        }
-        let bytes = std::fs::read(path).map_err(|e| cannot(e.to_string()))?;
-        if seal::looks_sealed(&bytes) {
-            seal::verify_checkpoint(&bytes).map_err(|why| {
-                Error::input(format!(
-                    "{shown}: damaged checkpoint, refused: {why}; resume from an intact copy \
-                     of the run directory or start the run again"
-                ))
-            })?;
-        } else if bytes.starts_with(HDF5_SIGNATURE) {
-            // An HDF5 file without our header: someone else's file, or an unverifiable
-            // checkpoint of format version 1 (both told apart below, and refused).
-        } else if has_hdf5_signature(path).map_err(|e| cannot(e.to_string()))? {
-            return Err(Error::input(format!(
-                "{shown}: damaged checkpoint, refused: its 512-byte header is not a \
-                 viscontact checkpoint header (or this is an HDF5 file of another program); \
-                 resume from an intact copy of the run directory or start the run again"
-            )));
-        } else {
-            return Err(Error::input(format!(
-                "{shown}: not an HDF5 file, so not a viscontact checkpoint; give the \
-                 checkpoint.h5 of a run directory"
-            )));
-        }
+        let sealed = verified_bytes(path)?;
         let f = h5_file(OpenMode::Read, path).map_err(|e| {
             Error::input(format!(
                 "{shown}: cannot open as HDF5 ({e}): the file is truncated or damaged; resume \
@@ -65,44 +32,7 @@ impl Checkpoint {
                  so the one a run left is intact unless something else changed it)"
             ))
         })?;
-        let format = f
-            .attr("format")
-            .and_then(|a| a.read_scalar::<VarLenUnicode>())
-            .map(|s| s.as_str().to_string())
-            .ok();
-        if format.as_deref() != Some(FORMAT) {
-            return Err(Error::input(format!(
-                "{shown}: an HDF5 file but not a viscontact checkpoint (its root attribute \
-                 'format' is {}, expected \"{FORMAT}\"); give the checkpoint.h5 that \
-                 `viscontact run` wrote",
-                format.map_or("missing".to_string(), |s| format!("{s:?}"))
-            )));
-        }
-        let version = f
-            .attr("format_version")
-            .and_then(|a| a.read_scalar::<u32>())
-            .map_err(|e| {
-                Error::input(format!(
-                    "{shown}: damaged checkpoint: attribute 'format_version' unreadable ({e})"
-                ))
-            })?;
-        if !seal::looks_sealed(&bytes) {
-            return Err(Error::input(format!(
-                "{shown}: checkpoint format version {version} carries no checksum, so its \
-                 integrity cannot be verified and it is refused (a damaged file could give \
-                 wrong results); resume it with the viscontact version that wrote it ({}) or \
-                 start the run again",
-                str_attr_of(&f, "writer").unwrap_or_else(|_| "unknown".into())
-            )));
-        }
-        if version > FORMAT_VERSION {
-            return Err(Error::input(format!(
-                "{shown}: checkpoint format version {version} is newer than this viscontact \
-                 reads (≤ {FORMAT_VERSION}); resume it with the viscontact version that \
-                 wrote it ({})",
-                str_attr_of(&f, "writer").unwrap_or_else(|_| "unknown".into())
-            )));
-        }
+        let version = format_version(&f, path, sealed)?;
         read_body(&f, path, version).map_err(|e| {
             Error::input(format!(
                 "{shown}: damaged checkpoint ({e}); resume from an intact checkpoint or start \
@@ -110,6 +40,93 @@ impl Checkpoint {
             ))
         })
     }
+}
+
+/// Reads the file at `path` and verifies its checksum where it carries our header: whether
+/// it does (an HDF5 file without it is told apart by `format_version`); anything else is
+/// refused.
+fn verified_bytes(path: &Path) -> Result<bool> {
+    let shown = path.display();
+    let cannot = |e: String| {
+        Error::input(format!(
+            "cannot read checkpoint '{shown}': {e}; give the checkpoint.h5 of a run \
+             directory"
+        ))
+    };
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => {}
+        Ok(_) => return Err(cannot("not a regular file".into())),
+        Err(e) => return Err(cannot(e.to_string())),
+    }
+    let bytes = std::fs::read(path).map_err(|e| cannot(e.to_string()))?;
+    if seal::looks_sealed(&bytes) {
+        seal::verify_checkpoint(&bytes).map_err(|why| {
+            Error::input(format!(
+                "{shown}: damaged checkpoint, refused: {why}; resume from an intact copy \
+                 of the run directory or start the run again"
+            ))
+        })?;
+    } else if bytes.starts_with(HDF5_SIGNATURE) {
+        // An HDF5 file without our header: someone else's file, or an unverifiable
+        // checkpoint of format version 1 (both told apart by `format_version`, and refused).
+    } else if has_hdf5_signature(path).map_err(|e| cannot(e.to_string()))? {
+        return Err(Error::input(format!(
+            "{shown}: damaged checkpoint, refused: its 512-byte header is not a \
+             viscontact checkpoint header (or this is an HDF5 file of another program); \
+             resume from an intact copy of the run directory or start the run again"
+        )));
+    } else {
+        return Err(Error::input(format!(
+            "{shown}: not an HDF5 file, so not a viscontact checkpoint; give the \
+             checkpoint.h5 of a run directory"
+        )));
+    }
+    Ok(seal::looks_sealed(&bytes))
+}
+
+/// The checkpoint's format version, refusing another program's HDF5 file, a checkpoint
+/// without a checksum (`sealed` false) and a newer format.
+fn format_version(f: &hdf5::File, path: &Path, sealed: bool) -> Result<u32> {
+    let shown = path.display();
+    let format = f
+        .attr("format")
+        .and_then(|a| a.read_scalar::<VarLenUnicode>())
+        .map(|s| s.as_str().to_string())
+        .ok();
+    if format.as_deref() != Some(FORMAT) {
+        return Err(Error::input(format!(
+            "{shown}: an HDF5 file but not a viscontact checkpoint (its root attribute \
+             'format' is {}, expected \"{FORMAT}\"); give the checkpoint.h5 that \
+             `viscontact run` wrote",
+            format.map_or("missing".to_string(), |s| format!("{s:?}"))
+        )));
+    }
+    let version = f
+        .attr("format_version")
+        .and_then(|a| a.read_scalar::<u32>())
+        .map_err(|e| {
+            Error::input(format!(
+                "{shown}: damaged checkpoint: attribute 'format_version' unreadable ({e})"
+            ))
+        })?;
+    if !sealed {
+        return Err(Error::input(format!(
+            "{shown}: checkpoint format version {version} carries no checksum, so its \
+             integrity cannot be verified and it is refused (a damaged file could give \
+             wrong results); resume it with the viscontact version that wrote it ({}) or \
+             start the run again",
+            str_attr_of(f, "writer").unwrap_or_else(|_| "unknown".into())
+        )));
+    }
+    if version > FORMAT_VERSION {
+        return Err(Error::input(format!(
+            "{shown}: checkpoint format version {version} is newer than this viscontact \
+             reads (≤ {FORMAT_VERSION}); resume it with the viscontact version that \
+             wrote it ({})",
+            str_attr_of(f, "writer").unwrap_or_else(|_| "unknown".into())
+        )));
+    }
+    Ok(version)
 }
 
 pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Result<Checkpoint> {
