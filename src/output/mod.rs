@@ -513,43 +513,10 @@ impl Series {
         make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
     ) -> Result<PathBuf> {
         let path = self.dir.join(&name);
-        let (options, sizes, at) = (self.options.clone(), self.sizes, path.clone());
-        let arrays = move || {
-            let (points, cells) = make();
-            let arrays = |fields: Vec<OwnedField>, count, what| {
-                let sizes = fields
-                    .iter()
-                    .map(|f| (&f.name[..], f.components, f.values.len()));
-                check_fields(sizes, count, what).map_err(|msg| frame_error(&at, step, msg))?;
-                Ok::<_, Error>(
-                    fields
-                        .into_iter()
-                        .filter(|f| options.wants(&f.name))
-                        .map(|f| f.array(options.precision))
-                        .collect::<Vec<_>>(),
-                )
-            };
-            Ok((
-                arrays(points, sizes.0, "point")?,
-                arrays(cells, sizes.1, "cell")?,
-            ))
-        };
+        let arrays = arrays(self.options.clone(), self.sizes, path.clone(), step, make);
         match &mut self.sink {
             Sink::Vtu(writer) => {
-                // Steps normally increase: only an older step can already be listed.
-                let newer = self
-                    .files
-                    .last()
-                    .is_none_or(|(_, f)| step_of(f) < Some(step));
-                let listed = if newer {
-                    None
-                } else {
-                    self.files.iter_mut().find(|(_, f)| *f == name)
-                };
-                match listed {
-                    Some(entry) => entry.0 = time,
-                    None => self.files.push((time, name)),
-                }
+                relist(&mut self.files, step, time, name);
                 let due = self.pvd_written.is_none_or(|t| t.elapsed() >= PVD_EVERY);
                 self.pvd_stale = !due;
                 if due {
@@ -683,6 +650,54 @@ fn other_run(at: &Path, stored: &str, run_id: &str) -> Error {
          another output directory (--out) or remove them",
         at.display()
     ))
+}
+
+/// The point and cell arrays of a frame as `make` gives its fields (`sizes`: the points and
+/// cells they must cover), checked and narrowed to what `options` asks for; run on the
+/// writer's thread.
+fn arrays(
+    options: Options,
+    sizes: (usize, usize),
+    at: PathBuf,
+    step: usize,
+    make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
+) -> impl FnOnce() -> Result<(Vec<Array>, Vec<Array>)> + Send + 'static {
+    move || {
+        let (points, cells) = make();
+        let arrays = |fields: Vec<OwnedField>, count, what| {
+            let sizes = fields
+                .iter()
+                .map(|f| (&f.name[..], f.components, f.values.len()));
+            check_fields(sizes, count, what).map_err(|msg| frame_error(&at, step, msg))?;
+            Ok::<_, Error>(
+                fields
+                    .into_iter()
+                    .filter(|f| options.wants(&f.name))
+                    .map(|f| f.array(options.precision))
+                    .collect::<Vec<_>>(),
+            )
+        };
+        Ok((
+            arrays(points, sizes.0, "point")?,
+            arrays(cells, sizes.1, "cell")?,
+        ))
+    }
+}
+
+/// Lists the .vtu of `step` in the series: a new entry, or (where a step is written again)
+/// the old one's time replaced.
+fn relist(files: &mut Vec<(f64, String)>, step: usize, time: f64, name: String) {
+    // Steps normally increase: only an older step can already be listed.
+    let newer = files.last().is_none_or(|(_, f)| step_of(f) < Some(step));
+    let listed = if newer {
+        None
+    } else {
+        files.iter_mut().find(|(_, f)| *f == name)
+    };
+    match listed {
+        Some(entry) => entry.0 = time,
+        None => files.push((time, name)),
+    }
 }
 
 /// Checks sizes and names of the fields of one kind (`what` = "point" or "cell"), given as
