@@ -352,59 +352,63 @@ impl Mesh {
     }
 
     fn find_group(&self, key: &str, boundary: bool) -> Result<&Group> {
-        let file = self.path.display();
-        let normalized = normalize_name(key);
-        let tag_key: Option<i32> = key.trim().parse().ok();
-        let stages: [&dyn Fn(&Group) -> bool; 3] = [
-            &|g| g.name.as_deref() == Some(key),
-            &|g| g.name.as_deref().map(normalize_name).as_deref() == Some(normalized.as_str()),
-            &|g| Some(g.tag) == tag_key,
-        ];
-        for matches in stages {
-            let found: Vec<&Group> = self.groups.iter().filter(|&g| matches(g)).collect();
-            if found.is_empty() {
-                continue;
+        let matcher = GroupKey::new(key);
+        for stage in 0..3 {
+            let found: Vec<&Group> = (self.groups.iter())
+                .filter(|g| matcher.matches(stage, g.name.as_deref(), g.tag))
+                .collect();
+            if !found.is_empty() {
+                return self.choose(found, key, boundary);
             }
-            let bdim = self.dim - 1;
-            let on_boundary: Vec<&Group> =
-                found.iter().copied().filter(|g| g.dim == bdim).collect();
-            let chosen = if !on_boundary.is_empty() {
-                on_boundary
-            } else if boundary {
-                let boundary_groups: Vec<String> = self
-                    .groups
-                    .iter()
-                    .filter(|g| g.dim == bdim)
-                    .map(describe)
-                    .collect();
-                let (is, needed) = match self.dim {
-                    2 => ("a surface", "a boundary (curve)"),
-                    _ => ("a volume", "a boundary (surface)"),
-                };
-                return Err(Error::input(format!(
-                    "mesh '{file}': '{key}' names the physical group {}, which is {is} \
-                     group, but {needed} group is needed here; the boundary groups \
-                     are: {}",
-                    describe(found[0]),
-                    or_none(&boundary_groups)
-                )));
-            } else {
-                found
-            };
-            if chosen.len() > 1 {
-                let list: Vec<String> = chosen.iter().map(|g| describe(g)).collect();
-                return Err(Error::input(format!(
-                    "mesh '{file}': '{key}' matches several physical groups: {}; use the exact \
-                     name (or rename the groups in gmsh so that they differ)",
-                    list.join(", ")
-                )));
-            }
-            return Ok(chosen[0]);
         }
-        let elsewhere = self.other_groups.iter().find(|(_, tag, name)| {
-            name.as_deref() == Some(key)
-                || name.as_deref().map(normalize_name).as_deref() == Some(normalized.as_str())
-                || Some(*tag) == tag_key
+        Err(self.missing(key, &matcher))
+    }
+
+    /// The one group of `found` (the groups a name or tag matched) that `key` names: one on
+    /// the boundary where there is, else (unless `boundary` requires one) any.
+    fn choose<'g>(&self, found: Vec<&'g Group>, key: &str, boundary: bool) -> Result<&'g Group> {
+        let file = self.path.display();
+        let bdim = self.dim - 1;
+        let on_boundary: Vec<&Group> = found.iter().copied().filter(|g| g.dim == bdim).collect();
+        let chosen = if !on_boundary.is_empty() {
+            on_boundary
+        } else if boundary {
+            let boundary_groups: Vec<String> = self
+                .groups
+                .iter()
+                .filter(|g| g.dim == bdim)
+                .map(describe)
+                .collect();
+            let (is, needed) = match self.dim {
+                2 => ("a surface", "a boundary (curve)"),
+                _ => ("a volume", "a boundary (surface)"),
+            };
+            return Err(Error::input(format!(
+                "mesh '{file}': '{key}' names the physical group {}, which is {is} \
+                 group, but {needed} group is needed here; the boundary groups \
+                 are: {}",
+                describe(found[0]),
+                or_none(&boundary_groups)
+            )));
+        } else {
+            found
+        };
+        if chosen.len() > 1 {
+            let list: Vec<String> = chosen.iter().map(|g| describe(g)).collect();
+            return Err(Error::input(format!(
+                "mesh '{file}': '{key}' matches several physical groups: {}; use the exact \
+                 name (or rename the groups in gmsh so that they differ)",
+                list.join(", ")
+            )));
+        }
+        Ok(chosen[0])
+    }
+
+    /// Why no physical group matches `key`: it names a group of another dimension, or none.
+    fn missing(&self, key: &str, matcher: &GroupKey) -> Error {
+        let file = self.path.display();
+        let elsewhere = (self.other_groups.iter()).find(|(_, tag, name)| {
+            (0..3).any(|stage| matcher.matches(stage, name.as_deref(), *tag))
         });
         if let Some((dim, tag, _)) = elsewhere {
             let kind = ["point", "curve", "surface", "volume"][(*dim).min(3)];
@@ -412,12 +416,12 @@ impl Mesh {
                 2 => ("curve", "surface"),
                 _ => ("surface", "volume"),
             };
-            return Err(Error::input(format!(
+            return Error::input(format!(
                 "mesh '{file}': '{key}' is a physical {kind} (tag {tag}); a boundary condition \
                  acts on a physical {boundary} and the body is a physical {cells} in a {}D \
                  mesh: put the boundary {boundary}s into the group in gmsh",
                 self.dim
-            )));
+            ));
         }
         let list: Vec<String> = self.groups.iter().map(describe).collect();
         let hint = if self.groups.is_empty() {
@@ -427,10 +431,37 @@ impl Mesh {
             "rename the group in gmsh or use one of these names (ASCII aliases match too: Γ → \
              Gamma, ',' → '_', case ignored; so does the tag)"
         };
-        Err(Error::input(format!(
+        Error::input(format!(
             "mesh '{file}' has no physical group '{key}'; it has: {} — {hint}",
             or_none(&list)
-        )))
+        ))
+    }
+}
+
+/// A group as a scene names it, matched in three stages: the exact name, the name
+/// normalized (`normalize_name`), the tag.
+struct GroupKey<'k> {
+    exact: &'k str,
+    normalized: String,
+    tag: Option<i32>,
+}
+
+impl<'k> GroupKey<'k> {
+    fn new(key: &'k str) -> Self {
+        GroupKey {
+            exact: key,
+            normalized: normalize_name(key),
+            tag: key.trim().parse().ok(),
+        }
+    }
+
+    /// Whether a group of this name and tag matches at `stage` (0, 1 or 2).
+    fn matches(&self, stage: usize, name: Option<&str>, tag: i32) -> bool {
+        match stage {
+            0 => name == Some(self.exact),
+            1 => name.map(normalize_name).as_deref() == Some(self.normalized.as_str()),
+            _ => Some(tag) == self.tag,
+        }
     }
 }
 
