@@ -4,7 +4,10 @@ use clap::{Parser, Subcommand};
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use viscontact::fem::Discretization;
+use viscontact::history::Plan;
 use viscontact::run::{resume, run, setup, Interrupt, Outcome, RunOptions};
+use viscontact::scene::Scene;
 use viscontact::{effects::Effects, mesh::Mesh, Result};
 
 #[derive(Parser)]
@@ -279,9 +282,35 @@ fn report(outcome: Outcome) -> Option<i32> {
     }
 }
 
+/// `check`: what a run of the scene would be, and whatever `run` refuses before its first
+/// step (exit 2).
 fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let (scene, mesh, disc) = setup(path, set)?;
-    let effects = Effects::new(&scene, &disc);
+    print_problem(&scene, &mesh, &disc);
+    let contact = viscontact::solver::choice::ContactPlan::of_run(&scene, &disc);
+    if let Some(plan) = &contact {
+        println!("contact    {plan}");
+    }
+    // Sizes first: a hostile time.steps is refused before anything is allocated per step.
+    let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
+    println!("resources  {estimate}");
+    estimate.check(&viscontact::run::default_out(&scene)?)?;
+    if let Some(plan) = &contact {
+        plan.check(&estimate)?;
+    }
+    let plan = Plan::new(&scene)?;
+    print_stability(&scene, &disc, &plan);
+    print_kernel(&scene, &disc, &plan);
+    for w in viscontact::effects::warnings(&scene, &disc) {
+        println!("warning    {w}");
+    }
+    viscontact::time_loop::refusals(&scene, &disc, &plan)
+}
+
+/// `check`'s first lines: the scene, its mesh and sizes, the time grid, the effects, the
+/// solver.
+fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
+    let effects = Effects::new(scene, disc);
     println!("scene      {} ({})", scene.name, scene.path.display());
     println!(
         "mesh       {}: {}D, {} nodes, {} {}, {} free dofs",
@@ -313,20 +342,11 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         )
     };
     println!("solver     {solver}");
-    let contact = viscontact::solver::choice::ContactPlan::of_run(&scene, &disc);
-    if let Some(plan) = &contact {
-        println!("contact    {plan}");
-    }
-    use viscontact::history::Plan;
+}
+
+/// `check`'s stability line: the explicit scheme's step limit, or why there is none.
+fn print_stability(scene: &Scene, disc: &Discretization, plan: &Plan) {
     use viscontact::stability::{StepLimit, Verdict};
-    // Sizes first: a hostile time.steps is refused before anything is allocated per step.
-    let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
-    println!("resources  {estimate}");
-    estimate.check(&viscontact::run::default_out(&scene)?)?;
-    if let Some(plan) = &contact {
-        plan.check(&estimate)?;
-    }
-    let plan = Plan::new(&scene)?;
     let limit_line = |l: &StepLimit, what: &str| match l.k_max {
         Some(k) => format!(
             "left endpoint scheme stable for k ≤ {k:.6e} (k/limit = {:.3}{what})",
@@ -334,7 +354,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         ),
         None => "no explicit elastic or memory term: no step limit".to_string(),
     };
-    match Verdict::new(&scene, &disc, &plan) {
+    match Verdict::new(scene, disc, plan) {
         Verdict::Implicit => println!("stability  implicit history: unconditionally stable"),
         Verdict::Limit(l) => println!("stability  {}", limit_line(&l, "")),
         Verdict::Amplification(a, l) => println!(
@@ -345,13 +365,17 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
             viscontact::stability::MAX_AMPLIFICATION
         ),
     }
+}
+
+/// `check`'s kernel and memory lines: how the memory sum runs and the history it keeps.
+fn print_kernel(scene: &Scene, disc: &Discretization, plan: &Plan) {
     let direct_bytes = (scene.time.steps + 1) * disc.n_free * 8;
-    let history_bytes = match &plan {
+    let history_bytes = match plan {
         Plan::None => 0,
         Plan::Exact { .. } => direct_bytes,
         _ => plan.prony().map_or(0, |t| t.len()) * disc.n_free * 8,
     };
-    match &plan {
+    match plan {
         Plan::Compressed(fit) => println!(
             "kernel     compressed: {} exponentials, certified max relative error {:.2e} on \
              the {} lags, fitted in {:.3} s; saves {:.1} MB against the direct sum",
@@ -374,11 +398,6 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         "memory     history state ≈ {:.1} MB",
         history_bytes as f64 / 1e6
     );
-    for w in viscontact::effects::warnings(&scene, &disc) {
-        println!("warning    {w}");
-    }
-    // Whatever `run` refuses before its first step, `check` refuses too (exit 2).
-    viscontact::time_loop::refusals(&scene, &disc, &plan)
 }
 
 fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
