@@ -130,77 +130,13 @@ fn format_version(f: &hdf5::File, path: &Path, sealed: bool) -> Result<u32> {
 }
 
 pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Result<Checkpoint> {
-    let ds = |name: &str| f.dataset(name);
-    let vec = |name: &str| -> hdf5::Result<Vec<f64>> { ds(name)?.read_raw::<f64>() };
-    let n = ds("step")?.read_scalar::<u64>()? as usize;
-    let time = ds("time")?.read_scalar::<f64>()?;
-    let k = ds("step_size")?.read_scalar::<f64>()?;
-    let mem = f.group("memory")?;
-    let kind = str_attr_of(&mem, "kind")?;
-    let memory = match kind.as_str() {
-        "none" => StoredMemory::None,
-        "prony" => {
-            let a = vec("memory/prony_a")?;
-            let decay = vec("memory/prony_decay")?;
-            let state = ds("memory/prony_state")?;
-            let flat = state.read_raw::<f64>()?;
-            let shape = state.shape();
-            if shape.len() != 2 || shape[0] != a.len() || decay.len() != a.len() {
-                return Err("memory/prony_* have inconsistent shapes".into());
-            }
-            let m = if shape[1] == 0 {
-                vec![Vec::new(); shape[0]]
-            } else {
-                flat.chunks(shape[1]).map(|c| c.to_vec()).collect()
-            };
-            StoredMemory::Prony { a, decay, m }
-        }
-        "direct" => StoredMemory::Direct {
-            file: str_attr_of(&mem, "history_file")?,
-            rows: mem.dataset("history_rows")?.read_scalar::<u64>()? as usize,
-            hash: mem.dataset("history_hash")?.read_scalar::<u64>()?,
-        },
-        other => return Err(format!("/memory kind {other:?} is unknown").into()),
-    };
-    let run = f.group("run")?;
-    let log = RunLog {
-        iterations: {
-            let all = run.dataset("iterations")?.read_raw::<i32>()?;
-            if all.len() < n || all[..n].iter().any(|&i| i < 0) {
-                return Err(format!("/run/iterations lacks the counts of steps 0..{n}").into());
-            }
-            all[..n].iter().map(|&i| i as usize).collect()
-        },
-        max_violation: run.dataset("max_violation")?.read_scalar::<f64>()?,
-        max_kkt_residual: run.dataset("max_kkt_residual")?.read_scalar::<f64>()?,
-    };
-    let sc = f.group("scene")?;
-    let mesh = f.group("mesh")?;
-    let physics_group = f.group("physics")?;
-    let mut physics = Vec::new();
-    for name in physics_group.attr_names()? {
-        if name != "description" {
-            physics.push((name.clone(), str_attr_of(&physics_group, &name)?));
-        }
-    }
-    physics.sort();
-    let id = Identity {
-        run_id: str_attr_of(f, "run_id")?,
-        scene_text: sc
-            .dataset("text")?
-            .read_scalar::<VarLenUnicode>()?
-            .as_str()
-            .to_string(),
-        scene_path: str_attr_of(&sc, "path")?,
-        scene_path_absolute: str_attr_of(&sc, "absolute_path")?,
-        mesh_path: str_attr_of(&mesh, "file")?,
-        mesh_fingerprint: mesh.dataset("fingerprint")?.read_scalar::<u64>()?,
-        groups_fingerprint: mesh.dataset("groups_fingerprint")?.read_scalar::<u64>()?,
-        nodes: mesh.attr("nodes")?.read_scalar::<u64>()? as usize,
-        triangles: mesh.attr("triangles")?.read_scalar::<u64>()? as usize,
-        physics,
-        dof_of: mesh.dataset("dof_of")?.read_raw::<i64>()?,
-    };
+    let vec = |name: &str| f64s(f, name);
+    let n = f.dataset("step")?.read_scalar::<u64>()? as usize;
+    let time = f.dataset("time")?.read_scalar::<f64>()?;
+    let k = f.dataset("step_size")?.read_scalar::<f64>()?;
+    let memory = read_memory(f)?;
+    let log = read_log(f, n)?;
+    let id = read_identity(f)?;
     let cp = Checkpoint {
         path: path.to_path_buf(),
         version,
@@ -237,6 +173,90 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
         return Err(format!("step_size {} is not a positive number", cp.k).into());
     }
     Ok(cp)
+}
+
+/// The f64 dataset `name`, flat.
+fn f64s(f: &hdf5::File, name: &str) -> hdf5::Result<Vec<f64>> {
+    f.dataset(name)?.read_raw::<f64>()
+}
+
+/// `/memory`: none, the Prony terms with their states, or the direct sum's history file.
+fn read_memory(f: &hdf5::File) -> hdf5::Result<StoredMemory> {
+    let vec = |name: &str| f64s(f, name);
+    let mem = f.group("memory")?;
+    let kind = str_attr_of(&mem, "kind")?;
+    Ok(match kind.as_str() {
+        "none" => StoredMemory::None,
+        "prony" => {
+            let a = vec("memory/prony_a")?;
+            let decay = vec("memory/prony_decay")?;
+            let state = f.dataset("memory/prony_state")?;
+            let flat = state.read_raw::<f64>()?;
+            let shape = state.shape();
+            if shape.len() != 2 || shape[0] != a.len() || decay.len() != a.len() {
+                return Err("memory/prony_* have inconsistent shapes".into());
+            }
+            let m = if shape[1] == 0 {
+                vec![Vec::new(); shape[0]]
+            } else {
+                flat.chunks(shape[1]).map(|c| c.to_vec()).collect()
+            };
+            StoredMemory::Prony { a, decay, m }
+        }
+        "direct" => StoredMemory::Direct {
+            file: str_attr_of(&mem, "history_file")?,
+            rows: mem.dataset("history_rows")?.read_scalar::<u64>()? as usize,
+            hash: mem.dataset("history_hash")?.read_scalar::<u64>()?,
+        },
+        other => return Err(format!("/memory kind {other:?} is unknown").into()),
+    })
+}
+
+/// `/run`: the iteration counts of steps 0..n and the run's worst violation and residual.
+fn read_log(f: &hdf5::File, n: usize) -> hdf5::Result<RunLog> {
+    let run = f.group("run")?;
+    Ok(RunLog {
+        iterations: {
+            let all = run.dataset("iterations")?.read_raw::<i32>()?;
+            if all.len() < n || all[..n].iter().any(|&i| i < 0) {
+                return Err(format!("/run/iterations lacks the counts of steps 0..{n}").into());
+            }
+            all[..n].iter().map(|&i| i as usize).collect()
+        },
+        max_violation: run.dataset("max_violation")?.read_scalar::<f64>()?,
+        max_kkt_residual: run.dataset("max_kkt_residual")?.read_scalar::<f64>()?,
+    })
+}
+
+/// The run's identity: its id, scene, mesh and physics.
+fn read_identity(f: &hdf5::File) -> hdf5::Result<Identity> {
+    let sc = f.group("scene")?;
+    let mesh = f.group("mesh")?;
+    let physics_group = f.group("physics")?;
+    let mut physics = Vec::new();
+    for name in physics_group.attr_names()? {
+        if name != "description" {
+            physics.push((name.clone(), str_attr_of(&physics_group, &name)?));
+        }
+    }
+    physics.sort();
+    Ok(Identity {
+        run_id: str_attr_of(f, "run_id")?,
+        scene_text: sc
+            .dataset("text")?
+            .read_scalar::<VarLenUnicode>()?
+            .as_str()
+            .to_string(),
+        scene_path: str_attr_of(&sc, "path")?,
+        scene_path_absolute: str_attr_of(&sc, "absolute_path")?,
+        mesh_path: str_attr_of(&mesh, "file")?,
+        mesh_fingerprint: mesh.dataset("fingerprint")?.read_scalar::<u64>()?,
+        groups_fingerprint: mesh.dataset("groups_fingerprint")?.read_scalar::<u64>()?,
+        nodes: mesh.attr("nodes")?.read_scalar::<u64>()? as usize,
+        triangles: mesh.attr("triangles")?.read_scalar::<u64>()? as usize,
+        physics,
+        dof_of: mesh.dataset("dof_of")?.read_raw::<i64>()?,
+    })
 }
 
 /// The frames `/series` records: steps increasing and below the checkpoint's step `n`.
