@@ -184,6 +184,20 @@ pub fn parse_vtu(bytes: &[u8]) -> std::result::Result<Vtu, String> {
         .chunks_exact(3)
         .map(|c| [c[0], c[1], c[2]])
         .collect();
+    let out_cells = cells_of(&cells, points.len())?;
+    check_sizes(&point_data, points.len(), "point")?;
+    check_sizes(&cell_data, out_cells.len(), "cell")?;
+    Ok(Vtu {
+        points,
+        cells: out_cells,
+        point_data,
+        cell_data,
+    })
+}
+
+/// The cells from the `<Cells>` arrays `connectivity` and `offsets`, each a list of point
+/// indices below `n_points`.
+fn cells_of(cells: &[Array], n_points: usize) -> std::result::Result<Vec<Vec<usize>>, String> {
     let get = |name: &str| {
         cells
             .iter()
@@ -203,33 +217,28 @@ pub fn parse_vtu(bytes: &[u8]) -> std::result::Result<Vtu, String> {
             .iter()
             .map(|&i| i as usize)
             .collect();
-        if c.iter().any(|&i| i >= points.len()) {
+        if c.iter().any(|&i| i >= n_points) {
             return Err("a cell refers to a missing point".into());
         }
         out_cells.push(c);
         start = end;
     }
-    for (what, list, count) in [
-        ("point", &point_data, points.len()),
-        ("cell", &cell_data, out_cells.len()),
-    ] {
-        for a in list {
-            if a.values.len() != a.components * count {
-                return Err(format!(
-                    "{what} field '{}' has {} values for {count} {what}s × {} components",
-                    a.name,
-                    a.values.len(),
-                    a.components
-                ));
-            }
+    Ok(out_cells)
+}
+
+/// Refuses a `what` field (point or cell) whose values are not components × `count`.
+fn check_sizes(list: &[Array], count: usize, what: &str) -> std::result::Result<(), String> {
+    for a in list {
+        if a.values.len() != a.components * count {
+            return Err(format!(
+                "{what} field '{}' has {} values for {count} {what}s × {} components",
+                a.name,
+                a.values.len(),
+                a.components
+            ));
         }
     }
-    Ok(Vtu {
-        points,
-        cells: out_cells,
-        point_data,
-        cell_data,
-    })
+    Ok(())
 }
 
 /// Every `<DataArray …>` in `s`: inline base64 (`format="binary"`, uncompressed) or
