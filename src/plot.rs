@@ -189,8 +189,24 @@ pub fn log_log_chart(
         .bold_line_style(RGBColor(205, 205, 205))
         .draw()
         .map_err(&err)?;
-    // Legend where the data are not: rising data leave the upper left corner free,
-    // falling data the lower left one.
+    for c in curves {
+        draw_curve(&mut chart, c, path)?;
+    }
+    chart
+        .configure_series_labels()
+        .position(legend_position(curves))
+        .label_font((FONT, 16))
+        .background_style(WHITE.mix(0.9))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()
+        .map_err(&err)?;
+    root.present().map_err(&err)?;
+    Ok(())
+}
+
+/// Where a chart's legend goes: where the data are not. Rising data leave the upper left
+/// corner free, falling data the lower left one.
+fn legend_position(curves: &[Curve]) -> SeriesLabelPosition {
     let mut rising = 0i32;
     for c in curves.iter().filter(|c| !c.reference) {
         if let (Some(a), Some(b)) = (c.points.first(), c.points.last()) {
@@ -201,53 +217,59 @@ pub fn log_log_chart(
             };
         }
     }
-    for c in curves {
-        if c.reference {
-            // Successive reference lines: grey, long dashes; lighter, short dashes.
-            let (grey, dash) = if c.color % 2 == 0 { (110, 8) } else { (165, 3) };
-            let style = RGBColor(grey, grey, grey).stroke_width(2);
-            chart
-                .draw_series(DashedLineSeries::new(c.points.clone(), dash, 5, style))
-                .map_err(&err)?
-                .label(c.label.clone())
-                .legend(move |(x, y)| {
-                    DashedPathElement::new(vec![(x, y), (x + 24, y)], dash, 4, style)
-                });
-        } else {
-            let color = PALETTE[c.color % PALETTE.len()];
-            chart
-                .draw_series(LineSeries::new(c.points.clone(), color.stroke_width(2)))
-                .map_err(&err)?
-                .label(c.label.clone())
-                .legend(move |(x, y)| {
-                    EmptyElement::at((x, y))
-                        + PathElement::new(vec![(0, 0), (24, 0)], color.stroke_width(2))
-                        + Circle::new((12, 0), 4, color.filled())
-                });
-            chart
-                .draw_series(c.points.iter().map(|&p| Circle::new(p, 5, color.filled())))
-                .map_err(&err)?;
-            let style = TextStyle::from((FONT, 13).into_font()).color(&color);
-            chart
-                .draw_series(c.points.iter().zip(&c.point_labels).map(|(&p, l)| {
-                    EmptyElement::at(p) + Text::new(l.clone(), (7, -16), style.clone())
-                }))
-                .map_err(&err)?;
-        }
+    if rising > 0 {
+        SeriesLabelPosition::UpperLeft
+    } else {
+        SeriesLabelPosition::LowerLeft
     }
-    chart
-        .configure_series_labels()
-        .position(if rising > 0 {
-            SeriesLabelPosition::UpperLeft
+}
+
+/// One curve of a log–log chart: a reference line dashed and grey, a measured one in its
+/// colour with its points marked and labelled.
+fn draw_curve<'a>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
+    c: &Curve,
+    path: &Path,
+) -> Result<()> {
+    let err = draw_err(path);
+    if c.reference {
+        // Successive reference lines: grey, long dashes; lighter, short dashes.
+        let (grey, dash) = if c.color.is_multiple_of(2) {
+            (110, 8)
         } else {
-            SeriesLabelPosition::LowerLeft
-        })
-        .label_font((FONT, 16))
-        .background_style(WHITE.mix(0.9))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()
-        .map_err(&err)?;
-    root.present().map_err(&err)?;
+            (165, 3)
+        };
+        let style = RGBColor(grey, grey, grey).stroke_width(2);
+        chart
+            .draw_series(DashedLineSeries::new(c.points.clone(), dash, 5, style))
+            .map_err(&err)?
+            .label(c.label.clone())
+            .legend(move |(x, y)| {
+                DashedPathElement::new(vec![(x, y), (x + 24, y)], dash, 4, style)
+            });
+    } else {
+        let color = PALETTE[c.color % PALETTE.len()];
+        chart
+            .draw_series(LineSeries::new(c.points.clone(), color.stroke_width(2)))
+            .map_err(&err)?
+            .label(c.label.clone())
+            .legend(move |(x, y)| {
+                EmptyElement::at((x, y))
+                    + PathElement::new(vec![(0, 0), (24, 0)], color.stroke_width(2))
+                    + Circle::new((12, 0), 4, color.filled())
+            });
+        chart
+            .draw_series(c.points.iter().map(|&p| Circle::new(p, 5, color.filled())))
+            .map_err(&err)?;
+        let style = TextStyle::from((FONT, 13).into_font()).color(&color);
+        chart
+            .draw_series(
+                c.points.iter().zip(&c.point_labels).map(|(&p, l)| {
+                    EmptyElement::at(p) + Text::new(l.clone(), (7, -16), style.clone())
+                }),
+            )
+            .map_err(&err)?;
+    }
     Ok(())
 }
 
