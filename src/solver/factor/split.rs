@@ -264,21 +264,7 @@ impl Schedule {
         if !split && path * 5 > total * 4 {
             return None;
         }
-        let mut unit_of = vec![usize::MAX; ns];
-        let mut units: Vec<Unit> = Vec::new();
-        for (bin, (_, roots)) in tree.deal(&frontier, bins).into_iter().enumerate() {
-            for root in roots {
-                let supernodes = tree.first[root]..root + 1;
-                unit_of[supernodes.clone()].fill(units.len());
-                let cols = layout.begin[supernodes.start]..layout.begin[root + 1];
-                units.push(Unit {
-                    supernodes,
-                    cols,
-                    record: 0..0,
-                    bin,
-                });
-            }
-        }
+        let (mut units, unit_of) = units(layout, &tree, &frontier, bins);
         let mut schedule = Schedule {
             units: Vec::new(),
             bins,
@@ -364,4 +350,26 @@ impl Schedule {
     ) -> &'a mut [f64] {
         &mut rs[self.rec[s] - unit.record.start..self.rec[s + 1] - unit.record.start]
     }
+}
+
+/// The units: the subtrees under `frontier` dealt to `bins` threads (`Tree::deal`), each
+/// with its supernodes and columns (its record is set later); and the unit of each
+/// supernode (usize::MAX outside them).
+fn units(layout: &Layout, tree: &Tree, frontier: &[usize], bins: usize) -> (Vec<Unit>, Vec<usize>) {
+    let mut unit_of = vec![usize::MAX; layout.n_supernodes()];
+    let mut units: Vec<Unit> = Vec::new();
+    for (bin, (_, roots)) in tree.deal(frontier, bins).into_iter().enumerate() {
+        for root in roots {
+            let supernodes = tree.first[root]..root + 1;
+            unit_of[supernodes.clone()].fill(units.len());
+            let cols = layout.begin[supernodes.start]..layout.begin[root + 1];
+            units.push(Unit {
+                supernodes,
+                cols,
+                record: 0..0,
+                bin,
+            });
+        }
+    }
+    (units, unit_of)
 }
