@@ -6,7 +6,7 @@
 use crate::fem::{Discretization, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::Scene;
-use crate::solver::choice::Contact;
+use crate::solver::choice::{Contact, ContactPlan};
 use crate::solver::matrix_free::MatrixFreeSolver;
 use crate::solver::{conic::ConicSolver, dual::DualSolver, Factor, Rows, StepSolver};
 use crate::Result;
@@ -76,7 +76,10 @@ pub const RIGHT_ANGLE_COSINE: f64 = 1e-9;
 /// 3D (P1 elements lock); a contact or friction boundary that is not straight at a node (the
 /// nodal normal there is an average of the facet normals); nodes where Γ3,1 meets Γ3,2 at a
 /// right angle, the only place where the split of the constraint force into contact
-/// pressure and friction traction is not unique (see `Rows::corner_cosines`).
+/// pressure and friction traction is not unique (see `Rows::corner_cosines`); a contact
+/// solver without D, whose sliding steps can take many minutes (`ContactPlan::slow_warning`).
+/// `check` prints them, `run` and `resume` print them before the first step and write them
+/// into summary.json.
 pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
     let mut w = Vec::new();
     use crate::scene::Model;
@@ -132,6 +135,7 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             fmt_num(cos)
         ));
     }
+    w.extend(ContactPlan::of_run(scene, disc).and_then(|p| p.slow_warning()));
     w
 }
 

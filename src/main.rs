@@ -247,9 +247,7 @@ fn exit_code(result: Result<Option<i32>>) -> ExitCode {
 fn report(outcome: Outcome) -> Option<i32> {
     match outcome {
         Outcome::Finished(s) => {
-            for w in &s.warnings {
-                eprintln!("warning: {w}");
-            }
+            // The warnings were printed before the first step (`run::drive`).
             println!(
                 "{}: {} steps, {} dofs, {:.2} s on {} thread{}; ‖u_N‖_H1 = {:.6e}; wrote {}",
                 s.name,

@@ -310,6 +310,10 @@ struct Drive<'a> {
 
 /// The time loop of a run with its consumers, then summary.json however the run ended.
 fn drive(d: Drive) -> Result<Outcome> {
+    let warnings = crate::effects::warnings(d.scene, d.disc);
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let mut tl = d.tl;
     let rows = Arc::new(tl.rows().clone());
     let mut consumers = Consumers {
@@ -380,6 +384,7 @@ fn drive(d: Drive) -> Result<Outcome> {
             directory: d.out.display().to_string(),
             files: frames.series.files().len(),
         },
+        warnings,
     };
     let summary = Summary::new(ending, &d.run_id, d.scene, d.mesh, d.disc, &tl, statistics);
     let written = write_atomic(

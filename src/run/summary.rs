@@ -61,6 +61,8 @@ pub(super) struct Ending {
     pub message: Option<String>,
     pub timing: Timing,
     pub output: OutputSummary,
+    /// `effects::warnings`, printed before the first step.
+    pub warnings: Vec<String>,
 }
 
 #[derive(Serialize, Debug, Clone)]
@@ -187,7 +189,7 @@ impl Summary {
                 per_step,
             },
             output: ending.output,
-            warnings: crate::effects::warnings(scene, disc),
+            warnings: ending.warnings,
             memory: MemorySummary::new(tl.plan(), tl.k()),
         }
     }

@@ -207,6 +207,24 @@ impl ContactPlan {
         )))
     }
 
+    /// A warning for a solver that can make a run take hours without saying so: the duals
+    /// without D, whose steps where the body starts to slide take hundreds of solves with
+    /// the factor of K_A (the plate with m = 16 055 rows in docs/performance.md: its first
+    /// five of 20 steps took 52 minutes on two cores, where a linear run of all 20 takes
+    /// under one).
+    pub fn slow_warning(&self) -> Option<String> {
+        matches!(self.solver, Contact::Sparse | Contact::MatrixFree).then(|| {
+            format!(
+                "the contact solver is the {} dual ({}): a step where the body starts to \
+                 slide can take hundreds of solves with the factor of K_A, minutes to tens of \
+                 minutes each on a large contact boundary (docs/performance.md); time the \
+                 first steps before planning a long run",
+                self.solver.key(),
+                self.reason()
+            )
+        })
+    }
+
     /// Why this solver: the key that forced it, or `auto`'s rule.
     fn reason(&self) -> String {
         match (self.choice, self.solver) {

@@ -148,3 +148,45 @@ fn the_contact_solver_and_the_steps_are_counted_together() {
     refused(&o, &["that the steps hold"]);
     assert!(!dir.exists(), "a refused run made its directory");
 }
+
+/// A dual without D can make a run take hours where the body starts to slide: `check` and
+/// `run` say so before the first step, and summary.json keeps it; the dense dual does not.
+#[test]
+fn the_duals_without_d_warn_that_sliding_steps_can_be_slow() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = SceneText::block()
+        .mesh(common::mesh_path("3d/block_004.msh"))
+        .set("time.steps", 2)
+        .write(tmp.path(), "s.toml");
+    let scene = scene.to_str().unwrap();
+    let slow = "minutes to tens of minutes each";
+    for solver in ["sparse", "matrix_free", "dense"] {
+        let set = format!("solver.contact=\"{solver}\"");
+        let (code, text) = common::cli(&["check", scene, "--set", &set]);
+        assert_eq!(code, 0, "{text}");
+        let warned = text.contains(&format!(
+            "warning    the contact solver is the {solver} dual"
+        ));
+        assert_eq!(warned, solver != "dense", "{solver}: {text}");
+        assert_eq!(text.contains(slow), solver != "dense", "{solver}: {text}");
+        let dir = tmp.path().join(solver);
+        let o = common::viscontact(&[
+            "run",
+            scene,
+            "--set",
+            &set,
+            "--quiet",
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{stderr}");
+        assert_eq!(
+            stderr.starts_with("warning: the contact solver"),
+            solver != "dense",
+            "{stderr}"
+        );
+        let warnings = common::summary(&dir)["warnings"].to_string();
+        assert_eq!(warnings.contains(slow), solver != "dense", "{warnings}");
+    }
+}
