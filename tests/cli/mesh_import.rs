@@ -1,16 +1,13 @@
 //! Mesh import: the shipped gmsh meshes, group lookup, normals, and every bad-mesh fixture.
 
-use std::path::{Path, PathBuf};
+use crate::common::{self, repo};
+use std::path::Path;
 
 use viscontact::mesh::{Group, Mesh};
 use viscontact::Error;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 fn read(rel: &str) -> Mesh {
-    let path = root().join(rel);
+    let path = repo().join(rel);
     Mesh::read(&path).unwrap_or_else(|e| panic!("{rel}: {e}"))
 }
 
@@ -156,7 +153,7 @@ fn paper_rectangles() {
     let mut read_any = 0;
     for n in [8, 16, 32, 64, 128] {
         let rel = format!("meshes/paper/rect_{n:03}.msh");
-        if n != 8 && !root().join(&rel).exists() {
+        if n != 8 && !repo().join(&rel).exists() {
             continue;
         }
         check_paper_rect(&read(&rel), n);
@@ -185,19 +182,7 @@ fn boundary_edges(m: &Mesh) -> std::collections::BTreeSet<[usize; 2]> {
 /// Every shipped mesh reads, counter-clockwise, and Γ1, Γ2, Γ3,1, Γ3,2 partition its boundary.
 #[test]
 fn every_shipped_mesh_reads_and_its_boundary_is_partitioned() {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "msh") {
-                out.push(p);
-            }
-        }
-    }
-    let mut files = Vec::new();
-    walk(&root().join("meshes"), &mut files);
-    files.sort();
+    let files = common::shipped_meshes();
     assert!(files.len() >= 3, "{files:?}");
     for path in &files {
         let m = Mesh::read(path).unwrap_or_else(|e| panic!("{e}"));
@@ -312,7 +297,7 @@ fn groups_by_name_alias_and_tag() {
 
 #[test]
 fn missing_group_is_reported_with_the_groups_present() {
-    let path = root().join("tests/data/no_contact_group.msh");
+    let path = repo().join("tests/data/no_contact_group.msh");
     let m = Mesh::read(&path).unwrap();
     assert!(m.group("Γ3,2").is_ok());
     let err = m.boundary_group("Gamma3_1").unwrap_err();
@@ -485,7 +470,7 @@ fn bracket_reads_with_all_groups() {
 
 #[test]
 fn msh22_is_refused_with_the_conversion_command() {
-    let path = root().join("tests/data/msh22.msh");
+    let path = repo().join("tests/data/msh22.msh");
     refused(&path, &["version 2.2", "-save -format msh41 -o"]);
 }
 
@@ -518,7 +503,7 @@ fn msh22_conversion_hint_works() {
     }
     let dir = tempfile::tempdir().unwrap();
     let old = dir.path().join("old mesh.msh");
-    std::fs::copy(root().join("tests/data/msh22.msh"), &old).unwrap();
+    std::fs::copy(repo().join("tests/data/msh22.msh"), &old).unwrap();
     let msg = refused(&old, &["-format msh41"]);
     let command = msg.split('`').nth(1).expect("a command in backticks");
     let status = std::process::Command::new("sh")
@@ -537,7 +522,7 @@ fn read_abs(path: &Path) -> Mesh {
 
 #[test]
 fn quadratic_triangles_are_refused() {
-    let path = root().join("tests/data/quadratic.msh");
+    let path = repo().join("tests/data/quadratic.msh");
     refused(
         &path,
         &[
@@ -550,7 +535,7 @@ fn quadratic_triangles_are_refused() {
 
 #[test]
 fn zero_area_triangle_is_refused() {
-    let path = root().join("tests/data/zero_area.msh");
+    let path = repo().join("tests/data/zero_area.msh");
     refused(
         &path,
         &["triangle 10", "zero area", "(1, 0.5)", "(1, 0)", "(1, 1)"],
@@ -559,9 +544,9 @@ fn zero_area_triangle_is_refused() {
 
 #[test]
 fn truncated_files_are_refused() {
-    refused(&root().join("tests/data/truncated.msh"), &["truncated"]);
+    refused(&repo().join("tests/data/truncated.msh"), &["truncated"]);
     // A binary file cut in the middle of $Nodes and of $Elements.
-    let bytes = std::fs::read(root().join("meshes/paper/rect_016_binary.msh")).unwrap();
+    let bytes = std::fs::read(repo().join("meshes/paper/rect_016_binary.msh")).unwrap();
     let dir = tempfile::tempdir().unwrap();
     for frac in [0.3, 0.5, 0.9, 0.999] {
         let path = dir.path().join(format!("cut_{frac}.msh"));
@@ -572,7 +557,7 @@ fn truncated_files_are_refused() {
 
 #[test]
 fn missing_file_is_refused() {
-    let path = root().join("tests/data/no_such_mesh.msh");
+    let path = repo().join("tests/data/no_such_mesh.msh");
     refused(
         &path,
         &[
@@ -586,7 +571,7 @@ fn missing_file_is_refused() {
 #[test]
 fn boundary_group_off_the_boundary_is_refused_where_it_is_used() {
     // The mesh reads (mesh-info shows it); the group is refused as a boundary group.
-    let path = root().join("tests/data/mesh_import/interior_edge.msh");
+    let path = repo().join("tests/data/mesh_import/interior_edge.msh");
     let mesh = Mesh::read(&path).unwrap();
     let err = mesh.boundary_group("diagonal").unwrap_err().to_string();
     for needle in ["\"diagonal\"", "(0, 0)–(1, 1)", "not on the boundary"] {
@@ -596,7 +581,7 @@ fn boundary_group_off_the_boundary_is_refused_where_it_is_used() {
 
 #[test]
 fn folded_mesh_is_refused() {
-    let path = root().join("tests/data/mesh_import/folded.msh");
+    let path = repo().join("tests/data/mesh_import/folded.msh");
     refused(&path, &["folds over itself", "triangles 1 and 2"]);
 }
 
@@ -704,7 +689,7 @@ fn garbage_is_refused_without_panic() {
 fn empty_boundary_group_is_refused_where_a_condition_needs_it() {
     // A group named in $PhysicalNames that no curve carries would silently drop its
     // boundary condition.
-    let text = std::fs::read_to_string(root().join("meshes/paper/rect_008.msh")).unwrap();
+    let text = std::fs::read_to_string(repo().join("meshes/paper/rect_008.msh")).unwrap();
     let text = text.replacen(
         "$PhysicalNames\n7\n",
         "$PhysicalNames\n8\n1 9 \"ghost\"\n",

@@ -125,6 +125,24 @@ pub fn map_msh_nodes(text: &str, f: impl Fn([f64; 3]) -> [f64; 3]) -> String {
     out
 }
 
+/// Every .msh file under the repository's meshes/, sorted.
+pub fn shipped_meshes() -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "msh") {
+                out.push(p);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(&repo().join("meshes"), &mut files);
+    files.sort();
+    files
+}
+
 /// Runs the binary from the repository root: (exit status, stdout + stderr).
 pub fn cli(args: &[&str]) -> (i32, String) {
     let out = viscontact(args);

@@ -297,19 +297,7 @@ fn block_008_counts_areas_and_normals() {
 /// theorem), which holds only for a closed, consistently outward boundary.
 #[test]
 fn every_shipped_3d_mesh_reads_and_its_boundary_is_partitioned() {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "msh") {
-                out.push(p);
-            }
-        }
-    }
-    let mut files = Vec::new();
-    walk(&repo().join("meshes"), &mut files);
-    files.sort();
+    let files = common::shipped_meshes();
     let mut seen = Vec::new();
     for path in &files {
         let m = read_mesh(path);
