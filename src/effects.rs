@@ -116,7 +116,8 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             ));
         }
     }
-    let right = Rows::new(&disc.contact, &disc.friction, disc.dim - 1)
+    let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+    let right = rows
         .corner_cosines()
         .into_iter()
         .filter(|(_, cos)| cos.abs() <= RIGHT_ANGLE_COSINE)
@@ -135,7 +136,10 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             fmt_num(cos)
         ));
     }
-    w.extend(ContactPlan::of_run(scene, disc).and_then(|p| p.slow_warning()));
+    if !rows.is_empty() {
+        let plan = ContactPlan::new(scene.solver.contact, &rows, disc.n_free);
+        w.extend(plan.slow_warning());
+    }
     w
 }
 

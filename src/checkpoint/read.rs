@@ -24,7 +24,7 @@ impl Checkpoint {
     /// this one.
     pub fn read(path: &Path) -> Result<Checkpoint> {
         let shown = path.display();
-        let sealed = verified_bytes(path)?;
+        let sealed = verify_seal(path)?;
         let f = h5_file(OpenMode::Read, path).map_err(|e| {
             Error::input(format!(
                 "{shown}: cannot open as HDF5 ({e}): the file is truncated or damaged; resume \
@@ -42,10 +42,10 @@ impl Checkpoint {
     }
 }
 
-/// Reads the file at `path` and verifies its checksum where it carries our header: whether
-/// it does (an HDF5 file without it is told apart by `format_version`); anything else is
-/// refused.
-fn verified_bytes(path: &Path) -> Result<bool> {
+/// Reads the file at `path` and verifies its checksum where it carries our header; returns
+/// whether it does (an HDF5 file without it is told apart by `format_version`). Anything
+/// else is refused.
+fn verify_seal(path: &Path) -> Result<bool> {
     let shown = path.display();
     let cannot = |e: String| {
         Error::input(format!(

@@ -664,7 +664,7 @@ fn arrays(
 ) -> impl FnOnce() -> Result<(Vec<Array>, Vec<Array>)> + Send + 'static {
     move || {
         let (points, cells) = make();
-        let arrays = |fields: Vec<OwnedField>, count, what| {
+        let checked = |fields: Vec<OwnedField>, count, what| {
             let sizes = fields
                 .iter()
                 .map(|f| (&f.name[..], f.components, f.values.len()));
@@ -678,8 +678,8 @@ fn arrays(
             )
         };
         Ok((
-            arrays(points, sizes.0, "point")?,
-            arrays(cells, sizes.1, "cell")?,
+            checked(points, sizes.0, "point")?,
+            checked(cells, sizes.1, "cell")?,
         ))
     }
 }

@@ -12,13 +12,17 @@ use viscontact::scene::ContactSolver;
 use viscontact::solver::choice::ContactPlan;
 use viscontact::solver::Rows;
 
+/// The block's scene at h = 1/4 over `steps` steps.
+fn block(steps: i64) -> SceneText {
+    SceneText::block()
+        .mesh(common::mesh_path("3d/block_004.msh"))
+        .set("time.steps", steps)
+}
+
 /// The block at h = 1/4 over 4 steps, written into `dir`, and a memory (bytes) in which its
 /// sparse plan fits and its dense one does not.
 fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64) {
-    let scene = SceneText::block()
-        .mesh(common::mesh_path("3d/block_004.msh"))
-        .set("time.steps", 4)
-        .write(dir, "s.toml");
+    let scene = block(4).write(dir, "s.toml");
     let (_s, _m, disc) = common::load(&scene, &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
     let memory = |choice| ContactPlan::new(choice, &rows, disc.n_free).memory.unwrap();
@@ -123,9 +127,7 @@ fn run_and_resume_refuse_a_plan_that_does_not_fit_and_leave_the_directory_as_it_
 #[test]
 fn the_contact_solver_and_the_steps_are_counted_together() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = SceneText::block()
-        .mesh(common::mesh_path("3d/block_004.msh"))
-        .set("time.steps", 20_000)
+    let scene = block(20_000)
         .table(
             "material.relaxation",
             "expr = \"0.2*(s+0.01)^(-0.5)\"\nmemory = \"exact\"",
@@ -154,10 +156,7 @@ fn the_contact_solver_and_the_steps_are_counted_together() {
 #[test]
 fn the_duals_without_d_warn_that_sliding_steps_can_be_slow() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = SceneText::block()
-        .mesh(common::mesh_path("3d/block_004.msh"))
-        .set("time.steps", 2)
-        .write(tmp.path(), "s.toml");
+    let scene = block(2).write(tmp.path(), "s.toml");
     let scene = scene.to_str().unwrap();
     let slow = "minutes to tens of minutes each";
     for solver in ["sparse", "matrix_free", "dense"] {
