@@ -63,11 +63,12 @@ impl Error {
     }
 }
 
-/// "SIGINT" / "SIGTERM" / "signal N".
+/// "SIGINT" / "SIGTERM" / "SIGHUP" / "signal N".
 pub fn signal_name(signal: i32) -> String {
     match signal {
         libc::SIGINT => "SIGINT".into(),
         libc::SIGTERM => "SIGTERM".into(),
+        libc::SIGHUP => "SIGHUP".into(),
         s => format!("signal {s}"),
     }
 }

@@ -7,6 +7,7 @@
 //! problem (3.1)) → [`time_loop`] (with [`history`]) → [`output`]; [`run`] drives them.
 
 pub mod checkpoint;
+pub mod console;
 pub mod effects;
 pub mod error;
 pub mod expr;

@@ -136,6 +136,9 @@ impl StepFlags {
 }
 
 fn main() -> ExitCode {
+    // Until the command is known (clap's help and errors too), a closed reader ends the
+    // process quietly; a run or a study outlives its terminal (src/console.rs).
+    viscontact::console::end_quietly_on_broken_pipe();
     let cli = Cli::parse();
     let interrupt = match interrupt_for(&cli.command) {
         Ok(i) => i,
@@ -146,11 +149,25 @@ fn main() -> ExitCode {
         Command::Study(a) => a.threads,
         _ => None,
     };
+    let only_prints = !matches!(
+        cli.command,
+        Command::Run { .. } | Command::Resume { .. } | Command::Study(_) | Command::StudyCase(_)
+    );
+    if !only_prints {
+        viscontact::console::outlive_broken_pipes();
+    }
     // After the signal handling (which must come before any thread is started).
     if let Err(e) = viscontact::threads::init(threads) {
         return exit_code(Err(e));
     }
-    exit_code(dispatch(cli.command, interrupt))
+    let result = dispatch(cli.command, interrupt);
+    match viscontact::console::stdout_failure() {
+        Some(why) if only_prints && result.is_ok() => {
+            viscontact::errln!("error: cannot write to standard output: {why}");
+            ExitCode::FAILURE
+        }
+        _ => exit_code(result),
+    }
 }
 
 /// SIGINT/SIGTERM stop a run or resume after its current step, or its setup before it
@@ -159,7 +176,7 @@ fn main() -> ExitCode {
 fn interrupt_for(command: &Command) -> std::result::Result<Interrupt, ExitCode> {
     match command {
         Command::Run { .. } | Command::Resume { .. } => Interrupt::on_signals().map_err(|e| {
-            eprintln!("error: cannot handle SIGINT/SIGTERM: {e}");
+            viscontact::errln!("error: cannot handle SIGINT/SIGTERM: {e}");
             ExitCode::FAILURE
         }),
         _ => Ok(Interrupt::default()),
@@ -212,7 +229,7 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
 fn plot(dir: &std::path::Path, options: &viscontact::plot::PlotOptions) -> Result<()> {
     let i = viscontact::plot::plot_run(dir, options)?;
     let view = i.view.map(|v| format!(", seen from {v:?}"));
-    println!(
+    viscontact::outln!(
         "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e}{})",
         i.output.display(),
         i.time,
@@ -235,8 +252,8 @@ fn exit_code(result: Result<Option<i32>>) -> ExitCode {
         Err(e) => {
             match e {
                 // Not an error of the user's or of the solve: what they asked for.
-                viscontact::Error::Interrupted(_) => eprintln!("{e}"),
-                _ => eprintln!("error: {e}"),
+                viscontact::Error::Interrupted(_) => viscontact::errln!("{e}"),
+                _ => viscontact::errln!("error: {e}"),
             }
             ExitCode::from(e.exit_code() as u8)
         }
@@ -248,7 +265,7 @@ fn report(outcome: Outcome) -> Option<i32> {
     match outcome {
         Outcome::Finished(s) => {
             // The warnings were printed before the first step (`run::drive`).
-            println!(
+            viscontact::outln!(
                 "{}: {} steps, {} dofs, {:.2} s on {} thread{}; ‖u_N‖_H1 = {:.6e}; wrote {}",
                 s.name,
                 s.steps,
@@ -266,7 +283,7 @@ fn report(outcome: Outcome) -> Option<i32> {
             message,
             ..
         } => {
-            println!("{message}");
+            viscontact::outln!("{message}");
             None
         }
         Outcome::Stopped {
@@ -274,7 +291,7 @@ fn report(outcome: Outcome) -> Option<i32> {
             message,
             ..
         } => {
-            eprintln!("{message}");
+            viscontact::errln!("{message}");
             Some(signal)
         }
     }
@@ -287,11 +304,11 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     print_problem(&scene, &mesh, &disc);
     let contact = viscontact::solver::choice::ContactPlan::of_run(&scene, &disc);
     if let Some(plan) = &contact {
-        println!("contact    {plan}");
+        viscontact::outln!("contact    {plan}");
     }
     // Sizes first: a hostile time.steps is refused before anything is allocated per step.
     let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
-    println!("resources  {estimate}");
+    viscontact::outln!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
     if let Some(plan) = &contact {
         plan.check(&estimate)?;
@@ -300,7 +317,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     print_stability(&scene, &disc, &plan);
     print_kernel(&scene, &disc, &plan);
     for w in viscontact::effects::warnings(&scene, &disc) {
-        println!("warning    {w}");
+        viscontact::outln!("warning    {w}");
     }
     viscontact::time_loop::refusals(&scene, &disc, &plan)
 }
@@ -309,8 +326,8 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
 /// solver.
 fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
     let effects = Effects::new(scene, disc);
-    println!("scene      {} ({})", scene.name, scene.path.display());
-    println!(
+    viscontact::outln!("scene      {} ({})", scene.name, scene.path.display());
+    viscontact::outln!(
         "mesh       {}: {}D, {} nodes, {} {}, {} free dofs",
         mesh.path.display(),
         mesh.dim,
@@ -323,13 +340,13 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         },
         disc.n_free
     );
-    println!(
+    viscontact::outln!(
         "time       T = {}, N = {}, k = {}",
         scene.time.end,
         scene.time.steps,
         scene.time.k()
     );
-    println!("effects    {}", effects.names().join(", "));
+    viscontact::outln!("effects    {}", effects.names().join(", "));
     let solver = if effects.linear() {
         "linear (one solve with the stored Cholesky factor of K_A per step)".to_string()
     } else {
@@ -339,7 +356,7 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
             disc.friction.len()
         )
     };
-    println!("solver     {solver}");
+    viscontact::outln!("solver     {solver}");
 }
 
 /// `check`'s stability line: the explicit scheme's step limit, or why there is none.
@@ -353,9 +370,11 @@ fn print_stability(scene: &Scene, disc: &Discretization, plan: &Plan) {
         None => "no explicit elastic or memory term: no step limit".to_string(),
     };
     match Verdict::new(scene, disc, plan) {
-        Verdict::Implicit => println!("stability  implicit history: unconditionally stable"),
-        Verdict::Limit(l) => println!("stability  {}", limit_line(&l, "")),
-        Verdict::Amplification(a, l) => println!(
+        Verdict::Implicit => {
+            viscontact::outln!("stability  implicit history: unconditionally stable")
+        }
+        Verdict::Limit(l) => viscontact::outln!("stability  {}", limit_line(&l, "")),
+        Verdict::Amplification(a, l) => viscontact::outln!(
             "stability  {}; direct-sum memory: response to a unit state peaks at {a:.3} over \
              the run's {} steps (stable: ≤ {})",
             limit_line(&l, ", elastic term"),
@@ -374,7 +393,7 @@ fn print_kernel(scene: &Scene, disc: &Discretization, plan: &Plan) {
         _ => plan.prony().map_or(0, |t| t.len()) * disc.n_free * 8,
     };
     match plan {
-        Plan::Compressed(fit) => println!(
+        Plan::Compressed(fit) => viscontact::outln!(
             "kernel     compressed: {} exponentials, certified max relative error {:.2e} on \
              the {} lags, fitted in {:.3} s; saves {:.1} MB against the direct sum",
             fit.terms.len(),
@@ -386,13 +405,13 @@ fn print_kernel(scene: &Scene, disc: &Discretization, plan: &Plan) {
         Plan::Exact {
             fallback: Some(why),
             ..
-        } => println!("kernel     runs exact (direct sum), not compressed: {why}"),
+        } => viscontact::outln!("kernel     runs exact (direct sum), not compressed: {why}"),
         Plan::Exact { fallback: None, .. } => {
-            println!("kernel     runs exact (direct sum): memory = \"exact\"")
+            viscontact::outln!("kernel     runs exact (direct sum): memory = \"exact\"")
         }
         _ => {}
     }
-    println!(
+    viscontact::outln!(
         "memory     history state ≈ {:.1} MB",
         history_bytes as f64 / 1e6
     );
@@ -403,7 +422,7 @@ fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {
     let groups = group_summaries(&mesh);
     if json {
         let v = mesh_json(path, &mesh, groups);
-        println!("{}", serde_json::to_string_pretty(&v).expect("json"));
+        viscontact::outln!("{}", serde_json::to_string_pretty(&v).expect("json"));
         return Ok(());
     }
     print_mesh_summary(path, &mesh, &groups);
@@ -503,8 +522,8 @@ fn print_mesh_summary(path: &std::path::Path, mesh: &Mesh, groups: &[serde_json:
         2 => ("angle", "counter-clockwise"),
         _ => ("dihedral angle", "positive volume"),
     };
-    println!("{}", path.display());
-    println!(
+    viscontact::outln!("{}", path.display());
+    viscontact::outln!(
         "  {}D: {} nodes, {} {} ({} reoriented to {orientation})",
         mesh.dim,
         mesh.nodes.len(),
@@ -512,9 +531,9 @@ fn print_mesh_summary(path: &std::path::Path, mesh: &Mesh, groups: &[serde_json:
         cells_key(mesh.dim),
         mesh.flipped
     );
-    println!("  physical groups:");
+    viscontact::outln!("  physical groups:");
     for g in groups {
-        println!(
+        viscontact::outln!(
             "    {:<10} tag {:<4} dim {}  {:>7} {}  {:>7} nodes{}",
             g["name"].as_str().unwrap_or(""),
             g["tag"],
@@ -532,7 +551,7 @@ fn print_mesh_summary(path: &std::path::Path, mesh: &Mesh, groups: &[serde_json:
                 .unwrap_or_default()
         );
     }
-    println!(
+    viscontact::outln!(
         "  quality: min {angle} {:.2}°, max aspect ratio {:.3}, {} {:.3e} .. {:.3e}",
         q.min_angle_deg,
         q.max_aspect_ratio,
@@ -541,13 +560,13 @@ fn print_mesh_summary(path: &std::path::Path, mesh: &Mesh, groups: &[serde_json:
         q.max_area
     );
     let parts = mesh.parts();
-    println!(
+    viscontact::outln!(
         "  parts: {} (cells connected through shared nodes)",
         parts.len()
     );
     if parts.len() > 1 {
         for (k, p) in parts.iter().enumerate() {
-            println!("    part {}: {}", k + 1, mesh.describe_part(p));
+            viscontact::outln!("    part {}: {}", k + 1, mesh.describe_part(p));
         }
     }
 }
@@ -556,11 +575,11 @@ fn print_mesh_summary(path: &std::path::Path, mesh: &Mesh, groups: &[serde_json:
 /// carry no condition, boundary groups with a defect.
 fn print_mesh_notes(mesh: &Mesh) {
     for note in overlapping_cell_groups(mesh) {
-        println!("  note: {note}");
+        viscontact::outln!("  note: {note}");
     }
     let coincident = mesh.coincident_nodes();
     if !coincident.is_empty() {
-        println!(
+        viscontact::outln!(
             "  warning: {}: a forgotten BooleanFragments (OpenCASCADE) or Coherence (built-in \
              kernel)? `check` and `run` refuse it unless [mesh] separate_parts = true",
             mesh.describe_coincident(&coincident)
@@ -568,14 +587,16 @@ fn print_mesh_notes(mesh: &Mesh) {
     }
     for (dim, tag, name) in &mesh.other_groups {
         let kind = ["point", "curve", "surface", "volume"][(*dim).min(3)];
-        println!(
+        viscontact::outln!(
             "  note: physical {kind} {} (tag {tag}) carries no condition in a {}D mesh",
             name.as_deref().unwrap_or("(no name)"),
             mesh.dim
         );
     }
     for g in mesh.groups.iter().filter_map(|g| g.defect.as_ref()) {
-        println!("  warning: {g} (refused only where a scene uses it as a boundary group)");
+        viscontact::outln!(
+            "  warning: {g} (refused only where a scene uses it as a boundary group)"
+        );
     }
 }
 
@@ -754,9 +775,9 @@ fn study(a: StudyArgs) -> Result<()> {
             cpus_per_task: a.cpus_per_task,
         };
         for p in slurm::emit(&scene, &opts, &slurm)? {
-            println!("wrote {}", p.display());
+            viscontact::outln!("wrote {}", p.display());
         }
-        println!("submit with {}", slurm.dir.join("submit.sh").display());
+        viscontact::outln!("submit with {}", slurm.dir.join("submit.sh").display());
         return Ok(());
     }
     let out = match a.out {
@@ -769,9 +790,9 @@ fn study(a: StudyArgs) -> Result<()> {
 /// Prints a study's tables and writes its files into `out`.
 fn print_study(report: &viscontact::study::StudyReport, out: &std::path::Path) -> Result<()> {
     use viscontact::study;
-    print!("{}", study::markdown(report));
+    viscontact::outln!("{}", study::markdown(report).trim_end());
     for p in study::write_report(report, out)? {
-        println!("wrote {}", p.display());
+        viscontact::outln!("wrote {}", p.display());
     }
     Ok(())
 }
@@ -794,9 +815,9 @@ fn memory_study(a: StudyArgs, scene: &std::path::Path) -> Result<()> {
         }
     };
     let report = memory_cost::run_memory_cost(scene, &opts)?;
-    print!("{}", memory_cost::markdown(&report));
+    viscontact::outln!("{}", memory_cost::markdown(&report).trim_end());
     for p in memory_cost::write_report(&report, &out)? {
-        println!("wrote {}", p.display());
+        viscontact::outln!("wrote {}", p.display());
     }
     Ok(())
 }

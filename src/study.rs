@@ -558,7 +558,7 @@ pub fn observed_order(e0: f64, e1: f64, p0: f64, p1: f64) -> Option<f64> {
 fn say(progress: bool, msg: &str) {
     use std::io::IsTerminal;
     if progress && std::io::stderr().is_terminal() {
-        eprintln!("{msg}");
+        crate::errln!("{msg}");
     }
 }
 

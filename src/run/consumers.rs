@@ -260,7 +260,7 @@ impl Progress {
             Kind::Lines => {
                 if self.printed.elapsed() >= Self::EVERY {
                     self.printed = Instant::now();
-                    eprintln!(
+                    crate::errln!(
                         "{}",
                         self.line(s.step.n, s.step.t, s.step.report.iterations)
                     );

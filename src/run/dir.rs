@@ -255,9 +255,20 @@ pub fn remove_run(dir: &Path) -> Result<()> {
 
 /// The run id summary.json records, if it records one.
 fn summary_run_id(dir: &Path) -> Option<String> {
+    summary_text(dir, "run_id")
+}
+
+/// A string field of `dir`'s summary.json, if it has one.
+fn summary_text(dir: &Path, key: &str) -> Option<String> {
     let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v.get("run_id")?.as_str().map(str::to_string)
+    v.get(key)?.as_str().map(str::to_string)
+}
+
+/// Whether `dir`'s summary.json says that run `run_id` completed.
+pub fn completed(dir: &Path, run_id: &str) -> bool {
+    summary_run_id(dir).as_deref() == Some(run_id)
+        && summary_text(dir, "status").as_deref() == Some("completed")
 }
 
 /// Refuses to resume run `run_id` (of `checkpoint`) into `dir` when `dir` holds another run:

@@ -11,15 +11,28 @@
 //! or one product of the matrix-free conjugate gradients): the run stops as if the first
 //! signal had come just before the step, with the checkpoint of the state at its start
 //! (written now if the last one is older), summary.json and the same exit codes; the
-//! resumed run solves the step from its start, bit for bit the uninterrupted one. Any other
-//! time (setup, clarabel, the first step, writing) a second signal ends the process at once
-//! by the signal's default action, as does a third; the checkpoint on disk is then the
-//! previous one (it is written through a temporary file and a rename, so it is never
-//! half-written).
+//! resumed run solves the step from its start, bit for bit the uninterrupted one.
+//!
+//! No later signal ever costs more than the step in progress. Before the run is committed
+//! (setup, while the directory still holds its earlier run unchanged: see below) a second
+//! signal ends the process at once by the signal's default action, which changes nothing
+//! on disk. Once it is committed, the directory holds this run alone and, until its first
+//! checkpoint, nothing to resume: a second or third signal that cannot give the step up
+//! (clarabel's steps, the first step, writing a frame or a checkpoint) is noted on stderr
+//! and the run stops after the step in progress as the first asked. Killing it then would
+//! lose what it computed: two Ctrl-C a few milliseconds apart used to end the process by
+//! the signal after setup, with the earlier run removed and no checkpoint written. SIGKILL
+//! still ends it at once; the directory then keeps its last checkpoint (written through a
+//! temporary file and a rename, so it is never half-written), if one was written.
+//!
+//! SIGHUP, which a terminal that goes away sends (an ssh session that drops), is taken as
+//! SIGTERM is: the run stops after its step with a checkpoint (exit 129). Under `nohup` it
+//! is ignored and the run goes on; its lines to the lost terminal are dropped
+//! (`crate::console`).
 //!
 //! # How the signals are received
 //!
-//! No handler is installed. [`Interrupt::on_signals`] blocks SIGINT and SIGTERM in the
+//! No handler is installed. [`Interrupt::on_signals`] blocks SIGINT, SIGTERM and SIGHUP in the
 //! calling thread before any other thread exists, so every thread the process starts
 //! inherits the mask, and one thread of ours takes them with `sigwait`. A library that
 //! installs handlers of its own therefore never sees them: the bundled METIS calls
@@ -33,12 +46,14 @@
 //!
 //! A new run replaces the directory's earlier run in one step, [`Interrupt::unless_signalled`]:
 //! under a lock that the signal thread also takes before it records a signal, the run
-//! checks that no signal came and then removes the earlier run. A signal therefore either
-//! came first (the run stops, the earlier run is intact) or after the replacement (the run
-//! is past setup and stops after its first step, with a checkpoint to resume from).
+//! checks that no signal came and then removes the earlier run, and is committed. A signal
+//! therefore either came first (the run stops, the earlier run is intact) or after the
+//! replacement (the run is past setup and stops after its first step, with a checkpoint to
+//! resume from). A resume commits the same way before it first changes the directory.
 
+use crate::error::signal_name;
 use crate::solver::Abandon;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// The signal that asked a run to stop, if one came; shared with the signal thread.
@@ -47,15 +62,18 @@ pub struct Interrupt {
     signal: Arc<AtomicUsize>,
     /// Held while a signal is recorded and while setup commits (see the module doc).
     commit: Arc<Mutex<()>>,
+    /// Setup has committed: the directory holds this run, and no signal may end the process.
+    committed: Arc<AtomicBool>,
     /// What a second signal asks of the step being solved.
     abandon: Abandon,
 }
 
 impl Interrupt {
-    /// Takes SIGINT and SIGTERM from now on: the first sets this flag, a second one of
-    /// either gives up the step being solved where it can be (`abandon`), else kills the
-    /// process as if nothing had taken them. Call it before the process
-    /// starts any thread (the mask it sets is inherited by threads started later).
+    /// Takes SIGINT, SIGTERM and SIGHUP from now on: the first sets this flag, a later one
+    /// gives up the step being solved where it can be (`abandon`), else, before the run
+    /// commits, kills the process as if nothing had taken them (see the module doc). Call
+    /// it before the process starts any thread (the mask it sets is inherited by threads
+    /// started later).
     pub fn on_signals() -> std::io::Result<Interrupt> {
         let set = stop_signals();
         // SAFETY: `set` is an initialized signal set; pthread_sigmask only reads it.
@@ -71,9 +89,10 @@ impl Interrupt {
         Ok(interrupt)
     }
 
-    /// The signal thread: waits for SIGINT/SIGTERM; records the first; gives up the step by
-    /// the second where the step allows, else dies by it.
+    /// The signal thread: waits for the stop signals; records the first; answers a later
+    /// one by [`Interrupt::again`].
     fn take_signals(&self, set: libc::sigset_t) {
+        let mut noted = false;
         loop {
             let mut sig: libc::c_int = 0;
             // SAFETY: `set` is initialized and `sig` a valid place for the result.
@@ -81,13 +100,34 @@ impl Interrupt {
                 continue;
             }
             if self.signal().is_some() {
-                if self.abandon.request() {
-                    continue;
-                }
-                die_by(sig);
+                self.again(sig, &mut noted);
+                continue;
             }
             let _commit = self.commit.lock().unwrap_or_else(|p| p.into_inner());
             self.raise(sig);
+        }
+    }
+
+    /// A signal after the first: gives up the step being solved where it can; else ends
+    /// the process if the run has not committed (nothing on disk changes), else says once
+    /// that the run stops after the step in progress.
+    fn again(&self, sig: libc::c_int, noted: &mut bool) {
+        if self.abandon.request() {
+            crate::errln!("\n{}: giving up the step in progress", signal_name(sig));
+            return;
+        }
+        // Under the commit lock: a commit in progress finishes first, and then counts.
+        let _commit = self.commit.lock().unwrap_or_else(|p| p.into_inner());
+        if !self.committed.load(Ordering::SeqCst) {
+            die_by(sig);
+        }
+        if !std::mem::replace(noted, true) {
+            crate::errln!(
+                "\n{}: the step in progress cannot be given up; the run stops after it, \
+                 with a checkpoint (SIGKILL would end it now, losing what it computed \
+                 since its last checkpoint)",
+                signal_name(sig)
+            );
         }
     }
 
@@ -119,16 +159,21 @@ impl Interrupt {
 
     /// Runs `commit` unless a signal has come, and so that no signal is recorded while it
     /// runs: `Err(signal)` when one came first.
+    /// From then on no signal ends the process (see the module doc).
     pub fn unless_signalled<T>(&self, commit: impl FnOnce() -> T) -> Result<T, i32> {
         let _commit = self.commit.lock().unwrap_or_else(|p| p.into_inner());
         match self.signal() {
             Some(s) => Err(s),
-            None => Ok(commit()),
+            None => {
+                let done = commit();
+                self.committed.store(true, Ordering::SeqCst);
+                Ok(done)
+            }
         }
     }
 }
 
-/// {SIGINT, SIGTERM}.
+/// {SIGINT, SIGTERM, SIGHUP}.
 fn stop_signals() -> libc::sigset_t {
     // SAFETY: sigemptyset initializes the set before sigaddset reads it.
     unsafe {
@@ -136,6 +181,7 @@ fn stop_signals() -> libc::sigset_t {
         libc::sigemptyset(&mut set);
         libc::sigaddset(&mut set, libc::SIGINT);
         libc::sigaddset(&mut set, libc::SIGTERM);
+        libc::sigaddset(&mut set, libc::SIGHUP);
         set
     }
 }

@@ -204,6 +204,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     stage()?;
     cp.check(&scene, &mesh, &disc)?;
+    check_continuation(checkpoint_path, &cp, &scene, opts.stop_after)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     let estimate = crate::resources::Estimate::new(&scene, &disc, cp.n);
     estimate.check(&out)?;
@@ -221,7 +222,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
             frames: cp.frames.as_deref(),
         });
     if cp.frames.is_none() {
-        eprintln!(
+        crate::errln!(
             "warning: {}: checkpoint format version {} records no checksums of the frames \
              before it; the series in {} is continued without verifying it",
             checkpoint_path.display(),
@@ -243,8 +244,9 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
     // The last moment a signal ends the resume unchanged; after it, it stops after a step.
-    stage()?;
-    dir::remove_temporaries(&out);
+    opts.interrupt
+        .unless_signalled(|| dir::remove_temporaries(&out))
+        .map_err(Error::Interrupted)?;
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::resume(&out, identity, scene.time.steps, tl.rows(), &cp);
     drive(Drive {
@@ -263,6 +265,49 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         opts,
         resumed_from: Some(cp.n),
     })
+}
+
+/// Refuses (exit 2) a resume that would do nothing the user asked for: one of a run that
+/// completed (it would solve its last step again) unless `time.end` moves the end later,
+/// and a `--stop-after` step that the checkpoint has passed.
+fn check_continuation(
+    path: &Path,
+    cp: &checkpoint::Checkpoint,
+    scene: &Scene,
+    stop_after: Option<usize>,
+) -> Result<()> {
+    let steps = scene.time.steps;
+    if cp.n >= steps && dir::completed(&cp.dir(), &cp.id.run_id) {
+        return Err(Error::input(format!(
+            "{}: the run is complete (summary.json: \"completed\", t = {}); to continue it, \
+             give a later end: --set time.end=T2",
+            path.display(),
+            scene.time.end
+        )));
+    }
+    match stop_after {
+        Some(s) if s < cp.n => Err(Error::input(format!(
+            "{}: --stop-after {s}: the checkpoint continues the run at step {} (steps up to \
+             {} are solved); give a step from {} to {steps}, or leave --stop-after out",
+            path.display(),
+            cp.n,
+            cp.n - 1,
+            cp.n
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Says (on stderr) that a `--stop-after` step at or past the last step does not stop the
+/// run: it runs to its end.
+fn note_stop_after(stop_after: Option<usize>, steps: usize) {
+    if let Some(s) = stop_after.filter(|&s| s >= steps) {
+        crate::errln!(
+            "warning: --stop-after {s}: the run's last step is {steps}, so it runs to its end \
+             (a stop after step {} or earlier leaves a checkpoint to resume)",
+            steps.saturating_sub(1)
+        );
+    }
 }
 
 /// Refuses (exit 2) a run whose contact solver, with what its steps hold (`steps`), would
@@ -312,8 +357,9 @@ struct Drive<'a> {
 fn drive(d: Drive) -> Result<Outcome> {
     let warnings = crate::effects::warnings(d.scene, d.disc);
     for w in &warnings {
-        eprintln!("warning: {w}");
+        crate::errln!("warning: {w}");
     }
+    note_stop_after(d.opts.stop_after, d.scene.time.steps);
     let mut tl = d.tl;
     let rows = Arc::new(tl.rows().clone());
     let mut consumers = Consumers {

@@ -375,7 +375,12 @@ fn stopped_by_signal_and_resumed(signals: &[&str], exits: &[Option<i32>], set: &
                         && stderr.contains("viscontact resume"),
                     "{what}: {stderr}"
                 );
-                assert_eq!(s["message"].as_str(), Some(stderr.trim()), "{what}");
+                // The last line; a second signal's note may come before it.
+                assert_eq!(
+                    s["message"].as_str(),
+                    stderr.trim().lines().last(),
+                    "{what}"
+                );
             }
         }
         let cp = stopped.join("checkpoint.h5");
@@ -415,13 +420,12 @@ fn terminated_with_sigterm_and_resumed_equals_uninterrupted() {
 
 /// SIGINT then SIGTERM at once: the second gives up the step being solved where a dual
 /// method is solving one (`solver::abandon`: exit 130, summary.json "interrupted" after the
-/// step before it) and ends the process at once anywhere else (setup is long past: between
-/// steps, writing a frame); with a checkpoint at every step, either resumes to the run that
-/// was never stopped.
+/// step before it); anywhere else (setup is long past: between steps, writing a frame) it
+/// is noted and the run stops after its step as the first asked, never killed; either
+/// resumes to the run that was never stopped.
 #[test]
 fn interrupted_twice_and_resumed_equals_uninterrupted() {
-    let exits = [Some(130), None];
-    stopped_by_signal_and_resumed(&["INT", "TERM"], &exits, &["checkpoint.every=1"]);
+    stopped_by_signal_and_resumed(&["INT", "TERM"], &[Some(130)], &[]);
 }
 
 /// With a general kernel the history file is appended to in place (never rewritten or

@@ -6,6 +6,7 @@ mod common;
 mod bad_data;
 mod checkpoint;
 mod fuzz;
+mod repeated_signals;
 mod resume_verify;
 mod robustness;
 mod setup_signals;
