@@ -116,6 +116,23 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             ));
         }
     }
+    for &what in &disc.idle_groups {
+        let (group, meaning) = match what {
+            "contact" => (
+                &scene.mesh.groups.contact,
+                "no non-penetration: the body passes freely through the foundation there",
+            ),
+            _ => (
+                &scene.mesh.groups.friction,
+                "neither the given normal stress F nor friction acts there",
+            ),
+        };
+        w.push(format!(
+            "the mesh has the {what} group '{group}' (mesh.groups.{what}), but the scene has \
+             no [{what}] table (or it is disabled), so that boundary is free: {meaning}; add \
+             [{what}] to the scene to impose it"
+        ));
+    }
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
     let right = rows
         .corner_cosines()

@@ -36,25 +36,38 @@ pub const ENV: &str = "VISCONTACT_THREADS";
 /// The count, once [`init`] or [`count`] has decided it.
 static COUNT: OnceLock<usize> = OnceLock::new();
 
+/// The most threads a run may ask for, as a multiple of the cores the process may use.
+/// Results are the same for every count, so more threads than cores only slow a run
+/// (`--threads 5000` turned a 0.25 s run into 9.6 s, and a billion spawned threads for 11
+/// minutes before the process aborted); a few times the cores is still a count someone
+/// may try on purpose (with a warning), far more is a typo.
+pub const MAX_PER_CORE: usize = 4;
+
 /// Decides the process's thread count (`flag`, else `VISCONTACT_THREADS`, else the cores it
 /// may use), sizes rayon's global pool and faer's parallelism by it, and returns it. Call it
 /// once, before any work: a second call, or one after [`count`], keeps the first count.
-/// A `VISCONTACT_THREADS` that is not a whole number ≥ 1 is bad input.
+/// A `VISCONTACT_THREADS` that is not a whole number ≥ 1, or a count above
+/// [`MAX_PER_CORE`] times the cores, is bad input; a count above the cores is warned of.
 pub fn init(flag: Option<NonZeroUsize>) -> Result<usize> {
-    let n = match flag {
-        Some(n) => n.get(),
+    let (n, source) = match flag {
+        Some(n) => (n.get(), format!("--threads {n}")),
         None => match std::env::var(ENV) {
-            Ok(text) => parse(&text).ok_or_else(|| {
-                Error::input(format!(
-                    "{ENV}={text:?}: expected the number of threads, a whole number ≥ 1"
-                ))
-            })?,
-            Err(std::env::VarError::NotPresent) => available(),
+            Ok(text) => (
+                parse(&text).ok_or_else(|| {
+                    Error::input(format!(
+                        "{ENV}={text:?}: expected the number of threads, a whole number ≥ 1 \
+                         written without spaces"
+                    ))
+                })?,
+                format!("{ENV}={text}"),
+            ),
+            Err(std::env::VarError::NotPresent) => (available(), String::new()),
             Err(std::env::VarError::NotUnicode(_)) => {
                 return Err(Error::input(format!("{ENV} is not valid UTF-8")));
             }
         },
     };
+    check(n, available(), &source)?;
     let n = *COUNT.get_or_init(|| n);
     // Fails only if the pool was started already (a second call): it keeps its size then.
     let _ = rayon::ThreadPoolBuilder::new()
@@ -65,9 +78,33 @@ pub fn init(flag: Option<NonZeroUsize>) -> Result<usize> {
     Ok(n)
 }
 
+/// Refuses `n` threads (asked for by `source`) above [`MAX_PER_CORE`] × `cores`, and warns
+/// of more than `cores`.
+fn check(n: usize, cores: usize, source: &str) -> Result<()> {
+    let most = MAX_PER_CORE * cores;
+    let cores_text = format!(
+        "this process may use {cores} core{}",
+        if cores == 1 { "" } else { "s" }
+    );
+    if n > most {
+        return Err(Error::input(format!(
+            "{source}: {cores_text}, and at most {most} threads ({MAX_PER_CORE} a core) are \
+             accepted; results are the same for every count, so give {cores} (or leave the \
+             count out to use the cores)"
+        )));
+    }
+    if n > cores {
+        crate::errln!(
+            "warning: {source}: {cores_text}; threads beyond the cores only slow the steps \
+             (the results are the same)"
+        );
+    }
+    Ok(())
+}
+
 /// A thread count as `VISCONTACT_THREADS` writes it: a whole number ≥ 1.
 fn parse(text: &str) -> Option<usize> {
-    text.trim().parse().ok().filter(|&n| n >= 1)
+    text.parse().ok().filter(|&n| n >= 1)
 }
 
 /// The cores the process may use (1 if the system cannot say), asked once: the answer
@@ -109,13 +146,22 @@ mod tests {
     #[test]
     fn counts_are_whole_numbers_from_one() {
         assert_eq!(parse("3"), Some(3));
-        assert_eq!(parse(" 16\n"), Some(16));
-        for bad in ["0", "-1", "", "two", "1.5"] {
+        assert_eq!(parse("16"), Some(16));
+        for bad in ["0", "-1", "", "two", "1.5", " 2", "16\n"] {
             assert_eq!(parse(bad), None, "{bad}");
         }
         assert!(available() >= 1);
         // However many threads the process runs, faer's kernels use no more than its cores.
         assert!(par().degree() <= available());
+    }
+
+    #[test]
+    fn counts_far_above_the_cores_are_refused() {
+        assert!(check(2, 2, "--threads 2").is_ok());
+        assert!(check(8, 2, "--threads 8").is_ok());
+        let e = check(9, 2, "--threads 9").unwrap_err().to_string();
+        assert!(e.contains("--threads 9") && e.contains("2 cores"), "{e}");
+        assert!(check(1_000_000_000, 16, "VISCONTACT_THREADS=1000000000").is_err());
     }
 
     /// A matrix of uniform entries in [−1, 1) from `seed`.

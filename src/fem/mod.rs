@@ -107,6 +107,9 @@ pub struct Discretization {
     pub contact_kink_deg: f64,
     /// The same for Γ3,2 (0 when friction is off).
     pub friction_kink_deg: f64,
+    /// The conditions ("contact", "friction") whose group the mesh has but the scene
+    /// leaves off: that boundary then carries no condition at all (`effects::warnings`).
+    pub idle_groups: Vec<&'static str>,
     /// The cells as [`Discretization::stress`] reads them, once it is called.
     stress_cells: std::sync::OnceLock<PackedCells>,
 }
@@ -192,6 +195,24 @@ impl RowMaker<'_> {
             area,
         }
     }
+}
+
+/// "contact" and "friction" where the mesh has the condition's group and the scene leaves
+/// the condition off.
+fn idle_groups(mesh: &Mesh, scene: &Scene) -> Vec<&'static str> {
+    let groups = &scene.mesh.groups;
+    [
+        ("contact", &groups.contact, scene.physics.contact),
+        (
+            "friction",
+            &groups.friction,
+            scene.physics.friction.is_some(),
+        ),
+    ]
+    .into_iter()
+    .filter(|(_, name, on)| !on && mesh.boundary_group(name).is_ok())
+    .map(|(what, _, _)| what)
+    .collect()
 }
 
 /// Γ3,1: one row n_i per free node, and the largest kink of the normals (empty and 0 when
@@ -369,6 +390,7 @@ impl Discretization {
             friction,
             contact_kink_deg: contact_kink,
             friction_kink_deg: friction_kink,
+            idle_groups: idle_groups(mesh, scene),
             stress_cells: std::sync::OnceLock::new(),
         })
     }

@@ -3,6 +3,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod asked_for;
 mod cli_errors;
 mod contact_plan;
 mod expr_differential;
@@ -12,3 +13,4 @@ mod mesh_checks;
 mod mesh_import;
 mod plot;
 mod run_dir;
+mod streams;
