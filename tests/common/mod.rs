@@ -314,6 +314,26 @@ pub fn signal_when(
     (child.wait().unwrap(), stderr)
 }
 
+/// Waits at most `limit` for `child`: its exit code, or minus the signal that ended it (a
+/// hang fails the test, naming `what`, after killing the process).
+pub fn exit_within(child: &mut std::process::Child, limit: std::time::Duration, what: &str) -> i32 {
+    use std::os::unix::process::ExitStatusExt;
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status
+                .code()
+                .unwrap_or_else(|| -status.signal().unwrap_or(0));
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{what}: no exit within {limit:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
 /// Copies the files of `from` (not recursive) into a new directory `to`.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();

@@ -19,7 +19,7 @@ use common::{SplitMix, BIN};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// How a trial ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -57,21 +57,8 @@ fn signalled(args: &[&str], delay: Duration, signals: &[(i32, Duration)]) -> i32
         // SAFETY: kill(2) on our own child's pid.
         unsafe { libc::kill(child.id() as i32, signal) };
     }
-    let sent = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            use std::os::unix::process::ExitStatusExt;
-            return status
-                .code()
-                .unwrap_or_else(|| -status.signal().unwrap_or(0));
-        }
-        if sent.elapsed() > Duration::from_secs(120) {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("{args:?}: no exit within 120 s of the signals {signals:?}");
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let what = format!("{args:?}: signals {signals:?}");
+    common::exit_within(&mut child, Duration::from_secs(120), &what)
 }
 
 /// One trial: the signals at `delay` into a run in `out`, which holds a copy of `full`.

@@ -16,7 +16,7 @@ use crate::common;
 use common::{SplitMix, BIN};
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Starts `viscontact ARGS`, sends `signal` after `delay`, and waits at most 5 s after the
 /// signal: the exit status (a hang fails the test, after killing the process).
@@ -31,23 +31,10 @@ fn signalled(args: &[&str], delay: Duration, signal: i32) -> i32 {
     std::thread::sleep(delay);
     // SAFETY: kill(2) on our own child's pid.
     unsafe { libc::kill(child.id() as i32, signal) };
-    let sent = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            use std::os::unix::process::ExitStatusExt;
-            // Ended by the signal itself: it came before `main` blocked it (the dynamic
-            // loader's and the runtime's start, some ms): what a shell reports as 128 + sig.
-            return status
-                .code()
-                .unwrap_or_else(|| -status.signal().unwrap_or(0));
-        }
-        if sent.elapsed() > Duration::from_secs(5) {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("{args:?}: no exit within 5 s of signal {signal} sent after {delay:?}");
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    // Ended by the signal itself: it came before `main` blocked it (the dynamic loader's
+    // and the runtime's start, some ms): what a shell reports as 128 + sig.
+    let what = format!("{args:?}, signal {signal} sent after {delay:?}");
+    common::exit_within(&mut child, Duration::from_secs(5), &what)
 }
 
 /// The setup time the summary of a run in `dir` reports.
