@@ -12,3 +12,4 @@ mod mesh_checks;
 mod mesh_import;
 mod plot;
 mod run_dir;
+mod scene_reference;

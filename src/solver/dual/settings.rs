@@ -1,5 +1,5 @@
 //! The tuning of the dual method, one typed value per choice the method makes (Clarabel's
-//! `DefaultSettings` is the model). No scene key sets them (DESIGN.md is the contract): a run
+//! `DefaultSettings` is the model). No scene key sets them (docs/scene.md lists every key): a run
 //! uses `DualSettings::default()`, whose values are the ones `tests/regression/golden.rs` pins bit for
 //! bit; tests pick others. The measurements behind each default are in docs/performance.md,
 //! "Contact solver tuning".
