@@ -10,6 +10,7 @@ mod extreme_values;
 mod hard_meshes;
 mod mesh_checks;
 mod mesh_import;
+mod performance_doc;
 mod plot;
 mod run_dir;
 mod scene_reference;
