@@ -5,12 +5,12 @@ mod common;
 
 mod cli_errors;
 mod contact_plan;
+mod docs;
 mod expr_differential;
 mod extreme_values;
 mod hard_meshes;
 mod mesh_checks;
 mod mesh_import;
-mod performance_doc;
 mod plot;
 mod run_dir;
 mod scene_reference;
