@@ -2,7 +2,8 @@
 //! today, in one table, and keeps the history after it; the code and the docs point into it
 //! by title (`docs/performance.md, "Threads"`), and every such title is one of its headings
 //! or bold paragraph titles; docs/architecture.md's floors hold every module of src/, and
-//! each module names (`crate::…`) only modules on the floors below its own.
+//! each module names (`crate::…`) only modules on the floors below its own; and every
+//! document the repository names is in it.
 
 use crate::common;
 
@@ -220,5 +221,66 @@ fn architecture_md_floors_hold_every_module_and_imports_run_down() {
     assert!(
         floor.len() >= 20,
         "the floors table was not read: {floor:?}"
+    );
+}
+
+/// The documents `text` (one line of words) names: `docs/….md`, a project document in
+/// capitals (`README.md`), and in a Markdown file the targets of its links (`](memory.md)`);
+/// not the files a command writes (`study.md`).
+fn named_documents(text: &str, markdown: bool) -> Vec<String> {
+    let word = |c: char| c.is_ascii_alphanumeric() || "_./-".contains(c);
+    let mut names = Vec::new();
+    for (i, _) in text.match_indices(".md") {
+        if text[i + 3..].starts_with(|c: char| c.is_ascii_alphanumeric()) {
+            continue;
+        }
+        let start = text[..i]
+            .char_indices()
+            .rev()
+            .find(|&(_, c)| !word(c))
+            .map_or(0, |(s, c)| s + c.len_utf8());
+        let name = &text[start..i + 3];
+        let stem = name.trim_end_matches(".md");
+        let capitals = !stem.is_empty() && stem.chars().all(|c| c.is_ascii_uppercase() || c == '_');
+        let link = markdown && text[..start].ends_with("](");
+        if name.starts_with("docs/") || capitals || link {
+            names.push(name.to_string());
+        }
+    }
+    names
+}
+
+#[test]
+fn every_document_the_repository_names_is_in_it() {
+    let mut files = Vec::new();
+    for (dir, ext) in [
+        ("src", "rs"),
+        ("docs", "md"),
+        ("tests", "rs"),
+        ("examples", "rs"),
+    ] {
+        files.extend(repo_files(dir, ext));
+    }
+    files.extend(repo_files("scripts", "sh"));
+    files.extend(repo_files("scripts", "py"));
+    files.push(repo().join("README.md"));
+    let mut seen = 0;
+    for file in &files {
+        let markdown = file.extension().is_some_and(|x| x == "md");
+        let text = std::fs::read_to_string(file).unwrap();
+        for name in named_documents(&text, markdown) {
+            seen += 1;
+            let here = file.parent().unwrap().join(&name);
+            assert!(
+                repo().join(&name).is_file() || here.is_file(),
+                "{} names {name}, which is not in the repository: cite the repository's own \
+                 docs, or say the thing itself",
+                file.display()
+            );
+        }
+    }
+    assert!(
+        seen >= 50,
+        "only {seen} documents named: the search is broken"
     );
 }
