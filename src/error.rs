@@ -51,7 +51,7 @@ impl Error {
         }
     }
 
-    /// The process exit status for this error (DESIGN.md: 2 for bad input, 1 otherwise;
+    /// The process exit status for this error (README.md, "Commands": 2 for bad input, 1 otherwise;
     /// 128 + the signal for a setup that a signal stopped, as a shell reports a process the
     /// signal ended).
     pub fn exit_code(&self) -> i32 {

@@ -2,7 +2,7 @@
 //! fully discrete scheme of Problem 3.1 in Xu, Wang, He, Chen, Han, Huang (2021): P1 finite
 //! elements in space, the left endpoint rule for both history integrals in time.
 //!
-//! The modules follow the data flow of DESIGN.md, one stage each:
+//! The modules follow the data flow of a run, one stage each (docs/architecture.md):
 //! [`scene`] → [`mesh`] → [`fem`] (discretization) → [`effects`] → [`solver`] (the per-step
 //! problem (3.1)) → [`time_loop`] (with [`history`]) → [`output`]; [`run`] drives them.
 

@@ -1,4 +1,4 @@
-//! The `viscontact` command line (DESIGN.md "Command line").
+//! The `viscontact` command line (README.md, "Commands").
 
 use clap::{Parser, Subcommand};
 use std::num::NonZeroUsize;
@@ -26,7 +26,7 @@ enum Command {
     /// Run a scene: writes solution.pvd + solution_NNNNNN.vtu and summary.json.
     Run {
         scene: PathBuf,
-        /// Output directory (default: out/<scene name>/).
+        /// Output directory (default: out/<scene name>/ in the working directory).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Override a scene key by its dotted path, e.g. --set time.steps=64 (repeatable).
@@ -653,7 +653,7 @@ struct StudyArgs {
     /// One mesh per level, then the reference mesh (for meshes that are not numbered).
     #[arg(long, value_delimiter = ',')]
     meshes: Vec<PathBuf>,
-    /// Output directory (default: out/<scene name>-study-<vary>/).
+    /// Output directory (default: out/<scene name>-study-<vary>/ in the working directory).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Runs per level for the median wall time (default: 3 under a second, else 1).

@@ -53,7 +53,7 @@ const GROUP_WHY: &str = "a tag is looked up in the mesh's physical groups; no nu
                          from it";
 
 /// Every numeric key the scene parser knows (tests/cli/extreme_values.rs checks that the parser
-/// has no other), in the order of DESIGN.md's scene file.
+/// has no other), in the order of docs/scene.md.
 pub const RANGES: &[Range] = &[
     row("mesh.groups.fixed", GROUP, "\"Γ1\"", GROUP_WHY),
     row("mesh.groups.traction", GROUP, "\"Γ2\"", GROUP_WHY),

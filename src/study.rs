@@ -1,4 +1,4 @@
-//! Accuracy against cost: the `study` command (DESIGN.md "Command line", issue 5).
+//! Accuracy against cost: the `study` command (README.md, "Commands"; docs/verification.md).
 //!
 //! A study runs one scene at several levels and measures, as Section 4 of the paper does,
 //! the error at the end time in the H¹ norm against a reference solution,

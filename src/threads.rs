@@ -123,9 +123,9 @@ pub fn count() -> usize {
 
 /// faer's parallelism for work that is large enough to share: all [`count`] threads, but
 /// no more than the cores the process may use. faer's parallel kernels wait for each other
-/// spinning, so more of them than cores is ruinous, where the step's passes (`team::Team`)
-/// merely lose their threaded way: on two cores here the block 1/24's setup took 9 s with
-/// two threads, 17.5 s with four and 64 s with eight. Their bits do not depend on the
+/// spinning, so more of them than cores is ruinous (eight on two cores made a setup seven
+/// times as long as two: docs/performance.md, "Threads"), where the step's passes
+/// (`team::Team`) merely lose their threaded way. Their bits do not depend on the
 /// parallelism (this module's tests), so the cap changes no result.
 pub fn par() -> Par {
     match count().min(available()) {

@@ -125,7 +125,7 @@ pub(super) fn iterations(log: &RunLog, steps: usize) -> Vec<i32> {
 }
 
 /// Writes the checkpoint of snapshot `s` of a run of `steps` steps to `path`: a new sealed
-/// HDF5 file, group by group (DESIGN.md "Checkpoint (HDF5)"). The order of the calls fixes
+/// HDF5 file, group by group (docs/restart.md). The order of the calls fixes
 /// the file's layout, which later checkpoints patch in place (`Template`).
 pub(super) fn write_checkpoint(
     path: &Path,

@@ -1,5 +1,5 @@
-//! Checkpoints: everything a run needs to continue as if it had never stopped (DESIGN.md
-//! "Checkpoint (HDF5)"), in `DIR/checkpoint.h5`, read back by `viscontact resume`.
+//! Checkpoints: everything a run needs to continue as if it had never stopped
+//! (docs/restart.md), in `DIR/checkpoint.h5`, read back by `viscontact resume`.
 //!
 //! A checkpoint at step n is the state *before* step n is solved: steps 0..n−1 are done and
 //! written, t_n = n k, and the history gives u_n and m_n exactly as the time loop holds them.

@@ -29,10 +29,9 @@ const BLOCKS_FROM: usize = 1 << 16;
 
 /// The blocks are kept only where at most 1 in `RECORDED_AT_MOST` entries is recorded:
 /// each recorded entry costs a second pass (its term stored, then added), so where the
-/// nodes' numbering is far from local the serial pass is faster. On two cores here one
-/// product with two blocks took 4.75 ms against 3.9 ms serial with 28 % of the entries
-/// recorded (the plate 0.03, gmsh's unstructured numbering), 5.0–6.2 against 4.8–5.3 ms
-/// with 8.8 % (block 1/24), 9.7 against 11.4–15.8 ms with 0.4 % (2D h = 1/512).
+/// nodes' numbering is far from local the serial pass is faster: on two cores the blocks
+/// lost at 28 % recorded, were about even at 8.8 % and won at 0.4 % (docs/performance.md,
+/// "Threads").
 const RECORDED_AT_MOST: usize = 4;
 
 /// Two symmetric matrices with the same sparsity pattern (K_B and K_R share the one

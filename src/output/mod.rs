@@ -1,4 +1,4 @@
-//! Writers: the ParaView time series of a run (DESIGN.md, "Output of run").
+//! Writers: the ParaView time series of a run (docs/output.md).
 //!
 //! Two formats (`[output] format`, [`Format`]):
 //! - `"vtu"` (the default): `solution_NNNNNN.vtu` (one VTK XML UnstructuredGrid per output

@@ -7,12 +7,9 @@
 //! components of vectors in 2D, the out-of-plane stress components, the contact fields away
 //! from Γ3. Those zero runs are all that deflate finds in them. zlib-rs at level 1 (its
 //! fastest, `deflate_quick`: fixed Huffman codes and a hash search for matches) spends its
-//! time hashing bytes that never match: on the fields of an h = 1/128 frame of
-//! examples/paper.toml (3.03 MB) it takes 10.7 ms (285 MB/s) for 54.5% of the size, slower
-//! than the time loop's step, so a run writing every step waited for its writer thread.
-//! zlib-rs's RLE strategy took 18 ms (54.5%), Huffman-only 23 ms (60.5%); fdeflate (the PNG
-//! encoder of image-rs, fixed tables tuned for filtered pixels) took 2.9 ms but wrote 78.9%
-//! (9–10 bits for a byte ≥ 128).
+//! time hashing bytes that never match: on a fine frame it was slower than the time loop's
+//! step, so a run writing every step waited for its writer thread; its RLE and Huffman-only
+//! strategies and fdeflate (the PNG encoder of image-rs) were slower or much larger.
 //!
 //! This encoder keeps the zero runs and drops the search: one deflate block per stream, every
 //! byte a literal, except the zero words — the data are read as 8-byte words, and a run of
@@ -23,17 +20,15 @@
 //! every non-zero double — goes out as its bytes with their bits reversed, one store and no
 //! table, whatever zero bytes it holds; 254, 255, the end of block and the lengths take 12
 //! bits. (The fixed code of RFC 1951 §3.2.6 takes 9 bits for half the bytes, each looked
-//! up; runs of zero bytes inside words cost a branch each and saved 1.2 points of size: the
-//! encoder was 2.99 ms with both, 2.33 ms with this code.) A zero double between non-zero
-//! ones costs 21 bits instead of 64; a block of zeros about 14 bits per 258 bytes. A stream
-//! that would not shrink (von Mises stress, say) is written as stored blocks instead, so
-//! compression never grows a frame by more than the few bytes of the headers. On the same
-//! fields: 1.43 ms (2.1 GB/s) for 61.0% of the size — the 6.5 points zlib gains come from
-//! matching the leading bytes of neighbouring values of smooth fields, which is the search
-//! that costs it seven times the time.
-//!
-//! Measured by examples/bench_output.rs on the last frame of its run (figures in docs/output.md,
-//! "Output of run").
+//! up; runs of zero bytes inside words cost a branch each for a little size, and were
+//! slower.) A zero double between non-zero ones costs 21 bits instead of 64; a block of
+//! zeros about 14 bits per 258 bytes. A stream that would not shrink (von Mises stress,
+//! say) is written as stored blocks instead, so compression never grows a frame by more
+//! than the few bytes of the headers. It is about seven times as fast as zlib-rs's fastest
+//! level, for 61.0% of the size against 54.5%: the points zlib gains come from matching the
+//! leading bytes of neighbouring values of smooth fields, which is the search that costs
+//! it the time. Every figure, measured by examples/bench_output.rs: docs/performance.md,
+//! "The measurements behind the code's constants", and docs/output.md, "Output of run".
 
 use std::io::Write as _;
 

@@ -1,4 +1,4 @@
-//! The consumers of a run's stream of solved steps (STYLE.md, scikit-fem's time loop as an
+//! The consumers of a run's stream of solved steps (after scikit-fem's time loop as an
 //! iterator): the loop in `run::drive` solves step n, hands it to each consumer, advances to
 //! t_{n+1} and tells the consumers that need the new state. Each consumer is a small type
 //! that knows one job:

@@ -1,4 +1,4 @@
-//! The frame of a solved step: the fields of DESIGN.md "Output of run" computed from the
+//! The frame of a solved step: the fields of docs/output.md computed from the
 //! step's velocity w_n, displacement u_n, memory m_n and multipliers z_n, handed to the
 //! series (`output`), which knows files, not the model.
 
@@ -84,7 +84,7 @@ pub(super) fn write_step(
     Ok(())
 }
 
-/// The fields of a step's frame (DESIGN.md "Output of run"): point fields, then cell fields
+/// The fields of a step's frame (docs/output.md): point fields, then cell fields
 /// (the stress and von Mises stress when `stress`), from `[w, u, z]` and m.
 fn fields(
     disc: &Discretization,

@@ -1,4 +1,4 @@
-//! summary.json (DESIGN.md "Output of run"): what a run did, in numbers.
+//! summary.json (docs/output.md): what a run did, in numbers.
 
 use super::consumers::Statistics;
 use crate::fem::Discretization;
@@ -7,7 +7,7 @@ use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use serde::Serialize;
 
-/// summary.json (DESIGN.md "Output of run"), written for every run that got past its
+/// summary.json (docs/output.md), written for every run that got past its
 /// setup: completed, failed or interrupted.
 #[derive(Serialize, Debug, Clone)]
 pub struct Summary {

@@ -1,4 +1,4 @@
-//! The scene file (TOML, DESIGN.md "Scene file"): what the user asks for. Reading it is
+//! The scene file (TOML, docs/scene.md): what the user asks for. Reading it is
 //! two steps: `SceneFile` mirrors the TOML exactly (unknown keys are errors, named by their
 //! dotted path), then `Scene::from_file` checks every value and compiles the expressions.
 //! `--set KEY=VALUE` overrides are applied to the TOML tree before either step, so an

@@ -209,9 +209,8 @@ impl ContactPlan {
 
     /// A warning for a solver that can make a run take hours without saying so: the duals
     /// without D, whose steps where the body starts to slide take hundreds of solves with
-    /// the factor of K_A (the plate with m = 16 055 rows in docs/performance.md: its first
-    /// five of 20 steps took 52 minutes on two cores, where a linear run of all 20 takes
-    /// under one).
+    /// the factor of K_A (the plate with m = 16 055 rows: minutes to tens of minutes a step,
+    /// docs/performance.md, "Large contact boundaries").
     pub fn slow_warning(&self) -> Option<String> {
         matches!(self.solver, Contact::Sparse | Contact::MatrixFree).then(|| {
             format!(

@@ -80,9 +80,8 @@ pub enum Preconditioner {
 pub struct MatrixFreeSettings {
     /// The dual's settings: the iteration's (`tolerance`, `max_iterations`, `eta`, `rim`,
     /// the damping and search settings) and `dependent_shift`. Default
-    /// `DualSettings::default()` but `far_after_damped` false: on the fine plate of issue 29
-    /// its steps 6 and 7 took the same 30 dual iterations with it and without, but 660 s
-    /// against 531 s (two steps only: docs/performance.md).
+    /// `DualSettings::default()` but `far_after_damped` false: with it the same dual
+    /// iterations took longer on the fine plate (docs/performance.md).
     pub dual: DualSettings,
     /// Conjugate gradient iterations per Newton system at most; a system not solved by then
     /// gives its last iterate, which the iteration's descent tests accept or reject.
@@ -90,10 +89,9 @@ pub struct MatrixFreeSettings {
     pub cg_max: usize,
     /// The largest forcing term of the inexact Newton method: a Newton system is solved to
     /// a residual of min(`forcing_max`, r/max|d|) · r for the iterate's KKT residual r.
-    /// Loose solves mislead the next prediction where many groups change state: on the
-    /// plate 0.03 the step where it starts to slide took 54 dual iterations with 0.5 (the
-    /// usual Eisenstat–Walker cap) and 25 with 0.01, the dense dual's exact solves 18
-    /// (docs/performance.md). Default 0.01; in (0, 1).
+    /// Loose solves mislead the next prediction where many groups change state: where a
+    /// plate starts to slide, the usual Eisenstat–Walker cap of 0.5 took over twice the
+    /// dual iterations of 0.01 (docs/performance.md). Default 0.01; in (0, 1).
     pub forcing_max: f64,
     /// Products with ±1 vectors for the estimate of diag D's mean. Default 4; ≥ 1.
     pub probes: usize,

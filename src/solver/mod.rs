@@ -1,4 +1,4 @@
-//! The per-step problem: (3.1) at step n is the convex program (DESIGN.md)
+//! The per-step problem: (3.1) at step n is the convex program (docs/architecture.md)
 //!
 //!   minimize   ½ wᵀ K_A w − b_nᵀ w + Σ_{i∈Γ3,2} c_i |w_τ,i|
 //!   subject to n_i·w_i ≤ 0   at every node i of Γ3,1,

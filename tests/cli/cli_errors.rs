@@ -1,4 +1,4 @@
-//! Bad input through the real binary (issue 2, "Bad input"; DESIGN.md "Command line"): each
+//! Bad input through the real binary (issue 2, "Bad input"; README.md, "Commands"): each
 //! case exits with status 2, names the file, key or physical group at fault on stderr and
 //! says what is wrong with it, does not panic, prints nothing on stdout, and leaves no output
 //! behind (`--out` points into a temporary directory that must stay absent or empty, or keep

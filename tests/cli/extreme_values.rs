@@ -1,10 +1,9 @@
 //! Extreme values for every numeric scene key (docs/scene_ranges.md, src/ranges.rs).
 //!
-//! The numeric keys are found from the scene parser itself: each table of a full scene gets
-//! an unknown key, whose error lists the table's fields; each field gets a table, whose
-//! error says what the field expects (a number, an integer, a table, a sequence). The keys
-//! that expect a number must be exactly the rows of `viscontact::ranges::RANGES`, so a new
-//! numeric key cannot escape its range (nor this test).
+//! The numeric keys are found from the scene parser itself (`common::scene::scene_keys`:
+//! each key's error for a table there says what it expects). The keys that expect a number
+//! must be exactly the rows of `viscontact::ranges::RANGES`, so a new numeric key cannot
+//! escape its range (nor this test).
 //!
 //! Then each key gets a fixed set of nasty values (1e300, -0.0, 1e-320, NaN, ±∞, i64::MAX,
 //! an integer beyond i64, …) and `VISCONTACT_EXTREME_CASES` random ones (default 24; seeded,
@@ -102,52 +101,14 @@ fn scene_for(key: &str, mesh: &str) -> SceneText {
 // The numeric keys, as the parser knows them
 // ---------------------------------------------------------------------------------------
 
-/// The parser's message for the full scene with `value` at `path` (a key of
-/// [`SceneText::set`]).
-fn parse_error(path: &str, value: toml::Value) -> String {
-    let text = full_scene("m.msh").set(path, value).text();
-    match viscontact::scene::parse_scene_text(Path::new("s.toml"), text, &[]) {
-        Ok(_) => String::new(),
-        Err(e) => e.to_string(),
-    }
-}
-
-/// The names between backticks after "expected" in serde's unknown-field message.
-fn expected_fields(msg: &str) -> Vec<String> {
-    let tail = &msg[msg.find("expected").unwrap_or(msg.len())..];
-    tail.split('`')
-        .skip(1)
-        .step_by(2)
-        .map(String::from)
-        .collect()
-}
-
-/// The numeric keys at or below `path` (with `[0]` for an array's element), found by asking
-/// the parser; each as its row of RANGES names it (with `[]`).
-fn numeric_keys(path: String, out: &mut BTreeSet<String>) {
-    let mut probe = toml::Table::new();
-    probe.insert("zzz_probe".into(), toml::Value::Integer(1));
-    let msg = parse_error(&path, toml::Value::Table(probe));
-    if msg.contains("unknown field `zzz_probe`") {
-        for f in expected_fields(&msg) {
-            let p = if path.is_empty() {
-                f
-            } else {
-                format!("{path}.{f}")
-            };
-            numeric_keys(p, out);
-        }
-    } else if msg.contains("expected a sequence") || msg.contains("expected an array") {
-        numeric_keys(format!("{path}[0]"), out);
-    } else if msg.contains("number") || msg.contains("integer") {
-        out.insert(path.replace("[0]", "[]"));
-    }
-}
-
 #[test]
 fn the_ranges_cover_every_numeric_key_of_the_parser() {
-    let mut found = BTreeSet::new();
-    numeric_keys(String::new(), &mut found);
+    // The keys that expect a number, each as its row of RANGES names it (with `[]`).
+    let found: BTreeSet<String> = common::scene::scene_keys()
+        .into_iter()
+        .filter(|(_, msg)| msg.contains("number") || msg.contains("integer"))
+        .map(|(key, _)| key.replace("[0]", "[]"))
+        .collect();
     let listed: BTreeSet<String> = viscontact::ranges::RANGES
         .iter()
         .map(|r| r.key.to_string())

@@ -1,7 +1,7 @@
 //! Hard meshes and boundary node rules: an unstructured mesh with sliver elements (min angle
 //! < 1°, aspect ratio ≥ 10³, some of them at a contact node) runs the paper's scene with the
 //! constraint holding and the fast solver agreeing with clarabel; the nodes where boundary
-//! parts meet get the rows DESIGN.md states (a node belongs to every part whose closure holds
+//! parts meet get the rows docs/decisions.md states (a node belongs to every part whose closure holds
 //! it, Γ1 wins); plane strain with ν = 0.4999 runs and stays finite.
 
 use crate::common;

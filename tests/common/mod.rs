@@ -127,18 +127,23 @@ pub fn map_msh_nodes(text: &str, f: impl Fn([f64; 3]) -> [f64; 3]) -> String {
 
 /// Every .msh file under the repository's meshes/, sorted.
 pub fn shipped_meshes() -> Vec<PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+    repo_files("meshes", "msh")
+}
+
+/// Every file ending in `.ext` under the repository's folder `dir`, sorted.
+pub fn repo_files(dir: &str, ext: &str) -> Vec<PathBuf> {
+    fn walk(dir: &Path, ext: &str, out: &mut Vec<PathBuf>) {
         for e in std::fs::read_dir(dir).unwrap() {
             let p = e.unwrap().path();
             if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "msh") {
+                walk(&p, ext, out);
+            } else if p.extension().is_some_and(|x| x == ext) {
                 out.push(p);
             }
         }
     }
     let mut files = Vec::new();
-    walk(&repo().join("meshes"), &mut files);
+    walk(&repo().join(dir), ext, &mut files);
     files.sort();
     files
 }

@@ -9,6 +9,7 @@
 //! integer beyond 64 bits) writes that text itself; everything that is TOML goes through
 //! here.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -166,6 +167,61 @@ impl SceneText {
     pub fn write(&self, dir: &Path, name: &str) -> PathBuf {
         super::write(dir, name, &self.text())
     }
+}
+
+/// Every key a scene may hold, found by asking the scene parser itself, so that a key added
+/// to it cannot escape the tests that walk them: each table gets an unknown key, whose error
+/// lists the table's fields; each field gets a table, whose error says what the field
+/// expects (a table: walked in turn; a sequence: its first element, walked as `[0]`; else a
+/// value). The keys that hold a value, by path with `[0]` for an array's element
+/// (`"material.relaxation.prony[0][0]"`, `"load.traction[0].on"`), each with the parser's
+/// message for a table there, which says what it expects (`"… expected a number"`).
+pub fn scene_keys() -> BTreeMap<String, String> {
+    let mut keys = BTreeMap::new();
+    walk_keys(String::new(), &mut keys);
+    keys
+}
+
+/// The keys at or below `path` into `keys` ([`scene_keys`]).
+fn walk_keys(path: String, keys: &mut BTreeMap<String, String>) {
+    let probe = Table::from_iter([("zzz_probe".to_string(), Value::Integer(1))]);
+    let msg = parse_error(&path, Value::Table(probe));
+    if msg.contains("unknown field `zzz_probe`") {
+        for field in expected_fields(&msg) {
+            let below = if path.is_empty() {
+                field
+            } else {
+                format!("{path}.{field}")
+            };
+            walk_keys(below, keys);
+        }
+    } else if msg.contains("expected a sequence") || msg.contains("expected an array") {
+        walk_keys(format!("{path}[0]"), keys);
+    } else {
+        keys.insert(path, msg);
+    }
+}
+
+/// The parser's message for the smallest scene its schema takes with `value` at `path` (a
+/// key of [`SceneText::set`]; `""` replaces the whole scene).
+fn parse_error(path: &str, value: Value) -> String {
+    let base =
+        SceneText::parse("[time]\nend = 1.0\nsteps = 4\n[material.viscosity]\ntheta = 0.1\n");
+    let text = base.mesh("m.msh").set(path, value).text();
+    match viscontact::scene::parse_scene_text(Path::new("s.toml"), text, &[]) {
+        Ok(_) => String::new(),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// The names between backticks after "expected" in serde's unknown-field message.
+fn expected_fields(msg: &str) -> Vec<String> {
+    let tail = &msg[msg.find("expected").unwrap_or(msg.len())..];
+    tail.split('`')
+        .skip(1)
+        .step_by(2)
+        .map(String::from)
+        .collect()
 }
 
 /// One step of a key path: a table's key or an array's element.

@@ -210,8 +210,8 @@ struct Group {
     elements: u64,
 }
 
-/// The boundary parts of DESIGN.md, which every shipped mesh has and which partition its
-/// boundary (load groups such as "top" are subsets of Γ2).
+/// The boundary parts of a scene (docs/scene.md, `[mesh.groups]`), which every shipped mesh
+/// has and which partition its boundary (load groups such as "top" are subsets of Γ2).
 const PARTS: [&str; 4] = ["Γ1", "Γ2", "Γ3,1", "Γ3,2"];
 
 #[test]

@@ -1,4 +1,4 @@
-//! The output files (DESIGN.md, "Output of run"): `.vtu` frames and the `.pvd` collection.
+//! The output files (docs/output.md): `.vtu` frames and the `.pvd` collection.
 //!
 //! Written files are read back four ways: with VTK's own reader (Python `vtk`, every layout,
 //! bit for bit), with this crate's reader (`output::read`, used by `plot`), as text (the
@@ -797,7 +797,7 @@ fn square_mesh(n: usize) -> (Vec<[f64; 3]>, Vec<usize>) {
     (points, cells)
 }
 
-/// A full frame of a run (every field DESIGN.md lists) on ~33k nodes / ~65k triangles.
+/// A full frame of a run (every field docs/output.md lists) on ~33k nodes / ~65k triangles.
 /// Prints the time per frame; the bound asserted is loose (shared CI machines), the target is
 /// well under 50 ms in an optimized build.
 #[test]

@@ -154,3 +154,44 @@ fn fast_solver_agrees_with_clarabel_on_unstructured_scenes() {
     println!("unstructured block: |u_N fast − clarabel| / |u_N| = {d:e}");
     assert!(d <= 1e-7, "unstructured block: {d:e}");
 }
+
+#[test]
+fn normal_stress_pushes_gamma32_away_from_the_foundation_and_nothing_stops_it_there() {
+    // docs/scene.md, `friction.normal_stress`: F is the foundation's pressure on Γ3,2, the
+    // load −Fν (ν the outward normal), so it pushes the body away from the foundation; and
+    // Γ3,2 has no non-penetration condition. On the paper's rectangle Γ3,2 is the right half
+    // of the bottom edge, ν = (0, −1): "away" is up. Without contact and with μ = 0 the
+    // problem is linear, so the difference of two runs is the response to F alone.
+    let linear = [&rect(8) as &str, "time.steps=8", "contact.enabled=false"];
+    let run = |f: &str| {
+        let (s, _m, d) = load(
+            &paper(),
+            &[&linear[..], &[f, "friction.coefficient=0"]].concat(),
+        );
+        (trace(&s, &d).u_final, d)
+    };
+    let (with_f, disc) = run("friction.normal_stress=0.01");
+    let (without_f, _) = run("friction.normal_stress=0");
+    let d = disc.dim;
+    let mut gamma32_nodes = 0;
+    for node in 0..disc.nodes.len() {
+        let dofs: Vec<usize> = (0..d).filter_map(|c| disc.free[d * node + c]).collect();
+        if dofs.len() < d || dofs.iter().all(|&i| disc.g_f[i] == 0.0) {
+            continue;
+        }
+        gamma32_nodes += 1;
+        let (ix, iy) = (dofs[0], dofs[1]);
+        assert!(disc.nodes[node][1].abs() < 1e-12 && disc.g_f[iy] < 0.0 && disc.g_f[ix] == 0.0);
+        let up = with_f[iy] - without_f[iy];
+        assert!(up > 0.0, "node {node}: F moved it by {up:e} in y, not up");
+        // Without F the top load presses Γ3,2 below y = 0: nothing holds it there.
+        if disc.nodes[node][0] > 1.5 {
+            assert!(
+                without_f[iy] < 0.0,
+                "node {node}: u_y = {:e}",
+                without_f[iy]
+            );
+        }
+    }
+    assert!(gamma32_nodes >= 4, "{gamma32_nodes} Γ3,2 nodes");
+}

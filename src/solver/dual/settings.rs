@@ -1,5 +1,5 @@
 //! The tuning of the dual method, one typed value per choice the method makes (Clarabel's
-//! `DefaultSettings` is the model). No scene key sets them (DESIGN.md is the contract): a run
+//! `DefaultSettings` is the model). No scene key sets them (docs/scene.md lists every key): a run
 //! uses `DualSettings::default()`, whose values are the ones `tests/regression/golden.rs` pins bit for
 //! bit; tests pick others. The measurements behind each default are in docs/performance.md,
 //! "Contact solver tuning".
@@ -45,7 +45,7 @@ pub struct DualSettings {
     /// slide). Holding them lets the first Newton step follow the new loads with the last
     /// step's sliding nodes. With `far_after_damped` the iteration after a damped Newton
     /// point holds them too; the others predict as the module doc says, so the answer does
-    /// not depend on it. Default 1 (measured: 2 is worse; docs/performance.md); 0 never
+    /// not depend on it. Default 1 (2 took more iterations: docs/performance.md); 0 never
     /// but after damped points.
     pub held_rims: usize,
     /// After a damped Newton point the next prediction takes η = 1 and holds the rims
@@ -106,9 +106,8 @@ pub struct DualSettings {
     /// that a kept factor preconditions (`pcg`), to the same relative residual of 1e-14;
     /// where it is not definite in f32 or they do not converge, it is factored in double
     /// precision after all. Below it the factorization is double and its solve direct:
-    /// there the few CG iterations cost about what the factorization saves (the 3D block
-    /// ran 8% slower with every size single). Measured: the plate 0.03 of issue 29 (systems
-    /// of 1 400–2 800 rows) 0.87× over 100 steps (docs/performance.md). Default 1024.
+    /// there the few CG iterations cost about what the factorization saves (both measured
+    /// in docs/performance.md, "Single precision where it pays"). Default 1024.
     pub single_min: usize,
     /// The form of the Newton systems. Default `NewtonForm::Cheaper`.
     pub newton_form: NewtonForm,

@@ -448,15 +448,10 @@ const MIN_SPLIT: usize = 1 << 18;
 
 /// The numeric factorization runs on faer's global parallelism (both cores) when its
 /// supernodes hold at least this many flops (`factorization_flops`), else on one thread.
-/// Measured side by side on the 2-core machine, one thread against two, full problem
-/// (C last) unless said: 2D h = 1/128 (3.5e8) 47 against 101–105 ms, 1/256 (2.8e9) 220
-/// against 373 ms, 1/512 (2.4e10) 1.07–1.12 against 1.71–1.78 s; 3D block h = 1/8 (2.4e8)
-/// 15 against 24–39 ms, 1/16 (1.5e10) 0.38 against 0.41–0.44 s, 1/24 (1.7e11) 3.12–3.18
-/// against 2.61–2.69 s (linear only, 1.2e11: 2.37–2.48 against 2.10–2.12 s); gmsh's
-/// unstructured blocks of size 0.042 (1.2e11) 2.22 against 1.91 s (linear only, 7.0e10:
-/// 1.44–1.46 against 1.36–1.40 s) and 0.035 (3.6e11) 6.7–7.2 against 4.9–5.0 s. Two
-/// threads pay where a large share of the work is in the few widest supernodes of a 3D
-/// factor (3 500–5 400 columns), not on the 2D factors of as many flops.
+/// Two threads pay where a large share of the work is in the few widest supernodes of a 3D
+/// factor (3 500–5 400 columns), not on the 2D factors of as many flops: every factor
+/// measured up to 2.4e10 flops was faster on one thread, every one from 7.0e10 on two
+/// (docs/performance.md, "The measurements behind the code's constants").
 const PARALLEL_FLOPS: f64 = 5e10;
 
 /// The flops of the numeric factorization, counted per supernode of k columns and r rows
