@@ -153,6 +153,8 @@ fn named_modules(text: &str) -> BTreeSet<String> {
                     .collect();
                 names.insert(match name.as_str() {
                     "Error" | "Result" => "error".to_string(),
+                    // The crate's two macros, exported at its root.
+                    "outln" | "errln" => "console".to_string(),
                     _ => name,
                 });
             }
