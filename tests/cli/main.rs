@@ -4,6 +4,7 @@
 mod common;
 
 mod cli_errors;
+mod conditions;
 mod contact_plan;
 mod expr_differential;
 mod extreme_values;
