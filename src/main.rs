@@ -324,6 +324,10 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         disc.n_free
     );
     println!(
+        "conditions {}",
+        viscontact::fem::constraints::summary(scene, disc.prescribed.len())
+    );
+    println!(
         "time       T = {}, N = {}, k = {}",
         scene.time.end,
         scene.time.steps,

@@ -356,6 +356,33 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a * b).sum()
 }
 
+/// `check`'s line on the conditions: each group and what it holds, and the number of
+/// prescribed dofs (moved to the right side of each step).
+pub fn summary(scene: &Scene, n_prescribed: usize) -> String {
+    let mut parts: Vec<String> = scene
+        .mesh
+        .groups
+        .fixed
+        .iter()
+        .map(|g| format!("'{g}' clamped"))
+        .collect();
+    for e in &scene.physics.dirichlet {
+        let what = match &e.components {
+            Components::Normal => "normal".to_string(),
+            Components::Axes(a) => a.iter().map(|&c| ["x", "y", "z"][c]).collect(),
+        };
+        let at = match e.written.iter().all(|v| v == "0") {
+            true => " = 0".to_string(),
+            false => format!(" = [{}]", e.written.join(", ")),
+        };
+        parts.push(format!("'{}' {what}{at}", e.on));
+    }
+    if parts.is_empty() {
+        parts.push("none".into());
+    }
+    format!("{}; {n_prescribed} prescribed dofs", parts.join(", "))
+}
+
 /// The scene's conditions for messages: "the clamped group 'Γ1'", or the groups listed.
 pub fn conditions(scene: &Scene) -> String {
     let fixed = &scene.mesh.groups.fixed;
