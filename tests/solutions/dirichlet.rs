@@ -55,46 +55,76 @@ fn a_prescribed_affine_motion_is_reproduced_exactly() {
     }
 }
 
+/// Runs the half and the whole scene and compares u_N on the half (whose nodes are the
+/// whole mesh's first, in the same order: tests/data/symmetry/mirror.py), with contact and
+/// friction engaged in the half; on the plane (`axis` = `plane`) nothing crosses it.
+fn half_agrees_with_whole(half: SceneText, whole: SceneText, axis: usize, plane: f64) {
+    let dir = tempfile::tempdir().unwrap();
+    let (sw, _, dw) = load(&whole.write(dir.path(), "whole.toml"), &[]);
+    let (sh, _, dh) = load(&half.write(dir.path(), "half.toml"), &[]);
+    let (tw, th) = (trace(&sw, &dw), trace(&sh, &dh));
+    for t in [&tw, &th] {
+        assert!(t.effects.contains(&"contact") && t.effects.contains(&"friction"));
+    }
+    let last = th.z.last().unwrap();
+    let n_contact = dh.contact.len();
+    assert!(last[..n_contact].iter().any(|&z| z != 0.0));
+    assert!(last[n_contact..].iter().any(|&z| z != 0.0));
+    for (a, b) in dh.nodes.iter().zip(&dw.nodes) {
+        assert_eq!(a, b);
+    }
+    let uw = viscontact::fem::nodal_vectors::<3>(&dw, &tw.u_final);
+    let uh = viscontact::fem::nodal_vectors::<3>(&dh, &th.u_final);
+    let got: Vec<f64> = uh.iter().flatten().copied().collect();
+    let want: Vec<f64> = uw[..uh.len()].iter().flatten().copied().collect();
+    let d = rel_diff(&got, &want);
+    assert!(d <= 1e-10, "half against whole: {d:e}");
+    let on_plane = dh
+        .nodes
+        .iter()
+        .zip(&uh)
+        .filter(|(x, _)| (x[axis] - plane).abs() < 1e-12);
+    assert!(on_plane.clone().count() > 0);
+    for (_, u) in on_plane {
+        assert_eq!(u[axis], 0.0);
+    }
+}
+
 /// The half block with a symmetry plane (u·n = 0 on y = 0.5) and the whole block, meshed as
 /// the half and its mirror image, agree on the half: contact on Γ3,1 (which meets the
 /// plane) and friction on Γ3,2 on, the paper's loads and memory.
 #[test]
 fn a_half_model_with_a_symmetry_plane_agrees_with_the_whole() {
-    let dir = tempfile::tempdir().unwrap();
     let data = repo().join("tests/data/symmetry");
     let base = || SceneText::block().set("time.steps", 16);
-    let whole = base()
-        .mesh(data.join("whole_block.msh"))
-        .write(dir.path(), "whole.toml");
+    half_agrees_with_whole(
+        base()
+            .mesh(data.join("half_block.msh"))
+            .dirichlet("sym", &["normal"], None),
+        base().mesh(data.join("whole_block.msh")),
+        1,
+        0.5,
+    );
+}
+
+/// The same in 2D, with friction on the symmetry line: the friction node there cannot
+/// slide in the half model (its tangent is the held component), as by symmetry in the whole.
+#[test]
+fn a_half_model_in_2d_agrees_with_the_whole_with_friction_on_the_line() {
+    let data = repo().join("tests/data/symmetry");
+    let base = || {
+        SceneText::paper()
+            .set("time.steps", 16)
+            .set("load.traction", Value::Array(vec![]))
+            .traction(None, &["0", "-0.1*(1-x*x)*min(t, 0.2)"])
+    };
     let half = base()
-        .mesh(data.join("half_block.msh"))
-        .dirichlet("sym", &["normal"], None)
-        .write(dir.path(), "half.toml");
-    let (sw, _, dw) = load(&whole, &[]);
-    let (sh, _, dh) = load(&half, &[]);
-    let (tw, th) = (trace(&sw, &dw), trace(&sh, &dh));
-    for t in [&tw, &th] {
-        assert!(t.effects.contains(&"contact") && t.effects.contains(&"friction"));
-    }
-    // Contact is active somewhere, and some friction node slides or sticks with γ ≠ 0.
-    let last = th.z.last().unwrap();
-    let n_contact = dh.contact.len();
-    assert!(last[..n_contact].iter().any(|&z| z != 0.0));
-    assert!(last[n_contact..].iter().any(|&z| z != 0.0));
-    let uw = viscontact::fem::nodal_vectors::<3>(&dw, &tw.u_final);
-    let uh = viscontact::fem::nodal_vectors::<3>(&dh, &th.u_final);
-    // The whole mesh's first nodes are the half's, in the same order (mirror.py).
-    for (a, b) in dh.nodes.iter().zip(&dw.nodes) {
-        assert_eq!(a, b);
-    }
-    let got: Vec<f64> = uh.iter().flatten().copied().collect();
-    let want: Vec<f64> = uw[..uh.len()].iter().flatten().copied().collect();
-    let d = rel_diff(&got, &want);
-    assert!(d <= 1e-10, "half against whole: {d:e}");
-    // The plane's nodes do not move across it.
-    for (x, u) in dh.nodes.iter().zip(&uh) {
-        if (x[1] - 0.5).abs() < 1e-12 {
-            assert_eq!(u[1], 0.0);
-        }
-    }
+        .mesh(data.join("half_rect.msh"))
+        .dirichlet("sym", &["normal"], None);
+    let (_, _, disc) = load(
+        &half.write(tempfile::tempdir().unwrap().path(), "h.toml"),
+        &[],
+    );
+    assert!(disc.friction.iter().all(|r| disc.nodes[r.node][0] > 0.0));
+    half_agrees_with_whole(half, base().mesh(data.join("whole_rect.msh")), 0, 0.0);
 }
