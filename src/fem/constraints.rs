@@ -193,6 +193,14 @@ impl Numbering {
                 conditions(scene)
             )));
         }
+        if scene.mesh.groups.fixed.is_empty() && scene.physics.dirichlet.is_empty() {
+            return Err(Error::input(format!(
+                "{file}: key 'mesh.groups.fixed': the scene has no condition \
+                 (mesh.groups.fixed = [] and no [[dirichlet]]), so the body is free to move \
+                 as a rigid body and K_A is singular; name a clamped group, or add \
+                 [[dirichlet]] entries that hold every rigid motion"
+            )));
+        }
         let held: Vec<bool> = self.held.iter().map(|&h| h != 0).collect();
         mesh.check_parts(&held, &conditions(scene), scene.mesh.separate_parts)
             .map_err(|e| Error::input(format!("{file}: {e}")))?;
@@ -391,7 +399,6 @@ pub fn conditions(scene: &Scene) -> String {
     };
     let dirichlet = &scene.physics.dirichlet;
     match (fixed.len(), dirichlet.len()) {
-        (0, 0) => "no condition (mesh.groups.fixed = [] and no [[dirichlet]])".into(),
         (1, 0) => format!("the clamped group '{}'", fixed[0]),
         (_, 0) => format!("the clamped groups {}", quoted(&mut fixed.iter())),
         (0, _) => format!(
