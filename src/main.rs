@@ -341,6 +341,10 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         disc.n_free
     );
     viscontact::outln!(
+        "conditions {}",
+        viscontact::fem::constraints::summary(scene, disc.prescribed.len())
+    );
+    viscontact::outln!(
         "time       T = {}, N = {}, k = {}",
         scene.time.end,
         scene.time.steps,

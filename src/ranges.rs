@@ -55,7 +55,12 @@ const GROUP_WHY: &str = "a tag is looked up in the mesh's physical groups; no nu
 /// Every numeric key the scene parser knows (tests/cli/extreme_values.rs checks that the parser
 /// has no other), in the order of docs/scene.md.
 pub const RANGES: &[Range] = &[
-    row("mesh.groups.fixed", GROUP, "\"Γ1\"", GROUP_WHY),
+    row(
+        "mesh.groups.fixed",
+        "a group (a name or any integer tag), a list of groups, or []",
+        "\"Γ1\"",
+        GROUP_WHY,
+    ),
     row("mesh.groups.traction", GROUP, "\"Γ2\"", GROUP_WHY),
     row("mesh.groups.contact", GROUP, "\"Γ3,1\"", GROUP_WHY),
     row("mesh.groups.friction", GROUP, "\"Γ3,2\"", GROUP_WHY),
@@ -157,6 +162,13 @@ pub const RANGES: &[Range] = &[
         "load.body[].value[]",
         "a number: 0 or 1e-100 ≤ |f| ≤ 1e100; or an expression of x, y, z, t",
         "required",
+        "the scale rule (an expression is checked where it is evaluated)",
+    ),
+    row("dirichlet[].on", GROUP, "required", GROUP_WHY),
+    row(
+        "dirichlet[].value[]",
+        "a number: 0 or 1e-100 ≤ |g| ≤ 1e100; or an expression of x, y, z, t",
+        "0 for each component",
         "the scale rule (an expression is checked where it is evaluated)",
     ),
     row(

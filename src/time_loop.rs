@@ -27,7 +27,7 @@
 //! elastic response ε_{n+1} = f/E.
 
 use crate::effects::{self, Effects};
-use crate::fem::{mul_add, Discretization, SymmetricPair};
+use crate::fem::{constraints, leading_block, mul_add, Discretization, Sparse, SymmetricPair};
 use crate::history::{History, LoopState, Plan, SavedLoop};
 use crate::scene::{self, Scene};
 use crate::solver::choice::Contact;
@@ -61,6 +61,9 @@ pub struct TimeLoop<'p> {
     /// K_B and K_R (when both are used and share their pattern): K_B u_n + K_R m_n in one
     /// pass over their lower triangles.
     paired: Option<SymmetricPair>,
+    /// The step matrix on all n_dofs when there are prescribed dofs: its free-by-prescribed
+    /// block moves their velocities to the right side (`fem::constraints`).
+    lift: Option<Sparse>,
     /// The request that gives up a step, where the step solver honours one.
     abandon: Option<Abandon>,
     /// Whether the state at t_n follows a step this loop solved, so that a stop can save it
@@ -206,6 +209,12 @@ impl<'p> TimeLoop<'p> {
                 disc.implicit_matrix(scene.time.k(), plan.r0(scene.physics.relaxation.as_ref())),
             ),
         };
+        // With prescribed dofs the factored matrix is the free block of the whole one.
+        let (implicit, lift) = match (implicit, &disc.k_a_all) {
+            (Some(all), Some(_)) => (Some(leading_block(&all, disc.n_free)), Some(all)),
+            (None, Some(all)) => (None, Some(all.clone())),
+            (implicit, None) => (implicit, None),
+        };
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
         // The step matrix is factored once, with the constrained boundary dofs ordered last
         // where the contact solver works on its trailing block.
@@ -216,7 +225,7 @@ impl<'p> TimeLoop<'p> {
         };
         let factor = Factor::new(matrix, &last)?;
         let solver = effects::step_solver(&effects, contact, matrix, &factor, &rows)?;
-        let n = disc.n_free;
+        let n = disc.n_dofs;
         let history = History::new(n, scene.time.k(), &plan);
         let paired = disc
             .k_b
@@ -245,6 +254,7 @@ impl<'p> TimeLoop<'p> {
             b: vec![0.0; n],
             growth: Growth::default(),
             paired,
+            lift,
             abandon: None,
             can_stop: false,
         })
@@ -368,11 +378,12 @@ impl<'p> TimeLoop<'p> {
         let armed = (self.abandon.as_ref())
             .filter(|_| self.can_stop)
             .map(Abandon::arm);
+        let nf = self.disc.n_free;
         let mut report = self.solver.solve(
             &self.factor,
             &self.rows,
-            &self.b,
-            &mut self.w,
+            &self.b[..nf],
+            &mut self.w[..nf],
             &mut self.z,
             Some(&self.z_before),
         );
@@ -410,10 +421,20 @@ impl<'p> TimeLoop<'p> {
         }))
     }
 
-    /// b_n = f_n − K_B u_n − K_R m_n − g_F into `b` (m_n into `m` on the way); returns
-    /// max|f_n − g_F|, the step's load for the divergence detector.
+    /// b_n = f_n − K_B u_n − K_R m_n − g_F into `b` (m_n into `m` on the way), and with
+    /// prescribed dofs their velocities w_p = (g(t_{n+1}) − u_{n,p})/k into `w` and
+    /// b_f −= M_fp w_p (`fem::constraints`); returns max|f_n − g_F|, the step's load for
+    /// the divergence detector.
     fn right_side(&mut self, t: f64) -> Result<f64> {
         let h = &mut self.history;
+        let disc = self.disc;
+        if !disc.prescribed.is_empty() {
+            let next = (h.n + 1) as f64 * h.k;
+            let g = constraints::values(&disc.prescribed, &disc.nodes, self.scene, next)?;
+            for (p, g) in disc.prescribed.iter().zip(g) {
+                self.w[p.dof] = (g - h.u[p.dof]) / h.k;
+            }
+        }
         self.b.fill(0.0);
         self.disc
             .loads
@@ -434,6 +455,9 @@ impl<'p> TimeLoop<'p> {
         }
         for (b, g) in self.b.iter_mut().zip(&self.disc.g_f) {
             *b -= g;
+        }
+        if let Some(lift) = &self.lift {
+            constraints::lift(lift, disc.n_free, &self.w, &mut self.b);
         }
         Ok(load_max)
     }
@@ -526,14 +550,16 @@ fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
 /// What a run refuses before it factors anything (exit 2), for the memory plan it will run
 /// (`Plan::new`, which already refused a kernel that is not finite on the run's lags, or a
 /// resumed run's `Plan::resumed`): a left endpoint step above the stability limit of the
-/// kernel as it will run (`Verdict`), loads that are not finite at t = 0. `viscontact check`
+/// kernel as it will run (`Verdict`), loads that are not finite at t = 0, prescribed
+/// displacements that are not finite at t = k. `viscontact check`
 /// calls it with the plan it prints, so that `check` fails wherever `run` would.
 pub fn refusals(scene: &Scene, disc: &Discretization, plan: &Plan) -> Result<()> {
     if scene.solver.history == scene::History::Left {
         Verdict::new(scene, disc, plan).check(scene)?;
     }
+    constraints::values(&disc.prescribed, &disc.nodes, scene, scene.time.k())?;
     disc.loads
-        .add(0.0, &disc.free, scene, &mut vec![0.0; disc.n_free])
+        .add(0.0, &disc.free, scene, &mut vec![0.0; disc.n_dofs])
 }
 
 #[cfg(test)]

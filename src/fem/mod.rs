@@ -1,8 +1,10 @@
-//! Discretization: P1 triangles (2D) or tetrahedra (3D), the dofs of V^h (w = 0 on Γ1
-//! eliminated; d per node), the stiffness matrices K_A, K_B, K_R, the load vector ⟨f_n, ·⟩,
+//! Discretization: P1 triangles (2D) or tetrahedra (3D), the dofs of V^h (d per node; the
+//! dofs held at zero by a Dirichlet condition eliminated, prescribed ones numbered after the
+//! free ones: `constraints`), the stiffness matrices K_A, K_B, K_R, the load vector ⟨f_n, ·⟩,
 //! the given-normal-stress load g_F and the nodal constraint rows on Γ3,1 (n_i·w_i ≤ 0) and
 //! Γ3,2 (weight c_i of |w_τ,i|, with w_τ,i in the tangent line (2D) or plane (3D)).
 
+pub mod constraints;
 pub mod element;
 pub mod loads;
 mod pair;
@@ -11,6 +13,7 @@ use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
 use crate::scene::{Friction, MeshChoice, Model, Scene};
 use crate::{Error, Result};
+pub use constraints::{Numbering, Prescribed};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::Loads;
@@ -83,19 +86,28 @@ pub struct Discretization {
     pub nodes: Vec<[f64; 3]>,
     /// The triangles (2D) or tetrahedra (3D).
     pub cells: Vec<Cell>,
-    /// Global dof d·node + component → free index; None on Γ1 (w = 0 there).
+    /// Global dof d·node + component → index: free dofs 0..n_free, prescribed dofs
+    /// n_free..n_dofs; None where a condition holds the dof at zero (Γ1).
     pub free: Vec<Option<usize>>,
+    /// The unknowns of the step problem.
     pub n_free: usize,
+    /// The length of the vectors the loop keeps: n_free plus the prescribed dofs.
+    pub n_dofs: usize,
+    /// The prescribed dofs (`[[dirichlet]]` values not identically zero), in index order.
+    pub prescribed: Vec<Prescribed>,
     /// A (4.1), B (4.2) (None when E = 0 or disabled), R's constant part I.
     pub a: Isotropic,
     pub b: Option<Isotropic>,
     pub r: Isotropic,
-    /// K_A, K_B, K_R in free numbering.
+    /// K_A on the free dofs (n_free); K_B, K_R on all n_dofs (the free and the prescribed).
     pub k_a: Sparse,
     pub k_b: Option<Sparse>,
     pub k_r: Sparse,
+    /// K_A on all n_dofs, when there are prescribed dofs (its free-by-prescribed block moves
+    /// their velocities to the right side).
+    pub k_a_all: Option<Sparse>,
     pub loads: Loads,
-    /// g_F_i = ∫_{Γ3,2} F φ_i ν da (free numbering); empty when F = 0 or no friction group.
+    /// g_F_i = ∫_{Γ3,2} F φ_i ν da (n_dofs); empty when F = 0 or no friction group.
     pub g_f: Vec<f64>,
     /// Rows n_i on Γ3,1 (empty when contact is off).
     pub contact: Vec<NodalRow>,
@@ -119,38 +131,6 @@ fn group<'m>(mesh: &'m Mesh, scene: &Scene, key: &str, value: &str) -> Result<&'
         .map_err(|e| Error::input(format!("{}: key '{key}': {e}", scene.path.display())))
 }
 
-/// The free index of every global dof d·node + component (None on the clamped group Γ1,
-/// which clamps whole nodes) and the number of free dofs; nothing free is refused.
-fn free_dofs(mesh: &Mesh, scene: &Scene) -> Result<(Vec<Option<usize>>, usize)> {
-    let (nn, d) = (mesh.nodes.len(), mesh.dim);
-    let fixed = group(mesh, scene, "mesh.groups.fixed", &scene.mesh.groups.fixed)?;
-    mesh.check_parts(fixed, scene.mesh.separate_parts)
-        .map_err(|e| Error::input(format!("{}: {e}", scene.path.display())))?;
-    let mut clamped = vec![false; nn];
-    for n in mesh.group_nodes(fixed) {
-        clamped[n] = true;
-    }
-    let mut free = vec![None; d * nn];
-    let mut n_free = 0;
-    for (i, c) in clamped.iter().enumerate() {
-        if !c {
-            for slot in &mut free[d * i..d * (i + 1)] {
-                *slot = Some(n_free);
-                n_free += 1;
-            }
-        }
-    }
-    if n_free == 0 {
-        return Err(Error::input(format!(
-            "{}: every node of '{}' is on the clamped group '{}'; nothing can move",
-            scene.path.display(),
-            mesh.path.display(),
-            scene.mesh.groups.fixed
-        )));
-    }
-    Ok((free, n_free))
-}
-
 /// The mesh's triangles (2D) or tetrahedra (3D) as cells.
 fn cells(mesh: &Mesh) -> Vec<Cell> {
     let xy = |i: usize| [mesh.nodes[i][0], mesh.nodes[i][1]];
@@ -168,32 +148,53 @@ fn cells(mesh: &Mesh) -> Vec<Cell> {
     }
 }
 
-/// Makes the nodal constraint rows from the free-dof numbering.
+/// Makes the nodal constraint rows of Γ3 from the dof numbering: a node whose every
+/// component is held by a Dirichlet condition has none (the condition wins); at a node with
+/// some held components a row must not act on them.
 struct RowMaker<'f> {
-    free: &'f [Option<usize>],
+    numbering: &'f Numbering,
     dim: usize,
 }
 
+/// A row that acts on a held component: the component.
+struct Acts(usize);
+
 impl RowMaker<'_> {
-    /// The free dofs of a node, if none is clamped (Γ1 wins over every other part).
-    fn node_dofs(&self, node: usize) -> Option<[usize; 3]> {
-        let d = self.dim;
-        let mut out = [0; 3];
-        for (c, o) in out.iter_mut().enumerate().take(d) {
-            *o = self.free[d * node + c]?;
-        }
-        Some(out)
+    /// Whether every component of `node` is held.
+    fn held(&self, node: usize) -> bool {
+        self.numbering.held[node].count_ones() as usize == self.dim
     }
 
-    fn row(&self, node: usize, dofs: [usize; 3], dir: [f64; 3], bound: f64, area: f64) -> NodalRow {
-        NodalRow {
+    /// The row `dir` at `node` (None when the node is held), its coefficients on held
+    /// components zero (placeholder dof 0: `NodalRow::entries` skips them); `Acts` when
+    /// `dir` has a component along a held one.
+    fn row(
+        &self,
+        node: usize,
+        mut dir: [f64; 3],
+        bound: f64,
+        area: f64,
+    ) -> std::result::Result<Option<NodalRow>, Acts> {
+        if self.held(node) {
+            return Ok(None);
+        }
+        let d = self.dim;
+        let mut dofs = [0; 3];
+        for c in 0..d {
+            match self.numbering.free[d * node + c] {
+                Some(i) if self.numbering.held[node] & (1 << c) == 0 => dofs[c] = i,
+                _ if dir[c].abs() <= 1e-12 => dir[c] = 0.0,
+                _ => return Err(Acts(c)),
+            }
+        }
+        Ok(Some(NodalRow {
             node,
             dofs,
             dir,
-            dim: self.dim,
+            dim: d,
             bound,
             area,
-        }
+        }))
     }
 }
 
@@ -215,6 +216,20 @@ fn idle_groups(mesh: &Mesh, scene: &Scene) -> Vec<&'static str> {
     .collect()
 }
 
+/// A Γ3 row at `node` that acts on a component a Dirichlet condition holds.
+fn acts_on_held(mesh: &Mesh, scene: &Scene, role: &str, node: usize, c: usize, why: &str) -> Error {
+    Error::input(format!(
+        "{}: key 'mesh.groups.{role}': the node at {} of the {role} group lies on a Dirichlet \
+         condition ({}) that holds its {} component, {why}; keep the {role} group off the \
+         condition's group (in gmsh, a separate physical group), or hold only components \
+         tangent to the {role} surface",
+        scene.path.display(),
+        fmt_at(mesh.nodes[node], scene.mesh.model),
+        constraints::conditions(scene),
+        ["x", "y", "z"][c],
+    ))
+}
+
 /// Γ3,1: one row n_i per free node, and the largest kink of the normals (empty and 0 when
 /// contact is off); a group with every node clamped is refused.
 fn contact_rows(mesh: &Mesh, scene: &Scene, rows: &RowMaker) -> Result<(Vec<NodalRow>, f64)> {
@@ -231,8 +246,12 @@ fn contact_rows(mesh: &Mesh, scene: &Scene, rows: &RowMaker) -> Result<(Vec<Noda
         contact_kink = k;
         let area = lumped_area(mesh, g);
         for (node, n) in normals {
-            if let Some(dofs) = rows.node_dofs(node) {
-                contact.push(rows.row(node, dofs, n, f64::INFINITY, area[node]));
+            match rows.row(node, n, f64::INFINITY, area[node]) {
+                Ok(row) => contact.extend(row),
+                Err(Acts(c)) => {
+                    let why = "along the contact normal: the two conditions contradict";
+                    return Err(acts_on_held(mesh, scene, "contact", node, c, why));
+                }
             }
         }
         if contact.is_empty() {
@@ -254,7 +273,7 @@ fn friction_rows(
     scene: &Scene,
     fr: &Friction,
     rows: &RowMaker,
-    n_free: usize,
+    n_dofs: usize,
 ) -> Result<(Vec<f64>, Vec<NodalRow>, f64)> {
     let g = group(
         mesh,
@@ -271,17 +290,14 @@ fn friction_rows(
         )?;
         check_overlap(mesh, scene, c, g)?;
     }
-    let (gf, c) = friction_integrals(mesh, scene, fr, g, rows, n_free)?;
+    let (gf, c) = friction_integrals(mesh, scene, fr, g, rows, n_dofs)?;
     let g_f = if gf.iter().any(|&v| v != 0.0) {
         gf
     } else {
         Vec::new()
     };
     let (normals, k) = mesh.nodal_normals(g);
-    if normals
-        .iter()
-        .all(|&(node, _)| rows.node_dofs(node).is_none())
-    {
+    if normals.iter().all(|&(node, _)| rows.held(node)) {
         return Err(on_fixed(
             scene,
             "friction",
@@ -291,18 +307,33 @@ fn friction_rows(
     }
     let area = lumped_area(mesh, g);
     let mut friction = Vec::new();
-    for (node, n) in normals {
-        // μF may vanish on parts of Γ3,2: nodes with c_i = 0 carry no friction.
-        if let (Some(dofs), true) = (rows.node_dofs(node), c[node] > 0.0) {
-            for t in tangents(n, rows.dim) {
-                friction.push(rows.row(node, dofs, t, c[node], area[node]));
+    // μF may vanish on parts of Γ3,2: nodes with c_i = 0 carry no friction.
+    for (node, n) in normals.into_iter().filter(|&(node, _)| c[node] > 0.0) {
+        let ts = tangents(n, rows.dim);
+        let made: std::result::Result<Vec<_>, Acts> = ts
+            .iter()
+            .map(|&t| rows.row(node, t, c[node], area[node]))
+            .collect();
+        match made {
+            Ok(r) => friction.extend(r.into_iter().flatten()),
+            // 2D: the tangent is the held component, so the node cannot slide.
+            Err(Acts(_)) if rows.dim == 2 && is_axis(ts[0]) => {}
+            Err(Acts(comp)) => {
+                let why = match rows.dim {
+                    2 => "and the tangent is inclined to it",
+                    _ => {
+                        "in the friction's tangent plane: friction at a node with a held \
+                          tangent component is supported in 2D only for now"
+                    }
+                };
+                return Err(acts_on_held(mesh, scene, "friction", node, comp, why));
             }
         }
     }
     Ok((g_f, friction, k))
 }
 
-/// By facet quadrature over the friction group `g`: g_F_i = ∫ F φ_i ν da (free numbering)
+/// By facet quadrature over the friction group `g`: g_F_i = ∫ F φ_i ν da (n_dofs)
 /// and c_i = ∫ μF φ_i da per node.
 fn friction_integrals(
     mesh: &Mesh,
@@ -310,10 +341,10 @@ fn friction_integrals(
     fr: &Friction,
     g: &Group,
     rows: &RowMaker,
-    n_free: usize,
+    n_dofs: usize,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    let (d, free) = (rows.dim, rows.free);
-    let mut gf = vec![0.0; n_free];
+    let (d, free) = (rows.dim, &rows.numbering.free);
+    let mut gf = vec![0.0; n_dofs];
     let mut c = vec![0.0; mesh.nodes.len()];
     for f in mesh.boundary_facets(g) {
         for (p, w, phi) in f.quadrature(mesh) {
@@ -346,7 +377,8 @@ impl Discretization {
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
         check_model(mesh, scene)?;
         let d = mesh.dim;
-        let (free, n_free) = free_dofs(mesh, scene)?;
+        let numbering = Numbering::new(mesh, scene)?;
+        let (free, n_free, n_dofs) = (&numbering.free, numbering.n_free, numbering.n_dofs);
         let cells = cells(mesh);
 
         let a = Isotropic::viscosity(scene.physics.theta, scene.physics.zeta);
@@ -359,16 +391,20 @@ impl Discretization {
                 Model::PlaneStrain | Model::ThreeD => Isotropic::lame(e, nu),
             });
         let r = Isotropic::identity();
-        let (k_a, k_b, k_r) = assemble(&cells, d, &free, n_free, a, b, r);
+        let (k_a_all, k_b, k_r) = assemble(&cells, d, free, n_dofs, a, b, r);
+        let (k_a, k_a_all) = match n_dofs > n_free {
+            true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
+            false => (k_a_all, None),
+        };
 
         let loads = Loads::new(mesh, scene, &cells)?;
         let rows = RowMaker {
-            free: &free,
+            numbering: &numbering,
             dim: d,
         };
         let (contact, contact_kink) = contact_rows(mesh, scene, &rows)?;
         let (g_f, friction, friction_kink) = match &scene.physics.friction {
-            Some(fr) => friction_rows(mesh, scene, fr, &rows, n_free)?,
+            Some(fr) => friction_rows(mesh, scene, fr, &rows, n_dofs)?,
             None => (Vec::new(), Vec::new(), 0.0),
         };
 
@@ -376,8 +412,11 @@ impl Discretization {
             dim: d,
             nodes: mesh.nodes.clone(),
             cells,
-            free,
             n_free,
+            n_dofs,
+            prescribed: numbering.prescribed.clone(),
+            free: numbering.free,
+            k_a_all,
             a,
             b,
             r,
@@ -493,10 +532,10 @@ impl Discretization {
         (s6, vm)
     }
 
-    /// K_A + k K_B + k² r(0) K_R: the step matrix of the implicit variant (the three share
-    /// one sparsity pattern, so this adds their value arrays).
+    /// K_A + k K_B + k² r(0) K_R on all n_dofs: the step matrix of the implicit variant (the
+    /// three share one sparsity pattern, so this adds their value arrays).
     pub fn implicit_matrix(&self, k: f64, r0: Option<f64>) -> Sparse {
-        let mut m = self.k_a.clone();
+        let mut m = self.k_a_all.as_ref().unwrap_or(&self.k_a).clone();
         let mut add = |other: &Sparse, c: f64| {
             debug_assert_eq!(other.symbolic().row_idx(), m.symbolic().row_idx());
             for (v, o) in m.val_mut().iter_mut().zip(other.val()) {
@@ -516,6 +555,21 @@ impl Discretization {
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
         p1_norms(&self.cells, &nodal_vectors::<3>(self, v))
     }
+}
+
+/// The block of `a` on its first `n` rows and columns (a's rows increase in each column).
+pub fn leading_block(a: &Sparse, n: usize) -> Sparse {
+    let a = a.as_ref();
+    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    let (mut col_ptr, mut row_idx, mut val) = (vec![0], Vec::new(), Vec::new());
+    for j in 0..n {
+        let rows = cp[j]..cp[j] + ri[cp[j]..cp[j + 1]].partition_point(|&r| r < n);
+        row_idx.extend_from_slice(&ri[rows.clone()]);
+        val.extend_from_slice(&v[rows]);
+        col_ptr.push(row_idx.len());
+    }
+    let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+    SparseColMat::new(pattern, val)
 }
 
 /// What [`Discretization::stress`] reads of the cells, packed: the d + 1 vertices (u32) and
@@ -596,6 +650,11 @@ fn lumped_area(mesh: &Mesh, g: &Group) -> Vec<f64> {
     area
 }
 
+/// Whether a unit direction is a coordinate axis (one nonzero component).
+fn is_axis(dir: [f64; 3]) -> bool {
+    dir.iter().filter(|c| c.abs() > 1e-12).count() == 1
+}
+
 /// Unit tangents at a boundary node with unit normal n: τ = (−n_y, n_x) in 2D; in 3D an
 /// orthonormal pair τ_1 = e × n / |e × n| (e the coordinate axis least aligned with n),
 /// τ_2 = n × τ_1. Any orthonormal pair gives the same |w_τ| (the friction is isotropic).
@@ -618,11 +677,11 @@ fn tangents(n: [f64; 3], d: usize) -> Vec<[f64; 3]> {
 /// A constraint group all of whose nodes are clamped: its condition would vanish silently.
 fn on_fixed(scene: &Scene, role: &str, value: &str, table: &str) -> Error {
     Error::input(format!(
-        "{}: key 'mesh.groups.{role}': every node of the group '{value}' lies on the clamped \
-         group '{}', so its condition would have no effect; name the right group, or remove \
-         {table} (or set enabled = false)",
+        "{}: key 'mesh.groups.{role}': every node of the group '{value}' lies on {}, so its \
+         condition would have no effect; name the right group, or remove {table} (or set \
+         enabled = false)",
         scene.path.display(),
-        scene.mesh.groups.fixed
+        constraints::conditions(scene)
     ))
 }
 
@@ -728,12 +787,12 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
     )))
 }
 
-/// Assembles K_A, K_B, K_R over all cells in free-dof numbering (Γ1 rows and columns
-/// dropped); the three share one sparsity pattern, built once from the mesh: node q couples
-/// with node p when a cell holds both. Γ1 clamps whole nodes, so a free node has all d dofs
-/// free, numbered consecutively in node order; the column of dof (p, c) lists, for each
-/// neighbour q of p in increasing order, the rows (q, 0..d). The element matrices are then
-/// added at their positions: no triplets, no sorting.
+/// Assembles K_A, K_B, K_R over all cells on the dofs with an index (`free`: the free and
+/// the prescribed ones; rows and columns of dofs held at zero dropped); the three share one
+/// sparsity pattern, built once from the mesh: node q couples with node p when a cell holds
+/// both. The column of index j, a component of node p, lists the indices of the components
+/// of p's neighbours q, increasing. The element matrices are then added at their positions
+/// (found by bisection in the column): no triplets.
 fn assemble(
     cells: &[Cell],
     d: usize,
@@ -743,25 +802,34 @@ fn assemble(
     b: Option<Isotropic>,
     r: Isotropic,
 ) -> (Sparse, Option<Sparse>, Sparse) {
-    let is_free = |p: usize| free[d * p].is_some();
+    let dofs = |p: usize| free[d * p..d * (p + 1)].iter().flatten().copied();
+    let has_dofs = |p: usize| dofs(p).next().is_some();
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
     for t in cells {
-        for &p in t.vertices().iter().filter(|&&p| is_free(p)) {
-            let free_q = t.vertices().iter().filter(|&&q| is_free(q));
-            neighbours[p].extend(free_q.map(|&q| q as u32));
+        for &p in t.vertices().iter().filter(|&&p| has_dofs(p)) {
+            let with_dofs = t.vertices().iter().filter(|&&q| has_dofs(q));
+            neighbours[p].extend(with_dofs.map(|&q| q as u32));
+        }
+    }
+    let mut node_of = vec![0; n];
+    for (g, i) in free.iter().enumerate() {
+        if let Some(i) = i {
+            node_of[*i] = g / d;
         }
     }
     let mut col_ptr = vec![0usize];
     let mut row_idx = Vec::new();
-    for (p, list) in neighbours.iter_mut().enumerate() {
+    for list in neighbours.iter_mut() {
         list.sort_unstable();
         list.dedup();
-        for _ in 0..if is_free(p) { d } else { 0 } {
-            for &q in list.iter() {
-                row_idx.extend(free[d * q as usize..d * (q as usize + 1)].iter().flatten());
-            }
-            col_ptr.push(row_idx.len());
+    }
+    for &p in &node_of {
+        let start = row_idx.len();
+        for &q in &neighbours[p] {
+            row_idx.extend(dofs(q as usize));
         }
+        row_idx[start..].sort_unstable();
+        col_ptr.push(row_idx.len());
     }
     let nnz = row_idx.len();
     let (mut va, mut vb, mut vr) = (
@@ -773,22 +841,24 @@ fn assemble(
     // building three element matrices per cell.
     for t in cells {
         let nodes = t.vertices();
-        for (j, &p) in nodes.iter().enumerate().filter(|(_, &p)| is_free(p)) {
-            for (i, &q) in nodes.iter().enumerate().filter(|(_, &q)| is_free(q)) {
-                // The block (q, p) starts at row d·k of p's columns, k = q's place among
-                // p's neighbours.
-                let k = neighbours[p]
-                    .binary_search(&(q as u32))
-                    .expect("the pattern holds every pair of a cell");
+        for (j, &p) in nodes.iter().enumerate() {
+            for (i, &q) in nodes.iter().enumerate() {
                 for be in 0..d {
-                    let start = col_ptr[free[d * p + be].expect("p is free")] + d * k;
+                    let Some(col) = free[d * p + be] else {
+                        continue;
+                    };
+                    let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
                     for al in 0..d {
+                        let Some(row) = free[d * q + al] else {
+                            continue;
+                        };
+                        let at = col_ptr[col] + column.partition_point(|&x| x < row);
                         let parts = t.parts(i, j, al, be);
-                        va[start + al] += t.entry(a, parts);
+                        va[at] += t.entry(a, parts);
                         if let Some(b) = b {
-                            vb[start + al] += t.entry(b, parts);
+                            vb[at] += t.entry(b, parts);
                         }
-                        vr[start + al] += t.entry(r, parts);
+                        vr[at] += t.entry(r, parts);
                     }
                 }
             }

@@ -22,7 +22,7 @@
 
 use std::collections::{BTreeSet, HashMap};
 
-use super::{fmt_point, Group, Mesh};
+use super::{fmt_point, Mesh};
 use crate::{Error, Result};
 
 /// Coordinates closer than this times the bounding-box diagonal are one place.
@@ -206,8 +206,9 @@ impl Mesh {
     }
 
     /// `check`/`run`: refuses coincident nodes (unless `separate_parts`) and any part that
-    /// holds no facet of `fixed` (Γ1), naming where and what fixes it.
-    pub fn check_parts(&self, fixed: &Group, separate_parts: bool) -> Result<()> {
+    /// holds no node of the conditions (`held` per node; `what` names them: "the clamped
+    /// group 'Γ1'"), naming where and what fixes it.
+    pub fn check_parts(&self, held: &[bool], what: &str, separate_parts: bool) -> Result<()> {
         let file = self.path.display();
         if !separate_parts {
             let places = self.coincident_nodes();
@@ -226,10 +227,6 @@ impl Mesh {
             }
         }
         let parts = self.parts();
-        let mut held = vec![false; self.nodes.len()];
-        for n in self.group_nodes(fixed) {
-            held[n] = true;
-        }
         let free: Vec<(usize, &Part)> = parts
             .iter()
             .enumerate()
@@ -244,16 +241,14 @@ impl Mesh {
         };
         Err(Error::input(format!(
             "mesh '{file}' has {} parts (sets of cells connected through shared nodes), and \
-             part {} ({}) holds no {} of the clamped group '{}'{more}: it could move as a rigid \
-             body, so K_A is singular. Put part of its boundary into '{}', connect it to the \
+             part {} ({}) holds no {} of {what}{more}: it could move as a rigid \
+             body, so K_A is singular. Put part of its boundary into a clamped group, connect it to the \
              body (gmsh: BooleanFragments in OpenCASCADE, Coherence in the built-in kernel), \
              or remove it{}",
             parts.len(),
             k + 1,
             self.describe_part(first),
             if self.dim == 2 { "edge" } else { "face" },
-            Mesh::display_name(fixed),
-            Mesh::display_name(fixed),
             if separate_parts {
                 "; `separate_parts = true` allows parts that only touch, not parts without Γ1"
             } else {

@@ -240,7 +240,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     )?;
     stage()?;
     let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
-    let saved = cp.saved(disc.n_free, tl.rows().len())?;
+    let saved = cp.saved(disc.n_dofs, tl.rows().len())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
     // The last moment a signal ends the resume unchanged; after it, it stops after a step.

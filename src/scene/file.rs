@@ -21,6 +21,41 @@ pub struct SceneFile {
     pub checkpoint: Option<CheckpointSection>,
     #[serde(default)]
     pub scheme: SchemeSection,
+    /// `[[dirichlet]]`: prescribed components of the displacement on boundary groups.
+    #[serde(default)]
+    pub dirichlet: Vec<DirichletSection>,
+}
+
+/// One `[[dirichlet]]` entry: on the group `on`, the displacement components `components`
+/// (any of "x", "y", "z", or "normal" alone on a flat group) equal `value` (one number or
+/// expression of x, y, z, t per component; zero when absent).
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct DirichletSection {
+    #[serde(deserialize_with = "group_ref")]
+    pub on: String,
+    pub components: ComponentNames,
+    pub value: Option<Vec<NumOrExpr>>,
+}
+
+/// `components`: one name or a list (`components = "x"`, `components = ["x", "y"]`).
+#[derive(Deserialize, Debug, Clone)]
+#[serde(
+    untagged,
+    expecting = "a component (\"x\", \"y\", \"z\" or \"normal\") or a list of them"
+)]
+pub enum ComponentNames {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl ComponentNames {
+    pub fn to_vec(&self) -> Vec<String> {
+        match self {
+            ComponentNames::One(x) => vec![x.clone()],
+            ComponentNames::Many(v) => v.clone(),
+        }
+    }
 }
 
 /// Which time discretization of the history terms.
@@ -95,11 +130,13 @@ impl Model {
 
 /// Which physical groups carry which boundary condition: each by its name or its integer
 /// tag, written as a TOML string or integer (`fixed = "Γ1"`, `fixed = 5`, `fixed = "5"`).
+/// `fixed` also takes a list of groups, or `[]` (no clamped group: `[[dirichlet]]` entries
+/// must then remove the rigid motions).
 #[derive(Deserialize, Debug, Clone)]
 #[serde(deny_unknown_fields, default)]
 pub struct Groups {
-    #[serde(deserialize_with = "group_ref")]
-    pub fixed: String,
+    #[serde(deserialize_with = "group_refs")]
+    pub fixed: Vec<String>,
     #[serde(deserialize_with = "group_ref")]
     pub traction: String,
     #[serde(deserialize_with = "group_ref")]
@@ -120,10 +157,35 @@ enum GroupRef {
     Tag(i64),
 }
 
+impl GroupRef {
+    fn text(self) -> String {
+        match self {
+            GroupRef::Name(s) => s,
+            GroupRef::Tag(t) => t.to_string(),
+        }
+    }
+}
+
 fn group_ref<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<String, D::Error> {
-    Ok(match GroupRef::deserialize(d)? {
-        GroupRef::Name(s) => s,
-        GroupRef::Tag(t) => t.to_string(),
+    Ok(GroupRef::deserialize(d)?.text())
+}
+
+/// One group or a list of groups (names or tags).
+fn group_refs<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Vec<String>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(
+        untagged,
+        expecting = "a physical group's name (a string) or tag (an integer), or a list of them ([] for none)"
+    )]
+    enum Refs {
+        One(GroupRef),
+        Many(Vec<GroupRef>),
+    }
+    Ok(match Refs::deserialize(d)? {
+        Refs::One(r) => vec![r.text()],
+        Refs::Many(v) => v.into_iter().map(GroupRef::text).collect(),
     })
 }
 
@@ -136,7 +198,7 @@ fn opt_group_ref<'de, D: serde::Deserializer<'de>>(
 impl Default for Groups {
     fn default() -> Self {
         Groups {
-            fixed: "Γ1".into(),
+            fixed: vec!["Γ1".into()],
             traction: "Γ2".into(),
             contact: "Γ3,1".into(),
             friction: "Γ3,2".into(),

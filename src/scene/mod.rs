@@ -12,11 +12,13 @@
 //! [`Scene::with_mesh`], …), which check the new values as the file's would be and keep
 //! [`Scene::text`] the TOML of the scene that runs.
 
+mod conditions;
 pub mod file;
 mod parts;
 mod physics;
 mod read;
 
+pub use conditions::{Components, Dirichlet};
 pub use file::{ContactSolver, Groups, History, MemoryMode, Model, SceneFile};
 pub use parts::{CheckpointPlan, MeshChoice, OutputPlan, SolverChoice, TimeGrid};
 pub use physics::{Friction, Physics, Traction};

@@ -3,6 +3,7 @@
 //! Converted from `[material]`, `[contact]`, `[friction]` and `[load]`, every number in
 //! range and every expression compiled.
 
+use super::conditions::Dirichlet;
 use super::file::{
     FrictionSection, LoadSection, MaterialSection, MemoryMode, Model, NumOrExpr, RelaxationSection,
     SceneFile,
@@ -52,6 +53,8 @@ pub struct Physics {
     pub tractions: Vec<Traction>,
     /// f_0: the body forces, one vector each.
     pub body_forces: Vec<Vec<Scalar>>,
+    /// `[[dirichlet]]`: prescribed displacement components.
+    pub dirichlet: Vec<Dirichlet>,
 }
 
 /// The message for a key whose value is refused for a reason of its own.
@@ -90,6 +93,7 @@ impl Physics {
             friction,
             tractions,
             body_forces,
+            dirichlet: super::conditions::dirichlet(&f.dirichlet, model, path)?,
         })
     }
 
@@ -350,7 +354,7 @@ fn vector(v: &[NumOrExpr], key: &str, model: Model, path: &Path) -> Result<Vec<S
         .collect()
 }
 
-fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Scalar> {
+pub(super) fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Scalar> {
     match v {
         NumOrExpr::Num(x) => Ok(Scalar::Const(ranges::scaled(*x, key, file)?)),
         NumOrExpr::Expr(s) => {
@@ -365,7 +369,7 @@ fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Sca
 }
 
 /// The variables of loads (space and time) and of F, μ (space): a 2D model has no z.
-fn variables(model: Model, time: bool) -> &'static [&'static str] {
+pub(super) fn variables(model: Model, time: bool) -> &'static [&'static str] {
     match (model.dim(), time) {
         (2, true) => &["x", "y", "t"],
         (2, false) => &["x", "y"],

@@ -5,6 +5,7 @@ mod common;
 
 mod asked_for;
 mod cli_errors;
+mod conditions;
 mod contact_plan;
 mod docs;
 mod expr_differential;

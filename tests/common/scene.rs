@@ -140,6 +140,18 @@ impl SceneText {
         self.push("load.body", entry)
     }
 
+    /// Appends a `[[dirichlet]]` on the group `on` holding `components` (names, or
+    /// ["normal"]) at `value` (one expression each; `None`: zero).
+    pub fn dirichlet(self, on: &str, components: &[&str], value: Option<&[&str]>) -> SceneText {
+        let mut entry = Table::new();
+        entry.insert("on".into(), on.into());
+        entry.insert("components".into(), strings(components));
+        if let Some(v) = value {
+            entry.insert("value".into(), strings(v));
+        }
+        self.push("dirichlet", entry)
+    }
+
     /// The value of `key`, if the scene has it.
     pub fn get(&self, key: &str) -> Option<&Value> {
         segments(key)

@@ -1065,3 +1065,39 @@ fn a_run_this_machine_cannot_hold_is_refused() {
         assert!(!out.exists(), "a refused run writes nothing");
     }
 }
+
+/// Scenes with Dirichlet conditions (issue 51), whose prescribed dofs the checkpoint keeps
+/// beside the free ones: the paper's rectangle pulled by a prescribed displacement of its
+/// right edge, and the half block with a symmetry plane whose right face is pushed down;
+/// stopped at step 7 of 16 and resumed = the run that never stopped, bit for bit.
+#[test]
+fn stopped_and_resumed_equals_uninterrupted_with_prescribed_displacements() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = common::repo().join("tests/data/symmetry");
+    let scenes = [
+        common::SceneText::paper()
+            .set("mesh.file", common::mesh_path("paper/rect_016.msh"))
+            .dirichlet("right", &["x"], Some(&["0.02*t*(1-y)"])),
+        common::SceneText::block()
+            .mesh(data.join("half_block.msh"))
+            .set("load.traction", toml::Value::Array(vec![]))
+            .dirichlet("sym", &["normal"], None)
+            .dirichlet("right", &["z"], Some(&["-0.02*t"])),
+    ];
+    for (i, s) in scenes.into_iter().enumerate() {
+        let s = s.set("time.steps", 16).set("checkpoint.every", 5);
+        let scene = s.write(tmp.path(), &format!("scene{i}.toml"));
+        let (full, part) = (
+            tmp.path().join(format!("full{i}")),
+            tmp.path().join(format!("part{i}")),
+        );
+        let summary = finished(run(&scene, &opts(&full, &[], None)).unwrap());
+        assert!(summary.iterations.total > 0);
+        assert!(matches!(
+            run(&scene, &opts(&part, &[], Some(7))).unwrap(),
+            Outcome::Stopped { step: 7, .. }
+        ));
+        finished(resume_quiet(&part.join("checkpoint.h5")));
+        assert_same_series(&full, &part, &format!("scene {i}"));
+    }
+}

@@ -5,6 +5,7 @@ mod common;
 
 mod contact;
 mod corner;
+mod dirichlet;
 mod friction_cone;
 mod matrix_free;
 mod memory;

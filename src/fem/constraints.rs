@@ -1,0 +1,470 @@
+//! The Dirichlet conditions and the dof numbering they give: the clamped groups of
+//! `mesh.groups.fixed` (u = 0, every component) and the `[[dirichlet]]` entries (chosen
+//! components, or the normal one on a flat group, equal to g(x, t)).
+//!
+//! # Numbering
+//!
+//! Global dof d·node + c. A dof with no condition is *free*: the free dofs are numbered
+//! 0..n_free in global order, the unknowns of the step problem. A dof held at zero for all
+//! t is eliminated (no index), as the clamped Γ1 always was: u = w = 0 there. A dof with a
+//! prescribed value that is not identically zero is *prescribed*: numbered n_free..n_dofs
+//! after the free ones, in global order, so the vectors the loop keeps (u, w, m, b) have
+//! n_dofs entries and the step problem reads their first n_free. Without prescribed values
+//! n_dofs = n_free and every vector, matrix and result is what it was without them.
+//!
+//! # Prescribed displacements in the scheme
+//!
+//! The scheme's unknown is the velocity: u_{n+1} = u_n + k w_n. A condition u(x, t) = g(x, t)
+//! at a prescribed dof i is imposed on the step's result, u_{n+1,i} = g_i(t_{n+1}), which
+//! fixes the velocity there before the step is solved:
+//!
+//!   w_{n,i} = (g_i(t_{n+1}) − u_{n,i}) / k,
+//!
+//! exactly (u_{n,i} is the value the previous step reached, so round-off does not drift).
+//! Splitting the step matrix M (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant)
+//! into free (f) and prescribed (p) blocks, the step problem on the free dofs is the same
+//! variational inequality with
+//!
+//!   M_ff w_f = b_f − M_fp w_p,    b = f_n − K_B u_n − K_R m_n − g_F  (all n_dofs rows),
+//!
+//! where u_n and m_n include the prescribed dofs, so that K_B u_n and K_R m_n see the
+//! prescribed displacement and its memory. M_ff is what is factored: symmetric positive
+//! definite once the conditions remove the rigid motions, of the cost it had.
+//!
+//! # Rules
+//!
+//! A dof held by two conditions is allowed when both hold it at zero (a clamped edge shared
+//! with a symmetry plane) or prescribe the same value as written (the same expression, and
+//! for `normal` the same sign); otherwise it is refused, naming both. `normal` needs a flat group
+//! whose normal is a coordinate axis (then it is that component, with the sign of the
+//! normal). A body (each connected part) must have its rigid motions removed by the
+//! conditions, or `check` and `run` refuse it.
+
+use super::{group, Sparse};
+use crate::mesh::{Group, Mesh, Part};
+use crate::scene::{Components, Scene};
+use crate::{Error, Result};
+
+/// A prescribed dof: global dof d·node + c gets index `dof` (≥ n_free) and the value
+/// scale · value_`value`(x, t) of `[[dirichlet]]` entry `entry`.
+#[derive(Clone, Copy, Debug)]
+pub struct Prescribed {
+    pub dof: usize,
+    pub node: usize,
+    pub entry: usize,
+    pub value: usize,
+    pub scale: f64,
+}
+
+/// The dof numbering under the scene's conditions.
+pub struct Numbering {
+    /// Global dof → index: free dofs 0..n_free, prescribed n_free..n_dofs, None if held at 0.
+    pub free: Vec<Option<usize>>,
+    pub n_free: usize,
+    pub n_dofs: usize,
+    pub prescribed: Vec<Prescribed>,
+    /// Per node, which components carry a condition (bit c for component c).
+    pub held: Vec<u8>,
+}
+
+/// What holds a dof while the numbering is built: the source (fixed group i, or
+/// `[[dirichlet]]` entry i) and the value (None: zero).
+#[derive(Clone, Copy)]
+struct Hold {
+    source: Source,
+    value: Option<(usize, f64)>,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Source {
+    Fixed(usize),
+    Dirichlet(usize),
+}
+
+impl Hold {
+    /// Both hold at zero, or both prescribe the same written value with the same sign.
+    fn agrees(self, other: Hold, scene: &Scene) -> bool {
+        let written = |h: Hold| match (h.source, h.value) {
+            (Source::Dirichlet(e), Some((v, scale))) => {
+                Some((&scene.physics.dirichlet[e].written[v], scale))
+            }
+            _ => None,
+        };
+        written(self) == written(other)
+    }
+}
+
+impl Source {
+    fn describe(self, scene: &Scene) -> String {
+        match self {
+            Source::Fixed(i) => format!(
+                "the clamped group '{}' (mesh.groups.fixed)",
+                scene.mesh.groups.fixed[i]
+            ),
+            Source::Dirichlet(i) => format!("'{}' (dirichlet[{i}])", scene.physics.dirichlet[i].on),
+        }
+    }
+}
+
+impl Numbering {
+    /// The numbering of `scene`'s conditions on `mesh`, every rule checked.
+    pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Numbering> {
+        let d = mesh.dim;
+        let mut holds: Vec<Option<Hold>> = vec![None; d * mesh.nodes.len()];
+        for (i, name) in scene.mesh.groups.fixed.iter().enumerate() {
+            let g = group(mesh, scene, "mesh.groups.fixed", name)?;
+            for node in mesh.group_nodes(g) {
+                for c in 0..d {
+                    let hold = Hold {
+                        source: Source::Fixed(i),
+                        value: None,
+                    };
+                    put(&mut holds, d * node + c, hold, mesh, scene)?;
+                }
+            }
+        }
+        for (i, e) in scene.physics.dirichlet.iter().enumerate() {
+            let g = group(mesh, scene, &format!("dirichlet[{i}].on"), &e.on)?;
+            for (c, v, scale) in axes(mesh, scene, g, i)? {
+                let value = (!e.is_zero(v)).then_some((v, scale));
+                for node in mesh.group_nodes(g) {
+                    let hold = Hold {
+                        source: Source::Dirichlet(i),
+                        value,
+                    };
+                    put(&mut holds, d * node + c, hold, mesh, scene)?;
+                }
+            }
+        }
+        let numbering = Numbering::of(&holds, d);
+        numbering.check(mesh, scene)?;
+        Ok(numbering)
+    }
+
+    /// Free dofs first, then prescribed ones, each in global order.
+    fn of(holds: &[Option<Hold>], d: usize) -> Numbering {
+        let mut free = vec![None; holds.len()];
+        let mut held = vec![0u8; holds.len() / d];
+        let mut n_free = 0;
+        for (g, h) in holds.iter().enumerate() {
+            match h {
+                None => {
+                    free[g] = Some(n_free);
+                    n_free += 1;
+                }
+                Some(_) => held[g / d] |= 1 << (g % d),
+            }
+        }
+        let mut prescribed = Vec::new();
+        for (g, h) in holds.iter().enumerate() {
+            if let Some(Hold {
+                source: Source::Dirichlet(entry),
+                value: Some((value, scale)),
+            }) = *h
+            {
+                let dof = n_free + prescribed.len();
+                free[g] = Some(dof);
+                prescribed.push(Prescribed {
+                    dof,
+                    node: g / d,
+                    entry,
+                    value,
+                    scale,
+                });
+            }
+        }
+        Numbering {
+            free,
+            n_free,
+            n_dofs: n_free + prescribed.len(),
+            prescribed,
+            held,
+        }
+    }
+
+    /// Something free, and every part of the body held against its rigid motions.
+    fn check(&self, mesh: &Mesh, scene: &Scene) -> Result<()> {
+        let file = scene.path.display();
+        if self.n_free == 0 {
+            return Err(Error::input(format!(
+                "{file}: every dof of '{}' carries a condition ({}); nothing is left to \
+                 solve for",
+                mesh.path.display(),
+                conditions(scene)
+            )));
+        }
+        if scene.mesh.groups.fixed.is_empty() && scene.physics.dirichlet.is_empty() {
+            return Err(Error::input(format!(
+                "{file}: key 'mesh.groups.fixed': the scene has no condition \
+                 (mesh.groups.fixed = [] and no [[dirichlet]]), so the body is free to move \
+                 as a rigid body and K_A is singular; name a clamped group, or add \
+                 [[dirichlet]] entries that hold every rigid motion"
+            )));
+        }
+        let held: Vec<bool> = self.held.iter().map(|&h| h != 0).collect();
+        mesh.check_parts(&held, &conditions(scene), scene.mesh.separate_parts)
+            .map_err(|e| Error::input(format!("{file}: {e}")))?;
+        if scene.physics.dirichlet.is_empty() {
+            // Clamped groups hold whole facets: every part that touches one is held.
+            return Ok(());
+        }
+        for (k, part) in mesh.parts().iter().enumerate() {
+            if let Some(motion) = self.rigid_motion_left(mesh, part) {
+                return Err(Error::input(format!(
+                    "{file}: the conditions ({}) leave {} free to move as a rigid body ({motion}), \
+                     so K_A is singular; clamp a group in mesh.groups.fixed or add [[dirichlet]] \
+                     entries that hold that motion (a roller on a plane normal to the motion's \
+                     direction, or a second symmetry plane)",
+                    conditions(scene),
+                    match mesh.parts().len() {
+                        1 => "the body".to_string(),
+                        _ => format!("part {} ({})", k + 1, mesh.describe_part(part)),
+                    }
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// A rigid motion of `part` that no condition holds, described, if there is one: the
+    /// rigid motions (translations, rotations about the part's centre, scaled by its size)
+    /// restricted to the held dofs are orthogonalized in turn (modified Gram–Schmidt); one
+    /// that is a combination of those before it is not held.
+    fn rigid_motion_left(&self, mesh: &Mesh, part: &Part) -> Option<String> {
+        let d = mesh.dim;
+        let centre: [f64; 3] = std::array::from_fn(|i| 0.5 * (part.min[i] + part.max[i]));
+        let size = (0..3)
+            .map(|i| part.max[i] - part.min[i])
+            .fold(0.0, f64::max)
+            .max(f64::MIN_POSITIVE);
+        let n_modes = if d == 2 { 3 } else { 6 };
+        let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n_modes];
+        for &node in &part.nodes {
+            let x: [f64; 3] = std::array::from_fn(|i| (mesh.nodes[node][i] - centre[i]) / size);
+            for c in (0..d).filter(|c| self.held[node] & (1 << c) != 0) {
+                for (m, col) in columns.iter_mut().enumerate() {
+                    col.push(rigid_mode(m, d, x)[c]);
+                }
+            }
+        }
+        let mut basis: Vec<Vec<f64>> = Vec::new();
+        for (m, mut col) in columns.into_iter().enumerate() {
+            for q in &basis {
+                let p = dot(q, &col);
+                col.iter_mut().zip(q).for_each(|(c, q)| *c -= p * q);
+            }
+            let norm = dot(&col, &col).sqrt();
+            // Each mode has norm ~ √(held dofs) at most; 1e-8 of 1 is far below any held
+            // motion of a mesh whose held nodes are not all (nearly) on one line.
+            if norm <= 1e-8 {
+                return Some(mode_name(m, d));
+            }
+            col.iter_mut().for_each(|c| *c /= norm);
+            basis.push(col);
+        }
+        None
+    }
+}
+
+/// Records `hold` on global dof `g`; a dof held twice keeps one hold when both are zero and
+/// is refused otherwise.
+fn put(holds: &mut [Option<Hold>], g: usize, hold: Hold, mesh: &Mesh, scene: &Scene) -> Result<()> {
+    match holds[g] {
+        None => holds[g] = Some(hold),
+        Some(old) if old.agrees(hold, scene) => {}
+        Some(old) => {
+            let (d, node) = (mesh.dim, g / mesh.dim);
+            return Err(Error::input(format!(
+                "{}: the node at {} lies on {} and on {}, which both hold its {} component at \
+                 different values; hold each component once (in gmsh, give the shared nodes to \
+                 one physical group), or write the same value in both",
+                scene.path.display(),
+                super::fmt_at(mesh.nodes[node], scene.mesh.model),
+                old.source.describe(scene),
+                hold.source.describe(scene),
+                ["x", "y", "z"][g % d],
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The (component, value index, scale) triples of `[[dirichlet]]` entry `i` on group `g`:
+/// the named axes, or for `normal` the axis of the flat group's normal with its sign.
+fn axes(mesh: &Mesh, scene: &Scene, g: &Group, i: usize) -> Result<Vec<(usize, usize, f64)>> {
+    let e = &scene.physics.dirichlet[i];
+    match &e.components {
+        Components::Axes(a) => Ok(a.iter().enumerate().map(|(v, &c)| (c, v, 1.0)).collect()),
+        Components::Normal => {
+            let (axis, sign) = flat_axis(mesh, g).map_err(|why| {
+                Error::input(format!(
+                    "{}: key 'dirichlet[{i}].components': [\"normal\"] on the group '{}': {why}",
+                    scene.path.display(),
+                    e.on
+                ))
+            })?;
+            Ok(vec![(axis, 0, sign)])
+        }
+    }
+}
+
+/// The coordinate axis and sign of a flat group's outward normal: refused when the facets'
+/// normals differ (a curved or kinked group) or the plane is inclined.
+fn flat_axis(mesh: &Mesh, g: &Group) -> std::result::Result<(usize, f64), String> {
+    let facets = mesh.boundary_facets(g);
+    let Some(first) = facets.first() else {
+        return Err("the group has no facets".into());
+    };
+    let n = first.normal;
+    if let Some(f) = facets
+        .iter()
+        .find(|f| (0..3).any(|c| (f.normal[c] - n[c]).abs() > 1e-9))
+    {
+        return Err(format!(
+            "the group is not flat (facet normals {} and {} differ); a normal component needs \
+             one plane: prescribe coordinate components instead, or split the group into \
+             flat ones",
+            crate::mesh::fmt_point(n, mesh.dim),
+            crate::mesh::fmt_point(f.normal, mesh.dim)
+        ));
+    }
+    match (0..mesh.dim).find(|&c| n[c].abs() >= 1.0 - 1e-12) {
+        Some(c) => Ok((c, n[c].signum())),
+        None => Err(format!(
+            "the plane's normal {} is inclined; only planes normal to a coordinate axis are \
+             supported for now (symmetry planes and rollers on x, y or z = const)",
+            crate::mesh::fmt_point(n, mesh.dim)
+        )),
+    }
+}
+
+/// Rigid mode m at the (centred, scaled) point x: translations along x, y (, z), then the
+/// rotations (about z in 2D; about x, y, z in 3D).
+fn rigid_mode(m: usize, d: usize, x: [f64; 3]) -> [f64; 3] {
+    if m < d {
+        let mut e = [0.0; 3];
+        e[m] = 1.0;
+        return e;
+    }
+    let mut axis = [0.0; 3];
+    axis[if d == 2 { 2 } else { m - d }] = 1.0;
+    crate::mesh::cross(axis, x)
+}
+
+fn mode_name(m: usize, d: usize) -> String {
+    let axis = ["x", "y", "z"];
+    if m < d {
+        format!("a translation along {}", axis[m])
+    } else {
+        format!("a rotation about {}", axis[if d == 2 { 2 } else { m - d }])
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a * b).sum()
+}
+
+/// `check`'s line on the conditions: each group and what it holds, and the number of
+/// prescribed dofs (moved to the right side of each step).
+pub fn summary(scene: &Scene, n_prescribed: usize) -> String {
+    let mut parts: Vec<String> = scene
+        .mesh
+        .groups
+        .fixed
+        .iter()
+        .map(|g| format!("'{g}' clamped"))
+        .collect();
+    for e in &scene.physics.dirichlet {
+        let what = match &e.components {
+            Components::Normal => "normal".to_string(),
+            Components::Axes(a) => a.iter().map(|&c| ["x", "y", "z"][c]).collect(),
+        };
+        let at = match e.written.iter().all(|v| v == "0") {
+            true => " = 0".to_string(),
+            false => format!(" = [{}]", e.written.join(", ")),
+        };
+        parts.push(format!("'{}' {what}{at}", e.on));
+    }
+    if parts.is_empty() {
+        parts.push("none".into());
+    }
+    format!("{}; {n_prescribed} prescribed dofs", parts.join(", "))
+}
+
+/// The scene's conditions for messages: "the clamped group 'Γ1'", or the groups listed.
+pub fn conditions(scene: &Scene) -> String {
+    let fixed = &scene.mesh.groups.fixed;
+    let quoted = |v: &mut dyn Iterator<Item = &String>| {
+        v.map(|g| format!("'{g}'")).collect::<Vec<_>>().join(", ")
+    };
+    let dirichlet = &scene.physics.dirichlet;
+    match (fixed.len(), dirichlet.len()) {
+        (1, 0) => format!("the clamped group '{}'", fixed[0]),
+        (_, 0) => format!("the clamped groups {}", quoted(&mut fixed.iter())),
+        (0, _) => format!(
+            "the [[dirichlet]] groups {}",
+            quoted(&mut dirichlet.iter().map(|e| &e.on))
+        ),
+        _ => format!(
+            "the clamped groups {} and the [[dirichlet]] groups {}",
+            quoted(&mut fixed.iter()),
+            quoted(&mut dirichlet.iter().map(|e| &e.on))
+        ),
+    }
+}
+
+/// g_i(t) at the prescribed dofs, in index order. A value that is not finite is refused:
+/// as bad input at the first step's t_1 = k (`time_loop::refusals` asks there before any
+/// step), as a failed run later.
+pub fn values(
+    prescribed: &[Prescribed],
+    nodes: &[[f64; 3]],
+    scene: &Scene,
+    t: f64,
+) -> Result<Vec<f64>> {
+    prescribed
+        .iter()
+        .map(|p| {
+            let x = nodes[p.node];
+            let pt = crate::expr::Point {
+                x: x[0],
+                y: x[1],
+                z: x[2],
+                t,
+                ..Default::default()
+            };
+            let g = p.scale * scene.physics.dirichlet[p.entry].value[p.value].eval(&pt);
+            if g.is_finite() {
+                return Ok(g);
+            }
+            let what = format!(
+                "{}: key 'dirichlet[{}].value[{}]' evaluates to {g} at {} at t = {t}",
+                scene.path.display(),
+                p.entry,
+                p.value,
+                super::fmt_at(x, scene.mesh.model)
+            );
+            Err(if t == scene.time.k() {
+                Error::input(format!("{what}; a prescribed displacement must be finite"))
+            } else {
+                Error::solve(format!(
+                    "{what}; the run stops here (the last checkpoint is kept)"
+                ))
+            })
+        })
+        .collect()
+}
+
+/// b_f −= M_fp w_p: the prescribed dofs' velocities (indices n_free.. of `w`) moved to the
+/// right side of the step problem on the free dofs, M the step matrix on all dofs.
+pub fn lift(m: &Sparse, n_free: usize, w: &[f64], b: &mut [f64]) {
+    let m = m.as_ref();
+    let (cp, ri, v) = (m.symbolic().col_ptr(), m.symbolic().row_idx(), m.val());
+    for j in n_free..m.ncols() {
+        for p in cp[j]..cp[j + 1] {
+            if ri[p] < n_free {
+                b[ri[p]] -= v[p] * w[j];
+            }
+        }
+    }
+}
