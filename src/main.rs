@@ -74,7 +74,7 @@ enum Command {
     Plot {
         /// The output directory of a run (or its solution.pvd).
         dir: PathBuf,
-        /// The frame nearest to this time (default: the last).
+        /// The frame nearest to this time, within the run's times (default: the last).
         #[arg(long)]
         time: Option<f64>,
         /// A point or cell field: von_mises, displacement, stress_XY, contact_pressure, …
@@ -83,7 +83,7 @@ enum Command {
         /// Displacement scale (default: the largest displacement is 10% of the body size).
         #[arg(long)]
         scale: Option<f64>,
-        /// The PNG to write (default: DIR/<field>_t<time>.png).
+        /// The PNG to write (default: <run>_<field>_t<time>.png in the current directory).
         #[arg(short = 'o', long = "output")]
         output: Option<PathBuf>,
         /// 3D runs: the direction from the body towards the eye (default 1,-1.5,-1:
@@ -211,6 +211,9 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
 /// Draws the figure and says what it shows.
 fn plot(dir: &std::path::Path, options: &viscontact::plot::PlotOptions) -> Result<()> {
     let i = viscontact::plot::plot_run(dir, options)?;
+    for note in &i.notes {
+        eprintln!("{note}");
+    }
     let view = i.view.map(|v| format!(", seen from {v:?}"));
     println!(
         "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e}{})",
