@@ -96,6 +96,17 @@ enum Command {
     },
 }
 
+/// `study --mesh-pattern`'s help. clap turns every `{n}` of a help text into a line break
+/// (issue 49: the placeholder vanished); a style reset between `{` and `n`, which clap
+/// strips off when the help is not coloured, keeps it.
+fn mesh_pattern_help() -> String {
+    let n = format!("{{{}n}}", clap::builder::styling::Reset);
+    format!(
+        "Mesh of level n, relative to the scene file: `{n}` or `{{n:03}}` for the level \
+         (default: from mesh.file when it ends in _NNN.msh)"
+    )
+}
+
 /// The flags that `run` and `resume` share: how the steps run and where they stop.
 #[derive(clap::Args)]
 struct StepFlags {
@@ -628,9 +639,7 @@ struct StudyArgs {
     /// The level of the parameter held fixed (default: the reference level).
     #[arg(long)]
     fixed: Option<usize>,
-    /// Mesh of level n, relative to the scene file: `{n}` or `{n:03}` for the level
-    /// (default: from mesh.file when it ends in _NNN.msh).
-    #[arg(long, conflicts_with = "meshes")]
+    #[arg(long, conflicts_with = "meshes", help = mesh_pattern_help())]
     mesh_pattern: Option<String>,
     /// One mesh per level, then the reference mesh (for meshes that are not numbered).
     #[arg(long, value_delimiter = ',')]

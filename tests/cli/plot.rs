@@ -159,7 +159,10 @@ fn plot_leaves_the_run_directory_alone_and_draws_the_same_from_any_directory() {
     plot(&run, &from_root, &[]);
     let elsewhere = tmp.path().join("elsewhere");
     std::fs::create_dir(&elsewhere).unwrap();
-    let o = viscontact_in(&elsewhere, &["plot", run.to_str().unwrap(), "--width", "800"]);
+    let o = viscontact_in(
+        &elsewhere,
+        &["plot", run.to_str().unwrap(), "--width", "800"],
+    );
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(!stderr.contains("warning"), "{stderr}");
@@ -184,7 +187,10 @@ fn plot_leaves_the_run_directory_alone_and_draws_the_same_from_any_directory() {
     assert!(Path::new(&mesh).is_absolute(), "{mesh}");
     let moved = tmp.path().join("moved/rect_008.msh");
     std::fs::write(&summary, text.replace(&mesh, moved.to_str().unwrap())).unwrap();
-    let o = viscontact_in(&elsewhere, &["plot", run.to_str().unwrap(), "-o", "moved.png"]);
+    let o = viscontact_in(
+        &elsewhere,
+        &["plot", run.to_str().unwrap(), "-o", "moved.png"],
+    );
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(
@@ -204,7 +210,13 @@ fn plot_refuses_a_time_outside_the_run_and_names_the_frame_it_drew() {
     let png = tmp.path().join("fig.png");
     let at = |time: &str| {
         let time = format!("--time={time}");
-        cli(&["plot", run.to_str().unwrap(), &time, "-o", png.to_str().unwrap()])
+        cli(&[
+            "plot",
+            run.to_str().unwrap(),
+            &time,
+            "-o",
+            png.to_str().unwrap(),
+        ])
     };
     for outside in ["5", "1.3", "-0.3", "NaN"] {
         let (code, text) = at(outside);
@@ -218,11 +230,20 @@ fn plot_refuses_a_time_outside_the_run_and_names_the_frame_it_drew() {
         let (code, text) = at(between);
         assert_eq!(code, 0, "--time {between}: {text}");
         assert!(
-            text.contains(&format!("no frame at t = {between}; drew the nearest, t = {drawn}")),
+            text.contains(&format!(
+                "no frame at t = {between}; drew the nearest, t = {drawn}"
+            )),
             "{text}"
         );
     }
     let (code, text) = at("0.5");
     assert_eq!(code, 0, "{text}");
     assert!(!text.contains("no frame"), "{text}");
+    // A directory without a series: one sentence, without the run of spaces of issue 49.
+    let (code, text) = cli(&["plot", tmp.path().to_str().unwrap()]);
+    assert_eq!(code, 2, "{text}");
+    assert!(
+        text.contains("give the output directory of a run (viscontact run … --out DIR)"),
+        "{text}"
+    );
 }
