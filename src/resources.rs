@@ -281,7 +281,7 @@ impl FileSystem {
 
 /// The share of the zeros and integers of a frame that zlib keeps, where it keeps the
 /// values that are in general nonzero: measured on the examples, so that the estimate is
-/// 1.0–1.25 times the frames written by the paper's example and the block, in float64 and
+/// 1.0–1.3 times the frames written by the paper's example and the block, in float64 and
 /// float32 (issue 49: the uncompressed size, 2.7 times the paper's, was estimated before).
 const ZLIB_KEEPS: f64 = 0.2;
 
