@@ -384,12 +384,37 @@ struct Colouring {
     values: Vec<f64>,
     per_point: bool,
     range: (f64, f64),
+    /// A field of the contact boundary (`TRACTIONS`), zero elsewhere: drawn as coloured
+    /// markers on the nodes that carry it, the body neutral (coloured cells would smear the
+    /// boundary's values over its first row of cells).
+    boundary: bool,
 }
 
 impl Colouring {
     /// `t` ∈ [0, 1] of a value on the colour bar.
     fn norm(&self, x: f64) -> f64 {
         (x - self.range.0) / (self.range.1 - self.range.0)
+    }
+
+    /// The colour of a piece of the body whose value is `x`.
+    fn fill(&self, x: f64) -> RGBColor {
+        if self.boundary {
+            NEUTRAL
+        } else {
+            colormap(self.norm(x))
+        }
+    }
+
+    /// The marker of node `n` at `at`: a disc of its value's colour, outlined, where a
+    /// boundary field is nonzero.
+    fn marker(&self, n: usize, at: (f64, f64)) -> Option<[Circle<(f64, f64), i32>; 2]> {
+        let x = self.values[n];
+        (self.boundary && x != 0.0).then(|| {
+            [
+                Circle::new(at, 7, colormap(self.norm(x)).filled()),
+                Circle::new(at, 7, BLACK.stroke_width(1)),
+            ]
+        })
     }
 
     /// The coloured pieces of a cell drawn as the triangle `p` (its corners' nodes `nodes`):
@@ -494,6 +519,8 @@ const CONTACT_COLOURS: [RGBColor; 2] = [RGBColor(220, 30, 30), RGBColor(240, 150
 const CONTACT_NAMES: [&str; 2] = ["Γ3,1 (contact)", "Γ3,2 (friction)"];
 /// The undeformed body's lines.
 const GHOST: RGBColor = RGBColor(150, 150, 150);
+/// The body under a boundary field's markers.
+const NEUTRAL: RGBColor = RGBColor(225, 225, 225);
 
 /// Pixel layout of a body figure: the body's plot area keeps its aspect ratio; a title
 /// above, a legend below, the colour bar on the right; axes around the body in 2D only.
@@ -608,11 +635,17 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
     let run = load_frame(dir, opts.time)?;
     let disp = displacement(&run)?;
     let (values, per_point) = field_values(&run.v, &opts.field)?;
+    let boundary = per_point
+        && TRACTIONS.iter().any(|t| {
+            (opts.field.strip_prefix(t))
+                .is_some_and(|rest| rest.is_empty() || rest.starts_with('_'))
+        });
     let colouring = Colouring {
         name: opts.field.clone(),
         range: value_range(&values),
         values,
         per_point,
+        boundary,
     };
     let output = match &opts.output {
         Some(path) => path.clone(),
@@ -737,7 +770,10 @@ impl<'a> Body2d<'a> {
                 .draw()?;
             self.draw_cells(&mut chart, colouring)?;
             self.draw_boundary(&mut chart)?;
-            self.draw_contact(&mut chart, contact)
+            let legend = self.draw_contact(&mut chart, contact)?;
+            let markers = (0..self.def.len()).filter_map(|n| colouring.marker(n, self.def[n]));
+            chart.draw_series(markers.flatten())?;
+            Ok(legend)
         };
         render(output, &lay, &title, colouring, body, |_| Ok(()))
     }
@@ -751,7 +787,7 @@ impl<'a> Body2d<'a> {
         chart.draw_series(
             polys
                 .iter()
-                .map(|(p, f)| Polygon::new(p.to_vec(), colormap(colouring.norm(*f)).filled())),
+                .map(|(p, f)| Polygon::new(p.to_vec(), colouring.fill(*f).filled())),
         )?;
         if self.tris.len() <= 20_000 {
             chart.draw_series(self.tris.iter().map(|t| {

@@ -239,6 +239,18 @@ fn plot_refuses_a_time_outside_the_run_and_names_the_frame_it_drew() {
     let (code, text) = at("0.5");
     assert_eq!(code, 0, "{text}");
     assert!(!text.contains("no frame"), "{text}");
+    // A field of the contact boundary: discs on its nodes (the largest value's in the top
+    // colour of the colour bar) on a neutral body, not a smear over the first row of cells.
+    let fig = tmp.path().join("pressure.png");
+    let px = plot(&run, &fig, &["--field", "contact_pressure"]);
+    let neutral = px.iter().filter(|p| **p == [225, 225, 225]).count();
+    assert!(
+        neutral > px.len() / 10,
+        "{neutral} of {} pixels neutral",
+        px.len()
+    );
+    let top = px.iter().filter(|p| **p == [253, 231, 37]).count();
+    assert!(top > 100, "{top} pixels of the largest pressure's colour");
     // A directory without a series: one sentence, without the run of spaces of issue 49.
     let (code, text) = cli(&["plot", tmp.path().to_str().unwrap()]);
     assert_eq!(code, 2, "{text}");
