@@ -74,7 +74,7 @@ enum Command {
     Plot {
         /// The output directory of a run (or its solution.pvd).
         dir: PathBuf,
-        /// The frame nearest to this time (default: the last).
+        /// The frame nearest to this time, within the run's times (default: the last).
         #[arg(long)]
         time: Option<f64>,
         /// A point or cell field: von_mises, displacement, stress_XY, contact_pressure, …
@@ -83,7 +83,7 @@ enum Command {
         /// Displacement scale (default: the largest displacement is 10% of the body size).
         #[arg(long)]
         scale: Option<f64>,
-        /// The PNG to write (default: DIR/<field>_t<time>.png).
+        /// The PNG to write (default: <run>_<field>_t<time>.png in the current directory).
         #[arg(short = 'o', long = "output")]
         output: Option<PathBuf>,
         /// 3D runs: the direction from the body towards the eye (default 1,-1.5,-1:
@@ -94,6 +94,17 @@ enum Command {
         #[arg(long, default_value_t = 1400, value_parser = clap::value_parser!(u32).range(600..=10000))]
         width: u32,
     },
+}
+
+/// `study --mesh-pattern`'s help. clap turns every `{n}` of a help text into a line break
+/// (issue 49: the placeholder vanished); a style reset between `{` and `n`, which clap
+/// strips off when the help is not coloured, keeps it.
+fn mesh_pattern_help() -> String {
+    let n = format!("{{{}n}}", clap::builder::styling::Reset);
+    format!(
+        "Mesh of level n, relative to the scene file: `{n}` or `{{n:03}}` for the level \
+         (default: from mesh.file when it ends in _NNN.msh)"
+    )
 }
 
 /// The flags that `run` and `resume` share: how the steps run and where they stop.
@@ -228,6 +239,9 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
 /// Draws the figure and says what it shows.
 fn plot(dir: &std::path::Path, options: &viscontact::plot::PlotOptions) -> Result<()> {
     let i = viscontact::plot::plot_run(dir, options)?;
+    for note in &i.notes {
+        eprintln!("{note}");
+    }
     let view = i.view.map(|v| format!(", seen from {v:?}"));
     viscontact::outln!(
         "wrote {} (t = {}, displacement × {:.4e}, {} from {:.4e} to {:.4e}{})",
@@ -650,9 +664,7 @@ struct StudyArgs {
     /// The level of the parameter held fixed (default: the reference level).
     #[arg(long)]
     fixed: Option<usize>,
-    /// Mesh of level n, relative to the scene file: `{n}` or `{n:03}` for the level
-    /// (default: from mesh.file when it ends in _NNN.msh).
-    #[arg(long, conflicts_with = "meshes")]
+    #[arg(long, conflicts_with = "meshes", help = mesh_pattern_help())]
     mesh_pattern: Option<String>,
     /// One mesh per level, then the reference mesh (for meshes that are not numbered).
     #[arg(long, value_delimiter = ',')]

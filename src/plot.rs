@@ -5,7 +5,7 @@
 //! Text is drawn with DejaVu Sans embedded in the binary (crate `dejavu`, rendered by
 //! ab_glyph), so a figure needs no system font and no fontconfig.
 
-use crate::output::read::{read_frame, read_series, Vtu};
+use crate::output::read::{read_frame, read_series, FrameRef, Vtu};
 use crate::{Error, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -92,14 +92,16 @@ pub fn colormap(t: f64) -> RGBColor {
 /// Options of the `plot` command.
 #[derive(Clone, Debug)]
 pub struct PlotOptions {
-    /// The frame nearest to this time (default: the last frame).
+    /// The frame nearest to this time (default: the last frame); refused when it lies
+    /// outside the frames' times by more than half the interval between frames.
     pub time: Option<f64>,
     /// A point or cell field; a vector or tensor field gives its magnitude, `name_X`,
     /// `name_XY`, … one component.
     pub field: String,
     /// Displacement scale (default: the largest displacement drawn as 10 % of the body size).
     pub scale: Option<f64>,
-    /// The PNG to write (default: `DIR/<field>_t<time>.png`).
+    /// The PNG to write (default: `<run>_<field>_t<time>.png` in the current directory,
+    /// not in the run's directory; see `default_output`).
     pub output: Option<PathBuf>,
     /// Width of the figure in pixels.
     pub width: u32,
@@ -156,6 +158,9 @@ pub struct PlotInfo {
     pub contact_marked: bool,
     /// The view direction of a 3D run (None: a 2D run).
     pub view: Option<[f64; 3]>,
+    /// What the user should know of the figure (one line each, for stderr): the time drawn
+    /// when no frame is at `--time`, why the contact groups could not be found.
+    pub notes: Vec<String>,
 }
 
 /// The values of `field` at points or cells (one scalar each), and whether per point.
@@ -216,34 +221,99 @@ struct ContactGroups {
     faces: [Vec<[usize; 3]>; 2],
 }
 
-/// Γ3,1 and Γ3,2 of the run's mesh, from its summary.json and scene (None when they
-/// cannot be found, e.g. the run was made from another directory).
-fn contact_groups(dir: &Path, nodes: usize) -> Option<ContactGroups> {
-    let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    let mesh = crate::mesh::Mesh::read(Path::new(v["mesh"].as_str()?)).ok()?;
+/// Γ3,1 and Γ3,2 of the run's mesh, from the scene and mesh that its summary.json names
+/// (absolute paths: found from any working directory). Err: why they cannot be found
+/// (a copied series, a moved or changed mesh), which `plot` says.
+fn contact_groups(dir: &Path, nodes: usize) -> std::result::Result<ContactGroups, String> {
+    let summary = dir.join("summary.json");
+    let text = std::fs::read_to_string(&summary)
+        .map_err(|e| format!("cannot read {}: {e}", summary.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", summary.display()))?;
+    let named = |key: &str| {
+        v[key]
+            .as_str()
+            .map(PathBuf::from)
+            .ok_or_else(|| format!("{} names no {key} file", summary.display()))
+    };
+    let mesh_path = named("mesh")?;
+    let mesh = crate::mesh::Mesh::read(&mesh_path)
+        .map_err(|e| format!("the run's mesh {} cannot be read: {e}", mesh_path.display()))?;
     if mesh.nodes.len() != nodes {
-        return None;
+        return Err(format!(
+            "the run's mesh {} has {} nodes, its frames {nodes}: the mesh changed since the run",
+            mesh_path.display(),
+            mesh.nodes.len()
+        ));
     }
-    let groups = crate::scene::read_scene_file(Path::new(v["scene"].as_str()?), &[])
+    let scene_path = named("scene")?;
+    let groups = crate::scene::read_scene_file(&scene_path, &[])
         .map(|(_, f)| f.mesh.groups)
-        .unwrap_or_default();
+        .map_err(|e| {
+            format!(
+                "the run's scene {} cannot be read: {e}",
+                scene_path.display()
+            )
+        })?;
     let group = |name: &str| mesh.boundary_group(name).ok();
     let [contact, friction] = [&groups.contact, &groups.friction].map(|n| group(n));
     let edges = |g: Option<&crate::mesh::Group>| g.map(|g| g.facets.clone()).unwrap_or_default();
     let faces = |g: Option<&crate::mesh::Group>| g.map(|g| g.faces.clone()).unwrap_or_default();
-    Some(ContactGroups {
+    Ok(ContactGroups {
         edges: [edges(contact), edges(friction)],
         faces: [faces(contact), faces(friction)],
     })
 }
 
-/// The frame `plot` draws: the run's directory, the frame's time and file, its content.
+/// The frame `plot` draws: the run's directory, the frame's time and file, its content,
+/// and a note when the frame is not at the time asked for.
 struct Loaded {
     dir: PathBuf,
     time: f64,
     frame: PathBuf,
     v: Vtu,
+    note: Option<String>,
+}
+
+/// The frame of `entries` (in time order, at least one) nearest to `t`, and a note when it
+/// is not at `t`. A time outside the frames' times by more than half the smallest interval
+/// between frames is refused: drawing the last frame for `--time 5` of a run to T = 1
+/// would show what the user did not ask for (issue 49).
+fn nearest_frame(
+    entries: &[(f64, FrameRef)],
+    t: f64,
+) -> Result<(&(f64, FrameRef), Option<String>)> {
+    let (first, last) = (entries[0].0, entries[entries.len() - 1].0);
+    let interval = entries
+        .windows(2)
+        .map(|w| w[1].0 - w[0].0)
+        .fold(f64::INFINITY, f64::min);
+    // Round-off of the times as the series file writes them.
+    let eps = 1e-9 * first.abs().max(last.abs()).max(1.0);
+    let slack = if interval.is_finite() {
+        0.5 * interval
+    } else {
+        0.0
+    } + eps;
+    if !(t >= first - slack && t <= last + slack) {
+        return Err(Error::input(format!(
+            "plot: --time {t} is outside the run's frames, t = {first} to {last} ({} frame{}); \
+             give a time in that range or leave --time out (the last frame)",
+            entries.len(),
+            if entries.len() == 1 { "" } else { "s" }
+        )));
+    }
+    let nearest = entries
+        .iter()
+        .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+        .expect("at least one frame");
+    let note = ((nearest.0 - t).abs() > eps).then(|| {
+        format!(
+            "plot: no frame at t = {t}; drew the nearest, t = {}",
+            nearest.0
+        )
+    });
+    Ok((nearest, note))
 }
 
 /// Reads the frame of the run at `dir` nearest to `time` (default: the last).
@@ -263,21 +333,23 @@ fn load_frame(dir: &Path, time: Option<f64>) -> Result<Loaded> {
     } else {
         dir.parent().unwrap_or(Path::new(".")).to_path_buf()
     };
-    let (time, frame) = match time {
-        None => entries.last(),
-        Some(t) => entries
-            .iter()
-            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs())),
+    if entries.is_empty() {
+        return Err(Error::input(format!(
+            "plot: {} lists no frames",
+            series.display()
+        )));
     }
-    .cloned()
-    .ok_or_else(|| Error::input(format!("plot: {} lists no frames", series.display())))?;
-    let v = read_frame(&frame)?;
-    let frame = frame.path().to_path_buf();
+    let ((time, frame), note) = match time {
+        None => (&entries[entries.len() - 1], None),
+        Some(t) => nearest_frame(&entries, t)?,
+    };
+    let v = read_frame(frame)?;
     Ok(Loaded {
         dir,
-        time,
-        frame,
+        time: *time,
+        frame: frame.path().to_path_buf(),
         v,
+        note,
     })
 }
 
@@ -312,12 +384,37 @@ struct Colouring {
     values: Vec<f64>,
     per_point: bool,
     range: (f64, f64),
+    /// A field of the contact boundary (`TRACTIONS`), zero elsewhere: drawn as coloured
+    /// markers on the nodes that carry it, the body neutral (coloured cells would smear the
+    /// boundary's values over its first row of cells).
+    boundary: bool,
 }
 
 impl Colouring {
     /// `t` ∈ [0, 1] of a value on the colour bar.
     fn norm(&self, x: f64) -> f64 {
         (x - self.range.0) / (self.range.1 - self.range.0)
+    }
+
+    /// The colour of a piece of the body whose value is `x`.
+    fn fill(&self, x: f64) -> RGBColor {
+        if self.boundary {
+            NEUTRAL
+        } else {
+            colormap(self.norm(x))
+        }
+    }
+
+    /// The marker of node `n` at `at`: a disc of its value's colour, outlined, where a
+    /// boundary field is nonzero.
+    fn marker(&self, n: usize, at: (f64, f64)) -> Option<[Circle<(f64, f64), i32>; 2]> {
+        let x = self.values[n];
+        (self.boundary && x != 0.0).then(|| {
+            [
+                Circle::new(at, 7, colormap(self.norm(x)).filled()),
+                Circle::new(at, 7, BLACK.stroke_width(1)),
+            ]
+        })
     }
 
     /// The coloured pieces of a cell drawn as the triangle `p` (its corners' nodes `nodes`):
@@ -422,6 +519,8 @@ const CONTACT_COLOURS: [RGBColor; 2] = [RGBColor(220, 30, 30), RGBColor(240, 150
 const CONTACT_NAMES: [&str; 2] = ["Γ3,1 (contact)", "Γ3,2 (friction)"];
 /// The undeformed body's lines.
 const GHOST: RGBColor = RGBColor(150, 150, 150);
+/// The body under a boundary field's markers.
+const NEUTRAL: RGBColor = RGBColor(225, 225, 225);
 
 /// Pixel layout of a body figure: the body's plot area keeps its aspect ratio; a title
 /// above, a legend below, the colour bar on the right; axes around the body in 2D only.
@@ -536,20 +635,31 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
     let run = load_frame(dir, opts.time)?;
     let disp = displacement(&run)?;
     let (values, per_point) = field_values(&run.v, &opts.field)?;
+    let boundary = per_point
+        && TRACTIONS.iter().any(|t| {
+            (opts.field.strip_prefix(t))
+                .is_some_and(|rest| rest.is_empty() || rest.starts_with('_'))
+        });
     let colouring = Colouring {
         name: opts.field.clone(),
         range: value_range(&values),
         values,
         per_point,
+        boundary,
     };
-    let output = opts.output.clone().unwrap_or_else(|| {
-        run.dir.join(format!(
-            "{}_t{}.png",
-            opts.field,
-            format!("{}", run.time).replace('.', "_")
-        ))
-    });
-    let contact = contact_groups(&run.dir, run.v.points.len());
+    let output = match &opts.output {
+        Some(path) => path.clone(),
+        None => default_output(&run.dir, &opts.field, run.time),
+    };
+    let mut notes: Vec<String> = run.note.iter().cloned().collect();
+    let contact = contact_groups(&run.dir, run.v.points.len())
+        .map_err(|why| {
+            notes.push(format!(
+                "warning: plot: {why}; Γ3,1 and Γ3,2 are not drawn, the nodes that carry a contact \
+                 pressure or a friction traction are circled instead"
+            ))
+        })
+        .ok();
     let (scale, view) = match cells(&run)? {
         Cells::Triangles(tris) => {
             if opts.view.is_some() {
@@ -577,7 +687,23 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
         range: colouring.range,
         contact_marked: contact.is_some(),
         view,
+        notes,
     })
+}
+
+/// The figure's file unless `-o` names one: `<run>_<field>_t<time>.png` (e.g.
+/// `paper_von_mises_t1.png`) in the current directory. Not in the run's directory: that
+/// directory is viscontact's own, which a rerun replaces and `resume` continues, and both
+/// refuse a directory holding files a run did not write (issue 49: a figure written there
+/// stopped the run from being resumed). The run's name keeps the figures of two runs apart.
+fn default_output(run_dir: &Path, field: &str, time: f64) -> PathBuf {
+    let run = run_dir
+        .canonicalize()
+        .ok()
+        .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "run".into());
+    let time = format!("{time}").replace('.', "_");
+    PathBuf::from(format!("{run}_{field}_t{time}.png"))
 }
 
 /// A 2D run's body: the frame, its triangles, their deformed positions.
@@ -644,7 +770,10 @@ impl<'a> Body2d<'a> {
                 .draw()?;
             self.draw_cells(&mut chart, colouring)?;
             self.draw_boundary(&mut chart)?;
-            self.draw_contact(&mut chart, contact)
+            let legend = self.draw_contact(&mut chart, contact)?;
+            let markers = (0..self.def.len()).filter_map(|n| colouring.marker(n, self.def[n]));
+            chart.draw_series(markers.flatten())?;
+            Ok(legend)
         };
         render(output, &lay, &title, colouring, body, |_| Ok(()))
     }
@@ -658,7 +787,7 @@ impl<'a> Body2d<'a> {
         chart.draw_series(
             polys
                 .iter()
-                .map(|(p, f)| Polygon::new(p.to_vec(), colormap(colouring.norm(*f)).filled())),
+                .map(|(p, f)| Polygon::new(p.to_vec(), colouring.fill(*f).filled())),
         )?;
         if self.tris.len() <= 20_000 {
             chart.draw_series(self.tris.iter().map(|t| {

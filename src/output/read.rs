@@ -39,7 +39,8 @@ pub fn read_series(path: &Path) -> Result<(PathBuf, Vec<(f64, FrameRef)>)> {
             (false, true) => h5,
             (false, false) => {
                 return Err(Error::input(format!(
-                    "{} holds neither {} nor {}; give the output directory of a run                      (viscontact run … --out DIR)",
+                    "{} holds neither {} nor {}; give the output directory of a run \
+                     (viscontact run … --out DIR)",
                     path.display(),
                     super::PVD_NAME,
                     super::VTKHDF_NAME

@@ -124,7 +124,7 @@ impl<'a> Body3d<'a> {
             pieces.clear();
             colouring.pieces(face.cell, face.nodes, p, &mut pieces);
             for (q, f) in &pieces {
-                let RGBColor(r, g, b) = colormap(colouring.norm(*f));
+                let RGBColor(r, g, b) = colouring.fill(*f);
                 let dim = |c: u8| (c as f64 * shade).round() as u8;
                 area.draw(&Polygon::new(
                     q.to_vec(),
@@ -142,6 +142,13 @@ impl<'a> Body3d<'a> {
             }
             for (n, colour) in marks.tractions(face.nodes) {
                 area.draw(&Circle::new(self.screen[n], 5, colour.stroke_width(2)))?;
+            }
+            for marker in face
+                .nodes
+                .iter()
+                .filter_map(|&n| colouring.marker(n, self.screen[n]))
+            {
+                marker.iter().try_for_each(|m| area.draw(m))?;
             }
         }
         Ok(())

@@ -4,6 +4,7 @@
 
 use super::{draw_err, register_fonts, trim_float, FONT, PALETTE};
 use crate::Result;
+use plotters::coord::combinators::WithKeyPoints;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use std::path::Path;
@@ -59,6 +60,48 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo / pad, hi * pad)
 }
 
+/// The ticks of a log axis over `lo..hi`: the powers of ten when there are three or more,
+/// else 1, 2, 5 × 10^k, else 1, 2, …, 9 × 10^k, else three values between, rounded to two
+/// digits: a study of two levels spans less than a decade, where plotters' own ticks (the
+/// powers of ten) left the y axis without a label and the x axis with one (issue 49).
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let decades = lo.log10().floor() as i32..=hi.log10().ceil() as i32;
+    let mantissas: [&[f64]; 3] = [
+        &[1.0],
+        &[1.0, 2.0, 5.0],
+        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0],
+    ];
+    for m in mantissas {
+        let ticks: Vec<f64> = decades
+            .clone()
+            .flat_map(|e| m.iter().map(move |m| m * 10f64.powi(e)))
+            .filter(|v| (lo..=hi).contains(v))
+            .collect();
+        if ticks.len() >= 3 {
+            return ticks;
+        }
+    }
+    (1..=3)
+        .map(|i| {
+            let v = lo * (hi / lo).powf(f64::from(i) / 4.0);
+            format!("{v:.1e}").parse().unwrap_or(v)
+        })
+        .collect()
+}
+
+/// `lo..hi` of a log axis grown at its top (`top`) or bottom by the room of a legend of
+/// `rows` entries, so that the legend sits beside the data and hides no point.
+fn with_legend_room((lo, hi): (f64, f64), rows: usize, top: bool) -> (f64, f64) {
+    // The legend's share of the plot's height (about 560 pixels): 22 pixels a row.
+    let share = ((22 * rows + 20) as f64 / 560.0).min(0.6);
+    let grow = (hi / lo).powf(share / (1.0 - share));
+    if top {
+        (lo, hi * grow)
+    } else {
+        (lo / grow, hi)
+    }
+}
+
 /// An axis label: plain for 0.01 ≤ |v| < 10⁴ (`0.05`, `200`), else `2e-3`.
 fn sci(v: f64) -> String {
     if v == 0.0 {
@@ -88,14 +131,22 @@ pub fn log_log_chart(
     let err = draw_err(path);
     let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
     root.fill(&WHITE).map_err(&err)?;
+    let position = legend_position(curves);
     let (x0, x1) = log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.0)));
-    let (y0, y1) = log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.1)));
+    let (y0, y1) = with_legend_room(
+        log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.1))),
+        curves.len(),
+        matches!(position, SeriesLabelPosition::UpperLeft),
+    );
     let mut chart = ChartBuilder::on(&root)
         .caption(title, (FONT, 26))
         .margin(20)
         .x_label_area_size(50)
         .y_label_area_size(80)
-        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+        .build_cartesian_2d(
+            (x0..x1).log_scale().with_key_points(log_ticks(x0, x1)),
+            (y0..y1).log_scale().with_key_points(log_ticks(y0, y1)),
+        )
         .map_err(&err)?;
     chart
         .configure_mesh()
@@ -116,7 +167,7 @@ pub fn log_log_chart(
     }
     chart
         .configure_series_labels()
-        .position(legend_position(curves))
+        .position(position)
         .label_font((FONT, 16))
         .background_style(WHITE.mix(0.9))
         .border_style(RGBColor(160, 160, 160))
@@ -146,10 +197,13 @@ fn legend_position(curves: &[Curve]) -> SeriesLabelPosition {
     }
 }
 
+/// A log axis with the ticks of [`log_ticks`].
+type LogAxis = WithKeyPoints<LogCoord<f64>>;
+
 /// One curve of a log–log chart: a reference line dashed and grey, a measured one in its
 /// colour with its points marked and labelled.
 fn draw_curve<'a>(
-    chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<LogAxis, LogAxis>>,
     c: &Curve,
     path: &Path,
 ) -> Result<()> {
@@ -162,8 +216,12 @@ fn draw_curve<'a>(
             (165, 3)
         };
         let style = RGBColor(grey, grey, grey).stroke_width(2);
+        // A straight line on log-log axes: its ends alone, so that the dashes run evenly
+        // (one dashed piece per level restarted the pattern at every point: jagged).
+        let ends = [c.points.first(), c.points.last()];
+        let ends: Vec<(f64, f64)> = ends.into_iter().flatten().copied().collect();
         chart
-            .draw_series(DashedLineSeries::new(c.points.clone(), dash, 5, style))
+            .draw_series(DashedLineSeries::new(ends, dash, 5, style))
             .map_err(&err)?
             .label(c.label.clone())
             .legend(move |(x, y)| {
@@ -198,6 +256,30 @@ fn draw_curve<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 49: a two-level study's axes, within a decade, get three ticks or more.
+    #[test]
+    fn a_log_axis_within_a_decade_has_ticks() {
+        assert_eq!(log_ticks(1e-4, 1.0), vec![1e-4, 1e-3, 1e-2, 0.1, 1.0]);
+        assert_eq!(
+            log_ticks(0.05, 0.15),
+            vec![0.05, 0.06, 0.07, 0.08, 0.09, 0.1]
+        );
+        assert_eq!(log_ticks(0.04, 0.3), vec![0.05, 0.1, 0.2]);
+        let close = log_ticks(0.21, 0.25);
+        assert_eq!(close.len(), 3);
+        assert!(close.iter().all(|t| (0.21..=0.25).contains(t)), "{close:?}");
+    }
+
+    /// The legend's room above the data: the data keep their place below it.
+    #[test]
+    fn the_legend_gets_room_beside_the_data() {
+        let (lo, hi) = with_legend_room((1e-3, 1e-1), 4, true);
+        assert_eq!(lo, 1e-3);
+        // 108 of 560 pixels: the data's two decades take the other 452.
+        let data_share = 2.0 / (hi / lo).log10();
+        assert!((data_share - 452.0 / 560.0).abs() < 1e-9, "{data_share}");
+    }
 
     #[test]
     fn axis_labels() {

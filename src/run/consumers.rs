@@ -206,7 +206,9 @@ impl Checkpoints {
 
 /// The progress bar on a terminal; without a terminal (a batch job's log) a line every
 /// [`Progress::EVERY`] on stderr: step, t, solver iterations, elapsed and estimated
-/// remaining time. Nothing with `--quiet`.
+/// remaining time. Nothing with `--quiet`. Both count the run's steps n = 0..=N as the run
+/// numbers them, `step n/N`, a resumed run from its checkpoint's step on; the bar is
+/// cleared however the run ends (dropped).
 pub(super) struct Progress {
     kind: Kind,
     first: usize,
@@ -232,16 +234,7 @@ impl Progress {
         let kind = match (enabled, std::io::stderr().is_terminal()) {
             (false, _) => Kind::Quiet,
             (true, false) => Kind::Lines,
-            (true, true) => {
-                let bar = indicatif::ProgressBar::new((last + 1 - first) as u64);
-                bar.set_style(
-                    indicatif::ProgressStyle::with_template(
-                        "{bar:40} step {pos}/{len}  {elapsed} < {eta}",
-                    )
-                    .expect("valid template"),
-                );
-                Kind::Bar(bar)
-            }
+            (true, true) => Kind::Bar(Self::bar(first, last)),
         };
         let now = Instant::now();
         Progress {
@@ -253,10 +246,36 @@ impl Progress {
         }
     }
 
+    /// The bar over the run's N + 1 steps, filled by those solved, a resumed run's steps
+    /// before its checkpoint included. Its text is [`Self::bar_text`]: indicatif's rate
+    /// would count the steps before the checkpoint as solved in no time.
+    fn bar(first: usize, last: usize) -> indicatif::ProgressBar {
+        indicatif::ProgressBar::new(last as u64 + 1)
+            .with_position(first as u64)
+            .with_style(
+                indicatif::ProgressStyle::with_template("{bar:40} {msg}").expect("valid template"),
+            )
+            .with_message(format!("step {first}/{last}"))
+    }
+
+    /// `step n/N  elapsed < remaining` once step `n` is solved ([`Self::times`]).
+    fn bar_text(&self, n: usize) -> String {
+        let (elapsed, remaining) = self.times(n);
+        format!(
+            "step {n}/{}  {} < {}",
+            self.last,
+            clock(elapsed),
+            clock(remaining)
+        )
+    }
+
     fn solved(&mut self, s: &Solved) {
         match &self.kind {
             Kind::Quiet => {}
-            Kind::Bar(bar) => bar.inc(1),
+            Kind::Bar(bar) => {
+                bar.set_message(self.bar_text(s.step.n));
+                bar.inc(1);
+            }
             Kind::Lines => {
                 if self.printed.elapsed() >= Self::EVERY {
                     self.printed = Instant::now();
@@ -269,12 +288,17 @@ impl Progress {
         }
     }
 
-    /// `step n/N  t = …  iterations i  elapsed …  remaining ≈ …`: the remaining time assumes
-    /// the steps left cost what the steps of this process cost on average.
-    fn line(&self, n: usize, t: f64, iterations: usize) -> String {
+    /// The seconds this process has run the steps, and those it will take once step `n` is
+    /// solved: the steps left cost what the steps of this process cost on average.
+    fn times(&self, n: usize) -> (f64, f64) {
         let elapsed = self.start.elapsed().as_secs_f64();
         let done = (n + 1 - self.first) as f64;
-        let remaining = elapsed / done * (self.last - n) as f64;
+        (elapsed, elapsed / done * (self.last - n) as f64)
+    }
+
+    /// `step n/N  t = …  iterations i  elapsed …  remaining ≈ …` ([`Self::times`]).
+    fn line(&self, n: usize, t: f64, iterations: usize) -> String {
+        let (elapsed, remaining) = self.times(n);
         format!(
             "step {n}/{}  t = {t:.6e}  iterations {iterations}  elapsed {}  remaining ≈ {}",
             self.last,
@@ -282,8 +306,11 @@ impl Progress {
             clock(remaining)
         )
     }
+}
 
-    pub fn finish(&self) {
+impl Drop for Progress {
+    /// Clears the bar: after the last step, a `--stop-after`, a signal or a failed step.
+    fn drop(&mut self) {
         if let Kind::Bar(bar) = &self.kind {
             bar.finish_and_clear();
         }
@@ -364,5 +391,17 @@ mod tests {
         );
         assert!(line.ends_with("remaining ≈ 3m02s"), "{line}");
         assert_eq!(clock(3723.4), "1h02m03s");
+    }
+
+    /// Issue 49: the bar counted N + 1 steps and restarted at 0 after a resume.
+    #[test]
+    fn the_bar_counts_the_run_s_steps_from_a_resume_s_checkpoint() {
+        let mut p = Progress::new(false, 81, 160);
+        p.start = Instant::now() - Duration::from_secs(20);
+        // Steps 81..=90 took 20 s: the 70 left take about 140 s.
+        assert_eq!(p.bar_text(90), "step 90/160  20s < 2m20s");
+        let bar = Progress::bar(81, 160);
+        assert_eq!((bar.position(), bar.length()), (81, Some(161)));
+        assert_eq!(bar.message(), "step 81/160");
     }
 }

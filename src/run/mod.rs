@@ -94,6 +94,7 @@ pub fn default_out(scene: &Scene) -> Result<PathBuf> {
 /// Loads everything a run needs and checks it: scene, mesh, discretization.
 pub fn setup(scene_path: &Path, overrides: &[String]) -> Result<(Scene, Mesh, Discretization)> {
     discretize(load_scene(scene_path, overrides)?)
+        .map_err(|e| crate::scene::name_set_key(e, scene_path, overrides))
 }
 
 /// The mesh and the discretization of a checked scene (a study's case of one, say).
@@ -109,7 +110,8 @@ pub fn load_scene(scene_path: &Path, overrides: &[String]) -> Result<Scene> {
     let (text, file) = read_scene_file(scene_path, overrides)?;
     Scene::from_file(scene_path, text, &file).map_err(|e| {
         let mesh = MeshChoice::from_section(&file.mesh, scene_path);
-        crate::fem::model_mismatch(scene_path, &mesh).unwrap_or(e)
+        let e = crate::fem::model_mismatch(scene_path, &mesh).unwrap_or(e);
+        crate::scene::name_set_key(e, scene_path, overrides)
     })
 }
 
@@ -125,7 +127,13 @@ fn read_mesh(scene: &Scene) -> Result<Mesh> {
 
 /// Runs a scene to its end (or to `stop_after`, or a signal), writing the series, the
 /// checkpoints and summary.json into the output directory, which then holds this run alone.
+/// A bad value given with `--set` is named as such (`scene::name_set_key`).
 pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
+    run_scene(scene_path, opts)
+        .map_err(|e| crate::scene::name_set_key(e, scene_path, &opts.overrides))
+}
+
+fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     // A signal between two stages ends setup with the directory as it was.
     let stage = || opts.interrupt.between_setup_stages();
@@ -387,7 +395,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         progress,
         ..
     } = consumers;
-    progress.finish();
+    drop(progress);
     let checkpoint = checkpoints.path();
     // Every checkpoint handed over reaches the disk before the run reports how it ended.
     // So does every frame handed to the series' writer thread (its errors name the file).
@@ -473,5 +481,24 @@ fn stopped_message(
                  be continued"
             .to_string(),
     };
-    format!("{why} after step {step} (t = {time}); {next}")
+    format!("{why} after step {step} (t = {}); {next}", time_text(time))
+}
+
+/// A time t_n = n·k as a user reads it: rounded to 12 significant digits, then the
+/// shortest text that reads back as that number (`0.332375`, not the `0.33237500000000003`
+/// of 2659 · 0.000125).
+fn time_text(t: f64) -> String {
+    let rounded: f64 = format!("{t:.11e}").parse().unwrap_or(t);
+    format!("{rounded}")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn times_are_shown_without_float_noise() {
+        assert_eq!(super::time_text(2659.0 * 0.000125), "0.332375");
+        assert_eq!(super::time_text(1.0 / 3.0), "0.333333333333");
+        assert_eq!(super::time_text(3.0e-9), "0.000000003");
+        assert_eq!(super::time_text(1.0), "1");
+    }
 }

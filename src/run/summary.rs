@@ -19,6 +19,7 @@ pub struct Summary {
     /// Why a run that did not complete ended, and how to continue it (null when completed).
     pub message: Option<String>,
     pub name: String,
+    /// The scene file and the mesh, absolute (`plot` reads them from any directory).
     pub scene: String,
     pub mesh: String,
     pub nodes: usize,
@@ -153,8 +154,8 @@ impl Summary {
             last_step: last,
             message: ending.message,
             name: scene.name.clone(),
-            scene: scene.path.display().to_string(),
-            mesh: mesh.path.display().to_string(),
+            scene: absolute(&scene.path),
+            mesh: absolute(&mesh.path),
             nodes: mesh.nodes.len(),
             elements: mesh.n_cells(),
             dofs: disc.n_free,
@@ -230,4 +231,14 @@ impl MemorySummary {
             fallback,
         })
     }
+}
+
+/// `path` as summary.json keeps it: canonical (absolute, without `..`), so that `plot` finds
+/// the run's scene and mesh from any working directory; as given when it cannot be resolved.
+fn absolute(path: &std::path::Path) -> String {
+    path.canonicalize()
+        .or_else(|_| std::path::absolute(path))
+        .unwrap_or_else(|_| path.to_path_buf())
+        .display()
+        .to_string()
 }

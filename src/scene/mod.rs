@@ -22,7 +22,7 @@ pub use conditions::{Components, Dirichlet};
 pub use file::{ContactSolver, Groups, History, MemoryMode, Model, SceneFile};
 pub use parts::{CheckpointPlan, MeshChoice, OutputPlan, SolverChoice, TimeGrid};
 pub use physics::{Friction, Physics, Traction};
-pub use read::{apply_override, parse_scene_text, read_scene_file};
+pub use read::{apply_override, name_set_key, parse_scene_text, read_scene_file};
 
 use crate::Result;
 use std::path::{Path, PathBuf};
@@ -47,7 +47,7 @@ impl Scene {
     /// Reads, overrides and checks a scene file.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Scene> {
         let (text, file) = read_scene_file(path, overrides)?;
-        Scene::from_file(path, text, &file)
+        Scene::from_file(path, text, &file).map_err(|e| name_set_key(e, path, overrides))
     }
 
     /// Checks every section of a schema-checked scene file read from `path` (`text` is its

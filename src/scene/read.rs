@@ -170,20 +170,9 @@ pub fn parse_scene_text(
     let file: SceneFile =
         serde_path_to_error::deserialize(toml::Value::Table(root)).map_err(|e| {
             let at = e.path().to_string();
-            // Say where the key came from: a --set override or the file.
-            let from_set = overrides.iter().any(|o| {
-                let key = o.split('=').next().unwrap_or("").trim();
-                at == key
-                    || at.starts_with(&format!("{key}."))
-                    || key.starts_with(&format!("{at}."))
-            });
-            let place = if from_set {
-                format!("--set (scene {})", path.display())
-            } else {
-                path.display().to_string()
-            };
             Error::input(format!(
-                "{place}: {}{}",
+                "{}: {}{}",
+                place(path, &at, overrides),
                 if at == "." {
                     String::new()
                 } else {
@@ -193,6 +182,41 @@ pub fn parse_scene_text(
             ))
         })?;
     Ok((effective, file))
+}
+
+/// The `--set KEY=VALUE` that gave `at` its value (its key is `at`, a table holding it or
+/// a key within it), if one did.
+fn set_of<'o>(overrides: &'o [String], at: &str) -> Option<&'o str> {
+    overrides.iter().map(String::as_str).find(|o| {
+        let key = o.split('=').next().unwrap_or("").trim();
+        at == key || at.starts_with(&format!("{key}.")) || key.starts_with(&format!("{at}."))
+    })
+}
+
+/// Where the value of key `at` came from, as its error names it: the scene file, or the
+/// `--set KEY=VALUE` on the command line (with the scene it overrides).
+fn place(path: &Path, at: &str, overrides: &[String]) -> String {
+    match set_of(overrides, at) {
+        Some(o) => format!("--set {o} (scene {})", path.display()),
+        None => path.display().to_string(),
+    }
+}
+
+/// An input error about a key of the scene at `path` (`PATH: key 'K'…`, as the checks of
+/// every section write it) names the `--set` that gave K its value instead of the file, in
+/// which the user would look for the value in vain (issue 49).
+pub fn name_set_key(e: Error, path: &Path, overrides: &[String]) -> Error {
+    let Error::Input(message) = &e else {
+        return e;
+    };
+    let Some(rest) = message.strip_prefix(&format!("{}: key '", path.display())) else {
+        return e;
+    };
+    let key = rest.split('\'').next().unwrap_or_default();
+    match set_of(overrides, key) {
+        Some(_) => Error::input(format!("{}: key '{rest}", place(path, key, overrides))),
+        None => e,
+    }
 }
 
 #[cfg(test)]

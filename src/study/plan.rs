@@ -20,7 +20,11 @@ pub struct Case {
 
 impl std::fmt::Display for Case {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}, N = {} ({:?})", self.mesh, self.steps, self.form)
+        write!(f, "{}, N = {}", self.mesh, self.steps)?;
+        match self.form {
+            KernelForm::AsGiven => Ok(()),
+            KernelForm::Expression => write!(f, ", the kernel as an expression"),
+        }
     }
 }
 

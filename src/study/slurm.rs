@@ -217,7 +217,7 @@ impl Script<'_> {
 set -euo pipefail
 DIR={dir}
 SCENE={scene}
-VISCONTACT=${{VISCONTACT:-{exe}}}
+{exe}
 IFS=$'\t' read -r -a row < <(awk -F'\t' -v id="$SLURM_ARRAY_TASK_ID" 'NR > 1 && $1 == id' "$DIR/runs.tsv") || true
 if [ "${{#row[@]}}" -lt 2 ]; then
   echo "runs.tsv has no run $SLURM_ARRAY_TASK_ID" >&2
@@ -243,20 +243,27 @@ exec "$VISCONTACT" run "$SCENE" "${{sets[@]}}" --out "$out" --quiet
             dir = quoted(self.dir),
             logs = self.dir.join("logs").display(),
             scene = quoted(self.scene),
-            exe = quoted(self.exe),
+            exe = self.exe_line(),
         )
+    }
+
+    /// The line that sets `$VISCONTACT`, unless the environment sets it, to the binary that
+    /// wrote the scripts. An assignment, not `"${VISCONTACT:-'…'}"`: inside double quotes the
+    /// single quotes would stay part of the word (issue 49: `bash collect.sh` exited 127).
+    fn exe_line(&self) -> String {
+        format!("VISCONTACT=${{VISCONTACT:-{}}}", quoted(self.exe))
     }
 
     fn collect(&self) -> String {
         format!(
             "#!/bin/bash\n# The tables and plots of the study, once every run of array.sh is complete.\n\
              #SBATCH --job-name=viscontact-collect\n#SBATCH --mem={mem}M\n\
-             #SBATCH --output={logs}/collect_%j.out\nset -euo pipefail\n\
-             exec \"${{VISCONTACT:-{exe}}}\" study --collect {dir}\n",
+             #SBATCH --output={logs}/collect_%j.out\nset -euo pipefail\n{exe}\n\
+             exec \"$VISCONTACT\" study --collect {dir}\n",
             mem = self.mem_mib,
             logs = self.dir.join("logs").display(),
             dir = quoted(self.dir),
-            exe = quoted(self.exe),
+            exe = self.exe_line(),
         )
     }
 
@@ -315,6 +322,8 @@ fn collect_run(
              array.sh again: it resumes the runs that stopped",
             out.display(),
             v["status"]
+                .as_str()
+                .unwrap_or("not started, no summary.json")
         )));
     }
     let (_, frames) = crate::output::read::read_series(out)?;

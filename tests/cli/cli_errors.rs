@@ -359,6 +359,36 @@ fn poisson_out_of_range() {
     }
 }
 
+/// Issue 49: a bad value given with `--set` is named as the `--set`, not as the scene
+/// file's, where the user would look for it in vain; checked while parsing, while checking
+/// the sections and while reading the mesh.
+#[test]
+fn a_bad_set_value_names_the_set() {
+    for (set, key) in [
+        ("time.steps=\"abc\"", "time.steps"),
+        ("time.steps=0", "time.steps"),
+        (
+            "material.elasticity.poisson=0.7",
+            "material.elasticity.poisson",
+        ),
+        ("mesh.groups.contact=\"zz\"", "mesh.groups.contact"),
+    ] {
+        let named = format!("--set {set} (scene ");
+        run_set_fails(set, &[set], &[&named, key]);
+    }
+}
+
+/// Issue 49: `study --help` kept the `{n}` of `--mesh-pattern` (clap made it a line break).
+#[test]
+fn study_help_shows_the_mesh_pattern_placeholder() {
+    let out = viscontact(["study", "--help"]);
+    let help = text(&out.stdout);
+    assert!(
+        help.contains("`{n}` or `{n:03}` for the level") && !help.contains('\x1b'),
+        "{help}"
+    );
+}
+
 #[test]
 fn steps_zero() {
     run_set_fails("N = 0", &["time.steps=0"], &["time.steps", "must"]);

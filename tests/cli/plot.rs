@@ -129,3 +129,133 @@ fn a_2d_run_is_still_drawn_and_refuses_a_view() {
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("--view is for 3D runs"), "{text}");
 }
+
+/// examples/paper.toml on rect_008, 2 steps (frames at t = 0, 0.5, 1), run from the
+/// repository root with the scene's relative path, as a user runs it: into `out`.
+fn paper_run(out: &Path) {
+    let o = viscontact(&[
+        "run",
+        "examples/paper.toml",
+        "--set",
+        "mesh.file=\"../meshes/paper/rect_008.msh\"",
+        "--set",
+        "time.steps=2",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// Issue 49, items 2 and 4: `plot DIR` without `-o` writes into the current directory, not
+/// into the run's (which a rerun then refused), and draws the same figure, Γ3,1 and Γ3,2
+/// included, from any working directory; a mesh that cannot be found is named in a warning.
+#[test]
+fn plot_leaves_the_run_directory_alone_and_draws_the_same_from_any_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("paper");
+    paper_run(&run);
+    let from_root = tmp.path().join("root.png");
+    plot(&run, &from_root, &[]);
+    let elsewhere = tmp.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let o = viscontact_in(
+        &elsewhere,
+        &["plot", run.to_str().unwrap(), "--width", "800"],
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(!stderr.contains("warning"), "{stderr}");
+    let png = elsewhere.join("paper_von_mises_t1.png");
+    assert!(
+        std::fs::read(&png).unwrap() == std::fs::read(&from_root).unwrap(),
+        "plot from another directory drew another figure"
+    );
+    let in_run: Vec<_> = std::fs::read_dir(&run)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".png"))
+        .collect();
+    assert!(in_run.is_empty(), "plot wrote {in_run:?} into the run");
+    // A rerun into the directory is not refused.
+    paper_run(&run);
+
+    // A mesh moved since the run: a warning names it, the traction nodes are circled.
+    let summary = run.join("summary.json");
+    let text = std::fs::read_to_string(&summary).unwrap();
+    let mesh = common::summary(&run)["mesh"].as_str().unwrap().to_string();
+    assert!(Path::new(&mesh).is_absolute(), "{mesh}");
+    let moved = tmp.path().join("moved/rect_008.msh");
+    std::fs::write(&summary, text.replace(&mesh, moved.to_str().unwrap())).unwrap();
+    let o = viscontact_in(
+        &elsewhere,
+        &["plot", run.to_str().unwrap(), "-o", "moved.png"],
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("warning") && stderr.contains(moved.to_str().unwrap()),
+        "{stderr}"
+    );
+    assert!(elsewhere.join("moved.png").exists());
+}
+
+/// Issue 49, item 9: `--time` outside the frames' times (t = 0, 0.5, 1) by more than half
+/// their interval is refused, naming the range; between frames, plot says which it drew.
+#[test]
+fn plot_refuses_a_time_outside_the_run_and_names_the_frame_it_drew() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("paper");
+    paper_run(&run);
+    let png = tmp.path().join("fig.png");
+    let at = |time: &str| {
+        let time = format!("--time={time}");
+        cli(&[
+            "plot",
+            run.to_str().unwrap(),
+            &time,
+            "-o",
+            png.to_str().unwrap(),
+        ])
+    };
+    for outside in ["5", "1.3", "-0.3", "NaN"] {
+        let (code, text) = at(outside);
+        assert_eq!(code, 2, "--time {outside}: {text}");
+        assert!(
+            text.contains("outside the run's frames, t = 0 to 1 (3 frames)"),
+            "{text}"
+        );
+    }
+    for (between, drawn) in [("0.3", "0.5"), ("1.2", "1"), ("-0.1", "0")] {
+        let (code, text) = at(between);
+        assert_eq!(code, 0, "--time {between}: {text}");
+        assert!(
+            text.contains(&format!(
+                "no frame at t = {between}; drew the nearest, t = {drawn}"
+            )),
+            "{text}"
+        );
+    }
+    let (code, text) = at("0.5");
+    assert_eq!(code, 0, "{text}");
+    assert!(!text.contains("no frame"), "{text}");
+    // A field of the contact boundary: discs on its nodes (the largest value's in the top
+    // colour of the colour bar) on a neutral body, not a smear over the first row of cells.
+    let fig = tmp.path().join("pressure.png");
+    let px = plot(&run, &fig, &["--field", "contact_pressure"]);
+    let neutral = px.iter().filter(|p| **p == [225, 225, 225]).count();
+    assert!(
+        neutral > px.len() / 10,
+        "{neutral} of {} pixels neutral",
+        px.len()
+    );
+    let top = px.iter().filter(|p| **p == [253, 231, 37]).count();
+    assert!(top > 100, "{top} pixels of the largest pressure's colour");
+    // A directory without a series: one sentence, without the run of spaces of issue 49.
+    let (code, text) = cli(&["plot", tmp.path().to_str().unwrap()]);
+    assert_eq!(code, 2, "{text}");
+    assert!(
+        text.contains("give the output directory of a run (viscontact run … --out DIR)"),
+        "{text}"
+    );
+}

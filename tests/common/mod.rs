@@ -253,9 +253,14 @@ pub fn assert_same_series(a: &Path, b: &Path, what: &str) {
 
 /// Runs the binary from the repository root.
 pub fn viscontact(args: &[&str]) -> Output {
+    viscontact_in(&repo(), args)
+}
+
+/// Runs the binary from the working directory `cwd`.
+pub fn viscontact_in(cwd: &Path, args: &[&str]) -> Output {
     Command::new(BIN)
         .args(args)
-        .current_dir(repo())
+        .current_dir(cwd)
         .output()
         .unwrap()
 }

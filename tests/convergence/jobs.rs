@@ -160,3 +160,57 @@ fn a_slurm_array_run_task_by_task_collects_the_tables_of_a_local_study() {
     assert_eq!(collected["timed"], "slurm_array");
     assert_eq!(untimed(&local), untimed(&collected));
 }
+
+/// Issue 49, item 3: the emitted scripts run as they are, `VISCONTACT` unset, although the
+/// array's directory and the binary that wrote them have a space, a quote and a `$` in
+/// their paths: every task of array.sh (`SLURM_ARRAY_TASK_ID`), then collect.sh, which
+/// exited 127 when the binary's path kept its single quotes.
+#[test]
+fn the_emitted_slurm_scripts_run_from_paths_with_spaces_and_quotes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let odd = tmp.path().join("a b'c \"d $HOME");
+    std::fs::create_dir(&odd).unwrap();
+    let exe = odd.join("viscontact");
+    std::fs::copy(BIN, &exe).unwrap();
+    let array = odd.join("array");
+    let scene = repo().join("examples/paper.toml");
+    let o = std::process::Command::new(&exe)
+        .args(["study", scene.to_str().unwrap(), "--levels", "8"])
+        .args(["--reference", "16", "--vary", "h", "--repeat", "1"])
+        .args(["--emit", "slurm", array.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let bash = |script: &str, id: Option<usize>| {
+        let mut c = std::process::Command::new("bash");
+        c.arg(array.join(script)).env_remove("VISCONTACT");
+        if let Some(id) = id {
+            c.env("SLURM_ARRAY_TASK_ID", id.to_string());
+        }
+        let o = c.output().unwrap();
+        let text = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{script} ({id:?}): {text}");
+    };
+    // Collected before any run: which run is not complete, in words (item 11: it printed
+    // the internal `AsGiven`).
+    let (code, text) = cli(&["study", "--collect", array.to_str().unwrap()]);
+    assert_eq!(code, 2, "{text}");
+    assert!(
+        text.contains(".msh, N = 16) in") && !text.contains("AsGiven"),
+        "{text}"
+    );
+    assert!(
+        text.contains("(status: not started, no summary.json)"),
+        "{text}"
+    );
+    let runs = std::fs::read_to_string(array.join("runs.tsv")).unwrap();
+    let n = runs.lines().count() - 1;
+    assert!(n >= 2, "{runs}");
+    for id in 0..n {
+        bash("array.sh", Some(id));
+        let summary = summary(&array.join(format!("runs/{id:04}")));
+        assert_eq!(summary["status"], "completed", "run {id}");
+    }
+    bash("collect.sh", None);
+    assert_eq!(study_json(&array)["timed"], "slurm_array");
+}

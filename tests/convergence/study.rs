@@ -519,10 +519,15 @@ fn study_and_plot_commands_write_their_files() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains("t = 0.5"));
     assert_eq!(&std::fs::read(&fig).unwrap()[1..4], b"PNG");
-    // A point field component, default output name.
-    let o = viscontact(&["plot", run.to_str().unwrap(), "--field", "displacement_Y"]);
+    // A point field component, default output name: in the working directory, not in the
+    // run's (issue 49).
+    let o = viscontact_in(
+        dir.path(),
+        &["plot", run.to_str().unwrap(), "--field", "displacement_Y"],
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(run.join("displacement_Y_t1.png").exists());
+    assert!(dir.path().join("run_displacement_Y_t1.png").exists());
+    assert!(!run.join("displacement_Y_t1.png").exists());
     // An unknown field is an input error that lists the fields.
     let o = viscontact(&["plot", run.to_str().unwrap(), "--field", "nope"]);
     assert_eq!(o.status.code(), Some(2));

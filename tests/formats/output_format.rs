@@ -1029,3 +1029,35 @@ print(g.GetNumberOfPoints(), sum(len(a.tobytes()) for a in arrays))
     );
     assert!(zlib < raw * 3 / 4, "zlib frame {zlib} bytes, raw {raw}");
 }
+
+/// Issue 49: `check`'s disk estimate of the frames is within 1.5 times what the paper's
+/// example and the block write (it was 2.7 times the paper's: the size before zlib).
+#[test]
+fn the_disk_estimate_is_near_what_a_run_writes() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (scene, set) in [
+        ("examples/paper.toml", None),
+        ("examples/paper.toml", Some("output.precision=\"float32\"")),
+        ("examples/block.toml", None),
+    ] {
+        let out = tmp.path().join(format!("run{}", set.is_some()));
+        let mut args = vec!["run", scene, "--quiet", "--out", out.to_str().unwrap()];
+        args.extend(set.iter().flat_map(|s| ["--set", s]));
+        let o = crate::common::viscontact(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let written: u64 = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap())
+            .filter(|e| e.file_name().to_string_lossy().starts_with("solution"))
+            .map(|e| e.metadata().unwrap().len())
+            .sum();
+        let path = crate::common::repo().join(scene);
+        let (s, _, disc) = crate::common::load(&path, &Vec::from_iter(set));
+        let estimate = viscontact::resources::Estimate::new(&s, &disc, 0).disk;
+        let ratio = estimate / written as f64;
+        assert!(
+            (1.0 / 1.5..=1.5).contains(&ratio),
+            "{scene} {set:?}: {estimate} bytes estimated, {written} written"
+        );
+    }
+}
