@@ -255,8 +255,15 @@ fn contact_groups(dir: &Path, nodes: usize) -> std::result::Result<ContactGroups
                 scene_path.display()
             )
         })?;
-    let group = |name: &str| mesh.boundary_group(name).ok();
-    let [contact, friction] = [&groups.contact, &groups.friction].map(|n| group(n));
+    // A group the run left without its condition is no contact boundary (issue 49, item 6).
+    let effects: Vec<&str> = v["effects"]
+        .as_array()
+        .map(|a| a.iter().filter_map(|e| e.as_str()).collect())
+        .unwrap_or_default();
+    let acts = |names: &[&str]| names.iter().any(|n| effects.contains(n));
+    let group = |name: &str, on: bool| on.then(|| mesh.boundary_group(name).ok()).flatten();
+    let contact = group(&groups.contact, acts(&["contact"]));
+    let friction = group(&groups.friction, acts(&["friction", "normal_stress"]));
     let edges = |g: Option<&crate::mesh::Group>| g.map(|g| g.facets.clone()).unwrap_or_default();
     let faces = |g: Option<&crate::mesh::Group>| g.map(|g| g.faces.clone()).unwrap_or_default();
     Ok(ContactGroups {

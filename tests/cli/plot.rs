@@ -130,6 +130,37 @@ fn a_2d_run_is_still_drawn_and_refuses_a_view() {
     assert!(text.contains("--view is for 3D runs"), "{text}");
 }
 
+/// A run whose scene leaves Γ3,1 and Γ3,2 without [contact] and [friction] drew them as the
+/// contact boundary all the same, while the body passed through the foundation (issue 49,
+/// item 6): their colours (and legend) are drawn only for conditions the run imposed.
+#[test]
+fn groups_without_their_condition_are_not_drawn_as_contact() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = SceneText::paper()
+        .mesh(mesh_path("paper/rect_008.msh"))
+        .remove("contact")
+        .remove("friction")
+        .write(tmp.path(), "s.toml");
+    let run = tmp.path().join("run");
+    let o = viscontact(&[
+        "run",
+        scene.to_str().unwrap(),
+        "--set",
+        "time.steps=2",
+        "--quiet",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let px = plot(&run, &tmp.path().join("fig.png"), &[]);
+    let orange = [240, 150, 0];
+    let marked = px.iter().filter(|p| **p == RED || **p == orange).count();
+    assert_eq!(
+        marked, 0,
+        "{marked} pixels of the contact and friction colours"
+    );
+}
+
 /// examples/paper.toml on rect_008, 2 steps (frames at t = 0, 0.5, 1), run from the
 /// repository root with the scene's relative path, as a user runs it: into `out`.
 fn paper_run(out: &Path) {
