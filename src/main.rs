@@ -150,7 +150,11 @@ fn main() -> ExitCode {
     if let Err(e) = viscontact::threads::init(threads) {
         return exit_code(Err(e));
     }
-    exit_code(dispatch(cli.command, interrupt))
+    let result = dispatch(cli.command, interrupt);
+    // After every PETSc object of the run is dropped (with the time loop, in dispatch).
+    #[cfg(feature = "petsc")]
+    viscontact::petsc::finalize();
+    exit_code(result)
 }
 
 /// SIGINT/SIGTERM stop a run or resume after its current step, or its setup before it
