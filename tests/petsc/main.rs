@@ -38,7 +38,10 @@ mod with_petsc {
     /// solver's name.
     fn u_final(scene: &SceneText, linear: &str) -> (Vec<f64>, &'static str) {
         let dir = tempfile::tempdir().unwrap();
-        let path = scene.clone().set("solver.linear", linear).write(dir.path(), "s.toml");
+        let path = scene
+            .clone()
+            .set("solver.linear", linear)
+            .write(dir.path(), "s.toml");
         let (scene, _mesh, disc) = common::load(&path, &[]);
         let _one = PETSC.lock().unwrap_or_else(|e| e.into_inner());
         let trace = common::trace(&scene, &disc);
@@ -67,10 +70,7 @@ mod with_petsc {
 
     /// Runs the binary on `scene` into a temporary directory with `env` set: its exit status,
     /// stderr and (for a run that wrote one) summary.json.
-    fn run(
-        scene: SceneText,
-        env: &[(&str, &str)],
-    ) -> (i32, String, Option<serde_json::Value>) {
+    fn run(scene: SceneText, env: &[(&str, &str)]) -> (i32, String, Option<serde_json::Value>) {
         let dir = tempfile::tempdir().unwrap();
         let path = scene.set("time.steps", 4).write(dir.path(), "s.toml");
         let out = dir.path().join("out");
@@ -103,7 +103,10 @@ mod with_petsc {
         let per_step = s["iterations"]["per_step"].as_array().unwrap();
         assert_eq!(per_step.len(), 5);
         // Step 0 starts from rest under a load: the Krylov method iterates.
-        assert!(per_step.iter().skip(1).all(|i| i.as_u64().unwrap() > 0), "{s}");
+        assert!(
+            per_step.iter().skip(1).all(|i| i.as_u64().unwrap() > 0),
+            "{s}"
+        );
     }
 
     #[test]
@@ -183,7 +186,10 @@ fn petsc_without_the_feature_is_refused_with_the_build_line() {
         assert_eq!(got, code, "{linear}: {text}");
         if code == 2 {
             assert!(text.contains("s.toml"), "{text}");
-            assert!(text.contains("cargo build --release --features petsc"), "{text}");
+            assert!(
+                text.contains("cargo build --release --features petsc"),
+                "{text}"
+            );
             assert!(text.contains("petsc-dev"), "{text}");
             assert!(!out.exists(), "a refused run wrote {}", out.display());
         }
