@@ -527,7 +527,7 @@ fn petsc_backend(
             rtol: crate::petsc::DEFAULT_RTOL,
         };
         let krylov = crate::petsc::Krylov::new(matrix, disc, &settings)?;
-        Ok(Backend::Petsc(Box::new(krylov)))
+        Ok(Backend::Petsc(krylov))
     }
     #[cfg(not(feature = "petsc"))]
     {

@@ -201,13 +201,15 @@ fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
     }
 }
 
-/// How a run solves its step matrix (K_A, or its implicit variant).
+/// How a run solves its step matrix (K_A, or its implicit variant). One per run: the
+/// factor's size in the enum costs nothing.
+#[allow(clippy::large_enum_variant)]
 pub enum Backend {
     /// Factored once, one solve with the factor per step (`Factor`).
     Cholesky(Factor),
     /// PETSc's KSP, set up once (`crate::petsc::Krylov`): linear runs only.
     #[cfg(feature = "petsc")]
-    Petsc(Box<crate::petsc::Krylov>),
+    Petsc(crate::petsc::Krylov),
 }
 
 impl Backend {
