@@ -334,7 +334,11 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         scene.time.k()
     );
     println!("effects    {}", effects.names().join(", "));
-    let solver = if effects.linear() {
+    let solver = if scene.solver.petsc() {
+        "linear (one Krylov solve per step by PETSc, CG + GAMG unless [solver.petsc] options \
+         or PETSC_OPTIONS change it; K_A is not factored)"
+            .to_string()
+    } else if effects.linear() {
         "linear (one solve with the stored Cholesky factor of K_A per step)".to_string()
     } else {
         format!(

@@ -110,6 +110,18 @@ mod with_petsc {
     }
 
     #[test]
+    fn check_names_the_petsc_backend() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = paper_linear()
+            .set("solver.linear", "petsc")
+            .write(dir.path(), "s.toml");
+        let (code, text) = common::cli(&["check", path.to_str().unwrap()]);
+        assert_eq!(code, 0, "{text}");
+        assert!(text.contains("Krylov solve per step by PETSc"), "{text}");
+        assert!(!text.contains("Cholesky"), "{text}");
+    }
+
+    #[test]
     fn scene_options_reach_petsc() {
         let scene = paper_linear()
             .set("solver.linear", "petsc")
