@@ -92,6 +92,25 @@ fn check(code: c_int, what: &str) -> Result<()> {
     }
 }
 
+/// PETSc's error code for memory it could not get (`PETSC_ERR_MEM`).
+const PETSC_ERR_MEM: c_int = 55;
+
+/// The setup's code as the run's error: where options were given (the scene's or
+/// `PETSC_OPTIONS`), a refusal is taken as theirs (exit 2, naming both); otherwise, or when
+/// memory ran out, the setup failed (exit 1).
+fn check_setup(code: c_int, options: &str) -> Result<()> {
+    let env = std::env::var("PETSC_OPTIONS").unwrap_or_default();
+    if code == 0 || code == PETSC_ERR_MEM || (options.trim().is_empty() && env.trim().is_empty()) {
+        return check(code, "setting up the KSP of K_A");
+    }
+    Err(Error::input(format!(
+        "PETSc refused the KSP of K_A with the options [solver.petsc] options = {options:?} \
+         and PETSC_OPTIONS = {env:?}: {} (error code {code}); correct the option PETSc's \
+         messages above name",
+        message(code)
+    )))
+}
+
 /// Initializes PETSc (and MPI through it) on the first call in the process; later calls
 /// do nothing. PETSc reads the `PETSC_OPTIONS` environment variable here.
 pub fn initialize() -> Result<()> {
@@ -181,7 +200,7 @@ impl Krylov {
                 &mut ctx,
             )
         };
-        check(code, "setting up the KSP of K_A")?;
+        check_setup(code, &settings.options)?;
         let (mut ksp, mut pc) = (std::ptr::null(), std::ptr::null());
         // SAFETY: ctx is a live KSP; the names are PETSc's static strings.
         check(

@@ -157,6 +157,18 @@ mod with_petsc {
     }
 
     #[test]
+    fn an_option_petsc_refuses_is_bad_input() {
+        let scene = paper_linear()
+            .set("solver.linear", "petsc")
+            .set("solver.petsc.options", "-pc_type no_such_pc");
+        let (code, stderr, _) = run(scene, &[]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(stderr.contains("-pc_type no_such_pc"), "{stderr}");
+        assert!(stderr.contains("PETSC_OPTIONS"), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+
+    #[test]
     fn petsc_with_contact_or_friction_is_refused() {
         for (scene, on) in [
             (SceneText::paper(), "[contact] and [friction]"),
