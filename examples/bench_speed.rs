@@ -151,7 +151,9 @@ fn main() {
         step_times.push(start.elapsed().as_secs_f64() / (scene.time.steps + 1) as f64);
     }
     let per_step = median(step_times);
-    let factor = tl.factor();
+    let factor = tl
+        .factor()
+        .expect("the benchmark's scenes solve with the stored factor (solver.linear)");
     let mut y: Vec<f64> = (0..factor.dim()).map(|i| (i % 7) as f64 - 3.0).collect();
     let solves: Vec<f64> = (0..20)
         .map(|_| {

@@ -18,6 +18,8 @@ pub mod kernel;
 pub mod kernel_fit;
 pub mod mesh;
 pub mod output;
+#[cfg(feature = "petsc")]
+pub mod petsc;
 pub mod plot;
 pub mod ranges;
 pub mod resources;

@@ -172,6 +172,9 @@ fn main() -> ExitCode {
         return exit_code(Err(e));
     }
     let result = dispatch(cli.command, interrupt);
+    // After every PETSc object of the run is dropped (with the time loop, in dispatch).
+    #[cfg(feature = "petsc")]
+    viscontact::petsc::finalize();
     match viscontact::console::stdout_failure() {
         Some(why) if only_prints && result.is_ok() => {
             viscontact::errln!("error: cannot write to standard output: {why}");
@@ -240,7 +243,7 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
 fn plot(dir: &std::path::Path, options: &viscontact::plot::PlotOptions) -> Result<()> {
     let i = viscontact::plot::plot_run(dir, options)?;
     for note in &i.notes {
-        eprintln!("{note}");
+        viscontact::errln!("{note}");
     }
     let view = i.view.map(|v| format!(", seen from {v:?}"));
     viscontact::outln!(
@@ -365,7 +368,11 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         scene.time.k()
     );
     viscontact::outln!("effects    {}", effects.names().join(", "));
-    let solver = if effects.linear() {
+    let solver = if scene.solver.petsc() {
+        "linear (one Krylov solve per step by PETSc, CG + GAMG unless [solver.petsc] options \
+         or PETSC_OPTIONS change it; K_A is not factored)"
+            .to_string()
+    } else if effects.linear() {
         "linear (one solve with the stored Cholesky factor of K_A per step)".to_string()
     } else {
         format!(

@@ -1,6 +1,7 @@
 //! The time loop of Problem 3.1: for n = 0, 1, …, N form b_n from the history and solve the
-//! step problem for w_n, then advance u and m. A run is `TimeLoop::new` (setup: factor K_A
-//! once, build the step solver) followed by [`TimeLoop::run`], the one driver of the steps:
+//! step problem for w_n, then advance u and m. A run is `TimeLoop::new` (setup: the linear
+//! backend of K_A, `solver::Backend` — factor it once, or with `solver.linear = "petsc"` set
+//! up PETSc's Krylov method instead — and the step solver) followed by [`TimeLoop::run`], the one driver of the steps:
 //! it hands each solved step to an [`Observer`] (the `run` command's consumers, a study, a
 //! test, a benchmark) and asks it whether to stop. [`TimeLoop::state`] and
 //! [`TimeLoop::restore`] are the only way a checkpoint sees the loop.
@@ -31,7 +32,7 @@ use crate::fem::{constraints, leading_block, mul_add, Discretization, Sparse, Sy
 use crate::history::{History, LoopState, Plan, SavedLoop};
 use crate::scene::{self, Scene};
 use crate::solver::choice::Contact;
-use crate::solver::{Abandon, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
+use crate::solver::{Abandon, Backend, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
 use crate::stability::Verdict;
 use crate::Result;
 
@@ -39,7 +40,7 @@ pub struct TimeLoop<'p> {
     scene: &'p Scene,
     disc: &'p Discretization,
     effects: Effects,
-    factor: Factor,
+    backend: Backend,
     solver: StepSolver,
     rows: Rows,
     history: History,
@@ -223,8 +224,15 @@ impl<'p> TimeLoop<'p> {
             true => rows.dofs(),
             false => Vec::new(),
         };
-        let factor = Factor::new(matrix, &last)?;
-        let solver = effects::step_solver(&effects, contact, matrix, &factor, &rows)?;
+        let (backend, solver) = match scene.solver.petsc() {
+            // The scene refused contact and friction (`SolverChoice`): a linear run.
+            true => (petsc_backend(scene, matrix, disc)?, StepSolver::Linear),
+            false => {
+                let factor = Factor::new(matrix, &last)?;
+                let solver = effects::step_solver(&effects, contact, matrix, &factor, &rows)?;
+                (Backend::Cholesky(factor), solver)
+            }
+        };
         let n = disc.n_dofs;
         let history = History::new(n, scene.time.k(), &plan);
         let paired = disc
@@ -241,7 +249,7 @@ impl<'p> TimeLoop<'p> {
             scene,
             disc,
             effects,
-            factor,
+            backend,
             solver,
             z: vec![0.0; rows.len()],
             z_before: vec![0.0; rows.len()],
@@ -339,9 +347,32 @@ impl<'p> TimeLoop<'p> {
         &self.solver
     }
 
-    /// The factor of the step matrix (K_A, or its implicit variant).
-    pub fn factor(&self) -> &Factor {
-        &self.factor
+    /// The factor of the step matrix (K_A, or its implicit variant), where the run has one
+    /// (not with `solver.linear = "petsc"`).
+    pub fn factor(&self) -> Option<&Factor> {
+        self.backend.factor()
+    }
+
+    /// The name of the step solver recorded in summary.json: the contact solver's, or for
+    /// a linear run through PETSc the KSP and PC it runs.
+    pub fn solver_name(&self) -> String {
+        match &self.backend {
+            Backend::Cholesky(_) => self.solver.name().to_string(),
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(k) => format!(
+                "linear (PETSc KSP {} with PC {} on K_A, one Krylov solve per step)",
+                k.ksp_type, k.pc_type
+            ),
+        }
+    }
+
+    /// PETSc's KSP, where the run solves through it.
+    #[cfg(feature = "petsc")]
+    pub fn krylov(&self) -> Option<&crate::petsc::Krylov> {
+        match &self.backend {
+            Backend::Petsc(k) => Some(k),
+            Backend::Cholesky(_) => None,
+        }
     }
 
     /// How the memory sum is computed.
@@ -379,14 +410,20 @@ impl<'p> TimeLoop<'p> {
             .filter(|_| self.can_stop)
             .map(Abandon::arm);
         let nf = self.disc.n_free;
-        let mut report = self.solver.solve(
-            &self.factor,
-            &self.rows,
-            &self.b[..nf],
-            &mut self.w[..nf],
-            &mut self.z,
-            Some(&self.z_before),
-        );
+        let mut report = match &mut self.backend {
+            Backend::Cholesky(factor) => self.solver.solve(
+                factor,
+                &self.rows,
+                &self.b[..nf],
+                &mut self.w[..nf],
+                &mut self.z,
+                Some(&self.z_before),
+            ),
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => {
+                crate::solver::krylov_step(krylov, &self.b[..nf], &mut self.w[..nf])?
+            }
+        };
         drop(armed);
         if report.status == StepStatus::Abandoned {
             // The solvers write w only for a solved step; z held the iterate.
@@ -499,6 +536,32 @@ impl<'p> TimeLoop<'p> {
     /// n → n + 1: u_{n+1} = u_n + k w_n and the memory update.
     fn advance(&mut self) {
         self.history.advance(&self.w);
+    }
+}
+
+/// The PETSc backend of the step matrix (`solver.linear = "petsc"`): its KSP with the scene's
+/// options. A build without the feature never gets here (the scene refused the key).
+fn petsc_backend(
+    scene: &Scene,
+    matrix: &crate::fem::Sparse,
+    disc: &Discretization,
+) -> Result<Backend> {
+    #[cfg(feature = "petsc")]
+    {
+        let settings = crate::petsc::KrylovSettings {
+            options: scene.solver.petsc_options.clone(),
+            rtol: crate::petsc::DEFAULT_RTOL,
+        };
+        let krylov = crate::petsc::Krylov::new(matrix, disc, &settings)?;
+        Ok(Backend::Petsc(krylov))
+    }
+    #[cfg(not(feature = "petsc"))]
+    {
+        let _ = (matrix, disc);
+        Err(crate::Error::input(format!(
+            "{}: solver.linear = \"petsc\" needs a build with the petsc feature",
+            scene.path.display()
+        )))
     }
 }
 

@@ -42,6 +42,39 @@ pub struct Summary {
     pub warnings: Vec<String>,
     /// How the memory sum was computed (`history::Plan`); absent without relaxation.
     pub memory: Option<MemorySummary>,
+    /// PETSc's Krylov method of a run with `solver.linear = "petsc"` (absent otherwise);
+    /// `iterations` counts its Krylov iterations per step.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub petsc: Option<PetscSummary>,
+}
+
+/// summary.json "petsc": the KSP a linear run through PETSc solved with.
+#[derive(Serialize, Debug, Clone)]
+pub struct PetscSummary {
+    /// The KSP's and the PC's types after the options (`cg` and `gamg` by default).
+    pub ksp_type: String,
+    pub pc_type: String,
+    /// `[solver.petsc] options` as the scene gave them.
+    pub options: String,
+    /// The `PETSC_OPTIONS` environment variable of the run (absent when unset).
+    pub environment: Option<String>,
+}
+
+impl PetscSummary {
+    #[cfg(feature = "petsc")]
+    fn new(tl: &TimeLoop) -> Option<Self> {
+        tl.krylov().map(|k| PetscSummary {
+            ksp_type: k.ksp_type.clone(),
+            pc_type: k.pc_type.clone(),
+            options: k.options.clone(),
+            environment: std::env::var("PETSC_OPTIONS").ok(),
+        })
+    }
+
+    #[cfg(not(feature = "petsc"))]
+    fn new(_: &TimeLoop) -> Option<Self> {
+        None
+    }
 }
 
 /// How a run ended.
@@ -163,7 +196,7 @@ impl Summary {
             step_size: tl.k(),
             end_time: scene.time.end,
             effects: tl.effects().names().iter().map(|s| s.to_string()).collect(),
-            solver: tl.solver().name().to_string(),
+            solver: tl.solver_name(),
             threads: crate::threads::count(),
             timing: ending.timing,
             final_: Final {
@@ -192,6 +225,7 @@ impl Summary {
             output: ending.output,
             warnings: ending.warnings,
             memory: MemorySummary::new(tl.plan(), tl.k()),
+            petsc: PetscSummary::new(tl),
         }
     }
 }

@@ -407,6 +407,34 @@ pub const DEFAULT_CHECKPOINT_SECONDS: f64 = 600.0;
 pub struct SolverSection {
     #[serde(default)]
     pub contact: ContactSolver,
+    #[serde(default)]
+    pub linear: LinearSolver,
+    /// `[solver.petsc]`: read where `linear = "petsc"`.
+    pub petsc: Option<PetscSection>,
+}
+
+/// How the step matrix K_A is solved (the linear backend).
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearSolver {
+    /// The stored Cholesky factor (for now: `auto` is `cholesky`).
+    #[default]
+    Auto,
+    /// K_A factored once (sparse Cholesky), one solve with the factor per step.
+    Cholesky,
+    /// PETSc's Krylov method with algebraic multigrid (CG + GAMG); builds with the cargo
+    /// feature `petsc` only, and runs without contact and friction only (for now).
+    Petsc,
+}
+
+/// `[solver.petsc]`: what a run with `linear = "petsc"` passes to PETSc.
+#[derive(Deserialize, Debug, Default, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct PetscSection {
+    /// Options for PETSc's options database, in its command-line syntax
+    /// ("-ksp_monitor -pc_type hypre"), inserted after `PETSC_OPTIONS`.
+    #[serde(default)]
+    pub options: String,
 }
 
 /// How a step with contact or friction is solved (`solver::choice`).

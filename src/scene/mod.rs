@@ -19,7 +19,7 @@ mod physics;
 mod read;
 
 pub use conditions::{Components, Dirichlet};
-pub use file::{ContactSolver, Groups, History, MemoryMode, Model, SceneFile};
+pub use file::{ContactSolver, Groups, History, LinearSolver, MemoryMode, Model, SceneFile};
 pub use parts::{CheckpointPlan, MeshChoice, OutputPlan, SolverChoice, TimeGrid};
 pub use physics::{Friction, Physics, Traction};
 pub use read::{apply_override, name_set_key, parse_scene_text, read_scene_file};
@@ -56,6 +56,7 @@ impl Scene {
     pub fn from_file(path: &Path, text: String, f: &SceneFile) -> Result<Scene> {
         let time = TimeGrid::from_section(&f.time, path)?;
         let physics = Physics::from_file(f, &time, path)?;
+        let solver = SolverChoice::from_sections(&f.solver, &f.scheme, &physics, path)?;
         let output = OutputPlan::from_section(&f.output, path)?;
         let checkpoint = CheckpointPlan::from_section(f.checkpoint.as_ref(), path)?;
         let name = f.name.clone().unwrap_or_else(|| {
@@ -70,7 +71,7 @@ impl Scene {
             mesh: MeshChoice::from_section(&f.mesh, path),
             time,
             physics,
-            solver: SolverChoice::from_sections(&f.solver, &f.scheme),
+            solver,
             output,
             checkpoint,
         })

@@ -3,10 +3,11 @@
 //! converted from its TOML section and checked there.
 
 use super::file::{
-    CheckpointSection, ContactSolver, Groups, History, MeshSection, Model, OutputCompression,
-    OutputFormat, OutputPrecision, OutputSection, SchemeSection, Seconds, SolverSection,
-    TimeSection, DEFAULT_CHECKPOINT_SECONDS,
+    CheckpointSection, ContactSolver, Groups, History, LinearSolver, MeshSection, Model,
+    OutputCompression, OutputFormat, OutputPrecision, OutputSection, SchemeSection, Seconds,
+    SolverSection, TimeSection, DEFAULT_CHECKPOINT_SECONDS,
 };
+use super::physics::Physics;
 use crate::{ranges, Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -74,10 +75,14 @@ impl TimeGrid {
 }
 
 /// `[solver]` and `[scheme]`: how each step of (3.1) is discretized and solved.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct SolverChoice {
     /// How a step with contact or friction is solved (`solver.contact`).
     pub contact: ContactSolver,
+    /// How the step matrix is solved (`solver.linear`; `auto` is `cholesky` for now).
+    pub linear: LinearSolver,
+    /// `[solver.petsc] options`, passed to PETSc where `linear = "petsc"` (empty by default).
+    pub petsc_options: String,
     /// The treatment of the elastic and memory terms (`scheme.history`).
     pub history: History,
     /// Run the left endpoint scheme beyond its stability limit (`scheme.allow_unstable`).
@@ -85,13 +90,58 @@ pub struct SolverChoice {
 }
 
 impl SolverChoice {
-    pub(super) fn from_sections(solver: &SolverSection, scheme: &SchemeSection) -> SolverChoice {
-        SolverChoice {
+    /// The sections checked: `linear = "petsc"` needs a build with the `petsc` feature and
+    /// a scene without contact and friction (`physics`).
+    pub(super) fn from_sections(
+        solver: &SolverSection,
+        scheme: &SchemeSection,
+        physics: &Physics,
+        path: &Path,
+    ) -> Result<SolverChoice> {
+        if solver.linear == LinearSolver::Petsc {
+            petsc_refusal(physics, path)?;
+        }
+        Ok(SolverChoice {
             contact: solver.contact,
+            linear: solver.linear,
+            petsc_options: solver
+                .petsc
+                .as_ref()
+                .map_or(String::new(), |p| p.options.clone()),
             history: scheme.history,
             allow_unstable: scheme.allow_unstable,
-        }
+        })
     }
+
+    /// Whether the run solves its step matrix through PETSc (`solver.linear = "petsc"`).
+    pub fn petsc(&self) -> bool {
+        self.linear == LinearSolver::Petsc
+    }
+}
+
+/// Why `solver.linear = "petsc"` cannot run (exit 2): a build without the `petsc` feature,
+/// or contact or friction (no contact solver works on PETSc yet).
+fn petsc_refusal(physics: &Physics, path: &Path) -> Result<()> {
+    let at = format!("{}: key 'solver.linear' = \"petsc\"", path.display());
+    if !cfg!(feature = "petsc") {
+        return Err(Error::input(format!(
+            "{at}: this viscontact was built without PETSc; build it with \
+             `cargo build --release --features petsc` after installing PETSc's development \
+             files (Debian 12: `apt-get install --no-install-recommends petsc-dev`), or set \
+             solver.linear = \"cholesky\""
+        )));
+    }
+    let on = match (physics.contact, physics.friction.is_some()) {
+        (true, true) => "[contact] and [friction]",
+        (true, false) => "[contact]",
+        (false, true) => "[friction]",
+        (false, false) => return Ok(()),
+    };
+    Err(Error::input(format!(
+        "{at}: the scene has {on}, and PETSc solves only linear runs (no contact, no \
+         friction) for now: the active-set contact solver on PETSc is not there yet; set \
+         solver.linear = \"cholesky\" (or \"auto\") for this scene"
+    )))
 }
 
 /// `[output]`: which frames are written, and how.

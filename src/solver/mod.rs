@@ -35,12 +35,14 @@
 //! its iterations and ends with `StepStatus::Abandoned`, writing no w. The time loop does
 //! not change.
 //!
-//! The linear backend is `Factor`: the time loop builds it (`Factor::new`) and passes it to
-//! `solve`. `Linear` needs only its solves with K_A, `Conic` none; the dual condenses
-//! through its structure (the forward and backward solves with the constrained dofs last,
-//! the trailing block L_CC). A second backend (an iterative or a distributed K_A solve)
-//! turns `Factor` into an enum over the backends with the same `new` and `solve`, which the
-//! time loop keeps calling; the solvers that need a triangular factor ask it for one.
+//! The linear backend is a `Backend`: the stored Cholesky factor `Factor` (`solver.linear =
+//! "cholesky"`, and `auto`), or PETSc's Krylov method with algebraic multigrid
+//! (`solver.linear = "petsc"`, cargo feature `petsc`, src/petsc/). The time loop builds one
+//! of them, never both. With the factor it passes `Factor` to `solve`: `Linear` needs only
+//! its solves with K_A, `Conic` none; the dual condenses through its structure (the forward
+//! and backward solves with the constrained dofs last, the trailing block L_CC). PETSc
+//! serves `Linear` only, through `krylov_step`: the scene refuses it with contact
+//! or friction until a contact solver works on it.
 
 mod abandon;
 pub mod choice;
@@ -197,6 +199,51 @@ fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
             y[i] += c * x;
         }
     }
+}
+
+/// How a run solves its step matrix (K_A, or its implicit variant). One per run: the
+/// factor's size in the enum costs nothing.
+#[allow(clippy::large_enum_variant)]
+pub enum Backend {
+    /// Factored once, one solve with the factor per step (`Factor`).
+    Cholesky(Factor),
+    /// PETSc's KSP, set up once (`crate::petsc::Krylov`): linear runs only.
+    #[cfg(feature = "petsc")]
+    Petsc(crate::petsc::Krylov),
+}
+
+impl Backend {
+    /// The stored factor, where the run has one.
+    pub fn factor(&self) -> Option<&Factor> {
+        match self {
+            Backend::Cholesky(f) => Some(f),
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(_) => None,
+        }
+    }
+}
+
+/// w = K⁻¹ b for a linear step through PETSc (`Backend::Petsc`): the report with the Krylov
+/// iterations, or `KrylovFailed` with the KSP's reason.
+#[cfg(feature = "petsc")]
+pub fn krylov_step(
+    krylov: &mut crate::petsc::Krylov,
+    b: &[f64],
+    w: &mut [f64],
+) -> crate::Result<StepReport> {
+    let s = krylov.solve(b, w)?;
+    Ok(StepReport {
+        status: match s.failed {
+            None => StepStatus::Solved,
+            Some(reason) => StepStatus::KrylovFailed {
+                reason,
+                iterations: s.iterations,
+                residual: s.residual,
+            },
+        },
+        iterations: s.iterations,
+        residual: s.residual,
+    })
 }
 
 /// The solver of a run, picked by its effects.

@@ -25,6 +25,14 @@ pub enum StepStatus {
     Abandoned,
     /// Clarabel stopped with another status than solved or almost solved.
     Unsolved(SolverStatus),
+    /// PETSc's Krylov method (the linear backend `solver.linear = "petsc"`) stopped without
+    /// converging: its `KSPConvergedReason` by name, after `iterations`, with the final
+    /// residual norm `residual` (preconditioned, unless the options changed the norm).
+    KrylovFailed {
+        reason: &'static str,
+        iterations: usize,
+        residual: f64,
+    },
     /// u_n or w_n has an entry that is not finite.
     NotFinite { u_max: f64, w_max: f64 },
     /// max|u_n| grew `factor` times its size per unit load at t = `since` (the time loop's
@@ -44,7 +52,8 @@ pub enum StepStatus {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct StepReport {
     pub status: StepStatus,
-    /// Newton iterations (dual) or interior-point iterations (clarabel); 0 for linear.
+    /// Newton iterations (dual) or interior-point iterations (clarabel); 0 for linear with
+    /// the stored factor, the Krylov iterations for linear through PETSc.
     pub iterations: usize,
     /// The solver's final residual, relative: the dual's stopping test over max|d|,
     /// clarabel's larger of its primal and dual residuals; 0 for linear.
@@ -86,6 +95,17 @@ impl StepReport {
             StepStatus::Unsolved(status) => format!(
                 "clarabel did not solve the step problem: status {status:?} after {} iterations",
                 self.iterations
+            ),
+            StepStatus::KrylovFailed {
+                reason,
+                iterations,
+                residual,
+            } => format!(
+                "PETSc's Krylov solve of K_A did not converge at step {n}, t = {t}: \
+                 KSP_{reason} after {iterations} iterations (residual norm {residual:e}); \
+                 check the options in [solver.petsc] options and PETSC_OPTIONS (a \
+                 -ksp_max_it or -ksp_rtol, a preconditioner that does not suit an SPD \
+                 matrix), or set [solver] linear = \"cholesky\""
             ),
             StepStatus::NotFinite { u_max, w_max } => format!(
                 "the solution is not finite at step {n}, t = {t} (max|u_n| = {u_max:e}, \

@@ -1,0 +1,347 @@
+//! PETSc as a linear backend (cargo feature `petsc`): the step matrix K_A solved by a Krylov
+//! method with algebraic multigrid instead of the stored Cholesky factor.
+//!
+//! The binding is our own and small (docs/decisions.md): `shim.c`, compiled by build.rs
+//! with the flags of PETSc's pkg-config file, keeps PETSc's macros and types on the C side
+//! and offers a few functions with plain C types; this module declares them and wraps them
+//! safely. One process, `PETSC_COMM_SELF`; PETSc is initialized once per process, on first
+//! use ([`initialize`]), and finalized by [`finalize`] at the end of `main`.
+//!
+//! # The solve
+//!
+//! K_A w = b by preconditioned CG with PETSc's smoothed-aggregation multigrid (GAMG), the
+//! default `-ksp_type cg -pc_type gamg`, stopped when the preconditioned residual has
+//! fallen by `rtol` (default 1e-12, [`DEFAULT_RTOL`]) relative to the preconditioned right
+//! side. The initial guess is the previous step's w. GAMG is given the near-null space of
+//! linear elasticity, the rigid-body modes restricted to the free dofs: d translations
+//! e_c and the rotations, (−y, x) in 2D and (0, −z, y), (z, 0, −x), (−y, x, 0) in 3D, about
+//! the centroid of the nodes, orthonormalized (PETSc's `MatNullSpaceCreate` asks for
+//! orthonormal vectors). The modes are built here rather than by
+//! `MatNullSpaceCreateRigidBody`, which needs every node's d dofs in one block: a node on a
+//! Γ1 that clamps some of its components breaks the blocks. Where the free dofs are node
+//! blocks (each node's d dofs free and consecutive, or all clamped), the matrix gets block
+//! size d, which GAMG uses to aggregate nodes.
+//!
+//! The scene's `[solver.petsc] options` are inserted into PETSc's options database before
+//! `KSPSetFromOptions`, after the `PETSC_OPTIONS` environment variable that PETSc reads at
+//! initialization: the scene's options win where both set a key. A KSP that does not
+//! converge (`KSPGetConvergedReason` < 0) fails the step with its reason.
+
+use crate::fem::{Discretization, Sparse};
+use crate::{Error, Result};
+use std::ffi::{c_char, c_int, c_void, CStr, CString};
+use std::sync::Mutex;
+
+/// The relative tolerance of the Krylov method by default: u_N agrees with the Cholesky
+/// run's to 1e-8 relative and better (tests/petsc.rs).
+pub const DEFAULT_RTOL: f64 = 1e-12;
+
+/// PetscInt of Debian's PETSc: 32 bits (build.rs refuses 64-bit indices).
+type PetscInt = i32;
+
+extern "C" {
+    fn vc_initialize() -> c_int;
+    fn vc_finalize() -> c_int;
+    fn vc_error_message(code: c_int) -> *const c_char;
+    fn vc_reason_name(reason: c_int) -> *const c_char;
+    #[allow(clippy::too_many_arguments)]
+    fn vc_ksp_create(
+        n: PetscInt,
+        rowptr: *const PetscInt,
+        cols: *const PetscInt,
+        vals: *const f64,
+        bs: PetscInt,
+        nvec: PetscInt,
+        near: *const f64,
+        rtol: f64,
+        options: *const c_char,
+        out: *mut *mut c_void,
+    ) -> c_int;
+    fn vc_ksp_solve(
+        ctx: *mut c_void,
+        b: *const f64,
+        x: *mut f64,
+        its: *mut PetscInt,
+        reason: *mut c_int,
+        rnorm: *mut f64,
+    ) -> c_int;
+    fn vc_ksp_types(ctx: *mut c_void, ksp: *mut *const c_char, pc: *mut *const c_char) -> c_int;
+    fn vc_ksp_destroy(ctx: *mut c_void) -> c_int;
+}
+
+/// Whether PETSc is initialized in this process: None before the first use, then the
+/// outcome of `PetscInitialize` (which cannot be tried twice), Some(Ok(false)) once finalized.
+static STATE: Mutex<Option<std::result::Result<bool, i32>>> = Mutex::new(None);
+
+/// PETSc's message for an error code of the shim's functions.
+fn message(code: c_int) -> String {
+    // SAFETY: vc_error_message returns a static NUL-terminated string for any code.
+    unsafe { CStr::from_ptr(vc_error_message(code)) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// A shim call's code as the run's error (exit 1): PETSc refused or failed at `what`.
+fn check(code: c_int, what: &str) -> Result<()> {
+    match code {
+        0 => Ok(()),
+        c => Err(Error::solve(format!(
+            "PETSc failed at {what}: {} (error code {c})",
+            message(c)
+        ))),
+    }
+}
+
+/// PETSc's error code for memory it could not get (`PETSC_ERR_MEM`).
+const PETSC_ERR_MEM: c_int = 55;
+
+/// The setup's code as the run's error: where options were given (the scene's or
+/// `PETSC_OPTIONS`), a refusal is taken as theirs (exit 2, naming both); otherwise, or when
+/// memory ran out, the setup failed (exit 1).
+fn check_setup(code: c_int, options: &str) -> Result<()> {
+    let env = std::env::var("PETSC_OPTIONS").unwrap_or_default();
+    if code == 0 || code == PETSC_ERR_MEM || (options.trim().is_empty() && env.trim().is_empty()) {
+        return check(code, "setting up the KSP of K_A");
+    }
+    Err(Error::input(format!(
+        "PETSc refused the KSP of K_A with the options [solver.petsc] options = {options:?} \
+         and PETSC_OPTIONS = {env:?}: {} (error code {code}); correct the option PETSc's \
+         messages above name",
+        message(code)
+    )))
+}
+
+/// Initializes PETSc (and MPI through it) on the first call in the process; later calls
+/// do nothing. PETSc reads the `PETSC_OPTIONS` environment variable here.
+pub fn initialize() -> Result<()> {
+    let mut state = STATE.lock().unwrap_or_else(|e| e.into_inner());
+    let code = match *state {
+        Some(Ok(true)) => return Ok(()),
+        Some(Ok(false)) => {
+            return Err(Error::solve(
+                "PETSc was finalized in this process and cannot be initialized again",
+            ))
+        }
+        Some(Err(code)) => code,
+        // SAFETY: called once per process, under the lock.
+        None => unsafe { vc_initialize() },
+    };
+    *state = Some(if code == 0 { Ok(true) } else { Err(code) });
+    check(code, "PetscInitialize")
+}
+
+/// Finalizes PETSc (and MPI) if it was initialized; every [`Krylov`] must be dropped
+/// before. Called once, at the end of `main`.
+pub fn finalize() {
+    let mut state = STATE.lock().unwrap_or_else(|e| e.into_inner());
+    if *state == Some(Ok(true)) {
+        // SAFETY: PETSc is initialized and no object of ours is alive (the caller's promise).
+        let code = unsafe { vc_finalize() };
+        if code != 0 {
+            crate::errln!("warning: PetscFinalize: {}", message(code));
+        }
+        *state = Some(Ok(false));
+    }
+}
+
+/// The options a [`Krylov`] solve runs with.
+#[derive(Clone, Debug)]
+pub struct KrylovSettings {
+    /// `[solver.petsc] options`: PETSc's command-line syntax, e.g. "-ksp_monitor".
+    pub options: String,
+    /// The relative tolerance before the options ([`DEFAULT_RTOL`]; `-ksp_rtol` changes it).
+    pub rtol: f64,
+}
+
+/// K_A in a PETSc matrix and its KSP, set up once per run.
+pub struct Krylov {
+    ctx: *mut c_void,
+    n: usize,
+    /// The KSP's and the PC's type after the options (`cg`, `gamg` by default).
+    pub ksp_type: String,
+    pub pc_type: String,
+    /// The options the scene passed.
+    pub options: String,
+}
+
+impl Krylov {
+    /// The KSP of `matrix` (the free-dof step matrix of `disc`, stored whole), its
+    /// near-null space from `disc`'s nodes.
+    pub fn new(matrix: &Sparse, disc: &Discretization, settings: &KrylovSettings) -> Result<Self> {
+        initialize()?;
+        let n = matrix.nrows();
+        let too_big = |_| Error::solve(format!("{n} dofs exceed PETSc's 32-bit indices"));
+        let m = matrix.as_ref();
+        let to_int = |v: &[usize]| -> Result<Vec<PetscInt>> {
+            v.iter()
+                .map(|&i| PetscInt::try_from(i).map_err(too_big))
+                .collect()
+        };
+        // K_A is symmetric: its column-compressed storage is its row-compressed one.
+        let rowptr = to_int(m.symbolic().col_ptr())?;
+        let cols = to_int(m.symbolic().row_idx())?;
+        let near = rigid_body_modes(disc);
+        let options = CString::new(settings.options.as_str())
+            .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
+        let mut ctx = std::ptr::null_mut();
+        // SAFETY: the arrays hold n + 1, nnz, nnz and nvec·n values as the shim reads them;
+        // PETSc copies them.
+        let code = unsafe {
+            vc_ksp_create(
+                n as PetscInt,
+                rowptr.as_ptr(),
+                cols.as_ptr(),
+                m.val().as_ptr(),
+                block_size(disc) as PetscInt,
+                (near.len() / n.max(1)) as PetscInt,
+                near.as_ptr(),
+                settings.rtol,
+                options.as_ptr(),
+                &mut ctx,
+            )
+        };
+        check_setup(code, &settings.options)?;
+        let (mut ksp, mut pc) = (std::ptr::null(), std::ptr::null());
+        // SAFETY: ctx is a live KSP; the names are PETSc's static strings.
+        check(
+            unsafe { vc_ksp_types(ctx, &mut ksp, &mut pc) },
+            "KSPGetType",
+        )?;
+        let name = |p: *const c_char| unsafe { CStr::from_ptr(p) }.to_string_lossy().into();
+        Ok(Krylov {
+            ctx,
+            n,
+            ksp_type: name(ksp),
+            pc_type: name(pc),
+            options: settings.options.clone(),
+        })
+    }
+
+    /// w ← K_A⁻¹ b from the initial guess in w: the Krylov iterations, the final residual
+    /// norm and, where the KSP did not converge, its reason.
+    pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
+        assert!(b.len() == self.n && w.len() == self.n);
+        let (mut its, mut reason, mut rnorm) = (0, 0, 0.0);
+        // SAFETY: b and w hold n values; PETSc reads b and writes w within the call.
+        let code = unsafe {
+            vc_ksp_solve(
+                self.ctx,
+                b.as_ptr(),
+                w.as_mut_ptr(),
+                &mut its,
+                &mut reason,
+                &mut rnorm,
+            )
+        };
+        check(code, "KSPSolve")?;
+        // SAFETY: KSPConvergedReasons names every reason PETSc returns, statically.
+        let name = || unsafe { CStr::from_ptr(vc_reason_name(reason)) };
+        Ok(Solve {
+            iterations: its as usize,
+            residual: rnorm,
+            failed: (reason < 0).then(|| name().to_str().unwrap_or("DIVERGED")),
+        })
+    }
+}
+
+/// What one KSP solve did.
+#[derive(Clone, Copy, Debug)]
+pub struct Solve {
+    pub iterations: usize,
+    /// The final residual norm (preconditioned, unless the options changed the norm).
+    pub residual: f64,
+    /// The `KSPConvergedReason` by name (`DIVERGED_ITS`, …) where it is negative.
+    pub failed: Option<&'static str>,
+}
+
+impl Drop for Krylov {
+    fn drop(&mut self) {
+        // SAFETY: ctx came from vc_ksp_create and is destroyed once, before PetscFinalize.
+        let code = unsafe { vc_ksp_destroy(self.ctx) };
+        if code != 0 {
+            crate::errln!("warning: destroying the KSP: {}", message(code));
+        }
+    }
+}
+
+/// The unknown (the index among the n_free unknowns) of global dof `g`, if it is one: not
+/// held at zero, nor prescribed (`[[dirichlet]]` values, numbered from n_free on).
+fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
+    disc.free[g].filter(|&f| f < disc.n_free)
+}
+
+/// d where every node's unknowns are d consecutive ones starting at a multiple of d, or
+/// none (a node clamped on Γ1); 1 otherwise.
+fn block_size(disc: &Discretization) -> usize {
+    let d = disc.dim;
+    let unknowns: Vec<Option<usize>> = (0..disc.free.len()).map(|g| unknown(disc, g)).collect();
+    let blocked = unknowns.chunks(d).all(|node| match node[0] {
+        None => node.iter().all(Option::is_none),
+        Some(first) => {
+            first % d == 0 && node.iter().enumerate().all(|(c, f)| *f == Some(first + c))
+        }
+    });
+    if blocked {
+        d
+    } else {
+        1
+    }
+}
+
+/// The rigid-body modes on the free dofs, about the nodes' centroid, orthonormalized
+/// (modified Gram–Schmidt, twice): d(d + 1)/2 vectors of n_free values, one after the other
+/// (fewer where a mode vanishes on the free dofs).
+fn rigid_body_modes(disc: &Discretization) -> Vec<f64> {
+    let (d, n) = (disc.dim, disc.n_free);
+    let count = disc.nodes.len().max(1) as f64;
+    let mut centre = [0.0; 3];
+    for x in &disc.nodes {
+        for c in 0..3 {
+            centre[c] += x[c] / count;
+        }
+    }
+    // Mode k's value at component c of a node at y (relative to the centre).
+    let value = |k: usize, c: usize, y: [f64; 3]| -> f64 {
+        if k < d {
+            return if c == k { 1.0 } else { 0.0 };
+        }
+        // Rotation about axis a (2D: about z only): ω × y with ω = e_a.
+        let a = if d == 2 { 2 } else { k - d };
+        let w = [0, 1, 2].map(|i| if i == a { 1.0 } else { 0.0 });
+        crate::mesh::cross(w, y)[c]
+    };
+    let modes = d * (d + 1) / 2;
+    let mut v: Vec<Vec<f64>> = (0..modes)
+        .map(|k| {
+            let mut m = vec![0.0; n];
+            for (i, x) in disc.nodes.iter().enumerate() {
+                let y = [0, 1, 2].map(|c| x[c] - centre[c]);
+                for c in 0..d {
+                    if let Some(f) = unknown(disc, d * i + c) {
+                        m[f] = value(k, c, y);
+                    }
+                }
+            }
+            m
+        })
+        .collect();
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    for m in v.iter_mut() {
+        let norm0 = dot(m, m).sqrt();
+        for _ in 0..2 {
+            for q in &basis {
+                let p = dot(m, q);
+                m.iter_mut().zip(q).for_each(|(a, b)| *a -= p * b);
+            }
+        }
+        let norm = dot(m, m).sqrt();
+        if norm > 1e-10 * norm0 {
+            basis.push(m.iter().map(|a| a / norm).collect());
+        }
+    }
+    basis.concat()
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}

@@ -1,0 +1,221 @@
+//! The PETSc linear backend (`[solver] linear = "petsc"`, cargo feature `petsc`): a linear
+//! run through PETSc's CG + GAMG agrees with the stored Cholesky factor's to 1e-8 relative in
+//! u_N (the paper's scene and the 3D block without contact and friction); the scene's options
+//! and `PETSC_OPTIONS` reach PETSc; a KSP that does not converge fails the run (exit 1)
+//! naming its reason; the scenes PETSc cannot run are refused (exit 2). Without the feature
+//! only the refusal of a build without PETSc is tested here.
+//!
+//! CI runs this binary with the feature: `cargo test --release --features petsc --test
+//! petsc`. The library runs share the process's one PETSc (not thread-safe), one at a time
+//! (`PETSC`); the command-line runs are processes of their own.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+use common::SceneText;
+
+/// The paper's scene without Γ3 (no contact, no friction): a linear run.
+#[cfg(feature = "petsc")]
+fn paper_linear() -> SceneText {
+    SceneText::paper().remove("contact").remove("friction")
+}
+
+/// The 3D block (examples/block.toml) without contact and friction.
+#[cfg(feature = "petsc")]
+fn block_linear() -> SceneText {
+    SceneText::block().remove("contact").remove("friction")
+}
+
+#[cfg(feature = "petsc")]
+mod with_petsc {
+    use super::*;
+    use std::sync::Mutex;
+
+    /// One library run through PETSc at a time.
+    static PETSC: Mutex<()> = Mutex::new(());
+
+    /// u_N of `scene` with `solver.linear = linear`, run through the library, and the
+    /// solver's name.
+    fn u_final(scene: &SceneText, linear: &str) -> (Vec<f64>, &'static str) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = scene
+            .clone()
+            .set("solver.linear", linear)
+            .write(dir.path(), "s.toml");
+        let (scene, _mesh, disc) = common::load(&path, &[]);
+        let _one = PETSC.lock().unwrap_or_else(|e| e.into_inner());
+        let trace = common::trace(&scene, &disc);
+        (trace.u_final, trace.solver)
+    }
+
+    fn agrees_with_cholesky(scene: SceneText, what: &str) {
+        let (petsc, _) = u_final(&scene, "petsc");
+        let (cholesky, name) = u_final(&scene, "cholesky");
+        assert!(name.contains("Cholesky"), "{name}");
+        let d = common::rel_diff(&petsc, &cholesky);
+        println!("{what}: max|u_N(petsc) − u_N(cholesky)| / max|u_N| = {d:e}");
+        assert!(common::max_abs(&cholesky) > 0.0);
+        assert!(d <= 1e-8, "{what}: u_N differs by {d:e} relative");
+    }
+
+    #[test]
+    fn paper_scene_without_contact_agrees_with_cholesky() {
+        agrees_with_cholesky(paper_linear(), "paper (2D) without contact and friction");
+    }
+
+    #[test]
+    fn block_without_contact_agrees_with_cholesky() {
+        agrees_with_cholesky(block_linear(), "block (3D) without contact and friction");
+    }
+
+    /// Runs the binary on `scene` into a temporary directory with `env` set: its exit status,
+    /// stderr and (for a run that wrote one) summary.json.
+    fn run(scene: SceneText, env: &[(&str, &str)]) -> (i32, String, Option<serde_json::Value>) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = scene.set("time.steps", 4).write(dir.path(), "s.toml");
+        let out = dir.path().join("out");
+        let out = std::process::Command::new(common::BIN)
+            .args(["run", "--quiet", "--out"])
+            .arg(&out)
+            .arg(&path)
+            .env_remove("PETSC_OPTIONS")
+            .envs(env.iter().copied())
+            .output()
+            .unwrap();
+        let summary = out
+            .status
+            .success()
+            .then(|| common::summary(&dir.path().join("out")));
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        (out.status.code().unwrap_or(-1), stderr, summary)
+    }
+
+    #[test]
+    fn summary_records_the_ksp_and_its_iterations() {
+        let scene = block_linear().set("solver.linear", "petsc");
+        let (code, stderr, summary) = run(scene, &[]);
+        assert_eq!(code, 0, "{stderr}");
+        let s = summary.unwrap();
+        assert_eq!(s["petsc"]["ksp_type"], "cg", "{s}");
+        assert_eq!(s["petsc"]["pc_type"], "gamg", "{s}");
+        assert_eq!(s["petsc"]["options"], "");
+        assert!(s["solver"].as_str().unwrap().contains("PETSc"), "{s}");
+        let per_step = s["iterations"]["per_step"].as_array().unwrap();
+        assert_eq!(per_step.len(), 5);
+        // Step 0 starts from rest under a load: the Krylov method iterates.
+        assert!(
+            per_step.iter().skip(1).all(|i| i.as_u64().unwrap() > 0),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn check_names_the_petsc_backend() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = paper_linear()
+            .set("solver.linear", "petsc")
+            .write(dir.path(), "s.toml");
+        let (code, text) = common::cli(&["check", path.to_str().unwrap()]);
+        assert_eq!(code, 0, "{text}");
+        assert!(text.contains("Krylov solve per step by PETSc"), "{text}");
+        assert!(!text.contains("Cholesky"), "{text}");
+    }
+
+    #[test]
+    fn scene_options_reach_petsc() {
+        let scene = paper_linear()
+            .set("solver.linear", "petsc")
+            .set("solver.petsc.options", "-ksp_type gmres -pc_type hypre");
+        let (code, stderr, summary) = run(scene, &[]);
+        assert_eq!(code, 0, "{stderr}");
+        let s = summary.unwrap();
+        assert_eq!(s["petsc"]["ksp_type"], "gmres", "{s}");
+        assert_eq!(s["petsc"]["pc_type"], "hypre", "{s}");
+        assert_eq!(s["petsc"]["options"], "-ksp_type gmres -pc_type hypre");
+    }
+
+    #[test]
+    fn petsc_options_environment_reaches_petsc() {
+        let scene = paper_linear().set("solver.linear", "petsc");
+        let (code, stderr, summary) = run(scene, &[("PETSC_OPTIONS", "-ksp_type bcgs")]);
+        assert_eq!(code, 0, "{stderr}");
+        let s = summary.unwrap();
+        assert_eq!(s["petsc"]["ksp_type"], "bcgs", "{s}");
+        assert_eq!(s["petsc"]["environment"], "-ksp_type bcgs", "{s}");
+    }
+
+    #[test]
+    fn a_ksp_that_does_not_converge_fails_the_run_with_its_reason() {
+        let scene = block_linear()
+            .set("solver.linear", "petsc")
+            .set("solver.petsc.options", "-ksp_max_it 1");
+        let (code, stderr, _) = run(scene, &[]);
+        assert_eq!(code, 1, "{stderr}");
+        assert!(stderr.contains("KSP_DIVERGED_ITS"), "{stderr}");
+        assert!(stderr.contains("after 1 iterations"), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+
+    #[test]
+    fn an_option_petsc_refuses_is_bad_input() {
+        let scene = paper_linear()
+            .set("solver.linear", "petsc")
+            .set("solver.petsc.options", "-pc_type no_such_pc");
+        let (code, stderr, _) = run(scene, &[]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(stderr.contains("-pc_type no_such_pc"), "{stderr}");
+        assert!(stderr.contains("PETSC_OPTIONS"), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+
+    #[test]
+    fn petsc_with_contact_or_friction_is_refused() {
+        for (scene, on) in [
+            (SceneText::paper(), "[contact] and [friction]"),
+            (SceneText::block().remove("friction"), "[contact]"),
+            (SceneText::paper().remove("contact"), "[friction]"),
+        ] {
+            let (code, stderr, _) = run(scene.set("solver.linear", "petsc"), &[]);
+            assert_eq!(code, 2, "{stderr}");
+            assert!(stderr.contains("solver.linear"), "{stderr}");
+            assert!(stderr.contains(on), "{stderr}");
+            assert!(stderr.contains("active-set"), "{stderr}");
+        }
+    }
+}
+
+/// A build without the feature refuses `linear = "petsc"` (exit 2) and says how to build
+/// with it; `cholesky` and `auto` run as before.
+#[cfg(not(feature = "petsc"))]
+#[test]
+fn petsc_without_the_feature_is_refused_with_the_build_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = SceneText::paper()
+        .remove("contact")
+        .remove("friction")
+        .set("time.steps", 2);
+    for (linear, code) in [("petsc", 2), ("cholesky", 0), ("auto", 0)] {
+        let path = scene
+            .clone()
+            .set("solver.linear", linear)
+            .write(dir.path(), "s.toml");
+        let out = dir.path().join(linear);
+        let (got, text) = common::cli(&[
+            "run",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+            path.to_str().unwrap(),
+        ]);
+        assert_eq!(got, code, "{linear}: {text}");
+        if code == 2 {
+            assert!(text.contains("s.toml"), "{text}");
+            assert!(
+                text.contains("cargo build --release --features petsc"),
+                "{text}"
+            );
+            assert!(text.contains("petsc-dev"), "{text}");
+            assert!(!out.exists(), "a refused run wrote {}", out.display());
+        }
+    }
+}
