@@ -68,6 +68,17 @@ mod with_petsc {
         agrees_with_cholesky(block_linear(), "block (3D) without contact and friction");
     }
 
+    /// A prescribed displacement (`[[dirichlet]]`, a value that is not zero) enters the right
+    /// side and leaves the unknowns: the Krylov solve and GAMG's near-null space take the
+    /// unknowns alone.
+    #[test]
+    fn a_prescribed_displacement_agrees_with_cholesky() {
+        let held: toml::Table =
+            toml::from_str("on = \"Γ3,2\"\ncomponents = [\"y\"]\nvalue = [\"0.01*t\"]").unwrap();
+        let scene = paper_linear().push("dirichlet", held);
+        agrees_with_cholesky(scene, "paper (2D) with Γ3,2 lifted by u_y = 0.01 t");
+    }
+
     /// Runs the binary on `scene` into a temporary directory with `env` set: its exit status,
     /// stderr and (for a run that wrote one) summary.json.
     fn run(scene: SceneText, env: &[(&str, &str)]) -> (i32, String, Option<serde_json::Value>) {
