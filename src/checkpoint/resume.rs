@@ -217,7 +217,9 @@ impl Checkpoint {
             .collect();
         if diffs.is_empty() && dof_of != self.id.dof_of {
             diffs.push(
-                "the clamped dofs (Γ1) differ from the run's: check mesh.groups.fixed".into(),
+                "the held dofs differ from the run's (clamped groups or [[dirichlet]] \
+                 components): check mesh.groups.fixed and the [[dirichlet]] entries"
+                    .into(),
             );
         }
         if diffs.is_empty() {

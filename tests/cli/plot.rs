@@ -108,11 +108,8 @@ fn a_3d_run_is_drawn_from_two_views_with_its_contact_boundary() {
     }
 }
 
-#[test]
-fn a_2d_run_is_still_drawn_and_refuses_a_view() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
-    let run = tmp.path().join("run");
+/// Runs the 2D `scene` for 2 steps into `run`.
+fn run_2d(scene: &Path, run: &Path) -> PathBuf {
     let o = viscontact(&[
         "run",
         scene.to_str().unwrap(),
@@ -123,6 +120,14 @@ fn a_2d_run_is_still_drawn_and_refuses_a_view() {
         run.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    run.to_path_buf()
+}
+
+#[test]
+fn a_2d_run_is_still_drawn_and_refuses_a_view() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let run = run_2d(&scene, &tmp.path().join("run"));
     let px = plot(&run, &tmp.path().join("fig.png"), &[]);
     assert!(px.iter().filter(|p| **p == RED).count() > 200);
     let (code, text) = cli(&["plot", run.to_str().unwrap(), "--view", "1,1,1"]);
@@ -141,17 +146,7 @@ fn groups_without_their_condition_are_not_drawn_as_contact() {
         .remove("contact")
         .remove("friction")
         .write(tmp.path(), "s.toml");
-    let run = tmp.path().join("run");
-    let o = viscontact(&[
-        "run",
-        scene.to_str().unwrap(),
-        "--set",
-        "time.steps=2",
-        "--quiet",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = run_2d(&scene, &tmp.path().join("run"));
     let px = plot(&run, &tmp.path().join("fig.png"), &[]);
     let orange = [240, 150, 0];
     let marked = px.iter().filter(|p| **p == RED || **p == orange).count();

@@ -324,6 +324,14 @@ pub fn signal_when(
     (child.wait().unwrap(), stderr)
 }
 
+/// The environment variable `name` parsed as a `T` (a test's size or seed), else `default`.
+pub fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
 /// Waits at most `limit` for `child`: its exit code, or minus the signal that ended it (a
 /// hang fails the test, naming `what`, after killing the process).
 pub fn exit_within(child: &mut std::process::Child, limit: std::time::Duration, what: &str) -> i32 {

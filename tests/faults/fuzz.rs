@@ -28,10 +28,7 @@ use viscontact::scene::Scene;
 use viscontact::time_loop::{Solved, TimeLoop};
 
 fn config() -> ProptestConfig {
-    let cases = std::env::var("VISCONTACT_FUZZ_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(300);
+    let cases = crate::common::env_or("VISCONTACT_FUZZ_CASES", 300);
     ProptestConfig {
         cases,
         failure_persistence: None,

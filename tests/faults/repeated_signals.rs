@@ -105,14 +105,8 @@ fn trial(
 
 #[test]
 fn two_or_three_quick_signals_never_lose_a_run() {
-    let trials: usize = std::env::var("VISCONTACT_SIGNAL_TRIALS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(8);
-    let seed: u64 = std::env::var("VISCONTACT_SEED")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(49);
+    let trials: usize = common::env_or("VISCONTACT_SIGNAL_TRIALS", 8);
+    let seed: u64 = common::env_or("VISCONTACT_SEED", 49);
     println!("seed {seed}, {trials} trials");
     let tmp = tempfile::tempdir().unwrap();
     let scene = common::paper_scene(tmp.path(), "s.toml", "paper/rect_032.msh", false);

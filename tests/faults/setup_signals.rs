@@ -44,14 +44,8 @@ fn setup_seconds(dir: &Path) -> f64 {
 
 #[test]
 fn signals_during_setup_exit_at_once_and_leave_the_earlier_run_intact() {
-    let count: usize = std::env::var("VISCONTACT_SETUP_SIGNALS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(4);
-    let seed: u64 = std::env::var("VISCONTACT_SEED")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(26);
+    let count: usize = common::env_or("VISCONTACT_SETUP_SIGNALS", 4);
+    let seed: u64 = common::env_or("VISCONTACT_SEED", 26);
     println!("seed {seed}, {count} signals of each kind, for run and for resume");
     let tmp = tempfile::tempdir().unwrap();
     let scene = common::paper_scene(tmp.path(), "big.toml", "paper/rect_128.msh", false);
