@@ -3,7 +3,7 @@
 //! friction term; no relaxation → no memory state; neither contact nor friction → every step
 //! is one solve with the stored factorization and no optimization solver is built.
 
-use crate::fem::{Discretization, Sparse};
+use crate::fem::{Discretization, Gamma3, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::Scene;
 use crate::solver::choice::{Contact, ContactPlan};
@@ -116,17 +116,18 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             ));
         }
     }
-    for &what in &disc.idle_groups {
-        let (group, meaning) = match what {
-            "contact" => (
+    for &condition in &disc.idle_groups {
+        let (group, meaning) = match condition {
+            Gamma3::Contact => (
                 &scene.mesh.groups.contact,
                 "no non-penetration: the body passes freely through the foundation there",
             ),
-            _ => (
+            Gamma3::Friction => (
                 &scene.mesh.groups.friction,
                 "neither the given normal stress F nor friction acts there",
             ),
         };
+        let what = condition.name();
         w.push(format!(
             "the mesh has the {what} group '{group}' (mesh.groups.{what}), but the scene has \
              no [{what}] table (or it is disabled), so that boundary is free: {meaning}; add \

@@ -121,7 +121,7 @@ pub struct Discretization {
     pub friction_kink_deg: f64,
     /// The conditions ("contact", "friction") whose group the mesh has but the scene
     /// leaves off: that boundary then carries no condition at all (`effects::warnings`).
-    pub idle_groups: Vec<&'static str>,
+    pub idle_groups: Vec<Gamma3>,
     /// The cells as [`Discretization::stress`] reads them, once it is called.
     stress_cells: std::sync::OnceLock<PackedCells>,
 }
@@ -198,21 +198,39 @@ impl RowMaker<'_> {
     }
 }
 
-/// "contact" and "friction" where the mesh has the condition's group and the scene leaves
-/// the condition off.
-fn idle_groups(mesh: &Mesh, scene: &Scene) -> Vec<&'static str> {
+/// A condition of Γ3, by its scene table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gamma3 {
+    /// `[contact]` on Γ3,1.
+    Contact,
+    /// `[friction]` on Γ3,2.
+    Friction,
+}
+
+impl Gamma3 {
+    /// The name of its table and of its `mesh.groups` key.
+    pub fn name(self) -> &'static str {
+        match self {
+            Gamma3::Contact => "contact",
+            Gamma3::Friction => "friction",
+        }
+    }
+}
+
+/// The conditions whose group the mesh has while the scene leaves them off.
+fn idle_groups(mesh: &Mesh, scene: &Scene) -> Vec<Gamma3> {
     let groups = &scene.mesh.groups;
     [
-        ("contact", &groups.contact, scene.physics.contact),
+        (Gamma3::Contact, &groups.contact, scene.physics.contact),
         (
-            "friction",
+            Gamma3::Friction,
             &groups.friction,
             scene.physics.friction.is_some(),
         ),
     ]
     .into_iter()
     .filter(|(_, name, on)| !on && mesh.boundary_group(name).is_ok())
-    .map(|(what, _, _)| what)
+    .map(|(condition, _, _)| condition)
     .collect()
 }
 

@@ -255,20 +255,18 @@ pub fn remove_run(dir: &Path) -> Result<()> {
 
 /// The run id summary.json records, if it records one.
 fn summary_run_id(dir: &Path) -> Option<String> {
-    summary_text(dir, "run_id")
+    summary(dir)?.get("run_id")?.as_str().map(str::to_string)
 }
 
-/// A string field of `dir`'s summary.json, if it has one.
-fn summary_text(dir: &Path, key: &str) -> Option<String> {
+/// `dir`'s summary.json, if it has one that reads.
+fn summary(dir: &Path) -> Option<serde_json::Value> {
     let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v.get(key)?.as_str().map(str::to_string)
+    serde_json::from_str(&text).ok()
 }
 
 /// Whether `dir`'s summary.json says that run `run_id` completed.
 pub fn completed(dir: &Path, run_id: &str) -> bool {
-    summary_run_id(dir).as_deref() == Some(run_id)
-        && summary_text(dir, "status").as_deref() == Some("completed")
+    summary(dir).is_some_and(|v| v["run_id"] == run_id && v["status"] == "completed")
 }
 
 /// Refuses to resume run `run_id` (of `checkpoint`) into `dir` when `dir` holds another run:

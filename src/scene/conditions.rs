@@ -3,6 +3,7 @@
 //! (`fem::constraints`).
 
 use super::file::{DirichletSection, Model, NumOrExpr};
+use super::values::of_space_and_time;
 use crate::expr::Scalar;
 use crate::{Error, Result};
 use std::path::Path;
@@ -88,10 +89,7 @@ fn entry(e: &DirichletSection, i: usize, model: Model, path: &Path) -> Result<Di
                     if model.dim() == 3 { ", z" } else { "" }
                 )));
             }
-            v.iter()
-                .enumerate()
-                .map(|(c, x)| value(x, model, path, &format!("{key}[{c}]")))
-                .collect::<Result<_>>()?
+            of_space_and_time(v, &key, model, path)?
         }
     };
     Ok(Dirichlet {
@@ -100,10 +98,6 @@ fn entry(e: &DirichletSection, i: usize, model: Model, path: &Path) -> Result<Di
         value,
         written,
     })
-}
-
-fn value(v: &NumOrExpr, model: Model, path: &Path, key: &str) -> Result<Scalar> {
-    super::physics::scalar(v, super::physics::variables(model, true), key, path)
 }
 
 /// "x", "y", "z" (each once; z only in 3D) or "normal" alone.

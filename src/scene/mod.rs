@@ -17,6 +17,7 @@ pub mod file;
 mod parts;
 mod physics;
 mod read;
+mod values;
 
 pub use conditions::{Components, Dirichlet};
 pub use file::{ContactSolver, Groups, History, LinearSolver, MemoryMode, Model, SceneFile};

@@ -8,6 +8,7 @@ use super::file::{
     FrictionSection, LoadSection, MaterialSection, MemoryMode, Model, NumOrExpr, RelaxationSection,
     SceneFile,
 };
+use super::values::{of_space_and_time, scalar, variables};
 use super::TimeGrid;
 use crate::expr::{Expr, Scalar};
 use crate::kernel::Kernel;
@@ -348,34 +349,7 @@ fn vector(v: &[NumOrExpr], key: &str, model: Model, path: &Path) -> Result<Vec<S
             v.len()
         )));
     }
-    v.iter()
-        .enumerate()
-        .map(|(i, c)| scalar(c, variables(model, true), &format!("{key}[{i}]"), path))
-        .collect()
-}
-
-pub(super) fn scalar(v: &NumOrExpr, allowed: &[&str], key: &str, file: &Path) -> Result<Scalar> {
-    match v {
-        NumOrExpr::Num(x) => Ok(Scalar::Const(ranges::scaled(*x, key, file)?)),
-        NumOrExpr::Expr(s) => {
-            // A plain number written as a string is a constant too.
-            if let Ok(x) = s.trim().parse::<f64>() {
-                return Ok(Scalar::Const(ranges::scaled(x, key, file)?));
-            }
-            Expr::parse(s, allowed, &format!("{}: key '{key}'", file.display()))
-                .map(|e| Scalar::Expr(Box::new(e)))
-        }
-    }
-}
-
-/// The variables of loads (space and time) and of F, μ (space): a 2D model has no z.
-pub(super) fn variables(model: Model, time: bool) -> &'static [&'static str] {
-    match (model.dim(), time) {
-        (2, true) => &["x", "y", "t"],
-        (2, false) => &["x", "y"],
-        (_, true) => &["x", "y", "z", "t"],
-        (_, false) => &["x", "y", "z"],
-    }
+    of_space_and_time(v, key, model, path)
 }
 
 /// The relaxation kernel of `[material.relaxation]`: exactly one of a Prony series, an

@@ -334,7 +334,7 @@ pub fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 /// Waits at most `limit` for `child`: its exit code, or minus the signal that ended it (a
 /// hang fails the test, naming `what`, after killing the process).
-pub fn exit_within(child: &mut std::process::Child, limit: std::time::Duration, what: &str) -> i32 {
+fn exit_within(child: &mut std::process::Child, limit: std::time::Duration, what: &str) -> i32 {
     use std::os::unix::process::ExitStatusExt;
     let start = std::time::Instant::now();
     loop {
@@ -350,6 +350,33 @@ pub fn exit_within(child: &mut std::process::Child, limit: std::time::Duration, 
         }
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
+}
+
+/// Starts `viscontact ARGS` (from the repository root, its output discarded), waits
+/// `delay`, sends `signals`, each after its gap, and waits at most `limit` for the process:
+/// its exit code, or minus the signal that ended it (a hang fails the test).
+pub fn signalled(
+    args: &[&str],
+    delay: std::time::Duration,
+    signals: &[(i32, std::time::Duration)],
+    limit: std::time::Duration,
+) -> i32 {
+    use std::process::Stdio;
+    let mut child = Command::new(BIN)
+        .args(args)
+        .current_dir(repo())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(delay);
+    for &(signal, gap) in signals {
+        std::thread::sleep(gap);
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(child.id() as i32, signal) };
+    }
+    let what = format!("{args:?} after {delay:?}, signals {signals:?}");
+    exit_within(&mut child, limit, &what)
 }
 
 /// Copies the files of `from` (not recursive) into a new directory `to`.

@@ -15,10 +15,9 @@
 
 use crate::common;
 
-use common::{SplitMix, BIN};
+use common::SplitMix;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
 /// How a trial ended.
@@ -40,27 +39,6 @@ fn contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     c
 }
 
-/// Starts `viscontact ARGS`, waits `delay`, sends `signals` with the gaps before each,
-/// and waits (at most 120 s) for the process: its exit code, or minus the signal that
-/// ended it.
-fn signalled(args: &[&str], delay: Duration, signals: &[(i32, Duration)]) -> i32 {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .current_dir(common::repo())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(delay);
-    for &(signal, gap) in signals {
-        std::thread::sleep(gap);
-        // SAFETY: kill(2) on our own child's pid.
-        unsafe { libc::kill(child.id() as i32, signal) };
-    }
-    let what = format!("{args:?}: signals {signals:?}");
-    common::exit_within(&mut child, Duration::from_secs(120), &what)
-}
-
 /// One trial: the signals at `delay` into a run in `out`, which holds a copy of `full`.
 fn trial(
     args: &[&str],
@@ -73,7 +51,7 @@ fn trial(
     common::copy_dir(full, out);
     let earlier = contents(out);
     let what = format!("{args:?} after {delay:?}, signals {signals:?}");
-    let code = signalled(args, delay, signals);
+    let code = common::signalled(args, delay, signals, Duration::from_secs(120));
     let intact = contents(out) == earlier;
     match code {
         0 => {

@@ -13,28 +13,21 @@
 
 use crate::common;
 
-use common::{SplitMix, BIN};
+use common::SplitMix;
 use std::path::Path;
-use std::process::{Command, Stdio};
 use std::time::Duration;
 
 /// Starts `viscontact ARGS`, sends `signal` after `delay`, and waits at most 5 s after the
-/// signal: the exit status (a hang fails the test, after killing the process).
+/// signal: the exit status. A process ended by the signal itself (minus the signal) got it
+/// before `main` blocked it (the dynamic loader's and the runtime's start, some ms): what a
+/// shell reports as 128 + sig.
 fn signalled(args: &[&str], delay: Duration, signal: i32) -> i32 {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .current_dir(common::repo())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(delay);
-    // SAFETY: kill(2) on our own child's pid.
-    unsafe { libc::kill(child.id() as i32, signal) };
-    // Ended by the signal itself: it came before `main` blocked it (the dynamic loader's
-    // and the runtime's start, some ms): what a shell reports as 128 + sig.
-    let what = format!("{args:?}, signal {signal} sent after {delay:?}");
-    common::exit_within(&mut child, Duration::from_secs(5), &what)
+    common::signalled(
+        args,
+        delay,
+        &[(signal, Duration::ZERO)],
+        Duration::from_secs(5),
+    )
 }
 
 /// The setup time the summary of a run in `dir` reports.
