@@ -10,6 +10,11 @@
 #   examples/bench_duals.sh [STEPS [SIZE...]]          # default: 2 0.06 0.03
 #   SOLVERS="dense sparse" examples/bench_duals.sh 3 0.03
 #
+# With a build that has the `petsc` feature (BIN names its binary), `linear_petsc` is the
+# linear-only run through PETSc and `active_set` the active-set solver:
+#   BIN=target/release/viscontact SOLVERS="dense active_set linear_petsc" \
+#       examples/bench_duals.sh 20 0.03
+#
 # docs/performance.md ("The sparse dual") quotes its rows for 0.03 and 0.015.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,7 +22,7 @@ steps=${1:-2}
 shift || true
 if [ $# -gt 0 ]; then sizes=("$@"); else sizes=(0.06 0.03); fi
 read -r -a solvers <<<"${SOLVERS:-matrix_free sparse}"
-bin=target/release/viscontact
+bin=${BIN:-target/release/viscontact}
 [ -x "$bin" ] || cargo build --release --bin viscontact
 command -v /usr/bin/time >/dev/null || { echo "needs GNU time (/usr/bin/time)" >&2; exit 2; }
 mkdir -p out/meshes
@@ -35,6 +40,8 @@ for size in "${sizes[@]}"; do
     for solver in linear "${solvers[@]}"; do
         case $solver in
             linear) set=(--set contact.enabled=false --set friction.enabled=false) ;;
+            linear_petsc) set=(--set contact.enabled=false --set friction.enabled=false
+                               --set solver.linear=petsc) ;;
             *) set=(--set "solver.contact=$solver") ;;
         esac
         out=$tmp/$size-$solver

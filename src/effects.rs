@@ -3,13 +3,14 @@
 //! friction term; no relaxation → no memory state; neither contact nor friction → every step
 //! is one solve with the stored factorization and no optimization solver is built.
 
-use crate::fem::{Discretization, Gamma3, Sparse};
+use crate::fem::{diagonal, Discretization, Gamma3, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::Scene;
+use crate::solver::active_set::{ActiveSetSettings, ActiveSetSolver};
 use crate::solver::choice::{Contact, ContactPlan};
 use crate::solver::matrix_free::MatrixFreeSolver;
-use crate::solver::{conic::ConicSolver, dual::DualSolver, Factor, Rows, StepSolver};
-use crate::Result;
+use crate::solver::{conic::ConicSolver, dual::DualSolver, Backend, Rows, StepSolver};
+use crate::{Error, Result};
 
 /// Which terms of (3.1) a run carries.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -163,24 +164,38 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
 
 /// Builds the step solver (Remark 2.5): `Linear` without constraint rows, otherwise
 /// `contact`, the scene's choice resolved (`solver.contact`; `auto` by the size of the dense
-/// dual, see `solver::choice`): the dense dual, a dual without D or clarabel. `matrix` is the
-/// step matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant) that `factor`
-/// holds, ordered as `contact` asks (`Contact::orders_last`).
+/// dual, see `solver::choice`): the dense dual, a dual without D or clarabel on the stored
+/// factor, or the active-set solver on PETSc. `matrix` is the step matrix (K_A, or K_A +
+/// k K_B + k² r(0) K_R for the implicit variant) that `backend` holds, a factor ordered as
+/// `contact` asks (`Contact::orders_last`).
 pub fn step_solver(
     effects: &Effects,
     contact: Contact,
     matrix: &Sparse,
-    factor: &Factor,
+    backend: &Backend,
     rows: &Rows,
 ) -> Result<StepSolver> {
     if effects.linear() {
         return Ok(StepSolver::Linear);
     }
+    let factor = || {
+        backend.factor().ok_or_else(|| {
+            Error::solve(format!(
+                "the {} contact solver needs the stored factor of K_A",
+                contact.key()
+            ))
+        })
+    };
     Ok(match contact {
-        Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor, rows))),
+        Contact::Dense => StepSolver::Dual(Box::new(DualSolver::new(factor()?, rows))),
         Contact::MatrixFree | Contact::Sparse => {
-            StepSolver::MatrixFree(Box::new(MatrixFreeSolver::new(factor, matrix, rows)))
+            StepSolver::MatrixFree(Box::new(MatrixFreeSolver::new(factor()?, matrix, rows)))
         }
         Contact::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
+        Contact::ActiveSet => {
+            let settings = ActiveSetSettings::default();
+            let solver = ActiveSetSolver::new(rows, &diagonal(matrix), settings);
+            StepSolver::ActiveSet(Box::new(solver))
+        }
     })
 }

@@ -368,7 +368,7 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         scene.time.k()
     );
     viscontact::outln!("effects    {}", effects.names().join(", "));
-    let solver = if scene.solver.petsc() {
+    let solver = if scene.solver.petsc() && effects.linear() {
         "linear (one Krylov solve per step by PETSc, CG + GAMG unless [solver.petsc] options \
          or PETSC_OPTIONS change it; K_A is not factored)"
             .to_string()

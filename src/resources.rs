@@ -191,6 +191,14 @@ pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
     8.0 * (3.0 * n as f64 + 20.0 * m as f64)
 }
 
+/// The memory of the active-set solver (`solver::active_set`) on m rows of a problem with n
+/// dofs, in bytes, besides PETSc's copy of K_A and its multigrid hierarchy: four n-vectors
+/// (b − f_slip, the right side, (K + S)w, the shell operator's work vector) and, per row, a
+/// removed direction or a share of a slip block (three dofs and up to nine values).
+pub fn active_set_bytes(m: usize, n: usize) -> f64 {
+    8.0 * 4.0 * n as f64 + 84.0 * m as f64
+}
+
 /// What ordering c constrained dofs last adds to a run's peak memory, in bytes: their block of
 /// L is the factor of the Schur complement on C, dense, and faer factors the root supernode
 /// that holds it as a full square (8c²) before it is repacked, with its factorization's

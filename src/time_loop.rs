@@ -224,15 +224,11 @@ impl<'p> TimeLoop<'p> {
             true => rows.dofs(),
             false => Vec::new(),
         };
-        let (backend, solver) = match scene.solver.petsc() {
-            // The scene refused contact and friction (`SolverChoice`): a linear run.
-            true => (petsc_backend(scene, matrix, disc)?, StepSolver::Linear),
-            false => {
-                let factor = Factor::new(matrix, &last)?;
-                let solver = effects::step_solver(&effects, contact, matrix, &factor, &rows)?;
-                (Backend::Cholesky(factor), solver)
-            }
+        let backend = match scene.solver.petsc() {
+            true => petsc_backend(scene, matrix, disc)?,
+            false => Backend::Cholesky(Factor::new(matrix, &last)?),
         };
+        let solver = effects::step_solver(&effects, contact, matrix, &backend, &rows)?;
         let n = disc.n_dofs;
         let history = History::new(n, scene.time.k(), &plan);
         let paired = disc
@@ -359,10 +355,17 @@ impl<'p> TimeLoop<'p> {
         match &self.backend {
             Backend::Cholesky(_) => self.solver.name().to_string(),
             #[cfg(feature = "petsc")]
-            Backend::Petsc(k) => format!(
-                "linear (PETSc KSP {} with PC {} on K_A, one Krylov solve per step)",
-                k.ksp_type, k.pc_type
-            ),
+            Backend::Petsc(k) => match self.solver {
+                StepSolver::ActiveSet(_) => format!(
+                    "active set (semismooth Newton on the primal system; PETSc KSP {} with the \
+                     PC {} of K_A, projected)",
+                    k.ksp_type, k.pc_type
+                ),
+                _ => format!(
+                    "linear (PETSc KSP {} with PC {} on K_A, one Krylov solve per step)",
+                    k.ksp_type, k.pc_type
+                ),
+            },
         }
     }
 
@@ -410,20 +413,14 @@ impl<'p> TimeLoop<'p> {
             .filter(|_| self.can_stop)
             .map(Abandon::arm);
         let nf = self.disc.n_free;
-        let mut report = match &mut self.backend {
-            Backend::Cholesky(factor) => self.solver.solve(
-                factor,
-                &self.rows,
-                &self.b[..nf],
-                &mut self.w[..nf],
-                &mut self.z,
-                Some(&self.z_before),
-            ),
-            #[cfg(feature = "petsc")]
-            Backend::Petsc(krylov) => {
-                crate::solver::krylov_step(krylov, &self.b[..nf], &mut self.w[..nf])?
-            }
-        };
+        let mut report = self.solver.solve(
+            &mut self.backend,
+            &self.rows,
+            &self.b[..nf],
+            &mut self.w[..nf],
+            &mut self.z,
+            Some(&self.z_before),
+        )?;
         drop(armed);
         if report.status == StepStatus::Abandoned {
             // The solvers write w only for a solved step; z held the iterate.

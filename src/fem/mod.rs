@@ -575,6 +575,19 @@ impl Discretization {
     }
 }
 
+/// The diagonal of the square matrix `a`.
+pub fn diagonal(a: &Sparse) -> Vec<f64> {
+    let a = a.as_ref();
+    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    (0..a.ncols())
+        .map(|j| {
+            (cp[j]..cp[j + 1])
+                .find(|&k| ri[k] == j)
+                .map_or(0.0, |k| v[k])
+        })
+        .collect()
+}
+
 /// The block of `a` on its first `n` rows and columns (a's rows increase in each column).
 pub fn leading_block(a: &Sparse, n: usize) -> Sparse {
     let a = a.as_ref();

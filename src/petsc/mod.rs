@@ -37,7 +37,7 @@ use std::sync::Mutex;
 pub const DEFAULT_RTOL: f64 = 1e-12;
 
 /// PetscInt of Debian's PETSc: 32 bits (build.rs refuses 64-bit indices).
-type PetscInt = i32;
+pub type PetscInt = i32;
 
 extern "C" {
     fn vc_initialize() -> c_int;
@@ -59,6 +59,23 @@ extern "C" {
     ) -> c_int;
     fn vc_ksp_solve(
         ctx: *mut c_void,
+        b: *const f64,
+        x: *mut f64,
+        its: *mut PetscInt,
+        reason: *mut c_int,
+        rnorm: *mut f64,
+    ) -> c_int;
+    fn vc_mult(ctx: *mut c_void, x: *const f64, y: *mut f64) -> c_int;
+    #[allow(clippy::too_many_arguments)]
+    fn vc_constrained_solve(
+        ctx: *mut c_void,
+        np: PetscInt,
+        pdofs: *const PetscInt,
+        pdirs: *const f64,
+        ns: PetscInt,
+        sdofs: *const PetscInt,
+        smats: *const f64,
+        rtol: f64,
         b: *const f64,
         x: *mut f64,
         its: *mut PetscInt,
@@ -234,13 +251,82 @@ impl Krylov {
             )
         };
         check(code, "KSPSolve")?;
+        Ok(Solve::of(its, reason, rnorm))
+    }
+}
+
+/// The nodal terms of a constrained system (`Krylov::solve_constrained`), flat as the shim
+/// reads them: directions removed, three dofs (−1: none) and three coefficients each,
+/// orthonormal within a node, so that applying them one after the other is the orthogonal
+/// projection Π onto the unconstrained directions; and 3 × 3 stiffness blocks S (row-major)
+/// on three dofs each.
+#[derive(Clone, Copy, Debug)]
+pub struct NodalTerms<'a> {
+    pub removed_dofs: &'a [PetscInt],
+    pub removed: &'a [f64],
+    pub stiffness_dofs: &'a [PetscInt],
+    pub stiffness: &'a [f64],
+}
+
+impl Krylov {
+    /// y = K x.
+    pub fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()> {
+        assert!(x.len() == self.n && y.len() == self.n);
+        // SAFETY: x and y hold n values; PETSc reads x and writes y within the call.
+        check(
+            unsafe { vc_mult(self.ctx, x.as_ptr(), y.as_mut_ptr()) },
+            "MatMult",
+        )
+    }
+
+    /// w ← the solution of Π(K + S)Π w + (I − Π) w = Π b, from the initial guess in w, by
+    /// the KSP's method (CG by default) preconditioned with Π M⁻¹ Π + (I − Π), M⁻¹ the
+    /// preconditioner of K set up once (GAMG): both symmetric positive definite, and the
+    /// hierarchy is never rebuilt when the terms change. Stopped at relative tolerance `rtol`.
+    pub fn solve_constrained(
+        &mut self,
+        terms: NodalTerms<'_>,
+        b: &[f64],
+        w: &mut [f64],
+        rtol: f64,
+    ) -> Result<Solve> {
+        assert!(b.len() == self.n && w.len() == self.n);
+        let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
+        assert!(terms.removed.len() == 3 * np && terms.stiffness.len() == 9 * ns);
+        let (mut its, mut reason, mut rnorm) = (0, 0, 0.0);
+        // SAFETY: the arrays hold what the counts say, b and w n values; PETSc reads them
+        // and writes w within the call, and keeps no pointer after it.
+        let code = unsafe {
+            vc_constrained_solve(
+                self.ctx,
+                np as PetscInt,
+                terms.removed_dofs.as_ptr(),
+                terms.removed.as_ptr(),
+                ns as PetscInt,
+                terms.stiffness_dofs.as_ptr(),
+                terms.stiffness.as_ptr(),
+                rtol,
+                b.as_ptr(),
+                w.as_mut_ptr(),
+                &mut its,
+                &mut reason,
+                &mut rnorm,
+            )
+        };
+        check(code, "KSPSolve of the constrained system")?;
+        Ok(Solve::of(its, reason, rnorm))
+    }
+}
+
+impl Solve {
+    fn of(its: PetscInt, reason: c_int, rnorm: f64) -> Self {
         // SAFETY: KSPConvergedReasons names every reason PETSc returns, statically.
         let name = || unsafe { CStr::from_ptr(vc_reason_name(reason)) };
-        Ok(Solve {
+        Solve {
             iterations: its as usize,
             residual: rnorm,
             failed: (reason < 0).then(|| name().to_str().unwrap_or("DIVERGED")),
-        })
+        }
     }
 }
 

@@ -58,6 +58,22 @@ pub struct PetscSummary {
     pub options: String,
     /// The `PETSC_OPTIONS` environment variable of the run (absent when unset).
     pub environment: Option<String>,
+    /// The active-set solver's Newton systems and their Krylov iterations, over the steps
+    /// this process solved (a resumed run: those after its checkpoint); absent for a
+    /// linear run, whose `iterations` are the Krylov iterations.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub newton: Option<NewtonSummary>,
+}
+
+/// summary.json "petsc" "newton": what the active-set solver's Newton systems took.
+#[derive(Serialize, Debug, Clone)]
+pub struct NewtonSummary {
+    pub steps: usize,
+    pub systems: usize,
+    pub krylov_total: usize,
+    /// The Krylov iterations of the largest system, and their mean.
+    pub krylov_max: usize,
+    pub krylov_mean: f64,
 }
 
 impl PetscSummary {
@@ -68,6 +84,19 @@ impl PetscSummary {
             pc_type: k.pc_type.clone(),
             options: k.options.clone(),
             environment: std::env::var("PETSC_OPTIONS").ok(),
+            newton: match tl.solver() {
+                crate::solver::StepSolver::ActiveSet(a) => {
+                    let c = a.counts();
+                    Some(NewtonSummary {
+                        steps: c.steps,
+                        systems: c.newton,
+                        krylov_total: c.krylov,
+                        krylov_max: c.max_krylov,
+                        krylov_mean: c.krylov as f64 / c.newton.max(1) as f64,
+                    })
+                }
+                _ => None,
+            },
         })
     }
 

@@ -417,13 +417,14 @@ pub struct SolverSection {
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum LinearSolver {
-    /// The stored Cholesky factor (for now: `auto` is `cholesky`).
+    /// The stored Cholesky factor, or PETSc where `contact = "active_set"`.
     #[default]
     Auto,
     /// K_A factored once (sparse Cholesky), one solve with the factor per step.
     Cholesky,
     /// PETSc's Krylov method with algebraic multigrid (CG + GAMG); builds with the cargo
-    /// feature `petsc` only, and runs without contact and friction only (for now).
+    /// feature `petsc` only. With contact or friction the contact solver is the active-set
+    /// one (`contact = "auto"` or `"active_set"`).
     Petsc,
 }
 
@@ -457,6 +458,10 @@ pub enum ContactSolver {
     Sparse,
     /// The whole per-step problem handed to clarabel (the cross-check).
     Clarabel,
+    /// The primal active-set (semismooth Newton) method, its Newton systems solved by
+    /// PETSc's Krylov method with algebraic multigrid: no factor of K_A (cargo feature
+    /// `petsc`).
+    ActiveSet,
 }
 
 fn yes() -> bool {

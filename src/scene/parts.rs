@@ -90,20 +90,26 @@ pub struct SolverChoice {
 }
 
 impl SolverChoice {
-    /// The sections checked: `linear = "petsc"` needs a build with the `petsc` feature and
-    /// a scene without contact and friction (`physics`).
+    /// The sections checked (`backend_refusal`): PETSc needs a build with the `petsc`
+    /// feature, and the contact solvers other than `active_set` need the stored factor.
     pub(super) fn from_sections(
         solver: &SolverSection,
         scheme: &SchemeSection,
         physics: &Physics,
         path: &Path,
     ) -> Result<SolverChoice> {
-        if solver.linear == LinearSolver::Petsc {
-            petsc_refusal(physics, path)?;
-        }
+        backend_refusal(solver, physics, path)?;
+        let petsc =
+            solver.linear == LinearSolver::Petsc || solver.contact == ContactSolver::ActiveSet;
         Ok(SolverChoice {
-            contact: solver.contact,
-            linear: solver.linear,
+            contact: match (solver.contact, petsc) {
+                (ContactSolver::Auto, true) => ContactSolver::ActiveSet,
+                (contact, _) => contact,
+            },
+            linear: match petsc {
+                true => LinearSolver::Petsc,
+                false => solver.linear,
+            },
             petsc_options: solver
                 .petsc
                 .as_ref()
@@ -113,35 +119,60 @@ impl SolverChoice {
         })
     }
 
-    /// Whether the run solves its step matrix through PETSc (`solver.linear = "petsc"`).
+    /// Whether the run solves its step matrix through PETSc (`solver.linear = "petsc"`, or
+    /// `solver.contact = "active_set"`).
     pub fn petsc(&self) -> bool {
         self.linear == LinearSolver::Petsc
     }
 }
 
-/// Why `solver.linear = "petsc"` cannot run (exit 2): a build without the `petsc` feature,
-/// or contact or friction (no contact solver works on PETSc yet).
-fn petsc_refusal(physics: &Physics, path: &Path) -> Result<()> {
-    let at = format!("{}: key 'solver.linear' = \"petsc\"", path.display());
-    if !cfg!(feature = "petsc") {
+/// Why the scene's backend and contact solver cannot run (exit 2): PETSc (`solver.linear =
+/// "petsc"` or `solver.contact = "active_set"`) in a build without the `petsc` feature; the
+/// active-set solver with the stored factor; a contact solver that needs the factor with
+/// PETSc, where the scene has contact or friction.
+fn backend_refusal(solver: &SolverSection, physics: &Physics, path: &Path) -> Result<()> {
+    let at =
+        |key: &str, value: &str| format!("{}: key 'solver.{key}' = \"{value}\"", path.display());
+    let (linear, contact) = (solver.linear, solver.contact);
+    let active_set = contact == ContactSolver::ActiveSet;
+    let at_petsc = match active_set {
+        true => at("contact", "active_set"),
+        false => at("linear", "petsc"),
+    };
+    if (linear == LinearSolver::Petsc || active_set) && !cfg!(feature = "petsc") {
         return Err(Error::input(format!(
-            "{at}: this viscontact was built without PETSc; build it with \
+            "{at_petsc}: this viscontact was built without PETSc; build it with \
              `cargo build --release --features petsc` after installing PETSc's development \
              files (Debian 12: `apt-get install --no-install-recommends petsc-dev`), or set \
-             solver.linear = \"cholesky\""
+             {}",
+            match active_set {
+                true => "another solver.contact (\"auto\" picks the stored factor's)",
+                false => "solver.linear = \"cholesky\"",
+            }
         )));
     }
-    let on = match (physics.contact, physics.friction.is_some()) {
-        (true, true) => "[contact] and [friction]",
-        (true, false) => "[contact]",
-        (false, true) => "[friction]",
-        (false, false) => return Ok(()),
-    };
-    Err(Error::input(format!(
-        "{at}: the scene has {on}, and PETSc solves only linear runs (no contact, no \
-         friction) for now: the active-set contact solver on PETSc is not there yet; set \
-         solver.linear = \"cholesky\" (or \"auto\") for this scene"
-    )))
+    if active_set && linear == LinearSolver::Cholesky {
+        return Err(Error::input(format!(
+            "{}: solver.contact = \"active_set\" solves its Newton systems by PETSc's Krylov \
+             method, not with the stored factor; set solver.linear = \"petsc\" or \"auto\", \
+             or another solver.contact",
+            at("linear", "cholesky")
+        )));
+    }
+    let needs_factor = !matches!(contact, ContactSolver::Auto | ContactSolver::ActiveSet);
+    if linear == LinearSolver::Petsc
+        && needs_factor
+        && (physics.contact || physics.friction.is_some())
+    {
+        return Err(Error::input(format!(
+            "{}: the {:?} contact solver works with the stored factor of K_A; with PETSc \
+             the contact solver is the active-set one: set solver.contact = \"active_set\" \
+             (or \"auto\"), or solver.linear = \"cholesky\"",
+            at("linear", "petsc"),
+            contact
+        )));
+    }
+    Ok(())
 }
 
 /// `[output]`: which frames are written, and how.

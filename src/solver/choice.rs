@@ -39,6 +39,7 @@ pub enum Contact {
     MatrixFree,
     Sparse,
     Clarabel,
+    ActiveSet,
 }
 
 impl Contact {
@@ -49,6 +50,7 @@ impl Contact {
             Contact::MatrixFree => "matrix_free",
             Contact::Sparse => "sparse",
             Contact::Clarabel => "clarabel",
+            Contact::ActiveSet => "active_set",
         }
     }
 
@@ -66,6 +68,7 @@ impl Contact {
             ContactSolver::MatrixFree => Contact::MatrixFree,
             ContactSolver::Sparse => Contact::Sparse,
             ContactSolver::Clarabel => Contact::Clarabel,
+            ContactSolver::ActiveSet => Contact::ActiveSet,
             ContactSolver::Auto => Contact::auto(rows.len(), rows.dofs().len(), rows.block),
         }
     }
@@ -146,6 +149,15 @@ impl ContactPlan {
                      supernodes that hold C and their ancestors (at most a linear step's \
                      solve); {ITERATIONS}"
                 ),
+            ),
+            Contact::ActiveSet => (
+                Some(resources::active_set_bytes(m, n)),
+                "per Newton iteration one Krylov solve of the primal system (the step matrix with \
+                 the active and sticking directions removed) preconditioned by the multigrid of \
+                 K_A set up once: tens of iterations, the last system to 1e-12; a step takes one \
+                 or two Newton iterations where the contact and slip sets stand, more where \
+                 they change"
+                    .to_string(),
             ),
             Contact::Clarabel => (
                 None,
@@ -252,6 +264,10 @@ impl std::fmt::Display for ContactPlan {
                 human(b)
             ),
             (Some(b), Contact::Sparse) => format!("≈ {} besides the factor of K_A", human(b)),
+            (Some(b), Contact::ActiveSet) => format!(
+                "≈ {} besides PETSc's copy of K_A and its multigrid hierarchy",
+                human(b)
+            ),
             (Some(b), _) => format!("≈ {}", human(b)),
         };
         write!(

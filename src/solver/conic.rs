@@ -123,6 +123,7 @@ impl ConicSolver {
             status: StepStatus::Solved,
             iterations: sol.iterations as usize,
             residual: sol.r_prim.max(sol.r_dual),
+            krylov: 0,
         };
         if !matches!(
             sol.status,

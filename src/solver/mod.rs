@@ -14,7 +14,8 @@
 //! (`choice`: `auto` picks by the memory the dense dual would need), the condensed dual
 //! semismooth Newton method (`dual`, with the dense m × m matrix D), the same dual with D
 //! applied through solves with the factor (`matrix_free`, for contact boundaries whose D
-//! does not fit) or clarabel on the whole problem (`conic`, the cross-check).
+//! does not fit), clarabel on the whole problem (`conic`, the cross-check), or, without
+//! any factor, the primal active-set method on PETSc (`active_set`).
 //!
 //! # Solvers, statuses and how a new one plugs in
 //!
@@ -37,14 +38,16 @@
 //!
 //! The linear backend is a `Backend`: the stored Cholesky factor `Factor` (`solver.linear =
 //! "cholesky"`, and `auto`), or PETSc's Krylov method with algebraic multigrid
-//! (`solver.linear = "petsc"`, cargo feature `petsc`, src/petsc/). The time loop builds one
-//! of them, never both. With the factor it passes `Factor` to `solve`: `Linear` needs only
-//! its solves with K_A, `Conic` none; the dual condenses through its structure (the forward
-//! and backward solves with the constrained dofs last, the trailing block L_CC). PETSc
-//! serves `Linear` only, through `krylov_step`: the scene refuses it with contact
-//! or friction until a contact solver works on it.
+//! (`solver.linear = "petsc"`, or `solver.contact = "active_set"`; cargo feature `petsc`,
+//! src/petsc/). The time loop builds one of them, never both, and hands it to `solve`. With
+//! the factor, `Linear` needs only its solves with K_A, `Conic` none; the dual condenses
+//! through its structure (the forward and backward solves with the constrained dofs last,
+//! the trailing block L_CC). PETSc serves `Linear` (`krylov_step`) and `ActiveSet`, whose
+//! Newton systems are K_A's with constrained directions projected out; the scene refuses
+//! the other contact solvers with PETSc and `active_set` with the factor.
 
 mod abandon;
+pub mod active_set;
 pub mod choice;
 pub mod conic;
 pub mod dual;
@@ -207,7 +210,8 @@ fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
 pub enum Backend {
     /// Factored once, one solve with the factor per step (`Factor`).
     Cholesky(Factor),
-    /// PETSc's KSP, set up once (`crate::petsc::Krylov`): linear runs only.
+    /// PETSc's KSP, set up once (`crate::petsc::Krylov`): linear runs and the active-set
+    /// contact solver.
     #[cfg(feature = "petsc")]
     Petsc(crate::petsc::Krylov),
 }
@@ -226,7 +230,7 @@ impl Backend {
 /// w = K⁻¹ b for a linear step through PETSc (`Backend::Petsc`): the report with the Krylov
 /// iterations, or `KrylovFailed` with the KSP's reason.
 #[cfg(feature = "petsc")]
-pub fn krylov_step(
+fn krylov_step(
     krylov: &mut crate::petsc::Krylov,
     b: &[f64],
     w: &mut [f64],
@@ -243,6 +247,7 @@ pub fn krylov_step(
         },
         iterations: s.iterations,
         residual: s.residual,
+        krylov: s.iterations,
     })
 }
 
@@ -257,6 +262,8 @@ pub enum StepSolver {
     MatrixFree(Box<matrix_free::MatrixFreeSolver>),
     /// The whole problem in clarabel; see `conic`.
     Conic(Box<conic::ConicSolver>),
+    /// The primal active-set method on PETSc's Krylov solves; see `active_set`.
+    ActiveSet(Box<active_set::ActiveSetSolver>),
 }
 
 impl StepSolver {
@@ -276,6 +283,10 @@ impl StepSolver {
                  stored Cholesky factor of K_A)"
             }
             StepSolver::Conic(_) => "clarabel (interior point on the whole step problem)",
+            StepSolver::ActiveSet(_) => {
+                "active set (semismooth Newton on the primal system, PETSc's Krylov method \
+                 with the multigrid of K_A)"
+            }
         }
     }
 
@@ -285,6 +296,7 @@ impl StepSolver {
         match self {
             StepSolver::Dual(d) => d.abandon_on(abandon),
             StepSolver::MatrixFree(d) => d.abandon_on(abandon),
+            StepSolver::ActiveSet(a) => a.abandon_on(abandon),
             StepSolver::Linear | StepSolver::Conic(_) => return false,
         }
         true
@@ -293,25 +305,43 @@ impl StepSolver {
     /// The `solver.contact` value to try when this solver's answer cannot be trusted.
     pub fn other(&self) -> &'static str {
         match self {
-            StepSolver::Conic(_) => "dense",
+            StepSolver::Conic(_) | StepSolver::ActiveSet(_) => "dense",
             _ => "clarabel",
         }
     }
 
-    /// Solves step n: `b` is b_n, `w` receives w_n, `z` the multipliers (λ on contact rows,
-    /// γ on friction rows; in: the previous step's z_{n−1}, used as a warm start with
-    /// `before`, z_{n−2}, where the time loop has it: see `dual::iteration`). w and z are
-    /// the step's solution only where the report's status is `Solved`.
+    /// Solves step n with the run's linear backend: `b` is b_n, `w` receives w_n (in: the
+    /// previous step's w_{n−1}), `z` the multipliers (λ on contact rows, γ on friction rows;
+    /// in: the previous step's z_{n−1}, used as a warm start with `before`, z_{n−2}, where
+    /// the time loop has it: see `dual::iteration`). w and z are the step's solution only
+    /// where the report's status is `Solved`. The time loop builds each solver with the
+    /// backend it needs (`effects::step_solver`); a PETSc error is the run's error.
     pub fn solve(
         &mut self,
-        factor: &Factor,
+        backend: &mut Backend,
         rows: &Rows,
         b: &[f64],
         w: &mut [f64],
         z: &mut [f64],
         before: Option<&[f64]>,
-    ) -> StepReport {
-        match self {
+    ) -> crate::Result<StepReport> {
+        // Without the `petsc` feature the factor is the only backend.
+        #[allow(clippy::infallible_destructuring_match)]
+        let factor = match backend {
+            Backend::Cholesky(factor) => factor,
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => {
+                return match self {
+                    StepSolver::Linear => krylov_step(krylov, b, w),
+                    StepSolver::ActiveSet(a) => a.solve(krylov, rows, b, w, z),
+                    _ => Err(crate::Error::solve(format!(
+                        "the {} solver needs the stored factor of K_A",
+                        self.name()
+                    ))),
+                }
+            }
+        };
+        Ok(match self {
             StepSolver::Linear => {
                 w.copy_from_slice(b);
                 factor.solve(w);
@@ -320,7 +350,12 @@ impl StepSolver {
             StepSolver::Dual(d) => d.solve(factor, rows, b, w, z, before),
             StepSolver::MatrixFree(d) => d.solve(factor, rows, b, w, z, before),
             StepSolver::Conic(c) => c.solve(rows, b, w, z),
-        }
+            StepSolver::ActiveSet(_) => {
+                return Err(crate::Error::solve(
+                    "the active-set contact solver needs the PETSc backend",
+                ))
+            }
+        })
     }
 }
 

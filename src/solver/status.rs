@@ -56,8 +56,11 @@ pub struct StepReport {
     /// the stored factor, the Krylov iterations for linear through PETSc.
     pub iterations: usize,
     /// The solver's final residual, relative: the dual's stopping test over max|d|,
-    /// clarabel's larger of its primal and dual residuals; 0 for linear.
+    /// clarabel's larger of its primal and dual residuals, the active-set solver's KKT
+    /// residual; 0 for linear.
     pub residual: f64,
+    /// The Krylov iterations of the active-set solver's Newton systems (0 for the others).
+    pub krylov: usize,
 }
 
 /// Where a step stands, for the messages: step n at t_n, the time step k, and the
@@ -80,9 +83,10 @@ impl StepReport {
                 residual,
                 scale,
             } => format!(
-                "the dual semismooth Newton method did not converge in {limit} iterations \
-                 (residual {residual:e} relative to {scale:e}); try [solver] contact = \
-                 \"clarabel\""
+                "the contact solver's semismooth Newton method did not converge in {limit} \
+                 iterations (residual {residual:e} relative to {scale:e}); try [solver] \
+                 contact = \"{}\"",
+                at.other_solver
             ),
             StepStatus::Abandoned => {
                 format!("step {n} at t = {t} was given up before it was solved")

@@ -185,13 +185,17 @@ pub fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&text).unwrap()
 }
 
-/// summary.json without what legitimately differs between two runs: wall times and the
-/// output directory.
+/// summary.json without what legitimately differs between two runs: wall times, the
+/// output directory and the work of this process (the active-set solver's Newton systems
+/// and Krylov iterations since the start or the resume).
 pub fn summary_values(dir: &Path) -> serde_json::Value {
     let mut v = summary(dir);
     v.as_object_mut().unwrap().remove("timing");
     v.as_object_mut().unwrap().remove("run_id");
     v["output"].as_object_mut().unwrap().remove("directory");
+    if let Some(petsc) = v.get_mut("petsc").and_then(|p| p.as_object_mut()) {
+        petsc.remove("newton");
+    }
     v
 }
 

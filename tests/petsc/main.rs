@@ -26,13 +26,16 @@ fn block_linear() -> SceneText {
     SceneText::block().remove("contact").remove("friction")
 }
 
+/// One library run through PETSc at a time (PETSc is not thread-safe).
+#[cfg(feature = "petsc")]
+static PETSC: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+#[cfg(feature = "petsc")]
+mod active_set;
+
 #[cfg(feature = "petsc")]
 mod with_petsc {
     use super::*;
-    use std::sync::Mutex;
-
-    /// One library run through PETSc at a time.
-    static PETSC: Mutex<()> = Mutex::new(());
 
     /// u_N of `scene` with `solver.linear = linear`, run through the library, and the
     /// solver's name.
@@ -43,7 +46,7 @@ mod with_petsc {
             .set("solver.linear", linear)
             .write(dir.path(), "s.toml");
         let (scene, _mesh, disc) = common::load(&path, &[]);
-        let _one = PETSC.lock().unwrap_or_else(|e| e.into_inner());
+        let _one = super::PETSC.lock().unwrap_or_else(|e| e.into_inner());
         let trace = common::trace(&scene, &disc);
         (trace.u_final, trace.solver)
     }
@@ -179,18 +182,23 @@ mod with_petsc {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 
+    /// With PETSc the contact solver is the active-set one: a contact solver that works with
+    /// the stored factor is refused with `linear = "petsc"`, and `active_set` with `linear =
+    /// "cholesky"` (exit 2, naming the keys).
     #[test]
-    fn petsc_with_contact_or_friction_is_refused() {
-        for (scene, on) in [
-            (SceneText::paper(), "[contact] and [friction]"),
-            (SceneText::block().remove("friction"), "[contact]"),
-            (SceneText::paper().remove("contact"), "[friction]"),
+    fn solvers_that_need_the_other_backend_are_refused() {
+        for (linear, contact, named) in [
+            ("petsc", "dense", "solver.linear"),
+            ("petsc", "clarabel", "solver.linear"),
+            ("cholesky", "active_set", "solver.linear"),
         ] {
-            let (code, stderr, _) = run(scene.set("solver.linear", "petsc"), &[]);
-            assert_eq!(code, 2, "{stderr}");
-            assert!(stderr.contains("solver.linear"), "{stderr}");
-            assert!(stderr.contains(on), "{stderr}");
-            assert!(stderr.contains("active-set"), "{stderr}");
+            let scene = SceneText::paper()
+                .set("solver.linear", linear)
+                .set("solver.contact", contact);
+            let (code, stderr, _) = run(scene, &[]);
+            assert_eq!(code, 2, "{linear} {contact}: {stderr}");
+            assert!(stderr.contains(named), "{stderr}");
+            assert!(stderr.contains("active_set"), "{stderr}");
         }
     }
 }

@@ -256,6 +256,7 @@ impl<'a, O: Operator> Iteration<'a, O> {
                     status,
                     iterations,
                     residual: res / self.scale.max(f64::MIN_POSITIVE),
+                    krylov: 0,
                 };
             }
             z.copy_from_slice(&b.trial);

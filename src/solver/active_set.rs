@@ -1,0 +1,697 @@
+//! The primal active-set contact solver (`solver.contact = "active_set"`): a semismooth
+//! Newton method on the step's optimality conditions whose linear systems are the sparse
+//! primal system itself, solved by a Krylov method with the algebraic multigrid of K set up
+//! once per run (PETSc's, through `ConstrainedSystem`). No factor of K, no m × m matrix:
+//! memory and cost grow like a linear run's.
+//!
+//! # The equations
+//!
+//! The step problem (`solver` module doc) with multipliers λ_i ≥ 0 on the contact rows n_i
+//! and γ_i on the friction blocks (|γ_i| ≤ c_i) is, with K the step matrix,
+//!
+//!   K w + Σ λ_i n_i + Σ γ_ik τ_ik = b,
+//!   λ_i = max(0, λ_i + ρ_i n_i·w)                     (Γ3,1: n·w ≤ 0, λ ≥ 0, λ n·w = 0),
+//!   γ_i = Π_{|·|≤c_i}(γ_i + ρ_i w_τ,i)                (Γ3,2: the friction disc, 2D: segment),
+//!
+//! with ρ_i > 0 any constants, one per node (here the diagonal of K along the row, the mean
+//! over a friction node's tangents, so that both arguments are forces). Given the iterate (w, z), the sets are: a contact row is *active* where
+//! λ_i + ρ_i n_i·w > 0, a friction node *sticks* where g_i = γ_i + ρ_i w_τ,i lies in the
+//! disc, and *slips* otherwise. The semismooth Newton step (Hintermüller–Ito–Kunisch's
+//! primal–dual active set; Hüeber–Stadler–Wohlmuth for the disc) sets
+//!
+//! - active: n_i·w⁺ = 0; inactive: λ⁺_i = 0;
+//! - sticking: w⁺_τ,i = 0;
+//! - slipping: γ⁺_i = c_i ĝ_i + β_i T_i w⁺_τ,i, the linearization of c g/|g| at g_i
+//!   (ĝ = g/|g|, T = I − ĝĝᵀ) solved for γ⁺: β_i = c_i ρ_i / (|g_i| − c_i) > 0. In 2D T = 0
+//!   and γ⁺ = c_i sign(g_i). At a fixed point T_i w_τ,i = 0 and γ_i = c_i ĝ_i whatever β_i
+//!   is, so β changes only the rate, not the solution.
+//!
+//! w⁺ then minimizes ½wᵀ(K + S)w − (b − f_slip)ᵀw over the w with the active and sticking
+//! directions at zero, S = Σ_slip β_i τ_iᵀ T_i τ_i (symmetric positive semidefinite, zero in
+//! 2D) and f_slip = Σ_slip c_i τ_iᵀ ĝ_i: with Π the orthogonal projection that removes
+//! those directions node by node (`Terms`),
+//!
+//!   Π(K + S)Π w⁺ + (I − Π) w⁺ = Π(b − f_slip),
+//!
+//! an SPD system of the size of K whatever the sets, preconditioned by Π M⁻¹ Π + (I − Π)
+//! with M⁻¹ the multigrid of K, which never changes. The multipliers of the removed
+//! directions follow from the residual r = b − f_slip − (K + S)w⁺ node by node, r_i =
+//! Σ z_k a_k over the node's removed rows a_k (least squares on at most three vectors; a
+//! row dependent on the node's others, as at a corner where Γ3,1 meets Γ3,2, gets none).
+//!
+//! # Stopping, accuracy and forcing
+//!
+//! A Newton iterate whose sets reproduce themselves satisfies the complementarity
+//! conditions exactly (2D) or up to the slip direction's convergence (3D); the iteration
+//! stops there once the KKT residual (`kkt_residual`, relative to max|w| and max|z|) is at
+//! most `tolerance` and the last system was solved to `rtol`. Until then the systems are
+//! solved inexactly, to the Eisenstat–Walker tolerance η_k = 0.9 (F_k/F_{k−1})² (F the KKT
+//! residual, safeguarded by 0.9 η_{k−1}², at most a tenth of η_{k−1}, between `rtol` and
+//! `loose`): a solve whose sets are still changing need not be accurate. The step starts
+//! from the previous step's w and multipliers, so its first sets are the previous step's.
+//!
+//! # Globalization
+//!
+//! The primal–dual active set converges in finitely many steps where K is an M-matrix;
+//! P1 elasticity is not one, and the sets can cycle. Three safeguards, none of which moves
+//! the solution (ρ and the order of the changes only steer the iteration):
+//!
+//! - a slipping node whose test turns it the other way sticks first (a reversal passes
+//!   through sticking; where the body slides, ρ = K's diagonal is far stiffer than the
+//!   boundary, and the test would swing between the two directions);
+//! - when the sets of an iterate were met before in the step (a cycle), every later
+//!   system is solved to `rtol`, ρ is divided by 10 (the test then weighs the multipliers
+//!   more, the velocities less), and an iteration makes at most half as many changes of
+//!   the sets as the last cycle proposed, the largest violations first (down to one at a
+//!   time);
+//! - `max_newton` iterations end the step with `StepStatus::MaxIterations`.
+//!
+//! On the golden scenes, the corners and a rotating traction (tests/petsc) every step
+//! converges; the bracket's sliding onset is the hardest (27 iterations in one step).
+
+use super::{kkt_residual, Abandon, Rows, StepReport, StepStatus};
+use crate::Result;
+
+/// What a linear solve of the Newton system did.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LinearSolve {
+    pub iterations: usize,
+    /// The final residual norm.
+    pub residual: f64,
+    /// Why the Krylov method stopped without converging (PETSc's reason), if it did.
+    pub failed: Option<&'static str>,
+}
+
+/// The systems of the Newton iteration: products with K and solves of the constrained
+/// system Π(K + S)Π w + (I − Π) w = Π b with the terms of `Terms`.
+pub trait ConstrainedSystem {
+    /// y = K x.
+    fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()>;
+    /// w ← the constrained system's solution, from the guess in w, to relative tolerance
+    /// `rtol`.
+    fn solve(&mut self, terms: &Terms, b: &[f64], w: &mut [f64], rtol: f64) -> Result<LinearSolve>;
+}
+
+/// The nodal terms of a Newton system, flat as PETSc's shim reads them: the removed
+/// directions (three dofs, −1 for none, and three coefficients each; orthonormal within a
+/// node, so that applying them one after the other is Π) and the slip stiffness blocks S_i
+/// (three dofs and a row-major 3 × 3 block each).
+#[derive(Clone, Debug, Default)]
+pub struct Terms {
+    pub removed_dofs: Vec<i32>,
+    pub removed: Vec<f64>,
+    pub stiffness_dofs: Vec<i32>,
+    pub stiffness: Vec<f64>,
+}
+
+impl Terms {
+    fn clear(&mut self) {
+        self.removed_dofs.clear();
+        self.removed.clear();
+        self.stiffness_dofs.clear();
+        self.stiffness.clear();
+    }
+
+    /// a ← Π a.
+    pub fn project(&self, a: &mut [f64]) {
+        for (d, v) in self.removed_dofs.chunks(3).zip(self.removed.chunks(3)) {
+            let p: f64 = (0..3)
+                .filter(|&c| d[c] >= 0)
+                .map(|c| v[c] * a[d[c] as usize])
+                .sum();
+            for c in (0..3).filter(|&c| d[c] >= 0) {
+                a[d[c] as usize] -= p * v[c];
+            }
+        }
+    }
+
+    /// y ← y + S x.
+    pub fn add_stiffness(&self, x: &[f64], y: &mut [f64]) {
+        for (d, m) in self.stiffness_dofs.chunks(3).zip(self.stiffness.chunks(9)) {
+            for r in (0..3).filter(|&r| d[r] >= 0) {
+                let s: f64 = (0..3)
+                    .filter(|&c| d[c] >= 0)
+                    .map(|c| m[3 * r + c] * x[d[c] as usize])
+                    .sum();
+                y[d[r] as usize] += s;
+            }
+        }
+    }
+}
+
+/// The settings of the active-set solver, with their defaults.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ActiveSetSettings {
+    /// Newton iterations before a step fails (default 50).
+    pub max_newton: usize,
+    /// The KKT residual at which a step is solved (default 1e-10): u_N agrees with the
+    /// dense dual's to 1e-8 relative (tests/petsc).
+    pub tolerance: f64,
+    /// The Krylov tolerance of the last system (default 1e-12, as the linear backend).
+    pub rtol: f64,
+    /// The loosest Krylov tolerance (default 1e-4).
+    pub loose: f64,
+}
+
+impl Default for ActiveSetSettings {
+    fn default() -> Self {
+        ActiveSetSettings {
+            max_newton: 50,
+            tolerance: 1e-10,
+            rtol: 1e-12,
+            loose: 1e-4,
+        }
+    }
+}
+
+/// A friction node's state in an iteration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Friction {
+    Stick,
+    /// ĝ (its d − 1 components in the node's tangent frame) and β.
+    Slip {
+        g: [f64; 2],
+        beta: f64,
+    },
+}
+
+/// The sets of an iterate: which contact rows are active, how each friction node behaves.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Sets {
+    active: Vec<bool>,
+    friction: Vec<Friction>,
+}
+
+impl Friction {
+    /// What a set tells apart: sticking, or slipping; in 2D, slipping which way (a 3D
+    /// direction turns continuously, and the Newton iteration follows it).
+    fn kind(&self) -> i8 {
+        match *self {
+            Friction::Stick => 0,
+            Friction::Slip { g: [x, 0.0], .. } if x.abs() == 1.0 => x.signum() as i8,
+            Friction::Slip { .. } => 2,
+        }
+    }
+}
+
+impl Sets {
+    /// A hash of the sets (deterministic: fixed keys).
+    fn signature(&self) -> u64 {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        self.active.hash(&mut h);
+        for f in &self.friction {
+            f.kind().hash(&mut h);
+        }
+        h.finish()
+    }
+
+    /// The changes from `self` to `next` (a contact row, or a friction node numbered after
+    /// them), each with its size at the iterate (w, z): the force by which the condition of
+    /// the old set is violated (ρ n·w or −λ for a contact row, ||g| − c| for a node).
+    fn changes(&self, next: &Sets, at: Iterate) -> Vec<(usize, f64)> {
+        let Iterate { rows, rho, w, z } = at;
+        let force = |i: usize| z[i] + rho[i] * rows.rows[i].apply(w);
+        let contact = (0..self.active.len())
+            .filter(|&i| self.active[i] != next.active[i])
+            .map(|i| (i, force(i).abs()));
+        let friction = (0..self.friction.len())
+            .filter(|&j| self.friction[j].kind() != next.friction[j].kind())
+            .map(|j| {
+                let block = rows.friction_block(j);
+                let c = rows.rows[block.start].bound;
+                let g = block.fold(0.0f64, |a, i| a.hypot(force(i)));
+                (self.active.len() + j, (g - c).abs())
+            });
+        contact.chain(friction).collect()
+    }
+
+    /// Keeps the `allowed` largest of the changes from `old` (`changes`; ties by index) and
+    /// takes back the others: a cycle of the sets is broken by changing fewer at a time.
+    fn keep_changes(&mut self, old: &Sets, at: Iterate, allowed: usize) {
+        let mut changes = old.changes(self, at);
+        changes.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+        for &(k, _) in changes.iter().skip(allowed) {
+            match k.checked_sub(self.active.len()) {
+                None => self.active[k] = old.active[k],
+                Some(j) => self.friction[j] = old.friction[j],
+            }
+        }
+    }
+
+    /// Whether `other` has the same active rows and the same sticking and slipping nodes
+    /// (`Friction::kind`).
+    fn same_as(&self, other: &Sets) -> bool {
+        self.active == other.active
+            && (self.friction.iter().map(Friction::kind))
+                .eq(other.friction.iter().map(Friction::kind))
+    }
+}
+
+/// What the sets are judged at: the rows, their ρ and the iterate (w, z).
+#[derive(Clone, Copy)]
+struct Iterate<'a> {
+    rows: &'a Rows,
+    rho: &'a [f64],
+    w: &'a [f64],
+    z: &'a [f64],
+}
+
+/// The rows of one node: its local dofs (the union over its rows: −1 where no row touches
+/// the component) and its contact row and friction block, if any.
+#[derive(Clone, Debug)]
+struct Node {
+    dofs: [i32; 3],
+    contact: Option<usize>,
+    friction: Option<usize>,
+}
+
+/// Counts over a run (the summary's iteration statistics).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ActiveSetCounts {
+    pub steps: usize,
+    pub newton: usize,
+    pub krylov: usize,
+    /// The most Newton iterations and Krylov iterations of one system.
+    pub max_newton: usize,
+    pub max_krylov: usize,
+}
+
+/// The active-set solver of a run.
+pub struct ActiveSetSolver {
+    settings: ActiveSetSettings,
+    nodes: Vec<Node>,
+    /// ρ of each row: the diagonal of K along it (`rho_base`), in a step lowered where the
+    /// sets cycle.
+    rho_base: Vec<f64>,
+    rho: Vec<f64>,
+    terms: Terms,
+    /// b − f_slip, and its projection Π(b − f_slip), the system's right side.
+    force: Vec<f64>,
+    rhs: Vec<f64>,
+    /// (K + S) w.
+    r: Vec<f64>,
+    counts: ActiveSetCounts,
+    abandon: Abandon,
+}
+
+impl ActiveSetSolver {
+    /// The solver for `rows` of the step matrix whose diagonal is `diagonal`.
+    pub fn new(rows: &Rows, diagonal: &[f64], settings: ActiveSetSettings) -> Self {
+        let mut rho: Vec<f64> = (rows.rows.iter())
+            .map(|r| r.entries().map(|(d, c)| c * c * diagonal[d]).sum())
+            .collect();
+        // One ρ per friction node, the mean of its rows': with ρ_ik different along the
+        // tangents a fixed point would not align γ_i with w_τ,i (the module doc).
+        for j in 0..rows.n_friction_nodes() {
+            let block = rows.friction_block(j);
+            let mean = rho[block.clone()].iter().sum::<f64>() / block.len() as f64;
+            rho[block].fill(mean);
+        }
+        ActiveSetSolver {
+            settings,
+            nodes: nodes(rows),
+            rho_base: rho.clone(),
+            rho,
+            terms: Terms::default(),
+            force: vec![0.0; diagonal.len()],
+            rhs: vec![0.0; diagonal.len()],
+            r: vec![0.0; diagonal.len()],
+            counts: ActiveSetCounts::default(),
+            abandon: Abandon::default(),
+        }
+    }
+
+    pub fn counts(&self) -> ActiveSetCounts {
+        self.counts
+    }
+
+    /// Gives up a step when `abandon` is requested (`solver::abandon`), between Newton
+    /// iterations.
+    pub fn abandon_on(&mut self, abandon: Abandon) {
+        self.abandon = abandon;
+    }
+
+    /// Solves the step: `w` in, the previous step's w; out, w_n. `z` in, the previous
+    /// multipliers; out, the step's.
+    pub fn solve(
+        &mut self,
+        system: &mut impl ConstrainedSystem,
+        rows: &Rows,
+        b: &[f64],
+        w: &mut [f64],
+        z: &mut [f64],
+    ) -> Result<StepReport> {
+        let s = self.settings;
+        self.rho.copy_from_slice(&self.rho_base);
+        let mut sets = self.sets(rows, w, z, None);
+        let (mut eta, mut kkt_before) = (s.loose, f64::NAN);
+        let (mut exact, mut krylov) = (false, 0);
+        // The sets met in this step (their hashes), and how many changes of the sets an
+        // iteration may make: all until the sets cycle, then half as many at each cycle, and
+        // ρ a tenth of what it was.
+        let mut seen = vec![sets.signature()];
+        let mut allowed = usize::MAX;
+        let mut cycled = false;
+        for newton in 1..=s.max_newton {
+            if self.abandon.requested() {
+                return Ok(report(StepStatus::Abandoned, newton - 1, kkt_before));
+            }
+            let rtol = if exact { s.rtol } else { eta };
+            self.assemble(rows, &sets, b);
+            self.terms.project(w);
+            let lin = system.solve(&self.terms, &self.rhs, w, rtol)?;
+            krylov += lin.iterations;
+            self.count_system(lin.iterations);
+            if let Some(reason) = lin.failed {
+                let status = StepStatus::KrylovFailed {
+                    reason,
+                    iterations: lin.iterations,
+                    residual: lin.residual,
+                };
+                return Ok(report(status, newton, kkt_before));
+            }
+            self.multipliers(system, rows, &sets, w, z)?;
+            let kkt = kkt_residual(rows, w, z, max_abs(w), max_abs(z));
+            let mut next = self.sets(rows, w, z, Some(&sets));
+            let same = next.same_as(&sets);
+            if same && rtol <= s.rtol && kkt <= s.tolerance {
+                self.count_step(newton);
+                return Ok(StepReport {
+                    status: StepStatus::Solved,
+                    iterations: newton,
+                    residual: kkt,
+                    krylov,
+                });
+            }
+            let at = Iterate {
+                rows,
+                rho: &self.rho,
+                w,
+                z,
+            };
+            if !same && seen.contains(&next.signature()) {
+                allowed = allowed.min(sets.changes(&next, at).len()).div_ceil(2);
+                cycled = true;
+            }
+            if allowed < usize::MAX {
+                next.keep_changes(&sets, at, allowed);
+            }
+            seen.push(next.signature());
+            if cycled {
+                self.rho.iter_mut().for_each(|r| *r *= 0.1);
+                cycled = false;
+            }
+            // The next system is the last one where the sets stand and the KKT residual is
+            // small, or once the sets have cycled: it is solved to `rtol`.
+            exact = (same && kkt <= s.tolerance.sqrt()) || allowed < usize::MAX;
+            eta = forcing(eta, kkt, kkt_before, &s);
+            kkt_before = kkt;
+            sets = next;
+        }
+        self.count_step(s.max_newton);
+        let status = StepStatus::MaxIterations {
+            limit: s.max_newton,
+            residual: kkt_before,
+            scale: 1.0,
+        };
+        Ok(report(status, s.max_newton, kkt_before))
+    }
+
+    fn count_system(&mut self, krylov: usize) {
+        self.counts.newton += 1;
+        self.counts.krylov += krylov;
+        self.counts.max_krylov = self.counts.max_krylov.max(krylov);
+    }
+
+    fn count_step(&mut self, newton: usize) {
+        self.counts.steps += 1;
+        self.counts.max_newton = self.counts.max_newton.max(newton);
+    }
+
+    /// The sets of the iterate (w, z).
+    fn sets(&self, rows: &Rows, w: &[f64], z: &[f64], before: Option<&Sets>) -> Sets {
+        let active = (0..rows.n_contact)
+            .map(|i| z[i] + self.rho[i] * rows.rows[i].apply(w) > 0.0)
+            .collect();
+        let friction = (0..rows.n_friction_nodes())
+            .map(|j| {
+                let block = rows.friction_block(j);
+                let (c, rho) = (rows.rows[block.start].bound, self.rho[block.start]);
+                let mut g = [0.0; 2];
+                for (k, i) in block.enumerate() {
+                    g[k] = z[i] + rho * rows.rows[i].apply(w);
+                }
+                let norm = g[0].hypot(g[1]);
+                let g = [g[0] / norm, g[1] / norm];
+                // A node that would turn back sticks first: ρ (K's diagonal) can be far
+                // stiffer than the boundary is where the body slides, and the test would
+                // swing between the two directions past the sticking state between them.
+                let reverses = match before.map(|b| b.friction[j]) {
+                    Some(Friction::Slip { g: old, .. }) => old[0] * g[0] + old[1] * g[1] < 0.0,
+                    _ => false,
+                };
+                if norm <= c || reverses {
+                    return Friction::Stick;
+                }
+                Friction::Slip {
+                    g,
+                    beta: (c * rho / (norm - c)).min(1e12 * rho),
+                }
+            })
+            .collect();
+        Sets { active, friction }
+    }
+
+    /// The Newton system's terms and right side b − f_slip for `sets`.
+    fn assemble(&mut self, rows: &Rows, sets: &Sets, b: &[f64]) {
+        self.terms.clear();
+        self.force.copy_from_slice(b);
+        for node in &self.nodes {
+            let mut removed: Vec<[f64; 3]> = Vec::new();
+            if let Some(i) = node.contact.filter(|&i| sets.active[i]) {
+                removed.push(rows.rows[i].dir);
+            }
+            if let Some(j) = node.friction {
+                let block = rows.friction_block(j);
+                match sets.friction[j] {
+                    Friction::Stick => removed.extend(block.map(|i| rows.rows[i].dir)),
+                    Friction::Slip { g, beta } => {
+                        let c = rows.rows[block.start].bound;
+                        for (k, i) in block.clone().enumerate() {
+                            rows.rows[i].add_transpose(-c * g[k], &mut self.force);
+                        }
+                        if block.len() == 2 {
+                            let tau = [rows.rows[block.start].dir, rows.rows[block.start + 1].dir];
+                            self.terms.stiffness_dofs.extend(node.dofs);
+                            self.terms.stiffness.extend(slip_block(&tau, g, beta));
+                        }
+                    }
+                }
+            }
+            for v in orthonormal(&removed).0 {
+                self.terms.removed_dofs.extend(node.dofs);
+                self.terms.removed.extend(v);
+            }
+        }
+        self.rhs.copy_from_slice(&self.force);
+        self.terms.project(&mut self.rhs);
+    }
+
+    /// The multipliers of the iterate w: λ = 0 on inactive rows, γ = c ĝ + β T w_τ on
+    /// slipping nodes, and on each node's removed rows the least-squares split of the
+    /// residual r = b − f_slip − (K + S) w there (`force` holds b − f_slip).
+    fn multipliers(
+        &mut self,
+        system: &mut impl ConstrainedSystem,
+        rows: &Rows,
+        sets: &Sets,
+        w: &[f64],
+        z: &mut [f64],
+    ) -> Result<()> {
+        system.mult(w, &mut self.r)?;
+        self.terms.add_stiffness(w, &mut self.r);
+        for node in &self.nodes {
+            let mut removed: Vec<usize> = Vec::new();
+            if let Some(i) = node.contact {
+                z[i] = 0.0;
+                if sets.active[i] {
+                    removed.push(i);
+                }
+            }
+            if let Some(j) = node.friction {
+                let block = rows.friction_block(j);
+                match sets.friction[j] {
+                    Friction::Stick => removed.extend(block),
+                    Friction::Slip { g, beta } => slip_multipliers(rows, j, g, beta, w, z),
+                }
+            }
+            let local = node.dofs.map(|d| match d {
+                -1 => 0.0,
+                d => self.force[d as usize] - self.r[d as usize],
+            });
+            let dirs: Vec<[f64; 3]> = removed.iter().map(|&i| rows.rows[i].dir).collect();
+            for (i, zi) in removed.iter().zip(split(&dirs, local)) {
+                z[*i] = zi;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The coefficients z with Σ z_k a_k = r in the least-squares sense, a_k = `dirs`: by the
+/// QR factors of Gram–Schmidt (`orthonormal`); a vector dependent on those before it gets 0.
+fn split(dirs: &[[f64; 3]], r: [f64; 3]) -> Vec<f64> {
+    let (q, index) = orthonormal(dirs);
+    let kept: Vec<usize> = (0..dirs.len()).filter(|&k| index[k].is_some()).collect();
+    // R y = Qᵀ r with R_jl = q_j·a_{kept_l} (upper triangular), back substitution.
+    let mut y: Vec<f64> = q.iter().map(|e| crate::mesh::dot(*e, r)).collect();
+    for j in (0..kept.len()).rev() {
+        for l in j + 1..kept.len() {
+            y[j] -= crate::mesh::dot(q[j], dirs[kept[l]]) * y[l];
+        }
+        y[j] /= crate::mesh::dot(q[j], dirs[kept[j]]);
+    }
+    let mut z = vec![0.0; dirs.len()];
+    for (j, &k) in kept.iter().enumerate() {
+        z[k] = y[j];
+    }
+    z
+}
+
+/// PETSc's KSP as the Newton systems' solver: K in its matrix, the constrained system by
+/// its shell operator and preconditioner (`petsc::Krylov::solve_constrained`).
+#[cfg(feature = "petsc")]
+impl ConstrainedSystem for crate::petsc::Krylov {
+    fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()> {
+        crate::petsc::Krylov::mult(self, x, y)
+    }
+
+    fn solve(&mut self, terms: &Terms, b: &[f64], w: &mut [f64], rtol: f64) -> Result<LinearSolve> {
+        let view = crate::petsc::NodalTerms {
+            removed_dofs: &terms.removed_dofs,
+            removed: &terms.removed,
+            stiffness_dofs: &terms.stiffness_dofs,
+            stiffness: &terms.stiffness,
+        };
+        let s = self.solve_constrained(view, b, w, rtol)?;
+        Ok(LinearSolve {
+            iterations: s.iterations,
+            residual: s.residual,
+            failed: s.failed,
+        })
+    }
+}
+
+fn report(status: StepStatus, iterations: usize, residual: f64) -> StepReport {
+    StepReport {
+        status,
+        iterations,
+        residual,
+        krylov: 0,
+    }
+}
+
+/// The Eisenstat–Walker forcing term (their choice 2, γ = 0.9, α = 2) after an iteration
+/// with KKT residual `kkt` (the one before: `before`, NaN at the first), at most a tenth of
+/// the last `eta`, between `settings.rtol` and `settings.loose`.
+fn forcing(eta: f64, kkt: f64, before: f64, settings: &ActiveSetSettings) -> f64 {
+    let mut next = 0.9 * (kkt / before).powi(2);
+    if !next.is_finite() {
+        next = settings.loose;
+    }
+    let safeguard = 0.9 * eta * eta;
+    if safeguard > 0.1 {
+        next = next.max(safeguard);
+    }
+    // Never looser than a tenth of the last: a stagnating iteration must not settle into
+    // solves that the initial guess already meets.
+    next.min(0.1 * eta).clamp(settings.rtol, settings.loose)
+}
+
+/// γ_i = c ĝ + β T w_τ on a slipping node j.
+fn slip_multipliers(rows: &Rows, j: usize, g: [f64; 2], beta: f64, w: &[f64], z: &mut [f64]) {
+    let block = rows.friction_block(j);
+    let c = rows.rows[block.start].bound;
+    let wt: Vec<f64> = block.clone().map(|i| rows.rows[i].apply(w)).collect();
+    let gw: f64 = wt.iter().zip(g).map(|(a, b)| a * b).sum();
+    for (k, i) in block.enumerate() {
+        let tangential = if wt.len() == 2 {
+            wt[k] - g[k] * gw
+        } else {
+            0.0
+        };
+        z[i] = c * g[k] + beta * tangential;
+    }
+}
+
+/// S_i = β Σ_kl T_kl τ_k τ_lᵀ (3 × 3, row-major) on a node's dofs, T = I − ĝĝᵀ.
+fn slip_block(tau: &[[f64; 3]; 2], g: [f64; 2], beta: f64) -> [f64; 9] {
+    let mut m = [0.0; 9];
+    for k in 0..2 {
+        for l in 0..2 {
+            let t = beta * (f64::from(u8::from(k == l)) - g[k] * g[l]);
+            for r in 0..3 {
+                for c in 0..3 {
+                    m[3 * r + c] += t * tau[k][r] * tau[l][c];
+                }
+            }
+        }
+    }
+    m
+}
+
+/// Modified Gram–Schmidt on a node's vectors: the orthonormal ones and, for each input,
+/// its index among them (None for a vector dependent on those before it).
+fn orthonormal(vs: &[[f64; 3]]) -> (Vec<[f64; 3]>, Vec<Option<usize>>) {
+    let (mut q, mut index): (Vec<[f64; 3]>, Vec<Option<usize>>) = (Vec::new(), Vec::new());
+    for v in vs {
+        let mut u = *v;
+        for _ in 0..2 {
+            for e in &q {
+                let p = crate::mesh::dot(u, *e);
+                for c in 0..3 {
+                    u[c] -= p * e[c];
+                }
+            }
+        }
+        let norm = crate::mesh::dot(u, u).sqrt();
+        let scale = crate::mesh::dot(*v, *v).sqrt();
+        if norm > 1e-8 * scale {
+            index.push(Some(q.len()));
+            q.push(u.map(|x| x / norm));
+        } else {
+            index.push(None);
+        }
+    }
+    (q, index)
+}
+
+/// The nodes of the rows, in the order of their first row.
+fn nodes(rows: &Rows) -> Vec<Node> {
+    let mut index = std::collections::HashMap::new();
+    let mut nodes: Vec<Node> = Vec::new();
+    for (i, row) in rows.rows.iter().enumerate() {
+        let k = *index.entry(row.node).or_insert_with(|| {
+            nodes.push(Node {
+                dofs: [-1; 3],
+                contact: None,
+                friction: None,
+            });
+            nodes.len() - 1
+        });
+        let node = &mut nodes[k];
+        for c in (0..row.dim).filter(|&c| row.dir[c] != 0.0) {
+            node.dofs[c] = row.dofs[c] as i32;
+        }
+        match i < rows.n_contact {
+            true => node.contact = Some(i),
+            false => node.friction = Some((i - rows.n_contact) / rows.block),
+        }
+    }
+    nodes
+}
+
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0, |a, x| a.max(x.abs()))
+}

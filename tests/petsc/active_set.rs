@@ -1,0 +1,181 @@
+//! The active-set contact solver (`solver.contact = "active_set"`, on PETSc) against the
+//! dense dual and clarabel: every golden scene with contact or friction (2D and 3D: the
+//! paper's variants, the bracket, the plate with a hole, the blocks, the slab), the corners
+//! where Γ3,1 meets Γ3,2, and a block under a traction that turns (nodes change state from
+//! step to step). u_N agrees with the dense dual's to 1e-8 relative; the runs are bit for
+//! bit the same when stopped and resumed; summary.json records the Newton and Krylov counts.
+
+use crate::common::{self, load, rel_diff, repo, trace, SceneText, Trace};
+
+/// Traces of `scene` with each of `solvers` (values of `solver.contact`), through the
+/// library, one PETSc run at a time.
+fn traces(scene: &SceneText, solvers: &[&str]) -> Vec<Trace> {
+    let dir = tempfile::tempdir().unwrap();
+    solvers
+        .iter()
+        .map(|s| {
+            let path = scene
+                .clone()
+                .set("solver.contact", *s)
+                .write(dir.path(), "s.toml");
+            let (scene, _mesh, disc) = load(&path, &[]);
+            let _one = crate::PETSC.lock().unwrap_or_else(|e| e.into_inner());
+            trace(&scene, &disc)
+        })
+        .collect()
+}
+
+/// The largest relative difference of w over the steps of two traces.
+fn max_step_diff(a: &Trace, b: &Trace) -> f64 {
+    (a.w.iter().zip(&b.w))
+        .map(|(x, y)| rel_diff(x, y))
+        .fold(0.0, f64::max)
+}
+
+/// `active_set` against `dense` (and `clarabel` where asked) on `scene`: u_N to 1e-8
+/// relative, every step's w to 1e-7.
+fn agrees(scene: SceneText, what: &str, with_clarabel: bool) {
+    let solvers: &[&str] = match with_clarabel {
+        true => &["dense", "active_set", "clarabel"],
+        false => &["dense", "active_set"],
+    };
+    let t = traces(&scene, solvers);
+    assert!(t[0].solver.starts_with("dual"), "{}", t[0].solver);
+    assert!(t[1].solver.starts_with("active set"), "{}", t[1].solver);
+    let (du, dw) = (
+        rel_diff(&t[1].u_final, &t[0].u_final),
+        max_step_diff(&t[1], &t[0]),
+    );
+    println!("{what}: |u_N − dense| {du:.1e}, max over steps |w − dense| {dw:.1e}");
+    assert!(common::max_abs(&t[0].u_final) > 0.0);
+    assert!(du <= 1e-8 && dw <= 1e-7, "{what}: {du:e} {dw:e}");
+    if with_clarabel {
+        let dc = rel_diff(&t[1].u_final, &t[2].u_final);
+        println!("{what}: |u_N − clarabel| {dc:.1e}");
+        assert!(dc <= 1e-7, "{what}: {dc:e}");
+    }
+}
+
+const RELAXATION: &str = "material.relaxation";
+
+/// The golden scenes with contact or friction (tests/regression/golden.rs), in 2D.
+#[test]
+fn the_golden_2d_scenes_agree_with_the_dense_dual() {
+    let paper = SceneText::paper;
+    let cases = [
+        (paper(), "paper"),
+        (
+            paper().mesh(repo().join("meshes/paper/rect_064.msh")),
+            "paper on rect_064",
+        ),
+        (paper().set("friction.normal_stress", 0.1), "paper F = 0.1"),
+        (paper().set("friction.coefficient", 5), "paper μ = 5"),
+        (paper().set("scheme.history", "implicit"), "paper, implicit"),
+        (
+            paper().table(RELAXATION, "expr = \"0.2*(s+0.01)^(-0.5)\""),
+            "paper, power law compressed",
+        ),
+        (
+            paper().table(RELAXATION, "table = { s = [0, 0.5, 1], r = [1, 0.3, 0.1] }"),
+            "paper, table kernel",
+        ),
+        (SceneText::example("bracket.toml"), "bracket"),
+        (SceneText::example("plate_hole.toml"), "plate with a hole"),
+    ];
+    for (scene, what) in cases {
+        agrees(scene, what, false);
+    }
+}
+
+/// The golden 3D scenes with contact and friction.
+#[test]
+fn the_golden_3d_scenes_agree_with_the_dense_dual() {
+    let block = SceneText::block;
+    let cases = [
+        (block(), "block"),
+        (block().set("friction.coefficient", 5), "block μ = 5"),
+        (
+            block()
+                .mesh(repo().join("tests/data/3d/block_unstructured.msh"))
+                .set("time.steps", 16),
+            "unstructured block",
+        ),
+    ];
+    for (scene, what) in cases {
+        agrees(scene, what, false);
+    }
+}
+
+/// Γ3,1 and Γ3,2 meeting at a corner of 45°, 89.9°, 90° and 135° (tests/data/corner): the
+/// contact normal and the friction tangent are dependent at 90°, and the force there splits
+/// in many ways; w is unique, and agrees.
+#[test]
+fn corners_agree_with_the_dense_dual() {
+    let dir = repo().join("tests/data/corner");
+    for angle in ["0450", "0899", "0900", "1350"] {
+        let scene =
+            SceneText::file(&dir.join("corner.toml")).mesh(dir.join(format!("corner_{angle}.msh")));
+        agrees(scene, &format!("corner {angle}"), false);
+    }
+}
+
+/// The block at h = 1/4 under a top traction whose tangential part turns once around over
+/// the run and whose normal part pulsates (as tests/solutions/matrix_free.rs): contact and
+/// friction nodes change state from step to step; u_N agrees with clarabel over 64 steps.
+#[test]
+fn a_rotating_traction_agrees_with_clarabel() {
+    let traction: toml::Table = toml::from_str(
+        "on = \"top\"\nvalue = [\"0.05*cos(2*pi*t)\", \"0.05*sin(2*pi*t)\", \
+         \"-0.03*sin(6*pi*t)\"]",
+    )
+    .unwrap();
+    let scene = SceneText::block()
+        .mesh(repo().join("meshes/3d/block_004.msh"))
+        .remove("load")
+        .push("load.traction", traction)
+        .set("time.steps", 64);
+    agrees(scene, "rotating traction", true);
+}
+
+/// A run stopped after a step and resumed gives the uninterrupted run's series and
+/// summary bit for bit (PETSc in one process is deterministic: GAMG's hierarchy is built
+/// from K_A alone, the same at the resume); summary.json records the Newton systems and
+/// their Krylov iterations.
+#[test]
+fn stop_and_resume_through_petsc_is_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = SceneText::paper()
+        .set("solver.contact", "active_set")
+        .set("output.every", 1)
+        .write(dir.path(), "s.toml");
+    let (whole, parts) = (dir.path().join("whole"), dir.path().join("parts"));
+    let run = |args: &[&str]| {
+        let (code, text) = common::cli(args);
+        assert_eq!(code, 0, "{args:?}: {text}");
+    };
+    let (path, whole_s, parts_s) = (
+        path.to_str().unwrap(),
+        whole.to_str().unwrap(),
+        parts.to_str().unwrap(),
+    );
+    run(&["run", "--quiet", "--out", whole_s, path]);
+    run(&[
+        "run",
+        "--quiet",
+        "--stop-after",
+        "12",
+        "--out",
+        parts_s,
+        path,
+    ]);
+    run(&["resume", "--quiet", &format!("{parts_s}/checkpoint.h5")]);
+    common::assert_same_series(&whole, &parts, "paper through active_set");
+    let s = common::summary(&whole);
+    let newton = &s["petsc"]["newton"];
+    assert_eq!(newton["steps"], 33, "{s}");
+    let systems = newton["systems"].as_u64().unwrap();
+    let per_step = s["iterations"]["per_step"].as_array().unwrap();
+    let sum: u64 = per_step.iter().map(|i| i.as_u64().unwrap()).sum();
+    assert_eq!(systems, sum, "{s}");
+    assert!(newton["krylov_total"].as_u64().unwrap() >= systems, "{s}");
+}
