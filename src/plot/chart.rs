@@ -1,6 +1,7 @@
 //! The log–log charts of a study (`study`'s error against h, k and wall time, and the
 //! cost of a kernel's tolerance): data curves with their points marked and labelled,
-//! reference slopes dashed.
+//! reference slopes dashed; and the linear chart of a run's force history
+//! (`plot --history`, `history_chart.rs`).
 
 use super::{draw_err, register_fonts, trim_float, FONT, PALETTE};
 use crate::Result;
@@ -175,6 +176,80 @@ pub fn log_log_chart(
         .map_err(&err)?;
     root.present().map_err(&err)?;
     Ok(())
+}
+
+/// A chart of `curves` on linear axes as a PNG at `path` (1000 × 700): lines without point
+/// markers, for series of many points (`plot --history`).
+pub fn line_chart(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    curves: &[Curve],
+) -> Result<()> {
+    register_fonts();
+    let err = draw_err(path);
+    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(&err)?;
+    let points = || curves.iter().flat_map(|c| c.points.iter());
+    let (x0, x1) = linear_range(points().map(|p| p.0));
+    let (y0, y1) = linear_range(points().map(|p| p.1));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, (FONT, 26))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(90)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(&err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&|v| sci(*v))
+        .y_label_formatter(&|v| sci(*v))
+        .label_style((FONT, 16))
+        .axis_desc_style((FONT, 18))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(205, 205, 205))
+        .draw()
+        .map_err(&err)?;
+    for c in curves {
+        let color = PALETTE[c.color % PALETTE.len()];
+        chart
+            .draw_series(LineSeries::new(c.points.clone(), color.stroke_width(2)))
+            .map_err(&err)?
+            .label(c.label.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .label_font((FONT, 16))
+        .background_style(WHITE.mix(0.9))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()
+        .map_err(&err)?;
+    root.present().map_err(&err)?;
+    Ok(())
+}
+
+/// `lo..hi` of the finite values, widened by 5 % on each side (±1 around a single value).
+fn linear_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = match hi > lo {
+        true => 0.05 * (hi - lo),
+        false => lo.abs().max(1.0),
+    };
+    (lo - pad, hi + pad)
 }
 
 /// Where a chart's legend goes: where the data are not. Rising data leave the upper left

@@ -9,9 +9,11 @@
 //! - [`Checkpoints`]: `checkpoint.h5` at every `checkpoint.every`-th step, once
 //!   `checkpoint.every_seconds` of wall time passed since the last one, before the last step
 //!   and where the run stops;
+//! - [`HistoryCsv`]: `history.csv`, the forces on the body at every step (`history_csv`);
 //! - [`Progress`]: the progress bar on a terminal, a progress line every 10 s in a log.
 
 use super::frame::write_step;
+use super::history_csv::HistoryCsv;
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::output::Series;
@@ -28,6 +30,7 @@ pub(super) struct Consumers<'a> {
     pub statistics: Statistics,
     pub frames: Frames<'a>,
     pub checkpoints: Checkpoints,
+    pub history: HistoryCsv<'a>,
     pub progress: Progress,
     pub stop: StopRule,
 }
@@ -49,6 +52,10 @@ impl Observer for Consumers<'_> {
         let flags = state_flags(&s.step);
         self.statistics.solved(s, &flags);
         self.frames.solved(s, &flags)?;
+        let rows = s.step.rows;
+        let (active, stick) = state_counts(rows, &flags);
+        let slip = rows.n_friction_nodes() - stick;
+        self.history.solved(s, [active, stick, slip])?;
         self.checkpoints.solved(s, flags);
         self.progress.solved(s);
         Ok(())

@@ -4,7 +4,7 @@
 //!   (`flock`, std's `File::try_lock`) on `DIR/.viscontact.lock`, which the kernel releases
 //!   when the process ends however it ends; a second process is refused (exit 2) with the
 //!   holder's pid, host and start time, which the holder writes into the file.
-//! - Files are ours by name ([`ours`]): the series, summary.json, the checkpoint files, the
+//! - Files are ours by name ([`ours`]): the series, summary.json, history.csv, the checkpoint files, the
 //!   lock file, and the temporary files our writers use (`.NAME.tmp.PID.N` of
 //!   `output::write_atomic`, `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`). Under the
 //!   lock no other process is writing, so temporary files are leftovers of a killed process
@@ -35,6 +35,7 @@ fn run_file(name: &str) -> bool {
             name,
             "solution.pvd"
                 | "solution.vtkhdf"
+                | "history.csv"
                 | "summary.json"
                 | "checkpoint.h5"
                 | "checkpoint_history.h5"
@@ -331,7 +332,7 @@ pub fn holds_series(dir: &Path) -> bool {
         run_file(n)
             && !matches!(
                 n,
-                "summary.json" | "checkpoint.h5" | "checkpoint_history.h5"
+                "summary.json" | "history.csv" | "checkpoint.h5" | "checkpoint_history.h5"
             )
     })
     .is_empty()
@@ -365,6 +366,7 @@ mod tests {
             "solution.vtkhdf",
             "solution_000012.vtu",
             "summary.json",
+            "history.csv",
             "checkpoint.h5",
             "checkpoint_history.h5",
             "checkpoint.h5.tmp",

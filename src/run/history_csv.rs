@@ -1,0 +1,371 @@
+//! `DIR/history.csv`: the forces on the body at every solved step, one row per step
+//! n = 0, …, N, written and flushed as the step is solved (docs/output.md).
+//!
+//! A row describes the equilibrium of step n: t_n, the state (u_n, w_n, m_n) and the
+//! multipliers z_n of the step problem (3.1) solved at t_n. Each force is the force on the
+//! body, summed over its group: the reactions r_n of each condition group (`fem::reactions`
+//! says how they are computed from the rows of the step's matrices at the held dofs), the
+//! resultant of each traction group's ⟨f_n, φ⟩ and of the body forces, the contact force
+//! −Σ_{Γ3,1} λ_i n_i, the friction force −Σ g_F − Σ_{Γ3,2} γ_i τ_i (the given normal stress
+//! F with the friction multipliers), and in 3D the moment Σ x_i × r_i of each condition
+//! group about the origin. The balance Σ r + Σ f − Σ g_F − Σ Pᵀz = 0 holds per component to
+//! the precision of the step's solve.
+//!
+//! A group's columns carry its name as the scene writes it, every character other than a
+//! letter, a digit, `_`, `-` or `.` replaced by `_`; conditions (or tractions) that name one
+//! group share its columns; a name that an earlier group's already took gets `_2`, `_3`, …
+//! (the first that is free). A dof held by two conditions reports its reaction in the
+//! first condition's group (the clamped groups in order, then the `[[dirichlet]]` entries).
+//!
+//! Numbers are Rust's shortest text that reads back as the same f64, so the file holds the
+//! exact bits; a resumed run keeps the rows before its checkpoint's step and writes the
+//! others again: its file equals the uninterrupted run's byte for byte.
+
+use crate::fem::loads::Source;
+use crate::fem::reactions::{Reactions, StepForces};
+use crate::fem::Discretization;
+use crate::mesh::{cross, Mesh};
+use crate::scene::{self, Scene};
+use crate::time_loop::{Solved, TimeLoop};
+use crate::{Error, Result};
+use std::fmt::Write as _;
+use std::fs::{File, OpenOptions};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+/// The file's name in the run directory.
+pub const FILE_NAME: &str = "history.csv";
+
+/// The groups of a scene's columns: which condition group each held dof reports to and
+/// which traction group each load does.
+struct Layout {
+    dim: usize,
+    /// Column names of the condition groups, and the group of each held dof.
+    conditions: Vec<String>,
+    condition_of: Vec<usize>,
+    /// Column names of the traction groups, and the group of each load (None: a body force).
+    tractions: Vec<String>,
+    traction_of: Vec<Option<usize>>,
+    body: bool,
+}
+
+impl Layout {
+    fn new(scene: &Scene, disc: &Discretization) -> Layout {
+        let (conditions, condition_of) =
+            column_groups(disc.held.iter().map(|(_, source)| source.group(scene)));
+        let sources: Vec<Source> = disc.loads.sources().collect();
+        let traction_names = sources.iter().filter_map(|s| match s {
+            Source::Traction(i) => Some(scene.physics.tractions[*i].on.as_str()),
+            Source::Body(_) => None,
+        });
+        let (tractions, mut of_traction) = column_groups(traction_names);
+        of_traction.reverse();
+        let traction_of = sources
+            .iter()
+            .map(|s| match s {
+                Source::Traction(_) => of_traction.pop(),
+                Source::Body(_) => None,
+            })
+            .collect();
+        Layout {
+            dim: disc.dim,
+            conditions,
+            condition_of,
+            tractions,
+            traction_of,
+            body: sources.iter().any(|s| matches!(s, Source::Body(_))),
+        }
+    }
+
+    /// The header's names, in the order of a row.
+    fn columns(&self) -> Vec<String> {
+        let axes = &["x", "y", "z"][..self.dim];
+        let vector =
+            |name: &str| -> Vec<String> { axes.iter().map(|a| format!("{name}_{a}")).collect() };
+        let mut names: Vec<String> = vec!["step".into(), "t".into()];
+        for g in &self.conditions {
+            names.extend(vector(&format!("reaction_{g}")));
+        }
+        for g in &self.tractions {
+            names.extend(vector(&format!("load_{g}")));
+        }
+        if self.body {
+            names.extend(vector("body"));
+        }
+        names.extend(vector("contact"));
+        names.extend(vector("friction"));
+        if self.dim == 3 {
+            for g in &self.conditions {
+                names.extend(vector(&format!("moment_{g}")));
+            }
+        }
+        names.extend(["active", "stick", "slip", "max_von_mises", "iterations"].map(String::from));
+        names
+    }
+}
+
+/// The column names of the scene's groups as a run writes them (`viscontact check`).
+pub fn columns(scene: &Scene, disc: &Discretization) -> Vec<String> {
+    Layout::new(scene, disc).columns()
+}
+
+/// A group name as a column name: every character but a letter, a digit, `_`, `-`, `.`
+/// becomes `_` (commas, quotes, spaces and the like have no place in a CSV header).
+fn column_name(written: &str) -> String {
+    written
+        .chars()
+        .map(
+            |c| match c.is_alphanumeric() || matches!(c, '_' | '-' | '.') {
+                true => c,
+                false => '_',
+            },
+        )
+        .collect()
+}
+
+/// The distinct groups of `names` (as written, in order of first appearance) as unique
+/// column names, and the group of each name: a column name taken already gets `_2`, `_3`, ….
+fn column_groups<'a>(names: impl Iterator<Item = &'a str>) -> (Vec<String>, Vec<usize>) {
+    let (mut written, mut columns): (Vec<&str>, Vec<String>) = (Vec::new(), Vec::new());
+    let of = names
+        .map(|name| {
+            if let Some(i) = written.iter().position(|w| *w == name) {
+                return i;
+            }
+            let base = column_name(name);
+            let column = std::iter::once(base.clone())
+                .chain((2..).map(|k| format!("{base}_{k}")))
+                .find(|c| !columns.contains(c))
+                .expect("an unused suffix exists");
+            written.push(name);
+            columns.push(column);
+            columns.len() - 1
+        })
+        .collect();
+    (columns, of)
+}
+
+/// The history file of a run and what its rows are computed with.
+pub(super) struct HistoryCsv<'a> {
+    file: File,
+    path: PathBuf,
+    layout: Layout,
+    reactions: Reactions,
+    disc: &'a Discretization,
+    scene: &'a Scene,
+    /// The text of a row, reused.
+    line: String,
+}
+
+impl<'a> HistoryCsv<'a> {
+    /// `DIR/history.csv` of a new run (from step 0), or of a run resumed at step `from`:
+    /// the rows of steps before `from` are kept, those after cut off (a run killed after its
+    /// last checkpoint wrote them); a file that lacks them is started again with a warning.
+    pub fn open(
+        out: &Path,
+        scene: &'a Scene,
+        mesh: &Mesh,
+        disc: &'a Discretization,
+        tl: &TimeLoop,
+        from: Option<usize>,
+    ) -> Result<Self> {
+        let (k_b, k_r) = match scene.solver.history {
+            scene::History::Left => (0.0, 0.0),
+            scene::History::Implicit => {
+                let r0 = tl.plan().r0(scene.physics.relaxation.as_ref());
+                (tl.k(), tl.k() * tl.k() * r0.unwrap_or(0.0))
+            }
+        };
+        let reactions = Reactions::new(mesh, scene, disc, k_b, k_r)?;
+        let layout = Layout::new(scene, disc);
+        let header = layout.columns().join(",") + "\n";
+        let path = out.join(FILE_NAME);
+        let io = |e| Error::io(&path, e);
+        let kept = from.and_then(|n| kept_bytes(&path, &header, n));
+        let file = match kept {
+            Some(len) => {
+                let mut file = OpenOptions::new().write(true).open(&path).map_err(io)?;
+                file.set_len(len).map_err(io)?;
+                std::io::Seek::seek(&mut file, std::io::SeekFrom::End(0)).map_err(io)?;
+                file
+            }
+            None => {
+                if let Some(n) = from.filter(|&n| n > 0) {
+                    crate::errln!(
+                        "warning: {} does not hold the rows of steps 0 to {} of this run; it \
+                         starts again at step {n}",
+                        path.display(),
+                        n - 1
+                    );
+                }
+                let mut file = File::create(&path).map_err(io)?;
+                file.write_all(header.as_bytes()).map_err(io)?;
+                file
+            }
+        };
+        Ok(HistoryCsv {
+            file,
+            path,
+            layout,
+            reactions,
+            disc,
+            scene,
+            line: String::new(),
+        })
+    }
+
+    /// Writes the row of a solved step; `counts` are its (active, stick, slip) nodes.
+    pub fn solved(&mut self, s: &Solved, counts: [usize; 3]) -> Result<()> {
+        let step = &s.step;
+        let forces =
+            (self.reactions).forces(self.disc, self.scene, step.t, [step.w, step.u], step.m)?;
+        let (_, von_mises) = (self.disc).stress(step.w, step.u, step.m, self.scene.mesh.model);
+        let max_von_mises = von_mises.into_iter().fold(0.0, f64::max);
+        self.line.clear();
+        let _ = write!(self.line, "{}", step.n);
+        put_number(&mut self.line, step.t);
+        for v in self.forces(step, &forces) {
+            put_number(&mut self.line, v);
+        }
+        let [active, stick, slip] = counts;
+        let _ = write!(self.line, ",{active},{stick},{slip}");
+        put_number(&mut self.line, max_von_mises);
+        let _ = writeln!(self.line, ",{}", step.report.iterations);
+        // One write a row: a killed run keeps every row it wrote whole.
+        (self.file.write_all(self.line.as_bytes())).map_err(|e| Error::io(&self.path, e))
+    }
+
+    /// The force (and moment) columns of a row, in the header's order.
+    fn forces(&self, step: &crate::time_loop::Step, f: &StepForces) -> Vec<f64> {
+        let (layout, d) = (&self.layout, self.layout.dim);
+        let mut reaction = vec![[0.0; 3]; layout.conditions.len()];
+        let mut moment = vec![[0.0; 3]; layout.conditions.len()];
+        for ((&(dof, _), &g), &r) in (self.reactions.held.iter())
+            .zip(&layout.condition_of)
+            .zip(&f.reactions)
+        {
+            let mut r_vec = [0.0; 3];
+            r_vec[dof % d] = r;
+            reaction[g][dof % d] += r;
+            let arm = cross(self.disc.nodes[dof / d], r_vec);
+            (0..3).for_each(|c| moment[g][c] += arm[c]);
+        }
+        let mut traction = vec![[0.0; 3]; layout.tractions.len()];
+        let mut body = [0.0; 3];
+        for (load, of) in f.loads.iter().zip(&layout.traction_of) {
+            let sum = match of {
+                Some(g) => &mut traction[*g],
+                None => &mut body,
+            };
+            (0..3).for_each(|c| sum[c] += load[c]);
+        }
+        let (contact, friction) = self.multiplier_forces(step);
+        let mut columns = Vec::new();
+        let mut put = |v: &[f64; 3]| columns.extend_from_slice(&v[..d]);
+        reaction.iter().for_each(&mut put);
+        traction.iter().for_each(&mut put);
+        if layout.body {
+            put(&body);
+        }
+        put(&contact);
+        put(&friction);
+        if d == 3 {
+            moment.iter().for_each(&mut put);
+        }
+        columns
+    }
+
+    /// −Σ λ_i n_i over Γ3,1 and −Σ g_F − Σ γ_i τ_i over Γ3,2.
+    fn multiplier_forces(&self, step: &crate::time_loop::Step) -> ([f64; 3], [f64; 3]) {
+        let rows = step.rows;
+        let (mut contact, mut friction) = ([0.0; 3], self.reactions.normal_stress);
+        for (i, (row, z)) in rows.rows.iter().zip(step.z).enumerate() {
+            let sum = match i < rows.n_contact {
+                true => &mut contact,
+                false => &mut friction,
+            };
+            (0..3).for_each(|c| sum[c] -= z * row.dir[c]);
+        }
+        (contact, friction)
+    }
+}
+
+/// `,v` with v as the shortest text that reads back as the same f64: plain for 0 and
+/// 1e-4 ≤ |v| < 1e16, else with an exponent (`1.5e-7`; plain, it would be
+/// `0.00000015`).
+fn put_number(line: &mut String, v: f64) {
+    let _ = match v == 0.0 || (1e-4..1e16).contains(&v.abs()) || !v.is_finite() {
+        true => write!(line, ",{v}"),
+        false => write!(line, ",{v:e}"),
+    };
+}
+
+/// The length of `path`'s header and rows of steps 0..n, when the file has the header
+/// `header` and those rows in order (else None).
+fn kept_bytes(path: &Path, header: &str, n: usize) -> Option<u64> {
+    let text = std::fs::read(path).ok()?;
+    let body = text.strip_prefix(header.as_bytes())?;
+    let mut len = header.len();
+    for step in 0..n {
+        let end = body[len - header.len()..]
+            .iter()
+            .position(|&b| b == b'\n')?;
+        let row = &body[len - header.len()..][..end];
+        let first = row.split(|&b| b == b',').next()?;
+        if first != step.to_string().as_bytes() {
+            return None;
+        }
+        len += end + 1;
+    }
+    Some(len as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn group_names_become_unique_column_names() {
+        let names = ["Γ1", "a b", "a_b", "Γ1", "x,\"y\"", "a_b_2"];
+        let (columns, of) = column_groups(names.into_iter());
+        assert_eq!(columns, ["Γ1", "a_b", "a_b_2", "x__y_", "a_b_2_2"]);
+        assert_eq!(of, [0, 1, 2, 0, 3, 4]);
+    }
+
+    #[test]
+    fn numbers_read_back_exactly() {
+        let mut line = String::new();
+        for v in [
+            0.0,
+            -0.0,
+            0.125,
+            1e-4,
+            7.4e-5,
+            -1.0 / 3.0,
+            2.5e16,
+            1e300,
+            5e-324,
+        ] {
+            line.clear();
+            put_number(&mut line, v);
+            let back: f64 = line[1..].parse().unwrap();
+            assert_eq!(back.to_bits(), v.to_bits(), "{line}");
+        }
+        put_number(&mut line, 7.4e-5);
+        assert!(line.ends_with(",7.4e-5"), "{line}");
+    }
+
+    #[test]
+    fn a_resume_keeps_the_rows_before_its_step() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE_NAME);
+        let header = "step,t\n";
+        std::fs::write(&path, "step,t\n0,0\n1,0.5\n2,1\n3,1.").unwrap();
+        assert_eq!(kept_bytes(&path, header, 2), Some(16));
+        assert_eq!(kept_bytes(&path, header, 0), Some(7));
+        assert_eq!(kept_bytes(&path, header, 4), None, "a half row is no row");
+        assert_eq!(kept_bytes(&path, "step,t,x\n", 1), None);
+        std::fs::write(&path, "step,t\n0,0\n2,1\n").unwrap();
+        assert_eq!(kept_bytes(&path, header, 2), None);
+    }
+}
