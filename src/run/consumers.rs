@@ -69,12 +69,14 @@ impl Observer for Consumers<'_> {
     }
 
     fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
-        // A checkpoint of step n + 1 may reach the disk only after the frames of steps ≤ n
-        // have: the frame writer runs on its own thread, and a resume keeps the frames
-        // before its step (a kill -9 in between lost a frame for good).
+        // A checkpoint of step n + 1 may reach the disk only after the frames and the
+        // history rows of steps ≤ n have: their writers run on threads of their own, and a
+        // resume keeps the frames and rows before its step (a kill -9 in between lost a
+        // frame for good).
         // The checkpoint records the checksums of those frames (output/verify.rs).
         if self.checkpoints.due.is_some() {
             self.frames.series.finish()?;
+            self.history.finish()?;
         }
         self.checkpoints
             .advanced(tl, &self.statistics.log, &self.frames.series)

@@ -25,13 +25,15 @@ use crate::fem::loads::Source;
 use crate::fem::reactions::{Reactions, StepForces};
 use crate::fem::Discretization;
 use crate::mesh::{cross, Mesh};
+use crate::output::Lines;
 use crate::scene::{self, Scene};
 use crate::time_loop::{Solved, TimeLoop};
 use crate::{Error, Result};
 use std::fmt::Write as _;
 use std::fs::{File, OpenOptions};
 use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::sync::Arc;
 
 /// The file's name in the run directory.
 pub const FILE_NAME: &str = "history.csv";
@@ -145,16 +147,16 @@ fn column_groups<'a>(names: impl Iterator<Item = &'a str>) -> (Vec<String>, Vec<
     (columns, of)
 }
 
-/// The history file of a run and what its rows are computed with.
+/// The history file of a run and what its rows are computed with. The forces of a step
+/// are computed as it is solved; its largest von Mises stress (a pass over the cells, the
+/// costly part of a row) and the writing on the thread of `output::Lines`.
 pub(super) struct HistoryCsv<'a> {
-    file: File,
-    path: PathBuf,
+    lines: Lines,
     layout: Layout,
     reactions: Reactions,
-    disc: &'a Discretization,
+    /// Shared with the writer thread.
+    disc: Arc<Discretization>,
     scene: &'a Scene,
-    /// The text of a row, reused.
-    line: String,
 }
 
 impl<'a> HistoryCsv<'a> {
@@ -165,7 +167,7 @@ impl<'a> HistoryCsv<'a> {
         out: &Path,
         scene: &'a Scene,
         mesh: &Mesh,
-        disc: &'a Discretization,
+        disc: &Arc<Discretization>,
         tl: &TimeLoop,
         from: Option<usize>,
     ) -> Result<Self> {
@@ -204,35 +206,40 @@ impl<'a> HistoryCsv<'a> {
             }
         };
         Ok(HistoryCsv {
-            file,
-            path,
+            lines: Lines::new(file, path),
             layout,
             reactions,
-            disc,
+            disc: Arc::clone(disc),
             scene,
-            line: String::new(),
         })
     }
 
-    /// Writes the row of a solved step; `counts` are its (active, stick, slip) nodes.
+    /// Hands the row of a solved step to the writer thread, which computes its largest
+    /// von Mises stress and writes the row; `counts` are its (active, stick, slip) nodes.
     pub fn solved(&mut self, s: &Solved, counts: [usize; 3]) -> Result<()> {
         let step = &s.step;
-        let forces =
-            (self.reactions).forces(self.disc, self.scene, step.t, [step.w, step.u], step.m)?;
-        let (_, von_mises) = (self.disc).stress(step.w, step.u, step.m, self.scene.mesh.model);
-        let max_von_mises = von_mises.into_iter().fold(0.0, f64::max);
-        self.line.clear();
-        let _ = write!(self.line, "{}", step.n);
-        put_number(&mut self.line, step.t);
-        for v in self.forces(step, &forces) {
-            put_number(&mut self.line, v);
-        }
-        let [active, stick, slip] = counts;
-        let _ = write!(self.line, ",{active},{stick},{slip}");
-        put_number(&mut self.line, max_von_mises);
-        let _ = writeln!(self.line, ",{}", step.report.iterations);
-        // One write a row: a killed run keeps every row it wrote whole.
-        (self.file.write_all(self.line.as_bytes())).map_err(|e| Error::io(&self.path, e))
+        let state = [step.w, step.u];
+        let forces = (self.reactions).forces(&self.disc, self.scene, step.t, state, step.m)?;
+        let columns = self.forces(step, &forces);
+        let (disc, model) = (Arc::clone(&self.disc), self.scene.mesh.model);
+        let (w, u, m) = (step.w.to_vec(), step.u.to_vec(), step.m.map(<[f64]>::to_vec));
+        let (n, t, iterations) = (step.n, step.t, step.report.iterations);
+        self.lines.send(move || {
+            let (_, von_mises) = disc.stress(&w, &u, m.as_deref(), model);
+            let mut line = n.to_string();
+            put_number(&mut line, t);
+            columns.into_iter().for_each(|v| put_number(&mut line, v));
+            let [active, stick, slip] = counts;
+            let _ = write!(line, ",{active},{stick},{slip}");
+            put_number(&mut line, von_mises.into_iter().fold(0.0, f64::max));
+            let _ = writeln!(line, ",{iterations}");
+            Ok(line)
+        })
+    }
+
+    /// Waits until every row handed over is written (before a checkpoint, at the end).
+    pub fn finish(&mut self) -> Result<()> {
+        self.lines.finish()
     }
 
     /// The force (and moment) columns of a row, in the header's order.

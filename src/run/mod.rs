@@ -402,17 +402,20 @@ fn drive(d: Drive) -> Result<Outcome> {
         statistics,
         mut frames,
         checkpoints,
+        mut history,
         progress,
         ..
     } = consumers;
     drop(progress);
     let checkpoint = checkpoints.path();
     // Every checkpoint handed over reaches the disk before the run reports how it ended.
-    // So does every frame handed to the series' writer thread (its errors name the file).
+    // So does every frame handed to the series' writer thread and every history row (their
+    // errors name the file).
     let flushed = checkpoints
         .writer
         .finish()
-        .and_then(|()| frames.series.finish());
+        .and_then(|()| frames.series.finish())
+        .and_then(|()| history.finish());
     let ended = ended.and_then(|end| flushed.map(|()| end));
     let steps_s = steps_start.elapsed().as_secs_f64();
     if let Ok(RunEnd::Completed) = ended {
