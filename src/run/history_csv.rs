@@ -222,7 +222,11 @@ impl<'a> HistoryCsv<'a> {
         let forces = (self.reactions).forces(&self.disc, self.scene, step.t, state, step.m)?;
         let columns = self.forces(step, &forces);
         let (disc, model) = (Arc::clone(&self.disc), self.scene.mesh.model);
-        let (w, u, m) = (step.w.to_vec(), step.u.to_vec(), step.m.map(<[f64]>::to_vec));
+        let (w, u, m) = (
+            step.w.to_vec(),
+            step.u.to_vec(),
+            step.m.map(<[f64]>::to_vec),
+        );
         let (n, t, iterations) = (step.n, step.t, step.report.iterations);
         self.lines.send(move || {
             let (_, von_mises) = disc.stress(&w, &u, m.as_deref(), model);

@@ -43,6 +43,19 @@ fn balanced(dir: &Path, scene: &Path, set: &[&str], what: &str) -> History {
     h
 }
 
+/// [`balanced`] with `steps` steps in the paper's scheme and in the implicit variant.
+fn in_both_schemes(dir: &Path, scene: &Path, steps: usize) -> Vec<(&'static str, History)> {
+    let runs = ["left", "implicit"].map(|scheme| {
+        let set = [
+            format!("time.steps={steps}"),
+            format!("scheme.history={scheme}"),
+        ];
+        let set: Vec<&str> = set.iter().map(String::as_str).collect();
+        (scheme, balanced(dir, scene, &set, scheme))
+    });
+    runs.into()
+}
+
 /// Whether some step has a nonzero value in column `name`.
 fn acts(h: &History, name: &str) -> bool {
     h.column(name).iter().any(|&v| v != 0.0)
@@ -52,13 +65,7 @@ fn acts(h: &History, name: &str) -> bool {
 fn the_paper_s_forces_balance_at_every_step_in_both_schemes() {
     let dir = tempfile::tempdir().unwrap();
     let scene = paper_scene(dir.path(), "p.toml", "paper/rect_016.msh", false);
-    for scheme in ["left", "implicit"] {
-        let set = [
-            "time.steps=16".to_string(),
-            format!("scheme.history={scheme}"),
-        ];
-        let set: Vec<&str> = set.iter().map(String::as_str).collect();
-        let h = balanced(dir.path(), &scene, &set, scheme);
+    for (scheme, h) in in_both_schemes(dir.path(), &scene, 16) {
         for column in ["reaction_Γ1_x", "load_top_y", "load_right_x", "contact_y"] {
             assert!(acts(&h, column), "{scheme}: {column} is zero throughout");
         }
@@ -125,13 +132,7 @@ fn forces_balance_with_prescribed_displacements() {
         .dirichlet("Γ1", &["x", "y"], Some(&g))
         .dirichlet("Γ2", &["x", "y"], Some(&g))
         .write(dir.path(), "prescribed.toml");
-    for scheme in ["left", "implicit"] {
-        let set = [
-            "time.steps=6".to_string(),
-            format!("scheme.history={scheme}"),
-        ];
-        let set: Vec<&str> = set.iter().map(String::as_str).collect();
-        let h = balanced(dir.path(), &scene, &set, scheme);
+    for (_, h) in in_both_schemes(dir.path(), &scene, 6) {
         assert!(acts(&h, "reaction_Γ1_x") && acts(&h, "reaction_Γ2_y"));
         assert!(acts(&h, "body_y"));
     }
