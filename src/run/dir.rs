@@ -272,7 +272,7 @@ pub fn completed(dir: &Path, run_id: &str) -> bool {
 
 /// Refuses to resume run `run_id` (of `checkpoint`) into `dir` when `dir` holds another run:
 /// a summary.json or a checkpoint.h5 of another run id, or, in a directory that is not the
-/// checkpoint's own, frames whose run no file identifies.
+/// checkpoint's own, frames or a history.csv whose run no file identifies.
 pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()> {
     let refuse = |what: String| {
         Err(Error::input(format!(
@@ -306,11 +306,12 @@ pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()>
             Err(e) => return refuse(format!("a checkpoint.h5 that cannot be read: {e}")),
         }
     }
-    let frames = entries(dir, run_file);
-    if !identified && !frames.is_empty() {
+    // Frames, or a history.csv alone (named last: the series says more).
+    let files = entries(dir, run_file);
+    let named = (files.iter().find(|n| *n != "history.csv")).or(files.first());
+    if let Some(name) = named.filter(|_| !identified) {
         return refuse(format!(
-            "'{}' and no summary.json or checkpoint.h5 naming its run",
-            frames[0]
+            "'{name}' and no summary.json or checkpoint.h5 naming its run"
         ));
     }
     Ok(())
