@@ -372,7 +372,7 @@ mod tests {
         let path = dir.path().join(FILE_NAME);
         let header = "step,t\n";
         std::fs::write(&path, "step,t\n0,0\n1,0.5\n2,1\n3,1.").unwrap();
-        assert_eq!(kept_bytes(&path, header, 2), Some(16));
+        assert_eq!(kept_bytes(&path, header, 2), Some(17));
         assert_eq!(kept_bytes(&path, header, 0), Some(7));
         assert_eq!(kept_bytes(&path, header, 4), None, "a half row is no row");
         assert_eq!(kept_bytes(&path, "step,t,x\n", 1), None);
