@@ -21,6 +21,7 @@ use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
 use crate::time_loop::{Observer, Solved, Step, TimeLoop};
 use crate::Result;
+use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -30,7 +31,7 @@ pub(super) struct Consumers<'a> {
     pub statistics: Statistics,
     pub frames: Frames<'a>,
     pub checkpoints: Checkpoints,
-    pub history: HistoryCsv<'a>,
+    pub history: HistoryCsv,
     pub progress: Progress,
     pub stop: StopRule,
 }
@@ -51,11 +52,11 @@ impl Observer for Consumers<'_> {
         // The step's contact/stick flags, which three of the consumers use.
         let flags = state_flags(&s.step);
         self.statistics.solved(s, &flags);
-        self.frames.solved(s, &flags)?;
+        let von_mises = self.frames.solved(s, &flags)?;
         let rows = s.step.rows;
         let (active, stick) = state_counts(rows, &flags);
         let slip = rows.n_friction_nodes() - stick;
-        self.history.solved(s, [active, stick, slip])?;
+        self.history.solved(s, [active, stick, slip], von_mises)?;
         self.checkpoints.solved(s, flags);
         self.progress.solved(s);
         Ok(())
@@ -126,19 +127,15 @@ pub(super) struct Frames<'a> {
 }
 
 impl Frames<'_> {
-    fn solved(&mut self, s: &Solved, flags: &[bool]) -> Result<()> {
-        if s.step.n.is_multiple_of(self.scene.output.every) || s.last {
-            let (disc, rows) = (&self.disc, &self.rows);
-            write_step(
-                &mut self.series,
-                disc,
-                self.scene.mesh.model,
-                rows,
-                &s.step,
-                flags,
-            )?;
+    /// Writes the step's frame if one is due; the receiver of its largest von Mises stress
+    /// when the frame has that field (`write_step`).
+    fn solved(&mut self, s: &Solved, flags: &[bool]) -> Result<Option<Receiver<f64>>> {
+        if !(s.step.n.is_multiple_of(self.scene.output.every) || s.last) {
+            return Ok(None);
         }
-        Ok(())
+        let (disc, rows) = (&self.disc, &self.rows);
+        let model = self.scene.mesh.model;
+        write_step(&mut self.series, disc, model, rows, &s.step, flags)
     }
 }
 

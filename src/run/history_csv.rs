@@ -21,18 +21,21 @@
 //! exact bits; a resumed run keeps the rows before its checkpoint's step and writes the
 //! others again: its file equals the uninterrupted run's byte for byte.
 
+use super::frame::max_von_mises;
 use crate::fem::loads::Source;
 use crate::fem::reactions::{Reactions, StepForces};
 use crate::fem::Discretization;
 use crate::mesh::{cross, Mesh};
 use crate::output::Lines;
 use crate::scene::{self, Scene};
+use crate::solver::Rows;
 use crate::time_loop::{Solved, TimeLoop};
 use crate::{Error, Result};
 use std::fmt::Write as _;
 use std::fs::{File, OpenOptions};
 use std::io::Write as _;
 use std::path::Path;
+use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 
 /// The file's name in the run directory.
@@ -147,25 +150,42 @@ fn column_groups<'a>(names: impl Iterator<Item = &'a str>) -> (Vec<String>, Vec<
     (columns, of)
 }
 
-/// The history file of a run and what its rows are computed with. The forces of a step
-/// are computed as it is solved; its largest von Mises stress (a pass over the cells, the
-/// costly part of a row) and the writing on the thread of `output::Lines`.
-pub(super) struct HistoryCsv<'a> {
+/// The history file of a run. A solved step's row is made on the thread of
+/// `output::Lines` from a copy of the step's state: its forces, and its largest von Mises
+/// stress, which the step's frame hands over when it has that field (else the row computes
+/// the stress); the time loop only copies w_n, u_n, m_n and z_n.
+pub(super) struct HistoryCsv {
     lines: Lines,
-    layout: Layout,
-    reactions: Reactions,
-    /// Shared with the writer thread.
-    disc: Arc<Discretization>,
-    scene: &'a Scene,
+    rows: Arc<RowMaker>,
 }
 
-impl<'a> HistoryCsv<'a> {
+/// What a row is made of besides the step's state, shared with the writer thread.
+struct RowMaker {
+    layout: Layout,
+    reactions: Reactions,
+    disc: Arc<Discretization>,
+    scene: Arc<Scene>,
+    rows: Rows,
+}
+
+/// A solved step as its row needs it: copies of its state and multipliers.
+struct StepCopy {
+    n: usize,
+    t: f64,
+    w: Vec<f64>,
+    u: Vec<f64>,
+    m: Option<Vec<f64>>,
+    z: Vec<f64>,
+    iterations: usize,
+}
+
+impl HistoryCsv {
     /// `DIR/history.csv` of a new run (from step 0), or of a run resumed at step `from`:
     /// the rows of steps before `from` are kept, those after cut off (a run killed after its
     /// last checkpoint wrote them); a file that lacks them is started again with a warning.
     pub fn open(
         out: &Path,
-        scene: &'a Scene,
+        scene: &Arc<Scene>,
         mesh: &Mesh,
         disc: &Arc<Discretization>,
         tl: &TimeLoop,
@@ -205,49 +225,77 @@ impl<'a> HistoryCsv<'a> {
                 file
             }
         };
-        Ok(HistoryCsv {
-            lines: Lines::new(file, path),
+        let rows = RowMaker {
             layout,
             reactions,
             disc: Arc::clone(disc),
-            scene,
+            scene: Arc::clone(scene),
+            rows: tl.rows().clone(),
+        };
+        Ok(HistoryCsv {
+            lines: Lines::new(file, path),
+            rows: Arc::new(rows),
         })
     }
 
-    /// Hands the row of a solved step to the writer thread, which computes its largest
-    /// von Mises stress and writes the row; `counts` are its (active, stick, slip) nodes.
-    pub fn solved(&mut self, s: &Solved, counts: [usize; 3]) -> Result<()> {
+    /// Hands the row of a solved step to the writer thread; `counts` are its (active,
+    /// stick, slip) nodes, `frame_von_mises` the receiver of its frame's largest von Mises
+    /// stress, if the frame has it.
+    pub fn solved(
+        &mut self,
+        s: &Solved,
+        counts: [usize; 3],
+        frame_von_mises: Option<Receiver<f64>>,
+    ) -> Result<()> {
         let step = &s.step;
-        let state = [step.w, step.u];
-        let forces = (self.reactions).forces(&self.disc, self.scene, step.t, state, step.m)?;
-        let columns = self.forces(step, &forces);
-        let (disc, model) = (Arc::clone(&self.disc), self.scene.mesh.model);
-        let (w, u, m) = (
-            step.w.to_vec(),
-            step.u.to_vec(),
-            step.m.map(<[f64]>::to_vec),
-        );
-        let (n, t, iterations) = (step.n, step.t, step.report.iterations);
-        self.lines.send(move || {
-            let (_, von_mises) = disc.stress(&w, &u, m.as_deref(), model);
-            let mut line = n.to_string();
-            put_number(&mut line, t);
-            columns.into_iter().for_each(|v| put_number(&mut line, v));
-            let [active, stick, slip] = counts;
-            let _ = write!(line, ",{active},{stick},{slip}");
-            put_number(&mut line, von_mises.into_iter().fold(0.0, f64::max));
-            let _ = writeln!(line, ",{iterations}");
-            Ok(line)
-        })
+        let copy = StepCopy {
+            n: step.n,
+            t: step.t,
+            w: step.w.to_vec(),
+            u: step.u.to_vec(),
+            m: step.m.map(<[f64]>::to_vec),
+            z: step.z.to_vec(),
+            iterations: step.report.iterations,
+        };
+        let rows = Arc::clone(&self.rows);
+        (self.lines).send(move || rows.row(&copy, counts, frame_von_mises))
     }
 
     /// Waits until every row handed over is written (before a checkpoint, at the end).
     pub fn finish(&mut self) -> Result<()> {
         self.lines.finish()
     }
+}
 
-    /// The force (and moment) columns of a row, in the header's order.
-    fn forces(&self, step: &crate::time_loop::Step, f: &StepForces) -> Vec<f64> {
+impl RowMaker {
+    /// The row of a step, its line ended.
+    fn row(
+        &self,
+        s: &StepCopy,
+        counts: [usize; 3],
+        frame: Option<Receiver<f64>>,
+    ) -> Result<String> {
+        let (disc, scene) = (&self.disc, &self.scene);
+        let forces = (self.reactions).forces(disc, scene, s.t, [&s.w, &s.u], s.m.as_deref())?;
+        let von_mises = (frame.and_then(|rx| rx.recv().ok())).unwrap_or_else(|| {
+            let (_, cells) = disc.stress(&s.w, &s.u, s.m.as_deref(), scene.mesh.model);
+            max_von_mises(&cells)
+        });
+        let mut line = s.n.to_string();
+        put_number(&mut line, s.t);
+        for v in self.forces(&s.z, &forces) {
+            put_number(&mut line, v);
+        }
+        let [active, stick, slip] = counts;
+        let _ = write!(line, ",{active},{stick},{slip}");
+        put_number(&mut line, von_mises);
+        let _ = writeln!(line, ",{}", s.iterations);
+        Ok(line)
+    }
+
+    /// The force (and moment) columns of a row, in the header's order; `z` the step's
+    /// multipliers.
+    fn forces(&self, z: &[f64], f: &StepForces) -> Vec<f64> {
         let (layout, d) = (&self.layout, self.layout.dim);
         let mut reaction = vec![[0.0; 3]; layout.conditions.len()];
         let mut moment = vec![[0.0; 3]; layout.conditions.len()];
@@ -270,7 +318,7 @@ impl<'a> HistoryCsv<'a> {
             };
             (0..3).for_each(|c| sum[c] += load[c]);
         }
-        let (contact, friction) = self.multiplier_forces(step);
+        let (contact, friction) = self.multiplier_forces(z);
         let mut columns = Vec::new();
         let mut put = |v: &[f64; 3]| columns.extend_from_slice(&v[..d]);
         reaction.iter().for_each(&mut put);
@@ -287,10 +335,10 @@ impl<'a> HistoryCsv<'a> {
     }
 
     /// −Σ λ_i n_i over Γ3,1 and −Σ g_F − Σ γ_i τ_i over Γ3,2.
-    fn multiplier_forces(&self, step: &crate::time_loop::Step) -> ([f64; 3], [f64; 3]) {
-        let rows = step.rows;
+    fn multiplier_forces(&self, z: &[f64]) -> ([f64; 3], [f64; 3]) {
+        let rows = &self.rows;
         let (mut contact, mut friction) = ([0.0; 3], self.reactions.normal_stress);
-        for (i, (row, z)) in rows.rows.iter().zip(step.z).enumerate() {
+        for (i, (row, z)) in rows.rows.iter().zip(z).enumerate() {
             let sum = match i < rows.n_contact {
                 true => &mut contact,
                 false => &mut friction,

@@ -141,7 +141,8 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     // A signal between two stages ends setup with the directory as it was.
     let stage = || opts.interrupt.between_setup_stages();
-    let scene = load_scene(scene_path, &opts.overrides)?;
+    // Shared with the writer thread of history.csv.
+    let scene = Arc::new(load_scene(scene_path, &opts.overrides)?);
     let out = match &opts.out {
         Some(out) => out.clone(),
         None => default_out(&scene)?,
@@ -205,7 +206,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let stage = || opts.interrupt.between_setup_stages();
     // What is wrong with the checkpoint itself is said first, then the directory.
     let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
-    let scene = cp.scene(&opts.overrides)?;
+    let scene = Arc::new(cp.scene(&opts.overrides)?);
     stage()?;
     let mesh = read_mesh(&scene).map_err(|e| {
         Error::input(format!(
@@ -356,7 +357,7 @@ struct Drive<'a> {
     disc: &'a Arc<Discretization>,
     tl: TimeLoop<'a>,
     series: Series,
-    history: HistoryCsv<'a>,
+    history: HistoryCsv,
     writer: checkpoint::Writer,
     log: RunLog,
     run_id: String,
