@@ -1,5 +1,7 @@
 //! `DIR/history.csv`: the forces on the body at every solved step, one row per step
-//! n = 0, …, N, written and flushed as the step is solved (docs/output.md).
+//! n = 0, …, N, made from a copy of the step on a writer thread (`output::Lines`) and
+//! written with one `write` each; a checkpoint of step n + 1 waits until the rows up to
+//! step n are written (docs/output.md).
 //!
 //! A row describes the equilibrium of step n: t_n, the state (u_n, w_n, m_n) and the
 //! multipliers z_n of the step problem (3.1) solved at t_n. Each force is the force on the
