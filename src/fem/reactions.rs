@@ -75,56 +75,12 @@ impl Reactions {
         k_b: f64,
         k_r: f64,
     ) -> Result<Self> {
-        let d = disc.dim;
         let mut row_of = vec![None; disc.free.len()];
         for (i, &(dof, _)) in disc.held.iter().enumerate() {
             row_of[dof] = Some(i as u32);
         }
-        let b = disc.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
-        let mut entries: Vec<(u32, usize, [f64; 3])> = Vec::new();
-        for t in &disc.cells {
-            let nodes = t.vertices();
-            for (i, &q) in nodes.iter().enumerate() {
-                for al in 0..d {
-                    let Some(row) = row_of[d * q + al] else {
-                        continue;
-                    };
-                    for (j, &p) in nodes.iter().enumerate() {
-                        for be in 0..d {
-                            if let Some(col) = disc.free[d * p + be] {
-                                let parts = t.parts(i, j, al, be);
-                                let (ka, kb, kr) = (
-                                    t.entry(disc.a, parts),
-                                    t.entry(b, parts),
-                                    t.entry(disc.r, parts),
-                                );
-                                entries.push((row, col, [ka + k_b * kb + k_r * kr, kb, kr]));
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        // Stable: the entries of one position are added in the cells' order.
-        entries.sort_by_key(|&(row, col, _)| (row, col));
-        let mut ptr = vec![0; disc.held.len() + 1];
-        let (mut cols, mut values): (Vec<usize>, Vec<[f64; 3]>) = (Vec::new(), Vec::new());
-        let mut last = None;
-        for (row, col, v) in entries {
-            if last == Some((row, col)) {
-                let sum = values.last_mut().expect("an entry was pushed");
-                (0..3).for_each(|c| sum[c] += v[c]);
-            } else {
-                cols.push(col);
-                values.push(v);
-                ptr[row as usize + 1] = cols.len();
-                last = Some((row, col));
-            }
-        }
-        // Rows without entries end where the row before them ends.
-        for i in 1..ptr.len() {
-            ptr[i] = ptr[i].max(ptr[i - 1]);
-        }
+        let (ptr, cols, values) = held_rows(disc, &row_of, k_b, k_r);
+        let d = disc.dim;
         let g_f_all = normal_stress_load(mesh, scene)?;
         let mut normal_stress = [0.0; 3];
         for (g, v) in g_f_all.iter().enumerate() {
@@ -175,6 +131,57 @@ impl Reactions {
         })?;
         Ok(StepForces { reactions, loads })
     }
+}
+
+/// The rows `row_of` numbers (held dofs) of M = K_A + `k_b` K_B + `k_r` K_R, K_B and K_R
+/// over the dofs with an index, compressed: (row starts, columns, the three values).
+fn held_rows(
+    disc: &Discretization,
+    row_of: &[Option<u32>],
+    k_b: f64,
+    k_r: f64,
+) -> (Vec<usize>, Vec<usize>, Vec<[f64; 3]>) {
+    let d = disc.dim;
+    let b = disc.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
+    let mut entries: Vec<(u32, usize, [f64; 3])> = Vec::new();
+    for t in &disc.cells {
+        let nodes = t.vertices();
+        for (i, &q) in nodes.iter().enumerate() {
+            for al in 0..d {
+                let Some(row) = row_of[d * q + al] else {
+                    continue;
+                };
+                for (j, &p) in nodes.iter().enumerate() {
+                    for (be, col) in (0..d).filter_map(|be| Some((be, disc.free[d * p + be]?))) {
+                        let parts = t.parts(i, j, al, be);
+                        let [ka, kb, kr] = [disc.a, b, disc.r].map(|c| t.entry(c, parts));
+                        entries.push((row, col, [ka + k_b * kb + k_r * kr, kb, kr]));
+                    }
+                }
+            }
+        }
+    }
+    // Stable: the entries of one position are added in the cells' order.
+    entries.sort_by_key(|&(row, col, _)| (row, col));
+    let mut ptr = vec![0; disc.held.len() + 1];
+    let (mut cols, mut values): (Vec<usize>, Vec<[f64; 3]>) = (Vec::new(), Vec::new());
+    let mut last = None;
+    for (row, col, v) in entries {
+        match values.last_mut() {
+            Some(sum) if last == Some((row, col)) => (0..3).for_each(|c| sum[c] += v[c]),
+            _ => {
+                cols.push(col);
+                values.push(v);
+                ptr[row as usize + 1] = cols.len();
+                last = Some((row, col));
+            }
+        }
+    }
+    // Rows without entries end where the row before them ends.
+    for i in 1..ptr.len() {
+        ptr[i] = ptr[i].max(ptr[i - 1]);
+    }
+    (ptr, cols, values)
 }
 
 /// g_F = ∫_{Γ3,2} F φ ν da on every global dof d·node + c (empty without friction).

@@ -204,29 +204,7 @@ impl HistoryCsv {
         let layout = Layout::new(scene, disc);
         let header = layout.columns().join(",") + "\n";
         let path = out.join(FILE_NAME);
-        let io = |e| Error::io(&path, e);
-        let kept = from.and_then(|n| kept_bytes(&path, &header, n));
-        let file = match kept {
-            Some(len) => {
-                let mut file = OpenOptions::new().write(true).open(&path).map_err(io)?;
-                file.set_len(len).map_err(io)?;
-                std::io::Seek::seek(&mut file, std::io::SeekFrom::End(0)).map_err(io)?;
-                file
-            }
-            None => {
-                if let Some(n) = from.filter(|&n| n > 0) {
-                    crate::errln!(
-                        "warning: {} does not hold the rows of steps 0 to {} of this run; it \
-                         starts again at step {n}",
-                        path.display(),
-                        n - 1
-                    );
-                }
-                let mut file = File::create(&path).map_err(io)?;
-                file.write_all(header.as_bytes()).map_err(io)?;
-                file
-            }
-        };
+        let file = open_file(&path, &header, from)?;
         let rows = RowMaker {
             layout,
             reactions,
@@ -349,6 +327,30 @@ impl RowMaker {
         }
         (contact, friction)
     }
+}
+
+/// `path` ready for the rows of a run from step 0 (`from` None: the header alone), or of a
+/// run resumed at step n: its header and rows of steps < n kept (`kept_bytes`), else
+/// started again with a warning.
+fn open_file(path: &Path, header: &str, from: Option<usize>) -> Result<File> {
+    let io = |e| Error::io(path, e);
+    if let Some(len) = from.and_then(|n| kept_bytes(path, header, n)) {
+        let mut file = OpenOptions::new().write(true).open(path).map_err(io)?;
+        file.set_len(len).map_err(io)?;
+        std::io::Seek::seek(&mut file, std::io::SeekFrom::End(0)).map_err(io)?;
+        return Ok(file);
+    }
+    if let Some(n) = from.filter(|&n| n > 0) {
+        crate::errln!(
+            "warning: {} does not hold the rows of steps 0 to {} of this run; it starts \
+             again at step {n}",
+            path.display(),
+            n - 1
+        );
+    }
+    let mut file = File::create(path).map_err(io)?;
+    file.write_all(header.as_bytes()).map_err(io)?;
+    Ok(file)
 }
 
 /// `,v` with v as the shortest text that reads back as the same f64: plain for 0 and
