@@ -172,6 +172,11 @@ fn the_history_is_drawn_and_an_unknown_column_refused() {
     ] {
         assert!(text.contains(needle), "{needle:?} not in {text}");
     }
+    let no_history = tmp.path().join("empty");
+    std::fs::create_dir(&no_history).unwrap();
+    let (code, text) = cli(&["plot", no_history.to_str().unwrap(), "--history"]);
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("history.csv does not exist"), "{text}");
     let (code, text) = cli(&["check", scene.to_str().unwrap()]);
     assert_eq!(code, 0, "{text}");
     assert!(
