@@ -93,6 +93,13 @@ enum Command {
         /// Width of the figure in pixels.
         #[arg(long, default_value_t = 1400, value_parser = clap::value_parser!(u32).range(600..=10000))]
         width: u32,
+        /// Draw columns of DIR/history.csv against t instead of the body (default: the
+        /// force columns; default output <run>_history.png).
+        #[arg(long, conflicts_with_all = ["time", "scale", "view"])]
+        history: bool,
+        /// With --history: the columns to draw, e.g. reaction_Gamma1_y,load_Gamma2_y.
+        #[arg(long, value_delimiter = ',', requires = "history")]
+        columns: Option<Vec<String>>,
     },
 }
 
@@ -218,12 +225,20 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
         Command::StudyCase(args) => study_case(args).map(|()| None),
         Command::Plot {
             dir,
+            history: true,
+            columns,
+            output,
+            ..
+        } => plot_history(&dir, columns.as_deref(), output.as_deref()).map(|()| None),
+        Command::Plot {
+            dir,
             time,
             field,
             scale,
             output,
             view,
             width,
+            ..
         } => plot(
             &dir,
             &viscontact::plot::PlotOptions {
@@ -255,6 +270,22 @@ fn plot(dir: &std::path::Path, options: &viscontact::plot::PlotOptions) -> Resul
         i.range.0,
         i.range.1,
         view.unwrap_or_default()
+    );
+    Ok(())
+}
+
+/// Draws the history chart and says what it shows.
+fn plot_history(
+    dir: &std::path::Path,
+    columns: Option<&[String]>,
+    output: Option<&std::path::Path>,
+) -> Result<()> {
+    let p = viscontact::plot::plot_history(dir, columns, output)?;
+    viscontact::outln!(
+        "wrote {} ({} over {} steps)",
+        p.output.display(),
+        p.columns.join(", "),
+        p.rows
     );
     Ok(())
 }
@@ -382,6 +413,13 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         )
     };
     viscontact::outln!("solver     {solver}");
+    let columns = viscontact::run::history_columns(scene, disc);
+    viscontact::outln!(
+        "history    {} columns of {}: {}",
+        columns.len(),
+        viscontact::run::HISTORY_FILE,
+        columns.join(",")
+    );
 }
 
 /// `check`'s stability line: the explicit scheme's step limit, or why there is none.

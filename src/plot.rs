@@ -1,6 +1,6 @@
 //! PNG figures (plotters, bitmap backend): the `plot` command — the deformed body of a run
-//! coloured by a field, the paper's Fig. 3 for any run — and (`chart`) the log-log charts
-//! of a study.
+//! coloured by a field, the paper's Fig. 3 for any run — (`chart`) the log-log charts
+//! of a study, and (`history_chart`) a run's forces against t (`plot --history`).
 //!
 //! Text is drawn with DejaVu Sans embedded in the binary (crate `dejavu`, rendered by
 //! ab_glyph), so a figure needs no system font and no fontconfig.
@@ -14,9 +14,11 @@ use std::path::{Path, PathBuf};
 
 mod body3d;
 mod chart;
+mod history_chart;
 mod surface;
 
 pub use chart::{log_log_chart, Curve};
+pub use history_chart::{plot_history, HistoryPlot};
 
 /// The font family every text of a figure uses.
 const FONT: &str = "sans-serif";
@@ -704,13 +706,17 @@ pub fn plot_run(dir: &Path, opts: &PlotOptions) -> Result<PlotInfo> {
 /// refuse a directory holding files a run did not write (issue 49: a figure written there
 /// stopped the run from being resumed). The run's name keeps the figures of two runs apart.
 fn default_output(run_dir: &Path, field: &str, time: f64) -> PathBuf {
-    let run = run_dir
+    let time = format!("{time}").replace('.', "_");
+    PathBuf::from(format!("{}_{field}_t{time}.png", run_name(run_dir)))
+}
+
+/// The name of a run's directory ("run" when it has none), for default figure names.
+fn run_name(run_dir: &Path) -> String {
+    run_dir
         .canonicalize()
         .ok()
         .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .unwrap_or_else(|| "run".into());
-    let time = format!("{time}").replace('.', "_");
-    PathBuf::from(format!("{run}_{field}_t{time}.png"))
+        .unwrap_or_else(|| "run".into())
 }
 
 /// A 2D run's body: the frame, its triangles, their deformed positions.

@@ -65,6 +65,10 @@ pub struct Numbering {
     pub prescribed: Vec<Prescribed>,
     /// Per node, which components carry a condition (bit c for component c).
     pub held: Vec<u8>,
+    /// Every held global dof (at zero or prescribed), increasing, with the condition that
+    /// holds it: the first to name it, the clamped groups in order, then the `[[dirichlet]]`
+    /// entries (the reactions of `fem::reactions` are reported per condition group).
+    pub held_by: Vec<(usize, Source)>,
 }
 
 /// What holds a dof while the numbering is built: the source (fixed group i, or
@@ -75,8 +79,10 @@ struct Hold {
     value: Option<(usize, f64)>,
 }
 
-#[derive(Clone, Copy, PartialEq)]
-enum Source {
+/// A Dirichlet condition of the scene: clamped group `mesh.groups.fixed[i]` or
+/// `[[dirichlet]]` entry i.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Source {
     Fixed(usize),
     Dirichlet(usize),
 }
@@ -95,6 +101,14 @@ impl Hold {
 }
 
 impl Source {
+    /// The group it holds, as the scene names it.
+    pub fn group(self, scene: &Scene) -> &str {
+        match self {
+            Source::Fixed(i) => &scene.mesh.groups.fixed[i],
+            Source::Dirichlet(i) => &scene.physics.dirichlet[i].on,
+        }
+    }
+
     fn describe(self, scene: &Scene) -> String {
         match self {
             Source::Fixed(i) => format!(
@@ -145,6 +159,7 @@ impl Numbering {
     fn of(holds: &[Option<Hold>], d: usize) -> Numbering {
         let mut free = vec![None; holds.len()];
         let mut held = vec![0u8; holds.len() / d];
+        let mut held_by = Vec::new();
         let mut n_free = 0;
         for (g, h) in holds.iter().enumerate() {
             match h {
@@ -152,7 +167,10 @@ impl Numbering {
                     free[g] = Some(n_free);
                     n_free += 1;
                 }
-                Some(_) => held[g / d] |= 1 << (g % d),
+                Some(hold) => {
+                    held[g / d] |= 1 << (g % d);
+                    held_by.push((g, hold.source));
+                }
             }
         }
         let mut prescribed = Vec::new();
@@ -179,6 +197,7 @@ impl Numbering {
             n_dofs: n_free + prescribed.len(),
             prescribed,
             held,
+            held_by,
         }
     }
 

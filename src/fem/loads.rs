@@ -22,7 +22,8 @@ struct Qp {
 }
 
 /// A traction (index into `Scene::tractions`) or a body force (into `Scene::body_forces`).
-enum Source {
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Source {
     Traction(usize),
     Body(usize),
 }
@@ -63,6 +64,11 @@ impl Loads {
         self.loads.is_empty()
     }
 
+    /// The loads in the order [`Loads::visit`] numbers them.
+    pub fn sources(&self) -> impl Iterator<Item = Source> + '_ {
+        self.loads.iter().map(|l| l.source)
+    }
+
     /// Adds ⟨f(t), φ_d⟩ for every free dof d to `rhs`. A value that is not finite stops the
     /// run with the key, the time and the place (bad input at t = 0, a failed run later).
     pub fn add(
@@ -72,7 +78,25 @@ impl Loads {
         scene: &Scene,
         rhs: &mut [f64],
     ) -> Result<()> {
-        for load in &self.loads {
+        self.visit(t, scene, |_, dof, v| {
+            if let Some(d) = free[dof] {
+                rhs[d] += v;
+            }
+        })
+    }
+
+    /// Hands every term of ⟨f(t), φ⟩ to `put(load, global dof, value)`: the weight times φ
+    /// times the load's component at a quadrature point, load i the i-th of
+    /// [`Loads::sources`]. Their sum over the dofs of a component is the load's resultant
+    /// (Σ φ = 1); `add` sums them into the free dofs. A value that is not finite stops the
+    /// run as `add` says.
+    pub fn visit(
+        &self,
+        t: f64,
+        scene: &Scene,
+        mut put: impl FnMut(usize, usize, f64),
+    ) -> Result<()> {
+        for (l, load) in self.loads.iter().enumerate() {
             let value: &[Scalar] = match load.source {
                 Source::Traction(i) => &scene.physics.tractions[i].value,
                 Source::Body(i) => &scene.physics.body_forces[i],
@@ -110,11 +134,8 @@ impl Loads {
                         });
                     }
                     for (n, ph) in q.nodes.iter().zip(q.phi) {
-                        if ph == 0.0 {
-                            continue;
-                        }
-                        if let Some(d) = free[self.dim * n + c] {
-                            rhs[d] += q.weight * ph * val;
+                        if ph != 0.0 {
+                            put(l, self.dim * n + c, q.weight * ph * val);
                         }
                     }
                 }

@@ -8,6 +8,7 @@ pub mod constraints;
 pub mod element;
 pub mod loads;
 mod pair;
+pub mod reactions;
 
 use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
@@ -95,6 +96,9 @@ pub struct Discretization {
     pub n_dofs: usize,
     /// The prescribed dofs (`[[dirichlet]]` values not identically zero), in index order.
     pub prescribed: Vec<Prescribed>,
+    /// Every held global dof (clamped, held at zero or prescribed), increasing, with the
+    /// condition that holds it (`Numbering::held_by`).
+    pub held: Vec<(usize, constraints::Source)>,
     /// A (4.1), B (4.2) (None when E = 0 or disabled), R's constant part I.
     pub a: Isotropic,
     pub b: Option<Isotropic>,
@@ -308,7 +312,7 @@ fn friction_rows(
         )?;
         check_overlap(mesh, scene, c, g)?;
     }
-    let (gf, c) = friction_integrals(mesh, scene, fr, g, rows, n_dofs)?;
+    let (gf, c) = friction_integrals(mesh, scene, fr, g, &rows.numbering.free, n_dofs)?;
     let g_f = if gf.iter().any(|&v| v != 0.0) {
         gf
     } else {
@@ -351,17 +355,17 @@ fn friction_rows(
     Ok((g_f, friction, k))
 }
 
-/// By facet quadrature over the friction group `g`: g_F_i = ∫ F φ_i ν da (n_dofs)
-/// and c_i = ∫ μF φ_i da per node.
+/// By facet quadrature over the friction group `g`: g_F_i = ∫ F φ_i ν da (`n_dofs`
+/// entries, i = `free`[global dof]) and c_i = ∫ μF φ_i da per node.
 fn friction_integrals(
     mesh: &Mesh,
     scene: &Scene,
     fr: &Friction,
     g: &Group,
-    rows: &RowMaker,
+    free: &[Option<usize>],
     n_dofs: usize,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    let (d, free) = (rows.dim, &rows.numbering.free);
+    let d = mesh.dim;
     let mut gf = vec![0.0; n_dofs];
     let mut c = vec![0.0; mesh.nodes.len()];
     for f in mesh.boundary_facets(g) {
@@ -433,6 +437,7 @@ impl Discretization {
             n_free,
             n_dofs,
             prescribed: numbering.prescribed.clone(),
+            held: numbering.held_by,
             free: numbering.free,
             k_a_all,
             a,

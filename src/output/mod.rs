@@ -13,6 +13,9 @@
 //!   mesh once, each frame's fields appended, the times in `Steps/Values`; layout and crash
 //!   behaviour in `vtkhdf.rs`), flushed after every frame.
 //!
+//! Besides the series, [`Lines`] (`lines.rs`) grows a text file by lines made on the same
+//! kind of thread (the run's `history.csv`).
+//!
 //! [`Series`] owns either: [`Series::create`] takes the mesh once; the checks of a frame, the
 //! choice of fields and precision and the writer thread are shared, only the sink differs.
 //!
@@ -37,6 +40,7 @@
 //! `run_id`) and in the `.pvd` (a comment), and [`Series::reopen`] refuses a series of
 //! another run.
 
+mod lines;
 mod pvd;
 pub mod read;
 mod verify;
@@ -52,6 +56,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::{Error, Result};
+pub use lines::Lines;
 pub use verify::{FrameSum, Resumed};
 
 /// Name of the collection file in a run's directory.

@@ -1,10 +1,12 @@
 //! The log–log charts of a study (`study`'s error against h, k and wall time, and the
 //! cost of a kernel's tolerance): data curves with their points marked and labelled,
-//! reference slopes dashed.
+//! reference slopes dashed; and the linear chart of a run's force history
+//! (`plot --history`, `history_chart.rs`).
 
 use super::{draw_err, register_fonts, trim_float, FONT, PALETTE};
 use crate::Result;
 use plotters::coord::combinators::WithKeyPoints;
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use std::path::Path;
@@ -127,10 +129,6 @@ pub fn log_log_chart(
     y_desc: &str,
     curves: &[Curve],
 ) -> Result<()> {
-    register_fonts();
-    let err = draw_err(path);
-    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
-    root.fill(&WHITE).map_err(&err)?;
     let position = legend_position(curves);
     let (x0, x1) = log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.0)));
     let (y0, y1) = with_legend_room(
@@ -138,43 +136,135 @@ pub fn log_log_chart(
         curves.len(),
         matches!(position, SeriesLabelPosition::UpperLeft),
     );
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FONT, 26))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d(
-            (x0..x1).log_scale().with_key_points(log_ticks(x0, x1)),
-            (y0..y1).log_scale().with_key_points(log_ticks(y0, y1)),
-        )
-        .map_err(&err)?;
-    chart
-        .configure_mesh()
-        .x_desc(x_desc)
-        .y_desc(y_desc)
-        .x_labels(8)
-        .y_labels(12)
-        .x_label_formatter(&|v| sci(*v))
-        .y_label_formatter(&|v| sci(*v))
-        .label_style((FONT, 16))
-        .axis_desc_style((FONT, 18))
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(205, 205, 205))
-        .draw()
-        .map_err(&err)?;
-    for c in curves {
-        draw_curve(&mut chart, c, path)?;
+    let axes = (
+        (x0..x1).log_scale().with_key_points(log_ticks(x0, x1)),
+        (y0..y1).log_scale().with_key_points(log_ticks(y0, y1)),
+    );
+    let frame = Frame {
+        path,
+        title,
+        desc: [x_desc, y_desc],
+        position,
+    };
+    frame.draw(axes, |chart| {
+        curves.iter().try_for_each(|c| draw_curve(chart, c, path))
+    })
+}
+
+/// A chart of `curves` on linear axes as a PNG at `path` (1000 × 700): lines without point
+/// markers, for series of many points (`plot --history`).
+pub fn line_chart(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    curves: &[Curve],
+) -> Result<()> {
+    let points = || curves.iter().flat_map(|c| c.points.iter());
+    let (x0, x1) = linear_range(points().map(|p| p.0));
+    let (y0, y1) = linear_range(points().map(|p| p.1));
+    let frame = Frame {
+        path,
+        title,
+        desc: [x_desc, y_desc],
+        position: SeriesLabelPosition::UpperLeft,
+    };
+    frame.draw((x0..x1, y0..y1), |chart| {
+        for c in curves {
+            let color = PALETTE[c.color % PALETTE.len()];
+            let style = color.stroke_width(2);
+            chart
+                .draw_series(LineSeries::new(c.points.clone(), style))
+                .map_err(draw_err(path))?
+                .label(c.label.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+        }
+        Ok(())
+    })
+}
+
+/// What a chart's PNG has around its curves: title, axes' descriptions, the legend's place.
+struct Frame<'a> {
+    path: &'a Path,
+    title: &'a str,
+    desc: [&'a str; 2],
+    position: SeriesLabelPosition,
+}
+
+impl Frame<'_> {
+    /// The chart on the axes `(x, y)`: grid and labels, the curves drawn by `curves`, then
+    /// the legend, written to the PNG.
+    fn draw<X, Y>(
+        self,
+        (x, y): (X, Y),
+        curves: impl for<'c> FnOnce(
+            &mut ChartContext<
+                'c,
+                BitMapBackend<'c>,
+                Cartesian2d<X::CoordDescType, Y::CoordDescType>,
+            >,
+        ) -> Result<()>,
+    ) -> Result<()>
+    where
+        X: AsRangedCoord<Value = f64>,
+        Y: AsRangedCoord<Value = f64>,
+        X::CoordDescType: ValueFormatter<f64>,
+        Y::CoordDescType: ValueFormatter<f64>,
+    {
+        register_fonts();
+        let err = draw_err(self.path);
+        let root = BitMapBackend::new(self.path, (1000, 700)).into_drawing_area();
+        root.fill(&WHITE).map_err(&err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(self.title, (FONT, 26))
+            .margin(20)
+            .x_label_area_size(50)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x, y)
+            .map_err(&err)?;
+        chart
+            .configure_mesh()
+            .x_desc(self.desc[0])
+            .y_desc(self.desc[1])
+            .x_labels(8)
+            .y_labels(12)
+            .x_label_formatter(&|v| sci(*v))
+            .y_label_formatter(&|v| sci(*v))
+            .label_style((FONT, 16))
+            .axis_desc_style((FONT, 18))
+            .light_line_style(RGBColor(235, 235, 235))
+            .bold_line_style(RGBColor(205, 205, 205))
+            .draw()
+            .map_err(&err)?;
+        curves(&mut chart)?;
+        chart
+            .configure_series_labels()
+            .position(self.position)
+            .label_font((FONT, 16))
+            .background_style(WHITE.mix(0.9))
+            .border_style(RGBColor(160, 160, 160))
+            .draw()
+            .map_err(&err)?;
+        root.present().map_err(&err)?;
+        Ok(())
     }
-    chart
-        .configure_series_labels()
-        .position(position)
-        .label_font((FONT, 16))
-        .background_style(WHITE.mix(0.9))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()
-        .map_err(&err)?;
-    root.present().map_err(&err)?;
-    Ok(())
+}
+
+/// `lo..hi` of the finite values, widened by 5 % on each side (±1 around a single value).
+fn linear_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = match hi > lo {
+        true => 0.05 * (hi - lo),
+        false => lo.abs().max(1.0),
+    };
+    (lo - pad, hi + pad)
 }
 
 /// Where a chart's legend goes: where the data are not. Rising data leave the upper left

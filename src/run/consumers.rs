@@ -9,9 +9,11 @@
 //! - [`Checkpoints`]: `checkpoint.h5` at every `checkpoint.every`-th step, once
 //!   `checkpoint.every_seconds` of wall time passed since the last one, before the last step
 //!   and where the run stops;
+//! - [`HistoryCsv`]: `history.csv`, the forces on the body at every step (`history_csv`);
 //! - [`Progress`]: the progress bar on a terminal, a progress line every 10 s in a log.
 
 use super::frame::write_step;
+use super::history_csv::HistoryCsv;
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::output::Series;
@@ -19,6 +21,7 @@ use crate::scene::Scene;
 use crate::solver::{kkt_residual, Rows};
 use crate::time_loop::{Observer, Solved, Step, TimeLoop};
 use crate::Result;
+use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -28,6 +31,7 @@ pub(super) struct Consumers<'a> {
     pub statistics: Statistics,
     pub frames: Frames<'a>,
     pub checkpoints: Checkpoints,
+    pub history: HistoryCsv,
     pub progress: Progress,
     pub stop: StopRule,
 }
@@ -48,7 +52,11 @@ impl Observer for Consumers<'_> {
         // The step's contact/stick flags, which three of the consumers use.
         let flags = state_flags(&s.step);
         self.statistics.solved(s, &flags);
-        self.frames.solved(s, &flags)?;
+        let von_mises = self.frames.solved(s, &flags)?;
+        let rows = s.step.rows;
+        let (active, stick) = state_counts(rows, &flags);
+        let slip = rows.n_friction_nodes() - stick;
+        self.history.solved(s, [active, stick, slip], von_mises)?;
         self.checkpoints.solved(s, flags);
         self.progress.solved(s);
         Ok(())
@@ -62,12 +70,14 @@ impl Observer for Consumers<'_> {
     }
 
     fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
-        // A checkpoint of step n + 1 may reach the disk only after the frames of steps ≤ n
-        // have: the frame writer runs on its own thread, and a resume keeps the frames
-        // before its step (a kill -9 in between lost a frame for good).
+        // A checkpoint of step n + 1 may reach the disk only after the frames and the
+        // history rows of steps ≤ n have: their writers run on threads of their own, and a
+        // resume keeps the frames and rows before its step (a kill -9 in between lost a
+        // frame for good).
         // The checkpoint records the checksums of those frames (output/verify.rs).
         if self.checkpoints.due.is_some() {
             self.frames.series.finish()?;
+            self.history.finish()?;
         }
         self.checkpoints
             .advanced(tl, &self.statistics.log, &self.frames.series)
@@ -117,19 +127,15 @@ pub(super) struct Frames<'a> {
 }
 
 impl Frames<'_> {
-    fn solved(&mut self, s: &Solved, flags: &[bool]) -> Result<()> {
-        if s.step.n.is_multiple_of(self.scene.output.every) || s.last {
-            let (disc, rows) = (&self.disc, &self.rows);
-            write_step(
-                &mut self.series,
-                disc,
-                self.scene.mesh.model,
-                rows,
-                &s.step,
-                flags,
-            )?;
+    /// Writes the step's frame if one is due; the receiver of its largest von Mises stress
+    /// when the frame has that field (`write_step`).
+    fn solved(&mut self, s: &Solved, flags: &[bool]) -> Result<Option<Receiver<f64>>> {
+        if !(s.step.n.is_multiple_of(self.scene.output.every) || s.last) {
+            return Ok(None);
         }
-        Ok(())
+        let (disc, rows) = (&self.disc, &self.rows);
+        let model = self.scene.mesh.model;
+        write_step(&mut self.series, disc, model, rows, &s.step, flags)
     }
 }
 

@@ -4,7 +4,7 @@
 //!   (`flock`, std's `File::try_lock`) on `DIR/.viscontact.lock`, which the kernel releases
 //!   when the process ends however it ends; a second process is refused (exit 2) with the
 //!   holder's pid, host and start time, which the holder writes into the file.
-//! - Files are ours by name ([`ours`]): the series, summary.json, the checkpoint files, the
+//! - Files are ours by name ([`ours`]): the series, summary.json, history.csv, the checkpoint files, the
 //!   lock file, and the temporary files our writers use (`.NAME.tmp.PID.N` of
 //!   `output::write_atomic`, `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`). Under the
 //!   lock no other process is writing, so temporary files are leftovers of a killed process
@@ -35,6 +35,7 @@ fn run_file(name: &str) -> bool {
             name,
             "solution.pvd"
                 | "solution.vtkhdf"
+                | "history.csv"
                 | "summary.json"
                 | "checkpoint.h5"
                 | "checkpoint_history.h5"
@@ -271,7 +272,7 @@ pub fn completed(dir: &Path, run_id: &str) -> bool {
 
 /// Refuses to resume run `run_id` (of `checkpoint`) into `dir` when `dir` holds another run:
 /// a summary.json or a checkpoint.h5 of another run id, or, in a directory that is not the
-/// checkpoint's own, frames whose run no file identifies.
+/// checkpoint's own, frames or a history.csv whose run no file identifies.
 pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()> {
     let refuse = |what: String| {
         Err(Error::input(format!(
@@ -305,11 +306,12 @@ pub fn check_same_run(dir: &Path, checkpoint: &Path, run_id: &str) -> Result<()>
             Err(e) => return refuse(format!("a checkpoint.h5 that cannot be read: {e}")),
         }
     }
-    let frames = entries(dir, run_file);
-    if !identified && !frames.is_empty() {
+    // Frames, or a history.csv alone (named last: the series says more).
+    let files = entries(dir, run_file);
+    let named = (files.iter().find(|n| *n != "history.csv")).or(files.first());
+    if let Some(name) = named.filter(|_| !identified) {
         return refuse(format!(
-            "'{}' and no summary.json or checkpoint.h5 naming its run",
-            frames[0]
+            "'{name}' and no summary.json or checkpoint.h5 naming its run"
         ));
     }
     Ok(())
@@ -331,7 +333,7 @@ pub fn holds_series(dir: &Path) -> bool {
         run_file(n)
             && !matches!(
                 n,
-                "summary.json" | "checkpoint.h5" | "checkpoint_history.h5"
+                "summary.json" | "history.csv" | "checkpoint.h5" | "checkpoint_history.h5"
             )
     })
     .is_empty()
@@ -365,6 +367,7 @@ mod tests {
             "solution.vtkhdf",
             "solution_000012.vtu",
             "summary.json",
+            "history.csv",
             "checkpoint.h5",
             "checkpoint_history.h5",
             "checkpoint.h5.tmp",

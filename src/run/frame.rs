@@ -3,6 +3,7 @@
 //! series (`output`), which knows files, not the model.
 
 use std::path::Path;
+use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 
 use crate::fem::Discretization;
@@ -52,7 +53,9 @@ pub fn region(mesh: &Mesh) -> Vec<i32> {
 /// contact/friction row block `i` is active (the run's state flags). The time loop only
 /// copies the step's state (w, u, m, z: a few hundred kB at h = 1/128); the fields are
 /// computed on the writer thread, which shares `disc` and `rows`. Fields not chosen are
-/// not computed.
+/// not computed. When the frame has the von Mises stress, its largest value is sent on the
+/// receiver returned, once computed (history.csv's row takes it instead of computing the
+/// stress again); a frame never made drops the sender.
 pub(super) fn write_step(
     series: &mut Series,
     disc: &Arc<Discretization>,
@@ -60,7 +63,7 @@ pub(super) fn write_step(
     rows: &Arc<Rows>,
     step: &Step,
     active: &[bool],
-) -> Result<()> {
+) -> Result<Option<Receiver<f64>>> {
     let (disc, rows) = (Arc::clone(disc), Arc::clone(rows));
     let (w, u, m, z) = (
         step.w.to_vec(),
@@ -70,8 +73,9 @@ pub(super) fn write_step(
     );
     let active = active.to_vec();
     let stress = series.options().wants("stress") || series.options().wants("von_mises");
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
     series.write_with(step.n, step.t, move || {
-        fields(
+        let (points, cells) = fields(
             &disc,
             model,
             &rows,
@@ -79,9 +83,19 @@ pub(super) fn write_step(
             stress,
             [&w, &u, &z],
             m.as_deref(),
-        )
+        );
+        if let Some(vm) = cells.iter().find(|f| f.name == "von_mises") {
+            let _ = tx.send(max_von_mises(&vm.values));
+        }
+        (points, cells)
     })?;
-    Ok(())
+    Ok(stress.then_some(rx))
+}
+
+/// The largest von Mises stress of a step's cells (0 without cells), as history.csv
+/// records it.
+pub(super) fn max_von_mises(von_mises: &[f64]) -> f64 {
+    von_mises.iter().copied().fold(0.0, f64::max)
 }
 
 /// The fields of a step's frame (docs/output.md): point fields, then cell fields

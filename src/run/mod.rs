@@ -7,19 +7,22 @@
 //!    the directory as it was (`dir`);
 //! 2. replace the run the directory holds (`run`) or continue it (`resume`);
 //! 3. `drive` the time loop: each solved step goes to the consumers (`consumers`:
-//!    statistics, frames, checkpoints, progress) until the last step, a `--stop-after` step,
+//!    statistics, frames, history.csv (`history_csv`), checkpoints, progress) until the
+//!    last step, a `--stop-after` step,
 //!    a signal (`interrupt`) or a failure;
 //! 4. write summary.json however the run ended (`summary`).
 
 mod consumers;
 mod dir;
 mod frame;
+mod history_csv;
 mod interrupt;
 mod summary;
 
 pub use crate::error::signal_name;
 pub use dir::LOCK_NAME;
 pub use frame::region;
+pub use history_csv::{columns as history_columns, FILE_NAME as HISTORY_FILE};
 pub use interrupt::Interrupt;
 pub use summary::{ContactSummary, Final, Iterations, OutputSummary, Status, Summary, Timing};
 
@@ -34,6 +37,7 @@ use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Frames, Progress, Statistics, StopRule};
 use dir::DirLock;
 use frame::open_series;
+use history_csv::HistoryCsv;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -137,7 +141,8 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     // A signal between two stages ends setup with the directory as it was.
     let stage = || opts.interrupt.between_setup_stages();
-    let scene = load_scene(scene_path, &opts.overrides)?;
+    // Shared with the writer thread of history.csv.
+    let scene = Arc::new(load_scene(scene_path, &opts.overrides)?);
     let out = match &opts.out {
         Some(out) => out.clone(),
         None => default_out(&scene)?,
@@ -164,6 +169,7 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     opts.interrupt
         .unless_signalled(|| dir::remove_run(&out))
         .map_err(Error::Interrupted)??;
+    let history = HistoryCsv::open(&out, &scene, &mesh, &disc, &tl, None)?;
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::new(&out, identity, scene.time.steps, tl.rows());
     drive(Drive {
@@ -172,6 +178,7 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
         disc: &disc,
         tl,
         series,
+        history,
         writer,
         log: RunLog::default(),
         run_id,
@@ -199,7 +206,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let stage = || opts.interrupt.between_setup_stages();
     // What is wrong with the checkpoint itself is said first, then the directory.
     let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
-    let scene = cp.scene(&opts.overrides)?;
+    let scene = Arc::new(cp.scene(&opts.overrides)?);
     stage()?;
     let mesh = read_mesh(&scene).map_err(|e| {
         Error::input(format!(
@@ -255,6 +262,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     opts.interrupt
         .unless_signalled(|| dir::remove_temporaries(&out))
         .map_err(Error::Interrupted)?;
+    let history = HistoryCsv::open(&out, &scene, &mesh, &disc, &tl, Some(cp.n))?;
     let run_id = identity.run_id.clone();
     let writer = checkpoint::Writer::resume(&out, identity, scene.time.steps, tl.rows(), &cp);
     drive(Drive {
@@ -263,6 +271,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         disc: &disc,
         tl,
         series,
+        history,
         writer,
         log: cp.log.clone(),
         run_id,
@@ -348,6 +357,7 @@ struct Drive<'a> {
     disc: &'a Arc<Discretization>,
     tl: TimeLoop<'a>,
     series: Series,
+    history: HistoryCsv,
     writer: checkpoint::Writer,
     log: RunLog,
     run_id: String,
@@ -379,6 +389,7 @@ fn drive(d: Drive) -> Result<Outcome> {
             scene: d.scene,
         },
         checkpoints: Checkpoints::new(d.writer, d.scene),
+        history: d.history,
         progress: Progress::new(d.opts.progress, tl.n(), d.scene.time.steps),
         stop: StopRule {
             after: d.opts.stop_after,
@@ -392,17 +403,20 @@ fn drive(d: Drive) -> Result<Outcome> {
         statistics,
         mut frames,
         checkpoints,
+        mut history,
         progress,
         ..
     } = consumers;
     drop(progress);
     let checkpoint = checkpoints.path();
     // Every checkpoint handed over reaches the disk before the run reports how it ended.
-    // So does every frame handed to the series' writer thread (its errors name the file).
+    // So does every frame handed to the series' writer thread and every history row (their
+    // errors name the file).
     let flushed = checkpoints
         .writer
         .finish()
-        .and_then(|()| frames.series.finish());
+        .and_then(|()| frames.series.finish())
+        .and_then(|()| history.finish());
     let ended = ended.and_then(|end| flushed.map(|()| end));
     let steps_s = steps_start.elapsed().as_secs_f64();
     if let Ok(RunEnd::Completed) = ended {

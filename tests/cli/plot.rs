@@ -1,6 +1,6 @@
 //! `viscontact plot` (issue 26): a 3D run's boundary surface from .vtu and .vtkhdf series,
 //! seen from two directions, with its contact boundary marked; unknown fields refused; the
-//! 2D figure still drawn.
+//! 2D figure still drawn; a run's history.csv against t (`--history`).
 
 use crate::common;
 use common::*;
@@ -133,6 +133,56 @@ fn a_2d_run_is_still_drawn_and_refuses_a_view() {
     let (code, text) = cli(&["plot", run.to_str().unwrap(), "--view", "1,1,1"]);
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("--view is for 3D runs"), "{text}");
+}
+
+/// `plot DIR --history`: the force columns (or those asked for) against t as a PNG; an
+/// unknown column is refused (exit 2) naming the columns the file has; `check` lists them.
+#[test]
+fn the_history_is_drawn_and_an_unknown_column_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", false);
+    let run = run_2d(&scene, &tmp.path().join("run"));
+    let dir = run.to_str().unwrap();
+    let png = tmp.path().join("history.png");
+    let (code, text) = cli(&["plot", dir, "--history", "-o", png.to_str().unwrap()]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("reaction_Γ1_x, reaction_Γ1_y, load_top_x"),
+        "{text}"
+    );
+    assert!(!text.contains("max_von_mises"), "{text}");
+    let (w, h, px) = pixels(&png);
+    assert_eq!((w, h), (1000, 700));
+    assert!(px.iter().filter(|p| **p != [255, 255, 255]).count() > 5000);
+    let columns = ["--columns", "reaction_Γ1_y,max_von_mises"];
+    let mut args = vec!["plot", dir, "--history", "-o", png.to_str().unwrap()];
+    args.extend(columns);
+    let (code, text) = cli(&args);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("(reaction_Γ1_y, max_von_mises over 3 steps)"),
+        "{text}"
+    );
+    let (code, text) = cli(&["plot", dir, "--history", "--columns", "reaction_x"]);
+    assert_eq!(code, 2, "{text}");
+    for needle in [
+        "no column 'reaction_x'",
+        "reaction_Γ1_x, reaction_Γ1_y",
+        "iterations",
+    ] {
+        assert!(text.contains(needle), "{needle:?} not in {text}");
+    }
+    let no_history = tmp.path().join("empty");
+    std::fs::create_dir(&no_history).unwrap();
+    let (code, text) = cli(&["plot", no_history.to_str().unwrap(), "--history"]);
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("history.csv does not exist"), "{text}");
+    let (code, text) = cli(&["check", scene.to_str().unwrap()]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("history    17 columns of history.csv: step,t,reaction_Γ1_x,"),
+        "{text}"
+    );
 }
 
 /// A run whose scene leaves Γ3,1 and Γ3,2 without [contact] and [friction] drew them as the

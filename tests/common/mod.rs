@@ -199,14 +199,14 @@ pub fn summary_values(dir: &Path) -> serde_json::Value {
     v
 }
 
-/// Every file of `dir` that a run's series consists of, by name.
+/// Every file of `dir` that a run's series consists of, and its history.csv, by name.
 pub fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap())
         .filter(|e| {
             let n = e.file_name().to_string_lossy().into_owned();
-            n.ends_with(".vtu") || n.ends_with(".pvd")
+            n.ends_with(".vtu") || n.ends_with(".pvd") || n == "history.csv"
         })
         .map(|e| {
             (
@@ -215,6 +215,31 @@ pub fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
             )
         })
         .collect()
+}
+
+/// A run's history.csv: its header and its rows as numbers.
+pub struct History {
+    pub header: Vec<String>,
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl History {
+    pub fn read(dir: &Path) -> History {
+        let text = std::fs::read_to_string(dir.join("history.csv")).unwrap();
+        let mut lines = text.lines();
+        let header = lines.next().unwrap().split(',').map(String::from).collect();
+        let rows = lines
+            .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+            .collect();
+        History { header, rows }
+    }
+
+    /// The values of column `name` at every step.
+    pub fn column(&self, name: &str) -> Vec<f64> {
+        let i = (self.header.iter().position(|h| h == name))
+            .unwrap_or_else(|| panic!("no column {name} in {:?}", self.header));
+        self.rows.iter().map(|r| r[i]).collect()
+    }
 }
 
 /// The bytes of a series file without its run id (the `<FieldData>` of a `.vtu`, the

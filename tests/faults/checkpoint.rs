@@ -61,8 +61,31 @@ fn stopped_and_resumed_equals_uninterrupted() {
         assert!(part.join("solution_000007.vtu").exists());
         assert!(!part.join("solution_000008.vtu").exists());
         assert_eq!(part.join("checkpoint_history.h5").exists(), expr);
+        // history.csv: the rows of steps 0..=7; a run killed after its checkpoint would
+        // have written more, half a row last: the resume cuts them off.
+        let history = std::fs::read_to_string(part.join("history.csv")).unwrap();
+        let full_history = std::fs::read_to_string(full.join("history.csv")).unwrap();
+        assert_eq!(history.lines().count(), 1 + 8);
+        assert!(
+            full_history.starts_with(&history),
+            "{what}: rows 0..=7 differ"
+        );
+        let beyond: String = full_history
+            .lines()
+            .skip(9)
+            .take(2)
+            .collect::<Vec<_>>()
+            .join("\n");
+        let mut longer = history + &beyond + "\n9,0.5625,0.00";
+        longer.push_str(&"9".repeat(3));
+        std::fs::write(part.join("history.csv"), longer).unwrap();
         let r = finished(resume_quiet(&part.join("checkpoint.h5")));
         assert_eq!(r.steps, 16);
+        let resumed = std::fs::read(part.join("history.csv")).unwrap();
+        assert!(
+            resumed == full_history.as_bytes(),
+            "{what}: the resumed history.csv differs from the uninterrupted run's"
+        );
         common::assert_same_series(&full, &part, what);
     }
 }

@@ -6,6 +6,7 @@ mod common;
 mod contact;
 mod corner;
 mod dirichlet;
+mod force_balance;
 mod friction_cone;
 mod matrix_free;
 mod memory;

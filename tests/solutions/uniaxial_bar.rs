@@ -124,3 +124,37 @@ fn bar_on_unstructured_mesh_of_a_plate_with_a_hole_is_not_exact() {
         .fold(0.0f64, f64::max);
     assert!(worst > 1e-3, "{worst}");
 }
+
+/// The reaction of the clamped end of the bar is the applied traction's resultant,
+/// −f(t_n)·1 along x (the right end x = 2 has height 1) and nothing along y, at every step
+/// of history.csv.
+#[test]
+fn the_clamped_end_s_reaction_is_the_applied_traction_s_resultant() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = bar_scene(
+        dir.path(),
+        &mesh_path("paper/rect_008.msh"),
+        "prony = [[0.7, 3.0], [0.2, 0.5]]",
+    );
+    let out = dir.path().join("out");
+    finished(viscontact::run::run(&scene, &run_options(&out, &[], None)).unwrap());
+    let h = History::read(&out);
+    assert_eq!(h.rows.len(), STEPS + 1);
+    let (t, rx, ry) = (
+        h.column("t"),
+        h.column("reaction_Γ1_x"),
+        h.column("reaction_Γ1_y"),
+    );
+    for n in 0..=STEPS {
+        let f = f(t[n]);
+        assert!(
+            (rx[n] + f).abs() <= 1e-12 * f,
+            "step {n}: reaction {} against −f = {}",
+            rx[n],
+            -f
+        );
+        assert!(ry[n].abs() <= 1e-12 * f, "step {n}: y reaction {}", ry[n]);
+    }
+    let load = h.column("load_right_x")[STEPS];
+    assert!((load - f(END)).abs() <= 1e-14 * f(END), "{load}");
+}

@@ -1,0 +1,197 @@
+//! The forces on the body at a solved step: the reactions of the Dirichlet conditions and the
+//! resultants of the loads (`DIR/history.csv`, written by `run/history_csv.rs`).
+//!
+//! # The balance
+//!
+//! Step n's equation holds on every dof of the mesh (free, prescribed and held at zero alike)
+//! once the conditions' forces r_n are added:
+//!
+//!   M w_n + K_B u_n + K_R m_n = f_n − g_F − Pᵀz_n + r_n,
+//!
+//! M the step matrix (K_A, or K_A + k K_B + k² r(0) K_R for the implicit variant, see
+//! `time_loop`), f_n the loads, g_F the given normal stress F on Γ3,2, z_n the contact and
+//! friction multipliers. At a free dof r_n is zero: there the equation is the step problem's
+//! (3.1). At a held dof h (clamped, held at zero, or prescribed) it is the reaction
+//!
+//!   r_{n,h} = (M w_n + K_B u_n + K_R m_n)_h − f_{n,h} + g_{F,h},
+//!
+//! the force the condition exerts on the body (Pᵀz has no entry at a held dof: a `NodalRow`
+//! drops the components a condition holds). A translation has no strain, so the rows of
+//! each matrix sum to zero over the dofs of one component, and summing the equation over
+//! them gives
+//!
+//!   Σ r_n + Σ f_n − Σ g_F − Σ Pᵀz_n = 0:
+//!
+//! reactions, loads, the normal stress and the contact and friction forces, each the force
+//! on the body, balance to the precision of the step's solve.
+//!
+//! # What is assembled
+//!
+//! `Discretization` assembles the matrices on the dofs with an index only (free and
+//! prescribed): the rows of the dofs held at zero are dropped. [`Reactions::new`] assembles
+//! the rows of K_A, K_B and K_R at every held dof, over the columns with an index (u, w and
+//! m vanish at the others), from the cells that touch a held node, with the element entries
+//! of the global assembly (`Cell::parts`, `Cell::entry`), and integrates g_F once more on
+//! every dof. Only a run that writes history.csv builds it, once; a step then costs the
+//! products of these few rows and one more evaluation of the loads (`Loads::visit`), which
+//! splits ⟨f_n, φ⟩ by load and keeps its values at the held dofs.
+
+use super::{constraints::Source, group, Discretization, Isotropic};
+use crate::mesh::Mesh;
+use crate::scene::Scene;
+use crate::Result;
+
+/// The held dofs' rows of the step's matrices and what is constant of the step's forces.
+pub struct Reactions {
+    /// Every held global dof d·node + c with its condition (`Discretization::held`): row i.
+    pub held: Vec<(usize, Source)>,
+    /// Global dof → its row, None at a dof no condition holds.
+    row_of: Vec<Option<u32>>,
+    /// The rows, compressed: columns (indices of u, w, m) and the values of M, K_B, K_R.
+    ptr: Vec<usize>,
+    cols: Vec<usize>,
+    values: Vec<[f64; 3]>,
+    /// g_F at the held dofs.
+    g_f: Vec<f64>,
+    /// −Σ g_F per component: the force of the normal stress F on the body.
+    pub normal_stress: [f64; 3],
+}
+
+/// The forces on the body at one step.
+pub struct StepForces {
+    /// r_{n,h} at every held dof, in the order of [`Reactions::held`].
+    pub reactions: Vec<f64>,
+    /// The resultant of each load (x, y, z), in the order of `Loads::sources`.
+    pub loads: Vec<[f64; 3]>,
+}
+
+impl Reactions {
+    /// The held rows of M = K_A + `k_b` K_B + `k_r` K_R (`k_b` = `k_r` = 0 for the
+    /// paper's scheme, k and k² r(0) for the implicit variant), K_B and K_R.
+    pub fn new(
+        mesh: &Mesh,
+        scene: &Scene,
+        disc: &Discretization,
+        k_b: f64,
+        k_r: f64,
+    ) -> Result<Self> {
+        let mut row_of = vec![None; disc.free.len()];
+        for (i, &(dof, _)) in disc.held.iter().enumerate() {
+            row_of[dof] = Some(i as u32);
+        }
+        let (ptr, cols, values) = held_rows(disc, &row_of, k_b, k_r);
+        let d = disc.dim;
+        let g_f_all = normal_stress_load(mesh, scene)?;
+        let mut normal_stress = [0.0; 3];
+        for (g, v) in g_f_all.iter().enumerate() {
+            normal_stress[g % d] -= v;
+        }
+        let g_f = match g_f_all.is_empty() {
+            true => vec![0.0; disc.held.len()],
+            false => disc.held.iter().map(|&(g, _)| g_f_all[g]).collect(),
+        };
+        Ok(Reactions {
+            held: disc.held.clone(),
+            row_of,
+            ptr,
+            cols,
+            values,
+            g_f,
+            normal_stress,
+        })
+    }
+
+    /// The reactions r_{n,h} = (M w + K_B u + K_R m)_h − f_h + g_F,h of the state
+    /// `[w, u]`, `m` (None without memory) at time `t`, and the loads' resultants.
+    pub fn forces(
+        &self,
+        disc: &Discretization,
+        scene: &Scene,
+        t: f64,
+        [w, u]: [&[f64]; 2],
+        m: Option<&[f64]>,
+    ) -> Result<StepForces> {
+        let mut reactions: Vec<f64> = (0..self.held.len())
+            .map(|h| {
+                let range = self.ptr[h]..self.ptr[h + 1];
+                let mut s = 0.0;
+                for (&col, v) in self.cols[range.clone()].iter().zip(&self.values[range]) {
+                    s += v[0] * w[col] + v[1] * u[col] + m.map_or(0.0, |m| v[2] * m[col]);
+                }
+                s + self.g_f[h]
+            })
+            .collect();
+        let d = disc.dim;
+        let mut loads = vec![[0.0; 3]; disc.loads.sources().count()];
+        disc.loads.visit(t, scene, |l, dof, v| {
+            loads[l][dof % d] += v;
+            if let Some(h) = self.row_of[dof] {
+                reactions[h as usize] -= v;
+            }
+        })?;
+        Ok(StepForces { reactions, loads })
+    }
+}
+
+/// The rows `row_of` numbers (held dofs) of M = K_A + `k_b` K_B + `k_r` K_R, K_B and K_R
+/// over the dofs with an index, compressed: (row starts, columns, the three values).
+fn held_rows(
+    disc: &Discretization,
+    row_of: &[Option<u32>],
+    k_b: f64,
+    k_r: f64,
+) -> (Vec<usize>, Vec<usize>, Vec<[f64; 3]>) {
+    let d = disc.dim;
+    let b = disc.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
+    let mut entries: Vec<(u32, usize, [f64; 3])> = Vec::new();
+    for t in &disc.cells {
+        let nodes = t.vertices();
+        for (i, &q) in nodes.iter().enumerate() {
+            for al in 0..d {
+                let Some(row) = row_of[d * q + al] else {
+                    continue;
+                };
+                for (j, &p) in nodes.iter().enumerate() {
+                    for (be, col) in (0..d).filter_map(|be| Some((be, disc.free[d * p + be]?))) {
+                        let parts = t.parts(i, j, al, be);
+                        let [ka, kb, kr] = [disc.a, b, disc.r].map(|c| t.entry(c, parts));
+                        entries.push((row, col, [ka + k_b * kb + k_r * kr, kb, kr]));
+                    }
+                }
+            }
+        }
+    }
+    // Stable: the entries of one position are added in the cells' order.
+    entries.sort_by_key(|&(row, col, _)| (row, col));
+    let mut ptr = vec![0; disc.held.len() + 1];
+    let (mut cols, mut values): (Vec<usize>, Vec<[f64; 3]>) = (Vec::new(), Vec::new());
+    let mut last = None;
+    for (row, col, v) in entries {
+        match values.last_mut() {
+            Some(sum) if last == Some((row, col)) => (0..3).for_each(|c| sum[c] += v[c]),
+            _ => {
+                cols.push(col);
+                values.push(v);
+                ptr[row as usize + 1] = cols.len();
+                last = Some((row, col));
+            }
+        }
+    }
+    // Rows without entries end where the row before them ends.
+    for i in 1..ptr.len() {
+        ptr[i] = ptr[i].max(ptr[i - 1]);
+    }
+    (ptr, cols, values)
+}
+
+/// g_F = ∫_{Γ3,2} F φ ν da on every global dof d·node + c (empty without friction).
+fn normal_stress_load(mesh: &Mesh, scene: &Scene) -> Result<Vec<f64>> {
+    let Some(fr) = &scene.physics.friction else {
+        return Ok(Vec::new());
+    };
+    let name = &scene.mesh.groups.friction;
+    let g = group(mesh, scene, "mesh.groups.friction", name)?;
+    let all: Vec<Option<usize>> = (0..mesh.dim * mesh.nodes.len()).map(Some).collect();
+    let (g_f, _) = super::friction_integrals(mesh, scene, fr, g, &all, all.len())?;
+    Ok(g_f)
+}

@@ -1,0 +1,157 @@
+//! history.csv: the forces on the body balance at every step (docs/output.md). The
+//! reactions come from the rows of the step's matrices at the held dofs, the other columns
+//! from the loads and the multipliers, so their sum per component is the residual of the
+//! step's equations summed over a translation: zero to the precision of the solve. Checked
+//! with contact and friction (the paper's scene, in both schemes), in 3D (the block), with
+//! a symmetry plane ([[dirichlet]] at zero) and with prescribed displacements.
+
+use crate::common;
+use common::*;
+use std::path::Path;
+use toml::Value;
+
+/// Runs `scene` into `dir/out` with `set` and checks every row of its history.csv: steps
+/// 0..=N at t_n, and per component |Σ forces| ≤ 1e-10 max |force|. Returns the history.
+fn balanced(dir: &Path, scene: &Path, set: &[&str], what: &str) -> History {
+    let out = dir.join(format!("out_{}", what.replace(' ', "_")));
+    let s = finished(viscontact::run::run(scene, &run_options(&out, set, None)).unwrap());
+    let h = History::read(&out);
+    assert_eq!(h.rows.len(), s.steps + 1, "{what}: one row per step");
+    let axes = match h.header.iter().any(|n| n.ends_with("_z")) {
+        true => &["x", "y", "z"][..],
+        false => &["x", "y"][..],
+    };
+    let k = h.column("t")[1];
+    for (n, row) in h.rows.iter().enumerate() {
+        assert_eq!((row[0], row[1]), (n as f64, n as f64 * k), "{what}");
+        for axis in axes {
+            let terms: Vec<f64> = (h.header.iter().zip(row))
+                .filter(|(name, _)| name.ends_with(&format!("_{axis}")))
+                .filter(|(name, _)| !name.starts_with("moment_"))
+                .map(|(_, v)| *v)
+                .collect();
+            let sum: f64 = terms.iter().sum();
+            let max = terms.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            assert!(
+                sum.abs() <= 1e-10 * max,
+                "{what}, step {n}, {axis}: Σ forces = {sum:e}, max |force| = {max:e}"
+            );
+        }
+    }
+    let reactions = h.header.iter().filter(|n| n.starts_with("reaction_"));
+    assert!(reactions.count() > 0, "{what}: {:?}", h.header);
+    h
+}
+
+/// [`balanced`] with `steps` steps in the paper's scheme and in the implicit variant.
+fn in_both_schemes(dir: &Path, scene: &Path, steps: usize) -> Vec<(&'static str, History)> {
+    let runs = ["left", "implicit"].map(|scheme| {
+        let set = [
+            format!("time.steps={steps}"),
+            format!("scheme.history={scheme}"),
+        ];
+        let set: Vec<&str> = set.iter().map(String::as_str).collect();
+        (scheme, balanced(dir, scene, &set, scheme))
+    });
+    runs.into()
+}
+
+/// Whether some step has a nonzero value in column `name`.
+fn acts(h: &History, name: &str) -> bool {
+    h.column(name).iter().any(|&v| v != 0.0)
+}
+
+#[test]
+fn the_paper_s_forces_balance_at_every_step_in_both_schemes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = paper_scene(dir.path(), "p.toml", "paper/rect_016.msh", false);
+    for (scheme, h) in in_both_schemes(dir.path(), &scene, 16) {
+        for column in ["reaction_Γ1_x", "load_top_y", "load_right_x", "contact_y"] {
+            assert!(acts(&h, column), "{scheme}: {column} is zero throughout");
+        }
+        // F = 0.01 on Γ3,2 = [1, 2] × {0} pushes up with 0.01 N; friction acts along x.
+        assert!(h
+            .column("friction_y")
+            .iter()
+            .all(|&v| (v - 0.01).abs() < 1e-15));
+        assert!(acts(&h, "friction_x") && acts(&h, "active") && acts(&h, "stick"));
+        assert!(h.column("max_von_mises").iter().all(|&v| v > 0.0));
+    }
+}
+
+#[test]
+fn the_block_s_forces_balance_in_3d() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = repo().join("examples/block.toml");
+    let mesh = format!("mesh.file={}", mesh_path("3d/block_004.msh"));
+    let h = balanced(dir.path(), &scene, &[&mesh, "time.steps=8"], "block");
+    for column in ["reaction_Γ1_z", "contact_z", "friction_x", "moment_Γ1_y"] {
+        assert!(acts(&h, column), "{column} is zero throughout");
+    }
+}
+
+/// A half model with a symmetry plane: the plane's reaction is normal to it, in 2D (with
+/// friction on the line) and in 3D.
+#[test]
+fn forces_balance_with_a_symmetry_plane() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = repo().join("tests/data/symmetry");
+    let block = SceneText::block()
+        .mesh(data.join("half_block.msh"))
+        .dirichlet("sym", &["normal"], None)
+        .write(dir.path(), "half_block.toml");
+    let h = balanced(dir.path(), &block, &["time.steps=8"], "half block");
+    assert!(acts(&h, "reaction_sym_y") && acts(&h, "moment_sym_x"));
+    assert!(!acts(&h, "reaction_sym_x") && !acts(&h, "reaction_sym_z"));
+    let rect = SceneText::paper()
+        .set("load.traction", Value::Array(vec![]))
+        .traction(None, &["0", "-0.1*(1-x*x)*min(t, 0.2)"])
+        .mesh(data.join("half_rect.msh"))
+        .dirichlet("sym", &["normal"], None)
+        .write(dir.path(), "half_rect.toml");
+    let h = balanced(dir.path(), &rect, &["time.steps=8"], "half rect");
+    assert!(acts(&h, "reaction_sym_x") && !acts(&h, "reaction_sym_y"));
+}
+
+/// Prescribed displacements (dofs numbered after the free ones) on two groups, no clamped
+/// group, with memory, in both schemes: the two groups' reactions balance each other and
+/// the body force.
+#[test]
+fn forces_balance_with_prescribed_displacements() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = ["0.01*t*(x + 2*y)", "-0.02*t*x - 0.001*t"];
+    let scene = SceneText::on(repo().join("tests/data/patch_square.msh"))
+        .set("mesh.groups.fixed", Value::Array(vec![]))
+        .set("time.end", 0.5)
+        .set("material.viscosity.theta", 0.3)
+        .set("material.viscosity.zeta", 0.2)
+        .set("material.elasticity.young", 2.0)
+        .set("material.elasticity.poisson", 0.3)
+        .literal("material.relaxation.prony", "[[1.0, 1.0]]")
+        .body(&["0", "-0.05*t"])
+        .dirichlet("Γ1", &["x", "y"], Some(&g))
+        .dirichlet("Γ2", &["x", "y"], Some(&g))
+        .write(dir.path(), "prescribed.toml");
+    for (_, h) in in_both_schemes(dir.path(), &scene, 6) {
+        assert!(acts(&h, "reaction_Γ1_x") && acts(&h, "reaction_Γ2_y"));
+        assert!(acts(&h, "body_y"));
+    }
+}
+
+/// A frame that has the von Mises stress hands its largest value to the step's row; a step
+/// without one computes it for the row: history.csv is the same bytes either way.
+#[test]
+fn the_history_does_not_depend_on_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = paper_scene(dir.path(), "p.toml", "paper/rect_008.msh", false);
+    let history = |name: &str, set: &[&str]| {
+        let out = dir.path().join(name);
+        let mut set = set.to_vec();
+        set.push("time.steps=8");
+        finished(viscontact::run::run(&scene, &run_options(&out, &set, None)).unwrap());
+        std::fs::read(out.join("history.csv")).unwrap()
+    };
+    let every_step = history("every", &[]);
+    assert!(every_step == history("some", &["output.every=3"]));
+    assert!(every_step == history("no_stress", &["output.fields=[\"displacement\"]"]));
+}
