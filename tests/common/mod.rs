@@ -240,6 +240,30 @@ impl History {
             .unwrap_or_else(|| panic!("no column {name} in {:?}", self.header));
         self.rows.iter().map(|r| r[i]).collect()
     }
+
+    /// Every row's forces balance: per component |Σ forces| ≤ 1e-10 max |force| (the
+    /// moments apart).
+    pub fn assert_balanced(&self, what: &str) {
+        let axes = match self.header.iter().any(|n| n.ends_with("_z")) {
+            true => &["x", "y", "z"][..],
+            false => &["x", "y"][..],
+        };
+        for (n, row) in self.rows.iter().enumerate() {
+            for axis in axes {
+                let terms: Vec<f64> = (self.header.iter().zip(row))
+                    .filter(|(name, _)| name.ends_with(&format!("_{axis}")))
+                    .filter(|(name, _)| !name.starts_with("moment_"))
+                    .map(|(_, v)| *v)
+                    .collect();
+                let sum: f64 = terms.iter().sum();
+                let max = terms.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                assert!(
+                    sum.abs() <= 1e-10 * max,
+                    "{what}, step {n}, {axis}: Σ forces = {sum:e}, max |force| = {max:e}"
+                );
+            }
+        }
+    }
 }
 
 /// The bytes of a series file without its run id (the `<FieldData>` of a `.vtu`, the

@@ -3,7 +3,8 @@
 //! paper's variants, the bracket, the plate with a hole, the blocks, the slab), the corners
 //! where Γ3,1 meets Γ3,2, and a block under a traction that turns (nodes change state from
 //! step to step). u_N agrees with the dense dual's to 1e-8 relative; the runs are bit for
-//! bit the same when stopped and resumed; summary.json records the Newton and Krylov counts.
+//! bit the same when stopped and resumed, their forces balance in history.csv, and
+//! summary.json records the Newton and Krylov counts.
 
 use crate::common::{self, load, rel_diff, repo, trace, SceneText, Trace};
 
@@ -170,6 +171,8 @@ fn stop_and_resume_through_petsc_is_bit_for_bit() {
     ]);
     run(&["resume", "--quiet", &format!("{parts_s}/checkpoint.h5")]);
     common::assert_same_series(&whole, &parts, "paper through active_set");
+    // The multipliers come from the residual of each Newton system: history.csv balances.
+    common::History::read(&whole).assert_balanced("paper through active_set");
     let s = common::summary(&whole);
     let newton = &s["petsc"]["newton"];
     assert_eq!(newton["steps"], 33, "{s}");

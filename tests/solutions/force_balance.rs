@@ -11,33 +11,17 @@ use std::path::Path;
 use toml::Value;
 
 /// Runs `scene` into `dir/out` with `set` and checks every row of its history.csv: steps
-/// 0..=N at t_n, and per component |Σ forces| ≤ 1e-10 max |force|. Returns the history.
+/// 0..=N at t_n, and the balance (`History::assert_balanced`). Returns the history.
 fn balanced(dir: &Path, scene: &Path, set: &[&str], what: &str) -> History {
     let out = dir.join(format!("out_{}", what.replace(' ', "_")));
     let s = finished(viscontact::run::run(scene, &run_options(&out, set, None)).unwrap());
     let h = History::read(&out);
     assert_eq!(h.rows.len(), s.steps + 1, "{what}: one row per step");
-    let axes = match h.header.iter().any(|n| n.ends_with("_z")) {
-        true => &["x", "y", "z"][..],
-        false => &["x", "y"][..],
-    };
     let k = h.column("t")[1];
     for (n, row) in h.rows.iter().enumerate() {
         assert_eq!((row[0], row[1]), (n as f64, n as f64 * k), "{what}");
-        for axis in axes {
-            let terms: Vec<f64> = (h.header.iter().zip(row))
-                .filter(|(name, _)| name.ends_with(&format!("_{axis}")))
-                .filter(|(name, _)| !name.starts_with("moment_"))
-                .map(|(_, v)| *v)
-                .collect();
-            let sum: f64 = terms.iter().sum();
-            let max = terms.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-            assert!(
-                sum.abs() <= 1e-10 * max,
-                "{what}, step {n}, {axis}: Σ forces = {sum:e}, max |force| = {max:e}"
-            );
-        }
     }
+    h.assert_balanced(what);
     let reactions = h.header.iter().filter(|n| n.starts_with("reaction_"));
     assert!(reactions.count() > 0, "{what}: {:?}", h.header);
     h
