@@ -154,9 +154,9 @@ impl ContactPlan {
                 Some(resources::active_set_bytes(m, n)),
                 "per Newton iteration one Krylov solve of the primal system (the step matrix with \
                  the active and sticking directions removed) preconditioned by the multigrid of \
-                 K_A set up once: tens of iterations, the last system to 1e-12; a step takes one \
-                 or two Newton iterations where the contact and slip sets stand, more where \
-                 they change"
+                 K_A set up once: tens of iterations, the last system to 1e-12; a step takes two \
+                 or three Newton systems where the contact and slip sets stand (a loose solve, \
+                 then the last), more where they change"
                     .to_string(),
             ),
             Contact::Clarabel => (

@@ -203,8 +203,8 @@ mod with_petsc {
     }
 }
 
-/// A build without the feature refuses `linear = "petsc"` (exit 2) and says how to build
-/// with it; `cholesky` and `auto` run as before.
+/// A build without the feature refuses `linear = "petsc"` and `contact = "active_set"`
+/// (exit 2) and says how to build with it; `cholesky` and `auto` run as before.
 #[cfg(not(feature = "petsc"))]
 #[test]
 fn petsc_without_the_feature_is_refused_with_the_build_line() {
@@ -237,4 +237,11 @@ fn petsc_without_the_feature_is_refused_with_the_build_line() {
             assert!(!out.exists(), "a refused run wrote {}", out.display());
         }
     }
+    let path = SceneText::paper()
+        .set("solver.contact", "active_set")
+        .write(dir.path(), "a.toml");
+    let (got, text) = common::cli(&["check", path.to_str().unwrap()]);
+    assert_eq!(got, 2, "{text}");
+    assert!(text.contains("solver.contact"), "{text}");
+    assert!(text.contains("--features petsc"), "{text}");
 }
