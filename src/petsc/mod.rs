@@ -238,21 +238,22 @@ impl Krylov {
     /// norm and, where the KSP did not converge, its reason.
     pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
-        let (mut its, mut reason, mut rnorm) = (0, 0, 0.0);
         // SAFETY: b and w hold n values; PETSc reads b and writes w within the call.
-        let code = unsafe {
-            vc_ksp_solve(
-                self.ctx,
-                b.as_ptr(),
-                w.as_mut_ptr(),
-                &mut its,
-                &mut reason,
-                &mut rnorm,
-            )
-        };
-        check(code, "KSPSolve")?;
-        Ok(Solve::of(its, reason, rnorm))
+        solved("KSPSolve", |its, reason, rnorm| unsafe {
+            vc_ksp_solve(self.ctx, b.as_ptr(), w.as_mut_ptr(), its, reason, rnorm)
+        })
     }
+}
+
+/// Runs a shim solve that reports its iterations, converged reason and residual norm
+/// through the pointers it is given: what it did, or PETSc's error at `what`.
+fn solved(
+    what: &str,
+    call: impl FnOnce(*mut PetscInt, *mut c_int, *mut f64) -> c_int,
+) -> Result<Solve> {
+    let (mut its, mut reason, mut rnorm) = (0, 0, 0.0);
+    check(call(&mut its, &mut reason, &mut rnorm), what)?;
+    Ok(Solve::of(its, reason, rnorm))
 }
 
 /// The nodal terms of a constrained system (`Krylov::solve_constrained`), flat as the shim
@@ -293,28 +294,28 @@ impl Krylov {
         assert!(b.len() == self.n && w.len() == self.n);
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
         assert!(terms.removed.len() == 3 * np && terms.stiffness.len() == 9 * ns);
-        let (mut its, mut reason, mut rnorm) = (0, 0, 0.0);
         // SAFETY: the arrays hold what the counts say, b and w n values; PETSc reads them
         // and writes w within the call, and keeps no pointer after it.
-        let code = unsafe {
-            vc_constrained_solve(
-                self.ctx,
-                np as PetscInt,
-                terms.removed_dofs.as_ptr(),
-                terms.removed.as_ptr(),
-                ns as PetscInt,
-                terms.stiffness_dofs.as_ptr(),
-                terms.stiffness.as_ptr(),
-                rtol,
-                b.as_ptr(),
-                w.as_mut_ptr(),
-                &mut its,
-                &mut reason,
-                &mut rnorm,
-            )
-        };
-        check(code, "KSPSolve of the constrained system")?;
-        Ok(Solve::of(its, reason, rnorm))
+        solved(
+            "KSPSolve of the constrained system",
+            |its, reason, rnorm| unsafe {
+                vc_constrained_solve(
+                    self.ctx,
+                    np as PetscInt,
+                    terms.removed_dofs.as_ptr(),
+                    terms.removed.as_ptr(),
+                    ns as PetscInt,
+                    terms.stiffness_dofs.as_ptr(),
+                    terms.stiffness.as_ptr(),
+                    rtol,
+                    b.as_ptr(),
+                    w.as_mut_ptr(),
+                    its,
+                    reason,
+                    rnorm,
+                )
+            },
+        )
     }
 }
 
