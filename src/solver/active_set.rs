@@ -695,3 +695,78 @@ fn nodes(rows: &Rows) -> Vec<Node> {
 fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0, |a, x| a.max(x.abs()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The least-squares split recovers the coefficients of independent directions exactly,
+    /// and gives a direction dependent on those before it nothing (the 90° corner).
+    #[test]
+    fn split_recovers_the_coefficients_of_a_node() {
+        let dirs = [[0.0, -1.0, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]];
+        let z = [0.3, -1.2, 2.5];
+        let r: [f64; 3] = std::array::from_fn(|c| (0..3).map(|k| z[k] * dirs[k][c]).sum());
+        let got = split(&dirs, r);
+        for (a, b) in got.iter().zip(z) {
+            assert!((a - b).abs() <= 1e-14, "{got:?}");
+        }
+        let corner = [[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+        assert_eq!(split(&corner, [0.0, -0.7, 0.0]), vec![0.7, 0.0]);
+    }
+
+    /// A slipping node's block β τᵀ(I − ĝĝᵀ)τ is symmetric, positive semidefinite, zero along
+    /// the slip direction τᵀĝ and β across it.
+    #[test]
+    fn the_slip_block_acts_across_the_slip_only() {
+        let (s, c) = 0.3f64.sin_cos();
+        let tau = [[c, s, 0.0], [-s, c, 0.0]];
+        let (g, beta) = ([0.8, -0.6], 2.5);
+        let m = slip_block(&tau, g, beta);
+        let apply = |x: [f64; 3]| -> [f64; 3] {
+            std::array::from_fn(|r| (0..3).map(|k| m[3 * r + k] * x[k]).sum())
+        };
+        let along: [f64; 3] = std::array::from_fn(|k| g[0] * tau[0][k] + g[1] * tau[1][k]);
+        let across: [f64; 3] = std::array::from_fn(|k| -g[1] * tau[0][k] + g[0] * tau[1][k]);
+        for r in 0..3 {
+            for k in 0..3 {
+                assert!((m[3 * r + k] - m[3 * k + r]).abs() <= 1e-15);
+            }
+        }
+        assert!(apply(along).iter().all(|v| v.abs() <= 1e-15));
+        let a = apply(across);
+        assert!(
+            (0..3).all(|k| (a[k] - beta * across[k]).abs() <= 1e-14),
+            "{a:?}"
+        );
+        assert!(apply([0.0, 0.0, 1.0]).iter().all(|v| *v == 0.0));
+    }
+
+    /// Π removes the directions of a node and keeps the rest; S adds its block.
+    #[test]
+    fn terms_project_and_add_their_stiffness() {
+        let n = [0.6, 0.0, 0.8];
+        let terms = Terms {
+            removed_dofs: vec![3, -1, 5],
+            removed: n.to_vec(),
+            stiffness_dofs: vec![0, 1, -1],
+            stiffness: vec![2.0, 1.0, 0.0, 1.0, 3.0, 0.0, 0.0, 0.0, 0.0],
+        };
+        let mut a = vec![1.0, 1.0, 1.0, 0.6, 7.0, 0.8];
+        terms.project(&mut a);
+        assert!(a[3].abs() <= 1e-15 && a[5].abs() <= 1e-15, "{a:?}");
+        assert_eq!(a[4], 7.0);
+        let mut y = vec![0.0; 6];
+        terms.add_stiffness(&[1.0, 2.0, 9.0, 9.0, 9.0, 9.0], &mut y);
+        assert_eq!(&y[..3], &[4.0, 7.0, 0.0]);
+    }
+
+    /// Eisenstat–Walker's forcing: at most a tenth of the last, within [rtol, loose].
+    #[test]
+    fn forcing_tightens_and_stays_in_its_bounds() {
+        let s = ActiveSetSettings::default();
+        assert_eq!(forcing(s.loose, 1e-2, f64::NAN, &s), 1e-5);
+        assert_eq!(forcing(1e-5, 1e-3, 1e-2, &s), 0.1 * 1e-5);
+        assert_eq!(forcing(1e-11, 1e-12, 1.0, &s), s.rtol);
+    }
+}
