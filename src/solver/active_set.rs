@@ -210,17 +210,16 @@ impl Sets {
     /// them), each with its size at the iterate (w, z): the force by which the condition of
     /// the old set is violated (ρ n·w or −λ for a contact row, ||g| − c| for a node).
     fn changes(&self, next: &Sets, at: Iterate) -> Vec<(usize, f64)> {
-        let Iterate { rows, rho, w, z } = at;
-        let force = |i: usize| z[i] + rho[i] * rows.rows[i].apply(w);
+        let rows = at.rows;
         let contact = (0..self.active.len())
             .filter(|&i| self.active[i] != next.active[i])
-            .map(|i| (i, force(i).abs()));
+            .map(|i| (i, at.force(i).abs()));
         let friction = (0..self.friction.len())
             .filter(|&j| self.friction[j].kind() != next.friction[j].kind())
             .map(|j| {
                 let block = rows.friction_block(j);
                 let c = rows.rows[block.start].bound;
-                let g = block.fold(0.0f64, |a, i| a.hypot(force(i)));
+                let g = block.fold(0.0f64, |a, i| a.hypot(at.force(i)));
                 (self.active.len() + j, (g - c).abs())
             });
         contact.chain(friction).collect()
@@ -248,13 +247,60 @@ impl Sets {
     }
 }
 
-/// What the sets are judged at: the rows, their ρ and the iterate (w, z).
+/// What the sets are judged at: the rows, their ρ (times `soften`, 10^−c after c cycles of
+/// the sets in the step) and the iterate (w, z).
 #[derive(Clone, Copy)]
 struct Iterate<'a> {
     rows: &'a Rows,
     rho: &'a [f64],
+    soften: f64,
     w: &'a [f64],
     z: &'a [f64],
+}
+
+impl Iterate<'_> {
+    /// ρ of row i.
+    fn rho(&self, i: usize) -> f64 {
+        self.soften * self.rho[i]
+    }
+
+    /// The argument of row i's complementarity function or projection: z_i + ρ_i (P w)_i.
+    fn force(&self, i: usize) -> f64 {
+        self.z[i] + self.rho(i) * self.rows.rows[i].apply(self.w)
+    }
+
+    /// The sets of the iterate; `before`, the sets it was solved with.
+    fn sets(&self, before: Option<&Sets>) -> Sets {
+        let rows = self.rows;
+        let active = (0..rows.n_contact).map(|i| self.force(i) > 0.0).collect();
+        let friction = (0..rows.n_friction_nodes())
+            .map(|j| {
+                let block = rows.friction_block(j);
+                let (c, rho) = (rows.rows[block.start].bound, self.rho(block.start));
+                let mut g = [0.0; 2];
+                for (k, i) in block.enumerate() {
+                    g[k] = self.force(i);
+                }
+                let norm = g[0].hypot(g[1]);
+                let g = [g[0] / norm, g[1] / norm];
+                // A node that would turn back sticks first: ρ (K's diagonal) can be far
+                // stiffer than the boundary is where the body slides, and the test would
+                // swing between the two directions past the sticking state between them.
+                let reverses = match before.map(|b| b.friction[j]) {
+                    Some(Friction::Slip { g: old, .. }) => old[0] * g[0] + old[1] * g[1] < 0.0,
+                    _ => false,
+                };
+                if norm <= c || reverses {
+                    return Friction::Stick;
+                }
+                Friction::Slip {
+                    g,
+                    beta: (c * rho / (norm - c)).min(1e12 * rho),
+                }
+            })
+            .collect();
+        Sets { active, friction }
+    }
 }
 
 /// The rows of one node: its local dofs (the union over its rows: −1 where no row touches
@@ -281,9 +327,8 @@ pub struct ActiveSetCounts {
 pub struct ActiveSetSolver {
     settings: ActiveSetSettings,
     nodes: Vec<Node>,
-    /// ρ of each row: the diagonal of K along it (`rho_base`), in a step lowered where the
-    /// sets cycle.
-    rho_base: Vec<f64>,
+    /// ρ of each row: the diagonal of K along it (lowered in a step where the sets cycle:
+    /// `Iterate::soften`).
     rho: Vec<f64>,
     terms: Terms,
     /// b − f_slip, and its projection Π(b − f_slip), the system's right side.
@@ -311,7 +356,6 @@ impl ActiveSetSolver {
         ActiveSetSolver {
             settings,
             nodes: nodes(rows),
-            rho_base: rho.clone(),
             rho,
             terms: Terms::default(),
             force: vec![0.0; diagonal.len()],
@@ -343,8 +387,8 @@ impl ActiveSetSolver {
         z: &mut [f64],
     ) -> Result<StepReport> {
         let s = self.settings;
-        self.rho.copy_from_slice(&self.rho_base);
-        let mut sets = self.sets(rows, w, z, None);
+        let mut soften = 1.0;
+        let mut sets = self.at(rows, soften, w, z).sets(None);
         let (mut eta, mut kkt_before) = (s.loose, f64::NAN);
         let (mut exact, mut krylov) = (false, 0);
         // The sets met in this step (their hashes), and how many changes of the sets an
@@ -352,7 +396,6 @@ impl ActiveSetSolver {
         // ρ a tenth of what it was.
         let mut seen = vec![sets.signature()];
         let mut allowed = usize::MAX;
-        let mut cycled = false;
         for newton in 1..=s.max_newton {
             if self.abandon.requested() {
                 return Ok(report(StepStatus::Abandoned, newton - 1, kkt_before));
@@ -373,7 +416,8 @@ impl ActiveSetSolver {
             }
             self.multipliers(system, rows, &sets, w, z)?;
             let kkt = kkt_residual(rows, w, z, max_abs(w), max_abs(z));
-            let mut next = self.sets(rows, w, z, Some(&sets));
+            let at = self.at(rows, soften, w, z);
+            let mut next = at.sets(Some(&sets));
             let same = next.same_as(&sets);
             if same && rtol <= s.rtol && kkt <= s.tolerance {
                 self.count_step(newton);
@@ -384,23 +428,16 @@ impl ActiveSetSolver {
                     krylov,
                 });
             }
-            let at = Iterate {
-                rows,
-                rho: &self.rho,
-                w,
-                z,
-            };
-            if !same && seen.contains(&next.signature()) {
+            let cycled = !same && seen.contains(&next.signature());
+            if cycled {
                 allowed = allowed.min(sets.changes(&next, at).len()).div_ceil(2);
-                cycled = true;
             }
             if allowed < usize::MAX {
                 next.keep_changes(&sets, at, allowed);
             }
             seen.push(next.signature());
             if cycled {
-                self.rho.iter_mut().for_each(|r| *r *= 0.1);
-                cycled = false;
+                soften *= 0.1;
             }
             // The next system is the last one where the sets stand and the KKT residual is
             // small, or once the sets have cycled: it is solved to `rtol`.
@@ -429,38 +466,15 @@ impl ActiveSetSolver {
         self.counts.max_newton = self.counts.max_newton.max(newton);
     }
 
-    /// The sets of the iterate (w, z).
-    fn sets(&self, rows: &Rows, w: &[f64], z: &[f64], before: Option<&Sets>) -> Sets {
-        let active = (0..rows.n_contact)
-            .map(|i| z[i] + self.rho[i] * rows.rows[i].apply(w) > 0.0)
-            .collect();
-        let friction = (0..rows.n_friction_nodes())
-            .map(|j| {
-                let block = rows.friction_block(j);
-                let (c, rho) = (rows.rows[block.start].bound, self.rho[block.start]);
-                let mut g = [0.0; 2];
-                for (k, i) in block.enumerate() {
-                    g[k] = z[i] + rho * rows.rows[i].apply(w);
-                }
-                let norm = g[0].hypot(g[1]);
-                let g = [g[0] / norm, g[1] / norm];
-                // A node that would turn back sticks first: ρ (K's diagonal) can be far
-                // stiffer than the boundary is where the body slides, and the test would
-                // swing between the two directions past the sticking state between them.
-                let reverses = match before.map(|b| b.friction[j]) {
-                    Some(Friction::Slip { g: old, .. }) => old[0] * g[0] + old[1] * g[1] < 0.0,
-                    _ => false,
-                };
-                if norm <= c || reverses {
-                    return Friction::Stick;
-                }
-                Friction::Slip {
-                    g,
-                    beta: (c * rho / (norm - c)).min(1e12 * rho),
-                }
-            })
-            .collect();
-        Sets { active, friction }
+    /// The iterate (w, z) of the rows, judged with ρ times `soften`.
+    fn at<'a>(&'a self, rows: &'a Rows, soften: f64, w: &'a [f64], z: &'a [f64]) -> Iterate<'a> {
+        Iterate {
+            rows,
+            rho: &self.rho,
+            soften,
+            w,
+            z,
+        }
     }
 
     /// The Newton system's terms and right side b − f_slip for `sets`.
