@@ -67,7 +67,7 @@
 //! - `max_newton` iterations end the step with `StepStatus::MaxIterations`.
 //!
 //! On the golden scenes, the corners and a rotating traction (tests/petsc) every step
-//! converges; the bracket's sliding onset is the hardest (27 iterations in one step).
+//! converges; the bracket's sliding onset is the hardest (35 iterations in one step).
 
 use super::{kkt_residual, Abandon, Rows, StepReport, StepStatus};
 use crate::Result;
