@@ -155,8 +155,9 @@ impl ContactPlan {
                 "per Newton iteration one Krylov solve of the primal system (the step matrix with \
                  the active and sticking directions removed) preconditioned by the multigrid of \
                  K_A set up once: tens of iterations, the last system to 1e-12; a step takes two \
-                 or three Newton systems where the contact and slip sets stand (a loose solve, \
-                 then the last), more where they change"
+                 or three Newton systems where the contact and slip sets stand in 2D (a loose \
+                 solve, then the last), about six in 3D where slipping nodes turn, tens where \
+                 contact or sliding sets in"
                     .to_string(),
             ),
             Contact::Clarabel => (
