@@ -94,6 +94,49 @@ impl CellMaterials {
     pub fn elastic(&self) -> bool {
         self.distinct.iter().any(|s| s.b.is_some())
     }
+
+    /// The number of cells in region i (i = 1.. for the entries; 0 outside every region).
+    pub fn count(&self, i: usize) -> usize {
+        self.region.iter().filter(|&&r| r as usize == i).count()
+    }
+}
+
+/// `check`'s lines on the regions (none for a scene without): each entry's group, its
+/// element count and its material, then the elements outside every region and how many
+/// distinct materials the cells hold.
+pub fn summary(materials: &CellMaterials, scene: &Scene) -> Vec<String> {
+    if materials.region.is_empty() {
+        return Vec::new();
+    }
+    let cells = ["triangles", "tetrahedra"][scene.mesh.model.dim() - 2];
+    let regions = scene.physics.regions.iter().enumerate();
+    let mut lines: Vec<String> = regions
+        .map(|(i, r)| {
+            let n = materials.count(i + 1);
+            format!(
+                "{}: '{}', {n} {cells}, {}",
+                i + 1,
+                r.on,
+                describe(&r.material)
+            )
+        })
+        .collect();
+    lines.push(format!(
+        "0: outside every region, {} {cells}, [material] {}; {} distinct materials",
+        materials.count(0),
+        describe(&scene.physics.material),
+        materials.distinct.len()
+    ));
+    lines
+}
+
+/// "θ = …, ζ = …, E = …, ν = …" (or "no elasticity").
+fn describe(m: &Material) -> String {
+    let elasticity = match m.elasticity {
+        Some((e, nu)) => format!("E = {e}, ν = {nu}"),
+        None => "no elasticity".into(),
+    };
+    format!("θ = {}, ζ = {}, {elasticity}", m.theta, m.zeta)
 }
 
 /// The region of every cell (0 outside all): each entry's group, which must be one of the
