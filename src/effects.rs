@@ -84,9 +84,11 @@ pub const RIGHT_ANGLE_COSINE: f64 = 1e-9;
 pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
     let mut w = Vec::new();
     use crate::scene::Model;
-    if let (Model::PlaneStrain | Model::ThreeD, Some((_, nu))) =
-        (scene.mesh.model, scene.physics.elasticity)
-    {
+    // The largest Poisson ratio of the body's materials.
+    let nu = (scene.physics.materials())
+        .filter_map(|m| m.elasticity.map(|(_, nu)| nu))
+        .reduce(f64::max);
+    if let (Model::PlaneStrain | Model::ThreeD, Some(nu)) = (scene.mesh.model, nu) {
         if nu > 0.45 {
             let (model, elements, remedy) = match scene.mesh.model {
                 Model::PlaneStrain => ("plane strain", "triangles", "a smaller ν or plane stress"),

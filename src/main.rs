@@ -392,6 +392,9 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         "conditions {}",
         viscontact::fem::constraints::summary(scene, disc.prescribed.len())
     );
+    for line in viscontact::fem::materials::summary(&disc.materials, scene) {
+        viscontact::outln!("region     {line}");
+    }
     viscontact::outln!(
         "time       T = {}, N = {}, k = {}",
         scene.time.end,

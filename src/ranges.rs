@@ -133,6 +133,31 @@ pub const RANGES: &[Range] = &[
         "none",
         SCALE,
     ),
+    row("material.region[].on", GROUP, "required", GROUP_WHY),
+    row(
+        "material.region[].viscosity.theta",
+        "as material.viscosity.theta",
+        "required in the region's [viscosity]",
+        "as material.viscosity.theta",
+    ),
+    row(
+        "material.region[].viscosity.zeta",
+        "as material.viscosity.zeta",
+        "0",
+        "as material.viscosity.zeta",
+    ),
+    row(
+        "material.region[].elasticity.young",
+        "as material.elasticity.young",
+        "required in the region's [elasticity]",
+        "as material.elasticity.young",
+    ),
+    row(
+        "material.region[].elasticity.poisson",
+        "as material.elasticity.poisson",
+        "0",
+        "as material.elasticity.poisson",
+    ),
     row(
         "friction.normal_stress",
         "a number: 0 or 1e-100 ≤ F ≤ 1e100; or an expression of x, y, z",

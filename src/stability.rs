@@ -16,7 +16,12 @@
 //!
 //! For each mode the recursion above is a (1 + p)×(1 + p) matrix in (u, m^(1..p)); the step
 //! limit is the largest k below which its spectral radius stays ≤ 1 (found by bisection on a
-//! logarithmic scan). Without memory this is k ≤ 2/λ_B. A compressed expression or table
+//! logarithmic scan). Without memory this is k ≤ 2/λ_B. A body of several materials
+//! (`[[material.region]]`) gets the modes of each: the Rayleigh quotients of K_B and K_R
+//! against K_A lie within the pointwise ratios of all of them (each cell's energies are
+//! those of its material), so every mode of every material must be stable; without memory
+//! this is exactly k ≤ 2/max λ_B, with memory it is the one-material analysis applied to
+//! each material. A compressed expression or table
 //! kernel (`kernel_fit`) is a Prony series, and the run is exactly the scheme with it, so it
 //! gets this exact limit too.
 //!
@@ -57,13 +62,18 @@ pub struct StepLimit {
     pub includes_memory: bool,
 }
 
-/// The two modal ratios (λ_B, λ_R) of the pointwise tensors against A in dimension d: the
-/// deviatoric mode (C τ = 2a τ) and the volumetric one (C I = (2a + d b) I).
-fn modes(a: Isotropic, b: Option<Isotropic>, r: Isotropic, d: usize) -> [(f64, f64); 2] {
-    let b = b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
-    let d = d as f64;
+/// The modal ratios (λ_B, λ_R) of the pointwise tensors against A in dimension d, two for
+/// each material of the cells: the deviatoric mode (C τ = 2a τ) and the volumetric one
+/// (C I = (2a + d b) I).
+fn modes(disc: &Discretization) -> Vec<(f64, f64)> {
+    let (r, d) = (disc.r, disc.dim as f64);
     let vol = |c: Isotropic| 2.0 * c.a + d * c.b;
-    [(b.a / a.a, r.a / a.a), (vol(b) / vol(a), vol(r) / vol(a))]
+    (disc.materials.distinct.iter())
+        .flat_map(|s| {
+            let (a, b) = (s.a, s.b_or_zero());
+            [(b.a / a.a, r.a / a.a), (vol(b) / vol(a), vol(r) / vol(a))]
+        })
+        .collect()
 }
 
 /// Spectral radius of the one-mode recursion at step k.
@@ -91,15 +101,16 @@ pub fn step_limit(disc: &Discretization, plan: &Plan) -> StepLimit {
         Plan::Exact { .. } => (Vec::new(), false),
         _ => (plan.prony().unwrap_or(&[]).to_vec(), true),
     };
-    if disc.b.is_none() && prony.is_empty() {
+    if !disc.materials.elastic() && prony.is_empty() {
         return StepLimit {
             k_max: None,
             includes_memory,
         };
     }
     let tol = 1e-12;
+    let modes = modes(disc);
     let stable = |k: f64| {
-        modes(disc.a, disc.b, disc.r, disc.dim)
+        modes
             .iter()
             .all(|&(lb, lr)| radius(k, lb, lr, &prony) <= 1.0 + tol)
     };
@@ -152,7 +163,7 @@ pub fn amplification(disc: &Discretization, lags: &Lags) -> f64 {
     // rev[n_max − l] = r_l, so that Σ_{l=1}^{n} r_l u_{n−l} is a contiguous dot product.
     let rev: Vec<f64> = r.iter().rev().copied().collect();
     let mut peak: f64 = 1.0;
-    for (lb, lr) in modes(disc.a, disc.b, disc.r, disc.dim) {
+    for (lb, lr) in modes(disc) {
         let mut u = Vec::with_capacity(n_max + 1);
         u.push(1.0f64);
         for n in 0..n_max {

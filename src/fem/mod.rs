@@ -2,11 +2,13 @@
 //! dofs held at zero by a Dirichlet condition eliminated, prescribed ones numbered after the
 //! free ones: `constraints`), the stiffness matrices K_A, K_B, K_R, the load vector ⟨f_n, ·⟩,
 //! the given-normal-stress load g_F and the nodal constraint rows on Γ3,1 (n_i·w_i ≤ 0) and
-//! Γ3,2 (weight c_i of |w_τ,i|, with w_τ,i in the tangent line (2D) or plane (3D)).
+//! Γ3,2 (weight c_i of |w_τ,i|, with w_τ,i in the tangent line (2D) or plane (3D)). A and
+//! B are those of each cell's material (`materials`: `[material]`, or a region's).
 
 pub mod constraints;
 pub mod element;
 pub mod loads;
+pub mod materials;
 mod pair;
 pub mod reactions;
 
@@ -18,6 +20,7 @@ pub use constraints::{Numbering, Prescribed};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::Loads;
+pub use materials::{CellMaterials, Stiffness};
 pub use pair::SymmetricPair;
 use std::path::Path;
 
@@ -99,9 +102,8 @@ pub struct Discretization {
     /// Every held global dof (clamped, held at zero or prescribed), increasing, with the
     /// condition that holds it (`Numbering::held_by`).
     pub held: Vec<(usize, constraints::Source)>,
-    /// A (4.1), B (4.2) (None when E = 0 or disabled), R's constant part I.
-    pub a: Isotropic,
-    pub b: Option<Isotropic>,
+    /// Each cell's A (4.1) and B (4.2); R's constant part I (the same in every cell).
+    pub materials: CellMaterials,
     pub r: Isotropic,
     /// K_A on the free dofs (n_free); K_B, K_R on all n_dofs (the free and the prescribed).
     pub k_a: Sparse,
@@ -403,17 +405,9 @@ impl Discretization {
         let (free, n_free, n_dofs) = (&numbering.free, numbering.n_free, numbering.n_dofs);
         let cells = cells(mesh);
 
-        let a = Isotropic::viscosity(scene.physics.theta, scene.physics.zeta);
-        let b = scene
-            .physics
-            .elasticity
-            .filter(|(e, _)| *e > 0.0)
-            .map(|(e, nu)| match scene.mesh.model {
-                Model::PlaneStress => Isotropic::plane_stress(e, nu),
-                Model::PlaneStrain | Model::ThreeD => Isotropic::lame(e, nu),
-            });
+        let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
-        let (k_a_all, k_b, k_r) = assemble(&cells, d, free, n_dofs, a, b, r);
+        let (k_a_all, k_b, k_r) = assemble(&cells, d, free, n_dofs, &materials, r);
         let (k_a, k_a_all) = match n_dofs > n_free {
             true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
             false => (k_a_all, None),
@@ -440,8 +434,7 @@ impl Discretization {
             held: numbering.held_by,
             free: numbering.free,
             k_a_all,
-            a,
-            b,
+            materials,
             r,
             k_a,
             k_b,
@@ -471,7 +464,8 @@ impl Discretization {
     /// nodal combinations p = Σ_C a_C v_C and q = Σ_C b_C v_C (v_A = w, v_B = u, v_R = m)
     /// σ = Σ_i (∇φ_i ⊗ p_i + p_i ⊗ ∇φ_i) + (Σ_i ∇φ_i · q_i) I over the cell's vertices i:
     /// one pass over the cells instead of three strains each (a frame at every step pays
-    /// this on the frame writer's thread, beside the time loop).
+    /// this on the frame writer's thread, beside the time loop). A and B are the cell's own:
+    /// the nodal p, q are made once per distinct material, and a cell reads its material's.
     pub fn stress(
         &self,
         w: &[f64],
@@ -497,26 +491,27 @@ impl Discretization {
         m: Option<&[f64]>,
         plane_stress: bool,
     ) -> (Vec<f64>, Vec<f64>) {
-        let b = self.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
-        let (a, r) = (self.a, self.r);
-        // [p_n, q_n] of every node (D components: 32 bytes a node in 2D).
-        let pq: Vec<[[f64; D]; 2]> = self
-            .free
-            .as_chunks::<D>()
-            .0
-            .iter()
-            .map(|dofs| {
-                let mut pq = [[0.0; D]; 2];
-                for (c, dof) in dofs.iter().enumerate() {
-                    if let Some(dof) = *dof {
-                        let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
-                        pq[0][c] = a.a * w + b.a * u + r.a * m;
-                        pq[1][c] = a.b * w + b.b * u + r.b * m;
+        let r = self.r;
+        // [p_n, q_n] of every node (D components: 32 bytes a node in 2D), for each distinct
+        // material.
+        let pq_of = |s: &Stiffness| -> Vec<[[f64; D]; 2]> {
+            let (a, b) = (s.a, s.b_or_zero());
+            let nodes = self.free.as_chunks::<D>().0.iter();
+            nodes
+                .map(|dofs| {
+                    let mut pq = [[0.0; D]; 2];
+                    for (c, dof) in dofs.iter().enumerate() {
+                        if let Some(dof) = *dof {
+                            let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
+                            pq[0][c] = a.a * w + b.a * u + r.a * m;
+                            pq[1][c] = a.b * w + b.b * u + r.b * m;
+                        }
                     }
-                }
-                pq
-            })
-            .collect();
+                    pq
+                })
+                .collect()
+        };
+        let pqs: Vec<Vec<[[f64; D]; 2]>> = self.materials.distinct.iter().map(pq_of).collect();
         let packed = self
             .stress_cells
             .get_or_init(|| PackedCells::new(&self.cells));
@@ -525,7 +520,8 @@ impl Discretization {
         let (grads, _) = packed.grad.as_chunks::<D>();
         let (grads, _) = grads.as_chunks::<N>();
         let (cells, _) = packed.nodes.as_chunks::<N>();
-        for (nodes, grad) in cells.iter().zip(grads) {
+        for ((nodes, grad), &material) in cells.iter().zip(grads).zip(&self.materials.of_cell) {
+            let pq = &pqs[material as usize];
             let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
             let mut tr = 0.0;
             for (g, &n) in grad.iter().zip(nodes) {
@@ -823,7 +819,8 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
     )))
 }
 
-/// Assembles K_A, K_B, K_R over all cells on the dofs with an index (`free`: the free and
+/// Assembles K_A, K_B, K_R over all cells, each with its material (K_B when any cell has
+/// elasticity), on the dofs with an index (`free`: the free and
 /// the prescribed ones; rows and columns of dofs held at zero dropped); the three share one
 /// sparsity pattern, built once from the mesh: node q couples with node p when a cell holds
 /// both. The column of index j, a component of node p, lists the indices of the components
@@ -834,8 +831,7 @@ fn assemble(
     d: usize,
     free: &[Option<usize>],
     n: usize,
-    a: Isotropic,
-    b: Option<Isotropic>,
+    materials: &CellMaterials,
     r: Isotropic,
 ) -> (Sparse, Option<Sparse>, Sparse) {
     let dofs = |p: usize| free[d * p..d * (p + 1)].iter().flatten().copied();
@@ -868,14 +864,16 @@ fn assemble(
         col_ptr.push(row_idx.len());
     }
     let nnz = row_idx.len();
+    let elastic = materials.elastic();
     let (mut va, mut vb, mut vr) = (
         vec![0.0; nnz],
-        vec![0.0; if b.is_some() { nnz } else { 0 }],
+        vec![0.0; if elastic { nnz } else { 0 }],
         vec![0.0; nnz],
     );
     // The entries of the three matrices from the same two factors (`Cell::parts`), without
     // building three element matrices per cell.
-    for t in cells {
+    for (c, t) in cells.iter().enumerate() {
+        let Stiffness { a, b } = materials.of(c);
         let nodes = t.vertices();
         for (j, &p) in nodes.iter().enumerate() {
             for (i, &q) in nodes.iter().enumerate() {
@@ -903,7 +901,7 @@ fn assemble(
     let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
     (
         SparseColMat::new(pattern.clone(), va),
-        b.map(|_| SparseColMat::new(pattern.clone(), vb)),
+        elastic.then(|| SparseColMat::new(pattern.clone(), vb)),
         SparseColMat::new(pattern, vr),
     )
 }

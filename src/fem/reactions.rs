@@ -36,7 +36,7 @@
 //! products of these few rows and one more evaluation of the loads (`Loads::visit`), which
 //! splits ⟨f_n, φ⟩ by load and keeps its values at the held dofs.
 
-use super::{constraints::Source, group, Discretization, Isotropic};
+use super::{constraints::Source, group, Discretization};
 use crate::mesh::Mesh;
 use crate::scene::Scene;
 use crate::Result;
@@ -142,9 +142,10 @@ fn held_rows(
     k_r: f64,
 ) -> (Vec<usize>, Vec<usize>, Vec<[f64; 3]>) {
     let d = disc.dim;
-    let b = disc.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 });
     let mut entries: Vec<(u32, usize, [f64; 3])> = Vec::new();
-    for t in &disc.cells {
+    for (c, t) in disc.cells.iter().enumerate() {
+        let s = disc.materials.of(c);
+        let (a, b) = (s.a, s.b_or_zero());
         let nodes = t.vertices();
         for (i, &q) in nodes.iter().enumerate() {
             for al in 0..d {
@@ -154,7 +155,7 @@ fn held_rows(
                 for (j, &p) in nodes.iter().enumerate() {
                     for (be, col) in (0..d).filter_map(|be| Some((be, disc.free[d * p + be]?))) {
                         let parts = t.parts(i, j, al, be);
-                        let [ka, kb, kr] = [disc.a, b, disc.r].map(|c| t.entry(c, parts));
+                        let [ka, kb, kr] = [a, b, disc.r].map(|c| t.entry(c, parts));
                         entries.push((row, col, [ka + k_b * kb + k_r * kr, kb, kr]));
                     }
                 }

@@ -190,14 +190,31 @@ impl Mesh {
     /// different dimensions, the boundary (dim-1) group wins. The error names the mesh file
     /// and the key, and lists the groups the file has.
     pub fn group(&self, key: &str) -> Result<&Group> {
-        self.find_group(key, false)
+        self.find_group(key, Want::Any)
+    }
+
+    /// Like [`Mesh::group`], but the group must hold cells of the body: a surface group in
+    /// 2D, a volume group in 3D (a material region). An empty one is refused.
+    pub fn cell_group(&self, key: &str) -> Result<&Group> {
+        let g = self.find_group(key, Want::Cells)?;
+        if g.cells.is_empty() {
+            let cells = ["triangles", "tetrahedra"][self.dim - 2];
+            return Err(Error::input(format!(
+                "mesh '{}': physical group '{}' (tag {}) has no {cells}: no element of the \
+                 mesh carries it; add the body's elements to the group in gmsh",
+                self.path.display(),
+                Self::display_name(g),
+                g.tag
+            )));
+        }
+        Ok(g)
     }
 
     /// Like [`Mesh::group`], but the group must be a boundary group: a curve group in 2D, a
     /// surface group in 3D. An empty group (named in `$PhysicalNames` but carried by no
     /// boundary entity) is refused: a boundary condition on it would silently do nothing.
     pub fn boundary_group(&self, key: &str) -> Result<&Group> {
-        let g = self.find_group(key, true)?;
+        let g = self.find_group(key, Want::Boundary)?;
         if let Some(why) = &g.defect {
             return Err(Error::input(why.clone()));
         }
@@ -351,28 +368,32 @@ impl Mesh {
         g.name.clone().unwrap_or_else(|| g.tag.to_string())
     }
 
-    fn find_group(&self, key: &str, boundary: bool) -> Result<&Group> {
+    fn find_group(&self, key: &str, want: Want) -> Result<&Group> {
         let matcher = GroupKey::new(key);
         for stage in 0..3 {
             let found: Vec<&Group> = (self.groups.iter())
                 .filter(|g| matcher.matches(stage, g.name.as_deref(), g.tag))
                 .collect();
             if !found.is_empty() {
-                return self.choose(found, key, boundary);
+                return self.choose(found, key, want);
             }
         }
-        Err(self.missing(key, &matcher))
+        Err(self.missing(key, &matcher, want))
     }
 
-    /// The one group of `found` (the groups a name or tag matched) that `key` names: one on
-    /// the boundary where there is, else (unless `boundary` requires one) any.
-    fn choose<'g>(&self, found: Vec<&'g Group>, key: &str, boundary: bool) -> Result<&'g Group> {
+    /// The one group of `found` (the groups a name or tag matched) that `key` names: for
+    /// cells one of the body's dimension, else one on the boundary where there is, else
+    /// (unless `want` requires one) any.
+    fn choose<'g>(&self, found: Vec<&'g Group>, key: &str, want: Want) -> Result<&'g Group> {
         let file = self.path.display();
+        if want == Want::Cells {
+            return self.choose_cells(found, key);
+        }
         let bdim = self.dim - 1;
         let on_boundary: Vec<&Group> = found.iter().copied().filter(|g| g.dim == bdim).collect();
         let chosen = if !on_boundary.is_empty() {
             on_boundary
-        } else if boundary {
+        } else if want == Want::Boundary {
             let boundary_groups: Vec<String> = self
                 .groups
                 .iter()
@@ -393,6 +414,39 @@ impl Mesh {
         } else {
             found
         };
+        self.only(chosen, key)
+    }
+
+    /// The one group of `found` of the body's dimension.
+    fn choose_cells<'g>(&self, found: Vec<&'g Group>, key: &str) -> Result<&'g Group> {
+        let of_body: Vec<&Group> = found
+            .iter()
+            .copied()
+            .filter(|g| g.dim == self.dim)
+            .collect();
+        if of_body.is_empty() {
+            let cell_groups: Vec<String> = (self.groups.iter())
+                .filter(|g| g.dim == self.dim)
+                .map(describe)
+                .collect();
+            let (is, needed) = match self.dim {
+                2 => ("a curve", "a surface"),
+                _ => ("a surface", "a volume"),
+            };
+            return Err(Error::input(format!(
+                "mesh '{}': '{key}' names the physical group {}, which is {is} group, but \
+                 {needed} group of the body's elements is needed here; those groups are: {}",
+                self.path.display(),
+                describe(found[0]),
+                or_none(&cell_groups)
+            )));
+        }
+        self.only(of_body, key)
+    }
+
+    /// The group when `chosen` holds one; else the error that `key` is ambiguous.
+    fn only<'g>(&self, chosen: Vec<&'g Group>, key: &str) -> Result<&'g Group> {
+        let file = self.path.display();
         if chosen.len() > 1 {
             let list: Vec<String> = chosen.iter().map(|g| describe(g)).collect();
             return Err(Error::input(format!(
@@ -405,7 +459,7 @@ impl Mesh {
     }
 
     /// Why no physical group matches `key`: it names a group of another dimension, or none.
-    fn missing(&self, key: &str, matcher: &GroupKey) -> Error {
+    fn missing(&self, key: &str, matcher: &GroupKey, want: Want) -> Error {
         let file = self.path.display();
         let elsewhere = (self.other_groups.iter()).find(|(_, tag, name)| {
             (0..3).any(|stage| matcher.matches(stage, name.as_deref(), *tag))
@@ -416,10 +470,14 @@ impl Mesh {
                 2 => ("curve", "surface"),
                 _ => ("surface", "volume"),
             };
+            let fix = match want {
+                Want::Cells => format!("a material region is a physical {cells}"),
+                _ => format!("put the boundary {boundary}s into the group in gmsh"),
+            };
             return Error::input(format!(
                 "mesh '{file}': '{key}' is a physical {kind} (tag {tag}); a boundary condition \
                  acts on a physical {boundary} and the body is a physical {cells} in a {}D \
-                 mesh: put the boundary {boundary}s into the group in gmsh",
+                 mesh: {fix}",
                 self.dim
             ));
         }
@@ -436,6 +494,17 @@ impl Mesh {
             or_none(&list)
         ))
     }
+}
+
+/// What kind of group a lookup needs.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Want {
+    /// Any group (a boundary one wins where a key matches several dimensions).
+    Any,
+    /// A group of the boundary's dimension.
+    Boundary,
+    /// A group of the body's dimension.
+    Cells,
 }
 
 /// A group as a scene names it, matched in three stages: the exact name, the name

@@ -75,8 +75,10 @@ const VTK_TRIANGLE: u8 = 5;
 const VTK_TETRA: u8 = 10;
 
 /// The fields a run writes (`[output] fields` chooses among them): point fields, cell fields,
-/// and `region`, the gmsh physical tag of each cell.
-pub const FIELDS: [&str; 8] = [
+/// and the static cell arrays ([`STATIC_CELL_FIELDS`]): `region`, the gmsh physical tag of
+/// each cell, and `material_region`, its `[[material.region]]` entry (written only by a scene
+/// with regions).
+pub const FIELDS: [&str; 9] = [
     "displacement",
     "velocity",
     "contact_pressure",
@@ -85,7 +87,12 @@ pub const FIELDS: [&str; 8] = [
     "stress",
     "von_mises",
     "region",
+    "material_region",
 ];
+
+/// The cell arrays of the mesh rather than of a frame (Int32, written once), in the order
+/// of the files.
+pub const STATIC_CELL_FIELDS: [&str; 2] = ["region", "material_region"];
 
 /// `[output] compression`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -137,16 +144,39 @@ impl Options {
 /// The mesh of a series. `points`: node coordinates (3 per node, z = 0 in 2D); `cells`:
 /// `nodes_per_cell` node indices per cell, concatenated (3 → VTK_TRIANGLE, 4 → VTK_TETRA,
 /// anything else is an input error); `region`: the gmsh physical tag of each cell, or empty
-/// for none.
+/// for none; `material_region`: each cell's `[[material.region]]` entry (0 outside every
+/// region, i for the i-th entry), or empty for none.
 #[derive(Clone, Copy, Debug)]
 pub struct Geometry<'a> {
     pub points: &'a [[f64; 3]],
     pub cells: &'a [usize],
     pub nodes_per_cell: usize,
     pub region: &'a [i32],
+    pub material_region: &'a [i32],
 }
 
-impl Geometry<'_> {
+impl<'a> Geometry<'a> {
+    /// The static cell arrays that are not empty, by name ([`STATIC_CELL_FIELDS`]' order).
+    pub(super) fn cell_statics(&self) -> Vec<(&'static str, &'a [i32])> {
+        let arrays = [self.region, self.material_region];
+        STATIC_CELL_FIELDS
+            .into_iter()
+            .zip(arrays)
+            .filter(|(_, a)| !a.is_empty())
+            .collect()
+    }
+
+    /// The geometry with the static cell arrays that `options` does not choose left empty.
+    pub(super) fn chosen(mut self, options: &Options) -> Self {
+        if !options.wants("region") {
+            self.region = &[];
+        }
+        if !options.wants("material_region") {
+            self.material_region = &[];
+        }
+        self
+    }
+
     /// Checks the mesh and returns its VTK cell type: 3 nodes per cell → VTK_TRIANGLE, 4 →
     /// VTK_TETRA, anything else, node indices out of range or a region tag count that is not
     /// the cell count → `Error::Input`.
@@ -176,11 +206,13 @@ impl Geometry<'_> {
                 cells[pos]
             )));
         }
-        if !self.region.is_empty() && self.region.len() != num_cells {
-            return Err(Error::input(format!(
-                "output: {} region tags for {num_cells} cells",
-                self.region.len()
-            )));
+        for (name, values) in self.cell_statics() {
+            if values.len() != num_cells {
+                return Err(Error::input(format!(
+                    "output: {} {name} values for {num_cells} cells",
+                    values.len()
+                )));
+            }
         }
         Ok(cell_type)
     }
@@ -328,10 +360,7 @@ impl Series {
         kept: Vec<(usize, f64)>,
     ) -> Result<Series> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let mut g = *geometry;
-        if !options.wants("region") {
-            g.region = &[];
-        }
+        let g = geometry.chosen(options);
         let sizes = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
         let (sink, files) = match options.format {
             Format::Vtu => (

@@ -509,6 +509,7 @@ mod tests {
                     cells: &cells,
                     nodes_per_cell: 3,
                     region: &[7, 9],
+                    material_region: &[],
                 };
                 let options = Options {
                     compression,

@@ -101,10 +101,7 @@ impl Series {
             .copied()
             .filter(|f| f.step < resumed.step)
             .collect();
-        let mut g = *geometry;
-        if !options.wants("region") {
-            g.region = &[];
-        }
+        let g = geometry.chosen(options);
         let mut series = match options.format {
             Format::Vtu => {
                 check_vtus(dir, run_id, &kept, resumed)?;
@@ -126,10 +123,7 @@ impl Series {
     /// so that later checkpoints record them; frames that cannot be read are left out (and so
     /// dropped from the series by the next resume).
     pub(super) fn checksum_kept(&mut self, g: &Geometry) -> Result<()> {
-        let mut g = *g;
-        if !self.options.wants("region") {
-            g.region = &[];
-        }
+        let g = g.chosen(&self.options);
         let sums: Vec<FrameSum> = match self.options.format {
             Format::Vtu => self
                 .files

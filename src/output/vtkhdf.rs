@@ -14,7 +14,9 @@
 //!   Offsets [C + 1]            int64   0, p, 2p, …
 //!   Types [C]                  uint8   5 = VTK_TRIANGLE, 10 = VTK_TETRA
 //!   PointData/<field> [S·N, c] values of every frame, frame after frame (c = 1: [S·N])
-//!   CellData/<field> [S·C, c]  likewise; CellData/region [C] int32 (gmsh tag) is static
+//!   CellData/<field> [S·C, c]  likewise; CellData/region [C] int32 (gmsh tag) is static,
+//!                              and so is CellData/material_region [C] int32 (a scene
+//!                              with regions: the `[[material.region]]` entry)
 //!   FieldData/run_id [1, len]  uint8, the bytes of the run id (one tuple: VTK reads one
 //!                              tuple of a field data array a step)
 //!   Steps                      attr NSteps = S (int64)
@@ -23,7 +25,7 @@
 //!                              int64 0, 1, 0, 0, 0: every frame has the one mesh above
 //!     FieldDataOffsets/run_id [S]   int64 0: every frame has the one run id
 //!     PointDataOffsets/<field> [S]  int64 k·N for frame k
-//!     CellDataOffsets/<field> [S]   int64 k·C for frame k (region: 0)
+//!     CellDataOffsets/<field> [S]   int64 k·C for frame k (the static ones: 0)
 //! /viscontact/step [S]         int64 the step number n of each frame (outside /VTKHDF,
 //!                              which the format leaves to the writer)
 //! ```
@@ -94,7 +96,7 @@ use hdf5_metno as hdf5;
 use hdf5_metno_sys as hdf5_sys;
 
 use super::writer::Written;
-use super::{zlib, Array, Compression, Geometry, Precision, Values};
+use super::{zlib, Array, Compression, Geometry, Precision, Values, STATIC_CELL_FIELDS};
 use crate::{Error, Result};
 
 /// Level of HDF5's deflate filter: it compresses the mesh (once); the fields' chunks come
@@ -131,7 +133,8 @@ pub(super) struct Sink {
     cells: Vec<usize>,
     nodes_per_cell: usize,
     cell_type: u8,
-    region: Vec<i32>,
+    /// The static cell fields (`output::STATIC_CELL_FIELDS`) the geometry has.
+    cell_arrays: Vec<(&'static str, Vec<i32>)>,
     run_id: String,
     compression: Compression,
     open: Option<Open>,
@@ -222,7 +225,9 @@ impl Sink {
             points: g.points.to_vec(),
             cells: g.cells.to_vec(),
             nodes_per_cell: g.nodes_per_cell,
-            region: g.region.to_vec(),
+            cell_arrays: (g.cell_statics().into_iter())
+                .map(|(name, values)| (name, values.to_vec()))
+                .collect(),
             run_id: run_id.to_string(),
             compression,
             open: None,
@@ -301,10 +306,10 @@ impl Sink {
                 growing::<i64>(offsets, &a.name)?;
             }
         }
-        if !self.region.is_empty() {
-            self.fixed::<i32>(&cell_data, "region", &[c])?
-                .write_raw(&self.region)?;
-            growing::<i64>(&cell_offsets, "region")?;
+        for (name, values) in &self.cell_arrays {
+            self.fixed::<i32>(&cell_data, name, &[c])?
+                .write_raw(values)?;
+            growing::<i64>(&cell_offsets, name)?;
         }
         growing::<i64>(&file.create_group("viscontact")?, "step")?;
         Ok(file)
@@ -384,22 +389,22 @@ impl Sink {
         let root = file.group("VTKHDF").map_err(h5)?;
         let steps = root.group("Steps").map_err(h5)?;
         let k = job.index;
-        let region = !self.region.is_empty();
+        let none = Vec::new();
         let deflate = self.compression == Compression::Zlib;
-        for (data, offsets, arrays, rows, region) in [
+        for (data, offsets, arrays, rows, statics) in [
             (
                 "PointData",
                 "PointDataOffsets",
                 &job.point_data,
                 self.num_points(),
-                false,
+                &none,
             ),
             (
                 "CellData",
                 "CellDataOffsets",
                 &job.cell_data,
                 self.num_cells(),
-                region,
+                &self.cell_arrays,
             ),
         ] {
             let data = root.group(data).map_err(h5)?;
@@ -410,9 +415,9 @@ impl Sink {
                     write_rows(&ds, a, k * rows, rows, deflate)?;
                     push(&offsets.dataset(&a.name)?, k, (k * rows) as i64)?;
                 }
-                if region {
-                    // The static region: every frame reads it from its start.
-                    push(&offsets.dataset("region")?, k, 0i64)?;
+                for (name, _) in statics {
+                    // A static cell field: every frame reads it from its start.
+                    push(&offsets.dataset(name)?, k, 0i64)?;
                 }
                 Ok(())
             })()
@@ -911,11 +916,14 @@ fn check_static(file: &hdf5::File, g: &Geometry, run_id: &str) -> std::result::R
         let root = file.group("VTKHDF")?;
         let i64s = |name: &str| root.dataset(name).and_then(|d| d.read_raw::<i64>());
         let points = root.dataset("Points")?.read_raw::<f64>()?;
-        let region = match g.region.is_empty() {
-            true => true,
-            false => root.dataset("CellData/region")?.read_raw::<i32>()? == g.region,
-        };
-        Ok(vec![
+        let mut statics = Vec::new();
+        for (name, values) in g.cell_statics() {
+            let stored = root
+                .dataset(&format!("CellData/{name}"))?
+                .read_raw::<i32>()?;
+            statics.push((name, stored == values));
+        }
+        let mut checks = vec![
             ("NumberOfPoints", i64s("NumberOfPoints")? == [n as i64]),
             ("NumberOfCells", i64s("NumberOfCells")? == [c as i64]),
             (
@@ -948,12 +956,17 @@ fn check_static(file: &hdf5::File, g: &Geometry, run_id: &str) -> std::result::R
                 "Types",
                 root.dataset("Types")?.read_raw::<u8>()? == vec![cell_type; c],
             ),
-            ("CellData/region", region),
             (
                 "FieldData/run_id",
                 root.dataset("FieldData/run_id")?.read_raw::<u8>()? == run_id.as_bytes(),
             ),
-        ])
+        ];
+        let cell_data = |name| match name {
+            "region" => "CellData/region",
+            _ => "CellData/material_region",
+        };
+        checks.extend(statics.into_iter().map(|(name, ok)| (cell_data(name), ok)));
+        Ok(checks)
     };
     let checks = read().map_err(|e| e.to_string())?;
     match checks.iter().find(|(_, ok)| !ok) {
@@ -966,7 +979,8 @@ fn check_static(file: &hdf5::File, g: &Geometry, run_id: &str) -> std::result::R
 }
 
 /// Every `Steps` entry of frames `0..frames` is what [`Sink::append`] writes (N points, C
-/// cells): the mesh offsets, the field offsets k·N and k·C (region: 0), the run id's 0.
+/// cells): the mesh offsets, the field offsets k·N and k·C (the static cell fields: 0), the
+/// run id's 0.
 fn check_steps(
     file: &hdf5::File,
     frames: usize,
@@ -984,7 +998,10 @@ fn check_steps(
         for (group, rows) in [("PointDataOffsets", n), ("CellDataOffsets", c)] {
             for ds in steps.group(group)?.datasets()? {
                 let name = ds.name().rsplit('/').next().unwrap_or_default().to_string();
-                let rows = if name == "region" { 0 } else { rows };
+                let rows = match STATIC_CELL_FIELDS.contains(&name.as_str()) {
+                    true => 0,
+                    false => rows,
+                };
                 expected.push((format!("{group}/{name}"), 0, rows as i64));
             }
         }

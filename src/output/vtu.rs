@@ -15,13 +15,14 @@
 //! Field values are Float64 or Float32 (`output.precision`), coordinates always Float64 (the
 //! mesh is exact in the file, and it costs once per frame after compression of a few
 //! percent), `connectivity`/`offsets` Int64 (`vtkIdType`), `types` UInt8 (5 = VTK_TRIANGLE,
-//! 10 = VTK_TETRA), the cell field `region` Int32 (gmsh physical tag). The run id is a
+//! 10 = VTK_TETRA), the cell fields `region` Int32 (gmsh physical tag) and, for a scene with
+//! regions, `material_region` Int32 (the `[[material.region]]` entry). The run id is a
 //! `FieldData` array `run_id`: UInt8, the bytes of the string, ascii — a VTK `String` array
 //! would say it better, but meshio refuses that type, and ParaView shows the UInt8 array too.
 //! A 6-component field is a symmetric tensor and gets VTK's component names XX, YY, ZZ, XY,
 //! YZ, XZ.
 //!
-//! The static arrays (points, connectivity, offsets, types, region) are encoded and
+//! The static arrays (points, connectivity, offsets, types, the static cell fields) are encoded and
 //! compressed once, in [`Grid::new`]; a frame compresses only its fields and copies the
 //! static bytes behind them.
 //!
@@ -215,7 +216,8 @@ pub(super) struct Grid {
     field_data: String,
     points: Static,
     cells: [Static; 3],
-    region: Option<Static>,
+    /// The static cell fields (`region`, `material_region`) the geometry has.
+    cell_arrays: Vec<Static>,
     /// Appended bytes of the static arrays: empty until [`Sink::prepare`] compresses them
     /// (every array has a header, so they are never empty after it).
     statics: Vec<u8>,
@@ -263,14 +265,9 @@ impl Grid {
             3,
             le(points.as_flattened().iter(), |x| x.to_le_bytes()),
         );
-        let region = (!g.region.is_empty()).then(|| {
-            add(
-                "region",
-                "Int32",
-                1,
-                le(g.region.iter(), |t| t.to_le_bytes()),
-            )
-        });
+        let cell_arrays = (g.cell_statics().into_iter())
+            .map(|(name, values)| add(name, "Int32", 1, le(values.iter(), |t| t.to_le_bytes())))
+            .collect();
 
         let id: Vec<String> = run_id.bytes().map(|b| b.to_string()).collect();
         let field_data = format!(
@@ -286,7 +283,7 @@ impl Grid {
             field_data,
             points: points_s,
             cells: [conn, offsets, types],
-            region,
+            cell_arrays,
             statics: Vec::new(),
             out: Vec::new(),
             buf: Vec::new(),
@@ -382,8 +379,8 @@ impl Grid {
         let put = |s: &Static, out: &mut Vec<u8>| {
             let _ = writeln!(out, "{} offset=\"{}\"/>", s.open, s.at);
         };
-        if let Some(r) = &self.region {
-            put(r, out);
+        for s in &self.cell_arrays {
+            put(s, out);
         }
         out.extend_from_slice(b"      </CellData>\n      <Points>\n");
         put(&self.points, out);
@@ -430,11 +427,11 @@ impl Sink for Grid {
             return;
         }
         // In reverse document order (see `write_frame`): types, offsets, connectivity, points,
-        // region.
+        // then the static cell fields.
         let [conn, offsets, types] = &mut self.cells;
         let order = [types, offsets, conn, &mut self.points]
             .into_iter()
-            .chain(self.region.as_mut());
+            .chain(self.cell_arrays.iter_mut());
         for s in order {
             s.at = self.statics.len();
             append(

@@ -14,11 +14,13 @@ use crate::solver::Rows;
 use crate::time_loop::Step;
 use crate::Result;
 
-/// The series of a run on `mesh` in `out`: a new one, or for a resume from a checkpoint of
-/// step n ≥ 1 the existing one, verified and continued after step n − 1 ([`Series::resume`]).
+/// The series of a run on `mesh` in `out` (`material_region`: each cell's
+/// `[[material.region]]` entry, empty without regions): a new one, or for a resume from a
+/// checkpoint of step n ≥ 1 the existing one, verified and continued after step n − 1
+/// ([`Series::resume`]).
 pub(super) fn open_series(
     out: &Path,
-    mesh: &Mesh,
+    (mesh, material_region): (&Mesh, &[i32]),
     run_id: &str,
     options: &Options,
     resumed: Option<&Resumed>,
@@ -30,6 +32,7 @@ pub(super) fn open_series(
         cells: &cells,
         nodes_per_cell,
         region: &region,
+        material_region,
     };
     match resumed {
         Some(r) if r.step > 0 => Series::resume(out, &geometry, run_id, options, r),

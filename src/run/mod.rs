@@ -161,7 +161,8 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     check_contact_plan(&scene, &disc, &estimate, None)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let series = open_series(&out, &mesh, &identity.run_id, &scene.output.options, None)?;
+    let statics = (&mesh, &disc.materials.region[..]);
+    let series = open_series(&out, statics, &identity.run_id, &scene.output.options, None)?;
     stage()?;
     let tl = TimeLoop::new(&scene, &disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
@@ -248,7 +249,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(
         &out,
-        &mesh,
+        (&mesh, &disc.materials.region[..]),
         &identity.run_id,
         &scene.output.options,
         resumed.as_ref(),

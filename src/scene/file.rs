@@ -219,6 +219,23 @@ pub struct MaterialSection {
     pub viscosity: ViscositySection,
     pub elasticity: Option<ElasticitySection>,
     pub relaxation: Option<RelaxationSection>,
+    /// `[[material.region]]`: parts of the body with a material of their own.
+    #[serde(default)]
+    pub region: Vec<RegionSection>,
+}
+
+/// One `[[material.region]]` entry: the cells of the physical group `on` (of the body's
+/// dimension) take the tables given here in place of `[material]`'s, checked as those are.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct RegionSection {
+    #[serde(deserialize_with = "group_ref")]
+    pub on: String,
+    pub viscosity: Option<ViscositySection>,
+    pub elasticity: Option<ElasticitySection>,
+    /// A kernel of the region's own: not supported yet, refused by the scene check whatever
+    /// it holds (the whole body runs `[material.relaxation]`).
+    pub relaxation: Option<serde::de::IgnoredAny>,
 }
 
 #[derive(Deserialize, Debug)]

@@ -2,11 +2,17 @@
 //! run, contact, friction and the loads: everything of the scene that the equations see.
 //! Converted from `[material]`, `[contact]`, `[friction]` and `[load]`, every number in
 //! range and every expression compiled.
+//!
+//! The operators A and B may depend on x (the paper allows it): `[[material.region]]`
+//! entries give the cells of a physical group a material of their own, its tables checked
+//! by the same functions as `[material]`'s (under the keys `material.region[i].…`), the
+//! tables a region leaves out taken from `[material]`. The kernel r is one for the whole
+//! body: a region's `relaxation` table is refused.
 
 use super::conditions::Dirichlet;
 use super::file::{
-    FrictionSection, LoadSection, MaterialSection, MemoryMode, Model, NumOrExpr, RelaxationSection,
-    SceneFile,
+    ElasticitySection, FrictionSection, LoadSection, MaterialSection, MemoryMode, Model, NumOrExpr,
+    RegionSection, RelaxationSection, SceneFile, ViscositySection,
 };
 use super::values::{of_space_and_time, scalar, variables};
 use super::TimeGrid;
@@ -30,14 +36,33 @@ pub struct Friction {
     pub coefficient: Scalar,
 }
 
-/// What the equations see.
-#[derive(Debug)]
-pub struct Physics {
+/// The material of (4.1)–(4.2) of the body or of a region of it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Material {
     /// θ, ζ of (4.1).
     pub theta: f64,
     pub zeta: f64,
     /// E, ν of (4.2); None when the elasticity term is disabled.
     pub elasticity: Option<(f64, f64)>,
+}
+
+/// A checked `[[material.region]]` entry.
+#[derive(Debug)]
+pub struct Region {
+    /// Physical group key (resolved against the mesh later: a group of the body's
+    /// dimension).
+    pub on: String,
+    /// `[material]`'s material with the region's tables in place of its own.
+    pub material: Material,
+}
+
+/// What the equations see.
+#[derive(Debug)]
+pub struct Physics {
+    /// `[material]`: the material of every cell outside the regions.
+    pub material: Material,
+    /// `[[material.region]]`, in the file's order.
+    pub regions: Vec<Region>,
     /// r(s) of the memory term; None when relaxation is disabled.
     pub relaxation: Option<Kernel>,
     /// For an expression or table kernel: compressed with this tolerance, or exact (None).
@@ -68,8 +93,13 @@ impl Physics {
     /// compressed kernel is checked against it).
     pub(super) fn from_file(f: &SceneFile, time: &TimeGrid, path: &Path) -> Result<Physics> {
         let model = f.mesh.model;
-        let (theta, zeta) = viscosity(&f.material, path)?;
-        let elasticity = elasticity(&f.material, model, path)?;
+        let (theta, zeta) = viscosity(&f.material.viscosity, "material", path)?;
+        let elasticity = elasticity(f.material.elasticity.as_ref(), "material", model, path)?;
+        let material = Material {
+            theta,
+            zeta,
+            elasticity,
+        };
         let section = f.material.relaxation.as_ref();
         let relaxation = match section {
             Some(r) if r.enabled => Some(kernel(r, path)?),
@@ -84,9 +114,8 @@ impl Physics {
         let friction = friction(f.friction.as_ref(), model, path)?;
         let (tractions, body_forces) = loads(&f.load, &f.mesh.groups.traction, model, path)?;
         Ok(Physics {
-            theta,
-            zeta,
-            elasticity,
+            material,
+            regions: regions(&f.material, material, model, path)?,
             relaxation,
             compression,
             horizon,
@@ -96,6 +125,11 @@ impl Physics {
             body_forces,
             dirichlet: super::conditions::dirichlet(&f.dirichlet, model, path)?,
         })
+    }
+
+    /// `[material]`'s material, then each region's.
+    pub fn materials(&self) -> impl Iterator<Item = &Material> {
+        std::iter::once(&self.material).chain(self.regions.iter().map(|r| &r.material))
     }
 
     /// The memory sum run directly (`material.relaxation.memory = "exact"`), checked as in
@@ -133,31 +167,72 @@ impl Physics {
     }
 }
 
-/// θ and ζ of (4.1): θ > 0, 0 ≤ ζ ≤ `ranges::MAX_BULK_RATIO`·θ.
-fn viscosity(m: &MaterialSection, path: &Path) -> Result<(f64, f64)> {
-    let v = &m.viscosity;
-    let theta = ranges::scaled_sign(v.theta, "material.viscosity.theta", path, true)?;
-    let zeta = ranges::scaled_sign(v.zeta, "material.viscosity.zeta", path, false)?;
+/// The `[[material.region]]` entries of `m`: each region's tables checked as `[material]`'s
+/// (keys `material.region[i].…`), the tables it leaves out taken from `base`; a region's
+/// relaxation table is refused (one kernel for the whole body).
+fn regions(m: &MaterialSection, base: Material, model: Model, path: &Path) -> Result<Vec<Region>> {
+    let region = |(i, r): (usize, &RegionSection)| -> Result<Region> {
+        let prefix = format!("material.region[{i}]");
+        if r.relaxation.is_some() {
+            return Err(bad(
+                path,
+                &format!("{prefix}.relaxation"),
+                &format!(
+                    "a relaxation kernel per region is not supported yet: the whole body \
+                     runs [material.relaxation]; remove the table from the region on '{}'",
+                    r.on
+                ),
+            ));
+        }
+        let (theta, zeta) = match &r.viscosity {
+            Some(v) => viscosity(v, &prefix, path)?,
+            None => (base.theta, base.zeta),
+        };
+        let elasticity = match &r.elasticity {
+            Some(e) => elasticity(Some(e), &prefix, model, path)?,
+            None => base.elasticity,
+        };
+        let material = Material {
+            theta,
+            zeta,
+            elasticity,
+        };
+        Ok(Region {
+            on: r.on.clone(),
+            material,
+        })
+    };
+    m.region.iter().enumerate().map(region).collect()
+}
+
+/// θ and ζ of (4.1) from the table `[<prefix>.viscosity]`: θ > 0,
+/// 0 ≤ ζ ≤ `ranges::MAX_BULK_RATIO`·θ.
+fn viscosity(v: &ViscositySection, prefix: &str, path: &Path) -> Result<(f64, f64)> {
+    let zeta_key = format!("{prefix}.viscosity.zeta");
+    let theta = ranges::scaled_sign(v.theta, &format!("{prefix}.viscosity.theta"), path, true)?;
+    let zeta = ranges::scaled_sign(v.zeta, &zeta_key, path, false)?;
     if zeta > ranges::MAX_BULK_RATIO * theta {
         let detail = format!(", {:e} times θ = {theta:?}", zeta / theta);
-        return Err(ranges::refuse(
-            path,
-            "material.viscosity.zeta",
-            zeta,
-            &detail,
-        ));
+        return Err(ranges::refuse(path, &zeta_key, zeta, &detail));
     }
     Ok((theta, zeta))
 }
 
-/// E and ν of (4.2) when the elasticity term is enabled; ν in the model's range.
-fn elasticity(m: &MaterialSection, model: Model, path: &Path) -> Result<Option<(f64, f64)>> {
-    let e = match &m.elasticity {
+/// E and ν of (4.2) from the table `[<prefix>.elasticity]` when it enables the elasticity
+/// term; ν in the model's range.
+fn elasticity(
+    e: Option<&ElasticitySection>,
+    prefix: &str,
+    model: Model,
+    path: &Path,
+) -> Result<Option<(f64, f64)>> {
+    let e = match e {
         Some(e) if e.enabled => e,
         _ => return Ok(None),
     };
-    let young = ranges::scaled_sign(e.young, "material.elasticity.young", path, false)?;
-    let nu = ranges::scaled(e.poisson, "material.elasticity.poisson", path)?;
+    let key = |k: &str| format!("{prefix}.elasticity.{k}");
+    let young = ranges::scaled_sign(e.young, &key("young"), path, false)?;
+    let nu = ranges::scaled(e.poisson, &key("poisson"), path)?;
     let ok = match model {
         Model::PlaneStress => nu > -1.0 && nu <= 0.5,
         Model::PlaneStrain | Model::ThreeD => nu > -1.0 && nu < 0.5,
@@ -170,7 +245,7 @@ fn elasticity(m: &MaterialSection, model: Model, path: &Path) -> Result<Option<(
         };
         return Err(bad(
             path,
-            "material.elasticity.poisson",
+            &key("poisson"),
             &format!("is {nu}; the Poisson ratio must satisfy {range}"),
         ));
     }

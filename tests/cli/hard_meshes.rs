@@ -242,7 +242,7 @@ fn plane_strain_with_poisson_ratio_0_4999_runs_and_stays_finite() {
         s.mesh.model,
         viscontact::scene::Model::PlaneStrain
     ));
-    assert_eq!(s.physics.elasticity, Some((0.2, 0.4999)));
+    assert_eq!(s.physics.material.elasticity, Some((0.2, 0.4999)));
     // The run warns that P1 triangles lock.
     let warnings = viscontact::effects::warnings(&s, &d);
     assert!(warnings.iter().any(|w| w.contains("lock")), "{warnings:?}");

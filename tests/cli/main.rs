@@ -14,6 +14,7 @@ mod hard_meshes;
 mod mesh_checks;
 mod mesh_import;
 mod plot;
+mod regions;
 mod run_dir;
 mod scene_reference;
 mod streams;

@@ -12,6 +12,7 @@
 #   zero_area.msh         hand-written, (0,2)x(0,1), 6 triangles + 1 triangle with 3
 #                         collinear nodes (element 10), all groups present; otherwise a
 #                         conforming mesh                                     (degenerate element)
+#   bimaterial_bar.msh    bimaterial_bar.geo meshed (two materials bonded along x = 1)
 #   symmetry/*.msh        half_block.geo, half_rect.geo meshed, and their mirror images (mirror.py)
 #   mesh_checks/*.msh     from the .geo files beside them (issue 26: two halves not
 #                         fragmented in 2D and 3D, a Γ2 arc off the mesh, Γ3,1 overlapping
@@ -134,6 +135,9 @@ for g in unfragmented fillet overlap regions; do
     mesh "mesh_checks/$g.geo" -format msh41 -o "mesh_checks/$g.msh"
 done
 mesh -3 mesh_checks/unfragmented_3d.geo -format msh41 -o mesh_checks/unfragmented_3d.msh
+
+# bimaterial_bar: two surfaces bonded along x = 1, for [[material.region]]
+mesh bimaterial_bar.geo -format msh41 -o bimaterial_bar.msh
 
 # symmetry/: half of a block with its symmetry plane, and the whole block made by mirroring
 # the half's mesh (so that the two meshes agree on the half; issue 51)

@@ -6,3 +6,4 @@ mod common;
 mod format_checks;
 mod output_format;
 mod output_vtkhdf;
+mod regions;

@@ -30,6 +30,7 @@ fn create(
         cells,
         nodes_per_cell: per_cell,
         region: &[],
+        material_region: &[],
     };
     Series::create(dir, &g, RUN, &Options::default())
 }
@@ -41,6 +42,7 @@ fn reopen(dir: &Path, run: &str, last_step: usize) -> viscontact::Result<Series>
         cells: &CELLS,
         nodes_per_cell: 3,
         region: &[],
+        material_region: &[],
     };
     Series::reopen(dir, &g, run, &Options::default(), last_step)
 }
@@ -673,6 +675,7 @@ for kind, data in (("point", g.GetPointData()), ("cell", g.GetCellData())):
                 cells: &CELLS,
                 nodes_per_cell: 3,
                 region: &[3, 8],
+                material_region: &[],
             };
             let options = Options {
                 compression,
@@ -754,6 +757,7 @@ fn only_the_chosen_fields_are_written() {
         cells: &CELLS,
         nodes_per_cell: 3,
         region: &[1, 2],
+        material_region: &[],
     };
     let options = Options {
         fields: Some(vec!["von_mises".into()]),

@@ -11,5 +11,6 @@ mod friction_cone;
 mod matrix_free;
 mod memory;
 mod patch;
+mod regions;
 mod three_d;
 mod uniaxial_bar;

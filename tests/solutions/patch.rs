@@ -74,17 +74,21 @@ fn check(model: &str, pick: impl Fn(&viscontact::fem::Discretization) -> (Isotro
 
 #[test]
 fn viscosity_patch_test() {
-    check("plane_stress", |d| (d.a, &d.k_a));
+    check("plane_stress", |d| (d.materials.of(0).a, &d.k_a));
 }
 
 #[test]
 fn elasticity_patch_test_plane_stress() {
-    check("plane_stress", |d| (d.b.unwrap(), d.k_b.as_ref().unwrap()));
+    check("plane_stress", |d| {
+        (d.materials.of(0).b.unwrap(), d.k_b.as_ref().unwrap())
+    });
 }
 
 #[test]
 fn elasticity_patch_test_plane_strain() {
-    check("plane_strain", |d| (d.b.unwrap(), d.k_b.as_ref().unwrap()));
+    check("plane_strain", |d| {
+        (d.materials.of(0).b.unwrap(), d.k_b.as_ref().unwrap())
+    });
 }
 
 #[test]
@@ -101,7 +105,11 @@ fn stress_of_linear_fields_is_exact_in_every_cell() {
         let (_, _, disc) = load(&scene(dir.path(), model, &["0".into(), "0".into()]), &[]);
         let fields = [(P, Q), (-0.3, 0.9), (0.25, 0.5)];
         let [w, u, m] = fields.map(|(p, q)| linear(&disc, p, q));
-        let tensors = [disc.a, disc.b.unwrap(), disc.r];
+        let tensors = [
+            disc.materials.of(0).a,
+            disc.materials.of(0).b.unwrap(),
+            disc.r,
+        ];
         let mut want = [0.0; 6];
         for (c, (p, q)) in tensors.iter().zip(fields) {
             for (x, y) in want
@@ -146,7 +154,10 @@ fn first_step_reproduces_a_linear_velocity_exactly() {
         &scene(dir.path(), "plane_stress", &["0".into(), "0".into()]),
         &[],
     );
-    let (s, _, disc) = load(&scene(dir.path(), "plane_stress", &traction(d0.a)), &[]);
+    let (s, _, disc) = load(
+        &scene(dir.path(), "plane_stress", &traction(d0.materials.of(0).a)),
+        &[],
+    );
     let tr = trace(&s, &disc);
     let w = disc.nodal(&tr.w[0]);
     let scale = P.abs().max(Q.abs());

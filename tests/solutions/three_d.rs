@@ -674,7 +674,11 @@ fn three_d_tensors_are_lame_and_viscosity() {
     let dir = tempfile::tempdir().unwrap();
     let scene = patch_box(&[]).write(dir.path(), "box.toml");
     let (_, mesh, disc) = load(&scene, &[]);
-    for ((name, want), got) in tensors().iter().zip([disc.a, disc.b.unwrap(), disc.r]) {
+    for ((name, want), got) in tensors().iter().zip([
+        disc.materials.of(0).a,
+        disc.materials.of(0).b.unwrap(),
+        disc.r,
+    ]) {
         assert!(
             (got.a - want.a).abs() < 1e-15 && (got.b - want.b).abs() < 1e-15,
             "{name}: {got:?} vs {want:?}"

@@ -1,0 +1,187 @@
+//! The material of each cell: `[material]`'s, or on the cells of a `[[material.region]]`'s
+//! group the region's. A (4.1) and B (4.2) then vary from cell to cell, and so do the
+//! element matrices of K_A and K_B, the stress and the stability limit; R = r·I and its
+//! K_R do not (one kernel for the whole body).
+//!
+//! The cells are grouped by distinct material (A, B), not by region: regions whose
+//! materials are equal, or equal to `[material]`'s, share one entry, so a scene whose
+//! regions repeat `[material]` computes exactly what the scene without them computes, bit
+//! for bit. An element may lie in one region only.
+
+use super::element::Isotropic;
+use crate::mesh::{fmt_point, Mesh};
+use crate::scene::{Material, Model, Scene};
+use crate::{Error, Result};
+
+/// The pointwise tensors of one material: A, and B (None when E = 0 or elasticity is off).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stiffness {
+    pub a: Isotropic,
+    pub b: Option<Isotropic>,
+}
+
+impl Stiffness {
+    /// A and B of `m` under `model` (plane stress as (4.2); plane strain and 3D with the 3D
+    /// Lamé coefficient).
+    pub fn of(m: &Material, model: Model) -> Self {
+        let b = (m.elasticity)
+            .filter(|(e, _)| *e > 0.0)
+            .map(|(e, nu)| match model {
+                Model::PlaneStress => Isotropic::plane_stress(e, nu),
+                Model::PlaneStrain | Model::ThreeD => Isotropic::lame(e, nu),
+            });
+        Stiffness {
+            a: Isotropic::viscosity(m.theta, m.zeta),
+            b,
+        }
+    }
+
+    /// B, or the zero tensor without elasticity.
+    pub fn b_or_zero(&self) -> Isotropic {
+        self.b.unwrap_or(Isotropic { a: 0.0, b: 0.0 })
+    }
+}
+
+/// Which material each cell has.
+pub struct CellMaterials {
+    /// The distinct materials of the cells, in the order of their first cell.
+    pub distinct: Vec<Stiffness>,
+    /// Each cell's index into `distinct`.
+    pub of_cell: Vec<u32>,
+    /// Each cell's region: 0 outside every region, i for the i-th `[[material.region]]`
+    /// entry (from 1); empty for a scene without regions.
+    pub region: Vec<i32>,
+}
+
+impl CellMaterials {
+    /// The materials of the cells of `mesh` (in the order of `Mesh::triangles` or
+    /// `Mesh::tetrahedra`) under `scene`: each region's group resolved among the groups of
+    /// the body's dimension; overlapping regions are refused.
+    pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
+        let regions = &scene.physics.regions;
+        let region = match regions.is_empty() {
+            true => Vec::new(),
+            false => region_of_cells(mesh, scene)?,
+        };
+        let model = scene.mesh.model;
+        let by_region: Vec<Stiffness> = (scene.physics.materials())
+            .map(|m| Stiffness::of(m, model))
+            .collect();
+        let mut distinct: Vec<Stiffness> = Vec::new();
+        let of_cell = (0..mesh.n_cells())
+            .map(|c| {
+                let s = by_region[region.get(c).map_or(0, |&r| r as usize)];
+                let i = distinct.iter().position(|d| *d == s).unwrap_or_else(|| {
+                    distinct.push(s);
+                    distinct.len() - 1
+                });
+                i as u32
+            })
+            .collect();
+        Ok(CellMaterials {
+            distinct,
+            of_cell,
+            region,
+        })
+    }
+
+    /// The material of cell `c`.
+    pub fn of(&self, c: usize) -> Stiffness {
+        self.distinct[self.of_cell[c] as usize]
+    }
+
+    /// Whether any cell has elasticity (K_B is assembled).
+    pub fn elastic(&self) -> bool {
+        self.distinct.iter().any(|s| s.b.is_some())
+    }
+
+    /// The number of cells in region i (i = 1.. for the entries; 0 outside every region).
+    pub fn count(&self, i: usize) -> usize {
+        self.region.iter().filter(|&&r| r as usize == i).count()
+    }
+}
+
+/// `check`'s lines on the regions (none for a scene without): each entry's group, its
+/// element count and its material, then the elements outside every region and how many
+/// distinct materials the cells hold.
+pub fn summary(materials: &CellMaterials, scene: &Scene) -> Vec<String> {
+    if materials.region.is_empty() {
+        return Vec::new();
+    }
+    let cells = ["triangles", "tetrahedra"][scene.mesh.model.dim() - 2];
+    let regions = scene.physics.regions.iter().enumerate();
+    let mut lines: Vec<String> = regions
+        .map(|(i, r)| {
+            let n = materials.count(i + 1);
+            format!(
+                "{}: '{}', {n} {cells}, {}",
+                i + 1,
+                r.on,
+                describe(&r.material)
+            )
+        })
+        .collect();
+    lines.push(format!(
+        "0: outside every region, {} {cells}, [material] {}; {} distinct materials",
+        materials.count(0),
+        describe(&scene.physics.material),
+        materials.distinct.len()
+    ));
+    lines
+}
+
+/// "θ = …, ζ = …, E = …, ν = …" (or "no elasticity").
+fn describe(m: &Material) -> String {
+    let elasticity = match m.elasticity {
+        Some((e, nu)) => format!("E = {e}, ν = {nu}"),
+        None => "no elasticity".into(),
+    };
+    format!("θ = {}, ζ = {}, {elasticity}", m.theta, m.zeta)
+}
+
+/// The region of every cell (0 outside all): each entry's group, which must be one of the
+/// body's dimension; a cell in two regions is refused, naming both and where.
+fn region_of_cells(mesh: &Mesh, scene: &Scene) -> Result<Vec<i32>> {
+    let file = scene.path.display();
+    let mut region = vec![0i32; mesh.n_cells()];
+    for (i, r) in scene.physics.regions.iter().enumerate() {
+        let key = format!("material.region[{i}].on");
+        let g = (mesh.cell_group(&r.on))
+            .map_err(|e| Error::input(format!("{file}: key '{key}': {e}")))?;
+        let shared: Vec<usize> = (g.cells.iter().copied())
+            .filter(|&c| region[c] != 0)
+            .collect();
+        if let Some(&c) = shared.first() {
+            let j = region[c] as usize - 1;
+            let other = &scene.physics.regions[j].on;
+            return Err(Error::input(format!(
+                "{file}: keys 'material.region[{j}].on' and '{key}': the groups '{other}' and \
+                 '{}' share {} elements (the first with its centroid at {}): an element takes \
+                 the material of one region; make the groups disjoint in gmsh, or merge the \
+                 two entries into one",
+                r.on,
+                shared.len(),
+                fmt_point(centroid(mesh, c), mesh.dim)
+            )));
+        }
+        for &c in &g.cells {
+            region[c] = i as i32 + 1;
+        }
+    }
+    Ok(region)
+}
+
+/// The centroid of cell `c`.
+fn centroid(mesh: &Mesh, c: usize) -> [f64; 3] {
+    let nodes: Vec<usize> = match mesh.dim {
+        2 => mesh.triangles[c].to_vec(),
+        _ => mesh.tetrahedra[c].to_vec(),
+    };
+    let mut p = [0.0; 3];
+    for &n in &nodes {
+        for (pk, xk) in p.iter_mut().zip(mesh.nodes[n]) {
+            *pk += xk / nodes.len() as f64;
+        }
+    }
+    p
+}
