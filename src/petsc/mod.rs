@@ -26,6 +26,11 @@
 //! `KSPSetFromOptions`, after the `PETSC_OPTIONS` environment variable that PETSc reads at
 //! initialization: the scene's options win where both set a key. A KSP that does not
 //! converge (`KSPGetConvergedReason` < 0) fails the step with its reason.
+//!
+//! The active-set solver's Newton systems (`solve_constrained`) have a KSP of their own, of
+//! the same type and options, on an assembled matrix with K's pattern (`shim.c` builds it
+//! in place and says why it is the one it is); its GAMG keeps the aggregates and
+//! interpolation of its first setup and recomputes the coarse operators at each rebuild.
 
 use crate::fem::{Discretization, Sparse};
 use crate::{Error, Result};
@@ -75,6 +80,7 @@ extern "C" {
         ns: PetscInt,
         sdofs: *const PetscInt,
         smats: *const f64,
+        setup: c_int,
         rtol: f64,
         b: *const f64,
         x: *mut f64,
@@ -281,15 +287,18 @@ impl Krylov {
     }
 
     /// w ← the solution of Π(K + S)Π w + (I − Π) w = Π b, from the initial guess in w, by
-    /// the KSP's method (CG by default) preconditioned with Π M⁻¹ Π + (I − Π), M⁻¹ the
-    /// preconditioner of K set up once (GAMG): both symmetric positive definite, and the
-    /// hierarchy is never rebuilt when the terms change. Stopped at relative tolerance `rtol`.
+    /// the KSP's method (CG by default) on the assembled matrix Π(K + S)Π + (I − Π)(K +
+    /// S)(I − Π), which has the same solution, preconditioned by GAMG built from one such
+    /// matrix: that of the last system unless `rebuild` (from this one, keeping GAMG's
+    /// aggregates and interpolation) or `anew` (from this one from scratch). Stopped at
+    /// relative tolerance `rtol`.
     pub fn solve_constrained(
         &mut self,
         terms: NodalTerms<'_>,
         b: &[f64],
         w: &mut [f64],
         rtol: f64,
+        (rebuild, anew): (bool, bool),
     ) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
@@ -307,6 +316,7 @@ impl Krylov {
                     ns as PetscInt,
                     terms.stiffness_dofs.as_ptr(),
                     terms.stiffness.as_ptr(),
+                    c_int::from(rebuild || anew) + c_int::from(anew),
                     rtol,
                     b.as_ptr(),
                     w.as_mut_ptr(),

@@ -43,12 +43,12 @@ typedef struct {
   Mat A;
   KSP ksp;
   Vec b, x;
-  /* The constrained system, created on first use: its shell operator and preconditioner
-   * (shell PC around the PC of ksp), a work vector, the terms of the solve in progress. */
-  Mat     C;
-  KSP     kc;
-  Vec     t;
-  VcTerms terms;
+  /* The constrained system, created on first use: its assembled matrix N, the matrix Q its
+   * preconditioner was built from, its KSP, the terms of the solve in progress. */
+  Mat       N, Q;
+  KSP       kc;
+  VcTerms   terms;
+  PetscInt *frame_of; /* n entries, −1 between calls (newton_matrix) */
 } VcKsp;
 
 /* The matrix in CSR (a symmetric matrix's CSC is its CSR), its near-null space as `nvec`
@@ -146,143 +146,228 @@ int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
   return 0;
 }
 
-/* a ← Π a: each removed direction v on its dofs, a ← a − (v·a) v. */
-static void project(const VcTerms *t, PetscScalar *a)
+/* The dofs of node term e that exist (d ≥ 0), packed: their count, indices and positions. */
+static PetscInt present(const PetscInt *d, PetscInt idx[3], int pos[3])
 {
-  for (PetscInt e = 0; e < t->np; e++) {
-    const PetscInt    *d = t->pdofs + 3 * e;
-    const PetscScalar *v = t->pdirs + 3 * e;
-    PetscScalar        p = 0;
-    for (int c = 0; c < 3; c++)
-      if (d[c] >= 0) p += v[c] * a[d[c]];
-    for (int c = 0; c < 3; c++)
-      if (d[c] >= 0) a[d[c]] -= p * v[c];
-  }
-}
-
-/* y ← y + S x over the stiffness blocks. */
-static void add_stiffness(const VcTerms *t, const PetscScalar *x, PetscScalar *y)
-{
-  for (PetscInt e = 0; e < t->ns; e++) {
-    const PetscInt    *d = t->sdofs + 3 * e;
-    const PetscScalar *m = t->smats + 9 * e;
-    for (int r = 0; r < 3; r++) {
-      if (d[r] < 0) continue;
-      for (int c = 0; c < 3; c++)
-        if (d[c] >= 0) y[d[r]] += m[3 * r + c] * x[d[c]];
+  PetscInt k = 0;
+  for (int c = 0; c < 3; c++)
+    if (d[c] >= 0) {
+      idx[k] = d[c];
+      pos[k++] = c;
     }
+  return k;
+}
+
+/* A node's removed directions as the reflection R = I − 2 Σ v vᵀ on its k dofs (packed,
+ * row-major k × k; orthonormal directions, so R = Π − (I − Π) and R² = I). */
+typedef struct {
+  PetscInt    k, dof[3];
+  PetscScalar r[9];
+} Frame;
+
+/* The position of entry (row, col) in the CSR arrays, −1 if the pattern lacks it. */
+static PetscInt entry(const PetscInt *ai, const PetscInt *aj, PetscInt row, PetscInt col)
+{
+  PetscInt lo = ai[row], hi = ai[row + 1];
+  while (lo < hi) {
+    PetscInt mid = (lo + hi) / 2;
+    if (aj[mid] < col) lo = mid + 1;
+    else hi = mid;
   }
+  return lo < ai[row + 1] && aj[lo] == col ? lo : -1;
 }
 
-/* y = Π(K + S)Π x + (I − Π) x: the operator of the constrained system, SPD on the whole
- * space where K + S is SPD on range Π. */
-static PetscErrorCode constrained_mult(Mat C, Vec x, Vec y)
+/* The frames of the terms' directions, one per node, and each dof's frame (−1: none) in
+ * s->frame_of, which the caller resets. */
+static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
 {
-  VcKsp             *s;
-  const PetscScalar *xa;
-  PetscScalar       *ta, *ya;
-  PetscInt           n;
+  const VcTerms *t = &s->terms;
+  Frame         *fr;
+  PetscInt       nf = 0;
 
   PetscFunctionBeginUser;
-  PetscCall(MatShellGetContext(C, &s));
-  PetscCall(VecCopy(x, s->t));
-  PetscCall(VecGetArray(s->t, &ta));
-  project(&s->terms, ta);
-  PetscCall(VecRestoreArray(s->t, &ta));
-  PetscCall(MatMult(s->A, s->t, y));
-  PetscCall(VecGetLocalSize(x, &n));
-  PetscCall(VecGetArrayRead(x, &xa));
-  PetscCall(VecGetArray(s->t, &ta));
-  PetscCall(VecGetArray(y, &ya));
-  add_stiffness(&s->terms, ta, ya);
-  project(&s->terms, ya);
-  for (PetscInt i = 0; i < n; i++) ta[i] = xa[i] - ta[i]; /* (I − Π) x */
-  for (PetscInt i = 0; i < n; i++) ya[i] += ta[i];
-  PetscCall(VecRestoreArray(y, &ya));
-  PetscCall(VecRestoreArray(s->t, &ta));
-  PetscCall(VecRestoreArrayRead(x, &xa));
+  PetscCall(PetscMalloc1(t->np, &fr));
+  for (PetscInt e = 0; e < t->np; e++) {
+    PetscInt           idx[3];
+    int                pos[3];
+    const PetscScalar *v = t->pdirs + 3 * e;
+    PetscInt           k = present(t->pdofs + 3 * e, idx, pos);
+    Frame             *f;
+    if (k == 0) continue;
+    if (s->frame_of[idx[0]] < 0) {
+      f = &fr[nf];
+      *f = (Frame){k, {idx[0], idx[1 % k], idx[2 % k]}, {0}};
+      for (PetscInt a = 0; a < k; a++) {
+        f->r[k * a + a] = 1.0;
+        s->frame_of[idx[a]] = nf;
+      }
+      nf++;
+    } else f = &fr[s->frame_of[idx[0]]];
+    for (PetscInt a = 0; a < k; a++)
+      for (PetscInt b = 0; b < k; b++) f->r[k * a + b] -= 2.0 * v[pos[a]] * v[pos[b]];
+  }
+  *out = fr;
+  *count = nf;
   PetscFunctionReturn(0);
 }
 
-/* y = Π M⁻¹ Π x + (I − Π) x, M⁻¹ the PC of K (GAMG by default): symmetric positive definite
- * where M⁻¹ is, and set up once for K. */
-static PetscErrorCode constrained_pc(PC pc, Vec x, Vec y)
+/* (R M R)_ij over the frames of i and j (a dof without one is its own, R = 1), M in CSR. */
+static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const PetscInt *ai,
+                             const PetscInt *aj, const PetscScalar *m, PetscInt i, PetscInt j)
 {
-  VcKsp             *s;
-  PC                 inner;
-  const PetscScalar *xa;
-  PetscScalar       *ta, *ya;
-  PetscInt           n;
+  Frame        unit_i = {1, {i}, {1.0}}, unit_j = {1, {j}, {1.0}};
+  const Frame *fi = frame_of[i] >= 0 ? &fr[frame_of[i]] : &unit_i;
+  const Frame *fj = frame_of[j] >= 0 ? &fr[frame_of[j]] : &unit_j;
+  PetscInt     a = 0, b = 0;
+  PetscScalar  sum = 0;
+
+  while (fi->dof[a] != i) a++;
+  while (fj->dof[b] != j) b++;
+  for (PetscInt p = 0; p < fi->k; p++)
+    for (PetscInt q = 0; q < fj->k; q++) {
+      PetscInt e = entry(ai, aj, fi->dof[p], fj->dof[q]);
+      if (e >= 0) sum += fi->r[fi->k * a + p] * m[e] * fj->r[fj->k * q + b];
+    }
+  return sum;
+}
+
+/* s->N ← Π(K + S)Π + (I − Π)(K + S)(I − Π) = ½ (K + S + R (K + S) R). The second term is
+ * K's own restriction to the removed directions: it decouples them from the rest (so that
+ * N x = Π b gives (I − Π) x = 0 and Π x the constrained solution, as Π(K + S)Π + (I − Π)
+ * would) while keeping K's graph and scale, which GAMG's aggregates need: with the
+ * identity in their place a sticking node was an aggregate of its own, too small for the
+ * rigid-body modes, and the hierarchy singular. N has K's pattern, for R and S act within
+ * a node and P1 assembly stores every pair of dofs of neighbouring nodes; only the rows and
+ * columns of nodes with removed directions change, computed here in place (a product of
+ * sparse matrices took a fifth of the step on the plate 0.03). */
+static PetscErrorCode newton_matrix(VcKsp *s)
+{
+  const VcTerms     *t = &s->terms;
+  const PetscInt    *ai, *aj;
+  const PetscScalar *ka;
+  PetscScalar       *na, *upd;
+  PetscInt          *at, n, nf, nu = 0, cap = 0;
+  PetscBool          done;
+  Frame             *fr = NULL;
 
   PetscFunctionBeginUser;
-  PetscCall(PCShellGetContext(pc, &s));
-  PetscCall(KSPGetPC(s->ksp, &inner));
-  PetscCall(VecCopy(x, s->t));
-  PetscCall(VecGetArray(s->t, &ta));
-  project(&s->terms, ta);
-  PetscCall(VecRestoreArray(s->t, &ta));
-  PetscCall(PCApply(inner, s->t, y));
-  PetscCall(VecGetLocalSize(x, &n));
-  PetscCall(VecGetArrayRead(x, &xa));
-  PetscCall(VecGetArray(s->t, &ta));
-  PetscCall(VecGetArray(y, &ya));
-  project(&s->terms, ya);
-  for (PetscInt i = 0; i < n; i++) ya[i] += xa[i] - ta[i];
-  PetscCall(VecRestoreArray(y, &ya));
-  PetscCall(VecRestoreArray(s->t, &ta));
-  PetscCall(VecRestoreArrayRead(x, &xa));
+  PetscCall(MatGetRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
+  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "the Newton matrix has no CSR arrays");
+  PetscCall(MatSeqAIJGetArrayRead(s->A, &ka));
+  PetscCall(MatSeqAIJGetArray(s->N, &na));
+  PetscCall(PetscArraycpy(na, ka, ai[n]));
+  PetscCall(MatSeqAIJRestoreArrayRead(s->A, &ka));
+  for (PetscInt e = 0; e < t->ns; e++) {
+    PetscInt idx[3];
+    int      pos[3];
+    PetscInt k = present(t->sdofs + 3 * e, idx, pos);
+    for (PetscInt r = 0; r < k; r++)
+      for (PetscInt c = 0; c < k; c++) {
+        PetscInt x = entry(ai, aj, idx[r], idx[c]);
+        PetscCheck(x >= 0, PETSC_COMM_SELF, PETSC_ERR_SUP, "K lacks a pair of a node's dofs");
+        na[x] += t->smats[9 * e + 3 * pos[r] + pos[c]];
+      }
+  }
+  PetscCall(frames(s, &fr, &nf));
+  for (PetscInt f = 0; f < nf; f++)
+    for (PetscInt a = 0; a < fr[f].k; a++) cap += 2 * (ai[fr[f].dof[a] + 1] - ai[fr[f].dof[a]]);
+  PetscCall(PetscMalloc2(cap, &upd, cap, &at));
+  /* The new values, from N = K + S as it stands, written once all are known: a framed row
+   * in full, and the mirrored entry of a column without a frame (N stays symmetric). */
+  for (PetscInt f = 0; f < nf; f++)
+    for (PetscInt a = 0; a < fr[f].k; a++) {
+      PetscInt i = fr[f].dof[a];
+      for (PetscInt x = ai[i]; x < ai[i + 1]; x++) {
+        PetscInt    j = aj[x];
+        PetscScalar v = 0.5 * (na[x] + reflected(fr, s->frame_of, ai, aj, na, i, j));
+        upd[nu] = v;
+        at[nu++] = x;
+        if (s->frame_of[j] < 0) {
+          upd[nu] = v;
+          at[nu++] = entry(ai, aj, j, i);
+        }
+      }
+    }
+  for (PetscInt u = 0; u < nu; u++) na[at[u]] = upd[u];
+  for (PetscInt f = 0; f < nf; f++)
+    for (PetscInt a = 0; a < fr[f].k; a++) s->frame_of[fr[f].dof[a]] = -1;
+  PetscCall(PetscFree2(upd, at));
+  PetscCall(PetscFree(fr));
+  PetscCall(MatSeqAIJRestoreArray(s->N, &na));
+  PetscCall(MatRestoreRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
   PetscFunctionReturn(0);
 }
 
-/* The constrained KSP: the type of ksp (CG by default, or what the options chose), its
- * monitors and norms, with the shell operator and preconditioner above. */
+/* The constrained KSP: the type of ksp and its PC (CG and GAMG by default, or what the
+ * options chose). Its operator is the Newton matrix N, its preconditioner is built from Q,
+ * N's copy at the last rebuild (same pattern, block size and near-null space as K): GAMG
+ * keeps its interpolation from one rebuild to the next and its smoothers estimate their
+ * eigenvalues anew (the aggregation's estimate would be the first matrix's). */
 static PetscErrorCode constrained_setup(VcKsp *s)
 {
-  PetscInt n;
-  KSPType  type;
-  PC       pc;
+  KSPType      type;
+  PC           pc;
+  MatNullSpace near;
+  PetscInt     n;
 
   PetscFunctionBeginUser;
+  PetscCall(MatGetNearNullSpace(s->A, &near));
+  PetscCall(MatDuplicate(s->A, MAT_DO_NOT_COPY_VALUES, &s->N));
+  PetscCall(MatDuplicate(s->A, MAT_DO_NOT_COPY_VALUES, &s->Q));
+  for (int k = 0; k < 2; k++) {
+    Mat m = k ? s->Q : s->N;
+    PetscCall(MatSetOption(m, MAT_SYMMETRIC, PETSC_TRUE));
+    PetscCall(MatSetOption(m, MAT_SPD, PETSC_TRUE));
+    PetscCall(MatSetNearNullSpace(m, near));
+  }
   PetscCall(MatGetSize(s->A, &n, NULL));
-  PetscCall(MatCreateShell(PETSC_COMM_SELF, n, n, n, n, s, &s->C));
-  PetscCall(MatShellSetOperation(s->C, MATOP_MULT, (void (*)(void))constrained_mult));
-  PetscCall(MatSetOption(s->C, MAT_SYMMETRIC, PETSC_TRUE));
-  PetscCall(MatCreateVecs(s->A, &s->t, NULL));
+  PetscCall(PetscMalloc1(n, &s->frame_of));
+  for (PetscInt i = 0; i < n; i++) s->frame_of[i] = -1;
   PetscCall(KSPCreate(PETSC_COMM_SELF, &s->kc));
-  PetscCall(KSPSetOperators(s->kc, s->C, s->C));
+  PetscCall(KSPSetOperators(s->kc, s->N, s->Q));
   PetscCall(KSPGetType(s->ksp, &type));
   PetscCall(KSPSetType(s->kc, type));
+  PetscCall(KSPGetPC(s->kc, &pc));
+  PetscCall(PCSetType(pc, PCGAMG));
+  PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_TRUE));
+  PetscCall(PCGAMGSetUseSAEstEig(pc, PETSC_FALSE));
+  /* GAMG's smoothers would use the operator N, whose residuals its coarse levels (of Q) do
+   * not match: CG then met an indefinite preconditioner. */
+  PetscCall(PCSetUseAmat(pc, PETSC_FALSE));
   PetscCall(KSPSetInitialGuessNonzero(s->kc, PETSC_TRUE));
   PetscCall(KSPSetFromOptions(s->kc));
-  /* After the options, which would otherwise make the PC GAMG's type. */
-  PetscCall(KSPGetPC(s->kc, &pc));
-  PetscCall(PCSetType(pc, PCSHELL));
-  PetscCall(PCShellSetContext(pc, s));
-  PetscCall(PCShellSetApply(pc, constrained_pc));
-  PetscCall(PCShellSetName(pc, "projected PC of K"));
   PetscFunctionReturn(0);
 }
 
 /* x ← the solution of the constrained system Π(K + S)Π x + (I − Π) x = Π b with the terms
  * given, from the initial guess in x, to relative tolerance rtol: iterations, reason and
- * final residual norm as vc_ksp_solve. */
+ * final residual norm as vc_ksp_solve. `setup`: 0, the preconditioner of the last system
+ * serves; 1, it is rebuilt from this system's matrix keeping GAMG's aggregates and
+ * interpolation; 2, it is built anew (what a step starts with, so that a resumed run
+ * builds what the uninterrupted one did). */
 int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const PetscScalar *pdirs,
-                         PetscInt ns, const PetscInt *sdofs, const PetscScalar *smats,
+                         PetscInt ns, const PetscInt *sdofs, const PetscScalar *smats, int setup,
                          PetscReal rtol, const PetscScalar *b, PetscScalar *x, PetscInt *its,
                          int *reason, PetscReal *rnorm)
 {
   VcKsp             *s = (VcKsp *)ctx;
   KSPConvergedReason r;
+  PC                 pc;
 
   if (!s->kc) PetscCall(constrained_setup(s));
   s->terms = (VcTerms){np, ns, pdofs, sdofs, pdirs, smats};
+  PetscCall(newton_matrix(s));
+  s->terms = (VcTerms){0};
+  PetscCall(KSPGetPC(s->kc, &pc));
+  if (setup > 0) PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
+  if (setup > 1) PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_FALSE));
   PetscCall(KSPSetTolerances(s->kc, rtol, 0.0, PETSC_DEFAULT, PETSC_DEFAULT));
   PetscCall(VecPlaceArray(s->b, b));
   PetscCall(VecPlaceArray(s->x, x));
   PetscCall(KSPSolve(s->kc, s->b, s->x));
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
-  s->terms = (VcTerms){0};
+  PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_TRUE));
   PetscCall(KSPGetIterationNumber(s->kc, its));
   PetscCall(KSPGetConvergedReason(s->kc, &r));
   PetscCall(KSPGetResidualNorm(s->kc, rnorm));
@@ -296,8 +381,9 @@ int vc_ksp_destroy(void *ctx)
 
   if (!s) return 0;
   PetscCall(KSPDestroy(&s->kc));
-  PetscCall(MatDestroy(&s->C));
-  PetscCall(VecDestroy(&s->t));
+  PetscCall(MatDestroy(&s->N));
+  PetscCall(MatDestroy(&s->Q));
+  PetscCall(PetscFree(s->frame_of));
   PetscCall(VecDestroy(&s->b));
   PetscCall(VecDestroy(&s->x));
   PetscCall(KSPDestroy(&s->ksp));

@@ -1,7 +1,7 @@
 //! The primal active-set contact solver (`solver.contact = "active_set"`): a semismooth
 //! Newton method on the step's optimality conditions whose linear systems are the sparse
-//! primal system itself, solved by a Krylov method with the algebraic multigrid of K set up
-//! once per run (PETSc's, through `ConstrainedSystem`). No factor of K, no m × m matrix:
+//! primal system itself, solved by a Krylov method with algebraic multigrid (PETSc's,
+//! through `ConstrainedSystem`). No factor of K, no m × m matrix:
 //! memory and cost grow like a linear run's.
 //!
 //! # The equations
@@ -33,8 +33,14 @@
 //!
 //!   Π(K + S)Π w⁺ + (I − Π) w⁺ = Π(b − f_slip),
 //!
-//! an SPD system of the size of K whatever the sets, preconditioned by Π M⁻¹ Π + (I − Π)
-//! with M⁻¹ the multigrid of K, which never changes. The multipliers of the removed
+//! an SPD system of the size of K whatever the sets. It is solved as N w⁺ = Π(b − f_slip)
+//! with N = Π(K + S)Π + (I − Π)(K + S)(I − Π), which has the same solution ((I − Π)w⁺ = 0)
+//! and K's sparsity, graph and scale: N is assembled, and its algebraic multigrid is built
+//! anew at the first system of a step and wherever the sets changed (keeping the
+//! aggregates and interpolation of the first, recomputing the coarse operators); where only
+//! the slip stiffness moved, the last one serves. A multigrid of K alone, projected, was a
+//! weak preconditioner where much of the face is active (docs/performance.md). The
+//! multipliers of the removed
 //! directions follow from the residual r = b − f_slip − (K + S)w⁺ node by node, r_i =
 //! Σ z_k a_k over the node's removed rows a_k (least squares on at most three vectors; a
 //! row dependent on the node's others, as at a corner where Γ3,1 meets Γ3,2, gets none).
@@ -88,8 +94,27 @@ pub trait ConstrainedSystem {
     /// y = K x.
     fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()>;
     /// w ← the constrained system's solution, from the guess in w, to relative tolerance
-    /// `rtol`.
-    fn solve(&mut self, terms: &Terms, b: &[f64], w: &mut [f64], rtol: f64) -> Result<LinearSolve>;
+    /// `rtol`, with the preconditioner `pc` says.
+    fn solve(
+        &mut self,
+        terms: &Terms,
+        b: &[f64],
+        w: &mut [f64],
+        rtol: f64,
+        pc: Preconditioner,
+    ) -> Result<LinearSolve>;
+}
+
+/// The preconditioner of a Newton system, where the backend builds one from the systems.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Preconditioner {
+    /// The last system's.
+    Last,
+    /// Rebuilt from this system, keeping what the sets do not change (GAMG's aggregates).
+    Rebuilt,
+    /// Built anew from this system: the first of a step, so that a step depends only on
+    /// what a checkpoint holds.
+    New,
 }
 
 /// The nodal terms of a Newton system, flat as PETSc's shim reads them: the removed
@@ -396,6 +421,7 @@ impl ActiveSetSolver {
         // ρ a tenth of what it was.
         let mut seen = vec![sets.signature()];
         let mut allowed = usize::MAX;
+        let mut built: Option<Sets> = None;
         for newton in 1..=s.max_newton {
             if self.abandon.requested() {
                 return Ok(report(StepStatus::Abandoned, newton - 1, kkt_before));
@@ -403,7 +429,17 @@ impl ActiveSetSolver {
             let rtol = if exact { s.rtol } else { eta };
             self.assemble(rows, &sets, b);
             self.terms.project(w);
-            let lin = system.solve(&self.terms, &self.rhs, w, rtol)?;
+            // The preconditioner is built anew at the start of the step and where the sets
+            // have changed; where only the slip stiffness moved, the last one serves.
+            let pc = match &built {
+                None => Preconditioner::New,
+                Some(b) if !b.same_as(&sets) => Preconditioner::Rebuilt,
+                Some(_) => Preconditioner::Last,
+            };
+            if pc != Preconditioner::Last {
+                built = Some(sets.clone());
+            }
+            let lin = system.solve(&self.terms, &self.rhs, w, rtol, pc)?;
             krylov += lin.iterations;
             self.count_system(lin.iterations);
             if let Some(reason) = lin.failed {
@@ -573,22 +609,31 @@ fn split(dirs: &[[f64; 3]], r: [f64; 3]) -> Vec<f64> {
     z
 }
 
-/// PETSc's KSP as the Newton systems' solver: K in its matrix, the constrained system by
-/// its shell operator and preconditioner (`petsc::Krylov::solve_constrained`).
+/// PETSc's KSP as the Newton systems' solver: K in its matrix, the constrained system in an
+/// assembled matrix of K's pattern with a multigrid of its own
+/// (`petsc::Krylov::solve_constrained`).
 #[cfg(feature = "petsc")]
 impl ConstrainedSystem for crate::petsc::Krylov {
     fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()> {
         crate::petsc::Krylov::mult(self, x, y)
     }
 
-    fn solve(&mut self, terms: &Terms, b: &[f64], w: &mut [f64], rtol: f64) -> Result<LinearSolve> {
+    fn solve(
+        &mut self,
+        terms: &Terms,
+        b: &[f64],
+        w: &mut [f64],
+        rtol: f64,
+        pc: Preconditioner,
+    ) -> Result<LinearSolve> {
         let view = crate::petsc::NodalTerms {
             removed_dofs: &terms.removed_dofs,
             removed: &terms.removed,
             stiffness_dofs: &terms.stiffness_dofs,
             stiffness: &terms.stiffness,
         };
-        let s = self.solve_constrained(view, b, w, rtol)?;
+        let setup = (pc == Preconditioner::Rebuilt, pc == Preconditioner::New);
+        let s = self.solve_constrained(view, b, w, rtol, setup)?;
         Ok(LinearSolve {
             iterations: s.iterations,
             residual: s.residual,
