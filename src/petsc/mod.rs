@@ -41,6 +41,12 @@ use std::sync::Mutex;
 /// run's to 1e-8 relative and better (tests/petsc.rs).
 pub const DEFAULT_RTOL: f64 = 1e-12;
 
+/// What to try where a KSP stopped without converging.
+pub const REMEDY: &str = "check the options in [solver.petsc] options and PETSC_OPTIONS (a \
+     -ksp_max_it or -ksp_rtol, a preconditioner that does not suit an SPD matrix), or set \
+     [solver] linear = \"cholesky\" (with contact, and a contact solver of the factor: \
+     dense, sparse, matrix_free or clarabel)";
+
 /// PetscInt of Debian's PETSc: 32 bits (build.rs refuses 64-bit indices).
 pub type PetscInt = i32;
 

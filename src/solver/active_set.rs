@@ -86,6 +86,8 @@ pub struct LinearSolve {
     pub residual: f64,
     /// Why the Krylov method stopped without converging (PETSc's reason), if it did.
     pub failed: Option<&'static str>,
+    /// What to try where it did.
+    pub remedy: &'static str,
 }
 
 /// The systems of the Newton iteration: products with K and solves of the constrained
@@ -443,10 +445,12 @@ impl ActiveSetSolver {
             krylov += lin.iterations;
             self.count_system(lin.iterations);
             if let Some(reason) = lin.failed {
-                let status = StepStatus::KrylovFailed {
+                let status = StepStatus::Stopped {
+                    solver: "the Krylov solve of a Newton system of the active-set solver",
                     reason,
                     iterations: lin.iterations,
                     residual: lin.residual,
+                    remedy: lin.remedy,
                 };
                 return Ok(report(status, newton, kkt_before));
             }
@@ -638,6 +642,7 @@ impl ConstrainedSystem for crate::petsc::Krylov {
             iterations: s.iterations,
             residual: s.residual,
             failed: s.failed,
+            remedy: crate::petsc::REMEDY,
         })
     }
 }

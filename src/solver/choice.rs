@@ -153,11 +153,12 @@ impl ContactPlan {
             Contact::ActiveSet => (
                 Some(resources::active_set_bytes(m, n)),
                 "per Newton iteration one Krylov solve of the primal system (the step matrix with \
-                 the active and sticking directions removed) preconditioned by the multigrid of \
-                 K_A set up once: tens of iterations, the last system to 1e-12; a step takes two \
-                 or three Newton systems where the contact and slip sets stand in 2D (a loose \
-                 solve, then the last), about six in 3D where slipping nodes turn, tens where \
-                 contact or sliding sets in"
+                 the active and sticking directions removed) preconditioned by a multigrid of \
+                 that matrix, built at a step's first system and rebuilt where the sets change \
+                 (a setup costs one or two solves); a step takes two or three Newton systems \
+                 where the contact and slip sets stand in 2D (a loose solve, then the last to \
+                 1e-12), about four in 3D where slipping nodes turn, tens where contact or \
+                 sliding sets in"
                     .to_string(),
             ),
             Contact::Clarabel => (
@@ -266,7 +267,8 @@ impl std::fmt::Display for ContactPlan {
             ),
             (Some(b), Contact::Sparse) => format!("≈ {} besides the factor of K_A", human(b)),
             (Some(b), Contact::ActiveSet) => format!(
-                "≈ {} besides PETSc's copy of K_A and its multigrid hierarchy",
+                "≈ {} besides PETSc's three matrices of K_A's size (K_A, the Newton matrix and \
+                 the copy its multigrid was built from) and two multigrid hierarchies",
                 human(b)
             ),
             (Some(b), _) => format!("≈ {}", human(b)),

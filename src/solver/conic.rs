@@ -129,7 +129,14 @@ impl ConicSolver {
             sol.status,
             SolverStatus::Solved | SolverStatus::AlmostSolved
         ) {
-            report.status = StepStatus::Unsolved(sol.status);
+            report.status = StepStatus::Stopped {
+                solver: "clarabel's interior point solve of the step problem",
+                reason: status_name(sol.status),
+                iterations: report.iterations,
+                residual: report.residual,
+                remedy: "try [solver] contact = \"dense\", or \"sparse\" where its memory \
+                         would not fit",
+            };
             return report;
         }
         for (wi, x) in w.iter_mut().zip(&sol.x[..self.n]) {
@@ -147,5 +154,23 @@ impl ConicSolver {
             }
         }
         report
+    }
+}
+
+/// Clarabel's status by its name.
+fn status_name(status: SolverStatus) -> &'static str {
+    match status {
+        SolverStatus::Unsolved => "Unsolved",
+        SolverStatus::Solved => "Solved",
+        SolverStatus::PrimalInfeasible => "PrimalInfeasible",
+        SolverStatus::DualInfeasible => "DualInfeasible",
+        SolverStatus::AlmostSolved => "AlmostSolved",
+        SolverStatus::AlmostPrimalInfeasible => "AlmostPrimalInfeasible",
+        SolverStatus::AlmostDualInfeasible => "AlmostDualInfeasible",
+        SolverStatus::MaxIterations => "MaxIterations",
+        SolverStatus::MaxTime => "MaxTime",
+        SolverStatus::NumericalError => "NumericalError",
+        SolverStatus::InsufficientProgress => "InsufficientProgress",
+        SolverStatus::CallbackTerminated => "CallbackTerminated",
     }
 }

@@ -228,7 +228,7 @@ impl Backend {
 }
 
 /// w = K⁻¹ b for a linear step through PETSc (`Backend::Petsc`): the report with the Krylov
-/// iterations, or `KrylovFailed` with the KSP's reason.
+/// iterations, or `Stopped` with the KSP's reason.
 #[cfg(feature = "petsc")]
 fn krylov_step(
     krylov: &mut crate::petsc::Krylov,
@@ -239,10 +239,12 @@ fn krylov_step(
     Ok(StepReport {
         status: match s.failed {
             None => StepStatus::Solved,
-            Some(reason) => StepStatus::KrylovFailed {
+            Some(reason) => StepStatus::Stopped {
+                solver: "PETSc's Krylov solve of K_A (KSP)",
                 reason,
                 iterations: s.iterations,
                 residual: s.residual,
+                remedy: crate::petsc::REMEDY,
             },
         },
         iterations: s.iterations,

@@ -4,7 +4,6 @@
 //! nowhere else, each message naming the step and what to try.
 
 use crate::{Error, Result};
-use clarabel::solver::SolverStatus;
 
 /// The outcome of a step: the contact solve's, then the time loop's checks of its answer.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -23,15 +22,16 @@ pub enum StepStatus {
     NewtonIndefinite,
     /// Given up on request before it was solved (`solver::abandon`); z holds an iterate.
     Abandoned,
-    /// Clarabel stopped with another status than solved or almost solved.
-    Unsolved(SolverStatus),
-    /// PETSc's Krylov method (the linear backend `solver.linear = "petsc"`) stopped without
-    /// converging: its `KSPConvergedReason` by name, after `iterations`, with the final
-    /// residual norm `residual` (preconditioned, unless the options changed the norm).
-    KrylovFailed {
+    /// The step's solver (or the linear solver under it) stopped without an answer, in its
+    /// own words: `solver` says which and what it solved, `reason` is its status by name
+    /// (clarabel's `SolverStatus`, PETSc's `KSPConvergedReason`), after `iterations`, with
+    /// its final residual; `remedy` says what to try.
+    Stopped {
+        solver: &'static str,
         reason: &'static str,
         iterations: usize,
         residual: f64,
+        remedy: &'static str,
     },
     /// u_n or w_n has an entry that is not finite.
     NotFinite { u_max: f64, w_max: f64 },
@@ -96,20 +96,15 @@ impl StepReport {
                  precision, so a Newton step cannot be solved; set `[solver] contact = \
                  \"clarabel\"` to solve the step problem without it, and report the scene"
                 .to_string(),
-            StepStatus::Unsolved(status) => format!(
-                "clarabel did not solve the step problem: status {status:?} after {} iterations",
-                self.iterations
-            ),
-            StepStatus::KrylovFailed {
+            StepStatus::Stopped {
+                solver,
                 reason,
                 iterations,
                 residual,
+                remedy,
             } => format!(
-                "PETSc's Krylov solve of K_A did not converge at step {n}, t = {t}: \
-                 KSP_{reason} after {iterations} iterations (residual norm {residual:e}); \
-                 check the options in [solver.petsc] options and PETSC_OPTIONS (a \
-                 -ksp_max_it or -ksp_rtol, a preconditioner that does not suit an SPD \
-                 matrix), or set [solver] linear = \"cholesky\""
+                "{solver} stopped without an answer at step {n}, t = {t}: {reason} after \
+                 {iterations} iterations (residual {residual:e}); {remedy}"
             ),
             StepStatus::NotFinite { u_max, w_max } => format!(
                 "the solution is not finite at step {n}, t = {t} (max|u_n| = {u_max:e}, \
