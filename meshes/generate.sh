@@ -56,6 +56,13 @@ echo "wrote bracket/bracket.msh"
 mesh plate_hole/plate_hole.geo -o plate_hole/plate_hole.msh
 echo "wrote plate_hole/plate_hole.msh"
 
+# the examples of issue 51: a punch on a pad (examples/punch.toml), a body with a soft layer
+# (examples/bimaterial.toml)
+mesh punch/punch.geo -o punch/punch.msh
+echo "wrote punch/punch.msh"
+mesh bimaterial/bimaterial.geo -o bimaterial/bimaterial.msh
+echo "wrote bimaterial/bimaterial.msh"
+
 # 3D, tetrahedra (4 nodes).  The block on its foundation, h = 1/2, 1/4, 1/8 (larger n:
 # `generate.sh block N` above)
 for n in 2 4 8; do
@@ -72,3 +79,7 @@ echo "wrote 3d/slab_016_t0040.msh"
 
 mesh -3 3d/slider.geo -o 3d/slider.msh
 echo "wrote 3d/slider.msh"
+
+# the half of the block cut by its plane of symmetry y = 0.5, h = 1/8 (examples/half_block.toml)
+mesh -3 half_block/half_block.geo -o half_block/half_block.msh
+echo "wrote half_block/half_block.msh"

@@ -1,11 +1,12 @@
 //! Golden regression values: numbers from known-good runs, stored in
 //! `tests/data/golden.json` and checked bit for bit.
 //!
-//! Each case runs a scene with the command-line tool (every `examples/*.toml`, variants of
-//! the paper's scene — friction, memory kernels, schemes, solvers, meshes —, 3D blocks and a
-//! thin slab, a 2D corner) and compares what summary.json says of it: the norms of u_N, the
-//! step solver's iterations (total and most in a step), the largest KKT residual and
-//! normal-velocity violation, the active and sticking nodes at the end. The build is
+//! Each case runs a scene with the command-line tool (every `examples/*.toml` as it stands,
+//! which `every_example_is_a_case` checks; variants of the paper's scene — friction, memory
+//! kernels, schemes, solvers, meshes —, 3D blocks and a thin slab, a 2D corner) and
+//! compares what summary.json says of it: the norms of u_N, the step solver's iterations
+//! (total and most in a step), the largest KKT residual and normal-velocity violation, the
+//! active and sticking nodes at the end. The build is
 //! deterministic (the same bits whatever the thread count and across stop/resume), so the
 //! comparison is exact: any change of a result shows, with the relative difference.
 //!
@@ -52,6 +53,9 @@ const CASES: &[Case] = &[
     case("bracket", "bracket.toml", &[], &[]),
     case("plate_hole", "plate_hole.toml", &[], &[]),
     case("block", BLOCK, &[], &[]),
+    case("half_block", "half_block.toml", &[], &[]),
+    case("punch", "punch.toml", &[], &[]),
+    case("bimaterial", "bimaterial.toml", &[], &[]),
     case("paper_064", PAPER, &[], &[]).on("meshes/paper/rect_064.msh"),
     case("paper_F0.1", PAPER, &[], &["friction.normal_stress=0.1"]),
     case("paper_mu5", PAPER, &[], &["friction.coefficient=5"]),
@@ -281,4 +285,18 @@ fn results_equal_the_stored_golden_values() {
 fn study_tables_equal_the_stored_golden_values() {
     let got = Golden::from([(TABLES.to_string(), study_tables())]);
     check_or_bless(got, |name| name == TABLES);
+}
+
+/// Every scene of examples/ is the base of a case as it stands (no edits, no overrides), so
+/// that a new example gets its golden values.
+#[test]
+fn every_example_is_a_case() {
+    for scene in common::repo_files("examples", "toml") {
+        let name = scene.file_name().unwrap().to_string_lossy().into_owned();
+        let plain = |c: &&Case| c.base == name && c.mesh.is_none() && c.edit.is_empty();
+        assert!(
+            CASES.iter().filter(plain).any(|c| c.set.is_empty()),
+            "examples/{name} is not a case of CASES: add it and bless its values"
+        );
+    }
 }

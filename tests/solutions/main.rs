@@ -11,6 +11,7 @@ mod friction_cone;
 mod matrix_free;
 mod memory;
 mod patch;
+mod punch;
 mod regions;
 mod three_d;
 mod uniaxial_bar;
