@@ -169,7 +169,7 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
 /// dual, see `solver::choice`): the dense dual, a dual without D or clarabel on the stored
 /// factor, or the active-set solver on PETSc. `matrix` is the step matrix (K_A, or K_A +
 /// k K_B + k² r(0) K_R for the implicit variant) that `backend` holds, a factor ordered as
-/// `contact` asks (`Contact::orders_last`).
+/// `contact` asks (`Contact::ordered_last`).
 pub fn step_solver(
     effects: &Effects,
     contact: Contact,

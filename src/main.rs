@@ -354,12 +354,23 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     if let Some(plan) = &contact {
         viscontact::outln!("contact    {plan}");
     }
+    let factor = viscontact::solver::choice::factor_bytes(&scene, &disc)?;
+    if let Some(bytes) = factor {
+        viscontact::outln!(
+            "factor     Cholesky factor of K_A: ≈ {} for its values (symbolic analysis in the \
+             run's ordering)",
+            viscontact::resources::human(bytes)
+        );
+    }
     // Sizes first: a hostile time.steps is refused before anything is allocated per step.
     let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
     viscontact::outln!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
     if let Some(plan) = &contact {
         plan.check(&estimate)?;
+    }
+    if let Some(bytes) = factor {
+        viscontact::resources::check_factor(bytes, disc.n_free)?;
     }
     let plan = Plan::new(&scene)?;
     print_stability(&scene, &disc, &plan);

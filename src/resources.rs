@@ -199,6 +199,25 @@ pub fn active_set_bytes(m: usize, n: usize) -> f64 {
     8.0 * 4.0 * n as f64 + 84.0 * m as f64
 }
 
+/// Refuses (exit 2) a Cholesky factor of K_A (`n` unknowns) whose values, `bytes` by its
+/// symbolic analysis, exceed `MARGIN` of the memory available (unknown: it passes): the
+/// allocation would otherwise fail (the process aborts) or the machine swap, after the
+/// ordering's minutes. The remedy is the backend without a factor.
+pub fn check_factor(bytes: f64, n: usize) -> Result<()> {
+    match available_memory()? {
+        Some(avail) if bytes > MARGIN * avail => Err(Error::input(format!(
+            "the Cholesky factor of K_A ({n} unknowns) would need ≈ {} for its values alone \
+             but {} (a run may plan {:.0} % of it): use a coarser mesh, or a build with PETSc \
+             (cargo build --release --features petsc), which solves K_A without a factor: \
+             [solver] linear = \"petsc\" (with contact, contact = \"active_set\")",
+            human(bytes),
+            memory_phrase(avail),
+            100.0 * MARGIN
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// What ordering c constrained dofs last adds to a run's peak memory, in bytes: their block of
 /// L is the factor of the Schur complement on C, dense, and faer factors the root supernode
 /// that holds it as a full square (8c²) before it is repacked, with its factorization's

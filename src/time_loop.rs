@@ -220,10 +220,7 @@ impl<'p> TimeLoop<'p> {
         // The step matrix is factored once, with the constrained boundary dofs ordered last
         // where the contact solver works on its trailing block.
         let contact = Contact::of(scene.solver.contact, &rows);
-        let last = match contact.orders_last() {
-            true => rows.dofs(),
-            false => Vec::new(),
-        };
+        let last = contact.ordered_last(&rows);
         let backend = match scene.solver.petsc() {
             true => petsc_backend(scene, matrix, disc)?,
             false => Backend::Cholesky(Factor::new(matrix, &last)?),

@@ -54,11 +54,15 @@ impl Contact {
         }
     }
 
-    /// Whether its factor of K_A orders the constrained dofs last (the dense dual condenses
-    /// through the trailing block, the matrix-free one multiplies by it); the others take
-    /// the fill-reducing order of a linear run.
-    pub fn orders_last(&self) -> bool {
-        matches!(self, Contact::Dense | Contact::MatrixFree)
+    /// The dofs its factor of K_A orders last: the constrained boundary dofs C of `rows`
+    /// for the dense dual (it condenses through the trailing block) and the matrix-free one
+    /// (it multiplies by it); none for the others, which take a linear run's fill-reducing
+    /// order.
+    pub fn ordered_last(&self, rows: &Rows) -> Vec<usize> {
+        match self {
+            Contact::Dense | Contact::MatrixFree => rows.dofs(),
+            _ => Vec::new(),
+        }
     }
 
     /// The solver the scene's `choice` names on `rows`, `auto` resolved (`Contact::auto`).
@@ -254,6 +258,18 @@ impl ContactPlan {
             _ => format!("solver.contact = \"{}\"", self.solver.key()),
         }
     }
+}
+
+/// The bytes of the values of the run's Cholesky factor of K_A, in its ordering, from its
+/// symbolic analysis (`factor::predicted_bytes`); None where the run solves K_A through
+/// PETSc. The implicit variant's step matrix has K_A's pattern, so the same analysis.
+pub fn factor_bytes(scene: &Scene, disc: &Discretization) -> Result<Option<f64>> {
+    if scene.solver.petsc() {
+        return Ok(None);
+    }
+    let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+    let last = Contact::of(scene.solver.contact, &rows).ordered_last(&rows);
+    super::factor::predicted_bytes(&disc.k_a, &last).map(Some)
 }
 
 impl std::fmt::Display for ContactPlan {

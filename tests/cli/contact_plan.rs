@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 use viscontact::resources::{MARGIN, MEMORY_ENV};
 use viscontact::scene::ContactSolver;
-use viscontact::solver::choice::ContactPlan;
+use viscontact::solver::choice::{factor_bytes, ContactPlan};
 use viscontact::solver::Rows;
 
 /// The block's scene at h = 1/4 over `steps` steps.
@@ -19,16 +19,18 @@ fn block(steps: i64) -> SceneText {
         .set("time.steps", steps)
 }
 
-/// The block at h = 1/4 over 4 steps, written into `dir`, and a memory (bytes) in which its
-/// sparse plan fits and its dense one does not.
-fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64) {
+/// The block at h = 1/4 over 4 steps, written into `dir`, a memory (bytes) in which its
+/// sparse plan fits and its dense one does not (each besides the factor of K_A, as `check`
+/// counts them), and the bytes of that factor's values.
+fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
     let scene = block(4).write(dir, "s.toml");
-    let (_s, _m, disc) = common::load(&scene, &[]);
+    let (s, _m, disc) = common::load(&scene, &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
     let memory = |choice| ContactPlan::new(choice, &rows, disc.n_free).memory.unwrap();
     let (dense, sparse) = (memory(ContactSolver::Dense), memory(ContactSolver::Sparse));
     assert!(sparse < dense, "{sparse} {dense}");
-    (scene, (dense * sparse).sqrt() / MARGIN)
+    let factor = factor_bytes(&s, &disc).unwrap().unwrap();
+    (scene, (dense * sparse).sqrt() / MARGIN, factor)
 }
 
 /// `viscontact ARGS` with `VISCONTACT_MEMORY` = `memory` bytes.
@@ -53,7 +55,7 @@ fn refused(o: &Output, parts: &[&str]) {
 #[test]
 fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
     let tmp = tempfile::tempdir().unwrap();
-    let (scene, tight) = scene_and_tight_memory(tmp.path());
+    let (scene, tight, factor) = scene_and_tight_memory(tmp.path());
     let scene = scene.to_str().unwrap();
     let (code, text) = common::cli(&["check", scene]);
     assert_eq!(code, 0, "{text}");
@@ -77,8 +79,10 @@ fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
             "solver.contact = \"sparse\"",
         ],
     );
+    // The sparse plan fits there; its factor of K_A (here larger than D) must fit too.
     let forced = ["check", scene, "--set", "solver.contact=sparse"];
-    let o = with_memory(tight, &forced);
+    refused(&with_memory(tight, &forced), &["Cholesky factor of K_A"]);
+    let o = with_memory(tight + factor / MARGIN, &forced);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(
@@ -95,7 +99,7 @@ fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
 #[test]
 fn run_and_resume_refuse_a_plan_that_does_not_fit_and_leave_the_directory_as_it_was() {
     let tmp = tempfile::tempdir().unwrap();
-    let (scene, tight) = scene_and_tight_memory(tmp.path());
+    let (scene, tight, _) = scene_and_tight_memory(tmp.path());
     let (scene, dir) = (scene.to_str().unwrap(), tmp.path().join("o"));
     let dir_s = dir.to_str().unwrap();
     let (code, text) = common::cli(&["run", scene, "--out", dir_s, "--quiet", "--stop-after", "2"]);
@@ -188,4 +192,44 @@ fn the_duals_without_d_warn_that_sliding_steps_can_be_slow() {
         let warnings = common::summary(&dir)["warnings"].to_string();
         assert_eq!(warnings.contains(slow), solver != "dense", "{warnings}");
     }
+}
+
+/// The Cholesky factor of K_A is sized by its symbolic analysis before anything is factored:
+/// `check` prints it, and `check` and `run` refuse (exit 2, naming the backend without a
+/// factor) a factor whose values do not fit, before the run directory is touched.
+#[test]
+fn a_factor_that_does_not_fit_is_refused_before_it_is_factored() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = block(4)
+        .set("contact.enabled", false)
+        .set("friction.enabled", false)
+        .write(tmp.path(), "s.toml");
+    let (s, _m, disc) = common::load(&scene, &[]);
+    let bytes = factor_bytes(&s, &disc).unwrap().unwrap();
+    assert!(bytes > 0.0);
+    let scene = scene.to_str().unwrap();
+    let (code, text) = common::cli(&["check", scene]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("factor     Cholesky factor of K_A: ≈ "),
+        "{text}"
+    );
+    let parts = [
+        "Cholesky factor of K_A",
+        "for its values alone",
+        "--features petsc",
+    ];
+    refused(&with_memory(bytes, &["check", scene]), &parts);
+    let dir = tmp.path().join("o");
+    let dir_s = dir.to_str().unwrap();
+    refused(
+        &with_memory(bytes, &["run", scene, "--out", dir_s, "--quiet"]),
+        &parts,
+    );
+    assert!(!dir.exists(), "a refused run left {}", dir.display());
+    let o = with_memory(
+        bytes / MARGIN * 1.01,
+        &["run", scene, "--out", dir_s, "--quiet"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }

@@ -468,7 +468,33 @@ fn factorization_flops(sym: &SymbolicSupernodalCholesky<usize>) -> f64 {
         .sum()
 }
 
-/// How a factor's solves are split (`split::Schedule::new`).
+/// The order of `a`'s dofs (nested dissection of the others, then `last`: ordering.rs), its
+/// inverse, and the symbolic analysis in it.
+type Analysis = (Vec<usize>, Vec<usize>, SymbolicCholesky<usize>);
+
+fn analysis(a: &Sparse, last: &[usize]) -> Result<Analysis> {
+    let fwd = super::ordering::constrained_last(a, last)?;
+    let mut inv = vec![0; a.nrows()];
+    for (i, &d) in fwd.iter().enumerate() {
+        inv[d] = i;
+    }
+    let symbolic = symbolic(a, &fwd, &inv)?;
+    Ok((fwd, inv, symbolic))
+}
+
+/// The bytes of the values of L (faer's numeric factorization holds them all at once).
+fn values_bytes(symbolic: &SymbolicCholesky<usize>) -> f64 {
+    8.0 * symbolic.len_val() as f64
+}
+
+/// The bytes of the values of the factor of `a` with the dofs in `last` ordered last, from
+/// its ordering and symbolic analysis alone (no numbers: seconds where the factorization
+/// takes minutes): what `check` prints, and what a run checks before it factors.
+pub fn predicted_bytes(a: &Sparse, last: &[usize]) -> Result<f64> {
+    let (_, _, symbolic) = analysis(a, last)?;
+    Ok(values_bytes(&symbolic))
+}
+
 /// The symbolic analysis of `a` in the ordering `fwd` (`inv` its inverse), supernodal.
 fn symbolic(a: &Sparse, fwd: &[usize], inv: &[usize]) -> Result<SymbolicCholesky<usize>> {
     let n = a.nrows();
@@ -560,13 +586,8 @@ impl Factor {
         par: impl FnOnce(f64) -> Par,
     ) -> Result<Self> {
         let n = a.nrows();
-        // Nested dissection of the other dofs, then C (ordering.rs).
-        let fwd = super::ordering::constrained_last(a, last)?;
-        let mut inv = vec![0; n];
-        for (i, &d) in fwd.iter().enumerate() {
-            inv[d] = i;
-        }
-        let symbolic = symbolic(a, &fwd, &inv)?;
+        let (fwd, inv, symbolic) = analysis(a, last)?;
+        crate::resources::check_factor(values_bytes(&symbolic), n)?;
         let par = match symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) => par(factorization_flops(s)),
             SymbolicCholeskyRaw::Simplicial(_) => Par::Seq,
