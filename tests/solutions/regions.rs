@@ -12,36 +12,12 @@
 //! every step to round-off.
 
 use crate::common;
+use crate::uniaxial_bar::{scalar_recursion, END, STEPS};
 use common::*;
 
-const STEPS: usize = 40;
-const END: f64 = 2.0;
 /// (θ, E) of `[material]` (the part x < 1, in no region) and of the region "stiff".
 const SOFT: (f64, f64) = (0.1, 0.5);
 const STIFF: (f64, f64) = (0.3, 2.0);
-
-fn f(t: f64) -> f64 {
-    0.01 + 0.02 * t + 0.01 * (3.0 * t).sin()
-}
-
-fn r(s: f64) -> f64 {
-    0.7 * (-3.0 * s).exp() + 0.2 * (-0.5 * s).exp()
-}
-
-/// The scheme on the scalar model of one material: (ε_n, ε'_n) for n = 0..=N.
-fn scalar_recursion((theta, young): (f64, f64)) -> Vec<(f64, f64)> {
-    let k = END / STEPS as f64;
-    let mut eps: Vec<f64> = vec![0.0];
-    let mut out = Vec::new();
-    for n in 0..=STEPS {
-        let t = n as f64 * k;
-        let mem: f64 = (0..n).map(|j| k * r((n - j) as f64 * k) * eps[j]).sum();
-        let rate = (f(t) - young * eps[n] - mem) / (2.0 * theta);
-        out.push((eps[n], rate));
-        eps.push(eps[n] + k * rate);
-    }
-    out
-}
 
 fn bar_mesh() -> String {
     repo()

@@ -12,8 +12,8 @@ use common::*;
 
 const THETA: f64 = 0.1;
 const E: f64 = 0.5;
-const STEPS: usize = 40;
-const END: f64 = 2.0;
+pub(crate) const STEPS: usize = 40;
+pub(crate) const END: f64 = 2.0;
 
 fn f(t: f64) -> f64 {
     0.01 + 0.02 * t + 0.01 * (3.0 * t).sin()
@@ -23,15 +23,15 @@ fn r(s: f64) -> f64 {
     0.7 * (-3.0 * s).exp() + 0.2 * (-0.5 * s).exp()
 }
 
-/// The scheme on the scalar model: (ε_n, ε'_n) for n = 0..=N.
-fn scalar_recursion() -> Vec<(f64, f64)> {
+/// The scheme on the scalar model of a material (θ, E): (ε_n, ε'_n) for n = 0..=N.
+pub(crate) fn scalar_recursion((theta, young): (f64, f64)) -> Vec<(f64, f64)> {
     let k = END / STEPS as f64;
     let mut eps: Vec<f64> = vec![0.0];
     let mut out = Vec::new();
     for n in 0..=STEPS {
         let t = n as f64 * k;
         let mem: f64 = (0..n).map(|j| k * r((n - j) as f64 * k) * eps[j]).sum();
-        let rate = (f(t) - E * eps[n] - mem) / (2.0 * THETA);
+        let rate = (f(t) - young * eps[n] - mem) / (2.0 * theta);
         out.push((eps[n], rate));
         eps.push(eps[n] + k * rate);
     }
@@ -60,7 +60,7 @@ fn check_bar(mesh: &str, relaxation: &str) -> f64 {
     let (scene, _mesh, disc) = load(&scene, &[]);
     let tr = trace(&scene, &disc);
     assert_eq!(tr.solver, viscontact::solver::StepSolver::Linear.name());
-    let exact = scalar_recursion();
+    let exact = scalar_recursion((THETA, E));
     let mut worst: f64 = 0.0;
     for (n, (eps, rate)) in exact.iter().enumerate() {
         let u = disc.nodal(&tr.u[n]);
@@ -114,7 +114,7 @@ fn bar_on_unstructured_mesh_of_a_plate_with_a_hole_is_not_exact() {
     );
     let (scene, _mesh, disc) = load(&scene, &[]);
     let tr = trace(&scene, &disc);
-    let (eps, _) = scalar_recursion()[STEPS];
+    let (eps, _) = scalar_recursion((THETA, E))[STEPS];
     let u = disc.nodal(&tr.u[STEPS]);
     let worst = disc
         .nodes
