@@ -394,12 +394,7 @@ impl Mesh {
         let chosen = if !on_boundary.is_empty() {
             on_boundary
         } else if want == Want::Boundary {
-            let boundary_groups: Vec<String> = self
-                .groups
-                .iter()
-                .filter(|g| g.dim == bdim)
-                .map(describe)
-                .collect();
+            let boundary_groups = self.described(bdim);
             let (is, needed) = match self.dim {
                 2 => ("a surface", "a boundary (curve)"),
                 _ => ("a volume", "a boundary (surface)"),
@@ -417,6 +412,14 @@ impl Mesh {
         self.only(chosen, key)
     }
 
+    /// The groups of dimension `dim`, described for a message.
+    fn described(&self, dim: usize) -> Vec<String> {
+        (self.groups.iter())
+            .filter(|g| g.dim == dim)
+            .map(describe)
+            .collect()
+    }
+
     /// The one group of `found` of the body's dimension.
     fn choose_cells<'g>(&self, found: Vec<&'g Group>, key: &str) -> Result<&'g Group> {
         let of_body: Vec<&Group> = found
@@ -425,10 +428,7 @@ impl Mesh {
             .filter(|g| g.dim == self.dim)
             .collect();
         if of_body.is_empty() {
-            let cell_groups: Vec<String> = (self.groups.iter())
-                .filter(|g| g.dim == self.dim)
-                .map(describe)
-                .collect();
+            let cell_groups = self.described(self.dim);
             let (is, needed) = match self.dim {
                 2 => ("a curve", "a surface"),
                 _ => ("a surface", "a volume"),

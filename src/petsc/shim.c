@@ -367,7 +367,7 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
   PetscCall(KSPSolve(s->kc, s->b, s->x));
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
-  PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_TRUE));
+  if (setup > 1) PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_TRUE));
   PetscCall(KSPGetIterationNumber(s->kc, its));
   PetscCall(KSPGetConvergedReason(s->kc, &r));
   PetscCall(KSPGetResidualNorm(s->kc, rnorm));
