@@ -189,7 +189,7 @@ fn main() {
     // a u32 row per entry: 20 bytes) and six vectors of n values (b, u, m, w, y and the
     // memory term). Unlike the two passes above, which stay in the last-level cache when run
     // on their own, this touches the step's whole working set, as the time loop does.
-    let k_r = disc.k_r.as_ref();
+    let k_r = disc.k_r[0].as_ref();
     let lower = (k_r.compute_nnz() - k_r.nrows()) / 2;
     let other: Vec<f64> = (0..(lower * 20).div_ceil(8) + 6 * factor.dim())
         .map(|i| (i % 11) as f64)

@@ -36,7 +36,7 @@ impl Effects {
         Effects {
             viscosity: true,
             elasticity: disc.k_b.is_some(),
-            memory: scene.physics.relaxation.is_some(),
+            memory: (disc.materials.distinct.iter()).any(|s| s.memory.is_some()),
             contact: !disc.contact.is_empty(),
             friction: !disc.friction.is_empty(),
             normal_stress: !disc.g_f.is_empty(),

@@ -13,18 +13,29 @@
 //! steps, it keeps u_0..u_{n−1} and evaluates the direct sum, O(n) per step. A longer run
 //! whose kernel misses its tolerance is refused (bad input naming the tolerance the fit
 //! reached), never silently run in O(N²). t_n − t_j is taken as (n − j)·k exactly.
+//!
+//! A body whose `[[material.region]]` entries have kernels of their own has one memory sum
+//! per kernel, its *memory group* g (0: `[material.relaxation]`):
+//!
+//!   m^(g)_n = k Σ_{j<n} r_g(t_n − t_j) u_j,   memory force Σ_g K_R^(g) m^(g)_n,
+//!
+//! K_R^(g) assembled on the elements of group g. Every kernel of such a body runs by the
+//! recursion ([`Plans`]): its memory is one list of Prony terms, each tagged with its group,
+//! and m_n is the groups' sums one after the other.
 
 use crate::kernel::Kernel;
 use crate::kernel_fit::{self, Fit, Lags};
 use crate::scene::{self, Scene};
 use crate::Result;
 
-/// One Prony term a e^{−b s}: its weight, its one-step decay e^{−b k}, its state m^(i)_n.
+/// One Prony term a e^{−b s}: its weight, its one-step decay e^{−b k}, its state m^(i)_n,
+/// and the memory group whose kernel it is a term of (0: the body's).
 #[derive(Clone, Debug)]
 pub struct PronyTerm {
     pub a: f64,
     pub decay: f64,
     pub m: Vec<f64>,
+    pub group: usize,
 }
 
 /// The memory state of the scheme.
@@ -64,13 +75,51 @@ pub enum Plan {
     },
 }
 
+/// One kernel of a scene as its plan needs it: r (None: no relaxation), how its memory sum
+/// is run, and the table its keys are in.
+#[derive(Clone, Copy)]
+pub struct Spec<'s> {
+    pub kernel: Option<&'s Kernel>,
+    pub compression: Option<f64>,
+    pub horizon: Option<f64>,
+    pub prefix: &'s str,
+}
+
+impl<'s> Spec<'s> {
+    /// `[material.relaxation]`, the body's kernel (memory group 0).
+    pub fn body(scene: &'s Scene) -> Self {
+        let p = &scene.physics;
+        Spec {
+            kernel: p.relaxation.as_ref(),
+            compression: p.compression,
+            horizon: p.horizon,
+            prefix: scene::BODY_KERNEL,
+        }
+    }
+
+    /// A region's own kernel (`Physics::region_kernels`).
+    pub fn region(prefix: &'s str, r: &'s scene::Relaxation) -> Self {
+        Spec {
+            kernel: r.kernel.as_ref(),
+            compression: r.compression,
+            horizon: r.horizon,
+            prefix,
+        }
+    }
+}
+
 impl Plan {
+    /// The plan of the body's kernel, `[material.relaxation]` ([`Plan::of`]).
+    pub fn new(scene: &Scene) -> Result<Plan> {
+        Self::of(Spec::body(scene), scene)
+    }
+
     /// Evaluates an expression or table kernel on every lag the run reads (r(k)..r(Nk), and
     /// r(0) for the implicit variant; a compressed kernel up to its horizon) — a non-finite
     /// value is bad input naming the key — and fits it when the scene asks for compression.
-    pub fn new(scene: &Scene) -> Result<Plan> {
-        let Some((lags, tolerance)) = Self::lags(scene)? else {
-            return Ok(Self::fixed(scene));
+    pub fn of(spec: Spec, scene: &Scene) -> Result<Plan> {
+        let Some((lags, tolerance)) = Self::lags(spec, scene)? else {
+            return Ok(Self::fixed(spec));
         };
         Ok(match tolerance {
             None => Self::exact(lags, scene, None),
@@ -78,12 +127,13 @@ impl Plan {
                 Ok(fit) => Plan::Compressed(fit),
                 Err(why) if scene.time.steps > kernel_fit::EXACT_STEPS => {
                     return Err(crate::Error::input(format!(
-                        "{}: key 'material.relaxation.tolerance': the kernel cannot be \
-                         compressed within {tolerance:e}: {why}. It is not run by the direct \
-                         sum instead: its time.steps = {} exceed {} (the direct sum keeps \
-                         every step's displacement, 8·dofs·N bytes, and takes O(N²·dofs) \
-                         time); memory = \"exact\" runs it anyway",
+                        "{}: key '{}.tolerance': the kernel cannot be compressed within \
+                         {tolerance:e}: {why}. It is not run by the direct sum instead: its \
+                         time.steps = {} exceed {} (the direct sum keeps every step's \
+                         displacement, 8·dofs·N bytes, and takes O(N²·dofs) time); memory = \
+                         \"exact\" runs it anyway",
                         scene.path.display(),
+                        spec.prefix,
                         scene.time.steps,
                         kernel_fit::EXACT_STEPS
                     )))
@@ -100,9 +150,9 @@ impl Plan {
     /// Where the fit leaves the tolerance on the new lags the resume is refused, naming the
     /// latest end time it still covers. A run that kept its past displacements continues the
     /// direct sum.
-    pub fn resumed(scene: &Scene, stored: Stored) -> Result<Plan> {
-        let Some((lags, tolerance)) = Self::lags(scene)? else {
-            return Ok(Self::fixed(scene));
+    pub fn resumed(spec: Spec, scene: &Scene, stored: Stored) -> Result<Plan> {
+        let Some((lags, tolerance)) = Self::lags(spec, scene)? else {
+            return Ok(Self::fixed(spec));
         };
         Ok(match (tolerance, stored) {
             (Some(tolerance), Stored::Terms(terms)) => {
@@ -116,10 +166,11 @@ impl Plan {
                          (relative) on the lags up to T, above the tolerance {tolerance:e}, and \
                          the checkpoint keeps no past displacements to fit again from. The fit \
                          holds up to t = {t_ok}: resume with --set time.end ≤ {t_ok}, or run \
-                         the scene again from the start with [material.relaxation] horizon = \
-                         {} (the latest end time its fit must cover)",
+                         the scene again from the start with [{}] horizon = {} (the latest \
+                         end time its fit must cover)",
                         scene.time.end,
                         terms.len(),
+                        spec.prefix,
                         scene.time.end
                     )));
                 }
@@ -152,9 +203,9 @@ impl Plan {
         Plan::Exact { lags, fallback }
     }
 
-    /// The plan of a scene without relaxation or with its own Prony series.
-    fn fixed(scene: &Scene) -> Plan {
-        match &scene.physics.relaxation {
+    /// The plan of a kernel that is absent or a Prony series.
+    fn fixed(spec: Spec) -> Plan {
+        match spec.kernel {
             Some(Kernel::Prony(terms)) => Plan::Prony(terms.clone()),
             _ => Plan::None,
         }
@@ -162,28 +213,28 @@ impl Plan {
 
     /// For an expression or table kernel: r on every lag the run reads, and the tolerance of
     /// its compression (None: `memory = "exact"`); None for the other kernels.
-    fn lags(scene: &Scene) -> Result<Option<(Lags, Option<f64>)>> {
-        let kernel = match &scene.physics.relaxation {
+    fn lags(spec: Spec, scene: &Scene) -> Result<Option<(Lags, Option<f64>)>> {
+        let kernel = match spec.kernel {
             None | Some(Kernel::Prony(_)) => return Ok(None),
             Some(kernel) => kernel,
         };
         let key = match kernel {
-            Kernel::Table(..) => "material.relaxation.table",
-            _ => "material.relaxation.expr",
+            Kernel::Table(..) => format!("{}.table", spec.prefix),
+            _ => format!("{}.expr", spec.prefix),
         };
         let implicit = scene.solver.history == scene::History::Implicit;
         // A compressed kernel is fitted up to its horizon, which a resume may extend the run
         // to (the scene checks horizon ≥ time.end).
-        let steps = match (scene.physics.compression, scene.physics.horizon) {
+        let steps = match (spec.compression, spec.horizon) {
             (Some(_), Some(h)) => scene
                 .time
                 .steps
                 .max((h / scene.time.k() - 1e-9).ceil() as usize),
             _ => scene.time.steps,
         };
-        let lags = Lags::new(kernel, scene.time.k(), steps, implicit, key)
+        let lags = Lags::new(kernel, scene.time.k(), steps, implicit, &key)
             .map_err(|e| crate::Error::input(format!("{}: {e}", scene.path.display())))?;
-        Ok(Some((lags, scene.physics.compression)))
+        Ok(Some((lags, spec.compression)))
     }
 
     /// The Prony series the recursion runs, if any.
@@ -202,6 +253,88 @@ impl Plan {
             Plan::Compressed(fit) => Some(fit.terms.iter().map(|t| t.0).sum()),
             _ => kernel.map(|k| k.eval(0.0)),
         }
+    }
+}
+
+/// How a run computes the memory sums of its memory groups: the body's kernel (group 0,
+/// `[material.relaxation]`) and each region's own (group g ≥ 1, `Physics::region_kernels`).
+/// A body with region kernels runs every kernel by the O(1) recursion (Prony or
+/// compressed): all its memory is one list of Prony terms, each tagged with its group.
+#[derive(Clone, Debug)]
+pub struct Plans {
+    pub body: Plan,
+    pub regions: Vec<Plan>,
+}
+
+impl Plans {
+    /// The plans of `scene`'s kernels ([`Plan::of`]); a kernel run by the direct sum in a body
+    /// with region kernels is refused.
+    pub fn new(scene: &Scene) -> Result<Plans> {
+        let body = Plan::new(scene)?;
+        let regions = (scene.physics.region_kernels().iter())
+            .map(|(prefix, r)| Plan::of(Spec::region(prefix, r), scene))
+            .collect::<Result<Vec<_>>>()?;
+        Self::checked(scene, body, regions)
+    }
+
+    /// The plans of a resumed run, from the Prony terms `stored` of each group (or the
+    /// direct sum's memory, for the body alone): [`Plan::resumed`] for each kernel.
+    pub fn resumed(scene: &Scene, mut stored: Vec<Stored>) -> Result<Plans> {
+        let kernels = scene.physics.region_kernels();
+        stored.resize_with(1 + kernels.len(), || Stored::Terms(Vec::new()));
+        let mut stored = stored.into_iter();
+        let body = Plan::resumed(Spec::body(scene), scene, stored.next().expect("group 0"))?;
+        let regions = (kernels.iter().zip(stored))
+            .map(|((prefix, r), s)| Plan::resumed(Spec::region(prefix, r), scene, s))
+            .collect::<Result<Vec<_>>>()?;
+        Self::checked(scene, body, regions)
+    }
+
+    /// Refuses a direct sum beside region kernels: the memory of several kernels is kept as
+    /// Prony terms only (the direct sum's past displacements are one history file).
+    fn checked(scene: &Scene, body: Plan, regions: Vec<Plan>) -> Result<Plans> {
+        let direct = std::iter::once(&body)
+            .chain(&regions)
+            .position(|p| matches!(p, Plan::Exact { .. }));
+        match direct {
+            Some(g) if !regions.is_empty() => {
+                let kernels = scene.physics.region_kernels();
+                let prefix = match g {
+                    0 => scene::BODY_KERNEL.to_string(),
+                    g => kernels[g - 1].0.clone(),
+                };
+                Err(crate::Error::input(format!(
+                    "{}: key '{prefix}.memory': this kernel would run by the direct sum, but a \
+                     body whose regions have kernels of their own runs each by the O(1) \
+                     recursion: give a Prony series, or an 'expr' or 'table' compressed \
+                     (memory = \"compressed\", the default) within its tolerance",
+                    scene.path.display()
+                )))
+            }
+            _ => Ok(Plans { body, regions }),
+        }
+    }
+
+    /// The plan of memory group g.
+    pub fn group(&self, g: usize) -> &Plan {
+        match g {
+            0 => &self.body,
+            g => &self.regions[g - 1],
+        }
+    }
+
+    /// The number of memory groups.
+    pub fn groups(&self) -> usize {
+        1 + self.regions.len()
+    }
+
+    /// r_g(0) of each group as the run uses it (None: a group without memory).
+    pub fn r0(&self, scene: &Scene) -> Vec<Option<f64>> {
+        let kernels = scene.physics.region_kernels();
+        let body = self.body.r0(scene.physics.relaxation.as_ref());
+        let regions =
+            (self.regions.iter().zip(&kernels)).map(|(p, (_, r))| p.r0(r.kernel.as_ref()));
+        std::iter::once(body).chain(regions).collect()
     }
 }
 
@@ -267,24 +400,25 @@ pub struct History {
 
 impl History {
     /// The state at n = 0: u_0 = 0 (the paper's example; the initial displacement is zero)
-    /// and m_0 = 0.
-    pub fn new(n_free: usize, k: f64, plan: &Plan) -> Self {
-        let memory = match plan {
-            Plan::None => Memory::None,
-            Plan::Prony(terms) | Plan::Compressed(Fit { terms, .. }) => Memory::Prony(
-                terms
-                    .iter()
-                    .map(|&(a, b)| PronyTerm {
-                        a,
-                        decay: (-b * k).exp(),
-                        m: vec![0.0; n_free],
-                    })
-                    .collect(),
-            ),
+    /// and m_0 = 0, for the memory groups of `plans`.
+    pub fn new(n_free: usize, k: f64, plans: &Plans) -> Self {
+        let groups = (0..plans.groups()).map(|g| (g, plans.group(g)));
+        let terms: Vec<PronyTerm> = (groups.clone())
+            .flat_map(|(g, plan)| plan.prony().unwrap_or(&[]).iter().map(move |t| (g, t)))
+            .map(|(group, &(a, b))| PronyTerm {
+                a,
+                decay: (-b * k).exp(),
+                m: vec![0.0; n_free],
+                group,
+            })
+            .collect();
+        let memory = match plans.body {
             Plan::Exact { .. } => Memory::Direct {
                 r_lag: Vec::new(),
                 past: Vec::new(),
             },
+            _ if terms.is_empty() => Memory::None,
+            _ => Memory::Prony(terms),
         };
         History {
             k,
@@ -300,13 +434,17 @@ impl History {
         !matches!(self.memory, Memory::None)
     }
 
-    /// m_n into `out` (overwritten). Returns false (and leaves `out` alone) without memory.
+    /// m_n of every memory group into `out` (overwritten), group g's at g·n_dofs (the body's
+    /// kernel `kernel` is the direct sum's). Returns false (and leaves `out` alone) without
+    /// memory.
     pub fn memory_into(&mut self, kernel: Option<&Kernel>, out: &mut [f64]) -> bool {
         match &mut self.memory {
             Memory::None => false,
             Memory::Prony(terms) => {
                 out.fill(0.0);
+                let n = self.u.len();
                 for term in terms.iter() {
+                    let out = &mut out[term.group * n..][..n];
                     for (o, m) in out.iter_mut().zip(&term.m) {
                         *o += term.a * m;
                     }
@@ -349,6 +487,7 @@ impl History {
                     // the same k: equal bits unless the kernel changed.
                     let expected = (t.decay.ln() / self.k) * saved.k;
                     if t.a.to_bits() != s.a.to_bits()
+                        || t.group != s.group
                         || (expected.exp() - s.decay).abs() > 1e-12 * s.decay.abs()
                     {
                         return Err(mismatch(&format!(
@@ -418,6 +557,46 @@ impl History {
 mod tests {
     use super::*;
 
+    /// The plans of a body without region kernels.
+    fn alone(body: Plan) -> Plans {
+        Plans {
+            body,
+            regions: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn each_group_sums_its_own_kernel() {
+        // Group 0: r = e^{−10s}; group 1: r = 0.5 e^{−3s} + 2 e^{−s}; each against the
+        // history of its kernel alone.
+        let k = 0.01;
+        let one = vec![(1.0, 10.0)];
+        let two = vec![(0.5, 3.0), (2.0, 1.0)];
+        let both = Plans {
+            body: Plan::Prony(one.clone()),
+            regions: vec![Plan::Compressed(Fit {
+                terms: two.clone(),
+                error: 0.0,
+                last_lag: 0,
+                seconds: 0.0,
+            })],
+        };
+        let mut h = History::new(2, k, &both);
+        let mut h0 = History::new(2, k, &alone(Plan::Prony(one)));
+        let mut h1 = History::new(2, k, &alone(Plan::Prony(two)));
+        let (mut m, mut m0, mut m1) = (vec![0.0; 4], vec![0.0; 2], vec![0.0; 2]);
+        for n in 0..50 {
+            let w = [(n as f64 * 0.3).cos(), 0.1 * n as f64];
+            assert!(h.memory_into(None, &mut m));
+            assert!(h0.memory_into(None, &mut m0) && h1.memory_into(None, &mut m1));
+            assert_eq!(m, [m0.clone(), m1.clone()].concat(), "n = {n}");
+            for h in [&mut h, &mut h0, &mut h1] {
+                h.advance(&w);
+            }
+        }
+        assert!(m[2..].iter().all(|&x| x != 0.0) && m[..2] != m[2..]);
+    }
+
     #[test]
     fn prony_recursion_equals_direct_sum() {
         let k = 0.01;
@@ -425,12 +604,12 @@ mod tests {
         let table_like = Kernel::Expr(Box::new(
             crate::expr::Expr::parse("exp(-10*s) + 0.5*exp(-3*s)", &["s"], "r").unwrap(),
         ));
-        let mut hp = History::new(3, k, &Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]));
+        let mut hp = History::new(3, k, &alone(Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)])));
         let exact = Plan::Exact {
             lags: Lags::new(&table_like, k, 200, false, "r").unwrap(),
             fallback: None,
         };
-        let mut hd = History::new(3, k, &exact);
+        let mut hd = History::new(3, k, &alone(exact));
         let (mut mp, mut md) = (vec![0.0; 3], vec![0.0; 3]);
         for n in 0..200 {
             let w = [(n as f64 * 0.1).sin(), 1.0, -0.5 * n as f64];
@@ -452,7 +631,7 @@ mod tests {
     fn compensated_sum_is_exact_for_constant_velocity() {
         // k = 0.1 is not a binary fraction: plain summation of 10^5 terms drifts visibly.
         let (k, n) = (0.1, 100_000);
-        let mut h = History::new(1, k, &Plan::None);
+        let mut h = History::new(1, k, &alone(Plan::None));
         let mut plain = 0.0f64;
         for _ in 0..n {
             h.advance(&[1.0]);

@@ -5,7 +5,7 @@ use std::num::NonZeroUsize;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use viscontact::fem::Discretization;
-use viscontact::history::Plan;
+use viscontact::history::{Plan, Plans};
 use viscontact::run::{resume, run, setup, Interrupt, Outcome, RunOptions};
 use viscontact::scene::Scene;
 use viscontact::{effects::Effects, mesh::Mesh, Result};
@@ -372,13 +372,13 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     if let Some(bytes) = factor {
         viscontact::resources::check_factor(bytes, disc.n_free)?;
     }
-    let plan = Plan::new(&scene)?;
-    print_stability(&scene, &disc, &plan);
-    print_kernel(&scene, &disc, &plan);
+    let plans = Plans::new(&scene)?;
+    print_stability(&scene, &disc, &plans);
+    print_kernels(&scene, &disc, &plans);
     for w in viscontact::effects::warnings(&scene, &disc) {
         viscontact::outln!("warning    {w}");
     }
-    viscontact::time_loop::refusals(&scene, &disc, &plan)
+    viscontact::time_loop::refusals(&scene, &disc, &plans)
 }
 
 /// `check`'s first lines: the scene, its mesh and sizes, the time grid, the effects, the
@@ -437,7 +437,7 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
 }
 
 /// `check`'s stability line: the explicit scheme's step limit, or why there is none.
-fn print_stability(scene: &Scene, disc: &Discretization, plan: &Plan) {
+fn print_stability(scene: &Scene, disc: &Discretization, plans: &Plans) {
     use viscontact::stability::{StepLimit, Verdict};
     let limit_line = |l: &StepLimit, what: &str| match l.k_max {
         Some(k) => format!(
@@ -446,7 +446,7 @@ fn print_stability(scene: &Scene, disc: &Discretization, plan: &Plan) {
         ),
         None => "no explicit elastic or memory term: no step limit".to_string(),
     };
-    match Verdict::new(scene, disc, plan) {
+    match Verdict::new(scene, disc, plans) {
         Verdict::Implicit => {
             viscontact::outln!("stability  implicit history: unconditionally stable")
         }
@@ -461,8 +461,25 @@ fn print_stability(scene: &Scene, disc: &Discretization, plan: &Plan) {
     }
 }
 
-/// `check`'s kernel and memory lines: how the memory sum runs and the history it keeps.
-fn print_kernel(scene: &Scene, disc: &Discretization, plan: &Plan) {
+/// `check`'s kernel and memory lines: how each memory group's sum runs (the body's, then
+/// each region kernel's, named by its table) and the history they keep.
+fn print_kernels(scene: &Scene, disc: &Discretization, plans: &Plans) {
+    let kernels = scene.physics.region_kernels();
+    let bytes: usize = (0..plans.groups())
+        .map(|g| {
+            let name = match g {
+                0 => String::new(),
+                g => format!("[{}] ", kernels[g - 1].0),
+            };
+            print_kernel(scene, disc, plans.group(g), &name)
+        })
+        .sum();
+    viscontact::outln!("memory     history state ≈ {:.1} MB", bytes as f64 / 1e6);
+}
+
+/// `check`'s kernel line for one memory group's `plan` (`name`: its table, for a region's);
+/// returns the bytes of its history state.
+fn print_kernel(scene: &Scene, disc: &Discretization, plan: &Plan, name: &str) -> usize {
     let direct_bytes = (scene.time.steps + 1) * disc.n_free * 8;
     let history_bytes = match plan {
         Plan::None => 0,
@@ -471,8 +488,8 @@ fn print_kernel(scene: &Scene, disc: &Discretization, plan: &Plan) {
     };
     match plan {
         Plan::Compressed(fit) => viscontact::outln!(
-            "kernel     compressed: {} exponentials, certified max relative error {:.2e} on \
-             the {} lags, fitted in {:.3} s; saves {:.1} MB against the direct sum",
+            "kernel     {name}compressed: {} exponentials, certified max relative error {:.2e} \
+             on the {} lags, fitted in {:.3} s; saves {:.1} MB against the direct sum",
             fit.terms.len(),
             fit.error,
             fit.last_lag,
@@ -486,12 +503,12 @@ fn print_kernel(scene: &Scene, disc: &Discretization, plan: &Plan) {
         Plan::Exact { fallback: None, .. } => {
             viscontact::outln!("kernel     runs exact (direct sum): memory = \"exact\"")
         }
+        Plan::Prony(terms) if !name.is_empty() => {
+            viscontact::outln!("kernel     {name}Prony series of {} terms", terms.len())
+        }
         _ => {}
     }
-    viscontact::outln!(
-        "memory     history state ≈ {:.1} MB",
-        history_bytes as f64 / 1e6
-    );
+    history_bytes
 }
 
 fn mesh_info(path: &std::path::Path, json: bool) -> Result<()> {

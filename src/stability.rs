@@ -21,7 +21,8 @@
 //! against K_A lie within the pointwise ratios of all of them (each cell's energies are
 //! those of its material), so every mode of every material must be stable; without memory
 //! this is exactly k ≤ 2/max λ_B, with memory it is the one-material analysis applied to
-//! each material. A compressed expression or table
+//! each material, with the kernel of its memory group (a region's own, `[material]`'s, or
+//! none). A compressed expression or table
 //! kernel (`kernel_fit`) is a Prony series, and the run is exactly the scheme with it, so it
 //! gets this exact limit too.
 //!
@@ -47,7 +48,7 @@
 //! and `[scheme] allow_unstable = true` runs it anyway.
 
 use crate::fem::{Discretization, Isotropic};
-use crate::history::Plan;
+use crate::history::{Plan, Plans};
 use crate::kernel_fit::Lags;
 use crate::scene::{self, Scene};
 use crate::{Error, Result};
@@ -64,14 +65,18 @@ pub struct StepLimit {
 
 /// The modal ratios (λ_B, λ_R) of the pointwise tensors against A in dimension d, two for
 /// each material of the cells: the deviatoric mode (C τ = 2a τ) and the volumetric one
-/// (C I = (2a + d b) I).
-fn modes(disc: &Discretization) -> Vec<(f64, f64)> {
-    let (r, d) = (disc.r, disc.dim as f64);
+/// (C I = (2a + d b) I), with the material's memory group (λ_R = 0 without one).
+fn modes(disc: &Discretization) -> Vec<(f64, f64, Option<usize>)> {
+    let (d, g) = (disc.dim as f64, |s: &crate::fem::Stiffness| s.memory);
     let vol = |c: Isotropic| 2.0 * c.a + d * c.b;
     (disc.materials.distinct.iter())
         .flat_map(|s| {
             let (a, b) = (s.a, s.b_or_zero());
-            [(b.a / a.a, r.a / a.a), (vol(b) / vol(a), vol(r) / vol(a))]
+            let r = s.memory.map_or(Isotropic { a: 0.0, b: 0.0 }, |_| disc.r);
+            [
+                (b.a / a.a, r.a / a.a, g(s)),
+                (vol(b) / vol(a), vol(r) / vol(a), g(s)),
+            ]
         })
         .collect()
 }
@@ -93,27 +98,27 @@ fn radius(k: f64, lambda_b: f64, lambda_r: f64, prony: &[(f64, f64)]) -> f64 {
     }
 }
 
-/// The largest k for which every mode is stable, for a Prony series (`None`: no memory).
-/// `includes_memory` is false only for a kernel run by the direct sum, whose memory term is
-/// judged by [`amplification`] instead.
-pub fn step_limit(disc: &Discretization, plan: &Plan) -> StepLimit {
-    let (prony, includes_memory): (Vec<(f64, f64)>, bool) = match plan {
-        Plan::Exact { .. } => (Vec::new(), false),
-        _ => (plan.prony().unwrap_or(&[]).to_vec(), true),
+/// The largest k for which every mode is stable, each with the Prony series of its memory
+/// group (`None`: no memory). `includes_memory` is false only for a kernel run by the direct
+/// sum, whose memory term is judged by [`amplification`] instead.
+pub fn step_limit(disc: &Discretization, plans: &Plans) -> StepLimit {
+    let includes_memory = !matches!(plans.body, Plan::Exact { .. });
+    let prony = |g: Option<usize>| match g.map(|g| plans.group(g)) {
+        Some(Plan::Exact { .. }) | None => &[][..],
+        Some(plan) => plan.prony().unwrap_or(&[]),
     };
-    if !disc.materials.elastic() && prony.is_empty() {
+    let modes: Vec<_> = (modes(disc).into_iter())
+        .map(|(lb, lr, g)| (lb, lr, prony(g)))
+        .collect();
+    if !disc.materials.elastic() && modes.iter().all(|m| m.2.is_empty()) {
         return StepLimit {
             k_max: None,
             includes_memory,
         };
     }
     let tol = 1e-12;
-    let modes = modes(disc);
-    let stable = |k: f64| {
-        modes
-            .iter()
-            .all(|&(lb, lr)| radius(k, lb, lr, &prony) <= 1.0 + tol)
-    };
+    let stable =
+        |k: f64| (modes.iter()).all(|&(lb, lr, prony)| radius(k, lb, lr, prony) <= 1.0 + tol);
     // Scan k upward by factors of 2 from a tiny step; bisect at the first unstable one.
     let mut lo = 1e-12;
     if !stable(lo) {
@@ -163,7 +168,7 @@ pub fn amplification(disc: &Discretization, lags: &Lags) -> f64 {
     // rev[n_max − l] = r_l, so that Σ_{l=1}^{n} r_l u_{n−l} is a contiguous dot product.
     let rev: Vec<f64> = r.iter().rev().copied().collect();
     let mut peak: f64 = 1.0;
-    for (lb, lr) in modes(disc) {
+    for (lb, lr, _) in modes(disc) {
         let mut u = Vec::with_capacity(n_max + 1);
         u.push(1.0f64);
         for n in 0..n_max {
@@ -197,12 +202,12 @@ pub enum Verdict {
 }
 
 impl Verdict {
-    pub fn new(scene: &Scene, disc: &Discretization, plan: &Plan) -> Verdict {
+    pub fn new(scene: &Scene, disc: &Discretization, plans: &Plans) -> Verdict {
         if scene.solver.history == scene::History::Implicit {
             return Verdict::Implicit;
         }
-        let limit = step_limit(disc, plan);
-        match plan {
+        let limit = step_limit(disc, plans);
+        match &plans.body {
             Plan::Exact { lags, .. } => Verdict::Amplification(amplification(disc, lags), limit),
             _ => Verdict::Limit(limit),
         }

@@ -29,7 +29,7 @@
 
 use crate::effects::{self, Effects};
 use crate::fem::{constraints, leading_block, mul_add, Discretization, Sparse, SymmetricPair};
-use crate::history::{History, LoopState, Plan, SavedLoop};
+use crate::history::{History, LoopState, Plans, SavedLoop};
 use crate::scene::{self, Scene};
 use crate::solver::choice::Contact;
 use crate::solver::{Abandon, Backend, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
@@ -44,8 +44,8 @@ pub struct TimeLoop<'p> {
     solver: StepSolver,
     rows: Rows,
     history: History,
-    /// How the memory sum is computed (the compressed kernel's fit, if any).
-    plan: Plan,
+    /// How the memory sums are computed (the compressed kernels' fits, if any).
+    plans: Plans,
     /// w_n of the last solved step.
     w: Vec<f64>,
     /// Multipliers of the last solved step z_{n−1}: λ on contact rows, γ on friction rows;
@@ -55,12 +55,13 @@ pub struct TimeLoop<'p> {
     z: Vec<f64>,
     z_before: Vec<f64>,
     spare: Vec<f64>,
-    /// m_n of the last solved step (empty without memory).
+    /// m_n of the last solved step, each memory group's after the other's (empty without
+    /// memory).
     m: Vec<f64>,
     b: Vec<f64>,
     growth: Growth,
-    /// K_B and K_R (when both are used and share their pattern): K_B u_n + K_R m_n in one
-    /// pass over their lower triangles.
+    /// K_B and the body's K_R (when both are used and share their pattern): K_B u_n + K_R
+    /// m_n in one pass over their lower triangles.
     paired: Option<SymmetricPair>,
     /// The step matrix on all n_dofs when there are prescribed dofs: its free-by-prescribed
     /// block moves their velocities to the right side (`fem::constraints`).
@@ -195,20 +196,20 @@ pub enum RunEnd {
 
 impl<'p> TimeLoop<'p> {
     pub fn new(scene: &'p Scene, disc: &'p Discretization) -> Result<Self> {
-        Self::with_plan(scene, disc, Plan::new(scene)?)
+        Self::with_plan(scene, disc, Plans::new(scene)?)
     }
 
-    /// A time loop with a memory plan in hand (a resumed run's, `Plan::resumed`), checked
+    /// A time loop with its memory plans in hand (a resumed run's, `Plans::resumed`), checked
     /// by [`refusals`] before anything is factored.
-    pub fn with_plan(scene: &'p Scene, disc: &'p Discretization, plan: Plan) -> Result<Self> {
-        refusals(scene, disc, &plan)?;
+    pub fn with_plan(scene: &'p Scene, disc: &'p Discretization, plans: Plans) -> Result<Self> {
+        refusals(scene, disc, &plans)?;
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
         let implicit = match scene.solver.history {
             scene::History::Left => None,
-            scene::History::Implicit => Some(
-                disc.implicit_matrix(scene.time.k(), plan.r0(scene.physics.relaxation.as_ref())),
-            ),
+            scene::History::Implicit => {
+                Some(disc.implicit_matrix(scene.time.k(), &plans.r0(scene)))
+            }
         };
         // With prescribed dofs the factored matrix is the free block of the whole one.
         let (implicit, lift) = match (implicit, &disc.k_a_all) {
@@ -227,14 +228,14 @@ impl<'p> TimeLoop<'p> {
         };
         let solver = effects::step_solver(&effects, contact, matrix, &backend, &rows)?;
         let n = disc.n_dofs;
-        let history = History::new(n, scene.time.k(), &plan);
+        let history = History::new(n, scene.time.k(), &plans);
         let paired = disc
             .k_b
             .as_ref()
             .filter(|_| history.has_memory())
-            .and_then(|k_b| SymmetricPair::new(k_b, &disc.k_r));
+            .and_then(|k_b| SymmetricPair::new(k_b, &disc.k_r[0]));
         let m = if history.has_memory() {
-            vec![0.0; n]
+            vec![0.0; plans.groups() * n]
         } else {
             Vec::new()
         };
@@ -249,7 +250,7 @@ impl<'p> TimeLoop<'p> {
             spare: vec![0.0; rows.len()],
             rows,
             history,
-            plan,
+            plans,
             w: vec![0.0; n],
             m,
             b: vec![0.0; n],
@@ -375,9 +376,9 @@ impl<'p> TimeLoop<'p> {
         }
     }
 
-    /// How the memory sum is computed.
-    pub fn plan(&self) -> &Plan {
-        &self.plan
+    /// How the memory sums are computed.
+    pub fn plans(&self) -> &Plans {
+        &self.plans
     }
 
     /// The index n of the next step to solve.
@@ -473,16 +474,19 @@ impl<'p> TimeLoop<'p> {
         // max|f_n − g_F| (g_F is empty without friction).
         let load_max = max_abs_diff(&self.b, &self.disc.g_f);
         let memory = h.memory_into(self.scene.physics.relaxation.as_ref(), &mut self.m);
+        // −K_B u_n − Σ_g K_R^(g) m^(g)_n, the body's group with K_B in one pass where paired.
+        let n = h.u.len();
+        let mut groups = (self.disc.k_r.iter()).zip(self.m.chunks_exact(n.max(1)));
         match (&mut self.paired, &self.disc.k_b) {
-            (Some(pair), _) if memory => pair.mul_add(&h.u, &self.m, -1.0, &mut self.b),
-            (_, k_b) => {
-                if let Some(k_b) = k_b {
-                    mul_add(k_b, &h.u, -1.0, &mut self.b);
-                }
-                if memory {
-                    mul_add(&self.disc.k_r, &self.m, -1.0, &mut self.b);
-                }
+            (Some(pair), _) if memory => {
+                let (_, m0) = groups.next().expect("group 0");
+                pair.mul_add(&h.u, m0, -1.0, &mut self.b)
             }
+            (_, Some(k_b)) => mul_add(k_b, &h.u, -1.0, &mut self.b),
+            (_, None) => {}
+        }
+        for (k_r, m) in groups {
+            mul_add(k_r, m, -1.0, &mut self.b);
         }
         for (b, g) in self.b.iter_mut().zip(&self.disc.g_f) {
             *b -= g;
@@ -610,9 +614,9 @@ fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
 /// kernel as it will run (`Verdict`), loads that are not finite at t = 0, prescribed
 /// displacements that are not finite at t = k. `viscontact check`
 /// calls it with the plan it prints, so that `check` fails wherever `run` would.
-pub fn refusals(scene: &Scene, disc: &Discretization, plan: &Plan) -> Result<()> {
+pub fn refusals(scene: &Scene, disc: &Discretization, plans: &Plans) -> Result<()> {
     if scene.solver.history == scene::History::Left {
-        Verdict::new(scene, disc, plan).check(scene)?;
+        Verdict::new(scene, disc, plans).check(scene)?;
     }
     constraints::values(&disc.prescribed, &disc.nodes, scene, scene.time.k())?;
     disc.loads

@@ -296,6 +296,18 @@ fn write_memory(f: &hdf5::File, s: &Snapshot, history: Option<&HistoryFile>) -> 
                 "one-step decay exp(-b_i k) of each term (exactly as used)",
                 "1",
             )?;
+            if terms.iter().any(|t| t.group != 0) {
+                let group: Vec<f64> = terms.iter().map(|t| t.group as f64).collect();
+                vector(
+                    &memory,
+                    "prony_group",
+                    &nt,
+                    &group,
+                    "memory group of each term: 0 the body's kernel ([material.relaxation]), \
+                     g the g-th [[material.region]] with a kernel of its own",
+                    "1",
+                )?;
+            }
             vector(
                 &memory,
                 "prony_state",

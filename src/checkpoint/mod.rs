@@ -217,6 +217,8 @@ pub enum StoredMemory {
         decay: Vec<f64>,
         /// m^(i)_n per term.
         m: Vec<Vec<f64>>,
+        /// The memory group of each term (all 0 where the file has no `prony_group`).
+        group: Vec<usize>,
     },
     /// Rows 0..rows of the history file and their running hash.
     Direct {

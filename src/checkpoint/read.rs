@@ -201,7 +201,16 @@ fn read_memory(f: &hdf5::File) -> hdf5::Result<StoredMemory> {
             } else {
                 flat.chunks(shape[1]).map(|c| c.to_vec()).collect()
             };
-            StoredMemory::Prony { a, decay, m }
+            // Written only where a region has a kernel of its own.
+            let group = match f.link_exists("memory/prony_group") {
+                true => vec("memory/prony_group")?,
+                false => vec![0.0; a.len()],
+            };
+            if group.len() != a.len() || group.iter().any(|&g| g.fract() != 0.0 || g < 0.0) {
+                return Err("memory/prony_group is not one group index per term".into());
+            }
+            let group = group.iter().map(|&g| g as usize).collect();
+            StoredMemory::Prony { a, decay, m, group }
         }
         "direct" => StoredMemory::Direct {
             file: str_attr_of(&mem, "history_file")?,

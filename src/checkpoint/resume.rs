@@ -5,7 +5,7 @@ use super::history_file::read_history;
 use super::{groups_fingerprint, mesh_fingerprint, physics_signature, Checkpoint, StoredMemory};
 use crate::fem::Discretization;
 use crate::history::{
-    memory_mismatch, Plan, PronyTerm, SavedHistory, SavedLoop, SavedMemory, Stored,
+    memory_mismatch, Plans, PronyTerm, SavedHistory, SavedLoop, SavedMemory, Stored,
 };
 use crate::mesh::Mesh;
 use crate::scene::{self, Scene};
@@ -231,19 +231,24 @@ impl Checkpoint {
         )))
     }
 
-    /// The memory plan the resumed run continues with ([`Plan::resumed`]): a compressed
-    /// run's own fit, its terms (a_i, b_i) read back from the stored a_i and e^{−b_i k}.
-    pub fn plan(&self, scene: &Scene) -> Result<Plan> {
+    /// The memory plans the resumed run continues with ([`Plans::resumed`]): a compressed
+    /// run's own fits, each group's terms (a_i, b_i) read back from the stored a_i and
+    /// e^{−b_i k}.
+    pub fn plans(&self, scene: &Scene) -> Result<Plans> {
         let stored = match &self.memory {
-            StoredMemory::Prony { a, decay, .. } => Stored::Terms(
-                a.iter()
-                    .zip(decay)
-                    .map(|(&a, &d)| (a, -d.ln() / self.k))
-                    .collect(),
-            ),
-            StoredMemory::None | StoredMemory::Direct { .. } => Stored::Direct,
+            StoredMemory::Prony {
+                a, decay, group, ..
+            } => {
+                let groups = group.iter().max().map_or(1, |g| g + 1);
+                let mut terms = vec![Vec::new(); groups];
+                for ((&a, &d), &g) in a.iter().zip(decay).zip(group) {
+                    terms[g].push((a, -d.ln() / self.k));
+                }
+                terms.into_iter().map(Stored::Terms).collect()
+            }
+            StoredMemory::None | StoredMemory::Direct { .. } => vec![Stored::Direct],
         };
-        Plan::resumed(scene, stored)
+        Plans::resumed(scene, stored)
             .map_err(|e| Error::input(format!("{}: {e}", self.path.display())))
     }
 
@@ -270,12 +275,13 @@ impl Checkpoint {
         }
         let memory = match &self.memory {
             StoredMemory::None => SavedMemory::None,
-            StoredMemory::Prony { a, decay, m } => SavedMemory::Prony(
+            StoredMemory::Prony { a, decay, m, group } => SavedMemory::Prony(
                 (0..a.len())
                     .map(|i| PronyTerm {
                         a: a[i],
                         decay: decay[i],
                         m: m[i].clone(),
+                        group: group[i],
                     })
                     .collect(),
             ),

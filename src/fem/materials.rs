@@ -1,7 +1,9 @@
 //! The material of each cell: `[material]`'s, or on the cells of a `[[material.region]]`'s
 //! group the region's. A (4.1) and B (4.2) then vary from cell to cell, and so do the
-//! element matrices of K_A and K_B, the stress and the stability limit; R = r·I and its
-//! K_R do not (one kernel for the whole body).
+//! element matrices of K_A and K_B, the stress and the stability limit. R = r·I: a region
+//! with a kernel of its own puts its cells into a memory group of their own (group g ≥ 1,
+//! `Physics::memory_group`), with its own K_R and memory state; the other cells are in the
+//! body's group 0 (or in none, without relaxation).
 //!
 //! The cells are grouped by distinct material (A, B), not by region: regions whose
 //! materials are equal, or equal to `[material]`'s, share one entry, so a scene whose
@@ -13,17 +15,19 @@ use crate::mesh::{fmt_point, Mesh};
 use crate::scene::{Material, Model, Scene};
 use crate::{Error, Result};
 
-/// The pointwise tensors of one material: A, and B (None when E = 0 or elasticity is off).
+/// The pointwise tensors of one material: A, and B (None when E = 0 or elasticity is off),
+/// and the memory group whose kernel r gives R = r·I (None without a relaxation term).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Stiffness {
     pub a: Isotropic,
     pub b: Option<Isotropic>,
+    pub memory: Option<usize>,
 }
 
 impl Stiffness {
     /// A and B of `m` under `model` (plane stress as (4.2); plane strain and 3D with the 3D
-    /// Lamé coefficient).
-    pub fn of(m: &Material, model: Model) -> Self {
+    /// Lamé coefficient), with the memory group `memory`.
+    pub fn of(m: &Material, model: Model, memory: Option<usize>) -> Self {
         let b = (m.elasticity)
             .filter(|(e, _)| *e > 0.0)
             .map(|(e, nu)| match model {
@@ -33,6 +37,7 @@ impl Stiffness {
         Stiffness {
             a: Isotropic::viscosity(m.theta, m.zeta),
             b,
+            memory,
         }
     }
 
@@ -63,9 +68,9 @@ impl CellMaterials {
             true => Vec::new(),
             false => region_of_cells(mesh, scene)?,
         };
-        let model = scene.mesh.model;
-        let by_region: Vec<Stiffness> = (scene.physics.materials())
-            .map(|m| Stiffness::of(m, model))
+        let (model, physics) = (scene.mesh.model, &scene.physics);
+        let by_region: Vec<Stiffness> = (physics.materials().enumerate())
+            .map(|(i, m)| Stiffness::of(m, model, physics.memory_group(i.checked_sub(1))))
             .collect();
         let mut distinct: Vec<Stiffness> = Vec::new();
         let of_cell = (0..mesh.n_cells())
@@ -95,6 +100,13 @@ impl CellMaterials {
         self.distinct.iter().any(|s| s.b.is_some())
     }
 
+    /// The number of memory groups, each with its K_R and memory state: the body's
+    /// `[material.relaxation]` (group 0, even where it has none) and each region's own
+    /// kernel.
+    pub fn groups(scene: &Scene) -> usize {
+        1 + scene.physics.region_kernels().len()
+    }
+
     /// The number of cells in region i (i = 1.. for the entries; 0 outside every region).
     pub fn count(&self, i: usize) -> usize {
         self.region.iter().filter(|&&r| r as usize == i).count()
@@ -109,12 +121,18 @@ pub fn summary(materials: &CellMaterials, scene: &Scene) -> Vec<String> {
         return Vec::new();
     }
     let cells = ["triangles", "tetrahedra"][scene.mesh.model.dim() - 2];
+    let group = |i: usize| scene.physics.memory_group(Some(i)).unwrap_or(0);
     let regions = scene.physics.regions.iter().enumerate();
     let mut lines: Vec<String> = regions
         .map(|(i, r)| {
             let n = materials.count(i + 1);
+            let kernel = match &r.relaxation {
+                None => String::new(),
+                Some(own) if own.kernel.is_none() => ", no relaxation".into(),
+                Some(_) => format!(", its own kernel (memory group {})", group(i)),
+            };
             format!(
-                "{}: '{}', {n} {cells}, {}",
+                "{}: '{}', {n} {cells}, {}{kernel}",
                 i + 1,
                 r.on,
                 describe(&r.material)

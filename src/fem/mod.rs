@@ -105,10 +105,12 @@ pub struct Discretization {
     /// Each cell's A (4.1) and B (4.2); R's constant part I (the same in every cell).
     pub materials: CellMaterials,
     pub r: Isotropic,
-    /// K_A on the free dofs (n_free); K_B, K_R on all n_dofs (the free and the prescribed).
+    /// K_A on the free dofs (n_free); K_B on all n_dofs (the free and the prescribed); K_R
+    /// of each memory group g, on the cells of group g (`Stiffness::memory`), on all n_dofs.
+    /// All share one pattern.
     pub k_a: Sparse,
     pub k_b: Option<Sparse>,
-    pub k_r: Sparse,
+    pub k_r: Vec<Sparse>,
     /// K_A on all n_dofs, when there are prescribed dofs (its free-by-prescribed block moves
     /// their velocities to the right side).
     pub k_a_all: Option<Sparse>,
@@ -407,7 +409,8 @@ impl Discretization {
 
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
-        let (k_a_all, k_b, k_r) = assemble(&cells, d, free, n_dofs, &materials, r);
+        let groups = CellMaterials::groups(scene);
+        let (k_a_all, k_b, k_r) = assemble(&cells, d, free, n_dofs, &materials, r, groups);
         let (k_a, k_a_all) = match n_dofs > n_free {
             true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
             false => (k_a_all, None),
@@ -466,6 +469,8 @@ impl Discretization {
     /// one pass over the cells instead of three strains each (a frame at every step pays
     /// this on the frame writer's thread, beside the time loop). A and B are the cell's own:
     /// the nodal p, q are made once per distinct material, and a cell reads its material's.
+    /// `m` holds the memory of every memory group, group g's at g·n_dofs.. (the cell's
+    /// material names its group, `Stiffness::memory`).
     pub fn stress(
         &self,
         w: &[f64],
@@ -491,9 +496,9 @@ impl Discretization {
         m: Option<&[f64]>,
         plane_stress: bool,
     ) -> (Vec<f64>, Vec<f64>) {
-        let r = self.r;
+        let (r, n) = (self.r, self.n_dofs);
         // [p_n, q_n] of every node (D components: 32 bytes a node in 2D), for each distinct
-        // material.
+        // material, its memory m from its group's part of `m`.
         let pq_of = |s: &Stiffness| -> Vec<[[f64; D]; 2]> {
             let (a, b) = (s.a, s.b_or_zero());
             let nodes = self.free.as_chunks::<D>().0.iter();
@@ -502,7 +507,8 @@ impl Discretization {
                     let mut pq = [[0.0; D]; 2];
                     for (c, dof) in dofs.iter().enumerate() {
                         if let Some(dof) = *dof {
-                            let (w, u, m) = (w[dof], u[dof], m.map_or(0.0, |m| m[dof]));
+                            let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + dof]);
+                            let (w, u) = (w[dof], u[dof]);
                             pq[0][c] = a.a * w + b.a * u + r.a * m;
                             pq[1][c] = a.b * w + b.b * u + r.b * m;
                         }
@@ -551,9 +557,10 @@ impl Discretization {
         (s6, vm)
     }
 
-    /// K_A + k K_B + k² r(0) K_R on all n_dofs: the step matrix of the implicit variant (the
-    /// three share one sparsity pattern, so this adds their value arrays).
-    pub fn implicit_matrix(&self, k: f64, r0: Option<f64>) -> Sparse {
+    /// K_A + k K_B + k² Σ_g r_g(0) K_R^(g) on all n_dofs: the step matrix of the implicit
+    /// variant, r_g(0) of each memory group with a kernel (None: a group without) in `r0`
+    /// (they share one sparsity pattern, so this adds their value arrays).
+    pub fn implicit_matrix(&self, k: f64, r0: &[Option<f64>]) -> Sparse {
         let mut m = self.k_a_all.as_ref().unwrap_or(&self.k_a).clone();
         let mut add = |other: &Sparse, c: f64| {
             debug_assert_eq!(other.symbolic().row_idx(), m.symbolic().row_idx());
@@ -564,8 +571,10 @@ impl Discretization {
         if let Some(k_b) = &self.k_b {
             add(k_b, k);
         }
-        if let Some(r0) = r0 {
-            add(&self.k_r, k * k * r0);
+        for (k_r, r0) in self.k_r.iter().zip(r0) {
+            if let Some(r0) = r0 {
+                add(k_r, k * k * r0);
+            }
         }
         m
     }
@@ -833,7 +842,8 @@ fn assemble(
     n: usize,
     materials: &CellMaterials,
     r: Isotropic,
-) -> (Sparse, Option<Sparse>, Sparse) {
+    groups: usize,
+) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
     let dofs = |p: usize| free[d * p..d * (p + 1)].iter().flatten().copied();
     let has_dofs = |p: usize| dofs(p).next().is_some();
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
@@ -868,12 +878,12 @@ fn assemble(
     let (mut va, mut vb, mut vr) = (
         vec![0.0; nnz],
         vec![0.0; if elastic { nnz } else { 0 }],
-        vec![0.0; nnz],
+        vec![vec![0.0; nnz]; groups],
     );
     // The entries of the three matrices from the same two factors (`Cell::parts`), without
     // building three element matrices per cell.
     for (c, t) in cells.iter().enumerate() {
-        let Stiffness { a, b } = materials.of(c);
+        let Stiffness { a, b, memory } = materials.of(c);
         let nodes = t.vertices();
         for (j, &p) in nodes.iter().enumerate() {
             for (i, &q) in nodes.iter().enumerate() {
@@ -892,7 +902,9 @@ fn assemble(
                         if let Some(b) = b {
                             vb[at] += t.entry(b, parts);
                         }
-                        vr[at] += t.entry(r, parts);
+                        if let Some(g) = memory {
+                            vr[g][at] += t.entry(r, parts);
+                        }
                     }
                 }
             }
@@ -902,6 +914,8 @@ fn assemble(
     (
         SparseColMat::new(pattern.clone(), va),
         elastic.then(|| SparseColMat::new(pattern.clone(), vb)),
-        SparseColMat::new(pattern, vr),
+        vr.into_iter()
+            .map(|v| SparseColMat::new(pattern.clone(), v))
+            .collect(),
     )
 }

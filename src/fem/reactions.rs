@@ -47,9 +47,10 @@ pub struct Reactions {
     pub held: Vec<(usize, Source)>,
     /// Global dof → its row, None at a dof no condition holds.
     row_of: Vec<Option<u32>>,
-    /// The rows, compressed: columns (indices of u, w, m) and the values of M, K_B, K_R.
+    /// The rows, compressed: columns (indices of u and w; of m, in its memory group's part)
+    /// and the values of M, K_B, K_R.
     ptr: Vec<usize>,
-    cols: Vec<usize>,
+    cols: Vec<[usize; 2]>,
     values: Vec<[f64; 3]>,
     /// g_F at the held dofs.
     g_f: Vec<f64>,
@@ -66,14 +67,14 @@ pub struct StepForces {
 }
 
 impl Reactions {
-    /// The held rows of M = K_A + `k_b` K_B + `k_r` K_R (`k_b` = `k_r` = 0 for the
-    /// paper's scheme, k and k² r(0) for the implicit variant), K_B and K_R.
+    /// The held rows of M = K_A + `k_b` K_B + Σ_g `k_r[g]` K_R^(g) (`k_b` = `k_r` = 0 for
+    /// the paper's scheme, k and k² r_g(0) for the implicit variant), K_B and K_R^(g).
     pub fn new(
         mesh: &Mesh,
         scene: &Scene,
         disc: &Discretization,
         k_b: f64,
-        k_r: f64,
+        k_r: &[f64],
     ) -> Result<Self> {
         let mut row_of = vec![None; disc.free.len()];
         for (i, &(dof, _)) in disc.held.iter().enumerate() {
@@ -115,8 +116,8 @@ impl Reactions {
             .map(|h| {
                 let range = self.ptr[h]..self.ptr[h + 1];
                 let mut s = 0.0;
-                for (&col, v) in self.cols[range.clone()].iter().zip(&self.values[range]) {
-                    s += v[0] * w[col] + v[1] * u[col] + m.map_or(0.0, |m| v[2] * m[col]);
+                for (&[col, at], v) in self.cols[range.clone()].iter().zip(&self.values[range]) {
+                    s += v[0] * w[col] + v[1] * u[col] + m.map_or(0.0, |m| v[2] * m[at]);
                 }
                 s + self.g_f[h]
             })
@@ -133,19 +134,26 @@ impl Reactions {
     }
 }
 
-/// The rows `row_of` numbers (held dofs) of M = K_A + `k_b` K_B + `k_r` K_R, K_B and K_R
-/// over the dofs with an index, compressed: (row starts, columns, the three values).
+/// The rows `row_of` numbers (held dofs) of M = K_A + `k_b` K_B + Σ_g `k_r[g]` K_R^(g), K_B
+/// and K_R over the dofs with an index, compressed: (row starts, columns of u and w and of
+/// m, the three values). An entry is kept per memory group: its K_R value multiplies that
+/// group's m.
 fn held_rows(
     disc: &Discretization,
     row_of: &[Option<u32>],
     k_b: f64,
-    k_r: f64,
-) -> (Vec<usize>, Vec<usize>, Vec<[f64; 3]>) {
+    k_r: &[f64],
+) -> (Vec<usize>, Vec<[usize; 2]>, Vec<[f64; 3]>) {
     let d = disc.dim;
-    let mut entries: Vec<(u32, usize, [f64; 3])> = Vec::new();
+    let mut entries: Vec<(u32, [usize; 2], [f64; 3])> = Vec::new();
     for (c, t) in disc.cells.iter().enumerate() {
         let s = disc.materials.of(c);
         let (a, b) = (s.a, s.b_or_zero());
+        let (r, g) = match s.memory {
+            Some(g) => (disc.r, g),
+            None => (crate::fem::Isotropic { a: 0.0, b: 0.0 }, 0),
+        };
+        let k_r = k_r.get(g).copied().unwrap_or(0.0);
         let nodes = t.vertices();
         for (i, &q) in nodes.iter().enumerate() {
             for al in 0..d {
@@ -155,8 +163,9 @@ fn held_rows(
                 for (j, &p) in nodes.iter().enumerate() {
                     for (be, col) in (0..d).filter_map(|be| Some((be, disc.free[d * p + be]?))) {
                         let parts = t.parts(i, j, al, be);
-                        let [ka, kb, kr] = [a, b, disc.r].map(|c| t.entry(c, parts));
-                        entries.push((row, col, [ka + k_b * kb + k_r * kr, kb, kr]));
+                        let [ka, kb, kr] = [a, b, r].map(|c| t.entry(c, parts));
+                        let at = g * disc.n_dofs + col;
+                        entries.push((row, [col, at], [ka + k_b * kb + k_r * kr, kb, kr]));
                     }
                 }
             }
@@ -165,7 +174,7 @@ fn held_rows(
     // Stable: the entries of one position are added in the cells' order.
     entries.sort_by_key(|&(row, col, _)| (row, col));
     let mut ptr = vec![0; disc.held.len() + 1];
-    let (mut cols, mut values): (Vec<usize>, Vec<[f64; 3]>) = (Vec::new(), Vec::new());
+    let (mut cols, mut values): (Vec<[usize; 2]>, Vec<[f64; 3]>) = (Vec::new(), Vec::new());
     let mut last = None;
     for (row, col, v) in entries {
         match values.last_mut() {

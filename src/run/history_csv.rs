@@ -193,14 +193,15 @@ impl HistoryCsv {
         tl: &TimeLoop,
         from: Option<usize>,
     ) -> Result<Self> {
+        let k = tl.k();
         let (k_b, k_r) = match scene.solver.history {
-            scene::History::Left => (0.0, 0.0),
+            scene::History::Left => (0.0, Vec::new()),
             scene::History::Implicit => {
-                let r0 = tl.plan().r0(scene.physics.relaxation.as_ref());
-                (tl.k(), tl.k() * tl.k() * r0.unwrap_or(0.0))
+                let r0 = tl.plans().r0(scene);
+                (k, r0.iter().map(|r0| k * k * r0.unwrap_or(0.0)).collect())
             }
         };
-        let reactions = Reactions::new(mesh, scene, disc, k_b, k_r)?;
+        let reactions = Reactions::new(mesh, scene, disc, k_b, &k_r)?;
         let layout = Layout::new(scene, disc);
         let header = layout.columns().join(",") + "\n";
         let path = out.join(FILE_NAME);

@@ -255,7 +255,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         resumed.as_ref(),
     )?;
     stage()?;
-    let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plan(&scene)?)?;
+    let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plans(&scene)?)?;
     let saved = cp.saved(disc.n_dofs, tl.rows().len())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;

@@ -40,8 +40,12 @@ pub struct Summary {
     pub output: OutputSummary,
     /// See `effects::warnings`.
     pub warnings: Vec<String>,
-    /// How the memory sum was computed (`history::Plan`); absent without relaxation.
+    /// How the body's memory sum was computed (`history::Plan`); absent without relaxation.
     pub memory: Option<MemorySummary>,
+    /// How the memory sum of each region's own kernel was computed, in the order of the
+    /// `[[material.region]]` entries that have one; absent without.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub region_memory: Vec<MemorySummary>,
     /// PETSc's Krylov method of a run with `solver.linear = "petsc"` (absent otherwise);
     /// `iterations` counts its Krylov iterations per step.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -253,7 +257,10 @@ impl Summary {
             },
             output: ending.output,
             warnings: ending.warnings,
-            memory: MemorySummary::new(tl.plan(), tl.k()),
+            memory: MemorySummary::new(&tl.plans().body, tl.k()),
+            region_memory: (tl.plans().regions.iter())
+                .filter_map(|p| MemorySummary::new(p, tl.k()))
+                .collect(),
             petsc: PetscSummary::new(tl),
         }
     }

@@ -233,9 +233,8 @@ pub struct RegionSection {
     pub on: String,
     pub viscosity: Option<ViscositySection>,
     pub elasticity: Option<ElasticitySection>,
-    /// A kernel of the region's own: not supported yet, refused by the scene check whatever
-    /// it holds (the whole body runs `[material.relaxation]`).
-    pub relaxation: Option<serde::de::IgnoredAny>,
+    /// A kernel of the region's own, in place of `[material.relaxation]` on its cells.
+    pub relaxation: Option<RelaxationSection>,
 }
 
 #[derive(Deserialize, Debug)]

@@ -6,8 +6,9 @@
 //! The operators A and B may depend on x (the paper allows it): `[[material.region]]`
 //! entries give the cells of a physical group a material of their own, its tables checked
 //! by the same functions as `[material]`'s (under the keys `material.region[i].…`), the
-//! tables a region leaves out taken from `[material]`. The kernel r is one for the whole
-//! body: a region's `relaxation` table is refused.
+//! tables a region leaves out taken from `[material]`. A region's own `relaxation` table
+//! gives its cells a kernel of their own (checked as `[material.relaxation]`; `enabled =
+//! false` leaves them without memory); `history` keeps one memory state per kernel.
 
 use super::conditions::Dirichlet;
 use super::file::{
@@ -46,6 +47,22 @@ pub struct Material {
     pub elasticity: Option<(f64, f64)>,
 }
 
+/// A relaxation kernel as a table gives it, checked, and how its memory sum is run.
+#[derive(Debug)]
+pub struct Relaxation {
+    /// r(s); None when the table disables relaxation (`enabled = false`).
+    pub kernel: Option<Kernel>,
+    /// For an expression or table kernel: compressed with this tolerance, or exact (None).
+    /// Always None for a Prony series (already O(1)).
+    pub compression: Option<f64>,
+    /// `<table>.horizon`: the fit of a compressed kernel covers the lags up to
+    /// max(time.end, horizon).
+    pub horizon: Option<f64>,
+}
+
+/// The table of the body's kernel, `[material.relaxation]` (the prefix of its keys).
+pub const BODY_KERNEL: &str = "material.relaxation";
+
 /// A checked `[[material.region]]` entry.
 #[derive(Debug)]
 pub struct Region {
@@ -54,6 +71,9 @@ pub struct Region {
     pub on: String,
     /// `[material]`'s material with the region's tables in place of its own.
     pub material: Material,
+    /// The region's own `relaxation` table (keys `material.region[i].relaxation.…`); None
+    /// where it has none and its cells run `[material.relaxation]`.
+    pub relaxation: Option<Relaxation>,
 }
 
 /// What the equations see.
@@ -100,22 +120,16 @@ impl Physics {
             zeta,
             elasticity,
         };
-        let section = f.material.relaxation.as_ref();
-        let relaxation = match section {
-            Some(r) if r.enabled => Some(kernel(r, path)?),
-            _ => None,
-        };
-        let compression = match (&relaxation, section) {
-            (Some(kernel), Some(r)) => compression(kernel, r, path)?,
-            _ => None,
-        };
-        let horizon = section.and_then(|r| r.horizon);
-        memory_fits(compression, horizon, time, path)?;
+        let Relaxation {
+            kernel: relaxation,
+            compression,
+            horizon,
+        } = relaxation(f.material.relaxation.as_ref(), BODY_KERNEL, time, path)?;
         let friction = friction(f.friction.as_ref(), model, path)?;
         let (tractions, body_forces) = loads(&f.load, &f.mesh.groups.traction, model, path)?;
         Ok(Physics {
             material,
-            regions: regions(&f.material, material, model, path)?,
+            regions: regions(&f.material, material, model, time, path)?,
             relaxation,
             compression,
             horizon,
@@ -130,6 +144,36 @@ impl Physics {
     /// `[material]`'s material, then each region's.
     pub fn materials(&self) -> impl Iterator<Item = &Material> {
         std::iter::once(&self.material).chain(self.regions.iter().map(|r| &r.material))
+    }
+
+    /// The kernels of the memory groups beyond the body's: group g ≥ 1 is the g-th region
+    /// with an enabled kernel of its own, given with the prefix of its keys. Group 0 is the
+    /// body's, `[material.relaxation]` (`relaxation`, `compression`, `horizon`).
+    pub fn region_kernels(&self) -> Vec<(String, &Relaxation)> {
+        (self.regions.iter().enumerate())
+            .filter_map(|(i, r)| match &r.relaxation {
+                Some(own) if own.kernel.is_some() => {
+                    Some((format!("material.region[{i}].relaxation"), own))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The memory group of the cells of region `i` (None: outside every region), None where
+    /// they have no relaxation term.
+    pub fn memory_group(&self, region: Option<usize>) -> Option<usize> {
+        let own = |r: &Region| r.relaxation.as_ref().map(|own| own.kernel.is_some());
+        match region.map(|i| (i, own(&self.regions[i]))) {
+            None | Some((_, None)) => self.relaxation.as_ref().map(|_| 0),
+            Some((_, Some(false))) => None,
+            Some((i, Some(true))) => Some(
+                1 + self.regions[..i]
+                    .iter()
+                    .filter(|r| own(r) == Some(true))
+                    .count(),
+            ),
+        }
     }
 
     /// The memory sum run directly (`material.relaxation.memory = "exact"`), checked as in
@@ -149,41 +193,65 @@ impl Physics {
         path: &Path,
     ) -> Result<()> {
         self.refuse_prony_memory(path)?;
-        let tolerance = tolerance_range(tolerance, path)?;
+        let tolerance = tolerance_range(tolerance, BODY_KERNEL, path)?;
         self.compression = self.compression.map(|_| tolerance);
         self.check_memory(time, path)
     }
 
     /// The kernel's memory on the time grid `time` (see [`memory_fits`]).
     pub(super) fn check_memory(&self, time: &TimeGrid, path: &Path) -> Result<()> {
-        memory_fits(self.compression, self.horizon, time, path)
+        memory_fits(self.compression, self.horizon, time, BODY_KERNEL, path)
     }
 
     fn refuse_prony_memory(&self, path: &Path) -> Result<()> {
         match self.relaxation {
-            Some(Kernel::Prony(_)) => Err(prony_memory(path)),
+            Some(Kernel::Prony(_)) => Err(prony_memory(BODY_KERNEL, path)),
             _ => Ok(()),
         }
     }
 }
 
+/// The relaxation table `section` (keys `<prefix>.…`): its kernel when enabled, how its
+/// memory sum is run, and the lags a compressed kernel's fit takes on the time grid `time`.
+fn relaxation(
+    section: Option<&RelaxationSection>,
+    prefix: &str,
+    time: &TimeGrid,
+    path: &Path,
+) -> Result<Relaxation> {
+    let kernel = match section {
+        Some(r) if r.enabled => Some(kernel(r, prefix, path)?),
+        _ => None,
+    };
+    let compression = match (&kernel, section) {
+        (Some(kernel), Some(r)) => compression(kernel, r, prefix, path)?,
+        _ => None,
+    };
+    let horizon = section.and_then(|r| r.horizon);
+    memory_fits(compression, horizon, time, prefix, path)?;
+    Ok(Relaxation {
+        kernel,
+        compression,
+        horizon,
+    })
+}
+
 /// The `[[material.region]]` entries of `m`: each region's tables checked as `[material]`'s
-/// (keys `material.region[i].…`), the tables it leaves out taken from `base`; a region's
-/// relaxation table is refused (one kernel for the whole body).
-fn regions(m: &MaterialSection, base: Material, model: Model, path: &Path) -> Result<Vec<Region>> {
+/// (keys `material.region[i].…`), the viscosity and elasticity it leaves out taken from
+/// `base`; its own relaxation table, if any, replaces `[material.relaxation]` on its cells.
+fn regions(
+    m: &MaterialSection,
+    base: Material,
+    model: Model,
+    time: &TimeGrid,
+    path: &Path,
+) -> Result<Vec<Region>> {
     let region = |(i, r): (usize, &RegionSection)| -> Result<Region> {
         let prefix = format!("material.region[{i}]");
-        if r.relaxation.is_some() {
-            return Err(bad(
-                path,
-                &format!("{prefix}.relaxation"),
-                &format!(
-                    "a relaxation kernel per region is not supported yet: the whole body \
-                     runs [material.relaxation]; remove the table from the region on '{}'",
-                    r.on
-                ),
-            ));
-        }
+        let kernel_prefix = format!("{prefix}.relaxation");
+        let relaxation = (r.relaxation.as_ref())
+            .map(|t| relaxation(Some(t), &kernel_prefix, time, path))
+            .transpose()?;
         let (theta, zeta) = match &r.viscosity {
             Some(v) => viscosity(v, &prefix, path)?,
             None => (base.theta, base.zeta),
@@ -200,6 +268,7 @@ fn regions(m: &MaterialSection, base: Material, model: Model, path: &Path) -> Re
         Ok(Region {
             on: r.on.clone(),
             material,
+            relaxation,
         })
     };
     m.region.iter().enumerate().map(region).collect()
@@ -252,36 +321,42 @@ fn elasticity(
     Ok(Some((young, nu)))
 }
 
-/// A Prony series may not say how its memory is run.
-fn prony_memory(path: &Path) -> Error {
+/// A Prony series may not say how its memory is run (`prefix`: the kernel's table).
+fn prony_memory(prefix: &str, path: &Path) -> Error {
     bad(
         path,
-        "material.relaxation.memory",
+        &format!("{prefix}.memory"),
         "a Prony series already runs by the exact O(1) recursion; 'memory', 'tolerance' and \
          'horizon' apply to 'expr' and 'table' kernels only: remove them",
     )
 }
 
-/// `material.relaxation.tolerance` in (0, 1).
-fn tolerance_range(tolerance: f64, path: &Path) -> Result<f64> {
-    let key = "material.relaxation.tolerance";
-    let tolerance = ranges::scaled_sign(tolerance, key, path, true)?;
+/// `<prefix>.tolerance` in (0, 1).
+fn tolerance_range(tolerance: f64, prefix: &str, path: &Path) -> Result<f64> {
+    let key = format!("{prefix}.tolerance");
+    let tolerance = ranges::scaled_sign(tolerance, &key, path, true)?;
     if tolerance >= 1.0 {
-        return Err(ranges::refuse(path, key, tolerance, ""));
+        return Err(ranges::refuse(path, &key, tolerance, ""));
     }
     Ok(tolerance)
 }
 
 /// How the memory sum of `kernel` is run: compressed at a tolerance, or exactly (None).
-fn compression(kernel: &Kernel, r: &RelaxationSection, path: &Path) -> Result<Option<f64>> {
+fn compression(
+    kernel: &Kernel,
+    r: &RelaxationSection,
+    prefix: &str,
+    path: &Path,
+) -> Result<Option<f64>> {
     if let Kernel::Prony(_) = kernel {
         if r.memory.is_some() || r.tolerance.is_some() || r.horizon.is_some() {
-            return Err(prony_memory(path));
+            return Err(prony_memory(prefix, path));
         }
         return Ok(None);
     }
     let tolerance = tolerance_range(
         r.tolerance.unwrap_or(crate::kernel_fit::DEFAULT_TOLERANCE),
+        prefix,
         path,
     )?;
     Ok(match r.memory.unwrap_or(MemoryMode::Compressed) {
@@ -297,14 +372,16 @@ fn memory_fits(
     compression: Option<f64>,
     horizon: Option<f64>,
     time: &TimeGrid,
+    prefix: &str,
     path: &Path,
 ) -> Result<()> {
     let TimeGrid { end, steps } = *time;
+    let horizon_key = format!("{prefix}.horizon");
     match horizon {
         Some(h) if compression.is_none() => {
             return Err(bad(
                 path,
-                "material.relaxation.horizon",
+                &horizon_key,
                 &format!(
                     "is {h}, but only a compressed kernel (an 'expr' or 'table' with memory \
                      = \"compressed\") is fitted: remove it"
@@ -314,7 +391,7 @@ fn memory_fits(
         Some(h) if !(ranges::in_scale(h) && h > 0.0 && h <= 1e6 * end) => {
             return Err(ranges::refuse(
                 path,
-                "material.relaxation.horizon",
+                &horizon_key,
                 h,
                 &format!(
                     " (the latest time.end a resume may set; here time.end = {end:?}, so at \
@@ -337,17 +414,17 @@ fn memory_fits(
     }
     let (key, fix) = match horizon {
         Some(h) if lags > n => (
-            "material.relaxation.horizon",
+            horizon_key,
             format!("is {h}: lower it to at most {:e}", max * end / n),
         ),
         _ => (
-            "time.steps",
-            format!("is {steps}: lower it, or set material.relaxation.memory = \"exact\""),
+            "time.steps".to_string(),
+            format!("is {steps}: lower it, or set {prefix}.memory = \"exact\""),
         ),
     };
     Err(bad(
         path,
-        key,
+        &key,
         &format!(
             "{fix} (the compressed kernel would be fitted and certified on {lags:.3e} lags, \
              max(time.steps, horizon/k) with k = time.end/time.steps, more than the {max:e} \
@@ -429,7 +506,7 @@ fn vector(v: &[NumOrExpr], key: &str, model: Model, path: &Path) -> Result<Vec<S
 
 /// The relaxation kernel of `[material.relaxation]`: exactly one of a Prony series, an
 /// expression of s and a table.
-fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
+fn kernel(r: &RelaxationSection, prefix: &str, path: &Path) -> Result<Kernel> {
     let given = [r.prony.is_some(), r.expr.is_some(), r.table.is_some()];
     if given.iter().filter(|&&g| g).count() != 1 {
         let names: Vec<&str> = ["prony", "expr", "table"]
@@ -439,8 +516,8 @@ fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
             .map(|(n, _)| *n)
             .collect();
         return Err(Error::input(format!(
-            "{}: [material.relaxation] needs exactly one of 'prony', 'expr', 'table' \
-             (or enabled = false); it has {}",
+            "{}: [{prefix}] needs exactly one of 'prony', 'expr', 'table' (or enabled \
+             = false); it has {}",
             path.display(),
             if names.is_empty() {
                 "none".to_string()
@@ -452,13 +529,13 @@ fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
     if let Some(p) = &r.prony {
         if p.is_empty() {
             return Err(Error::input(format!(
-                "{}: key 'material.relaxation.prony' is empty; give pairs [a_i, b_i]",
+                "{}: key '{prefix}.prony' is empty; give pairs [a_i, b_i]",
                 path.display()
             )));
         }
         let mut terms = Vec::new();
         for (i, [a, b]) in p.iter().enumerate() {
-            let key = format!("material.relaxation.prony[{i}]");
+            let key = format!("{prefix}.prony[{i}]");
             let a = ranges::scaled(*a, &format!("{key}[0]"), path)?;
             let b = ranges::scaled_sign(*b, &format!("{key}[1]"), path, false)?;
             terms.push((a, b));
@@ -466,11 +543,11 @@ fn kernel(r: &RelaxationSection, path: &Path) -> Result<Kernel> {
         return Ok(Kernel::Prony(terms));
     }
     if let Some(e) = &r.expr {
-        let key = format!("{}: key 'material.relaxation.expr'", path.display());
+        let key = format!("{}: key '{prefix}.expr'", path.display());
         return Ok(Kernel::Expr(Box::new(Expr::parse(e, &["s"], &key)?)));
     }
     let t = r.table.as_ref().expect("one of the three is present");
-    let key = "material.relaxation.table";
+    let key = format!("{prefix}.table");
     if t.s.len() != t.r.len() || t.s.is_empty() {
         return Err(Error::input(format!(
             "{}: key '{key}': 's' and 'r' must be non-empty and of equal length ({} vs {})",

@@ -24,7 +24,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::say;
-use crate::history::Plan;
+use crate::history::{Plan, Plans};
 use crate::kernel::Kernel;
 use crate::plot::{log_log_chart, Curve};
 use crate::run::{discretize, load_scene};
@@ -136,8 +136,8 @@ fn solve(
 ) -> Result<(Option<Vec<f64>>, Row)> {
     let start = Instant::now();
     let (scene, _mesh, disc) = discretize(case(load_scene(scene_path, overrides)?)?)?;
-    let plan = Plan::new(&scene)?;
-    let (method, terms, certified_error, fallback) = match &plan {
+    let plans = Plans::new(&scene)?;
+    let (method, terms, certified_error, fallback) = match &plans.body {
         Plan::Compressed(fit) => ("compressed", fit.terms.len(), Some(fit.error), None),
         Plan::Exact { fallback, .. } => ("exact", 0, None, fallback.clone()),
         Plan::None | Plan::Prony(_) => unreachable!("the study checked for expr or table"),
@@ -155,7 +155,7 @@ fn solve(
     if method == "exact" && !direct {
         return Ok((None, row));
     }
-    let mut tl = TimeLoop::with_plan(&scene, &disc, plan)?;
+    let mut tl = TimeLoop::with_plan(&scene, &disc, plans)?;
     super::solve_to_end(&mut tl, scene.time.steps)?;
     row.wall_s = Some(start.elapsed().as_secs_f64());
     Ok((Some(tl.u().to_vec()), row))

@@ -1,7 +1,7 @@
 //! `[[material.region]]` entries as a user writes them, right and wrong (issue 51): `check`
 //! prints the regions, and refuses (exit 2, naming the key, the group and the fix) regions
 //! that overlap, a group that is not of the body's dimension or not in the mesh, unknown keys
-//! and a kernel per region.
+//! and a region kernel run by the direct sum; a region kernel is printed and judged.
 
 use crate::common;
 use common::*;
@@ -67,6 +67,45 @@ fn check_prints_each_region_with_its_elements_and_material() {
     assert!(!text.lines().any(|l| l.starts_with("region ")), "{text}");
 }
 
+/// The step limit `check` prints ("stable for k ≤ …").
+fn step_limit(text: &str) -> f64 {
+    let after = text.split("stable for k ≤ ").nth(1).expect(text);
+    after.split_whitespace().next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn check_prints_each_region_kernel_and_judges_its_stability() {
+    let dir = tempfile::tempdir().unwrap();
+    // k = 1/64: below the limit of the strong kernel below.
+    let body = (bar().set("time.steps", 64)).table("material.relaxation", "prony = [[0.7, 3.0]]");
+    let (code, plain) = check(&body, dir.path(), "plain.toml");
+    assert_eq!(code, 0, "{plain}");
+    // The soft part without relaxation, the stiff one with a strong kernel of its own.
+    let scene = with_region(body.clone(), "soft", "relaxation = { enabled = false }");
+    let scene = with_region(scene, "stiff", "relaxation = { expr = \"40*exp(-2*s)\" }");
+    let (code, text) = check(&scene, dir.path(), "own.toml");
+    assert_eq!(code, 0, "{text}");
+    let region = |i: &str| text.lines().find(|l| l.contains(i)).expect(&text);
+    assert!(region("1: 'soft'").ends_with("no relaxation"), "{text}");
+    assert!(
+        region("2: 'stiff'").ends_with("its own kernel (memory group 1)"),
+        "{text}"
+    );
+    assert!(
+        text.contains("kernel     [material.region[1].relaxation] compressed: "),
+        "{text}"
+    );
+    // The stiff part's kernel is stronger than [material]'s: a smaller step limit.
+    let (own, alone) = (step_limit(&text), step_limit(&plain));
+    assert!(own < 0.5 * alone, "{own} against {alone}");
+    // The same kernel on no element of the body (every element in a region without
+    // relaxation) has no step limit from memory: E = 0.5, θ = 0.1 alone give 4θ/E = 0.8.
+    let none = with_region(body, "Ω", "relaxation = { enabled = false }");
+    let (code, text) = check(&none, dir.path(), "none.toml");
+    assert_eq!(code, 0, "{text}");
+    assert!((step_limit(&text) - 0.8).abs() < 1e-6, "{text}");
+}
+
 #[test]
 fn bad_regions_are_refused_naming_the_key_the_group_and_the_fix() {
     let dir = tempfile::tempdir().unwrap();
@@ -117,12 +156,25 @@ fn bad_regions_are_refused_naming_the_key_the_group_and_the_fix() {
             vec!["material.region[0].elasticity.poisson", "0.7"],
         ),
         (
-            with_region(bar(), "stiff", "relaxation = { prony = [[1.0, 2.0]] }"),
-            vec![
-                "material.region[0].relaxation",
-                "not supported yet",
-                "remove the table",
-            ],
+            with_region(bar(), "stiff", "relaxation = { prony = [[1.0, -2.0]] }"),
+            vec!["material.region[0].relaxation.prony[0][1]", "-2"],
+        ),
+        // A region's kernel runs by the recursion: the direct sum is refused.
+        (
+            with_region(
+                bar(),
+                "stiff",
+                "relaxation = { expr = \"exp(-s)\", memory = \"exact\" }",
+            ),
+            vec!["material.region[0].relaxation.memory", "O(1)", "compressed"],
+        ),
+        (
+            with_region(
+                bar(),
+                "stiff",
+                "relaxation = { expr = \"exp(-s)\", tolerance = 2.0 }",
+            ),
+            vec!["material.region[0].relaxation.tolerance", "2"],
         ),
     ];
     for (i, (scene, needles)) in cases.into_iter().enumerate() {

@@ -122,6 +122,29 @@ fn forces_balance_with_prescribed_displacements() {
     }
 }
 
+/// Two memory groups: the bimaterial bar clamped on its soft part, which relaxes with a
+/// compressed kernel of its own, the stiff part with [material]'s Prony series; in both
+/// schemes (the implicit one adds k² r_g(0) K_R^(g) of each group to the step matrix).
+#[test]
+fn forces_balance_with_a_kernel_per_region() {
+    let dir = tempfile::tempdir().unwrap();
+    let own: toml::Table =
+        toml::from_str("on = \"soft\"\nrelaxation = { expr = \"2*exp(-3*s) + 0.5*exp(-s/2)\" }")
+            .unwrap();
+    let scene = SceneText::on(repo().join("tests/data/bimaterial_bar.msh"))
+        .set("time.end", 1.0)
+        .set("material.viscosity.theta", 0.1)
+        .set("material.elasticity.young", 0.5)
+        .set("material.elasticity.poisson", 0.3)
+        .literal("material.relaxation.prony", "[[0.7, 3.0]]")
+        .traction(Some("right"), &["0.01 + 0.02*t", "0.005 + 0.005*t"])
+        .push("material.region", own)
+        .write(dir.path(), "regions.toml");
+    for (_, h) in in_both_schemes(dir.path(), &scene, 8) {
+        assert!(acts(&h, "reaction_Γ1_x") && acts(&h, "reaction_Γ1_y"));
+    }
+}
+
 /// A frame that has the von Mises stress hands its largest value to the step's row; a step
 /// without one computes it for the row: history.csv is the same bytes either way.
 #[test]

@@ -93,7 +93,7 @@ fn elasticity_patch_test_plane_strain() {
 
 #[test]
 fn relaxation_patch_test() {
-    check("plane_stress", |d| (d.r, &d.k_r));
+    check("plane_stress", |d| (d.r, &d.k_r[0]));
 }
 
 /// The frame's stress of linear w, u, m is A ε(w) + B ε(u) + ε(m) in every cell (σ_zz = 0 in

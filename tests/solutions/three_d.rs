@@ -902,7 +902,7 @@ fn clamped_elasticity_matrix_patch_test() {
 
 #[test]
 fn clamped_relaxation_matrix_patch_test() {
-    clamped_patch("R", tensors()[2].1, |d| &d.k_r);
+    clamped_patch("R", tensors()[2].1, |d| &d.k_r[0]);
 }
 
 /// A polynomial Σ c x^a y^b z^c as (coefficient, exponents).

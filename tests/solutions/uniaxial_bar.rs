@@ -24,7 +24,15 @@ fn r(s: f64) -> f64 {
 }
 
 /// The scheme on the scalar model of a material (θ, E): (ε_n, ε'_n) for n = 0..=N.
-pub(crate) fn scalar_recursion((theta, young): (f64, f64)) -> Vec<(f64, f64)> {
+pub(crate) fn scalar_recursion(material: (f64, f64)) -> Vec<(f64, f64)> {
+    scalar_recursion_with(material, &r)
+}
+
+/// [`scalar_recursion`] with the kernel `r`.
+pub(crate) fn scalar_recursion_with(
+    (theta, young): (f64, f64),
+    r: &dyn Fn(f64) -> f64,
+) -> Vec<(f64, f64)> {
     let k = END / STEPS as f64;
     let mut eps: Vec<f64> = vec![0.0];
     let mut out = Vec::new();
