@@ -2,7 +2,8 @@
 //! reactions come from the rows of the step's matrices at the held dofs, the other columns
 //! from the loads and the multipliers, so their sum per component is the residual of the
 //! step's equations summed over a translation: zero to the precision of the solve. Checked
-//! with contact and friction (the paper's scene, in both schemes), in 3D (the block), with
+//! with contact and friction (the paper's scene, in both schemes; the plate with a hole), in
+//! 3D (the block), with
 //! a symmetry plane ([[dirichlet]] at zero) and with prescribed displacements.
 
 use crate::common;
@@ -70,6 +71,18 @@ fn the_block_s_forces_balance_in_3d() {
     let mesh = format!("mesh.file={}", mesh_path("3d/block_004.msh"));
     let h = balanced(dir.path(), &scene, &[&mesh, "time.steps=8"], "block");
     for column in ["reaction_Γ1_z", "contact_z", "friction_x", "moment_Γ1_y"] {
+        assert!(acts(&h, column), "{column} is zero throughout");
+    }
+}
+
+/// The plate with a hole (examples/plate_hole.toml): contact and friction, a compressed
+/// kernel, plane strain.
+#[test]
+fn the_plate_s_forces_balance() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = repo().join("examples/plate_hole.toml");
+    let h = balanced(dir.path(), &scene, &["time.steps=12"], "plate");
+    for column in ["reaction_Γ1_x", "contact_y", "friction_x", "load_right_x"] {
         assert!(acts(&h, column), "{column} is zero throughout");
     }
 }
