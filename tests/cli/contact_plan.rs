@@ -8,8 +8,7 @@ use crate::common::{self, SceneText};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use viscontact::resources::{MARGIN, MEMORY_ENV};
-use viscontact::scene::ContactSolver;
-use viscontact::solver::choice::{factor_bytes, ContactPlan};
+use viscontact::solver::choice::{factor_bytes, Contact, ContactPlan, Why};
 use viscontact::solver::Rows;
 
 /// The block's scene at h = 1/4 over `steps` steps.
@@ -26,8 +25,11 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
     let scene = block(4).write(dir, "s.toml");
     let (s, _m, disc) = common::load(&scene, &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-    let memory = |choice| ContactPlan::new(choice, &rows, disc.n_free).memory.unwrap();
-    let (dense, sparse) = (memory(ContactSolver::Dense), memory(ContactSolver::Sparse));
+    let memory = |solver| {
+        let plan = ContactPlan::new(solver, Why::Key, &rows, disc.n_free);
+        plan.memory.unwrap()
+    };
+    let (dense, sparse) = (memory(Contact::Dense), memory(Contact::Sparse));
     assert!(sparse < dense, "{sparse} {dense}");
     let factor = factor_bytes(&s, &disc).unwrap().unwrap();
     (scene, (dense * sparse).sqrt() / MARGIN, factor)
@@ -138,8 +140,9 @@ fn the_contact_solver_and_the_steps_are_counted_together() {
         )
         .write(tmp.path(), "s.toml");
     let (s, _m, disc) = common::load(&scene, &[]);
-    let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-    let solver = ContactPlan::new(ContactSolver::Auto, &rows, disc.n_free)
+    let solver = common::descriptor(&s, &disc)
+        .contact()
+        .unwrap()
         .memory
         .unwrap();
     let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory;

@@ -38,6 +38,11 @@ pub fn load(scene: &Path, overrides: &[&str]) -> (Scene, Mesh, Discretization) {
     viscontact::run::setup(scene, &o).unwrap()
 }
 
+/// The scene's solver resolved on its discretization (`solver::choice::Descriptor`).
+pub fn descriptor(scene: &Scene, disc: &Discretization) -> viscontact::solver::choice::Descriptor {
+    viscontact::solver::choice::Descriptor::of_run(scene, disc).unwrap()
+}
+
 /// Result of running a scene through the library: per step (u_n, w_n, z_n), and u_N.
 pub struct Trace {
     pub u: Vec<Vec<f64>>,
