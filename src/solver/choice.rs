@@ -23,6 +23,7 @@
 //!   build with it, the sparse dual on the stored factor in a build without it;
 //! - without them (`solver.linear = "auto"`), the stored factor, or in a build with PETSc
 //!   its Krylov method where the factor's values exceed `FACTOR_LIMIT`.
+//!
 //! The factor's symbolic analysis is asked for only where the answer depends on it: in a
 //! build with PETSc, and where even a dense factor of the n dofs could exceed the limit
 //! (4n(n + 1) bytes > `FACTOR_LIMIT`, n > 44 720). A build without PETSc says in `check`

@@ -559,7 +559,7 @@ pub fn check_vtkhdf(file: &Path, args: &[&str]) -> serde_json::Value {
 /// second.
 pub fn strip_mesh(dir: &Path, nx: usize) -> PathBuf {
     use std::fmt::Write;
-    assert!(nx % 2 == 0);
+    assert!(nx.is_multiple_of(2));
     let h = 2.0 / nx as f64;
     // Node tags: the bottom row's node at x = ih is i + 1, the top row's nx + 2 + i.
     let (bottom, top) = (|i: usize| i + 1, |i: usize| nx + 2 + i);
