@@ -232,7 +232,13 @@ impl Descriptor {
         let dense = has_rows
             .then(|| resources::dense_dual_bytes(rows.len(), rows.dofs().len(), rows.block));
         let mut known = None;
-        let (contact, linear, why, linear_why) = match (scene.solver.contact, scene.solver.linear) {
+        // Without rows a contact solver other than the active set (which asks for PETSc) is
+        // no choice: the step is linear, and `solver.linear = "auto"` decides alone.
+        let contact_key = match (has_rows, scene.solver.contact) {
+            (false, key) if key != ContactSolver::ActiveSet => ContactSolver::Auto,
+            (_, key) => key,
+        };
+        let (contact, linear, why, linear_why) = match (contact_key, scene.solver.linear) {
             (contact, LinearSolver::Petsc) => {
                 let (solver, why) = match Contact::named(contact) {
                     Some(c) => (c, Why::Key),
@@ -278,7 +284,7 @@ impl Descriptor {
                 last: contact.map_or(Vec::new(), |c| c.ordered_last(&rows)),
             },
         };
-        let both_auto = (scene.solver.contact == ContactSolver::Auto
+        let both_auto = (contact_key == ContactSolver::Auto
             && scene.solver.linear == LinearSolver::Auto)
             .then_some(dense);
         Ok(Descriptor {
