@@ -239,6 +239,7 @@ fn a_factor_that_does_not_fit_is_refused_before_it_is_factored() {
 
 /// The rows of the paper's scene on `common::strip_mesh` of 13 000 squares (13 002 rows on
 /// 13 002 dofs, 2D): the dense dual would need 8·3·13 002² ≈ 4.06 GB, over `DENSE_LIMIT`.
+#[cfg(not(feature = "petsc"))]
 const STRIP: usize = 13_000;
 
 /// In a build without PETSc, `check` says where the build with it would pick otherwise, and
