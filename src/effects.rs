@@ -7,7 +7,7 @@ use crate::fem::{diagonal, Discretization, Gamma3, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::Scene;
 use crate::solver::active_set::{ActiveSetSettings, ActiveSetSolver};
-use crate::solver::choice::{Contact, ContactPlan};
+use crate::solver::choice::{Contact, Descriptor};
 use crate::solver::matrix_free::MatrixFreeSolver;
 use crate::solver::{conic::ConicSolver, dual::DualSolver, Backend, Rows, StepSolver};
 use crate::{Error, Result};
@@ -78,10 +78,10 @@ pub const RIGHT_ANGLE_COSINE: f64 = 1e-9;
 /// nodal normal there is an average of the facet normals); nodes where Γ3,1 meets Γ3,2 at a
 /// right angle, the only place where the split of the constraint force into contact
 /// pressure and friction traction is not unique (see `Rows::corner_cosines`); a contact
-/// solver without D, whose sliding steps can take many minutes (`ContactPlan::slow_warning`).
-/// `check` prints them, `run` and `resume` print them before the first step and write them
-/// into summary.json.
-pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
+/// solver without D, whose sliding steps can take many minutes (`ContactPlan::slow_warning`
+/// of `solver`, the run's resolved solver). `check` prints them, `run` and `resume` print
+/// them before the first step and write them into summary.json.
+pub fn warnings(scene: &Scene, disc: &Discretization, solver: &Descriptor) -> Vec<String> {
     let mut w = Vec::new();
     use crate::scene::Model;
     // The largest Poisson ratio of the body's materials.
@@ -157,29 +157,25 @@ pub fn warnings(scene: &Scene, disc: &Discretization) -> Vec<String> {
             fmt_num(cos)
         ));
     }
-    if !rows.is_empty() {
-        let plan = ContactPlan::new(scene.solver.contact, &rows, disc.n_free);
-        w.extend(plan.slow_warning());
-    }
+    w.extend(solver.contact().and_then(|plan| plan.slow_warning()));
     w
 }
 
-/// Builds the step solver (Remark 2.5): `Linear` without constraint rows, otherwise
-/// `contact`, the scene's choice resolved (`solver.contact`; `auto` by the size of the dense
-/// dual, see `solver::choice`): the dense dual, a dual without D or clarabel on the stored
-/// factor, or the active-set solver on PETSc. `matrix` is the step matrix (K_A, or K_A +
-/// k K_B + k² r(0) K_R for the implicit variant) that `backend` holds, a factor ordered as
-/// `contact` asks (`Contact::ordered_last`).
+/// Builds the step solver (Remark 2.5): `Linear` without constraint rows, otherwise the
+/// contact solver that `solver` names (`solver::choice::Descriptor`, the scene's keys
+/// resolved): the dense dual, a dual without D or clarabel on the stored factor, or the
+/// active-set solver on PETSc. `matrix` is the step matrix (K_A, or K_A + k K_B + k² r(0)
+/// K_R for the implicit variant) that `backend` holds, as `solver.build()` says.
 pub fn step_solver(
     effects: &Effects,
-    contact: Contact,
+    solver: &Descriptor,
     matrix: &Sparse,
     backend: &Backend,
     rows: &Rows,
 ) -> Result<StepSolver> {
-    if effects.linear() {
+    let Some(contact) = solver.contact_solver().filter(|_| !effects.linear()) else {
         return Ok(StepSolver::Linear);
-    }
+    };
     let factor = || {
         backend.factor().ok_or_else(|| {
             Error::solve(format!(

@@ -349,12 +349,13 @@ fn report(outcome: Outcome) -> Option<i32> {
 /// step (exit 2).
 fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let (scene, mesh, disc) = setup(path, set)?;
-    print_problem(&scene, &mesh, &disc);
-    let contact = viscontact::solver::choice::ContactPlan::of_run(&scene, &disc);
-    if let Some(plan) = &contact {
+    // The run's solver, resolved once: every line below and the refusals read it.
+    let mut solver = viscontact::solver::choice::Descriptor::of_run(&scene, &disc)?;
+    print_problem(&scene, &mesh, &disc, &solver);
+    if let Some(plan) = solver.contact() {
         viscontact::outln!("contact    {plan}");
     }
-    let factor = viscontact::solver::choice::factor_bytes(&scene, &disc)?;
+    let factor = solver.factor_bytes(&disc)?;
     if let Some(bytes) = factor {
         viscontact::outln!(
             "factor     Cholesky factor of K_A: ≈ {} for its values (symbolic analysis in the \
@@ -362,11 +363,17 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
             viscontact::resources::human(bytes)
         );
     }
+    if let Some(line) = solver.krylov_line() {
+        viscontact::outln!("factor     {line}");
+    }
+    if let Some(line) = solver.with_petsc(&disc)? {
+        viscontact::outln!("petsc      {line}");
+    }
     // Sizes first: a hostile time.steps is refused before anything is allocated per step.
     let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
     viscontact::outln!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
-    if let Some(plan) = &contact {
+    if let Some(plan) = solver.contact() {
         plan.check(&estimate)?;
     }
     if let Some(bytes) = factor {
@@ -375,7 +382,7 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let plans = Plans::new(&scene)?;
     print_stability(&scene, &disc, &plans);
     print_kernels(&scene, &disc, &plans);
-    for w in viscontact::effects::warnings(&scene, &disc) {
+    for w in viscontact::effects::warnings(&scene, &disc, &solver) {
         viscontact::outln!("warning    {w}");
     }
     viscontact::time_loop::refusals(&scene, &disc, &plans)
@@ -383,7 +390,12 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
 
 /// `check`'s first lines: the scene, its mesh and sizes, the time grid, the effects, the
 /// solver.
-fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
+fn print_problem(
+    scene: &Scene,
+    mesh: &Mesh,
+    disc: &Discretization,
+    solver: &viscontact::solver::choice::Descriptor,
+) {
     let effects = Effects::new(scene, disc);
     viscontact::outln!("scene      {} ({})", scene.name, scene.path.display());
     viscontact::outln!(
@@ -413,20 +425,7 @@ fn print_problem(scene: &Scene, mesh: &Mesh, disc: &Discretization) {
         scene.time.k()
     );
     viscontact::outln!("effects    {}", effects.names().join(", "));
-    let solver = if scene.solver.petsc() && effects.linear() {
-        "linear (one Krylov solve per step by PETSc, CG + GAMG unless [solver.petsc] options \
-         or PETSC_OPTIONS change it; K_A is not factored)"
-            .to_string()
-    } else if effects.linear() {
-        "linear (one solve with the stored Cholesky factor of K_A per step)".to_string()
-    } else {
-        format!(
-            "contact solver on {} Γ3,1 rows + {} Γ3,2 rows (nodes × tangents)",
-            disc.contact.len(),
-            disc.friction.len()
-        )
-    };
-    viscontact::outln!("solver     {solver}");
+    viscontact::outln!("solver     {}", solver.summary(disc));
     let columns = viscontact::run::history_columns(scene, disc);
     viscontact::outln!(
         "history    {} columns of {}: {}",

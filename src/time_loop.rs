@@ -1,7 +1,8 @@
 //! The time loop of Problem 3.1: for n = 0, 1, …, N form b_n from the history and solve the
 //! step problem for w_n, then advance u and m. A run is `TimeLoop::new` (setup: the linear
-//! backend of K_A, `solver::Backend` — factor it once, or with `solver.linear = "petsc"` set
-//! up PETSc's Krylov method instead — and the step solver) followed by [`TimeLoop::run`], the one driver of the steps:
+//! backend of K_A, `solver::Backend` — factor it once, or where the run's solver
+//! (`solver::choice::Descriptor`) says PETSc set up its Krylov method instead — and the step
+//! solver) followed by [`TimeLoop::run`], the one driver of the steps:
 //! it hands each solved step to an [`Observer`] (the `run` command's consumers, a study, a
 //! test, a benchmark) and asks it whether to stop. [`TimeLoop::state`] and
 //! [`TimeLoop::restore`] are the only way a checkpoint sees the loop.
@@ -31,7 +32,7 @@ use crate::effects::{self, Effects};
 use crate::fem::{constraints, leading_block, mul_add, Discretization, Sparse, SymmetricPair};
 use crate::history::{History, LoopState, Plans, SavedLoop};
 use crate::scene::{self, Scene};
-use crate::solver::choice::Contact;
+use crate::solver::choice::{Build, Descriptor};
 use crate::solver::{Abandon, Backend, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
 use crate::stability::Verdict;
 use crate::Result;
@@ -42,6 +43,8 @@ pub struct TimeLoop<'p> {
     effects: Effects,
     backend: Backend,
     solver: StepSolver,
+    /// The run's solver as resolved from the scene (`solver::choice`).
+    descriptor: Descriptor,
     rows: Rows,
     history: History,
     /// How the memory sums are computed (the compressed kernels' fits, if any).
@@ -202,6 +205,18 @@ impl<'p> TimeLoop<'p> {
     /// A time loop with its memory plans in hand (a resumed run's, `Plans::resumed`), checked
     /// by [`refusals`] before anything is factored.
     pub fn with_plan(scene: &'p Scene, disc: &'p Discretization, plans: Plans) -> Result<Self> {
+        Self::with_solver(scene, disc, plans, Descriptor::of_run(scene, disc)?)
+    }
+
+    /// A time loop with its memory plans and its solver in hand: `descriptor` is the scene's
+    /// `[solver]` resolved on `disc` (`Descriptor::of_run`), which a run has already checked
+    /// against the memory available.
+    pub fn with_solver(
+        scene: &'p Scene,
+        disc: &'p Discretization,
+        plans: Plans,
+        descriptor: Descriptor,
+    ) -> Result<Self> {
         refusals(scene, disc, &plans)?;
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
@@ -219,14 +234,12 @@ impl<'p> TimeLoop<'p> {
         };
         let matrix = implicit.as_ref().unwrap_or(&disc.k_a);
         // The step matrix is factored once, with the constrained boundary dofs ordered last
-        // where the contact solver works on its trailing block.
-        let contact = Contact::of(scene.solver.contact, &rows);
-        let last = contact.ordered_last(&rows);
-        let backend = match scene.solver.petsc() {
-            true => petsc_backend(scene, matrix, disc)?,
-            false => Backend::Cholesky(Factor::new(matrix, &last)?),
+        // where the contact solver works on its trailing block, or handed to PETSc.
+        let backend = match descriptor.build() {
+            Build::Krylov => petsc_backend(scene, matrix, disc)?,
+            Build::Factor { last } => Backend::Cholesky(Factor::new(matrix, last)?),
         };
-        let solver = effects::step_solver(&effects, contact, matrix, &backend, &rows)?;
+        let solver = effects::step_solver(&effects, &descriptor, matrix, &backend, &rows)?;
         let n = disc.n_dofs;
         let history = History::new(n, scene.time.k(), &plans);
         let paired = disc
@@ -245,6 +258,7 @@ impl<'p> TimeLoop<'p> {
             effects,
             backend,
             solver,
+            descriptor,
             z: vec![0.0; rows.len()],
             z_before: vec![0.0; rows.len()],
             spare: vec![0.0; rows.len()],
@@ -339,6 +353,11 @@ impl<'p> TimeLoop<'p> {
     /// The contact solver of the steps.
     pub fn solver(&self) -> &StepSolver {
         &self.solver
+    }
+
+    /// The run's solver as resolved from the scene: its plan, memory and what was built.
+    pub fn descriptor(&self) -> &Descriptor {
+        &self.descriptor
     }
 
     /// The factor of the step matrix (K_A, or its implicit variant), where the run has one
@@ -537,8 +556,9 @@ impl<'p> TimeLoop<'p> {
     }
 }
 
-/// The PETSc backend of the step matrix (`solver.linear = "petsc"`): its KSP with the scene's
-/// options. A build without the feature never gets here (the scene refused the key).
+/// The PETSc backend of the step matrix (`Build::Krylov`): its KSP with the scene's options. A
+/// build without the feature never gets here (the scene refused the keys, and `auto` picks
+/// PETSc only in a build with it).
 fn petsc_backend(
     scene: &Scene,
     matrix: &crate::fem::Sparse,

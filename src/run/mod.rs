@@ -31,7 +31,7 @@ use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::{write_atomic, Resumed, Series};
 use crate::scene::{read_scene_file, MeshChoice, Scene};
-use crate::solver::choice::ContactPlan;
+use crate::solver::choice::Descriptor;
 use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Frames, Progress, Statistics, StopRule};
@@ -158,13 +158,14 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
-    check_contact_plan(&scene, &disc, &estimate, None)?;
+    let solver = check_contact_plan(&scene, &disc, &estimate, None)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let statics = (&mesh, &disc.materials.region[..]);
     let series = open_series(&out, statics, &identity.run_id, &scene.output.options, None)?;
     stage()?;
-    let tl = TimeLoop::new(&scene, &disc)?;
+    let plans = crate::history::Plans::new(&scene)?;
+    let tl = TimeLoop::with_solver(&scene, &disc, plans, solver)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
     // a signal came first (then it stays as it was).
     opts.interrupt
@@ -224,7 +225,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     let estimate = crate::resources::Estimate::new(&scene, &disc, cp.n);
     estimate.check(&out)?;
-    check_contact_plan(&scene, &disc, &estimate, Some(checkpoint_path))?;
+    let solver = check_contact_plan(&scene, &disc, &estimate, Some(checkpoint_path))?;
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
@@ -255,7 +256,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         resumed.as_ref(),
     )?;
     stage()?;
-    let mut tl = TimeLoop::with_plan(&scene, &disc, cp.plans(&scene)?)?;
+    let mut tl = TimeLoop::with_solver(&scene, &disc, cp.plans(&scene)?, solver)?;
     let saved = cp.saved(disc.n_dofs, tl.rows().len())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
@@ -328,18 +329,19 @@ fn note_stop_after(stop_after: Option<usize>, steps: usize) {
     }
 }
 
-/// Refuses (exit 2) a run whose contact solver, with what its steps hold (`steps`), would
-/// not fit the memory available (`ContactPlan::check`). A
-/// resume of `checkpoint` cannot change `solver.contact`, the run's physics: its message
-/// says so.
+/// The run's solver, resolved once (`Descriptor::of_run`); refuses (exit 2) a run whose
+/// contact solver, with what its steps hold (`steps`), would not fit the memory available
+/// (`ContactPlan::check`). A resume of `checkpoint` cannot change `solver.contact`, the
+/// run's physics: its message says so.
 fn check_contact_plan(
     scene: &Scene,
     disc: &Discretization,
     steps: &crate::resources::Estimate,
     checkpoint: Option<&Path>,
-) -> Result<()> {
-    let Some(plan) = ContactPlan::of_run(scene, disc) else {
-        return Ok(());
+) -> Result<Descriptor> {
+    let solver = Descriptor::of_run(scene, disc)?;
+    let Some(plan) = solver.contact() else {
+        return Ok(solver);
     };
     plan.check(steps).map_err(|e| match checkpoint {
         Some(cp) => Error::input(format!(
@@ -348,7 +350,8 @@ fn check_contact_plan(
             cp.display()
         )),
         None => e,
-    })
+    })?;
+    Ok(solver)
 }
 
 /// A run in progress: what [`drive`] needs.
@@ -374,7 +377,7 @@ struct Drive<'a> {
 
 /// The time loop of a run with its consumers, then summary.json however the run ended.
 fn drive(d: Drive) -> Result<Outcome> {
-    let warnings = crate::effects::warnings(d.scene, d.disc);
+    let warnings = crate::effects::warnings(d.scene, d.disc, d.tl.descriptor());
     for w in &warnings {
         crate::errln!("warning: {w}");
     }

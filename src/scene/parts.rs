@@ -77,9 +77,10 @@ impl TimeGrid {
 /// `[solver]` and `[scheme]`: how each step of (3.1) is discretized and solved.
 #[derive(Clone, Debug)]
 pub struct SolverChoice {
-    /// How a step with contact or friction is solved (`solver.contact`).
+    /// How a step with contact or friction is solved (`solver.contact`, as the scene
+    /// gives it: `solver::choice::Descriptor` resolves `auto`).
     pub contact: ContactSolver,
-    /// How the step matrix is solved (`solver.linear`; `auto` is `cholesky` for now).
+    /// How the step matrix is solved (`solver.linear`, as the scene gives it).
     pub linear: LinearSolver,
     /// `[solver.petsc] options`, passed to PETSc where `linear = "petsc"` (empty by default).
     pub petsc_options: String,
@@ -92,6 +93,8 @@ pub struct SolverChoice {
 impl SolverChoice {
     /// The sections checked (`backend_refusal`): PETSc needs a build with the `petsc`
     /// feature, and the contact solvers other than `active_set` need the stored factor.
+    /// The keys are kept as given; `solver::choice::Descriptor` resolves them on the
+    /// discretization, once per run.
     pub(super) fn from_sections(
         solver: &SolverSection,
         scheme: &SchemeSection,
@@ -99,17 +102,9 @@ impl SolverChoice {
         path: &Path,
     ) -> Result<SolverChoice> {
         backend_refusal(solver, physics, path)?;
-        let petsc =
-            solver.linear == LinearSolver::Petsc || solver.contact == ContactSolver::ActiveSet;
         Ok(SolverChoice {
-            contact: match (solver.contact, petsc) {
-                (ContactSolver::Auto, true) => ContactSolver::ActiveSet,
-                (contact, _) => contact,
-            },
-            linear: match petsc {
-                true => LinearSolver::Petsc,
-                false => solver.linear,
-            },
+            contact: solver.contact,
+            linear: solver.linear,
             petsc_options: solver
                 .petsc
                 .as_ref()
@@ -117,12 +112,6 @@ impl SolverChoice {
             history: scheme.history,
             allow_unstable: scheme.allow_unstable,
         })
-    }
-
-    /// Whether the run solves its step matrix through PETSc (`solver.linear = "petsc"`, or
-    /// `solver.contact = "active_set"`).
-    pub fn petsc(&self) -> bool {
-        self.linear == LinearSolver::Petsc
     }
 }
 

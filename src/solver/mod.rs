@@ -11,7 +11,8 @@
 //! K_A never changes, so it is factored once per run (`Factor`). Which solver a run uses is
 //! decided by its effects (Remark 2.5): no constraint rows → `Linear` (one solve with the
 //! stored factor per step, no optimization solver built); otherwise, by `[solver] contact`
-//! (`choice`: `auto` picks by the memory the dense dual would need), the condensed dual
+//! (resolved once per run into `choice::Descriptor`: `auto` picks by the predicted memory of
+//! the dense dual and, with PETSc, of the factor), the condensed dual
 //! semismooth Newton method (`dual`, with the dense m × m matrix D), the same dual with D
 //! applied through solves with the factor (`matrix_free`, for contact boundaries whose D
 //! does not fit), clarabel on the whole problem (`conic`, the cross-check), or, without
@@ -29,7 +30,8 @@
 //! struct with documented defaults and `validate` (as `dual::DualSettings`), and
 //! `solve(&mut self, factor, rows, b, w, z) -> StepReport` that warm starts from z. It
 //! becomes a variant of `StepSolver` (its `name`, its arm in `solve`), of `choice::Contact`
-//! (its memory and cost) and of the scene's `ContactSolver`, and `effects::step_solver`
+//! (its memory, cost and what it needs built: `Contact::ordered_last`, and its arm in
+//! `choice::Descriptor::of_run`) and of the scene's `ContactSolver`, and `effects::step_solver`
 //! builds it; an outcome no `StepStatus` covers is a new variant with
 //! its message in `status.rs`. A solver whose steps can take minutes honours a request to
 //! give a step up (`abandon`, `StepSolver::abandon_on`): it looks at the request between
@@ -37,9 +39,10 @@
 //! not change.
 //!
 //! The linear backend is a `Backend`: the stored Cholesky factor `Factor` (`solver.linear =
-//! "cholesky"`, and `auto`), or PETSc's Krylov method with algebraic multigrid
-//! (`solver.linear = "petsc"`, or `solver.contact = "active_set"`; cargo feature `petsc`,
-//! src/petsc/). The time loop builds one of them, never both, and hands it to `solve`. With
+//! "cholesky"`, and `auto` within `choice::FACTOR_LIMIT`), or PETSc's Krylov method with
+//! algebraic multigrid (`solver.linear = "petsc"`, `solver.contact = "active_set"`, or `auto`
+//! beyond the limits in a build with the cargo feature `petsc`, src/petsc/). The time loop
+//! builds the one `choice::Build` names, never both, and hands it to `solve`. With
 //! the factor, `Linear` needs only its solves with K_A, `Conic` none; the dual condenses
 //! through its structure (the forward and backward solves with the constrained dofs last,
 //! the trailing block L_CC). PETSc serves `Linear` (`krylov_step`) and `ActiveSet`, whose

@@ -8,8 +8,7 @@ use crate::common::{self, SceneText};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use viscontact::resources::{MARGIN, MEMORY_ENV};
-use viscontact::scene::ContactSolver;
-use viscontact::solver::choice::{factor_bytes, ContactPlan};
+use viscontact::solver::choice::{factor_bytes, Contact, ContactPlan, Why};
 use viscontact::solver::Rows;
 
 /// The block's scene at h = 1/4 over `steps` steps.
@@ -26,8 +25,11 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
     let scene = block(4).write(dir, "s.toml");
     let (s, _m, disc) = common::load(&scene, &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-    let memory = |choice| ContactPlan::new(choice, &rows, disc.n_free).memory.unwrap();
-    let (dense, sparse) = (memory(ContactSolver::Dense), memory(ContactSolver::Sparse));
+    let memory = |solver| {
+        let plan = ContactPlan::new(solver, Why::Key, &rows, disc.n_free);
+        plan.memory.unwrap()
+    };
+    let (dense, sparse) = (memory(Contact::Dense), memory(Contact::Sparse));
     assert!(sparse < dense, "{sparse} {dense}");
     let factor = factor_bytes(&s, &disc).unwrap().unwrap();
     (scene, (dense * sparse).sqrt() / MARGIN, factor)
@@ -138,8 +140,9 @@ fn the_contact_solver_and_the_steps_are_counted_together() {
         )
         .write(tmp.path(), "s.toml");
     let (s, _m, disc) = common::load(&scene, &[]);
-    let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-    let solver = ContactPlan::new(ContactSolver::Auto, &rows, disc.n_free)
+    let solver = common::descriptor(&s, &disc)
+        .contact()
+        .unwrap()
         .memory
         .unwrap();
     let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory;
@@ -232,4 +235,58 @@ fn a_factor_that_does_not_fit_is_refused_before_it_is_factored() {
         &["run", scene, "--out", dir_s, "--quiet"],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// The rows of the paper's scene on `common::strip_mesh` of 13 000 squares (13 002 rows on
+/// 13 002 dofs, 2D): the dense dual would need 8·3·13 002² ≈ 4.06 GB, over `DENSE_LIMIT`.
+#[cfg(not(feature = "petsc"))]
+const STRIP: usize = 13_000;
+
+/// In a build without PETSc, `check` says where the build with it would pick otherwise, and
+/// how to get it: beyond `DENSE_LIMIT` `auto` takes the sparse dual here and the active set
+/// there; a plan that does not fit names that build too. A scene within both limits (the
+/// block) prints no such line.
+#[cfg(not(feature = "petsc"))]
+#[test]
+fn check_says_what_the_build_with_petsc_would_pick() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mesh = common::strip_mesh(tmp.path(), STRIP);
+    let scene = SceneText::paper()
+        .mesh(&mesh)
+        .set("time.steps", 2)
+        .write(tmp.path(), "s.toml");
+    let (s, _m, disc) = common::load(&scene, &[]);
+    let solver = common::descriptor(&s, &disc);
+    assert_eq!(solver.contact_solver(), Some(Contact::Sparse));
+    let scene = scene.to_str().unwrap();
+    let (code, text) = common::cli(&["check", scene]);
+    assert_eq!(code, 0, "{text}");
+    for part in [
+        "contact    sparse (auto: the dense dual would need ≈ 4.1 GB, over 4.0 GB)",
+        "petsc      a build with PETSc would pick solver.contact = \"active_set\" (auto: the \
+         dense dual would need ≈ 4.1 GB, over 4.0 GB); to get it, install PETSc's development \
+         files (Debian 12: `apt-get install --no-install-recommends petsc-dev`)",
+        "cargo build --release --features petsc",
+    ] {
+        assert!(text.contains(part), "{part:?} not in: {text}");
+    }
+    // Room for the steps and half of the sparse plan: refused, naming the build with PETSc.
+    let plan = solver.contact().unwrap().memory.unwrap();
+    let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory;
+    let o = with_memory((steps + 0.5 * plan) / MARGIN, &["check", scene]);
+    refused(
+        &o,
+        &[
+            "the sparse contact solver would need",
+            "a build with PETSc, whose auto picks the active-set solver",
+            "--features petsc",
+        ],
+    );
+    let block = block(4).write(tmp.path(), "b.toml");
+    let (code, text) = common::cli(&["check", block.to_str().unwrap()]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("contact    dense (auto: ") && !text.contains("petsc      "),
+        "{text}"
+    );
 }

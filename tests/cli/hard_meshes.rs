@@ -244,7 +244,7 @@ fn plane_strain_with_poisson_ratio_0_4999_runs_and_stays_finite() {
     ));
     assert_eq!(s.physics.material.elasticity, Some((0.2, 0.4999)));
     // The run warns that P1 triangles lock.
-    let warnings = viscontact::effects::warnings(&s, &d);
+    let warnings = viscontact::effects::warnings(&s, &d, &descriptor(&s, &d));
     assert!(warnings.iter().any(|w| w.contains("lock")), "{warnings:?}");
     // λ/μ = 2ν/(1 − 2ν) ≈ 5·10³: the volumetric mode limits the paper's explicit scheme.
     let steps = match TimeLoop::new(&s, &d) {

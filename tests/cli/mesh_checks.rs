@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use common::{cli, load, repo};
+use common::{cli, descriptor, load, repo};
 use std::path::PathBuf;
 
 fn data(name: &str) -> String {
@@ -223,7 +223,7 @@ fn overlapping_contact_and_friction_groups_are_refused() {
 fn bend_warning_names_the_group_that_bends() {
     let scene = PathBuf::from(data("bend.toml"));
     let (scene_v, _, disc) = load(&scene, &[]);
-    let warnings = viscontact::effects::warnings(&scene_v, &disc);
+    let warnings = viscontact::effects::warnings(&scene_v, &disc, &descriptor(&scene_v, &disc));
     let bend: Vec<&String> = warnings.iter().filter(|w| w.contains("bends")).collect();
     assert_eq!(bend.len(), 1, "{warnings:?}");
     assert!(
@@ -233,7 +233,7 @@ fn bend_warning_names_the_group_that_bends() {
     );
     // Contact on the straight bottom: no bend of its own, still only Γ2's.
     let (scene_v, _, disc) = load(&scene, &["contact.enabled=true"]);
-    let warnings = viscontact::effects::warnings(&scene_v, &disc);
+    let warnings = viscontact::effects::warnings(&scene_v, &disc, &descriptor(&scene_v, &disc));
     let bend: Vec<&String> = warnings.iter().filter(|w| w.contains("bends")).collect();
     assert_eq!(bend.len(), 1, "{warnings:?}");
     assert!(bend[0].contains("'Γ2'"), "{}", bend[0]);

@@ -38,6 +38,11 @@ pub fn load(scene: &Path, overrides: &[&str]) -> (Scene, Mesh, Discretization) {
     viscontact::run::setup(scene, &o).unwrap()
 }
 
+/// The scene's solver resolved on its discretization (`solver::choice::Descriptor`).
+pub fn descriptor(scene: &Scene, disc: &Discretization) -> viscontact::solver::choice::Descriptor {
+    viscontact::solver::choice::Descriptor::of_run(scene, disc).unwrap()
+}
+
 /// Result of running a scene through the library: per step (u_n, w_n, z_n), and u_N.
 pub struct Trace {
     pub u: Vec<Vec<f64>>,
@@ -544,4 +549,97 @@ pub fn check_vtkhdf(file: &Path, args: &[&str]) -> serde_json::Value {
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// A strip (0, 2) × (0, 2/nx) of one row of `nx` squares, each cut into two triangles,
+/// written as an MSH 4.1 mesh `strip.msh` into `dir` with the paper's groups (Γ1 at x = 0,
+/// Γ2 = top ∪ right, Γ3,1 the bottom's x < 1, Γ3,2 its x > 1; `nx` even): the paper's scene
+/// on it has about nx contact and friction rows, a boundary whose dense dual exceeds
+/// `solver::choice::DENSE_LIMIT` from nx ≈ 12 910 on, in a mesh that `check` reads in a
+/// second.
+pub fn strip_mesh(dir: &Path, nx: usize) -> PathBuf {
+    use std::fmt::Write;
+    assert!(nx.is_multiple_of(2));
+    let h = 2.0 / nx as f64;
+    // Node tags: the bottom row's node at x = ih is i + 1, the top row's nx + 2 + i.
+    let (bottom, top) = (|i: usize| i + 1, |i: usize| nx + 2 + i);
+    let mut t = String::from(
+        "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$PhysicalNames\n7\n1 1 \"Γ1\"\n\
+         1 2 \"Γ2\"\n1 3 \"Γ3,1\"\n1 4 \"Γ3,2\"\n1 5 \"top\"\n1 6 \"right\"\n\
+         2 10 \"Ω\"\n$EndPhysicalNames\n$Entities\n0 5 1 0\n",
+    );
+    // Curves (tag, box, physical tags, no bounding points): left, the bottom's two
+    // halves, top, right; the surface.
+    for (tag, physical) in [
+        (1, "1 1"),
+        (2, "1 3"),
+        (3, "1 4"),
+        (4, "2 2 5"),
+        (5, "2 2 6"),
+    ] {
+        writeln!(t, "{tag} 0 0 0 2 {h} 0 {physical} 0").unwrap();
+    }
+    writeln!(t, "1 0 0 0 2 {h} 0 1 10 0\n$EndEntities").unwrap();
+    let n_nodes = 2 * (nx + 1);
+    writeln!(t, "$Nodes\n1 {n_nodes} 1 {n_nodes}\n2 1 0 {n_nodes}").unwrap();
+    for tag in 1..=n_nodes {
+        writeln!(t, "{tag}").unwrap();
+    }
+    for y in [0.0, h] {
+        for i in 0..=nx {
+            writeln!(t, "{} {y} 0", i as f64 * h).unwrap();
+        }
+    }
+    t.push_str("$EndNodes\n");
+    let lines = |range: std::ops::Range<usize>, node: &dyn Fn(usize) -> usize| {
+        range.map(|i| [node(i), node(i + 1)]).collect::<Vec<_>>()
+    };
+    let mut blocks: Vec<(usize, usize, usize, Vec<Vec<usize>>)> = vec![
+        (1, 1, 1, vec![vec![bottom(0), top(0)]]),
+        (
+            1,
+            2,
+            1,
+            lines(0..nx / 2, &bottom)
+                .into_iter()
+                .map(Vec::from)
+                .collect(),
+        ),
+        (
+            1,
+            3,
+            1,
+            lines(nx / 2..nx, &bottom)
+                .into_iter()
+                .map(Vec::from)
+                .collect(),
+        ),
+        (
+            1,
+            4,
+            1,
+            lines(0..nx, &top).into_iter().map(Vec::from).collect(),
+        ),
+        (1, 5, 1, vec![vec![bottom(nx), top(nx)]]),
+    ];
+    let triangles = (0..nx)
+        .flat_map(|i| {
+            let (a, b, c, d) = (bottom(i), bottom(i + 1), top(i + 1), top(i));
+            [vec![a, b, c], vec![a, c, d]]
+        })
+        .collect();
+    blocks.push((2, 1, 2, triangles));
+    let n_elements: usize = blocks.iter().map(|b| b.3.len()).sum();
+    writeln!(t, "$Elements\n{} {n_elements} 1 {n_elements}", blocks.len()).unwrap();
+    let mut tag = 0;
+    for (dim, entity, kind, elements) in &blocks {
+        writeln!(t, "{dim} {entity} {kind} {}", elements.len()).unwrap();
+        for e in elements {
+            tag += 1;
+            let nodes: Vec<String> = e.iter().map(|n| n.to_string()).collect();
+            writeln!(t, "{tag} {}", nodes.join(" ")).unwrap();
+        }
+    }
+    t.push_str("$EndElements\n");
+    write(dir, "strip.msh", &t)
 }

@@ -203,6 +203,55 @@ mod with_petsc {
     }
 }
 
+/// `auto` with PETSc (`solver::choice`): the paper's scene on a strip of 13 000 squares
+/// (13 000 rows, a dense dual of ≈ 4.1 GB, over `DENSE_LIMIT`) takes the active set and
+/// PETSc's KSP, no factor, and `check` prints no line of what another build would pick; the
+/// example scenes, within both limits, keep the dense dual on the stored factor (their bits:
+/// the golden test), and a linear run keeps the factor.
+#[cfg(feature = "petsc")]
+#[test]
+fn auto_takes_the_active_set_beyond_the_dense_limit() {
+    use viscontact::solver::choice::{Build, Contact, Linear};
+    let tmp = tempfile::tempdir().unwrap();
+    let mesh = common::strip_mesh(tmp.path(), 13_000);
+    let strip = SceneText::paper()
+        .mesh(&mesh)
+        .set("time.steps", 2)
+        .write(tmp.path(), "s.toml");
+    let (s, _m, disc) = common::load(&strip, &[]);
+    let solver = common::descriptor(&s, &disc);
+    assert_eq!(solver.contact_solver(), Some(Contact::ActiveSet));
+    assert_eq!(solver.linear(), Linear::Petsc);
+    assert_eq!(solver.build(), &Build::Krylov);
+    let (code, text) = common::cli(&["check", strip.to_str().unwrap()]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("contact    active_set (auto: the dense dual would need ≈ 4.1 GB, over")
+            && text.contains("factor     none: K_A is solved by PETSc's Krylov method (auto:")
+            && !text.contains("petsc      "),
+        "{text}"
+    );
+    // With solver.linear = "cholesky" auto stays on the factor: the sparse dual.
+    let (s, _m, disc) = common::load(&strip, &["solver.linear=cholesky"]);
+    let solver = common::descriptor(&s, &disc);
+    assert_eq!(solver.contact_solver(), Some(Contact::Sparse));
+    for example in [
+        "examples/paper.toml",
+        "examples/block.toml",
+        "examples/half_block.toml",
+    ] {
+        let (s, _m, disc) = common::load(&common::repo().join(example), &[]);
+        let solver = common::descriptor(&s, &disc);
+        assert_eq!(solver.contact_solver(), Some(Contact::Dense), "{example}");
+        assert!(matches!(solver.build(), Build::Factor { .. }), "{example}");
+    }
+    let (s, _m, disc) = common::load(
+        &common::repo().join("examples/paper.toml"),
+        &["contact.enabled=false", "friction.enabled=false"],
+    );
+    assert_eq!(common::descriptor(&s, &disc).linear(), Linear::Cholesky);
+}
+
 /// A build without the feature refuses `linear = "petsc"` and `contact = "active_set"`
 /// (exit 2) and says how to build with it; `cholesky` and `auto` run as before.
 #[cfg(not(feature = "petsc"))]

@@ -56,7 +56,7 @@ fn both(make: impl Fn(&str) -> std::path::PathBuf) -> (Vec<f64>, Vec<f64>, usize
     let run = |solver: &str| {
         let (scene, _, disc) = load(&make(solver), &[]);
         let t = trace(&scene, &disc);
-        let dependent = viscontact::effects::warnings(&scene, &disc)
+        let dependent = viscontact::effects::warnings(&scene, &disc, &descriptor(&scene, &disc))
             .iter()
             .filter(|w| w.contains("split is not unique"))
             .count();
@@ -150,7 +150,9 @@ fn edge_3d_fast_equals_clarabel_at_any_rotation() {
 #[test]
 fn straight_junction_is_not_dependent() {
     let (scene, _, disc) = load(&repo().join("examples/paper.toml"), &[]);
-    assert!(viscontact::effects::warnings(&scene, &disc)
-        .iter()
-        .all(|w| !w.contains("not unique")));
+    assert!(
+        viscontact::effects::warnings(&scene, &disc, &descriptor(&scene, &disc))
+            .iter()
+            .all(|w| !w.contains("not unique"))
+    );
 }

@@ -9,8 +9,8 @@
 
 use crate::common;
 use common::*;
-use viscontact::scene::ContactSolver;
-use viscontact::solver::choice::{Contact, ContactPlan, DENSE_LIMIT};
+use viscontact::resources::dense_dual_bytes;
+use viscontact::solver::choice::{auto, Contact, ContactPlan, Why, DENSE_LIMIT};
 use viscontact::solver::Rows;
 
 /// u_N of a scene with each of `solvers` (values of solver.contact), and the solver names.
@@ -109,12 +109,9 @@ fn the_plan_names_the_solver_that_fits() {
     // The block at h = 1/8: 234 rows, D and its kin 1.8 MB, the matrix-free vectors 0.1 MB.
     let (scene, _m, disc) = load(&repo().join("examples/block.toml"), &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
-    let plan = ContactPlan::of_run(&scene, &disc).unwrap();
+    let solver = descriptor(&scene, &disc);
+    let plan = solver.contact().unwrap();
     assert_eq!(plan.solver, Contact::Dense);
-    assert_eq!(
-        plan.solver,
-        Contact::auto(rows.len(), rows.dofs().len(), rows.block)
-    );
     let dense = plan.memory.unwrap();
     assert!(dense < DENSE_LIMIT, "{dense}");
     assert!(
@@ -122,7 +119,7 @@ fn the_plan_names_the_solver_that_fits() {
             .starts_with("dense (auto: its matrices ≈ 1.8 MB, at most 4.0 GB)"),
         "{plan}"
     );
-    let forced = ContactPlan::new(ContactSolver::MatrixFree, &rows, disc.n_free);
+    let forced = ContactPlan::new(Contact::MatrixFree, Why::Key, &rows, disc.n_free);
     assert_eq!(forced.solver, Contact::MatrixFree);
     assert!(forced.memory.unwrap() < dense);
     assert!(
@@ -131,10 +128,14 @@ fn the_plan_names_the_solver_that_fits() {
             .starts_with("matrix_free (solver.contact = \"matrix_free\")"),
         "{forced}"
     );
-    let sparse = ContactPlan::new(ContactSolver::Sparse, &rows, disc.n_free);
+    let sparse = ContactPlan::new(Contact::Sparse, Why::Key, &rows, disc.n_free);
     assert_eq!(sparse.solver, Contact::Sparse);
     assert!(sparse.memory.unwrap() < forced.memory.unwrap());
     // A boundary of 50 times the rows and dofs would hold a dense dual over the limit.
+    // Without PETSc `auto` takes the sparse dual there, with it the active set.
     let (m, c) = (50 * rows.len(), 50 * rows.dofs().len());
-    assert_eq!(Contact::auto(m, c, rows.block), Contact::Sparse);
+    let dense = Some(dense_dual_bytes(m, c, rows.block));
+    let pick = |petsc| auto(dense, petsc, || Ok(None)).unwrap().0;
+    assert_eq!(pick(false), Some(Contact::Sparse));
+    assert_eq!(pick(true), Some(Contact::ActiveSet));
 }
