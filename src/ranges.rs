@@ -159,6 +159,36 @@ pub const RANGES: &[Range] = &[
         "as material.elasticity.poisson",
     ),
     row(
+        "material.region[].relaxation.prony[][]",
+        "as material.relaxation.prony[][]",
+        "none",
+        "as material.relaxation.prony[][]",
+    ),
+    row(
+        "material.region[].relaxation.tolerance",
+        "as material.relaxation.tolerance",
+        "1e-12",
+        "as material.relaxation.tolerance",
+    ),
+    row(
+        "material.region[].relaxation.horizon",
+        "as material.relaxation.horizon",
+        "time.end",
+        "as material.relaxation.horizon",
+    ),
+    row(
+        "material.region[].relaxation.table.s[]",
+        "as material.relaxation.table.s[]",
+        "none",
+        SCALE,
+    ),
+    row(
+        "material.region[].relaxation.table.r[]",
+        "as material.relaxation.table.r[]",
+        "none",
+        SCALE,
+    ),
+    row(
         "friction.normal_stress",
         "a number: 0 or 1e-100 ≤ F ≤ 1e100; or an expression of x, y, z",
         "required in [friction]",

@@ -80,11 +80,14 @@ fn scene_for(key: &str, mesh: &str) -> SceneText {
         .unwrap()
         .as_table()
         .unwrap();
-    let keep: &[&str] = if key.starts_with("material.relaxation.table") {
+    // A region's kernel is the same table on the region Ω (the whole body).
+    let (region, table) = match key.strip_prefix("material.region[].") {
+        Some(rest) => (true, rest),
+        None => (false, key),
+    };
+    let keep: &[&str] = if table.starts_with("relaxation.table") {
         &["table"]
-    } else if key.starts_with("material.relaxation.tolerance")
-        || key.starts_with("material.relaxation.horizon")
-    {
+    } else if table.starts_with("relaxation.tolerance") || table.starts_with("relaxation.horizon") {
         &["expr", "tolerance", "horizon"]
     } else {
         &["prony"]
@@ -94,7 +97,16 @@ fn scene_for(key: &str, mesh: &str) -> SceneText {
         .filter(|(k, _)| keep.contains(&k.as_str()))
         .map(|(k, v)| (k.clone(), v.clone()))
         .collect();
-    scene.set("material.relaxation", kept)
+    let prony: toml::Table = (relax.iter())
+        .filter(|(k, _)| *k == "prony")
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    match region {
+        true => (scene.set("material.relaxation", prony))
+            .set("material.region[0].on", "Ω")
+            .set("material.region[0].relaxation", kept),
+        false => scene.set("material.relaxation", kept),
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -169,8 +181,8 @@ fn draw(rng: &mut SplitMix) -> String {
 /// The path of `key` (a row of RANGES) with each `[]` an element: the first, or for the
 /// pair of a Prony term, either.
 fn path_of(key: &str, rng: &mut SplitMix) -> String {
-    if key == "material.relaxation.prony[][]" {
-        format!("material.relaxation.prony[0][{}]", rng.below(2))
+    if let Some(prefix) = key.strip_suffix("prony[][]") {
+        format!("{}prony[0][{}]", prefix.replace("[]", "[0]"), rng.below(2))
     } else {
         key.replace("[]", "[0]")
     }
