@@ -238,6 +238,7 @@ impl<'p> TimeLoop<'p> {
         let backend = match descriptor.build() {
             Build::Krylov => petsc_backend(scene, matrix, disc)?,
             Build::Factor { last } => Backend::Cholesky(Factor::new(matrix, last)?),
+            Build::Nothing => Backend::None,
         };
         let solver = effects::step_solver(&effects, &descriptor, matrix, &backend, &rows)?;
         let n = disc.n_dofs;
@@ -370,7 +371,7 @@ impl<'p> TimeLoop<'p> {
     /// a linear run through PETSc the KSP and PC it runs.
     pub fn solver_name(&self) -> String {
         match &self.backend {
-            Backend::Cholesky(_) => self.solver.name().to_string(),
+            Backend::Cholesky(_) | Backend::None => self.solver.name().to_string(),
             #[cfg(feature = "petsc")]
             Backend::Petsc(k) => match self.solver {
                 StepSolver::ActiveSet(_) => format!(
@@ -391,7 +392,7 @@ impl<'p> TimeLoop<'p> {
     pub fn krylov(&self) -> Option<&crate::petsc::Krylov> {
         match &self.backend {
             Backend::Petsc(k) => Some(k),
-            Backend::Cholesky(_) => None,
+            Backend::Cholesky(_) | Backend::None => None,
         }
     }
 

@@ -138,8 +138,10 @@ impl Linear {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Build {
     /// The stored Cholesky factor, with these dofs (sorted) ordered last
-    /// (`Contact::ordered_last`). clarabel needs no factor; the run still builds one.
+    /// (`Contact::ordered_last`).
     Factor { last: Vec<usize> },
+    /// Nothing: clarabel assembles and factors its own whole step problem.
+    Nothing,
     /// PETSc's KSP of the step matrix (`crate::petsc::Krylov`).
     Krylov,
 }
@@ -278,9 +280,10 @@ impl Descriptor {
         };
         // A run without rows has no contact solver, whatever the key.
         let contact = contact.filter(|_| has_rows);
-        let build = match linear {
-            Linear::Petsc => Build::Krylov,
-            Linear::Cholesky => Build::Factor {
+        let build = match (linear, contact) {
+            (_, Some(Contact::Clarabel)) => Build::Nothing,
+            (Linear::Petsc, _) => Build::Krylov,
+            (Linear::Cholesky, contact) => Build::Factor {
                 last: contact.map_or(Vec::new(), |c| c.ordered_last(&rows)),
             },
         };
@@ -392,6 +395,9 @@ impl Descriptor {
     /// The name of the linear backend and why, for `check`'s `factor` line where the run
     /// builds no factor.
     pub fn krylov_line(&self) -> Option<String> {
+        if self.build == Build::Nothing {
+            return Some("none: clarabel factors its own step problem, K_A is not factored".into());
+        }
         (self.build == Build::Krylov).then(|| {
             let why = match self.linear_why {
                 Why::Key => "solver.linear = \"petsc\"".to_string(),

@@ -213,6 +213,8 @@ fn scatter(p: &[Vec<(usize, f64)>], v: &[f64], y: &mut [f64]) {
 pub enum Backend {
     /// Factored once, one solve with the factor per step (`Factor`).
     Cholesky(Factor),
+    /// None: the step solver holds its own (clarabel).
+    None,
     /// PETSc's KSP, set up once (`crate::petsc::Krylov`): linear runs and the active-set
     /// contact solver.
     #[cfg(feature = "petsc")]
@@ -224,6 +226,7 @@ impl Backend {
     pub fn factor(&self) -> Option<&Factor> {
         match self {
             Backend::Cholesky(f) => Some(f),
+            Backend::None => None,
             #[cfg(feature = "petsc")]
             Backend::Petsc(_) => None,
         }
@@ -334,6 +337,15 @@ impl StepSolver {
         #[allow(clippy::infallible_destructuring_match)]
         let factor = match backend {
             Backend::Cholesky(factor) => factor,
+            Backend::None => {
+                return match self {
+                    StepSolver::Conic(c) => Ok(c.solve(rows, b, w, z)),
+                    _ => Err(crate::Error::solve(format!(
+                        "the {} solver needs the stored factor of K_A",
+                        self.name()
+                    ))),
+                }
+            }
             #[cfg(feature = "petsc")]
             Backend::Petsc(krylov) => {
                 return match self {

@@ -237,6 +237,35 @@ fn a_factor_that_does_not_fit_is_refused_before_it_is_factored() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
+/// clarabel builds no factor of K_A: it assembles and factors its own step problem.
+/// `check` says so (and sizes no factor), and its run agrees with the dense dual's.
+#[test]
+fn clarabel_builds_no_factor() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = block(2).write(tmp.path(), "s.toml");
+    let (s, _m, disc) = common::load(&scene, &["solver.contact=clarabel"]);
+    let mut solver = viscontact::solver::choice::Descriptor::of_run(&s, &disc).unwrap();
+    assert_eq!(*solver.build(), viscontact::solver::choice::Build::Nothing);
+    assert_eq!(solver.factor_bytes(&disc).unwrap(), None);
+    let scene = scene.to_str().unwrap();
+    let (code, text) = common::cli(&["check", scene, "--set", "solver.contact=clarabel"]);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("factor     none: clarabel"), "{text}");
+    assert!(!text.contains("Cholesky factor of K_A: ≈"), "{text}");
+    let u = |contact: &str| {
+        let set = format!("solver.contact={contact}");
+        let (s, _m, disc) = common::load(Path::new(scene), &[&set]);
+        common::trace(&s, &disc).u_final
+    };
+    let (conic, dense) = (u("clarabel"), u("dense"));
+    let scale = common::max_abs(&dense);
+    let diff = conic.iter().zip(&dense).map(|(a, b)| (a - b).abs());
+    assert!(
+        diff.fold(0.0, f64::max) <= 1e-6 * scale,
+        "{conic:?} {dense:?}"
+    );
+}
+
 /// The rows of the paper's scene on `common::strip_mesh` of 13 000 squares (13 002 rows on
 /// 13 002 dofs, 2D): the dense dual would need 8·3·13 002² ≈ 4.06 GB, over `DENSE_LIMIT`.
 #[cfg(not(feature = "petsc"))]
