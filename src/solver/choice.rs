@@ -291,7 +291,7 @@ impl Descriptor {
             && scene.solver.linear == LinearSolver::Auto)
             .then_some(dense);
         Ok(Descriptor {
-            contact: contact.map(|c| ContactPlan::new(c, why, &rows, disc.n_free)),
+            contact: contact.map(|c| ContactPlan::new(c, why, &rows, disc)),
             linear,
             linear_why,
             build,
@@ -461,9 +461,9 @@ pub struct ContactPlan {
 }
 
 impl ContactPlan {
-    /// The plan of `solver`, chosen for `why`, on `rows` of a problem with n dofs.
-    pub fn new(solver: Contact, why: Why, rows: &Rows, n: usize) -> Self {
-        let (m, c) = (rows.len(), rows.dofs().len());
+    /// The plan of `solver`, chosen for `why`, on `rows` of the problem `disc`.
+    pub fn new(solver: Contact, why: Why, rows: &Rows, disc: &Discretization) -> Self {
+        let (m, c, n) = (rows.len(), rows.dofs().len(), disc.n_free);
         let dense = resources::dense_dual_bytes(m, c, rows.block);
         let sparse = resources::matrix_free_bytes(m, n);
         let (m_f, products) = (m as f64, MatrixFreeSettings::default().cg_max + 2);
@@ -497,7 +497,7 @@ impl ContactPlan {
                 ),
             ),
             Contact::ActiveSet => (
-                Some(resources::active_set_bytes(m, n)),
+                Some(resources::active_set_bytes(m, n, disc.k_a.compute_nnz())),
                 "per Newton iteration one Krylov solve of the primal system (the step matrix with \
                  the active and sticking directions removed) preconditioned by a multigrid of \
                  that matrix, built at a step's first system and rebuilt where the sets change \
@@ -617,8 +617,8 @@ impl std::fmt::Display for ContactPlan {
             ),
             (Some(b), Contact::Sparse) => format!("≈ {} besides the factor of K_A", human(b)),
             (Some(b), Contact::ActiveSet) => format!(
-                "≈ {} besides PETSc's three matrices of K_A's size (K_A, the Newton matrix and \
-                 the copy its multigrid was built from) and two multigrid hierarchies",
+                "≈ {} with PETSc's three matrices of K_A's size (K_A, the Newton matrix and the \
+                 copy its multigrid was built from) and two multigrid hierarchies, estimated",
                 human(b)
             ),
             (Some(b), _) => format!("≈ {}", human(b)),

@@ -26,7 +26,7 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
     let (s, _m, disc) = common::load(&scene, &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
     let memory = |solver| {
-        let plan = ContactPlan::new(solver, Why::Key, &rows, disc.n_free);
+        let plan = ContactPlan::new(solver, Why::Key, &rows, &disc);
         plan.memory.unwrap()
     };
     let (dense, sparse) = (memory(Contact::Dense), memory(Contact::Sparse));

@@ -119,7 +119,7 @@ fn the_plan_names_the_solver_that_fits() {
             .starts_with("dense (auto: its matrices ≈ 1.8 MB, at most 4.0 GB)"),
         "{plan}"
     );
-    let forced = ContactPlan::new(Contact::MatrixFree, Why::Key, &rows, disc.n_free);
+    let forced = ContactPlan::new(Contact::MatrixFree, Why::Key, &rows, &disc);
     assert_eq!(forced.solver, Contact::MatrixFree);
     assert!(forced.memory.unwrap() < dense);
     assert!(
@@ -128,7 +128,7 @@ fn the_plan_names_the_solver_that_fits() {
             .starts_with("matrix_free (solver.contact = \"matrix_free\")"),
         "{forced}"
     );
-    let sparse = ContactPlan::new(Contact::Sparse, Why::Key, &rows, disc.n_free);
+    let sparse = ContactPlan::new(Contact::Sparse, Why::Key, &rows, &disc);
     assert_eq!(sparse.solver, Contact::Sparse);
     assert!(sparse.memory.unwrap() < forced.memory.unwrap());
     // A boundary of 50 times the rows and dofs would hold a dense dual over the limit.
