@@ -364,7 +364,14 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
         );
     }
     if let Some(line) = solver.krylov_line() {
-        viscontact::outln!("factor     {line}");
+        let avoided = match solver.avoided_factor(&disc)? {
+            Some(bytes) => format!(
+                "; the stored Cholesky factor would need ≈ {} for its values",
+                viscontact::resources::human(bytes)
+            ),
+            None => String::new(),
+        };
+        viscontact::outln!("factor     {line}{avoided}");
     }
     if let Some(line) = solver.with_petsc(&disc)? {
         viscontact::outln!("petsc      {line}");

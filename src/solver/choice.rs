@@ -338,6 +338,21 @@ impl Descriptor {
         Ok(Some(bytes))
     }
 
+    /// Where `auto` took PETSc's Krylov method for a large problem (n > 44 720, where a
+    /// factor could exceed `FACTOR_LIMIT`): the bytes of the values of the stored factor it
+    /// avoided, in a linear run's order (`check` prints them beside its `factor` line; the
+    /// analysis takes seconds where the factorization would take minutes). None otherwise.
+    pub fn avoided_factor(&mut self, disc: &Discretization) -> Result<Option<f64>> {
+        let by_auto = !matches!(self.linear_why, Why::Key | Why::OtherKey);
+        if self.build != Build::Krylov || !by_auto || !factor_may_exceed(disc.n_free) {
+            return Ok(None);
+        }
+        match &self.factor {
+            Some((_, bytes)) => Ok(Some(*bytes)),
+            None => super::factor::predicted_bytes(&disc.k_a, &[]).map(Some),
+        }
+    }
+
     /// In a build without PETSc, where `auto` would pick otherwise in the build with it:
     /// what it would pick, why, and how to get that build (`check` prints it). None in a
     /// build with PETSc, where a key decided, or where both builds pick the same.

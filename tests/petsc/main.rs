@@ -228,6 +228,7 @@ fn auto_takes_the_active_set_beyond_the_dense_limit() {
     assert!(
         text.contains("contact    active_set (auto: the dense dual would need ≈ 4.1 GB, over")
             && text.contains("factor     none: K_A is solved by PETSc's Krylov method (auto:")
+            && text.contains("; the stored Cholesky factor would need ≈ ")
             && !text.contains("petsc      "),
         "{text}"
     );
