@@ -53,7 +53,7 @@ pub const DENSE_LIMIT: f64 = 4e9;
 /// PETSc: 8 GB. The fine plate of issue 50 (size 0.015, 367 470 dofs: 3.2 GB of values, its
 /// linear run's peak 4.4 GB, 20 steps in 32.7 s on two cores) stays on the factor, which is
 /// faster wherever it fits (docs/performance.md); the plate at size 0.01 (1 162 293 dofs:
-/// ≈ 20 GB of values by the n^(4/3) growth of the fill) goes to PETSc. A run's peak is about
+/// 16.9 GB of values by its symbolic analysis) goes to PETSc. A run's peak is about
 /// 1.4× its factor's values (4.4 / 3.2 GB on the plate), so the limit is a run of ≈ 11 GB:
 /// within a 16 GB workstation with the run's own state, as `DENSE_LIMIT` is. Like it, a
 /// property of the problem, not of the machine.
@@ -685,7 +685,7 @@ mod tests {
     /// `DENSE_LIMIT` (without asking for the factor) or the factor's values exceed
     /// `FACTOR_LIMIT`: the fine plate (m = 16 055) goes to the active set, the coarse one
     /// (m = 4 274, its factor far below) stays dense, as does a factor of 3.2 GB (the fine
-    /// plate's, were its D small); ≈ 20 GB (the plate at size 0.01) does not.
+    /// plate's, were its D small); 16.9 GB (the plate at size 0.01) does not.
     #[test]
     fn auto_with_petsc_takes_the_active_set_beyond_either_limit() {
         let petsc = |m, factor| pick(m, m, 2, true, factor);
