@@ -402,9 +402,15 @@ impl History {
     /// The state at n = 0: u_0 = 0 (the paper's example; the initial displacement is zero)
     /// and m_0 = 0, for the memory groups of `plans`.
     pub fn new(n_free: usize, k: f64, plans: &Plans) -> Self {
-        let groups = (0..plans.groups()).map(|g| (g, plans.group(g)));
-        let terms: Vec<PronyTerm> = (groups.clone())
-            .flat_map(|(g, plan)| plan.prony().unwrap_or(&[]).iter().map(move |t| (g, t)))
+        let terms: Vec<PronyTerm> = (0..plans.groups())
+            .flat_map(|g| {
+                plans
+                    .group(g)
+                    .prony()
+                    .unwrap_or(&[])
+                    .iter()
+                    .map(move |t| (g, t))
+            })
             .map(|(group, &(a, b))| PronyTerm {
                 a,
                 decay: (-b * k).exp(),

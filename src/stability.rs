@@ -67,15 +67,15 @@ pub struct StepLimit {
 /// each material of the cells: the deviatoric mode (C τ = 2a τ) and the volumetric one
 /// (C I = (2a + d b) I), with the material's memory group (λ_R = 0 without one).
 fn modes(disc: &Discretization) -> Vec<(f64, f64, Option<usize>)> {
-    let (d, g) = (disc.dim as f64, |s: &crate::fem::Stiffness| s.memory);
+    let d = disc.dim as f64;
     let vol = |c: Isotropic| 2.0 * c.a + d * c.b;
     (disc.materials.distinct.iter())
         .flat_map(|s| {
             let (a, b) = (s.a, s.b_or_zero());
             let r = s.memory.map_or(Isotropic { a: 0.0, b: 0.0 }, |_| disc.r);
             [
-                (b.a / a.a, r.a / a.a, g(s)),
-                (vol(b) / vol(a), vol(r) / vol(a), g(s)),
+                (b.a / a.a, r.a / a.a, s.memory),
+                (vol(b) / vol(a), vol(r) / vol(a), s.memory),
             ]
         })
         .collect()

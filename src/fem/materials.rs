@@ -100,13 +100,6 @@ impl CellMaterials {
         self.distinct.iter().any(|s| s.b.is_some())
     }
 
-    /// The number of memory groups, each with its K_R and memory state: the body's
-    /// `[material.relaxation]` (group 0, even where it has none) and each region's own
-    /// kernel.
-    pub fn groups(scene: &Scene) -> usize {
-        1 + scene.physics.region_kernels().len()
-    }
-
     /// The number of cells in region i (i = 1.. for the entries; 0 outside every region).
     pub fn count(&self, i: usize) -> usize {
         self.region.iter().filter(|&&r| r as usize == i).count()

@@ -409,7 +409,7 @@ impl Discretization {
 
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
-        let groups = CellMaterials::groups(scene);
+        let groups = scene.physics.memory_groups();
         let (k_a_all, k_b, k_r) = assemble(&cells, d, free, n_dofs, &materials, r, groups);
         let (k_a, k_a_all) = match n_dofs > n_free {
             true => (leading_block(&k_a_all, n_free), Some(k_a_all)),

@@ -160,6 +160,18 @@ impl Physics {
             .collect()
     }
 
+    /// The number of memory groups, each with its K_R and memory state: the body's (group 0,
+    /// even where `[material.relaxation]` has no kernel) and each region kernel's.
+    pub fn memory_groups(&self) -> usize {
+        1 + (self.regions.iter())
+            .filter(|r| {
+                r.relaxation
+                    .as_ref()
+                    .is_some_and(|own| own.kernel.is_some())
+            })
+            .count()
+    }
+
     /// The memory group of the cells of region `i` (None: outside every region), None where
     /// they have no relaxation term.
     pub fn memory_group(&self, region: Option<usize>) -> Option<usize> {

@@ -614,13 +614,6 @@ impl ContactPlan {
     }
 }
 
-/// The bytes of the values of the run's Cholesky factor of K_A, in its ordering, from its
-/// symbolic analysis (`Descriptor::factor_bytes`); None where the run solves K_A through
-/// PETSc.
-pub fn factor_bytes(scene: &Scene, disc: &Discretization) -> Result<Option<f64>> {
-    Descriptor::of_run(scene, disc)?.factor_bytes(disc)
-}
-
 impl std::fmt::Display for ContactPlan {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         let memory = match (self.memory, self.solver) {

@@ -8,7 +8,7 @@ use crate::common::{self, SceneText};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use viscontact::resources::{MARGIN, MEMORY_ENV};
-use viscontact::solver::choice::{factor_bytes, Contact, ContactPlan, Why};
+use viscontact::solver::choice::{Contact, ContactPlan, Why};
 use viscontact::solver::Rows;
 
 /// The block's scene at h = 1/4 over `steps` steps.
@@ -31,7 +31,8 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
     };
     let (dense, sparse) = (memory(Contact::Dense), memory(Contact::Sparse));
     assert!(sparse < dense, "{sparse} {dense}");
-    let factor = factor_bytes(&s, &disc).unwrap().unwrap();
+    let factor = common::descriptor(&s, &disc).factor_bytes(&disc);
+    let factor = factor.unwrap().unwrap();
     (scene, (dense * sparse).sqrt() / MARGIN, factor)
 }
 
@@ -208,7 +209,8 @@ fn a_factor_that_does_not_fit_is_refused_before_it_is_factored() {
         .set("friction.enabled", false)
         .write(tmp.path(), "s.toml");
     let (s, _m, disc) = common::load(&scene, &[]);
-    let bytes = factor_bytes(&s, &disc).unwrap().unwrap();
+    let bytes = common::descriptor(&s, &disc).factor_bytes(&disc);
+    let bytes = bytes.unwrap().unwrap();
     assert!(bytes > 0.0);
     let scene = scene.to_str().unwrap();
     let (code, text) = common::cli(&["check", scene]);
@@ -266,11 +268,6 @@ fn clarabel_builds_no_factor() {
     );
 }
 
-/// The rows of the paper's scene on `common::strip_mesh` of 13 000 squares (13 002 rows on
-/// 13 002 dofs, 2D): the dense dual would need 8·3·13 002² ≈ 4.06 GB, over `DENSE_LIMIT`.
-#[cfg(not(feature = "petsc"))]
-const STRIP: usize = 13_000;
-
 /// In a build without PETSc, `check` says where the build with it would pick otherwise, and
 /// how to get it: beyond `DENSE_LIMIT` `auto` takes the sparse dual here and the active set
 /// there; a plan that does not fit names that build too. A scene within both limits (the
@@ -279,11 +276,7 @@ const STRIP: usize = 13_000;
 #[test]
 fn check_says_what_the_build_with_petsc_would_pick() {
     let tmp = tempfile::tempdir().unwrap();
-    let mesh = common::strip_mesh(tmp.path(), STRIP);
-    let scene = SceneText::paper()
-        .mesh(&mesh)
-        .set("time.steps", 2)
-        .write(tmp.path(), "s.toml");
+    let scene = common::strip_scene(tmp.path());
     let (s, _m, disc) = common::load(&scene, &[]);
     let solver = common::descriptor(&s, &disc);
     assert_eq!(solver.contact_solver(), Some(Contact::Sparse));

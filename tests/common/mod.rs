@@ -551,6 +551,16 @@ pub fn check_vtkhdf(file: &Path, args: &[&str]) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// The paper's scene over 2 steps on `strip_mesh` of 13 000 squares (13 002 rows on 13 002
+/// dofs, 2D: the dense dual would need 8·3·13 002² ≈ 4.06 GB, over `DENSE_LIMIT`), written
+/// into `dir` as s.toml, and its path.
+pub fn strip_scene(dir: &Path) -> PathBuf {
+    SceneText::paper()
+        .mesh(strip_mesh(dir, 13_000))
+        .set("time.steps", 2)
+        .write(dir, "s.toml")
+}
+
 /// A strip (0, 2) × (0, 2/nx) of one row of `nx` squares, each cut into two triangles,
 /// written as an MSH 4.1 mesh `strip.msh` into `dir` with the paper's groups (Γ1 at x = 0,
 /// Γ2 = top ∪ right, Γ3,1 the bottom's x < 1, Γ3,2 its x > 1; `nx` even): the paper's scene

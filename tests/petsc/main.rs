@@ -213,11 +213,7 @@ mod with_petsc {
 fn auto_takes_the_active_set_beyond_the_dense_limit() {
     use viscontact::solver::choice::{Build, Contact, Linear};
     let tmp = tempfile::tempdir().unwrap();
-    let mesh = common::strip_mesh(tmp.path(), 13_000);
-    let strip = SceneText::paper()
-        .mesh(&mesh)
-        .set("time.steps", 2)
-        .write(tmp.path(), "s.toml");
+    let strip = common::strip_scene(tmp.path());
     let (s, _m, disc) = common::load(&strip, &[]);
     let solver = common::descriptor(&s, &disc);
     assert_eq!(solver.contact_solver(), Some(Contact::ActiveSet));
