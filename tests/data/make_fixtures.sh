@@ -13,7 +13,8 @@
 #                         collinear nodes (element 10), all groups present; otherwise a
 #                         conforming mesh                                     (degenerate element)
 #   bimaterial_bar.msh    bimaterial_bar.geo meshed (two materials bonded along x = 1)
-#   symmetry/*.msh        half_block.geo, half_rect.geo meshed, and their mirror images (mirror.py)
+#   symmetry/*.msh        half_block.geo, half_rect.geo meshed, and their mirror images (mirror.py);
+#                         all four turned by 30° (turn.py: *_turned.msh, inclined planes)
 #   mesh_checks/*.msh     from the .geo files beside them (issue 26: two halves not
 #                         fragmented in 2D and 3D, a Γ2 arc off the mesh, Γ3,1 overlapping
 #                         Γ3,2, overlapping physical surfaces)
@@ -143,4 +144,4 @@ mesh bimaterial_bar.geo -format msh41 -o bimaterial_bar.msh
 # the half's mesh (so that the two meshes agree on the half; issue 51)
 mesh -3 symmetry/half_block.geo -format msh41 -o symmetry/half_block.msh
 mesh symmetry/half_rect.geo -format msh41 -o symmetry/half_rect.msh
-(cd symmetry && python3 mirror.py)
+(cd symmetry && python3 mirror.py && python3 turn.py)
