@@ -420,7 +420,7 @@ fn print_problem(
     );
     viscontact::outln!(
         "conditions {}",
-        viscontact::fem::constraints::summary(scene, disc.prescribed.len())
+        viscontact::fem::constraints::summary(scene, disc.prescribed.len(), &disc.frames)
     );
     for line in viscontact::fem::materials::summary(&disc.materials, scene) {
         viscontact::outln!("region     {line}");

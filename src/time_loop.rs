@@ -488,9 +488,12 @@ impl<'p> TimeLoop<'p> {
             }
         }
         self.b.fill(0.0);
-        self.disc
-            .loads
-            .add(t, &self.disc.free, self.scene, &mut self.b)?;
+        self.disc.loads.add(
+            t,
+            (&self.disc.free, &self.disc.frames),
+            self.scene,
+            &mut self.b,
+        )?;
         // max|f_n − g_F| (g_F is empty without friction).
         let load_max = max_abs_diff(&self.b, &self.disc.g_f);
         let memory = h.memory_into(self.scene.physics.relaxation.as_ref(), &mut self.m);
@@ -640,8 +643,12 @@ pub fn refusals(scene: &Scene, disc: &Discretization, plans: &Plans) -> Result<(
         Verdict::new(scene, disc, plans).check(scene)?;
     }
     constraints::values(&disc.prescribed, &disc.nodes, scene, scene.time.k())?;
-    disc.loads
-        .add(0.0, &disc.free, scene, &mut vec![0.0; disc.n_dofs])
+    disc.loads.add(
+        0.0,
+        (&disc.free, &disc.frames),
+        scene,
+        &mut vec![0.0; disc.n_dofs],
+    )
 }
 
 #[cfg(test)]

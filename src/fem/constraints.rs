@@ -31,19 +31,40 @@
 //! prescribed displacement and its memory. M_ff is what is factored: symmetric positive
 //! definite once the conditions remove the rigid motions, of the cost it had.
 //!
+//! # Inclined planes: nodal frames
+//!
+//! `normal` on a flat group holds u·n, n the plane's unit outward normal. Where n is a
+//! coordinate axis that is one dof (the component, with the sign of n). Where it is not,
+//! each node of the group gets a frame of its own ([`Frames`]): orthonormal axes a_0, a_1
+//! (, a_2), the first ones the directions held there (n, and where another condition meets
+//! the plane its direction), and the node's dofs are the components ũ_k = u·a_k, so that
+//! u·n = 0 is again one dof held at zero and eliminated. With Q the block-diagonal rotation (the identity at
+//! every other node), u = Q ũ, and the discrete problem in ũ is the same one written in
+//! other coordinates: K̃ = Qᵀ K Q for each matrix (the element entries rotated where a
+//! vertex has a frame: `Cell::parts_in`), f̃ = Qᵀ f for the loads and g_F (`Frames::spread`),
+//! the constraint rows P̃ = P Q (a row's direction in the node's frame), and the results u =
+//! Q ũ (`Frames::to_space`). Q is orthogonal, so K̃ stays symmetric positive definite with
+//! the same sparsity pattern and the same cost; the rows of one node keep their angles, so
+//! the contact and friction solvers see the same geometry. Nodes without a frame take no
+//! extra operation: a scene without an inclined plane keeps its bits.
+//!
 //! # Rules
 //!
 //! A dof held by two conditions is allowed when both hold it at zero (a clamped edge shared
 //! with a symmetry plane) or prescribe the same value as written (the same expression, and
-//! for `normal` the same sign); otherwise it is refused, naming both. `normal` needs a flat group
-//! whose normal is a coordinate axis (then it is that component, with the sign of the
-//! normal). A body (each connected part) must have its rigid motions removed by the
-//! conditions, or `check` and `run` refuse it.
+//! for `normal` the same sign); otherwise it is refused, naming both. `normal` needs a flat
+//! group (a curved or kinked one is refused). At a node that two conditions hold in
+//! different directions (two planes meeting, or a plane and an axis component) with one of
+//! them inclined, the directions must be perpendicular (the frame's first axes) or parallel
+//! (the same dof); an oblique pair is refused. A clamped node keeps no frame. A body (each
+//! connected part) must have its rigid motions removed by the conditions, or `check` and
+//! `run` refuse it.
 
 use super::{group, Sparse};
 use crate::mesh::{Group, Mesh, Part};
 use crate::scene::{Components, Scene};
 use crate::{Error, Result};
+use std::collections::HashMap;
 
 /// A prescribed dof: global dof d·node + c gets index `dof` (≥ n_free) and the value
 /// scale · value_`value`(x, t) of `[[dirichlet]]` entry `entry`.
@@ -69,6 +90,9 @@ pub struct Numbering {
     /// holds it: the first to name it, the clamped groups in order, then the `[[dirichlet]]`
     /// entries (the reactions of `fem::reactions` are reported per condition group).
     pub held_by: Vec<(usize, Source)>,
+    /// The frames of the nodes an inclined `normal` condition holds: there global dof
+    /// d·node + k is the component along the frame's axis k.
+    pub frames: Frames,
 }
 
 /// What holds a dof while the numbering is built: the source (fixed group i, or
@@ -125,9 +149,11 @@ impl Numbering {
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Numbering> {
         let d = mesh.dim;
         let mut holds: Vec<Option<Hold>> = vec![None; d * mesh.nodes.len()];
+        let mut clamped = vec![false; mesh.nodes.len()];
         for (i, name) in scene.mesh.groups.fixed.iter().enumerate() {
             let g = group(mesh, scene, "mesh.groups.fixed", name)?;
             for node in mesh.group_nodes(g) {
+                clamped[node] = true;
                 for c in 0..d {
                     let hold = Hold {
                         source: Source::Fixed(i),
@@ -137,26 +163,32 @@ impl Numbering {
                 }
             }
         }
+        let mut entries = Vec::new();
         for (i, e) in scene.physics.dirichlet.iter().enumerate() {
             let g = group(mesh, scene, &format!("dirichlet[{i}].on"), &e.on)?;
-            for (c, v, scale) in axes(mesh, scene, g, i)? {
-                let value = (!e.is_zero(v)).then_some((v, scale));
-                for node in mesh.group_nodes(g) {
+            entries.push((mesh.group_nodes(g), directions(mesh, scene, g, i)?));
+        }
+        let frames = Frames::new(mesh, scene, &entries, &clamped)?;
+        for (i, (nodes, held)) in entries.iter().enumerate() {
+            let e = &scene.physics.dirichlet[i];
+            for h in held {
+                for &node in nodes {
+                    let (c, sign) = frames.component(node, h.dir, d);
                     let hold = Hold {
                         source: Source::Dirichlet(i),
-                        value,
+                        value: (!e.is_zero(h.value)).then_some((h.value, sign)),
                     };
                     put(&mut holds, d * node + c, hold, mesh, scene)?;
                 }
             }
         }
-        let numbering = Numbering::of(&holds, d);
+        let numbering = Numbering::of(&holds, d, frames);
         numbering.check(mesh, scene)?;
         Ok(numbering)
     }
 
     /// Free dofs first, then prescribed ones, each in global order.
-    fn of(holds: &[Option<Hold>], d: usize) -> Numbering {
+    fn of(holds: &[Option<Hold>], d: usize, frames: Frames) -> Numbering {
         let mut free = vec![None; holds.len()];
         let mut held = vec![0u8; holds.len() / d];
         let mut held_by = Vec::new();
@@ -198,6 +230,7 @@ impl Numbering {
             prescribed,
             held,
             held_by,
+            frames,
         }
     }
 
@@ -262,7 +295,7 @@ impl Numbering {
             let x: [f64; 3] = std::array::from_fn(|i| (mesh.nodes[node][i] - centre[i]) / size);
             for c in (0..d).filter(|c| self.held[node] & (1 << c) != 0) {
                 for (m, col) in columns.iter_mut().enumerate() {
-                    col.push(rigid_mode(m, d, x)[c]);
+                    col.push(self.frames.to_dofs(node, rigid_mode(m, d, x))[c]);
                 }
             }
         }
@@ -308,28 +341,43 @@ fn put(holds: &mut [Option<Hold>], g: usize, hold: Hold, mesh: &Mesh, scene: &Sc
     Ok(())
 }
 
-/// The (component, value index, scale) triples of `[[dirichlet]]` entry `i` on group `g`:
-/// the named axes, or for `normal` the axis of the flat group's normal with its sign.
-fn axes(mesh: &Mesh, scene: &Scene, g: &Group, i: usize) -> Result<Vec<(usize, usize, f64)>> {
+/// A direction a `[[dirichlet]]` entry holds: the unit vector (a coordinate axis, or a flat
+/// group's outward normal) and the index of its value.
+struct Held {
+    dir: [f64; 3],
+    value: usize,
+}
+
+/// The directions `[[dirichlet]]` entry `i` holds on group `g`: the named axes, or the flat
+/// group's outward normal.
+fn directions(mesh: &Mesh, scene: &Scene, g: &Group, i: usize) -> Result<Vec<Held>> {
     let e = &scene.physics.dirichlet[i];
+    let axis = |c: usize| std::array::from_fn(|k| if k == c { 1.0 } else { 0.0 });
     match &e.components {
-        Components::Axes(a) => Ok(a.iter().enumerate().map(|(v, &c)| (c, v, 1.0)).collect()),
+        Components::Axes(a) => Ok(a
+            .iter()
+            .enumerate()
+            .map(|(value, &c)| Held {
+                dir: axis(c),
+                value,
+            })
+            .collect()),
         Components::Normal => {
-            let (axis, sign) = flat_axis(mesh, g).map_err(|why| {
+            let dir = flat_normal(mesh, g).map_err(|why| {
                 Error::input(format!(
                     "{}: key 'dirichlet[{i}].components': [\"normal\"] on the group '{}': {why}",
                     scene.path.display(),
                     e.on
                 ))
             })?;
-            Ok(vec![(axis, 0, sign)])
+            Ok(vec![Held { dir, value: 0 }])
         }
     }
 }
 
-/// The coordinate axis and sign of a flat group's outward normal: refused when the facets'
-/// normals differ (a curved or kinked group) or the plane is inclined.
-fn flat_axis(mesh: &Mesh, g: &Group) -> std::result::Result<(usize, f64), String> {
+/// A flat group's unit outward normal: refused when the facets' normals differ (a curved or
+/// kinked group).
+fn flat_normal(mesh: &Mesh, g: &Group) -> std::result::Result<[f64; 3], String> {
     let facets = mesh.boundary_facets(g);
     let Some(first) = facets.first() else {
         return Err("the group has no facets".into());
@@ -347,19 +395,154 @@ fn flat_axis(mesh: &Mesh, g: &Group) -> std::result::Result<(usize, f64), String
             crate::mesh::fmt_point(f.normal, mesh.dim)
         ));
     }
-    match (0..mesh.dim).find(|&c| n[c].abs() >= 1.0 - 1e-12) {
-        Some(c) => Ok((c, n[c].signum())),
-        None => Err(format!(
-            "the plane's normal {} is inclined; only planes normal to a coordinate axis are \
-             supported for now (symmetry planes and rollers on x, y or z = const)",
-            crate::mesh::fmt_point(n, mesh.dim)
-        )),
+    Ok(n)
+}
+
+/// A node's frame: orthonormal, right-handed axes a_0, a_1, a_2 (a_2 = e_z in 2D). The
+/// node's dof k is the component u·a_k of its displacement.
+pub type Axes = [[f64; 3]; 3];
+
+/// The nodes whose dofs are components in a frame of their own: those an inclined `normal`
+/// condition holds (a plane not normal to a coordinate axis). Every other node's dofs are its
+/// x, y (, z) components.
+#[derive(Clone, Debug, Default)]
+pub struct Frames(HashMap<usize, Axes>);
+
+impl Frames {
+    /// The frames of the nodes that an inclined direction of `entries` (each `[[dirichlet]]`
+    /// entry's nodes and directions) holds, unless clamped: the node's held directions first
+    /// (a_0, and a_1 where a second one holds it), completed right-handed. A node's held
+    /// directions must be parallel or perpendicular; others are refused.
+    fn new(
+        mesh: &Mesh,
+        scene: &Scene,
+        entries: &[(Vec<usize>, Vec<Held>)],
+        clamped: &[bool],
+    ) -> Result<Frames> {
+        let d = mesh.dim;
+        let inclined = |dir: [f64; 3]| (0..d).all(|c| dir[c].abs() < 1.0 - 1e-12);
+        let mut at: HashMap<usize, Vec<([f64; 3], usize)>> = HashMap::new();
+        for (nodes, held) in entries {
+            if held.iter().any(|h| inclined(h.dir)) {
+                for &node in nodes.iter().filter(|&&n| !clamped[n]) {
+                    at.entry(node).or_default();
+                }
+            }
+        }
+        for (i, (nodes, held)) in entries.iter().enumerate() {
+            for (&node, h) in nodes.iter().flat_map(|n| held.iter().map(move |h| (n, h))) {
+                if let Some(list) = at.get_mut(&node) {
+                    list.push((h.dir, i));
+                }
+            }
+        }
+        let mut nodes: Vec<usize> = at.keys().copied().collect();
+        nodes.sort_unstable();
+        let mut frames = HashMap::new();
+        for node in nodes {
+            let mut axes: Vec<([f64; 3], usize)> = Vec::new();
+            for &(dir, i) in &at[&node] {
+                match axes
+                    .iter()
+                    .find(|(a, _)| crate::mesh::dot(*a, dir).abs() > 1e-9)
+                {
+                    None => axes.push((dir, i)),
+                    Some((a, _)) if crate::mesh::dot(*a, dir).abs() >= 1.0 - 1e-9 => {}
+                    Some(&(a, j)) => return Err(oblique(mesh, scene, node, [(a, j), (dir, i)])),
+                }
+            }
+            let dirs: Vec<[f64; 3]> = axes.iter().map(|&(a, _)| a).collect();
+            frames.insert(node, frame(&dirs, d));
+        }
+        Ok(Frames(frames))
     }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// The frame of `node`, if it has one of its own.
+    pub fn of(&self, node: usize) -> Option<&Axes> {
+        match self.0.is_empty() {
+            true => None,
+            false => self.0.get(&node),
+        }
+    }
+
+    /// The dof components at `node` of the spatial vector v: v·a_k (v itself without a
+    /// frame).
+    pub fn to_dofs(&self, node: usize, v: [f64; 3]) -> [f64; 3] {
+        match self.of(node) {
+            Some(a) => a.map(|a| crate::mesh::dot(a, v)),
+            None => v,
+        }
+    }
+
+    /// The spatial vector Σ_k v_k a_k of the dof components v at `node` (v itself without a
+    /// frame).
+    pub fn to_space(&self, node: usize, v: [f64; 3]) -> [f64; 3] {
+        match self.of(node) {
+            Some(a) => std::array::from_fn(|c| (0..3).map(|k| v[k] * a[k][c]).sum()),
+            None => v,
+        }
+    }
+
+    /// Hands the value v of spatial component c at global dof `dof` = d·node + c to the
+    /// node's dofs: `put(d·node + k, (a_k)_c v)` for each k, or `put(dof, v)` without a frame.
+    pub fn spread(&self, d: usize, dof: usize, v: f64, mut put: impl FnMut(usize, f64)) {
+        let (node, c) = (dof / d, dof % d);
+        match self.of(node) {
+            Some(a) => (0..d).for_each(|k| put(d * node + k, a[k][c] * v)),
+            None => put(dof, v),
+        }
+    }
+
+    /// The dof component of `node` along the held direction `dir`, and the sign of `dir`
+    /// along it: the frame's axis parallel to it, or without a frame the coordinate axis
+    /// (where `dir` is inclined the node is clamped: any component serves to check the two
+    /// holds agree).
+    fn component(&self, node: usize, dir: [f64; 3], d: usize) -> (usize, f64) {
+        let along = self.to_dofs(node, dir);
+        let c = (0..d)
+            .max_by(|&a, &b| along[a].abs().total_cmp(&along[b].abs()))
+            .unwrap_or(0);
+        (c, along[c].signum())
+    }
+}
+
+/// The right-handed frame whose first axes are the orthonormal `dirs` (one or two).
+fn frame(dirs: &[[f64; 3]], d: usize) -> Axes {
+    let a0 = dirs[0];
+    if d == 2 {
+        return [a0, [-a0[1], a0[0], 0.0], [0.0, 0.0, 1.0]];
+    }
+    let a1 = match dirs.get(1) {
+        Some(&a1) => a1,
+        None => super::tangents(a0, 3)[0],
+    };
+    [a0, a1, crate::mesh::cross(a0, a1)]
+}
+
+/// Two held directions at one node that are neither parallel nor perpendicular.
+fn oblique(mesh: &Mesh, scene: &Scene, node: usize, held: [([f64; 3], usize); 2]) -> Error {
+    let [(a, i), (b, j)] = held;
+    let on = |i: usize| Source::Dirichlet(i).describe(scene);
+    Error::input(format!(
+        "{}: the node at {} lies on {} and on {}, which hold the directions {} and {}: neither \
+         parallel nor perpendicular, so no frame of the node holds both; make the planes meet \
+         at a right angle, or clamp the nodes where they meet (mesh.groups.fixed)",
+        scene.path.display(),
+        super::fmt_at(mesh.nodes[node], scene.mesh.model),
+        on(j),
+        on(i),
+        crate::mesh::fmt_point(a, mesh.dim),
+        crate::mesh::fmt_point(b, mesh.dim),
+    ))
 }
 
 /// Rigid mode m at the (centred, scaled) point x: translations along x, y (, z), then the
 /// rotations (about z in 2D; about x, y, z in 3D).
-fn rigid_mode(m: usize, d: usize, x: [f64; 3]) -> [f64; 3] {
+pub fn rigid_mode(m: usize, d: usize, x: [f64; 3]) -> [f64; 3] {
     if m < d {
         let mut e = [0.0; 3];
         e[m] = 1.0;
@@ -383,9 +566,9 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a * b).sum()
 }
 
-/// `check`'s line on the conditions: each group and what it holds, and the number of
-/// prescribed dofs (moved to the right side of each step).
-pub fn summary(scene: &Scene, n_prescribed: usize) -> String {
+/// `check`'s line on the conditions: each group and what it holds, the number of prescribed
+/// dofs (moved to the right side of each step) and of nodes with frames of their own.
+pub fn summary(scene: &Scene, n_prescribed: usize, frames: &Frames) -> String {
     let mut parts: Vec<String> = scene
         .mesh
         .groups
@@ -407,7 +590,14 @@ pub fn summary(scene: &Scene, n_prescribed: usize) -> String {
     if parts.is_empty() {
         parts.push("none".into());
     }
-    format!("{}; {n_prescribed} prescribed dofs", parts.join(", "))
+    let framed = match frames.0.len() {
+        0 => String::new(),
+        n => format!("; {n} nodes in frames of their own (inclined planes)"),
+    };
+    format!(
+        "{}; {n_prescribed} prescribed dofs{framed}",
+        parts.join(", ")
+    )
 }
 
 /// The scene's conditions for messages: "the clamped group 'Γ1'", or the groups listed.

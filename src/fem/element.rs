@@ -160,6 +160,37 @@ impl Cell {
         [delta + gi[be] * gj[al], gi[al] * gj[be]]
     }
 
+    /// [`Cell::parts`] where vertices have frames of their own (`constraints::Frames`): the
+    /// row's dof al of vertex i is the component along axis al of `frames[0]`, the column's
+    /// dof be of vertex j along axis be of `frames[1]` (None: the coordinate axes), so the
+    /// factors are Σ_{a,b} (a_al)_a (a_be)_b parts(i, j, a, b); without frames, `parts`.
+    pub fn parts_in(
+        &self,
+        [i, j]: [usize; 2],
+        [al, be]: [usize; 2],
+        frames: [Option<&[[f64; 3]; 3]>; 2],
+    ) -> [f64; 2] {
+        if frames == [None, None] {
+            return self.parts(i, j, al, be);
+        }
+        let along = |f: Option<&[[f64; 3]; 3]>, k: usize, a: usize| match f {
+            Some(axes) => axes[k][a],
+            None => f64::from(u8::from(k == a)),
+        };
+        let mut sum = [0.0; 2];
+        for a in 0..self.dim {
+            for b in 0..self.dim {
+                let w = along(frames[0], al, a) * along(frames[1], be, b);
+                if w != 0.0 {
+                    let p = self.parts(i, j, a, b);
+                    sum[0] += w * p[0];
+                    sum[1] += w * p[1];
+                }
+            }
+        }
+        sum
+    }
+
     /// The stiffness entry of material c with the factors `parts` (see [`Cell::parts`]).
     pub fn entry(&self, c: Isotropic, parts: [f64; 2]) -> f64 {
         self.measure * (c.a * parts[0] + c.b * parts[1])

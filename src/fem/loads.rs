@@ -6,7 +6,7 @@
 //!
 //! [`Facet::quadrature`]: crate::mesh::Facet::quadrature
 
-use super::Cell;
+use super::{Cell, Frames};
 use crate::expr::{Point, Scalar};
 use crate::mesh::{fmt_point, Mesh};
 use crate::scene::Scene;
@@ -69,24 +69,29 @@ impl Loads {
         self.loads.iter().map(|l| l.source)
     }
 
-    /// Adds ⟨f(t), φ_d⟩ for every free dof d to `rhs`. A value that is not finite stops the
-    /// run with the key, the time and the place (bad input at t = 0, a failed run later).
+    /// Adds ⟨f(t), φ_d⟩ for every free dof d to `rhs` (`free` its index, `frames` where
+    /// a node's dofs are components in a frame of its own). A value that is not finite
+    /// stops the run with the key, the time and the place (bad input at t = 0, a failed run
+    /// later).
     pub fn add(
         &self,
         t: f64,
-        free: &[Option<usize>],
+        (free, frames): (&[Option<usize>], &Frames),
         scene: &Scene,
         rhs: &mut [f64],
     ) -> Result<()> {
         self.visit(t, scene, |_, dof, v| {
-            if let Some(d) = free[dof] {
-                rhs[d] += v;
-            }
+            frames.spread(self.dim, dof, v, |g, v| {
+                if let Some(d) = free[g] {
+                    rhs[d] += v;
+                }
+            })
         })
     }
 
     /// Hands every term of ⟨f(t), φ⟩ to `put(load, global dof, value)`: the weight times φ
-    /// times the load's component at a quadrature point, load i the i-th of
+    /// times the load's component at a quadrature point (global dof d·node + c for the
+    /// spatial component c, whatever the node's frame), load i the i-th of
     /// [`Loads::sources`]. Their sum over the dofs of a component is the load's resultant
     /// (Σ φ = 1); `add` sums them into the free dofs. A value that is not finite stops the
     /// run as `add` says.

@@ -16,7 +16,7 @@ use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
 use crate::scene::{Friction, MeshChoice, Model, Scene};
 use crate::{Error, Result};
-pub use constraints::{Numbering, Prescribed};
+pub use constraints::{Frames, Numbering, Prescribed};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::Loads;
@@ -102,6 +102,10 @@ pub struct Discretization {
     /// Every held global dof (clamped, held at zero or prescribed), increasing, with the
     /// condition that holds it (`Numbering::held_by`).
     pub held: Vec<(usize, constraints::Source)>,
+    /// The nodes whose dofs are components in a frame of their own (an inclined `normal`
+    /// condition holds them; `constraints::Frames`): every vector and row is in these
+    /// components there, [`Discretization::nodal`] turns them back into x, y, z.
+    pub frames: Frames,
     /// Each cell's A (4.1) and B (4.2); R's constant part I (the same in every cell).
     pub materials: CellMaterials,
     pub r: Isotropic,
@@ -173,13 +177,22 @@ impl RowMaker<'_> {
         self.numbering.held[node].count_ones() as usize == self.dim
     }
 
-    /// The row `dir` at `node` (None when the node is held), its coefficients on held
-    /// components zero (placeholder dof 0: `NodalRow::entries` skips them); `Acts` when
-    /// `dir` has a component along a held one.
+    /// The spatial direction `dir` at `node` in the node's dof components (its frame's,
+    /// where it has one).
+    fn in_dofs(&self, node: usize, dir: [f64; 3]) -> [f64; 3] {
+        self.numbering.frames.to_dofs(node, dir)
+    }
+
+    /// The row `dir` at `node` (None when the node is held), in the node's dof components,
+    /// its coefficients on held components zero (placeholder dof 0: `NodalRow::entries`
+    /// skips them); `Acts` when `dir` has a component along a held one. A held component
+    /// multiplies a dof that is zero, so dropping it changes nothing; the bound 1e-9 only
+    /// tells a row that lies in the held plane, up to the round-off of facet normals and of
+    /// a frame, from one that contradicts the condition.
     fn row(
         &self,
         node: usize,
-        mut dir: [f64; 3],
+        dir: [f64; 3],
         bound: f64,
         area: f64,
     ) -> std::result::Result<Option<NodalRow>, Acts> {
@@ -187,11 +200,12 @@ impl RowMaker<'_> {
             return Ok(None);
         }
         let d = self.dim;
+        let mut dir = self.in_dofs(node, dir);
         let mut dofs = [0; 3];
         for c in 0..d {
             match self.numbering.free[d * node + c] {
                 Some(i) if self.numbering.held[node] & (1 << c) == 0 => dofs[c] = i,
-                _ if dir[c].abs() <= 1e-12 => dir[c] = 0.0,
+                _ if dir[c].abs() <= 1e-9 => dir[c] = 0.0,
                 _ => return Err(Acts(c)),
             }
         }
@@ -316,7 +330,8 @@ fn friction_rows(
         )?;
         check_overlap(mesh, scene, c, g)?;
     }
-    let (gf, c) = friction_integrals(mesh, scene, fr, g, &rows.numbering.free, n_dofs)?;
+    let dofs = (rows.numbering.free.as_slice(), &rows.numbering.frames);
+    let (gf, c) = friction_integrals(mesh, scene, fr, g, dofs, n_dofs)?;
     let g_f = if gf.iter().any(|&v| v != 0.0) {
         gf
     } else {
@@ -343,7 +358,7 @@ fn friction_rows(
         match made {
             Ok(r) => friction.extend(r.into_iter().flatten()),
             // 2D: the tangent is the held component, so the node cannot slide.
-            Err(Acts(_)) if rows.dim == 2 && is_axis(ts[0]) => {}
+            Err(Acts(_)) if rows.dim == 2 && is_axis(rows.in_dofs(node, ts[0])) => {}
             Err(Acts(comp)) => {
                 let why = match rows.dim {
                     2 => "and the tangent is inclined to it",
@@ -360,13 +375,14 @@ fn friction_rows(
 }
 
 /// By facet quadrature over the friction group `g`: g_F_i = ∫ F φ_i ν da (`n_dofs`
-/// entries, i = `free`[global dof]) and c_i = ∫ μF φ_i da per node.
+/// entries, i = `free`[global dof], in the nodes' `frames`) and c_i = ∫ μF φ_i da per
+/// node.
 fn friction_integrals(
     mesh: &Mesh,
     scene: &Scene,
     fr: &Friction,
     g: &Group,
-    free: &[Option<usize>],
+    (free, frames): (&[Option<usize>], &Frames),
     n_dofs: usize,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let d = mesh.dim;
@@ -386,9 +402,12 @@ fn friction_integrals(
             check_data(mu, "friction.coefficient", scene, p, true)?;
             for (&node, ph) in f.nodes().iter().zip(phi) {
                 for comp in 0..d {
-                    if let Some(dof) = free[d * node + comp] {
-                        gf[dof] += w * ph * big_f * f.normal[comp];
-                    }
+                    let v = w * ph * big_f * f.normal[comp];
+                    frames.spread(d, d * node + comp, v, |g, v| {
+                        if let Some(dof) = free[g] {
+                            gf[dof] += v;
+                        }
+                    });
                 }
                 c[node] += w * ph * mu * big_f;
             }
@@ -410,7 +429,8 @@ impl Discretization {
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
         let groups = scene.physics.memory_groups();
-        let (k_a_all, k_b, k_r) = assemble(&cells, d, free, n_dofs, &materials, r, groups);
+        let dofs = (free.as_slice(), &numbering.frames, n_dofs);
+        let (k_a_all, k_b, k_r) = assemble(&cells, d, dofs, &materials, r, groups);
         let (k_a, k_a_all) = match n_dofs > n_free {
             true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
             false => (k_a_all, None),
@@ -436,6 +456,7 @@ impl Discretization {
             prescribed: numbering.prescribed.clone(),
             held: numbering.held_by,
             free: numbering.free,
+            frames: numbering.frames,
             k_a_all,
             materials,
             r,
@@ -501,9 +522,9 @@ impl Discretization {
         // material, its memory m from its group's part of `m`.
         let pq_of = |s: &Stiffness| -> Vec<[[f64; D]; 2]> {
             let (a, b) = (s.a, s.b_or_zero());
-            let nodes = self.free.as_chunks::<D>().0.iter();
+            let nodes = self.free.as_chunks::<D>().0.iter().enumerate();
             nodes
-                .map(|dofs| {
+                .map(|(node, dofs)| {
                     let mut pq = [[0.0; D]; 2];
                     for (c, dof) in dofs.iter().enumerate() {
                         if let Some(dof) = *dof {
@@ -512,6 +533,13 @@ impl Discretization {
                             pq[0][c] = a.a * w + b.a * u + r.a * m;
                             pq[1][c] = a.b * w + b.b * u + r.b * m;
                         }
+                    }
+                    if self.frames.of(node).is_some() {
+                        // p and q are linear in the nodal vectors: turned into x, y, z alike.
+                        pq = pq.map(|v| {
+                            let v = self.frames.to_space(node, padded(v));
+                            std::array::from_fn(|c| v[c])
+                        });
                     }
                     pq
                 })
@@ -637,7 +665,13 @@ impl PackedCells {
     }
 }
 
-/// The first N components at every node of a free-dof vector (0 on Γ1 and beyond d).
+/// The first three entries of `v`, zero beyond its length.
+fn padded<const N: usize>(v: [f64; N]) -> [f64; 3] {
+    std::array::from_fn(|c| if c < N { v[c] } else { 0.0 })
+}
+
+/// The first N components at every node of a free-dof vector (0 on Γ1 and beyond d), in
+/// x, y, z (turned out of a node's frame where it has one).
 pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f64; N]> {
     let d = disc.dim;
     (0..disc.nodes.len())
@@ -645,6 +679,10 @@ pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f
             let mut out = [0.0; N];
             for (k, o) in out.iter_mut().enumerate().take(d) {
                 *o = disc.free[d * i + k].map_or(0.0, |dof| v[dof]);
+            }
+            if disc.frames.of(i).is_some() {
+                let x = disc.frames.to_space(i, padded(out));
+                out = std::array::from_fn(|k| x.get(k).copied().unwrap_or(0.0));
             }
             out
         })
@@ -829,8 +867,9 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 }
 
 /// Assembles K_A, K_B, K_R over all cells, each with its material (K_B when any cell has
-/// elasticity), on the dofs with an index (`free`: the free and
-/// the prescribed ones; rows and columns of dofs held at zero dropped); the three share one
+/// elasticity), on the dofs with an index (`free`: the free and the prescribed ones, n in
+/// all; rows and columns of dofs held at zero dropped; a node with a frame in its frame's
+/// components, `Cell::parts_in`); the three share one
 /// sparsity pattern, built once from the mesh: node q couples with node p when a cell holds
 /// both. The column of index j, a component of node p, lists the indices of the components
 /// of p's neighbours q, increasing. The element matrices are then added at their positions
@@ -838,8 +877,7 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 fn assemble(
     cells: &[Cell],
     d: usize,
-    free: &[Option<usize>],
-    n: usize,
+    (free, frames, n): (&[Option<usize>], &Frames, usize),
     materials: &CellMaterials,
     r: Isotropic,
     groups: usize,
@@ -885,6 +923,7 @@ fn assemble(
     for (c, t) in cells.iter().enumerate() {
         let Stiffness { a, b, memory } = materials.of(c);
         let nodes = t.vertices();
+        let frame = |i: usize| frames.of(nodes[i]);
         for (j, &p) in nodes.iter().enumerate() {
             for (i, &q) in nodes.iter().enumerate() {
                 for be in 0..d {
@@ -897,7 +936,7 @@ fn assemble(
                             continue;
                         };
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);
-                        let parts = t.parts(i, j, al, be);
+                        let parts = t.parts_in([i, j], [al, be], [frame(i), frame(j)]);
                         va[at] += t.entry(a, parts);
                         if let Some(b) = b {
                             vb[at] += t.entry(b, parts);

@@ -87,9 +87,15 @@ impl Reactions {
         for (g, v) in g_f_all.iter().enumerate() {
             normal_stress[g % d] -= v;
         }
+        // g_F at a held dof: the node's spatial g_F in its dof components.
+        let at_held = |g: usize| {
+            let node = g / d;
+            let v = std::array::from_fn(|c| if c < d { g_f_all[d * node + c] } else { 0.0 });
+            disc.frames.to_dofs(node, v)[g % d]
+        };
         let g_f = match g_f_all.is_empty() {
             true => vec![0.0; disc.held.len()],
-            false => disc.held.iter().map(|&(g, _)| g_f_all[g]).collect(),
+            false => disc.held.iter().map(|&(g, _)| at_held(g)).collect(),
         };
         Ok(Reactions {
             held: disc.held.clone(),
@@ -126,9 +132,11 @@ impl Reactions {
         let mut loads = vec![[0.0; 3]; disc.loads.sources().count()];
         disc.loads.visit(t, scene, |l, dof, v| {
             loads[l][dof % d] += v;
-            if let Some(h) = self.row_of[dof] {
-                reactions[h as usize] -= v;
-            }
+            disc.frames.spread(d, dof, v, |g, v| {
+                if let Some(h) = self.row_of[g] {
+                    reactions[h as usize] -= v;
+                }
+            });
         })?;
         Ok(StepForces { reactions, loads })
     }
@@ -155,6 +163,7 @@ fn held_rows(
         };
         let k_r = k_r.get(g).copied().unwrap_or(0.0);
         let nodes = t.vertices();
+        let frame = |i: usize| disc.frames.of(nodes[i]);
         for (i, &q) in nodes.iter().enumerate() {
             for al in 0..d {
                 let Some(row) = row_of[d * q + al] else {
@@ -162,7 +171,7 @@ fn held_rows(
                 };
                 for (j, &p) in nodes.iter().enumerate() {
                     for (be, col) in (0..d).filter_map(|be| Some((be, disc.free[d * p + be]?))) {
-                        let parts = t.parts(i, j, al, be);
+                        let parts = t.parts_in([i, j], [al, be], [frame(i), frame(j)]);
                         let [ka, kb, kr] = [a, b, r].map(|c| t.entry(c, parts));
                         let at = g * disc.n_dofs + col;
                         entries.push((row, [col, at], [ka + k_b * kb + k_r * kr, kb, kr]));
@@ -201,7 +210,9 @@ fn normal_stress_load(mesh: &Mesh, scene: &Scene) -> Result<Vec<f64>> {
     };
     let name = &scene.mesh.groups.friction;
     let g = group(mesh, scene, "mesh.groups.friction", name)?;
+    // Every global dof its own index, no frame: g_F in x, y, z at every node.
     let all: Vec<Option<usize>> = (0..mesh.dim * mesh.nodes.len()).map(Some).collect();
-    let (g_f, _) = super::friction_integrals(mesh, scene, fr, g, &all, all.len())?;
+    let dofs = (all.as_slice(), &super::Frames::default());
+    let (g_f, _) = super::friction_integrals(mesh, scene, fr, g, dofs, all.len())?;
     Ok(g_f)
 }

@@ -32,6 +32,7 @@
 //! in place and says why it is the one it is); its GAMG keeps the aggregates and
 //! interpolation of its first setup and recomputes the coarse operators at each rebuild.
 
+use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};
 use crate::{Error, Result};
 use std::ffi::{c_char, c_int, c_void, CStr, CString};
@@ -403,25 +404,17 @@ fn rigid_body_modes(disc: &Discretization) -> Vec<f64> {
             centre[c] += x[c] / count;
         }
     }
-    // Mode k's value at component c of a node at y (relative to the centre).
-    let value = |k: usize, c: usize, y: [f64; 3]| -> f64 {
-        if k < d {
-            return if c == k { 1.0 } else { 0.0 };
-        }
-        // Rotation about axis a (2D: about z only): ω × y with ω = e_a.
-        let a = if d == 2 { 2 } else { k - d };
-        let w = [0, 1, 2].map(|i| if i == a { 1.0 } else { 0.0 });
-        crate::mesh::cross(w, y)[c]
-    };
     let modes = d * (d + 1) / 2;
     let mut v: Vec<Vec<f64>> = (0..modes)
         .map(|k| {
             let mut m = vec![0.0; n];
             for (i, x) in disc.nodes.iter().enumerate() {
                 let y = [0, 1, 2].map(|c| x[c] - centre[c]);
-                for c in 0..d {
+                // Mode k at the node (relative to the centre), in the node's dofs.
+                let mode = disc.frames.to_dofs(i, rigid_mode(k, d, y));
+                for (c, value) in mode.into_iter().enumerate().take(d) {
                     if let Some(f) = unknown(disc, d * i + c) {
-                        m[f] = value(k, c, y);
+                        m[f] = value;
                     }
                 }
             }

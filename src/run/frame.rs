@@ -126,7 +126,8 @@ fn fields(
         } else if fc == 1 {
             friction[r.node] = z[i] / r.area;
         } else {
-            for (k, t) in r.dir.iter().enumerate() {
+            let tau = disc.frames.to_space(r.node, r.dir);
+            for (k, t) in tau.iter().enumerate() {
                 friction[3 * r.node + k] += z[i] * t / r.area;
             }
         }

@@ -284,10 +284,11 @@ impl RowMaker {
             .zip(&layout.condition_of)
             .zip(&f.reactions)
         {
-            let mut r_vec = [0.0; 3];
+            let (node, mut r_vec) = (dof / d, [0.0; 3]);
             r_vec[dof % d] = r;
-            reaction[g][dof % d] += r;
-            let arm = cross(self.disc.nodes[dof / d], r_vec);
+            let r_vec = self.disc.frames.to_space(node, r_vec);
+            (0..3).for_each(|c| reaction[g][c] += r_vec[c]);
+            let arm = cross(self.disc.nodes[node], r_vec);
             (0..3).for_each(|c| moment[g][c] += arm[c]);
         }
         let mut traction = vec![[0.0; 3]; layout.tractions.len()];
@@ -324,7 +325,8 @@ impl RowMaker {
                 true => &mut contact,
                 false => &mut friction,
             };
-            (0..3).for_each(|c| sum[c] -= z * row.dir[c]);
+            let dir = self.disc.frames.to_space(row.node, row.dir);
+            (0..3).for_each(|c| sum[c] -= z * dir[c]);
         }
         (contact, friction)
     }

@@ -131,24 +131,42 @@ fn bad_dirichlet_entries_are_named() {
     }
 }
 
-/// `normal` on an inclined plane: the square turned by 30°, its left edge inclined.
+/// `normal` on an inclined plane: the half block turned by 30° about x holds its symmetry
+/// plane in frames of the plane's nodes, and `check` says how many; on the square turned by
+/// 30°, an axis component held beside the inclined left edge's normal on the same nodes is
+/// neither parallel nor perpendicular to it, and is refused.
 #[test]
-fn an_inclined_normal_is_refused_for_now() {
+fn an_inclined_normal_is_held_in_frames_and_an_oblique_pair_is_refused() {
     let dir = tempfile::tempdir().unwrap();
+    let turned = repo().join("tests/data/symmetry/half_block_turned.msh");
+    let half = SceneText::block()
+        .mesh(&turned)
+        .dirichlet("sym", &["normal"], None)
+        .write(dir.path(), "half.toml");
+    let (code, text) = cli(&["check", &half.display().to_string()]);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("'sym' normal = 0"), "{text}");
+    assert!(text.contains("nodes in frames of their own"), "{text}");
     let text = std::fs::read_to_string(repo().join("tests/data/patch_square.msh")).unwrap();
     let (s, c) = (0.5f64, 0.75f64.sqrt());
-    let turned = map_msh_nodes(&text, |x| [c * x[0] - s * x[1], s * x[0] + c * x[1], x[2]]);
-    let mesh = write(dir.path(), "turned.msh", &turned);
+    let square = map_msh_nodes(&text, |x| [c * x[0] - s * x[1], s * x[0] + c * x[1], x[2]]);
+    let mesh = write(dir.path(), "turned.msh", &square);
     let scene = SceneText::on(&mesh)
         .set("time.end", 1.0)
         .set("time.steps", 1)
         .set("material.viscosity.theta", 1.0)
         .set("mesh.groups.fixed", Value::Array(vec![]))
         .dirichlet("Γ1", &["normal"], None)
-        .write(dir.path(), "turned.toml");
+        .dirichlet("Γ1", &["x"], None)
+        .write(dir.path(), "oblique.toml");
     refused(
         &scene,
-        &["inclined", "only planes normal to a coordinate axis"],
+        &[
+            "'Γ1' (dirichlet[0])",
+            "'Γ1' (dirichlet[1])",
+            "neither parallel nor perpendicular",
+            "right angle",
+        ],
     );
 }
 

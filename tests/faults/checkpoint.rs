@@ -12,7 +12,7 @@ use common::{
 use hdf5_metno as hdf5;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use viscontact::run::{resume, run, Outcome, ResumeOptions};
+use viscontact::run::{resume, run, Outcome, ResumeOptions, Summary};
 
 /// Stop at N/2 and resume = the run that never stopped, for a Prony and a general kernel,
 /// with contact and friction active.
@@ -98,19 +98,47 @@ fn stopped_and_resumed_equals_uninterrupted_in_3d() {
     let scene = common::repo().join("examples/block.toml");
     let mesh = format!("mesh.file={}", common::mesh_path("3d/block_004.msh"));
     let set = [mesh.as_str(), "checkpoint.every=5"];
-    let (full, part) = (tmp.path().join("full"), tmp.path().join("part"));
-    let s = finished(run(&scene, &opts(&full, &set, None)).unwrap());
+    let s = resumed_equals_uninterrupted(tmp.path(), &scene, &set, 13, "3D block");
     assert!(s.iterations.total > 0 && s.contact.friction_nodes > 0);
+}
+
+/// Runs `scene` with `set` whole into `dir/full`, and stopped after step `stop` and resumed
+/// into `dir/part`: the two series are the same bit for bit. Returns the whole run's
+/// summary.
+fn resumed_equals_uninterrupted(
+    dir: &Path,
+    scene: &Path,
+    set: &[&str],
+    stop: usize,
+    what: &str,
+) -> Summary {
+    let (full, part) = (dir.join("full"), dir.join("part"));
+    let s = finished(run(scene, &opts(&full, set, None)).unwrap());
     assert!(matches!(
-        run(&scene, &opts(&part, &set, Some(13))).unwrap(),
-        Outcome::Stopped { step: 13, .. }
+        run(scene, &opts(&part, set, Some(stop))).unwrap(),
+        Outcome::Stopped { step, .. } if step == stop
     ));
     let resume_opts = ResumeOptions {
         progress: false,
         ..Default::default()
     };
     finished(resume(&part.join("checkpoint.h5"), &resume_opts).unwrap());
-    common::assert_same_series(&full, &part, "3D block");
+    common::assert_same_series(&full, &part, what);
+    s
+}
+
+/// The half block turned by 30° (tests/data/symmetry/half_block_turned.msh), its inclined
+/// symmetry plane held in frames of the plane's nodes: the state is kept in those frames'
+/// components, and the resumed run equals the uninterrupted one bit for bit.
+#[test]
+fn stopped_and_resumed_equals_uninterrupted_with_an_inclined_plane() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = common::SceneText::block()
+        .mesh(common::repo().join("tests/data/symmetry/half_block_turned.msh"))
+        .set("time.steps", 12)
+        .dirichlet("sym", &["normal"], None)
+        .write(tmp.path(), "turned.toml");
+    resumed_equals_uninterrupted(tmp.path(), &scene, &[], 5, "turned half block");
 }
 
 /// A step given up (a second signal while a dual method solves it: `solver::abandon`)

@@ -1,7 +1,7 @@
 //! The active-set contact solver (`solver.contact = "active_set"`, on PETSc) against the
 //! dense dual and clarabel: every golden scene with contact or friction (2D and 3D: the
 //! paper's variants, the bracket, the plate with a hole, the blocks, the slab), the corners
-//! where Γ3,1 meets Γ3,2, and a block under a traction that turns (nodes change state from
+//! where Γ3,1 meets Γ3,2, half models with an inclined symmetry plane, and a block under a traction that turns (nodes change state from
 //! step to step). u_N agrees with the dense dual's to 1e-8 relative; the runs are bit for
 //! bit the same when stopped and resumed, their forces balance in history.csv, and
 //! summary.json records the Newton and Krylov counts.
@@ -104,6 +104,31 @@ fn the_golden_3d_scenes_agree_with_the_dense_dual() {
     ];
     for (scene, what) in cases {
         agrees(scene, what, false);
+    }
+}
+
+/// Half models whose symmetry plane is inclined (tests/data/symmetry/*_turned.msh: the
+/// plane nodes' dofs in frames of their own, and GAMG's rigid-body modes in those frames):
+/// the block in 3D, contact meeting the plane, and the rectangle in 2D, friction on the line.
+#[test]
+fn half_models_with_an_inclined_symmetry_plane_agree_with_the_dense_dual() {
+    let data = repo().join("tests/data/symmetry");
+    let cases = [
+        (SceneText::block(), "half_block_turned.msh"),
+        (
+            SceneText::paper()
+                .set("load.traction", toml::Value::Array(vec![]))
+                .traction(None, &["0", "-0.1*min(t, 0.2)"]),
+            "half_rect_turned.msh",
+        ),
+    ];
+    for (scene, mesh) in cases {
+        let scene =
+            scene
+                .mesh(data.join(mesh))
+                .set("time.steps", 16)
+                .dirichlet("sym", &["normal"], None);
+        agrees(scene, mesh, false);
     }
 }
 

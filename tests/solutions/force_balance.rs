@@ -3,8 +3,8 @@
 //! from the loads and the multipliers, so their sum per component is the residual of the
 //! step's equations summed over a translation: zero to the precision of the solve. Checked
 //! with contact and friction (the paper's scene, in both schemes; the plate with a hole), in
-//! 3D (the block), with
-//! a symmetry plane ([[dirichlet]] at zero) and with prescribed displacements.
+//! 3D (the block), with a symmetry plane ([[dirichlet]] at zero; an axis plane and an
+//! inclined one) and with prescribed displacements.
 
 use crate::common;
 use common::*;
@@ -108,6 +108,39 @@ fn forces_balance_with_a_symmetry_plane() {
         .write(dir.path(), "half_rect.toml");
     let h = balanced(dir.path(), &rect, &["time.steps=8"], "half rect");
     assert!(acts(&h, "reaction_sym_x") && !acts(&h, "reaction_sym_y"));
+}
+
+/// A half model whose symmetry plane is inclined (the half block turned by 30° about x:
+/// normal n = (0, cos, sin), each plane node's dofs in a frame of its own): forces balance,
+/// and the plane's reaction, summed from the frames' held components turned back into x,
+/// y, z, is normal to it. Likewise the half rectangle turned by 30°.
+#[test]
+fn forces_balance_with_an_inclined_symmetry_plane() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = repo().join("tests/data/symmetry/half_block_turned.msh");
+    let block = SceneText::block()
+        .mesh(mesh)
+        .dirichlet("sym", &["normal"], None)
+        .write(dir.path(), "turned.toml");
+    let h = balanced(dir.path(), &block, &["time.steps=8"], "turned block");
+    let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let r = ["x", "y", "z"].map(|a| h.column(&format!("reaction_sym_{a}")));
+    let size = r[1].iter().chain(&r[2]).fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(size > 0.0 && acts(&h, "moment_sym_x"));
+    for ((x, y), z) in r[0].iter().zip(&r[1]).zip(&r[2]) {
+        let across = -s * y + c * z;
+        assert!(x.abs() <= 1e-12 * size && across.abs() <= 1e-12 * size);
+    }
+    // 2D, the rectangle turned by 30°: Γ3,2 meets the inclined line, so g_F acts at a
+    // held dof of a frame.
+    let rect = SceneText::paper()
+        .set("load.traction", Value::Array(vec![]))
+        .traction(None, &["0", "-0.1*min(t, 0.2)"])
+        .mesh(repo().join("tests/data/symmetry/half_rect_turned.msh"))
+        .dirichlet("sym", &["normal"], None)
+        .write(dir.path(), "turned_rect.toml");
+    let h = balanced(dir.path(), &rect, &["time.steps=8"], "turned rect");
+    assert!(acts(&h, "reaction_sym_x") && acts(&h, "reaction_sym_y"));
 }
 
 /// Prescribed displacements (dofs numbered after the free ones) on two groups, no clamped

@@ -64,7 +64,9 @@ fn check(model: &str, pick: impl Fn(&viscontact::fem::Discretization) -> (Isotro
     let mut kv = vec![0.0; disc.n_free];
     mul_add(k, &v, 1.0, &mut kv);
     let mut f = vec![0.0; disc.n_free];
-    disc.loads.add(0.0, &disc.free, &s, &mut f).unwrap();
+    disc.loads
+        .add(0.0, (&disc.free, &disc.frames), &s, &mut f)
+        .unwrap();
     let d = rel_diff(&kv, &f);
     assert!(d < 1e-13, "{model}: |K v − f| / |f| = {d:e}");
     // Interior rows vanish (not just the total): at least half the rows are interior here.

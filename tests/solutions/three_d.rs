@@ -872,7 +872,9 @@ fn clamped_patch(
     let mut kv = vec![0.0; disc.n_free];
     mul_add(k, &v, 1.0, &mut kv);
     let mut f = vec![0.0; disc.n_free];
-    disc.loads.add(0.0, &disc.free, &s, &mut f).unwrap();
+    disc.loads
+        .add(0.0, (&disc.free, &disc.frames), &s, &mut f)
+        .unwrap();
     // Rounding only (sums of ~20 element contributions per row): 1e-12 of the load.
     let d = rel_diff(&kv, &f);
     assert!(d < 1e-12, "K_{name} v − f: {d:e}");
@@ -970,7 +972,9 @@ fn three_d_load_quadrature_is_exact_for_polynomials() {
     let (s, mesh, disc) = load(&scene, &[]);
     let all_free: Vec<Option<usize>> = (0..3 * mesh.nodes.len()).map(Some).collect();
     let mut f = vec![0.0; 3 * mesh.nodes.len()];
-    disc.loads.add(0.0, &all_free, &s, &mut f).unwrap();
+    disc.loads
+        .add(0.0, (&all_free, &Default::default()), &s, &mut f)
+        .unwrap();
     for (a, (fb, ft)) in body.iter().zip(&traction).enumerate() {
         for (m, w) in [
             ([0, 0, 0], "1"),
