@@ -29,8 +29,8 @@
 //!
 //! The active-set solver's Newton systems (`solve_constrained`) have a KSP of their own, of
 //! the same type and options, on an assembled matrix with K's pattern (`shim.c` builds it
-//! in place and says why it is the one it is); its GAMG keeps the aggregates and
-//! interpolation of its first setup and recomputes the coarse operators at each rebuild.
+//! in place and says why it is the one it is); its GAMG makes its aggregates and
+//! interpolation once, from K, and recomputes the coarse operators at each rebuild.
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};
@@ -87,7 +87,7 @@ extern "C" {
         ns: PetscInt,
         sdofs: *const PetscInt,
         smats: *const f64,
-        setup: c_int,
+        rebuild: c_int,
         rtol: f64,
         b: *const f64,
         x: *mut f64,
@@ -296,16 +296,15 @@ impl Krylov {
     /// w ← the solution of Π(K + S)Π w + (I − Π) w = Π b, from the initial guess in w, by
     /// the KSP's method (CG by default) on the assembled matrix Π(K + S)Π + (I − Π)(K +
     /// S)(I − Π), which has the same solution, preconditioned by GAMG built from one such
-    /// matrix: that of the last system unless `rebuild` (from this one, keeping GAMG's
-    /// aggregates and interpolation) or `anew` (from this one from scratch). Stopped at
-    /// relative tolerance `rtol`.
+    /// matrix: that of the last system unless `rebuild` (from this one, on the aggregates
+    /// and interpolation GAMG made of K). Stopped at relative tolerance `rtol`.
     pub fn solve_constrained(
         &mut self,
         terms: NodalTerms<'_>,
         b: &[f64],
         w: &mut [f64],
         rtol: f64,
-        (rebuild, anew): (bool, bool),
+        rebuild: bool,
     ) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
@@ -323,7 +322,7 @@ impl Krylov {
                     ns as PetscInt,
                     terms.stiffness_dofs.as_ptr(),
                     terms.stiffness.as_ptr(),
-                    c_int::from(rebuild || anew) + c_int::from(anew),
+                    c_int::from(rebuild),
                     rtol,
                     b.as_ptr(),
                     w.as_mut_ptr(),

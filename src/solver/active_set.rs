@@ -35,11 +35,11 @@
 //!
 //! an SPD system of the size of K whatever the sets. It is solved as N w⁺ = Π(b − f_slip)
 //! with N = Π(K + S)Π + (I − Π)(K + S)(I − Π), which has the same solution ((I − Π)w⁺ = 0)
-//! and K's sparsity, graph and scale: N is assembled, and its algebraic multigrid is built
-//! anew at the first system of a step and wherever the sets changed (keeping the
-//! aggregates and interpolation of the first, recomputing the coarse operators); where only
-//! the slip stiffness moved, the last one serves. A multigrid of K alone, projected, was a
-//! weak preconditioner where much of the face is active (docs/performance.md). The
+//! and K's sparsity, graph and scale: N is assembled, and its algebraic multigrid is
+//! rebuilt at the first system of a step and wherever the sets changed, on aggregates and
+//! an interpolation made once from K (the coarse operators and smoothers are N's); where
+//! only the slip stiffness moved, the last one serves. A multigrid of K alone, projected,
+//! was a weak preconditioner where much of the face is active (docs/performance.md). The
 //! multipliers of the removed
 //! directions follow from the residual r = b − f_slip − (K + S)w⁺ node by node, r_i =
 //! Σ z_k a_k over the node's removed rows a_k (least squares on at most three vectors; a
@@ -112,11 +112,10 @@ pub trait ConstrainedSystem {
 pub enum Preconditioner {
     /// The last system's.
     Last,
-    /// Rebuilt from this system, keeping what the sets do not change (GAMG's aggregates).
+    /// Rebuilt from this system, on what depends on K alone (GAMG's aggregates and
+    /// interpolation): at the first system of a step, so that a step depends only on what
+    /// a checkpoint holds, and where the sets changed.
     Rebuilt,
-    /// Built anew from this system: the first of a step, so that a step depends only on
-    /// what a checkpoint holds.
-    New,
 }
 
 /// The nodal terms of a Newton system, flat as PETSc's shim reads them: the removed
@@ -431,12 +430,11 @@ impl ActiveSetSolver {
             let rtol = if exact { s.rtol } else { eta };
             self.assemble(rows, &sets, b);
             self.terms.project(w);
-            // The preconditioner is built anew at the start of the step and where the sets
-            // have changed; where only the slip stiffness moved, the last one serves.
+            // The preconditioner is rebuilt at the start of the step and where the sets have
+            // changed; where only the slip stiffness moved, the last one serves.
             let pc = match &built {
-                None => Preconditioner::New,
-                Some(b) if !b.same_as(&sets) => Preconditioner::Rebuilt,
-                Some(_) => Preconditioner::Last,
+                Some(b) if b.same_as(&sets) => Preconditioner::Last,
+                _ => Preconditioner::Rebuilt,
             };
             if pc != Preconditioner::Last {
                 built = Some(sets.clone());
@@ -636,8 +634,7 @@ impl ConstrainedSystem for crate::petsc::Krylov {
             stiffness_dofs: &terms.stiffness_dofs,
             stiffness: &terms.stiffness,
         };
-        let setup = (pc == Preconditioner::Rebuilt, pc == Preconditioner::New);
-        let s = self.solve_constrained(view, b, w, rtol, setup)?;
+        let s = self.solve_constrained(view, b, w, rtol, pc == Preconditioner::Rebuilt)?;
         Ok(LinearSolve {
             iterations: s.iterations,
             residual: s.residual,

@@ -515,7 +515,7 @@ impl ContactPlan {
                 Some(resources::active_set_bytes(m, n, disc.k_a.compute_nnz())),
                 "per Newton iteration one Krylov solve of the primal system (the step matrix with \
                  the active and sticking directions removed) preconditioned by a multigrid of \
-                 that matrix, built at a step's first system and rebuilt where the sets change \
+                 that matrix, rebuilt at a step's first system and where the sets change \
                  (a setup costs one or two solves); a step takes two or three Newton systems \
                  where the contact and slip sets stand in 2D (a loose solve, then the last to \
                  1e-12), about four in 3D where slipping nodes turn, tens where contact or \
