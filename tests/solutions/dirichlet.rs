@@ -264,3 +264,42 @@ fn a_half_model_in_2d_with_an_inclined_symmetry_line_agrees_with_the_whole() {
         [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
     });
 }
+
+/// Two inclined planes at a right angle: the turned half block's symmetry plane and its
+/// top, pressed down by a prescribed normal displacement (no traction), the end x = 0 a
+/// roller instead of clamped. The nodes on two or three of these hold two or three
+/// directions in one frame, the top's nodes a prescribed value along an inclined axis; the
+/// turned run agrees with the unturned one (axis planes, no frames) turned.
+#[test]
+fn two_inclined_planes_at_a_right_angle_share_a_frame() {
+    let data = repo().join("tests/data/symmetry");
+    let (c, s) = turn();
+    let dir = tempfile::tempdir().unwrap();
+    let run = |mesh: &str| {
+        let scene = SceneText::block()
+            .set("time.steps", 8)
+            .set("load.traction", Value::Array(vec![]))
+            .set("mesh.groups.fixed", Value::Array(vec![]))
+            .mesh(data.join(mesh))
+            .dirichlet("Γ1", &["normal"], None)
+            .dirichlet("sym", &["normal"], None)
+            .dirichlet("top", &["normal"], Some(&["-0.002*t"]))
+            .write(dir.path(), mesh);
+        let (scene, _, disc) = load(&scene, &[]);
+        let t = trace(&scene, &disc);
+        assert!(
+            t.z.last().unwrap().iter().any(|&z| z != 0.0),
+            "{mesh}: no contact"
+        );
+        (
+            disc.frames.is_empty(),
+            viscontact::fem::nodal_vectors::<3>(&disc, &t.u_final),
+        )
+    };
+    let (no_frames, unturned) = run("half_block.msh");
+    let (none, got) = run("half_block_turned.msh");
+    assert!(no_frames && !none);
+    agrees_turned(got, &unturned, |v| {
+        [v[0], c * v[1] - s * v[2], s * v[1] + c * v[2]]
+    });
+}
