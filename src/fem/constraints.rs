@@ -479,10 +479,13 @@ impl Frames {
     }
 
     /// The spatial vector Σ_k v_k a_k of the dof components v at `node` (v itself without a
-    /// frame).
-    pub fn to_space(&self, node: usize, v: [f64; 3]) -> [f64; 3] {
+    /// frame), for the first N components of both (N = 2 in the plane; zero beyond 3).
+    pub fn to_space<const N: usize>(&self, node: usize, v: [f64; N]) -> [f64; N] {
         match self.of(node) {
-            Some(a) => std::array::from_fn(|c| (0..3).map(|k| v[k] * a[k][c]).sum()),
+            Some(a) => std::array::from_fn(|c| {
+                let along = |k: usize| a[k].get(c).copied().unwrap_or(0.0);
+                (0..N.min(3)).map(|k| v[k] * along(k)).sum()
+            }),
             None => v,
         }
     }

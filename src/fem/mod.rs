@@ -534,14 +534,8 @@ impl Discretization {
                             pq[1][c] = a.b * w + b.b * u + r.b * m;
                         }
                     }
-                    if self.frames.of(node).is_some() {
-                        // p and q are linear in the nodal vectors: turned into x, y, z alike.
-                        pq = pq.map(|v| {
-                            let v = self.frames.to_space(node, padded(v));
-                            std::array::from_fn(|c| v[c])
-                        });
-                    }
-                    pq
+                    // p and q are linear in the nodal vectors: turned into x, y, z alike.
+                    pq.map(|v| self.frames.to_space(node, v))
                 })
                 .collect()
         };
@@ -665,11 +659,6 @@ impl PackedCells {
     }
 }
 
-/// The first three entries of `v`, zero beyond its length.
-fn padded<const N: usize>(v: [f64; N]) -> [f64; 3] {
-    std::array::from_fn(|c| if c < N { v[c] } else { 0.0 })
-}
-
 /// The first N components at every node of a free-dof vector (0 on Γ1 and beyond d), in
 /// x, y, z (turned out of a node's frame where it has one).
 pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f64; N]> {
@@ -680,11 +669,7 @@ pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f
             for (k, o) in out.iter_mut().enumerate().take(d) {
                 *o = disc.free[d * i + k].map_or(0.0, |dof| v[dof]);
             }
-            if disc.frames.of(i).is_some() {
-                let x = disc.frames.to_space(i, padded(out));
-                out = std::array::from_fn(|k| x.get(k).copied().unwrap_or(0.0));
-            }
-            out
+            disc.frames.to_space(i, out)
         })
         .collect()
 }
