@@ -30,7 +30,8 @@
 //! The active-set solver's Newton systems (`solve_constrained`) have a KSP of their own, of
 //! the same type and options, on an assembled matrix with K's pattern (`shim.c` builds it
 //! in place and says why it is the one it is); its GAMG makes its aggregates and
-//! interpolation once, from K, and recomputes the coarse operators at each rebuild.
+//! interpolation once, from K, and updates the coarse operators where the matrix changed
+//! (`Hierarchy`).
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};
@@ -89,6 +90,7 @@ extern "C" {
         smats: *const f64,
         rebuild: c_int,
         rtol: f64,
+        of_start: c_int,
         b: *const f64,
         x: *mut f64,
         its: *mut PetscInt,
@@ -96,6 +98,7 @@ extern "C" {
         rnorm: *mut f64,
     ) -> c_int;
     fn vc_ksp_types(ctx: *mut c_void, ksp: *mut *const c_char, pc: *mut *const c_char) -> c_int;
+    fn vc_galerkin_defect(ctx: *mut c_void, defect: *mut f64) -> c_int;
     fn vc_ksp_destroy(ctx: *mut c_void) -> c_int;
 }
 
@@ -282,6 +285,28 @@ pub struct NodalTerms<'a> {
     pub stiffness: &'a [f64],
 }
 
+/// What a constrained system's multigrid is built from (`Krylov::solve_constrained`); the
+/// shim's `rebuild` codes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Hierarchy {
+    /// The last system's, as it stands.
+    Last = 0,
+    /// This system's, from K's coarse operators: a step's first system, so that a step
+    /// depends only on what a checkpoint holds.
+    FromK = 1,
+    /// This system's, by an update of the last one's where the matrices differ.
+    Updated = 2,
+}
+
+/// Where a constrained solve stops (`Krylov::solve_constrained`): at a residual of
+/// relative tolerance to the right side, PETSc's default, or to the initial residual
+/// (`KSPConvergedDefaultSetUIRNorm`), for the inexact systems of a Newton iteration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Tolerance {
+    OfRhs(f64),
+    OfStart(f64),
+}
+
 impl Krylov {
     /// y = K x.
     pub fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()> {
@@ -296,16 +321,20 @@ impl Krylov {
     /// w ← the solution of Π(K + S)Π w + (I − Π) w = Π b, from the initial guess in w, by
     /// the KSP's method (CG by default) on the assembled matrix Π(K + S)Π + (I − Π)(K +
     /// S)(I − Π), which has the same solution, preconditioned by GAMG built from one such
-    /// matrix: that of the last system unless `rebuild` (from this one, on the aggregates
-    /// and interpolation GAMG made of K). Stopped at relative tolerance `rtol`.
+    /// matrix, as `hierarchy` says, on the aggregates and interpolation GAMG made of K.
+    /// Stopped at `tolerance`.
     pub fn solve_constrained(
         &mut self,
         terms: NodalTerms<'_>,
         b: &[f64],
         w: &mut [f64],
-        rtol: f64,
-        rebuild: bool,
+        tolerance: Tolerance,
+        hierarchy: Hierarchy,
     ) -> Result<Solve> {
+        let (rtol, of_start) = match tolerance {
+            Tolerance::OfRhs(rtol) => (rtol, false),
+            Tolerance::OfStart(eta) => (eta, true),
+        };
         assert!(b.len() == self.n && w.len() == self.n);
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
         assert!(terms.removed.len() == 3 * np && terms.stiffness.len() == 9 * ns);
@@ -322,8 +351,9 @@ impl Krylov {
                     ns as PetscInt,
                     terms.stiffness_dofs.as_ptr(),
                     terms.stiffness.as_ptr(),
-                    c_int::from(rebuild),
+                    hierarchy as c_int,
                     rtol,
+                    c_int::from(of_start),
                     b.as_ptr(),
                     w.as_mut_ptr(),
                     its,
@@ -332,6 +362,21 @@ impl Krylov {
                 )
             },
         )
+    }
+
+    /// How far the Newton systems' multigrid is from the Galerkin products of its fine
+    /// matrix: the largest relative difference (Frobenius) between a coarse operator and
+    /// the product of the level above, computed anew. The coarse operators are updated in
+    /// place, not recomputed (`Hierarchy`); this is their check (tests/petsc). 0 before the
+    /// first Newton system and where the options chose another preconditioner than GAMG.
+    pub fn galerkin_defect(&mut self) -> Result<f64> {
+        let mut defect = 0.0;
+        // SAFETY: ctx is a live KSP; the shim writes one value.
+        check(
+            unsafe { vc_galerkin_defect(self.ctx, &mut defect) },
+            "the Galerkin check",
+        )?;
+        Ok(defect)
     }
 }
 

@@ -49,6 +49,11 @@ typedef struct {
   KSP       kc;
   VcTerms   terms;
   PetscInt *frame_of; /* n entries, −1 between calls (newton_matrix) */
+  /* GAMG's levels (0: coarsest) and K's Galerkin operators on levels 0 … nlev − 2, kept for
+   * galerkin_update; NULL where the constrained PC is not GAMG (the options chose another). */
+  PetscInt nlev;
+  Mat     *coarse_k;
+  int      of_start; /* the convergence test's: rtol of the initial residual, else of b */
 } VcKsp;
 
 /* The matrix in CSR (a symmetric matrix's CSC is its CSR), its near-null space as `nvec`
@@ -301,18 +306,22 @@ static PetscErrorCode newton_matrix(VcKsp *s)
 /* The constrained KSP: the type of ksp and its PC (CG and GAMG by default, or what the
  * options chose). Its operator is the Newton matrix N, its preconditioner is built from Q,
  * N's copy at the last rebuild (same pattern, block size and near-null space as K). GAMG's
- * aggregates and interpolation are made once, here, from K itself, and kept: a rebuild
- * recomputes the coarse operators of Q and the smoothers' eigenvalue estimates (the
- * aggregation's estimate would be K's). So a hierarchy is a function of K and of the
- * system it was rebuilt from, nothing before: a resumed run rebuilds what the
- * uninterrupted one did. Aggregating each step's first system anew instead cost 16 % more
- * on the plate 0.03 (docs/performance.md). */
+ * aggregates and interpolation are made once, here, from K itself, and kept, with K's
+ * coarse operators; a rebuild updates the coarse operators by galerkin_update, and the
+ * smoothers re-estimate their eigenvalues for the matrices changed (the aggregation's
+ * estimate would be K's). So a hierarchy is a function of K and of the system it was
+ * rebuilt from, nothing before: a resumed run rebuilds what the uninterrupted one did.
+ * Aggregating each step's first system anew instead cost 16 % more on the plate 0.03, and
+ * GAMG's own rebuild on kept aggregates (Galerkin products of the whole of Q) more than
+ * the update (docs/performance.md). Another PC, chosen by the options, is set up anew from
+ * Q at each rebuild. */
 static PetscErrorCode constrained_setup(VcKsp *s)
 {
   KSPType      type;
   PC           pc;
   MatNullSpace near;
   PetscInt     n;
+  PetscBool    gamg;
 
   PetscFunctionBeginUser;
   PetscCall(MatGetNearNullSpace(s->A, &near));
@@ -333,7 +342,6 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(KSPSetType(s->kc, type));
   PetscCall(KSPGetPC(s->kc, &pc));
   PetscCall(PCSetType(pc, PCGAMG));
-  PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_TRUE));
   PetscCall(PCGAMGSetUseSAEstEig(pc, PETSC_FALSE));
   /* GAMG's smoothers would use the operator N, whose residuals its coarse levels (of Q) do
    * not match: CG then met an indefinite preconditioner. */
@@ -341,20 +349,153 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(KSPSetInitialGuessNonzero(s->kc, PETSC_TRUE));
   PetscCall(KSPSetFromOptions(s->kc));
   PetscCall(MatCopy(s->A, s->Q, SAME_NONZERO_PATTERN));
-  PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_FALSE));
   PetscCall(PCSetUp(pc));
-  PetscCall(PCGAMGSetReuseInterpolation(pc, PETSC_TRUE));
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCGAMG, &gamg));
+  if (gamg) PetscCall(PCMGGetLevels(pc, &s->nlev));
+  if (gamg && s->nlev > 1) {
+    PetscCall(PetscMalloc1(s->nlev - 1, &s->coarse_k));
+    for (PetscInt l = 0; l + 1 < s->nlev; l++) {
+      KSP smoother;
+      Mat a;
+      PetscCall(PCMGGetSmoother(pc, l, &smoother));
+      PetscCall(KSPGetOperators(smoother, &a, NULL));
+      PetscCall(MatSetOption(a, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
+      PetscCall(MatDuplicate(a, MAT_COPY_VALUES, &s->coarse_k[l]));
+    }
+    /* The hierarchy is updated here, by galerkin_update, never by GAMG again. */
+    PetscCall(KSPSetReusePreconditioner(s->kc, PETSC_TRUE));
+  }
+  PetscFunctionReturn(0);
+}
+
+/* N − M (M: K or Q) as a matrix of its own: the entries where the two differ (the rows and
+ * columns of nodes whose removed directions or slip stiffness differ), on K's pattern; NULL
+ * where none does. */
+static PetscErrorCode difference(VcKsp *s, Mat m, Mat *d)
+{
+  const PetscInt    *ai, *aj;
+  const PetscScalar *ma, *na;
+  PetscInt           n, nnz = 0, *rowptr, *cols;
+  PetscScalar       *vals;
+  PetscBool          done;
+
+  PetscFunctionBeginUser;
+  *d = NULL;
+  PetscCall(MatGetRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
+  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "the Newton matrix has no CSR arrays");
+  PetscCall(MatSeqAIJGetArrayRead(m, &ma));
+  PetscCall(MatSeqAIJGetArrayRead(s->N, &na));
+  for (PetscInt x = 0; x < ai[n]; x++) nnz += na[x] != ma[x];
+  if (nnz > 0) {
+    PetscCall(PetscMalloc1(n + 1, &rowptr));
+    PetscCall(PetscMalloc1(nnz, &cols));
+    PetscCall(PetscMalloc1(nnz, &vals));
+    rowptr[0] = 0;
+    for (PetscInt i = 0, k = 0; i < n; i++) {
+      for (PetscInt x = ai[i]; x < ai[i + 1]; x++)
+        if (na[x] != ma[x]) {
+          cols[k] = aj[x];
+          vals[k++] = na[x] - ma[x];
+        }
+      rowptr[i + 1] = k;
+    }
+    PetscCall(MatCreate(PETSC_COMM_SELF, d));
+    PetscCall(MatSetSizes(*d, n, n, n, n));
+    PetscCall(MatSetType(*d, MATSEQAIJ));
+    PetscCall(MatSeqAIJSetPreallocationCSR(*d, rowptr, cols, vals));
+    PetscCall(PetscFree(rowptr));
+    PetscCall(PetscFree(cols));
+    PetscCall(PetscFree(vals));
+  }
+  PetscCall(MatSeqAIJRestoreArrayRead(s->N, &na));
+  PetscCall(MatSeqAIJRestoreArrayRead(m, &ma));
+  PetscCall(MatRestoreRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
+  PetscFunctionReturn(0);
+}
+/* Pᵀ D P for a symmetric D with few nonzero rows R: P_Rᵀ D_RR P_R, so that the product
+ * costs what R holds, not what P does. NULL where D is. */
+static PetscErrorCode restricted_ptap(Mat d, Mat p, Mat *out)
+{
+  const PetscInt *ai, *aj;
+  PetscInt        n, nc, nr = 0, *rows;
+  PetscBool       done;
+  IS              isr, isc;
+  Mat             dr, pr;
+
+  PetscFunctionBeginUser;
+  *out = NULL;
+  if (!d) PetscFunctionReturn(0);
+  PetscCall(MatGetRowIJ(d, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
+  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "a difference matrix has no CSR arrays");
+  PetscCall(PetscMalloc1(n, &rows));
+  for (PetscInt i = 0; i < n; i++)
+    if (ai[i + 1] > ai[i]) rows[nr++] = i;
+  PetscCall(MatRestoreRowIJ(d, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
+  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, nr, rows, PETSC_OWN_POINTER, &isr));
+  PetscCall(MatGetSize(p, NULL, &nc));
+  PetscCall(ISCreateStride(PETSC_COMM_SELF, nc, 0, 1, &isc));
+  PetscCall(MatCreateSubMatrix(d, isr, isr, MAT_INITIAL_MATRIX, &dr));
+  PetscCall(MatCreateSubMatrix(p, isr, isc, MAT_INITIAL_MATRIX, &pr));
+  PetscCall(MatPtAP(dr, pr, MAT_INITIAL_MATRIX, PETSC_DEFAULT, out));
+  PetscCall(MatDestroy(&dr));
+  PetscCall(MatDestroy(&pr));
+  PetscCall(ISDestroy(&isr));
+  PetscCall(ISDestroy(&isc));
+  PetscFunctionReturn(0);
+}
+
+/* Q ← N and its coarse operators on K's interpolations P_l, A_{l−1} = P_lᵀ A_l P_l with
+ * A_fine = Q, computed as a reference's plus the difference carried down: K's own at a
+ * step's first system (`from_k`), so that a step's hierarchies depend on K and the step
+ * alone, and the last system's within a step. Q differs from K only near the contact
+ * boundary, and from the last system only where the sets changed, so each product costs
+ * a fraction of GAMG's, which multiplies the whole of Q. The difference's pattern lies
+ * within K's, so each level's lies within its operator's, and the sum is written in place
+ * (MatAXPY on a subset pattern). */
+static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
+{
+  PC  pc;
+  Mat d;
+
+  PetscFunctionBeginUser;
+  PetscCall(KSPGetPC(s->kc, &pc));
+  PetscCall(difference(s, from_k ? s->A : s->Q, &d));
+  PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
+  for (PetscInt l = s->nlev - 1; l > 0; l--) {
+    KSP smoother;
+    Mat p, a, dc;
+    PetscCall(PCMGGetInterpolation(pc, l, &p));
+    PetscCall(restricted_ptap(d, p, &dc));
+    PetscCall(MatDestroy(&d));
+    PetscCall(PCMGGetSmoother(pc, l - 1, &smoother));
+    PetscCall(KSPGetOperators(smoother, &a, NULL));
+    if (from_k) PetscCall(MatCopy(s->coarse_k[l - 1], a, SAME_NONZERO_PATTERN));
+    if (dc) PetscCall(MatAXPY(a, 1.0, dc, SUBSET_NONZERO_PATTERN));
+    d = dc;
+  }
+  PetscCall(MatDestroy(&d));
+  /* A matrix changed in place is news to a KSP only through KSPSetOperators: without it,
+   * Chebyshev kept K's eigenvalue estimates, and CG met an indefinite preconditioner. */
+  for (PetscInt l = 0; l < s->nlev; l++) {
+    KSP smoother;
+    Mat a;
+    PetscCall(PCMGGetSmoother(pc, l, &smoother));
+    PetscCall(KSPGetOperators(smoother, &a, NULL));
+    PetscCall(KSPSetOperators(smoother, a, a));
+  }
   PetscFunctionReturn(0);
 }
 
 /* x ← the solution of the constrained system Π(K + S)Π x + (I − Π) x = Π b with the terms
- * given, from the initial guess in x, to relative tolerance rtol: iterations, reason and
+ * given, from the initial guess in x, to relative tolerance rtol (of b's norm, or where
+ * `of_start`, of the initial residual's: an inexact Newton system): iterations, reason and
  * final residual norm as vc_ksp_solve. `rebuild`: 0, the preconditioner of the last system
  * serves; 1, it is rebuilt from this system's matrix, on K's aggregates and interpolation
- * (what a step starts with, so that a resumed run builds what the uninterrupted one did). */
+ * (what a step starts with, so that a resumed run builds what the uninterrupted one did);
+ * 2, the same, by an update of the last one (galerkin_update). */
 int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const PetscScalar *pdirs,
                          PetscInt ns, const PetscInt *sdofs, const PetscScalar *smats, int rebuild,
-                         PetscReal rtol, const PetscScalar *b, PetscScalar *x, PetscInt *its,
+                         PetscReal rtol, int of_start, const PetscScalar *b, PetscScalar *x, PetscInt *its,
                          int *reason, PetscReal *rnorm)
 {
   VcKsp             *s = (VcKsp *)ctx;
@@ -366,8 +507,16 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
   PetscCall(newton_matrix(s));
   s->terms = (VcTerms){0};
   PetscCall(KSPGetPC(s->kc, &pc));
-  if (rebuild) PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
+  if (rebuild && s->coarse_k) PetscCall(galerkin_update(s, rebuild == 1));
+  else if (rebuild) PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
   PetscCall(KSPSetTolerances(s->kc, rtol, 0.0, PETSC_DEFAULT, PETSC_DEFAULT));
+  if (of_start != s->of_start) {
+    void *test;
+    PetscCall(KSPConvergedDefaultCreate(&test));
+    PetscCall(KSPSetConvergenceTest(s->kc, KSPConvergedDefault, test, KSPConvergedDefaultDestroy));
+    if (of_start) PetscCall(KSPConvergedDefaultSetUIRNorm(s->kc));
+    s->of_start = of_start;
+  }
   PetscCall(VecPlaceArray(s->b, b));
   PetscCall(VecPlaceArray(s->x, x));
   PetscCall(KSPSolve(s->kc, s->b, s->x));
@@ -380,11 +529,44 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
   return 0;
 }
 
+/* How far the constrained multigrid is from the Galerkin products of its fine matrix: the
+ * largest ‖A_{l−1} − P_lᵀ A_l P_l‖ / ‖A_{l−1}‖ (Frobenius) over the levels, the products
+ * computed anew from A_fine = Q (tests/petsc); 0 before the first constrained solve and
+ * where the PC is not GAMG. */
+int vc_galerkin_defect(void *ctx, PetscReal *defect)
+{
+  VcKsp *s = (VcKsp *)ctx;
+  PC     pc;
+
+  *defect = 0;
+  if (!s->coarse_k) return 0;
+  PetscCall(KSPGetPC(s->kc, &pc));
+  for (PetscInt l = s->nlev - 1; l > 0; l--) {
+    KSP       fine, coarse;
+    Mat       a, p, ac, c;
+    PetscReal dnorm, cnorm;
+    PetscCall(PCMGGetSmoother(pc, l, &fine));
+    PetscCall(PCMGGetSmoother(pc, l - 1, &coarse));
+    PetscCall(KSPGetOperators(fine, &a, NULL));
+    PetscCall(KSPGetOperators(coarse, &ac, NULL));
+    PetscCall(PCMGGetInterpolation(pc, l, &p));
+    PetscCall(MatPtAP(a, p, MAT_INITIAL_MATRIX, PETSC_DEFAULT, &c));
+    PetscCall(MatNorm(ac, NORM_FROBENIUS, &cnorm));
+    PetscCall(MatAXPY(c, -1.0, ac, DIFFERENT_NONZERO_PATTERN));
+    PetscCall(MatNorm(c, NORM_FROBENIUS, &dnorm));
+    PetscCall(MatDestroy(&c));
+    *defect = PetscMax(*defect, dnorm / cnorm);
+  }
+  return 0;
+}
+
 int vc_ksp_destroy(void *ctx)
 {
   VcKsp *s = (VcKsp *)ctx;
 
   if (!s) return 0;
+  for (PetscInt l = 0; s->coarse_k && l + 1 < s->nlev; l++) PetscCall(MatDestroy(&s->coarse_k[l]));
+  PetscCall(PetscFree(s->coarse_k));
   PetscCall(KSPDestroy(&s->kc));
   PetscCall(MatDestroy(&s->N));
   PetscCall(MatDestroy(&s->Q));

@@ -515,10 +515,10 @@ impl ContactPlan {
                 Some(resources::active_set_bytes(m, n, disc.k_a.compute_nnz())),
                 "per Newton iteration one Krylov solve of the primal system (the step matrix with \
                  the active and sticking directions removed) preconditioned by a multigrid of \
-                 that matrix, rebuilt at a step's first system and where the sets change \
-                 (a setup costs one or two solves); a step takes two or three Newton systems \
-                 where the contact and slip sets stand in 2D (a loose solve, then the last to \
-                 1e-12), about four in 3D where slipping nodes turn, tens where contact or \
+                 that matrix, made from K_A's at a step's first system and updated where the \
+                 sets change (an update costs a fraction of a solve); a step takes three to \
+                 five Newton systems where the contact and slip sets stand (solves to 1/100 \
+                 of their initial residual, then the last to 1e-12), tens where contact or \
                  sliding sets in"
                     .to_string(),
             ),

@@ -4,7 +4,8 @@
 //! where Γ3,1 meets Γ3,2, half models with an inclined symmetry plane, and a block under a traction that turns (nodes change state from
 //! step to step). u_N agrees with the dense dual's to 1e-8 relative; the runs are bit for
 //! bit the same when stopped and resumed, their forces balance in history.csv, and
-//! summary.json records the Newton and Krylov counts.
+//! summary.json records the Newton and Krylov counts. The Newton systems' multigrid,
+//! updated in place, is the Galerkin hierarchy of its system after every update.
 
 use crate::common::{self, load, rel_diff, repo, trace, SceneText, Trace};
 
@@ -206,4 +207,125 @@ fn stop_and_resume_through_petsc_is_bit_for_bit() {
     let sum: u64 = per_step.iter().map(|i| i.as_u64().unwrap()).sum();
     assert_eq!(systems, sum, "{s}");
     assert!(newton["krylov_total"].as_u64().unwrap() >= systems, "{s}");
+}
+
+/// The Newton systems' terms for a choice of sets on `disc`'s rows, flat as the shim reads
+/// them: the contact rows `active` picks removed; each friction node (not on Γ3,1) that
+/// `stick` picks with its two tangents removed, the others with a slip stiffness s (τ₁τ₁ᵀ +
+/// τ₂τ₂ᵀ) of s = 10⁻²·max |K|.
+struct Sets {
+    removed_dofs: Vec<i32>,
+    removed: Vec<f64>,
+    stiffness_dofs: Vec<i32>,
+    stiffness: Vec<f64>,
+}
+
+impl Sets {
+    fn of(
+        disc: &viscontact::fem::Discretization,
+        active: impl Fn(usize) -> bool,
+        stick: impl Fn(usize) -> bool,
+    ) -> Sets {
+        let dofs = |row: &viscontact::fem::NodalRow| -> [i32; 3] {
+            std::array::from_fn(|c| match row.dir[c] != 0.0 {
+                true => row.dofs[c] as i32,
+                false => -1,
+            })
+        };
+        let mut sets = Sets {
+            removed_dofs: Vec::new(),
+            removed: Vec::new(),
+            stiffness_dofs: Vec::new(),
+            stiffness: Vec::new(),
+        };
+        for (_, row) in disc.contact.iter().enumerate().filter(|(i, _)| active(*i)) {
+            sets.removed_dofs.extend(dofs(row));
+            sets.removed.extend(row.dir);
+        }
+        let contact: std::collections::HashSet<usize> =
+            disc.contact.iter().map(|r| r.node).collect();
+        let s = 1e-2 * common::max_abs(disc.k_a.val());
+        let pairs = disc
+            .friction
+            .chunks(2)
+            .filter(|t| !contact.contains(&t[0].node));
+        for (j, tangents) in pairs.enumerate() {
+            if stick(j) {
+                for t in tangents {
+                    sets.removed_dofs.extend(dofs(t));
+                    sets.removed.extend(t.dir);
+                }
+                continue;
+            }
+            let d: [i32; 3] =
+                std::array::from_fn(|c| dofs(&tangents[0])[c].max(dofs(&tangents[1])[c]));
+            sets.stiffness_dofs.extend(d);
+            sets.stiffness.extend((0..9).map(|e| {
+                let (a, b) = (e / 3, e % 3);
+                s * tangents.iter().map(|t| t.dir[a] * t.dir[b]).sum::<f64>()
+            }));
+        }
+        sets
+    }
+
+    fn view(&self) -> viscontact::petsc::NodalTerms<'_> {
+        viscontact::petsc::NodalTerms {
+            removed_dofs: &self.removed_dofs,
+            removed: &self.removed,
+            stiffness_dofs: &self.stiffness_dofs,
+            stiffness: &self.stiffness,
+        }
+    }
+}
+
+/// The Newton systems' multigrid is not rebuilt by GAMG but updated in place: its coarse
+/// operators are K's (at a step's first system) or the last system's plus the difference
+/// carried down the levels. After every system, kept or updated, each coarse operator is
+/// the Galerkin product of the level above computed anew, to 1e-12 relative; and a system
+/// solved on an updated hierarchy takes the iterations and gives the solution of the same
+/// system on a hierarchy made from K.
+#[test]
+fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
+    use viscontact::petsc::{Hierarchy, Krylov, KrylovSettings, Tolerance};
+    let dir = tempfile::tempdir().unwrap();
+    let path = SceneText::block().write(dir.path(), "s.toml");
+    let (_scene, _mesh, disc) = load(&path, &[]);
+    assert!(!disc.contact.is_empty() && !disc.friction.is_empty());
+    let _one = super::PETSC.lock().unwrap_or_else(|e| e.into_inner());
+    let settings = KrylovSettings {
+        options: String::new(),
+        rtol: 1e-12,
+    };
+    let mut krylov = Krylov::new(&disc.k_a, &disc, &settings).unwrap();
+    let mut rng = common::SplitMix(50);
+    let b: Vec<f64> = (0..disc.n_free).map(|_| rng.unit() - 0.5).collect();
+    let all = Sets::of(&disc, |_| true, |j| j % 2 == 0);
+    let some = Sets::of(&disc, |i| i % 3 != 0, |_| false);
+    let others = Sets::of(&disc, |i| i % 3 != 1, |j| j % 5 == 0);
+    let mut solve = |sets: &Sets, hierarchy: Hierarchy| {
+        let mut w = vec![0.0; disc.n_free];
+        let s = krylov
+            .solve_constrained(sets.view(), &b, &mut w, Tolerance::OfRhs(1e-12), hierarchy)
+            .unwrap();
+        assert!(s.failed.is_none(), "{hierarchy:?}: {:?}", s.failed);
+        let defect = krylov.galerkin_defect().unwrap();
+        println!(
+            "{hierarchy:?}: {} iterations, Galerkin defect {defect:e}",
+            s.iterations
+        );
+        assert!(defect <= 1e-12, "{hierarchy:?}: Galerkin defect {defect:e}");
+        (w, s.iterations)
+    };
+    solve(&all, Hierarchy::FromK);
+    let (updated, its_updated) = solve(&some, Hierarchy::Updated);
+    solve(&some, Hierarchy::Last);
+    solve(&others, Hierarchy::Updated);
+    let (from_k, its_from_k) = solve(&some, Hierarchy::FromK);
+    let d = rel_diff(&updated, &from_k);
+    println!("updated against from K: {its_updated} and {its_from_k} iterations, {d:e}");
+    assert!(
+        its_updated.abs_diff(its_from_k) <= 1,
+        "{its_updated} against {its_from_k}"
+    );
+    assert!(d <= 1e-9, "updated against from K: {d:e}");
 }
