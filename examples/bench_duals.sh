@@ -3,9 +3,10 @@
 # run: for each plate size, a linear-only run and the same scene with each of the solvers
 # named, the first STEPS steps of 20 (the block's span in larger steps), no output, no
 # checkpoints. Prints a Markdown table: setup and steps (summary.json), peak resident memory
-# (GNU time's "Maximum resident set size"), dual iterations. The plates are
-# meshes/3d/block.geo at height 1/4 with gmsh's unstructured tetrahedra of the given size,
-# made into out/meshes/ when missing.
+# (GNU time's "Maximum resident set size"), iterations (dual iterations; Krylov iterations
+# of a linear PETSc run; Newton systems of the active set, with their Krylov iterations).
+# The plates are meshes/3d/block.geo at height 1/4 with gmsh's unstructured tetrahedra of
+# the given size, made into out/meshes/ when missing.
 #
 #   examples/bench_duals.sh [STEPS [SIZE...]]          # default: 2 0.06 0.03
 #   SOLVERS="dense sparse" examples/bench_duals.sh 3 0.03
@@ -29,8 +30,8 @@ mkdir -p out/meshes
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-echo "| plate | solver | setup s | steps s | peak | dual iterations |"
-echo "|---|---|---|---|---|---|"
+echo "| plate | solver | setup s | steps s | peak | iterations | Krylov (a system: mean / max) |"
+echo "|---|---|---|---|---|---|---|"
 for size in "${sizes[@]}"; do
     mesh=out/meshes/plate_$size.msh
     [ -f "$mesh" ] || gmsh -3 meshes/3d/block.geo -setnumber height 0.25 \
@@ -54,8 +55,11 @@ import json, sys
 s = json.load(open(sys.argv[1]))
 t = s["timing"]
 peak = int(sys.argv[2]) * 1024
+newton = s.get("petsc", {}).get("newton")
+krylov = "—" if newton is None else (f"{newton['krylov_total']} ({newton['krylov_mean']:.1f} / "
+                                     f"{newton['krylov_max']})")
 print(f"| {sys.argv[3]} | {sys.argv[4]} | {t['setup_s']:.2f} | {t['steps_s']:.2f} | "
-      f"{peak / 1e9:.2f} GB | {s['iterations']['total']} |")
+      f"{peak / 1e9:.2f} GB | {s['iterations']['total']} | {krylov} |")
 EOF
     done
 done
