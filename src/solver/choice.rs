@@ -626,7 +626,8 @@ impl std::fmt::Display for ContactPlan {
             (Some(b), Contact::Sparse) => format!("≈ {} besides the factor of K_A", human(b)),
             (Some(b), Contact::ActiveSet) => format!(
                 "≈ {} with PETSc's three matrices of K_A's size (K_A, the Newton matrix and the \
-                 copy its multigrid was built from) and two multigrid hierarchies, estimated",
+                 copy its multigrid was built from), two multigrid hierarchies and K_A's coarse \
+                 operators, estimated",
                 human(b)
             ),
             (Some(b), _) => format!("≈ {}", human(b)),
