@@ -303,14 +303,23 @@ static PetscErrorCode newton_matrix(VcKsp *s)
   PetscFunctionReturn(0);
 }
 
+/* The smoother of the multigrid's level l (0: the coarsest, its solve) and its matrix. */
+static PetscErrorCode level(PC pc, PetscInt l, KSP *smoother, Mat *a)
+{
+  PetscFunctionBeginUser;
+  PetscCall(PCMGGetSmoother(pc, l, smoother));
+  PetscCall(KSPGetOperators(*smoother, a, NULL));
+  PetscFunctionReturn(0);
+}
+
 /* The constrained KSP: the type of ksp and its PC (CG and GAMG by default, or what the
  * options chose). Its operator is the Newton matrix N, its preconditioner is built from Q,
  * N's copy at the last rebuild (same pattern, block size and near-null space as K). GAMG's
  * aggregates and interpolation are made once, here, from K itself, and kept, with K's
  * coarse operators; a rebuild updates the coarse operators by galerkin_update, and the
  * smoothers re-estimate their eigenvalues for the matrices changed (the aggregation's
- * estimate would be K's). So a hierarchy is a function of K and of the system it was
- * rebuilt from, nothing before: a resumed run rebuilds what the uninterrupted one did.
+ * estimate would be K's). So a step's hierarchies are a function of K and of the step's
+ * own systems, nothing before: a resumed run rebuilds what the uninterrupted one did.
  * Aggregating each step's first system anew instead cost 16 % more on the plate 0.03, and
  * GAMG's own rebuild on kept aggregates (Galerkin products of the whole of Q) more than
  * the update (docs/performance.md). Another PC, chosen by the options, is set up anew from
@@ -357,8 +366,7 @@ static PetscErrorCode constrained_setup(VcKsp *s)
     for (PetscInt l = 0; l + 1 < s->nlev; l++) {
       KSP smoother;
       Mat a;
-      PetscCall(PCMGGetSmoother(pc, l, &smoother));
-      PetscCall(KSPGetOperators(smoother, &a, NULL));
+      PetscCall(level(pc, l, &smoother, &a));
       PetscCall(MatSetOption(a, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
       PetscCall(MatDuplicate(a, MAT_COPY_VALUES, &s->coarse_k[l]));
     }
@@ -412,6 +420,7 @@ static PetscErrorCode difference(VcKsp *s, Mat m, Mat *d)
   PetscCall(MatRestoreRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
   PetscFunctionReturn(0);
 }
+
 /* Pᵀ D P for a symmetric D with few nonzero rows R: P_Rᵀ D_RR P_R, so that the product
  * costs what R holds, not what P does. NULL where D is. */
 static PetscErrorCode restricted_ptap(Mat d, Mat p, Mat *out)
@@ -467,8 +476,7 @@ static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
     PetscCall(PCMGGetInterpolation(pc, l, &p));
     PetscCall(restricted_ptap(d, p, &dc));
     PetscCall(MatDestroy(&d));
-    PetscCall(PCMGGetSmoother(pc, l - 1, &smoother));
-    PetscCall(KSPGetOperators(smoother, &a, NULL));
+    PetscCall(level(pc, l - 1, &smoother, &a));
     if (from_k) PetscCall(MatCopy(s->coarse_k[l - 1], a, SAME_NONZERO_PATTERN));
     if (dc) PetscCall(MatAXPY(a, 1.0, dc, SUBSET_NONZERO_PATTERN));
     d = dc;
@@ -479,8 +487,7 @@ static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
   for (PetscInt l = 0; l < s->nlev; l++) {
     KSP smoother;
     Mat a;
-    PetscCall(PCMGGetSmoother(pc, l, &smoother));
-    PetscCall(KSPGetOperators(smoother, &a, NULL));
+    PetscCall(level(pc, l, &smoother, &a));
     PetscCall(KSPSetOperators(smoother, a, a));
   }
   PetscFunctionReturn(0);
@@ -500,13 +507,11 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
 {
   VcKsp             *s = (VcKsp *)ctx;
   KSPConvergedReason r;
-  PC                 pc;
 
   if (!s->kc) PetscCall(constrained_setup(s));
   s->terms = (VcTerms){np, ns, pdofs, sdofs, pdirs, smats};
   PetscCall(newton_matrix(s));
   s->terms = (VcTerms){0};
-  PetscCall(KSPGetPC(s->kc, &pc));
   if (rebuild && s->coarse_k) PetscCall(galerkin_update(s, rebuild == 1));
   else if (rebuild) PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
   PetscCall(KSPSetTolerances(s->kc, rtol, 0.0, PETSC_DEFAULT, PETSC_DEFAULT));
@@ -545,10 +550,8 @@ int vc_galerkin_defect(void *ctx, PetscReal *defect)
     KSP       fine, coarse;
     Mat       a, p, ac, c;
     PetscReal dnorm, cnorm;
-    PetscCall(PCMGGetSmoother(pc, l, &fine));
-    PetscCall(PCMGGetSmoother(pc, l - 1, &coarse));
-    PetscCall(KSPGetOperators(fine, &a, NULL));
-    PetscCall(KSPGetOperators(coarse, &ac, NULL));
+    PetscCall(level(pc, l, &fine, &a));
+    PetscCall(level(pc, l - 1, &coarse, &ac));
     PetscCall(PCMGGetInterpolation(pc, l, &p));
     PetscCall(MatPtAP(a, p, MAT_INITIAL_MATRIX, PETSC_DEFAULT, &c));
     PetscCall(MatNorm(ac, NORM_FROBENIUS, &cnorm));
