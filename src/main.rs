@@ -173,6 +173,9 @@ fn main() -> ExitCode {
     );
     if !only_prints {
         viscontact::console::outlive_broken_pipes();
+        if let Err(e) = viscontact::threads::one_process() {
+            return exit_code(Err(e));
+        }
     }
     // After the signal handling (which must come before any thread is started).
     if let Err(e) = viscontact::threads::init(threads) {

@@ -11,6 +11,11 @@
 //! - the step's passes (`team::Team`) cut their work in as many pieces and run
 //!   them on that many threads (the factor's solves on 16 at most).
 //!
+//! The process is one: a run does not spread over MPI ranks, so a process that an MPI
+//! launcher (`mpirun -n N`, `srun` with Open MPI or PMI-2) started as one of several is
+//! refused before it reads anything ([`one_process`]); each would otherwise run the whole
+//! scene into the same directory.
+//!
 //! With one thread nothing runs on a second thread. Results do not depend on the count:
 //! the step's arithmetic is decided by the matrix (the factor's two groups of subtrees,
 //! the two column parts of D), never by the thread count or by timing; where the pieces
@@ -76,6 +81,32 @@ pub fn init(flag: Option<NonZeroUsize>) -> Result<usize> {
         .build_global();
     faer::set_global_parallelism(par());
     Ok(n)
+}
+
+/// The environment variables by which MPI launchers tell each process how many they
+/// started: Open MPI's `mpirun` (and `srun` with Open MPI), and the PMI of MPICH's and
+/// Intel MPI's launchers and of Slurm's `srun --mpi=pmi2`.
+pub const LAUNCHER_SIZE: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];
+
+/// Refuses (bad input, exit 2) a process that an MPI launcher started as one of several:
+/// every one of them would run the whole scene, each into the same directory, where the
+/// directory's lock refuses all but one or each run replaces the last. A value that is not
+/// a count is not ours to judge and is let be.
+pub fn one_process() -> Result<()> {
+    for var in LAUNCHER_SIZE {
+        let value = std::env::var(var).unwrap_or_default();
+        let Some(size) = value.trim().parse::<u64>().ok().filter(|&n| n > 1) else {
+            continue;
+        };
+        return Err(Error::input(format!(
+            "{var}={value}: an MPI launcher (mpirun -n, srun) started viscontact as one of \
+             {size} processes, but a run does not spread over MPI ranks: each process would \
+             run the whole scene into the same directory. Start one process, without mpirun \
+             or srun -n; give it the machine's cores with --threads N (or {ENV}), and run \
+             many scenes on a cluster with `study --emit slurm`"
+        )));
+    }
+    Ok(())
 }
 
 /// Refuses `n` threads (asked for by `source`) above [`MAX_PER_CORE`] × `cores`, and warns

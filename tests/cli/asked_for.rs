@@ -71,6 +71,45 @@ fn thread_counts_far_above_the_cores_are_refused() {
     );
 }
 
+/// `mpirun -n 2 viscontact run` ran the whole scene twice into one directory, each exiting
+/// 0 (or one refused by the other's lock, where they overlapped). Now every process that
+/// an MPI launcher started as one of several is refused before it writes anything, naming
+/// the variable; a launcher's single process, and a value that is no count, run.
+#[test]
+fn a_process_that_mpi_started_as_one_of_several_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o");
+    let run = |command: &str, env: &[(&str, &str)]| {
+        let args = match command {
+            "run" => vec!["run", "examples/paper.toml", "--set", "time.steps=4"],
+            _ => vec!["resume", out.to_str().unwrap()],
+        };
+        let mut args = args;
+        args.extend(["--quiet", "--out", out.to_str().unwrap()]);
+        with_env(&args, env)
+    };
+    for (command, var, value) in [
+        ("run", "OMPI_COMM_WORLD_SIZE", "2"),
+        ("run", "PMI_SIZE", "16"),
+        ("resume", "OMPI_COMM_WORLD_SIZE", "3"),
+    ] {
+        let (code, text) = run(command, &[(var, value)]);
+        assert_eq!(code, 2, "{command} {var}={value}: {text}");
+        assert!(text.contains(&format!("{var}={value}")), "{text}");
+        assert!(
+            text.contains("one of") && text.contains("--threads"),
+            "{text}"
+        );
+        assert!(!out.exists(), "a refused process wrote {}", out.display());
+    }
+    for env in [[("OMPI_COMM_WORLD_SIZE", "1")], [("PMI_SIZE", "two")]] {
+        let (code, text) = run("run", &env);
+        assert_eq!(code, 0, "{env:?}: {text}");
+    }
+    let (code, text) = with_env(&["check", "examples/paper.toml"], &[("PMI_SIZE", "2")]);
+    assert_eq!(code, 0, "check only prints, on any launcher: {text}");
+}
+
 /// A run of the paper scene on the coarse mesh with N = 16, stopped after step 8: its
 /// directory and its checkpoint (at step 9).
 fn stopped_run(dir: &Path) -> (std::path::PathBuf, String) {
