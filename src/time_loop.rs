@@ -236,7 +236,7 @@ impl<'p> TimeLoop<'p> {
         // The step matrix is factored once, with the constrained boundary dofs ordered last
         // where the contact solver works on its trailing block, or handed to PETSc.
         let backend = match descriptor.build() {
-            Build::Krylov => petsc_backend(scene, matrix, disc)?,
+            Build::Krylov { newton } => petsc_backend(scene, matrix, disc, *newton)?,
             Build::Factor { last } => Backend::Cholesky(Factor::new(matrix, last)?),
             Build::Nothing => Backend::None,
         };
@@ -567,19 +567,21 @@ fn petsc_backend(
     scene: &Scene,
     matrix: &crate::fem::Sparse,
     disc: &Discretization,
+    newton: bool,
 ) -> Result<Backend> {
     #[cfg(feature = "petsc")]
     {
         let settings = crate::petsc::KrylovSettings {
             options: scene.solver.petsc_options.clone(),
             rtol: crate::petsc::DEFAULT_RTOL,
+            newton,
         };
         let krylov = crate::petsc::Krylov::new(matrix, disc, &settings)?;
         Ok(Backend::Petsc(krylov))
     }
     #[cfg(not(feature = "petsc"))]
     {
-        let _ = (matrix, disc);
+        let _ = (matrix, disc, newton);
         Err(crate::Error::input(format!(
             "{}: solver.linear = \"petsc\" needs a build with the petsc feature",
             scene.path.display()

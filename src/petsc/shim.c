@@ -43,8 +43,9 @@ typedef struct {
   Mat A;
   KSP ksp;
   Vec b, x;
-  /* The constrained system, created on first use: its assembled matrix N, the matrix Q its
-   * preconditioner was built from, its KSP, the terms of the solve in progress. */
+  /* The constrained system, created with the KSP where `newton`, else on first use: its
+   * assembled matrix N, the matrix Q its preconditioner was built from, its KSP, the terms
+   * of the solve in progress. */
   Mat       N, Q;
   KSP       kc;
   VcTerms   terms;
@@ -56,12 +57,16 @@ typedef struct {
   int      of_start; /* the convergence test's: rtol of the initial residual, else of b */
 } VcKsp;
 
+static PetscErrorCode constrained_setup(VcKsp *s);
+
 /* The matrix in CSR (a symmetric matrix's CSC is its CSR), its near-null space as `nvec`
  * orthonormal vectors of length n stored one after the other, CG + GAMG with relative
- * tolerance `rtol`, then `options` (PETSc's command-line syntax) and KSPSetFromOptions. */
+ * tolerance `rtol`, then `options` (PETSc's command-line syntax) and KSPSetFromOptions;
+ * set up for K's own solves, or where `newton`, for the constrained systems alone (their
+ * KSP and multigrid: constrained_setup), K's never being solved. */
 int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, const PetscScalar *vals,
                   PetscInt bs, PetscInt nvec, const PetscScalar *near, PetscReal rtol,
-                  const char *options, void **out)
+                  const char *options, int newton, void **out)
 {
   VcKsp       *s;
   MatNullSpace space;
@@ -100,7 +105,8 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   PetscCall(KSPSetInitialGuessNonzero(s->ksp, PETSC_TRUE));
   PetscCall(PetscOptionsInsertString(NULL, options));
   PetscCall(KSPSetFromOptions(s->ksp));
-  PetscCall(KSPSetUp(s->ksp));
+  if (newton) PetscCall(constrained_setup(s));
+  else PetscCall(KSPSetUp(s->ksp));
   PetscCall(MatCreateVecs(s->A, &s->x, &s->b));
   *out = s;
   return 0;
@@ -536,7 +542,7 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
 
 /* How far the constrained multigrid is from the Galerkin products of its fine matrix: the
  * largest ‖A_{l−1} − P_lᵀ A_l P_l‖ / ‖A_{l−1}‖ (Frobenius) over the levels, the products
- * computed anew from A_fine = Q (tests/petsc); 0 before the first constrained solve and
+ * computed anew from A_fine = Q (tests/petsc); 0 before the constrained system exists and
  * where the PC is not GAMG. */
 int vc_galerkin_defect(void *ctx, PetscReal *defect)
 {

@@ -142,8 +142,9 @@ pub enum Build {
     Factor { last: Vec<usize> },
     /// Nothing: clarabel assembles and factors its own whole step problem.
     Nothing,
-    /// PETSc's KSP of the step matrix (`crate::petsc::Krylov`).
-    Krylov,
+    /// PETSc's KSP of the step matrix (`crate::petsc::Krylov`); `newton`: for the active
+    /// set's Newton systems alone (their multigrid is set up, K_A's own KSP never solves).
+    Krylov { newton: bool },
 }
 
 /// Why a solver was chosen: the scene's key, or `auto`'s rule with the size it decided by.
@@ -282,7 +283,9 @@ impl Descriptor {
         let contact = contact.filter(|_| has_rows);
         let build = match (linear, contact) {
             (_, Some(Contact::Clarabel)) => Build::Nothing,
-            (Linear::Petsc, _) => Build::Krylov,
+            (Linear::Petsc, contact) => Build::Krylov {
+                newton: contact == Some(Contact::ActiveSet),
+            },
             (Linear::Cholesky, contact) => Build::Factor {
                 last: contact.map_or(Vec::new(), |c| c.ordered_last(&rows)),
             },
@@ -344,7 +347,10 @@ impl Descriptor {
     /// analysis takes seconds where the factorization would take minutes). None otherwise.
     pub fn avoided_factor(&mut self, disc: &Discretization) -> Result<Option<f64>> {
         let by_auto = !matches!(self.linear_why, Why::Key | Why::OtherKey);
-        if self.build != Build::Krylov || !by_auto || !factor_may_exceed(disc.n_free) {
+        if !matches!(self.build, Build::Krylov { .. })
+            || !by_auto
+            || !factor_may_exceed(disc.n_free)
+        {
             return Ok(None);
         }
         match &self.factor {
@@ -413,7 +419,7 @@ impl Descriptor {
         if self.build == Build::Nothing {
             return Some("none: clarabel factors its own step problem, K_A is not factored".into());
         }
-        (self.build == Build::Krylov).then(|| {
+        matches!(self.build, Build::Krylov { .. }).then(|| {
             let why = match self.linear_why {
                 Why::Key => "solver.linear = \"petsc\"".to_string(),
                 Why::OtherKey => "solver.contact = \"active_set\"".to_string(),

@@ -295,6 +295,7 @@ fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
     let settings = KrylovSettings {
         options: String::new(),
         rtol: 1e-12,
+        newton: true,
     };
     let mut krylov = Krylov::new(&disc.k_a, &disc, &settings).unwrap();
     let mut rng = common::SplitMix(50);
