@@ -31,7 +31,8 @@
 //! the same type and options, on an assembled matrix with K's pattern (`shim.c` builds it
 //! in place and says why it is the one it is); its GAMG makes its aggregates and
 //! interpolation once, from K, and updates the coarse operators where the matrix changed
-//! (`Hierarchy`).
+//! (`Hierarchy`). A KSP made for them (`KrylovSettings::newton`) sets up only their
+//! multigrid: K's own KSP keeps its type and options but is never set up or solved.
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};

@@ -632,7 +632,7 @@ impl std::fmt::Display for ContactPlan {
             (Some(b), Contact::Sparse) => format!("≈ {} besides the factor of K_A", human(b)),
             (Some(b), Contact::ActiveSet) => format!(
                 "≈ {} with PETSc's three matrices of K_A's size (K_A, the Newton matrix and the \
-                 copy its multigrid was built from), two multigrid hierarchies and K_A's coarse \
+                 copy its multigrid was built from), that multigrid's hierarchy and K_A's coarse \
                  operators, estimated",
                 human(b)
             ),
