@@ -222,13 +222,15 @@ static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
   PetscFunctionReturn(0);
 }
 
-/* (R M R)_ij over the frames of i and j (a dof without one is its own, R = 1), M in CSR. */
+/* (A M B)_ij, M in CSR, A = R over the frame of i where `left` (else I), B = R over the
+ * frame of j where `right` (else I); a dof without a frame is its own (R = 1). */
 static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const PetscInt *ai,
-                             const PetscInt *aj, const PetscScalar *m, PetscInt i, PetscInt j)
+                             const PetscInt *aj, const PetscScalar *m, PetscInt i, PetscInt j,
+                             int left, int right)
 {
   Frame        unit_i = {1, {i}, {1.0}}, unit_j = {1, {j}, {1.0}};
-  const Frame *fi = frame_of[i] >= 0 ? &fr[frame_of[i]] : &unit_i;
-  const Frame *fj = frame_of[j] >= 0 ? &fr[frame_of[j]] : &unit_j;
+  const Frame *fi = left && frame_of[i] >= 0 ? &fr[frame_of[i]] : &unit_i;
+  const Frame *fj = right && frame_of[j] >= 0 ? &fr[frame_of[j]] : &unit_j;
   PetscInt     a = 0, b = 0;
   PetscScalar  sum = 0;
 
@@ -242,15 +244,25 @@ static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Pe
   return sum;
 }
 
-/* s->N ← Π(K + S)Π + (I − Π)(K + S)(I − Π) = ½ (K + S + R (K + S) R). The second term is
- * K's own restriction to the removed directions: it decouples them from the rest (so that
- * N x = Π b gives (I − Π) x = 0 and Π x the constrained solution, as Π(K + S)Π + (I − Π)
- * would) while keeping K's graph and scale, which GAMG's aggregates need: with the
- * identity in their place a sticking node was an aggregate of its own, too small for the
- * rigid-body modes, and the hierarchy singular. N has K's pattern, for R and S act within
- * a node and P1 assembly stores every pair of dofs of neighbouring nodes; only the rows and
- * columns of nodes with removed directions change, computed here in place (a product of
- * sparse matrices took a fifth of the step on the plate 0.03). */
+/* The scale α of the removed directions' block in the Newton matrix (newton_matrix). The
+ * block is decoupled, so α does not move the solution; GAMG's aggregates come from K, so it
+ * need not be K's scale either, and the smaller it is, the nearer N's coarse operators
+ * P^T N P come to the constrained operator's, P^T Π(K + S)Π P, while staying definite.
+ * Measured (CG iterations; docs/performance.md): plate 0.03, 10 steps, α = 1, 0.3, 0.1,
+ * 0.01: 543, 496, 472, 505; the fine plate's first 7 steps, α = 1, 0.1, 0.03: 980, 944,
+ * 927; its 20 steps 2 113 and 2 023, 475.9 and 433.2 s. */
+#define DECOUPLED 0.1
+
+/* s->N ← Π(K + S)Π + α (I − Π)(K + S)(I − Π), with Π = (I + R)/2 node by node:
+ * ¼(1 + α)(M + RMR) + ¼(1 − α)(RM + MR) for M = K + S, α = DECOUPLED. The second term is
+ * a multiple of K's own restriction to the removed directions: it decouples them from the
+ * rest (so that N x = Π b gives (I − Π) x = 0 and Π x the constrained solution, as
+ * Π(K + S)Π + (I − Π) would) while keeping K's graph: with the identity in their place a
+ * sticking node was an aggregate of its own, too small for the rigid-body modes, when
+ * GAMG aggregated N. N has K's pattern, for R and S act within a node and P1 assembly
+ * stores every pair of dofs of neighbouring nodes; only the rows and columns of nodes with
+ * removed directions change, computed here in place (a product of sparse matrices took a
+ * fifth of the step on the plate 0.03). */
 static PetscErrorCode newton_matrix(VcKsp *s)
 {
   const VcTerms     *t = &s->terms;
@@ -290,7 +302,10 @@ static PetscErrorCode newton_matrix(VcKsp *s)
       PetscInt i = fr[f].dof[a];
       for (PetscInt x = ai[i]; x < ai[i + 1]; x++) {
         PetscInt    j = aj[x];
-        PetscScalar v = 0.5 * (na[x] + reflected(fr, s->frame_of, ai, aj, na, i, j));
+        PetscScalar rmr = reflected(fr, s->frame_of, ai, aj, na, i, j, 1, 1);
+        PetscScalar rm = reflected(fr, s->frame_of, ai, aj, na, i, j, 1, 0);
+        PetscScalar mr = reflected(fr, s->frame_of, ai, aj, na, i, j, 0, 1);
+        PetscScalar v = 0.25 * (1 + DECOUPLED) * (na[x] + rmr) + 0.25 * (1 - DECOUPLED) * (rm + mr);
         upd[nu] = v;
         at[nu++] = x;
         if (s->frame_of[j] < 0) {

@@ -34,8 +34,8 @@
 //!   Π(K + S)Π w⁺ + (I − Π) w⁺ = Π(b − f_slip),
 //!
 //! an SPD system of the size of K whatever the sets. It is solved as N w⁺ = Π(b − f_slip)
-//! with N = Π(K + S)Π + (I − Π)(K + S)(I − Π), which has the same solution ((I − Π)w⁺ = 0)
-//! and K's sparsity, graph and scale: N is assembled, and its algebraic multigrid has
+//! with N = Π(K + S)Π + α(I − Π)(K + S)(I − Π), α = 0.1 (`shim.c`, `DECOUPLED`), which has
+//! the same solution ((I − Π)w⁺ = 0) and K's sparsity and graph: N is assembled, and its algebraic multigrid has
 //! aggregates and an interpolation P made once from K and the coarse operators of N,
 //! Pᵀ N P level by level: made at the first system of a step from K's as PᵀKP + Pᵀ(N −
 //! K)P, and updated by the difference wherever the sets changed (`Preconditioner`; N − K
