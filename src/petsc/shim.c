@@ -43,9 +43,9 @@ typedef struct {
   Mat A;
   KSP ksp;
   Vec b, x;
-  /* The constrained system, created with the KSP where `newton`, else on first use: its
-   * assembled matrix N, the matrix Q its preconditioner was built from, its KSP, the terms
-   * of the solve in progress. */
+  /* The constrained system, created with the KSP where `newton` (else NULL): its assembled
+   * matrix N, the matrix Q its preconditioner was built from, its KSP, the terms of the
+   * solve in progress. */
   Mat       N, Q;
   KSP       kc;
   VcTerms   terms;
@@ -529,7 +529,7 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
   VcKsp             *s = (VcKsp *)ctx;
   KSPConvergedReason r;
 
-  if (!s->kc) PetscCall(constrained_setup(s));
+  PetscCheck(s->kc, PETSC_COMM_SELF, PETSC_ERR_ORDER, "the KSP is not the Newton systems'");
   s->terms = (VcTerms){np, ns, pdofs, sdofs, pdirs, smats};
   PetscCall(newton_matrix(s));
   s->terms = (VcTerms){0};

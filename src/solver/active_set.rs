@@ -35,12 +35,12 @@
 //!
 //! an SPD system of the size of K whatever the sets. It is solved as N w⁺ = Π(b − f_slip)
 //! with N = Π(K + S)Π + α(I − Π)(K + S)(I − Π), α = 0.1 (`shim.c`, `DECOUPLED`), which has
-//! the same solution ((I − Π)w⁺ = 0) and K's sparsity and graph: N is assembled, and its algebraic multigrid has
-//! aggregates and an interpolation P made once from K and the coarse operators of N,
-//! Pᵀ N P level by level: made at the first system of a step from K's as PᵀKP + Pᵀ(N −
-//! K)P, and updated by the difference wherever the sets changed (`Preconditioner`; N − K
-//! lives near the contact boundary, so an update costs a fraction of a solve); where only
-//! the slip stiffness moved, the last one serves. A multigrid of K alone, projected, was a
+//! the same solution ((I − Π)w⁺ = 0) and K's sparsity and graph: N is assembled, and its
+//! algebraic multigrid has aggregates and an interpolation P made once from K and the
+//! coarse operators of N, Pᵀ N P level by level: made at the first system of a step from
+//! K's as PᵀKP + Pᵀ(N − K)P, and updated by the difference wherever the sets changed
+//! (`Preconditioner`; N − K lives near the contact boundary, so an update costs a fraction
+//! of a solve); where only the slip stiffness moved, the last one serves. A multigrid of K alone, projected, was a
 //! weak preconditioner where much of the face is active (docs/performance.md). The
 //! multipliers of the removed directions follow from the residual r = b − f_slip − (K +
 //! S)w⁺ node by node, r_i = Σ z_k a_k over the node's removed rows a_k (least squares on

@@ -80,11 +80,10 @@ fn a_process_that_mpi_started_as_one_of_several_is_refused() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("o");
     let run = |command: &str, env: &[(&str, &str)]| {
-        let args = match command {
+        let mut args = match command {
             "run" => vec!["run", "examples/paper.toml", "--set", "time.steps=4"],
             _ => vec!["resume", out.to_str().unwrap()],
         };
-        let mut args = args;
         args.extend(["--quiet", "--out", out.to_str().unwrap()]);
         with_env(&args, env)
     };
