@@ -6,7 +6,7 @@
 use crate::fem::{diagonal, Discretization, Gamma3, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::Scene;
-use crate::solver::active_set::{ActiveSetSettings, ActiveSetSolver};
+use crate::solver::active_set::ActiveSetSolver;
 use crate::solver::choice::{Contact, Descriptor};
 use crate::solver::matrix_free::MatrixFreeSolver;
 use crate::solver::{conic::ConicSolver, dual::DualSolver, Backend, Rows, StepSolver};
@@ -158,6 +158,17 @@ pub fn warnings(scene: &Scene, disc: &Discretization, solver: &Descriptor) -> Ve
         ));
     }
     w.extend(solver.contact().and_then(|plan| plan.slow_warning()));
+    let active_set = solver.contact_solver() == Some(Contact::ActiveSet);
+    if scene.solver.active_set != Default::default() && !active_set {
+        w.push(format!(
+            "[solver.active_set] is set, but this run's steps are solved {}: its keys are \
+             not used",
+            match solver.contact_solver() {
+                Some(c) => format!("by the {} contact solver", c.key()),
+                None => "as linear systems (no contact or friction rows)".to_string(),
+            }
+        ));
+    }
     w
 }
 
@@ -191,8 +202,7 @@ pub fn step_solver(
         }
         Contact::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
         Contact::ActiveSet => {
-            let settings = ActiveSetSettings::default();
-            let solver = ActiveSetSolver::new(rows, &diagonal(matrix), settings);
+            let solver = ActiveSetSolver::new(rows, &diagonal(matrix), solver.active_set());
             StepSolver::ActiveSet(Box::new(solver))
         }
     })

@@ -48,6 +48,8 @@ pub struct Range {
 }
 
 const SCALE: &str = "the scale rule: products of a few scene values must stay normal doubles";
+const RELATIVE: &str = "a relative residual: below 1e-15 it is the round-off of doubles and \
+                        would never be met";
 const GROUP: &str = "a name (string) or any integer tag";
 const GROUP_WHY: &str = "a tag is looked up in the mesh's physical groups; no number is computed \
                          from it";
@@ -225,6 +227,30 @@ pub const RANGES: &[Range] = &[
         "a number: 0 or 1e-100 ≤ |g| ≤ 1e100; or an expression of x, y, z, t",
         "0 for each component",
         "the scale rule (an expression is checked where it is evaluated)",
+    ),
+    row(
+        "solver.active_set.tolerance",
+        "1e-15 ≤ tol < 1",
+        "1e-10",
+        RELATIVE,
+    ),
+    row(
+        "solver.active_set.max_iterations",
+        "1 ≤ n ≤ 10000",
+        "50",
+        "a step that needs more is not converging: it fails with the residual reached",
+    ),
+    row(
+        "solver.active_set.forcing",
+        "1e-15 ≤ η < 1",
+        "1e-2",
+        RELATIVE,
+    ),
+    row(
+        "solver.active_set.krylov_tolerance",
+        "1e-15 ≤ rtol < 1",
+        "1e-12",
+        RELATIVE,
     ),
     row(
         "output.every",

@@ -450,12 +450,12 @@ impl<'p> TimeLoop<'p> {
             report.status = self.trust(t, load_max);
         }
         let h = &self.history;
-        let other_solver = self.solver.other();
         report.check(&StepAt {
             n: h.n,
             t,
             k: h.k,
-            other_solver,
+            other_solver: self.solver.other(),
+            limit_key: self.solver.limit_key(),
         })?;
         Ok(Some(Step {
             n: h.n,

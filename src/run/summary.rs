@@ -69,9 +69,14 @@ pub struct PetscSummary {
     pub newton: Option<NewtonSummary>,
 }
 
-/// summary.json "petsc" "newton": what the active-set solver's Newton systems took.
+/// summary.json "petsc" "newton": what the active-set solver's Newton systems took, and
+/// the settings they ran with (`[solver.active_set]` over its defaults).
 #[derive(Serialize, Debug, Clone)]
 pub struct NewtonSummary {
+    pub tolerance: f64,
+    pub max_iterations: usize,
+    pub forcing: f64,
+    pub krylov_tolerance: f64,
     pub steps: usize,
     pub systems: usize,
     pub krylov_total: usize,
@@ -90,8 +95,12 @@ impl PetscSummary {
             environment: std::env::var("PETSC_OPTIONS").ok(),
             newton: match tl.solver() {
                 crate::solver::StepSolver::ActiveSet(a) => {
-                    let c = a.counts();
+                    let (c, s) = (a.counts(), a.settings());
                     Some(NewtonSummary {
+                        tolerance: s.tolerance,
+                        max_iterations: s.max_iterations,
+                        forcing: s.forcing,
+                        krylov_tolerance: s.krylov_tolerance,
                         steps: c.steps,
                         systems: c.newton,
                         krylov_total: c.krylov,

@@ -427,6 +427,25 @@ pub struct SolverSection {
     pub linear: LinearSolver,
     /// `[solver.petsc]`: read where `linear = "petsc"`.
     pub petsc: Option<PetscSection>,
+    /// `[solver.active_set]`: read where the contact solver is the active-set one.
+    #[serde(default)]
+    pub active_set: ActiveSetSection,
+}
+
+/// `[solver.active_set]`: the active-set solver's stopping test and Newton systems; a key
+/// left out takes the solver's default (`solver::active_set::ActiveSetSettings`), checked
+/// against its range (`ranges`) where the scene is read.
+#[derive(Deserialize, Debug, Default, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ActiveSetSection {
+    /// The KKT residual at which a step is solved.
+    pub tolerance: Option<f64>,
+    /// Newton iterations before a step fails.
+    pub max_iterations: Option<usize>,
+    /// The reduction of its starting residual each Newton system before the last solves for.
+    pub forcing: Option<f64>,
+    /// The Krylov tolerance of a step's last system, relative to its right side.
+    pub krylov_tolerance: Option<f64>,
 }
 
 /// How the step matrix K_A is solved (the linear backend).

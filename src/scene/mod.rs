@@ -20,7 +20,9 @@ mod read;
 mod values;
 
 pub use conditions::{Components, Dirichlet};
-pub use file::{ContactSolver, Groups, History, LinearSolver, MemoryMode, Model, SceneFile};
+pub use file::{
+    ActiveSetSection, ContactSolver, Groups, History, LinearSolver, MemoryMode, Model, SceneFile,
+};
 pub use parts::{CheckpointPlan, MeshChoice, OutputPlan, SolverChoice, TimeGrid};
 pub use physics::{Friction, Material, Physics, Region, Relaxation, Traction, BODY_KERNEL};
 pub use read::{apply_override, name_set_key, parse_scene_text, read_scene_file};

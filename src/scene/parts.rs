@@ -3,8 +3,8 @@
 //! converted from its TOML section and checked there.
 
 use super::file::{
-    CheckpointSection, ContactSolver, Groups, History, LinearSolver, MeshSection, Model,
-    OutputCompression, OutputFormat, OutputPrecision, OutputSection, SchemeSection, Seconds,
+    ActiveSetSection, CheckpointSection, ContactSolver, Groups, History, LinearSolver, MeshSection,
+    Model, OutputCompression, OutputFormat, OutputPrecision, OutputSection, SchemeSection, Seconds,
     SolverSection, TimeSection, DEFAULT_CHECKPOINT_SECONDS,
 };
 use super::physics::Physics;
@@ -84,6 +84,8 @@ pub struct SolverChoice {
     pub linear: LinearSolver,
     /// `[solver.petsc] options`, passed to PETSc where `linear = "petsc"` (empty by default).
     pub petsc_options: String,
+    /// `[solver.active_set]`, each key checked against its range.
+    pub active_set: ActiveSetSection,
     /// The treatment of the elastic and memory terms (`scheme.history`).
     pub history: History,
     /// Run the left endpoint scheme beyond its stability limit (`scheme.allow_unstable`).
@@ -102,6 +104,7 @@ impl SolverChoice {
         path: &Path,
     ) -> Result<SolverChoice> {
         backend_refusal(solver, physics, path)?;
+        active_set_ranges(&solver.active_set, path)?;
         Ok(SolverChoice {
             contact: solver.contact,
             linear: solver.linear,
@@ -109,6 +112,7 @@ impl SolverChoice {
                 .petsc
                 .as_ref()
                 .map_or(String::new(), |p| p.options.clone()),
+            active_set: solver.active_set,
             history: scheme.history,
             allow_unstable: scheme.allow_unstable,
         })
@@ -162,6 +166,34 @@ fn backend_refusal(solver: &SolverSection, physics: &Physics, path: &Path) -> Re
         )));
     }
     Ok(())
+}
+
+/// The keys of `[solver.active_set]` against their rows of `ranges::RANGES`.
+fn active_set_ranges(a: &ActiveSetSection, path: &Path) -> Result<()> {
+    let relative = [
+        ("tolerance", a.tolerance),
+        ("forcing", a.forcing),
+        ("krylov_tolerance", a.krylov_tolerance),
+    ];
+    for (key, value) in relative {
+        if let Some(v) = value.filter(|v| !(1e-15..1.0).contains(v)) {
+            return Err(ranges::refuse(
+                path,
+                &format!("solver.active_set.{key}"),
+                v,
+                "",
+            ));
+        }
+    }
+    match a.max_iterations {
+        Some(n) if !(1..=10_000).contains(&n) => Err(ranges::refuse(
+            path,
+            "solver.active_set.max_iterations",
+            n,
+            "",
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// `[output]`: which frames are written, and how.

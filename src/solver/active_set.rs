@@ -52,10 +52,10 @@
 //! A Newton iterate whose sets reproduce themselves satisfies the complementarity
 //! conditions exactly (2D) or up to the slip direction's convergence (3D); the iteration
 //! stops there once the KKT residual (`kkt_residual`, relative to max|w| and max|z|) is at
-//! most `tolerance` and the last system was solved to `rtol` of its right side. Until then
-//! the systems are solved inexactly, with a constant forcing term: each Krylov solve
-//! reduces the residual it starts from (that of the current iterate) by `loose`, η = 10⁻²
-//! (`Tolerance::OfStart`). A system whose sets are still changing need not be accurate,
+//! most `tolerance` and the last system was solved to `krylov_tolerance` of its right
+//! side (`ActiveSetSettings`, the scene's `[solver.active_set]`). Until then the systems are
+//! solved inexactly, with a constant forcing term: each Krylov solve reduces the residual it
+//! starts from (that of the current iterate) by `forcing`, η = 10⁻² (`Tolerance::OfStart`). A system whose sets are still changing need not be accurate,
 //! and measured from its own start every solve makes progress, where a tolerance relative
 //! to the right side is met by a warm start without an iteration. Eisenstat–Walker's
 //! forcing (their choice 2, relative to the right side and at most a tenth of the last
@@ -73,16 +73,17 @@
 //!   through sticking; where the body slides, ρ = K's diagonal is far stiffer than the
 //!   boundary, and the test would swing between the two directions);
 //! - when the sets of an iterate were met before in the step (a cycle), every later
-//!   system is solved to `rtol`, ρ is divided by 10 (the test then weighs the multipliers
-//!   more, the velocities less), and an iteration makes at most half as many changes of
-//!   the sets as the last cycle proposed, the largest violations first (down to one at a
-//!   time);
-//! - `max_newton` iterations end the step with `StepStatus::MaxIterations`.
+//!   system is solved to `krylov_tolerance`, ρ is divided by 10 (the test then weighs the
+//!   multipliers more, the velocities less), and an iteration makes at most half as many
+//!   changes of the sets as the last cycle proposed, the largest violations first (down to
+//!   one at a time);
+//! - `max_iterations` iterations end the step with `StepStatus::MaxIterations`.
 //!
 //! On the golden scenes, the corners and a rotating traction (tests/petsc) every step
 //! converges; the bracket's sliding onset is the hardest (35 iterations in one step).
 
 use super::{kkt_residual, Abandon, Rows, StepReport, StepStatus};
+use crate::scene::ActiveSetSection;
 use crate::Result;
 
 /// What a linear solve of the Newton system did.
@@ -183,29 +184,44 @@ impl Terms {
     }
 }
 
-/// The settings of the active-set solver, with their defaults.
+/// The settings of the active-set solver (`[solver.active_set]`), with their defaults.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ActiveSetSettings {
-    /// Newton iterations before a step fails (default 50).
-    pub max_newton: usize,
     /// The KKT residual at which a step is solved (default 1e-10): u_N agrees with the
     /// dense dual's to 1e-8 relative (tests/petsc).
     pub tolerance: f64,
-    /// The Krylov tolerance of the last system (default 1e-12, as the linear backend).
-    pub rtol: f64,
+    /// Newton iterations before a step fails (default 50).
+    pub max_iterations: usize,
     /// The forcing term of the systems before the last: the reduction of the residual each
     /// solves for, from the one it starts at (default 1e-2; 1e-3 and 1e-4 took 5 % and
     /// 14 % more time on the plate 0.03, docs/performance.md).
-    pub loose: f64,
+    pub forcing: f64,
+    /// The Krylov tolerance of a step's last system (default 1e-12, as the linear backend;
+    /// 1e-10 took 8 % less time on the fine plate, docs/performance.md).
+    pub krylov_tolerance: f64,
 }
 
 impl Default for ActiveSetSettings {
     fn default() -> Self {
         ActiveSetSettings {
-            max_newton: 50,
             tolerance: 1e-10,
-            rtol: 1e-12,
-            loose: 1e-2,
+            max_iterations: 50,
+            forcing: 1e-2,
+            krylov_tolerance: 1e-12,
+        }
+    }
+}
+
+impl ActiveSetSettings {
+    /// The scene's keys, each over its default (their ranges are checked where the scene
+    /// is read).
+    pub fn from_keys(keys: &ActiveSetSection) -> Self {
+        let d = ActiveSetSettings::default();
+        ActiveSetSettings {
+            tolerance: keys.tolerance.unwrap_or(d.tolerance),
+            max_iterations: keys.max_iterations.unwrap_or(d.max_iterations),
+            forcing: keys.forcing.unwrap_or(d.forcing),
+            krylov_tolerance: keys.krylov_tolerance.unwrap_or(d.krylov_tolerance),
         }
     }
 }
@@ -412,6 +428,10 @@ impl ActiveSetSolver {
         }
     }
 
+    pub fn settings(&self) -> ActiveSetSettings {
+        self.settings
+    }
+
     pub fn counts(&self) -> ActiveSetCounts {
         self.counts
     }
@@ -443,13 +463,13 @@ impl ActiveSetSolver {
         let mut seen = vec![sets.signature()];
         let mut allowed = usize::MAX;
         let mut built: Option<Sets> = None;
-        for newton in 1..=s.max_newton {
+        for newton in 1..=s.max_iterations {
             if self.abandon.requested() {
                 return Ok(report(StepStatus::Abandoned, newton - 1, kkt_before));
             }
             let tolerance = match exact {
-                true => Tolerance::OfRhs(s.rtol),
-                false => Tolerance::OfStart(s.loose),
+                true => Tolerance::OfRhs(s.krylov_tolerance),
+                false => Tolerance::OfStart(s.forcing),
             };
             self.assemble(rows, &sets, b);
             self.terms.project(w);
@@ -502,18 +522,18 @@ impl ActiveSetSolver {
                 soften *= 0.1;
             }
             // The next system is the last one where the sets stand and the KKT residual is
-            // small, or once the sets have cycled: it is solved to `rtol`.
+            // small, or once the sets have cycled: it is solved to `krylov_tolerance`.
             exact = (same && kkt <= s.tolerance.sqrt()) || allowed < usize::MAX;
             kkt_before = kkt;
             sets = next;
         }
-        self.count_step(s.max_newton);
+        self.count_step(s.max_iterations);
         let status = StepStatus::MaxIterations {
-            limit: s.max_newton,
+            limit: s.max_iterations,
             residual: kkt_before,
             scale: 1.0,
         };
-        Ok(report(status, s.max_newton, kkt_before))
+        Ok(report(status, s.max_iterations, kkt_before))
     }
 
     fn count_system(&mut self, krylov: usize) {

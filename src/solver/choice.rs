@@ -32,6 +32,7 @@
 //! `ContactPlan::check` before a run touches its directory: a plan that does not fit is
 //! refused (exit 2), naming the key that would, never silently changed.
 
+use super::active_set::ActiveSetSettings;
 use super::matrix_free::MatrixFreeSettings;
 use super::Rows;
 use crate::fem::Discretization;
@@ -225,6 +226,8 @@ pub struct Descriptor {
     /// The dense dual's bytes where both keys are `auto` (what the build with PETSc would
     /// decide by); None otherwise.
     both_auto: Option<Option<f64>>,
+    /// `[solver.active_set]` over its defaults (used where the contact solver is that one).
+    active_set: ActiveSetSettings,
 }
 
 impl Descriptor {
@@ -300,6 +303,7 @@ impl Descriptor {
             build,
             factor: known,
             both_auto,
+            active_set: ActiveSetSettings::from_keys(&scene.solver.active_set),
         })
     }
 
@@ -311,6 +315,11 @@ impl Descriptor {
     /// The contact solver; None for a linear run.
     pub fn contact_solver(&self) -> Option<Contact> {
         self.contact.as_ref().map(|p| p.solver)
+    }
+
+    /// The active-set solver's settings (`[solver.active_set]`).
+    pub fn active_set(&self) -> ActiveSetSettings {
+        self.active_set
     }
 
     /// The linear backend.

@@ -310,6 +310,14 @@ impl StepSolver {
         true
     }
 
+    /// The scene key of the solver's iteration limit, where the scene can set it.
+    pub fn limit_key(&self) -> Option<&'static str> {
+        match self {
+            StepSolver::ActiveSet(_) => Some("[solver.active_set] max_iterations"),
+            _ => None,
+        }
+    }
+
     /// The `solver.contact` value to try when this solver's answer cannot be trusted.
     pub fn other(&self) -> &'static str {
         match self {
@@ -882,6 +890,7 @@ mod tests {
             t: 0.5,
             k: 0.125,
             other_solver: "clarabel",
+            limit_key: None,
         };
         let err = report.check(&at).unwrap_err();
         assert_eq!(err.exit_code(), 1);

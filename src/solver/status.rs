@@ -70,6 +70,8 @@ pub struct StepAt {
     pub t: f64,
     pub k: f64,
     pub other_solver: &'static str,
+    /// The scene key that sets the solver's iteration limit, where it has one.
+    pub limit_key: Option<&'static str>,
 }
 
 impl StepReport {
@@ -84,8 +86,10 @@ impl StepReport {
                 scale,
             } => format!(
                 "the contact solver's semismooth Newton method did not converge in {limit} \
-                 iterations (residual {residual:e} relative to {scale:e}); try [solver] \
+                 iterations (residual {residual:e} relative to {scale:e}); {}try [solver] \
                  contact = \"{}\"",
+                at.limit_key
+                    .map_or(String::new(), |key| format!("raise {key}, or ")),
                 at.other_solver
             ),
             StepStatus::Abandoned => {

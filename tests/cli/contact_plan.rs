@@ -312,3 +312,28 @@ fn check_says_what_the_build_with_petsc_would_pick() {
         "{text}"
     );
 }
+
+/// `[solver.active_set]` in a scene whose steps another solver solves is said to be
+/// unused (`check`), and its values are checked all the same (exit 2 naming the key).
+#[test]
+fn active_set_keys_that_no_step_reads_are_warned_about_and_still_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = SceneText::paper()
+        .set("solver.contact", "dense")
+        .set("solver.active_set.tolerance", 1e-8)
+        .write(tmp.path(), "s.toml");
+    let scene = scene.to_str().unwrap();
+    let (code, text) = common::cli(&["check", scene]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("[solver.active_set] is set, but this run's steps are solved by the dense")
+            && text.contains("its keys are not used"),
+        "{text}"
+    );
+    let (code, text) = common::cli(&["check", scene, "--set", "solver.active_set.forcing=1.5"]);
+    assert_eq!(code, 2, "{text}");
+    assert!(
+        text.contains("key 'solver.active_set.forcing' is 1.5") && text.contains("1e-15 ≤ η < 1"),
+        "{text}"
+    );
+}

@@ -209,6 +209,67 @@ fn stop_and_resume_through_petsc_is_bit_for_bit() {
     assert!(newton["krylov_total"].as_u64().unwrap() >= systems, "{s}");
 }
 
+/// `[solver.active_set]` reaches the solver: looser tolerances take fewer Krylov
+/// iterations and move u_N by about the tolerance, summary.json records them, and a step
+/// beyond `max_iterations` fails the run (exit 1) naming the key.
+#[test]
+fn the_scene_sets_the_active_sets_tolerances_and_its_iteration_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = SceneText::paper().set("solver.contact", "active_set");
+    let loose = (scene.clone())
+        .set("solver.active_set.tolerance", 1e-6)
+        .set("solver.active_set.forcing", 0.1)
+        .set("solver.active_set.krylov_tolerance", 1e-8);
+    let run = |scene: &SceneText, name: &str| {
+        let path = scene.write(dir.path(), &format!("{name}.toml"));
+        let out = dir.path().join(name);
+        let (code, text) = common::cli(&[
+            "run",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+            path.to_str().unwrap(),
+        ]);
+        (code, text, out)
+    };
+    let (code, text, default) = run(&scene, "default");
+    assert_eq!(code, 0, "{text}");
+    let (code, text, looser) = run(&loose, "loose");
+    assert_eq!(code, 0, "{text}");
+    let newton = |out: &std::path::Path| common::summary(out)["petsc"]["newton"].clone();
+    let (d, l) = (newton(&default), newton(&looser));
+    assert_eq!(
+        (&d["tolerance"], &d["max_iterations"], &d["forcing"]),
+        (&1e-10.into(), &50.into(), &1e-2.into()),
+        "{d}"
+    );
+    assert_eq!(d["krylov_tolerance"], 1e-12, "{d}");
+    assert_eq!(
+        (&l["tolerance"], &l["forcing"], &l["krylov_tolerance"]),
+        (&1e-6.into(), &0.1.into(), &1e-8.into()),
+        "{l}"
+    );
+    let krylov = |n: &serde_json::Value| n["krylov_total"].as_u64().unwrap();
+    assert!(krylov(&l) < krylov(&d), "{l} against {d}");
+    let t = traces(&loose, &["dense", "active_set"]);
+    let du = rel_diff(&t[1].u_final, &t[0].u_final);
+    println!(
+        "tolerance 1e-6: |u_N − dense| {du:.1e}; Krylov {} against {}",
+        krylov(&l),
+        krylov(&d)
+    );
+    assert!(du > 1e-12 && du <= 1e-5, "{du:e}");
+
+    let (code, text, out) = run(&scene.set("solver.active_set.max_iterations", 1), "one");
+    assert_eq!(code, 1, "{text}");
+    assert!(
+        text.contains("did not converge in 1 iterations")
+            && text.contains("raise [solver.active_set] max_iterations"),
+        "{text}"
+    );
+    assert_eq!(common::summary(&out)["status"], "failed");
+}
+
 /// The Newton systems' terms for a choice of sets on `disc`'s rows, flat as the shim reads
 /// them: the contact rows `active` picks removed; each friction node (not on Γ3,1) that
 /// `stick` picks with its two tangents removed, the others with a slip stiffness s (τ₁τ₁ᵀ +
