@@ -34,6 +34,8 @@ enum Command {
         set: Vec<String>,
         #[command(flatten)]
         steps: StepFlags,
+        #[command(flatten)]
+        job: JobFlags,
     },
     /// Continue a run from its checkpoint: same results as if it had never stopped.
     Resume {
@@ -134,6 +136,28 @@ struct StepFlags {
     threads: Option<NonZeroUsize>,
 }
 
+/// `run --emit slurm DIR`: the run as a Slurm job that resumes itself, written, not run.
+#[derive(clap::Args)]
+struct JobFlags {
+    /// Write DIR/job.sh, a Slurm job of this run that resubmits itself until the run is
+    /// complete (submit it with sbatch), instead of running.
+    #[arg(long, num_args = 2, value_names = ["slurm", "DIR"], conflicts_with_all = ["stop_after", "force", "threads"])]
+    emit: Vec<String>,
+    /// With --emit slurm: the cores of the job's one task (its threads).
+    #[arg(long, default_value_t = 4, requires = "emit", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    cpus_per_task: usize,
+    /// With --emit slurm: the time limit of each job, in Slurm's form (e.g. 1-00:00:00;
+    /// default: the partition's).
+    #[arg(long, requires = "emit")]
+    time: Option<String>,
+    /// With --emit slurm: nodes (1: a run is one process).
+    #[arg(long, default_value_t = 1, requires = "emit")]
+    nodes: usize,
+    /// With --emit slurm: tasks per node (1: a run is one process).
+    #[arg(long, default_value_t = 1, requires = "emit")]
+    ntasks_per_node: usize,
+}
+
 impl StepFlags {
     /// The options of `run` or `resume` (`threads` is set for the process in `main`).
     fn options(
@@ -214,7 +238,15 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
             scene,
             out,
             set,
+            job,
+            ..
+        } if !job.emit.is_empty() => emit_job(&scene, &set, out.as_deref(), job).map(|()| None),
+        Command::Run {
+            scene,
+            out,
+            set,
             steps,
+            ..
         } => run(&scene, &steps.options(out, set, interrupt)).map(report),
         Command::Resume {
             checkpoint,
@@ -350,6 +382,42 @@ fn report(outcome: Outcome) -> Option<i32> {
 
 /// `check`: what a run of the scene would be, and whatever `run` refuses before its first
 /// step (exit 2).
+/// `run --emit slurm DIR`: writes the job and says how to submit it.
+fn emit_job(
+    scene: &std::path::Path,
+    set: &[String],
+    out: Option<&std::path::Path>,
+    job: JobFlags,
+) -> Result<()> {
+    use viscontact::run::slurm::{emit, JobOptions};
+    let [kind, dir] = &job.emit[..] else {
+        return Err(viscontact::Error::input(
+            "run: --emit takes two values: slurm DIR",
+        ));
+    };
+    if kind != "slurm" {
+        return Err(viscontact::Error::input(format!(
+            "run: --emit {kind}: the one kind is 'slurm' (--emit slurm DIR)"
+        )));
+    }
+    let options = JobOptions {
+        dir: PathBuf::from(dir),
+        cpus_per_task: job.cpus_per_task,
+        time: job.time,
+        nodes: job.nodes,
+        ntasks_per_node: job.ntasks_per_node,
+    };
+    let (path, memory) = emit(scene, set, out, &options)?;
+    viscontact::outln!(
+        "wrote {} (--mem {}, --cpus-per-task {})",
+        path.display(),
+        viscontact::resources::human(memory),
+        options.cpus_per_task
+    );
+    viscontact::outln!("submit with sbatch {}", path.display());
+    Ok(())
+}
+
 fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let (scene, mesh, disc) = setup(path, set)?;
     // The run's solver, resolved once: every line below and the refusals read it.

@@ -17,6 +17,7 @@ mod dir;
 mod frame;
 mod history_csv;
 mod interrupt;
+pub mod slurm;
 mod summary;
 
 pub use crate::error::signal_name;

@@ -30,6 +30,7 @@ use super::shared::{Discs, Transfers};
 use super::{
     assemble, check_levels, MeshFamily, Prepared, Solved, StudyOptions, StudyReport, Timed, Vary,
 };
+use crate::run::slurm::{exe_line, quoted};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -194,11 +195,6 @@ struct Script<'a> {
     mem_mib: u64,
 }
 
-/// A path as a single-quoted shell word.
-fn quoted(p: &Path) -> String {
-    format!("'{}'", p.display().to_string().replace('\'', r"'\''"))
-}
-
 impl Script<'_> {
     fn array(&self) -> String {
         format!(
@@ -247,11 +243,9 @@ exec "$VISCONTACT" run "$SCENE" "${{sets[@]}}" --out "$out" --quiet
         )
     }
 
-    /// The line that sets `$VISCONTACT`, unless the environment sets it, to the binary that
-    /// wrote the scripts. An assignment, not `"${VISCONTACT:-'…'}"`: inside double quotes the
-    /// single quotes would stay part of the word (issue 49: `bash collect.sh` exited 127).
+    /// The line that sets `$VISCONTACT` to the binary that wrote the scripts.
     fn exe_line(&self) -> String {
-        format!("VISCONTACT=${{VISCONTACT:-{}}}", quoted(self.exe))
+        exe_line(self.exe)
     }
 
     fn collect(&self) -> String {

@@ -10,3 +10,4 @@ mod repeated_signals;
 mod resume_verify;
 mod robustness;
 mod setup_signals;
+mod slurm_job;

@@ -1,0 +1,203 @@
+//! One run as a Slurm job that resumes itself: `viscontact run SCENE --emit slurm DIR`
+//! writes `DIR/job.sh` (and `DIR/logs/`), which `sbatch DIR/job.sh` submits.
+//!
+//! A job runs the scene into its output directory, or resumes it from the checkpoint an
+//! earlier job left. Slurm sends SIGTERM 120 s before the time limit (`--signal=B:TERM@120`,
+//! to the batch shell, which passes it on): the run stops after its step with a checkpoint
+//! (exit 143), and the job submits itself again. The next job resumes, bit for bit the run
+//! that never stopped (docs/restart.md), until summary.json says "completed". A job whose
+//! run solved no step since the job before (a step longer than the time limit, a failure)
+//! is not submitted again: its exit status and log say why.
+//!
+//! The script's lines come from `check`: `--mem` is the run's estimate (what grows with the
+//! steps, the stored factor or the contact solver's matrices, and 1 GiB for the mesh and
+//! the rest of its setup). A run is one process: `--nodes` and `--ntasks-per-node` other
+//! than 1 are refused, and the cores of the node are its threads (`--cpus-per-task`).
+
+use super::{default_out, setup};
+use crate::output::write_atomic;
+use crate::resources::{human, Estimate};
+use crate::solver::choice::Descriptor;
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// What the job asks of Slurm.
+#[derive(Clone, Debug)]
+pub struct JobOptions {
+    /// The directory of `job.sh` and `logs/`.
+    pub dir: PathBuf,
+    /// `--cpus-per-task`, the run's threads.
+    pub cpus_per_task: usize,
+    /// `--time`, as Slurm writes it (e.g. `1-00:00:00`); None: the partition's default.
+    pub time: Option<String>,
+    /// `--nodes` and `--ntasks-per-node`: 1 and 1 (a run is one process).
+    pub nodes: usize,
+    pub ntasks_per_node: usize,
+}
+
+/// Memory a run needs besides what `Estimate` and the solver count (its mesh, matrices,
+/// ordering and the buffers of its writers), as a study's array asks for each task.
+const SETUP_BYTES: f64 = 1024.0 * 1024.0 * 1024.0;
+
+/// A path as a single-quoted shell word.
+pub fn quoted(p: &Path) -> String {
+    word(&p.display().to_string())
+}
+
+/// Text as a single-quoted shell word.
+fn word(s: &str) -> String {
+    format!("'{}'", s.replace('\'', r"'\''"))
+}
+
+/// The line that sets `$VISCONTACT`, unless the environment sets it, to `exe`. An
+/// assignment, not `"${VISCONTACT:-'…'}"`: inside double quotes the single quotes would stay
+/// part of the word (issue 49: `bash collect.sh` exited 127).
+pub fn exe_line(exe: &Path) -> String {
+    format!("VISCONTACT=${{VISCONTACT:-{}}}", quoted(exe))
+}
+
+/// Writes `DIR/job.sh` for the run of `scene_path` with `overrides` into `out` (default:
+/// the run's default directory) and returns it with the memory it asks for.
+pub fn emit(
+    scene_path: &Path,
+    overrides: &[String],
+    out: Option<&Path>,
+    job: &JobOptions,
+) -> Result<(PathBuf, f64)> {
+    if (job.nodes, job.ntasks_per_node) != (1, 1) {
+        return Err(Error::input(format!(
+            "run --emit slurm: --nodes {} --ntasks-per-node {}: a run is one process in this \
+             version (no MPI ranks): write --nodes 1 --ntasks-per-node 1 and give the node's \
+             cores as threads (--cpus-per-task)",
+            job.nodes, job.ntasks_per_node
+        )));
+    }
+    if let Some(t) = job
+        .time
+        .as_deref()
+        .filter(|t| t.is_empty() || t.contains(char::is_whitespace))
+    {
+        return Err(Error::input(format!(
+            "run --emit slurm: --time {t:?}: write Slurm's form, e.g. 1-00:00:00 or 90:00"
+        )));
+    }
+    let (scene, _mesh, disc) = setup(scene_path, overrides)?;
+    if !scene.checkpoint.enabled {
+        return Err(Error::input(format!(
+            "{}: [checkpoint] enabled = false: the job resumes from checkpoints after its \
+             time limit; enable them (the default) to write a job",
+            scene_path.display()
+        )));
+    }
+    let mut solver = Descriptor::of_run(&scene, &disc)?;
+    let estimate = Estimate::new(&scene, &disc, 0);
+    let factor = solver.factor_bytes(&disc)?.unwrap_or(0.0);
+    let contact = solver.contact().and_then(|p| p.memory).unwrap_or(0.0);
+    let memory = estimate.memory + factor + contact + SETUP_BYTES;
+    let out = match out {
+        Some(o) => o.to_path_buf(),
+        None => default_out(&scene)?,
+    };
+    let absolute = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
+    let dir = absolute(&job.dir)?;
+    std::fs::create_dir_all(dir.join("logs")).map_err(|e| Error::io(&dir, e))?;
+    let script = Script {
+        name: &scene.name,
+        dir: &dir,
+        scene: &absolute(scene_path)?,
+        overrides,
+        out: &absolute(&out)?,
+        exe: &std::env::current_exe().map_err(|e| Error::io(Path::new("current_exe"), e))?,
+        job,
+        mem_mib: (memory / (1024.0 * 1024.0)).ceil() as u64,
+    };
+    let path = dir.join("job.sh");
+    write_atomic(&path, script.text().as_bytes())?;
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::Permissions::from_mode(0o755);
+    std::fs::set_permissions(&path, mode).map_err(|e| Error::io(&path, e))?;
+    Ok((path, memory))
+}
+
+/// What the script says.
+struct Script<'a> {
+    name: &'a str,
+    dir: &'a Path,
+    scene: &'a Path,
+    overrides: &'a [String],
+    out: &'a Path,
+    exe: &'a Path,
+    job: &'a JobOptions,
+    mem_mib: u64,
+}
+
+impl Script<'_> {
+    fn text(&self) -> String {
+        let time = match &self.job.time {
+            Some(t) => format!("#SBATCH --time={t}\n"),
+            None => String::new(),
+        };
+        let sets: String = (self.overrides.iter())
+            .map(|s| format!(" --set {}", word(s)))
+            .collect();
+        format!(
+            r#"#!/bin/bash
+# One viscontact run as a job that resumes itself, written by `viscontact run … --emit
+# slurm`. --mem: check's estimate ({mem_h}). SIGTERM 120 s before the time limit (B: to
+# this shell, which passes it on) makes the run stop after its step with a checkpoint; the
+# job then submits itself again, and the next job resumes the run, until it is complete.
+# A job whose run solved no step is not submitted again. Submit it with
+#   sbatch {job}
+#SBATCH --job-name=viscontact-{name}
+#SBATCH --nodes=1
+#SBATCH --ntasks-per-node=1
+#SBATCH --cpus-per-task={cpus}
+#SBATCH --mem={mem}M
+{time}#SBATCH --signal=B:TERM@120
+#SBATCH --output={logs}/%j.out
+set -uo pipefail
+{exe}
+OUT={out}
+JOB={job}
+export VISCONTACT_THREADS="${{SLURM_CPUS_PER_TASK:-{cpus}}}"
+field() {{ sed -n "s/^  \"$1\": \"\{{0,1\}}\([^\",]*\)\"\{{0,1\}},\{{0,1\}}\$/\1/p" "$OUT/summary.json" 2>/dev/null; }}
+if [ "$(field status)" = completed ]; then
+  echo "the run in $OUT is complete"
+  exit 0
+fi
+before=$(field last_step)
+if [ -f "$OUT/checkpoint.h5" ]; then
+  "$VISCONTACT" resume "$OUT/checkpoint.h5" --quiet &
+else
+  "$VISCONTACT" run {scene}{sets} --out "$OUT" --quiet &
+fi
+pid=$!
+trap 'kill -TERM "$pid" 2>/dev/null' TERM
+while true; do
+  wait "$pid"
+  code=$?
+  kill -0 "$pid" 2>/dev/null || break
+done
+if [ "$(field status)" = completed ]; then
+  exit 0
+fi
+after=$(field last_step)
+if [ "$(field status)" = interrupted ] && [ -f "$OUT/checkpoint.h5" ] && [ "$after" != "$before" ]; then
+  echo "stopped after step $after: submitting $JOB again to resume"
+  sbatch "$JOB" && exit 0
+fi
+echo "the run ended with status $code (summary.json: $(field status), last step ${{after:-none}}); not submitted again" >&2
+exit "$code"
+"#,
+            job = quoted(&self.dir.join("job.sh")),
+            mem_h = human(self.mem_mib as f64 * 1024.0 * 1024.0),
+            name = self.name.replace(char::is_whitespace, "_"),
+            cpus = self.job.cpus_per_task,
+            mem = self.mem_mib,
+            logs = self.dir.join("logs").display(),
+            exe = exe_line(self.exe),
+            out = quoted(self.out),
+            scene = quoted(self.scene),
+        )
+    }
+}
