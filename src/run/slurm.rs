@@ -98,6 +98,19 @@ pub fn emit(
         Some(o) => o.to_path_buf(),
         None => default_out(&scene)?,
     };
+    // A checkpoint already there would be resumed by the first job, whatever scene it is of.
+    if ["summary.json", "checkpoint.h5"]
+        .iter()
+        .any(|f| out.join(f).exists())
+    {
+        return Err(Error::input(format!(
+            "run --emit slurm: {} holds a run already; the job starts its run there and \
+             resumes only what its own jobs left: give another --out, or remove that run \
+             (to continue it, `viscontact resume {}/checkpoint.h5`)",
+            out.display(),
+            out.display()
+        )));
+    }
     let absolute = |p: &Path| std::path::absolute(p).map_err(|e| Error::io(p, e));
     let dir = absolute(&job.dir)?;
     std::fs::create_dir_all(dir.join("logs")).map_err(|e| Error::io(&dir, e))?;

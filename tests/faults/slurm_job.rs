@@ -3,8 +3,8 @@
 //! middle of the run (what `--signal=B:TERM@120` does before the time limit) stops the run
 //! with a checkpoint and submits the job again; the job run again resumes it to the end and
 //! submits nothing; a third says the run is complete. The series equals the run never
-//! stopped, bit for bit. A job of several ranks, or of a scene without checkpoints, is
-//! refused (exit 2).
+//! stopped, bit for bit. A job of several ranks, of a scene without checkpoints, or into a
+//! directory that holds a run already, is refused (exit 2).
 
 use crate::common;
 
@@ -151,6 +151,12 @@ fn a_job_of_several_ranks_or_without_checkpoints_is_refused() {
     let (code, text) = emit(&["--set", "checkpoint.enabled=false"]);
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("[checkpoint] enabled = false"), "{text}");
+    let earlier = tmp.path().join("earlier");
+    std::fs::create_dir(&earlier).unwrap();
+    std::fs::write(earlier.join("checkpoint.h5"), b"a run of another scene").unwrap();
+    let (code, text) = emit(&["--out", earlier.to_str().unwrap()]);
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("holds a run already"), "{text}");
     let (code, text) = emit(&["--time", "1 day"]);
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("Slurm's form"), "{text}");
