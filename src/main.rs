@@ -380,8 +380,19 @@ fn report(outcome: Outcome) -> Option<i32> {
     }
 }
 
-/// `check`: what a run of the scene would be, and whatever `run` refuses before its first
-/// step (exit 2).
+/// The directory of `--emit KIND DIR` where KIND is slurm, the one kind `command` writes.
+fn slurm_dir(command: &str, emit: &[String]) -> Result<PathBuf> {
+    match emit {
+        [kind, dir] if kind == "slurm" => Ok(PathBuf::from(dir)),
+        [kind, _] => Err(viscontact::Error::input(format!(
+            "{command}: --emit {kind}: the one kind is 'slurm' (--emit slurm DIR)"
+        ))),
+        _ => Err(viscontact::Error::input(format!(
+            "{command}: --emit takes two values: slurm DIR"
+        ))),
+    }
+}
+
 /// `run --emit slurm DIR`: writes the job and says how to submit it.
 fn emit_job(
     scene: &std::path::Path,
@@ -390,18 +401,8 @@ fn emit_job(
     job: JobFlags,
 ) -> Result<()> {
     use viscontact::run::slurm::{emit, JobOptions};
-    let [kind, dir] = &job.emit[..] else {
-        return Err(viscontact::Error::input(
-            "run: --emit takes two values: slurm DIR",
-        ));
-    };
-    if kind != "slurm" {
-        return Err(viscontact::Error::input(format!(
-            "run: --emit {kind}: the one kind is 'slurm' (--emit slurm DIR)"
-        )));
-    }
     let options = JobOptions {
-        dir: PathBuf::from(dir),
+        dir: slurm_dir("run", &job.emit)?,
         cpus_per_task: job.cpus_per_task,
         time: job.time,
         nodes: job.nodes,
@@ -418,6 +419,8 @@ fn emit_job(
     Ok(())
 }
 
+/// `check`: what a run of the scene would be, and whatever `run` refuses before its first
+/// step (exit 2).
 fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let (scene, mesh, disc) = setup(path, set)?;
     // The run's solver, resolved once: every line below and the refusals read it.
@@ -932,14 +935,9 @@ fn study(a: StudyArgs) -> Result<()> {
         progress: true,
         jobs: a.jobs,
     };
-    if let [kind, dir] = &a.emit[..] {
-        if kind != "slurm" {
-            return Err(viscontact::Error::input(format!(
-                "study: --emit {kind}: the one kind is 'slurm' (--emit slurm DIR)"
-            )));
-        }
+    if !a.emit.is_empty() {
         let slurm = slurm::SlurmOptions {
-            dir: PathBuf::from(dir),
+            dir: slurm_dir("study", &a.emit)?,
             at_once: (a.jobs > 1).then_some(a.jobs),
             cpus_per_task: a.cpus_per_task,
         };

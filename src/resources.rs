@@ -164,6 +164,13 @@ impl std::fmt::Display for Estimate {
     }
 }
 
+/// Memory a run holds besides what grows with its steps (the mesh, the matrices and, for a
+/// study's small cases, the factor of K_A), which `check`'s estimate leaves out: counted for
+/// each case that `study --jobs` packs, in the `--mem` of a study's job array and in that of
+/// `run --emit slurm` (which adds the factor and the contact solver's matrices). Large 3D
+/// meshes need more.
+pub const SETUP_MEMORY: f64 = 1024.0 * 1024.0 * 1024.0;
+
 pub fn human(bytes: f64) -> String {
     match bytes {
         b if b >= 1e12 => format!("{:.1} TB", b / 1e12),

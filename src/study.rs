@@ -70,6 +70,7 @@ pub mod transfer;
 
 use crate::fem::Discretization;
 use crate::kernel::Kernel;
+use crate::resources::SETUP_MEMORY;
 use crate::run::{discretize, load_scene};
 use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
@@ -362,11 +363,6 @@ fn case(mesh: &str, steps: usize) -> impl Fn(Scene) -> Result<Scene> + '_ {
         scene.with_mesh(Path::new(mesh))?.with_time(end, steps)
     }
 }
-
-/// Memory a run holds besides what grows with its steps (the mesh, the matrices and the
-/// factor of K_A), which `check`'s estimate leaves out: counted for each case that `--jobs`
-/// packs and in the `--mem` of `--emit slurm`. Large 3D meshes need more.
-pub const SETUP_MEMORY: f64 = 1024.0 * 1024.0 * 1024.0;
 
 /// A case read and discretized with its kernel in the form asked for: all of a run but its
 /// steps, and the name of the kernel the scene gives.

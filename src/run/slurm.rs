@@ -16,7 +16,7 @@
 
 use super::{default_out, setup};
 use crate::output::write_atomic;
-use crate::resources::{human, Estimate};
+use crate::resources::{human, Estimate, SETUP_MEMORY};
 use crate::solver::choice::Descriptor;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -34,10 +34,6 @@ pub struct JobOptions {
     pub nodes: usize,
     pub ntasks_per_node: usize,
 }
-
-/// Memory a run needs besides what `Estimate` and the solver count (its mesh, matrices,
-/// ordering and the buffers of its writers), as a study's array asks for each task.
-const SETUP_BYTES: f64 = 1024.0 * 1024.0 * 1024.0;
 
 /// A path as a single-quoted shell word.
 pub fn quoted(p: &Path) -> String {
@@ -93,7 +89,7 @@ pub fn emit(
     let estimate = Estimate::new(&scene, &disc, 0);
     let factor = solver.factor_bytes(&disc)?.unwrap_or(0.0);
     let contact = solver.contact().and_then(|p| p.memory).unwrap_or(0.0);
-    let memory = estimate.memory + factor + contact + SETUP_BYTES;
+    let memory = estimate.memory + factor + contact + SETUP_MEMORY;
     let out = match out {
         Some(o) => o.to_path_buf(),
         None => default_out(&scene)?,
@@ -125,11 +121,16 @@ pub fn emit(
         mem_mib: (memory / (1024.0 * 1024.0)).ceil() as u64,
     };
     let path = dir.join("job.sh");
-    write_atomic(&path, script.text().as_bytes())?;
+    write_script(&path, &script.text())?;
+    Ok((path, memory))
+}
+
+/// Writes a shell script (atomically) and makes it executable.
+pub fn write_script(path: &Path, text: &str) -> Result<()> {
+    write_atomic(path, text.as_bytes())?;
     use std::os::unix::fs::PermissionsExt;
     let mode = std::fs::Permissions::from_mode(0o755);
-    std::fs::set_permissions(&path, mode).map_err(|e| Error::io(&path, e))?;
-    Ok((path, memory))
+    std::fs::set_permissions(path, mode).map_err(|e| Error::io(path, e))
 }
 
 /// What the script says.

@@ -40,12 +40,12 @@
 //! coarse operators of N, Pᵀ N P level by level: made at the first system of a step from
 //! K's as PᵀKP + Pᵀ(N − K)P, and updated by the difference wherever the sets changed
 //! (`Preconditioner`; N − K lives near the contact boundary, so an update costs a fraction
-//! of a solve); where only the slip stiffness moved, the last one serves. A multigrid of K alone, projected, was a
-//! weak preconditioner where much of the face is active (docs/performance.md). The
-//! multipliers of the removed directions follow from the residual r = b − f_slip − (K +
-//! S)w⁺ node by node, r_i = Σ z_k a_k over the node's removed rows a_k (least squares on
-//! at most three vectors; a row dependent on the node's others, as at a corner where Γ3,1
-//! meets Γ3,2, gets none).
+//! of a solve); where only the slip stiffness moved, the last one serves. A multigrid of K
+//! alone, projected, was a weak preconditioner where much of the face is active
+//! (docs/performance.md). The multipliers of the removed directions follow from the
+//! residual r = b − f_slip − (K + S)w⁺ node by node, r_i = Σ z_k a_k over the node's
+//! removed rows a_k (least squares on at most three vectors; a row dependent on the node's
+//! others, as at a corner where Γ3,1 meets Γ3,2, gets none).
 //!
 //! # Stopping, accuracy and forcing
 //!
@@ -55,12 +55,12 @@
 //! most `tolerance` and the last system was solved to `krylov_tolerance` of its right
 //! side (`ActiveSetSettings`, the scene's `[solver.active_set]`). Until then the systems are
 //! solved inexactly, with a constant forcing term: each Krylov solve reduces the residual it
-//! starts from (that of the current iterate) by `forcing`, η = 10⁻² (`Tolerance::OfStart`). A system whose sets are still changing need not be accurate,
-//! and measured from its own start every solve makes progress, where a tolerance relative
-//! to the right side is met by a warm start without an iteration. Eisenstat–Walker's
-//! forcing (their choice 2, relative to the right side and at most a tenth of the last
-//! term so that it could not stall) took 1.7× the Krylov iterations on the plate 0.03
-//! (docs/performance.md). The step starts from the previous step's w and multipliers, so
+//! starts from (that of the current iterate) by `forcing`, η = 10⁻² (`Tolerance::OfStart`).
+//! A system whose sets are still changing need not be accurate, and measured from its own
+//! start every solve makes progress, where a tolerance relative to the right side is met
+//! by a warm start without an iteration. Eisenstat–Walker's forcing (their choice 2,
+//! relative to the right side and at most a tenth of the last term so that it could not
+//! stall) took 1.7× the Krylov iterations on the plate 0.03 (docs/performance.md). The step starts from the previous step's w and multipliers, so
 //! its first sets are the previous step's.
 //!
 //! # Globalization

@@ -15,7 +15,7 @@
 //! - Packing: a case starts while fewer than N run and the memory of its run and of the
 //!   running ones fits in the share of the available memory a run may plan: `check`'s
 //!   estimate of what the steps hold ([`crate::resources::Estimate`]) plus
-//!   [`super::SETUP_MEMORY`] each; a case that does not fit waits, unless nothing runs.
+//!   [`crate::resources::SETUP_MEMORY`] each; a case that does not fit waits, unless nothing runs.
 //! - This process, while it waits, makes the transfers of the cases' meshes onto their
 //!   references' meshes (`shared::Transfers`) for the error norms, which would otherwise
 //!   run alone after the last case.

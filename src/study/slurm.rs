@@ -30,7 +30,7 @@ use super::shared::{Discs, Transfers};
 use super::{
     assemble, check_levels, MeshFamily, Prepared, Solved, StudyOptions, StudyReport, Timed, Vary,
 };
-use crate::run::slurm::{exe_line, quoted};
+use crate::run::slurm::{exe_line, quoted, write_script};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -173,11 +173,9 @@ pub fn emit(scene_path: &Path, opts: &StudyOptions, slurm: &SlurmOptions) -> Res
     let mut written = Vec::new();
     for (name, text) in files {
         let path = dir.join(name);
-        crate::output::write_atomic(&path, text.as_bytes())?;
-        if name.ends_with(".sh") {
-            use std::os::unix::fs::PermissionsExt;
-            let mode = std::fs::Permissions::from_mode(0o755);
-            std::fs::set_permissions(&path, mode).map_err(|e| Error::io(&path, e))?;
+        match name.ends_with(".sh") {
+            true => write_script(&path, &text)?,
+            false => crate::output::write_atomic(&path, text.as_bytes())?,
         }
         written.push(path);
     }
@@ -239,13 +237,8 @@ exec "$VISCONTACT" run "$SCENE" "${{sets[@]}}" --out "$out" --quiet
             dir = quoted(self.dir),
             logs = self.dir.join("logs").display(),
             scene = quoted(self.scene),
-            exe = self.exe_line(),
+            exe = exe_line(self.exe),
         )
-    }
-
-    /// The line that sets `$VISCONTACT` to the binary that wrote the scripts.
-    fn exe_line(&self) -> String {
-        exe_line(self.exe)
     }
 
     fn collect(&self) -> String {
@@ -257,7 +250,7 @@ exec "$VISCONTACT" run "$SCENE" "${{sets[@]}}" --out "$out" --quiet
             mem = self.mem_mib,
             logs = self.dir.join("logs").display(),
             dir = quoted(self.dir),
-            exe = self.exe_line(),
+            exe = exe_line(self.exe),
         )
     }
 
