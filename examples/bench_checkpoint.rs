@@ -55,7 +55,7 @@ fn main() {
                 let t = Instant::now();
                 match run(Path::new("examples/paper.toml"), &opts).expect("the paper scene runs") {
                     Outcome::Finished(_) => {}
-                    Outcome::Stopped { .. } => unreachable!(),
+                    other => unreachable!("{other:?}"),
                 }
                 times[i].push(t.elapsed().as_secs_f64());
             }

@@ -20,6 +20,10 @@ pub enum Error {
         signal_name(*.0)
     )]
     Interrupted(i32),
+    /// A run's setup failed or was stopped on another MPI rank of the run, which
+    /// reported why: this rank ends with the same exit status, saying nothing.
+    #[error("another rank ended the run's setup (exit status {0}) and said why")]
+    Elsewhere(i32),
     /// An operating-system error while reading or writing a file. Exit status 1.
     #[error("{path}: {source}")]
     Io {
@@ -58,6 +62,7 @@ impl Error {
         match self {
             Error::Input(_) => 2,
             Error::Interrupted(signal) => 128 + signal,
+            Error::Elsewhere(code) => *code,
             Error::Solve(_) | Error::Io { .. } => 1,
         }
     }

@@ -22,6 +22,7 @@ pub mod output;
 pub mod petsc;
 pub mod plot;
 pub mod ranges;
+pub mod ranks;
 pub mod resources;
 pub mod run;
 pub mod scene;

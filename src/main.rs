@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use viscontact::fem::Discretization;
 use viscontact::history::{Plan, Plans};
+use viscontact::ranks::Ranks;
 use viscontact::run::{resume, run, setup, Interrupt, Outcome, RunOptions};
 use viscontact::scene::Scene;
 use viscontact::{effects::Effects, mesh::Mesh, Result};
@@ -150,10 +151,10 @@ struct JobFlags {
     /// default: the partition's).
     #[arg(long, requires = "emit")]
     time: Option<String>,
-    /// With --emit slurm: nodes (1: a run is one process).
+    /// With --emit slurm: nodes (more than 1: the run's MPI ranks, docs/cluster.md).
     #[arg(long, default_value_t = 1, requires = "emit")]
     nodes: usize,
-    /// With --emit slurm: tasks per node (1: a run is one process).
+    /// With --emit slurm: tasks per node, each a rank of the run (1: one process a node).
     #[arg(long, default_value_t = 1, requires = "emit")]
     ntasks_per_node: usize,
 }
@@ -165,8 +166,10 @@ impl StepFlags {
         out: Option<PathBuf>,
         overrides: Vec<String>,
         interrupt: Interrupt,
+        ranks: Ranks,
     ) -> RunOptions {
         RunOptions {
+            ranks,
             out,
             overrides,
             progress: !self.quiet,
@@ -195,17 +198,34 @@ fn main() -> ExitCode {
         cli.command,
         Command::Run { .. } | Command::Resume { .. } | Command::Study(_) | Command::StudyCase(_)
     );
+    let mut ranks = Ranks::ONE;
     if !only_prints {
         viscontact::console::outlive_broken_pipes();
-        if let Err(e) = viscontact::threads::one_process() {
-            return exit_code(Err(e));
+        // After the signal handling (which must come before any thread is started, MPI's
+        // too), before anything is read.
+        let (name, spreads) = match &cli.command {
+            Command::Run { .. } => ("run", true),
+            Command::Resume { .. } => ("resume", true),
+            _ => ("study", false),
+        };
+        match Ranks::of_process(name, spreads) {
+            Ok(r) => ranks = r,
+            Err(e) => return exit_code(Err(e)),
         }
     }
-    // After the signal handling (which must come before any thread is started).
     if let Err(e) = viscontact::threads::init(threads) {
         return exit_code(Err(e));
     }
-    let result = dispatch(cli.command, interrupt);
+    let result = dispatch(cli.command, interrupt, ranks);
+    if let (Err(e), true) = (&result, ranks.size > 1) {
+        // A failure after setup may be this rank's alone: it ends them all, so that none
+        // waits for it in a collective call (`viscontact::ranks`). Setup's were agreed.
+        use viscontact::Error::{Elsewhere, Input, Interrupted};
+        if !matches!(e, Input(_) | Interrupted(_) | Elsewhere(_)) {
+            viscontact::errln!("error: rank {}: {e}", ranks.rank);
+            ranks.abort(e.exit_code());
+        }
+    }
     // After every PETSc object of the run is dropped (with the time loop, in dispatch).
     #[cfg(feature = "petsc")]
     viscontact::petsc::finalize();
@@ -232,7 +252,7 @@ fn interrupt_for(command: &Command) -> std::result::Result<Interrupt, ExitCode> 
 }
 
 /// Runs the command: the signal that stopped a run, if one did.
-fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
+fn dispatch(command: Command, interrupt: Interrupt, ranks: Ranks) -> Result<Option<i32>> {
     match command {
         Command::Run {
             scene,
@@ -247,13 +267,13 @@ fn dispatch(command: Command, interrupt: Interrupt) -> Result<Option<i32>> {
             set,
             steps,
             ..
-        } => run(&scene, &steps.options(out, set, interrupt)).map(report),
+        } => run(&scene, &steps.options(out, set, interrupt, ranks)).map(report),
         Command::Resume {
             checkpoint,
             out,
             set,
             steps,
-        } => resume(&checkpoint, &steps.options(out, set, interrupt)).map(report),
+        } => resume(&checkpoint, &steps.options(out, set, interrupt, ranks)).map(report),
         Command::Check { scene, set } => check(&scene, &set).map(|()| None),
         Command::MeshInfo { mesh, json } => mesh_info(&mesh, json).map(|()| None),
         Command::Study(args) => study(*args).map(|()| None),
@@ -336,6 +356,8 @@ fn exit_code(result: Result<Option<i32>>) -> ExitCode {
             match e {
                 // Not an error of the user's or of the solve: what they asked for.
                 viscontact::Error::Interrupted(_) => viscontact::errln!("{e}"),
+                // Another rank said why.
+                viscontact::Error::Elsewhere(_) => {}
                 _ => viscontact::errln!("error: {e}"),
             }
             ExitCode::from(e.exit_code() as u8)
@@ -361,6 +383,8 @@ fn report(outcome: Outcome) -> Option<i32> {
             );
             None
         }
+        // Rank 0 reports the run (`viscontact::ranks`).
+        Outcome::Followed { signal } => signal,
         Outcome::Stopped {
             signal: None,
             message,

@@ -11,10 +11,8 @@
 //! - the step's passes (`team::Team`) cut their work in as many pieces and run
 //!   them on that many threads (the factor's solves on 16 at most).
 //!
-//! The process is one: a run does not spread over MPI ranks, so a process that an MPI
-//! launcher (`mpirun -n N`, `srun` with Open MPI or PMI-2) started as one of several is
-//! refused before it reads anything ([`one_process`]); each would otherwise run the whole
-//! scene into the same directory.
+//! Where an MPI launcher started several processes of a run on one node (docs/cluster.md),
+//! the default is each one's share of the cores.
 //!
 //! With one thread nothing runs on a second thread. Results do not depend on the count:
 //! the step's arithmetic is decided by the matrix (the factor's two groups of subtrees,
@@ -66,7 +64,7 @@ pub fn init(flag: Option<NonZeroUsize>) -> Result<usize> {
                 })?,
                 format!("{ENV}={text}"),
             ),
-            Err(std::env::VarError::NotPresent) => (available(), String::new()),
+            Err(std::env::VarError::NotPresent) => (default_count(), String::new()),
             Err(std::env::VarError::NotUnicode(_)) => {
                 return Err(Error::input(format!("{ENV} is not valid UTF-8")));
             }
@@ -83,30 +81,20 @@ pub fn init(flag: Option<NonZeroUsize>) -> Result<usize> {
     Ok(n)
 }
 
-/// The environment variables by which MPI launchers tell each process how many they
-/// started: Open MPI's `mpirun` (and `srun` with Open MPI), and the PMI of MPICH's and
-/// Intel MPI's launchers and of Slurm's `srun --mpi=pmi2`.
-pub const LAUNCHER_SIZE: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];
+/// The count where none is asked for: the cores this process may use, shared among the
+/// run's processes on this node (`mpirun -n 2` on two cores: one thread each).
+fn default_count() -> usize {
+    (available() / ranks_on_this_node()).max(1)
+}
 
-/// Refuses (bad input, exit 2) a process that an MPI launcher started as one of several:
-/// every one of them would run the whole scene, each into the same directory, where the
-/// directory's lock refuses all but one or each run replaces the last. A value that is not
-/// a count is not ours to judge and is let be.
-pub fn one_process() -> Result<()> {
-    for var in LAUNCHER_SIZE {
-        let value = std::env::var(var).unwrap_or_default();
-        let Some(size) = value.trim().parse::<u64>().ok().filter(|&n| n > 1) else {
-            continue;
-        };
-        return Err(Error::input(format!(
-            "{var}={value}: an MPI launcher (mpirun -n, srun) started viscontact as one of \
-             {size} processes, but a run does not spread over MPI ranks: each process would \
-             run the whole scene into the same directory. Start one process, without mpirun \
-             or srun -n; give it the machine's cores with --threads N (or {ENV}), and run \
-             many scenes on a cluster with `study --emit slurm`"
-        )));
-    }
-    Ok(())
+/// How many processes an MPI launcher started on this process's node (Open MPI's variable,
+/// MPICH's), 1 without one.
+fn ranks_on_this_node() -> usize {
+    ["OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS"]
+        .into_iter()
+        .find_map(|var| std::env::var(var).ok()?.trim().parse::<usize>().ok())
+        .filter(|&n| n >= 1)
+        .unwrap_or(1)
 }
 
 /// Refuses `n` threads (asked for by `source`) above [`MAX_PER_CORE`] × `cores`, and warns

@@ -4,8 +4,11 @@
 //! The binding is our own and small (docs/decisions.md): `shim.c`, compiled by build.rs
 //! with the flags of PETSc's pkg-config file, keeps PETSc's macros and types on the C side
 //! and offers a few functions with plain C types; this module declares them and wraps them
-//! safely. One process, `PETSC_COMM_SELF`; PETSc is initialized once per process, on first
-//! use ([`initialize`]), and finalized by [`finalize`] at the end of `main`.
+//! safely. PETSc is initialized once per process, on first use ([`initialize`]) or, under an
+//! MPI launcher with several processes, before the run reads anything (docs/cluster.md),
+//! and finalized by [`finalize`] at the end of `main`. K_A's KSP spans the ranks (each
+//! holds a block of its rows and gets the whole solution back); the Newton systems of the
+//! active set are one process's.
 //!
 //! # The solve
 //!
@@ -58,6 +61,10 @@ extern "C" {
     fn vc_finalize() -> c_int;
     fn vc_error_message(code: c_int) -> *const c_char;
     fn vc_reason_name(reason: c_int) -> *const c_char;
+    fn vc_world(rank: *mut c_int, size: *mut c_int) -> c_int;
+    fn vc_max_over_ranks(value: *mut c_int) -> c_int;
+    fn vc_from_rank0(value: *mut c_int) -> c_int;
+    fn vc_abort(code: c_int);
     #[allow(clippy::too_many_arguments)]
     fn vc_ksp_create(
         n: PetscInt,
@@ -163,6 +170,34 @@ pub fn initialize() -> Result<()> {
     };
     *state = Some(if code == 0 { Ok(true) } else { Err(code) });
     check(code, "PetscInitialize")
+}
+
+/// This process's rank and the number of ranks (MPI's world; PETSc initialized).
+pub fn world() -> Result<(usize, usize)> {
+    let (mut rank, mut size) = (0, 0);
+    // SAFETY: PETSc (and MPI) is initialized (`initialize`); the shim writes two ints.
+    check(unsafe { vc_world(&mut rank, &mut size) }, "MPI_Comm_size")?;
+    Ok((rank as usize, size as usize))
+}
+
+/// The largest of every rank's `value` (collective: every rank calls it).
+pub fn max_over_ranks(mut value: i32) -> Result<i32> {
+    // SAFETY: PETSc (and MPI) is initialized; the shim reads and writes one int.
+    check(unsafe { vc_max_over_ranks(&mut value) }, "MPI_Allreduce")?;
+    Ok(value)
+}
+
+/// Rank 0's `value` (collective: every rank calls it).
+pub fn from_rank0(mut value: i32) -> Result<i32> {
+    // SAFETY: PETSc (and MPI) is initialized; the shim reads and writes one int.
+    check(unsafe { vc_from_rank0(&mut value) }, "MPI_Bcast")?;
+    Ok(value)
+}
+
+/// Ends every rank with exit status `code` (`MPI_Abort`).
+pub fn abort(code: i32) {
+    // SAFETY: PETSc (and MPI) is initialized by whoever has several ranks to end.
+    unsafe { vc_abort(code) }
 }
 
 /// Finalizes PETSc (and MPI) if it was initialized; every [`Krylov`] must be dropped

@@ -1,7 +1,10 @@
 /* The C side of viscontact's PETSc binding (src/petsc/mod.rs): a handful of functions with
  * plain C types, so that PETSc's macros (PetscCall, PETSC_COMM_SELF, which is a pointer in
  * Open MPI) and its types stay on this side. Every function returns a PetscErrorCode (0:
- * success); vc_error_message turns one into PETSc's text. One process, PETSC_COMM_SELF. */
+ * success); vc_error_message turns one into PETSc's text. K_A's own KSP spans the ranks an MPI
+ * launcher started (PETSC_COMM_WORLD: each rank holds a contiguous block of its rows, and
+ * every rank gets the whole solution back); the active set's Newton systems are one
+ * process's (PETSC_COMM_SELF, refused on several). */
 #include <petscksp.h>
 
 #if defined(VC_REQUIRE_32BIT_INDICES) && defined(PETSC_USE_64BIT_INDICES)
@@ -29,6 +32,31 @@ const char *vc_error_message(int code)
 
 const char *vc_reason_name(int reason) { return KSPConvergedReasons[reason]; }
 
+/* This process's rank and the number of ranks in PETSC_COMM_WORLD. */
+int vc_world(int *rank, int *size)
+{
+  PetscCallMPI(MPI_Comm_rank(PETSC_COMM_WORLD, rank));
+  PetscCallMPI(MPI_Comm_size(PETSC_COMM_WORLD, size));
+  return 0;
+}
+
+/* *value ← the largest of every rank's *value (collective). */
+int vc_max_over_ranks(int *value)
+{
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, value, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD));
+  return 0;
+}
+
+/* *value ← rank 0's *value (collective). */
+int vc_from_rank0(int *value)
+{
+  PetscCallMPI(MPI_Bcast(value, 1, MPI_INT, 0, PETSC_COMM_WORLD));
+  return 0;
+}
+
+/* Ends every rank with exit status `code` (a rank that failed alone). */
+void vc_abort(int code) { MPI_Abort(PETSC_COMM_WORLD, code); }
+
 /* The nodal terms of the constrained operator (vc_constrained_solve): `np` directions removed,
  * each on up to three dofs (-1: none) with its coefficients, applied one after the other
  * (orthonormal within a node: the product is the orthogonal projection Π); `ns` local
@@ -43,6 +71,10 @@ typedef struct {
   Mat A;
   KSP ksp;
   Vec b, x;
+  /* The rows this rank owns, [lo, lo + count[rank]); each rank's count and first row
+   * (displ) for gathering the solution; count and displ NULL on one process. */
+  PetscInt     lo;
+  PetscMPIInt *count, *displ;
   /* The constrained system, created with the KSP where `newton` (else NULL): its assembled
    * matrix N, the matrix Q its preconditioner was built from, its KSP, the terms of the
    * solve in progress. */
@@ -59,11 +91,71 @@ typedef struct {
 
 static PetscErrorCode constrained_setup(VcKsp *s);
 
+/* The rows of `rank` among `size` ranks: whole blocks of bs rows, as even as they come. */
+static void owned(PetscInt n, PetscInt bs, PetscMPIInt rank, PetscMPIInt size, PetscInt *lo,
+                  PetscInt *hi)
+{
+  PetscInt64 blocks = n / bs;
+  *lo = (PetscInt)(bs * (blocks * rank / size));
+  *hi = rank + 1 == size ? n : (PetscInt)(bs * (blocks * (rank + 1) / size));
+}
+
+/* K_A on the ranks: on one, a SEQAIJ of the whole CSR (what the Newton systems update in
+ * place); on several, an MPIAIJ of which each rank gives its own rows [lo, hi) of the same
+ * global CSR, with each rank's share recorded for gathering the solution. */
+static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *rowptr,
+                                         const PetscInt *cols, const PetscScalar *vals, PetscInt bs,
+                                         PetscInt *hi)
+{
+  PetscMPIInt size, rank;
+
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_size(PETSC_COMM_WORLD, &size));
+  PetscCallMPI(MPI_Comm_rank(PETSC_COMM_WORLD, &rank));
+  if (size == 1) {
+    PetscCall(MatCreate(PETSC_COMM_SELF, &s->A));
+    PetscCall(MatSetSizes(s->A, n, n, n, n));
+    PetscCall(MatSetType(s->A, MATSEQAIJ));
+    if (bs > 1) PetscCall(MatSetBlockSize(s->A, bs));
+    PetscCall(MatSeqAIJSetPreallocationCSR(s->A, rowptr, cols, vals));
+    s->lo = 0;
+    *hi = n;
+    PetscFunctionReturn(0);
+  }
+  PetscInt *local;
+  PetscBool chosen;
+  /* GAMG's Galerkin products on several ranks add other ranks' contributions in the order
+   * their messages arrive with PETSc's default algorithm: on 3 ranks and more, two runs
+   * differed in the last bits (docs/cluster.md). The all-at-once product gave the same bits
+   * in every run tried (3, 4 and 5 ranks), so it is the default where PETSC_OPTIONS does
+   * not choose one (the scene's options may still). */
+  PetscCall(PetscOptionsHasName(NULL, NULL, "-matptap_via", &chosen));
+  if (!chosen) PetscCall(PetscOptionsSetValue(NULL, "-matptap_via", "allatonce"));
+  PetscCall(PetscMalloc2(size, &s->count, size, &s->displ));
+  for (PetscMPIInt r = 0; r < size; r++) {
+    PetscInt lo, h;
+    owned(n, bs, r, size, &lo, &h);
+    s->count[r] = (PetscMPIInt)(h - lo);
+    s->displ[r] = (PetscMPIInt)lo;
+  }
+  owned(n, bs, rank, size, &s->lo, hi);
+  PetscCall(PetscMalloc1(*hi - s->lo + 1, &local));
+  for (PetscInt i = s->lo; i <= *hi; i++) local[i - s->lo] = rowptr[i] - rowptr[s->lo];
+  PetscCall(MatCreate(PETSC_COMM_WORLD, &s->A));
+  PetscCall(MatSetSizes(s->A, *hi - s->lo, *hi - s->lo, n, n));
+  PetscCall(MatSetType(s->A, MATMPIAIJ));
+  if (bs > 1) PetscCall(MatSetBlockSize(s->A, bs));
+  PetscCall(MatMPIAIJSetPreallocationCSR(s->A, local, cols + rowptr[s->lo], vals + rowptr[s->lo]));
+  PetscCall(PetscFree(local));
+  PetscFunctionReturn(0);
+}
+
 /* The matrix in CSR (a symmetric matrix's CSC is its CSR), its near-null space as `nvec`
  * orthonormal vectors of length n stored one after the other, CG + GAMG with relative
  * tolerance `rtol`, then `options` (PETSc's command-line syntax) and KSPSetFromOptions;
  * set up for K's own solves, or where `newton`, for the constrained systems alone (their
- * KSP and multigrid: constrained_setup), K's never being solved. */
+ * KSP and multigrid: constrained_setup), K's never being solved. Every rank gives the
+ * whole matrix; on several ranks each keeps its rows, and `newton` is refused. */
 int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, const PetscScalar *vals,
                   PetscInt bs, PetscInt nvec, const PetscScalar *near, PetscReal rtol,
                   const char *options, int newton, void **out)
@@ -72,13 +164,14 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   MatNullSpace space;
   Vec         *vecs;
   PC           pc;
+  PetscInt     hi;
+  MPI_Comm     comm;
 
   PetscCall(PetscCalloc1(1, &s));
-  PetscCall(MatCreate(PETSC_COMM_SELF, &s->A));
-  PetscCall(MatSetSizes(s->A, n, n, n, n));
-  PetscCall(MatSetType(s->A, MATSEQAIJ));
-  if (bs > 1) PetscCall(MatSetBlockSize(s->A, bs));
-  PetscCall(MatSeqAIJSetPreallocationCSR(s->A, rowptr, cols, vals));
+  PetscCall(distributed_matrix(s, n, rowptr, cols, vals, bs, &hi));
+  PetscCheck(!newton || !s->count, PETSC_COMM_WORLD, PETSC_ERR_SUP,
+             "the active set's Newton systems run on one process");
+  PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatSetOption(s->A, MAT_SYMMETRIC, PETSC_TRUE));
   PetscCall(MatSetOption(s->A, MAT_SPD, PETSC_TRUE));
 
@@ -87,16 +180,16 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
     PetscScalar *a;
     PetscCall(MatCreateVecs(s->A, &vecs[k], NULL));
     PetscCall(VecGetArray(vecs[k], &a));
-    PetscCall(PetscArraycpy(a, near + k * n, n));
+    PetscCall(PetscArraycpy(a, near + k * n + s->lo, hi - s->lo));
     PetscCall(VecRestoreArray(vecs[k], &a));
   }
-  PetscCall(MatNullSpaceCreate(PETSC_COMM_SELF, PETSC_FALSE, nvec, vecs, &space));
+  PetscCall(MatNullSpaceCreate(comm, PETSC_FALSE, nvec, vecs, &space));
   PetscCall(MatSetNearNullSpace(s->A, space));
   PetscCall(MatNullSpaceDestroy(&space));
   for (PetscInt k = 0; k < nvec; k++) PetscCall(VecDestroy(&vecs[k]));
   PetscCall(PetscFree(vecs));
 
-  PetscCall(KSPCreate(PETSC_COMM_SELF, &s->ksp));
+  PetscCall(KSPCreate(comm, &s->ksp));
   PetscCall(KSPSetOperators(s->ksp, s->A, s->A));
   PetscCall(KSPSetType(s->ksp, KSPCG));
   PetscCall(KSPGetPC(s->ksp, &pc));
@@ -112,19 +205,33 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   return 0;
 }
 
+/* Every rank's x ← the whole of x, from each rank's owned rows (nothing on one process). */
+static PetscErrorCode gathered(VcKsp *s, PetscScalar *x)
+{
+  MPI_Comm comm;
+
+  PetscFunctionBeginUser;
+  if (!s->count) PetscFunctionReturn(0);
+  PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
+  PetscCallMPI(MPI_Allgatherv(MPI_IN_PLACE, 0, MPIU_SCALAR, x, s->count, s->displ, MPIU_SCALAR, comm));
+  PetscFunctionReturn(0);
+}
+
 /* x ← K⁻¹ b by the KSP, from the initial guess in x; its iterations, converged reason (< 0:
- * diverged) and final residual norm. */
+ * diverged) and final residual norm. b and x are whole on every rank (each gives the same
+ * b), and x is whole on every rank after it. */
 int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, PetscInt *its, int *reason,
                  PetscReal *rnorm)
 {
   VcKsp             *s = (VcKsp *)ctx;
   KSPConvergedReason r;
 
-  PetscCall(VecPlaceArray(s->b, b));
-  PetscCall(VecPlaceArray(s->x, x));
+  PetscCall(VecPlaceArray(s->b, b + s->lo));
+  PetscCall(VecPlaceArray(s->x, x + s->lo));
   PetscCall(KSPSolve(s->ksp, s->b, s->x));
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
+  PetscCall(gathered(s, x));
   PetscCall(KSPGetIterationNumber(s->ksp, its));
   PetscCall(KSPGetConvergedReason(s->ksp, &r));
   PetscCall(KSPGetResidualNorm(s->ksp, rnorm));
@@ -599,6 +706,7 @@ int vc_ksp_destroy(void *ctx)
   PetscCall(VecDestroy(&s->x));
   PetscCall(KSPDestroy(&s->ksp));
   PetscCall(MatDestroy(&s->A));
+  PetscCall(PetscFree2(s->count, s->displ));
   PetscCall(PetscFree(s));
   return 0;
 }

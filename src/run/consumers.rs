@@ -37,15 +37,45 @@ pub(super) struct Consumers<'a> {
 }
 
 /// When a run stops before its last step: after step `after` (`--stop-after`) or after the
-/// step being solved when a signal came.
+/// step being solved when a signal came, to this rank or, where the run has several, to
+/// any (`crate::ranks`).
 pub(super) struct StopRule {
     pub after: Option<usize>,
     pub interrupt: super::Interrupt,
+    pub ranks: crate::ranks::Ranks,
+}
+
+impl StopRule {
+    /// Whether the run stops after step n, the same answer on every rank; a signal that
+    /// reached another rank is recorded here as if it had come to this one.
+    pub fn asks(&self, n: usize) -> bool {
+        let signal = self.interrupt.signal();
+        let after = self.after == Some(n);
+        // An MPI failure ends the process in PETSc's handler; were it to return, stop here.
+        let (any, stop) = self.ranks.stop(signal, after).unwrap_or((signal, true));
+        if let Some(s) = any.filter(|_| signal.is_none()) {
+            self.interrupt.raise(s);
+        }
+        stop
+    }
+}
+
+/// A follower rank's observer (`crate::ranks`): it writes nothing, and stops with the others.
+pub(super) struct Follower(pub StopRule);
+
+impl Observer for Follower {
+    fn stop_after(&mut self, n: usize) -> bool {
+        self.0.asks(n)
+    }
+
+    fn solved(&mut self, _: &Solved) -> Result<()> {
+        Ok(())
+    }
 }
 
 impl Observer for Consumers<'_> {
     fn stop_after(&mut self, n: usize) -> bool {
-        self.stop.after == Some(n) || self.stop.interrupt.signal().is_some()
+        self.stop.asks(n)
     }
 
     fn solved(&mut self, s: &Solved) -> Result<()> {

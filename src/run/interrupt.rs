@@ -131,7 +131,15 @@ impl Interrupt {
         }
     }
 
-    /// Asks the run to stop as `signal` would (for library callers and tests).
+    /// A follower rank's (`crate::ranks`): committed from the start, so that no signal ends
+    /// the process; a signal only asks the run to stop after a step, which rank 0 decides
+    /// with the others, and before it commits, alone.
+    pub fn follow(&self) {
+        self.committed.store(true, Ordering::SeqCst);
+    }
+
+    /// Asks the run to stop as `signal` would (for library callers and tests, and for a
+    /// signal that reached another rank of the run).
     pub fn raise(&self, signal: i32) {
         self.signal.store(signal as usize, Ordering::SeqCst);
     }

@@ -4,7 +4,9 @@
 //!
 //! 1. load and check everything the run needs (the scene first, then, owning the output
 //!    directory, the mesh, the discretization and the step solver); a failure here leaves
-//!    the directory as it was (`dir`);
+//!    the directory as it was (`dir`). On several MPI ranks every rank does, and they agree
+//!    before the first collective call; rank 0 owns the directory and the others `follow`
+//!    (`crate::ranks`);
 //! 2. replace the run the directory holds (`run`) or continue it (`resume`);
 //! 3. `drive` the time loop: each solved step goes to the consumers (`consumers`:
 //!    statistics, frames, history.csv (`history_csv`), checkpoints, progress) until the
@@ -31,11 +33,12 @@ use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::{write_atomic, Resumed, Series};
+use crate::ranks::Ranks;
 use crate::scene::{read_scene_file, MeshChoice, Scene};
 use crate::solver::choice::Descriptor;
 use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
-use consumers::{Checkpoints, Consumers, Frames, Progress, Statistics, StopRule};
+use consumers::{Checkpoints, Consumers, Follower, Frames, Progress, Statistics, StopRule};
 use dir::DirLock;
 use frame::open_series;
 use history_csv::HistoryCsv;
@@ -45,7 +48,7 @@ use std::time::Instant;
 use summary::{summary_json, Ending};
 
 /// Options of a run (and of a resume) that are not part of the scene.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct RunOptions {
     pub out: Option<PathBuf>,
     pub overrides: Vec<String>,
@@ -58,6 +61,22 @@ pub struct RunOptions {
     /// Set by SIGINT/SIGTERM (see [`Interrupt::on_signals`]): stop like `stop_after` after
     /// the step being solved, or (during setup) before the directory is changed.
     pub interrupt: Interrupt,
+    /// The MPI ranks the run spreads over (`crate::ranks`; one by default).
+    pub ranks: Ranks,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            out: None,
+            overrides: Vec::new(),
+            progress: false,
+            stop_after: None,
+            force: false,
+            interrupt: Interrupt::default(),
+            ranks: Ranks::ONE,
+        }
+    }
 }
 
 /// How a run ended, when it did not fail (a failed run returns its error, after writing
@@ -76,6 +95,9 @@ pub enum Outcome {
         signal: Option<i32>,
         message: String,
     },
+    /// A follower rank's part of a run on several MPI ranks ended as rank 0's did, which
+    /// reported it; `signal` as in `Stopped`.
+    Followed { signal: Option<i32> },
 }
 
 /// The default output directory: `out/<scene name>/`. A scene name is a name, not a path:
@@ -139,10 +161,62 @@ pub fn run(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
 }
 
 fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
+    if !opts.ranks.is_first() {
+        return follow(scene_path, Begun::Run, opts);
+    }
     let start = Instant::now();
+    let ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
+    let tl = TimeLoop::with_solver(&ready.scene, &ready.disc, ready.plans, ready.solver)?;
+    // Setup succeeded: the run the directory held goes, before the first new frame, unless
+    // a signal came first (then it stays as it was).
+    let committed = opts
+        .interrupt
+        .unless_signalled(|| dir::remove_run(&ready.out));
+    tell_followers(opts, &committed)?;
+    committed.map_err(Error::Interrupted)??;
+    let (scene, mesh, disc, out) = (&ready.scene, &ready.mesh, &ready.disc, ready.out);
+    let history = HistoryCsv::open(&out, scene, mesh, disc, &tl, None)?;
+    let run_id = ready.identity.run_id.clone();
+    let writer = checkpoint::Writer::new(&out, ready.identity, scene.time.steps, tl.rows());
+    drive(Drive {
+        scene,
+        mesh,
+        disc,
+        tl,
+        series: ready.series,
+        history,
+        writer,
+        log: RunLog::default(),
+        run_id,
+        out,
+        _lock: ready.lock,
+        start,
+        setup_s: start.elapsed().as_secs_f64(),
+        opts,
+        resumed_from: None,
+    })
+}
+
+/// What a run or a resume has made ready before its time loop: everything that can fail
+/// on bad input, so that the ranks agree on it before PETSc's first collective call.
+struct Ready {
+    /// Shared with the writer thread of history.csv.
+    scene: Arc<Scene>,
+    mesh: Mesh,
+    /// Shared with the frame writer's thread (run/frame.rs).
+    disc: Arc<Discretization>,
+    solver: Descriptor,
+    plans: crate::history::Plans,
+    identity: checkpoint::Identity,
+    series: Series,
+    out: PathBuf,
+    lock: DirLock,
+}
+
+/// A new run's setup up to its time loop, with the output directory locked.
+fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     // A signal between two stages ends setup with the directory as it was.
     let stage = || opts.interrupt.between_setup_stages();
-    // Shared with the writer thread of history.csv.
     let scene = Arc::new(load_scene(scene_path, &opts.overrides)?);
     let out = match &opts.out {
         Some(out) => out.clone(),
@@ -154,43 +228,105 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     stage()?;
     let mesh = read_mesh(&scene)?;
     stage()?;
-    // Shared with the frame writer's thread (run/frame.rs).
     let disc = Arc::new(Discretization::new(&mesh, &scene)?);
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
     let solver = check_contact_plan(&scene, &disc, &estimate, None)?;
+    check_ranks(&scene, &solver, opts)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let statics = (&mesh, &disc.materials.region[..]);
     let series = open_series(&out, statics, &identity.run_id, &scene.output.options, None)?;
     stage()?;
     let plans = crate::history::Plans::new(&scene)?;
-    let tl = TimeLoop::with_solver(&scene, &disc, plans, solver)?;
-    // Setup succeeded: the run the directory held goes, before the first new frame, unless
-    // a signal came first (then it stays as it was).
-    opts.interrupt
-        .unless_signalled(|| dir::remove_run(&out))
-        .map_err(Error::Interrupted)??;
-    let history = HistoryCsv::open(&out, &scene, &mesh, &disc, &tl, None)?;
-    let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::new(&out, identity, scene.time.steps, tl.rows());
-    drive(Drive {
-        scene: &scene,
-        mesh: &mesh,
-        disc: &disc,
-        tl,
+    Ok(Ready {
+        scene,
+        mesh,
+        disc,
+        solver,
+        plans,
+        identity,
         series,
-        history,
-        writer,
-        log: RunLog::default(),
-        run_id,
         out,
-        _lock: lock,
-        start,
-        setup_s: start.elapsed().as_secs_f64(),
-        opts,
-        resumed_from: None,
+        lock,
+    })
+}
+
+/// Refuses (exit 2) a run under an MPI launcher with several processes whose steps do not
+/// spread over them (`crate::ranks`).
+fn check_ranks(scene: &Scene, solver: &Descriptor, opts: &RunOptions) -> Result<()> {
+    if opts.ranks.size == 1 || solver.spreads() {
+        return Ok(());
+    }
+    let this = match solver.contact_solver() {
+        Some(c) => format!("contact solver {}", c.key()),
+        None => "the stored Cholesky factor of K_A".to_string(),
+    };
+    Err(Error::input(format!(
+        "{}: started on {} MPI ranks, but only a run whose steps are linear PETSc solves \
+         spreads over ranks ([solver] linear = \"petsc\" and no contact or friction \
+         boundary); this run's steps take the {this}. Run it as one process, without mpirun \
+         or srun -n (docs/cluster.md)",
+        scene.path.display(),
+        opts.ranks.size,
+    )))
+}
+
+/// Rank 0's commit (the directory changed, or a signal came first), told to the followers
+/// of a run on several ranks, who stop with it.
+fn tell_followers<T>(opts: &RunOptions, committed: &std::result::Result<T, i32>) -> Result<()> {
+    let code = committed.as_ref().err().map_or(0, |s| 128 + s);
+    opts.ranks.first_says(code).map(|_| ())
+}
+
+/// What a follower rank follows: a run of the scene at its path, or a resume of the
+/// checkpoint at its path.
+#[derive(Clone, Copy)]
+enum Begun {
+    Run,
+    Resume,
+}
+
+/// A follower rank's part of a run or a resume (`crate::ranks`): the same setup without
+/// the directory, the same steps, nothing written.
+fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
+    opts.interrupt.follow();
+    let ready = || -> Result<_> {
+        let (scene, cp) = match begun {
+            Begun::Run => (load_scene(path, &opts.overrides)?, None),
+            Begun::Resume => {
+                let cp = checkpoint::Checkpoint::read(path)?;
+                (cp.scene(&opts.overrides)?, Some(cp))
+            }
+        };
+        let mesh = read_mesh(&scene)?;
+        let disc = Discretization::new(&mesh, &scene)?;
+        let solver = Descriptor::of_run(&scene, &disc)?;
+        check_ranks(&scene, &solver, opts)?;
+        let plans = match &cp {
+            Some(cp) => cp.plans(&scene)?,
+            None => crate::history::Plans::new(&scene)?,
+        };
+        Ok((scene, disc, solver, plans, cp))
+    };
+    let (scene, disc, solver, plans, cp) = opts.ranks.agree(ready())?;
+    let mut tl = TimeLoop::with_solver(&scene, &disc, plans, solver)?;
+    if let Some(cp) = &cp {
+        tl.restore(cp.saved(disc.n_dofs, tl.rows().len())?)?;
+    }
+    match opts.ranks.first_says(0)? {
+        0 => {}
+        code => return Err(Error::Elsewhere(code)),
+    }
+    let mut follower = Follower(StopRule {
+        after: opts.stop_after,
+        interrupt: opts.interrupt.clone(),
+        ranks: opts.ranks,
+    });
+    tl.run(scene.time.steps, &mut follower)?;
+    Ok(Outcome::Followed {
+        signal: opts.interrupt.signal(),
     })
 }
 
@@ -205,7 +341,50 @@ pub type ResumeOptions = RunOptions;
 /// describes the whole run. Bit for bit the run that never stopped. An output directory
 /// that holds another run is refused.
 pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
+    if !opts.ranks.is_first() {
+        return follow(checkpoint_path, Begun::Resume, opts);
+    }
     let start = Instant::now();
+    let (ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
+    let mut tl = TimeLoop::with_solver(&ready.scene, &ready.disc, ready.plans, ready.solver)?;
+    let saved = cp.saved(ready.disc.n_dofs, tl.rows().len())?;
+    tl.restore(saved)
+        .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
+    // The last moment a signal ends the resume unchanged; after it, it stops after a step.
+    let committed = opts
+        .interrupt
+        .unless_signalled(|| dir::remove_temporaries(&ready.out));
+    tell_followers(opts, &committed)?;
+    committed.map_err(Error::Interrupted)?;
+    let (scene, mesh, disc, out) = (&ready.scene, &ready.mesh, &ready.disc, ready.out);
+    let history = HistoryCsv::open(&out, scene, mesh, disc, &tl, Some(cp.n))?;
+    let run_id = ready.identity.run_id.clone();
+    let writer = checkpoint::Writer::resume(&out, ready.identity, scene.time.steps, tl.rows(), &cp);
+    drive(Drive {
+        scene,
+        mesh,
+        disc,
+        tl,
+        series: ready.series,
+        history,
+        writer,
+        log: cp.log.clone(),
+        run_id,
+        out,
+        _lock: ready.lock,
+        start,
+        setup_s: start.elapsed().as_secs_f64(),
+        opts,
+        resumed_from: Some(cp.n),
+    })
+}
+
+/// A resume's setup up to its time loop: the checkpoint, its scene and mesh checked, the
+/// output directory locked and its series verified.
+fn prepare_resume(
+    checkpoint_path: &Path,
+    opts: &ResumeOptions,
+) -> Result<(Ready, checkpoint::Checkpoint)> {
     let stage = || opts.interrupt.between_setup_stages();
     // What is wrong with the checkpoint itself is said first, then the directory.
     let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
@@ -227,6 +406,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let estimate = crate::resources::Estimate::new(&scene, &disc, cp.n);
     estimate.check(&out)?;
     let solver = check_contact_plan(&scene, &disc, &estimate, Some(checkpoint_path))?;
+    check_ranks(&scene, &solver, opts)?;
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
@@ -257,34 +437,19 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         resumed.as_ref(),
     )?;
     stage()?;
-    let mut tl = TimeLoop::with_solver(&scene, &disc, cp.plans(&scene)?, solver)?;
-    let saved = cp.saved(disc.n_dofs, tl.rows().len())?;
-    tl.restore(saved)
-        .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
-    // The last moment a signal ends the resume unchanged; after it, it stops after a step.
-    opts.interrupt
-        .unless_signalled(|| dir::remove_temporaries(&out))
-        .map_err(Error::Interrupted)?;
-    let history = HistoryCsv::open(&out, &scene, &mesh, &disc, &tl, Some(cp.n))?;
-    let run_id = identity.run_id.clone();
-    let writer = checkpoint::Writer::resume(&out, identity, scene.time.steps, tl.rows(), &cp);
-    drive(Drive {
-        scene: &scene,
-        mesh: &mesh,
-        disc: &disc,
-        tl,
+    let plans = cp.plans(&scene)?;
+    let ready = Ready {
+        scene,
+        mesh,
+        disc,
+        solver,
+        plans,
+        identity,
         series,
-        history,
-        writer,
-        log: cp.log.clone(),
-        run_id,
         out,
-        _lock: lock,
-        start,
-        setup_s: start.elapsed().as_secs_f64(),
-        opts,
-        resumed_from: Some(cp.n),
-    })
+        lock,
+    };
+    Ok((ready, cp))
 }
 
 /// Refuses (exit 2) a resume that would do nothing the user asked for: one of a run that
@@ -399,9 +564,13 @@ fn drive(d: Drive) -> Result<Outcome> {
         stop: StopRule {
             after: d.opts.stop_after,
             interrupt: d.opts.interrupt.clone(),
+            ranks: d.opts.ranks,
         },
     };
-    tl.abandon_on(d.opts.interrupt.abandon());
+    // A step given up on one rank would leave the others in the KSP's collective calls.
+    if d.opts.ranks.size == 1 {
+        tl.abandon_on(d.opts.interrupt.abandon());
+    }
     let steps_start = Instant::now();
     let ended = tl.run(d.scene.time.steps, &mut consumers);
     let Consumers {
@@ -458,6 +627,7 @@ fn drive(d: Drive) -> Result<Outcome> {
             files: frames.series.files().len(),
         },
         warnings,
+        ranks: d.opts.ranks.size,
     };
     let summary = Summary::new(ending, &d.run_id, d.scene, d.mesh, d.disc, &tl, statistics);
     let written = write_atomic(

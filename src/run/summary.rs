@@ -33,6 +33,8 @@ pub struct Summary {
     /// The threads the run used (`threads::count`: `--threads`, `VISCONTACT_THREADS`, else
     /// the cores the process may use); the results do not depend on it.
     pub threads: usize,
+    /// The MPI ranks the run spread over (`crate::ranks`; 1 without a launcher).
+    pub ranks: usize,
     pub timing: Timing,
     pub final_: Final,
     pub contact: ContactSummary,
@@ -139,6 +141,8 @@ pub(super) struct Ending {
     pub output: OutputSummary,
     /// `effects::warnings`, printed before the first step.
     pub warnings: Vec<String>,
+    /// The MPI ranks of the run.
+    pub ranks: usize,
 }
 
 #[derive(Serialize, Debug, Clone)]
@@ -240,6 +244,7 @@ impl Summary {
             effects: tl.effects().names().iter().map(|s| s.to_string()).collect(),
             solver: tl.solver_name(),
             threads: crate::threads::count(),
+            ranks: ending.ranks,
             timing: ending.timing,
             final_: Final {
                 time: if completed { scene.time.end } else { tl.time() },

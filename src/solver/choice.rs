@@ -332,6 +332,12 @@ impl Descriptor {
         &self.build
     }
 
+    /// Whether the run spreads over MPI ranks (docs/cluster.md): its steps are K_A's Krylov
+    /// solves alone (`solver.linear = "petsc"`, no Γ3 rows), whose KSP spans the ranks.
+    pub fn spreads(&self) -> bool {
+        self.build == Build::Krylov { newton: false }
+    }
+
     /// The bytes of the values of the run's Cholesky factor of K_A, in its ordering, from
     /// its symbolic analysis (`factor::predicted_bytes`; once, kept); None where the run
     /// solves K_A through PETSc. The implicit variant's step matrix has K_A's pattern, so

@@ -503,6 +503,7 @@ pub fn finished(o: viscontact::run::Outcome) -> viscontact::run::Summary {
     match o {
         viscontact::run::Outcome::Finished(s) => *s,
         viscontact::run::Outcome::Stopped { step, .. } => panic!("run stopped at step {step}"),
+        viscontact::run::Outcome::Followed { .. } => panic!("a follower rank has no summary"),
     }
 }
 

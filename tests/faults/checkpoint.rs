@@ -53,7 +53,7 @@ fn stopped_and_resumed_equals_uninterrupted() {
                 assert_eq!((step, time, signal), (7, 7.0 / 16.0, None));
                 assert_eq!(checkpoint, Some(part.join("checkpoint.h5")));
             }
-            Outcome::Finished(_) => panic!("--stop-after 7 did not stop"),
+            other => panic!("--stop-after 7 did not stop: {other:?}"),
         }
         let stopped = common::summary(&part);
         assert_eq!(stopped["status"], "interrupted");
@@ -177,7 +177,7 @@ fn a_step_given_up_resumes_as_the_run_never_stopped() {
                 assert_eq!((step, signal), (given_up - 1, None), "{contact}");
                 assert_eq!(checkpoint, Some(part.join("checkpoint.h5")), "{contact}");
             }
-            Outcome::Finished(_) => panic!("{contact}: step {given_up} was not given up"),
+            other => panic!("{contact}: step {given_up} was not given up: {other:?}"),
         }
         let stopped = common::summary(&part);
         assert_eq!(stopped["status"], "interrupted", "{contact}");

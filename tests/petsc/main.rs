@@ -34,6 +34,9 @@ static PETSC: std::sync::Mutex<()> = std::sync::Mutex::new(());
 mod active_set;
 
 #[cfg(feature = "petsc")]
+mod ranks;
+
+#[cfg(feature = "petsc")]
 mod with_petsc {
     use super::*;
 
@@ -201,49 +204,6 @@ mod with_petsc {
             assert!(stderr.contains("active_set"), "{stderr}");
         }
     }
-}
-
-/// Open MPI's `mpirun -n 2` (which CI installs with petsc-dev): every process refuses the
-/// run (exit 2, naming OMPI_COMM_WORLD_SIZE) before it writes anything, where both ran the
-/// whole scene into one directory. The refusal of each launcher's variable is tested in
-/// tests/cli; this is the real launcher, as root where CI runs as root.
-#[cfg(feature = "petsc")]
-#[test]
-fn mpirun_with_several_ranks_is_refused_before_anything_is_written() {
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("o");
-    let mut mpirun = std::process::Command::new("mpirun");
-    // This process's own MPI (initialized with PETSc by the library tests beside this one)
-    // left its launcher's variables in the environment; mpirun must not inherit them.
-    for (var, _) in std::env::vars_os() {
-        let name = var.to_string_lossy();
-        if ["OMPI_", "PMIX_", "ORTE_", "OPAL_"]
-            .iter()
-            .any(|p| name.starts_with(p))
-        {
-            mpirun.env_remove(&var);
-        }
-    }
-    let got = mpirun
-        .args([
-            "--oversubscribe",
-            "-n",
-            "2",
-            common::BIN,
-            "run",
-            "examples/paper.toml",
-        ])
-        .args(["--quiet", "--out", out.to_str().unwrap()])
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .current_dir(common::repo())
-        .output()
-        .expect("mpirun (Open MPI's openmpi-bin, installed with petsc-dev)");
-    let text =
-        String::from_utf8_lossy(&got.stderr).into_owned() + &String::from_utf8_lossy(&got.stdout);
-    assert_eq!(got.status.code(), Some(2), "{text}");
-    assert!(text.contains("OMPI_COMM_WORLD_SIZE=2"), "{text}");
-    assert!(!out.exists(), "a refused rank wrote {}", out.display());
 }
 
 /// `auto` with PETSc (`solver::choice`): the paper's scene on a strip of 13 000 squares

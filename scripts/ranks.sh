@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# One linear PETSc run over MPI ranks (docs/cluster.md): the plate lying on its foundation
+# (meshes/3d/block.geo at height 1/4, gmsh's unstructured tetrahedra of size SIZE, made
+# into out/meshes/ when missing) under the block's scene without contact and friction,
+# STEPS steps, no output but the last frame, no checkpoints; one process, then each rank
+# count, one after the other in one call. Prints setup, steps and total seconds (rank 0's
+# summary.json), the Krylov iterations, and the peak memory of the largest rank.
+#   HDF5_DIR=/usr/lib/x86_64-linux-gnu/hdf5/serial cargo build --release --features petsc
+#   BIN=target/release/viscontact scripts/ranks.sh [SIZE [STEPS [RANKS...]]]
+# default: 0.015 20 1 2. As root, Open MPI needs OMPI_ALLOW_RUN_AS_ROOT=1 and
+# OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1; more ranks than cores, MPIRUN="mpirun --oversubscribe".
+set -euo pipefail
+cd "$(dirname "$0")/.."
+size=${1:-0.015}
+steps=${2:-20}
+shift 2 || true
+ranks=("${@:-1 2}")
+bin=$(realpath "${BIN:-target/release/viscontact}")
+mpirun=${MPIRUN:-mpirun}
+mesh=out/meshes/plate_$size.msh
+mkdir -p out/meshes
+[ -f "$mesh" ] || gmsh -3 meshes/3d/block.geo -setnumber height 0.25 \
+    -setnumber unstructured 1 -setnumber Mesh.MeshSizeMax "$size" \
+    -format msh41 -bin -o "$mesh" >/dev/null
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+end=$(python3 -c "print($steps / 20)")
+printf '%-6s %8s %8s %8s %8s %8s %9s\n' ranks dofs setup_s steps_s total_s krylov peak_MB
+for n in ${ranks[@]}; do
+    # Each rank's peak, by GNU time around it (the rank from Open MPI's or PMI's variable).
+    cat >"$dir/one.sh" <<SH
+#!/bin/sh
+exec /usr/bin/time -f %M -o "$dir/peak.\${OMPI_COMM_WORLD_RANK:-\${PMI_RANK:-0}}" "\$@"
+SH
+    chmod +x "$dir/one.sh"
+    rm -f "$dir"/peak.*
+    $mpirun -n "$n" "$dir/one.sh" "$bin" run examples/block.toml --quiet --out "$dir/o$n" \
+        --set "mesh.file=../$mesh" --set "time.end=$end" --set "time.steps=$steps" \
+        --set contact.enabled=false --set friction.enabled=false \
+        --set solver.linear=petsc --set output.every=100000 \
+        --set checkpoint.enabled=false >/dev/null
+    peak=$(cat "$dir"/peak.* | sort -n | tail -1)
+    python3 - "$dir/o$n/summary.json" "$n" "$peak" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+t = s["timing"]
+print(f'{sys.argv[2]:<6} {s["dofs"]:>8} {t["setup_s"]:>8.2f} {t["steps_s"]:>8.2f} '
+      f'{t["total_s"]:>8.2f} {s["iterations"]["total"]:>8} {int(sys.argv[3]) / 1024:>9.0f}')
+PY
+done

@@ -1,0 +1,223 @@
+//! The MPI ranks of a run: `mpirun -n N viscontact run …` (or `srun`) in a build with the
+//! `petsc` feature. Without a launcher, or with one process, a run is one rank and nothing
+//! here calls MPI.
+//!
+//! # What spreads, and what each rank holds
+//!
+//! K_A's Krylov solves spread: PETSc's KSP on all the ranks, each holding a contiguous block
+//! of K_A's rows (whole nodes: `shim.c`), its part of GAMG's hierarchy and of every Krylov
+//! vector, and each getting the whole solution w_n back. The rest is replicated: every
+//! rank reads the scene and the mesh, assembles the matrices and keeps the history sums, so
+//! every rank computes the same right side b_n, bit for bit, from the same w's. Rank 0 (the
+//! *first*) alone owns the output directory (lock, series, history.csv, checkpoints,
+//! summary.json) and prints; the others *follow* (`run::follow`), writing nothing.
+//!
+//! So only the runs whose steps are linear PETSc solves spread (`solver.linear = "petsc"`
+//! and no Γ3 rows: `Descriptor::spreads`); any other run under a launcher with several
+//! processes is refused (exit 2), as is `study`. The memory of each rank is the
+//! replicated part (mesh, matrices, history) plus its share of PETSc's; partitioning the
+//! replicated part too is the next step (docs/cluster.md).
+//!
+//! # Agreement
+//!
+//! - **Setup.** Every rank's setup, failed or not, ends in [`Ranks::agree`] before the
+//!   first collective call of PETSc: if any rank failed, all stop there. Rank 0 reports
+//!   its own error; a follower reports its own only where rank 0 had none, and is silent
+//!   ([`Error::Elsewhere`]) otherwise. Rank 0 alone decides at a signal during setup and
+//!   commits the directory ([`Ranks::first_says`] tells the others).
+//! - **Stops.** After each step, [`Ranks::stop`] combines every rank's stop request (a
+//!   signal that reached any rank, `--stop-after`), so that all stop after the same step,
+//!   rank 0 with a checkpoint. A follower is never ended by a second signal: only rank 0
+//!   may be, before it commits, when nothing on disk has changed.
+//! - **Failures after setup.** A step that fails fails on every rank (the KSP's reason is
+//!   collective); a rank that fails alone (a frame rank 0 cannot write) ends them all
+//!   ([`Ranks::abort`], in `main`), so that none waits forever in a collective call.
+
+use crate::{Error, Result};
+
+/// The environment variables by which MPI launchers tell each process how many they
+/// started: Open MPI's `mpirun` (and `srun` with Open MPI), and the PMI of MPICH's and
+/// Intel MPI's launchers and of Slurm's `srun --mpi=pmi2`.
+pub const LAUNCHER_SIZE: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];
+
+/// This process's rank among the run's `size`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Ranks {
+    pub rank: usize,
+    pub size: usize,
+}
+
+/// The process count a launcher set in the environment, above 1, with its variable and
+/// text. A value that is not a count is not ours to judge and is let be.
+fn launched() -> Option<(&'static str, String, usize)> {
+    LAUNCHER_SIZE.into_iter().find_map(|var| {
+        let value = std::env::var(var).unwrap_or_default();
+        let size = value.trim().parse::<usize>().ok().filter(|&n| n > 1)?;
+        Some((var, value, size))
+    })
+}
+
+impl Ranks {
+    /// One process.
+    pub const ONE: Ranks = Ranks { rank: 0, size: 1 };
+
+    /// The ranks of this process for `command` (`run`, `resume`: `spreads`), before it reads
+    /// anything. One without a launcher or with one process. With several, in a build with
+    /// PETSc, MPI is initialized (with PETSc) and asked; a command that does not spread, or
+    /// a build without PETSc, is refused (bad input, exit 2): every process would run the
+    /// whole scene into the same directory.
+    pub fn of_process(command: &str, spreads: bool) -> Result<Ranks> {
+        let Some((var, value, size)) = launched() else {
+            return Ok(Ranks::ONE);
+        };
+        if spreads && cfg!(feature = "petsc") {
+            return world();
+        }
+        let how = if spreads {
+            "this build has no MPI: build with `--features petsc` (docs/cluster.md), which \
+             spreads a run whose steps are linear PETSc solves, or start one process"
+        } else {
+            "start one process"
+        };
+        Err(Error::input(format!(
+            "{var}={value}: an MPI launcher (mpirun -n, srun) started viscontact {command} as \
+             one of {size} processes, but it does not spread over MPI ranks here: each \
+             process would run the whole scene into the same directory. {how}, without \
+             mpirun or srun -n; give it the machine's cores with --threads N, and run many \
+             scenes on a cluster with `study --emit slurm`"
+        )))
+    }
+
+    /// Whether this is rank 0, which owns the output directory and prints.
+    pub fn is_first(&self) -> bool {
+        self.rank == 0
+    }
+
+    /// Every rank's setup outcome combined (collective on several ranks): `r` where every
+    /// rank succeeded or this is rank 0; else the first failure's exit status, quietly
+    /// ([`Error::Elsewhere`]) where rank 0 reports its own, or this follower's own error
+    /// where only followers failed.
+    pub fn agree<T>(&self, r: Result<T>) -> Result<T> {
+        if self.size == 1 {
+            return r;
+        }
+        let code = r.as_ref().err().map_or(0, Error::exit_code);
+        let (worst, first) = (self.max(code)?, self.first_says(code)?);
+        match r {
+            Err(e) if self.is_first() || first == 0 => Err(e),
+            Err(_) => Err(Error::Elsewhere(first)),
+            Ok(_) if worst == 0 => r,
+            Ok(_) if self.is_first() => Err(elsewhere_failed(worst)),
+            Ok(_) => Err(Error::Elsewhere(if first == 0 { worst } else { first })),
+        }
+    }
+
+    /// Whether the run stops after this step, and by which signal: this rank's request
+    /// (`signal`, `after`: `--stop-after` says so) combined with every other's, the same
+    /// answer on every rank (collective on several).
+    pub fn stop(&self, signal: Option<i32>, after: bool) -> Result<(Option<i32>, bool)> {
+        let mine = 2 * signal.unwrap_or(0) + i32::from(after);
+        let all = if self.size == 1 {
+            mine
+        } else {
+            self.max(mine)?
+        };
+        Ok((
+            (all / 2 > 0).then_some(all / 2),
+            all % 2 == 1 || all / 2 > 0,
+        ))
+    }
+
+    /// Rank 0's `value` on every rank (collective on several).
+    pub fn first_says(&self, value: i32) -> Result<i32> {
+        broadcast(*self, value)
+    }
+
+    /// The largest of every rank's `value` (collective on several).
+    fn max(&self, value: i32) -> Result<i32> {
+        max_over(*self, value)
+    }
+
+    /// Ends every rank of the run with exit status `code`: a rank that failed alone after
+    /// setup, so that no other waits for it in a collective call.
+    pub fn abort(&self, code: i32) {
+        #[cfg(feature = "petsc")]
+        if self.size > 1 {
+            crate::petsc::abort(code);
+        }
+        let _ = code;
+    }
+}
+
+/// Rank 0's error where only another rank's setup failed, with that rank's exit status.
+fn elsewhere_failed(code: i32) -> Error {
+    let what = format!(
+        "another rank's setup failed (exit status {code}; its message is above): the run \
+         stopped before it changed anything on disk"
+    );
+    match code {
+        2 => Error::input(what),
+        c if c > 128 => Error::Interrupted(c - 128),
+        _ => Error::solve(what),
+    }
+}
+
+#[cfg(feature = "petsc")]
+fn world() -> Result<Ranks> {
+    crate::petsc::initialize()?;
+    let (rank, size) = crate::petsc::world()?;
+    Ok(Ranks { rank, size })
+}
+
+#[cfg(feature = "petsc")]
+fn broadcast(ranks: Ranks, value: i32) -> Result<i32> {
+    if ranks.size == 1 {
+        return Ok(value);
+    }
+    crate::petsc::from_rank0(value)
+}
+
+#[cfg(feature = "petsc")]
+fn max_over(ranks: Ranks, value: i32) -> Result<i32> {
+    if ranks.size == 1 {
+        return Ok(value);
+    }
+    crate::petsc::max_over_ranks(value)
+}
+
+// Without PETSc there is no MPI, and a run is one rank (`Ranks::of_process` refuses more).
+#[cfg(not(feature = "petsc"))]
+fn world() -> Result<Ranks> {
+    Ok(Ranks::ONE)
+}
+
+#[cfg(not(feature = "petsc"))]
+fn broadcast(_: Ranks, value: i32) -> Result<i32> {
+    Ok(value)
+}
+
+#[cfg(not(feature = "petsc"))]
+fn max_over(_: Ranks, value: i32) -> Result<i32> {
+    Ok(value)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_rank_agrees_with_itself_and_stops_as_asked() {
+        let one = Ranks::ONE;
+        assert!(one.agree(Ok(3)).is_ok());
+        assert_eq!(
+            one.agree::<()>(Err(Error::input("x")))
+                .unwrap_err()
+                .exit_code(),
+            2
+        );
+        assert_eq!(one.stop(None, false).unwrap(), (None, false));
+        assert_eq!(one.stop(None, true).unwrap(), (None, true));
+        assert_eq!(one.stop(Some(15), false).unwrap(), (Some(15), true));
+        assert_eq!(one.first_says(7).unwrap(), 7);
+    }
+}

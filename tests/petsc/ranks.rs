@@ -1,0 +1,346 @@
+//! One run over several MPI ranks (`viscontact::ranks`) under Open MPI's real `mpirun`, as
+//! root where CI runs as root and with more ranks than cores: a linear PETSc run on 1, 2
+//! and 3 ranks agrees with the one-process run (bit for bit on one rank, to 1e-8 relative
+//! in u_N on more); stopped on 3 ranks and resumed on 2, it agrees with the uninterrupted
+//! run on 2 to the same tolerance, and resumed on the rank count it stopped on, bit for bit;
+//! SIGTERM to every rank stops it after a step with a checkpoint, and SIGKILL of one rank
+//! ends the others at once, the run then resuming from its last checkpoint; a run whose
+//! steps do not spread is refused (exit 2) before anything is written.
+
+use crate::common::{self, SceneText};
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+/// `mpirun -n RANKS viscontact ARGS` from the repository root (`launching`).
+fn mpirun(ranks: usize, args: &[&str]) -> Command {
+    let mut mpirun = Command::new("mpirun");
+    launching(&mut mpirun)
+        .args(["--oversubscribe", "-n", &ranks.to_string(), common::BIN])
+        .args(args);
+    mpirun
+}
+
+/// A command that starts mpirun, from the repository root, with what Open MPI asks of root.
+/// This process's own MPI (initialized with PETSc by the library tests beside these) left
+/// its launcher's variables in the environment; mpirun must not inherit them.
+fn launching(command: &mut Command) -> &mut Command {
+    for (var, _) in std::env::vars_os() {
+        let name = var.to_string_lossy();
+        if ["OMPI_", "PMIX_", "ORTE_", "OPAL_"]
+            .iter()
+            .any(|p| name.starts_with(p))
+        {
+            command.env_remove(&var);
+        }
+    }
+    command
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env_remove("PETSC_OPTIONS")
+        .current_dir(common::repo())
+}
+
+/// Its exit status and its output, stderr then stdout.
+fn outcome(out: Output) -> (i32, String) {
+    let text =
+        String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
+    (out.status.code().unwrap_or(-1), text)
+}
+
+/// `run SCENE --out OUT` on `ranks` ranks (0: one process without mpirun), then `more`.
+fn run(ranks: usize, scene: &Path, out: &Path, more: &[&str]) -> (i32, String) {
+    let mut args = vec!["run", scene.to_str().unwrap(), "--quiet"];
+    args.extend(["--out", out.to_str().unwrap()]);
+    args.extend(more);
+    outcome(match ranks {
+        0 => common::viscontact(&args),
+        n => mpirun(n, &args).output().unwrap(),
+    })
+}
+
+/// `resume DIR/checkpoint.h5` on `ranks` ranks.
+fn resume(ranks: usize, dir: &Path) -> (i32, String) {
+    let cp = dir.join("checkpoint.h5");
+    outcome(
+        mpirun(ranks, &["resume", cp.to_str().unwrap(), "--quiet"])
+            .output()
+            .unwrap(),
+    )
+}
+
+/// The displacement of a run's last frame, node by node.
+fn u_last(dir: &Path) -> Vec<f64> {
+    use viscontact::output::read::{read_frame, read_series};
+    let (_, frames) = read_series(&dir.join("solution.pvd")).unwrap();
+    let (_, last) = frames.last().unwrap();
+    let vtu = read_frame(last).unwrap();
+    vtu.point_field("displacement").unwrap().values.clone()
+}
+
+/// The 3D block (examples/block.toml) and the paper's scene, without contact and friction,
+/// through PETSc: 12 steps each.
+fn linear_scenes(dir: &Path) -> Vec<std::path::PathBuf> {
+    let block = SceneText::block().remove("contact").remove("friction");
+    let paper = SceneText::paper().remove("contact").remove("friction");
+    [("block.toml", block), ("paper.toml", paper)]
+        .into_iter()
+        .map(|(name, s)| {
+            s.set("solver.linear", "petsc")
+                .set("time.steps", 12)
+                .write(dir, name)
+        })
+        .collect()
+}
+
+#[test]
+fn a_linear_run_on_1_2_and_3_ranks_agrees_with_one_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    for scene in linear_scenes(tmp.path()) {
+        let what = scene.file_name().unwrap().to_string_lossy().into_owned();
+        let one = tmp.path().join(format!("{what}.one"));
+        // mpirun binds a rank to a core (one thread); the results do not depend on it.
+        let (code, text) = run(0, &scene, &one, &["--threads", "1"]);
+        assert_eq!(code, 0, "{text}");
+        let reference = u_last(&one);
+        assert!(common::max_abs(&reference) > 0.0);
+        for ranks in 1..=3 {
+            let out = tmp.path().join(format!("{what}.{ranks}"));
+            let (code, text) = run(ranks, &scene, &out, &["--threads", "1"]);
+            assert_eq!(code, 0, "{what} on {ranks} ranks: {text}");
+            // Rank 0 alone reports (and writes: the directory is checked whole below).
+            assert_eq!(text.matches("; wrote").count(), 1, "{text}");
+            assert_eq!(common::summary(&out)["ranks"], ranks, "{what}");
+            if ranks == 1 {
+                common::assert_same_series(&one, &out, "mpirun -n 1 against one process");
+                continue;
+            }
+            let d = common::rel_diff(&u_last(&out), &reference);
+            println!("{what}, {ranks} ranks: max|Δu_N| / max|u_N| = {d:e}");
+            assert!(d <= 1e-8, "{what} on {ranks} ranks: u_N differs by {d:e}");
+            let names = |dir: &Path| {
+                let mut n: Vec<_> = std::fs::read_dir(dir)
+                    .unwrap()
+                    .map(|e| e.unwrap().file_name())
+                    .collect();
+                n.sort();
+                n
+            };
+            assert_eq!(names(&out), names(&one), "{what}: the directories' files");
+        }
+    }
+}
+
+#[test]
+fn stopped_on_3_ranks_a_run_resumes_on_2_and_on_3() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = &linear_scenes(tmp.path())[0];
+    let whole = |ranks: usize| {
+        let out = tmp.path().join(format!("whole{ranks}"));
+        let (code, text) = run(ranks, scene, &out, &[]);
+        assert_eq!(code, 0, "{text}");
+        out
+    };
+    let (whole2, whole3) = (whole(2), whole(3));
+    for (again, reference) in [(3, &whole3), (2, &whole2)] {
+        let out = tmp.path().join(format!("stopped_resumed_on_{again}"));
+        let (code, text) = run(3, scene, &out, &["--stop-after", "5"]);
+        assert_eq!(code, 0, "{text}");
+        assert_eq!(common::summary(&out)["status"], "interrupted");
+        let (code, text) = resume(again, &out);
+        assert_eq!(code, 0, "resumed on {again}: {text}");
+        assert_eq!(common::summary(&out)["status"], "completed");
+        if again == 3 {
+            common::assert_same_series(reference, &out, "stopped and resumed on 3 ranks");
+        } else {
+            let d = common::rel_diff(&u_last(&out), &u_last(reference));
+            println!("stopped on 3, resumed on 2: max|Δu_N| / max|u_N| = {d:e}");
+            assert!(d <= 1e-8, "u_N differs by {d:e} from the run on 2");
+        }
+    }
+}
+
+/// The ranks mpirun started (its children), once there are `ranks` of them.
+fn ranks_of(mpirun: u32, ranks: usize) -> Vec<String> {
+    let start = Instant::now();
+    loop {
+        let out = Command::new("pgrep")
+            .args(["-P", &mpirun.to_string()])
+            .output()
+            .unwrap();
+        let pids: Vec<String> = String::from_utf8_lossy(&out.stdout)
+            .split_whitespace()
+            .map(String::from)
+            .collect();
+        if pids.len() == ranks {
+            return pids;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "{pids:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A run of the block on 2 ranks, 400 steps with a checkpoint every 10, that `signal` (`kill -s`) reaches on `which` of its ranks
+/// once frame 20 is written: mpirun's exit status, its output, and the directory.
+fn signalled(signal: &str, which: &[usize], dir: &Path) -> (i32, String, Duration) {
+    let scene = &linear_scenes(dir)[0];
+    let out = dir.join("o");
+    let child = mpirun(2, &["run", scene.to_str().unwrap(), "--quiet", "--out"])
+        .arg(&out)
+        .args(["--set", "time.steps=400", "--set", "checkpoint.every=10"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pids = ranks_of(child.id(), 2);
+    let frame = out.join("solution_000020.vtu");
+    let start = Instant::now();
+    while !frame.exists() {
+        assert!(start.elapsed() < Duration::from_secs(120), "no frame 20");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    for &rank in which {
+        let kill = Command::new("kill")
+            .args(["-s", signal, &pids[rank]])
+            .status()
+            .unwrap();
+        assert!(kill.success());
+    }
+    let sent = Instant::now();
+    let (code, text) = outcome(child.wait_with_output().unwrap());
+    (code, text, sent.elapsed())
+}
+
+#[test]
+fn sigterm_to_every_rank_stops_after_a_step_with_a_checkpoint_and_the_run_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, text, _) = signalled("TERM", &[0, 1], tmp.path());
+    let out = tmp.path().join("o");
+    assert_eq!(code, 143, "{text}");
+    let s = common::summary(&out);
+    assert_eq!(s["status"], "interrupted", "{s}");
+    assert!(text.contains("interrupted by SIGTERM after step"), "{text}");
+    let (code, text) = resume(2, &out);
+    assert_eq!(code, 0, "{text}");
+    let whole = tmp.path().join("whole");
+    let scene = tmp.path().join("block.toml");
+    let sets = ["--set", "time.steps=400", "--set", "checkpoint.every=10"];
+    let (code, text) = run(2, &scene, &whole, &sets);
+    assert_eq!(code, 0, "{text}");
+    common::assert_same_series(&whole, &out, "SIGTERM on 2 ranks, resumed on 2");
+}
+
+#[test]
+fn sigterm_to_one_rank_stops_them_all_after_the_same_step() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, text, _) = signalled("TERM", &[1], tmp.path());
+    assert_eq!(code, 143, "{text}");
+    let s = common::summary(&tmp.path().join("o"));
+    assert_eq!(s["status"], "interrupted", "{s}");
+    assert!(s["message"].as_str().unwrap().contains("SIGTERM"), "{s}");
+}
+
+#[test]
+fn sigkill_of_one_rank_ends_the_others_and_the_run_resumes_from_its_checkpoint() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, text, took) = signalled("KILL", &[1], tmp.path());
+    assert_ne!(code, 0, "{text}");
+    assert!(
+        took < Duration::from_secs(20),
+        "the others ran on for {took:?}"
+    );
+    let out = tmp.path().join("o");
+    assert!(
+        out.join("checkpoint.h5").exists(),
+        "no checkpoint to resume"
+    );
+    let (code, text) = resume(2, &out);
+    assert_eq!(code, 0, "{text}");
+    assert_eq!(common::summary(&out)["status"], "completed");
+}
+
+/// A run whose steps take the stored factor or a contact solver does not spread: every
+/// rank refuses it (exit 2), rank 0 alone says why, and nothing is written.
+#[test]
+fn a_run_that_does_not_spread_is_refused_before_anything_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let linear = tmp.path().join("cholesky.toml");
+    SceneText::paper()
+        .remove("contact")
+        .remove("friction")
+        .write(tmp.path(), "cholesky.toml");
+    for (scene, what) in [
+        (
+            common::repo().join("examples/paper.toml"),
+            "contact solver dense",
+        ),
+        (linear, "stored Cholesky factor"),
+    ] {
+        let out = tmp.path().join("o");
+        let (code, text) = run(2, &scene, &out, &[]);
+        assert_eq!(code, 2, "{text}");
+        assert_eq!(text.matches("error:").count(), 1, "{text}");
+        assert!(text.contains("started on 2 MPI ranks"), "{text}");
+        assert!(text.contains(what), "{text}");
+        assert!(!out.exists(), "a refused rank wrote {}", out.display());
+    }
+}
+
+/// `run --emit slurm` with two tasks: the job starts the run's ranks with srun (here a
+/// stand-in that runs Open MPI's mpirun with Slurm's task count) and the run completes on
+/// two ranks; a scene whose steps do not spread is refused.
+#[test]
+fn a_slurm_job_of_two_tasks_runs_the_scene_on_two_ranks() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = &linear_scenes(tmp.path())[0];
+    let (job, out) = (tmp.path().join("job"), tmp.path().join("o"));
+    let emit = |scene: &Path| {
+        common::cli(&[
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--emit",
+            "slurm",
+            job.to_str().unwrap(),
+            "--ntasks-per-node",
+            "2",
+        ])
+    };
+    let (code, text) = emit(&common::repo().join("examples/paper.toml"));
+    assert_eq!(code, 2, "{text}");
+    assert!(
+        text.contains("only a run whose steps are linear PETSc solves"),
+        "{text}"
+    );
+    let (code, text) = emit(scene);
+    assert_eq!(code, 0, "{text}");
+    let script = std::fs::read_to_string(job.join("job.sh")).unwrap();
+    assert!(script.contains("#SBATCH --ntasks-per-node=2\n"), "{script}");
+    assert!(
+        script.contains("srun --kill-on-bad-exit=1 \"$VISCONTACT\" run"),
+        "{script}"
+    );
+    let bin = tmp.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let srun = "#!/bin/sh\nshift\nexec mpirun --oversubscribe -n \"$SLURM_NTASKS\" \"$@\"\n";
+    common::write(&bin, "srun", srun);
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::Permissions::from_mode(0o755);
+    std::fs::set_permissions(bin.join("srun"), mode).unwrap();
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap());
+    let got = launching(&mut Command::new("bash"))
+        .arg(job.join("job.sh"))
+        .env("PATH", path)
+        .env("SLURM_NTASKS", "2")
+        .output()
+        .unwrap();
+    let (code, text) = outcome(got);
+    assert_eq!(code, 0, "{text}");
+    let s = common::summary(&out);
+    assert_eq!(
+        (&s["status"], &s["ranks"]),
+        (&"completed".into(), &2.into()),
+        "{s}"
+    );
+}
