@@ -11,8 +11,10 @@
 //!
 //! The script's lines come from `check`: `--mem` is the run's estimate (what grows with the
 //! steps, the stored factor or the contact solver's matrices, and 1 GiB for the mesh and
-//! the rest of its setup). A run is one process: `--nodes` and `--ntasks-per-node` other
-//! than 1 are refused, and the cores of the node are its threads (`--cpus-per-task`).
+//! the rest of its setup), for each of a node's tasks. The cores of a task are its threads
+//! (`--cpus-per-task`). A job of several tasks (`--nodes`, `--ntasks-per-node`) starts
+//! them with `srun` as the ranks of one run, which only a build with PETSc and a run whose
+//! steps spread over ranks allow (`crate::ranks`); srun passes the SIGTERM on to every rank.
 
 use super::{default_out, setup};
 use crate::output::write_atomic;
@@ -30,7 +32,8 @@ pub struct JobOptions {
     pub cpus_per_task: usize,
     /// `--time`, as Slurm writes it (e.g. `1-00:00:00`); None: the partition's default.
     pub time: Option<String>,
-    /// `--nodes` and `--ntasks-per-node`: 1 and 1 (a run is one process).
+    /// `--nodes` and `--ntasks-per-node`: the run's ranks (`crate::ranks`), 1 and 1 for one
+    /// process.
     pub nodes: usize,
     pub ntasks_per_node: usize,
 }
@@ -60,14 +63,6 @@ pub fn emit(
     out: Option<&Path>,
     job: &JobOptions,
 ) -> Result<(PathBuf, f64)> {
-    if (job.nodes, job.ntasks_per_node) != (1, 1) {
-        return Err(Error::input(format!(
-            "run --emit slurm: --nodes {} --ntasks-per-node {}: a run is one process in this \
-             version (no MPI ranks): write --nodes 1 --ntasks-per-node 1 and give the node's \
-             cores as threads (--cpus-per-task)",
-            job.nodes, job.ntasks_per_node
-        )));
-    }
     if let Some(t) = job
         .time
         .as_deref()
@@ -86,10 +81,12 @@ pub fn emit(
         )));
     }
     let mut solver = Descriptor::of_run(&scene, &disc)?;
+    check_ranks(job, &solver)?;
     let estimate = Estimate::new(&scene, &disc, 0);
     let factor = solver.factor_bytes(&disc)?.unwrap_or(0.0);
     let contact = solver.contact().and_then(|p| p.memory).unwrap_or(0.0);
-    let memory = estimate.memory + factor + contact + SETUP_MEMORY;
+    // Each rank holds what one process would, but PETSc's share (`crate::ranks`).
+    let memory = (estimate.memory + factor + contact + SETUP_MEMORY) * job.ntasks_per_node as f64;
     let out = match out {
         Some(o) => o.to_path_buf(),
         None => default_out(&scene)?,
@@ -125,6 +122,28 @@ pub fn emit(
     Ok((path, memory))
 }
 
+/// Refuses (exit 2) a job of several ranks whose run does not spread over them
+/// (`crate::ranks`), and a count of none.
+fn check_ranks(job: &JobOptions, solver: &Descriptor) -> Result<()> {
+    let ranks = job.nodes * job.ntasks_per_node;
+    let why = if ranks == 0 {
+        "a job has at least one node and one task on each"
+    } else if ranks == 1 || (cfg!(feature = "petsc") && solver.spreads()) {
+        return Ok(());
+    } else if cfg!(feature = "petsc") {
+        "only a run whose steps are linear PETSc solves spreads over MPI ranks ([solver] \
+         linear = \"petsc\", no contact or friction boundary; docs/cluster.md)"
+    } else {
+        "a run is one process in this build (no MPI: build with --features petsc to spread a \
+         run whose steps are linear PETSc solves; docs/cluster.md)"
+    };
+    Err(Error::input(format!(
+        "run --emit slurm: --nodes {} --ntasks-per-node {}: {why}; otherwise write --nodes 1 \
+         --ntasks-per-node 1 and give the node's cores as threads (--cpus-per-task)",
+        job.nodes, job.ntasks_per_node
+    )))
+}
+
 /// Writes a shell script (atomically) and makes it executable.
 pub fn write_script(path: &Path, text: &str) -> Result<()> {
     write_atomic(path, text.as_bytes())?;
@@ -154,17 +173,22 @@ impl Script<'_> {
         let sets: String = (self.overrides.iter())
             .map(|s| format!(" --set {}", word(s)))
             .collect();
+        // The run's ranks are the job's tasks (srun starts them; one that fails ends all).
+        let srun = match self.job.nodes * self.job.ntasks_per_node {
+            1 => "",
+            _ => "srun --kill-on-bad-exit=1 ",
+        };
         format!(
             r#"#!/bin/bash
 # One viscontact run as a job that resumes itself, written by `viscontact run … --emit
-# slurm`. --mem: check's estimate ({mem_h}). SIGTERM 120 s before the time limit (B: to
+# slurm`. --mem: check's estimate ({mem_h} a node). SIGTERM 120 s before the time limit (B: to
 # this shell, which passes it on) makes the run stop after its step with a checkpoint; the
 # job then submits itself again, and the next job resumes the run, until it is complete.
 # A job whose run solved no step is not submitted again. Submit it with
 #   sbatch {job}
 #SBATCH --job-name=viscontact-{name}
-#SBATCH --nodes=1
-#SBATCH --ntasks-per-node=1
+#SBATCH --nodes={nodes}
+#SBATCH --ntasks-per-node={ntasks}
 #SBATCH --cpus-per-task={cpus}
 #SBATCH --mem={mem}M
 {time}#SBATCH --signal=B:TERM@120
@@ -181,9 +205,9 @@ if [ "$(field status)" = completed ]; then
 fi
 before=$(field last_step)
 if [ -f "$OUT/checkpoint.h5" ]; then
-  "$VISCONTACT" resume "$OUT/checkpoint.h5" --quiet &
+  {srun}"$VISCONTACT" resume "$OUT/checkpoint.h5" --quiet &
 else
-  "$VISCONTACT" run {scene}{sets} --out "$OUT" --quiet &
+  {srun}"$VISCONTACT" run {scene}{sets} --out "$OUT" --quiet &
 fi
 pid=$!
 trap 'kill -TERM "$pid" 2>/dev/null' TERM
@@ -207,6 +231,8 @@ exit "$code"
             mem_h = human(self.mem_mib as f64 * 1024.0 * 1024.0),
             name = self.name.replace(char::is_whitespace, "_"),
             cpus = self.job.cpus_per_task,
+            nodes = self.job.nodes,
+            ntasks = self.job.ntasks_per_node,
             mem = self.mem_mib,
             logs = self.dir.join("logs").display(),
             exe = exe_line(self.exe),
