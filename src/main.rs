@@ -199,6 +199,10 @@ fn main() -> ExitCode {
         Command::Run { .. } | Command::Resume { .. } | Command::Study(_) | Command::StudyCase(_)
     );
     let mut ranks = Ranks::ONE;
+    if only_prints && viscontact::ranks::launcher_rank() > 0 {
+        // `mpirun -n 4 viscontact check …` prints once, on rank 0 (whose status mpirun reports).
+        return ExitCode::SUCCESS;
+    }
     if !only_prints {
         viscontact::console::outlive_broken_pipes();
         // After the signal handling (which must come before any thread is started, MPI's

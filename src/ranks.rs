@@ -57,6 +57,16 @@ fn launched() -> Option<(&'static str, String, usize)> {
     })
 }
 
+/// This process's rank as the launcher says (Open MPI's variable, PMI's), 0 without one:
+/// for the commands that only print (`check`, `mesh-info`, `plot`), which run on every rank
+/// and print on rank 0 alone, without MPI.
+pub fn launcher_rank() -> usize {
+    ["OMPI_COMM_WORLD_RANK", "PMI_RANK"]
+        .into_iter()
+        .find_map(|var| std::env::var(var).ok()?.trim().parse().ok())
+        .unwrap_or(0)
+}
+
 impl Ranks {
     /// One process.
     pub const ONE: Ranks = Ranks { rank: 0, size: 1 };

@@ -198,6 +198,9 @@ pub fn summary_values(dir: &Path) -> serde_json::Value {
     v.as_object_mut().unwrap().remove("timing");
     v.as_object_mut().unwrap().remove("run_id");
     v["output"].as_object_mut().unwrap().remove("directory");
+    if let Some(memory) = v.get_mut("memory").and_then(|m| m.as_object_mut()) {
+        memory.remove("fit_s"); // the compressed kernel's fit, a wall time
+    }
     if let Some(petsc) = v.get_mut("petsc").and_then(|p| p.as_object_mut()) {
         petsc.remove("newton");
     }

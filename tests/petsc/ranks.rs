@@ -78,11 +78,13 @@ fn u_last(dir: &Path) -> Vec<f64> {
     vtu.point_field("displacement").unwrap().values.clone()
 }
 
-/// The 3D block (examples/block.toml) and the paper's scene, without contact and friction,
-/// through PETSc: 12 steps each.
+/// The 3D block (examples/block.toml, a Prony kernel), the paper's scene with a power-law
+/// kernel compressed to a certified Prony sum, without contact and friction, through
+/// PETSc: 12 steps each.
 fn linear_scenes(dir: &Path) -> Vec<std::path::PathBuf> {
     let block = SceneText::block().remove("contact").remove("friction");
-    let paper = SceneText::paper().remove("contact").remove("friction");
+    let paper = (SceneText::paper().remove("contact").remove("friction"))
+        .table("material.relaxation", "expr = \"0.2*(s+0.01)^(-0.5)\"");
     [("block.toml", block), ("paper.toml", paper)]
         .into_iter()
         .map(|(name, s)| {
@@ -257,6 +259,20 @@ fn sigkill_of_one_rank_ends_the_others_and_the_run_resumes_from_its_checkpoint()
     let (code, text) = resume(2, &out);
     assert_eq!(code, 0, "{text}");
     assert_eq!(common::summary(&out)["status"], "completed");
+}
+
+/// `check` under mpirun prints once, on rank 0.
+#[test]
+fn check_on_two_ranks_prints_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = &linear_scenes(tmp.path())[1];
+    let (code, text) = outcome(
+        mpirun(2, &["check", scene.to_str().unwrap()])
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(code, 0, "{text}");
+    assert_eq!(text.matches("scene      ").count(), 1, "{text}");
 }
 
 /// A run whose steps take the stored factor or a contact solver does not spread: every
