@@ -27,8 +27,11 @@
 //!   commits the directory ([`Ranks::first_says`] tells the others).
 //! - **Stops.** After each step, [`Ranks::stop`] combines every rank's stop request (a
 //!   signal that reached any rank, `--stop-after`), so that all stop after the same step,
-//!   rank 0 with a checkpoint. A follower is never ended by a second signal: only rank 0
-//!   may be, before it commits, when nothing on disk has changed.
+//!   rank 0 with a checkpoint. During a step, the first signal gives it up: the Krylov
+//!   solve's convergence test asks every rank at each iteration, in one reduction, so all
+//!   leave it at the same iteration (`shim.c`; mpirun kills the ranks a second after it
+//!   passes a Ctrl-C on). A follower is never ended by a second signal: only rank 0 may
+//!   be, before it commits, when nothing on disk has changed.
 //! - **Failures after setup.** A step that fails fails on every rank (the KSP's reason is
 //!   collective); a rank that fails alone (a frame rank 0 cannot write) ends them all
 //!   ([`Ranks::abort`], in `main`), so that none waits forever in a collective call.

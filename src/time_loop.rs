@@ -331,14 +331,22 @@ impl<'p> TimeLoop<'p> {
     }
 
     /// From now on a request on `abandon` gives up the step being solved, where the step
-    /// solver honours it (the dual methods) and the loop's state before the step is one a
+    /// solver honours it (the dual methods, the active set, a linear step's PETSc Krylov
+    /// solve) and the loop's state before the step is one a
     /// stop leaves (after a step solved by this loop): `run` then tells its
     /// observer ([`Observer::abandoned`]) and ends with [`RunEnd::Stopped`] at that step.
     pub fn abandon_on(&mut self, abandon: &Abandon) {
-        self.abandon = self
-            .solver
-            .abandon_on(abandon.clone())
-            .then(|| abandon.clone());
+        let honoured = match (&mut self.solver, &mut self.backend) {
+            // A linear step through PETSc: its Krylov solve asks the request.
+            #[cfg(feature = "petsc")]
+            (StepSolver::Linear, Backend::Petsc(krylov)) => {
+                let request = abandon.clone();
+                krylov.give_up_when(move || request.requested());
+                true
+            }
+            (solver, _) => solver.abandon_on(abandon.clone()),
+        };
+        self.abandon = honoured.then(|| abandon.clone());
     }
 
     /// The rows of Γ3: contact rows, then friction rows.

@@ -79,13 +79,17 @@ extern "C" {
         newton: c_int,
         out: *mut *mut c_void,
     ) -> c_int;
+    #[allow(clippy::too_many_arguments)]
     fn vc_ksp_solve(
         ctx: *mut c_void,
         b: *const f64,
         x: *mut f64,
+        requested: Option<unsafe extern "C" fn(*mut c_void) -> c_int>,
+        flag: *mut c_void,
         its: *mut PetscInt,
         reason: *mut c_int,
         rnorm: *mut f64,
+        given_up: *mut c_int,
     ) -> c_int;
     fn vc_mult(ctx: *mut c_void, x: *const f64, y: *mut f64) -> c_int;
     #[allow(clippy::too_many_arguments)]
@@ -237,7 +241,12 @@ pub struct Krylov {
     pub pc_type: String,
     /// The options the scene passed.
     pub options: String,
+    /// Whether K_A's solve in progress is to be given up (`Krylov::give_up_when`).
+    give_up: Option<GiveUp>,
 }
+
+/// The question `Krylov::solve` asks at every iteration: give the solve up now?
+type GiveUp = Box<dyn Fn() -> bool>;
 
 impl Krylov {
     /// The KSP of `matrix` (the free-dof step matrix of `disc`, stored whole), its
@@ -290,18 +299,61 @@ impl Krylov {
             ksp_type: name(ksp),
             pc_type: name(pc),
             options: settings.options.clone(),
+            give_up: None,
         })
     }
 
+    /// Whether a solve may be given up (`give_up_when` was called).
+    pub fn can_give_up(&self) -> bool {
+        self.give_up.is_some()
+    }
+
+    /// From now on K_A's solve in progress is given up where `now` says so on any rank, on
+    /// every rank at the same Krylov iteration ([`Solve::given_up`]).
+    pub fn give_up_when(&mut self, now: impl Fn() -> bool + 'static) {
+        self.give_up = Some(Box::new(now));
+    }
+
     /// w ← K_A⁻¹ b from the initial guess in w: the Krylov iterations, the final residual
-    /// norm and, where the KSP did not converge, its reason.
+    /// norm and, where the KSP did not converge, its reason; where the solve was given up
+    /// (`give_up_when`), w holds an iterate.
     pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
-        // SAFETY: b and w hold n values; PETSc reads b and writes w within the call.
-        solved("KSPSolve", |its, reason, rnorm| unsafe {
-            vc_ksp_solve(self.ctx, b.as_ptr(), w.as_mut_ptr(), its, reason, rnorm)
-        })
+        let (requested, flag): (Option<unsafe extern "C" fn(*mut c_void) -> c_int>, _) =
+            match &self.give_up {
+                Some(now) => (Some(requested), now as *const GiveUp as *mut c_void),
+                None => (None, std::ptr::null_mut()),
+            };
+        let mut given_up = 0;
+        // SAFETY: b and w hold n values; PETSc reads b and writes w within the call; `flag`
+        // points to self.give_up, alive and unmoved during the call, and is read by
+        // `requested` alone.
+        let mut s = solved("KSPSolve", |its, reason, rnorm| unsafe {
+            vc_ksp_solve(
+                self.ctx,
+                b.as_ptr(),
+                w.as_mut_ptr(),
+                requested,
+                flag,
+                its,
+                reason,
+                rnorm,
+                &mut given_up,
+            )
+        })?;
+        s.given_up = given_up != 0;
+        Ok(s)
     }
+}
+
+/// Whether the solve is to be given up: the shim's question, at every Krylov iteration.
+///
+/// # Safety
+/// `flag` points to a live [`GiveUp`].
+unsafe extern "C" fn requested(flag: *mut c_void) -> c_int {
+    // SAFETY: the caller's promise (Krylov::solve passes its own).
+    let now = unsafe { &*(flag as *const GiveUp) };
+    c_int::from(now())
 }
 
 /// Runs a shim solve that reports its iterations, converged reason and residual norm
@@ -431,6 +483,7 @@ impl Solve {
             iterations: its as usize,
             residual: rnorm,
             failed: (reason < 0).then(|| name().to_str().unwrap_or("DIVERGED")),
+            given_up: false,
         }
     }
 }
@@ -443,6 +496,9 @@ pub struct Solve {
     pub residual: f64,
     /// The `KSPConvergedReason` by name (`DIVERGED_ITS`, …) where it is negative.
     pub failed: Option<&'static str>,
+    /// The solve was given up on request (`Krylov::give_up_when`; `failed` then names
+    /// `DIVERGED_NULL`).
+    pub given_up: bool,
 }
 
 impl Drop for Krylov {

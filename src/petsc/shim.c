@@ -75,6 +75,14 @@ typedef struct {
    * (displ) for gathering the solution; count and displ NULL on one process. */
   PetscInt     lo;
   PetscMPIInt *count, *displ;
+  /* K_A's convergence test (PETSc's, after the options), wrapped by converged_or_given_up;
+   * the request to give the solve up during vc_ksp_solve (NULL: none), and whether it did. */
+  PetscErrorCode (*inner)(KSP, PetscInt, PetscReal, KSPConvergedReason *, void *);
+  void *inner_ctx;
+  PetscErrorCode (*inner_destroy)(void *);
+  int (*requested)(void *);
+  void     *flag;
+  PetscBool given_up;
   /* The constrained system, created with the KSP where `newton` (else NULL): its assembled
    * matrix N, the matrix Q its preconditioner was built from, its KSP, the terms of the
    * solve in progress. */
@@ -152,6 +160,29 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
   PetscFunctionReturn(0);
 }
 
+/* K_A's convergence test: PETSc's, unless the solve is to be given up (the run's stop,
+ * vc_ksp_solve's `requested`), which every rank learns at the same iteration (a reduction
+ * over the ranks): the KSP then ends with KSP_DIVERGED_NULL and `given_up`, so that the
+ * ranks leave the collective calls together. Mpirun kills the ranks a second after it
+ * passes a Ctrl-C on as SIGTERM (docs/cluster.md): a step cannot be waited for. */
+static PetscErrorCode converged_or_given_up(KSP ksp, PetscInt it, PetscReal rnorm,
+                                            KSPConvergedReason *reason, void *ctx)
+{
+  VcKsp   *s = (VcKsp *)ctx;
+  int      stop = s->requested ? s->requested(s->flag) : 0;
+  MPI_Comm comm;
+
+  PetscFunctionBeginUser;
+  PetscCall(s->inner(ksp, it, rnorm, reason, s->inner_ctx));
+  PetscCall(PetscObjectGetComm((PetscObject)ksp, &comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &stop, 1, MPI_INT, MPI_MAX, comm));
+  if (stop && *reason == KSP_CONVERGED_ITERATING) {
+    *reason = KSP_DIVERGED_NULL;
+    s->given_up = PETSC_TRUE;
+  }
+  PetscFunctionReturn(0);
+}
+
 /* The matrix in CSR (a symmetric matrix's CSC is its CSR), its near-null space as `nvec`
  * orthonormal vectors of length n stored one after the other, CG + GAMG with relative
  * tolerance `rtol`, then `options` (PETSc's command-line syntax) and KSPSetFromOptions;
@@ -201,7 +232,11 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   PetscCall(PetscOptionsInsertString(NULL, options));
   PetscCall(KSPSetFromOptions(s->ksp));
   if (newton) PetscCall(constrained_setup(s));
-  else PetscCall(KSPSetUp(s->ksp));
+  else {
+    PetscCall(KSPSetUp(s->ksp));
+    PetscCall(KSPGetAndClearConvergenceTest(s->ksp, &s->inner, &s->inner_ctx, &s->inner_destroy));
+    PetscCall(KSPSetConvergenceTest(s->ksp, converged_or_given_up, s, NULL));
+  }
   PetscCall(MatCreateVecs(s->A, &s->x, &s->b));
   *out = s;
   return 0;
@@ -221,13 +256,18 @@ static PetscErrorCode gathered(VcKsp *s, PetscScalar *x)
 
 /* x ← K⁻¹ b by the KSP, from the initial guess in x; its iterations, converged reason (< 0:
  * diverged) and final residual norm. b and x are whole on every rank (each gives the same
- * b), and x is whole on every rank after it. */
-int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, PetscInt *its, int *reason,
-                 PetscReal *rnorm)
+ * b), and x is whole on every rank after it. `requested(flag)` (NULL: none), asked at every
+ * iteration, gives the solve up where it returns nonzero on any rank: then `given_up` and x
+ * holds an iterate. */
+int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, int (*requested)(void *),
+                 void *flag, PetscInt *its, int *reason, PetscReal *rnorm, int *given_up)
 {
   VcKsp             *s = (VcKsp *)ctx;
   KSPConvergedReason r;
 
+  s->requested = requested;
+  s->flag = flag;
+  s->given_up = PETSC_FALSE;
   PetscCall(VecPlaceArray(s->b, b + s->lo));
   PetscCall(VecPlaceArray(s->x, x + s->lo));
   PetscCall(KSPSolve(s->ksp, s->b, s->x));
@@ -238,6 +278,8 @@ int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, PetscInt *its,
   PetscCall(KSPGetConvergedReason(s->ksp, &r));
   PetscCall(KSPGetResidualNorm(s->ksp, rnorm));
   *reason = (int)r;
+  *given_up = s->given_up;
+  s->requested = NULL;
   return 0;
 }
 
@@ -698,6 +740,7 @@ int vc_ksp_destroy(void *ctx)
   VcKsp *s = (VcKsp *)ctx;
 
   if (!s) return 0;
+  if (s->inner_destroy) PetscCall(s->inner_destroy(s->inner_ctx));
   for (PetscInt l = 0; s->coarse_k && l + 1 < s->nlev; l++) PetscCall(MatDestroy(&s->coarse_k[l]));
   PetscCall(PetscFree(s->coarse_k));
   PetscCall(KSPDestroy(&s->kc));

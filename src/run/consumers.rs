@@ -58,6 +58,12 @@ impl StopRule {
         }
         stop
     }
+
+    /// A step given up (on every rank at once): the signal that did it, recorded on every
+    /// rank, as `asks` does.
+    pub fn share_signal(&self) {
+        let _ = self.asks(usize::MAX);
+    }
 }
 
 /// A follower rank's observer (`crate::ranks`): it writes nothing, and stops with the others.
@@ -69,6 +75,11 @@ impl Observer for Follower {
     }
 
     fn solved(&mut self, _: &Solved) -> Result<()> {
+        Ok(())
+    }
+
+    fn abandoned(&mut self, _: &TimeLoop) -> Result<()> {
+        self.0.share_signal();
         Ok(())
     }
 }
@@ -93,6 +104,7 @@ impl Observer for Consumers<'_> {
     }
 
     fn abandoned(&mut self, tl: &TimeLoop) -> Result<()> {
+        self.stop.share_signal();
         // The state before the step given up: the last solved step's, saved unless its
         // checkpoint is on disk already.
         self.checkpoints.due = self.checkpoints.unsaved.take();

@@ -5,7 +5,8 @@
 //! the command at the next stage boundary with the same codes, before the directory's
 //! earlier run is touched.
 //!
-//! A second signal is for a step that takes too long to wait for. While a dual method
+//! A second signal is for a step that takes too long to wait for (on several MPI ranks, the
+//! first: `Interrupt::give_up_at_first`). While a dual method
 //! solves a step that a stop could be made before (any step after the first one the
 //! process solved), it gives that step up (`solver::abandon`, within one Newton iteration
 //! or one product of the matrix-free conjugate gradients): the run stops as if the first
@@ -66,6 +67,8 @@ pub struct Interrupt {
     committed: Arc<AtomicBool>,
     /// What a second signal asks of the step being solved.
     abandon: Abandon,
+    /// The first signal asks it too (a run on several MPI ranks: `give_up_at_first`).
+    at_first: Arc<AtomicBool>,
 }
 
 impl Interrupt {
@@ -105,6 +108,9 @@ impl Interrupt {
             }
             let _commit = self.commit.lock().unwrap_or_else(|p| p.into_inner());
             self.raise(sig);
+            if self.at_first.load(Ordering::SeqCst) {
+                self.abandon.request();
+            }
         }
     }
 
@@ -129,6 +135,13 @@ impl Interrupt {
                 signal_name(sig)
             );
         }
+    }
+
+    /// A run on several MPI ranks: the first signal also gives up the step being solved
+    /// where it can be (on every rank at once; the run then stops before it), for mpirun
+    /// kills the ranks a second after it passes a Ctrl-C on (docs/cluster.md).
+    pub fn give_up_at_first(&self) {
+        self.at_first.store(true, Ordering::SeqCst);
     }
 
     /// A follower rank's (`crate::ranks`): committed from the start, so that no signal ends

@@ -319,6 +319,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         0 => {}
         code => return Err(Error::Elsewhere(code)),
     }
+    follow_signals(&mut tl, opts);
     let mut follower = Follower(StopRule {
         after: opts.stop_after,
         interrupt: opts.interrupt.clone(),
@@ -328,6 +329,16 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
     Ok(Outcome::Followed {
         signal: opts.interrupt.signal(),
     })
+}
+
+/// Hands the run's request to give a step up to the time loop; on several ranks the first
+/// signal makes it (`Interrupt::give_up_at_first`), and the step is given up on every rank
+/// at once (only a linear PETSc step spreads, and its Krylov solve shares the request).
+fn follow_signals(tl: &mut TimeLoop, opts: &RunOptions) {
+    if opts.ranks.size > 1 {
+        opts.interrupt.give_up_at_first();
+    }
+    tl.abandon_on(opts.interrupt.abandon());
 }
 
 /// Options of `viscontact resume`: those of a run; `out` defaults to the checkpoint's
@@ -567,10 +578,7 @@ fn drive(d: Drive) -> Result<Outcome> {
             ranks: d.opts.ranks,
         },
     };
-    // A step given up on one rank would leave the others in the KSP's collective calls.
-    if d.opts.ranks.size == 1 {
-        tl.abandon_on(d.opts.interrupt.abandon());
-    }
+    follow_signals(&mut tl, d.opts);
     let steps_start = Instant::now();
     let ended = tl.run(d.scene.time.steps, &mut consumers);
     let Consumers {

@@ -182,8 +182,9 @@ fn ranks_of(mpirun: u32, ranks: usize) -> Vec<String> {
     }
 }
 
-/// A run of the block on 2 ranks, 400 steps with a checkpoint every 10, that `signal` (`kill -s`) reaches on `which` of its ranks
-/// once frame 20 is written: mpirun's exit status, its output, and the directory.
+/// A run of the block on 2 ranks, 400 steps with a checkpoint every 10, that `signal`
+/// reaches on `which` of its ranks (none: on mpirun) once frame 20 is written: mpirun's
+/// exit status, its output, and how long it took to end.
 fn signalled(signal: &str, which: &[usize], dir: &Path) -> (i32, String, Duration) {
     let scene = &linear_scenes(dir)[0];
     let out = dir.join("o");
@@ -201,9 +202,16 @@ fn signalled(signal: &str, which: &[usize], dir: &Path) -> (i32, String, Duratio
         assert!(start.elapsed() < Duration::from_secs(120), "no frame 20");
         std::thread::sleep(Duration::from_millis(2));
     }
-    for &rank in which {
+    // None of the ranks: mpirun itself, as Ctrl-C in its terminal reaches it (the ranks are
+    // process groups of their own).
+    let mpirun_pid = child.id().to_string();
+    let targets: Vec<&String> = match which {
+        [] => vec![&mpirun_pid],
+        _ => which.iter().map(|&r| &pids[r]).collect(),
+    };
+    for pid in targets {
         let kill = Command::new("kill")
-            .args(["-s", signal, &pids[rank]])
+            .args(["-s", signal, pid])
             .status()
             .unwrap();
         assert!(kill.success());
@@ -230,6 +238,26 @@ fn sigterm_to_every_rank_stops_after_a_step_with_a_checkpoint_and_the_run_resume
     let (code, text) = run(2, &scene, &whole, &sets);
     assert_eq!(code, 0, "{text}");
     common::assert_same_series(&whole, &out, "SIGTERM on 2 ranks, resumed on 2");
+}
+
+/// Ctrl-C to mpirun: Open MPI passes SIGTERM to the ranks and kills them a second later;
+/// they give up the step in progress at once and stop before it, rank 0 with its
+/// checkpoint and summary.json, and the run resumes bit for bit.
+#[test]
+fn sigint_to_mpirun_stops_the_ranks_before_it_kills_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, text, _) = signalled("INT", &[], tmp.path());
+    let out = tmp.path().join("o");
+    let s = common::summary(&out);
+    assert_eq!(s["status"], "interrupted", "{s}\n{text}");
+    let (code, text) = resume(2, &out);
+    assert_eq!(code, 0, "{text}");
+    let whole = tmp.path().join("whole");
+    let scene = tmp.path().join("block.toml");
+    let sets = ["--set", "time.steps=400", "--set", "checkpoint.every=10"];
+    let (code, text) = run(2, &scene, &whole, &sets);
+    assert_eq!(code, 0, "{text}");
+    common::assert_same_series(&whole, &out, "Ctrl-C to mpirun, resumed on 2");
 }
 
 #[test]
@@ -359,4 +387,36 @@ fn a_slurm_job_of_two_tasks_runs_the_scene_on_two_ranks() {
         (&"completed".into(), &2.into()),
         "{s}"
     );
+}
+
+/// A linear PETSc step given up (the request every rank's Krylov solve asks at each
+/// iteration: the first signal on several ranks, the second on one) leaves the run where
+/// a stop after the step before leaves it, w as it was: the checkpoint of the state before
+/// the step resumes to the run never stopped, bit for bit. One process here, through the
+/// library, with the request made before the run: the first step it can stop before is
+/// given up, whatever the timing.
+#[test]
+fn a_linear_petsc_step_given_up_resumes_as_the_run_never_stopped() {
+    use viscontact::run::{resume, run, Outcome, ResumeOptions};
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = &linear_scenes(tmp.path())[0];
+    let (full, part) = (tmp.path().join("full"), tmp.path().join("part"));
+    let _one = super::PETSC.lock().unwrap_or_else(|e| e.into_inner());
+    common::finished(run(scene, &common::run_options(&full, &[], None)).unwrap());
+    let o = common::run_options(&part, &[], None);
+    let armed = o.interrupt.abandon().arm();
+    assert!(o.interrupt.abandon().request(), "granted while armed");
+    drop(armed);
+    match run(scene, &o).unwrap() {
+        Outcome::Stopped { step, signal, .. } => assert_eq!((step, signal), (0, None)),
+        other => panic!("step 1 was not given up: {other:?}"),
+    }
+    assert_eq!(common::summary(&part)["last_step"], 0);
+    assert!(!part.join("solution_000001.vtu").exists());
+    let o = ResumeOptions {
+        progress: false,
+        ..Default::default()
+    };
+    common::finished(resume(&part.join("checkpoint.h5"), &o).unwrap());
+    common::assert_same_series(&full, &part, "a linear PETSc step given up, resumed");
 }
