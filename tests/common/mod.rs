@@ -395,7 +395,7 @@ pub fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 /// Waits at most `limit` for `child`: its exit code, or minus the signal that ended it (a
 /// hang fails the test, naming `what`, after killing the process).
-fn exit_within(child: &mut std::process::Child, limit: std::time::Duration, what: &str) -> i32 {
+pub fn exit_within(child: &mut std::process::Child, limit: std::time::Duration, what: &str) -> i32 {
     use std::os::unix::process::ExitStatusExt;
     let start = std::time::Instant::now();
     loop {

@@ -420,3 +420,60 @@ fn a_linear_petsc_step_given_up_resumes_as_the_run_never_stopped() {
     common::finished(resume(&part.join("checkpoint.h5"), &o).unwrap());
     common::assert_same_series(&full, &part, "a linear PETSc step given up, resumed");
 }
+
+/// SIGTERM to both ranks at random moments of setup and of the first steps (the moments
+/// drawn up to 1.2 times what a run of 4 steps takes, mpirun's start included), with an
+/// earlier run in the directory: every
+/// mpirun ends within 10 s of the signal, and either the directory is byte for byte as it
+/// was (setup stopped) or it holds this run, interrupted with a checkpoint that resumes.
+/// `VISCONTACT_SEED` sets the seed (printed).
+#[test]
+fn sigterm_to_every_rank_during_setup_leaves_the_earlier_run_or_a_resumable_one() {
+    let seed: u64 = common::env_or("VISCONTACT_SEED", 52);
+    println!("seed {seed}");
+    let mut rng = common::SplitMix(seed);
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = (SceneText::paper().remove("contact").remove("friction"))
+        .mesh(common::repo().join("meshes/paper/rect_128.msh"))
+        .set("solver.linear", "petsc")
+        .set("time.steps", 200)
+        .write(tmp.path(), "big.toml");
+    let out = tmp.path().join("o");
+    // The earlier run, and how long mpirun takes to start the ranks, set up and solve 4 steps.
+    let start = Instant::now();
+    let (code, text) = run(2, &scene, &out, &["--stop-after", "3"]);
+    assert_eq!(code, 0, "{text}");
+    let span = start.elapsed().as_secs_f64();
+    let args = ["run", scene.to_str().unwrap(), "--quiet", "--out"];
+    let (mut in_setup, mut after) = (0, 0);
+    for _ in 0..4 {
+        let before = common::dir_contents(&out);
+        let delay = Duration::from_secs_f64(1.2 * span * rng.unit());
+        let mut child = mpirun(2, &args)
+            .arg(&out)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let pids = ranks_of(child.id(), 2);
+        std::thread::sleep(delay);
+        for pid in &pids {
+            let _ = Command::new("kill").args(["-s", "TERM", pid]).status();
+        }
+        let code = common::exit_within(&mut child, Duration::from_secs(10), "mpirun");
+        println!("SIGTERM after {delay:?} (of {span:.2} s): exit {code}");
+        if common::dir_contents(&out) == before {
+            in_setup += 1;
+            assert_ne!(code, 0, "{delay:?}: setup stopped, yet exit 0");
+            continue;
+        }
+        after += 1;
+        let s = common::summary(&out);
+        assert_eq!(s["status"], "interrupted", "{delay:?}: {s}");
+        let (code, text) = resume(2, &out);
+        assert_eq!(code, 0, "{delay:?}: {text}");
+        let (code, text) = run(2, &scene, &out, &["--stop-after", "3"]);
+        assert_eq!(code, 0, "{text}");
+    }
+    println!("{in_setup} signals stopped setup, {after} a run");
+}
