@@ -198,12 +198,14 @@ fn main() -> ExitCode {
         cli.command,
         Command::Run { .. } | Command::Resume { .. } | Command::Study(_) | Command::StudyCase(_)
     );
+    // `run --emit slurm` writes a job script and runs nothing.
+    let emits = matches!(&cli.command, Command::Run { job, .. } if !job.emit.is_empty());
     let mut ranks = Ranks::ONE;
-    if only_prints && viscontact::ranks::launcher_rank() > 0 {
+    if (only_prints || emits) && viscontact::ranks::launcher_rank() > 0 {
         // `mpirun -n 4 viscontact check …` prints once, on rank 0 (whose status mpirun reports).
         return ExitCode::SUCCESS;
     }
-    if !only_prints {
+    if !only_prints && !emits {
         viscontact::console::outlive_broken_pipes();
         // After the signal handling (which must come before any thread is started, MPI's
         // too), before anything is read.
@@ -216,6 +218,8 @@ fn main() -> ExitCode {
             Ok(r) => ranks = r,
             Err(e) => return exit_code(Err(e)),
         }
+    } else if emits {
+        viscontact::console::outlive_broken_pipes();
     }
     if let Err(e) = viscontact::threads::init(threads) {
         return exit_code(Err(e));

@@ -289,7 +289,7 @@ fn sigkill_of_one_rank_ends_the_others_and_the_run_resumes_from_its_checkpoint()
     assert_eq!(common::summary(&out)["status"], "completed");
 }
 
-/// `check` under mpirun prints once, on rank 0.
+/// `check` and `run --emit slurm` under mpirun print once, on rank 0.
 #[test]
 fn check_on_two_ranks_prints_once() {
     let tmp = tempfile::tempdir().unwrap();
@@ -301,6 +301,15 @@ fn check_on_two_ranks_prints_once() {
     );
     assert_eq!(code, 0, "{text}");
     assert_eq!(text.matches("scene      ").count(), 1, "{text}");
+    let job = tmp.path().join("job");
+    let emit = [
+        &["run", scene.to_str().unwrap(), "--emit", "slurm"][..],
+        &[job.to_str().unwrap()],
+    ];
+    let (code, text) = outcome(mpirun(2, &emit.concat()).output().unwrap());
+    assert_eq!(code, 0, "{text}");
+    assert_eq!(text.matches("submit with sbatch").count(), 1, "{text}");
+    assert!(job.join("job.sh").exists());
 }
 
 /// A run whose steps take the stored factor or a contact solver does not spread: every
