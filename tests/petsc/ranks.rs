@@ -301,10 +301,12 @@ fn check_on_two_ranks_prints_once() {
     );
     assert_eq!(code, 0, "{text}");
     assert_eq!(text.matches("scene      ").count(), 1, "{text}");
-    let job = tmp.path().join("job");
+    // The run's own directory in the temporary one: mpirun starts in the repository, whose
+    // out/paper may hold the README's run, which an emitted job refuses.
+    let (job, out) = (tmp.path().join("job"), tmp.path().join("o"));
     let emit = [
         &["run", scene.to_str().unwrap(), "--emit", "slurm"][..],
-        &[job.to_str().unwrap()],
+        &[job.to_str().unwrap(), "--out", out.to_str().unwrap()],
     ];
     let (code, text) = outcome(mpirun(2, &emit.concat()).output().unwrap());
     assert_eq!(code, 0, "{text}");
