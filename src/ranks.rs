@@ -70,6 +70,11 @@ pub fn launcher_rank() -> usize {
         .unwrap_or(0)
 }
 
+/// What spreads over ranks, for the refusals of a run that does not (`run`, `run --emit
+/// slurm`).
+pub const WHAT_SPREADS: &str = "only a run whose steps are linear PETSc solves spreads over \
+     MPI ranks ([solver] linear = \"petsc\", no contact or friction boundary; docs/cluster.md)";
+
 impl Ranks {
     /// One process.
     pub const ONE: Ranks = Ranks { rank: 0, size: 1 };
@@ -129,12 +134,7 @@ impl Ranks {
     /// (`signal`, `after`: `--stop-after` says so) combined with every other's, the same
     /// answer on every rank (collective on several).
     pub fn stop(&self, signal: Option<i32>, after: bool) -> Result<(Option<i32>, bool)> {
-        let mine = 2 * signal.unwrap_or(0) + i32::from(after);
-        let all = if self.size == 1 {
-            mine
-        } else {
-            self.max(mine)?
-        };
+        let all = self.max(2 * signal.unwrap_or(0) + i32::from(after))?;
         Ok((
             (all / 2 > 0).then_some(all / 2),
             all % 2 == 1 || all / 2 > 0,
@@ -143,12 +143,18 @@ impl Ranks {
 
     /// Rank 0's `value` on every rank (collective on several).
     pub fn first_says(&self, value: i32) -> Result<i32> {
-        broadcast(*self, value)
+        match self.size {
+            1 => Ok(value),
+            _ => mpi::from_rank0(value),
+        }
     }
 
     /// The largest of every rank's `value` (collective on several).
     fn max(&self, value: i32) -> Result<i32> {
-        max_over(*self, value)
+        match self.size {
+            1 => Ok(value),
+            _ => mpi::max_over_ranks(value),
+        }
     }
 
     /// Ends every rank of the run with exit status `code`: a rank that failed alone after
@@ -182,36 +188,25 @@ fn world() -> Result<Ranks> {
     Ok(Ranks { rank, size })
 }
 
-#[cfg(feature = "petsc")]
-fn broadcast(ranks: Ranks, value: i32) -> Result<i32> {
-    if ranks.size == 1 {
-        return Ok(value);
-    }
-    crate::petsc::from_rank0(value)
-}
-
-#[cfg(feature = "petsc")]
-fn max_over(ranks: Ranks, value: i32) -> Result<i32> {
-    if ranks.size == 1 {
-        return Ok(value);
-    }
-    crate::petsc::max_over_ranks(value)
-}
-
 // Without PETSc there is no MPI, and a run is one rank (`Ranks::of_process` refuses more).
 #[cfg(not(feature = "petsc"))]
 fn world() -> Result<Ranks> {
     Ok(Ranks::ONE)
 }
 
-#[cfg(not(feature = "petsc"))]
-fn broadcast(_: Ranks, value: i32) -> Result<i32> {
-    Ok(value)
-}
+/// The collective calls, through PETSc's MPI; none without it, where a run is one rank.
+#[cfg(feature = "petsc")]
+use crate::petsc as mpi;
 
 #[cfg(not(feature = "petsc"))]
-fn max_over(_: Ranks, value: i32) -> Result<i32> {
-    Ok(value)
+mod mpi {
+    pub fn from_rank0(value: i32) -> crate::Result<i32> {
+        Ok(value)
+    }
+
+    pub fn max_over_ranks(value: i32) -> crate::Result<i32> {
+        Ok(value)
+    }
 }
 
 #[cfg(test)]

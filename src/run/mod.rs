@@ -171,29 +171,18 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     // a signal came first (then it stays as it was).
     let committed = opts
         .interrupt
-        .unless_signalled(|| dir::remove_run(&ready.out));
+        .unless_signalled(|| dir::remove_run(&ready.opened.out));
     tell_followers(opts, &committed)?;
     committed.map_err(Error::Interrupted)??;
-    let (scene, mesh, disc, out) = (&ready.scene, &ready.mesh, &ready.disc, ready.out);
-    let history = HistoryCsv::open(&out, scene, mesh, disc, &tl, None)?;
-    let run_id = ready.identity.run_id.clone();
-    let writer = checkpoint::Writer::new(&out, ready.identity, scene.time.steps, tl.rows());
     drive(Drive {
-        scene,
-        mesh,
-        disc,
+        scene: &ready.scene,
+        mesh: &ready.mesh,
+        disc: &ready.disc,
         tl,
-        series: ready.series,
-        history,
-        writer,
-        log: RunLog::default(),
-        run_id,
-        out,
-        _lock: ready.lock,
+        opened: ready.opened,
+        resumed: None,
         start,
-        setup_s: start.elapsed().as_secs_f64(),
         opts,
-        resumed_from: None,
     })
 }
 
@@ -207,6 +196,12 @@ struct Ready {
     disc: Arc<Discretization>,
     solver: Descriptor,
     plans: crate::history::Plans,
+    opened: Opened,
+}
+
+/// The output directory as a run or a resume has opened it: locked, its series open for
+/// the frames to come, with the run's identity.
+struct Opened {
     identity: checkpoint::Identity,
     series: Series,
     out: PathBuf,
@@ -246,10 +241,12 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
         disc,
         solver,
         plans,
-        identity,
-        series,
-        out,
-        lock,
+        opened: Opened {
+            identity,
+            series,
+            out,
+            lock,
+        },
     })
 }
 
@@ -264,12 +261,11 @@ fn check_ranks(scene: &Scene, solver: &Descriptor, opts: &RunOptions) -> Result<
         None => "the stored Cholesky factor of K_A".to_string(),
     };
     Err(Error::input(format!(
-        "{}: started on {} MPI ranks, but only a run whose steps are linear PETSc solves \
-         spreads over ranks ([solver] linear = \"petsc\" and no contact or friction \
-         boundary); this run's steps take the {this}. Run it as one process, without mpirun \
-         or srun -n (docs/cluster.md)",
+        "{}: started on {} MPI ranks, but {}; this run's steps take the {this}. Run it as \
+         one process, without mpirun or srun -n",
         scene.path.display(),
         opts.ranks.size,
+        crate::ranks::WHAT_SPREADS,
     )))
 }
 
@@ -364,29 +360,18 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     // The last moment a signal ends the resume unchanged; after it, it stops after a step.
     let committed = opts
         .interrupt
-        .unless_signalled(|| dir::remove_temporaries(&ready.out));
+        .unless_signalled(|| dir::remove_temporaries(&ready.opened.out));
     tell_followers(opts, &committed)?;
     committed.map_err(Error::Interrupted)?;
-    let (scene, mesh, disc, out) = (&ready.scene, &ready.mesh, &ready.disc, ready.out);
-    let history = HistoryCsv::open(&out, scene, mesh, disc, &tl, Some(cp.n))?;
-    let run_id = ready.identity.run_id.clone();
-    let writer = checkpoint::Writer::resume(&out, ready.identity, scene.time.steps, tl.rows(), &cp);
     drive(Drive {
-        scene,
-        mesh,
-        disc,
+        scene: &ready.scene,
+        mesh: &ready.mesh,
+        disc: &ready.disc,
         tl,
-        series: ready.series,
-        history,
-        writer,
-        log: cp.log.clone(),
-        run_id,
-        out,
-        _lock: ready.lock,
+        opened: ready.opened,
+        resumed: Some(&cp),
         start,
-        setup_s: start.elapsed().as_secs_f64(),
         opts,
-        resumed_from: Some(cp.n),
     })
 }
 
@@ -455,10 +440,12 @@ fn prepare_resume(
         disc,
         solver,
         plans,
-        identity,
-        series,
-        out,
-        lock,
+        opened: Opened {
+            identity,
+            series,
+            out,
+            lock,
+        },
     };
     Ok((ready, cp))
 }
@@ -533,27 +520,38 @@ fn check_contact_plan(
 
 /// A run in progress: what [`drive`] needs.
 struct Drive<'a> {
-    scene: &'a Scene,
+    /// Shared with the writer thread of history.csv.
+    scene: &'a Arc<Scene>,
     mesh: &'a Mesh,
     disc: &'a Arc<Discretization>,
     tl: TimeLoop<'a>,
-    series: Series,
-    history: HistoryCsv,
-    writer: checkpoint::Writer,
-    log: RunLog,
-    run_id: String,
-    out: PathBuf,
     /// The directory is this run's until `drive` returns.
-    _lock: DirLock,
+    opened: Opened,
+    /// The checkpoint a resume continues; None for a new run.
+    resumed: Option<&'a checkpoint::Checkpoint>,
     start: Instant,
-    setup_s: f64,
     opts: &'a RunOptions,
-    /// The checkpoint step a resumed run starts from.
-    resumed_from: Option<usize>,
 }
 
-/// The time loop of a run with its consumers, then summary.json however the run ended.
+/// The time loop of a run with its consumers (history.csv and the checkpoints opened here,
+/// from the step a resume continues), then summary.json however the run ended.
 fn drive(d: Drive) -> Result<Outcome> {
+    let Opened {
+        identity,
+        series,
+        out,
+        lock: _lock,
+    } = d.opened;
+    let from = d.resumed.map(|cp| cp.n);
+    let history = HistoryCsv::open(&out, d.scene, d.mesh, d.disc, &d.tl, from)?;
+    let run_id = identity.run_id.clone();
+    let steps = d.scene.time.steps;
+    let writer = match d.resumed {
+        Some(cp) => checkpoint::Writer::resume(&out, identity, steps, d.tl.rows(), cp),
+        None => checkpoint::Writer::new(&out, identity, steps, d.tl.rows()),
+    };
+    let log = d.resumed.map_or_else(RunLog::default, |cp| cp.log.clone());
+    let setup_s = d.start.elapsed().as_secs_f64();
     let warnings = crate::effects::warnings(d.scene, d.disc, d.tl.descriptor());
     for w in &warnings {
         crate::errln!("warning: {w}");
@@ -562,15 +560,15 @@ fn drive(d: Drive) -> Result<Outcome> {
     let mut tl = d.tl;
     let rows = Arc::new(tl.rows().clone());
     let mut consumers = Consumers {
-        statistics: Statistics::new(d.log),
+        statistics: Statistics::new(log),
         frames: Frames {
-            series: d.series,
+            series,
             disc: Arc::clone(d.disc),
             rows: Arc::clone(&rows),
             scene: d.scene,
         },
-        checkpoints: Checkpoints::new(d.writer, d.scene),
-        history: d.history,
+        checkpoints: Checkpoints::new(writer, d.scene),
+        history,
         progress: Progress::new(d.opts.progress, tl.n(), d.scene.time.steps),
         stop: StopRule {
             after: d.opts.stop_after,
@@ -603,7 +601,7 @@ fn drive(d: Drive) -> Result<Outcome> {
     let steps_s = steps_start.elapsed().as_secs_f64();
     if let Ok(RunEnd::Completed) = ended {
         // Frames an earlier (or the interrupted) run left that this series does not list.
-        dir::remove_stale_frames(&frames.series, d.resumed_from.unwrap_or(0));
+        dir::remove_stale_frames(&frames.series, from.unwrap_or(0));
     }
     let last = statistics.last.unwrap_or(0);
     let signal = d.opts.interrupt.signal();
@@ -626,22 +624,19 @@ fn drive(d: Drive) -> Result<Outcome> {
         },
         message: message.clone(),
         timing: Timing {
-            setup_s: d.setup_s,
+            setup_s,
             steps_s,
             total_s: d.start.elapsed().as_secs_f64(),
         },
         output: OutputSummary {
-            directory: d.out.display().to_string(),
+            directory: out.display().to_string(),
             files: frames.series.files().len(),
         },
         warnings,
         ranks: d.opts.ranks.size,
     };
-    let summary = Summary::new(ending, &d.run_id, d.scene, d.mesh, d.disc, &tl, statistics);
-    let written = write_atomic(
-        &d.out.join("summary.json"),
-        summary_json(&summary).as_bytes(),
-    );
+    let summary = Summary::new(ending, &run_id, d.scene, d.mesh, d.disc, &tl, statistics);
+    let written = write_atomic(&out.join("summary.json"), summary_json(&summary).as_bytes());
     match ended {
         // The failure is what the run reports; its summary is written if the disk allows.
         Err(e) => Err(e),

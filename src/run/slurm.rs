@@ -131,8 +131,7 @@ fn check_ranks(job: &JobOptions, solver: &Descriptor) -> Result<()> {
     } else if ranks == 1 || (cfg!(feature = "petsc") && solver.spreads()) {
         return Ok(());
     } else if cfg!(feature = "petsc") {
-        "only a run whose steps are linear PETSc solves spreads over MPI ranks ([solver] \
-         linear = \"petsc\", no contact or friction boundary; docs/cluster.md)"
+        crate::ranks::WHAT_SPREADS
     } else {
         "a run is one process in this build (no MPI: build with --features petsc to spread a \
          run whose steps are linear PETSc solves; docs/cluster.md)"

@@ -182,6 +182,21 @@ fn ranks_of(mpirun: u32, ranks: usize) -> Vec<String> {
     }
 }
 
+/// The signalled runs' steps and checkpoints (`signalled`).
+const SIGNALLED: [&str; 4] = ["--set", "time.steps=400", "--set", "checkpoint.every=10"];
+
+/// Resumes the run `signalled` left in DIR/o on 2 ranks: it equals the same run never
+/// stopped, bit for bit.
+fn resumes_as_never_stopped(dir: &Path, what: &str) {
+    let out = dir.join("o");
+    let (code, text) = resume(2, &out);
+    assert_eq!(code, 0, "{what}: {text}");
+    let whole = dir.join("whole");
+    let (code, text) = run(2, &dir.join("block.toml"), &whole, &SIGNALLED);
+    assert_eq!(code, 0, "{text}");
+    common::assert_same_series(&whole, &out, what);
+}
+
 /// A run of the block on 2 ranks, 400 steps with a checkpoint every 10, that `signal`
 /// reaches on `which` of its ranks (none: on mpirun) once frame 20 is written: mpirun's
 /// exit status, its output, and how long it took to end.
@@ -190,7 +205,7 @@ fn signalled(signal: &str, which: &[usize], dir: &Path) -> (i32, String, Duratio
     let out = dir.join("o");
     let child = mpirun(2, &["run", scene.to_str().unwrap(), "--quiet", "--out"])
         .arg(&out)
-        .args(["--set", "time.steps=400", "--set", "checkpoint.every=10"])
+        .args(SIGNALLED)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -230,14 +245,7 @@ fn sigterm_to_every_rank_stops_after_a_step_with_a_checkpoint_and_the_run_resume
     let s = common::summary(&out);
     assert_eq!(s["status"], "interrupted", "{s}");
     assert!(text.contains("interrupted by SIGTERM after step"), "{text}");
-    let (code, text) = resume(2, &out);
-    assert_eq!(code, 0, "{text}");
-    let whole = tmp.path().join("whole");
-    let scene = tmp.path().join("block.toml");
-    let sets = ["--set", "time.steps=400", "--set", "checkpoint.every=10"];
-    let (code, text) = run(2, &scene, &whole, &sets);
-    assert_eq!(code, 0, "{text}");
-    common::assert_same_series(&whole, &out, "SIGTERM on 2 ranks, resumed on 2");
+    resumes_as_never_stopped(tmp.path(), "SIGTERM on 2 ranks, resumed on 2");
 }
 
 /// Ctrl-C to mpirun: Open MPI passes SIGTERM to the ranks and kills them a second later;
@@ -250,14 +258,7 @@ fn sigint_to_mpirun_stops_the_ranks_before_it_kills_them() {
     let out = tmp.path().join("o");
     let s = common::summary(&out);
     assert_eq!(s["status"], "interrupted", "{s}\n{text}");
-    let (code, text) = resume(2, &out);
-    assert_eq!(code, 0, "{text}");
-    let whole = tmp.path().join("whole");
-    let scene = tmp.path().join("block.toml");
-    let sets = ["--set", "time.steps=400", "--set", "checkpoint.every=10"];
-    let (code, text) = run(2, &scene, &whole, &sets);
-    assert_eq!(code, 0, "{text}");
-    common::assert_same_series(&whole, &out, "Ctrl-C to mpirun, resumed on 2");
+    resumes_as_never_stopped(tmp.path(), "Ctrl-C to mpirun, resumed on 2");
 }
 
 #[test]
