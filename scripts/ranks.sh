@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# One linear PETSc run over MPI ranks (docs/cluster.md): the plate lying on its foundation
+# One PETSc run over MPI ranks (docs/cluster.md): the plate lying on its foundation
 # (meshes/3d/block.geo at height 1/4, gmsh's unstructured tetrahedra of size SIZE, made
-# into out/meshes/ when missing) under the block's scene without contact and friction,
-# STEPS steps, no output but the last frame, no checkpoints; one process, then each rank
-# count, one after the other in one call. Prints setup, steps and total seconds (rank 0's
-# summary.json), the Krylov iterations, and the peak memory of the largest rank.
+# into out/meshes/ when missing) under the block's scene without contact and friction
+# (KIND=linear, the default) or with them through the active set (KIND=contact), STEPS
+# steps, no output but the last frame, no checkpoints; each rank count one after the other
+# in one call (0: one process, without mpirun). Prints setup, steps and total seconds (rank
+# 0's summary.json), the Krylov iterations, and the peak memory of the largest rank.
 #   HDF5_DIR=/usr/lib/x86_64-linux-gnu/hdf5/serial cargo build --release --features petsc
 #   BIN=target/release/viscontact scripts/ranks.sh [SIZE [STEPS [RANKS...]]]
 # default: 0.015 20 1 2. As root, Open MPI needs OMPI_ALLOW_RUN_AS_ROOT=1 and
@@ -15,6 +16,11 @@ size=${1:-0.015}
 steps=${2:-20}
 shift 2 || true
 ranks=("${@:-1 2}")
+case "${KIND:-linear}" in
+    linear) physics=(--set contact.enabled=false --set friction.enabled=false) ;;
+    contact) physics=(--set solver.contact=active_set) ;;
+    *) echo "KIND is linear or contact" >&2; exit 2 ;;
+esac
 bin=$(realpath "${BIN:-target/release/viscontact}")
 mpirun=${MPIRUN:-mpirun}
 mesh=out/meshes/plate_$size.msh
@@ -34,10 +40,11 @@ exec /usr/bin/time -f %M -o "$dir/peak.\${OMPI_COMM_WORLD_RANK:-\${PMI_RANK:-0}}
 SH
     chmod +x "$dir/one.sh"
     rm -f "$dir"/peak.*
-    $mpirun -n "$n" "$dir/one.sh" "$bin" run examples/block.toml --quiet --out "$dir/o$n" \
+    launch=("$mpirun" -n "$n")
+    [ "$n" = 0 ] && launch=()
+    "${launch[@]}" "$dir/one.sh" "$bin" run examples/block.toml --quiet --out "$dir/o$n" \
         --set "mesh.file=../$mesh" --set "time.end=$end" --set "time.steps=$steps" \
-        --set contact.enabled=false --set friction.enabled=false \
-        --set solver.linear=petsc --set output.every=100000 \
+        "${physics[@]}" --set solver.linear=petsc --set output.every=100000 \
         --set checkpoint.enabled=false >/dev/null
     peak=$(cat "$dir"/peak.* | sort -n | tail -1)
     python3 - "$dir/o$n/summary.json" "$n" "$peak" <<'PY'

@@ -4,17 +4,19 @@
 //!
 //! # What spreads, and what each rank holds
 //!
-//! K_A's Krylov solves spread: PETSc's KSP on all the ranks, each holding a contiguous block
-//! of K_A's rows (whole nodes: `shim.c`), its part of GAMG's hierarchy and of every Krylov
-//! vector, and each getting the whole solution w_n back. The rest is replicated: every
-//! rank reads the scene and the mesh, assembles the matrices and keeps the history sums, so
-//! every rank computes the same right side b_n, bit for bit, from the same w's. Rank 0 (the
+//! PETSc's Krylov solves spread, K_A's and the active set's Newton systems: their KSPs on
+//! all the ranks, each holding a contiguous block of the rows (whole nodes: `shim.c`), of
+//! which it makes the Newton matrix, its part of GAMG's hierarchy and of every Krylov
+//! vector, and each getting the whole solution back. The rest is replicated: every rank
+//! reads the scene and the mesh, assembles the matrices and keeps the history sums, so
+//! every rank computes the same right side b_n, bit for bit, from the same w's, and the
+//! active set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the
 //! *first*) alone owns the output directory (lock, series, history.csv, checkpoints,
 //! summary.json) and prints; the others *follow* (`run::follow`), writing nothing.
 //!
-//! So only the runs whose steps are linear PETSc solves spread (`solver.linear = "petsc"`
-//! and no Γ3 rows: `Descriptor::spreads`); any other run under a launcher with several
-//! processes is refused (exit 2), as is `study`. The memory of each rank is the
+//! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
+//! or with contact and friction through the active set: `Descriptor::spreads`); any other
+//! run under a launcher with several processes is refused (exit 2), as is `study`. The memory of each rank is the
 //! replicated part (mesh, matrices, history) plus its share of PETSc's; partitioning the
 //! replicated part too is the next step (docs/cluster.md).
 //!
@@ -72,8 +74,9 @@ pub fn launcher_rank() -> usize {
 
 /// What spreads over ranks, for the refusals of a run that does not (`run`, `run --emit
 /// slurm`).
-pub const WHAT_SPREADS: &str = "only a run whose steps are linear PETSc solves spreads over \
-     MPI ranks ([solver] linear = \"petsc\", no contact or friction boundary; docs/cluster.md)";
+pub const WHAT_SPREADS: &str = "only a run whose steps are PETSc solves spreads over MPI ranks \
+     ([solver] linear = \"petsc\", and with contact or friction contact = \"active_set\"; \
+     docs/cluster.md)";
 
 impl Ranks {
     /// One process.
@@ -93,7 +96,7 @@ impl Ranks {
         }
         let how = if spreads {
             "this build has no MPI: build with `--features petsc` (docs/cluster.md), which \
-             spreads a run whose steps are linear PETSc solves, or start one process"
+             spreads a run whose steps are PETSc solves, or start one process"
         } else {
             "start one process"
         };

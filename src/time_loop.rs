@@ -337,9 +337,10 @@ impl<'p> TimeLoop<'p> {
     /// observer ([`Observer::abandoned`]) and ends with [`RunEnd::Stopped`] at that step.
     pub fn abandon_on(&mut self, abandon: &Abandon) {
         let honoured = match (&mut self.solver, &mut self.backend) {
-            // A linear step through PETSc: its Krylov solve asks the request.
+            // A step through PETSc (linear, or the active set's Newton systems): its Krylov
+            // solves ask the request, at every iteration on every rank.
             #[cfg(feature = "petsc")]
-            (StepSolver::Linear, Backend::Petsc(krylov)) => {
+            (StepSolver::Linear | StepSolver::ActiveSet(_), Backend::Petsc(krylov)) => {
                 let request = abandon.clone();
                 krylov.give_up_when(move || request.requested());
                 true

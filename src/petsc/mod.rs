@@ -6,9 +6,9 @@
 //! and offers a few functions with plain C types; this module declares them and wraps them
 //! safely. PETSc is initialized once per process, on first use ([`initialize`]) or, under an
 //! MPI launcher with several processes, before the run reads anything (docs/cluster.md),
-//! and finalized by [`finalize`] at the end of `main`. K_A's KSP spans the ranks (each
-//! holds a block of its rows and gets the whole solution back); the Newton systems of the
-//! active set are one process's.
+//! and finalized by [`finalize`] at the end of `main`. The KSPs span the ranks, K_A's and
+//! the active set's Newton systems' (each rank holds a block of whole nodes' rows and gets
+//! the whole solution back).
 //!
 //! # The solve
 //!
@@ -72,6 +72,7 @@ extern "C" {
         cols: *const PetscInt,
         vals: *const f64,
         bs: PetscInt,
+        first: *const PetscInt,
         nvec: PetscInt,
         near: *const f64,
         rtol: f64,
@@ -84,7 +85,7 @@ extern "C" {
         ctx: *mut c_void,
         b: *const f64,
         x: *mut f64,
-        requested: Option<unsafe extern "C" fn(*mut c_void) -> c_int>,
+        requested: Option<Requested>,
         flag: *mut c_void,
         its: *mut PetscInt,
         reason: *mut c_int,
@@ -106,9 +107,12 @@ extern "C" {
         of_start: c_int,
         b: *const f64,
         x: *mut f64,
+        requested: Option<Requested>,
+        flag: *mut c_void,
         its: *mut PetscInt,
         reason: *mut c_int,
         rnorm: *mut f64,
+        given_up: *mut c_int,
     ) -> c_int;
     fn vc_ksp_types(ctx: *mut c_void, ksp: *mut *const c_char, pc: *mut *const c_char) -> c_int;
     fn vc_galerkin_defect(ctx: *mut c_void, defect: *mut f64) -> c_int;
@@ -265,11 +269,12 @@ impl Krylov {
         let rowptr = to_int(m.symbolic().col_ptr())?;
         let cols = to_int(m.symbolic().row_idx())?;
         let near = rigid_body_modes(disc);
+        let first = node_starts(disc);
         let options = CString::new(settings.options.as_str())
             .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
         let mut ctx = std::ptr::null_mut();
-        // SAFETY: the arrays hold n + 1, nnz, nnz and nvec·n values as the shim reads them;
-        // PETSc copies them.
+        // SAFETY: the arrays hold n + 1, nnz, nnz, n and nvec·n values as the shim reads
+        // them; PETSc copies them.
         let code = unsafe {
             vc_ksp_create(
                 n as PetscInt,
@@ -277,6 +282,7 @@ impl Krylov {
                 cols.as_ptr(),
                 m.val().as_ptr(),
                 block_size(disc) as PetscInt,
+                first.as_ptr(),
                 (near.len() / n.max(1)) as PetscInt,
                 near.as_ptr(),
                 settings.rtol,
@@ -319,52 +325,77 @@ impl Krylov {
     /// (`give_up_when`), w holds an iterate.
     pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
-        let (requested, flag): (Option<unsafe extern "C" fn(*mut c_void) -> c_int>, _) =
-            match &self.give_up {
-                Some(now) => (Some(requested), now as *const GiveUp as *mut c_void),
-                None => (None, std::ptr::null_mut()),
-            };
-        let mut given_up = 0;
+        let ctx = self.ctx;
         // SAFETY: b and w hold n values; PETSc reads b and writes w within the call; `flag`
-        // points to self.give_up, alive and unmoved during the call, and is read by
-        // `requested` alone.
-        let mut s = solved("KSPSolve", |its, reason, rnorm| unsafe {
-            vc_ksp_solve(
-                self.ctx,
-                b.as_ptr(),
-                w.as_mut_ptr(),
-                requested,
-                flag,
-                its,
-                reason,
-                rnorm,
-                &mut given_up,
-            )
-        })?;
-        s.given_up = given_up != 0;
-        Ok(s)
+        // is what `solved` made it.
+        solved(
+            "KSPSolve",
+            &self.give_up,
+            |requested, flag, its, reason, rnorm, given_up| unsafe {
+                vc_ksp_solve(
+                    ctx,
+                    b.as_ptr(),
+                    w.as_mut_ptr(),
+                    requested,
+                    flag,
+                    its,
+                    reason,
+                    rnorm,
+                    given_up,
+                )
+            },
+        )
     }
 }
+
+/// The shim's question at every Krylov iteration (`requested`).
+type Requested = unsafe extern "C" fn(*mut c_void) -> c_int;
 
 /// Whether the solve is to be given up: the shim's question, at every Krylov iteration.
 ///
 /// # Safety
 /// `flag` points to a live [`GiveUp`].
 unsafe extern "C" fn requested(flag: *mut c_void) -> c_int {
-    // SAFETY: the caller's promise (Krylov::solve passes its own).
+    // SAFETY: the caller's promise (`solved` passes the Krylov's own).
     let now = unsafe { &*(flag as *const GiveUp) };
     c_int::from(now())
 }
 
-/// Runs a shim solve that reports its iterations, converged reason and residual norm
-/// through the pointers it is given: what it did, or PETSc's error at `what`.
+/// Runs a shim solve that asks `give_up` at every iteration (where there is one: the
+/// shim's `requested` and `flag`, a pointer to it that lives through the call and is read
+/// by `requested` alone) and reports its iterations, converged reason, residual norm and
+/// whether it was given up through the pointers it is given: what it did, or PETSc's error
+/// at `what`.
 fn solved(
     what: &str,
-    call: impl FnOnce(*mut PetscInt, *mut c_int, *mut f64) -> c_int,
+    give_up: &Option<GiveUp>,
+    call: impl FnOnce(
+        Option<Requested>,
+        *mut c_void,
+        *mut PetscInt,
+        *mut c_int,
+        *mut f64,
+        *mut c_int,
+    ) -> c_int,
 ) -> Result<Solve> {
-    let (mut its, mut reason, mut rnorm) = (0, 0, 0.0);
-    check(call(&mut its, &mut reason, &mut rnorm), what)?;
-    Ok(Solve::of(its, reason, rnorm))
+    let (requested, flag): (Option<Requested>, _) = match give_up {
+        Some(now) => (Some(requested), now as *const GiveUp as *mut c_void),
+        None => (None, std::ptr::null_mut()),
+    };
+    let (mut its, mut reason, mut rnorm, mut given_up) = (0, 0, 0.0, 0);
+    let code = call(
+        requested,
+        flag,
+        &mut its,
+        &mut reason,
+        &mut rnorm,
+        &mut given_up,
+    );
+    check(code, what)?;
+    Ok(Solve {
+        given_up: given_up != 0,
+        ..Solve::of(its, reason, rnorm)
+    })
 }
 
 /// The nodal terms of a constrained system (`Krylov::solve_constrained`), flat as the shim
@@ -433,13 +464,16 @@ impl Krylov {
         assert!(b.len() == self.n && w.len() == self.n);
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
         assert!(terms.removed.len() == 3 * np && terms.stiffness.len() == 9 * ns);
+        let ctx = self.ctx;
         // SAFETY: the arrays hold what the counts say, b and w n values; PETSc reads them
-        // and writes w within the call, and keeps no pointer after it.
+        // and writes w within the call, and keeps no pointer after it; `flag` is what
+        // `solved` made it.
         solved(
             "KSPSolve of the constrained system",
-            |its, reason, rnorm| unsafe {
+            &self.give_up,
+            |requested, flag, its, reason, rnorm, given_up| unsafe {
                 vc_constrained_solve(
-                    self.ctx,
+                    ctx,
                     np as PetscInt,
                     terms.removed_dofs.as_ptr(),
                     terms.removed.as_ptr(),
@@ -451,9 +485,12 @@ impl Krylov {
                     c_int::from(of_start),
                     b.as_ptr(),
                     w.as_mut_ptr(),
+                    requested,
+                    flag,
                     its,
                     reason,
                     rnorm,
+                    given_up,
                 )
             },
         )
@@ -515,6 +552,19 @@ impl Drop for Krylov {
 /// held at zero, nor prescribed (`[[dirichlet]]` values, numbered from n_free on).
 fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
     disc.free[g].filter(|&f| f < disc.n_free)
+}
+
+/// Where a node's unknowns begin: 1 at each node's first unknown, 0 elsewhere (n_free
+/// flags). A node's unknowns are consecutive (numbered node by node), and the ranks split
+/// K_A's rows only where one begins (`shim.c`).
+fn node_starts(disc: &Discretization) -> Vec<PetscInt> {
+    let mut first = vec![0; disc.n_free];
+    for g in (0..disc.free.len()).step_by(disc.dim) {
+        if let Some(f) = (g..g + disc.dim).find_map(|g| unknown(disc, g)) {
+            first[f] = 1;
+        }
+    }
+    first
 }
 
 /// d where every node's unknowns are d consecutive ones starting at a multiple of d, or

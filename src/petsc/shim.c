@@ -3,8 +3,8 @@
  * Open MPI) and its types stay on this side. Every function returns a PetscErrorCode (0:
  * success); vc_error_message turns one into PETSc's text. K_A's own KSP spans the ranks an MPI
  * launcher started (PETSC_COMM_WORLD: each rank holds a contiguous block of its rows, and
- * every rank gets the whole solution back); the active set's Newton systems are one
- * process's (PETSC_COMM_SELF, refused on several). */
+ * every rank gets the whole solution back), and so do the active set's Newton systems,
+ * whose matrix each rank assembles for its own rows. */
 #include <petscksp.h>
 
 #if defined(VC_REQUIRE_32BIT_INDICES) && defined(PETSC_USE_64BIT_INDICES)
@@ -67,19 +67,27 @@ typedef struct {
   const PetscScalar *pdirs, *smats;
 } VcTerms;
 
+typedef struct VcKsp VcKsp;
+
+/* A KSP's convergence test (PETSc's, after the options), wrapped by converged_or_given_up. */
 typedef struct {
-  Mat A;
-  KSP ksp;
-  Vec b, x;
-  /* The rows this rank owns, [lo, lo + count[rank]); each rank's count and first row
-   * (displ) for gathering the solution; count and displ NULL on one process. */
-  PetscInt     lo;
-  PetscMPIInt *count, *displ;
-  /* K_A's convergence test (PETSc's, after the options), wrapped by converged_or_given_up;
-   * the request to give the solve up during vc_ksp_solve (NULL: none), and whether it did. */
   PetscErrorCode (*inner)(KSP, PetscInt, PetscReal, KSPConvergedReason *, void *);
   void *inner_ctx;
   PetscErrorCode (*inner_destroy)(void *);
+  VcKsp *s;
+} Watch;
+
+struct VcKsp {
+  Mat A;
+  KSP ksp;
+  Vec b, x;
+  /* The rows this rank owns, [lo, lo + m) (whole nodes); each rank's count and first row
+   * (displ) for gathering the solution; count and displ NULL on one process. */
+  PetscInt     lo, m;
+  PetscMPIInt *count, *displ;
+  /* The convergence tests of K_A's KSP and of the constrained one; the request to give the
+   * solve in progress up (NULL: none), and whether it did. */
+  Watch kw, cw;
   int (*requested)(void *);
   void     *flag;
   PetscBool given_up;
@@ -90,30 +98,37 @@ typedef struct {
   KSP       kc;
   VcTerms   terms;
   PetscInt *frame_of; /* n entries, −1 between calls (newton_matrix) */
+  /* On several ranks, the CSR of this rank's rows of K (offsets from 0, global columns),
+   * their values in K, N and Q (one process reads the matrices' own arrays), and which
+   * rows of N differ from K's now (held) and in the system being made (touched). */
+  PetscInt    *kai, *kaj;
+  PetscScalar *kav, *nav, *qav;
+  char        *held, *touched;
   /* GAMG's levels (0: coarsest) and K's Galerkin operators on levels 0 … nlev − 2, kept for
    * galerkin_update; NULL where the constrained PC is not GAMG (the options chose another). */
   PetscInt nlev;
   Mat     *coarse_k;
-  int      of_start; /* the convergence test's: rtol of the initial residual, else of b */
-} VcKsp;
+  int      of_start; /* the convergence test's: rtol of the initial residual, else of b; −1: none yet */
+};
 
 static PetscErrorCode constrained_setup(VcKsp *s);
 
-/* The rows of `rank` among `size` ranks: whole blocks of bs rows, as even as they come. */
-static void owned(PetscInt n, PetscInt bs, PetscMPIInt rank, PetscMPIInt size, PetscInt *lo,
-                  PetscInt *hi)
+/* The first row of `rank` among `size` ranks: the first row at or after its even share
+ * n·rank/size where a node's unknowns begin (`first`), so that each rank holds whole
+ * nodes (a node's frame and slip stiffness act on its own rows: newton_matrix). */
+static PetscInt owned(PetscInt n, const PetscInt *first, PetscMPIInt rank, PetscMPIInt size)
 {
-  PetscInt64 blocks = n / bs;
-  *lo = (PetscInt)(bs * (blocks * rank / size));
-  *hi = rank + 1 == size ? n : (PetscInt)(bs * (blocks * (rank + 1) / size));
+  PetscInt lo = (PetscInt)((PetscInt64)n * rank / size);
+  while (lo < n && !first[lo]) lo++;
+  return lo;
 }
 
 /* K_A on the ranks: on one, a SEQAIJ of the whole CSR (what the Newton systems update in
- * place); on several, an MPIAIJ of which each rank gives its own rows [lo, hi) of the same
- * global CSR, with each rank's share recorded for gathering the solution. */
+ * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) of the
+ * same global CSR, with each rank's share recorded for gathering the solution. */
 static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *rowptr,
                                          const PetscInt *cols, const PetscScalar *vals, PetscInt bs,
-                                         PetscInt *hi)
+                                         const PetscInt *first)
 {
   PetscMPIInt size, rank;
 
@@ -127,7 +142,7 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
     if (bs > 1) PetscCall(MatSetBlockSize(s->A, bs));
     PetscCall(MatSeqAIJSetPreallocationCSR(s->A, rowptr, cols, vals));
     s->lo = 0;
-    *hi = n;
+    s->m = n;
     PetscFunctionReturn(0);
   }
   PetscInt *local;
@@ -143,16 +158,16 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
   if (size > 2 && !chosen) PetscCall(PetscOptionsSetValue(NULL, "-matptap_via", "allatonce"));
   PetscCall(PetscMalloc2(size, &s->count, size, &s->displ));
   for (PetscMPIInt r = 0; r < size; r++) {
-    PetscInt lo, h;
-    owned(n, bs, r, size, &lo, &h);
-    s->count[r] = (PetscMPIInt)(h - lo);
+    PetscInt lo = owned(n, first, r, size), hi = r + 1 == size ? n : owned(n, first, r + 1, size);
+    s->count[r] = (PetscMPIInt)(hi - lo);
     s->displ[r] = (PetscMPIInt)lo;
   }
-  owned(n, bs, rank, size, &s->lo, hi);
-  PetscCall(PetscMalloc1(*hi - s->lo + 1, &local));
-  for (PetscInt i = s->lo; i <= *hi; i++) local[i - s->lo] = rowptr[i] - rowptr[s->lo];
+  s->lo = s->displ[rank];
+  s->m = s->count[rank];
+  PetscCall(PetscMalloc1(s->m + 1, &local));
+  for (PetscInt i = 0; i <= s->m; i++) local[i] = rowptr[s->lo + i] - rowptr[s->lo];
   PetscCall(MatCreate(PETSC_COMM_WORLD, &s->A));
-  PetscCall(MatSetSizes(s->A, *hi - s->lo, *hi - s->lo, n, n));
+  PetscCall(MatSetSizes(s->A, s->m, s->m, n, n));
   PetscCall(MatSetType(s->A, MATMPIAIJ));
   if (bs > 1) PetscCall(MatSetBlockSize(s->A, bs));
   PetscCall(MatMPIAIJSetPreallocationCSR(s->A, local, cols + rowptr[s->lo], vals + rowptr[s->lo]));
@@ -160,20 +175,40 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
   PetscFunctionReturn(0);
 }
 
-/* K_A's convergence test: PETSc's, unless the solve is to be given up (the run's stop,
- * vc_ksp_solve's `requested`), which every rank learns at the same iteration (a reduction
+/* On several ranks, the copy of this rank's rows of K that the Newton systems are made from
+ * (newton_matrix), and N's and Q's values, K's to begin with. */
+static PetscErrorCode local_rows(VcKsp *s, const PetscInt *rowptr, const PetscInt *cols,
+                                 const PetscScalar *vals)
+{
+  PetscInt base = rowptr[s->lo], nnz = rowptr[s->lo + s->m] - base;
+
+  PetscFunctionBeginUser;
+  PetscCall(PetscMalloc2(s->m + 1, &s->kai, nnz, &s->kaj));
+  PetscCall(PetscMalloc3(nnz, &s->kav, nnz, &s->nav, nnz, &s->qav));
+  PetscCall(PetscCalloc2(s->m, &s->held, s->m, &s->touched));
+  for (PetscInt i = 0; i <= s->m; i++) s->kai[i] = rowptr[s->lo + i] - base;
+  PetscCall(PetscArraycpy(s->kaj, cols + base, nnz));
+  PetscCall(PetscArraycpy(s->kav, vals + base, nnz));
+  PetscCall(PetscArraycpy(s->nav, vals + base, nnz));
+  PetscCall(PetscArraycpy(s->qav, vals + base, nnz));
+  PetscFunctionReturn(0);
+}
+
+/* A KSP's convergence test: PETSc's, unless the solve is to be given up (the run's stop,
+ * the solve's `requested`), which every rank learns at the same iteration (a reduction
  * over the ranks): the KSP then ends with KSP_DIVERGED_NULL and `given_up`, so that the
  * ranks leave the collective calls together. Mpirun kills the ranks a second after it
  * passes a Ctrl-C on as SIGTERM (docs/cluster.md): a step cannot be waited for. */
 static PetscErrorCode converged_or_given_up(KSP ksp, PetscInt it, PetscReal rnorm,
                                             KSPConvergedReason *reason, void *ctx)
 {
-  VcKsp   *s = (VcKsp *)ctx;
+  Watch   *w = (Watch *)ctx;
+  VcKsp   *s = w->s;
   int      stop = s->requested ? s->requested(s->flag) : 0;
   MPI_Comm comm;
 
   PetscFunctionBeginUser;
-  PetscCall(s->inner(ksp, it, rnorm, reason, s->inner_ctx));
+  PetscCall(w->inner(ksp, it, rnorm, reason, w->inner_ctx));
   PetscCall(PetscObjectGetComm((PetscObject)ksp, &comm));
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &stop, 1, MPI_INT, MPI_MAX, comm));
   if (stop && *reason == KSP_CONVERGED_ITERATING) {
@@ -183,27 +218,39 @@ static PetscErrorCode converged_or_given_up(KSP ksp, PetscInt it, PetscReal rnor
   PetscFunctionReturn(0);
 }
 
-/* The matrix in CSR (a symmetric matrix's CSC is its CSR), its near-null space as `nvec`
- * orthonormal vectors of length n stored one after the other, CG + GAMG with relative
- * tolerance `rtol`, then `options` (PETSc's command-line syntax) and KSPSetFromOptions;
- * set up for K's own solves, or where `newton`, for the constrained systems alone (their
- * KSP and multigrid: constrained_setup), K's never being solved. Every rank gives the
- * whole matrix; on several ranks each keeps its rows, and `newton` is refused. */
+/* ksp's convergence test, as it stands, wrapped by converged_or_given_up in w (the test
+ * w wrapped before, if any, destroyed). */
+static PetscErrorCode watch(VcKsp *s, KSP ksp, Watch *w)
+{
+  PetscFunctionBeginUser;
+  if (w->inner_destroy) PetscCall(w->inner_destroy(w->inner_ctx));
+  PetscCall(KSPGetAndClearConvergenceTest(ksp, &w->inner, &w->inner_ctx, &w->inner_destroy));
+  w->s = s;
+  PetscCall(KSPSetConvergenceTest(ksp, converged_or_given_up, w, NULL));
+  PetscFunctionReturn(0);
+}
+
+/* The matrix in CSR (a symmetric matrix's CSC is its CSR), `first[i]` nonzero where a
+ * node's unknowns begin at row i, its near-null space as `nvec` orthonormal vectors of
+ * length n stored one after the other, CG + GAMG with relative tolerance `rtol`, then
+ * `options` (PETSc's command-line syntax) and KSPSetFromOptions; set up for K's own
+ * solves, or where `newton`, for the constrained systems alone (their KSP and multigrid:
+ * constrained_setup), K's never being solved. Every rank gives the whole matrix; on
+ * several ranks each keeps its rows. */
 int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, const PetscScalar *vals,
-                  PetscInt bs, PetscInt nvec, const PetscScalar *near, PetscReal rtol,
-                  const char *options, int newton, void **out)
+                  PetscInt bs, const PetscInt *first, PetscInt nvec, const PetscScalar *near,
+                  PetscReal rtol, const char *options, int newton, void **out)
 {
   VcKsp       *s;
   MatNullSpace space;
   Vec         *vecs;
   PC           pc;
-  PetscInt     hi;
   MPI_Comm     comm;
 
   PetscCall(PetscCalloc1(1, &s));
-  PetscCall(distributed_matrix(s, n, rowptr, cols, vals, bs, &hi));
-  PetscCheck(!newton || !s->count, PETSC_COMM_WORLD, PETSC_ERR_SUP,
-             "the active set's Newton systems run on one process");
+  s->of_start = -1;
+  PetscCall(distributed_matrix(s, n, rowptr, cols, vals, bs, first));
+  if (newton && s->count) PetscCall(local_rows(s, rowptr, cols, vals));
   PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatSetOption(s->A, MAT_SYMMETRIC, PETSC_TRUE));
   PetscCall(MatSetOption(s->A, MAT_SPD, PETSC_TRUE));
@@ -213,7 +260,7 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
     PetscScalar *a;
     PetscCall(MatCreateVecs(s->A, &vecs[k], NULL));
     PetscCall(VecGetArray(vecs[k], &a));
-    PetscCall(PetscArraycpy(a, near + k * n + s->lo, hi - s->lo));
+    PetscCall(PetscArraycpy(a, near + k * n + s->lo, s->m));
     PetscCall(VecRestoreArray(vecs[k], &a));
   }
   PetscCall(MatNullSpaceCreate(comm, PETSC_FALSE, nvec, vecs, &space));
@@ -234,8 +281,7 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   if (newton) PetscCall(constrained_setup(s));
   else {
     PetscCall(KSPSetUp(s->ksp));
-    PetscCall(KSPGetAndClearConvergenceTest(s->ksp, &s->inner, &s->inner_ctx, &s->inner_destroy));
-    PetscCall(KSPSetConvergenceTest(s->ksp, converged_or_given_up, s, NULL));
+    PetscCall(watch(s, s->ksp, &s->kw));
   }
   PetscCall(MatCreateVecs(s->A, &s->x, &s->b));
   *out = s;
@@ -254,32 +300,43 @@ static PetscErrorCode gathered(VcKsp *s, PetscScalar *x)
   PetscFunctionReturn(0);
 }
 
-/* x ← K⁻¹ b by the KSP, from the initial guess in x; its iterations, converged reason (< 0:
- * diverged) and final residual norm. b and x are whole on every rank (each gives the same
- * b), and x is whole on every rank after it. `requested(flag)` (NULL: none), asked at every
- * iteration, gives the solve up where it returns nonzero on any rank: then `given_up` and x
- * holds an iterate. */
-int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, int (*requested)(void *),
-                 void *flag, PetscInt *its, int *reason, PetscReal *rnorm, int *given_up)
+/* x ← the solution of ksp's system (K_A's or the constrained one) with right side b, from
+ * the initial guess in x; its iterations, converged reason (< 0: diverged) and final
+ * residual norm. b and x are whole on every rank (each gives the same b), and x is whole on
+ * every rank after it. `requested(flag)` (NULL: none), asked at every iteration, gives the
+ * solve up where it returns nonzero on any rank: then `given_up` and x holds an iterate. */
+static PetscErrorCode solved(VcKsp *s, KSP ksp, const PetscScalar *b, PetscScalar *x,
+                             int (*requested)(void *), void *flag, PetscInt *its, int *reason,
+                             PetscReal *rnorm, int *given_up)
 {
-  VcKsp             *s = (VcKsp *)ctx;
   KSPConvergedReason r;
 
+  PetscFunctionBeginUser;
   s->requested = requested;
   s->flag = flag;
   s->given_up = PETSC_FALSE;
   PetscCall(VecPlaceArray(s->b, b + s->lo));
   PetscCall(VecPlaceArray(s->x, x + s->lo));
-  PetscCall(KSPSolve(s->ksp, s->b, s->x));
+  PetscCall(KSPSolve(ksp, s->b, s->x));
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
   PetscCall(gathered(s, x));
-  PetscCall(KSPGetIterationNumber(s->ksp, its));
-  PetscCall(KSPGetConvergedReason(s->ksp, &r));
-  PetscCall(KSPGetResidualNorm(s->ksp, rnorm));
+  PetscCall(KSPGetIterationNumber(ksp, its));
+  PetscCall(KSPGetConvergedReason(ksp, &r));
+  PetscCall(KSPGetResidualNorm(ksp, rnorm));
   *reason = (int)r;
   *given_up = s->given_up;
   s->requested = NULL;
+  PetscFunctionReturn(0);
+}
+
+/* x ← K⁻¹ b by K_A's KSP, as `solved` says. */
+int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, int (*requested)(void *),
+                 void *flag, PetscInt *its, int *reason, PetscReal *rnorm, int *given_up)
+{
+  VcKsp *s = (VcKsp *)ctx;
+
+  PetscCall(solved(s, s->ksp, b, x, requested, flag, its, reason, rnorm, given_up));
   return 0;
 }
 
@@ -295,16 +352,17 @@ int vc_ksp_types(void *ctx, const char **ksp_type, const char **pc_type)
   return 0;
 }
 
-/* y = K x. */
+/* y = K x, x and y whole on every rank. */
 int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 {
   VcKsp *s = (VcKsp *)ctx;
 
-  PetscCall(VecPlaceArray(s->b, x));
-  PetscCall(VecPlaceArray(s->x, y));
+  PetscCall(VecPlaceArray(s->b, x + s->lo));
+  PetscCall(VecPlaceArray(s->x, y + s->lo));
   PetscCall(MatMult(s->A, s->b, s->x));
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
+  PetscCall(gathered(s, y));
   return 0;
 }
 
@@ -373,11 +431,22 @@ static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
   PetscFunctionReturn(0);
 }
 
-/* (A M B)_ij, M in CSR, A = R over the frame of i where `left` (else I), B = R over the
- * frame of j where `right` (else I); a dof without a frame is its own (R = 1). */
-static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const PetscInt *ai,
-                             const PetscInt *aj, const PetscScalar *m, PetscInt i, PetscInt j,
-                             int left, int right)
+/* A rank's rows of K and N in CSR, [lo, lo + m): offsets ai from 0, global columns aj,
+ * values k of K and n of N. On one process, the matrices' own arrays (N is written in
+ * place); on several, the copies local_rows made (N is set from them: local_close). */
+typedef struct {
+  PetscInt           lo, m;
+  const PetscInt    *ai, *aj;
+  const PetscScalar *k;
+  PetscScalar       *n;
+} Local;
+
+/* (A M B)_ij, M the local rows' values (l->n) with row i among them, A = R over the frame
+ * of i where `left` (else I), B = R over the frame of j where `right` (else I); a dof
+ * without a frame is its own (R = 1). A node's dofs are all on one rank, so the rows of
+ * i's frame are local too. */
+static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Local *l, PetscInt i,
+                             PetscInt j, int left, int right)
 {
   Frame        unit_i = {1, {i}, {1.0}}, unit_j = {1, {j}, {1.0}};
   const Frame *fi = left && frame_of[i] >= 0 ? &fr[frame_of[i]] : &unit_i;
@@ -389,10 +458,69 @@ static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Pe
   while (fj->dof[b] != j) b++;
   for (PetscInt p = 0; p < fi->k; p++)
     for (PetscInt q = 0; q < fj->k; q++) {
-      PetscInt e = entry(ai, aj, fi->dof[p], fj->dof[q]);
-      if (e >= 0) sum += fi->r[fi->k * a + p] * m[e] * fj->r[fj->k * q + b];
+      PetscInt e = entry(l->ai, l->aj, fi->dof[p] - l->lo, fj->dof[q]);
+      if (e >= 0) sum += fi->r[fi->k * a + p] * l->n[e] * fj->r[fj->k * q + b];
     }
   return sum;
+}
+
+/* This rank's rows of K and N (`write`: N's to be written). */
+static PetscErrorCode local_open(VcKsp *s, PetscBool write, Local *l)
+{
+  PetscBool done;
+
+  PetscFunctionBeginUser;
+  if (s->count) {
+    *l = (Local){s->lo, s->m, s->kai, s->kaj, s->kav, s->nav};
+    PetscFunctionReturn(0);
+  }
+  l->lo = 0;
+  PetscCall(MatGetRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &l->m, &l->ai, &l->aj, &done));
+  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "the Newton matrix has no CSR arrays");
+  PetscCall(MatSeqAIJGetArrayRead(s->A, &l->k));
+  if (write) PetscCall(MatSeqAIJGetArray(s->N, &l->n));
+  else PetscCall(MatSeqAIJGetArrayRead(s->N, (const PetscScalar **)&l->n));
+  PetscFunctionReturn(0);
+}
+
+/* Ends what local_open began. */
+static PetscErrorCode local_close(VcKsp *s, PetscBool write, Local *l)
+{
+  PetscBool done;
+
+  PetscFunctionBeginUser;
+  if (s->count) PetscFunctionReturn(0);
+  if (write) PetscCall(MatSeqAIJRestoreArray(s->N, &l->n));
+  else PetscCall(MatSeqAIJRestoreArrayRead(s->N, (const PetscScalar **)&l->n));
+  PetscCall(MatSeqAIJRestoreArrayRead(s->A, &l->k));
+  PetscCall(MatRestoreRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &l->m, &l->ai, &l->aj, &done));
+  PetscFunctionReturn(0);
+}
+
+/* On several ranks, N ← this rank's rows as newton_matrix made them (s->nav): those it
+ * changed (touched) and those that differed from K before (held), which it put back. */
+static PetscErrorCode set_rows(VcKsp *s)
+{
+  PetscFunctionBeginUser;
+  for (PetscInt r = 0; r < s->m; r++) {
+    PetscInt row = s->lo + r, x = s->kai[r];
+    if (s->held[r] || s->touched[r])
+      PetscCall(MatSetValues(s->N, 1, &row, s->kai[r + 1] - x, s->kaj + x, s->nav + x, INSERT_VALUES));
+    s->held[r] = s->touched[r];
+    s->touched[r] = 0;
+  }
+  PetscCall(MatAssemblyBegin(s->N, MAT_FINAL_ASSEMBLY));
+  PetscCall(MatAssemblyEnd(s->N, MAT_FINAL_ASSEMBLY));
+  PetscFunctionReturn(0);
+}
+
+/* Q ← N, the matrix the constrained preconditioner is now built from. */
+static PetscErrorCode keep_q(VcKsp *s)
+{
+  PetscFunctionBeginUser;
+  PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
+  if (s->count) PetscCall(PetscArraycpy(s->qav, s->nav, s->kai[s->m]));
+  PetscFunctionReturn(0);
 }
 
 /* The scale α of the removed directions' block in the Newton matrix (newton_matrix). The
@@ -413,65 +541,62 @@ static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Pe
  * GAMG aggregated N. N has K's pattern, for R and S act within a node and P1 assembly
  * stores every pair of dofs of neighbouring nodes; only the rows and columns of nodes with
  * removed directions change, computed here in place (a product of sparse matrices took a
- * fifth of the step on the plate 0.03). */
+ * fifth of the step on the plate 0.03). Each rank makes its own rows: a framed row in full,
+ * and in the others the entries in framed columns. */
 static PetscErrorCode newton_matrix(VcKsp *s)
 {
-  const VcTerms     *t = &s->terms;
-  const PetscInt    *ai, *aj;
-  const PetscScalar *ka;
-  PetscScalar       *na, *upd;
-  PetscInt          *at, n, nf, nu = 0, cap = 0;
-  PetscBool          done;
-  Frame             *fr = NULL;
+  const VcTerms *t = &s->terms;
+  Local          l;
+  PetscScalar   *upd = NULL;
+  PetscInt      *at = NULL, nf, nu = 0, cap = 0;
+  Frame         *fr = NULL;
 
   PetscFunctionBeginUser;
-  PetscCall(MatGetRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
-  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "the Newton matrix has no CSR arrays");
-  PetscCall(MatSeqAIJGetArrayRead(s->A, &ka));
-  PetscCall(MatSeqAIJGetArray(s->N, &na));
-  PetscCall(PetscArraycpy(na, ka, ai[n]));
-  PetscCall(MatSeqAIJRestoreArrayRead(s->A, &ka));
+  PetscCall(local_open(s, PETSC_TRUE, &l));
+  PetscCall(PetscArraycpy(l.n, l.k, l.ai[l.m]));
   for (PetscInt e = 0; e < t->ns; e++) {
     PetscInt idx[3];
     int      pos[3];
     PetscInt k = present(t->sdofs + 3 * e, idx, pos);
-    for (PetscInt r = 0; r < k; r++)
+    if (k == 0 || idx[0] < l.lo || idx[0] >= l.lo + l.m) continue; /* another rank's node */
+    for (PetscInt r = 0; r < k; r++) {
       for (PetscInt c = 0; c < k; c++) {
-        PetscInt x = entry(ai, aj, idx[r], idx[c]);
+        PetscInt x = entry(l.ai, l.aj, idx[r] - l.lo, idx[c]);
         PetscCheck(x >= 0, PETSC_COMM_SELF, PETSC_ERR_SUP, "K lacks a pair of a node's dofs");
-        na[x] += t->smats[9 * e + 3 * pos[r] + pos[c]];
+        l.n[x] += t->smats[9 * e + 3 * pos[r] + pos[c]];
       }
+      if (s->touched) s->touched[idx[r] - l.lo] = 1;
+    }
   }
   PetscCall(frames(s, &fr, &nf));
-  for (PetscInt f = 0; f < nf; f++)
-    for (PetscInt a = 0; a < fr[f].k; a++) cap += 2 * (ai[fr[f].dof[a] + 1] - ai[fr[f].dof[a]]);
-  PetscCall(PetscMalloc2(cap, &upd, cap, &at));
-  /* The new values, from N = K + S as it stands, written once all are known: a framed row
-   * in full, and the mirrored entry of a column without a frame (N stays symmetric). */
-  for (PetscInt f = 0; f < nf; f++)
-    for (PetscInt a = 0; a < fr[f].k; a++) {
-      PetscInt i = fr[f].dof[a];
-      for (PetscInt x = ai[i]; x < ai[i + 1]; x++) {
-        PetscInt    j = aj[x];
-        PetscScalar rmr = reflected(fr, s->frame_of, ai, aj, na, i, j, 1, 1);
-        PetscScalar rm = reflected(fr, s->frame_of, ai, aj, na, i, j, 1, 0);
-        PetscScalar mr = reflected(fr, s->frame_of, ai, aj, na, i, j, 0, 1);
-        PetscScalar v = 0.25 * (1 + DECOUPLED) * (na[x] + rmr) + 0.25 * (1 - DECOUPLED) * (rm + mr);
-        upd[nu] = v;
-        at[nu++] = x;
-        if (s->frame_of[j] < 0) {
-          upd[nu] = v;
-          at[nu++] = entry(ai, aj, j, i);
-        }
+  /* The new values, from N = K + S as it stands, written once all are known. */
+  for (PetscInt r = 0; r < l.m; r++) {
+    PetscInt i = l.lo + r;
+    int      framed = s->frame_of[i] >= 0;
+    for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++) {
+      PetscInt j = l.aj[x];
+      if (!framed && s->frame_of[j] < 0) continue;
+      PetscScalar rmr = reflected(fr, s->frame_of, &l, i, j, 1, 1);
+      PetscScalar rm = reflected(fr, s->frame_of, &l, i, j, 1, 0);
+      PetscScalar mr = reflected(fr, s->frame_of, &l, i, j, 0, 1);
+      if (nu == cap) {
+        cap = PetscMax(2 * cap, 1024);
+        PetscCall(PetscRealloc(cap * sizeof(*upd), &upd));
+        PetscCall(PetscRealloc(cap * sizeof(*at), &at));
       }
+      upd[nu] = 0.25 * (1 + DECOUPLED) * (l.n[x] + rmr) + 0.25 * (1 - DECOUPLED) * (rm + mr);
+      at[nu++] = x;
+      if (s->touched) s->touched[r] = 1;
     }
-  for (PetscInt u = 0; u < nu; u++) na[at[u]] = upd[u];
+  }
+  for (PetscInt u = 0; u < nu; u++) l.n[at[u]] = upd[u];
   for (PetscInt f = 0; f < nf; f++)
     for (PetscInt a = 0; a < fr[f].k; a++) s->frame_of[fr[f].dof[a]] = -1;
-  PetscCall(PetscFree2(upd, at));
+  PetscCall(PetscFree(upd));
+  PetscCall(PetscFree(at));
   PetscCall(PetscFree(fr));
-  PetscCall(MatSeqAIJRestoreArray(s->N, &na));
-  PetscCall(MatRestoreRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
+  PetscCall(local_close(s, PETSC_TRUE, &l));
+  if (s->count) PetscCall(set_rows(s));
   PetscFunctionReturn(0);
 }
 
@@ -503,11 +628,16 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   MatNullSpace near;
   PetscInt     n;
   PetscBool    gamg;
+  MPI_Comm     comm;
 
   PetscFunctionBeginUser;
+  PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatGetNearNullSpace(s->A, &near));
-  PetscCall(MatDuplicate(s->A, MAT_DO_NOT_COPY_VALUES, &s->N));
+  PetscCall(MatDuplicate(s->A, MAT_COPY_VALUES, &s->N));
   PetscCall(MatDuplicate(s->A, MAT_DO_NOT_COPY_VALUES, &s->Q));
+  /* On several ranks, N is set row by row from this rank's own (set_rows). */
+  PetscCall(MatSetOption(s->N, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
+  if (s->count) PetscCall(MatSetOption(s->N, MAT_NO_OFF_PROC_ENTRIES, PETSC_TRUE));
   for (int k = 0; k < 2; k++) {
     Mat m = k ? s->Q : s->N;
     PetscCall(MatSetOption(m, MAT_SYMMETRIC, PETSC_TRUE));
@@ -517,7 +647,7 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(MatGetSize(s->A, &n, NULL));
   PetscCall(PetscMalloc1(n, &s->frame_of));
   for (PetscInt i = 0; i < n; i++) s->frame_of[i] = -1;
-  PetscCall(KSPCreate(PETSC_COMM_SELF, &s->kc));
+  PetscCall(KSPCreate(comm, &s->kc));
   PetscCall(KSPSetOperators(s->kc, s->N, s->Q));
   PetscCall(KSPGetType(s->ksp, &type));
   PetscCall(KSPSetType(s->kc, type));
@@ -548,48 +678,47 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscFunctionReturn(0);
 }
 
-/* N − M (M: K or Q) as a matrix of its own: the entries where the two differ (the rows and
- * columns of nodes whose removed directions or slip stiffness differ), on K's pattern; NULL
- * where none does. */
-static PetscErrorCode difference(VcKsp *s, Mat m, Mat *d)
+/* N − M (M: K where `from_k`, else Q) as a matrix of its own, with N's layout: the
+ * entries where the two differ (the rows and columns of nodes whose removed directions or
+ * slip stiffness differ), on K's pattern; NULL where none does on any rank. */
+static PetscErrorCode difference(VcKsp *s, PetscBool from_k, Mat *d)
 {
-  const PetscInt    *ai, *aj;
-  const PetscScalar *ma, *na;
-  PetscInt           n, nnz = 0, *rowptr, *cols;
+  Local              l;
+  const PetscScalar *ma;
+  PetscInt           n, nnz = 0, total, *rowptr, *cols;
   PetscScalar       *vals;
-  PetscBool          done;
+  MPI_Comm           comm;
 
   PetscFunctionBeginUser;
   *d = NULL;
-  PetscCall(MatGetRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
-  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "the Newton matrix has no CSR arrays");
-  PetscCall(MatSeqAIJGetArrayRead(m, &ma));
-  PetscCall(MatSeqAIJGetArrayRead(s->N, &na));
-  for (PetscInt x = 0; x < ai[n]; x++) nnz += na[x] != ma[x];
-  if (nnz > 0) {
-    PetscCall(PetscMalloc1(n + 1, &rowptr));
-    PetscCall(PetscMalloc1(nnz, &cols));
-    PetscCall(PetscMalloc1(nnz, &vals));
+  PetscCall(PetscObjectGetComm((PetscObject)s->N, &comm));
+  PetscCall(MatGetSize(s->N, &n, NULL));
+  PetscCall(local_open(s, PETSC_FALSE, &l));
+  if (from_k) ma = l.k;
+  else if (s->count) ma = s->qav;
+  else PetscCall(MatSeqAIJGetArrayRead(s->Q, &ma));
+  for (PetscInt x = 0; x < l.ai[l.m]; x++) nnz += l.n[x] != ma[x];
+  PetscCallMPI(MPI_Allreduce(&nnz, &total, 1, MPIU_INT, MPI_SUM, comm));
+  if (total > 0) {
+    PetscCall(PetscMalloc3(l.m + 1, &rowptr, nnz, &cols, nnz, &vals));
     rowptr[0] = 0;
-    for (PetscInt i = 0, k = 0; i < n; i++) {
-      for (PetscInt x = ai[i]; x < ai[i + 1]; x++)
-        if (na[x] != ma[x]) {
-          cols[k] = aj[x];
-          vals[k++] = na[x] - ma[x];
+    for (PetscInt r = 0, k = 0; r < l.m; r++) {
+      for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++)
+        if (l.n[x] != ma[x]) {
+          cols[k] = l.aj[x];
+          vals[k++] = l.n[x] - ma[x];
         }
-      rowptr[i + 1] = k;
+      rowptr[r + 1] = k;
     }
-    PetscCall(MatCreate(PETSC_COMM_SELF, d));
-    PetscCall(MatSetSizes(*d, n, n, n, n));
-    PetscCall(MatSetType(*d, MATSEQAIJ));
+    PetscCall(MatCreate(comm, d));
+    PetscCall(MatSetSizes(*d, l.m, l.m, n, n));
+    PetscCall(MatSetType(*d, MATAIJ));
     PetscCall(MatSeqAIJSetPreallocationCSR(*d, rowptr, cols, vals));
-    PetscCall(PetscFree(rowptr));
-    PetscCall(PetscFree(cols));
-    PetscCall(PetscFree(vals));
+    PetscCall(MatMPIAIJSetPreallocationCSR(*d, rowptr, cols, vals));
+    PetscCall(PetscFree3(rowptr, cols, vals));
   }
-  PetscCall(MatSeqAIJRestoreArrayRead(s->N, &na));
-  PetscCall(MatSeqAIJRestoreArrayRead(m, &ma));
-  PetscCall(MatRestoreRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
+  if (!from_k && !s->count) PetscCall(MatSeqAIJRestoreArrayRead(s->Q, &ma));
+  PetscCall(local_close(s, PETSC_FALSE, &l));
   PetscFunctionReturn(0);
 }
 
@@ -597,24 +726,23 @@ static PetscErrorCode difference(VcKsp *s, Mat m, Mat *d)
  * costs what R holds, not what P does. NULL where D is. */
 static PetscErrorCode restricted_ptap(Mat d, Mat p, Mat *out)
 {
-  const PetscInt *ai, *aj;
-  PetscInt        n, nc, nr = 0, *rows;
-  PetscBool       done;
-  IS              isr, isc;
-  Mat             dr, pr;
+  PetscInt c0, c1;
+  IS       isr, isc;
+  Mat      dr, pr;
+  MPI_Comm comm;
 
   PetscFunctionBeginUser;
   *out = NULL;
   if (!d) PetscFunctionReturn(0);
-  PetscCall(MatGetRowIJ(d, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
-  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "a difference matrix has no CSR arrays");
-  PetscCall(PetscMalloc1(n, &rows));
-  for (PetscInt i = 0; i < n; i++)
-    if (ai[i + 1] > ai[i]) rows[nr++] = i;
-  PetscCall(MatRestoreRowIJ(d, 0, PETSC_FALSE, PETSC_FALSE, &n, &ai, &aj, &done));
-  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, nr, rows, PETSC_OWN_POINTER, &isr));
-  PetscCall(MatGetSize(p, NULL, &nc));
-  PetscCall(ISCreateStride(PETSC_COMM_SELF, nc, 0, 1, &isc));
+  PetscCall(PetscObjectGetComm((PetscObject)d, &comm));
+  PetscCall(MatFindNonzeroRows(d, &isr));
+  if (!isr) { /* every row is nonzero */
+    PetscInt r0, r1;
+    PetscCall(MatGetOwnershipRange(d, &r0, &r1));
+    PetscCall(ISCreateStride(comm, r1 - r0, r0, 1, &isr));
+  }
+  PetscCall(MatGetOwnershipRangeColumn(p, &c0, &c1));
+  PetscCall(ISCreateStride(comm, c1 - c0, c0, 1, &isc));
   PetscCall(MatCreateSubMatrix(d, isr, isr, MAT_INITIAL_MATRIX, &dr));
   PetscCall(MatCreateSubMatrix(p, isr, isc, MAT_INITIAL_MATRIX, &pr));
   PetscCall(MatPtAP(dr, pr, MAT_INITIAL_MATRIX, PETSC_DEFAULT, out));
@@ -640,8 +768,8 @@ static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
 
   PetscFunctionBeginUser;
   PetscCall(KSPGetPC(s->kc, &pc));
-  PetscCall(difference(s, from_k ? s->A : s->Q, &d));
-  PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
+  PetscCall(difference(s, from_k, &d));
+  PetscCall(keep_q(s));
   for (PetscInt l = s->nlev - 1; l > 0; l--) {
     KSP smoother;
     Mat p, a, dc;
@@ -666,43 +794,36 @@ static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
 }
 
 /* x ← the solution of the constrained system Π(K + S)Π x + (I − Π) x = Π b with the terms
- * given, from the initial guess in x, to relative tolerance rtol (of b's norm, or where
- * `of_start`, of the initial residual's: an inexact Newton system): iterations, reason and
- * final residual norm as vc_ksp_solve. `rebuild`: 0, the preconditioner of the last system
- * serves; 1, it is rebuilt from this system's matrix, on K's aggregates and interpolation
- * (what a step starts with, so that a resumed run builds what the uninterrupted one did);
- * 2, the same, by an update of the last one (galerkin_update). */
+ * given (every rank gives all of them), from the initial guess in x, to relative tolerance
+ * rtol (of b's norm, or where `of_start`, of the initial residual's: an inexact Newton
+ * system), as `solved` says. `rebuild`: 0, the preconditioner of the last system serves;
+ * 1, it is rebuilt from this system's matrix, on K's aggregates and interpolation (what a
+ * step starts with, so that a resumed run builds what the uninterrupted one did); 2, the
+ * same, by an update of the last one (galerkin_update). */
 int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const PetscScalar *pdirs,
                          PetscInt ns, const PetscInt *sdofs, const PetscScalar *smats, int rebuild,
-                         PetscReal rtol, int of_start, const PetscScalar *b, PetscScalar *x, PetscInt *its,
-                         int *reason, PetscReal *rnorm)
+                         PetscReal rtol, int of_start, const PetscScalar *b, PetscScalar *x,
+                         int (*requested)(void *), void *flag, PetscInt *its, int *reason,
+                         PetscReal *rnorm, int *given_up)
 {
-  VcKsp             *s = (VcKsp *)ctx;
-  KSPConvergedReason r;
+  VcKsp *s = (VcKsp *)ctx;
 
   PetscCheck(s->kc, PETSC_COMM_SELF, PETSC_ERR_ORDER, "the KSP is not the Newton systems'");
   s->terms = (VcTerms){np, ns, pdofs, sdofs, pdirs, smats};
   PetscCall(newton_matrix(s));
   s->terms = (VcTerms){0};
   if (rebuild && s->coarse_k) PetscCall(galerkin_update(s, rebuild == 1));
-  else if (rebuild) PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
+  else if (rebuild) PetscCall(keep_q(s));
   PetscCall(KSPSetTolerances(s->kc, rtol, 0.0, PETSC_DEFAULT, PETSC_DEFAULT));
   if (of_start != s->of_start) {
     void *test;
     PetscCall(KSPConvergedDefaultCreate(&test));
     PetscCall(KSPSetConvergenceTest(s->kc, KSPConvergedDefault, test, KSPConvergedDefaultDestroy));
     if (of_start) PetscCall(KSPConvergedDefaultSetUIRNorm(s->kc));
+    PetscCall(watch(s, s->kc, &s->cw));
     s->of_start = of_start;
   }
-  PetscCall(VecPlaceArray(s->b, b));
-  PetscCall(VecPlaceArray(s->x, x));
-  PetscCall(KSPSolve(s->kc, s->b, s->x));
-  PetscCall(VecResetArray(s->x));
-  PetscCall(VecResetArray(s->b));
-  PetscCall(KSPGetIterationNumber(s->kc, its));
-  PetscCall(KSPGetConvergedReason(s->kc, &r));
-  PetscCall(KSPGetResidualNorm(s->kc, rnorm));
-  *reason = (int)r;
+  PetscCall(solved(s, s->kc, b, x, requested, flag, its, reason, rnorm, given_up));
   return 0;
 }
 
@@ -740,13 +861,19 @@ int vc_ksp_destroy(void *ctx)
   VcKsp *s = (VcKsp *)ctx;
 
   if (!s) return 0;
-  if (s->inner_destroy) PetscCall(s->inner_destroy(s->inner_ctx));
+  for (int k = 0; k < 2; k++) {
+    Watch *w = k ? &s->cw : &s->kw;
+    if (w->inner_destroy) PetscCall(w->inner_destroy(w->inner_ctx));
+  }
   for (PetscInt l = 0; s->coarse_k && l + 1 < s->nlev; l++) PetscCall(MatDestroy(&s->coarse_k[l]));
   PetscCall(PetscFree(s->coarse_k));
   PetscCall(KSPDestroy(&s->kc));
   PetscCall(MatDestroy(&s->N));
   PetscCall(MatDestroy(&s->Q));
   PetscCall(PetscFree(s->frame_of));
+  PetscCall(PetscFree2(s->kai, s->kaj));
+  PetscCall(PetscFree3(s->kav, s->nav, s->qav));
+  PetscCall(PetscFree2(s->held, s->touched));
   PetscCall(VecDestroy(&s->b));
   PetscCall(VecDestroy(&s->x));
   PetscCall(KSPDestroy(&s->ksp));

@@ -329,7 +329,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
 
 /// Hands the run's request to give a step up to the time loop; on several ranks the first
 /// signal makes it (`Interrupt::give_up_at_first`), and the step is given up on every rank
-/// at once (only a linear PETSc step spreads, and its Krylov solve shares the request).
+/// at once (only PETSc's steps spread, and their Krylov solves share the request).
 fn follow_signals(tl: &mut TimeLoop, opts: &RunOptions) {
     if opts.ranks.size > 1 {
         opts.interrupt.give_up_at_first();

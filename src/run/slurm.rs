@@ -134,7 +134,7 @@ fn check_ranks(job: &JobOptions, solver: &Descriptor) -> Result<()> {
         crate::ranks::WHAT_SPREADS
     } else {
         "a run is one process in this build (no MPI: build with --features petsc to spread a \
-         run whose steps are linear PETSc solves; docs/cluster.md)"
+         run whose steps are PETSc solves; docs/cluster.md)"
     };
     Err(Error::input(format!(
         "run --emit slurm: --nodes {} --ntasks-per-node {}: {why}; otherwise write --nodes 1 \

@@ -82,7 +82,7 @@
 //! On the golden scenes, the corners and a rotating traction (tests/petsc) every step
 //! converges; the bracket's sliding onset is the hardest (35 iterations in one step).
 
-use super::{kkt_residual, Abandon, Rows, StepReport, StepStatus};
+use super::{kkt_residual, Rows, StepReport, StepStatus};
 use crate::scene::ActiveSetSection;
 use crate::Result;
 
@@ -96,6 +96,8 @@ pub struct LinearSolve {
     pub failed: Option<&'static str>,
     /// What to try where it did.
     pub remedy: &'static str,
+    /// The solve was given up on request (the run's stop: `solver::abandon`).
+    pub given_up: bool,
 }
 
 /// The systems of the Newton iteration: products with K and solves of the constrained
@@ -399,7 +401,8 @@ pub struct ActiveSetSolver {
     /// (K + S) w.
     r: Vec<f64>,
     counts: ActiveSetCounts,
-    abandon: Abandon,
+    /// The w a step started from, put back where the step is given up.
+    start: Vec<f64>,
 }
 
 impl ActiveSetSolver {
@@ -424,7 +427,7 @@ impl ActiveSetSolver {
             rhs: vec![0.0; diagonal.len()],
             r: vec![0.0; diagonal.len()],
             counts: ActiveSetCounts::default(),
-            abandon: Abandon::default(),
+            start: vec![0.0; diagonal.len()],
         }
     }
 
@@ -436,14 +439,9 @@ impl ActiveSetSolver {
         self.counts
     }
 
-    /// Gives up a step when `abandon` is requested (`solver::abandon`), between Newton
-    /// iterations.
-    pub fn abandon_on(&mut self, abandon: Abandon) {
-        self.abandon = abandon;
-    }
-
     /// Solves the step: `w` in, the previous step's w; out, w_n. `z` in, the previous
-    /// multipliers; out, the step's.
+    /// multipliers; out, the step's. A step whose Krylov solve is given up (the system's
+    /// request: `solver::abandon`) ends `Abandoned` with w as it came in.
     pub fn solve(
         &mut self,
         system: &mut impl ConstrainedSystem,
@@ -463,10 +461,8 @@ impl ActiveSetSolver {
         let mut seen = vec![sets.signature()];
         let mut allowed = usize::MAX;
         let mut built: Option<Sets> = None;
+        self.start.copy_from_slice(w);
         for newton in 1..=s.max_iterations {
-            if self.abandon.requested() {
-                return Ok(report(StepStatus::Abandoned, newton - 1, kkt_before));
-            }
             let tolerance = match exact {
                 true => Tolerance::OfRhs(s.krylov_tolerance),
                 false => Tolerance::OfStart(s.forcing),
@@ -486,6 +482,10 @@ impl ActiveSetSolver {
             let lin = system.solve(&self.terms, &self.rhs, w, tolerance, pc)?;
             krylov += lin.iterations;
             self.count_system(lin.iterations);
+            if lin.given_up {
+                w.copy_from_slice(&self.start);
+                return Ok(report(StepStatus::Abandoned, newton, kkt_before));
+            }
             if let Some(reason) = lin.failed {
                 let status = StepStatus::Stopped {
                     solver: "the Krylov solve of a Newton system of the active-set solver",
@@ -692,6 +692,7 @@ impl ConstrainedSystem for crate::petsc::Krylov {
             residual: s.residual,
             failed: s.failed,
             remedy: crate::petsc::REMEDY,
+            given_up: s.given_up,
         })
     }
 }

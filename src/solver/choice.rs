@@ -332,10 +332,11 @@ impl Descriptor {
         &self.build
     }
 
-    /// Whether the run spreads over MPI ranks (docs/cluster.md): its steps are K_A's Krylov
-    /// solves alone (`solver.linear = "petsc"`, no Γ3 rows), whose KSP spans the ranks.
+    /// Whether the run spreads over MPI ranks (docs/cluster.md): its steps are PETSc's
+    /// Krylov solves (`solver.linear = "petsc"`: K_A's, or the active set's Newton
+    /// systems), whose KSPs span the ranks.
     pub fn spreads(&self) -> bool {
-        self.build == Build::Krylov { newton: false }
+        matches!(self.build, Build::Krylov { .. })
     }
 
     /// The bytes of the values of the run's Cholesky factor of K_A, in its ordering, from

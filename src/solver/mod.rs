@@ -305,13 +305,14 @@ impl StepSolver {
     }
 
     /// Gives up the dual methods' steps when `abandon` is requested (`abandon`); clarabel's
-    /// and the linear steps are always finished. Whether a step honours it.
+    /// and the linear steps are always finished (the PETSc steps, linear and active set,
+    /// are given up by their Krylov solves: `TimeLoop::abandon_on`). Whether a step
+    /// honours it.
     pub fn abandon_on(&mut self, abandon: Abandon) -> bool {
         match self {
             StepSolver::Dual(d) => d.abandon_on(abandon),
             StepSolver::MatrixFree(d) => d.abandon_on(abandon),
-            StepSolver::ActiveSet(a) => a.abandon_on(abandon),
-            StepSolver::Linear | StepSolver::Conic(_) => return false,
+            StepSolver::Linear | StepSolver::Conic(_) | StepSolver::ActiveSet(_) => return false,
         }
         true
     }

@@ -1,11 +1,13 @@
 //! One run over several MPI ranks (`viscontact::ranks`) under Open MPI's real `mpirun`, as
-//! root where CI runs as root and with more ranks than cores: a linear PETSc run on 1, 2
-//! and 3 ranks agrees with the one-process run (bit for bit on one rank, to 1e-8 relative
-//! in u_N on more); stopped on 3 ranks and resumed on 2, it agrees with the uninterrupted
-//! run on 2 to the same tolerance, and resumed on the rank count it stopped on, bit for bit;
-//! SIGTERM to every rank stops it after a step with a checkpoint, and SIGKILL of one rank
-//! ends the others at once, the run then resuming from its last checkpoint; a run whose
-//! steps do not spread is refused (exit 2) before anything is written.
+//! root where CI runs as root and with more ranks than cores: a PETSc run, linear or with
+//! contact and friction through the active set, 2D and 3D, Prony and compressed kernels,
+//! on 1, 2 and 3 ranks agrees with the one-process run (bit for bit on one rank, to 1e-8
+//! relative in u_N on more); stopped on 3 ranks and resumed on 2, it agrees with the
+//! uninterrupted run on 2 to the same tolerance, and resumed on the rank count it stopped
+//! on, bit for bit; SIGTERM to every rank stops it after a step with a checkpoint, and
+//! SIGKILL of one rank ends the others at once, the run then resuming from its last
+//! checkpoint; a run whose steps do not spread is refused (exit 2) before anything is
+//! written.
 
 use crate::common::{self, SceneText};
 use std::path::Path;
@@ -95,20 +97,37 @@ fn linear_scenes(dir: &Path) -> Vec<std::path::PathBuf> {
         .collect()
 }
 
-#[test]
-fn a_linear_run_on_1_2_and_3_ranks_agrees_with_one_process() {
-    let tmp = tempfile::tempdir().unwrap();
-    for scene in linear_scenes(tmp.path()) {
+/// The block with contact and friction (a Prony kernel) and the paper's scene with its
+/// power-law kernel compressed (2D, contact and friction), through the active set on
+/// PETSc: 8 steps each.
+fn contact_scenes(dir: &Path) -> Vec<std::path::PathBuf> {
+    let paper = SceneText::paper().table("material.relaxation", "expr = \"0.2*(s+0.01)^(-0.5)\"");
+    [("block.toml", SceneText::block()), ("paper.toml", paper)]
+        .into_iter()
+        .map(|(name, s)| {
+            (s.set("solver.linear", "petsc"))
+                .set("solver.contact", "active_set")
+                .set("time.steps", 8)
+                .write(dir, name)
+        })
+        .collect()
+}
+
+/// Each scene run on 1, 2 and 3 ranks agrees with the one-process run: bit for bit on one
+/// rank, to 1e-8 relative in u_N on more, with the same files in its directory.
+fn agree_on_1_2_and_3_ranks(scenes: &[std::path::PathBuf]) {
+    for scene in scenes {
+        let dir = scene.parent().unwrap();
         let what = scene.file_name().unwrap().to_string_lossy().into_owned();
-        let one = tmp.path().join(format!("{what}.one"));
+        let one = dir.join(format!("{what}.one"));
         // mpirun binds a rank to a core (one thread); the results do not depend on it.
-        let (code, text) = run(0, &scene, &one, &["--threads", "1"]);
+        let (code, text) = run(0, scene, &one, &["--threads", "1"]);
         assert_eq!(code, 0, "{text}");
         let reference = u_last(&one);
         assert!(common::max_abs(&reference) > 0.0);
         for ranks in 1..=3 {
-            let out = tmp.path().join(format!("{what}.{ranks}"));
-            let (code, text) = run(ranks, &scene, &out, &["--threads", "1"]);
+            let out = dir.join(format!("{what}.{ranks}"));
+            let (code, text) = run(ranks, scene, &out, &["--threads", "1"]);
             assert_eq!(code, 0, "{what} on {ranks} ranks: {text}");
             // Rank 0 alone reports (and writes: the directory is checked whole below).
             assert_eq!(text.matches("; wrote").count(), 1, "{text}");
@@ -134,18 +153,44 @@ fn a_linear_run_on_1_2_and_3_ranks_agrees_with_one_process() {
 }
 
 #[test]
+fn a_linear_run_on_1_2_and_3_ranks_agrees_with_one_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    agree_on_1_2_and_3_ranks(&linear_scenes(tmp.path()));
+}
+
+/// The active set's Newton systems spread as K_A's solves do: each rank makes the Newton
+/// matrix's rows of its own nodes, and every rank takes the same decisions from the whole
+/// w it gets back.
+#[test]
+fn a_run_with_contact_and_friction_on_1_2_and_3_ranks_agrees_with_one_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    agree_on_1_2_and_3_ranks(&contact_scenes(tmp.path()));
+}
+
+/// The block, linear and with contact and friction.
+#[test]
 fn stopped_on_3_ranks_a_run_resumes_on_2_and_on_3() {
     let tmp = tempfile::tempdir().unwrap();
-    let scene = &linear_scenes(tmp.path())[0];
+    let (linear, contact) = (tmp.path().join("linear"), tmp.path().join("contact"));
+    std::fs::create_dir_all(&linear).unwrap();
+    std::fs::create_dir_all(&contact).unwrap();
+    stopped_on_3_resumed_on_2_and_on_3(&linear_scenes(&linear)[0]);
+    stopped_on_3_resumed_on_2_and_on_3(&contact_scenes(&contact)[0]);
+}
+
+/// `scene` stopped on 3 ranks after step 5 and resumed on 3 equals the run never stopped on
+/// 3, bit for bit; resumed on 2, the run on 2 to 1e-8 relative in u_N.
+fn stopped_on_3_resumed_on_2_and_on_3(scene: &Path) {
+    let dir = scene.parent().unwrap();
     let whole = |ranks: usize| {
-        let out = tmp.path().join(format!("whole{ranks}"));
+        let out = dir.join(format!("whole{ranks}"));
         let (code, text) = run(ranks, scene, &out, &[]);
         assert_eq!(code, 0, "{text}");
         out
     };
     let (whole2, whole3) = (whole(2), whole(3));
     for (again, reference) in [(3, &whole3), (2, &whole2)] {
-        let out = tmp.path().join(format!("stopped_resumed_on_{again}"));
+        let out = dir.join(format!("stopped_resumed_on_{again}"));
         let (code, text) = run(3, scene, &out, &["--stop-after", "5"]);
         assert_eq!(code, 0, "{text}");
         assert_eq!(common::summary(&out)["status"], "interrupted");
@@ -185,24 +230,24 @@ fn ranks_of(mpirun: u32, ranks: usize) -> Vec<String> {
 /// The signalled runs' steps and checkpoints (`signalled`).
 const SIGNALLED: [&str; 4] = ["--set", "time.steps=400", "--set", "checkpoint.every=10"];
 
-/// Resumes the run `signalled` left in DIR/o on 2 ranks: it equals the same run never
-/// stopped, bit for bit.
-fn resumes_as_never_stopped(dir: &Path, what: &str) {
+/// Resumes the run of `scene` that `signalled` left in DIR/o on 2 ranks: it equals the same
+/// run never stopped, bit for bit.
+fn resumes_as_never_stopped(scene: &Path, what: &str) {
+    let dir = scene.parent().unwrap();
     let out = dir.join("o");
     let (code, text) = resume(2, &out);
     assert_eq!(code, 0, "{what}: {text}");
     let whole = dir.join("whole");
-    let (code, text) = run(2, &dir.join("block.toml"), &whole, &SIGNALLED);
+    let (code, text) = run(2, scene, &whole, &SIGNALLED);
     assert_eq!(code, 0, "{text}");
     common::assert_same_series(&whole, &out, what);
 }
 
-/// A run of the block on 2 ranks, 400 steps with a checkpoint every 10, that `signal`
-/// reaches on `which` of its ranks (none: on mpirun) once frame 20 is written: mpirun's
-/// exit status, its output, and how long it took to end.
-fn signalled(signal: &str, which: &[usize], dir: &Path) -> (i32, String, Duration) {
-    let scene = &linear_scenes(dir)[0];
-    let out = dir.join("o");
+/// A run of `scene` on 2 ranks, 400 steps with a checkpoint every 10, that `signal` reaches
+/// on `which` of its ranks (none: on mpirun) once frame 20 is written, in the scene's
+/// directory: mpirun's exit status, its output, and how long it took to end.
+fn signalled(signal: &str, which: &[usize], scene: &Path) -> (i32, String, Duration) {
+    let out = scene.parent().unwrap().join("o");
     let child = mpirun(2, &["run", scene.to_str().unwrap(), "--quiet", "--out"])
         .arg(&out)
         .args(SIGNALLED)
@@ -236,16 +281,22 @@ fn signalled(signal: &str, which: &[usize], dir: &Path) -> (i32, String, Duratio
     (code, text, sent.elapsed())
 }
 
+/// The block, linear and with contact and friction.
 #[test]
 fn sigterm_to_every_rank_stops_after_a_step_with_a_checkpoint_and_the_run_resumes() {
     let tmp = tempfile::tempdir().unwrap();
-    let (code, text, _) = signalled("TERM", &[0, 1], tmp.path());
-    let out = tmp.path().join("o");
-    assert_eq!(code, 143, "{text}");
-    let s = common::summary(&out);
-    assert_eq!(s["status"], "interrupted", "{s}");
-    assert!(text.contains("interrupted by SIGTERM after step"), "{text}");
-    resumes_as_never_stopped(tmp.path(), "SIGTERM on 2 ranks, resumed on 2");
+    let (linear, contact) = (tmp.path().join("linear"), tmp.path().join("contact"));
+    std::fs::create_dir_all(&linear).unwrap();
+    std::fs::create_dir_all(&contact).unwrap();
+    for scene in [&linear_scenes(&linear)[0], &contact_scenes(&contact)[0]] {
+        let (code, text, _) = signalled("TERM", &[0, 1], scene);
+        let out = scene.parent().unwrap().join("o");
+        assert_eq!(code, 143, "{text}");
+        let s = common::summary(&out);
+        assert_eq!(s["status"], "interrupted", "{s}");
+        assert!(text.contains("interrupted by SIGTERM after step"), "{text}");
+        resumes_as_never_stopped(scene, "SIGTERM on 2 ranks, resumed on 2");
+    }
 }
 
 /// Ctrl-C to mpirun: Open MPI passes SIGTERM to the ranks and kills them a second later;
@@ -254,17 +305,18 @@ fn sigterm_to_every_rank_stops_after_a_step_with_a_checkpoint_and_the_run_resume
 #[test]
 fn sigint_to_mpirun_stops_the_ranks_before_it_kills_them() {
     let tmp = tempfile::tempdir().unwrap();
-    let (_, text, _) = signalled("INT", &[], tmp.path());
+    let scene = &linear_scenes(tmp.path())[0];
+    let (_, text, _) = signalled("INT", &[], scene);
     let out = tmp.path().join("o");
     let s = common::summary(&out);
     assert_eq!(s["status"], "interrupted", "{s}\n{text}");
-    resumes_as_never_stopped(tmp.path(), "Ctrl-C to mpirun, resumed on 2");
+    resumes_as_never_stopped(scene, "Ctrl-C to mpirun, resumed on 2");
 }
 
 #[test]
 fn sigterm_to_one_rank_stops_them_all_after_the_same_step() {
     let tmp = tempfile::tempdir().unwrap();
-    let (code, text, _) = signalled("TERM", &[1], tmp.path());
+    let (code, text, _) = signalled("TERM", &[1], &linear_scenes(tmp.path())[0]);
     assert_eq!(code, 143, "{text}");
     let s = common::summary(&tmp.path().join("o"));
     assert_eq!(s["status"], "interrupted", "{s}");
@@ -274,7 +326,7 @@ fn sigterm_to_one_rank_stops_them_all_after_the_same_step() {
 #[test]
 fn sigkill_of_one_rank_ends_the_others_and_the_run_resumes_from_its_checkpoint() {
     let tmp = tempfile::tempdir().unwrap();
-    let (code, text, took) = signalled("KILL", &[1], tmp.path());
+    let (code, text, took) = signalled("KILL", &[1], &linear_scenes(tmp.path())[0]);
     assert_ne!(code, 0, "{text}");
     assert!(
         took < Duration::from_secs(20),
@@ -366,7 +418,7 @@ fn a_slurm_job_of_two_tasks_runs_the_scene_on_two_ranks() {
     let (code, text) = emit(&common::repo().join("examples/paper.toml"));
     assert_eq!(code, 2, "{text}");
     assert!(
-        text.contains("only a run whose steps are linear PETSc solves"),
+        text.contains("only a run whose steps are PETSc solves"),
         "{text}"
     );
     let (code, text) = emit(scene);
@@ -401,36 +453,40 @@ fn a_slurm_job_of_two_tasks_runs_the_scene_on_two_ranks() {
     );
 }
 
-/// A linear PETSc step given up (the request every rank's Krylov solve asks at each
-/// iteration: the first signal on several ranks, the second on one) leaves the run where
-/// a stop after the step before leaves it, w as it was: the checkpoint of the state before
-/// the step resumes to the run never stopped, bit for bit. One process here, through the
-/// library, with the request made before the run: the first step it can stop before is
-/// given up, whatever the timing.
+/// A PETSc step given up, linear or the active set's (the request every rank's Krylov
+/// solves ask at each iteration: the first signal on several ranks, the second on one),
+/// leaves the run where a stop after the step before leaves it, w as it was: the checkpoint
+/// of the state before the step resumes to the run never stopped, bit for bit. One process
+/// here, through the library, with the request made before the run: the first step it can
+/// stop before is given up, whatever the timing.
 #[test]
-fn a_linear_petsc_step_given_up_resumes_as_the_run_never_stopped() {
+fn a_petsc_step_given_up_resumes_as_the_run_never_stopped() {
     use viscontact::run::{resume, run, Outcome, ResumeOptions};
     let tmp = tempfile::tempdir().unwrap();
-    let scene = &linear_scenes(tmp.path())[0];
-    let (full, part) = (tmp.path().join("full"), tmp.path().join("part"));
+    let contact = tmp.path().join("contact");
+    std::fs::create_dir_all(&contact).unwrap();
     let _one = super::PETSC.lock().unwrap_or_else(|e| e.into_inner());
-    common::finished(run(scene, &common::run_options(&full, &[], None)).unwrap());
-    let o = common::run_options(&part, &[], None);
-    let armed = o.interrupt.abandon().arm();
-    assert!(o.interrupt.abandon().request(), "granted while armed");
-    drop(armed);
-    match run(scene, &o).unwrap() {
-        Outcome::Stopped { step, signal, .. } => assert_eq!((step, signal), (0, None)),
-        other => panic!("step 1 was not given up: {other:?}"),
+    for scene in [&linear_scenes(tmp.path())[0], &contact_scenes(&contact)[0]] {
+        let dir = scene.parent().unwrap();
+        let (full, part) = (dir.join("full"), dir.join("part"));
+        common::finished(run(scene, &common::run_options(&full, &[], None)).unwrap());
+        let o = common::run_options(&part, &[], None);
+        let armed = o.interrupt.abandon().arm();
+        assert!(o.interrupt.abandon().request(), "granted while armed");
+        drop(armed);
+        match run(scene, &o).unwrap() {
+            Outcome::Stopped { step, signal, .. } => assert_eq!((step, signal), (0, None)),
+            other => panic!("step 1 was not given up: {other:?}"),
+        }
+        assert_eq!(common::summary(&part)["last_step"], 0);
+        assert!(!part.join("solution_000001.vtu").exists());
+        let o = ResumeOptions {
+            progress: false,
+            ..Default::default()
+        };
+        common::finished(resume(&part.join("checkpoint.h5"), &o).unwrap());
+        common::assert_same_series(&full, &part, "a PETSc step given up, resumed");
     }
-    assert_eq!(common::summary(&part)["last_step"], 0);
-    assert!(!part.join("solution_000001.vtu").exists());
-    let o = ResumeOptions {
-        progress: false,
-        ..Default::default()
-    };
-    common::finished(resume(&part.join("checkpoint.h5"), &o).unwrap());
-    common::assert_same_series(&full, &part, "a linear PETSc step given up, resumed");
 }
 
 /// SIGTERM to both ranks at random moments of setup and of the first steps (the moments
