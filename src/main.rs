@@ -58,6 +58,11 @@ enum Command {
         scene: PathBuf,
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
+        /// The MPI ranks to plan for (a build with PETSc, a run through it): what each
+        /// holds and does; refused where they would not fit the memory available.
+        #[arg(long, value_name = "N", default_value_t = 1,
+              value_parser = clap::value_parser!(u32).range(1..))]
+        ranks: u32,
     },
     /// Nodes, elements, physical groups with sizes, and element quality of a gmsh mesh.
     MeshInfo {
@@ -282,7 +287,7 @@ fn dispatch(command: Command, interrupt: Interrupt, ranks: Ranks) -> Result<Opti
             set,
             steps,
         } => resume(&checkpoint, &steps.options(out, set, interrupt, ranks)).map(report),
-        Command::Check { scene, set } => check(&scene, &set).map(|()| None),
+        Command::Check { scene, set, ranks } => check(&scene, &set, ranks as usize).map(|()| None),
         Command::MeshInfo { mesh, json } => mesh_info(&mesh, json).map(|()| None),
         Command::Study(args) => study(*args).map(|()| None),
         Command::StudyCase(args) => study_case(args).map(|()| None),
@@ -451,12 +456,13 @@ fn emit_job(
     Ok(())
 }
 
-/// `check`: what a run of the scene would be, and whatever `run` refuses before its first
-/// step (exit 2).
-fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
+/// `check`: what a run of the scene on `ranks` MPI ranks would be, and whatever `run`
+/// refuses before its first step (exit 2).
+fn check(path: &std::path::Path, set: &[String], ranks: usize) -> Result<()> {
     let (scene, mesh, disc) = setup(path, set)?;
     // The run's solver, resolved once: every line below and the refusals read it.
     let mut solver = viscontact::solver::choice::Descriptor::of_run(&scene, &disc)?;
+    viscontact::run::check_ranks(&scene, &solver, ranks, &format!("--ranks {ranks}"))?;
     print_problem(&scene, &mesh, &disc, &solver);
     if let Some(plan) = solver.contact() {
         viscontact::outln!("contact    {plan}");
@@ -486,9 +492,9 @@ fn check(path: &std::path::Path, set: &[String]) -> Result<()> {
     let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
     viscontact::outln!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
-    if let Some(plan) = solver.contact() {
-        plan.check(&estimate)?;
-    }
+    viscontact::run::check_memory(&disc, &solver, &estimate, ranks, |line| {
+        viscontact::outln!("ranks      {line}")
+    })?;
     if let Some(bytes) = factor {
         viscontact::resources::check_factor(bytes, disc.n_free)?;
     }

@@ -171,6 +171,141 @@ impl Ranks {
     }
 }
 
+/// What Open MPI adds to a rank's resident memory, which a process without a launcher (as
+/// `check` is) does not hold and counts for several ranks: 8.6 MB measured on the 3D block
+/// (a rank's setup peak under `mpirun -n 2` against one process's), doubled.
+#[cfg(feature = "petsc")]
+const MPI_RUNTIME: f64 = 16e6;
+
+/// What each rank of a run over `size` ranks holds and does (`check --ranks N`, and the
+/// refusal of a run whose ranks would not fit the memory available): its share of K_A
+/// (the largest rank's, over `petsc::row_blocks`' split) and its memory, what every rank
+/// holds whole (the replicated part: this process's setup peak so far, measured, and what
+/// the steps hold) and its share of PETSc's matrices and multigrid.
+#[cfg(feature = "petsc")]
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub size: usize,
+    /// The rows of K_A.
+    pub rows: usize,
+    /// The largest rank's share.
+    pub largest: crate::petsc::RankShare,
+    /// Bytes every rank holds whole, and the largest rank's of PETSc's.
+    pub replicated: f64,
+    pub spread: f64,
+    /// What every rank of several would hold whole (`replicated` with MPI's runtime), and
+    /// PETSc's bytes a rank on several ranks times their count (what they split).
+    on_several: f64,
+    spread_several: f64,
+}
+
+#[cfg(feature = "petsc")]
+impl Plan {
+    /// The plan of `disc` over `size` ranks, its steps through the active set's Newton
+    /// systems where `newton` (else K_A's solves), holding `steps` bytes besides the setup.
+    pub fn new(disc: &crate::fem::Discretization, size: usize, newton: bool, steps: f64) -> Plan {
+        use crate::resources::{peak_memory, petsc_bytes};
+        let shares = crate::petsc::rank_shares(disc, size);
+        let largest = shares
+            .iter()
+            .copied()
+            .max_by_key(|s| s.entries)
+            .unwrap_or_default();
+        let entries = shares.iter().map(|s| s.entries).sum();
+        // Under a launcher the peak holds MPI's runtime already.
+        let launched = launched().is_some();
+        let setup = peak_memory().unwrap_or(0.0) + steps;
+        let on_several = setup + if launched { 0.0 } else { MPI_RUNTIME };
+        Plan {
+            size,
+            rows: disc.n_free,
+            largest,
+            replicated: if size > 1 { on_several } else { setup },
+            spread: petsc_bytes(largest.entries, newton, size),
+            on_several,
+            spread_several: petsc_bytes(entries, newton, 2),
+        }
+    }
+
+    /// The memory of the largest rank.
+    pub fn per_rank(&self) -> f64 {
+        self.replicated + self.spread
+    }
+
+    /// Refuses (exit 2) ranks that would need more than `resources::MARGIN` of the memory
+    /// available (`VISCONTACT_MEMORY` is a rank's), naming how many ranks would fit, or
+    /// that none would where the replicated part alone does not.
+    pub fn check(&self) -> Result<()> {
+        use crate::resources::{available_memory, human, memory_phrase, MARGIN};
+        let Some(avail) = available_memory()? else {
+            return Ok(());
+        };
+        let budget = MARGIN * avail;
+        if self.per_rank() <= budget {
+            return Ok(());
+        }
+        // The ranks split PETSc's part evenly but for whole nodes: 5 % for the largest.
+        let remedy = match budget - self.on_several {
+            left if left > 0.0 => format!(
+                "≈ {} ranks would fit (mpirun -n {0} or srun -n {0}, each rank with the \
+                 memory this one has)",
+                (1.05 * self.spread_several / left)
+                    .ceil()
+                    .max(self.size as f64 + 1.0)
+            ),
+            _ => format!(
+                "no rank count would: every rank holds the mesh, the matrices and the \
+                 history whole in this version (≈ {} here), and only PETSc's part spreads; \
+                 use a coarser mesh or ranks with more memory (docs/cluster.md)",
+                human(self.on_several)
+            ),
+        };
+        Err(Error::input(format!(
+            "a run on {} would need ≈ {} a rank (≈ {} that every rank holds whole and ≈ {} \
+             of PETSc's) but {} (a run may plan {:.0} % of it): {remedy}",
+            self.ranks(),
+            human(self.per_rank()),
+            human(self.replicated),
+            human(self.spread),
+            memory_phrase(avail),
+            100.0 * MARGIN
+        )))
+    }
+
+    /// "1 rank", "4 ranks".
+    fn ranks(&self) -> String {
+        match self.size {
+            1 => "one rank".to_string(),
+            n => format!("{n} ranks"),
+        }
+    }
+}
+
+/// `check`'s `ranks` line.
+#[cfg(feature = "petsc")]
+impl std::fmt::Display for Plan {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        use crate::resources::human;
+        let l = &self.largest;
+        write!(
+            f,
+            "{}: the largest holds {} of K_A's {} rows ({} entries; a product with K_A \
+             fetches {} values of other ranks' rows); memory ≈ {} a rank: ≈ {} that every \
+             rank holds whole (mesh, matrices, history: this setup's peak, measured, and \
+             what the steps hold) and ≈ {} of PETSc's (its share of the matrices and the \
+             multigrid)",
+            self.ranks(),
+            l.rows,
+            self.rows,
+            l.entries,
+            l.ghosts,
+            human(self.per_rank()),
+            human(self.replicated),
+            human(self.spread)
+        )
+    }
+}
+
 /// Rank 0's error where only another rank's setup failed, with that rank's exit status.
 fn elsewhere_failed(code: i32) -> Error {
     let what = format!(

@@ -208,8 +208,32 @@ pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
 /// its prolongator), and the copy of K_A's coarse operators that Q's are updated from (0.4).
 /// K_A's own KSP is never set up in an active-set run, so it holds no hierarchy.
 pub fn active_set_bytes(m: usize, n: usize, nnz: usize) -> f64 {
-    let petsc = 12.0 * nnz as f64 * (3.0 + 0.8 + 0.4);
-    8.0 * 4.0 * n as f64 + 84.0 * m as f64 + petsc
+    8.0 * 4.0 * n as f64 + 84.0 * m as f64 + petsc_bytes(nnz, true, 1)
+}
+
+/// PETSc's share of a run through it (`petsc_bytes`) on the rank that holds `entries` of
+/// K_A's, in bytes: AIJ, 12 bytes an entry, K_A's and its smoothed-aggregation hierarchy
+/// (0.8 of it); with the active set's Newton systems (`newton`), the Newton matrix N and
+/// Q, the N its multigrid was built from, Q's hierarchy and K_A's coarse operators (0.4:
+/// `active_set_bytes`), K_A's own hierarchy never being built, and on several ranks
+/// (`ranks`) the copy of the rank's rows that N is made from (`shim.c`: K's, N's and Q's
+/// values and the column indices, 28 bytes an entry).
+pub fn petsc_bytes(entries: usize, newton: bool, ranks: usize) -> f64 {
+    let per_entry = match (newton, ranks) {
+        (false, _) => 12.0 * (1.0 + 0.8),
+        (true, 1) => 12.0 * (3.0 + 0.8 + 0.4),
+        (true, _) => 12.0 * (3.0 + 0.8 + 0.4) + 28.0,
+    };
+    per_entry * entries as f64
+}
+
+/// The most memory this process has held so far, in bytes: its resident peak (`VmHWM` of
+/// /proc/self/status); None where the system does not say.
+pub fn peak_memory() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024.0)
 }
 
 /// Refuses (exit 2) a Cholesky factor of K_A (`n` unknowns) whose values, `bytes` by its

@@ -72,7 +72,7 @@ extern "C" {
         cols: *const PetscInt,
         vals: *const f64,
         bs: PetscInt,
-        first: *const PetscInt,
+        blocks: *const PetscInt,
         nvec: PetscInt,
         near: *const f64,
         rtol: f64,
@@ -269,12 +269,13 @@ impl Krylov {
         let rowptr = to_int(m.symbolic().col_ptr())?;
         let cols = to_int(m.symbolic().row_idx())?;
         let near = rigid_body_modes(disc);
-        let first = node_starts(disc);
+        let (_, size) = world()?;
+        let blocks = to_int(&row_blocks(disc, size))?;
         let options = CString::new(settings.options.as_str())
             .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
         let mut ctx = std::ptr::null_mut();
-        // SAFETY: the arrays hold n + 1, nnz, nnz, n and nvec·n values as the shim reads
-        // them; PETSc copies them.
+        // SAFETY: the arrays hold n + 1, nnz, nnz, size + 1 and nvec·n values as the shim
+        // reads them; PETSc copies them.
         let code = unsafe {
             vc_ksp_create(
                 n as PetscInt,
@@ -282,7 +283,7 @@ impl Krylov {
                 cols.as_ptr(),
                 m.val().as_ptr(),
                 block_size(disc) as PetscInt,
-                first.as_ptr(),
+                blocks.as_ptr(),
                 (near.len() / n.max(1)) as PetscInt,
                 near.as_ptr(),
                 settings.rtol,
@@ -554,17 +555,62 @@ fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
     disc.free[g].filter(|&f| f < disc.n_free)
 }
 
-/// Where a node's unknowns begin: 1 at each node's first unknown, 0 elsewhere (n_free
-/// flags). A node's unknowns are consecutive (numbered node by node), and the ranks split
-/// K_A's rows only where one begins (`shim.c`).
-fn node_starts(disc: &Discretization) -> Vec<PetscInt> {
-    let mut first = vec![0; disc.n_free];
+/// The rows of K_A that each of `size` ranks holds: rank r the rows blocks[r]..blocks[r + 1]
+/// (size + 1 values, the last n_free), each block the first row at or after its even share
+/// n_free·r/size where a node's unknowns begin, so that a rank holds whole nodes (the
+/// active set's frames and slip stiffness act on a node's own rows: `shim.c`). A node's
+/// unknowns are consecutive (numbered node by node).
+pub fn row_blocks(disc: &Discretization, size: usize) -> Vec<usize> {
+    let n = disc.n_free;
+    let mut starts = vec![false; n + 1];
+    starts[n] = true;
     for g in (0..disc.free.len()).step_by(disc.dim) {
         if let Some(f) = (g..g + disc.dim).find_map(|g| unknown(disc, g)) {
-            first[f] = 1;
+            starts[f] = true;
         }
     }
-    first
+    (0..=size)
+        .map(|r| {
+            let share = (n as u128 * r as u128 / size.max(1) as u128) as usize;
+            (share..=n).find(|&i| starts[i]).unwrap_or(n)
+        })
+        .collect()
+}
+
+/// A rank's share of K_A over `row_blocks`' split: its rows, its stored entries, and the
+/// values of other ranks' rows that a product with K_A fetches (its rows' distinct columns
+/// outside them): a Krylov iteration's work and messages on that rank.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RankShare {
+    pub rows: usize,
+    pub entries: usize,
+    pub ghosts: usize,
+}
+
+/// Each of `size` ranks' share of K_A (`row_blocks`).
+pub fn rank_shares(disc: &Discretization, size: usize) -> Vec<RankShare> {
+    let blocks = row_blocks(disc, size);
+    let k = disc.k_a.as_ref();
+    let (ptr, idx) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
+    let mut seen = vec![usize::MAX; disc.n_free];
+    (0..size)
+        .map(|r| {
+            let rows = blocks[r]..blocks[r + 1];
+            let mut share = RankShare {
+                rows: rows.len(),
+                ..RankShare::default()
+            };
+            // K_A is symmetric: its column j is its row j.
+            for &i in rows.clone().flat_map(|j| &idx[ptr[j]..ptr[j + 1]]) {
+                share.entries += 1;
+                if !rows.contains(&i) && seen[i] != r {
+                    seen[i] = r;
+                    share.ghosts += 1;
+                }
+            }
+            share
+        })
+        .collect()
 }
 
 /// d where every node's unknowns are d consecutive ones starting at a multiple of d, or

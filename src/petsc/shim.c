@@ -113,22 +113,14 @@ struct VcKsp {
 
 static PetscErrorCode constrained_setup(VcKsp *s);
 
-/* The first row of `rank` among `size` ranks: the first row at or after its even share
- * n·rank/size where a node's unknowns begin (`first`), so that each rank holds whole
- * nodes (a node's frame and slip stiffness act on its own rows: newton_matrix). */
-static PetscInt owned(PetscInt n, const PetscInt *first, PetscMPIInt rank, PetscMPIInt size)
-{
-  PetscInt lo = (PetscInt)((PetscInt64)n * rank / size);
-  while (lo < n && !first[lo]) lo++;
-  return lo;
-}
-
 /* K_A on the ranks: on one, a SEQAIJ of the whole CSR (what the Newton systems update in
  * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) of the
- * same global CSR, with each rank's share recorded for gathering the solution. */
+ * same global CSR, rank r the rows blocks[r] … blocks[r + 1] − 1 (whole nodes: the Newton
+ * matrix's frames and slip stiffness act on a node's own rows), with each rank's share
+ * recorded for gathering the solution. */
 static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *rowptr,
                                          const PetscInt *cols, const PetscScalar *vals, PetscInt bs,
-                                         const PetscInt *first)
+                                         const PetscInt *blocks)
 {
   PetscMPIInt size, rank;
 
@@ -158,9 +150,8 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
   if (size > 2 && !chosen) PetscCall(PetscOptionsSetValue(NULL, "-matptap_via", "allatonce"));
   PetscCall(PetscMalloc2(size, &s->count, size, &s->displ));
   for (PetscMPIInt r = 0; r < size; r++) {
-    PetscInt lo = owned(n, first, r, size), hi = r + 1 == size ? n : owned(n, first, r + 1, size);
-    s->count[r] = (PetscMPIInt)(hi - lo);
-    s->displ[r] = (PetscMPIInt)lo;
+    s->count[r] = (PetscMPIInt)(blocks[r + 1] - blocks[r]);
+    s->displ[r] = (PetscMPIInt)blocks[r];
   }
   s->lo = s->displ[rank];
   s->m = s->count[rank];
@@ -230,15 +221,15 @@ static PetscErrorCode watch(VcKsp *s, KSP ksp, Watch *w)
   PetscFunctionReturn(0);
 }
 
-/* The matrix in CSR (a symmetric matrix's CSC is its CSR), `first[i]` nonzero where a
- * node's unknowns begin at row i, its near-null space as `nvec` orthonormal vectors of
+/* The matrix in CSR (a symmetric matrix's CSC is its CSR), the ranks' rows (`blocks`: size
+ * + 1 row numbers, distributed_matrix), its near-null space as `nvec` orthonormal vectors of
  * length n stored one after the other, CG + GAMG with relative tolerance `rtol`, then
  * `options` (PETSc's command-line syntax) and KSPSetFromOptions; set up for K's own
  * solves, or where `newton`, for the constrained systems alone (their KSP and multigrid:
  * constrained_setup), K's never being solved. Every rank gives the whole matrix; on
  * several ranks each keeps its rows. */
 int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, const PetscScalar *vals,
-                  PetscInt bs, const PetscInt *first, PetscInt nvec, const PetscScalar *near,
+                  PetscInt bs, const PetscInt *blocks, PetscInt nvec, const PetscScalar *near,
                   PetscReal rtol, const char *options, int newton, void **out)
 {
   VcKsp       *s;
@@ -249,7 +240,7 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
 
   PetscCall(PetscCalloc1(1, &s));
   s->of_start = -1;
-  PetscCall(distributed_matrix(s, n, rowptr, cols, vals, bs, first));
+  PetscCall(distributed_matrix(s, n, rowptr, cols, vals, bs, blocks));
   if (newton && s->count) PetscCall(local_rows(s, rowptr, cols, vals));
   PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatSetOption(s->A, MAT_SYMMETRIC, PETSC_TRUE));

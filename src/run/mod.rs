@@ -227,8 +227,8 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
-    let solver = check_contact_plan(&scene, &disc, &estimate, None)?;
-    check_ranks(&scene, &solver, opts)?;
+    let solver = check_contact_plan(&scene, &disc, &estimate, None, opts.ranks.size)?;
+    check_started_ranks(&scene, &solver, opts)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let statics = (&mesh, &disc.materials.region[..]);
@@ -250,10 +250,10 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     })
 }
 
-/// Refuses (exit 2) a run under an MPI launcher with several processes whose steps do not
-/// spread over them (`crate::ranks`).
-fn check_ranks(scene: &Scene, solver: &Descriptor, opts: &RunOptions) -> Result<()> {
-    if opts.ranks.size == 1 || solver.spreads() {
+/// Refuses (exit 2) a run on `ranks` MPI ranks whose steps do not spread over them
+/// (`crate::ranks`); `how` says where the count comes from ("started on 2 MPI ranks").
+pub fn check_ranks(scene: &Scene, solver: &Descriptor, ranks: usize, how: &str) -> Result<()> {
+    if ranks == 1 || solver.spreads() {
         return Ok(());
     }
     let this = match solver.contact_solver() {
@@ -261,12 +261,17 @@ fn check_ranks(scene: &Scene, solver: &Descriptor, opts: &RunOptions) -> Result<
         None => "the stored Cholesky factor of K_A".to_string(),
     };
     Err(Error::input(format!(
-        "{}: started on {} MPI ranks, but {}; this run's steps take the {this}. Run it as \
-         one process, without mpirun or srun -n",
+        "{}: {how}, but {}; this run's steps take the {this}. Run it as one process, without \
+         mpirun or srun -n",
         scene.path.display(),
-        opts.ranks.size,
         crate::ranks::WHAT_SPREADS,
     )))
+}
+
+/// `check_ranks` for the ranks this run or resume was started on.
+fn check_started_ranks(scene: &Scene, solver: &Descriptor, opts: &RunOptions) -> Result<()> {
+    let how = format!("started on {} MPI ranks", opts.ranks.size);
+    check_ranks(scene, solver, opts.ranks.size, &how)
 }
 
 /// Rank 0's commit (the directory changed, or a signal came first), told to the followers
@@ -299,7 +304,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         let mesh = read_mesh(&scene)?;
         let disc = Discretization::new(&mesh, &scene)?;
         let solver = Descriptor::of_run(&scene, &disc)?;
-        check_ranks(&scene, &solver, opts)?;
+        check_started_ranks(&scene, &solver, opts)?;
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,
@@ -401,8 +406,14 @@ fn prepare_resume(
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
     let estimate = crate::resources::Estimate::new(&scene, &disc, cp.n);
     estimate.check(&out)?;
-    let solver = check_contact_plan(&scene, &disc, &estimate, Some(checkpoint_path))?;
-    check_ranks(&scene, &solver, opts)?;
+    let solver = check_contact_plan(
+        &scene,
+        &disc,
+        &estimate,
+        Some(checkpoint_path),
+        opts.ranks.size,
+    )?;
+    check_started_ranks(&scene, &solver, opts)?;
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;
@@ -494,28 +505,51 @@ fn note_stop_after(stop_after: Option<usize>, steps: usize) {
 }
 
 /// The run's solver, resolved once (`Descriptor::of_run`); refuses (exit 2) a run whose
-/// contact solver, with what its steps hold (`steps`), would not fit the memory available
-/// (`ContactPlan::check`). A resume of `checkpoint` cannot change `solver.contact`, the
-/// run's physics: its message says so.
+/// memory would not fit (`check_memory`) on its `ranks`. A resume of `checkpoint` cannot
+/// change `solver.contact`, the run's physics: where the contact solver's memory is what
+/// does not fit, its message says so.
 fn check_contact_plan(
     scene: &Scene,
     disc: &Discretization,
     steps: &crate::resources::Estimate,
     checkpoint: Option<&Path>,
+    ranks: usize,
 ) -> Result<Descriptor> {
     let solver = Descriptor::of_run(scene, disc)?;
-    let Some(plan) = solver.contact() else {
-        return Ok(solver);
-    };
-    plan.check(steps).map_err(|e| match checkpoint {
-        Some(cp) => Error::input(format!(
+    let spreads = solver.spreads();
+    check_memory(disc, &solver, steps, ranks, |_| {}).map_err(|e| match checkpoint {
+        Some(cp) if !spreads => Error::input(format!(
             "{}: {e}; a resume keeps the run's solver.contact: resume it where more memory \
              is available, or start a new run with `viscontact run`",
             cp.display()
         )),
-        None => e,
+        _ => e,
     })?;
     Ok(solver)
+}
+
+/// Refuses (exit 2) a run whose memory would not fit the memory available: through PETSc,
+/// a rank's on `ranks` ranks (`ranks::Plan::check`, which names how many would fit; `show`
+/// gets its line before), else its contact solver's with what its steps hold (`steps`:
+/// `ContactPlan::check`).
+pub fn check_memory(
+    disc: &Discretization,
+    solver: &Descriptor,
+    steps: &crate::resources::Estimate,
+    ranks: usize,
+    show: impl FnOnce(&str),
+) -> Result<()> {
+    #[cfg(feature = "petsc")]
+    if let crate::solver::choice::Build::Krylov { newton } = *solver.build() {
+        let plan = crate::ranks::Plan::new(disc, ranks, newton, steps.memory);
+        show(&plan.to_string());
+        return plan.check();
+    }
+    let _ = (disc, ranks, show);
+    match solver.contact() {
+        Some(plan) => plan.check(steps),
+        None => Ok(()),
+    }
 }
 
 /// A run in progress: what [`drive`] needs.

@@ -158,6 +158,19 @@ fn a_linear_run_on_1_2_and_3_ranks_agrees_with_one_process() {
     agree_on_1_2_and_3_ranks(&linear_scenes(tmp.path()));
 }
 
+/// A half model whose plane of symmetry holds each node's normal component (a node there
+/// has two unknowns, so K_A has no node blocks): the ranks split its rows where a node's
+/// unknowns begin, and the run agrees with one process as the whole models do.
+#[test]
+fn a_half_model_with_two_unknowns_on_its_plane_on_1_2_and_3_ranks_agrees_with_one_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    let half = (SceneText::example("half_block.toml").set("solver.linear", "petsc"))
+        .set("solver.contact", "active_set")
+        .set("time.steps", 8)
+        .write(tmp.path(), "half_block.toml");
+    agree_on_1_2_and_3_ranks(&[half]);
+}
+
 /// The active set's Newton systems spread as K_A's solves do: each rank makes the Newton
 /// matrix's rows of its own nodes, and every rank takes the same decisions from the whole
 /// w it gets back.
@@ -544,4 +557,81 @@ fn sigterm_to_every_rank_during_setup_leaves_the_earlier_run_or_a_resumable_one(
         assert_eq!(code, 0, "{text}");
     }
     println!("{in_setup} signals stopped setup, {after} a run");
+}
+
+/// `viscontact ARGS` (on `ranks` ranks; 0: one process without mpirun) with
+/// `VISCONTACT_MEMORY=memory`: its exit status and output.
+fn with_memory(ranks: usize, memory: f64, args: &[&str]) -> (i32, String) {
+    let mut command = match ranks {
+        0 => {
+            let mut plain = Command::new(common::BIN);
+            launching(&mut plain).args(args);
+            plain
+        }
+        n => mpirun(n, args),
+    };
+    let out = command
+        .env("VISCONTACT_MEMORY", memory.to_string())
+        .output()
+        .unwrap();
+    outcome(out)
+}
+
+/// The megabytes `check` prints after `before` in `text` ("≈ 45.2 MB").
+fn megabytes_after(text: &str, before: &str) -> f64 {
+    let at = text
+        .find(before)
+        .unwrap_or_else(|| panic!("no {before:?} in {text}"));
+    let figure = text[at + before.len()..].split_whitespace().next().unwrap();
+    assert!(text[at + before.len()..].contains(" MB"), "{text}");
+    1e6 * figure.parse::<f64>().unwrap()
+}
+
+/// `check --ranks N` plans a run through PETSc over N ranks: the largest rank's share of
+/// K_A's rows (whole nodes) and its memory, what every rank holds whole and its share of
+/// PETSc's. Where a rank would not fit `VISCONTACT_MEMORY` (a rank's memory), `check`
+/// refuses (exit 2) naming how many ranks would, `check` with that many passes and the run
+/// on that many completes; below what every rank holds whole, `check` and `run` (one
+/// process, or under mpirun) refuse naming none, before anything is written.
+#[test]
+fn check_plans_the_ranks_and_refuses_ranks_that_would_not_fit_naming_how_many_would() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = &contact_scenes(tmp.path())[0];
+    let path = scene.to_str().unwrap();
+    let (code, text) = common::cli(&["check", path, "--ranks", "2"]);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains("ranks      2 ranks: the largest holds 1944 of K_A's 3888 rows"),
+        "{text}"
+    );
+    // A budget between what 2 ranks and 3 ranks need a rank (PETSc's share falls by a
+    // third, a margin of a sixth of it on either side).
+    let whole = megabytes_after(&text, "a rank: ≈ ");
+    let petsc = megabytes_after(&text, "what the steps hold) and ≈ ");
+    let memory = (whole + 0.84 * petsc) / 0.8;
+    let (code, text) = with_memory(0, memory, &["check", path, "--ranks", "2"]);
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("≈ 3 ranks would fit (mpirun -n 3"), "{text}");
+    let (code, text) = with_memory(0, memory, &["check", path, "--ranks", "3"]);
+    assert_eq!(code, 0, "{text}");
+    let out = tmp.path().join("o3");
+    let run3 = ["run", path, "--quiet", "--out", out.to_str().unwrap()];
+    let (code, text) = with_memory(3, memory, &run3);
+    assert_eq!(code, 0, "{text}");
+    assert_eq!(common::summary(&out)["status"], "completed");
+    // Less than every rank holds whole: no count fits.
+    let memory = 0.9 * whole;
+    for ranks in ["1", "2"] {
+        let (code, text) = with_memory(0, memory, &["check", path, "--ranks", ranks]);
+        assert_eq!(code, 2, "{text}");
+        assert!(text.contains("no rank count would"), "{text}");
+    }
+    let out = tmp.path().join("refused");
+    let run = ["run", path, "--quiet", "--out", out.to_str().unwrap()];
+    for ranks in [0, 2] {
+        let (code, text) = with_memory(ranks, memory, &run);
+        assert_eq!(code, 2, "{text}");
+        assert_eq!(text.matches("no rank count would").count(), 1, "{text}");
+        assert!(!out.exists(), "a refused run wrote {}", out.display());
+    }
 }
