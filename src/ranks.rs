@@ -5,20 +5,28 @@
 //! # What spreads, and what each rank holds
 //!
 //! PETSc's Krylov solves spread, K_A's and the active set's Newton systems: their KSPs on
-//! all the ranks, each holding a contiguous block of the rows (whole nodes: `shim.c`), of
-//! which it makes the Newton matrix, its part of GAMG's hierarchy and of every Krylov
-//! vector, and each getting the whole solution back. The rest is replicated: every rank
-//! reads the scene and the mesh, assembles the matrices and keeps the history sums, so
-//! every rank computes the same right side b_n, bit for bit, from the same w's, and the
-//! active set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the
-//! *first*) alone owns the output directory (lock, series, history.csv, checkpoints,
-//! summary.json) and prints; the others *follow* (`run::follow`), writing nothing.
+//! all the ranks, each holding the rows of the nodes METIS's partition gives it
+//! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
+//! of every Krylov vector, and each getting the whole solution back. The rest is
+//! replicated: every rank reads the scene and the mesh, assembles the matrices and keeps
+//! the history sums, so every rank computes the same right side b_n, bit for bit, from the
+//! same w's, and the active set's decisions (its sets, its KKT residual) are the same on
+//! every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
+//! history.csv, checkpoints, summary.json) and prints; the others *follow* (`run::follow`),
+//! writing nothing.
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
-//! run under a launcher with several processes is refused (exit 2), as is `study`. The memory of each rank is the
-//! replicated part (mesh, matrices, history) plus its share of PETSc's; partitioning the
-//! replicated part too is the next step (docs/cluster.md).
+//! run under a launcher with several processes is refused (exit 2), as is `study`. The
+//! memory of each rank is the replicated part (mesh, matrices, history) plus its share of
+//! PETSc's; partitioning the replicated part too is the next step (docs/cluster.md).
+//!
+//! # Planning
+//!
+//! [`Plan`] is what a rank of a run over N ranks holds and does (`check --ranks N`): its
+//! share of K_A's rows, entries and of the values a product fetches from other ranks, and
+//! its memory, the replicated part (the setup's peak, measured) and its share of PETSc's.
+//! `check` and `run` refuse ranks that would not fit, naming how many would.
 //!
 //! # Agreement
 //!
@@ -179,7 +187,7 @@ const MPI_RUNTIME: f64 = 16e6;
 
 /// What each rank of a run over `size` ranks holds and does (`check --ranks N`, and the
 /// refusal of a run whose ranks would not fit the memory available): its share of K_A
-/// (the largest rank's, over `petsc::row_blocks`' split) and its memory, what every rank
+/// (the largest rank's, over `petsc::Layout`'s partition) and its memory, what every rank
 /// holds whole (the replicated part: this process's setup peak so far, measured, and what
 /// the steps hold) and its share of PETSc's matrices and multigrid.
 #[cfg(feature = "petsc")]
@@ -203,9 +211,14 @@ pub struct Plan {
 impl Plan {
     /// The plan of `disc` over `size` ranks, its steps through the active set's Newton
     /// systems where `newton` (else K_A's solves), holding `steps` bytes besides the setup.
-    pub fn new(disc: &crate::fem::Discretization, size: usize, newton: bool, steps: f64) -> Plan {
+    pub fn new(
+        disc: &crate::fem::Discretization,
+        size: usize,
+        newton: bool,
+        steps: f64,
+    ) -> Result<Plan> {
         use crate::resources::{peak_memory, petsc_bytes};
-        let shares = crate::petsc::rank_shares(disc, size);
+        let shares = crate::petsc::Layout::new(disc, size)?.shares(disc);
         let largest = shares
             .iter()
             .copied()
@@ -216,7 +229,7 @@ impl Plan {
         let launched = launched().is_some();
         let setup = peak_memory().unwrap_or(0.0) + steps;
         let on_several = setup + if launched { 0.0 } else { MPI_RUNTIME };
-        Plan {
+        Ok(Plan {
             size,
             rows: disc.n_free,
             largest,
@@ -224,7 +237,7 @@ impl Plan {
             spread: petsc_bytes(largest.entries, newton, size),
             on_several,
             spread_several: petsc_bytes(entries, newton, 2),
-        }
+        })
     }
 
     /// The memory of the largest rank.

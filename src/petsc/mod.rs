@@ -7,8 +7,8 @@
 //! safely. PETSc is initialized once per process, on first use ([`initialize`]) or, under an
 //! MPI launcher with several processes, before the run reads anything (docs/cluster.md),
 //! and finalized by [`finalize`] at the end of `main`. The KSPs span the ranks, K_A's and
-//! the active set's Newton systems' (each rank holds a block of whole nodes' rows and gets
-//! the whole solution back).
+//! the active set's Newton systems' (each rank holds a block of whole nodes' rows, as
+//! [`Layout`] partitions them, and gets the whole solution back).
 //!
 //! # The solve
 //!
@@ -36,6 +36,10 @@
 //! interpolation once, from K, and updates the coarse operators where the matrix changed
 //! (`Hierarchy`). A KSP made for them (`KrylovSettings::newton`) sets up only their
 //! multigrid: K's own KSP keeps its type and options but is never set up or solved.
+
+mod layout;
+
+pub use layout::Layout;
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};
@@ -247,6 +251,11 @@ pub struct Krylov {
     pub options: String,
     /// Whether K_A's solve in progress is to be given up (`Krylov::give_up_when`).
     give_up: Option<GiveUp>,
+    /// Where the unknowns stand among PETSc's rows, and two vectors in that order for the
+    /// calls where they are not the same (several ranks).
+    layout: Layout,
+    rows_b: Vec<f64>,
+    rows_w: Vec<f64>,
 }
 
 /// The question `Krylov::solve` asks at every iteration: give the solve up now?
@@ -259,18 +268,22 @@ impl Krylov {
         initialize()?;
         let n = matrix.nrows();
         let too_big = |_| Error::solve(format!("{n} dofs exceed PETSc's 32-bit indices"));
-        let m = matrix.as_ref();
         let to_int = |v: &[usize]| -> Result<Vec<PetscInt>> {
             v.iter()
                 .map(|&i| PetscInt::try_from(i).map_err(too_big))
                 .collect()
         };
-        // K_A is symmetric: its column-compressed storage is its row-compressed one.
-        let rowptr = to_int(m.symbolic().col_ptr())?;
-        let cols = to_int(m.symbolic().row_idx())?;
-        let near = rigid_body_modes(disc);
         let (_, size) = world()?;
-        let blocks = to_int(&row_blocks(disc, size))?;
+        let layout = Layout::new(disc, size)?;
+        // K_A is symmetric: its column-compressed storage is its row-compressed one.
+        let (rowptr, cols, vals) = layout.matrix(matrix);
+        let (rowptr, cols) = (to_int(&rowptr)?, to_int(&cols)?);
+        let blocks = to_int(&layout.blocks)?;
+        let mut near = rigid_body_modes(disc);
+        for mode in near.chunks_mut(n.max(1)) {
+            let unknowns = mode.to_vec();
+            layout.to_rows(&unknowns, mode);
+        }
         let options = CString::new(settings.options.as_str())
             .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
         let mut ctx = std::ptr::null_mut();
@@ -281,7 +294,7 @@ impl Krylov {
                 n as PetscInt,
                 rowptr.as_ptr(),
                 cols.as_ptr(),
-                m.val().as_ptr(),
+                vals.as_ptr(),
                 block_size(disc) as PetscInt,
                 blocks.as_ptr(),
                 (near.len() / n.max(1)) as PetscInt,
@@ -307,6 +320,9 @@ impl Krylov {
             pc_type: name(pc),
             options: settings.options.clone(),
             give_up: None,
+            rows_b: vec![0.0; if layout.permutes() { n } else { 0 }],
+            rows_w: vec![0.0; if layout.permutes() { n } else { 0 }],
+            layout,
         })
     }
 
@@ -326,26 +342,45 @@ impl Krylov {
     /// (`give_up_when`), w holds an iterate.
     pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
-        let ctx = self.ctx;
         // SAFETY: b and w hold n values; PETSc reads b and writes w within the call; `flag`
         // is what `solved` made it.
-        solved(
-            "KSPSolve",
-            &self.give_up,
-            |requested, flag, its, reason, rnorm, given_up| unsafe {
-                vc_ksp_solve(
-                    ctx,
-                    b.as_ptr(),
-                    w.as_mut_ptr(),
-                    requested,
-                    flag,
-                    its,
-                    reason,
-                    rnorm,
-                    given_up,
-                )
-            },
-        )
+        self.in_rows(b, w, |ctx, b, w, give_up| {
+            solved(
+                "KSPSolve",
+                give_up,
+                |requested, flag, its, reason, rnorm, given_up| unsafe {
+                    vc_ksp_solve(
+                        ctx,
+                        b.as_ptr(),
+                        w.as_mut_ptr(),
+                        requested,
+                        flag,
+                        its,
+                        reason,
+                        rnorm,
+                        given_up,
+                    )
+                },
+            )
+        })
+    }
+
+    /// `call(ctx, b, w, give_up)` with b and w in the order of PETSc's rows (`Layout`), and
+    /// w back in the unknowns' order after it.
+    fn in_rows<T>(
+        &mut self,
+        b: &[f64],
+        w: &mut [f64],
+        call: impl FnOnce(*mut c_void, &[f64], &mut [f64], &Option<GiveUp>) -> Result<T>,
+    ) -> Result<T> {
+        if !self.layout.permutes() {
+            return call(self.ctx, b, w, &self.give_up);
+        }
+        self.layout.to_rows(b, &mut self.rows_b);
+        self.layout.to_rows(w, &mut self.rows_w);
+        let out = call(self.ctx, &self.rows_b, &mut self.rows_w, &self.give_up);
+        self.layout.from_rows(&self.rows_w, w);
+        out
     }
 }
 
@@ -439,10 +474,12 @@ impl Krylov {
     pub fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()> {
         assert!(x.len() == self.n && y.len() == self.n);
         // SAFETY: x and y hold n values; PETSc reads x and writes y within the call.
-        check(
-            unsafe { vc_mult(self.ctx, x.as_ptr(), y.as_mut_ptr()) },
-            "MatMult",
-        )
+        self.in_rows(x, y, |ctx, x, y, _| {
+            check(
+                unsafe { vc_mult(ctx, x.as_ptr(), y.as_mut_ptr()) },
+                "MatMult",
+            )
+        })
     }
 
     /// w ← the solution of Π(K + S)Π w + (I − Π) w = Π b, from the initial guess in w, by
@@ -465,36 +502,47 @@ impl Krylov {
         assert!(b.len() == self.n && w.len() == self.n);
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
         assert!(terms.removed.len() == 3 * np && terms.stiffness.len() == 9 * ns);
-        let ctx = self.ctx;
+        // The terms' dofs as PETSc's rows (−1, none, stays).
+        let layout = &self.layout;
+        let rows = |dofs: &[PetscInt]| -> Vec<PetscInt> {
+            let row = |&d: &PetscInt| match d {
+                d if d < 0 => d,
+                d => layout.row(d as usize) as PetscInt,
+            };
+            dofs.iter().map(row).collect()
+        };
+        let (removed_rows, stiffness_rows) = (rows(terms.removed_dofs), rows(terms.stiffness_dofs));
         // SAFETY: the arrays hold what the counts say, b and w n values; PETSc reads them
         // and writes w within the call, and keeps no pointer after it; `flag` is what
         // `solved` made it.
-        solved(
-            "KSPSolve of the constrained system",
-            &self.give_up,
-            |requested, flag, its, reason, rnorm, given_up| unsafe {
-                vc_constrained_solve(
-                    ctx,
-                    np as PetscInt,
-                    terms.removed_dofs.as_ptr(),
-                    terms.removed.as_ptr(),
-                    ns as PetscInt,
-                    terms.stiffness_dofs.as_ptr(),
-                    terms.stiffness.as_ptr(),
-                    hierarchy as c_int,
-                    rtol,
-                    c_int::from(of_start),
-                    b.as_ptr(),
-                    w.as_mut_ptr(),
-                    requested,
-                    flag,
-                    its,
-                    reason,
-                    rnorm,
-                    given_up,
-                )
-            },
-        )
+        self.in_rows(b, w, |ctx, b, w, give_up| {
+            solved(
+                "KSPSolve of the constrained system",
+                give_up,
+                |requested, flag, its, reason, rnorm, given_up| unsafe {
+                    vc_constrained_solve(
+                        ctx,
+                        np as PetscInt,
+                        removed_rows.as_ptr(),
+                        terms.removed.as_ptr(),
+                        ns as PetscInt,
+                        stiffness_rows.as_ptr(),
+                        terms.stiffness.as_ptr(),
+                        hierarchy as c_int,
+                        rtol,
+                        c_int::from(of_start),
+                        b.as_ptr(),
+                        w.as_mut_ptr(),
+                        requested,
+                        flag,
+                        its,
+                        reason,
+                        rnorm,
+                        given_up,
+                    )
+                },
+            )
+        })
     }
 
     /// How far the Newton systems' multigrid is from the Galerkin products of its fine
@@ -555,62 +603,14 @@ fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
     disc.free[g].filter(|&f| f < disc.n_free)
 }
 
-/// The rows of K_A that each of `size` ranks holds: rank r the rows blocks[r]..blocks[r + 1]
-/// (size + 1 values, the last n_free), each block the first row at or after its even share
-/// n_free·r/size where a node's unknowns begin, so that a rank holds whole nodes (the
-/// active set's frames and slip stiffness act on a node's own rows: `shim.c`). A node's
-/// unknowns are consecutive (numbered node by node).
-pub fn row_blocks(disc: &Discretization, size: usize) -> Vec<usize> {
-    let n = disc.n_free;
-    let mut starts = vec![false; n + 1];
-    starts[n] = true;
-    for g in (0..disc.free.len()).step_by(disc.dim) {
-        if let Some(f) = (g..g + disc.dim).find_map(|g| unknown(disc, g)) {
-            starts[f] = true;
-        }
-    }
-    (0..=size)
-        .map(|r| {
-            let share = (n as u128 * r as u128 / size.max(1) as u128) as usize;
-            (share..=n).find(|&i| starts[i]).unwrap_or(n)
-        })
-        .collect()
-}
-
-/// A rank's share of K_A over `row_blocks`' split: its rows, its stored entries, and the
-/// values of other ranks' rows that a product with K_A fetches (its rows' distinct columns
-/// outside them): a Krylov iteration's work and messages on that rank.
+/// A rank's share of K_A (`Layout`): its rows, its stored entries, and the values of other
+/// ranks' rows that a product with K_A fetches (its rows' distinct columns outside them): a
+/// Krylov iteration's work and messages on that rank.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RankShare {
     pub rows: usize,
     pub entries: usize,
     pub ghosts: usize,
-}
-
-/// Each of `size` ranks' share of K_A (`row_blocks`).
-pub fn rank_shares(disc: &Discretization, size: usize) -> Vec<RankShare> {
-    let blocks = row_blocks(disc, size);
-    let k = disc.k_a.as_ref();
-    let (ptr, idx) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
-    let mut seen = vec![usize::MAX; disc.n_free];
-    (0..size)
-        .map(|r| {
-            let rows = blocks[r]..blocks[r + 1];
-            let mut share = RankShare {
-                rows: rows.len(),
-                ..RankShare::default()
-            };
-            // K_A is symmetric: its column j is its row j.
-            for &i in rows.clone().flat_map(|j| &idx[ptr[j]..ptr[j + 1]]) {
-                share.entries += 1;
-                if !rows.contains(&i) && seen[i] != r {
-                    seen[i] = r;
-                    share.ghosts += 1;
-                }
-            }
-            share
-        })
-        .collect()
 }
 
 /// d where every node's unknowns are d consecutive ones starting at a multiple of d, or

@@ -541,7 +541,7 @@ pub fn check_memory(
 ) -> Result<()> {
     #[cfg(feature = "petsc")]
     if let crate::solver::choice::Build::Krylov { newton } = *solver.build() {
-        let plan = crate::ranks::Plan::new(disc, ranks, newton, steps.memory);
+        let plan = crate::ranks::Plan::new(disc, ranks, newton, steps.memory)?;
         show(&plan.to_string());
         return plan.check();
     }

@@ -1,0 +1,205 @@
+//! How the ranks hold K_A's unknowns (docs/cluster.md): each rank a contiguous block of
+//! PETSc's rows, whole nodes (the active set's frames and slip stiffness act on a node's own
+//! rows: `shim.c`).
+//!
+//! On one rank the rows are the unknowns themselves, in their order. On several, METIS's
+//! k-way partition of the nodes' graph (two nodes adjacent where K_A couples them) says which
+//! rank holds a node, and the rows number the nodes part by part, in their own order within
+//! a part, each node's unknowns one after the other. The mesh's numbering cut into blocks
+//! instead made a rank's product with K_A fetch more values of other ranks' rows than it
+//! holds rows, six times as many on 16 ranks of the fine plate (docs/cluster.md, "Planning").
+//! Every rank computes the same partition (METIS is deterministic with its default seed),
+//! so none is sent. Vectors cross between the two orders at every PETSc call (`to_rows`,
+//! `from_rows`): two copies of n values, against a solve's tens of products with K_A.
+
+use super::RankShare;
+use crate::fem::{Discretization, Sparse};
+use crate::{Error, Result};
+
+/// Where each unknown stands among PETSc's rows, and each rank's rows.
+#[derive(Clone, Debug)]
+pub struct Layout {
+    /// The row of each unknown; None on one rank, where they are the same.
+    row: Option<Vec<usize>>,
+    /// Rank r holds the rows blocks[r]..blocks[r + 1] (size + 1 values, the last n_free).
+    pub blocks: Vec<usize>,
+}
+
+impl Layout {
+    /// The layout of `disc`'s unknowns over `size` ranks.
+    pub fn new(disc: &Discretization, size: usize) -> Result<Layout> {
+        let n = disc.n_free;
+        if size <= 1 {
+            return Ok(Layout {
+                row: None,
+                blocks: vec![0, n],
+            });
+        }
+        let nodes = nodes(disc);
+        let part = partition(disc, &nodes, size)?;
+        let mut order: Vec<usize> = (0..nodes.len()).collect();
+        order.sort_by_key(|&v| (part[v], v));
+        let (mut row, mut blocks) = (vec![0; n], vec![0; size + 1]);
+        let mut next = 0;
+        for v in order {
+            for &i in &nodes[v] {
+                row[i] = next;
+                next += 1;
+            }
+            blocks[part[v] + 1] += nodes[v].len();
+        }
+        for r in 0..size {
+            blocks[r + 1] += blocks[r];
+        }
+        Ok(Layout {
+            row: Some(row),
+            blocks,
+        })
+    }
+
+    /// The row of unknown i.
+    pub fn row(&self, i: usize) -> usize {
+        self.row.as_ref().map_or(i, |row| row[i])
+    }
+
+    /// Whether the rows are the unknowns in another order.
+    pub fn permutes(&self) -> bool {
+        self.row.is_some()
+    }
+
+    /// `rows` ← x in the rows' order.
+    pub fn to_rows(&self, x: &[f64], rows: &mut [f64]) {
+        match &self.row {
+            Some(row) => (x.iter().zip(row)).for_each(|(&v, &r)| rows[r] = v),
+            None => rows.copy_from_slice(x),
+        }
+    }
+
+    /// x ← `rows`, from the rows' order.
+    pub fn from_rows(&self, rows: &[f64], x: &mut [f64]) {
+        match &self.row {
+            Some(row) => (x.iter_mut().zip(row)).for_each(|(v, &r)| *v = rows[r]),
+            None => x.copy_from_slice(rows),
+        }
+    }
+
+    /// The symmetric `matrix` in the rows' order, as CSR (its CSC): row pointers, columns,
+    /// values.
+    pub fn matrix(&self, matrix: &Sparse) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+        let m = matrix.as_ref();
+        let (ptr, idx, val) = (m.symbolic().col_ptr(), m.symbolic().row_idx(), m.val());
+        let Some(row) = &self.row else {
+            return (ptr.to_vec(), idx.to_vec(), val.to_vec());
+        };
+        let mut unknown = vec![0; row.len()];
+        for (i, &r) in row.iter().enumerate() {
+            unknown[r] = i;
+        }
+        let (mut rowptr, mut cols, mut vals) = (vec![0], Vec::new(), Vec::new());
+        let mut entries: Vec<(usize, f64)> = Vec::new();
+        for &i in &unknown {
+            entries.clear();
+            entries.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]], val[p])));
+            entries.sort_by_key(|&(c, _)| c);
+            cols.extend(entries.iter().map(|&(c, _)| c));
+            vals.extend(entries.iter().map(|&(_, v)| v));
+            rowptr.push(cols.len());
+        }
+        (rowptr, cols, vals)
+    }
+
+    /// Each rank's share of K_A (`disc.k_a`): its rows, entries and the values of other
+    /// ranks' rows that a product fetches.
+    pub fn shares(&self, disc: &Discretization) -> Vec<RankShare> {
+        let k = disc.k_a.as_ref();
+        let (ptr, idx) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
+        let size = self.blocks.len() - 1;
+        let rank = |row: usize| self.blocks.partition_point(|&b| b <= row) - 1;
+        let mut shares = vec![RankShare::default(); size];
+        let mut seen = vec![usize::MAX; disc.n_free];
+        for i in 0..disc.n_free {
+            let r = rank(self.row(i));
+            let share = &mut shares[r];
+            share.rows += 1;
+            // K_A is symmetric: its column i is its row i.
+            for &j in &idx[ptr[i]..ptr[i + 1]] {
+                share.entries += 1;
+                if rank(self.row(j)) != r && seen[j] != r {
+                    seen[j] = r;
+                    share.ghosts += 1;
+                }
+            }
+        }
+        shares
+    }
+}
+
+/// The unknowns of each node that has any, node by node.
+fn nodes(disc: &Discretization) -> Vec<Vec<usize>> {
+    (0..disc.free.len())
+        .step_by(disc.dim)
+        .map(|g| {
+            (g..g + disc.dim)
+                .filter_map(|g| super::unknown(disc, g))
+                .collect()
+        })
+        .filter(|u: &Vec<usize>| !u.is_empty())
+        .collect()
+}
+
+/// METIS's k-way partition of the nodes' graph into `size` parts: each node's part.
+fn partition(disc: &Discretization, nodes: &[Vec<usize>], size: usize) -> Result<Vec<usize>> {
+    let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
+    let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
+    let mut vertex = vec![0; disc.n_free];
+    for (v, unknowns) in nodes.iter().enumerate() {
+        unknowns.iter().for_each(|&i| vertex[i] = v);
+    }
+    let k = disc.k_a.as_ref();
+    let (ptr, rows) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
+    let (mut xadj, mut adjncy) = (vec![0], Vec::new());
+    for (v, unknowns) in nodes.iter().enumerate() {
+        let mut previous = usize::MAX;
+        // P1: a node's unknowns are coupled to the same nodes; the rows are sorted.
+        for &j in &rows[ptr[unknowns[0]]..ptr[unknowns[0] + 1]] {
+            let w = vertex[j];
+            if w != v && w != previous {
+                adjncy.push(idx(w)?);
+            }
+            previous = w;
+        }
+        xadj.push(idx(adjncy.len())?);
+    }
+    let (mut nvtxs, mut ncon, mut nparts) = (idx(nodes.len())?, 1, idx(size)?);
+    let (mut cut, mut part) = (0, vec![0; nodes.len()]);
+    // SAFETY: xadj (nvtxs + 1 entries) and adjncy describe a graph without self loops,
+    // symmetric because K_A's pattern is; part holds nvtxs entries; null weights, targets
+    // and options mean unit weights, even parts and METIS's defaults (a fixed seed). METIS
+    // reads the graph and writes cut and part. The runs that partition (under a launcher)
+    // order nothing with METIS at the same time (`solver::ordering` serializes its own).
+    let status = unsafe {
+        metis_sys::METIS_PartGraphKway(
+            &mut nvtxs,
+            &mut ncon,
+            xadj.as_mut_ptr(),
+            adjncy.as_mut_ptr(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            &mut nparts,
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            &mut cut,
+            part.as_mut_ptr(),
+        )
+    };
+    if status != metis_sys::rstatus_et_METIS_OK {
+        return Err(Error::solve(format!(
+            "METIS could not partition the mesh's {} nodes among {size} ranks (status \
+             {status})",
+            nodes.len()
+        )));
+    }
+    Ok(part.iter().map(|&p| p as usize).collect())
+}
