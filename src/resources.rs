@@ -202,27 +202,29 @@ pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
 /// dofs whose K_A stores `nnz` entries (both triangles), in bytes: four n-vectors (b −
 /// f_slip, the right side, (K + S)w, the shell operator's work vector); per row, a removed
 /// direction or a share of a slip block (three dofs and up to nine values); and PETSc's
-/// matrices, three of K_A's pattern (K_A, the Newton matrix N and Q, the N its multigrid was
-/// built from; AIJ, 12 bytes an entry), Q's smoothed-aggregation hierarchy, counted as 0.8
-/// of one (its coarse operators, 0.3–0.5 of the fine one's entries on 3D elasticity, and
-/// its prolongator), and the copy of K_A's coarse operators that Q's are updated from (0.4).
-/// K_A's own KSP is never set up in an active-set run, so it holds no hierarchy.
+/// part on one rank (`petsc_bytes`).
 pub fn active_set_bytes(m: usize, n: usize, nnz: usize) -> f64 {
     8.0 * 4.0 * n as f64 + 84.0 * m as f64 + petsc_bytes(nnz, true, 1)
 }
 
-/// PETSc's share of a run through it (`petsc_bytes`) on the rank that holds `entries` of
-/// K_A's, in bytes: AIJ, 12 bytes an entry, K_A's and its smoothed-aggregation hierarchy
-/// (0.8 of it); with the active set's Newton systems (`newton`), the Newton matrix N and
-/// Q, the N its multigrid was built from, Q's hierarchy and K_A's coarse operators (0.4:
-/// `active_set_bytes`), K_A's own hierarchy never being built, and on several ranks
-/// (`ranks`) the copy of the rank's rows that N is made from (`shim.c`: K's, N's and Q's
-/// values and the column indices, 28 bytes an entry).
+/// PETSc's part of a run through it on a rank that holds `entries` of K_A's, in bytes, on
+/// one of `ranks` ranks, with the active set's Newton systems where `newton`: what the
+/// rank holds at its peak beyond its setup's, fitted to the fine plate's peaks (367 470
+/// dofs, 16.0 M entries; docs/cluster.md, "Planning"). Counted from the matrices alone,
+/// AIJ at 12 bytes an entry, it would be K_A and GAMG's hierarchy (0.8 of it), 21.6 bytes
+/// an entry, and for the active set the Newton matrix N and Q, the N its multigrid was
+/// built from, Q's hierarchy and K_A's coarse operators (0.4), 50.4 bytes an entry (K_A's
+/// own hierarchy is never built there), and on several ranks the shim's copy of the rank's
+/// rows that N is made from, 28 more; the runs' peaks held 41 and 67 bytes an entry on
+/// one rank (GAMG's setup and the Krylov vectors besides) and 97 and 145 on each of two
+/// (the off-rank blocks, their column maps and message buffers, the rank's rows of K_A
+/// renumbered for PETSc).
 pub fn petsc_bytes(entries: usize, newton: bool, ranks: usize) -> f64 {
     let per_entry = match (newton, ranks) {
-        (false, _) => 12.0 * (1.0 + 0.8),
-        (true, 1) => 12.0 * (3.0 + 0.8 + 0.4),
-        (true, _) => 12.0 * (3.0 + 0.8 + 0.4) + 28.0,
+        (false, 1) => 41.0,
+        (false, _) => 97.0,
+        (true, 1) => 67.0,
+        (true, _) => 145.0,
     };
     per_entry * entries as f64
 }

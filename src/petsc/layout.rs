@@ -12,7 +12,7 @@
 //! so none is sent. Vectors cross between the two orders at every PETSc call (`to_rows`,
 //! `from_rows`): two copies of n values, against a solve's tens of products with K_A.
 
-use super::RankShare;
+use super::{PetscInt, RankShare};
 use crate::fem::{Discretization, Sparse};
 use crate::{Error, Result};
 
@@ -83,21 +83,27 @@ impl Layout {
         }
     }
 
-    /// The symmetric `matrix` in the rows' order, as CSR (its CSC): row pointers, columns,
-    /// values.
-    pub fn matrix(&self, matrix: &Sparse) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    /// Rank `rank`'s rows of the symmetric `matrix` in the rows' order, as CSR (its CSC)
+    /// with the n + 1 row pointers of the whole and the other ranks' rows empty: what the
+    /// shim keeps of it. On one rank the matrix's own arrays, its values not copied.
+    pub fn rows_of<'a>(&self, matrix: &'a Sparse, rank: usize) -> Result<Csr<'a>> {
         let m = matrix.as_ref();
         let (ptr, idx, val) = (m.symbolic().col_ptr(), m.symbolic().row_idx(), m.val());
         let Some(row) = &self.row else {
-            return (ptr.to_vec(), idx.to_vec(), val.to_vec());
+            return Ok(Csr {
+                rowptr: petsc_ints(ptr)?,
+                cols: petsc_ints(idx)?,
+                vals: std::borrow::Cow::Borrowed(val),
+            });
         };
         let mut unknown = vec![0; row.len()];
         for (i, &r) in row.iter().enumerate() {
             unknown[r] = i;
         }
-        let (mut rowptr, mut cols, mut vals) = (vec![0], Vec::new(), Vec::new());
+        let (first, end) = (self.blocks[rank], self.blocks[rank + 1]);
+        let (mut rowptr, mut cols, mut vals) = (vec![0; first + 1], Vec::new(), Vec::new());
         let mut entries: Vec<(usize, f64)> = Vec::new();
-        for &i in &unknown {
+        for &i in &unknown[first..end] {
             entries.clear();
             entries.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]], val[p])));
             entries.sort_by_key(|&(c, _)| c);
@@ -105,7 +111,12 @@ impl Layout {
             vals.extend(entries.iter().map(|&(_, v)| v));
             rowptr.push(cols.len());
         }
-        (rowptr, cols, vals)
+        rowptr.resize(row.len() + 1, cols.len());
+        Ok(Csr {
+            rowptr: petsc_ints(&rowptr)?,
+            cols: petsc_ints(&cols)?,
+            vals: std::borrow::Cow::Owned(vals),
+        })
     }
 
     /// Each rank's share of K_A (`disc.k_a`): its rows, entries and the values of other
@@ -132,6 +143,21 @@ impl Layout {
         }
         shares
     }
+}
+
+/// A matrix's rows as the shim takes them (`Layout::rows_of`).
+pub struct Csr<'a> {
+    pub rowptr: Vec<PetscInt>,
+    pub cols: Vec<PetscInt>,
+    pub vals: std::borrow::Cow<'a, [f64]>,
+}
+
+/// `v` as PETSc's indices, or the error that they do not fit (32 bits).
+pub fn petsc_ints(v: &[usize]) -> Result<Vec<PetscInt>> {
+    let too_big = |_| Error::solve("K_A is too large for PETSc's 32-bit indices".to_string());
+    v.iter()
+        .map(|&i| PetscInt::try_from(i).map_err(too_big))
+        .collect()
 }
 
 /// The unknowns of each node that has any, node by node.

@@ -267,18 +267,10 @@ impl Krylov {
     pub fn new(matrix: &Sparse, disc: &Discretization, settings: &KrylovSettings) -> Result<Self> {
         initialize()?;
         let n = matrix.nrows();
-        let too_big = |_| Error::solve(format!("{n} dofs exceed PETSc's 32-bit indices"));
-        let to_int = |v: &[usize]| -> Result<Vec<PetscInt>> {
-            v.iter()
-                .map(|&i| PetscInt::try_from(i).map_err(too_big))
-                .collect()
-        };
-        let (_, size) = world()?;
+        let (rank, size) = world()?;
         let layout = Layout::new(disc, size)?;
-        // K_A is symmetric: its column-compressed storage is its row-compressed one.
-        let (rowptr, cols, vals) = layout.matrix(matrix);
-        let (rowptr, cols) = (to_int(&rowptr)?, to_int(&cols)?);
-        let blocks = to_int(&layout.blocks)?;
+        let csr = layout.rows_of(matrix, rank)?;
+        let blocks = layout::petsc_ints(&layout.blocks)?;
         let mut near = rigid_body_modes(disc);
         for mode in near.chunks_mut(n.max(1)) {
             let unknowns = mode.to_vec();
@@ -288,13 +280,13 @@ impl Krylov {
             .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
         let mut ctx = std::ptr::null_mut();
         // SAFETY: the arrays hold n + 1, nnz, nnz, size + 1 and nvec·n values as the shim
-        // reads them; PETSc copies them.
+        // reads them (nnz this rank's entries, on several ranks); PETSc copies them.
         let code = unsafe {
             vc_ksp_create(
                 n as PetscInt,
-                rowptr.as_ptr(),
-                cols.as_ptr(),
-                vals.as_ptr(),
+                csr.rowptr.as_ptr(),
+                csr.cols.as_ptr(),
+                csr.vals.as_ptr(),
                 block_size(disc) as PetscInt,
                 blocks.as_ptr(),
                 (near.len() / n.max(1)) as PetscInt,

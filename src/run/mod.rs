@@ -256,6 +256,13 @@ pub fn check_ranks(scene: &Scene, solver: &Descriptor, ranks: usize, how: &str) 
     if ranks == 1 || solver.spreads() {
         return Ok(());
     }
+    if !cfg!(feature = "petsc") {
+        return Err(Error::input(format!(
+            "{how}: this build has no MPI, and a run is one process; to spread a run whose \
+             steps are PETSc solves over MPI ranks (docs/cluster.md), {}",
+            crate::solver::choice::PETSC_HOW
+        )));
+    }
     let this = match solver.contact_solver() {
         Some(c) => format!("contact solver {}", c.key()),
         None => "the stored Cholesky factor of K_A".to_string(),

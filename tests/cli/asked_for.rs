@@ -109,6 +109,24 @@ fn a_process_that_mpi_started_as_one_of_several_is_refused() {
     assert_eq!(code, 0, "check only prints, on any launcher: {text}");
 }
 
+/// `check --ranks N` plans a run over N MPI ranks: one rank is every run; more are refused
+/// (exit 2) in a build without PETSc, saying how to get one, and for a run whose steps do
+/// not spread (docs/cluster.md); 0 is no count.
+#[test]
+fn check_plans_one_rank_and_refuses_more_where_the_run_cannot_spread() {
+    let (code, text) = common::cli(&["check", "examples/paper.toml", "--ranks", "1"]);
+    assert_eq!(code, 0, "{text}");
+    let (code, text) = common::cli(&["check", "examples/paper.toml", "--ranks", "2"]);
+    assert_eq!(code, 2, "{text}");
+    let why = match cfg!(feature = "petsc") {
+        true => "this run's steps take the contact solver dense",
+        false => "this build has no MPI",
+    };
+    assert!(text.contains("--ranks 2") && text.contains(why), "{text}");
+    let (code, text) = common::cli(&["check", "examples/paper.toml", "--ranks", "0"]);
+    assert_eq!(code, 2, "{text}");
+}
+
 /// A run of the paper scene on the coarse mesh with N = 16, stopped after step 8: its
 /// directory and its checkpoint (at step 9).
 fn stopped_run(dir: &Path) -> (std::path::PathBuf, String) {
