@@ -11,7 +11,8 @@
 //!
 //! The script's lines come from `check`: `--mem` is the run's estimate (what grows with the
 //! steps, the stored factor or the contact solver's matrices, and 1 GiB for the mesh and
-//! the rest of its setup), for each of a node's tasks. The cores of a task are its threads
+//! the rest of its setup; for a run through PETSc what `check --ranks` says a rank holds),
+//! for each of a node's tasks. The cores of a task are its threads
 //! (`--cpus-per-task`). A job of several tasks (`--nodes`, `--ntasks-per-node`) starts
 //! them with `srun` as the ranks of one run, which only a build with PETSc and a run whose
 //! steps spread over ranks allow (`crate::ranks`); srun passes the SIGTERM on to every rank.
@@ -83,10 +84,16 @@ pub fn emit(
     let mut solver = Descriptor::of_run(&scene, &disc)?;
     check_ranks(job, &solver)?;
     let estimate = Estimate::new(&scene, &disc, 0);
-    let factor = solver.factor_bytes(&disc)?.unwrap_or(0.0);
-    let contact = solver.contact().and_then(|p| p.memory).unwrap_or(0.0);
-    // Each rank holds what one process would, but PETSc's share (`crate::ranks`).
-    let memory = (estimate.memory + factor + contact + SETUP_MEMORY) * job.ntasks_per_node as f64;
+    let ranks = job.nodes * job.ntasks_per_node;
+    let task = match rank_memory(&disc, &solver, ranks, estimate.memory)? {
+        Some(rank) => rank,
+        None => {
+            let factor = solver.factor_bytes(&disc)?.unwrap_or(0.0);
+            let contact = solver.contact().and_then(|p| p.memory).unwrap_or(0.0);
+            estimate.memory + factor + contact + SETUP_MEMORY
+        }
+    };
+    let memory = task * job.ntasks_per_node as f64;
     let out = match out {
         Some(o) => o.to_path_buf(),
         None => default_out(&scene)?,
@@ -120,6 +127,25 @@ pub fn emit(
     let path = dir.join("job.sh");
     write_script(&path, &script.text())?;
     Ok((path, memory))
+}
+
+/// The memory of a rank of a run through PETSc over `ranks` ranks, what `check --ranks`
+/// says (`crate::ranks::Plan`: this process's setup peak, what the steps hold, its share of
+/// PETSc's); None for a run that does not go through PETSc.
+fn rank_memory(
+    disc: &crate::fem::Discretization,
+    solver: &Descriptor,
+    ranks: usize,
+    steps: f64,
+) -> Result<Option<f64>> {
+    #[cfg(feature = "petsc")]
+    if let crate::solver::choice::Build::Krylov { newton } = *solver.build() {
+        return Ok(Some(
+            crate::ranks::Plan::new(disc, ranks.max(1), newton, steps)?.per_rank(),
+        ));
+    }
+    let _ = (disc, solver, ranks, steps);
+    Ok(None)
 }
 
 /// Refuses (exit 2) a job of several ranks whose run does not spread over them

@@ -442,6 +442,17 @@ fn a_slurm_job_of_two_tasks_runs_the_scene_on_two_ranks() {
         script.contains("srun --kill-on-bad-exit=1 \"$VISCONTACT\" run"),
         "{script}"
     );
+    // --mem: what `check --ranks 2` says a rank holds, for each of the node's two tasks.
+    let (code, text) = common::cli(&["check", scene.to_str().unwrap(), "--ranks", "2"]);
+    assert_eq!(code, 0, "{text}");
+    let rank = megabytes_after(&text, "memory ≈ ");
+    let mem = script.split("#SBATCH --mem=").nth(1).unwrap();
+    let mib: f64 = mem.split('M').next().unwrap().parse().unwrap();
+    let asked = mib * 1024.0 * 1024.0;
+    assert!(
+        (asked - 2.0 * rank).abs() < 4e6,
+        "--mem {asked:e} against 2 × {rank:e}"
+    );
     let bin = tmp.path().join("bin");
     std::fs::create_dir(&bin).unwrap();
     let srun = "#!/bin/sh\nshift\nexec mpirun --oversubscribe -n \"$SLURM_NTASKS\" \"$@\"\n";
