@@ -114,10 +114,11 @@ struct VcKsp {
 static PetscErrorCode constrained_setup(VcKsp *s);
 
 /* K_A on the ranks: on one, a SEQAIJ of the whole CSR (what the Newton systems update in
- * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) of the
- * same global CSR, rank r the rows blocks[r] … blocks[r + 1] − 1 (whole nodes: the Newton
- * matrix's frames and slip stiffness act on a node's own rows), with each rank's share
- * recorded for gathering the solution. */
+ * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) of a
+ * CSR with the whole's row pointers (the other ranks' rows may be empty), rank r the rows
+ * blocks[r] … blocks[r + 1] − 1 (whole nodes: the Newton matrix's frames and slip
+ * stiffness act on a node's own rows), with each rank's share recorded for gathering the
+ * solution. */
 static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *rowptr,
                                          const PetscInt *cols, const PetscScalar *vals, PetscInt bs,
                                          const PetscInt *blocks)
@@ -226,8 +227,8 @@ static PetscErrorCode watch(VcKsp *s, KSP ksp, Watch *w)
  * length n stored one after the other, CG + GAMG with relative tolerance `rtol`, then
  * `options` (PETSc's command-line syntax) and KSPSetFromOptions; set up for K's own
  * solves, or where `newton`, for the constrained systems alone (their KSP and multigrid:
- * constrained_setup), K's never being solved. Every rank gives the whole matrix; on
- * several ranks each keeps its rows. */
+ * constrained_setup), K's never being solved. On one rank the matrix is whole; on several
+ * each rank gives (and keeps) its own rows, the others' rows empty. */
 int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, const PetscScalar *vals,
                   PetscInt bs, const PetscInt *blocks, PetscInt nvec, const PetscScalar *near,
                   PetscReal rtol, const char *options, int newton, void **out)
@@ -424,7 +425,7 @@ static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
 
 /* A rank's rows of K and N in CSR, [lo, lo + m): offsets ai from 0, global columns aj,
  * values k of K and n of N. On one process, the matrices' own arrays (N is written in
- * place); on several, the copies local_rows made (N is set from them: local_close). */
+ * place); on several, the copies local_rows made (N is set from them: set_rows). */
 typedef struct {
   PetscInt           lo, m;
   const PetscInt    *ai, *aj;
