@@ -336,23 +336,29 @@ fn sigterm_to_one_rank_stops_them_all_after_the_same_step() {
     assert!(s["message"].as_str().unwrap().contains("SIGTERM"), "{s}");
 }
 
+/// The block, linear and with contact and friction: mpirun ends the other rank within
+/// seconds, and the run resumes from its last checkpoint to the run never stopped, bit for
+/// bit.
 #[test]
 fn sigkill_of_one_rank_ends_the_others_and_the_run_resumes_from_its_checkpoint() {
     let tmp = tempfile::tempdir().unwrap();
-    let (code, text, took) = signalled("KILL", &[1], &linear_scenes(tmp.path())[0]);
-    assert_ne!(code, 0, "{text}");
-    assert!(
-        took < Duration::from_secs(20),
-        "the others ran on for {took:?}"
-    );
-    let out = tmp.path().join("o");
-    assert!(
-        out.join("checkpoint.h5").exists(),
-        "no checkpoint to resume"
-    );
-    let (code, text) = resume(2, &out);
-    assert_eq!(code, 0, "{text}");
-    assert_eq!(common::summary(&out)["status"], "completed");
+    let (linear, contact) = (tmp.path().join("linear"), tmp.path().join("contact"));
+    std::fs::create_dir_all(&linear).unwrap();
+    std::fs::create_dir_all(&contact).unwrap();
+    for scene in [&linear_scenes(&linear)[0], &contact_scenes(&contact)[0]] {
+        let (code, text, took) = signalled("KILL", &[1], scene);
+        assert_ne!(code, 0, "{text}");
+        assert!(
+            took < Duration::from_secs(20),
+            "the others ran on for {took:?}"
+        );
+        let out = scene.parent().unwrap().join("o");
+        assert!(
+            out.join("checkpoint.h5").exists(),
+            "no checkpoint to resume"
+        );
+        resumes_as_never_stopped(scene, "SIGKILL of one rank, resumed on 2");
+    }
 }
 
 /// `check` and `run --emit slurm` under mpirun print once, on rank 0.
