@@ -193,14 +193,14 @@ const MPI_RUNTIME: f64 = 16e6;
 #[cfg(feature = "petsc")]
 #[derive(Clone, Debug)]
 pub struct Plan {
-    pub size: usize,
+    size: usize,
     /// The rows of K_A.
-    pub rows: usize,
+    rows: usize,
     /// The largest rank's share.
-    pub largest: crate::petsc::RankShare,
+    largest: crate::petsc::RankShare,
     /// Bytes every rank holds whole, and the largest rank's of PETSc's.
-    pub replicated: f64,
-    pub spread: f64,
+    replicated: f64,
+    spread: f64,
     /// What every rank of several would hold whole (`replicated` with MPI's runtime), and
     /// PETSc's bytes a rank on several ranks times their count (what they split).
     on_several: f64,
@@ -285,7 +285,7 @@ impl Plan {
         )))
     }
 
-    /// "1 rank", "4 ranks".
+    /// "one rank", "4 ranks".
     fn ranks(&self) -> String {
         match self.size {
             1 => "one rank".to_string(),

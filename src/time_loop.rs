@@ -49,8 +49,10 @@ pub struct TimeLoop<'p> {
     history: History,
     /// How the memory sums are computed (the compressed kernels' fits, if any).
     plans: Plans,
-    /// w_n of the last solved step.
+    /// w_n of the last solved step, and its unknowns kept while a step that can be given up
+    /// is solved into w (a solver may leave an iterate there).
     w: Vec<f64>,
+    w_start: Vec<f64>,
     /// Multipliers of the last solved step z_{n−1}: λ on contact rows, γ on friction rows;
     /// and of the step before it, z_{n−2} (z_{n−1} itself before a second step), for the
     /// warm start's extrapolation (`StepSolver::solve`); `spare` keeps z_{n−1} while step
@@ -267,6 +269,7 @@ impl<'p> TimeLoop<'p> {
             history,
             plans,
             w: vec![0.0; n],
+            w_start: vec![0.0; disc.n_free],
             m,
             b: vec![0.0; n],
             growth: Growth::default(),
@@ -440,6 +443,9 @@ impl<'p> TimeLoop<'p> {
             .filter(|_| self.can_stop)
             .map(Abandon::arm);
         let nf = self.disc.n_free;
+        if armed.is_some() {
+            self.w_start.copy_from_slice(&self.w[..nf]);
+        }
         let mut report = self.solver.solve(
             &mut self.backend,
             &self.rows,
@@ -450,7 +456,8 @@ impl<'p> TimeLoop<'p> {
         )?;
         drop(armed);
         if report.status == StepStatus::Abandoned {
-            // The solvers write w only for a solved step; z held the iterate.
+            // w and z may hold the step's iterate: both go back to the step before.
+            self.w[..nf].copy_from_slice(&self.w_start);
             self.z.copy_from_slice(&self.spare);
             return Ok(None);
         }

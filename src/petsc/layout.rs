@@ -12,7 +12,7 @@
 //! so none is sent. Vectors cross between the two orders at every PETSc call (`to_rows`,
 //! `from_rows`): two copies of n values, against a solve's tens of products with K_A.
 
-use super::{PetscInt, RankShare};
+use super::PetscInt;
 use crate::fem::{Discretization, Sparse};
 use crate::{Error, Result};
 
@@ -143,6 +143,16 @@ impl Layout {
         }
         shares
     }
+}
+
+/// A rank's share of K_A (`Layout`): its rows, its stored entries, and the values of other
+/// ranks' rows that a product with K_A fetches (its rows' distinct columns outside them): a
+/// Krylov iteration's work and messages on that rank.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RankShare {
+    pub rows: usize,
+    pub entries: usize,
+    pub ghosts: usize,
 }
 
 /// A matrix's rows as the shim takes them (`Layout::rows_of`).

@@ -39,7 +39,7 @@
 
 mod layout;
 
-pub use layout::Layout;
+pub use layout::{Layout, RankShare};
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};
@@ -84,18 +84,7 @@ extern "C" {
         newton: c_int,
         out: *mut *mut c_void,
     ) -> c_int;
-    #[allow(clippy::too_many_arguments)]
-    fn vc_ksp_solve(
-        ctx: *mut c_void,
-        b: *const f64,
-        x: *mut f64,
-        requested: Option<Requested>,
-        flag: *mut c_void,
-        its: *mut PetscInt,
-        reason: *mut c_int,
-        rnorm: *mut f64,
-        given_up: *mut c_int,
-    ) -> c_int;
+    fn vc_ksp_solve(ctx: *mut c_void, b: *const f64, x: *mut f64, v: *mut VcSolve) -> c_int;
     fn vc_mult(ctx: *mut c_void, x: *const f64, y: *mut f64) -> c_int;
     #[allow(clippy::too_many_arguments)]
     fn vc_constrained_solve(
@@ -111,12 +100,7 @@ extern "C" {
         of_start: c_int,
         b: *const f64,
         x: *mut f64,
-        requested: Option<Requested>,
-        flag: *mut c_void,
-        its: *mut PetscInt,
-        reason: *mut c_int,
-        rnorm: *mut f64,
-        given_up: *mut c_int,
+        v: *mut VcSolve,
     ) -> c_int;
     fn vc_ksp_types(ctx: *mut c_void, ksp: *mut *const c_char, pc: *mut *const c_char) -> c_int;
     fn vc_galerkin_defect(ctx: *mut c_void, defect: *mut f64) -> c_int;
@@ -318,11 +302,6 @@ impl Krylov {
         })
     }
 
-    /// Whether a solve may be given up (`give_up_when` was called).
-    pub fn can_give_up(&self) -> bool {
-        self.give_up.is_some()
-    }
-
     /// From now on K_A's solve in progress is given up where `now` says so on any rank, on
     /// every rank at the same Krylov iteration ([`Solve::given_up`]).
     pub fn give_up_when(&mut self, now: impl Fn() -> bool + 'static) {
@@ -334,31 +313,14 @@ impl Krylov {
     /// (`give_up_when`), w holds an iterate.
     pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
-        // SAFETY: b and w hold n values; PETSc reads b and writes w within the call; `flag`
-        // is what `solved` made it.
-        self.in_rows(b, w, |ctx, b, w, give_up| {
-            solved(
-                "KSPSolve",
-                give_up,
-                |requested, flag, its, reason, rnorm, given_up| unsafe {
-                    vc_ksp_solve(
-                        ctx,
-                        b.as_ptr(),
-                        w.as_mut_ptr(),
-                        requested,
-                        flag,
-                        its,
-                        reason,
-                        rnorm,
-                        given_up,
-                    )
-                },
-            )
+        // SAFETY: b and w hold n values; PETSc reads b and writes w within the call.
+        self.solved("KSPSolve", b, w, |ctx, b, w, v| unsafe {
+            vc_ksp_solve(ctx, b, w, v)
         })
     }
 
-    /// `call(ctx, b, w, give_up)` with b and w in the order of PETSc's rows (`Layout`), and
-    /// w back in the unknowns' order after it.
+    /// `call(ctx, b, w)` with b and w in the order of PETSc's rows (`Layout`), and w back
+    /// in the unknowns' order after it.
     fn in_rows<T>(
         &mut self,
         b: &[f64],
@@ -374,56 +336,59 @@ impl Krylov {
         self.layout.from_rows(&self.rows_w, w);
         out
     }
+
+    /// A shim solve, `call(ctx, b, w, v)` on b and w in the order of PETSc's rows
+    /// (`in_rows`), which asks at every iteration whether to give the solve up (where
+    /// `give_up_when` said how: the shim's `requested` and, in v, a pointer to the question
+    /// that lives through the call) and fills v: what it did, or PETSc's error at `what`.
+    fn solved(
+        &mut self,
+        what: &str,
+        b: &[f64],
+        w: &mut [f64],
+        call: impl FnOnce(*mut c_void, *const f64, *mut f64, *mut VcSolve) -> c_int,
+    ) -> Result<Solve> {
+        self.in_rows(b, w, |ctx, b, w, give_up| {
+            let mut v = VcSolve {
+                requested: None,
+                flag: std::ptr::null_mut(),
+                its: 0,
+                reason: 0,
+                rnorm: 0.0,
+                given_up: 0,
+            };
+            if let Some(now) = give_up {
+                v.requested = Some(requested);
+                v.flag = now as *const GiveUp as *mut c_void;
+            }
+            check(call(ctx, b.as_ptr(), w.as_mut_ptr(), &mut v), what)?;
+            Ok(Solve {
+                given_up: v.given_up != 0,
+                ..Solve::of(v.its, v.reason, v.rnorm)
+            })
+        })
+    }
 }
 
-/// The shim's question at every Krylov iteration (`requested`).
-type Requested = unsafe extern "C" fn(*mut c_void) -> c_int;
+/// A shim solve's request and outcome (shim.c's `VcSolve`).
+#[repr(C)]
+struct VcSolve {
+    requested: Option<unsafe extern "C" fn(*mut c_void) -> c_int>,
+    flag: *mut c_void,
+    its: PetscInt,
+    reason: c_int,
+    rnorm: f64,
+    given_up: c_int,
+}
 
 /// Whether the solve is to be given up: the shim's question, at every Krylov iteration.
 ///
 /// # Safety
 /// `flag` points to a live [`GiveUp`].
 unsafe extern "C" fn requested(flag: *mut c_void) -> c_int {
-    // SAFETY: the caller's promise (`solved` passes the Krylov's own).
+    // SAFETY: the caller's promise (`Krylov::solved` passes the Krylov's own).
     let now = unsafe { &*(flag as *const GiveUp) };
     c_int::from(now())
-}
-
-/// Runs a shim solve that asks `give_up` at every iteration (where there is one: the
-/// shim's `requested` and `flag`, a pointer to it that lives through the call and is read
-/// by `requested` alone) and reports its iterations, converged reason, residual norm and
-/// whether it was given up through the pointers it is given: what it did, or PETSc's error
-/// at `what`.
-fn solved(
-    what: &str,
-    give_up: &Option<GiveUp>,
-    call: impl FnOnce(
-        Option<Requested>,
-        *mut c_void,
-        *mut PetscInt,
-        *mut c_int,
-        *mut f64,
-        *mut c_int,
-    ) -> c_int,
-) -> Result<Solve> {
-    let (requested, flag): (Option<Requested>, _) = match give_up {
-        Some(now) => (Some(requested), now as *const GiveUp as *mut c_void),
-        None => (None, std::ptr::null_mut()),
-    };
-    let (mut its, mut reason, mut rnorm, mut given_up) = (0, 0, 0.0, 0);
-    let code = call(
-        requested,
-        flag,
-        &mut its,
-        &mut reason,
-        &mut rnorm,
-        &mut given_up,
-    );
-    check(code, what)?;
-    Ok(Solve {
-        given_up: given_up != 0,
-        ..Solve::of(its, reason, rnorm)
-    })
 }
 
 /// The nodal terms of a constrained system (`Krylov::solve_constrained`), flat as the shim
@@ -505,34 +470,23 @@ impl Krylov {
         };
         let (removed_rows, stiffness_rows) = (rows(terms.removed_dofs), rows(terms.stiffness_dofs));
         // SAFETY: the arrays hold what the counts say, b and w n values; PETSc reads them
-        // and writes w within the call, and keeps no pointer after it; `flag` is what
-        // `solved` made it.
-        self.in_rows(b, w, |ctx, b, w, give_up| {
-            solved(
-                "KSPSolve of the constrained system",
-                give_up,
-                |requested, flag, its, reason, rnorm, given_up| unsafe {
-                    vc_constrained_solve(
-                        ctx,
-                        np as PetscInt,
-                        removed_rows.as_ptr(),
-                        terms.removed.as_ptr(),
-                        ns as PetscInt,
-                        stiffness_rows.as_ptr(),
-                        terms.stiffness.as_ptr(),
-                        hierarchy as c_int,
-                        rtol,
-                        c_int::from(of_start),
-                        b.as_ptr(),
-                        w.as_mut_ptr(),
-                        requested,
-                        flag,
-                        its,
-                        reason,
-                        rnorm,
-                        given_up,
-                    )
-                },
+        // and writes w within the call, and keeps no pointer after it.
+        let what = "KSPSolve of the constrained system";
+        self.solved(what, b, w, |ctx, b, w, v| unsafe {
+            vc_constrained_solve(
+                ctx,
+                np as PetscInt,
+                removed_rows.as_ptr(),
+                terms.removed.as_ptr(),
+                ns as PetscInt,
+                stiffness_rows.as_ptr(),
+                terms.stiffness.as_ptr(),
+                hierarchy as c_int,
+                rtol,
+                c_int::from(of_start),
+                b,
+                w,
+                v,
             )
         })
     }
@@ -593,16 +547,6 @@ impl Drop for Krylov {
 /// held at zero, nor prescribed (`[[dirichlet]]` values, numbered from n_free on).
 fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
     disc.free[g].filter(|&f| f < disc.n_free)
-}
-
-/// A rank's share of K_A (`Layout`): its rows, its stored entries, and the values of other
-/// ranks' rows that a product with K_A fetches (its rows' distinct columns outside them): a
-/// Krylov iteration's work and messages on that rank.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RankShare {
-    pub rows: usize,
-    pub entries: usize,
-    pub ghosts: usize,
 }
 
 /// d where every node's unknowns are d consecutive ones starting at a multiple of d, or

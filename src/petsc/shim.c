@@ -69,6 +69,19 @@ typedef struct {
 
 typedef struct VcKsp VcKsp;
 
+/* A Krylov solve's request and outcome (vc_ksp_solve, vc_constrained_solve): the question
+ * `requested(flag)` (NULL: none), asked at every iteration, whether to give the solve up;
+ * then its iterations, converged reason (< 0: diverged), final residual norm and whether
+ * it was given up. */
+typedef struct {
+  int (*requested)(void *);
+  void     *flag;
+  PetscInt  its;
+  int       reason;
+  PetscReal rnorm;
+  int       given_up;
+} VcSolve;
+
 /* A KSP's convergence test (PETSc's, after the options), wrapped by converged_or_given_up. */
 typedef struct {
   PetscErrorCode (*inner)(KSP, PetscInt, PetscReal, KSPConvergedReason *, void *);
@@ -85,12 +98,10 @@ struct VcKsp {
    * (displ) for gathering the solution; count and displ NULL on one process. */
   PetscInt     lo, m;
   PetscMPIInt *count, *displ;
-  /* The convergence tests of K_A's KSP and of the constrained one; the request to give the
-   * solve in progress up (NULL: none), and whether it did. */
-  Watch kw, cw;
-  int (*requested)(void *);
-  void     *flag;
-  PetscBool given_up;
+  /* The convergence tests of K_A's KSP and of the constrained one; the solve in progress
+   * (NULL between solves), whose request they ask. */
+  Watch    kw, cw;
+  VcSolve *solve;
   /* The constrained system, created with the KSP where `newton` (else NULL): its assembled
    * matrix N, the matrix Q its preconditioner was built from, its KSP, the terms of the
    * solve in progress. */
@@ -196,7 +207,8 @@ static PetscErrorCode converged_or_given_up(KSP ksp, PetscInt it, PetscReal rnor
 {
   Watch   *w = (Watch *)ctx;
   VcKsp   *s = w->s;
-  int      stop = s->requested ? s->requested(s->flag) : 0;
+  VcSolve *v = s->solve;
+  int      stop = v && v->requested ? v->requested(v->flag) : 0;
   MPI_Comm comm;
 
   PetscFunctionBeginUser;
@@ -205,7 +217,7 @@ static PetscErrorCode converged_or_given_up(KSP ksp, PetscInt it, PetscReal rnor
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &stop, 1, MPI_INT, MPI_MAX, comm));
   if (stop && *reason == KSP_CONVERGED_ITERATING) {
     *reason = KSP_DIVERGED_NULL;
-    s->given_up = PETSC_TRUE;
+    v->given_up = 1;
   }
   PetscFunctionReturn(0);
 }
@@ -293,42 +305,38 @@ static PetscErrorCode gathered(VcKsp *s, PetscScalar *x)
 }
 
 /* x ← the solution of ksp's system (K_A's or the constrained one) with right side b, from
- * the initial guess in x; its iterations, converged reason (< 0: diverged) and final
- * residual norm. b and x are whole on every rank (each gives the same b), and x is whole on
- * every rank after it. `requested(flag)` (NULL: none), asked at every iteration, gives the
- * solve up where it returns nonzero on any rank: then `given_up` and x holds an iterate. */
-static PetscErrorCode solved(VcKsp *s, KSP ksp, const PetscScalar *b, PetscScalar *x,
-                             int (*requested)(void *), void *flag, PetscInt *its, int *reason,
-                             PetscReal *rnorm, int *given_up)
+ * the initial guess in x, asking and filling v (VcSolve). b and x are whole on every rank
+ * (each gives the same b), and x is whole on every rank after it; where a rank's request
+ * gave the solve up, x holds an iterate. */
+static PetscErrorCode solved(VcKsp *s, KSP ksp, const PetscScalar *b, PetscScalar *x, VcSolve *v)
 {
   KSPConvergedReason r;
+  PetscErrorCode     err;
 
   PetscFunctionBeginUser;
-  s->requested = requested;
-  s->flag = flag;
-  s->given_up = PETSC_FALSE;
+  v->given_up = 0;
   PetscCall(VecPlaceArray(s->b, b + s->lo));
   PetscCall(VecPlaceArray(s->x, x + s->lo));
-  PetscCall(KSPSolve(ksp, s->b, s->x));
+  s->solve = v; /* for the convergence test, during this call only */
+  err = KSPSolve(ksp, s->b, s->x);
+  s->solve = NULL;
+  PetscCall(err);
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
   PetscCall(gathered(s, x));
-  PetscCall(KSPGetIterationNumber(ksp, its));
+  PetscCall(KSPGetIterationNumber(ksp, &v->its));
   PetscCall(KSPGetConvergedReason(ksp, &r));
-  PetscCall(KSPGetResidualNorm(ksp, rnorm));
-  *reason = (int)r;
-  *given_up = s->given_up;
-  s->requested = NULL;
+  PetscCall(KSPGetResidualNorm(ksp, &v->rnorm));
+  v->reason = (int)r;
   PetscFunctionReturn(0);
 }
 
 /* x ← K⁻¹ b by K_A's KSP, as `solved` says. */
-int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, int (*requested)(void *),
-                 void *flag, PetscInt *its, int *reason, PetscReal *rnorm, int *given_up)
+int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, VcSolve *v)
 {
   VcKsp *s = (VcKsp *)ctx;
 
-  PetscCall(solved(s, s->ksp, b, x, requested, flag, its, reason, rnorm, given_up));
+  PetscCall(solved(s, s->ksp, b, x, v));
   return 0;
 }
 
@@ -795,8 +803,7 @@ static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
 int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const PetscScalar *pdirs,
                          PetscInt ns, const PetscInt *sdofs, const PetscScalar *smats, int rebuild,
                          PetscReal rtol, int of_start, const PetscScalar *b, PetscScalar *x,
-                         int (*requested)(void *), void *flag, PetscInt *its, int *reason,
-                         PetscReal *rnorm, int *given_up)
+                         VcSolve *v)
 {
   VcKsp *s = (VcKsp *)ctx;
 
@@ -815,7 +822,7 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
     PetscCall(watch(s, s->kc, &s->cw));
     s->of_start = of_start;
   }
-  PetscCall(solved(s, s->kc, b, x, requested, flag, its, reason, rnorm, given_up));
+  PetscCall(solved(s, s->kc, b, x, v));
   return 0;
 }
 

@@ -253,26 +253,36 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
 /// Refuses (exit 2) a run on `ranks` MPI ranks whose steps do not spread over them
 /// (`crate::ranks`); `how` says where the count comes from ("started on 2 MPI ranks").
 pub fn check_ranks(scene: &Scene, solver: &Descriptor, ranks: usize, how: &str) -> Result<()> {
+    match why_not_spread(solver, ranks) {
+        None => Ok(()),
+        Some(why) => Err(Error::input(format!(
+            "{}: {how}, but {why}. Run it as one process, without mpirun or srun -n",
+            scene.path.display(),
+        ))),
+    }
+}
+
+/// Why a run of `solver` cannot spread over `ranks` MPI ranks (`crate::ranks`); None where
+/// it can, or is one rank.
+fn why_not_spread(solver: &Descriptor, ranks: usize) -> Option<String> {
     if ranks == 1 || solver.spreads() {
-        return Ok(());
+        return None;
     }
     if !cfg!(feature = "petsc") {
-        return Err(Error::input(format!(
-            "{how}: this build has no MPI, and a run is one process; to spread a run whose \
-             steps are PETSc solves over MPI ranks (docs/cluster.md), {}",
+        return Some(format!(
+            "this build has no MPI, and a run is one process; to spread a run whose steps are \
+             PETSc solves over MPI ranks (docs/cluster.md), {}",
             crate::solver::choice::PETSC_HOW
-        )));
+        ));
     }
     let this = match solver.contact_solver() {
         Some(c) => format!("contact solver {}", c.key()),
         None => "the stored Cholesky factor of K_A".to_string(),
     };
-    Err(Error::input(format!(
-        "{}: {how}, but {}; this run's steps take the {this}. Run it as one process, without \
-         mpirun or srun -n",
-        scene.path.display(),
-        crate::ranks::WHAT_SPREADS,
-    )))
+    Some(format!(
+        "{}; this run's steps take the {this}",
+        crate::ranks::WHAT_SPREADS
+    ))
 }
 
 /// `check_ranks` for the ranks this run or resume was started on.
@@ -547,8 +557,7 @@ pub fn check_memory(
     show: impl FnOnce(&str),
 ) -> Result<()> {
     #[cfg(feature = "petsc")]
-    if let crate::solver::choice::Build::Krylov { newton } = *solver.build() {
-        let plan = crate::ranks::Plan::new(disc, ranks, newton, steps.memory)?;
+    if let Some(plan) = ranks_plan(disc, solver, ranks, steps.memory)? {
         show(&plan.to_string());
         return plan.check();
     }
@@ -556,6 +565,24 @@ pub fn check_memory(
     match solver.contact() {
         Some(plan) => plan.check(steps),
         None => Ok(()),
+    }
+}
+
+/// What a rank of a run through PETSc over `ranks` ranks holds and does (`ranks::Plan`,
+/// what `check --ranks` prints), holding `steps` bytes besides its setup; None for a run
+/// that does not go through PETSc.
+#[cfg(feature = "petsc")]
+fn ranks_plan(
+    disc: &Discretization,
+    solver: &Descriptor,
+    ranks: usize,
+    steps: f64,
+) -> Result<Option<crate::ranks::Plan>> {
+    match *solver.build() {
+        crate::solver::choice::Build::Krylov { newton } => {
+            crate::ranks::Plan::new(disc, ranks, newton, steps).map(Some)
+        }
+        _ => Ok(None),
     }
 }
 

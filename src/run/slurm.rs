@@ -84,8 +84,18 @@ pub fn emit(
     let mut solver = Descriptor::of_run(&scene, &disc)?;
     check_ranks(job, &solver)?;
     let estimate = Estimate::new(&scene, &disc, 0);
-    let ranks = job.nodes * job.ntasks_per_node;
-    let task = match rank_memory(&disc, &solver, ranks, estimate.memory)? {
+    // A run through PETSc: what `check --ranks` says a rank holds.
+    #[cfg(feature = "petsc")]
+    let rank = super::ranks_plan(
+        &disc,
+        &solver,
+        job.nodes * job.ntasks_per_node,
+        estimate.memory,
+    )?
+    .map(|p| p.per_rank());
+    #[cfg(not(feature = "petsc"))]
+    let rank: Option<f64> = None;
+    let task = match rank {
         Some(rank) => rank,
         None => {
             let factor = solver.factor_bytes(&disc)?.unwrap_or(0.0);
@@ -129,38 +139,16 @@ pub fn emit(
     Ok((path, memory))
 }
 
-/// The memory of a rank of a run through PETSc over `ranks` ranks, what `check --ranks`
-/// says (`crate::ranks::Plan`: this process's setup peak, what the steps hold, its share of
-/// PETSc's); None for a run that does not go through PETSc.
-fn rank_memory(
-    disc: &crate::fem::Discretization,
-    solver: &Descriptor,
-    ranks: usize,
-    steps: f64,
-) -> Result<Option<f64>> {
-    #[cfg(feature = "petsc")]
-    if let crate::solver::choice::Build::Krylov { newton } = *solver.build() {
-        return Ok(Some(
-            crate::ranks::Plan::new(disc, ranks.max(1), newton, steps)?.per_rank(),
-        ));
-    }
-    let _ = (disc, solver, ranks, steps);
-    Ok(None)
-}
-
 /// Refuses (exit 2) a job of several ranks whose run does not spread over them
 /// (`crate::ranks`), and a count of none.
 fn check_ranks(job: &JobOptions, solver: &Descriptor) -> Result<()> {
     let ranks = job.nodes * job.ntasks_per_node;
-    let why = if ranks == 0 {
-        "a job has at least one node and one task on each"
-    } else if ranks == 1 || (cfg!(feature = "petsc") && solver.spreads()) {
-        return Ok(());
-    } else if cfg!(feature = "petsc") {
-        crate::ranks::WHAT_SPREADS
-    } else {
-        "a run is one process in this build (no MPI: build with --features petsc to spread a \
-         run whose steps are PETSc solves; docs/cluster.md)"
+    let why = match ranks {
+        0 => "a job has at least one node and one task on each".to_string(),
+        _ => match super::why_not_spread(solver, ranks) {
+            None => return Ok(()),
+            Some(why) => why,
+        },
     };
     Err(Error::input(format!(
         "run --emit slurm: --nodes {} --ntasks-per-node {}: {why}; otherwise write --nodes 1 \

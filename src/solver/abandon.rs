@@ -4,8 +4,9 @@
 //! shared between whoever makes it (the run's signal thread: a second SIGINT/SIGTERM, see
 //! `run::interrupt`) and the solver of the step; the dual iterations (dense, sparse,
 //! matrix-free) look at it before every iteration and the conjugate gradients of the
-//! matrix-free Newton systems before every product, and end with
-//! `StepStatus::Abandoned`. The time loop then puts back the multipliers the step started
+//! matrix-free Newton systems before every product, and end with `StepStatus::Abandoned`;
+//! so do PETSc's Krylov solves (a linear step's, the active set's Newton systems'), at
+//! every iteration. The time loop then puts back the w and the multipliers the step started
 //! from: the loop stands where it stood before the step, exactly as a stop after the
 //! previous step leaves it, so a checkpoint of it resumes bit for bit (the step is solved
 //! again from its start). Clarabel's interior-point iterations are not interrupted.

@@ -401,8 +401,6 @@ pub struct ActiveSetSolver {
     /// (K + S) w.
     r: Vec<f64>,
     counts: ActiveSetCounts,
-    /// The w a step started from, put back where the step is given up.
-    start: Vec<f64>,
 }
 
 impl ActiveSetSolver {
@@ -427,7 +425,6 @@ impl ActiveSetSolver {
             rhs: vec![0.0; diagonal.len()],
             r: vec![0.0; diagonal.len()],
             counts: ActiveSetCounts::default(),
-            start: vec![0.0; diagonal.len()],
         }
     }
 
@@ -441,7 +438,8 @@ impl ActiveSetSolver {
 
     /// Solves the step: `w` in, the previous step's w; out, w_n. `z` in, the previous
     /// multipliers; out, the step's. A step whose Krylov solve is given up (the system's
-    /// request: `solver::abandon`) ends `Abandoned` with w as it came in.
+    /// request: `solver::abandon`) ends `Abandoned` with an iterate in w, which the time loop
+    /// puts back.
     pub fn solve(
         &mut self,
         system: &mut impl ConstrainedSystem,
@@ -461,7 +459,6 @@ impl ActiveSetSolver {
         let mut seen = vec![sets.signature()];
         let mut allowed = usize::MAX;
         let mut built: Option<Sets> = None;
-        self.start.copy_from_slice(w);
         for newton in 1..=s.max_iterations {
             let tolerance = match exact {
                 true => Tolerance::OfRhs(s.krylov_tolerance),
@@ -483,7 +480,6 @@ impl ActiveSetSolver {
             krylov += lin.iterations;
             self.count_system(lin.iterations);
             if lin.given_up {
-                w.copy_from_slice(&self.start);
                 return Ok(report(StepStatus::Abandoned, newton, kkt_before));
             }
             if let Some(reason) = lin.failed {

@@ -241,12 +241,8 @@ fn krylov_step(
     b: &[f64],
     w: &mut [f64],
 ) -> crate::Result<StepReport> {
-    // A step given up leaves w as it found it (the loop's state before the step).
-    let start = krylov.can_give_up().then(|| w.to_vec());
+    // A step given up leaves an iterate in w, which the time loop puts back.
     let s = krylov.solve(b, w)?;
-    if let (true, Some(start)) = (s.given_up, start) {
-        w.copy_from_slice(&start);
-    }
     Ok(StepReport {
         status: match s.failed {
             _ if s.given_up => StepStatus::Abandoned,

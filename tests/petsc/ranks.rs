@@ -113,6 +113,18 @@ fn contact_scenes(dir: &Path) -> Vec<std::path::PathBuf> {
         .collect()
 }
 
+/// The block linear (`linear_scenes`) and with contact and friction (`contact_scenes`),
+/// each in a directory of its own under `dir`, for the tests that run both.
+fn both_blocks(dir: &Path) -> [std::path::PathBuf; 2] {
+    let (linear, contact) = (dir.join("linear"), dir.join("contact"));
+    std::fs::create_dir_all(&linear).unwrap();
+    std::fs::create_dir_all(&contact).unwrap();
+    [
+        linear_scenes(&linear).swap_remove(0),
+        contact_scenes(&contact).swap_remove(0),
+    ]
+}
+
 /// Each scene run on 1, 2 and 3 ranks agrees with the one-process run: bit for bit on one
 /// rank, to 1e-8 relative in u_N on more, with the same files in its directory.
 fn agree_on_1_2_and_3_ranks(scenes: &[std::path::PathBuf]) {
@@ -184,11 +196,9 @@ fn a_run_with_contact_and_friction_on_1_2_and_3_ranks_agrees_with_one_process() 
 #[test]
 fn stopped_on_3_ranks_a_run_resumes_on_2_and_on_3() {
     let tmp = tempfile::tempdir().unwrap();
-    let (linear, contact) = (tmp.path().join("linear"), tmp.path().join("contact"));
-    std::fs::create_dir_all(&linear).unwrap();
-    std::fs::create_dir_all(&contact).unwrap();
-    stopped_on_3_resumed_on_2_and_on_3(&linear_scenes(&linear)[0]);
-    stopped_on_3_resumed_on_2_and_on_3(&contact_scenes(&contact)[0]);
+    for scene in &both_blocks(tmp.path()) {
+        stopped_on_3_resumed_on_2_and_on_3(scene);
+    }
 }
 
 /// `scene` stopped on 3 ranks after step 5 and resumed on 3 equals the run never stopped on
@@ -298,10 +308,7 @@ fn signalled(signal: &str, which: &[usize], scene: &Path) -> (i32, String, Durat
 #[test]
 fn sigterm_to_every_rank_stops_after_a_step_with_a_checkpoint_and_the_run_resumes() {
     let tmp = tempfile::tempdir().unwrap();
-    let (linear, contact) = (tmp.path().join("linear"), tmp.path().join("contact"));
-    std::fs::create_dir_all(&linear).unwrap();
-    std::fs::create_dir_all(&contact).unwrap();
-    for scene in [&linear_scenes(&linear)[0], &contact_scenes(&contact)[0]] {
+    for scene in &both_blocks(tmp.path()) {
         let (code, text, _) = signalled("TERM", &[0, 1], scene);
         let out = scene.parent().unwrap().join("o");
         assert_eq!(code, 143, "{text}");
@@ -342,10 +349,7 @@ fn sigterm_to_one_rank_stops_them_all_after_the_same_step() {
 #[test]
 fn sigkill_of_one_rank_ends_the_others_and_the_run_resumes_from_its_checkpoint() {
     let tmp = tempfile::tempdir().unwrap();
-    let (linear, contact) = (tmp.path().join("linear"), tmp.path().join("contact"));
-    std::fs::create_dir_all(&linear).unwrap();
-    std::fs::create_dir_all(&contact).unwrap();
-    for scene in [&linear_scenes(&linear)[0], &contact_scenes(&contact)[0]] {
+    for scene in &both_blocks(tmp.path()) {
         let (code, text, took) = signalled("KILL", &[1], scene);
         assert_ne!(code, 0, "{text}");
         assert!(
@@ -493,10 +497,8 @@ fn a_slurm_job_of_two_tasks_runs_the_scene_on_two_ranks() {
 fn a_petsc_step_given_up_resumes_as_the_run_never_stopped() {
     use viscontact::run::{resume, run, Outcome, ResumeOptions};
     let tmp = tempfile::tempdir().unwrap();
-    let contact = tmp.path().join("contact");
-    std::fs::create_dir_all(&contact).unwrap();
     let _one = super::PETSC.lock().unwrap_or_else(|e| e.into_inner());
-    for scene in [&linear_scenes(tmp.path())[0], &contact_scenes(&contact)[0]] {
+    for scene in &both_blocks(tmp.path()) {
         let dir = scene.parent().unwrap();
         let (full, part) = (dir.join("full"), dir.join("part"));
         common::finished(run(scene, &common::run_options(&full, &[], None)).unwrap());
