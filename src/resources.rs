@@ -210,21 +210,21 @@ pub fn active_set_bytes(m: usize, n: usize, nnz: usize) -> f64 {
 /// PETSc's part of a run through it on a rank that holds `entries` of K_A's, in bytes, on
 /// one of `ranks` ranks, with the active set's Newton systems where `newton`: what the
 /// rank holds at its peak beyond its setup's, fitted to the fine plate's peaks (367 470
-/// dofs, 16.0 M entries; docs/cluster.md, "Planning"). Counted from the matrices alone,
-/// AIJ at 12 bytes an entry, it would be K_A and GAMG's hierarchy (0.8 of it), 21.6 bytes
-/// an entry, and for the active set the Newton matrix N and Q, the N its multigrid was
-/// built from, Q's hierarchy and K_A's coarse operators (0.4), 50.4 bytes an entry (K_A's
-/// own hierarchy is never built there), and on several ranks the shim's copy of the rank's
-/// rows that N is made from, 28 more; the runs' peaks held 41 and 67 bytes an entry on
-/// one rank (GAMG's setup and the Krylov vectors besides) and 97 and 145 on each of two
-/// (the off-rank blocks, their column maps and message buffers, the rank's rows of K_A
-/// renumbered for PETSc).
+/// dofs, 16.0 M entries, a setup peak of 1.17 GB; docs/cluster.md, "Planning"). Counted
+/// from the matrices alone, AIJ at 12 bytes an entry, it would be K_A and GAMG's hierarchy
+/// (0.8 of it), 21.6 bytes an entry, and for the active set the Newton matrix N and Q, the
+/// N its multigrid was built from, Q's hierarchy and K_A's coarse operators (0.4), 50.4
+/// bytes an entry (K_A's own hierarchy is never built there), and on several ranks the
+/// shim's copy of the rank's rows that N is made from, 28 more; the runs' peaks held 48
+/// and 75 bytes an entry on one rank (GAMG's setup and the Krylov vectors besides) and 96
+/// and 160 on each of two (the off-rank blocks, their column maps and message buffers, the
+/// rank's rows of K_A renumbered for PETSc).
 pub fn petsc_bytes(entries: usize, newton: bool, ranks: usize) -> f64 {
     let per_entry = match (newton, ranks) {
-        (false, 1) => 41.0,
-        (false, _) => 97.0,
-        (true, 1) => 67.0,
-        (true, _) => 145.0,
+        (false, 1) => 48.0,
+        (false, _) => 96.0,
+        (true, 1) => 75.0,
+        (true, _) => 160.0,
     };
     per_entry * entries as f64
 }
