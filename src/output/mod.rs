@@ -42,6 +42,7 @@
 
 mod lines;
 mod pvd;
+mod pvtu;
 pub mod read;
 mod verify;
 mod vtkhdf;
@@ -145,7 +146,9 @@ impl Options {
 /// `nodes_per_cell` node indices per cell, concatenated (3 → VTK_TRIANGLE, 4 → VTK_TETRA,
 /// anything else is an input error); `region`: the gmsh physical tag of each cell, or empty
 /// for none; `material_region`: each cell's `[[material.region]]` entry (0 outside every
-/// region, i for the i-th entry), or empty for none.
+/// region, i for the i-th entry), or empty for none; `pieces`: each cell's piece, for a run
+/// over MPI ranks whose `.vtu` frames are a `.pvtu` with a piece per rank (`pvtu.rs`), or
+/// empty for one file a frame.
 #[derive(Clone, Copy, Debug)]
 pub struct Geometry<'a> {
     pub points: &'a [[f64; 3]],
@@ -153,6 +156,7 @@ pub struct Geometry<'a> {
     pub nodes_per_cell: usize,
     pub region: &'a [i32],
     pub material_region: &'a [i32],
+    pub pieces: &'a [u32],
 }
 
 impl<'a> Geometry<'a> {
@@ -263,6 +267,8 @@ pub fn vtu_name(step: usize) -> String {
     format!("solution_{step:06}.vtu")
 }
 
+pub use pvtu::pvtu_name;
+
 /// A named field: `components` values per point (or per cell), row-major.
 #[derive(Clone, Copy, Debug)]
 pub struct Field<'a> {
@@ -326,7 +332,11 @@ pub struct Series {
 
 /// The writer thread of each format.
 enum Sink {
-    Vtu(writer::Writer<vtu::Grid>),
+    Vtu {
+        /// Whether a frame is a `.pvtu` in pieces (else one `.vtu`).
+        pieces: bool,
+        writer: writer::Writer<pvtu::Frames>,
+    },
     Vtkhdf {
         /// The step of each frame in `files`.
         steps: Vec<usize>,
@@ -363,14 +373,21 @@ impl Series {
         let g = geometry.chosen(options);
         let sizes = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
         let (sink, files) = match options.format {
-            Format::Vtu => (
-                Sink::Vtu(writer::Writer::new(vtu::Grid::new(
-                    &g,
-                    run_id,
-                    options.compression,
-                )?)),
-                Vec::new(),
-            ),
+            Format::Vtu => {
+                let pieces = !g.pieces.is_empty();
+                let frames = match pieces {
+                    false => pvtu::Frames::One(Box::new(vtu::Grid::new(
+                        &g,
+                        run_id,
+                        options.compression,
+                    )?)),
+                    true => {
+                        pvtu::Frames::Pieces(pvtu::Pieces::new(&g, run_id, options.compression)?)
+                    }
+                };
+                let writer = writer::Writer::new(frames);
+                (Sink::Vtu { pieces, writer }, Vec::new())
+            }
             Format::Vtkhdf => (
                 Sink::Vtkhdf {
                     steps: kept.iter().map(|&(s, _)| s).collect(),
@@ -532,7 +549,8 @@ impl Series {
             )));
         }
         Ok(match self.sink {
-            Sink::Vtu(_) => vtu_name(step),
+            Sink::Vtu { pieces: false, .. } => vtu_name(step),
+            Sink::Vtu { pieces: true, .. } => pvtu_name(step),
             Sink::Vtkhdf { .. } => VTKHDF_NAME.to_string(),
         })
     }
@@ -549,7 +567,7 @@ impl Series {
         let path = self.dir.join(&name);
         let arrays = arrays(self.options.clone(), self.sizes, path.clone(), step, make);
         match &mut self.sink {
-            Sink::Vtu(writer) => {
+            Sink::Vtu { writer, .. } => {
                 relist(&mut self.files, step, time, name);
                 let due = self.pvd_written.is_none_or(|t| t.elapsed() >= PVD_EVERY);
                 self.pvd_stale = !due;
@@ -599,12 +617,12 @@ impl Series {
             self.pvd_stale = false;
             self.pvd_written = Some(Instant::now());
             let pvd = Some(collection(&self.dir, &self.files, &self.run_id));
-            if let Sink::Vtu(writer) = &mut self.sink {
+            if let Sink::Vtu { writer, .. } = &mut self.sink {
                 writer.send(Box::new(move || Ok(vtu::Job { vtu: None, pvd })))?;
             }
         }
         let (finished, written) = match &mut self.sink {
-            Sink::Vtu(writer) => (writer.finish(), writer.take_written()),
+            Sink::Vtu { writer, .. } => (writer.finish(), writer.take_written()),
             Sink::Vtkhdf { writer, .. } => (writer.finish(), writer.take_written()),
         };
         for w in written {
@@ -617,7 +635,7 @@ impl Series {
     /// [`Series::finish`]: what a checkpoint records, `verify.rs`).
     pub fn checksums(&self) -> Vec<FrameSum> {
         let steps: Vec<Option<usize>> = match &self.sink {
-            Sink::Vtu(_) => self.files.iter().map(|(_, f)| step_of(f)).collect(),
+            Sink::Vtu { .. } => self.files.iter().map(|(_, f)| step_of(f)).collect(),
             Sink::Vtkhdf { steps, .. } => steps.iter().map(|&s| Some(s)).collect(),
         };
         steps
@@ -765,23 +783,38 @@ fn frame_error(path: &Path, step: usize, msg: String) -> Error {
     Error::input(format!("{} (output step {step}): {msg}", path.display()))
 }
 
-/// The step number encoded in a `solution_NNNNNN.vtu` name.
+/// The step number encoded in a `solution_NNNNNN.vtu` or `solution_NNNNNN.pvtu` name.
 fn step_of(file: &str) -> Option<usize> {
-    file.strip_prefix("solution_")?
-        .strip_suffix(".vtu")?
-        .parse()
-        .ok()
+    let rest = file.strip_prefix("solution_")?;
+    let digits = rest.strip_suffix(".vtu").or(rest.strip_suffix(".pvtu"))?;
+    digits.parse().ok()
+}
+
+/// The frame file of step `step` in `dir`: its `.pvtu` where there is one (a run over MPI
+/// ranks), else its `.vtu`.
+fn frame_file(dir: &Path, step: usize) -> String {
+    match dir.join(pvtu_name(step)).exists() {
+        true => pvtu_name(step),
+        false => vtu_name(step),
+    }
 }
 
 /// The CRC-32 and length of the file at `path`, read in blocks.
 pub(crate) fn crc32_of_file(path: &Path) -> std::io::Result<(u32, u64)> {
+    let mut h = crc32fast::Hasher::new();
+    let len = hash_file(path, &mut h)?;
+    Ok((h.finalize(), len))
+}
+
+/// Feeds the file at `path` to `h`, in blocks; returns its length.
+fn hash_file(path: &Path, h: &mut crc32fast::Hasher) -> std::io::Result<u64> {
     use std::io::Read;
     let mut file = std::fs::File::open(path)?;
     let mut buf = vec![0u8; 1 << 18];
-    let (mut h, mut len) = (crc32fast::Hasher::new(), 0u64);
+    let mut len = 0u64;
     loop {
         match file.read(&mut buf) {
-            Ok(0) => return Ok((h.finalize(), len)),
+            Ok(0) => return Ok(len),
             Ok(k) => {
                 h.update(&buf[..k]);
                 len += k as u64;
@@ -844,6 +877,8 @@ mod tests {
         assert_eq!(step_of("solution_1234567.vtu"), Some(1234567));
         assert_eq!(step_of("other_000012.vtu"), None);
         assert_eq!(step_of("solution_x.vtu"), None);
+        assert_eq!(step_of("solution_000012.pvtu"), Some(12));
+        assert_eq!(step_of("solution_000012/solution_000012_0.vtu"), None);
     }
 
     #[test]

@@ -122,10 +122,85 @@ pub fn read_pvd(path: &Path) -> Result<Vec<(f64, PathBuf)>> {
     Ok(entries.into_iter().map(|(t, f)| (t, dir.join(f))).collect())
 }
 
-/// Reads a `.vtu` file written by [`super::Series`].
+/// Reads a `.vtu` file written by [`super::Series`], or a `.pvtu` and its pieces as the one
+/// mesh they were cut from (its points in the mesh's order).
 pub fn read_vtu(path: &Path) -> Result<Vtu> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if path.extension().is_some_and(|e| e == "pvtu") {
+        return read_pieces(path, &String::from_utf8_lossy(&bytes));
+    }
     parse_vtu(&bytes).map_err(|m| Error::input(format!("{}: {m}", path.display())))
+}
+
+/// The pieces of the `.pvtu` at `path` (`text`), joined.
+fn read_pieces(path: &Path, text: &str) -> Result<Vtu> {
+    let parent = path.parent().unwrap_or(Path::new("."));
+    let pieces = (super::pvtu::sources(text).into_iter())
+        .map(|source| read_vtu(&parent.join(source)))
+        .collect::<Result<Vec<Vtu>>>()?;
+    join(pieces).map_err(|m| Error::input(format!("{}: {m}", path.display())))
+}
+
+/// Pieces as the one mesh they were cut from: each point where its global id
+/// (`GlobalPointIds`) puts it, so that point fields are in the mesh's order, and the cells
+/// piece after piece.
+fn join(pieces: Vec<Vtu>) -> std::result::Result<Vtu, String> {
+    let ids = |v: &Vtu| -> std::result::Result<Vec<usize>, String> {
+        let ids = (v.point_field(super::vtu::GLOBAL_IDS))
+            .ok_or_else(|| format!("a piece has no point array {}", super::vtu::GLOBAL_IDS))?;
+        Ok(ids.values.iter().map(|&x| x as usize).collect())
+    };
+    let ids = pieces
+        .iter()
+        .map(ids)
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let n = ids
+        .iter()
+        .flatten()
+        .map(|&i| i + 1)
+        .max()
+        .ok_or("lists no pieces")?;
+    let empty = |arrays: &[Array], count: usize| -> Vec<Array> {
+        (arrays.iter().filter(|a| a.name != super::vtu::GLOBAL_IDS))
+            .map(|a| Array {
+                name: a.name.clone(),
+                components: a.components,
+                values: vec![f64::NAN; a.components * count],
+            })
+            .collect()
+    };
+    let mut whole = Vtu {
+        points: vec![[f64::NAN; 3]; n],
+        cells: Vec::new(),
+        point_data: empty(&pieces[0].point_data, n),
+        cell_data: empty(&pieces[0].cell_data, 0),
+    };
+    for (piece, ids) in pieces.into_iter().zip(ids) {
+        ids.iter()
+            .zip(&piece.points)
+            .for_each(|(&i, &p)| whole.points[i] = p);
+        let cells = piece.cells.iter();
+        (whole.cells).extend(cells.map(|c| c.iter().map(|&k| ids[k]).collect()));
+        for a in whole.point_data.iter_mut() {
+            let k = a.components;
+            let theirs = piece.point_field(&a.name).filter(|b| b.components == k);
+            let theirs = theirs.ok_or_else(|| format!("a piece has no point field {}", a.name))?;
+            for (j, &i) in ids.iter().enumerate() {
+                a.values[i * k..(i + 1) * k].copy_from_slice(&theirs.values[j * k..(j + 1) * k]);
+            }
+        }
+        for a in whole.cell_data.iter_mut() {
+            let theirs = piece
+                .cell_field(&a.name)
+                .filter(|b| b.components == a.components);
+            let theirs = theirs.ok_or_else(|| format!("a piece has no cell field {}", a.name))?;
+            a.values.extend_from_slice(&theirs.values);
+        }
+    }
+    match whole.points.iter().position(|p| p[0].is_nan()) {
+        Some(i) => Err(format!("point {i} of the mesh is in none of its pieces")),
+        None => Ok(whole),
+    }
 }
 
 /// The bytes of the `_`-prefixed raw appended section, and whether they are zlib blocks.
@@ -162,11 +237,13 @@ pub fn parse_vtu(bytes: &[u8]) -> std::result::Result<Vtu, String> {
     if !text.contains("header_type=\"UInt64\"") {
         return Err("only header_type=\"UInt64\" is supported".into());
     }
+    // `<PointData>`, or with attributes (`<PointData GlobalIds="…">`).
     let section = |tag: &str| -> &str {
-        let open = format!("<{tag}>");
-        let close = format!("</{tag}>");
-        match (text.find(&open), text.find(&close)) {
-            (Some(a), Some(b)) if b > a => &text[a + open.len()..b],
+        let open = [format!("<{tag}>"), format!("<{tag} ")];
+        let start = open.iter().filter_map(|o| text.find(o)).min();
+        let start = start.and_then(|a| text[a..].find('>').map(|e| a + e + 1));
+        match (start, text.find(&format!("</{tag}>"))) {
+            (Some(a), Some(b)) if b >= a => &text[a..b],
             _ => "",
         }
     };
@@ -510,6 +587,7 @@ mod tests {
                     nodes_per_cell: 3,
                     region: &[7, 9],
                     material_region: &[],
+                    pieces: &[],
                 };
                 let options = Options {
                     compression,

@@ -38,7 +38,8 @@
 
 use std::path::Path;
 
-use super::{crc32_of_file, step_of, vtkhdf, vtu_name, Format, Geometry, Options, Series};
+use super::pvtu::crc32_of_frame;
+use super::{frame_file, step_of, vtkhdf, Format, Geometry, Options, Series};
 use super::{Precision, VTKHDF_NAME};
 use crate::{Error, Result};
 
@@ -106,7 +107,10 @@ impl Series {
             Format::Vtu => {
                 check_vtus(dir, run_id, &kept, resumed)?;
                 let mut s = Series::create(dir, geometry, run_id, options)?;
-                s.files = kept.iter().map(|f| (f.time, vtu_name(f.step))).collect();
+                s.files = kept
+                    .iter()
+                    .map(|f| (f.time, frame_file(dir, f.step)))
+                    .collect();
                 s
             }
             Format::Vtkhdf => {
@@ -129,7 +133,7 @@ impl Series {
                 .files
                 .iter()
                 .filter_map(|(time, file)| {
-                    let (crc32, bytes) = crc32_of_file(&self.dir.join(file)).ok()?;
+                    let (crc32, bytes) = crc32_of_frame(&self.dir.join(file)).ok()?;
                     Some(FrameSum {
                         step: step_of(file)?,
                         time: *time,
@@ -168,12 +172,12 @@ fn damaged_file(path: &Path, why: &str, step: Option<usize>) -> Error {
     ))
 }
 
-/// Every kept `.vtu` is there with the recorded bytes.
+/// Every kept `.vtu` (or `.pvtu` and its pieces) is there with the recorded bytes.
 fn check_vtus(dir: &Path, run_id: &str, kept: &[FrameSum], resumed: &Resumed) -> Result<()> {
     let mut flaws = Vec::new();
     for f in kept {
-        let path = dir.join(vtu_name(f.step));
-        let flaw = match crc32_of_file(&path) {
+        let path = dir.join(frame_file(dir, f.step));
+        let flaw = match crc32_of_frame(&path) {
             Ok((crc32, bytes)) if (crc32, bytes) == (f.crc32, f.bytes) => continue,
             Ok(_) => match vtu_run_id(&path) {
                 Some(id) if id != run_id => Flaw::OtherRun(id),
@@ -190,12 +194,16 @@ fn check_vtus(dir: &Path, run_id: &str, kept: &[FrameSum], resumed: &Resumed) ->
     }
 }
 
-/// The run id in the `<FieldData>` of a `.vtu` (in its first 4 kB), if it has one.
+/// The run id in the `<FieldData>` of a `.vtu` (in its first 4 kB), or in the comment of a
+/// `.pvtu`, if it has one.
 fn vtu_run_id(path: &Path) -> Option<String> {
     use std::io::Read;
     let mut head = vec![0u8; 4096];
     let len = std::fs::File::open(path).ok()?.read(&mut head).ok()?;
     let text = String::from_utf8_lossy(&head[..len]);
+    if path.extension().is_some_and(|e| e == "pvtu") {
+        return super::pvd::run_id(&text).map(str::to_string);
+    }
     let at = text.find("Name=\"run_id\"")?;
     let values = &text[at..];
     let values = &values[values.find('>')? + 1..];
@@ -279,8 +287,8 @@ fn not_intact(at: &Path, flaws: &[(usize, Flaw)], recorded: usize, r: &Resumed) 
                 .map(|(s, _)| *s)
                 .collect();
             let files = match at.is_dir() {
-                true if steps.len() == 1 => format!(" ({})", vtu_name(steps[0])),
-                true => format!(" ({}, …)", vtu_name(steps[0])),
+                true if steps.len() == 1 => format!(" ({})", frame_file(at, steps[0])),
+                true => format!(" ({}, …)", frame_file(at, steps[0])),
                 false => String::new(),
             };
             format!(

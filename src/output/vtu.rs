@@ -40,8 +40,7 @@ use std::io::Write as _;
 
 use std::path::{Path, PathBuf};
 
-use super::writer::{Sink, Written};
-use super::{crc32_of_file, write_atomic, write_atomic_with, zlib, Array, Compression, Geometry};
+use super::{write_atomic_with, zlib, Array, Compression, Geometry};
 use crate::Result;
 
 /// Uncompressed bytes per zlib block: VTK's default (vtkDataCompressor block size).
@@ -218,6 +217,8 @@ pub(super) struct Grid {
     cells: [Static; 3],
     /// The static cell fields (`region`, `material_region`) the geometry has.
     cell_arrays: Vec<Static>,
+    /// A piece's [`GLOBAL_IDS`] (`pvtu.rs`), or none.
+    ids: Option<Static>,
     /// Appended bytes of the static arrays: empty until [`Sink::prepare`] compresses them
     /// (every array has a header, so they are never empty after it).
     statics: Vec<u8>,
@@ -284,10 +285,23 @@ impl Grid {
             points: points_s,
             cells: [conn, offsets, types],
             cell_arrays,
+            ids: None,
             statics: Vec::new(),
             out: Vec::new(),
             buf: Vec::new(),
         })
+    }
+
+    /// The grid of a piece of a larger mesh whose point i is the mesh's point `ids[i]`: the
+    /// static point array [`GLOBAL_IDS`], VTK's global ids of the points.
+    pub(super) fn with_global_ids(mut self, ids: &[usize]) -> Grid {
+        let raw = le(ids.iter(), |&i| (i as i64).to_le_bytes());
+        self.ids = Some(Static {
+            open: array_open("Int64", GLOBAL_IDS, 1),
+            at: 0,
+            raw,
+        });
+        self
     }
 
     /// Writes the `.vtu` of these fields to `path` ([`write_atomic_with`]): the XML up to the
@@ -295,7 +309,7 @@ impl Grid {
     /// and the XML once more with the fields' offsets, which are known only then (they are
     /// padded to a fixed width, so the XML keeps its length). Sizes were checked by the
     /// caller.
-    fn write_frame(
+    pub(super) fn write_frame(
         &mut self,
         path: &Path,
         point_data: &[Array],
@@ -353,13 +367,7 @@ impl Grid {
              <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n",
             self.field_data, self.num_points, self.num_cells
         );
-        for (k, (a, offset)) in arrays.iter().zip(offsets).enumerate() {
-            if k == 0 {
-                out.extend_from_slice(b"      <PointData>\n");
-            }
-            if k == n_point {
-                out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
-            }
+        let field = |(a, offset): (&&Array, &u64), out: &mut Vec<u8>| {
             // Blanks before `/>` keep the width of any u64 offset.
             let offset = offset.to_string();
             let _ = writeln!(
@@ -369,16 +377,16 @@ impl Grid {
                 "",
                 pad = 20 - offset.len()
             );
-        }
-        if arrays.is_empty() {
-            out.extend_from_slice(b"      <PointData>\n");
-        }
-        if n_point == arrays.len() {
-            out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
-        }
+        };
         let put = |s: &Static, out: &mut Vec<u8>| {
             let _ = writeln!(out, "{} offset=\"{}\"/>", s.open, s.at);
         };
+        let _ = writeln!(out, "      <PointData{}>", global_ids(self.ids.is_some()));
+        let fields = arrays.iter().zip(offsets);
+        fields.clone().take(n_point).for_each(|f| field(f, out));
+        self.ids.iter().for_each(|s| put(s, out));
+        out.extend_from_slice(b"      </PointData>\n      <CellData>\n");
+        fields.skip(n_point).for_each(|f| field(f, out));
         for s in &self.cell_arrays {
             put(s, out);
         }
@@ -392,37 +400,10 @@ impl Grid {
             b"      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _",
         );
     }
-}
-
-impl Sink for Grid {
-    type Job = Job;
-
-    /// The `.vtu` (temporary file + rename) and its CRC-32 (read back: the file is in the
-    /// page cache, and its block sizes were patched in after the blocks), then the `.pvd`
-    /// (likewise).
-    fn write(&mut self, job: Job) -> Result<Option<Written>> {
-        let written = match job.vtu {
-            Some(v) => {
-                self.write_frame(&v.path, &v.point_data, &v.cell_data)?;
-                let (crc32, bytes) =
-                    crc32_of_file(&v.path).map_err(|e| crate::Error::io(&v.path, e))?;
-                Some(Written {
-                    step: v.step,
-                    crc32,
-                    bytes,
-                })
-            }
-            None => None,
-        };
-        if let Some((path, text)) = job.pvd {
-            write_atomic(&path, text.as_bytes())?;
-        }
-        Ok(written)
-    }
 
     /// Compresses the static arrays (once; zlib's search at level 6 takes about 20 ms at
     /// h = 1/128, which the writer thread spends beside the run's setup).
-    fn prepare(&mut self) {
+    pub(super) fn prepare(&mut self) {
         if !self.statics.is_empty() {
             return;
         }
@@ -431,7 +412,8 @@ impl Sink for Grid {
         let [conn, offsets, types] = &mut self.cells;
         let order = [types, offsets, conn, &mut self.points]
             .into_iter()
-            .chain(self.cell_arrays.iter_mut());
+            .chain(self.cell_arrays.iter_mut())
+            .chain(self.ids.iter_mut());
         for s in order {
             s.at = self.statics.len();
             append(
@@ -443,10 +425,18 @@ impl Sink for Grid {
             .expect("appending to memory cannot fail");
         }
     }
+}
 
-    /// Every file was closed when it was written.
-    fn close(&mut self) -> Result<()> {
-        Ok(())
+/// The point array of a piece (`pvtu.rs`) that numbers its points in the whole mesh (Int64,
+/// from 0), VTK's global ids: `vtkGenerateGlobalIds`' name, flagged by the `GlobalIds`
+/// attribute of `<PointData>`.
+pub const GLOBAL_IDS: &str = "GlobalPointIds";
+
+/// The attribute of `<PointData>` (or `<PPointData>`) that flags [`GLOBAL_IDS`], if `has`.
+pub(super) fn global_ids(has: bool) -> String {
+    match has {
+        true => format!(" GlobalIds=\"{GLOBAL_IDS}\""),
+        false => String::new(),
     }
 }
 
@@ -457,8 +447,17 @@ const SYMMETRIC_TENSOR: [&str; 6] = ["XX", "YY", "ZZ", "XY", "YZ", "XZ"];
 /// 6-component array is a symmetric tensor: its components are named XX, YY, ZZ, XY, YZ, XZ
 /// (`ComponentName0` …, as VTK writes them), so ParaView shows `stress_XY`.
 fn array_open(ty: &str, name: &str, components: usize) -> String {
+    format!(
+        "        <DataArray {} format=\"appended\"",
+        array_attrs(ty, name, components)
+    )
+}
+
+/// `type=… Name=… NumberOfComponents=…` and the component names of a symmetric tensor: the
+/// attributes of a `DataArray`, and of a `.pvtu`'s `PDataArray` (`pvtu.rs`).
+pub(super) fn array_attrs(ty: &str, name: &str, components: usize) -> String {
     let mut s = format!(
-        "        <DataArray type=\"{ty}\" Name=\"{}\" NumberOfComponents=\"{components}\"",
+        "type=\"{ty}\" Name=\"{}\" NumberOfComponents=\"{components}\"",
         escape_attr(name)
     );
     if components == 6 {
@@ -466,7 +465,6 @@ fn array_open(ty: &str, name: &str, components: usize) -> String {
             s.push_str(&format!(" ComponentName{i}=\"{c}\""));
         }
     }
-    s.push_str(" format=\"appended\"");
     s
 }
 

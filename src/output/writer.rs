@@ -8,8 +8,8 @@
 //! missing. The pattern is the checkpoint writer's (src/checkpoint/writer.rs), without its
 //! replacement of waiting snapshots: every frame is kept.
 //!
-//! What a frame becomes on disk is the [`Sink`]'s business: `.vtu` + `.pvd` (`vtu.rs`) or
-//! one more step of `solution.vtkhdf` (`vtkhdf.rs`). A sink reports the CRC-32 of each frame
+//! What a frame becomes on disk is the [`Sink`]'s business: `.vtu` + `.pvd` (`vtu.rs`; in
+//! pieces, `pvtu.rs`) or one more step of `solution.vtkhdf` (`vtkhdf.rs`). A sink reports the CRC-32 of each frame
 //! it wrote ([`Written`]); the series collects them when the thread ends
 //! ([`Writer::finish`]), which is also what a checkpoint waits for, so a checkpoint records
 //! the checksums of exactly the frames written before it (`docs/restart.md`).

@@ -172,15 +172,46 @@ pub fn petsc_ints(v: &[usize]) -> Result<Vec<PetscInt>> {
 
 /// The unknowns of each node that has any, node by node.
 fn nodes(disc: &Discretization) -> Vec<Vec<usize>> {
-    (0..disc.free.len())
-        .step_by(disc.dim)
-        .map(|g| {
-            (g..g + disc.dim)
-                .filter_map(|g| super::unknown(disc, g))
-                .collect()
-        })
-        .filter(|u: &Vec<usize>| !u.is_empty())
+    (0..disc.free.len() / disc.dim)
+        .map(|v| node_unknowns(disc, v))
+        .filter(|u| !u.is_empty())
         .collect()
+}
+
+/// The unknowns of mesh node `v`.
+fn node_unknowns(disc: &Discretization, v: usize) -> Vec<usize> {
+    let g = v * disc.dim;
+    (g..g + disc.dim)
+        .filter_map(|g| super::unknown(disc, g))
+        .collect()
+}
+
+/// The piece of each cell (`cells`: `nodes_per_cell` mesh nodes each) in the `.pvtu` frames
+/// of a run over `size` ranks (`output`'s `pvtu.rs`): the lowest part, in the partition of
+/// [`Layout::new`], among the cell's nodes that have unknowns, so that piece r is rank r's
+/// part of the mesh; 0 for a cell whose nodes are all clamped.
+pub fn cell_pieces(
+    disc: &Discretization,
+    cells: &[usize],
+    nodes_per_cell: usize,
+    size: usize,
+) -> Result<Vec<u32>> {
+    let part = partition(disc, &nodes(disc), size)?;
+    let mut of_node = vec![u32::MAX; disc.free.len() / disc.dim];
+    let with_unknowns = (0..of_node.len()).filter(|&v| !node_unknowns(disc, v).is_empty());
+    for (v, p) in with_unknowns.zip(part) {
+        of_node[v] = p as u32;
+    }
+    Ok(cells
+        .chunks(nodes_per_cell.max(1))
+        .map(|c| {
+            c.iter()
+                .map(|&v| of_node[v])
+                .min()
+                .filter(|&p| p != u32::MAX)
+        })
+        .map(|p| p.unwrap_or(0))
+        .collect())
 }
 
 /// METIS's k-way partition of the nodes' graph into `size` parts: each node's part.

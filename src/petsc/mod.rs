@@ -39,7 +39,7 @@
 
 mod layout;
 
-pub use layout::{Layout, RankShare};
+pub use layout::{cell_pieces, Layout, RankShare};
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};

@@ -4,7 +4,8 @@
 //!   (`flock`, std's `File::try_lock`) on `DIR/.viscontact.lock`, which the kernel releases
 //!   when the process ends however it ends; a second process is refused (exit 2) with the
 //!   holder's pid, host and start time, which the holder writes into the file.
-//! - Files are ours by name ([`ours`]): the series, summary.json, history.csv, the checkpoint files, the
+//! - Files are ours by name ([`ours`]): the series (with the directories of a `.pvtu`
+//!   frame's pieces), summary.json, history.csv, the checkpoint files, the
 //!   lock file, and the temporary files our writers use (`.NAME.tmp.PID.N` of
 //!   `output::write_atomic`, `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`). Under the
 //!   lock no other process is writing, so temporary files are leftovers of a killed process
@@ -26,11 +27,7 @@ pub const LOCK_NAME: &str = ".viscontact.lock";
 /// The files a run writes into its directory (besides temporaries); anything else there is
 /// the user's.
 fn run_file(name: &str) -> bool {
-    let frame = name
-        .strip_prefix("solution_")
-        .and_then(|r| r.strip_suffix(".vtu"))
-        .is_some_and(|d| d.len() >= 6 && d.bytes().all(|b| b.is_ascii_digit()));
-    frame
+    frame_step(name).is_some()
         || matches!(
             name,
             "solution.pvd"
@@ -42,12 +39,60 @@ fn run_file(name: &str) -> bool {
         )
 }
 
+/// The step of a frame's entry in a run's directory: `solution_NNNNNN.vtu`,
+/// `solution_NNNNNN.pvtu` or the directory `solution_NNNNNN` of its pieces (a run over MPI
+/// ranks, docs/output.md).
+fn frame_step(name: &str) -> Option<usize> {
+    let rest = name.strip_prefix("solution_")?;
+    let digits = (rest.strip_suffix(".vtu"))
+        .or(rest.strip_suffix(".pvtu"))
+        .unwrap_or(rest);
+    let ok = digits.len() >= 6 && digits.bytes().all(|b| b.is_ascii_digit());
+    ok.then(|| digits.parse().ok()).flatten()
+}
+
+/// Whether `name` is a frame's directory of pieces (`solution_NNNNNN`).
+fn piece_dir(name: &str) -> bool {
+    frame_step(name).is_some() && !name.contains('.')
+}
+
+/// A piece in the directory `dir` (`solution_NNNNNN`): `solution_NNNNNN_R.vtu`, or a
+/// temporary file of one.
+fn piece_file(dir: &str, name: &str) -> bool {
+    let piece = |n: &str| {
+        (n.strip_prefix(dir))
+            .and_then(|r| r.strip_prefix('_'))
+            .and_then(|r| r.strip_suffix(".vtu"))
+            .is_some_and(|r| !r.is_empty() && r.bytes().all(|b| b.is_ascii_digit()))
+    };
+    piece(name) || temporary_of(name, piece)
+}
+
+/// Removes the entry `name` of `dir`, a file of ours or a directory of pieces: its pieces,
+/// then the directory, which stays if it holds anything else (the user's).
+fn remove_entry(dir: &Path, name: &str) -> std::io::Result<()> {
+    let path = dir.join(name);
+    if !(piece_dir(name) && path.is_dir()) {
+        return std::fs::remove_file(path);
+    }
+    for piece in entries(&path, |n| piece_file(name, n)) {
+        std::fs::remove_file(path.join(piece))?;
+    }
+    let _ = std::fs::remove_dir(path);
+    Ok(())
+}
+
 /// A temporary file of our writers: `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`, or
 /// `.NAME.tmp.PID.N` (`output::write_atomic`) for a NAME of ours.
 fn temporary(name: &str) -> bool {
     if let Some(base) = name.strip_suffix(".tmp") {
         return matches!(base, "checkpoint.h5" | "checkpoint_history.h5");
     }
+    temporary_of(name, run_file)
+}
+
+/// `.NAME.tmp.PID.N` for a NAME that `ours` selects.
+fn temporary_of(name: &str, ours: impl Fn(&str) -> bool) -> bool {
     let Some(rest) = name.strip_prefix('.') else {
         return false;
     };
@@ -56,7 +101,7 @@ fn temporary(name: &str) -> bool {
         return false;
     };
     let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
-    digits(n) && digits(pid) && head.strip_suffix(".tmp").is_some_and(run_file)
+    digits(n) && digits(pid) && head.strip_suffix(".tmp").is_some_and(ours)
 }
 
 /// Every file a run of viscontact writes into its directory.
@@ -242,14 +287,19 @@ pub fn remove_temporaries(dir: &Path) {
     for name in entries(dir, temporary) {
         let _ = std::fs::remove_file(dir.join(name));
     }
+    for pieces in entries(dir, piece_dir) {
+        let path = dir.join(&pieces);
+        for name in entries(&path, |n| temporary_of(n, |m| piece_file(&pieces, m))) {
+            let _ = std::fs::remove_file(path.join(name));
+        }
+    }
 }
 
 /// Removes the run the directory holds (only under the lock, once the new run's setup
 /// succeeded): its series, summary, checkpoints and leftovers. The user's files stay.
 pub fn remove_run(dir: &Path) -> Result<()> {
     for name in entries(dir, |n| run_file(n) || temporary(n)) {
-        let path = dir.join(name);
-        std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
+        remove_entry(dir, &name).map_err(|e| Error::io(&dir.join(&name), e))?;
     }
     Ok(())
 }
@@ -346,12 +396,16 @@ pub fn holds_series(dir: &Path) -> bool {
 pub fn remove_stale_frames(series: &crate::output::Series, from: usize) {
     let dir = series.dir();
     for name in entries(dir, run_file) {
-        let step = name
-            .strip_prefix("solution_")
-            .and_then(|r| r.strip_suffix(".vtu"))
-            .and_then(|r| r.parse::<usize>().ok());
-        if step.is_some_and(|s| s >= from) && !series.files().iter().any(|(_, f)| *f == name) {
-            let _ = std::fs::remove_file(dir.join(name));
+        let Some(step) = frame_step(&name).filter(|&s| s >= from) else {
+            continue;
+        };
+        // A directory of pieces goes with its `.pvtu`.
+        let file = match piece_dir(&name) {
+            true => crate::output::pvtu_name(step),
+            false => name.clone(),
+        };
+        if !series.files().iter().any(|(_, f)| *f == file) {
+            let _ = remove_entry(dir, &name);
         }
     }
 }
@@ -366,6 +420,9 @@ mod tests {
             "solution.pvd",
             "solution.vtkhdf",
             "solution_000012.vtu",
+            "solution_000012.pvtu",
+            "solution_000012",
+            ".solution_000012.pvtu.tmp.4242.7",
             "summary.json",
             "history.csv",
             "checkpoint.h5",
@@ -382,6 +439,8 @@ mod tests {
         for name in [
             "notes.txt",
             "solution_12.vtu",
+            "solution_12",
+            "solution_000012.txt",
             "solution.pvd.tmp",
             ".notes.txt.tmp.1.2",
             ".solution.pvd.tmp.x.2",
@@ -393,6 +452,13 @@ mod tests {
         }
         assert!(temporary(".solution_000001.vtu.tmp.12.0"));
         assert!(!temporary("solution_000001.vtu"));
+        assert!(piece_dir("solution_000001") && !piece_dir("solution_000001.vtu"));
+        for name in ["solution_000001_0.vtu", ".solution_000001_12.vtu.tmp.5.1"] {
+            assert!(piece_file("solution_000001", name), "{name}");
+        }
+        for name in ["solution_000002_0.vtu", "solution_000001_.vtu", "notes.txt"] {
+            assert!(!piece_file("solution_000001", name), "{name}");
+        }
     }
 
     #[test]

@@ -8,35 +8,58 @@ use std::sync::Arc;
 
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
-use crate::output::{Geometry, Options, OwnedField, Resumed, Series};
+use crate::output::{Format, Geometry, Options, OwnedField, Resumed, Series};
 use crate::scene::Model;
 use crate::solver::Rows;
 use crate::time_loop::Step;
 use crate::Result;
 
-/// The series of a run on `mesh` in `out` (`material_region`: each cell's
-/// `[[material.region]]` entry, empty without regions): a new one, or for a resume from a
-/// checkpoint of step n ≥ 1 the existing one, verified and continued after step n − 1
-/// ([`Series::resume`]).
+/// The series of a run on `mesh` (discretized as `disc`) over `ranks` MPI ranks in `out`:
+/// a new one, or for a resume from a checkpoint of step n ≥ 1 the existing one, verified
+/// and continued after step n − 1 ([`Series::resume`]).
 pub(super) fn open_series(
     out: &Path,
-    (mesh, material_region): (&Mesh, &[i32]),
+    (mesh, disc): (&Mesh, &Discretization),
+    ranks: usize,
     run_id: &str,
     options: &Options,
     resumed: Option<&Resumed>,
 ) -> Result<Series> {
     let (cells, nodes_per_cell) = mesh.cell_nodes();
     let region = region(mesh);
+    let pieces = pieces(disc, (&cells, nodes_per_cell), ranks, options)?;
     let geometry = Geometry {
         points: &mesh.nodes,
         cells: &cells,
         nodes_per_cell,
         region: &region,
-        material_region,
+        material_region: &disc.materials.region,
+        pieces: &pieces,
     };
     match resumed {
         Some(r) if r.step > 0 => Series::resume(out, &geometry, run_id, options, r),
         _ => Series::create(out, &geometry, run_id, options),
+    }
+}
+
+/// Each cell's piece where the frames of a run over several ranks are `.vtu` files (a
+/// `.pvtu` a frame with a piece per rank's part of the mesh, docs/output.md); else none,
+/// one file a frame. Only a build with PETSc runs over several ranks.
+fn pieces(
+    disc: &Discretization,
+    (cells, nodes_per_cell): (&[usize], usize),
+    ranks: usize,
+    options: &Options,
+) -> Result<Vec<u32>> {
+    if ranks <= 1 || options.format != Format::Vtu {
+        return Ok(Vec::new());
+    }
+    #[cfg(feature = "petsc")]
+    return crate::petsc::cell_pieces(disc, cells, nodes_per_cell, ranks);
+    #[cfg(not(feature = "petsc"))]
+    {
+        let _ = (disc, cells, nodes_per_cell);
+        Ok(Vec::new())
     }
 }
 

@@ -231,8 +231,14 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     check_started_ranks(&scene, &solver, opts)?;
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let statics = (&mesh, &disc.materials.region[..]);
-    let series = open_series(&out, statics, &identity.run_id, &scene.output.options, None)?;
+    let series = open_series(
+        &out,
+        (&mesh, &disc),
+        opts.ranks.size,
+        &identity.run_id,
+        &scene.output.options,
+        None,
+    )?;
     stage()?;
     let plans = crate::history::Plans::new(&scene)?;
     Ok(Ready {
@@ -455,7 +461,8 @@ fn prepare_resume(
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(
         &out,
-        (&mesh, &disc.materials.region[..]),
+        (&mesh, &disc),
+        opts.ranks.size,
         &identity.run_id,
         &scene.output.options,
         resumed.as_ref(),

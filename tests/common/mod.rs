@@ -207,22 +207,22 @@ pub fn summary_values(dir: &Path) -> serde_json::Value {
     v
 }
 
-/// Every file of `dir` that a run's series consists of, and its history.csv, by name.
+/// Every file of `dir` that a run's series consists of (the pieces of a `.pvtu` frame as
+/// `solution_NNNNNN/NAME`), and its history.csv, by name, run ids taken out.
 pub fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .filter(|e| {
-            let n = e.file_name().to_string_lossy().into_owned();
-            n.ends_with(".vtu") || n.ends_with(".pvd") || n == "history.csv"
-        })
-        .map(|e| {
-            (
-                e.file_name().to_string_lossy().into_owned(),
-                without_run_id(std::fs::read(e.path()).unwrap()),
-            )
-        })
-        .collect()
+    let mut files = BTreeMap::new();
+    for e in std::fs::read_dir(dir).unwrap().map(|e| e.unwrap()) {
+        let n = e.file_name().to_string_lossy().into_owned();
+        if e.path().is_dir() && n.starts_with("solution_") {
+            // The pieces of a `.pvtu` frame (a run over MPI ranks).
+            for (piece, bytes) in frames(&e.path()) {
+                files.insert(format!("{n}/{piece}"), bytes);
+            }
+        } else if [".vtu", ".pvtu", ".pvd"].iter().any(|x| n.ends_with(x)) || n == "history.csv" {
+            files.insert(n, without_run_id(std::fs::read(e.path()).unwrap()));
+        }
+    }
+    files
 }
 
 /// A run's history.csv: its header and its rows as numbers.
@@ -510,16 +510,21 @@ pub fn finished(o: viscontact::run::Outcome) -> viscontact::run::Summary {
     }
 }
 
-/// Every file of a directory with its bytes (not recursive), by name.
+/// Every file of a directory with its bytes, by name (a subdirectory's files as `DIR/NAME`).
 pub fn dir_contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            (name, std::fs::read(e.path()).unwrap())
-        })
-        .collect()
+    let mut files = BTreeMap::new();
+    for e in std::fs::read_dir(dir).unwrap().map(|e| e.unwrap()) {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if e.path().is_dir() {
+            // The pieces of a `.pvtu` frame (a run over MPI ranks).
+            for (inner, bytes) in dir_contents(&e.path()) {
+                files.insert(format!("{name}/{inner}"), bytes);
+            }
+        } else {
+            files.insert(name, std::fs::read(e.path()).unwrap());
+        }
+    }
+    files
 }
 
 /// Whether python3 imports vtk and h5py; a loud note when not (a failure with CI set).

@@ -5,5 +5,6 @@ mod common;
 
 mod format_checks;
 mod output_format;
+mod output_pieces;
 mod output_vtkhdf;
 mod regions;

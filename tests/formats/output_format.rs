@@ -31,6 +31,7 @@ fn create(
         nodes_per_cell: per_cell,
         region: &[],
         material_region: &[],
+        pieces: &[],
     };
     Series::create(dir, &g, RUN, &Options::default())
 }
@@ -43,6 +44,7 @@ fn reopen(dir: &Path, run: &str, last_step: usize) -> viscontact::Result<Series>
         nodes_per_cell: 3,
         region: &[],
         material_region: &[],
+        pieces: &[],
     };
     Series::reopen(dir, &g, run, &Options::default(), last_step)
 }
@@ -676,6 +678,7 @@ for kind, data in (("point", g.GetPointData()), ("cell", g.GetCellData())):
                 nodes_per_cell: 3,
                 region: &[3, 8],
                 material_region: &[],
+                pieces: &[],
             };
             let options = Options {
                 compression,
@@ -758,6 +761,7 @@ fn only_the_chosen_fields_are_written() {
         nodes_per_cell: 3,
         region: &[1, 2],
         material_region: &[],
+        pieces: &[],
     };
     let options = Options {
         fields: Some(vec!["von_mises".into()]),

@@ -13,6 +13,7 @@ use crate::common::{self, SceneText};
 use std::path::Path;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
+use viscontact::output::read::{read_frame, read_series, read_vtu};
 
 /// `mpirun -n RANKS viscontact ARGS` from the repository root (`launching`).
 fn mpirun(ranks: usize, args: &[&str]) -> Command {
@@ -73,7 +74,6 @@ fn resume(ranks: usize, dir: &Path) -> (i32, String) {
 
 /// The displacement of a run's last frame, node by node.
 fn u_last(dir: &Path) -> Vec<f64> {
-    use viscontact::output::read::{read_frame, read_series};
     let (_, frames) = read_series(&dir.join("solution.pvd")).unwrap();
     let (_, last) = frames.last().unwrap();
     let vtu = read_frame(last).unwrap();
@@ -151,17 +151,75 @@ fn agree_on_1_2_and_3_ranks(scenes: &[std::path::PathBuf]) {
             let d = common::rel_diff(&u_last(&out), &reference);
             println!("{what}, {ranks} ranks: max|Δu_N| / max|u_N| = {d:e}");
             assert!(d <= 1e-8, "{what} on {ranks} ranks: u_N differs by {d:e}");
-            let names = |dir: &Path| {
-                let mut n: Vec<_> = std::fs::read_dir(dir)
-                    .unwrap()
-                    .map(|e| e.unwrap().file_name())
-                    .collect();
-                n.sort();
-                n
-            };
-            assert_eq!(names(&out), names(&one), "{what}: the directories' files");
+            assert_pieces(&out, &one, ranks, &what);
         }
     }
+}
+
+/// The directory `out` of a run over `ranks` ranks holds the files of `one`'s, the one
+/// process's, with each frame a `.pvtu` of `ranks` pieces in place of its `.vtu`; VTK's
+/// parallel reader reads the last with every piece's points, each point's global id, and
+/// the one-process frame's cells.
+fn assert_pieces(out: &Path, one: &Path, ranks: usize, what: &str) {
+    let names = |dir: &Path| {
+        let mut n: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| !n.starts_with("solution_") || n.contains('.'))
+            .map(|n| n.replace(".pvtu", ".vtu"))
+            .collect();
+        n.sort();
+        n
+    };
+    assert_eq!(names(out), names(one), "{what}: the directories' files");
+    let (_, frames) = read_series(&out.join("solution.pvd")).unwrap();
+    let pvtu = frames.last().unwrap().1.path().to_path_buf();
+    let text = std::fs::read_to_string(&pvtu).unwrap();
+    assert_eq!(text.matches("<Piece ").count(), ranks, "{}", pvtu.display());
+    if !common::python_available() {
+        return;
+    }
+    let script = r#"
+import sys, vtk
+counts = []
+for name, reader in ((sys.argv[1], vtk.vtkXMLPUnstructuredGridReader()), (sys.argv[2], vtk.vtkXMLUnstructuredGridReader())):
+    reader.SetFileName(name)
+    reader.Update()
+    g = reader.GetOutput()
+    counts += [g.GetNumberOfPoints(), g.GetNumberOfCells()]
+print(*counts)
+"#;
+    let last_vtu = one.join(pvtu.file_name().unwrap()).with_extension("vtu");
+    let out = launching(&mut Command::new("python3"))
+        .args(["-c", script])
+        .arg(&pvtu)
+        .arg(&last_vtu)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let counts: Vec<usize> = String::from_utf8_lossy(&out.stdout)
+        .split_whitespace()
+        .map(|w| w.parse().unwrap())
+        .collect();
+    let pieces_points: usize = (text.split("Source=\"").skip(1))
+        .map(|s| &s[..s.find('"').unwrap()])
+        .map(|s| {
+            read_vtu(&pvtu.parent().unwrap().join(s))
+                .unwrap()
+                .points
+                .len()
+        })
+        .sum();
+    assert_eq!(counts[0], pieces_points, "{what}: VTK's points");
+    assert!(
+        counts[0] > counts[2],
+        "{what}: the borders' points are in two pieces"
+    );
+    assert_eq!(counts[1], counts[3], "{what}: VTK's cells");
 }
 
 #[test]
@@ -279,7 +337,7 @@ fn signalled(signal: &str, which: &[usize], scene: &Path) -> (i32, String, Durat
         .spawn()
         .unwrap();
     let pids = ranks_of(child.id(), 2);
-    let frame = out.join("solution_000020.vtu");
+    let frame = out.join("solution_000020.pvtu");
     let start = Instant::now();
     while !frame.exists() {
         assert!(start.elapsed() < Duration::from_secs(120), "no frame 20");
