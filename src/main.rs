@@ -492,9 +492,8 @@ fn check(path: &std::path::Path, set: &[String], ranks: usize) -> Result<()> {
     let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
     viscontact::outln!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
-    viscontact::run::check_memory(&disc, &solver, &estimate, ranks, |line| {
-        viscontact::outln!("ranks      {line}")
-    })?;
+    let mut show = |line: &str| viscontact::outln!("ranks      {line}");
+    viscontact::run::check_memory(&disc, &solver, &estimate, ranks, Some(&mut show))?;
     if let Some(bytes) = factor {
         viscontact::resources::check_factor(bytes, disc.n_free)?;
     }

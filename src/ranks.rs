@@ -25,7 +25,8 @@
 //!
 //! [`Plan`] is what a rank of a run over N ranks holds and does (`check --ranks N`): its
 //! share of K_A's rows, entries and of the values a product fetches from other ranks, and
-//! its memory, the replicated part (the setup's peak, measured) and its share of PETSc's.
+//! its memory, the replicated part (the setup's peak, measured) and its share of PETSc's,
+//! and for `check` a step's expected time on this machine ([`Plan::timed`]).
 //! `check` and `run` refuse ranks that would not fit, naming how many would.
 //!
 //! # Agreement
@@ -205,6 +206,10 @@ pub struct Plan {
     /// PETSc's bytes a rank on several ranks times their count (what they split).
     on_several: f64,
     spread_several: f64,
+    /// Through the active set's Newton systems.
+    newton: bool,
+    /// A step's expected seconds on this machine ([`Plan::timed`]), once timed.
+    step_s: Option<f64>,
 }
 
 #[cfg(feature = "petsc")]
@@ -237,7 +242,19 @@ impl Plan {
             spread: petsc_bytes(largest.entries, newton, size),
             on_several,
             spread_several: petsc_bytes(entries, newton, 2),
+            newton,
+            step_s: None,
         })
+    }
+
+    /// The plan with a step's expected time on this machine: the largest rank's share of a
+    /// product with K_A, timed here (`product_seconds`), times a Krylov iteration's cost in
+    /// such products and the iterations a step takes (`step_products`).
+    pub fn timed(mut self, disc: &crate::fem::Discretization) -> Plan {
+        let total = disc.k_a.as_ref().val().len().max(1);
+        let share = self.largest.entries as f64 / total as f64;
+        self.step_s = Some(product_seconds(disc) * share * step_products(self.rows, self.newton));
+        self
     }
 
     /// The memory of the largest rank.
@@ -315,8 +332,78 @@ impl std::fmt::Display for Plan {
             human(self.per_rank()),
             human(self.replicated),
             human(self.spread)
-        )
+        )?;
+        if let Some(step) = self.step_s {
+            // Two significant digits: 11, 5.1, 0.015.
+            let digits = (1.0 - step.log10().floor()).clamp(0.0, 9.0) as usize;
+            let how = match self.newton {
+                false => "K_A's solve",
+                true => "the active set's Newton systems, on average over a run",
+            };
+            write!(
+                f,
+                "; a step ≈ {step:.digits$} s on this machine ({how}: a product with the rank's \
+                 rows timed here, times the products a step's Krylov iterations cost on the \
+                 measured plates; docs/cluster.md)"
+            )?;
+        }
+        Ok(())
     }
+}
+
+/// A Krylov iteration of CG + GAMG on K_A costs this many products with K_A (its
+/// V-cycle's smoothing and coarse levels besides the product): the fine plate's linear
+/// PETSc run on one rank took 4.68 s a step, 301.6 times a product (0.0155 s, timed as
+/// [`product_seconds`] does, in the same session), in 31.0 iterations a step as
+/// `step_products` counts them (docs/cluster.md, "Planning").
+#[cfg(feature = "petsc")]
+const ITERATION_PRODUCTS: f64 = 9.7;
+
+/// A step through the active set costs this many linear steps, on average over a run: the
+/// fine plate's 20 steps (the onset of contact and sliding included) took 3.92 and 3.84
+/// times the linear PETSc run's in two calls (docs/performance.md); the plate 0.03's, 2.7.
+#[cfg(feature = "petsc")]
+const NEWTON_STEPS: f64 = 3.9;
+
+/// The products with K_A that a step costs on `rows` unknowns: K_A's solve took 23 CG
+/// iterations a step on the plate of 54 990 unknowns and 31 on the one of 367 470
+/// (docs/performance.md), a growth as rows^0.157 that this extrapolates.
+#[cfg(feature = "petsc")]
+fn step_products(rows: usize, newton: bool) -> f64 {
+    let iterations = 23.0 * (rows.max(1) as f64 / 54_990.0).powf(0.157);
+    let linear = iterations * ITERATION_PRODUCTS;
+    match newton {
+        false => linear,
+        true => linear * NEWTON_STEPS,
+    }
+}
+
+/// The seconds of one product y = K_A x on one thread, the least of five (after one that
+/// warms the caches): what a rank's Krylov iteration is made of, on this machine.
+#[cfg(feature = "petsc")]
+fn product_seconds(disc: &crate::fem::Discretization) -> f64 {
+    let k = disc.k_a.as_ref();
+    let (ptr, idx, val) = (k.symbolic().col_ptr(), k.symbolic().row_idx(), k.val());
+    let x: Vec<f64> = (0..disc.n_free).map(|i| 1.0 + (i % 7) as f64).collect();
+    let mut y = vec![0.0; disc.n_free];
+    let mut best = f64::INFINITY;
+    for round in 0..6 {
+        let start = std::time::Instant::now();
+        // K_A is symmetric: its column j is its row j.
+        for (j, yj) in y.iter_mut().enumerate() {
+            let range = ptr[j]..ptr[j + 1];
+            *yj = idx[range.clone()]
+                .iter()
+                .zip(&val[range])
+                .map(|(&i, v)| v * x[i])
+                .sum();
+        }
+        std::hint::black_box(&y);
+        if round > 0 {
+            best = best.min(start.elapsed().as_secs_f64());
+        }
+    }
+    best
 }
 
 /// Rank 0's error where only another rank's setup failed, with that rank's exit status.

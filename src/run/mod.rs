@@ -541,7 +541,7 @@ fn check_contact_plan(
 ) -> Result<Descriptor> {
     let solver = Descriptor::of_run(scene, disc)?;
     let spreads = solver.spreads();
-    check_memory(disc, &solver, steps, ranks, |_| {}).map_err(|e| match checkpoint {
+    check_memory(disc, &solver, steps, ranks, None).map_err(|e| match checkpoint {
         Some(cp) if !spreads => Error::input(format!(
             "{}: {e}; a resume keeps the run's solver.contact: resume it where more memory \
              is available, or start a new run with `viscontact run`",
@@ -553,19 +553,21 @@ fn check_contact_plan(
 }
 
 /// Refuses (exit 2) a run whose memory would not fit the memory available: through PETSc,
-/// a rank's on `ranks` ranks (`ranks::Plan::check`, which names how many would fit; `show`
-/// gets its line before), else its contact solver's with what its steps hold (`steps`:
-/// `ContactPlan::check`).
+/// a rank's on `ranks` ranks (`ranks::Plan::check`, which names how many would fit; `show`,
+/// where given, gets its line before, with a step's time on this machine), else its
+/// contact solver's with what its steps hold (`steps`: `ContactPlan::check`).
 pub fn check_memory(
     disc: &Discretization,
     solver: &Descriptor,
     steps: &crate::resources::Estimate,
     ranks: usize,
-    show: impl FnOnce(&str),
+    show: Option<&mut dyn FnMut(&str)>,
 ) -> Result<()> {
     #[cfg(feature = "petsc")]
     if let Some(plan) = ranks_plan(disc, solver, ranks, steps.memory)? {
-        show(&plan.to_string());
+        if let Some(show) = show {
+            show(&plan.clone().timed(disc).to_string());
+        }
         return plan.check();
     }
     let _ = (disc, ranks, show);

@@ -681,6 +681,14 @@ fn check_plans_the_ranks_and_refuses_ranks_that_would_not_fit_naming_how_many_wo
         text.contains("ranks      2 ranks: the largest holds 1944 of K_A's 3888 rows"),
         "{text}"
     );
+    // A step's time on this machine, estimated from a product timed by `check`.
+    let step = text
+        .split("a step ≈ ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next());
+    let step: f64 = step.and_then(|s| s.parse().ok()).expect(&text);
+    assert!(step > 0.0 && step < 10.0, "{text}");
+    assert!(text.contains("the active set's Newton systems"), "{text}");
     // A budget between what 2 ranks and 3 ranks need a rank (PETSc's share falls by a
     // third, a margin of a sixth of it on either side).
     let whole = megabytes_after(&text, "a rank: ≈ ");
