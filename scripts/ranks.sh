@@ -3,7 +3,8 @@
 # (meshes/3d/block.geo at height 1/4, gmsh's unstructured tetrahedra of size SIZE, made
 # into out/meshes/ when missing) under the block's scene without contact and friction
 # (KIND=linear, the default) or with them through the active set (KIND=contact), STEPS
-# steps, no output but the last frame, no checkpoints; each rank count one after the other
+# steps, no output but the last frame (EVERY=K: a frame every K steps; over several ranks a
+# frame is a .pvtu with a piece per rank), no checkpoints; each rank count one after the other
 # in one call (0: one process, without mpirun). Prints setup, steps and total seconds (rank
 # 0's summary.json), the Krylov iterations, and the peak memory of the largest rank.
 #   HDF5_DIR=/usr/lib/x86_64-linux-gnu/hdf5/serial cargo build --release --features petsc
@@ -44,7 +45,7 @@ SH
     [ "$n" = 0 ] && launch=()
     "${launch[@]}" "$dir/one.sh" "$bin" run examples/block.toml --quiet --out "$dir/o$n" \
         --set "mesh.file=../$mesh" --set "time.end=$end" --set "time.steps=$steps" \
-        "${physics[@]}" --set solver.linear=petsc --set output.every=100000 \
+        "${physics[@]}" --set solver.linear=petsc --set "output.every=${EVERY:-100000}" \
         --set checkpoint.enabled=false >/dev/null
     peak=$(cat "$dir"/peak.* | sort -n | tail -1)
     python3 - "$dir/o$n/summary.json" "$n" "$peak" <<'PY'
