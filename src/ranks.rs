@@ -257,6 +257,11 @@ impl Plan {
         self
     }
 
+    /// A step's expected seconds, once [`Plan::timed`].
+    pub fn step_s(&self) -> Option<f64> {
+        self.step_s
+    }
+
     /// The memory of the largest rank.
     pub fn per_rank(&self) -> f64 {
         self.replicated + self.spread

@@ -73,7 +73,9 @@ pub fn emit(
             "run --emit slurm: --time {t:?}: write Slurm's form, e.g. 1-00:00:00 or 90:00"
         )));
     }
+    let started = std::time::Instant::now();
     let (scene, _mesh, disc) = setup(scene_path, overrides)?;
+    let setup_s = started.elapsed().as_secs_f64();
     if !scene.checkpoint.enabled {
         return Err(Error::input(format!(
             "{}: [checkpoint] enabled = false: the job resumes from checkpoints after its \
@@ -84,17 +86,23 @@ pub fn emit(
     let mut solver = Descriptor::of_run(&scene, &disc)?;
     check_ranks(job, &solver)?;
     let estimate = Estimate::new(&scene, &disc, 0);
-    // A run through PETSc: what `check --ranks` says a rank holds.
+    // A run through PETSc: what `check --ranks` says a rank holds, and a step's time.
     #[cfg(feature = "petsc")]
-    let rank = super::ranks_plan(
+    let plan = super::ranks_plan(
         &disc,
         &solver,
         job.nodes * job.ntasks_per_node,
         estimate.memory,
     )?
-    .map(|p| p.per_rank());
+    .map(|p| p.timed(&disc));
+    #[cfg(feature = "petsc")]
+    let (rank, step_s) = (
+        plan.as_ref().map(|p| p.per_rank()),
+        plan.and_then(|p| p.step_s()),
+    );
     #[cfg(not(feature = "petsc"))]
-    let rank: Option<f64> = None;
+    let (rank, step_s): (Option<f64>, Option<f64>) = (None, None);
+    let estimated = step_s.map(|step| run_seconds(setup_s, scene.time.steps, step));
     let task = match rank {
         Some(rank) => rank,
         None => {
@@ -133,6 +141,7 @@ pub fn emit(
         exe: &std::env::current_exe().map_err(|e| Error::io(Path::new("current_exe"), e))?,
         job,
         mem_mib: (memory / (1024.0 * 1024.0)).ceil() as u64,
+        estimated,
     };
     let path = dir.join("job.sh");
     write_script(&path, &script.text())?;
@@ -175,13 +184,40 @@ struct Script<'a> {
     exe: &'a Path,
     job: &'a JobOptions,
     mem_mib: u64,
+    /// `check`'s estimate of the whole run in seconds, where it has one (`run_seconds`).
+    estimated: Option<f64>,
+}
+
+/// What the job asks for a run's time where `--time` is not given: 1.5 times `check`'s
+/// estimate, twice the setup measured here (PETSc's multigrid besides it) and `steps`
+/// steps of `step_s` (`ranks::Plan::timed`).
+fn run_seconds(setup_s: f64, steps: usize, step_s: f64) -> f64 {
+    1.5 * (2.0 * setup_s + steps as f64 * step_s)
+}
+
+/// Slurm's `--time` for `seconds`, in whole minutes, at least 10 and at most a day: a
+/// longer run goes on in the jobs it submits, each resuming from the last checkpoint.
+fn slurm_time(seconds: f64) -> String {
+    let minutes = (seconds / 60.0).ceil().clamp(10.0, 24.0 * 60.0) as u64;
+    format!(
+        "{}-{:02}:{:02}:00",
+        minutes / (24 * 60),
+        minutes / 60 % 24,
+        minutes % 60
+    )
 }
 
 impl Script<'_> {
     fn text(&self) -> String {
-        let time = match &self.job.time {
-            Some(t) => format!("#SBATCH --time={t}\n"),
-            None => String::new(),
+        let time = match (&self.job.time, self.estimated) {
+            (Some(t), _) => format!("#SBATCH --time={t}\n"),
+            (None, Some(s)) => format!(
+                "# --time: 1.5 × check's estimate of the run ({} s), at most a day.\n\
+                 #SBATCH --time={}\n",
+                s.round(),
+                slurm_time(s)
+            ),
+            (None, None) => String::new(),
         };
         let sets: String = (self.overrides.iter())
             .map(|s| format!(" --set {}", word(s)))
@@ -252,5 +288,18 @@ exit "$code"
             out = quoted(self.out),
             scene = quoted(self.scene),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_estimated_time_is_in_slurms_form_between_ten_minutes_and_a_day() {
+        assert_eq!(super::slurm_time(0.0), "0-00:10:00");
+        assert_eq!(super::slurm_time(3599.5), "0-01:00:00");
+        assert_eq!(super::slurm_time(3601.0), "0-01:01:00");
+        assert_eq!(super::slurm_time(86_399.0), "1-00:00:00");
+        assert_eq!(super::slurm_time(1e9), "1-00:00:00");
+        assert_eq!(super::run_seconds(10.0, 100, 2.0), 330.0);
     }
 }

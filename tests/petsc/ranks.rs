@@ -521,6 +521,12 @@ fn a_slurm_job_of_two_tasks_runs_the_scene_on_two_ranks() {
         (asked - 2.0 * rank).abs() < 4e6,
         "--mem {asked:e} against 2 × {rank:e}"
     );
+    // --time: check's estimate of the 12 steps, ten minutes at least.
+    assert!(
+        script.contains("# --time: 1.5 × check's estimate"),
+        "{script}"
+    );
+    assert!(script.contains("#SBATCH --time=0-00:10:00\n"), "{script}");
     let bin = tmp.path().join("bin");
     std::fs::create_dir(&bin).unwrap();
     let srun = "#!/bin/sh\nshift\nexec mpirun --oversubscribe -n \"$SLURM_NTASKS\" \"$@\"\n";
