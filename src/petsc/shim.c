@@ -627,7 +627,7 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PC           pc;
   MatNullSpace near;
   PetscInt     n;
-  PetscBool    gamg;
+  PetscBool    gamg, chosen;
   MPI_Comm     comm;
 
   PetscFunctionBeginUser;
@@ -662,6 +662,13 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(MatCopy(s->A, s->Q, SAME_NONZERO_PATTERN));
   PetscCall(PCSetUp(pc));
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCGAMG, &gamg));
+  /* A W-cycle: the coarse operators, K's aggregates with N's values, approximate the
+   * constrained operator less well on finer meshes, and visiting them twice a level halved
+   * the fine plate's CG iterations (docs/performance.md, "A W-cycle for the Newton
+   * systems"). Set once GAMG made its levels (its setup resets their cycles), unless the
+   * options choose one (-pc_mg_cycle_type v puts the V-cycle back). */
+  PetscCall(PetscOptionsHasName(NULL, NULL, "-pc_mg_cycle_type", &chosen));
+  if (gamg && !chosen) PetscCall(PCMGSetCycleType(pc, PC_MG_CYCLE_W));
   if (gamg) PetscCall(PCMGGetLevels(pc, &s->nlev));
   if (gamg && s->nlev > 1) {
     PetscCall(PetscMalloc1(s->nlev - 1, &s->coarse_k));
