@@ -347,9 +347,9 @@ impl std::fmt::Display for Plan {
             };
             write!(
                 f,
-                "; a step ≈ {step:.digits$} s on this machine ({how}: a product with the rank's \
-                 rows timed here, times the products a step's Krylov iterations cost on the \
-                 measured plates; docs/cluster.md)"
+                "; a step ≈ {step:.digits$} s on this machine ({how}: a product with K_A timed \
+                 here, scaled to the rank's entries, times the products a step's Krylov \
+                 iterations cost on the measured plates; docs/cluster.md)"
             )?;
         }
         Ok(())

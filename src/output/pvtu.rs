@@ -19,8 +19,8 @@
 //! parts is in both pieces, with the same values; there are no ghost cells. A part without
 //! cells has no piece. Each piece is a `.vtu` of `vtu.rs` with the fields of a one-process
 //! frame, its own mesh encoded once per run, and the point array `GlobalPointIds` (VTK's
-//! global ids: each point's number in the whole mesh, from 0), by which ParaView's filters
-//! and this crate's reader (`read.rs`) join the pieces again.
+//! global ids: each point's number in the whole mesh, from 0), by which this crate's reader
+//! (`read.rs`) joins the pieces again, and VTK's filters that match shared points find them.
 //!
 //! A frame is written piece by piece, each through a temporary file and a rename, then the
 //! `.pvtu`; a checkpoint records the CRC-32 of the `.pvtu`'s bytes followed by its pieces'

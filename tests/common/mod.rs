@@ -210,19 +210,14 @@ pub fn summary_values(dir: &Path) -> serde_json::Value {
 /// Every file of `dir` that a run's series consists of (the pieces of a `.pvtu` frame as
 /// `solution_NNNNNN/NAME`), and its history.csv, by name, run ids taken out.
 pub fn frames(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut files = BTreeMap::new();
-    for e in std::fs::read_dir(dir).unwrap().map(|e| e.unwrap()) {
-        let n = e.file_name().to_string_lossy().into_owned();
-        if e.path().is_dir() && n.starts_with("solution_") {
-            // The pieces of a `.pvtu` frame (a run over MPI ranks).
-            for (piece, bytes) in frames(&e.path()) {
-                files.insert(format!("{n}/{piece}"), bytes);
-            }
-        } else if [".vtu", ".pvtu", ".pvd"].iter().any(|x| n.ends_with(x)) || n == "history.csv" {
-            files.insert(n, without_run_id(std::fs::read(e.path()).unwrap()));
-        }
-    }
-    files
+    let series = |n: &str| {
+        let ours = !n.contains('/') || n.starts_with("solution_");
+        ours && ([".vtu", ".pvtu", ".pvd"].iter().any(|x| n.ends_with(x)) || n == "history.csv")
+    };
+    (dir_contents(dir).into_iter())
+        .filter(|(n, _)| series(n))
+        .map(|(n, bytes)| (n, without_run_id(bytes)))
+        .collect()
 }
 
 /// A run's history.csv: its header and its rows as numbers.
@@ -525,6 +520,19 @@ pub fn dir_contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         }
     }
     files
+}
+
+/// `python3 -c SCRIPT ARGS…`: its standard output; the test fails, showing its standard
+/// error, if the script does.
+pub fn python_out(script: &str, args: &[&Path]) -> String {
+    let out = Command::new("python3")
+        .args(["-c", script])
+        .args(args)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// Whether python3 imports vtk and h5py; a loud note when not (a failure with CI set).

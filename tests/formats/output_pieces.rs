@@ -7,7 +7,6 @@
 use crate::common;
 
 use std::path::Path;
-use std::process::Command;
 
 use viscontact::output::read::{read_frame, read_series};
 use viscontact::output::{Field, Frame, FrameSum, Geometry, Options, Resumed, Series};
@@ -149,17 +148,7 @@ for i, row in zip(n(ids), u):
     print(int(i), *[repr(float(x)) for x in row])
 print("region", *sorted(set(int(x) for x in n(g.GetCellData().GetArray("region")))))
 "#;
-    let out = Command::new("python3")
-        .args(["-c", script])
-        .arg(dir.join("solution_000002.pvtu"))
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = common::python_out(script, &[&dir.join("solution_000002.pvtu")]);
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("18 12 GlobalPointIds"));
     let (u, _) = values(2);

@@ -158,8 +158,8 @@ fn agree_on_1_2_and_3_ranks(scenes: &[std::path::PathBuf]) {
 
 /// The directory `out` of a run over `ranks` ranks holds the files of `one`'s, the one
 /// process's, with each frame a `.pvtu` of `ranks` pieces in place of its `.vtu`; VTK's
-/// parallel reader reads the last with every piece's points, each point's global id, and
-/// the one-process frame's cells.
+/// parallel reader reads the last with every piece's points (more than the mesh's) and the
+/// one-process frame's cells.
 fn assert_pieces(out: &Path, one: &Path, ranks: usize, what: &str) {
     let names = |dir: &Path| {
         let mut n: Vec<String> = std::fs::read_dir(dir)
@@ -190,18 +190,7 @@ for name, reader in ((sys.argv[1], vtk.vtkXMLPUnstructuredGridReader()), (sys.ar
 print(*counts)
 "#;
     let last_vtu = one.join(pvtu.file_name().unwrap()).with_extension("vtu");
-    let out = launching(&mut Command::new("python3"))
-        .args(["-c", script])
-        .arg(&pvtu)
-        .arg(&last_vtu)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let counts: Vec<usize> = String::from_utf8_lossy(&out.stdout)
+    let counts: Vec<usize> = common::python_out(script, &[&pvtu, &last_vtu])
         .split_whitespace()
         .map(|w| w.parse().unwrap())
         .collect();
