@@ -72,11 +72,12 @@
 //! - a slipping node whose test turns it the other way sticks first (a reversal passes
 //!   through sticking; where the body slides, ρ = K's diagonal is far stiffer than the
 //!   boundary, and the test would swing between the two directions);
-//! - when the sets of an iterate were met before in the step (a cycle), every later
-//!   system is solved to `krylov_tolerance`, ρ is divided by 10 (the test then weighs the
-//!   multipliers more, the velocities less), and an iteration makes at most half as many
-//!   changes of the sets as the last cycle proposed, the largest violations first (down to
-//!   one at a time);
+//! - when the sets an iteration proposes, or those it keeps of them (below), were met
+//!   before in the step (a cycle), every later system is solved to `krylov_tolerance`, ρ
+//!   is divided by 10 (the test then weighs the multipliers more, the velocities less),
+//!   and an iteration makes at most half as many changes of the sets as the last cycle
+//!   proposed, the largest violations first (down to one at a time). The kept sets count:
+//!   limited to two changes, the bracket's onset once went round four sets for good;
 //! - `max_iterations` iterations end the step with `StepStatus::MaxIterations`.
 //!
 //! On the golden scenes, the corners and a rotating traction (tests/petsc) every step
@@ -495,8 +496,8 @@ impl ActiveSetSolver {
             self.multipliers(system, rows, &sets, w, z)?;
             let kkt = kkt_residual(rows, w, z, max_abs(w), max_abs(z));
             let at = self.at(rows, soften, w, z);
-            let mut next = at.sets(Some(&sets));
-            let same = next.same_as(&sets);
+            let proposed = at.sets(Some(&sets));
+            let same = proposed.same_as(&sets);
             if same && exact && kkt <= s.tolerance {
                 self.count_step(newton);
                 return Ok(StepReport {
@@ -506,17 +507,26 @@ impl ActiveSetSolver {
                     krylov,
                 });
             }
-            let cycled = !same && seen.contains(&next.signature());
+            let kept = |allowed: usize| {
+                let mut next = proposed.clone();
+                if allowed < usize::MAX {
+                    next.keep_changes(&sets, at, allowed);
+                }
+                next
+            };
+            // A cycle: the sets proposed, or those that the limit on changes keeps of them,
+            // were met before in the step.
+            let mut next = kept(allowed);
+            let cycled = !same
+                && [&proposed, &next]
+                    .iter()
+                    .any(|t| seen.contains(&t.signature()));
             if cycled {
-                allowed = allowed.min(sets.changes(&next, at).len()).div_ceil(2);
-            }
-            if allowed < usize::MAX {
-                next.keep_changes(&sets, at, allowed);
-            }
-            seen.push(next.signature());
-            if cycled {
+                allowed = allowed.min(sets.changes(&proposed, at).len()).div_ceil(2);
+                next = kept(allowed);
                 soften *= 0.1;
             }
+            seen.push(next.signature());
             // The next system is the last one where the sets stand and the KKT residual is
             // small, or once the sets have cycled: it is solved to `krylov_tolerance`.
             exact = (same && kkt <= s.tolerance.sqrt()) || allowed < usize::MAX;
