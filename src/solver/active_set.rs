@@ -40,7 +40,8 @@
 //! coarse operators of N, Pᵀ N P level by level: made at the first system of a step from
 //! K's as PᵀKP + Pᵀ(N − K)P, and updated by the difference wherever the sets changed
 //! (`Preconditioner`; N − K lives near the contact boundary, so an update costs a fraction
-//! of a solve); where only the slip stiffness moved, the last one serves. A multigrid of K
+//! of a solve); where only the slip stiffness moved, and by less than a tenth of K's
+//! diagonal at every node (`STIFFNESS_MOVED`), the last one serves. A multigrid of K
 //! alone, projected, was a weak preconditioner where much of the face is active
 //! (docs/performance.md). The multipliers of the removed directions follow from the
 //! residual r = b − f_slip − (K + S)w⁺ node by node, r_i = Σ z_k a_k over the node's
@@ -81,11 +82,18 @@
 //! - `max_iterations` iterations end the step with `StepStatus::MaxIterations`.
 //!
 //! On the golden scenes, the corners and a rotating traction (tests/petsc) every step
-//! converges; the bracket's sliding onset is the hardest (35 iterations in one step).
+//! converges; the bracket's sliding onset is the hardest (31 iterations in one step).
 
 use super::{kkt_residual, Rows, StepReport, StepStatus};
 use crate::scene::ActiveSetSection;
 use crate::Result;
+
+/// How far a slipping node's stiffness β may move, in units of its ρ, before the Newton
+/// system's preconditioner is updated rather than kept (`Sets::stiffness_moved`): a tenth
+/// of K's diagonal leaves the kept multigrid close to the system's. Without the bound, a
+/// multigrid made where β reached 17 ρ served systems where it was 10⁻⁴ ρ
+/// (docs/performance.md, "Updating the multigrid where the slip stiffness moves").
+const STIFFNESS_MOVED: f64 = 0.1;
 
 /// What a linear solve of the Newton system did.
 #[derive(Clone, Copy, Debug, Default)]
@@ -303,6 +311,21 @@ impl Sets {
         }
     }
 
+    /// Whether a node slipping in both `self` and `other` has a slip stiffness β that
+    /// differs by more than `STIFFNESS_MOVED` times its ρ (K's diagonal along the
+    /// tangents): then a preconditioner made from one is not one for the other. Only in
+    /// 3D: a 2D node's slip adds no stiffness (T = 0).
+    fn stiffness_moved(&self, other: &Sets, rows: &Rows, rho: &[f64]) -> bool {
+        let mut pairs = self.friction.iter().zip(&other.friction).enumerate();
+        pairs.any(|(j, pair)| match pair {
+            (Friction::Slip { beta: a, .. }, Friction::Slip { beta: b, .. }) => {
+                let block = rows.friction_block(j);
+                block.len() == 2 && (a - b).abs() > STIFFNESS_MOVED * rho[block.start]
+            }
+            _ => false,
+        })
+    }
+
     /// Whether `other` has the same active rows and the same sticking and slipping nodes
     /// (`Friction::kind`).
     fn same_as(&self, other: &Sets) -> bool {
@@ -467,11 +490,14 @@ impl ActiveSetSolver {
             };
             self.assemble(rows, &sets, b);
             self.terms.project(w);
-            // The preconditioner is rebuilt at the start of the step and where the sets have
-            // changed; where only the slip stiffness moved, the last one serves.
+            // The preconditioner is rebuilt at the start of the step and where the sets or
+            // the slip stiffness have changed; where the stiffness moved a little, the last
+            // one serves.
             let pc = match &built {
                 None => Preconditioner::Rebuilt,
-                Some(b) if b.same_as(&sets) => Preconditioner::Last,
+                Some(b) if b.same_as(&sets) && !b.stiffness_moved(&sets, rows, &self.rho) => {
+                    Preconditioner::Last
+                }
                 Some(_) => Preconditioner::Updated,
             };
             if pc != Preconditioner::Last {
@@ -802,6 +828,7 @@ fn max_abs(v: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fem::NodalRow;
 
     /// The least-squares split recovers the coefficients of independent directions exactly,
     /// and gives a direction dependent on those before it nothing (the 90° corner).
@@ -843,6 +870,40 @@ mod tests {
             "{a:?}"
         );
         assert!(apply([0.0, 0.0, 1.0]).iter().all(|v| *v == 0.0));
+    }
+
+    /// A slipping node whose β moved by more than a tenth of its ρ asks for a new
+    /// preconditioner, in 3D only (a 2D slip adds no stiffness); a node that sticks in
+    /// either set is the sets' business (`same_as`), not the stiffness's.
+    #[test]
+    fn only_a_3d_slip_stiffness_that_moved_far_calls_for_a_new_preconditioner() {
+        let row = |node: usize, dir: [f64; 3], dim: usize| NodalRow {
+            node,
+            dofs: [3 * node, 3 * node + 1, 3 * node + 2],
+            dir,
+            dim,
+            bound: 1.0,
+            area: 1.0,
+        };
+        let tangents = [row(0, [1.0, 0.0, 0.0], 3), row(0, [0.0, 1.0, 0.0], 3)];
+        let rows_3d = Rows::new(&[], &tangents, 2);
+        let rows_2d = Rows::new(&[], &[row(0, [1.0, 0.0, 0.0], 2)], 1);
+        let rho = [4.0, 4.0];
+        let slip = |beta: f64| Sets {
+            active: vec![],
+            friction: vec![Friction::Slip {
+                g: [1.0, 0.0],
+                beta,
+            }],
+        };
+        let stick = Sets {
+            active: vec![],
+            friction: vec![Friction::Stick],
+        };
+        assert!(slip(50.0).stiffness_moved(&slip(1e-3), &rows_3d, &rho));
+        assert!(!slip(1.0).stiffness_moved(&slip(1.3), &rows_3d, &rho));
+        assert!(!slip(50.0).stiffness_moved(&slip(1e-3), &rows_2d, &rho));
+        assert!(!stick.stiffness_moved(&slip(50.0), &rows_3d, &rho));
     }
 
     /// Π removes the directions of a node and keeps the rest; S adds its block.
