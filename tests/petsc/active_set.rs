@@ -1,8 +1,9 @@
 //! The active-set contact solver (`solver.contact = "active_set"`, on PETSc) against the
 //! dense dual and clarabel: every golden scene with contact or friction (2D and 3D: the
 //! paper's variants, the bracket, the plate with a hole, the blocks, the slab), the corners
-//! where Γ3,1 meets Γ3,2, half models with an inclined symmetry plane, and a block under a traction that turns (nodes change state from
-//! step to step). u_N agrees with the dense dual's to 1e-8 relative; the runs are bit for
+//! where Γ3,1 meets Γ3,2, half models with an inclined symmetry plane, friction whose
+//! coefficient is an expression, and a block under a traction that turns (nodes change
+//! state from step to step). u_N agrees with the dense dual's to 1e-8 relative; the runs are bit for
 //! bit the same when stopped and resumed, their forces balance in history.csv, and
 //! summary.json records the Newton and Krylov counts. The Newton systems' multigrid,
 //! updated in place, is the Galerkin hierarchy of its system after every update.
@@ -144,6 +145,29 @@ fn corners_agree_with_the_dense_dual() {
             SceneText::file(&dir.join("corner.toml")).mesh(dir.join(format!("corner_{angle}.msh")));
         agrees(scene, &format!("corner {angle}"), false);
     }
+}
+
+/// Friction whose coefficient is an expression of the position (μ = 0.6 x, as
+/// tests/solutions/friction_cone.rs) on the unstructured slider pushed at 30° to the x
+/// axis: the nodes near x = 0 slide in every direction of their tangent plane, those near
+/// x = 1 stick; u_N agrees with the dense dual and with clarabel.
+#[test]
+fn an_expression_friction_coefficient_agrees_with_the_dense_dual_and_clarabel() {
+    let a = 30f64.to_radians();
+    let scene = SceneText::on(common::mesh_path("3d/slider.msh"))
+        .set("name", "slider")
+        .set("mesh.model", "3d")
+        .set("mesh.groups.fixed", "Γ1")
+        .set("mesh.groups.traction", "Γ2")
+        .set("mesh.groups.friction", "Γ3,2")
+        .set("time.end", 1.0)
+        .set("time.steps", 2)
+        .set("material.viscosity.theta", 1.0)
+        .set("material.viscosity.zeta", 0.5)
+        .set("friction.normal_stress", 1.0)
+        .set("friction.coefficient", "0.6*x")
+        .body(&[&a.cos().to_string(), &a.sin().to_string(), "0"]);
+    agrees(scene, "slider, μ = 0.6 x", true);
 }
 
 /// The block at h = 1/4 under a top traction whose tangential part turns once around over
