@@ -13,8 +13,9 @@
 //!   λ_i = max(0, λ_i + ρ_i n_i·w)                     (Γ3,1: n·w ≤ 0, λ ≥ 0, λ n·w = 0),
 //!   γ_i = Π_{|·|≤c_i}(γ_i + ρ_i w_τ,i)                (Γ3,2: the friction disc, 2D: segment),
 //!
-//! with ρ_i > 0 any constants, one per node (here the diagonal of K along the row, the mean
-//! over a friction node's tangents, so that both arguments are forces). Given the iterate (w, z), the sets are: a contact row is *active* where
+//! with ρ_i > 0 any constants, one per node (here a tenth of the diagonal of K along the
+//! row, the mean over a friction node's tangents, so that both arguments are forces: K's
+//! diagonal itself is far stiffer than a thin body's boundary, `RHO_START`). Given the iterate (w, z), the sets are: a contact row is *active* where
 //! λ_i + ρ_i n_i·w > 0, a friction node *sticks* where g_i = γ_i + ρ_i w_τ,i lies in the
 //! disc, and *slips* otherwise. The semismooth Newton step (Hintermüller–Ito–Kunisch's
 //! primal–dual active set; Hüeber–Stadler–Wohlmuth for the disc) sets
@@ -71,7 +72,7 @@
 //! the solution (ρ and the order of the changes only steer the iteration):
 //!
 //! - a slipping node whose test turns it the other way sticks first (a reversal passes
-//!   through sticking; where the body slides, ρ = K's diagonal is far stiffer than the
+//!   through sticking; where the body slides, ρ (from K's diagonal) is far stiffer than the
 //!   boundary, and the test would swing between the two directions);
 //! - when the sets an iteration proposes, or those it keeps of them (below), were met
 //!   before in the step (a cycle), every later system is solved to `krylov_tolerance`, ρ
@@ -88,10 +89,16 @@ use super::{kkt_residual, Rows, StepReport, StepStatus};
 use crate::scene::ActiveSetSection;
 use crate::Result;
 
-/// How far a slipping node's stiffness β may move, in units of its ρ, before the Newton
+/// ρ at the start of a step, in units of K's diagonal along the row (`Iterate::rho`): K's
+/// diagonal is far stiffer than the boundary of a thin body, and on the thin slab
+/// (tests/data/3d/slab_t0008.msh) the sets wandered without converging with it
+/// (docs/performance.md, "The thin slab: ρ at a tenth of K's diagonal").
+const RHO_START: f64 = 0.1;
+
+/// How far a slipping node's stiffness β may move, in units of K's diagonal, before the Newton
 /// system's preconditioner is updated rather than kept (`Sets::stiffness_moved`): a tenth
 /// of K's diagonal leaves the kept multigrid close to the system's. Without the bound, a
-/// multigrid made where β reached 17 ρ served systems where it was 10⁻⁴ ρ
+/// multigrid made where β reached 17 times the diagonal served systems where it was 10⁻⁴ of it
 /// (docs/performance.md, "Updating the multigrid where the slip stiffness moves").
 const STIFFNESS_MOVED: f64 = 0.1;
 
@@ -312,15 +319,15 @@ impl Sets {
     }
 
     /// Whether a node slipping in both `self` and `other` has a slip stiffness β that
-    /// differs by more than `STIFFNESS_MOVED` times its ρ (K's diagonal along the
-    /// tangents): then a preconditioner made from one is not one for the other. Only in
-    /// 3D: a 2D node's slip adds no stiffness (T = 0).
-    fn stiffness_moved(&self, other: &Sets, rows: &Rows, rho: &[f64]) -> bool {
+    /// differs by more than `STIFFNESS_MOVED` times K's diagonal along the node's tangents
+    /// (`diagonal`, per row): then a preconditioner made from one is not one for the other.
+    /// Only in 3D: a 2D node's slip adds no stiffness (T = 0).
+    fn stiffness_moved(&self, other: &Sets, rows: &Rows, diagonal: &[f64]) -> bool {
         let mut pairs = self.friction.iter().zip(&other.friction).enumerate();
         pairs.any(|(j, pair)| match pair {
             (Friction::Slip { beta: a, .. }, Friction::Slip { beta: b, .. }) => {
                 let block = rows.friction_block(j);
-                block.len() == 2 && (a - b).abs() > STIFFNESS_MOVED * rho[block.start]
+                block.len() == 2 && (a - b).abs() > STIFFNESS_MOVED * diagonal[block.start]
             }
             _ => false,
         })
@@ -335,8 +342,8 @@ impl Sets {
     }
 }
 
-/// What the sets are judged at: the rows, their ρ (times `soften`, 10^−c after c cycles of
-/// the sets in the step) and the iterate (w, z).
+/// What the sets are judged at: the rows, their ρ (K's diagonal times `soften`:
+/// `RHO_START`, divided by 10 at each cycle of the sets in the step) and the iterate (w, z).
 #[derive(Clone, Copy)]
 struct Iterate<'a> {
     rows: &'a Rows,
@@ -415,8 +422,7 @@ pub struct ActiveSetCounts {
 pub struct ActiveSetSolver {
     settings: ActiveSetSettings,
     nodes: Vec<Node>,
-    /// ρ of each row: the diagonal of K along it (lowered in a step where the sets cycle:
-    /// `Iterate::soften`).
+    /// The diagonal of K along each row, ρ's unit (ρ itself is `Iterate::rho`).
     rho: Vec<f64>,
     terms: Terms,
     /// b − f_slip, and its projection Π(b − f_slip), the system's right side.
@@ -473,7 +479,7 @@ impl ActiveSetSolver {
         z: &mut [f64],
     ) -> Result<StepReport> {
         let s = self.settings;
-        let mut soften = 1.0;
+        let mut soften = RHO_START;
         let mut sets = self.at(rows, soften, w, z).sets(None);
         let mut kkt_before = f64::NAN;
         let (mut exact, mut krylov) = (false, 0);
