@@ -71,6 +71,27 @@ impl SceneText {
         SceneText::example("block.toml")
     }
 
+    /// The unstructured slider (meshes/3d/slider.msh: clamped on top, friction on the
+    /// bottom) with viscosity only (each step is the same static problem), F = 1, friction
+    /// coefficient `mu` (an expression of x, y) and a body force of unit size at
+    /// `angle_deg` to the x axis; one step.
+    pub fn slider(mu: &str, angle_deg: f64) -> SceneText {
+        let a = angle_deg.to_radians();
+        SceneText::on(super::mesh_path("3d/slider.msh"))
+            .set("name", "slider")
+            .set("mesh.model", "3d")
+            .set("mesh.groups.fixed", "Γ1")
+            .set("mesh.groups.traction", "Γ2")
+            .set("mesh.groups.friction", "Γ3,2")
+            .set("time.end", 1.0)
+            .set("time.steps", 1)
+            .set("material.viscosity.theta", 1.0)
+            .set("material.viscosity.zeta", 0.5)
+            .set("friction.normal_stress", 1.0)
+            .set("friction.coefficient", mu)
+            .body(&[&a.cos().to_string(), &a.sin().to_string(), "0"])
+    }
+
     /// `mesh.file = mesh`.
     pub fn mesh(self, mesh: impl AsRef<Path>) -> SceneText {
         self.set("mesh.file", mesh.as_ref().display().to_string())

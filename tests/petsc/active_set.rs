@@ -180,20 +180,7 @@ fn corners_agree_with_the_dense_dual() {
 /// x = 1 stick; u_N agrees with the dense dual and with clarabel.
 #[test]
 fn an_expression_friction_coefficient_agrees_with_the_dense_dual_and_clarabel() {
-    let a = 30f64.to_radians();
-    let scene = SceneText::on(common::mesh_path("3d/slider.msh"))
-        .set("name", "slider")
-        .set("mesh.model", "3d")
-        .set("mesh.groups.fixed", "Γ1")
-        .set("mesh.groups.traction", "Γ2")
-        .set("mesh.groups.friction", "Γ3,2")
-        .set("time.end", 1.0)
-        .set("time.steps", 2)
-        .set("material.viscosity.theta", 1.0)
-        .set("material.viscosity.zeta", 0.5)
-        .set("friction.normal_stress", 1.0)
-        .set("friction.coefficient", "0.6*x")
-        .body(&[&a.cos().to_string(), &a.sin().to_string(), "0"]);
+    let scene = SceneText::slider("0.6*x", 30.0).set("time.steps", 2);
     agrees(scene, "slider, μ = 0.6 x", true);
 }
 

@@ -10,23 +10,9 @@ use viscontact::fem::Discretization;
 
 const ANGLE_DEG: f64 = 30.0;
 
-/// The slider with viscosity only (each step is the same static problem) and a body force
-/// of unit size at 30°; `mu` is the friction coefficient (an expression of x, y).
+/// The slider (`SceneText::slider`) at 30° with friction coefficient `mu`, solved by `solver`.
 fn scene(dir: &std::path::Path, mu: &str, solver: &str) -> std::path::PathBuf {
-    let a = ANGLE_DEG.to_radians();
-    SceneText::on(mesh_path("3d/slider.msh"))
-        .set("name", "slider")
-        .set("mesh.model", "3d")
-        .set("mesh.groups.fixed", "Γ1")
-        .set("mesh.groups.traction", "Γ2")
-        .set("mesh.groups.friction", "Γ3,2")
-        .set("time.end", 1.0)
-        .set("time.steps", 1)
-        .set("material.viscosity.theta", 1.0)
-        .set("material.viscosity.zeta", 0.5)
-        .set("friction.normal_stress", 1.0)
-        .set("friction.coefficient", mu)
-        .body(&[&a.cos().to_string(), &a.sin().to_string(), "0"])
+    SceneText::slider(mu, ANGLE_DEG)
         .set("solver.contact", solver)
         .write(dir, &format!("slider_{solver}.toml"))
 }
