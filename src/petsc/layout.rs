@@ -214,33 +214,40 @@ pub fn cell_pieces(
         .collect())
 }
 
-/// METIS's k-way partition of the nodes' graph into `size` parts: each node's part.
+/// METIS's k-way partition of the nodes' graph into `size` parts: each node's part. Two
+/// nodes are adjacent where a cell holds both (where K_A couples them: P1), so that the
+/// partition needs no matrix, and a rank that keeps only its own columns of K_A
+/// (`fem::Discretization::keep_columns`) makes the same one.
 fn partition(disc: &Discretization, nodes: &[Vec<usize>], size: usize) -> Result<Vec<usize>> {
     let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
     let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
-    let mut vertex = vec![0; disc.n_free];
-    for (v, unknowns) in nodes.iter().enumerate() {
-        unknowns.iter().for_each(|&i| vertex[i] = v);
+    let mut vertex = vec![usize::MAX; disc.free.len() / disc.dim];
+    let with_unknowns = (0..vertex.len()).filter(|&p| !node_unknowns(disc, p).is_empty());
+    for (v, p) in with_unknowns.enumerate() {
+        vertex[p] = v;
     }
-    let k = disc.k_a.as_ref();
-    let (ptr, rows) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
+    let mut adjacent: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
+    for cell in &disc.cells {
+        let of = |p: &usize| Some(vertex[*p]).filter(|&v| v != usize::MAX);
+        for v in cell.vertices().iter().filter_map(of) {
+            let others = cell.vertices().iter().filter_map(of).filter(|&w| w != v);
+            adjacent[v].extend(others);
+        }
+    }
     let (mut xadj, mut adjncy) = (vec![0], Vec::new());
-    for (v, unknowns) in nodes.iter().enumerate() {
-        let mut previous = usize::MAX;
-        // P1: a node's unknowns are coupled to the same nodes; the rows are sorted.
-        for &j in &rows[ptr[unknowns[0]]..ptr[unknowns[0] + 1]] {
-            let w = vertex[j];
-            if w != v && w != previous {
-                adjncy.push(idx(w)?);
-            }
-            previous = w;
+    for list in &mut adjacent {
+        list.sort_unstable();
+        list.dedup();
+        for &w in list.iter() {
+            adjncy.push(idx(w)?);
         }
         xadj.push(idx(adjncy.len())?);
+        *list = Vec::new();
     }
     let (mut nvtxs, mut ncon, mut nparts) = (idx(nodes.len())?, 1, idx(size)?);
     let (mut cut, mut part) = (0, vec![0; nodes.len()]);
     // SAFETY: xadj (nvtxs + 1 entries) and adjncy describe a graph without self loops,
-    // symmetric because K_A's pattern is; part holds nvtxs entries; null weights, targets
+    // symmetric (a cell makes both arrows); part holds nvtxs entries; null weights, targets
     // and options mean unit weights, even parts and METIS's defaults (a fixed seed). METIS
     // reads the graph and writes cut and part. The runs that partition (under a launcher)
     // order nothing with METIS at the same time (`solver::ordering` serializes its own).
