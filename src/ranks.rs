@@ -169,6 +169,19 @@ impl Ranks {
         }
     }
 
+    /// On one of several ranks, `disc` keeps the columns of K_A, K_B and K_R of the
+    /// unknowns whose rows this rank holds in PETSc (`petsc::Layout`), and no others
+    /// (`Discretization::keep_columns`); nothing on one rank.
+    pub fn keep_own_columns(&self, disc: &mut crate::fem::Discretization) -> Result<()> {
+        #[cfg(feature = "petsc")]
+        if self.size > 1 {
+            let layout = crate::petsc::Layout::new(disc, self.size)?;
+            disc.keep_columns(layout.own(self.rank));
+        }
+        let _ = disc;
+        Ok(())
+    }
+
     /// Ends every rank of the run with exit status `code`: a rank that failed alone after
     /// setup, so that no other waits for it in a collective call.
     pub fn abort(&self, code: i32) {

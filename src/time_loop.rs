@@ -29,7 +29,9 @@
 //! elastic response ε_{n+1} = f/E.
 
 use crate::effects::{self, Effects};
-use crate::fem::{constraints, leading_block, mul_add, Discretization, Sparse, SymmetricPair};
+use crate::fem::{
+    constraints, leading_block, mul_add, mul_add_rows, Discretization, Sparse, SymmetricPair,
+};
 use crate::history::{History, LoopState, Plans, SavedLoop};
 use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
@@ -248,7 +250,7 @@ impl<'p> TimeLoop<'p> {
         let paired = disc
             .k_b
             .as_ref()
-            .filter(|_| history.has_memory())
+            .filter(|_| history.has_memory() && disc.own.is_none())
             .and_then(|k_b| SymmetricPair::new(k_b, &disc.k_r[0]));
         let m = if history.has_memory() {
             vec![0.0; plans.groups() * n]
@@ -516,22 +518,31 @@ impl<'p> TimeLoop<'p> {
         // −K_B u_n − Σ_g K_R^(g) m^(g)_n, the body's group with K_B in one pass where paired.
         let n = h.u.len();
         let mut groups = (self.disc.k_r.iter()).zip(self.m.chunks_exact(n.max(1)));
+        // A rank of several holds its own columns (`Discretization::keep_columns`): its
+        // rows of the products, gathered below.
+        let product = |k: &Sparse, x: &[f64], b: &mut [f64]| match &disc.own {
+            Some(own) => mul_add_rows(k, own, x, -1.0, b),
+            None => mul_add(k, x, -1.0, b),
+        };
         match (&mut self.paired, &self.disc.k_b) {
             (Some(pair), _) if memory => {
                 let (_, m0) = groups.next().expect("group 0");
                 pair.mul_add(&h.u, m0, -1.0, &mut self.b)
             }
-            (_, Some(k_b)) => mul_add(k_b, &h.u, -1.0, &mut self.b),
+            (_, Some(k_b)) => product(k_b, &h.u, &mut self.b),
             (_, None) => {}
         }
         for (k_r, m) in groups {
-            mul_add(k_r, m, -1.0, &mut self.b);
+            product(k_r, m, &mut self.b);
         }
         for (b, g) in self.b.iter_mut().zip(&self.disc.g_f) {
             *b -= g;
         }
         if let Some(lift) = &self.lift {
             constraints::lift(lift, disc.n_free, &self.w, &mut self.b);
+        }
+        if disc.own.is_some() {
+            self.backend.gather(&mut self.b)?;
         }
         Ok(load_max)
     }

@@ -134,6 +134,9 @@ pub struct Discretization {
     /// The conditions ("contact", "friction") whose group the mesh has but the scene
     /// leaves off: that boundary then carries no condition at all (`effects::warnings`).
     pub idle_groups: Vec<Gamma3>,
+    /// On one of several MPI ranks, the unknowns whose columns of K_A, K_B and K_R this rank
+    /// keeps whole ([`Discretization::keep_columns`]); None: every column (one process).
+    pub own: Option<Vec<usize>>,
     /// The cells as [`Discretization::stress`] reads them, once it is called.
     stress_cells: std::sync::OnceLock<PackedCells>,
 }
@@ -470,8 +473,29 @@ impl Discretization {
             contact_kink_deg: contact_kink,
             friction_kink_deg: friction_kink,
             idle_groups: idle_groups(mesh, scene),
+            own: None,
             stress_cells: std::sync::OnceLock::new(),
         })
+    }
+
+    /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) whole and of
+    /// the others the diagonal entry alone: a rank of several, which holds those unknowns'
+    /// rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric matrix's column is
+    /// its row, so each rank computes its own entries of a product ([`mul_add_rows`]) and
+    /// the ranks gather the rest; the diagonal stays for the active set's ρ. Where K_A has a
+    /// block on prescribed dofs (`k_a_all`), which moves their velocities to every row's
+    /// right side, the matrices stay whole.
+    pub fn keep_columns(&mut self, own: Vec<usize>) {
+        if self.k_a_all.is_some() {
+            return;
+        }
+        let mut keep = vec![false; self.n_dofs];
+        own.iter().for_each(|&i| keep[i] = true);
+        let trim = |a: &mut Sparse| *a = columns_kept(a, &keep);
+        trim(&mut self.k_a);
+        self.k_b.iter_mut().for_each(trim);
+        self.k_r.iter_mut().for_each(trim);
+        self.own = Some(own);
     }
 
     /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1; z = 0 in 2D).
@@ -604,6 +628,37 @@ impl Discretization {
     /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
         p1_norms(&self.cells, &nodal_vectors::<3>(self, v))
+    }
+}
+
+/// `a` with the columns j where `keep[j]` whole and the diagonal entry alone of the others.
+fn columns_kept(a: &Sparse, keep: &[bool]) -> Sparse {
+    let a = a.as_ref();
+    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    let (mut col_ptr, mut row_idx, mut val) = (vec![0], Vec::new(), Vec::new());
+    for j in 0..a.ncols() {
+        let kept = (cp[j]..cp[j + 1]).filter(|&p| keep[j] || ri[p] == j);
+        for p in kept {
+            row_idx.push(ri[p]);
+            val.push(v[p]);
+        }
+        col_ptr.push(row_idx.len());
+    }
+    let pattern = SymbolicSparseColMat::new_checked(a.nrows(), a.ncols(), col_ptr, None, row_idx);
+    SparseColMat::new(pattern, val)
+}
+
+/// y_i += α (A x)_i for the unknowns i in `own`, each a column the symmetric `a` keeps
+/// whole (`Discretization::keep_columns`): its row.
+pub fn mul_add_rows(a: &Sparse, own: &[usize], x: &[f64], alpha: f64, y: &mut [f64]) {
+    let a = a.as_ref();
+    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    for &i in own {
+        let range = cp[i]..cp[i + 1];
+        let row: f64 = (ri[range.clone()].iter().zip(&v[range]))
+            .map(|(&j, a)| a * x[j])
+            .sum();
+        y[i] += alpha * row;
     }
 }
 

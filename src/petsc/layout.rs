@@ -62,6 +62,13 @@ impl Layout {
         self.row.as_ref().map_or(i, |row| row[i])
     }
 
+    /// The unknowns whose rows rank `rank` holds, increasing.
+    pub fn own(&self, rank: usize) -> Vec<usize> {
+        let block = self.blocks[rank]..self.blocks[rank + 1];
+        let n = *self.blocks.last().unwrap_or(&0);
+        (0..n).filter(|&i| block.contains(&self.row(i))).collect()
+    }
+
     /// Whether the rows are the unknowns in another order.
     pub fn permutes(&self) -> bool {
         self.row.is_some()

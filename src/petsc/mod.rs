@@ -86,6 +86,7 @@ extern "C" {
     ) -> c_int;
     fn vc_ksp_solve(ctx: *mut c_void, b: *const f64, x: *mut f64, v: *mut VcSolve) -> c_int;
     fn vc_mult(ctx: *mut c_void, x: *const f64, y: *mut f64) -> c_int;
+    fn vc_gather(ctx: *mut c_void, x: *mut f64) -> c_int;
     #[allow(clippy::too_many_arguments)]
     fn vc_constrained_solve(
         ctx: *mut c_void,
@@ -489,6 +490,23 @@ impl Krylov {
                 v,
             )
         })
+    }
+
+    /// Every rank's v ← the whole of v, each unknown's value from the rank that holds its
+    /// row (a right side each rank made its own entries of); nothing on one rank.
+    pub fn gather(&mut self, v: &mut [f64]) -> Result<()> {
+        if !self.layout.permutes() {
+            return Ok(());
+        }
+        let n = self.n.min(v.len());
+        self.layout.to_rows(&v[..n], &mut self.rows_b);
+        // SAFETY: rows_b holds n values, which the shim gathers in place within the call.
+        check(
+            unsafe { vc_gather(self.ctx, self.rows_b.as_mut_ptr()) },
+            "MPI_Allgatherv",
+        )?;
+        self.layout.from_rows(&self.rows_b, &mut v[..n]);
+        Ok(())
     }
 
     /// How far the Newton systems' multigrid is from the Galerkin products of its fine

@@ -352,6 +352,13 @@ int vc_ksp_types(void *ctx, const char **ksp_type, const char **pc_type)
   return 0;
 }
 
+/* Every rank's x (in the rows' order) ← the whole of x, from each rank's own rows. */
+int vc_gather(void *ctx, PetscScalar *x)
+{
+  PetscCall(gathered((VcKsp *)ctx, x));
+  return 0;
+}
+
 /* y = K x, x and y whole on every rank. */
 int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 {

@@ -223,12 +223,14 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     stage()?;
     let mesh = read_mesh(&scene)?;
     stage()?;
-    let disc = Arc::new(Discretization::new(&mesh, &scene)?);
+    let mut disc = Discretization::new(&mesh, &scene)?;
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
     let solver = check_contact_plan(&scene, &disc, &estimate, None, opts.ranks.size)?;
     check_started_ranks(&scene, &solver, opts)?;
+    opts.ranks.keep_own_columns(&mut disc)?;
+    let disc = Arc::new(disc);
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
     let series = open_series(
@@ -325,9 +327,10 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
             }
         };
         let mesh = read_mesh(&scene)?;
-        let disc = Discretization::new(&mesh, &scene)?;
+        let mut disc = Discretization::new(&mesh, &scene)?;
         let solver = Descriptor::of_run(&scene, &disc)?;
         check_started_ranks(&scene, &solver, opts)?;
+        opts.ranks.keep_own_columns(&mut disc)?;
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,
@@ -422,7 +425,7 @@ fn prepare_resume(
         ))
     })?;
     stage()?;
-    let disc = Arc::new(Discretization::new(&mesh, &scene)?);
+    let mut disc = Discretization::new(&mesh, &scene)?;
     stage()?;
     cp.check(&scene, &mesh, &disc)?;
     check_continuation(checkpoint_path, &cp, &scene, opts.stop_after)?;
@@ -437,6 +440,8 @@ fn prepare_resume(
         opts.ranks.size,
     )?;
     check_started_ranks(&scene, &solver, opts)?;
+    opts.ranks.keep_own_columns(&mut disc)?;
+    let disc = Arc::new(disc);
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
     dir::check_same_run(&out, checkpoint_path, &cp.id.run_id)?;

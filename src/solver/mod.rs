@@ -231,6 +231,19 @@ impl Backend {
             Backend::Petsc(_) => None,
         }
     }
+
+    /// Every rank's `v` ← the whole of it, each of its unknowns from the rank that holds its
+    /// row (`Discretization::keep_columns`); nothing on one process.
+    pub fn gather(&mut self, v: &mut [f64]) -> crate::Result<()> {
+        match self {
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => krylov.gather(v),
+            _ => {
+                let _ = v;
+                Ok(())
+            }
+        }
+    }
 }
 
 /// w = K⁻¹ b for a linear step through PETSc (`Backend::Petsc`): the report with the Krylov

@@ -1,0 +1,75 @@
+//! A rank's own columns (`Discretization::keep_columns`): a rank of a run over several MPI
+//! ranks keeps of K_A, K_B and K_R the columns of the unknowns whose rows it holds, and
+//! computes its entries of the right side's products from them (`fem::mul_add_rows`). On
+//! the 3D block with elasticity and memory, for a random half of the nodes: those entries
+//! agree with the whole matrices' products to round-off, the diagonal stays whole (the
+//! active set's ρ reads it), and the other columns are gone. A scene with prescribed dofs
+//! keeps its matrices whole.
+
+use crate::common;
+use common::*;
+use toml::Value;
+use viscontact::fem::{diagonal, mul_add, mul_add_rows, Sparse};
+
+#[test]
+fn a_ranks_own_columns_give_its_rows_of_the_products() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = SceneText::block().write(dir.path(), "block.toml");
+    let (_, _, whole) = load(&path, &[]);
+    let (_, _, mut mine) = load(&path, &[]);
+    let mut rng = SplitMix(52);
+    let d = mine.dim;
+    let own: Vec<usize> = (0..mine.free.len() / d)
+        .filter(|_| rng.below(2) == 0)
+        .flat_map(|v| (d * v..d * v + d).filter_map(|g| mine.free[g]))
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    assert!(own.len() > whole.n_free / 4 && own.len() < 3 * whole.n_free / 4);
+    mine.keep_columns(own.clone());
+    assert_eq!(mine.own.as_deref(), Some(own.as_slice()));
+    let x: Vec<f64> = (0..whole.n_dofs).map(|_| rng.unit() - 0.5).collect();
+    let pairs: Vec<(&Sparse, &Sparse)> = [(&whole.k_a, &mine.k_a)]
+        .into_iter()
+        .chain(whole.k_b.iter().zip(&mine.k_b))
+        .chain(whole.k_r.iter().zip(&mine.k_r))
+        .collect();
+    assert_eq!(pairs.len(), 3, "K_A, K_B and one K_R");
+    for (k, (full, kept)) in pairs.into_iter().enumerate() {
+        let (mut y, mut rows) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+        mul_add(full, &x, -1.0, &mut y);
+        mul_add_rows(kept, &own, &x, -1.0, &mut rows);
+        let at = |v: &[f64]| own.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let diff = rel_diff(&at(&rows), &at(&y));
+        assert!(diff < 1e-14, "matrix {k}: own rows differ by {diff:e}");
+        assert_eq!(diagonal(kept), diagonal(full), "matrix {k}");
+        let entries = |m: &Sparse| m.as_ref().val().len();
+        let others = whole.n_free - own.len();
+        assert!(entries(kept) < entries(full) * 3 / 4 + others, "matrix {k}");
+        // The other columns hold their diagonal alone.
+        let ptr = kept.as_ref().symbolic().col_ptr();
+        let single = (0..whole.n_free)
+            .filter(|&j| ptr[j + 1] - ptr[j] == 1)
+            .count();
+        assert_eq!(single, others, "matrix {k}");
+    }
+}
+
+#[test]
+fn a_scene_with_prescribed_dofs_keeps_its_matrices_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = SceneText::on(repo().join("tests/data/patch_square.msh"))
+        .set("mesh.groups.fixed", Value::Array(vec![]))
+        .set("time.end", 0.5)
+        .set("time.steps", 5)
+        .set("material.viscosity.theta", 0.3)
+        .set("material.viscosity.zeta", 0.2)
+        .dirichlet("Γ1", &["x", "y"], Some(&["0.01*t", "0"]))
+        .write(dir.path(), "prescribed.toml");
+    let (_, _, mut disc) = load(&path, &[]);
+    assert!(disc.k_a_all.is_some());
+    let before = disc.k_a.as_ref().val().to_vec();
+    disc.keep_columns(vec![0, 1]);
+    assert!(disc.own.is_none());
+    assert_eq!(disc.k_a.as_ref().val(), &before[..]);
+}
