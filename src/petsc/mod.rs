@@ -35,7 +35,9 @@
 //! in place and says why it is the one it is); its GAMG makes its aggregates and
 //! interpolation once, from K, and updates the coarse operators where the matrix changed
 //! (`Hierarchy`). A KSP made for them (`KrylovSettings::newton`) sets up only their
-//! multigrid: K's own KSP keeps its type and options but is never set up or solved.
+//! multigrid: K's own KSP keeps its type and options but is never set up or solved, and on
+//! several ranks it goes, with K's matrix, before GAMG's setup (a rank's memory peaks
+//! there): a product with K ([`Krylov::mult`]) then takes the rank's copy of its rows.
 
 mod layout;
 

@@ -239,8 +239,9 @@ static PetscErrorCode watch(VcKsp *s, KSP ksp, Watch *w)
  * length n stored one after the other, CG + GAMG with relative tolerance `rtol`, then
  * `options` (PETSc's command-line syntax) and KSPSetFromOptions; set up for K's own
  * solves, or where `newton`, for the constrained systems alone (their KSP and multigrid:
- * constrained_setup), K's never being solved. On one rank the matrix is whole; on several
- * each rank gives (and keeps) its own rows, the others' rows empty. */
+ * constrained_setup), K's never being solved (on several ranks K's matrix and KSP then go).
+ * On one rank the matrix is whole; on several each rank gives (and keeps) its own rows, the
+ * others' rows empty. */
 int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, const PetscScalar *vals,
                   PetscInt bs, const PetscInt *blocks, PetscInt nvec, const PetscScalar *near,
                   PetscReal rtol, const char *options, int newton, void **out)
@@ -254,7 +255,6 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   PetscCall(PetscCalloc1(1, &s));
   s->of_start = -1;
   PetscCall(distributed_matrix(s, n, rowptr, cols, vals, bs, blocks));
-  if (newton && s->count) PetscCall(local_rows(s, rowptr, cols, vals));
   PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatSetOption(s->A, MAT_SYMMETRIC, PETSC_TRUE));
   PetscCall(MatSetOption(s->A, MAT_SPD, PETSC_TRUE));
@@ -282,12 +282,15 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   PetscCall(KSPSetInitialGuessNonzero(s->ksp, PETSC_TRUE));
   PetscCall(PetscOptionsInsertString(NULL, options));
   PetscCall(KSPSetFromOptions(s->ksp));
-  if (newton) PetscCall(constrained_setup(s));
-  else {
+  if (newton) {
+    PetscCall(constrained_setup(s));
+    /* After GAMG's setup, a rank's peak, which its products no longer hold. */
+    if (s->count) PetscCall(local_rows(s, rowptr, cols, vals));
+  } else {
     PetscCall(KSPSetUp(s->ksp));
     PetscCall(watch(s, s->ksp, &s->kw));
   }
-  PetscCall(MatCreateVecs(s->A, &s->x, &s->b));
+  PetscCall(MatCreateVecs(s->A ? s->A : s->N, &s->x, &s->b));
   *out = s;
   return 0;
 }
@@ -299,7 +302,7 @@ static PetscErrorCode gathered(VcKsp *s, PetscScalar *x)
 
   PetscFunctionBeginUser;
   if (!s->count) PetscFunctionReturn(0);
-  PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
+  comm = PETSC_COMM_WORLD; /* the ranks' (several: count) */
   PetscCallMPI(MPI_Allgatherv(MPI_IN_PLACE, 0, MPIU_SCALAR, x, s->count, s->displ, MPIU_SCALAR, comm));
   PetscFunctionReturn(0);
 }
@@ -336,6 +339,7 @@ int vc_ksp_solve(void *ctx, const PetscScalar *b, PetscScalar *x, VcSolve *v)
 {
   VcKsp *s = (VcKsp *)ctx;
 
+  PetscCheck(s->ksp, PETSC_COMM_SELF, PETSC_ERR_ORDER, "K's KSP went with K's matrix (the Newton systems' KSP on several ranks)");
   PetscCall(solved(s, s->ksp, b, x, v));
   return 0;
 }
@@ -346,8 +350,10 @@ int vc_ksp_types(void *ctx, const char **ksp_type, const char **pc_type)
   VcKsp *s = (VcKsp *)ctx;
   PC     pc;
 
-  PetscCall(KSPGetType(s->ksp, ksp_type));
-  PetscCall(KSPGetPC(s->ksp, &pc));
+  KSP    ksp = s->ksp ? s->ksp : s->kc; /* the same type and options */
+
+  PetscCall(KSPGetType(ksp, ksp_type));
+  PetscCall(KSPGetPC(ksp, &pc));
   PetscCall(PCGetType(pc, pc_type));
   return 0;
 }
@@ -359,11 +365,21 @@ int vc_gather(void *ctx, PetscScalar *x)
   return 0;
 }
 
-/* y = K x, x and y whole on every rank. */
+/* y = K x, x and y whole on every rank: by K's matrix, or where it went (the Newton
+ * systems' KSP on several ranks: constrained_setup) by this rank's copy of its rows. */
 int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 {
   VcKsp *s = (VcKsp *)ctx;
 
+  if (!s->A) {
+    for (PetscInt r = 0; r < s->m; r++) {
+      PetscScalar sum = 0;
+      for (PetscInt k = s->kai[r]; k < s->kai[r + 1]; k++) sum += s->kav[k] * x[s->kaj[k]];
+      y[s->lo + r] = sum;
+    }
+    PetscCall(gathered(s, y));
+    return 0;
+  }
   PetscCall(VecPlaceArray(s->b, x + s->lo));
   PetscCall(VecPlaceArray(s->x, y + s->lo));
   PetscCall(MatMult(s->A, s->b, s->x));
@@ -674,6 +690,13 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(KSPSetInitialGuessNonzero(s->kc, PETSC_TRUE));
   PetscCall(KSPSetFromOptions(s->kc));
   PetscCall(MatCopy(s->A, s->Q, SAME_NONZERO_PATTERN));
+  /* On several ranks K's matrix, and the KSP of K that is never solved here, go before
+   * GAMG's setup, a rank's peak: the Newton systems are made of the rank's own copy of its
+   * rows of K (local_rows), and vc_mult multiplies by it. */
+  if (s->count) {
+    PetscCall(KSPDestroy(&s->ksp));
+    PetscCall(MatDestroy(&s->A));
+  }
   PetscCall(PCSetUp(pc));
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCGAMG, &gamg));
   /* A W-cycle: the coarse operators, K's aggregates with N's values, approximate the
@@ -685,6 +708,18 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   if (gamg && !chosen) PetscCall(PCMGSetCycleType(pc, PC_MG_CYCLE_W));
   if (gamg) PetscCall(PCMGGetLevels(pc, &s->nlev));
   if (gamg && s->nlev > 1) {
+    /* GAMG's Galerkin products keep what a product of the same pattern would reuse; the
+     * hierarchy is updated by galerkin_update alone, which makes products of its own, so
+     * that goes: 0.30 GB a rank on two ranks of the fine plate, nothing on one process. */
+    for (PetscInt l = 0; l < s->nlev; l++) {
+      KSP smoother;
+      Mat a, p;
+      PetscCall(level(pc, l, &smoother, &a));
+      PetscCall(MatProductClear(a));
+      if (l == 0) continue;
+      PetscCall(PCMGGetInterpolation(pc, l, &p));
+      PetscCall(MatProductClear(p));
+    }
     PetscCall(PetscMalloc1(s->nlev - 1, &s->coarse_k));
     for (PetscInt l = 0; l + 1 < s->nlev; l++) {
       KSP smoother;
