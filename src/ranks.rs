@@ -7,26 +7,30 @@
 //! PETSc's Krylov solves spread, K_A's and the active set's Newton systems: their KSPs on
 //! all the ranks, each holding the rows of the nodes METIS's partition gives it
 //! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
-//! of every Krylov vector, and each getting the whole solution back. The rest is
-//! replicated: every rank reads the scene and the mesh, assembles the matrices and keeps
-//! the history sums, so every rank computes the same right side b_n, bit for bit, from the
-//! same w's, and the active set's decisions (its sets, its KKT residual) are the same on
-//! every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
+//! of every Krylov vector, and each getting the whole solution back. Every rank reads the
+//! scene and the mesh and assembles the matrices, then keeps of K_A, K_B and K_R the
+//! columns of its own unknowns (`Discretization::keep_columns`: a symmetric matrix's
+//! column is its row), computes its entries of the right side's products from them and
+//! gathers the others' (`Backend::gather`). The rest is replicated: the history sums and
+//! every n-vector, so every rank holds the same right side b_n, bit for bit, and the
+//! active set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
 //! history.csv, checkpoints, summary.json) and prints; the others *follow* (`run::follow`),
 //! writing nothing.
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
-//! memory of each rank is the replicated part (mesh, matrices, history) plus its share of
-//! PETSc's; partitioning the replicated part too is the next step (docs/cluster.md).
+//! memory of each rank is the replicated part (mesh, cells, history), its columns of the
+//! matrices and its share of PETSc's; partitioning the mesh and the assembly too is the
+//! next step (docs/cluster.md).
 //!
 //! # Planning
 //!
 //! [`Plan`] is what a rank of a run over N ranks holds and does (`check --ranks N`): its
 //! share of K_A's rows, entries and of the values a product fetches from other ranks, and
-//! its memory, the replicated part (the setup's peak, measured) and its share of PETSc's,
-//! and for `check` a step's expected time on this machine ([`Plan::timed`]).
+//! its memory, its own part (the setup's peak, measured, less the columns it drops) and its
+//! share of PETSc's, and for `check` a step's expected time on this machine
+//! ([`Plan::timed`]).
 //! `check` and `run` refuse ranks that would not fit, naming how many would.
 //!
 //! # Agreement
@@ -201,9 +205,11 @@ const MPI_RUNTIME: f64 = 16e6;
 
 /// What each rank of a run over `size` ranks holds and does (`check --ranks N`, and the
 /// refusal of a run whose ranks would not fit the memory available): its share of K_A
-/// (the largest rank's, over `petsc::Layout`'s partition) and its memory, what every rank
-/// holds whole (the replicated part: this process's setup peak so far, measured, and what
-/// the steps hold) and its share of PETSc's matrices and multigrid.
+/// (the largest rank's, over `petsc::Layout`'s partition) and its memory: its own part
+/// (this process's setup peak so far, measured, less the other ranks' columns of K_A, K_B
+/// and K_R, which a rank drops once assembled (`Discretization::keep_columns`), and what
+/// the steps hold) and its share of PETSc's matrices and multigrid. Every rank assembles
+/// the whole matrices first: the setup's peak is a floor that no rank count lowers.
 #[cfg(feature = "petsc")]
 #[derive(Clone, Debug)]
 pub struct Plan {
@@ -212,12 +218,14 @@ pub struct Plan {
     rows: usize,
     /// The largest rank's share.
     largest: crate::petsc::RankShare,
-    /// Bytes every rank holds whole, and the largest rank's of PETSc's.
-    replicated: f64,
+    /// The largest rank's own bytes, and its bytes of PETSc's.
+    own: f64,
     spread: f64,
-    /// What every rank of several would hold whole (`replicated` with MPI's runtime), and
-    /// PETSc's bytes a rank on several ranks times their count (what they split).
+    /// A rank's setup peak on several ranks (the measured one with MPI's runtime), the
+    /// bytes of K_A, K_B and K_R whole (`matrix_bytes`), which the ranks split once
+    /// assembled, and PETSc's bytes a rank on several ranks times their count.
     on_several: f64,
+    matrices: f64,
     spread_several: f64,
     /// Through the active set's Newton systems.
     newton: bool,
@@ -242,18 +250,25 @@ impl Plan {
             .copied()
             .max_by_key(|s| s.entries)
             .unwrap_or_default();
-        let entries = shares.iter().map(|s| s.entries).sum();
+        let entries: usize = shares.iter().map(|s| s.entries).sum();
         // Under a launcher the peak holds MPI's runtime already.
         let launched = launched().is_some();
         let setup = peak_memory().unwrap_or(0.0) + steps;
         let on_several = setup + if launched { 0.0 } else { MPI_RUNTIME };
+        let matrices = matrix_bytes(disc);
+        let dropped = (1.0 - largest.entries as f64 / entries.max(1) as f64) * matrices;
         Ok(Plan {
             size,
             rows: disc.n_free,
             largest,
-            replicated: if size > 1 { on_several } else { setup },
+            own: if size > 1 {
+                on_several - dropped
+            } else {
+                setup
+            },
             spread: petsc_bytes(largest.entries, newton, size),
             on_several,
+            matrices,
             spread_several: petsc_bytes(entries, newton, 2),
             newton,
             step_s: None,
@@ -275,14 +290,16 @@ impl Plan {
         self.step_s
     }
 
-    /// The memory of the largest rank.
+    /// The memory of the largest rank: its setup's peak, or what it holds with PETSc's
+    /// share, whichever is more.
     pub fn per_rank(&self) -> f64 {
-        self.replicated + self.spread
+        let setup = if self.size > 1 { self.on_several } else { 0.0 };
+        (self.own + self.spread).max(setup)
     }
 
     /// Refuses (exit 2) ranks that would need more than `resources::MARGIN` of the memory
     /// available (`VISCONTACT_MEMORY` is a rank's), naming how many ranks would fit, or
-    /// that none would where the replicated part alone does not.
+    /// that none would where the setup's peak alone does not fit.
     pub fn check(&self) -> Result<()> {
         use crate::resources::{available_memory, human, memory_phrase, MARGIN};
         let Some(avail) = available_memory()? else {
@@ -292,28 +309,31 @@ impl Plan {
         if self.per_rank() <= budget {
             return Ok(());
         }
-        // The ranks split PETSc's part evenly but for whole nodes: 5 % for the largest.
+        // R ranks hold on_several − M + (M + PETSc's)/R each (M: the matrices they split),
+        // evenly but for whole nodes: 5 % more for the largest.
+        let split = self.matrices + self.spread_several;
         let remedy = match budget - self.on_several {
-            left if left > 0.0 => format!(
+            left if left >= 0.0 => format!(
                 "≈ {} ranks would fit (mpirun -n {0} or srun -n {0}, each rank with the \
                  memory this one has)",
-                (1.05 * self.spread_several / left)
+                (1.05 * split / (left + self.matrices))
                     .ceil()
                     .max(self.size as f64 + 1.0)
             ),
             _ => format!(
-                "no rank count would: every rank holds the mesh, the matrices and the \
-                 history whole in this version (≈ {} here), and only PETSc's part spreads; \
-                 use a coarser mesh or ranks with more memory (docs/cluster.md)",
+                "no rank count would: every rank reads the mesh and assembles the whole \
+                 matrices before it keeps its own columns (≈ {} here), and only the \
+                 matrices and PETSc's part spread; use a coarser mesh or ranks with more \
+                 memory (docs/cluster.md)",
                 human(self.on_several)
             ),
         };
         Err(Error::input(format!(
-            "a run on {} would need ≈ {} a rank (≈ {} that every rank holds whole and ≈ {} \
-             of PETSc's) but {} (a run may plan {:.0} % of it): {remedy}",
+            "a run on {} would need ≈ {} a rank (≈ {} of its own and ≈ {} of PETSc's) but {} \
+             (a run may plan {:.0} % of it): {remedy}",
             self.ranks(),
             human(self.per_rank()),
-            human(self.replicated),
+            human(self.own),
             human(self.spread),
             memory_phrase(avail),
             100.0 * MARGIN
@@ -335,20 +355,26 @@ impl std::fmt::Display for Plan {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         use crate::resources::human;
         let l = &self.largest;
+        let dropped = match self.size {
+            1 => "",
+            _ => {
+                ", less the other ranks' columns of K_A, K_B and K_R, which it drops once \
+                  assembled"
+            }
+        };
         write!(
             f,
             "{}: the largest holds {} of K_A's {} rows ({} entries; a product with K_A \
-             fetches {} values of other ranks' rows); memory ≈ {} a rank: ≈ {} that every \
-             rank holds whole (mesh, matrices, history: this setup's peak, measured, and \
-             what the steps hold) and ≈ {} of PETSc's (its share of the matrices and the \
-             multigrid)",
+             fetches {} values of other ranks' rows); memory ≈ {} a rank: ≈ {} of its own \
+             (this setup's peak, measured{dropped}, and what the steps hold) and ≈ {} of \
+             PETSc's (its share of the matrices and the multigrid)",
             self.ranks(),
             l.rows,
             self.rows,
             l.entries,
             l.ghosts,
             human(self.per_rank()),
-            human(self.replicated),
+            human(self.own),
             human(self.spread)
         )?;
         if let Some(step) = self.step_s {
@@ -367,6 +393,15 @@ impl std::fmt::Display for Plan {
         }
         Ok(())
     }
+}
+
+/// The bytes of K_A, K_B and K_R as the discretization holds them: an index (8 bytes) and
+/// a value (8) an entry, each.
+#[cfg(feature = "petsc")]
+fn matrix_bytes(disc: &crate::fem::Discretization) -> f64 {
+    let entries = |m: &crate::fem::Sparse| m.as_ref().val().len() as f64;
+    let (k_b, k_r) = (disc.k_b.iter(), disc.k_r.iter());
+    16.0 * (entries(&disc.k_a) + k_b.chain(k_r).map(entries).sum::<f64>())
 }
 
 /// A Krylov iteration of CG + GAMG on K_A costs this many products with K_A (its

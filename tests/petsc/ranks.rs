@@ -660,11 +660,13 @@ fn megabytes_after(text: &str, before: &str) -> f64 {
 }
 
 /// `check --ranks N` plans a run through PETSc over N ranks: the largest rank's share of
-/// K_A's rows (whole nodes) and its memory, what every rank holds whole and its share of
-/// PETSc's. Where a rank would not fit `VISCONTACT_MEMORY` (a rank's memory), `check`
-/// refuses (exit 2) naming how many ranks would, `check` with that many passes and the run
-/// on that many completes; below what every rank holds whole, `check` and `run` (one
-/// process, or under mpirun) refuse naming none, before anything is written.
+/// K_A's rows (whole nodes) and its memory, its own part (the setup's peak less the
+/// columns of the matrices it drops) and its share of PETSc's. Where a rank would not fit
+/// `VISCONTACT_MEMORY` (a rank's memory), `check` refuses (exit 2) naming how many ranks
+/// would, `check` with that many passes and the run on that many completes; below the
+/// setup's peak, which every rank reaches before it drops the other ranks' columns,
+/// `check` and `run` (one process, or under mpirun) refuse naming none, before anything is
+/// written.
 #[test]
 fn check_plans_the_ranks_and_refuses_ranks_that_would_not_fit_naming_how_many_would() {
     let tmp = tempfile::tempdir().unwrap();
@@ -685,10 +687,10 @@ fn check_plans_the_ranks_and_refuses_ranks_that_would_not_fit_naming_how_many_wo
     assert!(step > 0.0 && step < 10.0, "{text}");
     assert!(text.contains("the active set's Newton systems"), "{text}");
     // A budget between what 2 ranks and 3 ranks need a rank (PETSc's share falls by a
-    // third, a margin of a sixth of it on either side).
-    let whole = megabytes_after(&text, "a rank: ≈ ");
+    // third, a margin of a sixth of it on either side; the rank's own part falls too).
+    let own = megabytes_after(&text, "a rank: ≈ ");
     let petsc = megabytes_after(&text, "what the steps hold) and ≈ ");
-    let memory = (whole + 0.84 * petsc) / 0.8;
+    let memory = (own + 0.84 * petsc) / 0.8;
     let (code, text) = with_memory(0, memory, &["check", path, "--ranks", "2"]);
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("≈ 3 ranks would fit (mpirun -n 3"), "{text}");
@@ -699,8 +701,8 @@ fn check_plans_the_ranks_and_refuses_ranks_that_would_not_fit_naming_how_many_wo
     let (code, text) = with_memory(3, memory, &run3);
     assert_eq!(code, 0, "{text}");
     assert_eq!(common::summary(&out)["status"], "completed");
-    // Less than every rank holds whole: no count fits.
-    let memory = 0.9 * whole;
+    // Less than a rank's own part (below the setup's peak): no count fits.
+    let memory = 0.9 * own;
     for ranks in ["1", "2"] {
         let (code, text) = with_memory(0, memory, &["check", path, "--ranks", ranks]);
         assert_eq!(code, 2, "{text}");
