@@ -633,18 +633,24 @@ impl Discretization {
 
 /// `a` with the columns j where `keep[j]` whole and the diagonal entry alone of the others.
 fn columns_kept(a: &Sparse, keep: &[bool]) -> Sparse {
+    let (nrows, ncols) = (a.nrows(), a.ncols());
+    entries_kept(a, (nrows, ncols), |i, j| keep[j] || i == j)
+}
+
+/// The `size` (rows, columns) leading block of `a` with its entries (i, j) where `keep(i,
+/// j)`, in their order.
+fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) -> bool) -> Sparse {
     let a = a.as_ref();
     let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
     let (mut col_ptr, mut row_idx, mut val) = (vec![0], Vec::new(), Vec::new());
-    for j in 0..a.ncols() {
-        let kept = (cp[j]..cp[j + 1]).filter(|&p| keep[j] || ri[p] == j);
-        for p in kept {
+    for j in 0..size.1 {
+        for p in (cp[j]..cp[j + 1]).filter(|&p| ri[p] < size.0 && keep(ri[p], j)) {
             row_idx.push(ri[p]);
             val.push(v[p]);
         }
         col_ptr.push(row_idx.len());
     }
-    let pattern = SymbolicSparseColMat::new_checked(a.nrows(), a.ncols(), col_ptr, None, row_idx);
+    let pattern = SymbolicSparseColMat::new_checked(size.0, size.1, col_ptr, None, row_idx);
     SparseColMat::new(pattern, val)
 }
 
@@ -677,17 +683,7 @@ pub fn diagonal(a: &Sparse) -> Vec<f64> {
 
 /// The block of `a` on its first `n` rows and columns (a's rows increase in each column).
 pub fn leading_block(a: &Sparse, n: usize) -> Sparse {
-    let a = a.as_ref();
-    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
-    let (mut col_ptr, mut row_idx, mut val) = (vec![0], Vec::new(), Vec::new());
-    for j in 0..n {
-        let rows = cp[j]..cp[j] + ri[cp[j]..cp[j + 1]].partition_point(|&r| r < n);
-        row_idx.extend_from_slice(&ri[rows.clone()]);
-        val.extend_from_slice(&v[rows]);
-        col_ptr.push(row_idx.len());
-    }
-    let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-    SparseColMat::new(pattern, val)
+    entries_kept(a, (n, n), |_, _| true)
 }
 
 /// What [`Discretization::stress`] reads of the cells, packed: the d + 1 vertices (u32) and

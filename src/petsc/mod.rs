@@ -500,14 +500,14 @@ impl Krylov {
         if !self.layout.permutes() {
             return Ok(());
         }
-        let n = self.n.min(v.len());
-        self.layout.to_rows(&v[..n], &mut self.rows_b);
+        assert_eq!(v.len(), self.n);
+        self.layout.to_rows(v, &mut self.rows_b);
         // SAFETY: rows_b holds n values, which the shim gathers in place within the call.
         check(
             unsafe { vc_gather(self.ctx, self.rows_b.as_mut_ptr()) },
             "MPI_Allgatherv",
         )?;
-        self.layout.from_rows(&self.rows_b, &mut v[..n]);
+        self.layout.from_rows(&self.rows_b, v);
         Ok(())
     }
 

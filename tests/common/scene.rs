@@ -71,6 +71,21 @@ impl SceneText {
         SceneText::example("block.toml")
     }
 
+    /// The unstructured square (tests/data/patch_square.msh) with no clamped group, for the
+    /// scenes that prescribe its boundary: T = 0.5 in 5 steps, viscosity θ = 0.3, ζ = 0.2,
+    /// elasticity E = 2, ν = 0.3 and the Prony kernel e^{−s}.
+    pub fn unclamped_square() -> SceneText {
+        SceneText::on(super::repo().join("tests/data/patch_square.msh"))
+            .set("mesh.groups.fixed", Value::Array(vec![]))
+            .set("time.end", 0.5)
+            .set("time.steps", 5)
+            .set("material.viscosity.theta", 0.3)
+            .set("material.viscosity.zeta", 0.2)
+            .set("material.elasticity.young", 2.0)
+            .set("material.elasticity.poisson", 0.3)
+            .literal("material.relaxation.prony", "[[1.0, 1.0]]")
+    }
+
     /// The unstructured slider (meshes/3d/slider.msh: clamped on top, friction on the
     /// bottom) with viscosity only (each step is the same static problem), F = 1, friction
     /// coefficient `mu` (an expression of x, y) and a body force of unit size at

@@ -8,7 +8,6 @@
 
 use crate::common;
 use common::*;
-use toml::Value;
 use viscontact::fem::{diagonal, mul_add, mul_add_rows, Sparse};
 
 #[test]
@@ -58,12 +57,7 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
 #[test]
 fn a_scene_with_prescribed_dofs_keeps_its_matrices_whole() {
     let dir = tempfile::tempdir().unwrap();
-    let path = SceneText::on(repo().join("tests/data/patch_square.msh"))
-        .set("mesh.groups.fixed", Value::Array(vec![]))
-        .set("time.end", 0.5)
-        .set("time.steps", 5)
-        .set("material.viscosity.theta", 0.3)
-        .set("material.viscosity.zeta", 0.2)
+    let path = SceneText::unclamped_square()
         .dirichlet("Γ1", &["x", "y"], Some(&["0.01*t", "0"]))
         .write(dir.path(), "prescribed.toml");
     let (_, _, mut disc) = load(&path, &[]);

@@ -26,16 +26,8 @@ fn g(x: [f64; 3], t: f64) -> [f64; 2] {
 fn a_prescribed_affine_motion_is_reproduced_exactly() {
     let dir = tempfile::tempdir().unwrap();
     for history in ["left", "implicit"] {
-        let path = SceneText::on(repo().join("tests/data/patch_square.msh"))
-            .set("mesh.groups.fixed", Value::Array(vec![]))
-            .set("time.end", 0.5)
-            .set("time.steps", 5)
+        let path = SceneText::unclamped_square()
             .set("scheme.history", history)
-            .set("material.viscosity.theta", 0.3)
-            .set("material.viscosity.zeta", 0.2)
-            .set("material.elasticity.young", 2.0)
-            .set("material.elasticity.poisson", 0.3)
-            .literal("material.relaxation.prony", "[[1.0, 1.0]]")
             .dirichlet("Γ1", &["x", "y"], Some(&G))
             .dirichlet("Γ2", &["x", "y"], Some(&G))
             .write(dir.path(), "affine.toml");

@@ -150,14 +150,7 @@ fn forces_balance_with_an_inclined_symmetry_plane() {
 fn forces_balance_with_prescribed_displacements() {
     let dir = tempfile::tempdir().unwrap();
     let g = ["0.01*t*(x + 2*y)", "-0.02*t*x - 0.001*t"];
-    let scene = SceneText::on(repo().join("tests/data/patch_square.msh"))
-        .set("mesh.groups.fixed", Value::Array(vec![]))
-        .set("time.end", 0.5)
-        .set("material.viscosity.theta", 0.3)
-        .set("material.viscosity.zeta", 0.2)
-        .set("material.elasticity.young", 2.0)
-        .set("material.elasticity.poisson", 0.3)
-        .literal("material.relaxation.prony", "[[1.0, 1.0]]")
+    let scene = SceneText::unclamped_square()
         .body(&["0", "-0.05*t"])
         .dirichlet("Γ1", &["x", "y"], Some(&g))
         .dirichlet("Γ2", &["x", "y"], Some(&g))
