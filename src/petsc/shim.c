@@ -110,11 +110,11 @@ struct VcKsp {
   VcTerms   terms;
   PetscInt *frame_of; /* n entries, −1 between calls (newton_matrix) */
   /* On several ranks, the CSR of this rank's rows of K (offsets from 0, global columns),
-   * their values in K, N and Q (one process reads the matrices' own arrays), and which
-   * rows of N differ from K's now (held) and in the system being made (touched). */
-  PetscInt    *kai, *kaj;
-  PetscScalar *kav, *nav, *qav;
-  char        *held, *touched;
+   * their values, and how many entries of each row lie left of the rank's own columns
+   * (`below`, by which a CSR entry is found in N's and Q's blocks: Values); one process
+   * reads K's, N's and Q's own arrays. */
+  PetscInt    *kai, *kaj, *below;
+  PetscScalar *kav;
   /* GAMG's levels (0: coarsest) and K's Galerkin operators on levels 0 … nlev − 2, kept for
    * galerkin_update; NULL where the constrained PC is not GAMG (the options chose another). */
   PetscInt nlev;
@@ -123,6 +123,7 @@ struct VcKsp {
 };
 
 static PetscErrorCode constrained_setup(VcKsp *s);
+static PetscErrorCode check_blocks(VcKsp *s);
 
 /* K_A on the ranks: on one, a SEQAIJ of the whole CSR (what the Newton systems update in
  * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) of a
@@ -178,22 +179,25 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
   PetscFunctionReturn(0);
 }
 
-/* On several ranks, the copy of this rank's rows of K that the Newton systems are made from
- * (newton_matrix), and N's and Q's values, K's to begin with. */
+/* On several ranks, the copy of this rank's rows of K (columns in order) that the Newton
+ * systems are made from (newton_matrix) and vc_mult multiplies by, with each row's count
+ * of columns left of the rank's own. */
 static PetscErrorCode local_rows(VcKsp *s, const PetscInt *rowptr, const PetscInt *cols,
                                  const PetscScalar *vals)
 {
   PetscInt base = rowptr[s->lo], nnz = rowptr[s->lo + s->m] - base;
 
   PetscFunctionBeginUser;
-  PetscCall(PetscMalloc2(s->m + 1, &s->kai, nnz, &s->kaj));
-  PetscCall(PetscMalloc3(nnz, &s->kav, nnz, &s->nav, nnz, &s->qav));
-  PetscCall(PetscCalloc2(s->m, &s->held, s->m, &s->touched));
+  PetscCall(PetscMalloc3(s->m + 1, &s->kai, nnz, &s->kaj, s->m, &s->below));
+  PetscCall(PetscMalloc1(nnz, &s->kav));
   for (PetscInt i = 0; i <= s->m; i++) s->kai[i] = rowptr[s->lo + i] - base;
   PetscCall(PetscArraycpy(s->kaj, cols + base, nnz));
   PetscCall(PetscArraycpy(s->kav, vals + base, nnz));
-  PetscCall(PetscArraycpy(s->nav, vals + base, nnz));
-  PetscCall(PetscArraycpy(s->qav, vals + base, nnz));
+  for (PetscInt r = 0; r < s->m; r++) {
+    PetscInt x = s->kai[r];
+    while (x < s->kai[r + 1] && s->kaj[x] < s->lo) x++;
+    s->below[r] = x - s->kai[r];
+  }
   PetscFunctionReturn(0);
 }
 
@@ -286,6 +290,7 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
     PetscCall(constrained_setup(s));
     /* After GAMG's setup, a rank's peak, which its products no longer hold. */
     if (s->count) PetscCall(local_rows(s, rowptr, cols, vals));
+    if (s->count) PetscCall(check_blocks(s));
   } else {
     PetscCall(KSPSetUp(s->ksp));
     PetscCall(watch(s, s->ksp, &s->kw));
@@ -454,22 +459,95 @@ static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
   PetscFunctionReturn(0);
 }
 
-/* A rank's rows of K and N in CSR, [lo, lo + m): offsets ai from 0, global columns aj,
- * values k of K and n of N. On one process, the matrices' own arrays (N is written in
- * place); on several, the copies local_rows made (N is set from them: set_rows). */
+/* A rank's rows of K in CSR, [lo, lo + m): offsets ai from 0, global columns aj (in
+ * order), values k, and on several ranks each row's count of columns left of the rank's
+ * own (below; NULL on one process). N and Q share the pattern (Values). On one process,
+ * N's pattern and K's own array; on several, the copy local_rows made. */
 typedef struct {
   PetscInt           lo, m;
-  const PetscInt    *ai, *aj;
+  const PetscInt    *ai, *aj, *below;
   const PetscScalar *k;
-  PetscScalar       *n;
 } Local;
 
-/* (A M B)_ij, M the local rows' values (l->n) with row i among them, A = R over the frame
+/* N's or Q's values, written or read in place where Local's CSR has them: on one process
+ * the matrix's own array, in that order; on several, the arrays of its two blocks
+ * (PETSc's MPIAIJ): the diagonal block (the rank's own columns) and the off-diagonal one,
+ * whose row holds the columns left of the own ones, then those right of them, in order.
+ * So a CSR entry's place follows from its row's count of left columns: no copy of the
+ * values in CSR order (N's and Q's were 8 bytes an entry each: 0.13 GB a rank on two ranks
+ * of the fine plate). */
+typedef struct {
+  Mat             blocks[2]; /* NULL, NULL on one process */
+  PetscScalar    *a[2];
+  const PetscInt *ai[2], *aj[2];
+} Values;
+
+/* The place of CSR entry x, in local row r, among the values v. */
+static PetscScalar *at(const Values *v, const Local *l, PetscInt r, PetscInt x)
+{
+  PetscInt off = x - l->ai[r], left, own;
+
+  if (!v->blocks[0]) return v->a[0] + x;
+  left = l->below[r];
+  own = v->ai[0][r + 1] - v->ai[0][r];
+  if (off < left) return v->a[1] + v->ai[1][r] + off;
+  if (off < left + own) return v->a[0] + v->ai[0][r] + off - left;
+  return v->a[1] + v->ai[1][r] + off - own;
+}
+
+/* The values of m (N or Q) in place (`write`: to be written). */
+static PetscErrorCode values_open(Mat m, PetscBool write, Values *v)
+{
+  PetscBool seq;
+
+  PetscFunctionBeginUser;
+  *v = (Values){{NULL, NULL}, {NULL, NULL}, {NULL, NULL}, {NULL, NULL}};
+  PetscCall(PetscObjectTypeCompare((PetscObject)m, MATSEQAIJ, &seq));
+  if (seq) {
+    if (write) PetscCall(MatSeqAIJGetArray(m, &v->a[0]));
+    else PetscCall(MatSeqAIJGetArrayRead(m, (const PetscScalar **)&v->a[0]));
+    PetscFunctionReturn(0);
+  }
+  PetscCall(MatMPIAIJGetSeqAIJ(m, &v->blocks[0], &v->blocks[1], NULL));
+  for (int b = 0; b < 2; b++) {
+    PetscInt  rows;
+    PetscBool done;
+    PetscCall(MatGetRowIJ(v->blocks[b], 0, PETSC_FALSE, PETSC_FALSE, &rows, &v->ai[b], &v->aj[b], &done));
+    PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "a block of the Newton matrix has no CSR arrays");
+    if (write) PetscCall(MatSeqAIJGetArray(v->blocks[b], &v->a[b]));
+    else PetscCall(MatSeqAIJGetArrayRead(v->blocks[b], (const PetscScalar **)&v->a[b]));
+  }
+  PetscFunctionReturn(0);
+}
+
+/* Ends what values_open began on m. A matrix written is assembled again on several ranks
+ * (collective; its values stay), as MatSetValues would have it, which tells its KSP. */
+static PetscErrorCode values_close(Mat m, PetscBool write, Values *v)
+{
+  PetscFunctionBeginUser;
+  if (!v->blocks[0]) {
+    if (write) PetscCall(MatSeqAIJRestoreArray(m, &v->a[0]));
+    else PetscCall(MatSeqAIJRestoreArrayRead(m, (const PetscScalar **)&v->a[0]));
+    PetscFunctionReturn(0);
+  }
+  for (int b = 0; b < 2; b++) {
+    PetscInt  rows;
+    PetscBool done;
+    if (write) PetscCall(MatSeqAIJRestoreArray(v->blocks[b], &v->a[b]));
+    else PetscCall(MatSeqAIJRestoreArrayRead(v->blocks[b], (const PetscScalar **)&v->a[b]));
+    PetscCall(MatRestoreRowIJ(v->blocks[b], 0, PETSC_FALSE, PETSC_FALSE, &rows, &v->ai[b], &v->aj[b], &done));
+  }
+  if (write) PetscCall(MatAssemblyBegin(m, MAT_FINAL_ASSEMBLY));
+  if (write) PetscCall(MatAssemblyEnd(m, MAT_FINAL_ASSEMBLY));
+  PetscFunctionReturn(0);
+}
+
+/* (A M B)_ij, M the local rows' values (n) with row i among them, A = R over the frame
  * of i where `left` (else I), B = R over the frame of j where `right` (else I); a dof
  * without a frame is its own (R = 1). A node's dofs are all on one rank, so the rows of
  * i's frame are local too. */
-static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Local *l, PetscInt i,
-                             PetscInt j, int left, int right)
+static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Local *l,
+                             const Values *n, PetscInt i, PetscInt j, int left, int right)
 {
   Frame        unit_i = {1, {i}, {1.0}}, unit_j = {1, {j}, {1.0}};
   const Frame *fi = left && frame_of[i] >= 0 ? &fr[frame_of[i]] : &unit_i;
@@ -481,59 +559,81 @@ static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Lo
   while (fj->dof[b] != j) b++;
   for (PetscInt p = 0; p < fi->k; p++)
     for (PetscInt q = 0; q < fj->k; q++) {
-      PetscInt e = entry(l->ai, l->aj, fi->dof[p] - l->lo, fj->dof[q]);
-      if (e >= 0) sum += fi->r[fi->k * a + p] * l->n[e] * fj->r[fj->k * q + b];
+      PetscInt row = fi->dof[p] - l->lo, e = entry(l->ai, l->aj, row, fj->dof[q]);
+      if (e >= 0) sum += fi->r[fi->k * a + p] * *at(n, l, row, e) * fj->r[fj->k * q + b];
     }
   return sum;
 }
 
-/* This rank's rows of K and N (`write`: N's to be written). */
-static PetscErrorCode local_open(VcKsp *s, PetscBool write, Local *l)
+/* This rank's rows of K. */
+static PetscErrorCode local_open(VcKsp *s, Local *l)
 {
   PetscBool done;
 
   PetscFunctionBeginUser;
   if (s->count) {
-    *l = (Local){s->lo, s->m, s->kai, s->kaj, s->kav, s->nav};
+    *l = (Local){s->lo, s->m, s->kai, s->kaj, s->below, s->kav};
     PetscFunctionReturn(0);
   }
-  l->lo = 0;
+  *l = (Local){0};
   PetscCall(MatGetRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &l->m, &l->ai, &l->aj, &done));
   PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "the Newton matrix has no CSR arrays");
   PetscCall(MatSeqAIJGetArrayRead(s->A, &l->k));
-  if (write) PetscCall(MatSeqAIJGetArray(s->N, &l->n));
-  else PetscCall(MatSeqAIJGetArrayRead(s->N, (const PetscScalar **)&l->n));
   PetscFunctionReturn(0);
 }
 
 /* Ends what local_open began. */
-static PetscErrorCode local_close(VcKsp *s, PetscBool write, Local *l)
+static PetscErrorCode local_close(VcKsp *s, Local *l)
 {
   PetscBool done;
 
   PetscFunctionBeginUser;
   if (s->count) PetscFunctionReturn(0);
-  if (write) PetscCall(MatSeqAIJRestoreArray(s->N, &l->n));
-  else PetscCall(MatSeqAIJRestoreArrayRead(s->N, (const PetscScalar **)&l->n));
   PetscCall(MatSeqAIJRestoreArrayRead(s->A, &l->k));
   PetscCall(MatRestoreRowIJ(s->N, 0, PETSC_FALSE, PETSC_FALSE, &l->m, &l->ai, &l->aj, &done));
   PetscFunctionReturn(0);
 }
 
-/* On several ranks, N ← this rank's rows as newton_matrix made them (s->nav): those it
- * changed (touched) and those that differed from K before (held), which it put back. */
-static PetscErrorCode set_rows(VcKsp *s)
+/* On several ranks, that N's two blocks hold this rank's rows of K's pattern as Values
+ * reads them: each row's own columns in the diagonal block, the others in the
+ * off-diagonal one, left ones first (checked once; a PETSc that stored them otherwise
+ * would have the Newton systems made wrong). */
+static PetscErrorCode check_blocks(VcKsp *s)
+{
+  Local           l;
+  Values          n;
+  const PetscInt *garray;
+  PetscInt        bad = 0;
+
+  PetscFunctionBeginUser;
+  PetscCall(local_open(s, &l));
+  PetscCall(values_open(s->N, PETSC_FALSE, &n));
+  PetscCall(MatMPIAIJGetSeqAIJ(s->N, NULL, NULL, &garray));
+  for (PetscInt r = 0; r < l.m && !bad; r++) {
+    PetscInt left = l.below[r], own = n.ai[0][r + 1] - n.ai[0][r];
+    PetscInt other = n.ai[1][r + 1] - n.ai[1][r];
+    bad = left > other || own + other != l.ai[r + 1] - l.ai[r];
+    for (PetscInt x = l.ai[r]; x < l.ai[r + 1] && !bad; x++) {
+      PetscInt off = x - l.ai[r], col;
+      if (off < left) col = garray[n.aj[1][n.ai[1][r] + off]];
+      else if (off < left + own) col = l.lo + n.aj[0][n.ai[0][r] + off - left];
+      else col = garray[n.aj[1][n.ai[1][r] + off - own]];
+      bad = col != l.aj[x];
+    }
+  }
+  PetscCall(values_close(s->N, PETSC_FALSE, &n));
+  PetscCheck(!bad, PETSC_COMM_SELF, PETSC_ERR_PLIB, "the Newton matrix's blocks do not hold K's rows in order");
+  PetscFunctionReturn(0);
+}
+
+/* N ← K, row by row in place. */
+static PetscErrorCode reset_to_k(const Local *l, const Values *n)
 {
   PetscFunctionBeginUser;
-  for (PetscInt r = 0; r < s->m; r++) {
-    PetscInt row = s->lo + r, x = s->kai[r];
-    if (s->held[r] || s->touched[r])
-      PetscCall(MatSetValues(s->N, 1, &row, s->kai[r + 1] - x, s->kaj + x, s->nav + x, INSERT_VALUES));
-    s->held[r] = s->touched[r];
-    s->touched[r] = 0;
-  }
-  PetscCall(MatAssemblyBegin(s->N, MAT_FINAL_ASSEMBLY));
-  PetscCall(MatAssemblyEnd(s->N, MAT_FINAL_ASSEMBLY));
+  if (!n->blocks[0]) PetscCall(PetscArraycpy(n->a[0], l->k, l->ai[l->m]));
+  else
+    for (PetscInt r = 0; r < l->m; r++)
+      for (PetscInt x = l->ai[r]; x < l->ai[r + 1]; x++) *at(n, l, r, x) = l->k[x];
   PetscFunctionReturn(0);
 }
 
@@ -542,7 +642,6 @@ static PetscErrorCode keep_q(VcKsp *s)
 {
   PetscFunctionBeginUser;
   PetscCall(MatCopy(s->N, s->Q, SAME_NONZERO_PATTERN));
-  if (s->count) PetscCall(PetscArraycpy(s->qav, s->nav, s->kai[s->m]));
   PetscFunctionReturn(0);
 }
 
@@ -570,13 +669,15 @@ static PetscErrorCode newton_matrix(VcKsp *s)
 {
   const VcTerms *t = &s->terms;
   Local          l;
-  PetscScalar   *upd = NULL;
-  PetscInt      *at = NULL, nf, nu = 0, cap = 0;
+  Values         n;
+  PetscScalar   *upd = NULL, **dst = NULL;
+  PetscInt       nf, nu = 0, cap = 0;
   Frame         *fr = NULL;
 
   PetscFunctionBeginUser;
-  PetscCall(local_open(s, PETSC_TRUE, &l));
-  PetscCall(PetscArraycpy(l.n, l.k, l.ai[l.m]));
+  PetscCall(local_open(s, &l));
+  PetscCall(values_open(s->N, PETSC_TRUE, &n));
+  PetscCall(reset_to_k(&l, &n));
   for (PetscInt e = 0; e < t->ns; e++) {
     PetscInt idx[3];
     int      pos[3];
@@ -586,9 +687,8 @@ static PetscErrorCode newton_matrix(VcKsp *s)
       for (PetscInt c = 0; c < k; c++) {
         PetscInt x = entry(l.ai, l.aj, idx[r] - l.lo, idx[c]);
         PetscCheck(x >= 0, PETSC_COMM_SELF, PETSC_ERR_SUP, "K lacks a pair of a node's dofs");
-        l.n[x] += t->smats[9 * e + 3 * pos[r] + pos[c]];
+        *at(&n, &l, idx[r] - l.lo, x) += t->smats[9 * e + 3 * pos[r] + pos[c]];
       }
-      if (s->touched) s->touched[idx[r] - l.lo] = 1;
     }
   }
   PetscCall(frames(s, &fr, &nf));
@@ -599,27 +699,27 @@ static PetscErrorCode newton_matrix(VcKsp *s)
     for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++) {
       PetscInt j = l.aj[x];
       if (!framed && s->frame_of[j] < 0) continue;
-      PetscScalar rmr = reflected(fr, s->frame_of, &l, i, j, 1, 1);
-      PetscScalar rm = reflected(fr, s->frame_of, &l, i, j, 1, 0);
-      PetscScalar mr = reflected(fr, s->frame_of, &l, i, j, 0, 1);
+      PetscScalar rmr = reflected(fr, s->frame_of, &l, &n, i, j, 1, 1);
+      PetscScalar rm = reflected(fr, s->frame_of, &l, &n, i, j, 1, 0);
+      PetscScalar mr = reflected(fr, s->frame_of, &l, &n, i, j, 0, 1);
       if (nu == cap) {
         cap = PetscMax(2 * cap, 1024);
         PetscCall(PetscRealloc(cap * sizeof(*upd), &upd));
-        PetscCall(PetscRealloc(cap * sizeof(*at), &at));
+        PetscCall(PetscRealloc(cap * sizeof(*dst), &dst));
       }
-      upd[nu] = 0.25 * (1 + DECOUPLED) * (l.n[x] + rmr) + 0.25 * (1 - DECOUPLED) * (rm + mr);
-      at[nu++] = x;
-      if (s->touched) s->touched[r] = 1;
+      dst[nu] = at(&n, &l, r, x);
+      upd[nu] = 0.25 * (1 + DECOUPLED) * (*dst[nu] + rmr) + 0.25 * (1 - DECOUPLED) * (rm + mr);
+      nu++;
     }
   }
-  for (PetscInt u = 0; u < nu; u++) l.n[at[u]] = upd[u];
+  for (PetscInt u = 0; u < nu; u++) *dst[u] = upd[u];
   for (PetscInt f = 0; f < nf; f++)
     for (PetscInt a = 0; a < fr[f].k; a++) s->frame_of[fr[f].dof[a]] = -1;
   PetscCall(PetscFree(upd));
-  PetscCall(PetscFree(at));
+  PetscCall(PetscFree(dst));
   PetscCall(PetscFree(fr));
-  PetscCall(local_close(s, PETSC_TRUE, &l));
-  if (s->count) PetscCall(set_rows(s));
+  PetscCall(values_close(s->N, PETSC_TRUE, &n));
+  PetscCall(local_close(s, &l));
   PetscFunctionReturn(0);
 }
 
@@ -658,9 +758,8 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(MatGetNearNullSpace(s->A, &near));
   PetscCall(MatDuplicate(s->A, MAT_COPY_VALUES, &s->N));
   PetscCall(MatDuplicate(s->A, MAT_DO_NOT_COPY_VALUES, &s->Q));
-  /* On several ranks, N is set row by row from this rank's own (set_rows). */
+  /* N's values are written in place (newton_matrix), never a new entry. */
   PetscCall(MatSetOption(s->N, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
-  if (s->count) PetscCall(MatSetOption(s->N, MAT_NO_OFF_PROC_ENTRIES, PETSC_TRUE));
   for (int k = 0; k < 2; k++) {
     Mat m = k ? s->Q : s->N;
     PetscCall(MatSetOption(m, MAT_SYMMETRIC, PETSC_TRUE));
@@ -734,47 +833,54 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscFunctionReturn(0);
 }
 
+/* Entry x (row r) of K, or of Q where q is its values. */
+static PetscScalar old(const Local *l, const Values *q, PetscInt r, PetscInt x)
+{
+  return q ? *at(q, l, r, x) : l->k[x];
+}
+
 /* N − M (M: K where `from_k`, else Q) as a matrix of its own, with N's layout: the
  * entries where the two differ (the rows and columns of nodes whose removed directions or
  * slip stiffness differ), on K's pattern; NULL where none does on any rank. */
 static PetscErrorCode difference(VcKsp *s, PetscBool from_k, Mat *d)
 {
-  Local              l;
-  const PetscScalar *ma;
-  PetscInt           n, nnz = 0, total, *rowptr, *cols;
-  PetscScalar       *vals;
-  MPI_Comm           comm;
+  Local        l;
+  Values       n, q;
+  PetscInt     size, nnz = 0, total, *rowptr, *cols;
+  PetscScalar *vals;
+  MPI_Comm     comm;
 
   PetscFunctionBeginUser;
   *d = NULL;
   PetscCall(PetscObjectGetComm((PetscObject)s->N, &comm));
-  PetscCall(MatGetSize(s->N, &n, NULL));
-  PetscCall(local_open(s, PETSC_FALSE, &l));
-  if (from_k) ma = l.k;
-  else if (s->count) ma = s->qav;
-  else PetscCall(MatSeqAIJGetArrayRead(s->Q, &ma));
-  for (PetscInt x = 0; x < l.ai[l.m]; x++) nnz += l.n[x] != ma[x];
+  PetscCall(MatGetSize(s->N, &size, NULL));
+  PetscCall(local_open(s, &l));
+  PetscCall(values_open(s->N, PETSC_FALSE, &n));
+  if (!from_k) PetscCall(values_open(s->Q, PETSC_FALSE, &q));
+  for (PetscInt r = 0; r < l.m; r++)
+    for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++) nnz += *at(&n, &l, r, x) != old(&l, from_k ? NULL : &q, r, x);
   PetscCallMPI(MPI_Allreduce(&nnz, &total, 1, MPIU_INT, MPI_SUM, comm));
   if (total > 0) {
     PetscCall(PetscMalloc3(l.m + 1, &rowptr, nnz, &cols, nnz, &vals));
     rowptr[0] = 0;
     for (PetscInt r = 0, k = 0; r < l.m; r++) {
       for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++)
-        if (l.n[x] != ma[x]) {
+        if (*at(&n, &l, r, x) != old(&l, from_k ? NULL : &q, r, x)) {
           cols[k] = l.aj[x];
-          vals[k++] = l.n[x] - ma[x];
+          vals[k++] = *at(&n, &l, r, x) - old(&l, from_k ? NULL : &q, r, x);
         }
       rowptr[r + 1] = k;
     }
     PetscCall(MatCreate(comm, d));
-    PetscCall(MatSetSizes(*d, l.m, l.m, n, n));
+    PetscCall(MatSetSizes(*d, l.m, l.m, size, size));
     PetscCall(MatSetType(*d, MATAIJ));
     PetscCall(MatSeqAIJSetPreallocationCSR(*d, rowptr, cols, vals));
     PetscCall(MatMPIAIJSetPreallocationCSR(*d, rowptr, cols, vals));
     PetscCall(PetscFree3(rowptr, cols, vals));
   }
-  if (!from_k && !s->count) PetscCall(MatSeqAIJRestoreArrayRead(s->Q, &ma));
-  PetscCall(local_close(s, PETSC_FALSE, &l));
+  if (!from_k) PetscCall(values_close(s->Q, PETSC_FALSE, &q));
+  PetscCall(values_close(s->N, PETSC_FALSE, &n));
+  PetscCall(local_close(s, &l));
   PetscFunctionReturn(0);
 }
 
@@ -926,9 +1032,8 @@ int vc_ksp_destroy(void *ctx)
   PetscCall(MatDestroy(&s->N));
   PetscCall(MatDestroy(&s->Q));
   PetscCall(PetscFree(s->frame_of));
-  PetscCall(PetscFree2(s->kai, s->kaj));
-  PetscCall(PetscFree3(s->kav, s->nav, s->qav));
-  PetscCall(PetscFree2(s->held, s->touched));
+  PetscCall(PetscFree3(s->kai, s->kaj, s->below));
+  PetscCall(PetscFree(s->kav));
   PetscCall(VecDestroy(&s->b));
   PetscCall(VecDestroy(&s->x));
   PetscCall(KSPDestroy(&s->ksp));
