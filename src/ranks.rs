@@ -11,7 +11,8 @@
 //! scene and the mesh and assembles the matrices, then keeps of K_A, K_B and K_R the
 //! columns of its own unknowns (`Discretization::keep_columns`: a symmetric matrix's
 //! column is its row), computes its entries of the right side's products from them and
-//! gathers the others' (`Backend::gather`). The rest is replicated: the history sums and
+//! gathers the others' (`Backend::gather`); where K_A is the step matrix its rows go to
+//! PETSc ([`OwnRows`]), and the rank keeps K_A's diagonal alone. The rest is replicated: the history sums and
 //! every n-vector, so every rank holds the same right side b_n, bit for bit, and the
 //! active set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
 //! history.csv, checkpoints, summary.json) and prints; the others *follow* (`run::follow`),
@@ -28,7 +29,8 @@
 //!
 //! [`Plan`] is what a rank of a run over N ranks holds and does (`check --ranks N`): its
 //! share of K_A's rows, entries and of the values a product fetches from other ranks, and
-//! its memory, its own part (the setup's peak, measured, less the columns it drops) and its
+//! its memory, its own part (the setup's peak, measured, less what of the matrices it
+//! drops) and its
 //! share of PETSc's, and for `check` a step's expected time on this machine
 //! ([`Plan::timed`]).
 //! `check` and `run` refuse ranks that would not fit, naming how many would.
@@ -175,15 +177,33 @@ impl Ranks {
 
     /// On one of several ranks, `disc` keeps the columns of K_A, K_B and K_R of the
     /// unknowns whose rows this rank holds in PETSc (`petsc::Layout`), and no others
-    /// (`Discretization::keep_columns`); nothing on one rank.
-    pub fn keep_own_columns(&self, disc: &mut crate::fem::Discretization) -> Result<()> {
+    /// (`Discretization::keep_columns`). Where K_A is the step matrix (`solver.history =
+    /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, [`OwnRows`], and
+    /// `disc` keeps K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`). The heap
+    /// the whole matrices held then goes back to the system (`resources::return_freed_memory`).
+    /// Nothing on one rank.
+    pub fn keep_own_columns(
+        &self,
+        disc: &mut crate::fem::Discretization,
+        history: crate::scene::History,
+    ) -> Result<Option<OwnRows>> {
         #[cfg(feature = "petsc")]
         if self.size > 1 {
             let layout = crate::petsc::Layout::new(disc, self.size)?;
             disc.keep_columns(layout.own(self.rank));
+            let step_is_k_a = history == crate::scene::History::Left && disc.k_a_all.is_none();
+            let rows = if step_is_k_a {
+                let rows = layout.rows_of(&disc.k_a, self.rank)?.into_owned();
+                disc.keep_diagonal_of_k_a();
+                Some(OwnRows(rows))
+            } else {
+                None
+            };
+            crate::resources::return_freed_memory();
+            return Ok(rows);
         }
-        let _ = disc;
-        Ok(())
+        let _ = (disc, history);
+        Ok(None)
     }
 
     /// Ends every rank of the run with exit status `code`: a rank that failed alone after
@@ -196,6 +216,12 @@ impl Ranks {
         let _ = code;
     }
 }
+
+/// On one of several ranks, the rank's rows of K_A in PETSc's numbering, which
+/// [`Ranks::keep_own_columns`] took out of the discretization for the time loop's PETSc
+/// backend (`petsc::Krylov`): its matrices are made of them, and the Newton systems read
+/// them as their copy of K, the rank's only one.
+pub struct OwnRows(#[cfg(feature = "petsc")] pub(crate) crate::petsc::Csr<'static>);
 
 /// What Open MPI adds to a rank's resident memory, which a process without a launcher (as
 /// `check` is) does not hold and counts for several ranks: 8.6 MB measured on the 3D block
@@ -222,10 +248,13 @@ pub struct Plan {
     own: f64,
     spread: f64,
     /// A rank's setup peak on several ranks (the measured one with MPI's runtime), the
-    /// bytes of K_A, K_B and K_R whole (`matrix_bytes`), which the ranks split once
-    /// assembled, and PETSc's bytes a rank on several ranks times their count.
+    /// bytes of K_A, K_B and K_R whole (`matrix_bytes`), which a rank drops once
+    /// assembled, of which it keeps its share of `kept` (all three, or K_B and K_R where
+    /// its rows of K_A go to PETSc: `Ranks::keep_own_columns`), and PETSc's bytes a rank
+    /// on several ranks times their count.
     on_several: f64,
     matrices: f64,
+    kept: f64,
     spread_several: f64,
     /// Through the active set's Newton systems.
     newton: bool,
@@ -236,12 +265,14 @@ pub struct Plan {
 #[cfg(feature = "petsc")]
 impl Plan {
     /// The plan of `disc` over `size` ranks, its steps through the active set's Newton
-    /// systems where `newton` (else K_A's solves), holding `steps` bytes besides the setup.
+    /// systems where `newton` (else K_A's solves), holding `steps` bytes besides the setup;
+    /// `history`: the scene's (`solver.history`), which says whether K_A is the step matrix.
     pub fn new(
         disc: &crate::fem::Discretization,
         size: usize,
         newton: bool,
         steps: f64,
+        history: crate::scene::History,
     ) -> Result<Plan> {
         use crate::resources::{peak_memory, petsc_bytes};
         let shares = crate::petsc::Layout::new(disc, size)?.shares(disc);
@@ -256,7 +287,13 @@ impl Plan {
         let setup = peak_memory().unwrap_or(0.0) + steps;
         let on_several = setup + if launched { 0.0 } else { MPI_RUNTIME };
         let matrices = matrix_bytes(disc);
-        let dropped = (1.0 - largest.entries as f64 / entries.max(1) as f64) * matrices;
+        let step_is_k_a = history == crate::scene::History::Left && disc.k_a_all.is_none();
+        let kept = if step_is_k_a {
+            matrices - 16.0 * disc.k_a.as_ref().val().len() as f64
+        } else {
+            matrices
+        };
+        let dropped = matrices - largest.entries as f64 / entries.max(1) as f64 * kept;
         Ok(Plan {
             size,
             rows: disc.n_free,
@@ -269,6 +306,7 @@ impl Plan {
             spread: petsc_bytes(largest.entries, newton, size),
             on_several,
             matrices,
+            kept,
             spread_several: petsc_bytes(entries, newton, 2),
             newton,
             step_s: None,
@@ -309,9 +347,9 @@ impl Plan {
         if self.per_rank() <= budget {
             return Ok(());
         }
-        // R ranks hold on_several − M + (M + PETSc's)/R each (M: the matrices they split),
-        // evenly but for whole nodes: 5 % more for the largest.
-        let split = self.matrices + self.spread_several;
+        // R ranks hold on_several − M + (M' + PETSc's)/R each (M: the matrices they drop,
+        // M' what they keep of them), evenly but for whole nodes: 5 % more for the largest.
+        let split = self.kept + self.spread_several;
         let remedy = match budget - self.on_several {
             left if left >= 0.0 => format!(
                 "≈ {} ranks would fit (mpirun -n {0} or srun -n {0}, each rank with the \

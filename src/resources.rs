@@ -209,26 +209,40 @@ pub fn active_set_bytes(m: usize, n: usize, nnz: usize) -> f64 {
 
 /// PETSc's part of a run through it on a rank that holds `entries` of K_A's, in bytes, on
 /// one of `ranks` ranks, with the active set's Newton systems where `newton`: what the
-/// rank holds at its peak beyond its own part (its setup's peak, less on several ranks the
-/// other ranks' columns of K_A, K_B and K_R: `ranks::Plan`), fitted to the fine plate's
+/// rank holds at its peak beyond its own part (its setup's peak, less on several ranks what
+/// of K_A, K_B and K_R it drops: `ranks::Plan`), fitted to the fine plate's
 /// peaks (367 470 dofs, 16.0 M entries, a setup peak of 1.17 GB; docs/cluster.md,
 /// "Planning"). Counted from the matrices alone, AIJ at 12 bytes an entry, it would be K_A
 /// and GAMG's hierarchy (0.8 of it), 21.6 bytes an entry, and for the active set the
 /// Newton matrix N and Q, the N its multigrid was built from, Q's hierarchy and K_A's
 /// coarse operators (0.4), 50.4 bytes an entry (K_A's own hierarchy is never built there);
 /// the runs' peaks held 48 and 75 bytes an entry on one rank (GAMG's setup and the Krylov
-/// vectors besides) and 84 and 105 on each of two (the off-rank blocks, their column maps
+/// vectors besides) and 80 and 85 on each of two (the off-rank blocks, their column maps
 /// and message buffers, GAMG's Galerkin products' data for reuse until the shim frees it,
-/// the rank's rows of K_A renumbered for PETSc and, for the active set, the shim's copy of
-/// them that N is made from; K_A's own matrix goes there before GAMG's setup).
+/// and the rank's rows of K_A in PETSc's numbering, which it hands over instead of keeping
+/// K_A's columns: `ranks::OwnRows`; K_A's own matrix goes there before GAMG's setup).
 pub fn petsc_bytes(entries: usize, newton: bool, ranks: usize) -> f64 {
     let per_entry = match (newton, ranks) {
         (false, 1) => 48.0,
-        (false, _) => 84.0,
+        (false, _) => 80.0,
         (true, 1) => 75.0,
-        (true, _) => 105.0,
+        (true, _) => 85.0,
     };
     per_entry * entries as f64
+}
+
+/// Hands back to the system the heap pages of the blocks freed so far (glibc's
+/// `malloc_trim`; nothing elsewhere). glibc keeps the pages of freed blocks below its mmap
+/// threshold, so a rank's resident memory kept the whole matrices it had dropped for its
+/// own columns (`Ranks::keep_own_columns`) and PETSc's setup transients: on two ranks of
+/// the fine plate 0.60 GB a rank after the columns were kept (docs/cluster.md, "Memory
+/// per rank"). Called where a setup stage has just freed much; it takes milliseconds.
+pub fn return_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim releases only memory that the allocator holds free.
+    unsafe {
+        libc::malloc_trim(0);
+    }
 }
 
 /// The most memory this process has held so far, in bytes: its resident peak (`VmHWM` of

@@ -33,6 +33,7 @@ use crate::fem::{
     constraints, leading_block, mul_add, mul_add_rows, Discretization, Sparse, SymmetricPair,
 };
 use crate::history::{History, LoopState, Plans, SavedLoop};
+use crate::ranks::OwnRows;
 use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
 use crate::solver::{Abandon, Backend, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
@@ -209,17 +210,19 @@ impl<'p> TimeLoop<'p> {
     /// A time loop with its memory plans in hand (a resumed run's, `Plans::resumed`), checked
     /// by [`refusals`] before anything is factored.
     pub fn with_plan(scene: &'p Scene, disc: &'p Discretization, plans: Plans) -> Result<Self> {
-        Self::with_solver(scene, disc, plans, Descriptor::of_run(scene, disc)?)
+        Self::with_solver(scene, disc, plans, Descriptor::of_run(scene, disc)?, None)
     }
 
     /// A time loop with its memory plans and its solver in hand: `descriptor` is the scene's
     /// `[solver]` resolved on `disc` (`Descriptor::of_run`), which a run has already checked
-    /// against the memory available.
+    /// against the memory available. On one of several MPI ranks, `own` is the rank's rows
+    /// of K_A where they were taken out of `disc` for PETSc (`Ranks::keep_own_columns`).
     pub fn with_solver(
         scene: &'p Scene,
         disc: &'p Discretization,
         plans: Plans,
         descriptor: Descriptor,
+        own: Option<OwnRows>,
     ) -> Result<Self> {
         refusals(scene, disc, &plans)?;
         let effects = Effects::new(scene, disc);
@@ -240,7 +243,7 @@ impl<'p> TimeLoop<'p> {
         // The step matrix is factored once, with the constrained boundary dofs ordered last
         // where the contact solver works on its trailing block, or handed to PETSc.
         let backend = match descriptor.build() {
-            Build::Krylov { newton } => petsc_backend(scene, matrix, disc, *newton)?,
+            Build::Krylov { newton } => petsc_backend(scene, (matrix, own), disc, *newton)?,
             Build::Factor { last } => Backend::Cholesky(Factor::new(matrix, last)?),
             Build::Nothing => Backend::None,
         };
@@ -592,7 +595,7 @@ impl<'p> TimeLoop<'p> {
 /// PETSc only in a build with it).
 fn petsc_backend(
     scene: &Scene,
-    matrix: &crate::fem::Sparse,
+    (matrix, own): (&crate::fem::Sparse, Option<OwnRows>),
     disc: &Discretization,
     newton: bool,
 ) -> Result<Backend> {
@@ -603,12 +606,12 @@ fn petsc_backend(
             rtol: crate::petsc::DEFAULT_RTOL,
             newton,
         };
-        let krylov = crate::petsc::Krylov::new(matrix, disc, &settings)?;
+        let krylov = crate::petsc::Krylov::new(matrix, own.map(|o| o.0), disc, &settings)?;
         Ok(Backend::Petsc(krylov))
     }
     #[cfg(not(feature = "petsc"))]
     {
-        let _ = (matrix, disc, newton);
+        let _ = (matrix, own, disc, newton);
         Err(crate::Error::input(format!(
             "{}: solver.linear = \"petsc\" needs a build with the petsc feature",
             scene.path.display()

@@ -498,6 +498,13 @@ impl Discretization {
         self.own = Some(own);
     }
 
+    /// K_A's diagonal alone, where its rows went to the linear backend (on one of several
+    /// MPI ranks: `Ranks::keep_own_columns`): what the active set's ρ reads of it.
+    pub fn keep_diagonal_of_k_a(&mut self) {
+        let size = (self.k_a.nrows(), self.k_a.ncols());
+        self.k_a = entries_kept(&self.k_a, size, |i, j| i == j);
+    }
+
     /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1; z = 0 in 2D).
     pub fn nodal(&self, v: &[f64]) -> Vec<f64> {
         nodal_vectors::<3>(self, v).into_flattened()

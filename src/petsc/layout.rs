@@ -169,6 +169,17 @@ pub struct Csr<'a> {
     pub vals: std::borrow::Cow<'a, [f64]>,
 }
 
+impl Csr<'_> {
+    /// The rows with their values of their own (copied where they were borrowed).
+    pub fn into_owned(self) -> Csr<'static> {
+        Csr {
+            rowptr: self.rowptr,
+            cols: self.cols,
+            vals: std::borrow::Cow::Owned(self.vals.into_owned()),
+        }
+    }
+}
+
 /// `v` as PETSc's indices, or the error that they do not fit (32 bits).
 pub fn petsc_ints(v: &[usize]) -> Result<Vec<PetscInt>> {
     let too_big = |_| Error::solve("K_A is too large for PETSc's 32-bit indices".to_string());

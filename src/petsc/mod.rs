@@ -41,7 +41,7 @@
 
 mod layout;
 
-pub use layout::{cell_pieces, Layout, RankShare};
+pub use layout::{cell_pieces, Csr, Layout, RankShare};
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};
@@ -243,20 +243,33 @@ pub struct Krylov {
     layout: Layout,
     rows_b: Vec<f64>,
     rows_w: Vec<f64>,
+    /// On several ranks, for the Newton systems: this rank's rows of the step matrix, which
+    /// the shim reads as its copy of K until the KSP is destroyed (it keeps none).
+    _rows: Option<Csr<'static>>,
 }
 
 /// The question `Krylov::solve` asks at every iteration: give the solve up now?
 type GiveUp = Box<dyn Fn() -> bool>;
 
 impl Krylov {
-    /// The KSP of `matrix` (the free-dof step matrix of `disc`, stored whole), its
-    /// near-null space from `disc`'s nodes.
-    pub fn new(matrix: &Sparse, disc: &Discretization, settings: &KrylovSettings) -> Result<Self> {
+    /// The KSP of `matrix` (the free-dof step matrix of `disc`: whole on one rank, this
+    /// rank's columns on several), its near-null space from `disc`'s nodes; on one of
+    /// several ranks, of `own`, the rank's rows of K_A where they were taken out of `disc`
+    /// already (`Ranks::keep_own_columns`: `matrix` then holds K_A's diagonal alone).
+    pub fn new(
+        matrix: &Sparse,
+        own: Option<Csr<'static>>,
+        disc: &Discretization,
+        settings: &KrylovSettings,
+    ) -> Result<Self> {
         initialize()?;
         let n = matrix.nrows();
         let (rank, size) = world()?;
         let layout = Layout::new(disc, size)?;
-        let csr = layout.rows_of(matrix, rank)?;
+        let csr = match own {
+            Some(own) => own,
+            None => layout.rows_of(matrix, rank)?,
+        };
         let blocks = layout::petsc_ints(&layout.blocks)?;
         let mut near = rigid_body_modes(disc);
         for mode in near.chunks_mut(n.max(1)) {
@@ -267,7 +280,9 @@ impl Krylov {
             .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
         let mut ctx = std::ptr::null_mut();
         // SAFETY: the arrays hold n + 1, nnz, nnz, size + 1 and nvec·n values as the shim
-        // reads them (nnz this rank's entries, on several ranks); PETSc copies them.
+        // reads them (nnz this rank's entries, on several ranks); PETSc copies them, and
+        // on several ranks for the Newton systems the shim reads cols and vals until the
+        // KSP is destroyed: the Krylov keeps them (`_rows`), their buffers never moved.
         let code = unsafe {
             vc_ksp_create(
                 n as PetscInt,
@@ -285,6 +300,8 @@ impl Krylov {
             )
         };
         check_setup(code, &settings.options)?;
+        // GAMG's setup freed what its products held meanwhile.
+        crate::resources::return_freed_memory();
         let (mut ksp, mut pc) = (std::ptr::null(), std::ptr::null());
         // SAFETY: ctx is a live KSP; the names are PETSc's static strings.
         check(
@@ -302,6 +319,7 @@ impl Krylov {
             rows_b: vec![0.0; if layout.permutes() { n } else { 0 }],
             rows_w: vec![0.0; if layout.permutes() { n } else { 0 }],
             layout,
+            _rows: (size > 1 && settings.newton).then(|| csr.into_owned()),
         })
     }
 

@@ -109,12 +109,13 @@ struct VcKsp {
   KSP       kc;
   VcTerms   terms;
   PetscInt *frame_of; /* n entries, −1 between calls (newton_matrix) */
-  /* On several ranks, the CSR of this rank's rows of K (offsets from 0, global columns),
-   * their values, and how many entries of each row lie left of the rank's own columns
-   * (`below`, by which a CSR entry is found in N's and Q's blocks: Values); one process
-   * reads K's, N's and Q's own arrays. */
-  PetscInt    *kai, *kaj, *below;
-  PetscScalar *kav;
+  /* On several ranks, the CSR of this rank's rows of K (offsets from 0; global columns
+   * and values in the caller's arrays, vc_ksp_create), and how many entries of each row
+   * lie left of the rank's own columns (`below`, by which a CSR entry is found in N's and
+   * Q's blocks: Values); one process reads K's, N's and Q's own arrays. */
+  PetscInt          *kai, *below;
+  const PetscInt    *kaj;
+  const PetscScalar *kav;
   /* GAMG's levels (0: coarsest) and K's Galerkin operators on levels 0 … nlev − 2, kept for
    * galerkin_update; NULL where the constrained PC is not GAMG (the options chose another). */
   PetscInt nlev;
@@ -179,20 +180,19 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
   PetscFunctionReturn(0);
 }
 
-/* On several ranks, the copy of this rank's rows of K (columns in order) that the Newton
- * systems are made from (newton_matrix) and vc_mult multiplies by, with each row's count
- * of columns left of the rank's own. */
+/* On several ranks, this rank's rows of K (columns in order) that the Newton systems are
+ * made from (newton_matrix) and vc_mult multiplies by: the caller's arrays, read in place,
+ * with row offsets from 0 and each row's count of columns left of the rank's own. */
 static PetscErrorCode local_rows(VcKsp *s, const PetscInt *rowptr, const PetscInt *cols,
                                  const PetscScalar *vals)
 {
-  PetscInt base = rowptr[s->lo], nnz = rowptr[s->lo + s->m] - base;
+  PetscInt base = rowptr[s->lo];
 
   PetscFunctionBeginUser;
-  PetscCall(PetscMalloc3(s->m + 1, &s->kai, nnz, &s->kaj, s->m, &s->below));
-  PetscCall(PetscMalloc1(nnz, &s->kav));
+  PetscCall(PetscMalloc2(s->m + 1, &s->kai, s->m, &s->below));
   for (PetscInt i = 0; i <= s->m; i++) s->kai[i] = rowptr[s->lo + i] - base;
-  PetscCall(PetscArraycpy(s->kaj, cols + base, nnz));
-  PetscCall(PetscArraycpy(s->kav, vals + base, nnz));
+  s->kaj = cols + base;
+  s->kav = vals + base;
   for (PetscInt r = 0; r < s->m; r++) {
     PetscInt x = s->kai[r];
     while (x < s->kai[r + 1] && s->kaj[x] < s->lo) x++;
@@ -245,7 +245,8 @@ static PetscErrorCode watch(VcKsp *s, KSP ksp, Watch *w)
  * solves, or where `newton`, for the constrained systems alone (their KSP and multigrid:
  * constrained_setup), K's never being solved (on several ranks K's matrix and KSP then go).
  * On one rank the matrix is whole; on several each rank gives (and keeps) its own rows, the
- * others' rows empty. */
+ * others' rows empty, and for the Newton systems the shim reads `cols` and `vals` of them
+ * until vc_ksp_destroy (its copy of K's rows: the caller keeps them). */
 int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, const PetscScalar *vals,
                   PetscInt bs, const PetscInt *blocks, PetscInt nvec, const PetscScalar *near,
                   PetscReal rtol, const char *options, int newton, void **out)
@@ -495,6 +496,29 @@ static PetscScalar *at(const Values *v, const Local *l, PetscInt r, PetscInt x)
   return v->a[1] + v->ai[1][r] + off - own;
 }
 
+/* Row r's CSR entries among v's values as three runs, one after the other in CSR order:
+ * on several ranks its left columns (off-diagonal block), its own (diagonal block) and its
+ * right ones (off-diagonal block, after the left); on one process the row, then nothing. */
+static void runs(const Values *v, const Local *l, PetscInt r, PetscScalar *run[3], PetscInt len[3])
+{
+  PetscInt width = l->ai[r + 1] - l->ai[r], left, own;
+
+  if (!v->blocks[0]) {
+    run[0] = run[1] = run[2] = v->a[0] + l->ai[r];
+    len[0] = width;
+    len[1] = len[2] = 0;
+    return;
+  }
+  left = l->below[r];
+  own = v->ai[0][r + 1] - v->ai[0][r];
+  run[0] = v->a[1] + v->ai[1][r];
+  run[1] = v->a[0] + v->ai[0][r];
+  run[2] = run[0] + left;
+  len[0] = left;
+  len[1] = own;
+  len[2] = width - left - own;
+}
+
 /* The values of m (N or Q) in place (`write`: to be written). */
 static PetscErrorCode values_open(Mat m, PetscBool write, Values *v)
 {
@@ -632,8 +656,13 @@ static PetscErrorCode reset_to_k(const Local *l, const Values *n)
   PetscFunctionBeginUser;
   if (!n->blocks[0]) PetscCall(PetscArraycpy(n->a[0], l->k, l->ai[l->m]));
   else
-    for (PetscInt r = 0; r < l->m; r++)
-      for (PetscInt x = l->ai[r]; x < l->ai[r + 1]; x++) *at(n, l, r, x) = l->k[x];
+    for (PetscInt r = 0; r < l->m; r++) {
+      PetscScalar *run[3];
+      PetscInt     len[3], x = l->ai[r];
+      runs(n, l, r, run, len);
+      for (int p = 0; p < 3; p++)
+        for (PetscInt i = 0; i < len[p]; i++) run[p][i] = l->k[x++];
+    }
   PetscFunctionReturn(0);
 }
 
@@ -833,10 +862,28 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscFunctionReturn(0);
 }
 
-/* Entry x (row r) of K, or of Q where q is its values. */
-static PetscScalar old(const Local *l, const Values *q, PetscInt r, PetscInt x)
+/* Row r's entries where N (values n) and M (Q's values q, or K where q is NULL) differ:
+ * their count, and where cols is given, their columns and N − M there. N and Q share
+ * their layout, so their runs match. */
+static PetscInt row_difference(const Local *l, const Values *n, const Values *q, PetscInt r,
+                               PetscInt *cols, PetscScalar *vals)
 {
-  return q ? *at(q, l, r, x) : l->k[x];
+  PetscScalar *nrun[3], *qrun[3];
+  PetscInt     len[3], x = l->ai[r], k = 0;
+
+  runs(n, l, r, nrun, len);
+  if (q) runs(q, l, r, qrun, len);
+  for (int p = 0; p < 3; p++)
+    for (PetscInt i = 0; i < len[p]; i++, x++) {
+      PetscScalar nv = nrun[p][i], mv = q ? qrun[p][i] : l->k[x];
+      if (nv == mv) continue;
+      if (cols) {
+        cols[k] = l->aj[x];
+        vals[k] = nv - mv;
+      }
+      k++;
+    }
+  return k;
 }
 
 /* N − M (M: K where `from_k`, else Q) as a matrix of its own, with N's layout: the
@@ -845,7 +892,7 @@ static PetscScalar old(const Local *l, const Values *q, PetscInt r, PetscInt x)
 static PetscErrorCode difference(VcKsp *s, PetscBool from_k, Mat *d)
 {
   Local        l;
-  Values       n, q;
+  Values       n, q, *m = from_k ? NULL : &q;
   PetscInt     size, nnz = 0, total, *rowptr, *cols;
   PetscScalar *vals;
   MPI_Comm     comm;
@@ -857,20 +904,13 @@ static PetscErrorCode difference(VcKsp *s, PetscBool from_k, Mat *d)
   PetscCall(local_open(s, &l));
   PetscCall(values_open(s->N, PETSC_FALSE, &n));
   if (!from_k) PetscCall(values_open(s->Q, PETSC_FALSE, &q));
-  for (PetscInt r = 0; r < l.m; r++)
-    for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++) nnz += *at(&n, &l, r, x) != old(&l, from_k ? NULL : &q, r, x);
+  for (PetscInt r = 0; r < l.m; r++) nnz += row_difference(&l, &n, m, r, NULL, NULL);
   PetscCallMPI(MPI_Allreduce(&nnz, &total, 1, MPIU_INT, MPI_SUM, comm));
   if (total > 0) {
     PetscCall(PetscMalloc3(l.m + 1, &rowptr, nnz, &cols, nnz, &vals));
     rowptr[0] = 0;
-    for (PetscInt r = 0, k = 0; r < l.m; r++) {
-      for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++)
-        if (*at(&n, &l, r, x) != old(&l, from_k ? NULL : &q, r, x)) {
-          cols[k] = l.aj[x];
-          vals[k++] = *at(&n, &l, r, x) - old(&l, from_k ? NULL : &q, r, x);
-        }
-      rowptr[r + 1] = k;
-    }
+    for (PetscInt r = 0; r < l.m; r++)
+      rowptr[r + 1] = rowptr[r] + row_difference(&l, &n, m, r, cols + rowptr[r], vals + rowptr[r]);
     PetscCall(MatCreate(comm, d));
     PetscCall(MatSetSizes(*d, l.m, l.m, size, size));
     PetscCall(MatSetType(*d, MATAIJ));
@@ -1032,8 +1072,7 @@ int vc_ksp_destroy(void *ctx)
   PetscCall(MatDestroy(&s->N));
   PetscCall(MatDestroy(&s->Q));
   PetscCall(PetscFree(s->frame_of));
-  PetscCall(PetscFree3(s->kai, s->kaj, s->below));
-  PetscCall(PetscFree(s->kav));
+  PetscCall(PetscFree2(s->kai, s->below));
   PetscCall(VecDestroy(&s->b));
   PetscCall(VecDestroy(&s->x));
   PetscCall(KSPDestroy(&s->ksp));

@@ -166,7 +166,13 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     }
     let start = Instant::now();
     let ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
-    let tl = TimeLoop::with_solver(&ready.scene, &ready.disc, ready.plans, ready.solver)?;
+    let tl = TimeLoop::with_solver(
+        &ready.scene,
+        &ready.disc,
+        ready.plans,
+        ready.solver,
+        ready.own,
+    )?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
     // a signal came first (then it stays as it was).
     let committed = opts
@@ -195,6 +201,8 @@ struct Ready {
     /// Shared with the frame writer's thread (run/frame.rs).
     disc: Arc<Discretization>,
     solver: Descriptor,
+    /// On one of several ranks, its rows of K_A for PETSc (`Ranks::keep_own_columns`).
+    own: Option<crate::ranks::OwnRows>,
     plans: crate::history::Plans,
     opened: Opened,
 }
@@ -229,7 +237,9 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     estimate.check(&out)?;
     let solver = check_contact_plan(&scene, &disc, &estimate, None, opts.ranks.size)?;
     check_started_ranks(&scene, &solver, opts)?;
-    opts.ranks.keep_own_columns(&mut disc)?;
+    let own = opts
+        .ranks
+        .keep_own_columns(&mut disc, scene.solver.history)?;
     let disc = Arc::new(disc);
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
@@ -248,6 +258,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
         mesh,
         disc,
         solver,
+        own,
         plans,
         opened: Opened {
             identity,
@@ -330,15 +341,17 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         let mut disc = Discretization::new(&mesh, &scene)?;
         let solver = Descriptor::of_run(&scene, &disc)?;
         check_started_ranks(&scene, &solver, opts)?;
-        opts.ranks.keep_own_columns(&mut disc)?;
+        let own = opts
+            .ranks
+            .keep_own_columns(&mut disc, scene.solver.history)?;
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,
         };
-        Ok((scene, disc, solver, plans, cp))
+        Ok((scene, disc, solver, own, plans, cp))
     };
-    let (scene, disc, solver, plans, cp) = opts.ranks.agree(ready())?;
-    let mut tl = TimeLoop::with_solver(&scene, &disc, plans, solver)?;
+    let (scene, disc, solver, own, plans, cp) = opts.ranks.agree(ready())?;
+    let mut tl = TimeLoop::with_solver(&scene, &disc, plans, solver, own)?;
     if let Some(cp) = &cp {
         tl.restore(cp.saved(disc.n_dofs, tl.rows().len())?)?;
     }
@@ -384,7 +397,13 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     }
     let start = Instant::now();
     let (ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
-    let mut tl = TimeLoop::with_solver(&ready.scene, &ready.disc, ready.plans, ready.solver)?;
+    let mut tl = TimeLoop::with_solver(
+        &ready.scene,
+        &ready.disc,
+        ready.plans,
+        ready.solver,
+        ready.own,
+    )?;
     let saved = cp.saved(ready.disc.n_dofs, tl.rows().len())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
@@ -440,7 +459,9 @@ fn prepare_resume(
         opts.ranks.size,
     )?;
     check_started_ranks(&scene, &solver, opts)?;
-    opts.ranks.keep_own_columns(&mut disc)?;
+    let own = opts
+        .ranks
+        .keep_own_columns(&mut disc, scene.solver.history)?;
     let disc = Arc::new(disc);
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
@@ -479,6 +500,7 @@ fn prepare_resume(
         mesh,
         disc,
         solver,
+        own,
         plans,
         opened: Opened {
             identity,
@@ -546,7 +568,7 @@ fn check_contact_plan(
 ) -> Result<Descriptor> {
     let solver = Descriptor::of_run(scene, disc)?;
     let spreads = solver.spreads();
-    check_memory(disc, &solver, steps, ranks, None).map_err(|e| match checkpoint {
+    check_memory(scene, disc, &solver, steps, ranks, None).map_err(|e| match checkpoint {
         Some(cp) if !spreads => Error::input(format!(
             "{}: {e}; a resume keeps the run's solver.contact: resume it where more memory \
              is available, or start a new run with `viscontact run`",
@@ -562,6 +584,7 @@ fn check_contact_plan(
 /// where given, gets its line before, with a step's time on this machine), else its
 /// contact solver's with what its steps hold (`steps`: `ContactPlan::check`).
 pub fn check_memory(
+    scene: &Scene,
     disc: &Discretization,
     solver: &Descriptor,
     steps: &crate::resources::Estimate,
@@ -569,13 +592,13 @@ pub fn check_memory(
     show: Option<&mut dyn FnMut(&str)>,
 ) -> Result<()> {
     #[cfg(feature = "petsc")]
-    if let Some(plan) = ranks_plan(disc, solver, ranks, steps.memory)? {
+    if let Some(plan) = ranks_plan(scene, disc, solver, ranks, steps.memory)? {
         if let Some(show) = show {
             show(&plan.clone().timed(disc).to_string());
         }
         return plan.check();
     }
-    let _ = (disc, ranks, show);
+    let _ = (scene, disc, ranks, show);
     match solver.contact() {
         Some(plan) => plan.check(steps),
         None => Ok(()),
@@ -587,6 +610,7 @@ pub fn check_memory(
 /// that does not go through PETSc.
 #[cfg(feature = "petsc")]
 fn ranks_plan(
+    scene: &Scene,
     disc: &Discretization,
     solver: &Descriptor,
     ranks: usize,
@@ -594,7 +618,8 @@ fn ranks_plan(
 ) -> Result<Option<crate::ranks::Plan>> {
     match *solver.build() {
         crate::solver::choice::Build::Krylov { newton } => {
-            crate::ranks::Plan::new(disc, ranks, newton, steps).map(Some)
+            let history = scene.solver.history;
+            crate::ranks::Plan::new(disc, ranks, newton, steps, history).map(Some)
         }
         _ => Ok(None),
     }

@@ -89,6 +89,7 @@ pub fn emit(
     // A run through PETSc: what `check --ranks` says a rank holds, and a step's time.
     #[cfg(feature = "petsc")]
     let plan = super::ranks_plan(
+        &scene,
         &disc,
         &solver,
         job.nodes * job.ntasks_per_node,

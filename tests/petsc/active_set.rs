@@ -396,7 +396,7 @@ fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
         rtol: 1e-12,
         newton: true,
     };
-    let mut krylov = Krylov::new(&disc.k_a, &disc, &settings).unwrap();
+    let mut krylov = Krylov::new(&disc.k_a, None, &disc, &settings).unwrap();
     let mut rng = common::SplitMix(50);
     let b: Vec<f64> = (0..disc.n_free).map(|_| rng.unit() - 0.5).collect();
     let all = Sets::of(&disc, |_| true, |j| j % 2 == 0);

@@ -239,6 +239,20 @@ fn a_run_with_contact_and_friction_on_1_2_and_3_ranks_agrees_with_one_process() 
     agree_on_1_2_and_3_ranks(&contact_scenes(tmp.path()));
 }
 
+/// With the implicit history the step matrix is K_A + k K_B + k² r(0) K_R, not K_A: a rank
+/// then keeps its columns of K_A, and PETSc takes the step matrix's rows, made from the
+/// rank's columns (`Ranks::keep_own_columns` hands K_A's rows over only where K_A is it).
+#[test]
+fn the_implicit_history_with_contact_on_1_2_and_3_ranks_agrees_with_one_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    let block = (SceneText::block().set("scheme.history", "implicit"))
+        .set("solver.linear", "petsc")
+        .set("solver.contact", "active_set")
+        .set("time.steps", 8)
+        .write(tmp.path(), "block.toml");
+    agree_on_1_2_and_3_ranks(&[block]);
+}
+
 /// The block, linear and with contact and friction.
 #[test]
 fn stopped_on_3_ranks_a_run_resumes_on_2_and_on_3() {

@@ -3,8 +3,9 @@
 //! computes its entries of the right side's products from them (`fem::mul_add_rows`). On
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
 //! agree with the whole matrices' products to round-off, the diagonal stays whole (the
-//! active set's ρ reads it), and the other columns are gone. A scene with prescribed dofs
-//! keeps its matrices whole.
+//! active set's ρ reads it), and the other columns are gone. Where a rank's rows of K_A go
+//! to PETSc, K_A keeps its diagonal alone (`Discretization::keep_diagonal_of_k_a`). A scene
+//! with prescribed dofs keeps its matrices whole.
 
 use crate::common;
 use common::*;
@@ -52,6 +53,19 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
             .count();
         assert_eq!(single, others, "matrix {k}");
     }
+}
+
+#[test]
+fn k_a_handed_over_keeps_its_diagonal_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = SceneText::block().write(dir.path(), "block.toml");
+    let (_, _, mut disc) = load(&path, &[]);
+    let whole = diagonal(&disc.k_a);
+    assert!(whole.iter().all(|&d| d > 0.0));
+    disc.keep_columns((0..disc.n_free).step_by(2).collect());
+    disc.keep_diagonal_of_k_a();
+    assert_eq!(disc.k_a.as_ref().val().len(), disc.n_free);
+    assert_eq!(diagonal(&disc.k_a), whole);
 }
 
 #[test]
