@@ -393,11 +393,15 @@ impl std::fmt::Display for Plan {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         use crate::resources::human;
         let l = &self.largest;
-        let dropped = match self.size {
-            1 => "",
-            _ => {
+        let dropped = match (self.size, self.kept < self.matrices) {
+            (1, _) => "",
+            (_, false) => {
                 ", less the other ranks' columns of K_A, K_B and K_R, which it drops once \
                   assembled"
+            }
+            (_, true) => {
+                ", less the other ranks' columns of K_A, K_B and K_R and its own of K_A, \
+                  which it drops once assembled (its rows of K_A go to PETSc)"
             }
         };
         write!(

@@ -37,7 +37,8 @@
 //! (`Hierarchy`). A KSP made for them (`KrylovSettings::newton`) sets up only their
 //! multigrid: K's own KSP keeps its type and options but is never set up or solved, and on
 //! several ranks it goes, with K's matrix, before GAMG's setup (a rank's memory peaks
-//! there): a product with K ([`Krylov::mult`]) then takes the rank's copy of its rows.
+//! there): a product with K ([`Krylov::mult`]) then takes the rank's rows of K, which
+//! the Krylov keeps (the rank's only copy of them: `ranks::OwnRows`).
 
 mod layout;
 

@@ -289,7 +289,6 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   PetscCall(KSPSetFromOptions(s->ksp));
   if (newton) {
     PetscCall(constrained_setup(s));
-    /* After GAMG's setup, a rank's peak, which its products no longer hold. */
     if (s->count) PetscCall(local_rows(s, rowptr, cols, vals));
     if (s->count) PetscCall(check_blocks(s));
   } else {
@@ -372,7 +371,7 @@ int vc_gather(void *ctx, PetscScalar *x)
 }
 
 /* y = K x, x and y whole on every rank: by K's matrix, or where it went (the Newton
- * systems' KSP on several ranks: constrained_setup) by this rank's copy of its rows. */
+ * systems' KSP on several ranks: constrained_setup) by this rank's rows (local_rows). */
 int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 {
   VcKsp *s = (VcKsp *)ctx;
@@ -463,7 +462,7 @@ static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
 /* A rank's rows of K in CSR, [lo, lo + m): offsets ai from 0, global columns aj (in
  * order), values k, and on several ranks each row's count of columns left of the rank's
  * own (below; NULL on one process). N and Q share the pattern (Values). On one process,
- * N's pattern and K's own array; on several, the copy local_rows made. */
+ * N's pattern and K's own array; on several, the caller's rows (local_rows). */
 typedef struct {
   PetscInt           lo, m;
   const PetscInt    *ai, *aj, *below;
@@ -819,8 +818,8 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(KSPSetFromOptions(s->kc));
   PetscCall(MatCopy(s->A, s->Q, SAME_NONZERO_PATTERN));
   /* On several ranks K's matrix, and the KSP of K that is never solved here, go before
-   * GAMG's setup, a rank's peak: the Newton systems are made of the rank's own copy of its
-   * rows of K (local_rows), and vc_mult multiplies by it. */
+   * GAMG's setup, a rank's peak: the Newton systems are made of the rank's rows of K as
+   * the caller gave them (local_rows), and vc_mult multiplies by them. */
   if (s->count) {
     PetscCall(KSPDestroy(&s->ksp));
     PetscCall(MatDestroy(&s->A));
