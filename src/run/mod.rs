@@ -166,13 +166,7 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     }
     let start = Instant::now();
     let ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
-    let tl = TimeLoop::with_solver(
-        &ready.scene,
-        &ready.disc,
-        ready.plans,
-        ready.solver,
-        ready.own,
-    )?;
+    let tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
     // a signal came first (then it stays as it was).
     let committed = opts
@@ -200,11 +194,24 @@ struct Ready {
     mesh: Mesh,
     /// Shared with the frame writer's thread (run/frame.rs).
     disc: Arc<Discretization>,
+    solving: Solving,
+    opened: Opened,
+}
+
+/// What the time loop is made of besides the scene and the discretization.
+struct Solving {
     solver: Descriptor,
     /// On one of several ranks, its rows of K_A for PETSc (`Ranks::keep_own_columns`).
     own: Option<crate::ranks::OwnRows>,
     plans: crate::history::Plans,
-    opened: Opened,
+}
+
+impl Solving {
+    /// The time loop of `scene` on `disc` (PETSc's first collective call, where the run
+    /// goes through PETSc: after the ranks agreed on the setup).
+    fn time_loop<'a>(self, scene: &'a Scene, disc: &'a Discretization) -> Result<TimeLoop<'a>> {
+        TimeLoop::with_solver(scene, disc, self.plans, self.solver, self.own)
+    }
 }
 
 /// The output directory as a run or a resume has opened it: locked, its series open for
@@ -257,9 +264,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
         scene,
         mesh,
         disc,
-        solver,
-        own,
-        plans,
+        solving: Solving { solver, own, plans },
         opened: Opened {
             identity,
             series,
@@ -348,10 +353,10 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,
         };
-        Ok((scene, disc, solver, own, plans, cp))
+        Ok((scene, disc, Solving { solver, own, plans }, cp))
     };
-    let (scene, disc, solver, own, plans, cp) = opts.ranks.agree(ready())?;
-    let mut tl = TimeLoop::with_solver(&scene, &disc, plans, solver, own)?;
+    let (scene, disc, solving, cp) = opts.ranks.agree(ready())?;
+    let mut tl = solving.time_loop(&scene, &disc)?;
     if let Some(cp) = &cp {
         tl.restore(cp.saved(disc.n_dofs, tl.rows().len())?)?;
     }
@@ -397,13 +402,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     }
     let start = Instant::now();
     let (ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
-    let mut tl = TimeLoop::with_solver(
-        &ready.scene,
-        &ready.disc,
-        ready.plans,
-        ready.solver,
-        ready.own,
-    )?;
+    let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     let saved = cp.saved(ready.disc.n_dofs, tl.rows().len())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
@@ -499,9 +498,7 @@ fn prepare_resume(
         scene,
         mesh,
         disc,
-        solver,
-        own,
-        plans,
+        solving: Solving { solver, own, plans },
         opened: Opened {
             identity,
             series,
