@@ -12,11 +12,12 @@
 //! columns of its own unknowns (`Discretization::keep_columns`: a symmetric matrix's
 //! column is its row), computes its entries of the right side's products from them and
 //! gathers the others' (`Backend::gather`); where K_A is the step matrix its rows go to
-//! PETSc ([`OwnRows`]), and the rank keeps K_A's diagonal alone. The rest is replicated: the history sums and
-//! every n-vector, so every rank holds the same right side b_n, bit for bit, and the
-//! active set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
-//! history.csv, checkpoints, summary.json) and prints; the others *follow* (`run::follow`),
-//! writing nothing.
+//! PETSc ([`OwnRows`]), and the rank keeps K_A's diagonal alone. The rest is replicated:
+//! the history sums and every n-vector, so every rank holds the same right side b_n, bit
+//! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
+//! every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
+//! history.csv, checkpoints, summary.json) and prints; the others *follow*
+//! (`run::follow`), writing nothing.
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
@@ -30,9 +31,8 @@
 //! [`Plan`] is what a rank of a run over N ranks holds and does (`check --ranks N`): its
 //! share of K_A's rows, entries and of the values a product fetches from other ranks, and
 //! its memory, its own part (the setup's peak, measured, less what of the matrices it
-//! drops) and its
-//! share of PETSc's, and for `check` a step's expected time on this machine
-//! ([`Plan::timed`]).
+//! drops) and its share of PETSc's, and for `check` a step's expected time on this
+//! machine ([`Plan::timed`]).
 //! `check` and `run` refuse ranks that would not fit, naming how many would.
 //!
 //! # Agreement
@@ -191,8 +191,7 @@ impl Ranks {
         if self.size > 1 {
             let layout = crate::petsc::Layout::new(disc, self.size)?;
             disc.keep_columns(layout.own(self.rank));
-            let step_is_k_a = history == crate::scene::History::Left && disc.k_a_all.is_none();
-            let rows = if step_is_k_a {
+            let rows = if hands_over_k_a(disc, history) {
                 let rows = layout.rows_of(&disc.k_a, self.rank)?.into_owned();
                 disc.keep_diagonal_of_k_a();
                 Some(OwnRows(rows))
@@ -222,6 +221,14 @@ impl Ranks {
 /// backend (`petsc::Krylov`): its matrices are made of them, and the Newton systems read
 /// them as their copy of K, the rank's only one.
 pub struct OwnRows(#[cfg(feature = "petsc")] pub(crate) crate::petsc::Csr<'static>);
+
+/// Whether a rank of several hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]):
+/// where K_A is the step matrix (the left endpoint history) and the rank keeps its columns
+/// (no prescribed dofs, whose right side reads K_A whole).
+#[cfg(feature = "petsc")]
+fn hands_over_k_a(disc: &crate::fem::Discretization, history: crate::scene::History) -> bool {
+    history == crate::scene::History::Left && disc.k_a_all.is_none()
+}
 
 /// What Open MPI adds to a rank's resident memory, which a process without a launcher (as
 /// `check` is) does not hold and counts for several ranks: 8.6 MB measured on the 3D block
@@ -287,8 +294,7 @@ impl Plan {
         let setup = peak_memory().unwrap_or(0.0) + steps;
         let on_several = setup + if launched { 0.0 } else { MPI_RUNTIME };
         let matrices = matrix_bytes(disc);
-        let step_is_k_a = history == crate::scene::History::Left && disc.k_a_all.is_none();
-        let kept = if step_is_k_a {
+        let kept = if hands_over_k_a(disc, history) {
             matrices - 16.0 * disc.k_a.as_ref().val().len() as f64
         } else {
             matrices

@@ -607,6 +607,8 @@ fn petsc_backend(
             newton,
         };
         let krylov = crate::petsc::Krylov::new(matrix, own.map(|o| o.0), disc, &settings)?;
+        // GAMG's setup freed what its products held meanwhile.
+        crate::resources::return_freed_memory();
         Ok(Backend::Petsc(krylov))
     }
     #[cfg(not(feature = "petsc"))]

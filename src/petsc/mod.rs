@@ -301,8 +301,6 @@ impl Krylov {
             )
         };
         check_setup(code, &settings.options)?;
-        // GAMG's setup freed what its products held meanwhile.
-        crate::resources::return_freed_memory();
         let (mut ksp, mut pc) = (std::ptr::null(), std::ptr::null());
         // SAFETY: ctx is a live KSP; the names are PETSc's static strings.
         check(
