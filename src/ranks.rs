@@ -12,7 +12,7 @@
 //! columns of its own unknowns (`Discretization::keep_columns`: a symmetric matrix's
 //! column is its row), computes its entries of the right side's products from them and
 //! gathers the others' (`Backend::gather`); where K_A is the step matrix its rows go to
-//! PETSc ([`OwnRows`]), and the rank keeps K_A's diagonal alone. The rest is replicated:
+//! PETSc ([`Own`]), and the rank keeps K_A's diagonal alone. The rest is replicated:
 //! the history sums and every n-vector, so every rank holds the same right side b_n, bit
 //! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
 //! every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
@@ -178,15 +178,15 @@ impl Ranks {
     /// On one of several ranks, `disc` keeps the columns of K_A, K_B and K_R of the
     /// unknowns whose rows this rank holds in PETSc (`petsc::Layout`), and no others
     /// (`Discretization::keep_columns`). Where K_A is the step matrix (`solver.history =
-    /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, [`OwnRows`], and
-    /// `disc` keeps K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`). The heap
-    /// the whole matrices held then goes back to the system (`resources::return_freed_memory`).
-    /// Nothing on one rank.
+    /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
+    /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`). The heap the whole
+    /// matrices held then goes back to the system (`resources::return_freed_memory`). What
+    /// goes on to PETSc, the layout included, is [`Own`]; nothing on one rank.
     pub fn keep_own_columns(
         &self,
         disc: &mut crate::fem::Discretization,
         history: crate::scene::History,
-    ) -> Result<Option<OwnRows>> {
+    ) -> Result<Option<Own>> {
         #[cfg(feature = "petsc")]
         if self.size > 1 {
             let layout = crate::petsc::Layout::new(disc, self.size)?;
@@ -194,12 +194,12 @@ impl Ranks {
             let rows = if hands_over_k_a(disc, history) {
                 let rows = layout.rows_of(&disc.k_a, self.rank)?.into_owned();
                 disc.keep_diagonal_of_k_a();
-                Some(OwnRows(rows))
+                Some(rows)
             } else {
                 None
             };
             crate::resources::return_freed_memory();
-            return Ok(rows);
+            return Ok(Some(Own { layout, rows }));
         }
         let _ = (disc, history);
         Ok(None)
@@ -216,11 +216,17 @@ impl Ranks {
     }
 }
 
-/// On one of several ranks, the rank's rows of K_A in PETSc's numbering, which
-/// [`Ranks::keep_own_columns`] took out of the discretization for the time loop's PETSc
-/// backend (`petsc::Krylov`): its matrices are made of them, and the Newton systems read
-/// them as their copy of K, the rank's only one.
-pub struct OwnRows(#[cfg(feature = "petsc")] pub(crate) crate::petsc::Csr<'static>);
+/// On one of several ranks, what [`Ranks::keep_own_columns`] hands to the time loop's PETSc
+/// backend (`petsc::Krylov`): which rank holds which rows (METIS's partition, made once a
+/// rank), and where K_A is the step matrix, the rank's rows of K_A in PETSc's numbering,
+/// taken out of the discretization: PETSc's matrices are made of them, and the Newton
+/// systems read them as their copy of K, the rank's only one.
+pub struct Own {
+    #[cfg(feature = "petsc")]
+    pub(crate) layout: crate::petsc::Layout,
+    #[cfg(feature = "petsc")]
+    pub(crate) rows: Option<crate::petsc::Csr<'static>>,
+}
 
 /// Whether a rank of several hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]):
 /// where K_A is the step matrix (the left endpoint history) and the rank keeps its columns

@@ -220,7 +220,7 @@ pub fn active_set_bytes(m: usize, n: usize, nnz: usize) -> f64 {
 /// vectors besides) and 80 and 85 on each of two (the off-rank blocks, their column maps
 /// and message buffers, GAMG's Galerkin products' data for reuse until the shim frees it,
 /// and the rank's rows of K_A in PETSc's numbering, which it hands over instead of keeping
-/// K_A's columns: `ranks::OwnRows`; K_A's own matrix goes there before GAMG's setup).
+/// K_A's columns: `ranks::Own`; K_A's own matrix goes there before GAMG's setup).
 pub fn petsc_bytes(entries: usize, newton: bool, ranks: usize) -> f64 {
     let per_entry = match (newton, ranks) {
         (false, 1) => 48.0,

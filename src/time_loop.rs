@@ -33,7 +33,7 @@ use crate::fem::{
     constraints, leading_block, mul_add, mul_add_rows, Discretization, Sparse, SymmetricPair,
 };
 use crate::history::{History, LoopState, Plans, SavedLoop};
-use crate::ranks::OwnRows;
+use crate::ranks::Own;
 use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
 use crate::solver::{Abandon, Backend, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
@@ -215,14 +215,15 @@ impl<'p> TimeLoop<'p> {
 
     /// A time loop with its memory plans and its solver in hand: `descriptor` is the scene's
     /// `[solver]` resolved on `disc` (`Descriptor::of_run`), which a run has already checked
-    /// against the memory available. On one of several MPI ranks, `own` is the rank's rows
-    /// of K_A where they were taken out of `disc` for PETSc (`Ranks::keep_own_columns`).
+    /// against the memory available. On one of several MPI ranks, `own` is what
+    /// `Ranks::keep_own_columns` made for PETSc: the layout over the ranks, and the rank's
+    /// rows of K_A where they were taken out of `disc`.
     pub fn with_solver(
         scene: &'p Scene,
         disc: &'p Discretization,
         plans: Plans,
         descriptor: Descriptor,
-        own: Option<OwnRows>,
+        own: Option<Own>,
     ) -> Result<Self> {
         refusals(scene, disc, &plans)?;
         let effects = Effects::new(scene, disc);
@@ -595,7 +596,7 @@ impl<'p> TimeLoop<'p> {
 /// PETSc only in a build with it).
 fn petsc_backend(
     scene: &Scene,
-    (matrix, own): (&crate::fem::Sparse, Option<OwnRows>),
+    (matrix, own): (&crate::fem::Sparse, Option<Own>),
     disc: &Discretization,
     newton: bool,
 ) -> Result<Backend> {
@@ -606,7 +607,8 @@ fn petsc_backend(
             rtol: crate::petsc::DEFAULT_RTOL,
             newton,
         };
-        let krylov = crate::petsc::Krylov::new(matrix, own.map(|o| o.0), disc, &settings)?;
+        let own = own.map(|o| (o.layout, o.rows));
+        let krylov = crate::petsc::Krylov::new(matrix, own, disc, &settings)?;
         // GAMG's setup freed what its products held meanwhile.
         crate::resources::return_freed_memory();
         Ok(Backend::Petsc(krylov))

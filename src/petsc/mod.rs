@@ -38,7 +38,7 @@
 //! multigrid: K's own KSP keeps its type and options but is never set up or solved, and on
 //! several ranks it goes, with K's matrix, before GAMG's setup (a rank's memory peaks
 //! there): a product with K ([`Krylov::mult`]) then takes the rank's rows of K, which
-//! the Krylov keeps (the rank's only copy of them: `ranks::OwnRows`).
+//! the Krylov keeps (the rank's only copy of them: `ranks::Own`).
 
 mod layout;
 
@@ -254,21 +254,25 @@ type GiveUp = Box<dyn Fn() -> bool>;
 
 impl Krylov {
     /// The KSP of `matrix` (the free-dof step matrix of `disc`: whole on one rank, this
-    /// rank's columns on several), its near-null space from `disc`'s nodes; on one of
-    /// several ranks, of `own`, the rank's rows of K_A where they were taken out of `disc`
-    /// already (`Ranks::keep_own_columns`: `matrix` then holds K_A's diagonal alone).
+    /// rank's columns on several), its near-null space from `disc`'s nodes. On one of
+    /// several ranks, `own` is the layout of `disc` over the ranks where it was made
+    /// already, and the rank's rows of K_A where they were taken out of `disc`
+    /// (`Ranks::keep_own_columns`: `matrix` then holds K_A's diagonal alone).
     pub fn new(
         matrix: &Sparse,
-        own: Option<Csr<'static>>,
+        own: Option<(Layout, Option<Csr<'static>>)>,
         disc: &Discretization,
         settings: &KrylovSettings,
     ) -> Result<Self> {
         initialize()?;
         let n = matrix.nrows();
         let (rank, size) = world()?;
-        let layout = Layout::new(disc, size)?;
-        let csr = match own {
+        let (layout, rows) = match own {
             Some(own) => own,
+            None => (Layout::new(disc, size)?, None),
+        };
+        let csr = match rows {
+            Some(rows) => rows,
             None => layout.rows_of(matrix, rank)?,
         };
         let blocks = layout::petsc_ints(&layout.blocks)?;

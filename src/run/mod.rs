@@ -201,8 +201,8 @@ struct Ready {
 /// What the time loop is made of besides the scene and the discretization.
 struct Solving {
     solver: Descriptor,
-    /// On one of several ranks, its rows of K_A for PETSc (`Ranks::keep_own_columns`).
-    own: Option<crate::ranks::OwnRows>,
+    /// On one of several ranks, its layout and rows of K_A for PETSc (`Ranks::keep_own_columns`).
+    own: Option<crate::ranks::Own>,
     plans: crate::history::Plans,
 }
 
