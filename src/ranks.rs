@@ -8,11 +8,13 @@
 //! all the ranks, each holding the rows of the nodes METIS's partition gives it
 //! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
 //! of every Krylov vector, and each getting the whole solution back. Every rank reads the
-//! scene and the mesh and assembles the matrices, then keeps of K_A, K_B and K_R the
-//! columns of its own unknowns (`Discretization::keep_columns`: a symmetric matrix's
-//! column is its row), computes its entries of the right side's products from them and
-//! gathers the others' (`Backend::gather`); where K_A is the step matrix its rows go to
-//! PETSc ([`Own`]), and the rank keeps K_A's diagonal alone. The rest is replicated:
+//! scene and the whole mesh, and of K_A, K_B and K_R holds the columns of its own unknowns
+//! alone (a symmetric matrix's column is its row): it assembles only those
+//! ([`Ranks::discretize`]) where the scene's keys take PETSc, or keeps them of the whole
+//! matrices (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It
+//! computes its entries of the right side's products from them and gathers the others'
+//! (`Backend::gather`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
+//! the rank keeps K_A's diagonal alone. The rest is replicated:
 //! the history sums and every n-vector, so every rank holds the same right side b_n, bit
 //! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
 //! every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
@@ -23,7 +25,7 @@
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
 //! memory of each rank is the replicated part (mesh, cells, history), its columns of the
-//! matrices and its share of PETSc's; partitioning the mesh and the assembly too is the
+//! matrices and its share of PETSc's; partitioning the mesh and the history too is the
 //! next step (docs/cluster.md).
 //!
 //! # Planning
@@ -31,7 +33,7 @@
 //! [`Plan`] is what a rank of a run over N ranks holds and does (`check --ranks N`): its
 //! share of K_A's rows, entries and of the values a product fetches from other ranks, and
 //! its memory, its own part (the setup's peak, measured, less what of the matrices it
-//! drops) and its share of PETSc's, and for `check` a step's expected time on this
+//! does not hold) and its share of PETSc's, and for `check` a step's expected time on this
 //! machine ([`Plan::timed`]).
 //! `check` and `run` refuse ranks that would not fit, naming how many would.
 //!
@@ -175,8 +177,36 @@ impl Ranks {
         }
     }
 
+    /// The discretization of `scene` on `mesh` as this rank holds it. On one of several
+    /// ranks of a run whose keys take PETSc (`SolverChoice::takes_petsc`), the rank
+    /// assembles of K_A, K_B and K_R only the columns of the unknowns whose rows it holds
+    /// in PETSc (`Discretization::with_columns`, over `petsc::Layout`'s partition, made
+    /// here once and handed on in [`Own`]), so that no rank holds the whole matrices. Else
+    /// the whole: one rank, or `solver.linear = "auto"`, whose choice reads the whole K_A
+    /// (the analysis of its factor) before a rank keeps its columns.
+    pub fn discretize(
+        &self,
+        mesh: &crate::mesh::Mesh,
+        scene: &crate::scene::Scene,
+    ) -> Result<(crate::fem::Discretization, Option<Own>)> {
+        #[cfg(feature = "petsc")]
+        if self.size > 1 && scene.solver.takes_petsc() {
+            let mut layout = None;
+            let disc = crate::fem::Discretization::with_columns(mesh, scene, |disc| {
+                let made = crate::petsc::Layout::new(disc, self.size)?;
+                let own = made.own(self.rank);
+                layout = Some(made);
+                Ok(Some(own))
+            })?;
+            let own = layout.map(|layout| Own { layout, rows: None });
+            return Ok((disc, own));
+        }
+        Ok((crate::fem::Discretization::new(mesh, scene)?, None))
+    }
+
     /// On one of several ranks, `disc` keeps the columns of K_A, K_B and K_R of the
-    /// unknowns whose rows this rank holds in PETSc (`petsc::Layout`), and no others
+    /// unknowns whose rows this rank holds in PETSc (`petsc::Layout`; `made`: the layout
+    /// [`Ranks::discretize`] made, when it assembled those columns alone), and no others
     /// (`Discretization::keep_columns`). Where K_A is the step matrix (`solver.history =
     /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
     /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`). The heap the whole
@@ -186,11 +216,17 @@ impl Ranks {
         &self,
         disc: &mut crate::fem::Discretization,
         history: crate::scene::History,
+        made: Option<Own>,
     ) -> Result<Option<Own>> {
         #[cfg(feature = "petsc")]
         if self.size > 1 {
-            let layout = crate::petsc::Layout::new(disc, self.size)?;
-            disc.keep_columns(layout.own(self.rank));
+            let layout = match made {
+                Some(own) => own.layout,
+                None => crate::petsc::Layout::new(disc, self.size)?,
+            };
+            if disc.own.is_none() {
+                disc.keep_columns(layout.own(self.rank));
+            }
             let rows = if hands_over_k_a(disc, history) {
                 let rows = layout.rows_of(&disc.k_a, self.rank)?.into_owned();
                 disc.keep_diagonal_of_k_a();
@@ -201,7 +237,7 @@ impl Ranks {
             crate::resources::return_freed_memory();
             return Ok(Some(Own { layout, rows }));
         }
-        let _ = (disc, history);
+        let _ = (disc, history, made);
         Ok(None)
     }
 
@@ -245,10 +281,11 @@ const MPI_RUNTIME: f64 = 16e6;
 /// What each rank of a run over `size` ranks holds and does (`check --ranks N`, and the
 /// refusal of a run whose ranks would not fit the memory available): its share of K_A
 /// (the largest rank's, over `petsc::Layout`'s partition) and its memory: its own part
-/// (this process's setup peak so far, measured, less the other ranks' columns of K_A, K_B
-/// and K_R, which a rank drops once assembled (`Discretization::keep_columns`), and what
-/// the steps hold) and its share of PETSc's matrices and multigrid. Every rank assembles
-/// the whole matrices first: the setup's peak is a floor that no rank count lowers.
+/// (this process's setup peak so far, measured, less what of the matrices it does not
+/// hold on a rank, and what the steps hold) and its share of PETSc's matrices and
+/// multigrid. A rank of a run whose keys take PETSc assembles its own columns alone
+/// (`Ranks::discretize`); one that assembles the whole matrices first (`solver.linear =
+/// "auto"`) holds them at its setup's peak, a floor that no rank count lowers.
 #[cfg(feature = "petsc")]
 #[derive(Clone, Debug)]
 pub struct Plan {
@@ -260,15 +297,21 @@ pub struct Plan {
     /// The largest rank's own bytes, and its bytes of PETSc's.
     own: f64,
     spread: f64,
-    /// A rank's setup peak on several ranks (the measured one with MPI's runtime), the
-    /// bytes of K_A, K_B and K_R whole (`matrix_bytes`), which a rank drops once
-    /// assembled, of which it keeps its share of `kept` (all three, or K_B and K_R where
-    /// its rows of K_A go to PETSc: `Ranks::keep_own_columns`), and PETSc's bytes a rank
-    /// on several ranks times their count.
-    on_several: f64,
+    /// What a rank holds whatever the rank count: the measured setup peak with MPI's
+    /// runtime and what the steps hold, less the matrices this process holds.
+    base: f64,
+    /// The bytes of K_A, K_B and K_R whole (`matrix_bytes`), of which a rank assembles its
+    /// share of all (`by_columns`) or all first, and keeps its share of `kept` (all three,
+    /// or K_B and K_R where its rows of K_A go to PETSc: `Ranks::keep_own_columns`, which
+    /// copies them, `rows` bytes in all, beside its columns); PETSc's bytes a rank on
+    /// several ranks times their count.
     matrices: f64,
     kept: f64,
+    rows_bytes: f64,
     spread_several: f64,
+    by_columns: bool,
+    /// The largest rank's fraction of K_A's entries.
+    share: f64,
     /// Through the active set's Newton systems.
     newton: bool,
     /// A step's expected seconds on this machine ([`Plan::timed`]), once timed.
@@ -277,15 +320,15 @@ pub struct Plan {
 
 #[cfg(feature = "petsc")]
 impl Plan {
-    /// The plan of `disc` over `size` ranks, its steps through the active set's Newton
-    /// systems where `newton` (else K_A's solves), holding `steps` bytes besides the setup;
-    /// `history`: the scene's (`solver.history`), which says whether K_A is the step matrix.
+    /// The plan of `disc` (whole, or a rank's columns) for `scene` over `size` ranks, its
+    /// steps through the active set's Newton systems where `newton` (else K_A's solves),
+    /// holding `steps` bytes besides the setup.
     pub fn new(
         disc: &crate::fem::Discretization,
+        scene: &crate::scene::Scene,
         size: usize,
         newton: bool,
         steps: f64,
-        history: crate::scene::History,
     ) -> Result<Plan> {
         use crate::resources::{peak_memory, petsc_bytes};
         let shares = crate::petsc::Layout::new(disc, size)?.shares(disc);
@@ -298,31 +341,39 @@ impl Plan {
         // Under a launcher the peak holds MPI's runtime already.
         let launched = launched().is_some();
         let setup = peak_memory().unwrap_or(0.0) + steps;
-        let on_several = setup + if launched { 0.0 } else { MPI_RUNTIME };
-        let matrices = matrix_bytes(disc);
-        let kept = if hands_over_k_a(disc, history) {
-            matrices - 16.0 * disc.k_a.as_ref().val().len() as f64
-        } else {
-            matrices
+        let base = setup + if launched { 0.0 } else { MPI_RUNTIME } - matrix_bytes(disc);
+        let matrices = whole_matrix_bytes(disc, entries);
+        let (kept, rows_bytes) = match hands_over_k_a(disc, scene.solver.history) {
+            true => (matrices - 16.0 * entries as f64, 12.0 * entries as f64),
+            false => (matrices, 0.0),
         };
-        let dropped = matrices - largest.entries as f64 / entries.max(1) as f64 * kept;
+        let share = largest.entries as f64 / entries.max(1) as f64;
         Ok(Plan {
             size,
             rows: disc.n_free,
             largest,
-            own: if size > 1 {
-                on_several - dropped
-            } else {
-                setup
-            },
+            own: if size > 1 { base + share * kept } else { setup },
             spread: petsc_bytes(largest.entries, newton, size),
-            on_several,
+            base,
             matrices,
             kept,
+            rows_bytes,
             spread_several: petsc_bytes(entries, newton, 2),
+            by_columns: scene.solver.takes_petsc(),
+            share,
             newton,
             step_s: None,
         })
+    }
+
+    /// A rank's setup peak where it holds `share` of K_A's entries: what it holds whatever
+    /// the rank count, and the matrices whole, or its share of them with its copy of its
+    /// rows of K_A.
+    fn setup_peak(&self, share: f64) -> f64 {
+        match self.by_columns {
+            true => self.base + share * (self.matrices + self.rows_bytes),
+            false => self.base + self.matrices,
+        }
     }
 
     /// The plan with a step's expected time on this machine: the largest rank's share of a
@@ -343,13 +394,16 @@ impl Plan {
     /// The memory of the largest rank: its setup's peak, or what it holds with PETSc's
     /// share, whichever is more.
     pub fn per_rank(&self) -> f64 {
-        let setup = if self.size > 1 { self.on_several } else { 0.0 };
+        let setup = match self.size {
+            1 => 0.0,
+            _ => self.setup_peak(self.share),
+        };
         (self.own + self.spread).max(setup)
     }
 
     /// Refuses (exit 2) ranks that would need more than `resources::MARGIN` of the memory
     /// available (`VISCONTACT_MEMORY` is a rank's), naming how many ranks would fit, or
-    /// that none would where the setup's peak alone does not fit.
+    /// that none would where what every rank holds does not fit.
     pub fn check(&self) -> Result<()> {
         use crate::resources::{available_memory, human, memory_phrase, MARGIN};
         let Some(avail) = available_memory()? else {
@@ -359,23 +413,31 @@ impl Plan {
         if self.per_rank() <= budget {
             return Ok(());
         }
-        // R ranks hold on_several − M + (M' + PETSc's)/R each (M: the matrices they drop,
-        // M' what they keep of them), evenly but for whole nodes: 5 % more for the largest.
-        let split = self.kept + self.spread_several;
-        let remedy = match budget - self.on_several {
-            left if left >= 0.0 => format!(
+        // R ranks hold base + (M' + PETSc's)/R each, and at setup base + M, or base +
+        // (M + rows)/R where a rank assembles its own columns alone (M: the matrices, M'
+        // what a rank keeps of them), evenly but for whole nodes: 5 % more for the largest.
+        let (left, split) = (budget - self.base, self.kept + self.spread_several);
+        let spreads = match self.by_columns {
+            true => split.max(self.matrices + self.rows_bytes),
+            false => split,
+        };
+        let remedy = match left > 0.0 && budget >= self.setup_peak(0.0) {
+            true => format!(
                 "≈ {} ranks would fit (mpirun -n {0} or srun -n {0}, each rank with the \
                  memory this one has)",
-                (1.05 * split / (left + self.matrices))
-                    .ceil()
-                    .max(self.size as f64 + 1.0)
+                (1.05 * spreads / left).ceil().max(self.size as f64 + 1.0)
             ),
-            _ => format!(
-                "no rank count would: every rank reads the mesh and assembles the whole \
-                 matrices before it keeps its own columns (≈ {} here), and only the \
-                 matrices and PETSc's part spread; use a coarser mesh or ranks with more \
-                 memory (docs/cluster.md)",
-                human(self.on_several)
+            false => format!(
+                "no rank count would: every rank reads the mesh and holds the history (≈ {} \
+                 here{}), and only the matrices and PETSc's part spread; use a coarser mesh \
+                 or ranks with more memory (docs/cluster.md)",
+                human(self.setup_peak(0.0)),
+                match self.by_columns {
+                    true => "",
+                    false =>
+                        ", and assembles the whole matrices before it keeps its own \
+                              columns: `solver.linear = \"auto\"`",
+                },
             ),
         };
         Err(Error::input(format!(
@@ -405,16 +467,14 @@ impl std::fmt::Display for Plan {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         use crate::resources::human;
         let l = &self.largest;
+        let others = match self.by_columns {
+            true => "the other ranks' columns of K_A, K_B and K_R, which it does not assemble",
+            false => "the other ranks' columns of K_A, K_B and K_R, which it drops once assembled",
+        };
         let dropped = match (self.size, self.kept < self.matrices) {
-            (1, _) => "",
-            (_, false) => {
-                ", less the other ranks' columns of K_A, K_B and K_R, which it drops once \
-                  assembled"
-            }
-            (_, true) => {
-                ", less the other ranks' columns of K_A, K_B and K_R and its own of K_A, \
-                  which it drops once assembled (its rows of K_A go to PETSc)"
-            }
+            (1, _) => String::new(),
+            (_, false) => format!(", less {others}"),
+            (_, true) => format!(", less {others}, and its own of K_A (its rows go to PETSc)"),
         };
         write!(
             f,
@@ -456,6 +516,18 @@ fn matrix_bytes(disc: &crate::fem::Discretization) -> f64 {
     let entries = |m: &crate::fem::Sparse| m.as_ref().val().len() as f64;
     let (k_b, k_r) = (disc.k_b.iter(), disc.k_r.iter());
     16.0 * (entries(&disc.k_a) + k_b.chain(k_r).map(entries).sum::<f64>())
+}
+
+/// The bytes of K_A, K_B and K_R whole, K_A's pattern holding `entries` (all the ranks'
+/// shares): the same as [`matrix_bytes`] of the whole, which a rank that keeps its columns
+/// does not hold; K_B and K_R share K_A's pattern where a rank keeps columns (no prescribed
+/// dofs, which a whole discretization counts itself).
+#[cfg(feature = "petsc")]
+fn whole_matrix_bytes(disc: &crate::fem::Discretization, entries: usize) -> f64 {
+    match disc.own {
+        None => matrix_bytes(disc),
+        Some(_) => 16.0 * entries as f64 * (1 + disc.k_b.iter().count() + disc.k_r.len()) as f64,
+    }
 }
 
 /// A Krylov iteration of CG + GAMG on K_A costs this many products with K_A (its

@@ -233,8 +233,9 @@ pub fn petsc_bytes(entries: usize, newton: bool, ranks: usize) -> f64 {
 
 /// Hands back to the system the heap pages of the blocks freed so far (glibc's
 /// `malloc_trim`; nothing elsewhere). glibc keeps the pages of freed blocks below its mmap
-/// threshold, so a rank's resident memory kept the whole matrices it had dropped for its
-/// own columns (`Ranks::keep_own_columns`) and PETSc's setup transients: on two ranks of
+/// threshold, so a rank's resident memory kept the matrices it had dropped (the whole
+/// ones, for its own columns, or its columns of K_A, for PETSc's rows:
+/// `Ranks::keep_own_columns`) and PETSc's setup transients: on two ranks of
 /// the fine plate 0.60 GB a rank after the columns were kept (docs/cluster.md, "Memory
 /// per rank"). Called where a setup stage has just freed much; it takes milliseconds.
 pub fn return_freed_memory() {

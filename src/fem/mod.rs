@@ -423,21 +423,29 @@ impl Discretization {
     /// The discretization of `scene` on `mesh`: the free dofs (Γ1 clamped), the cells, the
     /// stiffness matrices, the loads and the constraint rows on Γ3,1 and Γ3,2.
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
+        Self::with_columns(mesh, scene, |_| Ok(None))
+    }
+
+    /// The discretization with of K_A, K_B and K_R only the columns of the unknowns that
+    /// `own` names (increasing) whole, and the diagonal entry alone of the others, as
+    /// [`Discretization::keep_columns`] leaves them, bit for bit, but without the whole
+    /// matrices ever in memory: on one of several MPI ranks (`Ranks::discretize`). `own`
+    /// reads the discretization before its matrices are assembled (they are empty then):
+    /// its unknowns and cells, of which METIS's partition is made; None keeps every column.
+    /// Where there are prescribed dofs every column is kept, as `keep_columns` does.
+    pub fn with_columns(
+        mesh: &Mesh,
+        scene: &Scene,
+        own: impl FnOnce(&Discretization) -> Result<Option<Vec<usize>>>,
+    ) -> Result<Self> {
         check_model(mesh, scene)?;
         let d = mesh.dim;
         let numbering = Numbering::new(mesh, scene)?;
-        let (free, n_free, n_dofs) = (&numbering.free, numbering.n_free, numbering.n_dofs);
+        let (n_free, n_dofs) = (numbering.n_free, numbering.n_dofs);
         let cells = cells(mesh);
 
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
-        let groups = scene.physics.memory_groups();
-        let dofs = (free.as_slice(), &numbering.frames, n_dofs);
-        let (k_a_all, k_b, k_r) = assemble(&cells, d, dofs, &materials, r, groups);
-        let (k_a, k_a_all) = match n_dofs > n_free {
-            true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
-            false => (k_a_all, None),
-        };
 
         let loads = Loads::new(mesh, scene, &cells)?;
         let rows = RowMaker {
@@ -450,7 +458,7 @@ impl Discretization {
             None => (Vec::new(), Vec::new(), 0.0),
         };
 
-        Ok(Discretization {
+        let mut disc = Discretization {
             dim: d,
             nodes: mesh.nodes.clone(),
             cells,
@@ -460,12 +468,15 @@ impl Discretization {
             held: numbering.held_by,
             free: numbering.free,
             frames: numbering.frames,
-            k_a_all,
+            k_a_all: None,
             materials,
             r,
-            k_a,
-            k_b,
-            k_r,
+            k_a: Sparse::new(
+                SymbolicSparseColMat::new_checked(0, 0, vec![0], None, vec![]),
+                vec![],
+            ),
+            k_b: None,
+            k_r: Vec::new(),
             loads,
             g_f,
             contact,
@@ -475,7 +486,36 @@ impl Discretization {
             idle_groups: idle_groups(mesh, scene),
             own: None,
             stress_cells: std::sync::OnceLock::new(),
-        })
+        };
+        let own = own(&disc)?.filter(|_| n_dofs == n_free);
+        disc.assemble(scene.physics.memory_groups(), own);
+        Ok(disc)
+    }
+
+    /// Assembles K_A, K_B and K_R (`assemble`), of the unknowns `own` the columns whole and
+    /// of the others the diagonal entry (None: every column).
+    fn assemble(&mut self, groups: usize, own: Option<Vec<usize>>) {
+        let keep = own.as_ref().map(|own| {
+            let mut keep = vec![false; self.n_dofs];
+            own.iter().for_each(|&i| keep[i] = true);
+            keep
+        });
+        let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
+        let (materials, r) = (&self.materials, self.r);
+        let (k_a_all, k_b, k_r) = assemble(
+            &self.cells,
+            self.dim,
+            dofs,
+            materials,
+            r,
+            groups,
+            keep.as_deref(),
+        );
+        (self.k_a, self.k_a_all) = match self.n_dofs > self.n_free {
+            true => (leading_block(&k_a_all, self.n_free), Some(k_a_all)),
+            false => (k_a_all, None),
+        };
+        (self.k_b, self.k_r, self.own) = (k_b, k_r, own);
     }
 
     /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) whole and of
@@ -916,7 +956,9 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 /// sparsity pattern, built once from the mesh: node q couples with node p when a cell holds
 /// both. The column of index j, a component of node p, lists the indices of the components
 /// of p's neighbours q, increasing. The element matrices are then added at their positions
-/// (found by bisection in the column): no triplets.
+/// (found by bisection in the column): no triplets. Where `keep` is given, the column j
+/// with `keep[j]` false holds its diagonal entry alone (a rank of several: the others'
+/// columns are not its own); each kept entry sums the same terms in the same order.
 fn assemble(
     cells: &[Cell],
     d: usize,
@@ -924,7 +966,9 @@ fn assemble(
     materials: &CellMaterials,
     r: Isotropic,
     groups: usize,
+    keep: Option<&[bool]>,
 ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
+    let whole = |col: usize| keep.is_none_or(|keep| keep[col]);
     let dofs = |p: usize| free[d * p..d * (p + 1)].iter().flatten().copied();
     let has_dofs = |p: usize| dofs(p).next().is_some();
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
@@ -946,10 +990,13 @@ fn assemble(
         list.sort_unstable();
         list.dedup();
     }
-    for &p in &node_of {
+    for (col, &p) in node_of.iter().enumerate() {
         let start = row_idx.len();
-        for &q in &neighbours[p] {
-            row_idx.extend(dofs(q as usize));
+        match whole(col) {
+            true => neighbours[p]
+                .iter()
+                .for_each(|&q| row_idx.extend(dofs(q as usize))),
+            false => row_idx.push(col),
         }
         row_idx[start..].sort_unstable();
         col_ptr.push(row_idx.len());
@@ -975,7 +1022,7 @@ fn assemble(
                     };
                     let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
                     for al in 0..d {
-                        let Some(row) = free[d * q + al] else {
+                        let Some(row) = free[d * q + al].filter(|&i| i == col || whole(col)) else {
                             continue;
                         };
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);

@@ -126,25 +126,31 @@ impl Layout {
         })
     }
 
-    /// Each rank's share of K_A (`disc.k_a`): its rows, entries and the values of other
-    /// ranks' rows that a product fetches.
+    /// Each rank's share of K_A: its rows, entries and the values of other ranks' rows that
+    /// a product fetches. Counted on the nodes' graph, whose pattern K_A's is (the unknowns
+    /// of a node couple with those of the node and of its neighbours), so that a rank that
+    /// assembled only its own columns (`Ranks::discretize`) counts every rank's share.
     pub fn shares(&self, disc: &Discretization) -> Vec<RankShare> {
-        let k = disc.k_a.as_ref();
-        let (ptr, idx) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
+        let nodes = nodes(disc);
+        let adjacent = adjacency(disc, &nodes);
         let size = self.blocks.len() - 1;
-        let rank = |row: usize| self.blocks.partition_point(|&b| b <= row) - 1;
+        // A rank holds whole nodes: a node's first unknown says whose it is.
+        let rank_of = |v: usize| self.blocks.partition_point(|&b| b <= self.row(nodes[v][0])) - 1;
+        let rank: Vec<usize> = (0..nodes.len()).map(rank_of).collect();
+        let mut order: Vec<usize> = (0..nodes.len()).collect();
+        order.sort_by_key(|&v| rank[v]);
         let mut shares = vec![RankShare::default(); size];
-        let mut seen = vec![usize::MAX; disc.n_free];
-        for i in 0..disc.n_free {
-            let r = rank(self.row(i));
+        let mut seen = vec![usize::MAX; nodes.len()];
+        for v in order {
+            let (r, unknowns) = (rank[v], nodes[v].len());
             let share = &mut shares[r];
-            share.rows += 1;
-            // K_A is symmetric: its column i is its row i.
-            for &j in &idx[ptr[i]..ptr[i + 1]] {
-                share.entries += 1;
-                if rank(self.row(j)) != r && seen[j] != r {
-                    seen[j] = r;
-                    share.ghosts += 1;
+            let coupled: usize = adjacent[v].iter().map(|&w| nodes[w].len()).sum();
+            share.rows += unknowns;
+            share.entries += unknowns * (unknowns + coupled);
+            for &w in adjacent[v].iter().filter(|&&w| rank[w] != r) {
+                if seen[w] != r {
+                    seen[w] = r;
+                    share.ghosts += nodes[w].len();
                 }
             }
         }
@@ -232,13 +238,9 @@ pub fn cell_pieces(
         .collect())
 }
 
-/// METIS's k-way partition of the nodes' graph into `size` parts: each node's part. Two
-/// nodes are adjacent where a cell holds both (where K_A couples them: P1), so that the
-/// partition needs no matrix, and a rank that keeps only its own columns of K_A
-/// (`fem::Discretization::keep_columns`) makes the same one.
-fn partition(disc: &Discretization, nodes: &[Vec<usize>], size: usize) -> Result<Vec<usize>> {
-    let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
-    let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
+/// The nodes' graph on the nodes with unknowns (`nodes`, in their order): for each, the
+/// others that a cell holds with it (where K_A couples them: P1), increasing.
+fn adjacency(disc: &Discretization, nodes: &[Vec<usize>]) -> Vec<Vec<usize>> {
     let mut vertex = vec![usize::MAX; disc.free.len() / disc.dim];
     let with_unknowns = (0..vertex.len()).filter(|&p| !node_unknowns(disc, p).is_empty());
     for (v, p) in with_unknowns.enumerate() {
@@ -252,10 +254,23 @@ fn partition(disc: &Discretization, nodes: &[Vec<usize>], size: usize) -> Result
             adjacent[v].extend(others);
         }
     }
-    let (mut xadj, mut adjncy) = (vec![0], Vec::new());
     for list in &mut adjacent {
         list.sort_unstable();
         list.dedup();
+    }
+    adjacent
+}
+
+/// METIS's k-way partition of the nodes' graph into `size` parts: each node's part. Two
+/// nodes are adjacent where a cell holds both (where K_A couples them: P1), so that the
+/// partition needs no matrix: a rank makes it before it assembles its own columns of K_A
+/// alone (`fem::Discretization::with_columns`), and every rank makes the same one.
+fn partition(disc: &Discretization, nodes: &[Vec<usize>], size: usize) -> Result<Vec<usize>> {
+    let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
+    let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
+    let mut adjacent = adjacency(disc, nodes);
+    let (mut xadj, mut adjncy) = (vec![0], Vec::new());
+    for list in &mut adjacent {
         for &w in list.iter() {
             adjncy.push(idx(w)?);
         }

@@ -238,7 +238,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     stage()?;
     let mesh = read_mesh(&scene)?;
     stage()?;
-    let mut disc = Discretization::new(&mesh, &scene)?;
+    let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
@@ -246,7 +246,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     check_started_ranks(&scene, &solver, opts)?;
     let own = opts
         .ranks
-        .keep_own_columns(&mut disc, scene.solver.history)?;
+        .keep_own_columns(&mut disc, scene.solver.history, made)?;
     let disc = Arc::new(disc);
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
@@ -343,12 +343,12 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
             }
         };
         let mesh = read_mesh(&scene)?;
-        let mut disc = Discretization::new(&mesh, &scene)?;
+        let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
         let solver = Descriptor::of_run(&scene, &disc)?;
         check_started_ranks(&scene, &solver, opts)?;
         let own = opts
             .ranks
-            .keep_own_columns(&mut disc, scene.solver.history)?;
+            .keep_own_columns(&mut disc, scene.solver.history, made)?;
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,
@@ -443,7 +443,7 @@ fn prepare_resume(
         ))
     })?;
     stage()?;
-    let mut disc = Discretization::new(&mesh, &scene)?;
+    let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
     stage()?;
     cp.check(&scene, &mesh, &disc)?;
     check_continuation(checkpoint_path, &cp, &scene, opts.stop_after)?;
@@ -460,7 +460,7 @@ fn prepare_resume(
     check_started_ranks(&scene, &solver, opts)?;
     let own = opts
         .ranks
-        .keep_own_columns(&mut disc, scene.solver.history)?;
+        .keep_own_columns(&mut disc, scene.solver.history, made)?;
     let disc = Arc::new(disc);
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;
@@ -615,8 +615,7 @@ fn ranks_plan(
 ) -> Result<Option<crate::ranks::Plan>> {
     match *solver.build() {
         crate::solver::choice::Build::Krylov { newton } => {
-            let history = scene.solver.history;
-            crate::ranks::Plan::new(disc, ranks, newton, steps, history).map(Some)
+            crate::ranks::Plan::new(disc, scene, ranks, newton, steps).map(Some)
         }
         _ => Ok(None),
     }

@@ -93,6 +93,14 @@ pub struct SolverChoice {
 }
 
 impl SolverChoice {
+    /// Whether the keys alone take PETSc's Krylov solves, whatever the mesh: `linear =
+    /// "petsc"`, or `contact = "active_set"` (the two rules of `solver::choice::Descriptor`
+    /// that read nothing of K_A). A rank of several then assembles only its own columns
+    /// (`Ranks::discretize`).
+    pub fn takes_petsc(&self) -> bool {
+        self.linear == LinearSolver::Petsc || self.contact == ContactSolver::ActiveSet
+    }
+
     /// The sections checked (`backend_refusal`): PETSc needs a build with the `petsc`
     /// feature, and the contact solvers other than `active_set` need the stored factor.
     /// The keys are kept as given; `solver::choice::Descriptor` resolves them on the

@@ -252,6 +252,43 @@ fn auto_takes_the_active_set_beyond_the_dense_limit() {
     assert_eq!(common::descriptor(&s, &disc).linear(), Linear::Cholesky);
 }
 
+/// Each rank's share of K_A (`petsc::Layout::shares`, `check --ranks`), counted on the
+/// nodes' graph so that a rank that assembled its own columns alone counts every rank's,
+/// is what the whole K_A's pattern says: on the 3D block over 3 ranks and the paper's 2D
+/// scene over 2, each rank's rows, stored entries, and distinct columns outside its rows.
+#[cfg(feature = "petsc")]
+#[test]
+fn the_ranks_shares_of_k_a_are_those_of_its_pattern() {
+    use std::collections::BTreeSet;
+    let tmp = tempfile::tempdir().unwrap();
+    for (scene, size) in [(SceneText::block(), 3), (SceneText::paper(), 2)] {
+        let path = scene.write(tmp.path(), "s.toml");
+        let (_s, _m, disc) = common::load(&path, &[]);
+        let layout = viscontact::petsc::Layout::new(&disc, size).unwrap();
+        let rank = |i: usize| layout.blocks.partition_point(|&b| b <= layout.row(i)) - 1;
+        let k = disc.k_a.as_ref();
+        let (ptr, idx) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
+        let mut expected = vec![(0, 0, BTreeSet::<usize>::new()); size];
+        for i in 0..disc.n_free {
+            let (rows, entries, ghosts) = &mut expected[rank(i)];
+            *rows += 1;
+            *entries += ptr[i + 1] - ptr[i];
+            ghosts.extend(
+                idx[ptr[i]..ptr[i + 1]]
+                    .iter()
+                    .filter(|&&j| rank(j) != rank(i)),
+            );
+        }
+        let shares = layout.shares(&disc);
+        for (r, ((rows, entries, ghosts), share)) in expected.iter().zip(&shares).enumerate() {
+            assert_eq!(share.rows, *rows, "rank {r} of {size}");
+            assert_eq!(share.entries, *entries, "rank {r} of {size}");
+            assert_eq!(share.ghosts, ghosts.len(), "rank {r} of {size}");
+            assert!(share.ghosts > 0 && share.rows > disc.n_free / (2 * size));
+        }
+    }
+}
+
 /// A build without the feature refuses `linear = "petsc"` and `contact = "active_set"`
 /// (exit 2) and says how to build with it; `cholesky` and `auto` run as before.
 #[cfg(not(feature = "petsc"))]

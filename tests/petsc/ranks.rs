@@ -675,12 +675,11 @@ fn megabytes_after(text: &str, before: &str) -> f64 {
 
 /// `check --ranks N` plans a run through PETSc over N ranks: the largest rank's share of
 /// K_A's rows (whole nodes) and its memory, its own part (the setup's peak less the
-/// columns of the matrices it drops) and its share of PETSc's. Where a rank would not fit
-/// `VISCONTACT_MEMORY` (a rank's memory), `check` refuses (exit 2) naming how many ranks
-/// would, `check` with that many passes and the run on that many completes; below the
-/// setup's peak, which every rank reaches before it drops the other ranks' columns,
-/// `check` and `run` (one process, or under mpirun) refuse naming none, before anything is
-/// written.
+/// columns of the matrices it does not assemble) and its share of PETSc's. Where a rank
+/// would not fit `VISCONTACT_MEMORY` (a rank's memory), `check` refuses (exit 2) naming how
+/// many ranks would, `check` with that many passes and the run on that many completes;
+/// below what every rank holds whatever their count (the mesh, the history), `check` and
+/// `run` (one process, or under mpirun) refuse naming none, before anything is written.
 #[test]
 fn check_plans_the_ranks_and_refuses_ranks_that_would_not_fit_naming_how_many_would() {
     let tmp = tempfile::tempdir().unwrap();
@@ -715,7 +714,7 @@ fn check_plans_the_ranks_and_refuses_ranks_that_would_not_fit_naming_how_many_wo
     let (code, text) = with_memory(3, memory, &run3);
     assert_eq!(code, 0, "{text}");
     assert_eq!(common::summary(&out)["status"], "completed");
-    // Less than a rank's own part (below the setup's peak): no count fits.
+    // Less than a rank's own part (below what every rank holds): no count fits.
     let memory = 0.9 * own;
     for ranks in ["1", "2"] {
         let (code, text) = with_memory(0, memory, &["check", path, "--ranks", ranks]);

@@ -3,13 +3,26 @@
 //! computes its entries of the right side's products from them (`fem::mul_add_rows`). On
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
 //! agree with the whole matrices' products to round-off, the diagonal stays whole (the
-//! active set's ρ reads it), and the other columns are gone. Where a rank's rows of K_A go
-//! to PETSc, K_A keeps its diagonal alone (`Discretization::keep_diagonal_of_k_a`). A scene
-//! with prescribed dofs keeps its matrices whole.
+//! active set's ρ reads it), and the other columns are gone. A rank that assembles those
+//! columns alone (`Discretization::with_columns`) holds the same matrices, bit for bit.
+//! Where a rank's rows of K_A go to PETSc, K_A keeps its diagonal alone
+//! (`Discretization::keep_diagonal_of_k_a`). A scene with prescribed dofs keeps its
+//! matrices whole.
 
 use crate::common;
 use common::*;
-use viscontact::fem::{diagonal, mul_add, mul_add_rows, Sparse};
+use viscontact::fem::{diagonal, mul_add, mul_add_rows, Discretization, Sparse};
+
+/// The unknowns of a random half of `disc`'s nodes, increasing.
+fn random_half(disc: &Discretization, rng: &mut SplitMix) -> Vec<usize> {
+    let d = disc.dim;
+    (0..disc.free.len() / d)
+        .filter(|_| rng.below(2) == 0)
+        .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g]))
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect()
+}
 
 #[test]
 fn a_ranks_own_columns_give_its_rows_of_the_products() {
@@ -18,13 +31,7 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
     let (_, _, whole) = load(&path, &[]);
     let (_, _, mut mine) = load(&path, &[]);
     let mut rng = SplitMix(52);
-    let d = mine.dim;
-    let own: Vec<usize> = (0..mine.free.len() / d)
-        .filter(|_| rng.below(2) == 0)
-        .flat_map(|v| (d * v..d * v + d).filter_map(|g| mine.free[g]))
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
+    let own = random_half(&mine, &mut rng);
     assert!(own.len() > whole.n_free / 4 && own.len() < 3 * whole.n_free / 4);
     mine.keep_columns(own.clone());
     assert_eq!(mine.own.as_deref(), Some(own.as_slice()));
@@ -55,6 +62,48 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
     }
 }
 
+/// On the 3D block and the paper's 2D scene (K_A, K_B and K_R each), for a random half of
+/// the nodes: the columns a rank assembles alone are those it keeps of the whole.
+#[test]
+fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, scene) in [
+        ("block.toml", SceneText::block()),
+        ("paper.toml", SceneText::paper()),
+    ] {
+        let path = scene.write(dir.path(), name);
+        let (scene, mesh, mut kept) = load(&path, &[]);
+        let own = random_half(&kept, &mut SplitMix(7));
+        kept.keep_columns(own.clone());
+        let mut asked = false;
+        let mine = Discretization::with_columns(&mesh, &scene, |disc| {
+            asked = disc.n_free == kept.n_free && disc.cells.len() == kept.cells.len();
+            Ok(Some(own.clone()))
+        })
+        .unwrap();
+        assert!(
+            asked,
+            "{name}: the unknowns and cells come before the matrices"
+        );
+        assert_eq!(mine.own, kept.own, "{name}");
+        let matrices = |d: &Discretization| {
+            let mut all = vec![d.k_a.clone()];
+            all.extend(d.k_b.iter().cloned());
+            all.extend(d.k_r.iter().cloned());
+            all
+        };
+        let (a, b) = (matrices(&mine), matrices(&kept));
+        assert_eq!(a.len(), b.len(), "{name}");
+        for (k, (a, b)) in a.iter().zip(&b).enumerate() {
+            let (a, b) = (a.as_ref(), b.as_ref());
+            assert_eq!(a.symbolic().col_ptr(), b.symbolic().col_ptr(), "{name} {k}");
+            assert_eq!(a.symbolic().row_idx(), b.symbolic().row_idx(), "{name} {k}");
+            let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a.val()), bits(b.val()), "{name} {k}");
+        }
+    }
+}
+
 #[test]
 fn k_a_handed_over_keeps_its_diagonal_alone() {
     let dir = tempfile::tempdir().unwrap();
@@ -74,10 +123,13 @@ fn a_scene_with_prescribed_dofs_keeps_its_matrices_whole() {
     let path = SceneText::unclamped_square()
         .dirichlet("Γ1", &["x", "y"], Some(&["0.01*t", "0"]))
         .write(dir.path(), "prescribed.toml");
-    let (_, _, mut disc) = load(&path, &[]);
+    let (scene, mesh, mut disc) = load(&path, &[]);
     assert!(disc.k_a_all.is_some());
     let before = disc.k_a.as_ref().val().to_vec();
     disc.keep_columns(vec![0, 1]);
     assert!(disc.own.is_none());
     assert_eq!(disc.k_a.as_ref().val(), &before[..]);
+    let mine = Discretization::with_columns(&mesh, &scene, |_| Ok(Some(vec![0, 1]))).unwrap();
+    assert!(mine.own.is_none());
+    assert_eq!(mine.k_a.as_ref().val(), &before[..]);
 }
