@@ -209,8 +209,9 @@ impl Ranks {
     /// [`Ranks::discretize`] made, when it assembled those columns alone), and no others
     /// (`Discretization::keep_columns`). Where K_A is the step matrix (`solver.history =
     /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
-    /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`). The heap the whole
-    /// matrices held then goes back to the system (`resources::return_freed_memory`). What
+    /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`), and K_B and K_R^(0)
+    /// become the rank's rows of both, paired (`Discretization::pair_own_rows`). The heap
+    /// the matrices held then goes back to the system (`resources::return_freed_memory`). What
     /// goes on to PETSc, the layout included, is [`Own`]; nothing on one rank.
     pub fn keep_own_columns(
         &self,
@@ -230,6 +231,8 @@ impl Ranks {
             let rows = if hands_over_k_a(disc, history) {
                 let rows = layout.rows_of(&disc.k_a, self.rank)?.into_owned();
                 disc.keep_diagonal_of_k_a();
+                // The implicit variant's step matrix is made of the columns of all three.
+                disc.pair_own_rows();
                 Some(rows)
             } else {
                 None
@@ -301,10 +304,10 @@ pub struct Plan {
     /// runtime and what the steps hold, less the matrices this process holds.
     base: f64,
     /// The bytes of K_A, K_B and K_R whole (`matrix_bytes`), of which a rank assembles its
-    /// share of all (`by_columns`) or all first, and keeps its share of `kept` (all three,
-    /// or K_B and K_R where its rows of K_A go to PETSc: `Ranks::keep_own_columns`, which
-    /// copies them, `rows` bytes in all, beside its columns); PETSc's bytes a rank on
-    /// several ranks times their count.
+    /// share of all (`by_columns`) or all first, and keeps its share of `kept` (its rows of
+    /// K_B and K_R, paired, and of K_A unless they go to PETSc: `Ranks::keep_own_columns`,
+    /// which copies them, `rows_bytes` in all, beside its columns; all three whole with
+    /// prescribed dofs); PETSc's bytes a rank on several ranks times their count.
     matrices: f64,
     kept: f64,
     rows_bytes: f64,
@@ -343,9 +346,15 @@ impl Plan {
         let setup = peak_memory().unwrap_or(0.0) + steps;
         let base = setup + if launched { 0.0 } else { MPI_RUNTIME } - matrix_bytes(disc);
         let matrices = whole_matrix_bytes(disc, entries);
-        let (kept, rows_bytes) = match hands_over_k_a(disc, scene.solver.history) {
-            true => (matrices - 16.0 * entries as f64, 12.0 * entries as f64),
-            false => (matrices, 0.0),
+        let hands_over = hands_over_k_a(disc, scene.solver.history);
+        let kept = match disc.k_a_all {
+            Some(_) => matrices,
+            None => kept_per_entry(disc, hands_over) * entries as f64,
+        };
+        let rows_bytes = if hands_over {
+            12.0 * entries as f64
+        } else {
+            0.0
         };
         let share = largest.entries as f64 / entries.max(1) as f64;
         Ok(Plan {
@@ -471,7 +480,7 @@ impl std::fmt::Display for Plan {
             true => "the other ranks' columns of K_A, K_B and K_R, which it does not assemble",
             false => "the other ranks' columns of K_A, K_B and K_R, which it drops once assembled",
         };
-        let dropped = match (self.size, self.kept < self.matrices) {
+        let dropped = match (self.size, self.rows_bytes > 0.0) {
             (1, _) => String::new(),
             (_, false) => format!(", less {others}"),
             (_, true) => format!(", less {others}, and its own of K_A (its rows go to PETSc)"),
@@ -516,6 +525,20 @@ fn matrix_bytes(disc: &crate::fem::Discretization) -> f64 {
     let entries = |m: &crate::fem::Sparse| m.as_ref().val().len() as f64;
     let (k_b, k_r) = (disc.k_b.iter(), disc.k_r.iter());
     16.0 * (entries(&disc.k_a) + k_b.chain(k_r).map(entries).sum::<f64>())
+}
+
+/// The bytes a rank keeps of its own columns of K_A, K_B and K_R, an entry of K_A's
+/// pattern (no prescribed dofs, so one pattern): 16 of each where it keeps their columns,
+/// and where its rows of K_A go to PETSc (`hands_over`), none of K_A, and 20 of K_B and
+/// K_R^(0) paired (`Discretization::pair_own_rows`; 16 of K_R^(0) alone without K_B).
+#[cfg(feature = "petsc")]
+fn kept_per_entry(disc: &crate::fem::Discretization, hands_over: bool) -> f64 {
+    let (k_b, k_r) = (disc.k_b.iter().count(), disc.k_r.len());
+    let columns = 16.0 * (1 + k_b + k_r) as f64;
+    match hands_over {
+        false => columns,
+        true => columns - 16.0 - 12.0 * (k_b.min(k_r)) as f64,
+    }
 }
 
 /// The bytes of K_A, K_B and K_R whole, K_A's pattern holding `entries` (all the ranks'

@@ -528,13 +528,18 @@ impl<'p> TimeLoop<'p> {
             Some(own) => mul_add_rows(k, own, x, -1.0, b),
             None => mul_add(k, x, -1.0, b),
         };
-        match (&mut self.paired, &self.disc.k_b) {
-            (Some(pair), _) if memory => {
+        match (&mut self.paired, &disc.own_pair, &disc.k_b) {
+            (Some(pair), _, _) if memory => {
                 let (_, m0) = groups.next().expect("group 0");
                 pair.mul_add(&h.u, m0, -1.0, &mut self.b)
             }
-            (_, Some(k_b)) => product(k_b, &h.u, &mut self.b),
-            (_, None) => {}
+            (_, Some(rows), _) => {
+                let own = disc.own.as_deref().unwrap_or_default();
+                let m0 = groups.next().map(|(_, m0)| m0);
+                rows.mul_add(own, &h.u, m0, -1.0, &mut self.b)
+            }
+            (_, _, Some(k_b)) => product(k_b, &h.u, &mut self.b),
+            (_, _, None) => {}
         }
         for (k_r, m) in groups {
             product(k_r, m, &mut self.b);

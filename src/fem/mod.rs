@@ -21,7 +21,7 @@ pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::Loads;
 pub use materials::{CellMaterials, Stiffness};
-pub use pair::SymmetricPair;
+pub use pair::{RowsPair, SymmetricPair};
 use std::path::Path;
 
 /// Sparse symmetric matrix (both triangles stored), columns compressed.
@@ -137,6 +137,10 @@ pub struct Discretization {
     /// On one of several MPI ranks, the unknowns whose columns of K_A, K_B and K_R this rank
     /// keeps whole ([`Discretization::keep_columns`]); None: every column (one process).
     pub own: Option<Vec<usize>>,
+    /// On one of several MPI ranks, K_B and K_R^(0) as the rank's rows of both, paired
+    /// ([`Discretization::pair_own_rows`]); `k_b` and `k_r[0]` then hold their diagonal
+    /// alone.
+    pub own_pair: Option<RowsPair>,
     /// The cells as [`Discretization::stress`] reads them, once it is called.
     stress_cells: std::sync::OnceLock<PackedCells>,
 }
@@ -485,6 +489,7 @@ impl Discretization {
             friction_kink_deg: friction_kink,
             idle_groups: idle_groups(mesh, scene),
             own: None,
+            own_pair: None,
             stress_cells: std::sync::OnceLock::new(),
         };
         let own = own(&disc)?.filter(|_| n_dofs == n_free);
@@ -536,6 +541,25 @@ impl Discretization {
         self.k_b.iter_mut().for_each(trim);
         self.k_r.iter_mut().for_each(trim);
         self.own = Some(own);
+    }
+
+    /// On one of several MPI ranks that keeps its own columns, K_B and K_R^(0) as its rows of
+    /// both in one [`RowsPair`] (20 bytes an entry where the two took 32), each then with its
+    /// diagonal alone; nothing without K_B or where the columns are whole. Only where K_A is
+    /// the step matrix: the implicit variant's is made of all three matrices' columns.
+    pub fn pair_own_rows(&mut self) {
+        let (Some(own), Some(k_b), Some(k_r)) = (&self.own, &mut self.k_b, self.k_r.first_mut())
+        else {
+            return;
+        };
+        let Some(pair) = RowsPair::new(k_b, k_r, own) else {
+            return;
+        };
+        for m in [k_b, k_r] {
+            let size = (m.nrows(), m.ncols());
+            *m = entries_kept(m, size, |i, j| i == j);
+        }
+        self.own_pair = Some(pair);
     }
 
     /// K_A's diagonal alone, where its rows went to the linear backend (on one of several

@@ -234,6 +234,68 @@ impl SymmetricPair {
     }
 }
 
+/// On one of several MPI ranks, the rank's rows of two symmetric matrices with one pattern
+/// (K_B and K_R^(0), of which it keeps its own columns: `Discretization::keep_columns`), in
+/// one array: a column index as u32 and the two values side by side, 20 bytes an entry
+/// where the two matrices' columns take 32. The product gives each row the bits of the two
+/// matrices' own products one after the other (`fem::mul_add_rows`): each sum runs over
+/// the row's columns in their order.
+pub struct RowsPair {
+    /// The rank's rows, in the order of `Discretization::own`: row k's entries are
+    /// cols[ptr[k]..ptr[k + 1]].
+    ptr: Vec<usize>,
+    cols: Vec<u32>,
+    values: Vec<[f64; 2]>,
+}
+
+impl RowsPair {
+    /// The rows `own` of `a` and `b` (their columns: the matrices are symmetric); None
+    /// unless the two have the same pattern and fewer than 2^32 rows.
+    pub fn new(a: &Sparse, b: &Sparse, own: &[usize]) -> Option<RowsPair> {
+        if !same_pattern(a.symbolic(), b.symbolic()) || u32::try_from(a.nrows()).is_err() {
+            return None;
+        }
+        let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
+        let (va, vb) = (a.val(), b.val());
+        let entries: usize = own.iter().map(|&i| cp[i + 1] - cp[i]).sum();
+        let mut pair = RowsPair {
+            ptr: Vec::with_capacity(own.len() + 1),
+            cols: Vec::with_capacity(entries),
+            values: Vec::with_capacity(entries),
+        };
+        pair.ptr.push(0);
+        for &i in own {
+            let col = cp[i]..cp[i + 1];
+            pair.cols.extend(ri[col.clone()].iter().map(|&j| j as u32));
+            pair.values.extend(col.map(|p| [va[p], vb[p]]));
+            pair.ptr.push(pair.cols.len());
+        }
+        Some(pair)
+    }
+
+    /// y_i += α (A x)_i, then y_i += α (B z)_i where z is given, for the rows i of `own`
+    /// (the rows the pair was made of).
+    pub fn mul_add(&self, own: &[usize], x: &[f64], z: Option<&[f64]>, alpha: f64, y: &mut [f64]) {
+        for (k, &i) in own.iter().enumerate() {
+            let row = self.ptr[k]..self.ptr[k + 1];
+            let entries = self.cols[row.clone()].iter().zip(&self.values[row]);
+            match z {
+                Some(z) => {
+                    // −0.0, where `Iterator::sum` starts: the bits of `mul_add_rows`.
+                    let (mut ax, mut bz) = (-0.0, -0.0);
+                    for (&j, [a, b]) in entries {
+                        ax += a * x[j as usize];
+                        bz += b * z[j as usize];
+                    }
+                    y[i] += alpha * ax;
+                    y[i] += alpha * bz;
+                }
+                None => y[i] += alpha * entries.map(|(&j, [a, _])| a * x[j as usize]).sum::<f64>(),
+            }
+        }
+    }
+}
+
 /// `v` cut into consecutive pieces of the given lengths.
 fn consecutive(v: &mut [f64], lengths: impl Iterator<Item = usize>) -> Vec<&mut [f64]> {
     let mut rest = v;

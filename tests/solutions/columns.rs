@@ -4,7 +4,8 @@
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
 //! agree with the whole matrices' products to round-off, the diagonal stays whole (the
 //! active set's ρ reads it), and the other columns are gone. A rank that assembles those
-//! columns alone (`Discretization::with_columns`) holds the same matrices, bit for bit.
+//! columns alone (`Discretization::with_columns`) holds the same matrices, bit for bit; its
+//! rows of K_B and K_R paired (`Discretization::pair_own_rows`) give the same products.
 //! Where a rank's rows of K_A go to PETSc, K_A keeps its diagonal alone
 //! (`Discretization::keep_diagonal_of_k_a`). A scene with prescribed dofs keeps its
 //! matrices whole.
@@ -101,6 +102,41 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
             let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(a.val()), bits(b.val()), "{name} {k}");
         }
+    }
+}
+
+/// A rank's rows of K_B and K_R paired (`Discretization::pair_own_rows`): the product
+/// gives the rank's entries the bits of the two matrices' own products one after the
+/// other, with and without the memory term, and the two matrices keep their diagonal alone.
+#[test]
+fn k_b_and_k_r_paired_give_the_bits_of_their_own_products() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = SceneText::block().write(dir.path(), "block.toml");
+    let (_, _, mut disc) = load(&path, &[]);
+    let mut rng = SplitMix(11);
+    let own = random_half(&disc, &mut rng);
+    disc.keep_columns(own.clone());
+    let (k_b, k_r) = (disc.k_b.clone().unwrap(), disc.k_r[0].clone());
+    disc.pair_own_rows();
+    let pair = disc.own_pair.as_ref().expect("K_B and K_R paired");
+    let (x, z): (Vec<f64>, Vec<f64>) = (0..disc.n_dofs)
+        .map(|_| (rng.unit() - 0.5, rng.unit() - 0.5))
+        .unzip();
+    let y0: Vec<f64> = (0..disc.n_dofs).map(|_| rng.unit()).collect();
+    let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let (mut both, mut alone) = (y0.clone(), y0.clone());
+    mul_add_rows(&k_b, &own, &x, -1.0, &mut both);
+    alone.clone_from(&both);
+    mul_add_rows(&k_r, &own, &z, -1.0, &mut both);
+    let (mut paired, mut paired_alone) = (y0.clone(), y0.clone());
+    pair.mul_add(&own, &x, Some(&z), -1.0, &mut paired);
+    pair.mul_add(&own, &x, None, -1.0, &mut paired_alone);
+    assert_eq!(bits(&paired), bits(&both));
+    assert_eq!(bits(&paired_alone), bits(&alone));
+    assert_ne!(bits(&paired), bits(&y0));
+    for (kept, whole) in [(disc.k_b.as_ref().unwrap(), &k_b), (&disc.k_r[0], &k_r)] {
+        assert_eq!(kept.as_ref().val().len(), disc.n_dofs);
+        assert_eq!(diagonal(kept), diagonal(whole));
     }
 }
 
