@@ -255,7 +255,7 @@ impl<'p> TimeLoop<'p> {
             .k_b
             .as_ref()
             .filter(|_| history.has_memory() && disc.own.is_none())
-            .and_then(|k_b| SymmetricPair::new(k_b, &disc.k_r[0]));
+            .and_then(|k_b| SymmetricPair::new(k_b, disc.k_r.first()?));
         let m = if history.has_memory() {
             vec![0.0; plans.groups() * n]
         } else {

@@ -100,6 +100,11 @@ impl CellMaterials {
         self.distinct.iter().any(|s| s.b.is_some())
     }
 
+    /// Whether any cell has a memory term (K_R is assembled).
+    pub fn memory(&self) -> bool {
+        self.distinct.iter().any(|s| s.memory.is_some())
+    }
+
     /// The number of cells in region i (i = 1.. for the entries; 0 outside every region).
     pub fn count(&self, i: usize) -> usize {
         self.region.iter().filter(|&&r| r as usize == i).count()

@@ -110,8 +110,8 @@ pub struct Discretization {
     pub materials: CellMaterials,
     pub r: Isotropic,
     /// K_A on the free dofs (n_free); K_B on all n_dofs (the free and the prescribed); K_R
-    /// of each memory group g, on the cells of group g (`Stiffness::memory`), on all n_dofs.
-    /// All share one pattern.
+    /// of each memory group g, on the cells of group g (`Stiffness::memory`), on all n_dofs
+    /// (none where no cell has a memory term). All share one pattern.
     pub k_a: Sparse,
     pub k_b: Option<Sparse>,
     pub k_r: Vec<Sparse>,
@@ -493,7 +493,12 @@ impl Discretization {
             stress_cells: std::sync::OnceLock::new(),
         };
         let own = own(&disc)?.filter(|_| n_dofs == n_free);
-        disc.assemble(scene.physics.memory_groups(), own);
+        // Without a memory term in any cell K_R would be zero: none is assembled.
+        let groups = match disc.materials.memory() {
+            true => scene.physics.memory_groups(),
+            false => 0,
+        };
+        disc.assemble(groups, own);
         Ok(disc)
     }
 

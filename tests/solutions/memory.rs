@@ -523,3 +523,28 @@ fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
         .unwrap_or_else(|| panic!("no estimate in {text}"));
     assert!(mb >= 15.36, "{text}");
 }
+
+/// A body without a memory term (no `[material.relaxation]`: Remark 2.5) assembles no K_R,
+/// which would be zero, and runs as with a kernel whose weight is zero, to round-off (the
+/// products of K_B then run alone or paired with K_R, in another order).
+#[test]
+fn a_body_without_memory_assembles_no_k_r() {
+    let dir = tempfile::tempdir().unwrap();
+    let none = SceneText::paper()
+        .remove("material.relaxation")
+        .write(dir.path(), "none.toml");
+    let zero = SceneText::paper()
+        .table("material.relaxation", "prony = [[0.0, 10.0]]")
+        .write(dir.path(), "zero.toml");
+    let (scene_none, _, disc_none) = common::load(&none, &[]);
+    let (scene_zero, _, disc_zero) = common::load(&zero, &[]);
+    assert!(disc_none.k_r.is_empty());
+    assert_eq!(disc_zero.k_r.len(), 1);
+    let (a, b) = (
+        common::trace(&scene_none, &disc_none).u_final,
+        common::trace(&scene_zero, &disc_zero).u_final,
+    );
+    assert!(common::max_abs(&a) > 0.0);
+    let d = common::rel_diff(&a, &b);
+    assert!(d < 1e-12, "u_N differs by {d:e}");
+}
