@@ -281,6 +281,32 @@ fn hands_over_k_a(disc: &crate::fem::Discretization, history: crate::scene::Hist
 #[cfg(feature = "petsc")]
 const MPI_RUNTIME: f64 = 16e6;
 
+/// How a rank of several holds K_A, K_B and K_R, which its setup's peak depends on.
+#[cfg(feature = "petsc")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Holding {
+    /// Its own columns alone, assembled so (`Ranks::discretize`: the scene names PETSc).
+    Columns,
+    /// The whole matrices assembled first, then its own columns kept (`solver.linear =
+    /// "auto"`, whose choice reads the whole K_A).
+    WholeFirst,
+    /// The whole matrices, kept: prescribed dofs, whose velocities reach every row's right
+    /// side through K_A.
+    Whole,
+}
+
+#[cfg(feature = "petsc")]
+impl Holding {
+    /// How a rank of several holds the matrices of `disc` for `scene`.
+    fn of(disc: &crate::fem::Discretization, scene: &crate::scene::Scene) -> Holding {
+        match (disc.k_a_all.is_some(), scene.solver.takes_petsc()) {
+            (true, _) => Holding::Whole,
+            (false, true) => Holding::Columns,
+            (false, false) => Holding::WholeFirst,
+        }
+    }
+}
+
 /// What each rank of a run over `size` ranks holds and does (`check --ranks N`, and the
 /// refusal of a run whose ranks would not fit the memory available): its share of K_A
 /// (the largest rank's, over `petsc::Layout`'s partition) and its memory: its own part
@@ -304,15 +330,16 @@ pub struct Plan {
     /// runtime and what the steps hold, less the matrices this process holds.
     base: f64,
     /// The bytes of K_A, K_B and K_R whole (`matrix_bytes`), of which a rank assembles its
-    /// share of all (`by_columns`) or all first, and keeps its share of `kept` (its rows of
-    /// K_B and K_R, paired, and of K_A unless they go to PETSc: `Ranks::keep_own_columns`,
-    /// which copies them, `rows_bytes` in all, beside its columns; all three whole with
-    /// prescribed dofs); PETSc's bytes a rank on several ranks times their count.
+    /// share or all first (`holding`), and keeps its share of `kept` (its rows of K_B and
+    /// K_R, paired, and of K_A unless they go to PETSc: `Ranks::keep_own_columns`, which
+    /// copies them, `rows_bytes` in all, beside its columns; none of the three where every
+    /// rank holds them whole, in `base`); PETSc's bytes a rank on several ranks times their
+    /// count.
     matrices: f64,
     kept: f64,
     rows_bytes: f64,
     spread_several: f64,
-    by_columns: bool,
+    holding: Holding,
     /// The largest rank's fraction of K_A's entries.
     share: f64,
     /// Through the active set's Newton systems.
@@ -344,13 +371,18 @@ impl Plan {
         // Under a launcher the peak holds MPI's runtime already.
         let launched = launched().is_some();
         let setup = peak_memory().unwrap_or(0.0) + steps;
-        let base = setup + if launched { 0.0 } else { MPI_RUNTIME } - matrix_bytes(disc);
-        let matrices = whole_matrix_bytes(disc, entries);
+        let holding = Holding::of(disc, scene);
         let hands_over = hands_over_k_a(disc, scene.solver.history);
-        let kept = match disc.k_a_all {
-            Some(_) => matrices,
-            None => kept_per_entry(disc, hands_over) * entries as f64,
+        // With the matrices whole on every rank they are part of what every rank holds.
+        let (held, matrices, kept) = match holding {
+            Holding::Whole => (0.0, 0.0, 0.0),
+            _ => (
+                matrix_bytes(disc),
+                whole_matrix_bytes(disc, entries),
+                kept_per_entry(disc, hands_over) * entries as f64,
+            ),
         };
+        let base = setup + if launched { 0.0 } else { MPI_RUNTIME } - held;
         let rows_bytes = if hands_over {
             12.0 * entries as f64
         } else {
@@ -368,7 +400,7 @@ impl Plan {
             kept,
             rows_bytes,
             spread_several: petsc_bytes(entries, newton, 2),
-            by_columns: scene.solver.takes_petsc(),
+            holding,
             share,
             newton,
             step_s: None,
@@ -379,9 +411,10 @@ impl Plan {
     /// the rank count, and the matrices whole, or its share of them with its copy of its
     /// rows of K_A.
     fn setup_peak(&self, share: f64) -> f64 {
-        match self.by_columns {
-            true => self.base + share * (self.matrices + self.rows_bytes),
-            false => self.base + self.matrices,
+        match self.holding {
+            Holding::Columns => self.base + share * (self.matrices + self.rows_bytes),
+            Holding::WholeFirst => self.base + self.matrices,
+            Holding::Whole => self.base,
         }
     }
 
@@ -426,9 +459,17 @@ impl Plan {
         // (M + rows)/R where a rank assembles its own columns alone (M: the matrices, M'
         // what a rank keeps of them), evenly but for whole nodes: 5 % more for the largest.
         let (left, split) = (budget - self.base, self.kept + self.spread_several);
-        let spreads = match self.by_columns {
-            true => split.max(self.matrices + self.rows_bytes),
-            false => split,
+        let spreads = match self.holding {
+            Holding::Columns => split.max(self.matrices + self.rows_bytes),
+            _ => split,
+        };
+        let whole = match self.holding {
+            Holding::Columns => "",
+            Holding::WholeFirst => {
+                ", and assembles the whole matrices before it keeps its own columns: \
+                 `solver.linear = \"auto\"`"
+            }
+            Holding::Whole => ", and the whole matrices: prescribed dofs",
         };
         let remedy = match left > 0.0 && budget >= self.setup_peak(0.0) {
             true => format!(
@@ -441,12 +482,7 @@ impl Plan {
                  here{}), and only the matrices and PETSc's part spread; use a coarser mesh \
                  or ranks with more memory (docs/cluster.md)",
                 human(self.setup_peak(0.0)),
-                match self.by_columns {
-                    true => "",
-                    false =>
-                        ", and assembles the whole matrices before it keeps its own \
-                              columns: `solver.linear = \"auto\"`",
-                },
+                whole,
             ),
         };
         Err(Error::input(format!(
@@ -476,14 +512,16 @@ impl std::fmt::Display for Plan {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         use crate::resources::human;
         let l = &self.largest;
-        let others = match self.by_columns {
-            true => "the other ranks' columns of K_A, K_B and K_R, which it does not assemble",
-            false => "the other ranks' columns of K_A, K_B and K_R, which it drops once assembled",
+        let others = "the other ranks' columns of K_A, K_B and K_R";
+        let others = match self.holding {
+            Holding::Columns => format!(", less {others}, which it does not assemble"),
+            Holding::WholeFirst => format!(", less {others}, which it drops once assembled"),
+            Holding::Whole => ", with the matrices whole (prescribed dofs)".to_string(),
         };
         let dropped = match (self.size, self.rows_bytes > 0.0) {
             (1, _) => String::new(),
-            (_, false) => format!(", less {others}"),
-            (_, true) => format!(", less {others}, and its own of K_A (its rows go to PETSc)"),
+            (_, false) => others,
+            (_, true) => format!("{others}, and its own of K_A (its rows go to PETSc)"),
         };
         write!(
             f,

@@ -82,7 +82,20 @@ mod with_petsc {
         let held: toml::Table =
             toml::from_str("on = \"Γ3,2\"\ncomponents = [\"y\"]\nvalue = [\"0.01*t\"]").unwrap();
         let scene = paper_linear().push("dirichlet", held);
-        agrees_with_cholesky(scene, "paper (2D) with Γ3,2 lifted by u_y = 0.01 t");
+        agrees_with_cholesky(scene.clone(), "paper (2D) with Γ3,2 lifted by u_y = 0.01 t");
+        // Over ranks every rank holds the matrices whole (their velocities reach every row),
+        // and `check` plans them so.
+        let dir = tempfile::tempdir().unwrap();
+        let path = scene
+            .set("solver.linear", "petsc")
+            .write(dir.path(), "s.toml");
+        let path = path.to_str().unwrap();
+        let (code, text) = common::cli(&["check", path, "--ranks", "2"]);
+        assert_eq!(code, 0, "{text}");
+        assert!(
+            text.contains("with the matrices whole (prescribed dofs)"),
+            "{text}"
+        );
     }
 
     /// Runs the binary on `scene` into a temporary directory with `env` set: its exit status,
