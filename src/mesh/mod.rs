@@ -27,6 +27,7 @@
 //! ([`Mesh::group`]). The code downstream sees the boundary of either dimension through
 //! [`Mesh::boundary_facets`]: edges in 2D, triangles in 3D, with normal and measure.
 
+mod facets;
 mod groups;
 mod msh;
 mod parts;
@@ -609,12 +610,12 @@ pub fn fmt_point(p: [f64; 3], dim: usize) -> String {
 
 // What the 2D and 3D builders (`plane.rs`, `solid.rs`) share besides the groups.
 
-/// How the cells use a facet (an edge in 2D, a face in 3D): its orientation in the first
-/// cell that has it, that cell, and how many cells have it.
-struct FacetUse<const F: usize> {
-    dir: [usize; F],
-    cell: usize,
-    count: u32,
+/// A mesh whose node or cell indices do not fit 32 bits (`facets::Facets`).
+fn too_many_nodes(file: &impl std::fmt::Display) -> Error {
+    Error::input(format!(
+        "mesh file '{file}' has more than 2^32 nodes or cells, more than viscontact indexes: \
+         split the body or use a coarser mesh"
+    ))
 }
 
 /// The index of a node no cell uses.

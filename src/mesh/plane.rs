@@ -6,15 +6,26 @@
 //! direction (a fold) or by three or more. Every line of a physical curve group must be a
 //! boundary edge of the triangle mesh; it is stored with the body on its left.
 
-use std::collections::HashMap;
 use std::path::Path;
 
+use super::facets::Facets;
 use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::signed_area;
-use super::{check_finite, fmt_point, renumber, FacetUse, Mesh};
+use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh};
 use crate::{Error, Result};
+
+/// How messages about the triangle mesh name its parts.
+const WORDS: Words = Words {
+    element: "line",
+    mesh: "triangle mesh",
+    cells: "triangles",
+    cell: "triangle",
+    facet: "edge",
+    a_facet: "an edge",
+    boundary: "curves of the meshed surface",
+};
 
 /// Geometry, topology and groups of a 2D mesh from the raw file content.
 pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
@@ -32,16 +43,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
     let (triangles, flipped) = orient_triangles(&file, &raw, &new_index, &nodes, scale)?;
     let edges = edge_uses(&file, &raw, &triangles, &nodes)?;
 
-    let words = Words {
-        element: "line",
-        mesh: "triangle mesh",
-        cells: "triangles",
-        cell: "triangle",
-        facet: "edge",
-        a_facet: "an edge",
-        boundary: "curves of the meshed surface",
-    };
-    let lookup = |[a, b]: [usize; 2]| edges.get(&[a.min(b), a.max(b)]).map(|e| (e.dir, e.count));
+    let lookup = |f: [usize; 2]| edges.lookup(f);
     let groups = fill_groups(
         &file,
         &raw,
@@ -49,7 +51,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         group_table(&raw, names, 2),
         &new_index,
         lookup,
-        &words,
+        &WORDS,
         |g, f| g.facets.push(f),
     )?;
 
@@ -147,54 +149,22 @@ fn orient_triangles(
     Ok((triangles, flipped))
 }
 
-/// The edges by their sorted nodes: each is used by one triangle (boundary) or by two in
+/// The edges of the triangles: each is used by one triangle (boundary) or by two in
 /// opposite directions; a fold or an edge of three triangles is refused.
 fn edge_uses(
     file: &impl std::fmt::Display,
     raw: &RawMesh,
     triangles: &[[usize; 3]],
     nodes: &[[f64; 3]],
-) -> Result<HashMap<[usize; 2], FacetUse<2>>> {
-    let mut edges: HashMap<[usize; 2], FacetUse<2>> = HashMap::with_capacity(triangles.len() * 2);
+) -> Result<Facets<2>> {
+    let uses = (triangles.iter().enumerate())
+        .flat_map(|(k, tri)| [0, 1, 2].map(|i| (k, [tri[i], tri[(i + 1) % 3]])));
+    let edges = Facets::new(uses).ok_or_else(|| too_many_nodes(file))?;
     let tri_tag = |k: usize| raw.triangles[k].tag;
-    for (k, tri) in triangles.iter().enumerate() {
-        for i in 0..3 {
-            let dir = [tri[i], tri[(i + 1) % 3]];
-            let key = [dir[0].min(dir[1]), dir[0].max(dir[1])];
-            let e = edges.entry(key).or_insert(FacetUse {
-                dir,
-                cell: k,
-                count: 0,
-            });
-            e.count += 1;
-            let edge_at = || {
-                format!(
-                    "{}–{}",
-                    fmt_point(nodes[key[0]], 2),
-                    fmt_point(nodes[key[1]], 2)
-                )
-            };
-            if e.count == 2 && e.dir == dir {
-                return Err(Error::input(format!(
-                    "mesh file '{file}' folds over itself: triangles {} and {} (gmsh element \
-                     tags) overlap at the edge {}; an inverted element in the middle of the mesh \
-                     cannot be repaired by reorienting it: fix the geometry or remesh",
-                    tri_tag(e.cell),
-                    tri_tag(k),
-                    edge_at()
-                )));
-            }
-            if e.count == 3 {
-                return Err(Error::input(format!(
-                    "mesh file '{file}': the edge {} is shared by three or more triangles (e.g. \
-                     {} and {}, gmsh element tags); the mesh is not a valid 2D domain \
-                     (overlapping surfaces?): fix the geometry or remesh",
-                    edge_at(),
-                    tri_tag(e.cell),
-                    tri_tag(k)
-                )));
-            }
-        }
+    let edge_at =
+        |[a, b]: [usize; 2]| format!("{}–{}", fmt_point(nodes[a], 2), fmt_point(nodes[b], 2));
+    match edges.misuse(|a, b| a == b) {
+        None => Ok(edges),
+        Some(misuse) => Err(misuse.error(file, &WORDS, tri_tag, edge_at)),
     }
-    Ok(edges)
 }

@@ -6,14 +6,14 @@
 //! triangle of a physical surface group must be a boundary face of the tetrahedral mesh; it
 //! is stored with the outward orientation of its tetrahedron.
 
-use std::collections::HashMap;
 use std::path::Path;
 
+use super::facets::Facets;
 use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::{check_finite, fmt_point, renumber, FacetUse, Mesh};
+use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -45,6 +45,17 @@ pub(crate) fn volume6(p: [[f64; 3]; 4]) -> f64 {
 /// normal points out of the tetrahedron; face k is opposite vertex k.
 pub(crate) const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
 
+/// How messages about the tetrahedral mesh name its parts.
+const WORDS: Words = Words {
+    element: "triangle",
+    mesh: "tetrahedral mesh",
+    cells: "tetrahedra",
+    cell: "tetrahedron",
+    facet: "face",
+    a_facet: "a face",
+    boundary: "surfaces of the meshed volume",
+};
+
 /// Geometry, topology and groups of a 3D mesh from the raw file content.
 pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
     let file = path.display();
@@ -57,16 +68,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
     let (tetrahedra, flipped) = orient_tetrahedra(&file, &raw, &new_index, &nodes, scale)?;
     let faces = face_uses(&file, &raw, &tetrahedra, &nodes)?;
 
-    let words = Words {
-        element: "triangle",
-        mesh: "tetrahedral mesh",
-        cells: "tetrahedra",
-        cell: "tetrahedron",
-        facet: "face",
-        a_facet: "a face",
-        boundary: "surfaces of the meshed volume",
-    };
-    let lookup = |f: [usize; 3]| faces.get(&face_key(f)).map(|e| (e.dir, e.count));
+    let lookup = |f: [usize; 3]| faces.lookup(f);
     let groups = fill_groups(
         &file,
         &raw,
@@ -74,7 +76,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         group_table(&raw, names, 3),
         &new_index,
         lookup,
-        &words,
+        &WORDS,
         |g, f| g.faces.push(f),
     )?;
 
@@ -148,61 +150,29 @@ fn orient_tetrahedra(
     Ok((tetrahedra, flipped))
 }
 
-/// A face by its sorted nodes.
-fn face_key(f: [usize; 3]) -> [usize; 3] {
-    let mut k = f;
-    k.sort_unstable();
-    k
-}
-
-/// The faces by [`face_key`]: each is used by one tetrahedron (boundary) or by two in
+/// The faces of the tetrahedra: each is used by one tetrahedron (boundary) or by two in
 /// opposite orientations; a fold or a face of three tetrahedra is refused.
 fn face_uses(
     file: &impl std::fmt::Display,
     raw: &RawMesh,
     tetrahedra: &[[usize; 4]],
     nodes: &[[f64; 3]],
-) -> Result<HashMap<[usize; 3], FacetUse<3>>> {
-    let mut faces: HashMap<[usize; 3], FacetUse<3>> = HashMap::with_capacity(tetrahedra.len() * 3);
+) -> Result<Facets<3>> {
+    let uses = (tetrahedra.iter().enumerate())
+        .flat_map(|(k, tet)| FACES.map(|local| (k, local.map(|i| tet[i]))));
+    let faces = Facets::new(uses).ok_or_else(|| too_many_nodes(file))?;
     let tet_tag = |k: usize| raw.tetrahedra[k].tag;
-    for (k, tet) in tetrahedra.iter().enumerate() {
-        for local in FACES {
-            let dir = local.map(|i| tet[i]);
-            let e = faces.entry(face_key(dir)).or_insert(FacetUse {
-                dir,
-                cell: k,
-                count: 0,
-            });
-            e.count += 1;
-            let face_at = || {
-                let pts: Vec<String> = dir.iter().map(|&n| fmt_point(nodes[n], 3)).collect();
-                pts.join("–")
-            };
-            // The same face seen from the other side is an even permutation of the reverse.
-            let same_side = e.count == 2
-                && (0..3).any(|r| [e.dir[r], e.dir[(r + 1) % 3], e.dir[(r + 2) % 3]] == dir);
-            if same_side {
-                return Err(Error::input(format!(
-                    "mesh file '{file}' folds over itself: tetrahedra {} and {} (gmsh element \
-                     tags) overlap at the face {}; fix the geometry or remesh",
-                    tet_tag(e.cell),
-                    tet_tag(k),
-                    face_at()
-                )));
-            }
-            if e.count == 3 {
-                return Err(Error::input(format!(
-                    "mesh file '{file}': the face {} is shared by three or more tetrahedra \
-                     (e.g. {} and {}, gmsh element tags); the mesh is not a valid 3D domain \
-                     (overlapping volumes?): fix the geometry or remesh",
-                    face_at(),
-                    tet_tag(e.cell),
-                    tet_tag(k)
-                )));
-            }
-        }
+    let face_at = |f: [usize; 3]| {
+        let pts: Vec<String> = f.iter().map(|&n| fmt_point(nodes[n], 3)).collect();
+        pts.join("–")
+    };
+    // The same face seen from the other side is an odd permutation: the same side, an even one.
+    let same_side =
+        |a: [u32; 3], b: [u32; 3]| (0..3).any(|r| [a[r], a[(r + 1) % 3], a[(r + 2) % 3]] == b);
+    match faces.misuse(same_side) {
+        None => Ok(faces),
+        Some(misuse) => Err(misuse.error(file, &WORDS, tet_tag, face_at)),
     }
-    Ok(faces)
 }
 
 /// Quality of a tetrahedral mesh: the smallest dihedral angle (70.53° for a regular
