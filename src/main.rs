@@ -493,7 +493,14 @@ fn check(path: &std::path::Path, set: &[String], ranks: usize) -> Result<()> {
     viscontact::outln!("resources  {estimate}");
     estimate.check(&viscontact::run::default_out(&scene)?)?;
     let mut show = |line: &str| viscontact::outln!("ranks      {line}");
-    viscontact::run::check_memory(&scene, &disc, &solver, &estimate, ranks, Some(&mut show))?;
+    viscontact::run::check_memory(
+        &scene,
+        &disc,
+        &solver,
+        &estimate,
+        (ranks, None),
+        Some(&mut show),
+    )?;
     if let Some(bytes) = factor {
         viscontact::resources::check_factor(bytes, disc.n_free)?;
     }

@@ -350,18 +350,25 @@ pub struct Plan {
 
 #[cfg(feature = "petsc")]
 impl Plan {
-    /// The plan of `disc` (whole, or a rank's columns) for `scene` over `size` ranks, its
-    /// steps through the active set's Newton systems where `newton` (else K_A's solves),
-    /// holding `steps` bytes besides the setup.
+    /// The plan of `disc` (whole, or a rank's columns) for `scene` over `size` ranks (the
+    /// partition `made` holds where this rank made one for them: `Ranks::discretize`; else
+    /// made here), its steps through the active set's Newton systems where `newton` (else
+    /// K_A's solves), holding `steps` bytes besides the setup.
     pub fn new(
         disc: &crate::fem::Discretization,
         scene: &crate::scene::Scene,
-        size: usize,
+        (size, made): (usize, Option<&Own>),
         newton: bool,
         steps: f64,
     ) -> Result<Plan> {
         use crate::resources::{peak_memory, petsc_bytes};
-        let shares = crate::petsc::Layout::new(disc, size)?.shares(disc);
+        let made = made
+            .map(|own| &own.layout)
+            .filter(|l| l.blocks.len() == size + 1);
+        let shares = match made {
+            Some(layout) => layout.shares(disc),
+            None => crate::petsc::Layout::new(disc, size)?.shares(disc),
+        };
         let largest = shares
             .iter()
             .copied()

@@ -242,7 +242,8 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
-    let solver = check_contact_plan(&scene, &disc, &estimate, None, opts.ranks.size)?;
+    let ranks = (opts.ranks.size, made.as_ref());
+    let solver = check_contact_plan(&scene, &disc, &estimate, None, ranks)?;
     check_started_ranks(&scene, &solver, opts)?;
     let own = opts
         .ranks
@@ -455,7 +456,7 @@ fn prepare_resume(
         &disc,
         &estimate,
         Some(checkpoint_path),
-        opts.ranks.size,
+        (opts.ranks.size, made.as_ref()),
     )?;
     check_started_ranks(&scene, &solver, opts)?;
     let own = opts
@@ -553,7 +554,8 @@ fn note_stop_after(stop_after: Option<usize>, steps: usize) {
 }
 
 /// The run's solver, resolved once (`Descriptor::of_run`); refuses (exit 2) a run whose
-/// memory would not fit (`check_memory`) on its `ranks`. A resume of `checkpoint` cannot
+/// memory would not fit (`check_memory`) on its `ranks` (their count, and this rank's
+/// layout where `Ranks::discretize` made one). A resume of `checkpoint` cannot
 /// change `solver.contact`, the run's physics: where the contact solver's memory is what
 /// does not fit, its message says so.
 fn check_contact_plan(
@@ -561,7 +563,7 @@ fn check_contact_plan(
     disc: &Discretization,
     steps: &crate::resources::Estimate,
     checkpoint: Option<&Path>,
-    ranks: usize,
+    ranks: (usize, Option<&crate::ranks::Own>),
 ) -> Result<Descriptor> {
     let solver = Descriptor::of_run(scene, disc)?;
     let spreads = solver.spreads();
@@ -577,7 +579,8 @@ fn check_contact_plan(
 }
 
 /// Refuses (exit 2) a run whose memory would not fit the memory available: through PETSc,
-/// a rank's on `ranks` ranks (`ranks::Plan::check`, which names how many would fit; `show`,
+/// a rank's on `ranks` ranks (their count, and the layout a rank made where it has one:
+/// `ranks::Plan::new`; `ranks::Plan::check`, which names how many would fit; `show`,
 /// where given, gets its line before, with a step's time on this machine), else its
 /// contact solver's with what its steps hold (`steps`: `ContactPlan::check`).
 pub fn check_memory(
@@ -585,7 +588,7 @@ pub fn check_memory(
     disc: &Discretization,
     solver: &Descriptor,
     steps: &crate::resources::Estimate,
-    ranks: usize,
+    ranks: (usize, Option<&crate::ranks::Own>),
     show: Option<&mut dyn FnMut(&str)>,
 ) -> Result<()> {
     #[cfg(feature = "petsc")]
@@ -610,12 +613,12 @@ fn ranks_plan(
     scene: &Scene,
     disc: &Discretization,
     solver: &Descriptor,
-    ranks: usize,
+    (ranks, made): (usize, Option<&crate::ranks::Own>),
     steps: f64,
 ) -> Result<Option<crate::ranks::Plan>> {
     match *solver.build() {
         crate::solver::choice::Build::Krylov { newton } => {
-            crate::ranks::Plan::new(disc, scene, ranks, newton, steps).map(Some)
+            crate::ranks::Plan::new(disc, scene, (ranks, made), newton, steps).map(Some)
         }
         _ => Ok(None),
     }

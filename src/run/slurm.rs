@@ -92,7 +92,7 @@ pub fn emit(
         &scene,
         &disc,
         &solver,
-        job.nodes * job.ntasks_per_node,
+        (job.nodes * job.ntasks_per_node, None),
         estimate.memory,
     )?
     .map(|p| p.timed(&disc));
