@@ -107,21 +107,27 @@ impl Layout {
         for (i, &r) in row.iter().enumerate() {
             unknown[r] = i;
         }
-        let (first, end) = (self.blocks[rank], self.blocks[rank + 1]);
-        let (mut rowptr, mut cols, mut vals) = (vec![0; first + 1], Vec::new(), Vec::new());
-        let mut entries: Vec<(usize, f64)> = Vec::new();
-        for &i in &unknown[first..end] {
-            entries.clear();
-            entries.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]], val[p])));
-            entries.sort_by_key(|&(c, _)| c);
-            cols.extend(entries.iter().map(|&(c, _)| c));
-            vals.extend(entries.iter().map(|&(_, v)| v));
-            rowptr.push(cols.len());
+        let own = &unknown[self.blocks[rank]..self.blocks[rank + 1]];
+        // Sized once: grown by doubling, the values could hold up to twice their length.
+        let entries: usize = own.iter().map(|&i| ptr[i + 1] - ptr[i]).sum();
+        let (mut cols, mut vals) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
+        let mut rowptr = Vec::with_capacity(row.len() + 1);
+        rowptr.resize(self.blocks[rank] + 1, 0);
+        let mut sorted: Vec<(usize, f64)> = Vec::new();
+        for &i in own {
+            sorted.clear();
+            sorted.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]], val[p])));
+            sorted.sort_by_key(|&(c, _)| c);
+            for &(c, v) in &sorted {
+                cols.push(petsc_int(c)?);
+                vals.push(v);
+            }
+            rowptr.push(petsc_int(cols.len())?);
         }
-        rowptr.resize(row.len() + 1, cols.len());
+        rowptr.resize(row.len() + 1, petsc_int(cols.len())?);
         Ok(Csr {
-            rowptr: petsc_ints(&rowptr)?,
-            cols: petsc_ints(&cols)?,
+            rowptr,
+            cols,
             vals: std::borrow::Cow::Owned(vals),
         })
     }
@@ -188,10 +194,13 @@ impl Csr<'_> {
 
 /// `v` as PETSc's indices, or the error that they do not fit (32 bits).
 pub fn petsc_ints(v: &[usize]) -> Result<Vec<PetscInt>> {
-    let too_big = |_| Error::solve("K_A is too large for PETSc's 32-bit indices".to_string());
-    v.iter()
-        .map(|&i| PetscInt::try_from(i).map_err(too_big))
-        .collect()
+    v.iter().map(|&i| petsc_int(i)).collect()
+}
+
+/// `i` as a PETSc index, or the error that it does not fit (32 bits).
+fn petsc_int(i: usize) -> Result<PetscInt> {
+    PetscInt::try_from(i)
+        .map_err(|_| Error::solve("K_A is too large for PETSc's 32-bit indices".to_string()))
 }
 
 /// The unknowns of each node that has any, node by node.

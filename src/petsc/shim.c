@@ -760,6 +760,16 @@ static PetscErrorCode level(PC pc, PetscInt l, KSP *smoother, Mat *a)
   PetscFunctionReturn(0);
 }
 
+/* m is symmetric positive definite, with the near-null space `near`. */
+static PetscErrorCode spd(Mat m, MatNullSpace near)
+{
+  PetscFunctionBeginUser;
+  PetscCall(MatSetOption(m, MAT_SYMMETRIC, PETSC_TRUE));
+  PetscCall(MatSetOption(m, MAT_SPD, PETSC_TRUE));
+  PetscCall(MatSetNearNullSpace(m, near));
+  PetscFunctionReturn(0);
+}
+
 /* The constrained KSP: the type of ksp and its PC (CG and GAMG by default, or what the
  * options chose). Its operator is the Newton matrix N, its preconditioner is built from Q,
  * N's copy at the last rebuild (same pattern, block size and near-null space as K). GAMG's
@@ -784,21 +794,15 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscFunctionBeginUser;
   PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatGetNearNullSpace(s->A, &near));
-  PetscCall(MatDuplicate(s->A, MAT_COPY_VALUES, &s->N));
-  PetscCall(MatDuplicate(s->A, MAT_DO_NOT_COPY_VALUES, &s->Q));
-  /* N's values are written in place (newton_matrix), never a new entry. */
-  PetscCall(MatSetOption(s->N, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
-  for (int k = 0; k < 2; k++) {
-    Mat m = k ? s->Q : s->N;
-    PetscCall(MatSetOption(m, MAT_SYMMETRIC, PETSC_TRUE));
-    PetscCall(MatSetOption(m, MAT_SPD, PETSC_TRUE));
-    PetscCall(MatSetNearNullSpace(m, near));
-  }
+  PetscCall(MatDuplicate(s->A, MAT_COPY_VALUES, &s->Q));
+  PetscCall(spd(s->Q, near));
   PetscCall(MatGetSize(s->A, &n, NULL));
   PetscCall(PetscMalloc1(n, &s->frame_of));
   for (PetscInt i = 0; i < n; i++) s->frame_of[i] = -1;
   PetscCall(KSPCreate(comm, &s->kc));
-  PetscCall(KSPSetOperators(s->kc, s->N, s->Q));
+  /* Q is the operator too until the multigrid is made: N, whose values every solve writes
+   * (newton_matrix), is made last, so that it is not held through the setup's peak. */
+  PetscCall(KSPSetOperators(s->kc, s->Q, s->Q));
   PetscCall(KSPGetType(s->ksp, &type));
   PetscCall(KSPSetType(s->kc, type));
   PetscCall(KSPGetPC(s->kc, &pc));
@@ -816,7 +820,6 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(PCSetUseAmat(pc, PETSC_FALSE));
   PetscCall(KSPSetInitialGuessNonzero(s->kc, PETSC_TRUE));
   PetscCall(KSPSetFromOptions(s->kc));
-  PetscCall(MatCopy(s->A, s->Q, SAME_NONZERO_PATTERN));
   /* On several ranks K's matrix, and the KSP of K that is never solved here, go before
    * GAMG's setup, a rank's peak: the Newton systems are made of the rank's rows of K as
    * the caller gave them (local_rows), and vc_mult multiplies by them. */
@@ -858,6 +861,12 @@ static PetscErrorCode constrained_setup(VcKsp *s)
     /* The hierarchy is updated here, by galerkin_update, never by GAMG again. */
     PetscCall(KSPSetReusePreconditioner(s->kc, PETSC_TRUE));
   }
+  /* The preconditioner's matrix stays Q, so the PC is not set up again for N. */
+  PetscCall(MatDuplicate(s->Q, MAT_DO_NOT_COPY_VALUES, &s->N));
+  PetscCall(spd(s->N, near));
+  /* N's values are written in place (newton_matrix), never a new entry. */
+  PetscCall(MatSetOption(s->N, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
+  PetscCall(KSPSetOperators(s->kc, s->N, s->Q));
   PetscFunctionReturn(0);
 }
 
