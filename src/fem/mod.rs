@@ -141,7 +141,8 @@ pub struct Discretization {
     /// ([`Discretization::pair_own_rows`]); `k_b` and `k_r[0]` then hold their diagonal
     /// alone.
     pub own_pair: Option<RowsPair>,
-    /// The cells as [`Discretization::stress`] reads them, once it is called.
+    /// The cells as [`Discretization::stress`] reads them on one process, once it is called
+    /// (a rank of several reads `cells`).
     stress_cells: std::sync::OnceLock<PackedCells>,
 }
 
@@ -640,20 +641,14 @@ impl Discretization {
                 .collect()
         };
         let pqs: Vec<Vec<[[f64; D]; 2]>> = self.materials.distinct.iter().map(pq_of).collect();
-        let packed = self
-            .stress_cells
-            .get_or_init(|| PackedCells::new(&self.cells));
         let n_cells = self.cells.len();
         let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
-        let (grads, _) = packed.grad.as_chunks::<D>();
-        let (grads, _) = grads.as_chunks::<N>();
-        let (cells, _) = packed.nodes.as_chunks::<N>();
-        for ((nodes, grad), &material) in cells.iter().zip(grads).zip(&self.materials.of_cell) {
+        let mut cell = |nodes: [usize; N], grad: &[[f64; D]; N], material: u32| {
             let pq = &pqs[material as usize];
             let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
             let mut tr = 0.0;
-            for (g, &n) in grad.iter().zip(nodes) {
-                let [p, q] = &pq[n as usize];
+            for (g, n) in grad.iter().zip(nodes) {
+                let [p, q] = &pq[n];
                 for a in 0..D {
                     for b in 0..D {
                         g_p[a][b] += g[a] * p[b];
@@ -675,6 +670,26 @@ impl Discretization {
             let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
             vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt());
             s6.extend(s);
+        };
+        let materials = &self.materials.of_cell;
+        // A rank of several holds the cells already; packing them again would cost rank 0,
+        // which writes the frames and history.csv, 112 bytes a tetrahedron more than the
+        // others hold (a frame is read beside PETSc's solves, not beside a factor).
+        if self.own.is_some() {
+            for (c, &material) in self.cells.iter().zip(materials) {
+                let grad = std::array::from_fn(|i| std::array::from_fn(|a| c.grad[i][a]));
+                cell(std::array::from_fn(|i| c.nodes[i]), &grad, material);
+            }
+        } else {
+            let packed = self
+                .stress_cells
+                .get_or_init(|| PackedCells::new(&self.cells));
+            let (grads, _) = packed.grad.as_chunks::<D>();
+            let (grads, _) = grads.as_chunks::<N>();
+            let (cells, _) = packed.nodes.as_chunks::<N>();
+            for ((nodes, grad), &material) in cells.iter().zip(grads).zip(materials) {
+                cell(nodes.map(|n| n as usize), grad, material);
+            }
         }
         (s6, vm)
     }
@@ -767,7 +782,7 @@ pub fn leading_block(a: &Sparse, n: usize) -> Sparse {
 /// takes 144. A frame at every step computes the stress on the writer thread beside the
 /// time loop, whose solves read a factor that about fills the last-level cache at h = 1/128
 /// (21 MB of 32): each byte the writer reads evicts one of the factor's. Built by the first
-/// frame that writes the stress.
+/// frame that writes the stress, on one process.
 struct PackedCells {
     nodes: Vec<u32>,
     grad: Vec<f64>,
