@@ -217,16 +217,17 @@ pub fn active_set_bytes(m: usize, n: usize, nnz: usize) -> f64 {
 /// Newton matrix N and Q, the N its multigrid was built from, Q's hierarchy and K_A's
 /// coarse operators (0.4), 50.4 bytes an entry (K_A's own hierarchy is never built there);
 /// the runs' peaks held 48 and 75 bytes an entry on one rank (GAMG's setup and the Krylov
-/// vectors besides) and 80 and 85 on each of two (the off-rank blocks, their column maps
-/// and message buffers, GAMG's Galerkin products' data for reuse until the shim frees it,
-/// and the rank's rows of K_A in PETSc's numbering, which it hands over instead of keeping
-/// K_A's columns: `ranks::Own`; K_A's own matrix goes there before GAMG's setup).
+/// vectors besides) and 74 and 76 on the largest of two (the off-rank blocks, their column
+/// maps and message buffers, GAMG's Galerkin products' data for reuse until the shim frees
+/// it, and the rank's rows of K_A in PETSc's numbering, which it hands over instead of
+/// keeping K_A's columns: `ranks::Own`; K_A's own matrix goes before GAMG's setup, and the
+/// Newton matrix is made after it).
 pub fn petsc_bytes(entries: usize, newton: bool, ranks: usize) -> f64 {
     let per_entry = match (newton, ranks) {
         (false, 1) => 48.0,
-        (false, _) => 80.0,
+        (false, _) => 74.0,
         (true, 1) => 75.0,
-        (true, _) => 85.0,
+        (true, _) => 76.0,
     };
     per_entry * entries as f64
 }
