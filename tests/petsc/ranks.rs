@@ -2,12 +2,12 @@
 //! root where CI runs as root and with more ranks than cores: a PETSc run, linear or with
 //! contact and friction through the active set, 2D and 3D, Prony and compressed kernels,
 //! on 1, 2 and 3 ranks agrees with the one-process run (bit for bit on one rank, to 1e-8
-//! relative in u_N on more); stopped on 3 ranks and resumed on 2, it agrees with the
-//! uninterrupted run on 2 to the same tolerance, and resumed on the rank count it stopped
-//! on, bit for bit; SIGTERM to every rank stops it after a step with a checkpoint, and
-//! SIGKILL of one rank ends the others at once, the run then resuming from its last
-//! checkpoint; a run whose steps do not spread is refused (exit 2) before anything is
-//! written.
+//! relative in u_N and the von Mises stress on more); stopped on 3 ranks and resumed on 2,
+//! it agrees with the uninterrupted run on 2 to the same tolerance, and resumed on the rank
+//! count it stopped on, bit for bit; SIGTERM to every rank stops it after a step with a
+//! checkpoint, and SIGKILL of one rank ends the others at once, the run then resuming from
+//! its last checkpoint; a run whose steps do not spread is refused (exit 2) before anything
+//! is written.
 
 use crate::common::{self, SceneText};
 use std::path::Path;
@@ -80,6 +80,24 @@ fn u_last(dir: &Path) -> Vec<f64> {
     vtu.point_field("displacement").unwrap().values.clone()
 }
 
+/// The von Mises stress of the last frame in `dir`, cell by cell in the order of the cells'
+/// sorted vertices (a frame in pieces lists its cells piece by piece).
+fn von_mises_last(dir: &Path) -> Vec<f64> {
+    let (_, frames) = read_series(&dir.join("solution.pvd")).unwrap();
+    let vtu = read_frame(&frames.last().unwrap().1).unwrap();
+    let values = &vtu.cell_field("von_mises").unwrap().values;
+    let mut cells: Vec<(Vec<usize>, f64)> = (vtu.cells.iter().zip(values))
+        .map(|(c, &v)| {
+            let mut c = c.clone();
+            c.sort_unstable();
+            (c, v)
+        })
+        .collect();
+    cells.sort_by(|a, b| a.0.cmp(&b.0));
+    assert!(cells.iter().any(|&(_, v)| v > 0.0), "{}", dir.display());
+    cells.into_iter().map(|(_, v)| v).collect()
+}
+
 /// The 3D block (examples/block.toml, a Prony kernel), the paper's scene with a power-law
 /// kernel compressed to a certified Prony sum, without contact and friction, through
 /// PETSc: 12 steps each.
@@ -126,7 +144,8 @@ fn both_blocks(dir: &Path) -> [std::path::PathBuf; 2] {
 }
 
 /// Each scene run on 1, 2 and 3 ranks agrees with the one-process run: bit for bit on one
-/// rank, to 1e-8 relative in u_N on more, with the same files in its directory.
+/// rank, to 1e-8 relative in u_N and the last frame's von Mises stress on more, with the
+/// same files in its directory.
 fn agree_on_1_2_and_3_ranks(scenes: &[std::path::PathBuf]) {
     for scene in scenes {
         let dir = scene.parent().unwrap();
@@ -151,6 +170,12 @@ fn agree_on_1_2_and_3_ranks(scenes: &[std::path::PathBuf]) {
             let d = common::rel_diff(&u_last(&out), &reference);
             println!("{what}, {ranks} ranks: max|Δu_N| / max|u_N| = {d:e}");
             assert!(d <= 1e-8, "{what} on {ranks} ranks: u_N differs by {d:e}");
+            // The stresses, which a rank of several computes from its cells, not packed.
+            let d = common::rel_diff(&von_mises_last(&out), &von_mises_last(&one));
+            assert!(
+                d <= 1e-8,
+                "{what} on {ranks} ranks: von Mises differs by {d:e}"
+            );
             assert_pieces(&out, &one, ranks, &what);
         }
     }
