@@ -795,7 +795,7 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatGetNearNullSpace(s->A, &near));
   PetscCall(MatDuplicate(s->A, MAT_COPY_VALUES, &s->Q));
-  PetscCall(spd(s->Q, near));
+  PetscCall(spd(s->Q, near)); /* Q's reference keeps `near` when K's matrix goes, below */
   PetscCall(MatGetSize(s->A, &n, NULL));
   PetscCall(PetscMalloc1(n, &s->frame_of));
   for (PetscInt i = 0; i < n; i++) s->frame_of[i] = -1;
