@@ -140,9 +140,7 @@ impl Layout {
         let nodes = nodes(disc);
         let adjacent = adjacency(disc, &nodes);
         let size = self.blocks.len() - 1;
-        // A rank holds whole nodes: a node's first unknown says whose it is.
-        let rank_of = |v: usize| self.blocks.partition_point(|&b| b <= self.row(nodes[v][0])) - 1;
-        let rank: Vec<usize> = (0..nodes.len()).map(rank_of).collect();
+        let rank = self.ranks_of(&nodes);
         let mut order: Vec<usize> = (0..nodes.len()).collect();
         order.sort_by_key(|&v| rank[v]);
         let mut shares = vec![RankShare::default(); size];
@@ -161,6 +159,41 @@ impl Layout {
             }
         }
         shares
+    }
+
+    /// The rank that holds each of `nodes` (the unknowns of each node that has any): a rank
+    /// holds whole nodes, so a node's first unknown says whose it is.
+    fn ranks_of(&self, nodes: &[Vec<usize>]) -> Vec<usize> {
+        let rank_of = |v: &Vec<usize>| self.blocks.partition_point(|&b| b <= self.row(v[0])) - 1;
+        nodes.iter().map(rank_of).collect()
+    }
+
+    /// The piece of each cell (`cells`: `nodes_per_cell` mesh nodes each) in the `.pvtu`
+    /// frames of a run over these ranks (`output`'s `pvtu.rs`): the lowest rank among those
+    /// that hold the cell's nodes with unknowns, so that piece r is rank r's part of the
+    /// mesh; 0 for a cell whose nodes are all clamped.
+    pub fn cell_pieces(
+        &self,
+        disc: &Discretization,
+        cells: &[usize],
+        nodes_per_cell: usize,
+    ) -> Vec<u32> {
+        let nodes = nodes(disc);
+        let mut of_node = vec![u32::MAX; disc.free.len() / disc.dim];
+        let with_unknowns = (0..of_node.len()).filter(|&v| !node_unknowns(disc, v).is_empty());
+        for (v, r) in with_unknowns.zip(self.ranks_of(&nodes)) {
+            of_node[v] = r as u32;
+        }
+        cells
+            .chunks(nodes_per_cell.max(1))
+            .map(|c| {
+                c.iter()
+                    .map(|&v| of_node[v])
+                    .min()
+                    .filter(|&p| p != u32::MAX)
+            })
+            .map(|p| p.unwrap_or(0))
+            .collect()
     }
 }
 
@@ -217,34 +250,6 @@ fn node_unknowns(disc: &Discretization, v: usize) -> Vec<usize> {
     (g..g + disc.dim)
         .filter_map(|g| super::unknown(disc, g))
         .collect()
-}
-
-/// The piece of each cell (`cells`: `nodes_per_cell` mesh nodes each) in the `.pvtu` frames
-/// of a run over `size` ranks (`output`'s `pvtu.rs`): the lowest part, in the partition of
-/// [`Layout::new`], among the cell's nodes that have unknowns, so that piece r is rank r's
-/// part of the mesh; 0 for a cell whose nodes are all clamped.
-pub fn cell_pieces(
-    disc: &Discretization,
-    cells: &[usize],
-    nodes_per_cell: usize,
-    size: usize,
-) -> Result<Vec<u32>> {
-    let part = partition(disc, &nodes(disc), size)?;
-    let mut of_node = vec![u32::MAX; disc.free.len() / disc.dim];
-    let with_unknowns = (0..of_node.len()).filter(|&v| !node_unknowns(disc, v).is_empty());
-    for (v, p) in with_unknowns.zip(part) {
-        of_node[v] = p as u32;
-    }
-    Ok(cells
-        .chunks(nodes_per_cell.max(1))
-        .map(|c| {
-            c.iter()
-                .map(|&v| of_node[v])
-                .min()
-                .filter(|&p| p != u32::MAX)
-        })
-        .map(|p| p.unwrap_or(0))
-        .collect())
 }
 
 /// The nodes' graph on the nodes with unknowns (`nodes`, in their order): for each, the

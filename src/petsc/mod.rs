@@ -42,7 +42,7 @@
 
 mod layout;
 
-pub use layout::{cell_pieces, Csr, Layout, RankShare};
+pub use layout::{Csr, Layout, RankShare};
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};

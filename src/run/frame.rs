@@ -8,26 +8,27 @@ use std::sync::Arc;
 
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
-use crate::output::{Format, Geometry, Options, OwnedField, Resumed, Series};
+use crate::output::{Geometry, Options, OwnedField, Resumed, Series};
 use crate::scene::Model;
 use crate::solver::Rows;
 use crate::time_loop::Step;
 use crate::Result;
 
-/// The series of a run on `mesh` (discretized as `disc`) over `ranks` MPI ranks in `out`:
-/// a new one, or for a resume from a checkpoint of step n ≥ 1 the existing one, verified
-/// and continued after step n − 1 ([`Series::resume`]).
+/// The series of a run on `mesh` (discretized as `disc`) in `out`, its frames in a piece
+/// per rank where `own` holds the ranks' layout (a run over several MPI ranks): a new one,
+/// or for a resume from a checkpoint of step n ≥ 1 the existing one, verified and continued
+/// after step n − 1 ([`Series::resume`]).
 pub(super) fn open_series(
     out: &Path,
     (mesh, disc): (&Mesh, &Discretization),
-    ranks: usize,
+    own: Option<&crate::ranks::Own>,
     run_id: &str,
     options: &Options,
     resumed: Option<&Resumed>,
 ) -> Result<Series> {
     let (cells, nodes_per_cell) = mesh.cell_nodes();
     let region = region(mesh);
-    let pieces = pieces(disc, (&cells, nodes_per_cell), ranks, options)?;
+    let pieces = pieces(disc, (&cells, nodes_per_cell), own, options);
     let geometry = Geometry {
         points: &mesh.nodes,
         cells: &cells,
@@ -42,25 +43,22 @@ pub(super) fn open_series(
     }
 }
 
-/// Each cell's piece where the frames of a run over several ranks are `.vtu` files (a
-/// `.pvtu` a frame with a piece per rank's part of the mesh, docs/output.md); else none,
-/// one file a frame. Only a build with PETSc runs over several ranks.
+/// Each cell's piece where the frames of a run over several ranks (`own`: their layout,
+/// whose partition the pieces follow) are `.vtu` files (a `.pvtu` a frame with a piece per
+/// rank's part of the mesh, docs/output.md); else none, one file a frame. Only a build with
+/// PETSc runs over several ranks.
 fn pieces(
     disc: &Discretization,
     (cells, nodes_per_cell): (&[usize], usize),
-    ranks: usize,
+    own: Option<&crate::ranks::Own>,
     options: &Options,
-) -> Result<Vec<u32>> {
-    if ranks <= 1 || options.format != Format::Vtu {
-        return Ok(Vec::new());
-    }
+) -> Vec<u32> {
     #[cfg(feature = "petsc")]
-    return crate::petsc::cell_pieces(disc, cells, nodes_per_cell, ranks);
-    #[cfg(not(feature = "petsc"))]
-    {
-        let _ = (disc, cells, nodes_per_cell);
-        Ok(Vec::new())
+    if let Some(own) = own.filter(|_| options.format == crate::output::Format::Vtu) {
+        return own.layout.cell_pieces(disc, cells, nodes_per_cell);
     }
+    let _ = (disc, cells, nodes_per_cell, own, options);
+    Vec::new()
 }
 
 /// The gmsh physical tag of each cell: the first group of the cells' dimension (in file

@@ -254,7 +254,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     let series = open_series(
         &out,
         (&mesh, &disc),
-        opts.ranks.size,
+        own.as_ref(),
         &identity.run_id,
         &scene.output.options,
         None,
@@ -488,7 +488,7 @@ fn prepare_resume(
     let series = open_series(
         &out,
         (&mesh, &disc),
-        opts.ranks.size,
+        own.as_ref(),
         &identity.run_id,
         &scene.output.options,
         resumed.as_ref(),
