@@ -19,13 +19,15 @@
 //! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
 //! every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
 //! history.csv, checkpoints, summary.json) and prints; the others *follow*
-//! (`run::follow`), writing nothing.
+//! (`run::follow`), writing nothing. No rank keeps the mesh past its setup, and only rank 0
+//! the cells, from which it computes the stresses, norms and frames: a follower lets go of
+//! them once its columns and its layout are made (`Discretization::forget_cells`).
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
-//! memory of each rank is the replicated part (mesh, cells, history), its columns of the
-//! matrices and its share of PETSc's; partitioning the mesh and the history too is the
+//! memory of each rank is the replicated part (the history; during setup the mesh and the
+//! cells, which set a floor), its columns of the matrices and its share of PETSc's; partitioning the mesh and the history too is the
 //! next step (docs/cluster.md).
 //!
 //! # Planning

@@ -720,6 +720,17 @@ impl Discretization {
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
         p1_norms(&self.cells, &nodal_vectors::<3>(self, v))
     }
+
+    /// Lets go of the cells and of each cell's material and region (`materials.distinct`
+    /// stays): on a rank of several other than rank 0, which computes no stress, norm,
+    /// reaction or frame (rank 0 does them all), nothing reads them once the matrices are
+    /// assembled and the rank's layout is made. [`Discretization::stress`] and
+    /// [`Discretization::norms`] would see an empty mesh afterwards.
+    pub fn forget_cells(&mut self) {
+        self.cells = Vec::new();
+        self.materials.of_cell = Vec::new();
+        self.materials.region = Vec::new();
+    }
 }
 
 /// `a` with the columns j where `keep[j]` whole and the diagonal entry alone of the others.

@@ -181,27 +181,41 @@ struct StepCopy {
     iterations: usize,
 }
 
+/// The held rows and the constant forces that history.csv's reactions are computed from
+/// (`fem::reactions`), for the run's step matrix: K_A, or with `solver.history =
+/// "implicit"` K_A + k K_B + k² r_g(0) K_R^(g) (`plans`' r_g). Made during setup, so that
+/// the mesh goes before the step solver's setup (PETSc's or the factor's), the largest of a
+/// run's peaks.
+pub(super) fn reactions(
+    scene: &Scene,
+    mesh: &Mesh,
+    disc: &Discretization,
+    plans: &crate::history::Plans,
+) -> Result<Reactions> {
+    let k = scene.time.k();
+    let (k_b, k_r) = match scene.solver.history {
+        scene::History::Left => (0.0, Vec::new()),
+        scene::History::Implicit => {
+            let r0 = plans.r0(scene);
+            (k, r0.iter().map(|r0| k * k * r0.unwrap_or(0.0)).collect())
+        }
+    };
+    Reactions::new(mesh, scene, disc, k_b, &k_r)
+}
+
 impl HistoryCsv {
     /// `DIR/history.csv` of a new run (from step 0), or of a run resumed at step `from`:
     /// the rows of steps before `from` are kept, those after cut off (a run killed after its
     /// last checkpoint wrote them); a file that lacks them is started again with a warning.
+    /// `reactions`: the held rows made during setup ([`reactions`]).
     pub fn open(
         out: &Path,
         scene: &Arc<Scene>,
-        mesh: &Mesh,
+        reactions: Reactions,
         disc: &Arc<Discretization>,
         tl: &TimeLoop,
         from: Option<usize>,
     ) -> Result<Self> {
-        let k = tl.k();
-        let (k_b, k_r) = match scene.solver.history {
-            scene::History::Left => (0.0, Vec::new()),
-            scene::History::Implicit => {
-                let r0 = tl.plans().r0(scene);
-                (k, r0.iter().map(|r0| k * k * r0.unwrap_or(0.0)).collect())
-            }
-        };
-        let reactions = Reactions::new(mesh, scene, disc, k_b, &k_r)?;
         let layout = Layout::new(scene, disc);
         let header = layout.columns().join(",") + "\n";
         let path = out.join(FILE_NAME);

@@ -30,6 +30,7 @@ pub use interrupt::Interrupt;
 pub use summary::{ContactSummary, Final, Iterations, OutputSummary, Status, Summary, Timing};
 
 use crate::checkpoint::{self, RunLog};
+use crate::fem::reactions::Reactions;
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
 use crate::output::{write_atomic, Resumed, Series};
@@ -45,7 +46,7 @@ use history_csv::HistoryCsv;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
-use summary::{summary_json, Ending};
+use summary::{summary_json, Ending, MeshFacts};
 
 /// Options of a run (and of a resume) that are not part of the scene.
 #[derive(Clone, Debug)]
@@ -177,6 +178,7 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     drive(Drive {
         scene: &ready.scene,
         mesh: &ready.mesh,
+        reactions: ready.reactions,
         disc: &ready.disc,
         tl,
         opened: ready.opened,
@@ -191,7 +193,10 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
 struct Ready {
     /// Shared with the writer thread of history.csv.
     scene: Arc<Scene>,
-    mesh: Mesh,
+    /// What is kept of the mesh, which goes before the step solver's setup: what
+    /// summary.json says of it, and history.csv's held rows.
+    mesh: MeshFacts,
+    reactions: Reactions,
     /// Shared with the frame writer's thread (run/frame.rs).
     disc: Arc<Discretization>,
     solving: Solving,
@@ -261,9 +266,11 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     )?;
     stage()?;
     let plans = crate::history::Plans::new(&scene)?;
+    let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
     Ok(Ready {
         scene,
-        mesh,
+        mesh: MeshFacts::of(&mesh),
+        reactions,
         disc,
         solving: Solving { solver, own, plans },
         opened: Opened {
@@ -350,6 +357,8 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         let own = opts
             .ranks
             .keep_own_columns(&mut disc, scene.solver.history, made)?;
+        // Before PETSc's setup, the rank's peak: rank 0 alone computes from the cells.
+        disc.forget_cells();
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,
@@ -416,6 +425,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     drive(Drive {
         scene: &ready.scene,
         mesh: &ready.mesh,
+        reactions: ready.reactions,
         disc: &ready.disc,
         tl,
         opened: ready.opened,
@@ -495,9 +505,11 @@ fn prepare_resume(
     )?;
     stage()?;
     let plans = cp.plans(&scene)?;
+    let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
     let ready = Ready {
         scene,
-        mesh,
+        mesh: MeshFacts::of(&mesh),
+        reactions,
         disc,
         solving: Solving { solver, own, plans },
         opened: Opened {
@@ -628,7 +640,9 @@ fn ranks_plan(
 struct Drive<'a> {
     /// Shared with the writer thread of history.csv.
     scene: &'a Arc<Scene>,
-    mesh: &'a Mesh,
+    mesh: &'a MeshFacts,
+    /// history.csv's held rows (`history_csv::reactions`).
+    reactions: Reactions,
     disc: &'a Arc<Discretization>,
     tl: TimeLoop<'a>,
     /// The directory is this run's until `drive` returns.
@@ -649,7 +663,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         lock: _lock,
     } = d.opened;
     let from = d.resumed.map(|cp| cp.n);
-    let history = HistoryCsv::open(&out, d.scene, d.mesh, d.disc, &d.tl, from)?;
+    let history = HistoryCsv::open(&out, d.scene, d.reactions, d.disc, &d.tl, from)?;
     let run_id = identity.run_id.clone();
     let steps = d.scene.time.steps;
     let writer = match d.resumed {

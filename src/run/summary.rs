@@ -203,6 +203,24 @@ pub(super) fn summary_json(s: &Summary) -> String {
     serde_json::to_string_pretty(&v).expect("summary serializes") + "\n"
 }
 
+/// What summary.json says of the mesh: its file, nodes and elements, kept once the mesh
+/// itself is dropped (after setup, before the step solver's).
+pub(super) struct MeshFacts {
+    path: std::path::PathBuf,
+    nodes: usize,
+    elements: usize,
+}
+
+impl MeshFacts {
+    pub fn of(mesh: &Mesh) -> MeshFacts {
+        MeshFacts {
+            path: mesh.path.clone(),
+            nodes: mesh.nodes.len(),
+            elements: mesh.n_cells(),
+        }
+    }
+}
+
 impl Summary {
     /// The summary of a run of `scene` whose time loop stands at `tl` (u_N = u_0 + kΣ_{j<N}
     /// w_j is the history's u at n = N: w_N is not added), with the statistics of every
@@ -211,7 +229,7 @@ impl Summary {
         ending: Ending,
         run_id: &str,
         scene: &Scene,
-        mesh: &Mesh,
+        mesh: &MeshFacts,
         disc: &Discretization,
         tl: &TimeLoop,
         stats: Statistics,
@@ -235,8 +253,8 @@ impl Summary {
             name: scene.name.clone(),
             scene: absolute(&scene.path),
             mesh: absolute(&mesh.path),
-            nodes: mesh.nodes.len(),
-            elements: mesh.n_cells(),
+            nodes: mesh.nodes,
+            elements: mesh.elements,
             dofs: disc.n_free,
             steps: scene.time.steps,
             step_size: tl.k(),
