@@ -600,10 +600,37 @@ impl Discretization {
         m: Option<&[f64]>,
         model: Model,
     ) -> (Vec<f64>, Vec<f64>) {
+        let n_cells = self.cells.len();
+        let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
+        self.each_stress([w, u], m, model, |s, v| {
+            s6.extend(s);
+            vm.push(v);
+        });
+        (s6, vm)
+    }
+
+    /// The largest von Mises stress of the cells of [`Discretization::stress`] (0 without
+    /// cells), the same number, without its arrays: history.csv's at a step without a
+    /// frame (7 doubles a cell less on the thread that makes its rows).
+    pub fn max_von_mises(&self, w: &[f64], u: &[f64], m: Option<&[f64]>, model: Model) -> f64 {
+        let mut max = 0.0;
+        self.each_stress([w, u], m, model, |_, v| max = f64::max(max, v));
+        max
+    }
+
+    /// Hands each cell's σ (XX YY ZZ XY YZ XZ) and von Mises stress to `sink`, in the cells'
+    /// order ([`Discretization::stress`]).
+    fn each_stress(
+        &self,
+        wu: [&[f64]; 2],
+        m: Option<&[f64]>,
+        model: Model,
+        sink: impl FnMut([f64; 6], f64),
+    ) {
         let plane_stress = model == Model::PlaneStress;
         match self.dim {
-            2 => self.stresses::<2, 3>([w, u], m, plane_stress),
-            _ => self.stresses::<3, 4>([w, u], m, plane_stress),
+            2 => self.stresses::<2, 3>(wu, m, plane_stress, sink),
+            _ => self.stresses::<3, 4>(wu, m, plane_stress, sink),
         }
     }
 
@@ -617,7 +644,8 @@ impl Discretization {
         [w, u]: [&[f64]; 2],
         m: Option<&[f64]>,
         plane_stress: bool,
-    ) -> (Vec<f64>, Vec<f64>) {
+        mut sink: impl FnMut([f64; 6], f64),
+    ) {
         let (r, n) = (self.r, self.n_dofs);
         // [p_n, q_n] of every node (D components: 32 bytes a node in 2D), for each distinct
         // material, its memory m from its group's part of `m`.
@@ -641,8 +669,6 @@ impl Discretization {
                 .collect()
         };
         let pqs: Vec<Vec<[[f64; D]; 2]>> = self.materials.distinct.iter().map(pq_of).collect();
-        let n_cells = self.cells.len();
-        let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
         let mut cell = |nodes: [usize; N], grad: &[[f64; D]; N], material: u32| {
             let pq = &pqs[material as usize];
             let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
@@ -668,8 +694,10 @@ impl Discretization {
             ];
             let (dx, dy, dz) = (s[0] - s[1], s[1] - s[2], s[2] - s[0]);
             let shear = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
-            vm.push((0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt());
-            s6.extend(s);
+            sink(
+                s,
+                (0.5 * (dx * dx + dy * dy + dz * dz) + 3.0 * shear).sqrt(),
+            );
         };
         let materials = &self.materials.of_cell;
         // A rank of several holds the cells already; packing them again would cost rank 0,
@@ -691,7 +719,6 @@ impl Discretization {
                 cell(nodes.map(|n| n as usize), grad, material);
             }
         }
-        (s6, vm)
     }
 
     /// K_A + k K_B + k² Σ_g r_g(0) K_R^(g) on all n_dofs: the step matrix of the implicit

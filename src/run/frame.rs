@@ -118,7 +118,7 @@ pub(super) fn write_step(
 
 /// The largest von Mises stress of a step's cells (0 without cells), as history.csv
 /// records it.
-pub(super) fn max_von_mises(von_mises: &[f64]) -> f64 {
+fn max_von_mises(von_mises: &[f64]) -> f64 {
     von_mises.iter().copied().fold(0.0, f64::max)
 }
 

@@ -23,7 +23,6 @@
 //! exact bits; a resumed run keeps the rows before its checkpoint's step and writes the
 //! others again: its file equals the uninterrupted run's byte for byte.
 
-use super::frame::max_von_mises;
 use crate::fem::loads::Source;
 use crate::fem::reactions::{Reactions, StepForces};
 use crate::fem::Discretization;
@@ -272,10 +271,8 @@ impl RowMaker {
     ) -> Result<String> {
         let (disc, scene) = (&self.disc, &self.scene);
         let forces = (self.reactions).forces(disc, scene, s.t, [&s.w, &s.u], s.m.as_deref())?;
-        let von_mises = (frame.and_then(|rx| rx.recv().ok())).unwrap_or_else(|| {
-            let (_, cells) = disc.stress(&s.w, &s.u, s.m.as_deref(), scene.mesh.model);
-            max_von_mises(&cells)
-        });
+        let von_mises = (frame.and_then(|rx| rx.recv().ok()))
+            .unwrap_or_else(|| disc.max_von_mises(&s.w, &s.u, s.m.as_deref(), scene.mesh.model));
         let mut line = s.n.to_string();
         put_number(&mut line, s.t);
         for v in self.forces(&s.z, &forces) {
