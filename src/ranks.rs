@@ -27,8 +27,8 @@
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
 //! memory of each rank is the replicated part (the history; during setup the mesh and the
-//! cells, which set a floor), its columns of the matrices and its share of PETSc's; partitioning the mesh and the history too is the
-//! next step (docs/cluster.md).
+//! cells, which set a floor), its columns of the matrices and its share of PETSc's;
+//! partitioning the mesh and the history too is the next step (docs/cluster.md).
 //!
 //! # Planning
 //!

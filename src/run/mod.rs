@@ -46,7 +46,7 @@ use history_csv::HistoryCsv;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
-use summary::{summary_json, Ending, MeshFacts};
+use summary::{summary_json, Ending};
 
 /// Options of a run (and of a resume) that are not part of the scene.
 #[derive(Clone, Debug)]
@@ -177,7 +177,6 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     committed.map_err(Error::Interrupted)??;
     drive(Drive {
         scene: &ready.scene,
-        mesh: &ready.mesh,
         reactions: ready.reactions,
         disc: &ready.disc,
         tl,
@@ -193,9 +192,8 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
 struct Ready {
     /// Shared with the writer thread of history.csv.
     scene: Arc<Scene>,
-    /// What is kept of the mesh, which goes before the step solver's setup: what
-    /// summary.json says of it, and history.csv's held rows.
-    mesh: MeshFacts,
+    /// history.csv's held rows, made from the mesh, which goes before the step solver's
+    /// setup (`history_csv::reactions`).
     reactions: Reactions,
     /// Shared with the frame writer's thread (run/frame.rs).
     disc: Arc<Discretization>,
@@ -269,7 +267,6 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
     Ok(Ready {
         scene,
-        mesh: MeshFacts::of(&mesh),
         reactions,
         disc,
         solving: Solving { solver, own, plans },
@@ -424,7 +421,6 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     committed.map_err(Error::Interrupted)?;
     drive(Drive {
         scene: &ready.scene,
-        mesh: &ready.mesh,
         reactions: ready.reactions,
         disc: &ready.disc,
         tl,
@@ -508,7 +504,6 @@ fn prepare_resume(
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
     let ready = Ready {
         scene,
-        mesh: MeshFacts::of(&mesh),
         reactions,
         disc,
         solving: Solving { solver, own, plans },
@@ -640,7 +635,6 @@ fn ranks_plan(
 struct Drive<'a> {
     /// Shared with the writer thread of history.csv.
     scene: &'a Arc<Scene>,
-    mesh: &'a MeshFacts,
     /// history.csv's held rows (`history_csv::reactions`).
     reactions: Reactions,
     disc: &'a Arc<Discretization>,
@@ -755,7 +749,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         warnings,
         ranks: d.opts.ranks.size,
     };
-    let summary = Summary::new(ending, &run_id, d.scene, d.mesh, d.disc, &tl, statistics);
+    let summary = Summary::new(ending, &run_id, d.scene, d.disc, &tl, statistics);
     let written = write_atomic(&out.join("summary.json"), summary_json(&summary).as_bytes());
     match ended {
         // The failure is what the run reports; its summary is written if the disk allows.

@@ -2,7 +2,6 @@
 
 use super::consumers::Statistics;
 use crate::fem::Discretization;
-use crate::mesh::Mesh;
 use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
 use serde::Serialize;
@@ -203,24 +202,6 @@ pub(super) fn summary_json(s: &Summary) -> String {
     serde_json::to_string_pretty(&v).expect("summary serializes") + "\n"
 }
 
-/// What summary.json says of the mesh: its file, nodes and elements, kept once the mesh
-/// itself is dropped (after setup, before the step solver's).
-pub(super) struct MeshFacts {
-    path: std::path::PathBuf,
-    nodes: usize,
-    elements: usize,
-}
-
-impl MeshFacts {
-    pub fn of(mesh: &Mesh) -> MeshFacts {
-        MeshFacts {
-            path: mesh.path.clone(),
-            nodes: mesh.nodes.len(),
-            elements: mesh.n_cells(),
-        }
-    }
-}
-
 impl Summary {
     /// The summary of a run of `scene` whose time loop stands at `tl` (u_N = u_0 + kΣ_{j<N}
     /// w_j is the history's u at n = N: w_N is not added), with the statistics of every
@@ -229,7 +210,6 @@ impl Summary {
         ending: Ending,
         run_id: &str,
         scene: &Scene,
-        mesh: &MeshFacts,
         disc: &Discretization,
         tl: &TimeLoop,
         stats: Statistics,
@@ -252,9 +232,11 @@ impl Summary {
             message: ending.message,
             name: scene.name.clone(),
             scene: absolute(&scene.path),
-            mesh: absolute(&mesh.path),
-            nodes: mesh.nodes,
-            elements: mesh.elements,
+            // The mesh itself is gone (after setup); the discretization holds its nodes and
+            // cells (the summary is rank 0's, which keeps them).
+            mesh: absolute(&scene.mesh.file),
+            nodes: disc.nodes.len(),
+            elements: disc.cells.len(),
             dofs: disc.n_free,
             steps: scene.time.steps,
             step_size: tl.k(),
