@@ -17,11 +17,15 @@
 //! the rank keeps K_A's diagonal alone. The rest is replicated:
 //! the history sums and every n-vector, so every rank holds the same right side b_n, bit
 //! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
-//! every rank. Rank 0 (the *first*) alone owns the output directory (lock, series,
-//! history.csv, checkpoints, summary.json) and prints; the others *follow*
-//! (`run::follow`), writing nothing. No rank keeps the mesh past its setup, and only rank 0
-//! the cells, from which it computes the stresses, norms and frames: a follower lets go of
-//! them once its columns and its layout are made (`Discretization::forget_cells`).
+//! every rank. Rank 0 (the *first*) owns the output directory (lock, series, history.csv,
+//! checkpoints, summary.json) and prints; the others *follow* (`run::follow`). Of each
+//! `.vtu` frame every rank writes its own piece, its part of the mesh, and the ranks agree
+//! that all are on disk ([`Ranks::written`]) before rank 0 lists them in the frame's
+//! `.pvtu` (`run::frame::OwnFrames`). No rank keeps the mesh past its setup; rank 0 keeps
+//! every cell, from which it computes the norms and history.csv's stresses, and a follower
+//! lets go of them once its columns and its layout are made
+//! (`Discretization::forget_cells`), keeping its piece's node numbers, from which it makes
+//! the piece's cells again at its first frame (`Discretization::make_cells`).
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
@@ -161,6 +165,53 @@ impl Ranks {
             (all / 2 > 0).then_some(all / 2),
             all % 2 == 1 || all / 2 > 0,
         ))
+    }
+
+    /// Every rank's part of a frame written (collective on several): the largest of the
+    /// ranks' `r` (their pieces' largest von Mises stress) where every rank wrote its part.
+    /// A rank that failed says why itself; the others fail quietly
+    /// ([`Error::Elsewhere`]), rank 0 with an error that says another rank failed, which
+    /// ends the run as a failed write does (exit 1).
+    pub fn written(&self, r: Result<f64>) -> Result<f64> {
+        if self.size == 1 {
+            return r;
+        }
+        let code = r.as_ref().err().map_or(0, Error::exit_code);
+        let worst = self.max(code)?;
+        let largest = self.largest(*r.as_ref().unwrap_or(&0.0))?;
+        match r {
+            Err(e) if self.is_first() => Err(e),
+            Err(e) => {
+                crate::errln!("error: rank {}: {e}", self.rank);
+                Err(Error::Elsewhere(code))
+            }
+            Ok(_) if worst == 0 => Ok(largest),
+            Ok(_) if self.is_first() => Err(Error::solve(format!(
+                "another rank could not write its piece of the frame (exit status {worst}; its \
+                 message is above); the frames and the checkpoint before it are kept"
+            ))),
+            Ok(_) => Err(Error::Elsewhere(worst)),
+        }
+    }
+
+    /// Rank 0's `text` on every rank (collective on several).
+    pub fn first_says_text(&self, text: &str) -> Result<String> {
+        if self.size == 1 {
+            return Ok(text.to_string());
+        }
+        let len = self.first_says(i32::try_from(text.len()).unwrap_or(i32::MAX))?;
+        let mut bytes = text.as_bytes().to_vec();
+        bytes.resize(usize::try_from(len).unwrap_or(0), 0);
+        mpi::from_rank0_bytes(&mut bytes)?;
+        Ok(String::from_utf8_lossy(&bytes).into_owned())
+    }
+
+    /// The largest of every rank's `value` (collective on several).
+    fn largest(&self, value: f64) -> Result<f64> {
+        match self.size {
+            1 => Ok(value),
+            _ => mpi::max_real_over_ranks(value),
+        }
     }
 
     /// Rank 0's `value` on every rank (collective on several).
@@ -694,6 +745,14 @@ mod mpi {
 
     pub fn max_over_ranks(value: i32) -> crate::Result<i32> {
         Ok(value)
+    }
+
+    pub fn max_real_over_ranks(value: f64) -> crate::Result<f64> {
+        Ok(value)
+    }
+
+    pub fn from_rank0_bytes(_: &mut [u8]) -> crate::Result<()> {
+        Ok(())
     }
 }
 

@@ -151,19 +151,35 @@ fn group<'m>(mesh: &'m Mesh, scene: &Scene, key: &str, value: &str) -> Result<&'
         .map_err(|e| Error::input(format!("{}: key '{key}': {e}", scene.path.display())))
 }
 
+/// Which cells [`Discretization::stress`] covers.
+#[derive(Clone, Copy, Debug)]
+pub enum StressCells<'a> {
+    /// Every cell of the discretization, in its order.
+    All,
+    /// The cells of these indices, in their order (rank 0's piece of a frame).
+    Only(&'a [usize]),
+    /// These cells with these materials (`CellMaterials::of_cell`'s), made apart from the
+    /// discretization's (a follower rank's piece: [`Discretization::make_cells`]).
+    Of(&'a [Cell], &'a [u32]),
+}
+
 /// The mesh's triangles (2D) or tetrahedra (3D) as cells.
 fn cells(mesh: &Mesh) -> Vec<Cell> {
-    let xy = |i: usize| [mesh.nodes[i][0], mesh.nodes[i][1]];
     match mesh.dim {
-        2 => mesh
-            .triangles
-            .iter()
+        2 => cells_of(2, mesh.triangles.as_flattened(), &mesh.nodes),
+        _ => cells_of(3, mesh.tetrahedra.as_flattened(), &mesh.nodes),
+    }
+}
+
+/// The cells of dimension `dim` whose nodes are `nodes` (dim + 1 a cell), at `points`.
+fn cells_of(dim: usize, nodes: &[usize], points: &[[f64; 3]]) -> Vec<Cell> {
+    let xy = |i: usize| [points[i][0], points[i][1]];
+    match dim {
+        2 => (nodes.as_chunks::<3>().0.iter())
             .map(|t| Cell::triangle(*t, t.map(xy)))
             .collect(),
-        _ => mesh
-            .tetrahedra
-            .iter()
-            .map(|t| Cell::tetrahedron(*t, t.map(|i| mesh.nodes[i])))
+        _ => (nodes.as_chunks::<4>().0.iter())
+            .map(|t| Cell::tetrahedron(*t, t.map(|i| points[i])))
             .collect(),
     }
 }
@@ -582,8 +598,8 @@ impl Discretization {
 
     /// Per-cell stress σ_n = A ε(w_n) + B ε(u_n) + ε(m_n) (2.1 discretized; R = r·I, so the
     /// memory term is ε of m_n = kΣ r(t_n − t_j) u_j) as 6 components XX YY ZZ XY YZ XZ, and
-    /// the von Mises stress. Plane stress has σ_zz = 0; plane strain σ_zz = b_A tr ε(w) +
-    /// b_B tr ε(u) (the out-of-plane strain is zero).
+    /// the von Mises stress, of the cells `cells` says (a rank's piece of a frame, or all). Plane stress has σ_zz = 0; plane strain σ_zz =
+    /// b_A tr ε(w) + b_B tr ε(u) (the out-of-plane strain is zero).
     ///
     /// Each of A, B, R has the form C τ = 2a τ + b tr(τ) I, and ε is linear, so with the
     /// nodal combinations p = Σ_C a_C v_C and q = Σ_C b_C v_C (v_A = w, v_B = u, v_R = m)
@@ -595,14 +611,18 @@ impl Discretization {
     /// material names its group, `Stiffness::memory`).
     pub fn stress(
         &self,
-        w: &[f64],
-        u: &[f64],
+        [w, u]: [&[f64]; 2],
         m: Option<&[f64]>,
         model: Model,
+        cells: StressCells,
     ) -> (Vec<f64>, Vec<f64>) {
-        let n_cells = self.cells.len();
+        let n_cells = match cells {
+            StressCells::All => self.cells.len(),
+            StressCells::Only(only) => only.len(),
+            StressCells::Of(of, _) => of.len(),
+        };
         let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
-        self.each_stress([w, u], m, model, |s, v| {
+        self.each_stress([w, u], m, (model, cells), |s, v| {
             s6.extend(s);
             vm.push(v);
         });
@@ -614,23 +634,25 @@ impl Discretization {
     /// frame (7 doubles a cell less on the thread that makes its rows).
     pub fn max_von_mises(&self, w: &[f64], u: &[f64], m: Option<&[f64]>, model: Model) -> f64 {
         let mut max = 0.0;
-        self.each_stress([w, u], m, model, |_, v| max = f64::max(max, v));
+        self.each_stress([w, u], m, (model, StressCells::All), |_, v| {
+            max = f64::max(max, v)
+        });
         max
     }
 
     /// Hands each cell's σ (XX YY ZZ XY YZ XZ) and von Mises stress to `sink`, in the cells'
-    /// order ([`Discretization::stress`]).
+    /// order, or of the cells `cells` says in theirs ([`Discretization::stress`]).
     fn each_stress(
         &self,
         wu: [&[f64]; 2],
         m: Option<&[f64]>,
-        model: Model,
+        (model, only): (Model, StressCells),
         sink: impl FnMut([f64; 6], f64),
     ) {
-        let plane_stress = model == Model::PlaneStress;
+        let how = (model == Model::PlaneStress, only);
         match self.dim {
-            2 => self.stresses::<2, 3>(wu, m, plane_stress, sink),
-            _ => self.stresses::<3, 4>(wu, m, plane_stress, sink),
+            2 => self.stresses::<2, 3>(wu, m, how, sink),
+            _ => self.stresses::<3, 4>(wu, m, how, sink),
         }
     }
 
@@ -643,7 +665,7 @@ impl Discretization {
         &self,
         [w, u]: [&[f64]; 2],
         m: Option<&[f64]>,
-        plane_stress: bool,
+        (plane_stress, only): (bool, StressCells),
         mut sink: impl FnMut([f64; 6], f64),
     ) {
         let (r, n) = (self.r, self.n_dofs);
@@ -700,14 +722,21 @@ impl Discretization {
             );
         };
         let materials = &self.materials.of_cell;
+        let each = |one: &mut dyn FnMut(usize)| match only {
+            StressCells::Only(cells) => cells.iter().for_each(|&c| one(c)),
+            _ => (0..self.cells.len()).for_each(one),
+        };
+        let mut of_cell = |t: &Cell, material: u32| {
+            let grad = std::array::from_fn(|i| std::array::from_fn(|a| t.grad[i][a]));
+            cell(std::array::from_fn(|i| t.nodes[i]), &grad, material);
+        };
         // A rank of several holds the cells already; packing them again would cost rank 0,
-        // which writes the frames and history.csv, 112 bytes a tetrahedron more than the
-        // others hold (a frame is read beside PETSc's solves, not beside a factor).
-        if self.own.is_some() {
-            for (c, &material) in self.cells.iter().zip(materials) {
-                let grad = std::array::from_fn(|i| std::array::from_fn(|a| c.grad[i][a]));
-                cell(std::array::from_fn(|i| c.nodes[i]), &grad, material);
-            }
+        // which writes history.csv, 112 bytes a tetrahedron more than the others hold (a
+        // frame is written beside PETSc's solves, not beside a factor).
+        if let StressCells::Of(cells, materials) = only {
+            (cells.iter().zip(materials)).for_each(|(t, &material)| of_cell(t, material));
+        } else if self.own.is_some() {
+            each(&mut |c| of_cell(&self.cells[c], materials[c]));
         } else {
             let packed = self
                 .stress_cells
@@ -715,9 +744,7 @@ impl Discretization {
             let (grads, _) = packed.grad.as_chunks::<D>();
             let (grads, _) = grads.as_chunks::<N>();
             let (cells, _) = packed.nodes.as_chunks::<N>();
-            for ((nodes, grad), &material) in cells.iter().zip(grads).zip(materials) {
-                cell(nodes.map(|n| n as usize), grad, material);
-            }
+            each(&mut |c| cell(cells[c].map(|n| n as usize), &grads[c], materials[c]));
         }
     }
 
@@ -749,14 +776,21 @@ impl Discretization {
     }
 
     /// Lets go of the cells and of each cell's material and region (`materials.distinct`
-    /// stays): on a rank of several other than rank 0, which computes no stress, norm,
-    /// reaction or frame (rank 0 does them all), nothing reads them once the matrices are
-    /// assembled and the rank's layout is made. [`Discretization::stress`] and
+    /// stays): on a rank of several other than rank 0, which computes the norms and
+    /// history.csv's stresses, nothing reads them once the matrices are assembled and the
+    /// rank's layout is made; its piece of the frames makes its own cells
+    /// ([`Discretization::make_cells`]). [`Discretization::stress`] and
     /// [`Discretization::norms`] would see an empty mesh afterwards.
     pub fn forget_cells(&mut self) {
         self.cells = Vec::new();
         self.materials.of_cell = Vec::new();
         self.materials.region = Vec::new();
+    }
+
+    /// The cells of the nodes `nodes` (dim + 1 a cell), made from the nodes' coordinates as
+    /// the discretization made its own: the same bits.
+    pub fn make_cells(&self, nodes: &[usize]) -> Vec<Cell> {
+        cells_of(self.dim, nodes, &self.nodes)
     }
 }
 

@@ -157,6 +157,10 @@ pub struct Geometry<'a> {
     pub region: &'a [i32],
     pub material_region: &'a [i32],
     pub pieces: &'a [u32],
+    /// With `pieces`: each rank writes its own piece of a frame ([`OwnPiece`]), and the
+    /// series only lists them in the frame's `.pvtu` ([`Series::list_pieces`]); else the
+    /// series writes every piece from the frame's whole fields.
+    pub pieces_by_ranks: bool,
 }
 
 impl<'a> Geometry<'a> {
@@ -267,7 +271,7 @@ pub fn vtu_name(step: usize) -> String {
     format!("solution_{step:06}.vtu")
 }
 
-pub use pvtu::pvtu_name;
+pub use pvtu::{pvtu_name, OwnPiece, PieceMesh};
 
 /// A named field: `components` values per point (or per cell), row-major.
 #[derive(Clone, Copy, Debug)]
@@ -523,7 +527,7 @@ impl Series {
             owned(&frame.point_data, points, "point")?,
             owned(&frame.cell_data, cells, "cell")?,
         );
-        self.send(frame.step, frame.time, name, move || fields)
+        self.send(frame.step, frame.time, (name, self.sizes), move || fields)
     }
 
     /// As [`Series::write`], for fields that `make` computes on the writer thread: (point
@@ -537,7 +541,21 @@ impl Series {
         make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
     ) -> Result<PathBuf> {
         let name = self.file_name(step, time)?;
-        self.send(step, time, name, make)
+        self.send(step, time, (name, self.sizes), make)
+    }
+
+    /// Lists step `step`'s frame, whose pieces every rank has written ([`OwnPiece`]), in its
+    /// `.pvtu` (a series whose geometry has `pieces_by_ranks`); `fields` are the frame's
+    /// (point fields, cell fields) by name and components, without values.
+    pub fn list_pieces(
+        &mut self,
+        step: usize,
+        time: f64,
+        fields: (Vec<OwnedField>, Vec<OwnedField>),
+    ) -> Result<PathBuf> {
+        let name = self.file_name(step, time)?;
+        // Fields of no point and no cell: the sizes that the writer thread checks.
+        self.send(step, time, (name, (0, 0)), move || fields)
     }
 
     /// The file (in the series' directory) of step `step`'s frame; a non-finite time is an
@@ -555,17 +573,17 @@ impl Series {
         })
     }
 
-    /// Lists the frame and queues it: the thread makes its fields, checks them and keeps
-    /// those chosen, in the chosen precision.
+    /// Lists the frame (its file `name`) and queues it: the thread makes its fields, checks
+    /// them against `sizes` (points, cells) and keeps those chosen, in the chosen precision.
     fn send(
         &mut self,
         step: usize,
         time: f64,
-        name: String,
+        (name, sizes): (String, (usize, usize)),
         make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
     ) -> Result<PathBuf> {
         let path = self.dir.join(&name);
-        let arrays = arrays(self.options.clone(), self.sizes, path.clone(), step, make);
+        let arrays = arrays(self.options.clone(), sizes, path.clone(), step, make);
         match &mut self.sink {
             Sink::Vtu { writer, .. } => {
                 relist(&mut self.files, step, time, name);
@@ -714,26 +732,35 @@ fn arrays(
     step: usize,
     make: impl FnOnce() -> (Vec<OwnedField>, Vec<OwnedField>) + Send + 'static,
 ) -> impl FnOnce() -> Result<(Vec<Array>, Vec<Array>)> + Send + 'static {
-    move || {
-        let (points, cells) = make();
-        let checked = |fields: Vec<OwnedField>, count, what| {
-            let sizes = fields
-                .iter()
-                .map(|f| (&f.name[..], f.components, f.values.len()));
-            check_fields(sizes, count, what).map_err(|msg| frame_error(&at, step, msg))?;
-            Ok::<_, Error>(
-                fields
-                    .into_iter()
-                    .filter(|f| options.wants(&f.name))
-                    .map(|f| f.array(options.precision))
-                    .collect::<Vec<_>>(),
-            )
-        };
-        Ok((
-            checked(points, sizes.0, "point")?,
-            checked(cells, sizes.1, "cell")?,
-        ))
-    }
+    move || checked_arrays(&options, (&at, step), make(), sizes)
+}
+
+/// The arrays of a frame's fields (`fields`: point fields, cell fields; `sizes`: the
+/// points and cells they must cover), checked and narrowed to what `options` asks for; an
+/// error names the frame's file `at` and its step.
+pub(super) fn checked_arrays(
+    options: &Options,
+    (at, step): (&Path, usize),
+    (points, cells): (Vec<OwnedField>, Vec<OwnedField>),
+    sizes: (usize, usize),
+) -> Result<(Vec<Array>, Vec<Array>)> {
+    let checked = |fields: Vec<OwnedField>, count, what| {
+        let sizes = fields
+            .iter()
+            .map(|f| (&f.name[..], f.components, f.values.len()));
+        check_fields(sizes, count, what).map_err(|msg| frame_error(at, step, msg))?;
+        Ok::<_, Error>(
+            fields
+                .into_iter()
+                .filter(|f| options.wants(&f.name))
+                .map(|f| f.array(options.precision))
+                .collect::<Vec<_>>(),
+        )
+    };
+    Ok((
+        checked(points, sizes.0, "point")?,
+        checked(cells, sizes.1, "cell")?,
+    ))
 }
 
 /// Lists the .vtu of `step` in the series: a new entry, or (where a step is written again)

@@ -29,16 +29,19 @@
 //! `.pvtu` no longer lists (a resume on fewer ranks) are removed once the frame is written:
 //! a step has one frame on disk.
 //!
-//! Rank 0 writes every piece, on its writer thread, since every rank holds the whole
-//! solution today (docs/cluster.md); the layout is the one a run whose ranks hold only
-//! their part will write piece by piece.
+//! In a run, each rank writes its own piece ([`OwnPiece`], from the fields of its piece's
+//! cells alone) and rank 0's series lists the pieces in the `.pvtu` once every rank's is on
+//! disk (`Series::list_pieces`; the geometry's `pieces_by_ranks`); a series handed whole
+//! frames (`Series::write`) writes every piece itself.
 
+use std::borrow::Cow;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use super::vtu::{array_attrs, escape_attr, global_ids, Grid, Job, Vtu, GLOBAL_IDS};
 use super::writer::{Sink, Written};
-use super::{pvd, vtu_name, write_atomic, Array, Compression, Geometry, Values};
+use super::{checked_arrays, pvd, vtu_name, write_atomic, Array, Compression, Geometry};
+use super::{Options, OwnedField, Values};
 use crate::{Error, Result};
 
 /// The `.pvtu` of step `step`: `solution_{step:06}.pvtu`.
@@ -114,9 +117,14 @@ struct Piece {
     cells: Vec<usize>,
 }
 
-/// The pieces of every frame of a series.
+/// The pieces of every frame of a series: written here from a frame's whole fields, or
+/// (`Geometry::pieces_by_ranks`, a run) by each rank ([`OwnPiece`]) before the series
+/// lists them (`Series::list_pieces`).
 pub(super) struct Pieces {
+    /// Each piece's mesh where this writes the pieces; empty where the ranks do.
     pieces: Vec<Piece>,
+    /// The ranks whose pieces have cells, in order: those the `.pvtu` lists.
+    ranks: Vec<usize>,
     run_id: String,
     /// The `<PCellData>` lines of the static cell arrays (`region`, `material_region`).
     statics: Vec<String>,
@@ -139,10 +147,12 @@ impl Pieces {
         for (c, &p) in g.pieces.iter().enumerate() {
             cells_of[p as usize].push(c);
         }
+        let ranks = (0..count).filter(|&r| !cells_of[r].is_empty()).collect();
         let mut pieces = Vec::new();
         for (rank, cells) in cells_of.into_iter().enumerate() {
-            if !cells.is_empty() {
-                pieces.push(piece(g, rank, cells, run_id, compression)?);
+            if !cells.is_empty() && !g.pieces_by_ranks {
+                let mesh = PieceMesh::of(g, rank, cells);
+                pieces.push(Piece::new(mesh, run_id, compression)?);
             }
         }
         let statics = g
@@ -152,6 +162,7 @@ impl Pieces {
             .collect();
         Ok(Pieces {
             pieces,
+            ranks,
             run_id: run_id.to_string(),
             statics,
         })
@@ -162,26 +173,22 @@ impl Pieces {
         self.pieces.iter_mut().for_each(|p| p.grid.prepare());
     }
 
-    /// Writes the frame `v` (whole-mesh fields; `v.path` its `.pvtu`): every piece, then the
+    /// Writes the frame `v` (`v.path` its `.pvtu`): every piece from the whole-mesh fields
+    /// (unless the ranks wrote them: then `v`'s arrays only name the fields), then the
     /// `.pvtu`; removes what another layout or rank count left of this step.
     pub(super) fn write(&mut self, v: &Vtu) -> Result<()> {
         let parent = v.path.parent().unwrap_or(Path::new("."));
         let (dir_name, _) = piece_name(v.step, 0);
-        let dir = parent.join(&dir_name);
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        let mut sources = Vec::with_capacity(self.pieces.len());
         for p in &mut self.pieces {
-            let (_, file) = piece_name(v.step, p.rank);
-            let point_data: Vec<Array> =
-                v.point_data.iter().map(|a| gather(a, &p.points)).collect();
-            let cell_data: Vec<Array> = v.cell_data.iter().map(|a| gather(a, &p.cells)).collect();
-            p.grid
-                .write_frame(&dir.join(&file), &point_data, &cell_data)?;
-            sources.push(format!("{dir_name}/{file}"));
+            p.write(parent, v.step, &v.point_data, (&v.cell_data, false))?;
         }
+        let sources: Vec<String> = (self.ranks.iter())
+            .map(|&r| format!("{dir_name}/{}", piece_name(v.step, r).1))
+            .collect();
+        let dir = parent.join(&dir_name);
         write_atomic(&v.path, self.xml(v, &sources).as_bytes())?;
         let _ = std::fs::remove_file(parent.join(vtu_name(v.step)));
-        remove_pieces(&dir, v.step, |r| !self.pieces.iter().any(|p| p.rank == r));
+        remove_pieces(&dir, v.step, |r| !self.ranks.contains(&r));
         Ok(())
     }
 
@@ -224,55 +231,168 @@ impl Pieces {
     }
 }
 
-/// Piece `rank` of `g`: the cells `cells` and the points they use, in the whole mesh's order.
-fn piece(
-    g: &Geometry,
+/// The mesh of piece `rank`: its cells, the points they use (both as numbered in the whole
+/// mesh, in its order) and its own numbering of them. Made during a rank's setup, while it
+/// has the mesh; encoded at the rank's first frame ([`OwnPiece::new`]).
+pub struct PieceMesh {
     rank: usize,
+    points: Vec<usize>,
     cells: Vec<usize>,
-    run_id: &str,
-    compression: Compression,
-) -> Result<Piece> {
-    let npc = g.nodes_per_cell;
-    let mut local = vec![usize::MAX; g.points.len()];
-    for &c in &cells {
-        g.cells[c * npc..(c + 1) * npc]
-            .iter()
-            .for_each(|&i| local[i] = 0);
+    /// The whole mesh's point count (of the point fields a frame hands over).
+    whole_points: usize,
+    coords: Vec<[f64; 3]>,
+    connectivity: Vec<usize>,
+    nodes_per_cell: usize,
+    region: Vec<i32>,
+    material_region: Vec<i32>,
+}
+
+impl PieceMesh {
+    /// The piece of `rank` in `g` (whose `pieces` give each cell's), or None where it has
+    /// no cells (a part without cells has no piece).
+    pub fn of_rank(g: &Geometry, rank: usize, options: &Options) -> Option<PieceMesh> {
+        let g = g.chosen(options);
+        let cells: Vec<usize> = (g.pieces.iter().enumerate())
+            .filter(|&(_, &p)| p as usize == rank)
+            .map(|(c, _)| c)
+            .collect();
+        (!cells.is_empty()).then(|| PieceMesh::of(&g, rank, cells))
     }
-    let points: Vec<usize> = (0..g.points.len()).filter(|&i| local[i] == 0).collect();
-    for (k, &i) in points.iter().enumerate() {
-        local[i] = k;
-    }
-    let coords: Vec<[f64; 3]> = points.iter().map(|&i| g.points[i]).collect();
-    let connectivity: Vec<usize> = (cells.iter())
-        .flat_map(|&c| g.cells[c * npc..(c + 1) * npc].iter().map(|&i| local[i]))
-        .collect();
-    let subset = |a: &[i32]| -> Vec<i32> {
-        match a.is_empty() {
-            true => Vec::new(),
-            false => cells.iter().map(|&c| a[c]).collect(),
+
+    /// Piece `rank` of `g`: the cells `cells` and the points they use.
+    fn of(g: &Geometry, rank: usize, cells: Vec<usize>) -> PieceMesh {
+        let npc = g.nodes_per_cell;
+        let mut local = vec![usize::MAX; g.points.len()];
+        for &c in &cells {
+            g.cells[c * npc..(c + 1) * npc]
+                .iter()
+                .for_each(|&i| local[i] = 0);
         }
-    };
-    let (region, material_region) = (subset(g.region), subset(g.material_region));
-    let grid = Grid::new(
-        &Geometry {
-            points: &coords,
-            cells: &connectivity,
+        let points: Vec<usize> = (0..g.points.len()).filter(|&i| local[i] == 0).collect();
+        for (k, &i) in points.iter().enumerate() {
+            local[i] = k;
+        }
+        let subset = |a: &[i32]| -> Vec<i32> {
+            match a.is_empty() {
+                true => Vec::new(),
+                false => cells.iter().map(|&c| a[c]).collect(),
+            }
+        };
+        PieceMesh {
+            rank,
+            whole_points: g.points.len(),
+            coords: points.iter().map(|&i| g.points[i]).collect(),
+            connectivity: (cells.iter())
+                .flat_map(|&c| g.cells[c * npc..(c + 1) * npc].iter().map(|&i| local[i]))
+                .collect(),
             nodes_per_cell: npc,
-            region: &region,
-            material_region: &material_region,
-            pieces: &[],
-        },
-        run_id,
-        compression,
-    )?
-    .with_global_ids(&points);
-    Ok(Piece {
-        rank,
-        grid,
-        points,
-        cells,
-    })
+            region: subset(g.region),
+            material_region: subset(g.material_region),
+            points,
+            cells,
+        }
+    }
+
+    /// The piece's cells, numbered in the whole mesh, in its order.
+    pub fn cells(&self) -> &[usize] {
+        &self.cells
+    }
+
+    /// The nodes of the piece's cells, numbered in the whole mesh (`nodes_per_cell` a cell).
+    pub fn cell_nodes(&self) -> Vec<usize> {
+        self.connectivity.iter().map(|&k| self.points[k]).collect()
+    }
+}
+
+impl Piece {
+    /// The piece of `mesh`, its mesh encoded ([`Grid::new`]) with the global ids.
+    fn new(mesh: PieceMesh, run_id: &str, compression: Compression) -> Result<Piece> {
+        let grid = Grid::new(
+            &Geometry {
+                points: &mesh.coords,
+                cells: &mesh.connectivity,
+                nodes_per_cell: mesh.nodes_per_cell,
+                region: &mesh.region,
+                material_region: &mesh.material_region,
+                pieces: &[],
+                pieces_by_ranks: false,
+            },
+            run_id,
+            compression,
+        )?
+        .with_global_ids(&mesh.points);
+        Ok(Piece {
+            rank: mesh.rank,
+            grid,
+            points: mesh.points,
+            cells: mesh.cells,
+        })
+    }
+
+    /// Writes the piece of step `step`'s frame (in its directory in `parent`, made if
+    /// missing): `point_data` of the whole mesh's points, `cell_data` of the whole mesh's
+    /// cells or (`cells_own`) of the piece's alone, in its order.
+    fn write(
+        &mut self,
+        parent: &Path,
+        step: usize,
+        point_data: &[Array],
+        (cell_data, cells_own): (&[Array], bool),
+    ) -> Result<()> {
+        let (dir_name, file) = piece_name(step, self.rank);
+        let dir = parent.join(dir_name);
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        let point_data: Vec<Array> = point_data.iter().map(|a| gather(a, &self.points)).collect();
+        let cell_data: Cow<[Array]> = match cells_own {
+            true => Cow::Borrowed(cell_data),
+            false => Cow::Owned(cell_data.iter().map(|a| gather(a, &self.cells)).collect()),
+        };
+        self.grid
+            .write_frame(&dir.join(file), &point_data, &cell_data)
+    }
+}
+
+/// The piece of a run's frames that its own rank writes (a run over MPI ranks, `.vtu`
+/// frames): each frame's piece file, before rank 0 lists the pieces in the frame's
+/// `.pvtu` (`Series::list_pieces`), once every rank's is on disk.
+pub struct OwnPiece {
+    piece: Piece,
+    whole_points: usize,
+    dir: PathBuf,
+    options: Options,
+}
+
+impl OwnPiece {
+    /// The piece of `mesh` in the series of `dir`, its mesh encoded with the run id.
+    pub fn new(dir: &Path, mesh: PieceMesh, run_id: &str, options: &Options) -> Result<OwnPiece> {
+        Ok(OwnPiece {
+            whole_points: mesh.whole_points,
+            piece: Piece::new(mesh, run_id, options.compression)?,
+            dir: dir.to_path_buf(),
+            options: options.clone(),
+        })
+    }
+
+    /// The piece's cells, numbered in the whole mesh, in its order.
+    pub fn cells(&self) -> &[usize] {
+        &self.piece.cells
+    }
+
+    /// Writes step `step`'s piece: `points`, fields of the whole mesh's points, and
+    /// `cells`, fields of the piece's cells in its order; those the options leave out are
+    /// not written. A field of the wrong size is an input error naming the piece.
+    pub fn write(
+        &mut self,
+        step: usize,
+        points: Vec<OwnedField>,
+        cells: Vec<OwnedField>,
+    ) -> Result<()> {
+        let (dir_name, file) = piece_name(step, self.piece.rank);
+        let at = self.dir.join(dir_name).join(file);
+        let sizes = (self.whole_points, self.piece.cells.len());
+        let (points, cells) = checked_arrays(&self.options, (&at, step), (points, cells), sizes)?;
+        self.piece.write(&self.dir, step, &points, (&cells, true))
+    }
 }
 
 /// The values of `a` at the tuples `at`.

@@ -588,6 +588,7 @@ mod tests {
                     region: &[7, 9],
                     material_region: &[],
                     pieces: &[],
+                    pieces_by_ranks: false,
                 };
                 let options = Options {
                     compression,

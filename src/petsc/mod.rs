@@ -71,6 +71,8 @@ extern "C" {
     fn vc_world(rank: *mut c_int, size: *mut c_int) -> c_int;
     fn vc_max_over_ranks(value: *mut c_int) -> c_int;
     fn vc_from_rank0(value: *mut c_int) -> c_int;
+    fn vc_max_real_over_ranks(value: *mut f64) -> c_int;
+    fn vc_from_rank0_bytes(bytes: *mut c_char, n: c_int) -> c_int;
     fn vc_abort(code: c_int);
     #[allow(clippy::too_many_arguments)]
     fn vc_ksp_create(
@@ -192,6 +194,27 @@ pub fn from_rank0(mut value: i32) -> Result<i32> {
     // SAFETY: PETSc (and MPI) is initialized; the shim reads and writes one int.
     check(unsafe { vc_from_rank0(&mut value) }, "MPI_Bcast")?;
     Ok(value)
+}
+
+/// The largest of every rank's `value` (collective: every rank calls it).
+pub fn max_real_over_ranks(mut value: f64) -> Result<f64> {
+    // SAFETY: PETSc (and MPI) is initialized; the shim reads and writes one double.
+    check(
+        unsafe { vc_max_real_over_ranks(&mut value) },
+        "MPI_Allreduce",
+    )?;
+    Ok(value)
+}
+
+/// Rank 0's `bytes` (collective: every rank calls it with as many).
+pub fn from_rank0_bytes(bytes: &mut [u8]) -> Result<()> {
+    let n = c_int::try_from(bytes.len())
+        .map_err(|_| Error::solve("MPI_Bcast: more bytes than an int counts"))?;
+    // SAFETY: PETSc (and MPI) is initialized; the shim reads and writes the n bytes.
+    check(
+        unsafe { vc_from_rank0_bytes(bytes.as_mut_ptr().cast(), n) },
+        "MPI_Bcast",
+    )
 }
 
 /// Ends every rank with exit status `code` (`MPI_Abort`).

@@ -47,6 +47,20 @@ int vc_max_over_ranks(int *value)
   return 0;
 }
 
+/* *value ← the largest of every rank's *value (collective). */
+int vc_max_real_over_ranks(double *value)
+{
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, value, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD));
+  return 0;
+}
+
+/* bytes[0..n) ← rank 0's (collective; every rank gives the same n). */
+int vc_from_rank0_bytes(char *bytes, int n)
+{
+  PetscCallMPI(MPI_Bcast(bytes, n, MPI_CHAR, 0, PETSC_COMM_WORLD));
+  return 0;
+}
+
 /* *value ← rank 0's *value (collective). */
 int vc_from_rank0(int *value)
 {

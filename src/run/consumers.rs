@@ -12,7 +12,7 @@
 //! - [`HistoryCsv`]: `history.csv`, the forces on the body at every step (`history_csv`);
 //! - [`Progress`]: the progress bar on a terminal, a progress line every 10 s in a log.
 
-use super::frame::write_step;
+use super::frame::{due, write_step, OwnFrames};
 use super::history_csv::HistoryCsv;
 use crate::checkpoint::{self, RunLog};
 use crate::fem::Discretization;
@@ -66,20 +66,28 @@ impl StopRule {
     }
 }
 
-/// A follower rank's observer (`crate::ranks`): it writes nothing, and stops with the others.
-pub(super) struct Follower(pub StopRule);
+/// A follower rank's observer (`crate::ranks`): it writes its piece of the frames where
+/// the ranks write their own, nothing else, and stops with the others.
+pub(super) struct Follower<'a> {
+    pub stop: StopRule,
+    pub frames: Option<OwnFrames>,
+    pub disc: &'a Discretization,
+}
 
-impl Observer for Follower {
+impl Observer for Follower<'_> {
     fn stop_after(&mut self, n: usize) -> bool {
-        self.0.asks(n)
+        self.stop.asks(n)
     }
 
-    fn solved(&mut self, _: &Solved) -> Result<()> {
+    fn solved(&mut self, s: &Solved) -> Result<()> {
+        if let Some(frames) = self.frames.as_mut().filter(|f| f.due(s)) {
+            frames.write(self.disc, &s.step, &state_flags(&s.step))?;
+        }
         Ok(())
     }
 
     fn abandoned(&mut self, _: &TimeLoop) -> Result<()> {
-        self.0.share_signal();
+        self.stop.share_signal();
         Ok(())
     }
 }
@@ -162,6 +170,8 @@ impl Statistics {
 /// The ParaView series: a frame at every `output.every`-th step and at the last.
 pub(super) struct Frames<'a> {
     pub series: Series,
+    /// Rank 0's piece where the ranks write their own pieces of a frame.
+    pub pieces: Option<OwnFrames>,
     /// Shared with the writer thread, which computes the frames' fields.
     pub disc: Arc<Discretization>,
     pub rows: Arc<Rows>,
@@ -172,8 +182,16 @@ impl Frames<'_> {
     /// Writes the step's frame if one is due; the receiver of its largest von Mises stress
     /// when the frame has that field (`write_step`).
     fn solved(&mut self, s: &Solved, flags: &[bool]) -> Result<Option<Receiver<f64>>> {
-        if !(s.step.n.is_multiple_of(self.scene.output.every) || s.last) {
+        if !due(self.scene.output.every, s) {
             return Ok(None);
+        }
+        if let Some(pieces) = &mut self.pieces {
+            let (fields, largest) = pieces.write(&self.disc, &s.step, flags)?;
+            let stress = fields.1.iter().any(|f| f.name == "von_mises");
+            self.series.list_pieces(s.step.n, s.step.t, fields)?;
+            let (tx, rx) = std::sync::mpsc::sync_channel(1);
+            let _ = tx.send(largest);
+            return Ok(stress.then_some(rx));
         }
         let (disc, rows) = (&self.disc, &self.rows);
         let model = self.scene.mesh.model;

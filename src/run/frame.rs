@@ -2,22 +2,24 @@
 //! step's velocity w_n, displacement u_n, memory m_n and multipliers z_n, handed to the
 //! series (`output`), which knows files, not the model.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 
-use crate::fem::Discretization;
+use crate::fem::{Cell, Discretization, StressCells};
 use crate::mesh::Mesh;
-use crate::output::{Geometry, Options, OwnedField, Resumed, Series};
-use crate::scene::Model;
+use crate::output::{Geometry, Options, OwnPiece, OwnedField, PieceMesh, Resumed, Series};
+use crate::ranks::Ranks;
+use crate::scene::{Model, Scene};
 use crate::solver::Rows;
-use crate::time_loop::Step;
+use crate::time_loop::{Solved, Step};
 use crate::Result;
 
 /// The series of a run on `mesh` (discretized as `disc`) in `out`, its frames in a piece
 /// per rank where `own` holds the ranks' layout (a run over several MPI ranks): a new one,
 /// or for a resume from a checkpoint of step n ≥ 1 the existing one, verified and continued
-/// after step n − 1 ([`Series::resume`]).
+/// after step n − 1 ([`Series::resume`]). Where the ranks write their own pieces, also
+/// rank 0's piece's mesh ([`piece_of_rank`]).
 pub(super) fn open_series(
     out: &Path,
     (mesh, disc): (&Mesh, &Discretization),
@@ -25,22 +27,53 @@ pub(super) fn open_series(
     run_id: &str,
     options: &Options,
     resumed: Option<&Resumed>,
-) -> Result<Series> {
+) -> Result<(Series, Option<Option<PieceMesh>>)> {
+    with_geometry((mesh, disc), own, options, |geometry| {
+        let series = match resumed {
+            Some(r) if r.step > 0 => Series::resume(out, geometry, run_id, options, r),
+            _ => Series::create(out, geometry, run_id, options),
+        }?;
+        Ok((series, piece_of(geometry, 0, options)))
+    })
+}
+
+/// Rank `rank`'s piece of the frames of `mesh` where the ranks write their own (`own`:
+/// their layout; `.vtu` frames): its mesh, None inside where its part has no cells; None
+/// where the frames are not in pieces.
+pub(super) fn piece_of_rank(
+    (mesh, disc): (&Mesh, &Discretization),
+    own: Option<&crate::ranks::Own>,
+    options: &Options,
+    rank: usize,
+) -> Option<Option<PieceMesh>> {
+    with_geometry((mesh, disc), own, options, |g| piece_of(g, rank, options))
+}
+
+/// [`piece_of_rank`] of the frames' geometry `g`.
+fn piece_of(g: &Geometry, rank: usize, options: &Options) -> Option<Option<PieceMesh>> {
+    (!g.pieces.is_empty()).then(|| PieceMesh::of_rank(g, rank, options))
+}
+
+/// `f` of the geometry of the frames of `mesh` (discretized as `disc`): each cell's piece
+/// where the ranks write their own ([`pieces`]).
+fn with_geometry<T>(
+    (mesh, disc): (&Mesh, &Discretization),
+    own: Option<&crate::ranks::Own>,
+    options: &Options,
+    f: impl FnOnce(&Geometry) -> T,
+) -> T {
     let (cells, nodes_per_cell) = mesh.cell_nodes();
     let region = region(mesh);
     let pieces = pieces(disc, (&cells, nodes_per_cell), own, options);
-    let geometry = Geometry {
+    f(&Geometry {
         points: &mesh.nodes,
         cells: &cells,
         nodes_per_cell,
         region: &region,
         material_region: &disc.materials.region,
         pieces: &pieces,
-    };
-    match resumed {
-        Some(r) if r.step > 0 => Series::resume(out, &geometry, run_id, options, r),
-        _ => Series::create(out, &geometry, run_id, options),
-    }
+        pieces_by_ranks: true,
+    })
 }
 
 /// Each cell's piece where the frames of a run over several ranks (`own`: their layout,
@@ -59,6 +92,148 @@ fn pieces(
     }
     let _ = (disc, cells, nodes_per_cell, own, options);
     Vec::new()
+}
+
+/// A rank's own piece of the frames of a run over several ranks whose frames are `.vtu`
+/// files: at a frame's step every rank computes the fields of its piece's cells (and the
+/// point fields) and writes its piece, the ranks agree that every piece is on disk
+/// ([`Ranks::written`], which also gives the largest von Mises stress of them all), and
+/// rank 0's series then lists them in the frame's `.pvtu` (`Series::list_pieces`). No rank
+/// computes the whole mesh's cell fields.
+///
+/// The piece's encoded mesh, and on a follower its cells, are made at the first frame,
+/// after PETSc's setup, where a rank peaks: until then the rank keeps the piece's mesh
+/// alone (its node numbers and points), and a follower none of the cells that assembled
+/// its columns (`Discretization::forget_cells`).
+pub(super) struct OwnFrames {
+    piece: Piece,
+    /// The series' directory and the run id, which the piece's file records.
+    out: (PathBuf, String),
+    every: usize,
+    model: Model,
+    options: Options,
+    ranks: Ranks,
+}
+
+/// A rank's piece of the frames, before and after its first frame.
+enum Piece {
+    /// This rank's part has no cells.
+    None,
+    /// Before the first frame: the piece's mesh, and (a follower) the material of each of
+    /// its cells (rank 0 holds every cell with its material).
+    Mesh(PieceMesh, Option<Vec<u32>>),
+    /// The piece and (a follower) its cells and their materials.
+    Made(Box<OwnPiece>, Option<(Vec<Cell>, Vec<u32>)>),
+}
+
+impl OwnFrames {
+    /// This rank's frames of `mesh` (its piece's, if any) in the series of `out`; on a
+    /// follower, whose discretization keeps no cell, with its cells' `materials`.
+    pub fn new(
+        (mesh, materials): (Option<PieceMesh>, Option<Vec<u32>>),
+        (out, run_id): (&Path, &str),
+        scene: &Scene,
+        ranks: Ranks,
+    ) -> OwnFrames {
+        OwnFrames {
+            piece: mesh.map_or(Piece::None, |m| Piece::Mesh(m, materials)),
+            out: (out.to_path_buf(), run_id.to_string()),
+            every: scene.output.every,
+            model: scene.mesh.model,
+            options: scene.output.options.clone(),
+            ranks,
+        }
+    }
+
+    /// Whether the frame of step `s` is due ([`due`]).
+    pub fn due(&self, s: &Solved) -> bool {
+        due(self.every, s)
+    }
+
+    /// Writes this rank's piece of step `step`'s frame (`active`: the run's state flags),
+    /// and waits until every rank has written its own (collective). Returns the frame's
+    /// fields by name and components (their values left out: what the `.pvtu` lists) and
+    /// the largest von Mises stress of every rank's cells (0 without that field).
+    pub fn write(
+        &mut self,
+        disc: &Discretization,
+        step: &Step,
+        active: &[bool],
+    ) -> Result<(Named, f64)> {
+        let (names, mine) = match self.write_piece(disc, step, active) {
+            Ok((names, vm)) => (names, Ok(vm)),
+            Err(e) => (Named::default(), Err(e)),
+        };
+        Ok((names, self.ranks.written(mine)?))
+    }
+
+    /// [`OwnFrames::write`] on this rank alone: the fields' names and its cells' largest
+    /// von Mises stress.
+    fn write_piece(
+        &mut self,
+        disc: &Discretization,
+        step: &Step,
+        active: &[bool],
+    ) -> Result<(Named, f64)> {
+        self.make(disc)?;
+        let cells = match &self.piece {
+            Piece::Made(_, Some((cells, materials))) => StressCells::Of(cells, materials),
+            Piece::Made(piece, None) => StressCells::Only(piece.cells()),
+            _ if self.ranks.is_first() => StressCells::Only(&[]),
+            _ => return Ok((Named::default(), 0.0)),
+        };
+        let stresses = self.options.wants("stress") || self.options.wants("von_mises");
+        let [w, u, z] = [step.w, step.u, step.z];
+        let cells = stresses.then_some(cells);
+        let fields = fields(
+            disc,
+            self.model,
+            step.rows,
+            active,
+            cells,
+            [w, u, z],
+            step.m,
+        );
+        let (points, cells) = fields;
+        let named = |fields: &[OwnedField]| -> Vec<OwnedField> {
+            let named = |f: &OwnedField| OwnedField {
+                name: f.name.clone(),
+                components: f.components,
+                values: Vec::new(),
+            };
+            fields.iter().map(named).collect()
+        };
+        let names = (named(&points), named(&cells));
+        let von_mises = cells.iter().find(|f| f.name == "von_mises");
+        let vm = von_mises.map_or(0.0, |f| max_von_mises(&f.values));
+        if let Piece::Made(piece, _) = &mut self.piece {
+            piece.write(step.n, points, cells)?;
+        }
+        Ok((names, vm))
+    }
+
+    /// Makes the piece (its mesh encoded) and a follower's cells, at the first frame.
+    fn make(&mut self, disc: &Discretization) -> Result<()> {
+        if !matches!(self.piece, Piece::Mesh(..)) {
+            return Ok(());
+        }
+        let Piece::Mesh(mesh, materials) = std::mem::replace(&mut self.piece, Piece::None) else {
+            return Ok(());
+        };
+        let cells = materials.map(|m| (disc.make_cells(&mesh.cell_nodes()), m));
+        let (out, run_id) = &self.out;
+        let piece = OwnPiece::new(out, mesh, run_id, &self.options)?;
+        self.piece = Piece::Made(Box::new(piece), cells);
+        Ok(())
+    }
+}
+
+/// A frame's point fields and cell fields by name and components, without values.
+pub(super) type Named = (Vec<OwnedField>, Vec<OwnedField>);
+
+/// Whether a run writes the frame of step `s`: at every `every`-th step and the last.
+pub(super) fn due(every: usize, s: &Solved) -> bool {
+    s.step.n.is_multiple_of(every) || s.last
 }
 
 /// The gmsh physical tag of each cell: the first group of the cells' dimension (in file
@@ -104,7 +279,7 @@ pub(super) fn write_step(
             model,
             &rows,
             &active,
-            stress,
+            stress.then_some(StressCells::All),
             [&w, &u, &z],
             m.as_deref(),
         );
@@ -122,14 +297,15 @@ fn max_von_mises(von_mises: &[f64]) -> f64 {
     von_mises.iter().copied().fold(0.0, f64::max)
 }
 
-/// The fields of a step's frame (docs/output.md): point fields, then cell fields
-/// (the stress and von Mises stress when `stress`), from `[w, u, z]` and m.
+/// The fields of a step's frame (docs/output.md): point fields, then cell fields (the
+/// stress and von Mises stress of the cells `cells` says, where it is Some), from
+/// `[w, u, z]` and m.
 fn fields(
     disc: &Discretization,
     model: Model,
     rows: &Rows,
     active: &[bool],
-    stress: bool,
+    cells: Option<StressCells>,
     [w, u, z]: [&[f64]; 3],
     m: Option<&[f64]>,
 ) -> (Vec<OwnedField>, Vec<OwnedField>) {
@@ -162,8 +338,8 @@ fn fields(
         values,
     };
     let mut cell_data = Vec::new();
-    if stress {
-        let (stress, von_mises) = disc.stress(w, u, m, model);
+    if let Some(only) = cells {
+        let (stress, von_mises) = disc.stress([w, u], m, model, only);
         cell_data.push(field("stress", 6, stress));
         cell_data.push(field("von_mises", 1, von_mises));
     }

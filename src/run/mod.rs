@@ -33,6 +33,7 @@ use crate::checkpoint::{self, RunLog};
 use crate::fem::reactions::Reactions;
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
+use crate::output::PieceMesh;
 use crate::output::{write_atomic, Resumed, Series};
 use crate::ranks::Ranks;
 use crate::scene::{read_scene_file, MeshChoice, Scene};
@@ -41,7 +42,7 @@ use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Follower, Frames, Progress, Statistics, StopRule};
 use dir::DirLock;
-use frame::open_series;
+use frame::{open_series, OwnFrames};
 use history_csv::HistoryCsv;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -167,6 +168,7 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     }
     let start = Instant::now();
     let ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
+    tell_followers_the_series(opts, &ready.opened)?;
     let tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
     // a signal came first (then it stays as it was).
@@ -222,6 +224,8 @@ impl Solving {
 struct Opened {
     identity: checkpoint::Identity,
     series: Series,
+    /// Rank 0's piece of the frames where the ranks write their own (`frame::OwnFrames`).
+    pieces: Option<OwnFrames>,
     out: PathBuf,
     lock: DirLock,
 }
@@ -254,7 +258,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     let disc = Arc::new(disc);
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let series = open_series(
+    let (series, first) = open_series(
         &out,
         (&mesh, &disc),
         own.as_ref(),
@@ -262,6 +266,8 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
         &scene.output.options,
         None,
     )?;
+    let rank0 = |mesh| OwnFrames::new((mesh, None), (&out, &identity.run_id), &scene, opts.ranks);
+    let pieces = first.map(rank0);
     stage()?;
     let plans = crate::history::Plans::new(&scene)?;
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
@@ -273,6 +279,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
         opened: Opened {
             identity,
             series,
+            pieces,
             out,
             lock,
         },
@@ -327,6 +334,27 @@ fn tell_followers<T>(opts: &RunOptions, committed: &std::result::Result<T, i32>)
     opts.ranks.first_says(code).map(|_| ())
 }
 
+/// Tells the followers the run id and the output directory (collective on several ranks),
+/// which they write their pieces of the frames with ([`series_of_follower`]).
+fn tell_followers_the_series(opts: &RunOptions, opened: &Opened) -> Result<()> {
+    let out = std::path::absolute(&opened.out).unwrap_or_else(|_| opened.out.clone());
+    let text = format!("{}\n{}", opened.identity.run_id, out.display());
+    opts.ranks.first_says_text(&text).map(|_| ())
+}
+
+/// A follower's frames: its piece of them, if the ranks write their own (`piece`: its mesh
+/// and its cells' materials, made during its setup), in rank 0's directory.
+fn series_of_follower(
+    piece: Option<(Option<PieceMesh>, Option<Vec<u32>>)>,
+    scene: &Scene,
+    opts: &RunOptions,
+) -> Result<Option<OwnFrames>> {
+    let text = opts.ranks.first_says_text("")?;
+    let (run_id, out) = text.split_once('\n').unwrap_or((&text, "."));
+    let frames = |p| OwnFrames::new(p, (Path::new(out), run_id), scene, opts.ranks);
+    Ok(piece.map(frames))
+}
+
 /// What a follower rank follows: a run of the scene at its path, or a resume of the
 /// checkpoint at its path.
 #[derive(Clone, Copy)]
@@ -354,15 +382,27 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         let own = opts
             .ranks
             .keep_own_columns(&mut disc, scene.solver.history, made)?;
-        // Before PETSc's setup, the rank's peak: rank 0 alone computes from the cells.
+        let options = &scene.output.options;
+        let piece = frame::piece_of_rank((&mesh, &disc), own.as_ref(), options, opts.ranks.rank);
+        let of_cell = &disc.materials.of_cell;
+        let materials =
+            |p: &PieceMesh| -> Vec<u32> { p.cells().iter().map(|&c| of_cell[c]).collect() };
+        let piece = piece.map(|p| {
+            let materials = p.as_ref().map(materials);
+            (p, materials)
+        });
+        // Before PETSc's setup, the rank's peak: rank 0 alone computes the norms and
+        // history.csv's stresses from every cell; a follower's piece makes its own cells
+        // at its first frame, after that peak.
         disc.forget_cells();
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,
         };
-        Ok((scene, disc, Solving { solver, own, plans }, cp))
+        Ok((scene, (disc, piece), Solving { solver, own, plans }, cp))
     };
-    let (scene, disc, solving, cp) = opts.ranks.agree(ready())?;
+    let (scene, (disc, piece), solving, cp) = opts.ranks.agree(ready())?;
+    let frames = series_of_follower(piece, &scene, opts)?;
     let mut tl = solving.time_loop(&scene, &disc)?;
     if let Some(cp) = &cp {
         tl.restore(cp.saved(disc.n_dofs, tl.rows().len())?)?;
@@ -372,11 +412,15 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         code => return Err(Error::Elsewhere(code)),
     }
     follow_signals(&mut tl, opts);
-    let mut follower = Follower(StopRule {
-        after: opts.stop_after,
-        interrupt: opts.interrupt.clone(),
-        ranks: opts.ranks,
-    });
+    let mut follower = Follower {
+        stop: StopRule {
+            after: opts.stop_after,
+            interrupt: opts.interrupt.clone(),
+            ranks: opts.ranks,
+        },
+        frames,
+        disc: &disc,
+    };
     tl.run(scene.time.steps, &mut follower)?;
     Ok(Outcome::Followed {
         signal: opts.interrupt.signal(),
@@ -409,6 +453,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     }
     let start = Instant::now();
     let (ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
+    tell_followers_the_series(opts, &ready.opened)?;
     let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     let saved = cp.saved(ready.disc.n_dofs, tl.rows().len())?;
     tl.restore(saved)
@@ -491,7 +536,7 @@ fn prepare_resume(
         );
     }
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let series = open_series(
+    let (series, first) = open_series(
         &out,
         (&mesh, &disc),
         own.as_ref(),
@@ -499,6 +544,8 @@ fn prepare_resume(
         &scene.output.options,
         resumed.as_ref(),
     )?;
+    let rank0 = |mesh| OwnFrames::new((mesh, None), (&out, &identity.run_id), &scene, opts.ranks);
+    let pieces = first.map(rank0);
     stage()?;
     let plans = cp.plans(&scene)?;
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
@@ -510,6 +557,7 @@ fn prepare_resume(
         opened: Opened {
             identity,
             series,
+            pieces,
             out,
             lock,
         },
@@ -653,6 +701,7 @@ fn drive(d: Drive) -> Result<Outcome> {
     let Opened {
         identity,
         series,
+        pieces,
         out,
         lock: _lock,
     } = d.opened;
@@ -677,6 +726,7 @@ fn drive(d: Drive) -> Result<Outcome> {
         statistics: Statistics::new(log),
         frames: Frames {
             series,
+            pieces,
             disc: Arc::clone(d.disc),
             rows: Arc::clone(&rows),
             scene: d.scene,

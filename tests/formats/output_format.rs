@@ -32,6 +32,7 @@ fn create(
         region: &[],
         material_region: &[],
         pieces: &[],
+        pieces_by_ranks: false,
     };
     Series::create(dir, &g, RUN, &Options::default())
 }
@@ -45,6 +46,7 @@ fn reopen(dir: &Path, run: &str, last_step: usize) -> viscontact::Result<Series>
         region: &[],
         material_region: &[],
         pieces: &[],
+        pieces_by_ranks: false,
     };
     Series::reopen(dir, &g, run, &Options::default(), last_step)
 }
@@ -679,6 +681,7 @@ for kind, data in (("point", g.GetPointData()), ("cell", g.GetCellData())):
                 region: &[3, 8],
                 material_region: &[],
                 pieces: &[],
+                pieces_by_ranks: false,
             };
             let options = Options {
                 compression,
@@ -762,6 +765,7 @@ fn only_the_chosen_fields_are_written() {
         region: &[1, 2],
         material_region: &[],
         pieces: &[],
+        pieces_by_ranks: false,
     };
     let options = Options {
         fields: Some(vec!["von_mises".into()]),

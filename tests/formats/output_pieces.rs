@@ -53,6 +53,7 @@ fn with_geometry<T>(pieces: &[u32], f: impl FnOnce(&Geometry) -> T) -> T {
         region: &region,
         material_region: &[],
         pieces,
+        pieces_by_ranks: false,
     })
 }
 

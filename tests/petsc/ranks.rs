@@ -451,6 +451,41 @@ fn sigkill_of_one_rank_ends_the_others_and_the_run_resumes_from_its_checkpoint()
     }
 }
 
+/// Each rank writes its own piece of a frame. One that cannot (its piece's file is taken by
+/// a directory) fails the run on every rank (exit 1), naming its file, before the frame's
+/// `.pvtu` lists the pieces; the series and the checkpoint before it stay, and the run then
+/// resumes to the same bits as the run never stopped.
+#[test]
+fn a_rank_that_cannot_write_its_piece_fails_the_run_and_it_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let [linear, _] = both_blocks(tmp.path());
+    let dir = linear.parent().unwrap();
+    let (whole, out) = (dir.join("whole"), dir.join("o"));
+    let (code, text) = run(2, &linear, &whole, &[]);
+    assert_eq!(code, 0, "{text}");
+    let (code, text) = run(2, &linear, &out, &["--stop-after", "5"]);
+    assert_eq!(code, 0, "{text}");
+    let taken = out.join("solution_000008/solution_000008_1.vtu");
+    std::fs::create_dir_all(taken.join("in_the_way")).unwrap();
+    let (code, text) = resume(2, &out);
+    assert_eq!(code, 1, "{text}");
+    assert!(text.contains("error: rank 1:"), "{text}");
+    assert!(text.contains("solution_000008_1.vtu"), "{text}");
+    assert!(
+        text.contains("another rank could not write its piece"),
+        "{text}"
+    );
+    assert_eq!(common::summary(&out)["status"], "failed");
+    let pvd = std::fs::read_to_string(out.join("solution.pvd")).unwrap();
+    assert!(pvd.contains("solution_000007.pvtu"), "{pvd}");
+    assert!(!pvd.contains("solution_000008.pvtu"), "{pvd}");
+    assert!(!out.join("solution_000008.pvtu").exists());
+    std::fs::remove_dir_all(&taken).unwrap();
+    let (code, text) = resume(2, &out);
+    assert_eq!(code, 0, "{text}");
+    common::assert_same_series(&whole, &out, "failed at a piece, resumed on 2 ranks");
+}
+
 /// `check` and `run --emit slurm` under mpirun print once, on rank 0.
 #[test]
 fn check_on_two_ranks_prints_once() {
