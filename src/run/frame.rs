@@ -15,41 +15,57 @@ use crate::solver::Rows;
 use crate::time_loop::{Solved, Step};
 use crate::Result;
 
-/// The series of a run on `mesh` (discretized as `disc`) in `out`, its frames in a piece
-/// per rank where `own` holds the ranks' layout (a run over several MPI ranks): a new one,
-/// or for a resume from a checkpoint of step n ≥ 1 the existing one, verified and continued
-/// after step n − 1 ([`Series::resume`]). Where the ranks write their own pieces, also
-/// rank 0's piece's mesh ([`piece_of_rank`]).
+/// The series of a run of `scene` on `mesh` (discretized as `disc`) in `out`, its frames
+/// in a piece per rank where `own` holds the ranks' layout (a run over several MPI ranks): a
+/// new one, or for a resume from a checkpoint of step n ≥ 1 the existing one, verified and
+/// continued after step n − 1 ([`Series::resume`]). Where the ranks write their own pieces,
+/// also rank 0's piece of the frames.
 pub(super) fn open_series(
-    out: &Path,
+    (out, run_id): (&Path, &str),
     (mesh, disc): (&Mesh, &Discretization),
-    own: Option<&crate::ranks::Own>,
-    run_id: &str,
-    options: &Options,
+    (own, ranks): (Option<&crate::ranks::Own>, Ranks),
+    scene: &Scene,
     resumed: Option<&Resumed>,
-) -> Result<(Series, Option<Option<PieceMesh>>)> {
+) -> Result<(Series, Option<OwnFrames>)> {
+    let options = &scene.output.options;
     with_geometry((mesh, disc), own, options, |geometry| {
         let series = match resumed {
             Some(r) if r.step > 0 => Series::resume(out, geometry, run_id, options, r),
             _ => Series::create(out, geometry, run_id, options),
         }?;
-        Ok((series, piece_of(geometry, 0, options)))
+        let setup = piece_of(geometry, 0, options).map(|mesh| PieceSetup {
+            mesh,
+            materials: None,
+        });
+        let first = setup.map(|s| OwnFrames::new(s, (out, run_id), scene, ranks));
+        Ok((series, first))
     })
 }
 
-/// Rank `rank`'s piece of the frames of `mesh` where the ranks write their own (`own`:
-/// their layout; `.vtu` frames): its mesh, None inside where its part has no cells; None
-/// where the frames are not in pieces.
-pub(super) fn piece_of_rank(
+/// A rank's piece of the frames as its setup leaves it: the piece's mesh (None where its
+/// part has no cells) and, on a follower, whose discretization lets go of every cell, the
+/// material of each of the piece's cells (rank 0 holds every cell with its material).
+pub(super) struct PieceSetup {
+    mesh: Option<PieceMesh>,
+    materials: Option<Vec<u32>>,
+}
+
+/// A follower's piece of the frames of `mesh` where the ranks write their own (`own`:
+/// their layout; `.vtu` frames); None where the frames are not in pieces.
+pub(super) fn piece_of_follower(
     (mesh, disc): (&Mesh, &Discretization),
     own: Option<&crate::ranks::Own>,
     options: &Options,
     rank: usize,
-) -> Option<Option<PieceMesh>> {
-    with_geometry((mesh, disc), own, options, |g| piece_of(g, rank, options))
+) -> Option<PieceSetup> {
+    let mesh = with_geometry((mesh, disc), own, options, |g| piece_of(g, rank, options))?;
+    let of_cell = &disc.materials.of_cell;
+    let materials = (mesh.as_ref()).map(|p| p.cells().iter().map(|&c| of_cell[c]).collect());
+    Some(PieceSetup { mesh, materials })
 }
 
-/// [`piece_of_rank`] of the frames' geometry `g`.
+/// Rank `rank`'s piece of the frames' geometry `g`: its mesh, None inside where its part
+/// has no cells; None where the frames are not in pieces.
 fn piece_of(g: &Geometry, rank: usize, options: &Options) -> Option<Option<PieceMesh>> {
     (!g.pieces.is_empty()).then(|| PieceMesh::of_rank(g, rank, options))
 }
@@ -127,14 +143,14 @@ enum Piece {
 }
 
 impl OwnFrames {
-    /// This rank's frames of `mesh` (its piece's, if any) in the series of `out`; on a
-    /// follower, whose discretization keeps no cell, with its cells' `materials`.
+    /// This rank's frames of its piece `setup` in the series of `out`.
     pub fn new(
-        (mesh, materials): (Option<PieceMesh>, Option<Vec<u32>>),
+        setup: PieceSetup,
         (out, run_id): (&Path, &str),
         scene: &Scene,
         ranks: Ranks,
     ) -> OwnFrames {
+        let PieceSetup { mesh, materials } = setup;
         OwnFrames {
             piece: mesh.map_or(Piece::None, |m| Piece::Mesh(m, materials)),
             out: (out.to_path_buf(), run_id.to_string()),
@@ -182,9 +198,8 @@ impl OwnFrames {
             _ if self.ranks.is_first() => StressCells::Only(&[]),
             _ => return Ok((Named::default(), 0.0)),
         };
-        let stresses = self.options.wants("stress") || self.options.wants("von_mises");
         let [w, u, z] = [step.w, step.u, step.z];
-        let cells = stresses.then_some(cells);
+        let cells = wants_stress(&self.options).then_some(cells);
         let fields = fields(
             disc,
             self.model,
@@ -214,16 +229,15 @@ impl OwnFrames {
 
     /// Makes the piece (its mesh encoded) and a follower's cells, at the first frame.
     fn make(&mut self, disc: &Discretization) -> Result<()> {
-        if !matches!(self.piece, Piece::Mesh(..)) {
-            return Ok(());
-        }
-        let Piece::Mesh(mesh, materials) = std::mem::replace(&mut self.piece, Piece::None) else {
-            return Ok(());
+        self.piece = match std::mem::replace(&mut self.piece, Piece::None) {
+            Piece::Mesh(mesh, materials) => {
+                let cells = materials.map(|m| (disc.make_cells(&mesh.cell_nodes()), m));
+                let (out, run_id) = &self.out;
+                let piece = OwnPiece::new(out, mesh, run_id, &self.options)?;
+                Piece::Made(Box::new(piece), cells)
+            }
+            made => made,
         };
-        let cells = materials.map(|m| (disc.make_cells(&mesh.cell_nodes()), m));
-        let (out, run_id) = &self.out;
-        let piece = OwnPiece::new(out, mesh, run_id, &self.options)?;
-        self.piece = Piece::Made(Box::new(piece), cells);
         Ok(())
     }
 }
@@ -271,7 +285,7 @@ pub(super) fn write_step(
         step.z.to_vec(),
     );
     let active = active.to_vec();
-    let stress = series.options().wants("stress") || series.options().wants("von_mises");
+    let stress = wants_stress(series.options());
     let (tx, rx) = std::sync::mpsc::sync_channel(1);
     series.write_with(step.n, step.t, move || {
         let (points, cells) = fields(
@@ -289,6 +303,11 @@ pub(super) fn write_step(
         (points, cells)
     })?;
     Ok(stress.then_some(rx))
+}
+
+/// Whether a frame has a field of the stresses (the stress or the von Mises stress).
+fn wants_stress(options: &Options) -> bool {
+    options.wants("stress") || options.wants("von_mises")
 }
 
 /// The largest von Mises stress of a step's cells (0 without cells), as history.csv

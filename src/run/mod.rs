@@ -33,7 +33,6 @@ use crate::checkpoint::{self, RunLog};
 use crate::fem::reactions::Reactions;
 use crate::fem::Discretization;
 use crate::mesh::Mesh;
-use crate::output::PieceMesh;
 use crate::output::{write_atomic, Resumed, Series};
 use crate::ranks::Ranks;
 use crate::scene::{read_scene_file, MeshChoice, Scene};
@@ -42,7 +41,7 @@ use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
 use consumers::{Checkpoints, Consumers, Follower, Frames, Progress, Statistics, StopRule};
 use dir::DirLock;
-use frame::{open_series, OwnFrames};
+use frame::{open_series, OwnFrames, PieceSetup};
 use history_csv::HistoryCsv;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -258,16 +257,13 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     let disc = Arc::new(disc);
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let (series, first) = open_series(
-        &out,
+    let (series, pieces) = open_series(
+        (&out, &identity.run_id),
         (&mesh, &disc),
-        own.as_ref(),
-        &identity.run_id,
-        &scene.output.options,
+        (own.as_ref(), opts.ranks),
+        &scene,
         None,
     )?;
-    let rank0 = |mesh| OwnFrames::new((mesh, None), (&out, &identity.run_id), &scene, opts.ranks);
-    let pieces = first.map(rank0);
     stage()?;
     let plans = crate::history::Plans::new(&scene)?;
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
@@ -345,7 +341,7 @@ fn tell_followers_the_series(opts: &RunOptions, opened: &Opened) -> Result<()> {
 /// A follower's frames: its piece of them, if the ranks write their own (`piece`: its mesh
 /// and its cells' materials, made during its setup), in rank 0's directory.
 fn series_of_follower(
-    piece: Option<(Option<PieceMesh>, Option<Vec<u32>>)>,
+    piece: Option<PieceSetup>,
     scene: &Scene,
     opts: &RunOptions,
 ) -> Result<Option<OwnFrames>> {
@@ -383,14 +379,8 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
             .ranks
             .keep_own_columns(&mut disc, scene.solver.history, made)?;
         let options = &scene.output.options;
-        let piece = frame::piece_of_rank((&mesh, &disc), own.as_ref(), options, opts.ranks.rank);
-        let of_cell = &disc.materials.of_cell;
-        let materials =
-            |p: &PieceMesh| -> Vec<u32> { p.cells().iter().map(|&c| of_cell[c]).collect() };
-        let piece = piece.map(|p| {
-            let materials = p.as_ref().map(materials);
-            (p, materials)
-        });
+        let piece =
+            frame::piece_of_follower((&mesh, &disc), own.as_ref(), options, opts.ranks.rank);
         // Before PETSc's setup, the rank's peak: rank 0 alone computes the norms and
         // history.csv's stresses from every cell; a follower's piece makes its own cells
         // at its first frame, after that peak.
@@ -536,16 +526,13 @@ fn prepare_resume(
         );
     }
     // Before the factorization: the series' writer thread compresses the mesh beside it.
-    let (series, first) = open_series(
-        &out,
+    let (series, pieces) = open_series(
+        (&out, &identity.run_id),
         (&mesh, &disc),
-        own.as_ref(),
-        &identity.run_id,
-        &scene.output.options,
+        (own.as_ref(), opts.ranks),
+        &scene,
         resumed.as_ref(),
     )?;
-    let rank0 = |mesh| OwnFrames::new((mesh, None), (&out, &identity.run_id), &scene, opts.ranks);
-    let pieces = first.map(rank0);
     stage()?;
     let plans = cp.plans(&scene)?;
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
