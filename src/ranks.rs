@@ -22,10 +22,12 @@
 //! `.vtu` frame every rank writes its own piece, its part of the mesh, and the ranks agree
 //! that all are on disk ([`Ranks::written`]) before rank 0 lists them in the frame's
 //! `.pvtu` (`run::frame::OwnFrames`). No rank keeps the mesh past its setup; rank 0 keeps
-//! every cell, from which it computes the norms and history.csv's stresses, and a follower
-//! lets go of them once its columns and its layout are made
-//! (`Discretization::forget_cells`), keeping its piece's node numbers, from which it makes
-//! the piece's cells again at its first frame (`Discretization::make_cells`).
+//! every cell, from which it computes the norms and history.csv's stresses. A follower
+//! holds none: where the scene's keys take PETSc its setup makes each cell from the mesh
+//! as it reads it (`fem::CellSource::Made`), and else it lets go of them once its columns
+//! and its layout are made (`Discretization::forget_cells`); it keeps its piece's node
+//! numbers, from which it makes the piece's cells at its first frame
+//! (`Discretization::make_cells`).
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
@@ -236,7 +238,8 @@ impl Ranks {
     /// in PETSc (`Discretization::with_columns`, over `petsc::Layout`'s partition, made
     /// here once and handed on in [`Own`]), so that no rank holds the whole matrices. Else
     /// the whole: one rank, or `solver.linear = "auto"`, whose choice reads the whole K_A
-    /// (the analysis of its factor) before a rank keeps its columns.
+    /// (the analysis of its factor) before a rank keeps its columns. Rank 0 holds every
+    /// cell; a follower that assembles its columns alone holds none.
     pub fn discretize(
         &self,
         mesh: &crate::mesh::Mesh,
@@ -245,12 +248,18 @@ impl Ranks {
         #[cfg(feature = "petsc")]
         if self.size > 1 && scene.solver.takes_petsc() {
             let mut layout = None;
-            let disc = crate::fem::Discretization::with_columns(mesh, scene, |disc| {
-                let made = crate::petsc::Layout::new(disc, self.size)?;
-                let own = made.own(self.rank);
-                layout = Some(made);
-                Ok(Some(own))
-            })?;
+            let hold_cells = self.is_first();
+            let disc = crate::fem::Discretization::with_columns(
+                mesh,
+                scene,
+                hold_cells,
+                |disc, cells| {
+                    let made = crate::petsc::Layout::new(disc, cells, self.size)?;
+                    let own = made.own(self.rank);
+                    layout = Some(made);
+                    Ok(Some(own))
+                },
+            )?;
             let own = layout.map(|layout| Own { layout, rows: None });
             return Ok((disc, own));
         }
@@ -276,7 +285,7 @@ impl Ranks {
         if self.size > 1 {
             let layout = match made {
                 Some(own) => own.layout,
-                None => crate::petsc::Layout::new(disc, self.size)?,
+                None => crate::petsc::Layout::new(disc, disc.held_cells(), self.size)?,
             };
             if disc.own.is_none() {
                 disc.keep_columns(layout.own(self.rank));
@@ -419,8 +428,11 @@ impl Plan {
             .map(|own| &own.layout)
             .filter(|l| l.blocks.len() == size + 1);
         let shares = match made {
-            Some(layout) => layout.shares(disc),
-            None => crate::petsc::Layout::new(disc, size)?.shares(disc),
+            Some(layout) => layout.shares(disc, disc.held_cells()),
+            None => {
+                let cells = disc.held_cells();
+                crate::petsc::Layout::new(disc, cells, size)?.shares(disc, cells)
+            }
         };
         let largest = shares
             .iter()

@@ -6,7 +6,7 @@
 //!
 //! [`Facet::quadrature`]: crate::mesh::Facet::quadrature
 
-use super::{Cell, Frames};
+use super::{Cell, CellSource, Frames};
 use crate::expr::{Point, Scalar};
 use crate::mesh::{fmt_point, Mesh};
 use crate::scene::Scene;
@@ -41,7 +41,7 @@ pub struct Loads {
 }
 
 impl Loads {
-    pub fn new(mesh: &Mesh, scene: &Scene, cells: &[Cell]) -> Result<Self> {
+    pub fn new(mesh: &Mesh, scene: &Scene, cells: CellSource) -> Result<Self> {
         // The traction boundary Γ2, for the check that every load group lies inside it.
         let gamma2: std::result::Result<HashSet<Vec<usize>>, String> = mesh
             .boundary_group(&scene.mesh.groups.traction)
@@ -206,9 +206,9 @@ fn traction(
 }
 
 /// Body force i over every cell, by `body_rule`.
-fn body_force(mesh: &Mesh, cells: &[Cell], i: usize) -> VectorLoad {
+fn body_force(mesh: &Mesh, cells: CellSource, i: usize) -> VectorLoad {
     let mut qps = Vec::new();
-    for t in cells {
+    cells.each(|_, t| {
         for (phi, weight) in body_rule(t) {
             let mut p = [0.0; 3];
             for (k, pk) in p.iter_mut().enumerate() {
@@ -223,7 +223,7 @@ fn body_force(mesh: &Mesh, cells: &[Cell], i: usize) -> VectorLoad {
                 phi,
             });
         }
-    }
+    });
     VectorLoad {
         source: Source::Body(i),
         qps,

@@ -88,7 +88,8 @@ pub struct Discretization {
     /// Spatial dimension d (2 or 3): d dofs per node.
     pub dim: usize,
     pub nodes: Vec<[f64; 3]>,
-    /// The triangles (2D) or tetrahedra (3D).
+    /// The triangles (2D) or tetrahedra (3D); none on a follower rank of several
+    /// ([`Discretization::with_columns`], [`Discretization::forget_cells`]).
     pub cells: Vec<Cell>,
     /// Global dof d·node + component → index: free dofs 0..n_free, prescribed dofs
     /// n_free..n_dofs; None where a condition holds the dof at zero (Γ1).
@@ -165,22 +166,74 @@ pub enum StressCells<'a> {
 
 /// The mesh's triangles (2D) or tetrahedra (3D) as cells.
 fn cells(mesh: &Mesh) -> Vec<Cell> {
+    let (nodes, dim) = mesh_cells(mesh);
+    cells_of(dim, nodes, &mesh.nodes).collect()
+}
+
+/// The mesh's cells' vertices (dim + 1 a cell), flattened, and the dimension.
+fn mesh_cells(mesh: &Mesh) -> (&[usize], usize) {
     match mesh.dim {
-        2 => cells_of(2, mesh.triangles.as_flattened(), &mesh.nodes),
-        _ => cells_of(3, mesh.tetrahedra.as_flattened(), &mesh.nodes),
+        2 => (mesh.triangles.as_flattened(), 2),
+        _ => (mesh.tetrahedra.as_flattened(), 3),
     }
 }
 
-/// The cells of dimension `dim` whose nodes are `nodes` (dim + 1 a cell), at `points`.
-fn cells_of(dim: usize, nodes: &[usize], points: &[[f64; 3]]) -> Vec<Cell> {
+/// The cells of dimension `dim` whose nodes are `nodes` (dim + 1 a cell), at `points`,
+/// made one at a time.
+fn cells_of<'a>(
+    dim: usize,
+    nodes: &'a [usize],
+    points: &'a [[f64; 3]],
+) -> impl Iterator<Item = Cell> + 'a {
+    let (triangles, tetrahedra) = match dim {
+        2 => (nodes.as_chunks::<3>().0, &[][..]),
+        _ => (&[][..], nodes.as_chunks::<4>().0),
+    };
     let xy = |i: usize| [points[i][0], points[i][1]];
-    match dim {
-        2 => (nodes.as_chunks::<3>().0.iter())
-            .map(|t| Cell::triangle(*t, t.map(xy)))
-            .collect(),
-        _ => (nodes.as_chunks::<4>().0.iter())
-            .map(|t| Cell::tetrahedron(*t, t.map(|i| points[i])))
-            .collect(),
+    let made_2d = triangles.iter().map(move |t| Cell::triangle(*t, t.map(xy)));
+    let made_3d = (tetrahedra.iter()).map(|t| Cell::tetrahedron(*t, t.map(|i| points[i])));
+    made_2d.chain(made_3d)
+}
+
+/// The cells of a discretization in the mesh's order, as its setup reads them: held
+/// ([`Discretization::cells`]), or made one at a time from the mesh, the same bits, by a
+/// rank of several that holds none (a follower: [`Discretization::with_columns`]), so that
+/// no follower ever holds the whole mesh's cells (144 bytes a tetrahedron).
+#[derive(Clone, Copy)]
+pub enum CellSource<'a> {
+    Held(&'a [Cell]),
+    Made(&'a Mesh),
+}
+
+impl<'a> CellSource<'a> {
+    /// `cells` where they are `held`, else those of `mesh`.
+    fn of(held: bool, cells: &'a [Cell], mesh: &'a Mesh) -> CellSource<'a> {
+        match held {
+            true => CellSource::Held(cells),
+            false => CellSource::Made(mesh),
+        }
+    }
+
+    /// Hands each cell to `f` with its index, in order.
+    pub fn each(self, mut f: impl FnMut(usize, &Cell)) {
+        match self {
+            CellSource::Held(cells) => cells.iter().enumerate().for_each(|(c, t)| f(c, t)),
+            CellSource::Made(mesh) => {
+                let (nodes, dim) = mesh_cells(mesh);
+                (cells_of(dim, nodes, &mesh.nodes).enumerate()).for_each(|(c, t)| f(c, &t))
+            }
+        }
+    }
+
+    /// Hands each cell's vertices to `f`, in order (no cell is made).
+    pub fn each_vertices(self, mut f: impl FnMut(&[usize])) {
+        match self {
+            CellSource::Held(cells) => cells.iter().for_each(|t| f(t.vertices())),
+            CellSource::Made(mesh) => {
+                let (nodes, dim) = mesh_cells(mesh);
+                nodes.chunks(dim + 1).for_each(f)
+            }
+        }
     }
 }
 
@@ -444,7 +497,7 @@ impl Discretization {
     /// The discretization of `scene` on `mesh`: the free dofs (Γ1 clamped), the cells, the
     /// stiffness matrices, the loads and the constraint rows on Γ3,1 and Γ3,2.
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
-        Self::with_columns(mesh, scene, |_| Ok(None))
+        Self::with_columns(mesh, scene, true, |_, _| Ok(None))
     }
 
     /// The discretization with of K_A, K_B and K_R only the columns of the unknowns that
@@ -453,22 +506,29 @@ impl Discretization {
     /// matrices ever in memory: on one of several MPI ranks (`Ranks::discretize`). `own`
     /// reads the discretization before its matrices are assembled (they are empty then):
     /// its unknowns and cells, of which METIS's partition is made; None keeps every column.
-    /// Where there are prescribed dofs every column is kept, as `keep_columns` does.
+    /// Where there are prescribed dofs every column is kept, as `keep_columns` does. Without
+    /// `hold_cells` (a follower rank, which computes no norm and no stress of the whole
+    /// mesh) [`Discretization::cells`] stays empty: the setup makes each cell from the mesh
+    /// when it reads it ([`CellSource::Made`]), and the rank holds none.
     pub fn with_columns(
         mesh: &Mesh,
         scene: &Scene,
-        own: impl FnOnce(&Discretization) -> Result<Option<Vec<usize>>>,
+        hold_cells: bool,
+        own: impl FnOnce(&Discretization, CellSource) -> Result<Option<Vec<usize>>>,
     ) -> Result<Self> {
         check_model(mesh, scene)?;
         let d = mesh.dim;
         let numbering = Numbering::new(mesh, scene)?;
         let (n_free, n_dofs) = (numbering.n_free, numbering.n_dofs);
-        let cells = cells(mesh);
+        let cells = match hold_cells {
+            true => cells(mesh),
+            false => Vec::new(),
+        };
 
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
 
-        let loads = Loads::new(mesh, scene, &cells)?;
+        let loads = Loads::new(mesh, scene, CellSource::of(hold_cells, &cells, mesh))?;
         let rows = RowMaker {
             numbering: &numbering,
             dim: d,
@@ -509,40 +569,42 @@ impl Discretization {
             own_pair: None,
             stress_cells: std::sync::OnceLock::new(),
         };
-        let own = own(&disc)?.filter(|_| n_dofs == n_free);
+        let own =
+            own(&disc, CellSource::of(hold_cells, &disc.cells, mesh))?.filter(|_| n_dofs == n_free);
         // Without a memory term in any cell K_R would be zero: none is assembled.
         let groups = match disc.materials.memory() {
             true => scene.physics.memory_groups(),
             false => 0,
         };
-        disc.assemble(groups, own);
+        let (k_a_all, k_b, k_r) = disc.assemble(
+            CellSource::of(hold_cells, &disc.cells, mesh),
+            groups,
+            own.as_deref(),
+        );
+        (disc.k_a, disc.k_a_all) = match n_dofs > n_free {
+            true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
+            false => (k_a_all, None),
+        };
+        (disc.k_b, disc.k_r, disc.own) = (k_b, k_r, own);
         Ok(disc)
     }
 
-    /// Assembles K_A, K_B and K_R (`assemble`), of the unknowns `own` the columns whole and
-    /// of the others the diagonal entry (None: every column).
-    fn assemble(&mut self, groups: usize, own: Option<Vec<usize>>) {
-        let keep = own.as_ref().map(|own| {
+    /// K_A on all n_dofs, K_B and K_R (`assemble`) of the cells `cells`, of the unknowns
+    /// `own` the columns whole and of the others the diagonal entry (None: every column).
+    fn assemble(
+        &self,
+        cells: CellSource,
+        groups: usize,
+        own: Option<&[usize]>,
+    ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
+        let keep = own.map(|own| {
             let mut keep = vec![false; self.n_dofs];
             own.iter().for_each(|&i| keep[i] = true);
             keep
         });
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
         let (materials, r) = (&self.materials, self.r);
-        let (k_a_all, k_b, k_r) = assemble(
-            &self.cells,
-            self.dim,
-            dofs,
-            materials,
-            r,
-            groups,
-            keep.as_deref(),
-        );
-        (self.k_a, self.k_a_all) = match self.n_dofs > self.n_free {
-            true => (leading_block(&k_a_all, self.n_free), Some(k_a_all)),
-            false => (k_a_all, None),
-        };
-        (self.k_b, self.k_r, self.own) = (k_b, k_r, own);
+        assemble(cells, self.dim, dofs, materials, r, groups, keep.as_deref())
     }
 
     /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) whole and of
@@ -775,10 +837,11 @@ impl Discretization {
         p1_norms(&self.cells, &nodal_vectors::<3>(self, v))
     }
 
-    /// Lets go of the cells and of each cell's material and region (`materials.distinct`
-    /// stays): on a rank of several other than rank 0, which computes the norms and
-    /// history.csv's stresses, nothing reads them once the matrices are assembled and the
-    /// rank's layout is made; its piece of the frames makes its own cells
+    /// Lets go of the cells (where it held them: `solver.linear = "auto"`) and of each
+    /// cell's material and region (`materials.distinct` stays): on a rank of several other
+    /// than rank 0, which computes the norms and history.csv's stresses, nothing reads them
+    /// once the matrices are assembled and the rank's layout is made; its piece of the
+    /// frames makes its own cells
     /// ([`Discretization::make_cells`]). [`Discretization::stress`] and
     /// [`Discretization::norms`] would see an empty mesh afterwards.
     pub fn forget_cells(&mut self) {
@@ -787,10 +850,16 @@ impl Discretization {
         self.materials.region = Vec::new();
     }
 
+    /// The cells it holds ([`Discretization::cells`]: none on a follower rank, which made
+    /// them from the mesh during its setup).
+    pub fn held_cells(&self) -> CellSource<'_> {
+        CellSource::Held(&self.cells)
+    }
+
     /// The cells of the nodes `nodes` (dim + 1 a cell), made from the nodes' coordinates as
     /// the discretization made its own: the same bits.
     pub fn make_cells(&self, nodes: &[usize]) -> Vec<Cell> {
-        cells_of(self.dim, nodes, &self.nodes)
+        cells_of(self.dim, nodes, &self.nodes).collect()
     }
 }
 
@@ -1068,15 +1137,13 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 /// Assembles K_A, K_B, K_R over all cells, each with its material (K_B when any cell has
 /// elasticity), on the dofs with an index (`free`: the free and the prescribed ones, n in
 /// all; rows and columns of dofs held at zero dropped; a node with a frame in its frame's
-/// components, `Cell::parts_in`); the three share one
-/// sparsity pattern, built once from the mesh: node q couples with node p when a cell holds
-/// both. The column of index j, a component of node p, lists the indices of the components
-/// of p's neighbours q, increasing. The element matrices are then added at their positions
-/// (found by bisection in the column): no triplets. Where `keep` is given, the column j
-/// with `keep[j]` false holds its diagonal entry alone (a rank of several: the others'
-/// columns are not its own); each kept entry sums the same terms in the same order.
+/// components, `Cell::parts_in`); the three share one sparsity pattern ([`pattern`]). The
+/// element matrices are added at their positions (found by bisection in the column): no
+/// triplets. Where `keep` is given, the column j with `keep[j]` false holds its diagonal
+/// entry alone (a rank of several: the others' columns are not its own); each kept entry
+/// sums the same terms in the same order.
 fn assemble(
-    cells: &[Cell],
+    cells: CellSource,
     d: usize,
     (free, frames, n): (&[Option<usize>], &Frames, usize),
     materials: &CellMaterials,
@@ -1085,38 +1152,7 @@ fn assemble(
     keep: Option<&[bool]>,
 ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
     let whole = |col: usize| keep.is_none_or(|keep| keep[col]);
-    let dofs = |p: usize| free[d * p..d * (p + 1)].iter().flatten().copied();
-    let has_dofs = |p: usize| dofs(p).next().is_some();
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
-    for t in cells {
-        for &p in t.vertices().iter().filter(|&&p| has_dofs(p)) {
-            let with_dofs = t.vertices().iter().filter(|&&q| has_dofs(q));
-            neighbours[p].extend(with_dofs.map(|&q| q as u32));
-        }
-    }
-    let mut node_of = vec![0; n];
-    for (g, i) in free.iter().enumerate() {
-        if let Some(i) = i {
-            node_of[*i] = g / d;
-        }
-    }
-    let mut col_ptr = vec![0usize];
-    let mut row_idx = Vec::new();
-    for list in neighbours.iter_mut() {
-        list.sort_unstable();
-        list.dedup();
-    }
-    for (col, &p) in node_of.iter().enumerate() {
-        let start = row_idx.len();
-        match whole(col) {
-            true => neighbours[p]
-                .iter()
-                .for_each(|&q| row_idx.extend(dofs(q as usize))),
-            false => row_idx.push(col),
-        }
-        row_idx[start..].sort_unstable();
-        col_ptr.push(row_idx.len());
-    }
+    let (col_ptr, row_idx) = pattern(cells, d, (free, n), &whole);
     let nnz = row_idx.len();
     let elastic = materials.elastic();
     let (mut va, mut vb, mut vr) = (
@@ -1126,7 +1162,7 @@ fn assemble(
     );
     // The entries of the three matrices from the same two factors (`Cell::parts`), without
     // building three element matrices per cell.
-    for (c, t) in cells.iter().enumerate() {
+    cells.each(|c, t| {
         let Stiffness { a, b, memory } = materials.of(c);
         let nodes = t.vertices();
         let frame = |i: usize| frames.of(nodes[i]);
@@ -1154,13 +1190,70 @@ fn assemble(
                 }
             }
         }
-    }
+    });
+    // Each matrix owns its pattern: the last takes this one, so that no spare copy of it
+    // stands beside them at the setup's peak.
     let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-    (
-        SparseColMat::new(pattern.clone(), va),
-        elastic.then(|| SparseColMat::new(pattern.clone(), vb)),
-        vr.into_iter()
-            .map(|v| SparseColMat::new(pattern.clone(), v))
-            .collect(),
-    )
+    let k_b = elastic.then(|| SparseColMat::new(pattern.clone(), vb));
+    let k_r = (vr.into_iter())
+        .map(|v| SparseColMat::new(pattern.clone(), v))
+        .collect();
+    (SparseColMat::new(pattern, va), k_b, k_r)
+}
+
+/// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,
+/// built from the cells' vertices: node q couples with node p when a cell holds both. The
+/// column of index j, a component of node p, lists the indices of the components of p's
+/// neighbours q, increasing, where `whole(j)`; else j alone (its diagonal entry). Only the
+/// nodes with a whole column list their neighbours (a rank of several: its own nodes, not
+/// the whole mesh's), and the row indices are allocated once, at their exact count.
+fn pattern(
+    cells: CellSource,
+    d: usize,
+    (free, n): (&[Option<usize>], usize),
+    whole: &dyn Fn(usize) -> bool,
+) -> (Vec<usize>, Vec<usize>) {
+    let dofs = |p: usize| free[d * p..d * (p + 1)].iter().flatten().copied();
+    let has_dofs = |p: usize| dofs(p).next().is_some();
+    let lists = |p: usize| dofs(p).any(whole);
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
+    cells.each_vertices(|vertices| {
+        for &p in vertices.iter().filter(|&&p| lists(p)) {
+            let with_dofs = vertices.iter().filter(|&&q| has_dofs(q));
+            neighbours[p].extend(with_dofs.map(|&q| q as u32));
+        }
+    });
+    for list in neighbours.iter_mut() {
+        list.sort_unstable();
+        list.dedup();
+    }
+    let mut node_of = vec![0; n];
+    for (g, i) in free.iter().enumerate() {
+        if let Some(i) = i {
+            node_of[*i] = g / d;
+        }
+    }
+    let column_len = |col: usize, p: usize| match whole(col) {
+        true => neighbours[p]
+            .iter()
+            .map(|&q| dofs(q as usize).count())
+            .sum(),
+        false => 1,
+    };
+    let entries = (node_of.iter().enumerate()).map(|(col, &p)| column_len(col, p));
+    let mut row_idx = Vec::with_capacity(entries.sum());
+    let mut col_ptr = Vec::with_capacity(n + 1);
+    col_ptr.push(0);
+    for (col, &p) in node_of.iter().enumerate() {
+        let start = row_idx.len();
+        match whole(col) {
+            true => neighbours[p]
+                .iter()
+                .for_each(|&q| row_idx.extend(dofs(q as usize))),
+            false => row_idx.push(col),
+        }
+        row_idx[start..].sort_unstable();
+        col_ptr.push(row_idx.len());
+    }
+    (col_ptr, row_idx)
 }

@@ -13,7 +13,7 @@
 //! `from_rows`): two copies of n values, against a solve's tens of products with K_A.
 
 use super::PetscInt;
-use crate::fem::{Discretization, Sparse};
+use crate::fem::{CellSource, Discretization, Sparse};
 use crate::{Error, Result};
 
 /// Where each unknown stands among PETSc's rows, and each rank's rows.
@@ -26,8 +26,9 @@ pub struct Layout {
 }
 
 impl Layout {
-    /// The layout of `disc`'s unknowns over `size` ranks.
-    pub fn new(disc: &Discretization, size: usize) -> Result<Layout> {
+    /// The layout of `disc`'s unknowns over `size` ranks, its nodes' graph read from
+    /// `cells` (`disc`'s own, or the mesh's where it holds none: a follower rank).
+    pub fn new(disc: &Discretization, cells: CellSource, size: usize) -> Result<Layout> {
         let n = disc.n_free;
         if size <= 1 {
             return Ok(Layout {
@@ -36,7 +37,7 @@ impl Layout {
             });
         }
         let nodes = nodes(disc);
-        let part = partition(disc, &nodes, size)?;
+        let part = partition(disc, cells, &nodes, size)?;
         let mut order: Vec<usize> = (0..nodes.len()).collect();
         order.sort_by_key(|&v| (part[v], v));
         let (mut row, mut blocks) = (vec![0; n], vec![0; size + 1]);
@@ -135,10 +136,11 @@ impl Layout {
     /// Each rank's share of K_A: its rows, entries and the values of other ranks' rows that
     /// a product fetches. Counted on the nodes' graph, whose pattern K_A's is (the unknowns
     /// of a node couple with those of the node and of its neighbours), so that a rank that
-    /// assembled only its own columns (`Ranks::discretize`) counts every rank's share.
-    pub fn shares(&self, disc: &Discretization) -> Vec<RankShare> {
+    /// assembled only its own columns (`Ranks::discretize`) counts every rank's share (the
+    /// graph read from `cells`, as [`Layout::new`] reads it).
+    pub fn shares(&self, disc: &Discretization, cells: CellSource) -> Vec<RankShare> {
         let nodes = nodes(disc);
-        let adjacent = adjacency(disc, &nodes);
+        let adjacent = adjacency(disc, cells, &nodes);
         let size = self.blocks.len() - 1;
         let rank = self.ranks_of(&nodes);
         let mut order: Vec<usize> = (0..nodes.len()).collect();
@@ -253,21 +255,21 @@ fn node_unknowns(disc: &Discretization, v: usize) -> Vec<usize> {
 }
 
 /// The nodes' graph on the nodes with unknowns (`nodes`, in their order): for each, the
-/// others that a cell holds with it (where K_A couples them: P1), increasing.
-fn adjacency(disc: &Discretization, nodes: &[Vec<usize>]) -> Vec<Vec<usize>> {
+/// others that one of `cells` holds with it (where K_A couples them: P1), increasing.
+fn adjacency(disc: &Discretization, cells: CellSource, nodes: &[Vec<usize>]) -> Vec<Vec<usize>> {
     let mut vertex = vec![usize::MAX; disc.free.len() / disc.dim];
     let with_unknowns = (0..vertex.len()).filter(|&p| !node_unknowns(disc, p).is_empty());
     for (v, p) in with_unknowns.enumerate() {
         vertex[p] = v;
     }
     let mut adjacent: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
-    for cell in &disc.cells {
+    cells.each_vertices(|vertices| {
         let of = |p: &usize| Some(vertex[*p]).filter(|&v| v != usize::MAX);
-        for v in cell.vertices().iter().filter_map(of) {
-            let others = cell.vertices().iter().filter_map(of).filter(|&w| w != v);
+        for v in vertices.iter().filter_map(of) {
+            let others = vertices.iter().filter_map(of).filter(|&w| w != v);
             adjacent[v].extend(others);
         }
-    }
+    });
     for list in &mut adjacent {
         list.sort_unstable();
         list.dedup();
@@ -279,10 +281,15 @@ fn adjacency(disc: &Discretization, nodes: &[Vec<usize>]) -> Vec<Vec<usize>> {
 /// nodes are adjacent where a cell holds both (where K_A couples them: P1), so that the
 /// partition needs no matrix: a rank makes it before it assembles its own columns of K_A
 /// alone (`fem::Discretization::with_columns`), and every rank makes the same one.
-fn partition(disc: &Discretization, nodes: &[Vec<usize>], size: usize) -> Result<Vec<usize>> {
+fn partition(
+    disc: &Discretization,
+    cells: CellSource,
+    nodes: &[Vec<usize>],
+    size: usize,
+) -> Result<Vec<usize>> {
     let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
     let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
-    let mut adjacent = adjacency(disc, nodes);
+    let mut adjacent = adjacency(disc, cells, nodes);
     let (mut xadj, mut adjncy) = (vec![0], Vec::new());
     for list in &mut adjacent {
         for &w in list.iter() {

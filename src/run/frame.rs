@@ -43,7 +43,7 @@ pub(super) fn open_series(
 }
 
 /// A rank's piece of the frames as its setup leaves it: the piece's mesh (None where its
-/// part has no cells) and, on a follower, whose discretization lets go of every cell, the
+/// part has no cells) and, on a follower, whose discretization holds no cell, the
 /// material of each of the piece's cells (rank 0 holds every cell with its material).
 pub(super) struct PieceSetup {
     mesh: Option<PieceMesh>,

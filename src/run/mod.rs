@@ -382,8 +382,9 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         let piece =
             frame::piece_of_follower((&mesh, &disc), own.as_ref(), options, opts.ranks.rank);
         // Before PETSc's setup, the rank's peak: rank 0 alone computes the norms and
-        // history.csv's stresses from every cell; a follower's piece makes its own cells
-        // at its first frame, after that peak.
+        // history.csv's stresses from every cell; a follower holds none (or, where `auto`
+        // assembled the whole, no longer), and its piece makes its own cells at its first
+        // frame, after that peak.
         disc.forget_cells();
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,

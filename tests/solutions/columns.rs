@@ -4,7 +4,8 @@
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
 //! agree with the whole matrices' products to round-off, the diagonal stays whole (the
 //! active set's ρ reads it), and the other columns are gone. A rank that assembles those
-//! columns alone (`Discretization::with_columns`) holds the same matrices, bit for bit; its
+//! columns alone (`Discretization::with_columns`) holds the same matrices and loads, bit for
+//! bit, whether it holds the cells or makes them from the mesh as it reads them; its
 //! rows of K_B and K_R paired (`Discretization::pair_own_rows`) give the same products.
 //! Where a rank's rows of K_A go to PETSc, K_A keeps its diagonal alone
 //! (`Discretization::keep_diagonal_of_k_a`). A scene with prescribed dofs keeps its
@@ -63,44 +64,66 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
     }
 }
 
-/// On the 3D block and the paper's 2D scene (K_A, K_B and K_R each), for a random half of
-/// the nodes: the columns a rank assembles alone are those it keeps of the whole.
+/// On the 3D block and the paper's 2D scene (K_A, K_B and K_R each, and a body force), for
+/// a random half of the nodes: the columns a rank assembles alone are those it keeps of the
+/// whole, bit for bit, and so are its loads, whether it holds the cells (rank 0) or makes
+/// each from the mesh as it reads it and holds none (a follower).
 #[test]
 fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_whole() {
     let dir = tempfile::tempdir().unwrap();
     for (name, scene) in [
-        ("block.toml", SceneText::block()),
-        ("paper.toml", SceneText::paper()),
+        ("block.toml", SceneText::block().body(&["0", "0", "-0.5*x"])),
+        ("paper.toml", SceneText::paper().body(&["0.1*y", "-1"])),
     ] {
         let path = scene.write(dir.path(), name);
         let (scene, mesh, mut kept) = load(&path, &[]);
         let own = random_half(&kept, &mut SplitMix(7));
         kept.keep_columns(own.clone());
-        let mut asked = false;
-        let mine = Discretization::with_columns(&mesh, &scene, |disc| {
-            asked = disc.n_free == kept.n_free && disc.cells.len() == kept.cells.len();
-            Ok(Some(own.clone()))
-        })
-        .unwrap();
-        assert!(
-            asked,
-            "{name}: the unknowns and cells come before the matrices"
-        );
-        assert_eq!(mine.own, kept.own, "{name}");
-        let matrices = |d: &Discretization| {
-            let mut all = vec![d.k_a.clone()];
-            all.extend(d.k_b.iter().cloned());
-            all.extend(d.k_r.iter().cloned());
-            all
-        };
-        let (a, b) = (matrices(&mine), matrices(&kept));
-        assert_eq!(a.len(), b.len(), "{name}");
-        for (k, (a, b)) in a.iter().zip(&b).enumerate() {
-            let (a, b) = (a.as_ref(), b.as_ref());
-            assert_eq!(a.symbolic().col_ptr(), b.symbolic().col_ptr(), "{name} {k}");
-            assert_eq!(a.symbolic().row_idx(), b.symbolic().row_idx(), "{name} {k}");
+        for hold_cells in [true, false] {
+            let case = format!("{name}, cells held: {hold_cells}");
+            let mut asked = false;
+            let mine = Discretization::with_columns(&mesh, &scene, hold_cells, |disc, cells| {
+                let mut vertices = Vec::new();
+                cells.each_vertices(|v| vertices.extend_from_slice(v));
+                let whole = kept.cells.iter().flat_map(|t| t.vertices().iter().copied());
+                asked = disc.n_free == kept.n_free && vertices == whole.collect::<Vec<_>>();
+                Ok(Some(own.clone()))
+            })
+            .unwrap();
+            assert!(
+                asked,
+                "{case}: the unknowns and cells come before the matrices"
+            );
+            let held = match hold_cells {
+                true => kept.cells.len(),
+                false => 0,
+            };
+            assert_eq!(mine.cells.len(), held, "{case}");
+            assert_eq!(mine.own, kept.own, "{case}");
             let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(a.val()), bits(b.val()), "{name} {k}");
+            let loads = |d: &Discretization| {
+                let mut f = vec![0.0; d.n_dofs];
+                let free = (d.free.as_slice(), &d.frames);
+                d.loads.add(0.5, free, &scene, &mut f).unwrap();
+                f
+            };
+            let f = loads(&kept);
+            assert!(f.iter().any(|&v| v != 0.0), "{case}");
+            assert_eq!(bits(&loads(&mine)), bits(&f), "{case}");
+            let matrices = |d: &Discretization| {
+                let mut all = vec![d.k_a.clone()];
+                all.extend(d.k_b.iter().cloned());
+                all.extend(d.k_r.iter().cloned());
+                all
+            };
+            let (a, b) = (matrices(&mine), matrices(&kept));
+            assert_eq!(a.len(), b.len(), "{case}");
+            for (k, (a, b)) in a.iter().zip(&b).enumerate() {
+                let (a, b) = (a.as_ref(), b.as_ref());
+                assert_eq!(a.symbolic().col_ptr(), b.symbolic().col_ptr(), "{case} {k}");
+                assert_eq!(a.symbolic().row_idx(), b.symbolic().row_idx(), "{case} {k}");
+                assert_eq!(bits(a.val()), bits(b.val()), "{case} {k}");
+            }
         }
     }
 }
@@ -165,7 +188,8 @@ fn a_scene_with_prescribed_dofs_keeps_its_matrices_whole() {
     disc.keep_columns(vec![0, 1]);
     assert!(disc.own.is_none());
     assert_eq!(disc.k_a.as_ref().val(), &before[..]);
-    let mine = Discretization::with_columns(&mesh, &scene, |_| Ok(Some(vec![0, 1]))).unwrap();
+    let mine =
+        Discretization::with_columns(&mesh, &scene, false, |_, _| Ok(Some(vec![0, 1]))).unwrap();
     assert!(mine.own.is_none());
     assert_eq!(mine.k_a.as_ref().val(), &before[..]);
 }
