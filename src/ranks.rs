@@ -21,13 +21,13 @@
 //! checkpoints, summary.json) and prints; the others *follow* (`run::follow`). Of each
 //! `.vtu` frame every rank writes its own piece, its part of the mesh, and the ranks agree
 //! that all are on disk ([`Ranks::written`]) before rank 0 lists them in the frame's
-//! `.pvtu` (`run::frame::OwnFrames`). No rank keeps the mesh past its setup; rank 0 keeps
-//! every cell, from which it computes the norms and history.csv's stresses. A follower
-//! holds none: where the scene's keys take PETSc its setup makes each cell from the mesh
-//! as it reads it (`fem::CellSource::Made`), and else it lets go of them once its columns
-//! and its layout are made (`Discretization::forget_cells`); it keeps its piece's node
-//! numbers, from which it makes the piece's cells at its first frame
-//! (`Discretization::make_cells`).
+//! `.pvtu` (`run::frame::OwnFrames`). No rank keeps the mesh past its setup, and none
+//! holds the cells where the scene's keys take PETSc: its setup makes each from the mesh
+//! as it reads it (`fem::CellSource::Made`). Rank 0 keeps each cell's vertices, from which
+//! it makes the cells again to compute the norms and history.csv's stresses (`fem::Hold`);
+//! a follower keeps its piece's node numbers, from which it makes the piece's cells at its
+//! first frame (`Discretization::make_cells`). (Where `auto`'s choice assembled the whole,
+//! rank 0 keeps every cell and a follower lets go of them: `Discretization::forget_cells`.)
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
@@ -238,8 +238,8 @@ impl Ranks {
     /// in PETSc (`Discretization::with_columns`, over `petsc::Layout`'s partition, made
     /// here once and handed on in [`Own`]), so that no rank holds the whole matrices. Else
     /// the whole: one rank, or `solver.linear = "auto"`, whose choice reads the whole K_A
-    /// (the analysis of its factor) before a rank keeps its columns. Rank 0 holds every
-    /// cell; a follower that assembles its columns alone holds none.
+    /// (the analysis of its factor) before a rank keeps its columns. A rank that assembles
+    /// its columns alone holds no cell: rank 0 their vertices, a follower nothing.
     pub fn discretize(
         &self,
         mesh: &crate::mesh::Mesh,
@@ -248,18 +248,17 @@ impl Ranks {
         #[cfg(feature = "petsc")]
         if self.size > 1 && scene.solver.takes_petsc() {
             let mut layout = None;
-            let hold_cells = self.is_first();
-            let disc = crate::fem::Discretization::with_columns(
-                mesh,
-                scene,
-                hold_cells,
-                |disc, cells| {
+            let hold = match self.is_first() {
+                true => crate::fem::Hold::Vertices,
+                false => crate::fem::Hold::Nothing,
+            };
+            let disc =
+                crate::fem::Discretization::with_columns(mesh, scene, hold, |disc, cells| {
                     let made = crate::petsc::Layout::new(disc, cells, self.size)?;
                     let own = made.own(self.rank);
                     layout = Some(made);
                     Ok(Some(own))
-                },
-            )?;
+                })?;
             let own = layout.map(|layout| Own { layout, rows: None });
             return Ok((disc, own));
         }
@@ -285,7 +284,7 @@ impl Ranks {
         if self.size > 1 {
             let layout = match made {
                 Some(own) => own.layout,
-                None => crate::petsc::Layout::new(disc, disc.held_cells(), self.size)?,
+                None => crate::petsc::Layout::new(disc, disc.cell_source(), self.size)?,
             };
             if disc.own.is_none() {
                 disc.keep_columns(layout.own(self.rank));
@@ -372,8 +371,8 @@ impl Holding {
 /// What each rank of a run over `size` ranks holds and does (`check --ranks N`, and the
 /// refusal of a run whose ranks would not fit the memory available): its share of K_A
 /// (the largest rank's, over `petsc::Layout`'s partition) and its memory: its own part
-/// (this process's setup peak so far, measured, less what of the matrices it does not
-/// hold on a rank, and what the steps hold) and its share of PETSc's matrices and
+/// (this process's setup peak so far, measured, less what of the matrices and of the cells
+/// it does not hold on a rank, and what the steps hold) and its share of PETSc's matrices and
 /// multigrid. A rank of a run whose keys take PETSc assembles its own columns alone
 /// (`Ranks::discretize`); one that assembles the whole matrices first (`solver.linear =
 /// "auto"`) holds them at its setup's peak, a floor that no rank count lowers.
@@ -388,8 +387,9 @@ pub struct Plan {
     /// The largest rank's own bytes, and its bytes of PETSc's.
     own: f64,
     spread: f64,
-    /// What a rank holds whatever the rank count: the measured setup peak with MPI's
-    /// runtime and what the steps hold, less the matrices this process holds.
+    /// What a rank of several holds whatever their count: the measured setup peak with
+    /// MPI's runtime and what the steps hold, less the matrices and the cells this process
+    /// holds and such a rank does not.
     base: f64,
     /// The bytes of K_A, K_B and K_R whole (`matrix_bytes`), of which a rank assembles its
     /// share or all first (`holding`), and keeps its share of `kept` (its rows of K_B and
@@ -428,9 +428,9 @@ impl Plan {
             .map(|own| &own.layout)
             .filter(|l| l.blocks.len() == size + 1);
         let shares = match made {
-            Some(layout) => layout.shares(disc, disc.held_cells()),
+            Some(layout) => layout.shares(disc, disc.cell_source()),
             None => {
-                let cells = disc.held_cells();
+                let cells = disc.cell_source();
                 crate::petsc::Layout::new(disc, cells, size)?.shares(disc, cells)
             }
         };
@@ -454,7 +454,8 @@ impl Plan {
                 kept_per_entry(disc, hands_over) * entries as f64,
             ),
         };
-        let base = setup + if launched { 0.0 } else { MPI_RUNTIME } - held;
+        let base =
+            setup + if launched { 0.0 } else { MPI_RUNTIME } - held - cell_bytes(disc, holding);
         let rows_bytes = if hands_over {
             12.0 * entries as f64
         } else {
@@ -590,10 +591,14 @@ impl std::fmt::Display for Plan {
             Holding::WholeFirst => format!(", less {others}, which it drops once assembled"),
             Holding::Whole => ", with the matrices whole (prescribed dofs)".to_string(),
         };
+        let cells = match self.holding {
+            Holding::Columns => ", and the cells, which it does not hold (rank 0 their vertices)",
+            _ => "",
+        };
         let dropped = match (self.size, self.rows_bytes > 0.0) {
             (1, _) => String::new(),
-            (_, false) => others,
-            (_, true) => format!("{others}, and its own of K_A (its rows go to PETSc)"),
+            (_, false) => format!("{others}{cells}"),
+            (_, true) => format!("{others}, its own of K_A (its rows go to PETSc){cells}"),
         };
         write!(
             f,
@@ -625,6 +630,21 @@ impl std::fmt::Display for Plan {
             )?;
         }
         Ok(())
+    }
+}
+
+/// The bytes of the cells that `disc` holds (`check`, one process) and a rank of several
+/// holding the matrices as `holding` says does not: where a rank assembles its own columns
+/// alone it holds no cell, rank 0 (the largest) each cell's vertices (`fem::Hold`).
+#[cfg(feature = "petsc")]
+fn cell_bytes(disc: &crate::fem::Discretization, holding: Holding) -> f64 {
+    let vertices = 4 * (disc.dim + 1);
+    match holding {
+        Holding::Columns => {
+            let cell = std::mem::size_of::<crate::fem::Cell>() - vertices;
+            (disc.cells.len() * cell) as f64
+        }
+        _ => 0.0,
     }
 }
 

@@ -375,7 +375,7 @@ const ZLIB_KEEPS: f64 = 0.2;
 /// (connectivity, offsets and types; `region`); compressed as [`ZLIB_KEEPS`] says.
 fn frame_bytes(scene: &Scene, disc: &Discretization) -> f64 {
     let o = &scene.output.options;
-    let (n, c) = (disc.nodes.len() as f64, disc.cells.len() as f64);
+    let (n, c) = (disc.nodes.len() as f64, disc.n_cells() as f64);
     let dim = disc.dim as f64;
     let value = match o.precision {
         Precision::Float64 => 8.0,

@@ -88,9 +88,12 @@ pub struct Discretization {
     /// Spatial dimension d (2 or 3): d dofs per node.
     pub dim: usize,
     pub nodes: Vec<[f64; 3]>,
-    /// The triangles (2D) or tetrahedra (3D); none on a follower rank of several
-    /// ([`Discretization::with_columns`], [`Discretization::forget_cells`]).
+    /// The triangles (2D) or tetrahedra (3D) on one process; none on a rank of several
+    /// ([`Discretization::with_columns`], [`Discretization::forget_cells`]), which reads
+    /// them through [`Discretization::cell_source`].
     pub cells: Vec<Cell>,
+    /// On rank 0 of several, each cell's dim + 1 vertices ([`Hold::Vertices`]); else none.
+    vertices: Vec<u32>,
     /// Global dof d·node + component → index: free dofs 0..n_free, prescribed dofs
     /// n_free..n_dofs; None where a condition holds the dof at zero (Γ1).
     pub free: Vec<Option<usize>>,
@@ -185,44 +188,63 @@ fn cells_of<'a>(
     nodes: &'a [usize],
     points: &'a [[f64; 3]],
 ) -> impl Iterator<Item = Cell> + 'a {
-    let (triangles, tetrahedra) = match dim {
-        2 => (nodes.as_chunks::<3>().0, &[][..]),
-        _ => (&[][..], nodes.as_chunks::<4>().0),
-    };
-    let xy = |i: usize| [points[i][0], points[i][1]];
-    let made_2d = triangles.iter().map(move |t| Cell::triangle(*t, t.map(xy)));
-    let made_3d = (tetrahedra.iter()).map(|t| Cell::tetrahedron(*t, t.map(|i| points[i])));
-    made_2d.chain(made_3d)
+    (nodes.chunks_exact(dim + 1)).map(move |v| make_cell(dim, corners(v), points))
 }
 
-/// The cells of a discretization in the mesh's order, as its setup reads them: held
-/// ([`Discretization::cells`]), or made one at a time from the mesh, the same bits, by a
-/// rank of several that holds none (a follower: [`Discretization::with_columns`]), so that
-/// no follower ever holds the whole mesh's cells (144 bytes a tetrahedron).
+/// The cell of dimension `dim` with the vertices `v` (the first dim + 1), at `points`.
+fn make_cell(dim: usize, v: [usize; 4], points: &[[f64; 3]]) -> Cell {
+    match dim {
+        2 => {
+            let t = [v[0], v[1], v[2]];
+            Cell::triangle(t, t.map(|i| [points[i][0], points[i][1]]))
+        }
+        _ => Cell::tetrahedron(v, v.map(|i| points[i])),
+    }
+}
+
+/// A cell's dim + 1 vertices `v` as four (a triangle's last repeated: unused).
+fn corners(v: &[usize]) -> [usize; 4] {
+    std::array::from_fn(|i| v[i.min(v.len() - 1)])
+}
+
+/// The cells of a discretization in the mesh's order, as it reads them: held
+/// ([`Discretization::cells`]: one process), or each made when it is read, the same bits,
+/// from the mesh (a rank of several during its setup: [`Discretization::with_columns`]) or
+/// from the cells' vertices that rank 0 of several holds (16 bytes a tetrahedron where a
+/// cell takes 144), so that no rank of several holds the whole mesh's cells.
 #[derive(Clone, Copy)]
 pub enum CellSource<'a> {
     Held(&'a [Cell]),
     Made(&'a Mesh),
+    /// Each cell's dim + 1 vertices, at `points`.
+    Vertices {
+        vertices: &'a [u32],
+        points: &'a [[f64; 3]],
+        dim: usize,
+    },
 }
 
 impl<'a> CellSource<'a> {
-    /// `cells` where they are `held`, else those of `mesh`.
-    fn of(held: bool, cells: &'a [Cell], mesh: &'a Mesh) -> CellSource<'a> {
-        match held {
-            true => CellSource::Held(cells),
-            false => CellSource::Made(mesh),
+    /// The cells as the setup of a discretization that holds what `hold` says reads them:
+    /// `cells` where it holds them, else each made from `mesh`.
+    fn setup(hold: Hold, cells: &'a [Cell], mesh: &'a Mesh) -> CellSource<'a> {
+        match hold {
+            Hold::Cells => CellSource::Held(cells),
+            _ => CellSource::Made(mesh),
         }
     }
 
     /// Hands each cell to `f` with its index, in order.
     pub fn each(self, mut f: impl FnMut(usize, &Cell)) {
-        match self {
-            CellSource::Held(cells) => cells.iter().enumerate().for_each(|(c, t)| f(c, t)),
-            CellSource::Made(mesh) => {
-                let (nodes, dim) = mesh_cells(mesh);
-                (cells_of(dim, nodes, &mesh.nodes).enumerate()).for_each(|(c, t)| f(c, &t))
-            }
+        if let CellSource::Held(cells) = self {
+            return cells.iter().enumerate().for_each(|(c, t)| f(c, t));
         }
+        let (points, dim) = self.points();
+        let mut c = 0;
+        self.each_vertices(|v| {
+            f(c, &make_cell(dim, corners(v), points));
+            c += 1;
+        });
     }
 
     /// Hands each cell's vertices to `f`, in order (no cell is made).
@@ -231,10 +253,66 @@ impl<'a> CellSource<'a> {
             CellSource::Held(cells) => cells.iter().for_each(|t| f(t.vertices())),
             CellSource::Made(mesh) => {
                 let (nodes, dim) = mesh_cells(mesh);
-                nodes.chunks(dim + 1).for_each(f)
+                nodes.chunks_exact(dim + 1).for_each(f)
+            }
+            CellSource::Vertices { vertices, dim, .. } => {
+                for v in vertices.chunks_exact(dim + 1) {
+                    f(&corners_u32(v)[..=dim]);
+                }
             }
         }
     }
+
+    /// Cell `c`.
+    pub fn get(self, c: usize) -> Cell {
+        let (points, dim) = self.points();
+        match self {
+            CellSource::Held(cells) => cells[c],
+            CellSource::Made(mesh) => {
+                let (nodes, _) = mesh_cells(mesh);
+                make_cell(dim, corners(&nodes[c * (dim + 1)..][..=dim]), points)
+            }
+            CellSource::Vertices { vertices, .. } => {
+                let v = corners_u32(&vertices[c * (dim + 1)..][..=dim]);
+                make_cell(dim, v, points)
+            }
+        }
+    }
+
+    /// The number of cells.
+    pub fn count(self) -> usize {
+        match self {
+            CellSource::Held(cells) => cells.len(),
+            CellSource::Made(mesh) => mesh.n_cells(),
+            CellSource::Vertices { vertices, dim, .. } => vertices.len() / (dim + 1),
+        }
+    }
+
+    /// The points the vertices number and the dimension (none for held cells).
+    fn points(self) -> (&'a [[f64; 3]], usize) {
+        match self {
+            CellSource::Held(cells) => (&[], cells.first().map_or(0, |t| t.dim)),
+            CellSource::Made(mesh) => (&mesh.nodes, mesh.dim),
+            CellSource::Vertices { points, dim, .. } => (points, dim),
+        }
+    }
+}
+
+/// What of its cells a discretization holds past its setup.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Hold {
+    /// Every cell (one process).
+    Cells,
+    /// Each cell's vertices, from which it makes a cell when it reads it (rank 0 of
+    /// several, which computes the norms and history.csv's stresses of every cell).
+    Vertices,
+    /// None (a follower rank of several).
+    Nothing,
+}
+
+/// [`corners`] of vertices held as u32.
+fn corners_u32(v: &[u32]) -> [usize; 4] {
+    std::array::from_fn(|i| v[i.min(v.len() - 1)] as usize)
 }
 
 /// Makes the nodal constraint rows of Γ3 from the dof numbering: a node whose every
@@ -497,7 +575,7 @@ impl Discretization {
     /// The discretization of `scene` on `mesh`: the free dofs (Γ1 clamped), the cells, the
     /// stiffness matrices, the loads and the constraint rows on Γ3,1 and Γ3,2.
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
-        Self::with_columns(mesh, scene, true, |_, _| Ok(None))
+        Self::with_columns(mesh, scene, Hold::Cells, |_, _| Ok(None))
     }
 
     /// The discretization with of K_A, K_B and K_R only the columns of the unknowns that
@@ -506,29 +584,29 @@ impl Discretization {
     /// matrices ever in memory: on one of several MPI ranks (`Ranks::discretize`). `own`
     /// reads the discretization before its matrices are assembled (they are empty then):
     /// its unknowns and cells, of which METIS's partition is made; None keeps every column.
-    /// Where there are prescribed dofs every column is kept, as `keep_columns` does. Without
-    /// `hold_cells` (a follower rank, which computes no norm and no stress of the whole
-    /// mesh) [`Discretization::cells`] stays empty: the setup makes each cell from the mesh
-    /// when it reads it ([`CellSource::Made`]), and the rank holds none.
+    /// Where there are prescribed dofs every column is kept, as `keep_columns` does. The
+    /// discretization holds what `hold` says of the cells; where that is not every cell (a
+    /// rank of several) its setup makes each from the mesh when it reads it
+    /// ([`CellSource::Made`]).
     pub fn with_columns(
         mesh: &Mesh,
         scene: &Scene,
-        hold_cells: bool,
+        hold: Hold,
         own: impl FnOnce(&Discretization, CellSource) -> Result<Option<Vec<usize>>>,
     ) -> Result<Self> {
         check_model(mesh, scene)?;
         let d = mesh.dim;
         let numbering = Numbering::new(mesh, scene)?;
         let (n_free, n_dofs) = (numbering.n_free, numbering.n_dofs);
-        let cells = match hold_cells {
-            true => cells(mesh),
-            false => Vec::new(),
+        let cells = match hold {
+            Hold::Cells => cells(mesh),
+            _ => Vec::new(),
         };
 
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
 
-        let loads = Loads::new(mesh, scene, CellSource::of(hold_cells, &cells, mesh))?;
+        let loads = Loads::new(mesh, scene, CellSource::setup(hold, &cells, mesh))?;
         let rows = RowMaker {
             numbering: &numbering,
             dim: d,
@@ -568,16 +646,17 @@ impl Discretization {
             own: None,
             own_pair: None,
             stress_cells: std::sync::OnceLock::new(),
+            vertices: Vec::new(),
         };
         let own =
-            own(&disc, CellSource::of(hold_cells, &disc.cells, mesh))?.filter(|_| n_dofs == n_free);
+            own(&disc, CellSource::setup(hold, &disc.cells, mesh))?.filter(|_| n_dofs == n_free);
         // Without a memory term in any cell K_R would be zero: none is assembled.
         let groups = match disc.materials.memory() {
             true => scene.physics.memory_groups(),
             false => 0,
         };
         let (k_a_all, k_b, k_r) = disc.assemble(
-            CellSource::of(hold_cells, &disc.cells, mesh),
+            CellSource::setup(hold, &disc.cells, mesh),
             groups,
             own.as_deref(),
         );
@@ -586,6 +665,18 @@ impl Discretization {
             false => (k_a_all, None),
         };
         (disc.k_b, disc.k_r, disc.own) = (k_b, k_r, own);
+        if hold == Hold::Vertices {
+            let (nodes, _) = mesh_cells(mesh);
+            let too_large = |_| {
+                Error::input(format!(
+                    "mesh '{}': more nodes than a run over several MPI ranks numbers (2^32)",
+                    mesh.path.display()
+                ))
+            };
+            disc.vertices = (nodes.iter())
+                .map(|&v| u32::try_from(v).map_err(too_large))
+                .collect::<Result<_>>()?;
+        }
         Ok(disc)
     }
 
@@ -679,7 +770,7 @@ impl Discretization {
         cells: StressCells,
     ) -> (Vec<f64>, Vec<f64>) {
         let n_cells = match cells {
-            StressCells::All => self.cells.len(),
+            StressCells::All => self.n_cells(),
             StressCells::Only(only) => only.len(),
             StressCells::Of(of, _) => of.len(),
         };
@@ -786,19 +877,20 @@ impl Discretization {
         let materials = &self.materials.of_cell;
         let each = |one: &mut dyn FnMut(usize)| match only {
             StressCells::Only(cells) => cells.iter().for_each(|&c| one(c)),
-            _ => (0..self.cells.len()).for_each(one),
+            _ => (0..self.n_cells()).for_each(one),
         };
         let mut of_cell = |t: &Cell, material: u32| {
             let grad = std::array::from_fn(|i| std::array::from_fn(|a| t.grad[i][a]));
             cell(std::array::from_fn(|i| t.nodes[i]), &grad, material);
         };
-        // A rank of several holds the cells already; packing them again would cost rank 0,
-        // which writes history.csv, 112 bytes a tetrahedron more than the others hold (a
-        // frame is written beside PETSc's solves, not beside a factor).
+        // Rank 0 of several makes each cell from its vertices (16 bytes a tetrahedron) as it
+        // reads it, on the thread that writes history.csv, beside PETSc's solves; packing
+        // them, as one process does beside its factor, would hold 112 bytes a tetrahedron.
         if let StressCells::Of(cells, materials) = only {
             (cells.iter().zip(materials)).for_each(|(t, &material)| of_cell(t, material));
         } else if self.own.is_some() {
-            each(&mut |c| of_cell(&self.cells[c], materials[c]));
+            let cells = self.cell_source();
+            each(&mut |c| of_cell(&cells.get(c), materials[c]));
         } else {
             let packed = self
                 .stress_cells
@@ -834,7 +926,7 @@ impl Discretization {
 
     /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
-        p1_norms(&self.cells, &nodal_vectors::<3>(self, v))
+        norms_of(self.cell_source(), &nodal_vectors::<3>(self, v))
     }
 
     /// Lets go of the cells (where it held them: `solver.linear = "auto"`) and of each
@@ -850,10 +942,22 @@ impl Discretization {
         self.materials.region = Vec::new();
     }
 
-    /// The cells it holds ([`Discretization::cells`]: none on a follower rank, which made
-    /// them from the mesh during its setup).
-    pub fn held_cells(&self) -> CellSource<'_> {
-        CellSource::Held(&self.cells)
+    /// Its cells: those it holds ([`Discretization::cells`]), or on rank 0 of several
+    /// each made from its vertices when it is read; none on a follower rank of several.
+    pub fn cell_source(&self) -> CellSource<'_> {
+        match self.vertices.is_empty() {
+            true => CellSource::Held(&self.cells),
+            false => CellSource::Vertices {
+                vertices: &self.vertices,
+                points: &self.nodes,
+                dim: self.dim,
+            },
+        }
+    }
+
+    /// The number of cells of the mesh (those it holds, or their vertices).
+    pub fn n_cells(&self) -> usize {
+        self.cell_source().count()
     }
 
     /// The cells of the nodes `nodes` (dim + 1 a cell), made from the nodes' coordinates as
@@ -961,8 +1065,13 @@ pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f
 /// per simplex of dimension d, ∫(Σ v_i φ_i)² = |T|/((d+1)(d+2)) (Σ v_i² + (Σ v_i)²), and the
 /// gradient is constant.
 pub fn p1_norms<const N: usize>(cells: &[Cell], v: &[[f64; N]]) -> (f64, f64) {
+    norms_of(CellSource::Held(cells), v)
+}
+
+/// [`p1_norms`] over the cells `cells` reads.
+fn norms_of<const N: usize>(cells: CellSource, v: &[[f64; N]]) -> (f64, f64) {
     let (mut l2, mut h1) = (0.0, 0.0);
-    for t in cells {
+    cells.each(|_, t| {
         let vs = t.vertices();
         let denom = ((t.dim + 1) * (t.dim + 2)) as f64;
         // c is a component of v[n] for every vertex n, not an index into v.
@@ -980,7 +1089,7 @@ pub fn p1_norms<const N: usize>(cells: &[Cell], v: &[[f64; N]]) -> (f64, f64) {
                 h1 += t.measure * g * g;
             }
         }
-    }
+    });
     (l2.sqrt(), h1.sqrt())
 }
 

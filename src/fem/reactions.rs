@@ -154,7 +154,7 @@ fn held_rows(
 ) -> (Vec<usize>, Vec<[usize; 2]>, Vec<[f64; 3]>) {
     let d = disc.dim;
     let mut entries: Vec<(u32, [usize; 2], [f64; 3])> = Vec::new();
-    for (c, t) in disc.cells.iter().enumerate() {
+    disc.cell_source().each(|c, t| {
         let s = disc.materials.of(c);
         let (a, b) = (s.a, s.b_or_zero());
         let (r, g) = match s.memory {
@@ -179,7 +179,7 @@ fn held_rows(
                 }
             }
         }
-    }
+    });
     // Stable: the entries of one position are added in the cells' order.
     entries.sort_by_key(|&(row, col, _)| (row, col));
     let mut ptr = vec![0; disc.held.len() + 1];

@@ -292,7 +292,7 @@ impl Krylov {
         let (rank, size) = world()?;
         let (layout, rows) = match own {
             Some(own) => own,
-            None => (Layout::new(disc, disc.held_cells(), size)?, None),
+            None => (Layout::new(disc, disc.cell_source(), size)?, None),
         };
         let csr = match rows {
             Some(rows) => rows,

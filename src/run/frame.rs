@@ -44,7 +44,7 @@ pub(super) fn open_series(
 
 /// A rank's piece of the frames as its setup leaves it: the piece's mesh (None where its
 /// part has no cells) and, on a follower, whose discretization holds no cell, the
-/// material of each of the piece's cells (rank 0 holds every cell with its material).
+/// material of each of the piece's cells (rank 0 holds every cell's vertices and material).
 pub(super) struct PieceSetup {
     mesh: Option<PieceMesh>,
     materials: Option<Vec<u32>>,
@@ -136,7 +136,7 @@ enum Piece {
     /// This rank's part has no cells.
     None,
     /// Before the first frame: the piece's mesh, and (a follower) the material of each of
-    /// its cells (rank 0 holds every cell with its material).
+    /// its cells (rank 0 holds every cell's vertices and material).
     Mesh(PieceMesh, Option<Vec<u32>>),
     /// The piece and (a follower) its cells and their materials.
     Made(Box<OwnPiece>, Option<(Vec<Cell>, Vec<u32>)>),

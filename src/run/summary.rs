@@ -233,10 +233,10 @@ impl Summary {
             name: scene.name.clone(),
             scene: absolute(&scene.path),
             // The mesh itself is gone (after setup); the discretization holds its nodes and
-            // cells (the summary is rank 0's, which keeps them).
+            // cells (the summary is rank 0's, which keeps them, or their vertices).
             mesh: absolute(&scene.mesh.file),
             nodes: disc.nodes.len(),
-            elements: disc.cells.len(),
+            elements: disc.n_cells(),
             dofs: disc.n_free,
             steps: scene.time.steps,
             step_size: tl.k(),

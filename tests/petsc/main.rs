@@ -277,7 +277,7 @@ fn the_ranks_shares_of_k_a_are_those_of_its_pattern() {
     for (scene, size) in [(SceneText::block(), 3), (SceneText::paper(), 2)] {
         let path = scene.write(tmp.path(), "s.toml");
         let (_s, _m, disc) = common::load(&path, &[]);
-        let layout = viscontact::petsc::Layout::new(&disc, disc.held_cells(), size).unwrap();
+        let layout = viscontact::petsc::Layout::new(&disc, disc.cell_source(), size).unwrap();
         let rank = |i: usize| layout.blocks.partition_point(|&b| b <= layout.row(i)) - 1;
         let k = disc.k_a.as_ref();
         let (ptr, idx) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
@@ -292,7 +292,7 @@ fn the_ranks_shares_of_k_a_are_those_of_its_pattern() {
                     .filter(|&&j| rank(j) != rank(i)),
             );
         }
-        let shares = layout.shares(&disc, disc.held_cells());
+        let shares = layout.shares(&disc, disc.cell_source());
         for (r, ((rows, entries, ghosts), share)) in expected.iter().zip(&shares).enumerate() {
             assert_eq!(share.rows, *rows, "rank {r} of {size}");
             assert_eq!(share.entries, *entries, "rank {r} of {size}");

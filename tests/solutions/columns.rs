@@ -5,7 +5,8 @@
 //! agree with the whole matrices' products to round-off, the diagonal stays whole (the
 //! active set's ρ reads it), and the other columns are gone. A rank that assembles those
 //! columns alone (`Discretization::with_columns`) holds the same matrices and loads, bit for
-//! bit, whether it holds the cells or makes them from the mesh as it reads them; its
+//! bit, whether it holds the cells, their vertices or nothing; from the vertices alone (rank
+//! 0) it computes the stresses and norms of the cells held, bit for bit; its
 //! rows of K_B and K_R paired (`Discretization::pair_own_rows`) give the same products.
 //! Where a rank's rows of K_A go to PETSc, K_A keeps its diagonal alone
 //! (`Discretization::keep_diagonal_of_k_a`). A scene with prescribed dofs keeps its
@@ -13,7 +14,7 @@
 
 use crate::common;
 use common::*;
-use viscontact::fem::{diagonal, mul_add, mul_add_rows, Discretization, Sparse};
+use viscontact::fem::{diagonal, mul_add, mul_add_rows, Discretization, Hold, Sparse, StressCells};
 
 /// The unknowns of a random half of `disc`'s nodes, increasing.
 fn random_half(disc: &Discretization, rng: &mut SplitMix) -> Vec<usize> {
@@ -79,10 +80,10 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
         let (scene, mesh, mut kept) = load(&path, &[]);
         let own = random_half(&kept, &mut SplitMix(7));
         kept.keep_columns(own.clone());
-        for hold_cells in [true, false] {
-            let case = format!("{name}, cells held: {hold_cells}");
+        for hold in [Hold::Cells, Hold::Vertices, Hold::Nothing] {
+            let case = format!("{name}, holding {hold:?}");
             let mut asked = false;
-            let mine = Discretization::with_columns(&mesh, &scene, hold_cells, |disc, cells| {
+            let mine = Discretization::with_columns(&mesh, &scene, hold, |disc, cells| {
                 let mut vertices = Vec::new();
                 cells.each_vertices(|v| vertices.extend_from_slice(v));
                 let whole = kept.cells.iter().flat_map(|t| t.vertices().iter().copied());
@@ -94,11 +95,12 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
                 asked,
                 "{case}: the unknowns and cells come before the matrices"
             );
-            let held = match hold_cells {
-                true => kept.cells.len(),
-                false => 0,
+            let (held, read) = match hold {
+                Hold::Cells => (kept.cells.len(), kept.cells.len()),
+                Hold::Vertices => (0, kept.cells.len()),
+                Hold::Nothing => (0, 0),
             };
-            assert_eq!(mine.cells.len(), held, "{case}");
+            assert_eq!((mine.cells.len(), mine.n_cells()), (held, read), "{case}");
             assert_eq!(mine.own, kept.own, "{case}");
             let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             let loads = |d: &Discretization| {
@@ -125,6 +127,59 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
                 assert_eq!(bits(a.val()), bits(b.val()), "{case} {k}");
             }
         }
+    }
+}
+
+/// Rank 0 of several holds each cell's vertices alone (`Hold::Vertices`) and makes a cell
+/// from them when it reads it: on the 3D block and the paper's 2D scene, the stresses of
+/// every cell and of some, the largest von Mises stress and the norms are the bits of the
+/// cells held.
+#[test]
+fn rank_0_computes_from_the_cells_vertices_what_it_would_from_the_cells() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, scene) in [
+        ("block.toml", SceneText::block()),
+        ("paper.toml", SceneText::paper()),
+    ] {
+        let path = scene.write(dir.path(), name);
+        let (scene, mesh, mut held) = load(&path, &[]);
+        let own = random_half(&held, &mut SplitMix(3));
+        held.keep_columns(own.clone());
+        let mine = Discretization::with_columns(&mesh, &scene, Hold::Vertices, |_, _| {
+            Ok(Some(own.clone()))
+        })
+        .unwrap();
+        assert!(mine.cells.is_empty() && mine.n_cells() == held.cells.len());
+        let mut rng = SplitMix(5);
+        let mut random = |len: usize| (0..len).map(|_| rng.unit() - 0.5).collect::<Vec<_>>();
+        let (w, u) = (random(held.n_dofs), random(held.n_dofs));
+        let m = random(held.n_dofs * held.k_r.len());
+        let m = (!m.is_empty()).then_some(m.as_slice());
+        let model = scene.mesh.model;
+        let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let some: Vec<usize> = (0..held.cells.len()).step_by(3).rev().collect();
+        for cells in [StressCells::All, StressCells::Only(&some)] {
+            let (s, vm) = held.stress([&w, &u], m, model, cells);
+            let (s2, vm2) = mine.stress([&w, &u], m, model, cells);
+            assert!(vm.iter().any(|&v| v > 0.0), "{name}");
+            assert_eq!(
+                (bits(&s2), bits(&vm2)),
+                (bits(&s), bits(&vm)),
+                "{name} {cells:?}"
+            );
+        }
+        let largest = held.max_von_mises(&w, &u, m, model);
+        assert_eq!(
+            mine.max_von_mises(&w, &u, m, model).to_bits(),
+            largest.to_bits()
+        );
+        let (l2, semi) = held.norms(&w);
+        let (l2_mine, semi_mine) = mine.norms(&w);
+        assert!(l2 > 0.0 && semi > 0.0, "{name}");
+        assert_eq!(
+            [l2_mine, semi_mine].map(f64::to_bits),
+            [l2, semi].map(f64::to_bits)
+        );
     }
 }
 
@@ -189,7 +244,8 @@ fn a_scene_with_prescribed_dofs_keeps_its_matrices_whole() {
     assert!(disc.own.is_none());
     assert_eq!(disc.k_a.as_ref().val(), &before[..]);
     let mine =
-        Discretization::with_columns(&mesh, &scene, false, |_, _| Ok(Some(vec![0, 1]))).unwrap();
+        Discretization::with_columns(&mesh, &scene, Hold::Nothing, |_, _| Ok(Some(vec![0, 1])))
+            .unwrap();
     assert!(mine.own.is_none());
     assert_eq!(mine.k_a.as_ref().val(), &before[..]);
 }
