@@ -427,12 +427,10 @@ impl Plan {
         let made = made
             .map(|own| &own.layout)
             .filter(|l| l.blocks.len() == size + 1);
+        let cells = disc.cell_source();
         let shares = match made {
-            Some(layout) => layout.shares(disc, disc.cell_source()),
-            None => {
-                let cells = disc.cell_source();
-                crate::petsc::Layout::new(disc, cells, size)?.shares(disc, cells)
-            }
+            Some(layout) => layout.shares(disc, cells),
+            None => crate::petsc::Layout::new(disc, cells, size)?.shares(disc, cells),
         };
         let largest = shares
             .iter()

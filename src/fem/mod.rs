@@ -266,17 +266,13 @@ impl<'a> CellSource<'a> {
     /// Cell `c`.
     pub fn get(self, c: usize) -> Cell {
         let (points, dim) = self.points();
-        match self {
-            CellSource::Held(cells) => cells[c],
-            CellSource::Made(mesh) => {
-                let (nodes, _) = mesh_cells(mesh);
-                make_cell(dim, corners(&nodes[c * (dim + 1)..][..=dim]), points)
-            }
-            CellSource::Vertices { vertices, .. } => {
-                let v = corners_u32(&vertices[c * (dim + 1)..][..=dim]);
-                make_cell(dim, v, points)
-            }
-        }
+        let at = c * (dim + 1)..(c + 1) * (dim + 1);
+        let v = match self {
+            CellSource::Held(cells) => return cells[c],
+            CellSource::Made(mesh) => corners(&mesh_cells(mesh).0[at]),
+            CellSource::Vertices { vertices, .. } => corners_u32(&vertices[at]),
+        };
+        make_cell(dim, v, points)
     }
 
     /// The number of cells.
