@@ -884,6 +884,20 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   PetscFunctionReturn(0);
 }
 
+/* *out ← a square parallel matrix of global size `size` whose m rows on this rank are the
+ * CSR given (row offsets from 0, global columns in order), values copied. */
+static PetscErrorCode from_csr(MPI_Comm comm, PetscInt m, PetscInt size, const PetscInt *rowptr,
+                               const PetscInt *cols, const PetscScalar *vals, Mat *out)
+{
+  PetscFunctionBeginUser;
+  PetscCall(MatCreate(comm, out));
+  PetscCall(MatSetSizes(*out, m, m, size, size));
+  PetscCall(MatSetType(*out, MATAIJ));
+  PetscCall(MatSeqAIJSetPreallocationCSR(*out, rowptr, cols, vals));
+  PetscCall(MatMPIAIJSetPreallocationCSR(*out, rowptr, cols, vals));
+  PetscFunctionReturn(0);
+}
+
 /* Row r's entries where N (values n) and M (Q's values q, or K where q is NULL) differ:
  * their count, and where cols is given, their columns and N − M there. N and Q share
  * their layout, so their runs match. */
@@ -933,11 +947,7 @@ static PetscErrorCode difference(VcKsp *s, PetscBool from_k, Mat *d)
     rowptr[0] = 0;
     for (PetscInt r = 0; r < l.m; r++)
       rowptr[r + 1] = rowptr[r] + row_difference(&l, &n, m, r, cols + rowptr[r], vals + rowptr[r]);
-    PetscCall(MatCreate(comm, d));
-    PetscCall(MatSetSizes(*d, l.m, l.m, size, size));
-    PetscCall(MatSetType(*d, MATAIJ));
-    PetscCall(MatSeqAIJSetPreallocationCSR(*d, rowptr, cols, vals));
-    PetscCall(MatMPIAIJSetPreallocationCSR(*d, rowptr, cols, vals));
+    PetscCall(from_csr(comm, l.m, size, rowptr, cols, vals, d));
     PetscCall(PetscFree3(rowptr, cols, vals));
   }
   if (!from_k) PetscCall(values_close(s->Q, PETSC_FALSE, &q));
@@ -977,6 +987,229 @@ static PetscErrorCode restricted_ptap(Mat d, Mat p, Mat *out)
   PetscFunctionReturn(0);
 }
 
+/* This rank's rows of D over the fine indices `need` (its nonzero rows and every column
+ * they touch, sorted): row k of *local is D's row need[k] where that row is this rank's,
+ * empty where it is another's. */
+static PetscErrorCode own_rows(Mat d, IS *need, Mat *local)
+{
+  PetscInt           r0, r1, n = 0, nnz = 0, *idx, *rowptr, *cols;
+  PetscScalar       *vals;
+  const PetscInt    *c;
+  const PetscScalar *v;
+
+  PetscFunctionBeginUser;
+  PetscCall(MatGetOwnershipRange(d, &r0, &r1));
+  for (PetscInt r = r0; r < r1; r++) {
+    PetscInt nc;
+    PetscCall(MatGetRow(d, r, &nc, NULL, NULL));
+    nnz += nc;
+    PetscCall(MatRestoreRow(d, r, &nc, NULL, NULL));
+  }
+  PetscCall(PetscMalloc1(nnz + r1 - r0, &idx));
+  for (PetscInt r = r0; r < r1; r++) {
+    PetscInt nc;
+    PetscCall(MatGetRow(d, r, &nc, &c, NULL));
+    if (nc) idx[n++] = r;
+    for (PetscInt j = 0; j < nc; j++) idx[n++] = c[j];
+    PetscCall(MatRestoreRow(d, r, &nc, &c, NULL));
+  }
+  PetscCall(PetscSortRemoveDupsInt(&n, idx));
+  PetscCall(PetscMalloc3(n + 1, &rowptr, nnz, &cols, nnz, &vals));
+  rowptr[0] = 0;
+  for (PetscInt k = 0; k < n; k++) {
+    PetscInt nc = 0, at = rowptr[k];
+    if (idx[k] >= r0 && idx[k] < r1) PetscCall(MatGetRow(d, idx[k], &nc, &c, &v));
+    for (PetscInt j = 0; j < nc; j++, at++) {
+      PetscCall(PetscFindInt(c[j], n, idx, &cols[at]));
+      vals[at] = v[j];
+    }
+    if (nc) PetscCall(MatRestoreRow(d, idx[k], &nc, &c, &v));
+    rowptr[k + 1] = at;
+  }
+  PetscCall(MatCreate(PETSC_COMM_SELF, local));
+  PetscCall(MatSetSizes(*local, n, n, n, n));
+  PetscCall(MatSetType(*local, MATSEQAIJ));
+  PetscCall(MatSeqAIJSetPreallocationCSR(*local, rowptr, cols, vals));
+  PetscCall(PetscFree3(rowptr, cols, vals));
+  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, n, idx, PETSC_OWN_POINTER, need));
+  PetscFunctionReturn(0);
+}
+
+/* The coarse entries of Pᵀ D P that this rank's rows of D make: P's rows `need` fetched
+ * whole (collective) and a sequential product over them; NULL where the rank has no row. */
+static PetscErrorCode partial_ptap(Mat d, Mat p, Mat *part)
+{
+  PetscInt n, nc;
+  IS       need, all;
+  Mat      local, *rows;
+
+  PetscFunctionBeginUser;
+  *part = NULL;
+  PetscCall(MatGetSize(p, NULL, &nc));
+  PetscCall(own_rows(d, &need, &local));
+  PetscCall(ISCreateStride(PETSC_COMM_SELF, nc, 0, 1, &all));
+  PetscCall(MatCreateSubMatrices(p, 1, &need, &all, MAT_INITIAL_MATRIX, &rows));
+  PetscCall(ISGetLocalSize(need, &n));
+  if (n > 0) {
+    PetscCall(MatProductCreate(local, rows[0], NULL, part));
+    /* A prefix of its own: the -matptap_via that GAMG's products read is not for it. */
+    PetscCall(MatSetOptionsPrefix(*part, "vc_update_"));
+    PetscCall(MatProductSetType(*part, MATPRODUCT_PtAP));
+    PetscCall(MatProductSetAlgorithm(*part, MATPRODUCTALGORITHMDEFAULT));
+    PetscCall(MatProductSetFill(*part, PETSC_DEFAULT));
+    PetscCall(MatProductSetFromOptions(*part));
+    PetscCall(MatProductSymbolic(*part));
+    PetscCall(MatProductNumeric(*part));
+    PetscCall(MatProductClear(*part));
+  }
+  PetscCall(MatDestroySubMatrices(1, &rows));
+  PetscCall(MatDestroy(&local));
+  PetscCall(ISDestroy(&all));
+  PetscCall(ISDestroy(&need));
+  PetscFunctionReturn(0);
+}
+
+/* Each rank's rows of part (NULL: none), sent to the rank that owns them in P's column
+ * layout: ints[q] (row, count, columns) and vals[q] for each rank q (collective). */
+static PetscErrorCode send_to_owners(Mat part, Mat p, PetscInt **ints, PetscScalar **vals,
+                                     PetscMPIInt *ni, PetscMPIInt *nv, PetscMPIInt *di,
+                                     PetscMPIInt *dv)
+{
+  const PetscInt    *ranges, *ia = NULL, *ja = NULL;
+  const PetscScalar *va = NULL;
+  PetscInt           nc, rows = 0, *sendi;
+  PetscScalar       *sends;
+  PetscMPIInt        size, *si, *sv, *ei, *ev;
+  PetscBool          done;
+  MPI_Comm           comm;
+
+  PetscFunctionBeginUser;
+  PetscCall(PetscObjectGetComm((PetscObject)p, &comm));
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  PetscCall(MatGetOwnershipRangesColumn(p, &ranges));
+  PetscCall(MatGetSize(p, NULL, &nc));
+  PetscCall(PetscCalloc4(size, &si, size, &sv, size + 1, &ei, size + 1, &ev));
+  if (part) {
+    PetscCall(MatGetRowIJ(part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &ia, &ja, &done));
+    PetscCall(MatSeqAIJGetArrayRead(part, &va));
+  }
+  for (PetscInt a = 0, q = 0; a < rows; a++) {
+    while (a >= ranges[q + 1]) q++;
+    if (ia[a + 1] == ia[a]) continue;
+    si[q] += (PetscMPIInt)(2 + ia[a + 1] - ia[a]);
+    sv[q] += (PetscMPIInt)(ia[a + 1] - ia[a]);
+  }
+  for (PetscMPIInt q = 0; q < size; q++) {
+    ei[q + 1] = ei[q] + si[q];
+    ev[q + 1] = ev[q] + sv[q];
+  }
+  PetscCall(PetscMalloc2(ei[size], &sendi, ev[size], &sends));
+  for (PetscInt a = 0, xi = 0, xv = 0; a < rows; a++) {
+    PetscInt len = ia[a + 1] - ia[a];
+    if (!len) continue;
+    sendi[xi++] = a;
+    sendi[xi++] = len;
+    PetscCall(PetscArraycpy(sendi + xi, ja + ia[a], len));
+    PetscCall(PetscArraycpy(sends + xv, va + ia[a], len));
+    xi += len;
+    xv += len;
+  }
+  if (part) {
+    PetscCall(MatSeqAIJRestoreArrayRead(part, &va));
+    PetscCall(MatRestoreRowIJ(part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &ia, &ja, &done));
+  }
+  PetscCallMPI(MPI_Alltoall(si, 1, MPI_INT, ni, 1, MPI_INT, comm));
+  PetscCallMPI(MPI_Alltoall(sv, 1, MPI_INT, nv, 1, MPI_INT, comm));
+  di[0] = dv[0] = 0;
+  for (PetscMPIInt q = 0; q < size; q++) {
+    di[q + 1] = di[q] + ni[q];
+    dv[q + 1] = dv[q] + nv[q];
+  }
+  PetscCall(PetscMalloc2(di[size], ints, dv[size], vals));
+  PetscCallMPI(MPI_Alltoallv(sendi, si, ei, MPIU_INT, *ints, ni, di, MPIU_INT, comm));
+  PetscCallMPI(MPI_Alltoallv(sends, sv, ev, MPIU_SCALAR, *vals, nv, dv, MPIU_SCALAR, comm));
+  PetscCall(PetscFree2(sendi, sends));
+  PetscCall(PetscFree4(si, sv, ei, ev));
+  PetscFunctionReturn(0);
+}
+
+/* sum ← this rank's coarse rows (P's column layout), the received parts added rank by
+ * rank as the buffers hold them (ints: row, count, columns; vals: the values), so that
+ * every run adds them in the same order. */
+static PetscErrorCode add_in_rank_order(Mat p, const PetscInt *ints, PetscInt length,
+                                        const PetscScalar *vals, Mat *sum)
+{
+  const PetscInt *ranges;
+  PetscInt        c0, nc, rows, *bound;
+  PetscMPIInt     rank;
+
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_rank(PetscObjectComm((PetscObject)p), &rank));
+  PetscCall(MatGetOwnershipRangesColumn(p, &ranges));
+  PetscCall(MatGetSize(p, NULL, &nc));
+  c0   = ranges[rank];
+  rows = ranges[rank + 1] - c0;
+  PetscCall(PetscCalloc1(rows, &bound));
+  for (PetscInt x = 0; x < length; x += 2 + ints[x + 1]) bound[ints[x] - c0] += ints[x + 1];
+  PetscCall(MatCreateSeqAIJ(PETSC_COMM_SELF, rows, nc, 0, bound, sum));
+  for (PetscInt x = 0, y = 0; x < length; y += ints[x + 1], x += 2 + ints[x + 1]) {
+    PetscInt row = ints[x] - c0;
+    PetscCall(MatSetValues(*sum, 1, &row, ints[x + 1], ints + x + 2, vals + y, ADD_VALUES));
+  }
+  PetscCall(MatAssemblyBegin(*sum, MAT_FINAL_ASSEMBLY));
+  PetscCall(MatAssemblyEnd(*sum, MAT_FINAL_ASSEMBLY));
+  PetscCall(PetscFree(bound));
+  PetscFunctionReturn(0);
+}
+
+/* *out ← the parallel matrix whose rows on this rank are those of the sequential `rows`
+ * (square, its columns global). */
+static PetscErrorCode as_parallel(Mat rows, MPI_Comm comm, Mat *out)
+{
+  const PetscInt    *ia, *ja;
+  const PetscScalar *va;
+  PetscInt           m, nc;
+  PetscBool          done;
+
+  PetscFunctionBeginUser;
+  PetscCall(MatGetSize(rows, NULL, &nc));
+  PetscCall(MatGetRowIJ(rows, 0, PETSC_FALSE, PETSC_FALSE, &m, &ia, &ja, &done));
+  PetscCall(MatSeqAIJGetArrayRead(rows, &va));
+  PetscCall(from_csr(comm, m, nc, ia, ja, va, out));
+  PetscCall(MatSeqAIJRestoreArrayRead(rows, &va));
+  PetscCall(MatRestoreRowIJ(rows, 0, PETSC_FALSE, PETSC_FALSE, &m, &ia, &ja, &done));
+  PetscFunctionReturn(0);
+}
+
+/* Pᵀ D P on three ranks or more, the same bits in every run: each rank multiplies its own
+ * rows of D by the rows of P they touch (partial_ptap), and the rank that owns a coarse row
+ * adds what every rank made of it in rank order. PETSc's parallel products add other ranks'
+ * contributions in the order their messages arrive (the scalable one), or cost many times
+ * the work on these thin products (the all-at-once one, docs/performance.md). NULL where D
+ * is. */
+static PetscErrorCode ordered_ptap(Mat d, Mat p, Mat *out)
+{
+  PetscInt    *ints;
+  PetscScalar *vals;
+  PetscMPIInt  size, *ni, *nv, *di, *dv;
+  Mat          part, sum;
+
+  PetscFunctionBeginUser;
+  *out = NULL;
+  if (!d) PetscFunctionReturn(0);
+  PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)p), &size));
+  PetscCall(partial_ptap(d, p, &part));
+  PetscCall(PetscMalloc4(size, &ni, size, &nv, size + 1, &di, size + 1, &dv));
+  PetscCall(send_to_owners(part, p, &ints, &vals, ni, nv, di, dv));
+  PetscCall(MatDestroy(&part));
+  PetscCall(add_in_rank_order(p, ints, di[size], vals, &sum));
+  PetscCall(as_parallel(sum, PetscObjectComm((PetscObject)p), out));
+  PetscCall(MatDestroy(&sum));
+  PetscCall(PetscFree2(ints, vals));
+  PetscCall(PetscFree4(ni, nv, di, dv));
+  PetscFunctionReturn(0);
+}
+
 /* Q ← N and its coarse operators on K's interpolations P_l, A_{l−1} = P_lᵀ A_l P_l with
  * A_fine = Q, computed as a reference's plus the difference carried down: K's own at a
  * step's first system (`from_k`), so that a step's hierarchies depend on K and the step
@@ -987,10 +1220,12 @@ static PetscErrorCode restricted_ptap(Mat d, Mat p, Mat *out)
  * (MatAXPY on a subset pattern). */
 static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
 {
-  PC  pc;
-  Mat d;
+  PC          pc;
+  Mat         d;
+  PetscMPIInt size;
 
   PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)s->N), &size));
   PetscCall(KSPGetPC(s->kc, &pc));
   PetscCall(difference(s, from_k, &d));
   PetscCall(keep_q(s));
@@ -998,7 +1233,7 @@ static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
     KSP smoother;
     Mat p, a, dc;
     PetscCall(PCMGGetInterpolation(pc, l, &p));
-    PetscCall(restricted_ptap(d, p, &dc));
+    PetscCall(size > 2 ? ordered_ptap(d, p, &dc) : restricted_ptap(d, p, &dc));
     PetscCall(MatDestroy(&d));
     PetscCall(level(pc, l - 1, &smoother, &a));
     if (from_k) PetscCall(MatCopy(s->coarse_k[l - 1], a, SAME_NONZERO_PATTERN));
@@ -1014,6 +1249,24 @@ static PetscErrorCode galerkin_update(VcKsp *s, PetscBool from_k)
     PetscCall(level(pc, l, &smoother, &a));
     PetscCall(KSPSetOperators(smoother, a, a));
   }
+  PetscFunctionReturn(0);
+}
+
+int vc_galerkin_defect(void *ctx, PetscReal *defect);
+
+/* With the PETSc option -viscontact_galerkin_check, rank 0 prints after each update how far
+ * the hierarchy is from the Galerkin products computed anew (vc_galerkin_defect): the
+ * check of the update on several ranks, whose runs no library test can host (tests/petsc). */
+static PetscErrorCode check_galerkin(VcKsp *s)
+{
+  PetscBool check;
+  PetscReal defect;
+
+  PetscFunctionBeginUser;
+  PetscCall(PetscOptionsHasName(NULL, NULL, "-viscontact_galerkin_check", &check));
+  if (!check) PetscFunctionReturn(0);
+  PetscCall(vc_galerkin_defect(s, &defect));
+  PetscCall(PetscPrintf(PETSC_COMM_WORLD, "Galerkin defect %.3e\n", (double)defect));
   PetscFunctionReturn(0);
 }
 
@@ -1035,8 +1288,10 @@ int vc_constrained_solve(void *ctx, PetscInt np, const PetscInt *pdofs, const Pe
   s->terms = (VcTerms){np, ns, pdofs, sdofs, pdirs, smats};
   PetscCall(newton_matrix(s));
   s->terms = (VcTerms){0};
-  if (rebuild && s->coarse_k) PetscCall(galerkin_update(s, rebuild == 1));
-  else if (rebuild) PetscCall(keep_q(s));
+  if (rebuild && s->coarse_k) {
+    PetscCall(galerkin_update(s, rebuild == 1));
+    PetscCall(check_galerkin(s));
+  } else if (rebuild) PetscCall(keep_q(s));
   PetscCall(KSPSetTolerances(s->kc, rtol, 0.0, PETSC_DEFAULT, PETSC_DEFAULT));
   if (of_start != s->of_start) {
     void *test;
