@@ -6,7 +6,8 @@
 # steps, no output but the last frame (EVERY=K: a frame every K steps; over several ranks a
 # frame is a .pvtu with a piece per rank), no checkpoints; each rank count one after the other
 # in one call (0: one process, without mpirun). Prints setup, steps and total seconds (rank
-# 0's summary.json), the Krylov iterations, and the peak memory of the largest rank.
+# 0's summary.json), the Newton systems (with contact) and Krylov iterations, and the peak
+# memory of the largest rank.
 #   HDF5_DIR=/usr/lib/x86_64-linux-gnu/hdf5/serial cargo build --release --features petsc
 #   BIN=target/release/viscontact scripts/ranks.sh [SIZE [STEPS [RANKS...]]]
 # default: 0.015 20 1 2. As root, Open MPI needs OMPI_ALLOW_RUN_AS_ROOT=1 and
@@ -23,7 +24,7 @@ case "${KIND:-linear}" in
     *) echo "KIND is linear or contact" >&2; exit 2 ;;
 esac
 bin=$(realpath "${BIN:-target/release/viscontact}")
-mpirun=${MPIRUN:-mpirun}
+read -ra mpirun <<<"${MPIRUN:-mpirun}" # a command with its options
 mesh=out/meshes/plate_$size.msh
 mkdir -p out/meshes
 [ -f "$mesh" ] || gmsh -3 meshes/3d/block.geo -setnumber height 0.25 \
@@ -32,7 +33,8 @@ mkdir -p out/meshes
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 end=$(python3 -c "print($steps / 20)")
-printf '%-6s %8s %8s %8s %8s %8s %9s\n' ranks dofs setup_s steps_s total_s krylov peak_MB
+printf '%-6s %8s %8s %8s %8s %8s %8s %9s\n' ranks dofs setup_s steps_s total_s systems krylov \
+    peak_MB
 for n in ${ranks[@]}; do
     # Each rank's peak, by GNU time around it (the rank from Open MPI's or PMI's variable).
     cat >"$dir/one.sh" <<SH
@@ -41,7 +43,7 @@ exec /usr/bin/time -f %M -o "$dir/peak.\${OMPI_COMM_WORLD_RANK:-\${PMI_RANK:-0}}
 SH
     chmod +x "$dir/one.sh"
     rm -f "$dir"/peak.*
-    launch=("$mpirun" -n "$n")
+    launch=("${mpirun[@]}" -n "$n")
     [ "$n" = 0 ] && launch=()
     "${launch[@]}" "$dir/one.sh" "$bin" run examples/block.toml --quiet --out "$dir/o$n" \
         --set "mesh.file=../$mesh" --set "time.end=$end" --set "time.steps=$steps" \
@@ -52,7 +54,11 @@ SH
 import json, sys
 s = json.load(open(sys.argv[1]))
 t = s["timing"]
+# With contact, the iterations are the active set's Newton systems and PETSc's record
+# counts their Krylov iterations; without, the iterations are the Krylov iterations.
+newton = (s.get("petsc") or {}).get("newton")
+systems, krylov = (newton["systems"], newton["krylov_total"]) if newton else ("-", s["iterations"]["total"])
 print(f'{sys.argv[2]:<6} {s["dofs"]:>8} {t["setup_s"]:>8.2f} {t["steps_s"]:>8.2f} '
-      f'{t["total_s"]:>8.2f} {s["iterations"]["total"]:>8} {int(sys.argv[3]) / 1024:>9.0f}')
+      f'{t["total_s"]:>8.2f} {systems:>8} {krylov:>8} {int(sys.argv[3]) / 1024:>9.0f}')
 PY
 done
