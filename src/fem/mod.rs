@@ -188,7 +188,7 @@ fn cells_of<'a>(
     nodes: &'a [usize],
     points: &'a [[f64; 3]],
 ) -> impl Iterator<Item = Cell> + 'a {
-    (nodes.chunks_exact(dim + 1)).map(move |v| make_cell(dim, corners(v), points))
+    (nodes.chunks_exact(dim + 1)).map(move |v| make_cell(dim, corners(v, |i| i), points))
 }
 
 /// The cell of dimension `dim` with the vertices `v` (the first dim + 1), at `points`.
@@ -202,9 +202,10 @@ fn make_cell(dim: usize, v: [usize; 4], points: &[[f64; 3]]) -> Cell {
     }
 }
 
-/// A cell's dim + 1 vertices `v` as four (a triangle's last repeated: unused).
-fn corners(v: &[usize]) -> [usize; 4] {
-    std::array::from_fn(|i| v[i.min(v.len() - 1)])
+/// A cell's dim + 1 vertices `v` (node numbers as `index` reads them) as four, a
+/// triangle's last repeated (unused).
+fn corners<T: Copy>(v: &[T], index: impl Fn(T) -> usize) -> [usize; 4] {
+    std::array::from_fn(|i| index(v[i.min(v.len() - 1)]))
 }
 
 /// The cells of a discretization in the mesh's order, as it reads them: held
@@ -242,7 +243,7 @@ impl<'a> CellSource<'a> {
         let (points, dim) = self.points();
         let mut c = 0;
         self.each_vertices(|v| {
-            f(c, &make_cell(dim, corners(v), points));
+            f(c, &make_cell(dim, corners(v, |i| i), points));
             c += 1;
         });
     }
@@ -257,7 +258,7 @@ impl<'a> CellSource<'a> {
             }
             CellSource::Vertices { vertices, dim, .. } => {
                 for v in vertices.chunks_exact(dim + 1) {
-                    f(&corners_u32(v)[..=dim]);
+                    f(&corners(v, |i| i as usize)[..=dim]);
                 }
             }
         }
@@ -269,8 +270,8 @@ impl<'a> CellSource<'a> {
         let at = c * (dim + 1)..(c + 1) * (dim + 1);
         let v = match self {
             CellSource::Held(cells) => return cells[c],
-            CellSource::Made(mesh) => corners(&mesh_cells(mesh).0[at]),
-            CellSource::Vertices { vertices, .. } => corners_u32(&vertices[at]),
+            CellSource::Made(mesh) => corners(&mesh_cells(mesh).0[at], |i| i),
+            CellSource::Vertices { vertices, .. } => corners(&vertices[at], |i| i as usize),
         };
         make_cell(dim, v, points)
     }
@@ -304,11 +305,6 @@ pub enum Hold {
     Vertices,
     /// None (a follower rank of several).
     Nothing,
-}
-
-/// [`corners`] of vertices held as u32.
-fn corners_u32(v: &[u32]) -> [usize; 4] {
-    std::array::from_fn(|i| v[i.min(v.len() - 1)] as usize)
 }
 
 /// Makes the nodal constraint rows of Γ3 from the dof numbering: a node whose every

@@ -1070,16 +1070,16 @@ static PetscErrorCode partial_ptap(Mat d, Mat p, Mat *part)
 }
 
 /* Each rank's rows of part (NULL: none), sent to the rank that owns them in P's column
- * layout: ints[q] (row, count, columns) and vals[q] for each rank q (collective). */
-static PetscErrorCode send_to_owners(Mat part, Mat p, PetscInt **ints, PetscScalar **vals,
-                                     PetscMPIInt *ni, PetscMPIInt *nv, PetscMPIInt *di,
-                                     PetscMPIInt *dv)
+ * layout (collective). Received, rank by rank: *ints (row, count, columns, for each row;
+ * *length of them) and *vals (the values). */
+static PetscErrorCode send_to_owners(Mat part, Mat p, PetscInt **ints, PetscInt *length,
+                                     PetscScalar **vals)
 {
   const PetscInt    *ranges, *ia = NULL, *ja = NULL;
   const PetscScalar *va = NULL;
-  PetscInt           nc, rows = 0, *sendi;
+  PetscInt           rows = 0, *sendi;
   PetscScalar       *sends;
-  PetscMPIInt        size, *si, *sv, *ei, *ev;
+  PetscMPIInt        size, *si, *sv, *ei, *ev, *ni, *nv, *di, *dv;
   PetscBool          done;
   MPI_Comm           comm;
 
@@ -1087,8 +1087,8 @@ static PetscErrorCode send_to_owners(Mat part, Mat p, PetscInt **ints, PetscScal
   PetscCall(PetscObjectGetComm((PetscObject)p, &comm));
   PetscCallMPI(MPI_Comm_size(comm, &size));
   PetscCall(MatGetOwnershipRangesColumn(p, &ranges));
-  PetscCall(MatGetSize(p, NULL, &nc));
   PetscCall(PetscCalloc4(size, &si, size, &sv, size + 1, &ei, size + 1, &ev));
+  PetscCall(PetscMalloc4(size, &ni, size, &nv, size + 1, &di, size + 1, &dv));
   if (part) {
     PetscCall(MatGetRowIJ(part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &ia, &ja, &done));
     PetscCall(MatSeqAIJGetArrayRead(part, &va));
@@ -1128,8 +1128,10 @@ static PetscErrorCode send_to_owners(Mat part, Mat p, PetscInt **ints, PetscScal
   PetscCall(PetscMalloc2(di[size], ints, dv[size], vals));
   PetscCallMPI(MPI_Alltoallv(sendi, si, ei, MPIU_INT, *ints, ni, di, MPIU_INT, comm));
   PetscCallMPI(MPI_Alltoallv(sends, sv, ev, MPIU_SCALAR, *vals, nv, dv, MPIU_SCALAR, comm));
+  *length = di[size];
   PetscCall(PetscFree2(sendi, sends));
   PetscCall(PetscFree4(si, sv, ei, ev));
+  PetscCall(PetscFree4(ni, nv, di, dv));
   PetscFunctionReturn(0);
 }
 
@@ -1189,24 +1191,20 @@ static PetscErrorCode as_parallel(Mat rows, MPI_Comm comm, Mat *out)
  * is. */
 static PetscErrorCode ordered_ptap(Mat d, Mat p, Mat *out)
 {
-  PetscInt    *ints;
+  PetscInt    *ints, length = 0;
   PetscScalar *vals;
-  PetscMPIInt  size, *ni, *nv, *di, *dv;
   Mat          part, sum;
 
   PetscFunctionBeginUser;
   *out = NULL;
   if (!d) PetscFunctionReturn(0);
-  PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)p), &size));
   PetscCall(partial_ptap(d, p, &part));
-  PetscCall(PetscMalloc4(size, &ni, size, &nv, size + 1, &di, size + 1, &dv));
-  PetscCall(send_to_owners(part, p, &ints, &vals, ni, nv, di, dv));
+  PetscCall(send_to_owners(part, p, &ints, &length, &vals));
   PetscCall(MatDestroy(&part));
-  PetscCall(add_in_rank_order(p, ints, di[size], vals, &sum));
+  PetscCall(add_in_rank_order(p, ints, length, vals, &sum));
   PetscCall(as_parallel(sum, PetscObjectComm((PetscObject)p), out));
   PetscCall(MatDestroy(&sum));
   PetscCall(PetscFree2(ints, vals));
-  PetscCall(PetscFree4(ni, nv, di, dv));
   PetscFunctionReturn(0);
 }
 
