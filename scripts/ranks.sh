@@ -12,6 +12,7 @@
 #   BIN=target/release/viscontact scripts/ranks.sh [SIZE [STEPS [RANKS...]]]
 # default: 0.015 20 1 2. As root, Open MPI needs OMPI_ALLOW_RUN_AS_ROOT=1 and
 # OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1; more ranks than cores, MPIRUN="mpirun --oversubscribe".
+# On a machine without PETSc and MPI: scripts/carry.sh packs this script with what it runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 size=${1:-0.015}
@@ -39,7 +40,7 @@ for n in ${ranks[@]}; do
     # Each rank's peak, by GNU time around it (the rank from Open MPI's or PMI's variable).
     cat >"$dir/one.sh" <<SH
 #!/bin/sh
-exec /usr/bin/time -f %M -o "$dir/peak.\${OMPI_COMM_WORLD_RANK:-\${PMI_RANK:-0}}" "\$@"
+exec ${TIME_BIN:-/usr/bin/time} -f %M -o "$dir/peak.\${OMPI_COMM_WORLD_RANK:-\${PMI_RANK:-0}}" "\$@"
 SH
     chmod +x "$dir/one.sh"
     rm -f "$dir"/peak.*
