@@ -385,6 +385,14 @@ pub fn memory_mismatch(what: &str) -> String {
 }
 
 /// The state carried from step to step: n, u_n (compensated) and the memory.
+///
+/// On a follower rank of several (`crate::ranks`) the memory keeps only the dofs that the
+/// rank's rows of Σ_g K_R^(g) m^(g)_n and its piece of a frame read (`kept`,
+/// `Discretization::memory_reach`): each Prony state and each past displacement of the
+/// direct sum holds their values alone, in that order, updated by the same arithmetic dof
+/// by dof, so m_n there has the bits of the whole one (and is 0 elsewhere). Rank 0 keeps
+/// every dof: it writes the checkpoints, and history.csv's stresses and reactions read the
+/// whole m_n.
 #[derive(Clone, Debug)]
 pub struct History {
     pub k: f64,
@@ -396,12 +404,20 @@ pub struct History {
     pub u_comp: Vec<f64>,
     pub u_sum: Vec<f64>,
     pub memory: Memory,
+    /// The dofs whose memory this history keeps, in increasing order (None: every one).
+    pub kept: Option<Vec<usize>>,
 }
 
 impl History {
     /// The state at n = 0: u_0 = 0 (the paper's example; the initial displacement is zero)
     /// and m_0 = 0, for the memory groups of `plans`.
     pub fn new(n_free: usize, k: f64, plans: &Plans) -> Self {
+        Self::keeping(n_free, k, plans, None)
+    }
+
+    /// [`History::new`] whose memory keeps the dofs `kept` alone (None: every one).
+    pub fn keeping(n_free: usize, k: f64, plans: &Plans, kept: Option<Vec<usize>>) -> Self {
+        let n_kept = kept.as_ref().map_or(n_free, Vec::len);
         let terms: Vec<PronyTerm> = (0..plans.groups())
             .flat_map(|g| {
                 plans
@@ -414,7 +430,7 @@ impl History {
             .map(|(group, &(a, b))| PronyTerm {
                 a,
                 decay: (-b * k).exp(),
-                m: vec![0.0; n_free],
+                m: vec![0.0; n_kept],
                 group,
             })
             .collect();
@@ -433,6 +449,7 @@ impl History {
             u_comp: vec![0.0; n_free],
             u_sum: vec![0.0; n_free],
             memory,
+            kept,
         }
     }
 
@@ -451,9 +468,7 @@ impl History {
                 let n = self.u.len();
                 for term in terms.iter() {
                     let out = &mut out[term.group * n..][..n];
-                    for (o, m) in out.iter_mut().zip(&term.m) {
-                        *o += term.a * m;
-                    }
+                    add_at(out, self.kept.as_deref(), term.a, &term.m);
                 }
                 true
             }
@@ -467,10 +482,7 @@ impl History {
                 out.fill(0.0);
                 // m_n = k Σ_{j<n} r((n − j) k) u_j
                 for (j, uj) in past.iter().enumerate() {
-                    let c = self.k * r_lag[n - j - 1];
-                    for (o, u) in out.iter_mut().zip(uj) {
-                        *o += c * u;
-                    }
+                    add_at(out, self.kept.as_deref(), self.k * r_lag[n - j - 1], uj);
                 }
                 true
             }
@@ -479,7 +491,8 @@ impl History {
 
     /// Takes back a saved history into this one, freshly built from the same scene (a
     /// resume): the memory must be of the kind this one plans, with the same Prony weights
-    /// and, up to the rounding of e^{−b k}, the same decays.
+    /// and, up to the rounding of e^{−b k}, the same decays. A checkpoint holds every dof;
+    /// this history keeps its own of them.
     pub fn restore(&mut self, saved: SavedHistory) -> Result<()> {
         let mismatch = |what: &str| crate::Error::input(memory_mismatch(what));
         match (&mut self.memory, saved.memory) {
@@ -501,14 +514,18 @@ impl History {
                             s.a, s.decay
                         )));
                     }
-                    if s.m.len() != t.m.len() {
+                    if s.m.len() != self.u.len() {
                         return Err(mismatch(&format!("term {i} of the wrong size")));
                     }
-                    *t = s;
+                    let m = at(self.kept.as_deref(), &s.m);
+                    *t = PronyTerm { m, ..s };
                 }
             }
             (Memory::Direct { past, r_lag }, SavedMemory::Direct(rows)) => {
-                *past = rows;
+                *past = match self.kept.as_deref() {
+                    None => rows,
+                    kept => rows.iter().map(|u| at(kept, u)).collect(),
+                };
                 r_lag.clear();
             }
             (_, SavedMemory::None) => return Err(mismatch("absent (no relaxation)")),
@@ -532,12 +549,17 @@ impl History {
             Memory::Prony(terms) => {
                 for term in terms.iter_mut() {
                     // m^(i)_{n+1} = e^{−b_i k} (m^(i)_n + k u_n)
-                    for (m, u) in term.m.iter_mut().zip(&self.u) {
-                        *m = term.decay * (*m + k * u);
+                    let decay = term.decay;
+                    let next = |m: &mut f64, u: f64| *m = decay * (*m + k * u);
+                    match &self.kept {
+                        None => (term.m.iter_mut().zip(&self.u)).for_each(|(m, &u)| next(m, u)),
+                        Some(kept) => {
+                            (term.m.iter_mut().zip(kept)).for_each(|(m, &i)| next(m, self.u[i]))
+                        }
                     }
                 }
             }
-            Memory::Direct { past, .. } => past.push(self.u.clone()),
+            Memory::Direct { past, .. } => past.push(at(self.kept.as_deref(), &self.u)),
         }
         let state = self
             .u
@@ -556,6 +578,23 @@ impl History {
             *u = t + *comp;
         }
         self.n += 1;
+    }
+}
+
+/// The values of the whole vector `v` at the dofs `kept` (all of it without).
+fn at(kept: Option<&[usize]>, v: &[f64]) -> Vec<f64> {
+    match kept {
+        None => v.to_vec(),
+        Some(kept) => kept.iter().map(|&i| v[i]).collect(),
+    }
+}
+
+/// out_i += c v_i, where v holds the values at the dofs `kept` in their order (all of
+/// `out` without).
+fn add_at(out: &mut [f64], kept: Option<&[usize]>, c: f64, v: &[f64]) {
+    match kept {
+        None => (out.iter_mut().zip(v)).for_each(|(o, v)| *o += c * v),
+        Some(kept) => (kept.iter().zip(v)).for_each(|(&i, v)| out[i] += c * v),
     }
 }
 
@@ -630,6 +669,60 @@ mod tests {
             }
             hp.advance(&w);
             hd.advance(&w);
+        }
+    }
+
+    #[test]
+    fn a_history_keeping_some_dofs_has_their_bits_of_the_whole_memory() {
+        // A follower rank's history (`History::keeping`) against the whole one: the same
+        // m_n bits at the kept dofs and 0 elsewhere, step after step and across a restore
+        // from the whole history's saved state, for the recursion (two groups) and the
+        // direct sum.
+        let k = 0.01;
+        let two = Plans {
+            body: Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]),
+            regions: vec![Plan::Prony(vec![(2.0, 1.0)])],
+        };
+        let kernel = Kernel::Expr(Box::new(
+            crate::expr::Expr::parse("1/(1+s)", &["s"], "r").unwrap(),
+        ));
+        let exact = alone(Plan::Exact {
+            lags: Lags::new(&kernel, k, 60, false, "r").unwrap(),
+            fallback: None,
+        });
+        let saved = |h: &History| SavedHistory {
+            n: h.n,
+            k: h.k,
+            u: h.u.clone(),
+            u_sum: h.u_sum.clone(),
+            u_comp: h.u_comp.clone(),
+            memory: match &h.memory {
+                Memory::None => SavedMemory::None,
+                Memory::Prony(terms) => SavedMemory::Prony(terms.clone()),
+                Memory::Direct { past, .. } => SavedMemory::Direct(past.clone()),
+            },
+        };
+        for plans in [two, exact] {
+            let len = 4 * plans.groups();
+            let mut whole = History::new(4, k, &plans);
+            let mut part = History::keeping(4, k, &plans, Some(vec![0, 2, 3]));
+            let (mut m, mut mp) = (vec![0.0; len], vec![0.0; len]);
+            for n in 0..60 {
+                if n == 30 {
+                    part = History::keeping(4, k, &plans, Some(vec![0, 2, 3]));
+                    part.restore(saved(&whole)).unwrap();
+                }
+                assert!(whole.memory_into(Some(&kernel), &mut m));
+                assert!(part.memory_into(Some(&kernel), &mut mp));
+                for (i, (a, b)) in m.iter().zip(&mp).enumerate() {
+                    let expected = if i % 4 == 1 { 0.0 } else { *a };
+                    assert_eq!(b.to_bits(), expected.to_bits(), "n = {n}, entry {i}");
+                }
+                let w = [(n as f64 * 0.3).cos(), 1.0, -0.5 * n as f64, 0.25];
+                whole.advance(&w);
+                part.advance(&w);
+            }
+            assert!(m.iter().all(|&x| x != 0.0));
         }
     }
 

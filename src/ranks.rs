@@ -14,8 +14,11 @@
 //! matrices (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It
 //! computes its entries of the right side's products from them and gathers the others'
 //! (`Backend::gather`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
-//! the rank keeps K_A's diagonal alone. The rest is replicated:
-//! the history sums and every n-vector, so every rank holds the same right side b_n, bit
+//! the rank keeps K_A's diagonal alone. The history's memory (the Prony states, the
+//! direct sum's past displacements) a follower keeps of the dofs that its rows of K_R and
+//! its piece of a frame read alone ([`Own`], `History::keeping`), with the same bits
+//! there; rank 0 keeps it whole, for the checkpoints and history.csv. The rest is
+//! replicated: u_n and every n-vector, so every rank holds the same right side b_n, bit
 //! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
 //! every rank. Rank 0 (the *first*) owns the output directory (lock, series, history.csv,
 //! checkpoints, summary.json) and prints; the others *follow* (`run::follow`). Of each
@@ -32,9 +35,10 @@
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
-//! memory of each rank is the replicated part (the history; during setup the mesh and the
-//! cells, which set a floor), its columns of the matrices and its share of PETSc's;
-//! partitioning the mesh and the history too is the next step (docs/cluster.md).
+//! memory of each rank is the replicated part (u_n and the n-vectors, rank 0's whole
+//! memory; during setup the mesh and the cells, which set a floor), its columns of the
+//! matrices, a follower's part of the memory, and its share of PETSc's; reading the mesh
+//! in parts, and rank 0's memory in parts too, are the next steps (docs/cluster.md).
 //!
 //! # Planning
 //!
@@ -259,7 +263,11 @@ impl Ranks {
                     layout = Some(made);
                     Ok(Some(own))
                 })?;
-            let own = layout.map(|layout| Own { layout, rows: None });
+            let own = layout.map(|layout| Own {
+                layout,
+                rows: None,
+                memory: None,
+            });
             return Ok((disc, own));
         }
         Ok((crate::fem::Discretization::new(mesh, scene)?, None))
@@ -299,7 +307,12 @@ impl Ranks {
                 None
             };
             crate::resources::return_freed_memory();
-            return Ok(Some(Own { layout, rows }));
+            let memory = (!self.is_first()).then(|| disc.memory_reach()).flatten();
+            return Ok(Some(Own {
+                layout,
+                rows,
+                memory,
+            }));
         }
         let _ = (disc, history, made);
         Ok(None)
@@ -320,12 +333,16 @@ impl Ranks {
 /// backend (`petsc::Krylov`): which rank holds which rows (METIS's partition, made once a
 /// rank), and where K_A is the step matrix, the rank's rows of K_A in PETSc's numbering,
 /// taken out of the discretization: PETSc's matrices are made of them, and the Newton
-/// systems read them as their copy of K, the rank's only one.
+/// systems read them as their copy of K, the rank's only one. On a follower, the dofs
+/// whose memory its history keeps (`History::keeping`).
 pub struct Own {
     #[cfg(feature = "petsc")]
     pub(crate) layout: crate::petsc::Layout,
     #[cfg(feature = "petsc")]
     pub(crate) rows: Option<crate::petsc::Csr<'static>>,
+    /// A follower's `Discretization::memory_reach`; None on rank 0, which keeps every dof's
+    /// memory (it writes the checkpoints and history.csv).
+    pub(crate) memory: Option<Vec<usize>>,
 }
 
 /// Whether a rank of several hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]):
@@ -549,8 +566,8 @@ impl Plan {
                 (1.05 * spreads / left).ceil().max(self.size as f64 + 1.0)
             ),
             false => format!(
-                "no rank count would: every rank reads the mesh and holds the history (≈ {} \
-                 here{}), and only the matrices and PETSc's part spread; use a coarser mesh \
+                "no rank count would: every rank reads the mesh, and rank 0 holds the whole \
+                 history (≈ {} here{}), and only the matrices and PETSc's part spread; use a coarser mesh \
                  or ranks with more memory (docs/cluster.md)",
                 human(self.setup_peak(0.0)),
                 whole,

@@ -223,9 +223,10 @@ impl<'p> TimeLoop<'p> {
         disc: &'p Discretization,
         plans: Plans,
         descriptor: Descriptor,
-        own: Option<Own>,
+        mut own: Option<Own>,
     ) -> Result<Self> {
         refusals(scene, disc, &plans)?;
+        let kept = own.as_mut().and_then(|own| own.memory.take());
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
         let implicit = match scene.solver.history {
@@ -250,7 +251,7 @@ impl<'p> TimeLoop<'p> {
         };
         let solver = effects::step_solver(&effects, &descriptor, matrix, &backend, &rows)?;
         let n = disc.n_dofs;
-        let history = History::new(n, scene.time.k(), &plans);
+        let history = History::keeping(n, scene.time.k(), &plans, kept);
         let paired = disc
             .k_b
             .as_ref()
@@ -320,6 +321,10 @@ impl<'p> TimeLoop<'p> {
 
     /// What a checkpoint saves of the loop at t_n, before step n is solved.
     pub fn state(&self) -> LoopState<'_> {
+        debug_assert!(
+            self.history.kept.is_none(),
+            "a follower's history is not saved"
+        );
         LoopState {
             history: &self.history,
             w: &self.w,

@@ -729,6 +729,27 @@ impl Discretization {
         self.own_pair = Some(pair);
     }
 
+    /// On one of several MPI ranks that keeps its own columns, the dofs whose memory m_n
+    /// its rows of Σ_g K_R^(g) m^(g)_n read, in increasing order: the rows of its columns of
+    /// every K_R^(g) (of K_R^(0), those it pairs with K_B). They are the nodes that share a
+    /// cell with memory with one of its own nodes, so every node of its piece of a frame
+    /// whose cell's stress reads m (each cell of the piece has one of the rank's nodes:
+    /// `output::pvtu`). None where it holds the matrices whole.
+    pub fn memory_reach(&self) -> Option<Vec<usize>> {
+        let own = self.own.as_ref()?;
+        let mut read = vec![false; self.n_dofs];
+        for k_r in &self.k_r {
+            let (cp, ri) = (k_r.symbolic().col_ptr(), k_r.symbolic().row_idx());
+            for &j in own {
+                ri[cp[j]..cp[j + 1]].iter().for_each(|&i| read[i] = true);
+            }
+        }
+        if let Some(pair) = &self.own_pair {
+            pair.columns().for_each(|j| read[j] = true);
+        }
+        Some((0..self.n_dofs).filter(|&i| read[i]).collect())
+    }
+
     /// K_A's diagonal alone, where its rows went to the linear backend (on one of several
     /// MPI ranks: `Ranks::keep_own_columns`): what the active set's ρ reads of it.
     pub fn keep_diagonal_of_k_a(&mut self) {

@@ -273,6 +273,11 @@ impl RowsPair {
         Some(pair)
     }
 
+    /// The columns of the rank's rows, each as often as it occurs.
+    pub fn columns(&self) -> impl Iterator<Item = usize> + '_ {
+        self.cols.iter().map(|&j| j as usize)
+    }
+
     /// y_i += α (A x)_i, then y_i += α (B z)_i where z is given, for the rows i of `own`
     /// (the rows the pair was made of).
     pub fn mul_add(&self, own: &[usize], x: &[f64], z: Option<&[f64]>, alpha: f64, y: &mut [f64]) {
