@@ -314,6 +314,23 @@ fn the_implicit_history_with_contact_on_1_2_and_3_ranks_agrees_with_one_process(
     agree_on_1_2_and_3_ranks(&[block]);
 }
 
+/// The direct sum (an expression kernel with `memory = "exact"`), whose past displacements
+/// a follower keeps of the dofs it reads alone (`History::keeping`), with contact and
+/// friction: on 1, 2 and 3 ranks it agrees with one process, and stopped on 3 ranks it
+/// resumes from the checkpoint's whole past on 3, bit for bit, and on 2.
+#[test]
+fn the_direct_sum_on_1_2_and_3_ranks_agrees_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let kernel = "expr = \"exp(-10*s)\"\nmemory = \"exact\"";
+    let block = (SceneText::block().table("material.relaxation", kernel))
+        .set("solver.linear", "petsc")
+        .set("solver.contact", "active_set")
+        .set("time.steps", 8)
+        .write(tmp.path(), "block.toml");
+    agree_on_1_2_and_3_ranks(std::slice::from_ref(&block));
+    stopped_on_3_resumed_on_2_and_on_3(&block);
+}
+
 /// The block, linear and with contact and friction.
 #[test]
 fn stopped_on_3_ranks_a_run_resumes_on_2_and_on_3() {
