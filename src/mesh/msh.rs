@@ -644,6 +644,14 @@ fn add_elements(
             )
         })
     };
+    // Each list at its exact size: grown by doubling, the tetrahedra's took up to twice it.
+    let count = |t: ElementType| -> usize {
+        let blocks = elements.element_blocks.iter();
+        blocks.filter(|b| b.element_type == t).map(|b| b.elements.len()).sum()
+    };
+    raw.triangles.reserve_exact(count(ElementType::Tri3));
+    raw.tetrahedra.reserve_exact(count(ElementType::Tet4));
+    raw.lines.reserve_exact(count(ElementType::Lin2));
     for block in &elements.element_blocks {
         let entity = (block.entity_dim, block.entity_tag);
         for e in &block.elements {
