@@ -647,7 +647,10 @@ fn add_elements(
     // Each list at its exact size: grown by doubling, the tetrahedra's took up to twice it.
     let count = |t: ElementType| -> usize {
         let blocks = elements.element_blocks.iter();
-        blocks.filter(|b| b.element_type == t).map(|b| b.elements.len()).sum()
+        blocks
+            .filter(|b| b.element_type == t)
+            .map(|b| b.elements.len())
+            .sum()
     };
     raw.triangles.reserve_exact(count(ElementType::Tri3));
     raw.tetrahedra.reserve_exact(count(ElementType::Tet4));

@@ -140,7 +140,7 @@ impl Layout {
     /// graph read from `cells`, as [`Layout::new`] reads it).
     pub fn shares(&self, disc: &Discretization, cells: CellSource) -> Vec<RankShare> {
         let nodes = nodes(disc);
-        let adjacent = adjacency(disc, cells, &nodes);
+        let graph = Graph::new(disc, cells, &nodes);
         let size = self.blocks.len() - 1;
         let rank = self.ranks_of(&nodes);
         let mut order: Vec<usize> = (0..nodes.len()).collect();
@@ -150,10 +150,11 @@ impl Layout {
         for v in order {
             let (r, unknowns) = (rank[v], nodes[v].len());
             let share = &mut shares[r];
-            let coupled: usize = adjacent[v].iter().map(|&w| nodes[w].len()).sum();
+            let adjacent = graph.of(v).iter().map(|&w| w as usize);
+            let coupled: usize = adjacent.clone().map(|w| nodes[w].len()).sum();
             share.rows += unknowns;
             share.entries += unknowns * (unknowns + coupled);
-            for &w in adjacent[v].iter().filter(|&&w| rank[w] != r) {
+            for w in adjacent.filter(|&w| rank[w] != r) {
                 if seen[w] != r {
                     seen[w] = r;
                     share.ghosts += nodes[w].len();
@@ -255,26 +256,69 @@ fn node_unknowns(disc: &Discretization, v: usize) -> Vec<usize> {
 }
 
 /// The nodes' graph on the nodes with unknowns (`nodes`, in their order): for each, the
-/// others that one of `cells` holds with it (where K_A couples them: P1), increasing.
-fn adjacency(disc: &Discretization, cells: CellSource, nodes: &[Vec<usize>]) -> Vec<Vec<usize>> {
-    let mut vertex = vec![usize::MAX; disc.free.len() / disc.dim];
-    let with_unknowns = (0..vertex.len()).filter(|&p| !node_unknowns(disc, p).is_empty());
-    for (v, p) in with_unknowns.enumerate() {
-        vertex[p] = v;
-    }
-    let mut adjacent: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
-    cells.each_vertices(|vertices| {
-        let of = |p: &usize| Some(vertex[*p]).filter(|&v| v != usize::MAX);
-        for v in vertices.iter().filter_map(of) {
-            let others = vertices.iter().filter_map(of).filter(|&w| w != v);
-            adjacent[v].extend(others);
+/// others that one of `cells` holds with it (where K_A couples them: P1), increasing, in
+/// compressed rows. Made from the cells' vertices (4 bytes each) and the cells at each
+/// node, each neighbour once: the lists grown cell by cell, each neighbour as often as a
+/// cell holds it, took 100 MB on the fine plate, rank 0's peak on 16 ranks
+/// (docs/cluster.md). Node and cell numbers fit 32 bits (the mesh's reader refuses more:
+/// `mesh::facets`).
+struct Graph {
+    /// The neighbours of node v are `adjacent[start[v]..start[v + 1]]`.
+    start: Vec<usize>,
+    adjacent: Vec<u32>,
+}
+
+impl Graph {
+    fn new(disc: &Discretization, cells: CellSource, nodes: &[Vec<usize>]) -> Graph {
+        const NONE: u32 = u32::MAX;
+        let mut vertex = vec![NONE; disc.free.len() / disc.dim];
+        let with_unknowns = (0..vertex.len()).filter(|&p| !node_unknowns(disc, p).is_empty());
+        for (v, p) in with_unknowns.enumerate() {
+            vertex[p] = v as u32;
         }
-    });
-    for list in &mut adjacent {
-        list.sort_unstable();
-        list.dedup();
+        // Each cell's vertices in the graph (NONE: a node without unknowns).
+        let (mut corners, mut per) = (Vec::new(), 1);
+        cells.each_vertices(|vertices| {
+            per = vertices.len().max(1);
+            corners.extend(vertices.iter().map(|&p| vertex[p]));
+        });
+        // The cells at each node, by counting.
+        let n = nodes.len();
+        let mut at = vec![0; n + 1];
+        let held = || (corners.iter().enumerate()).filter(|(_, &v)| v != NONE);
+        held().for_each(|(_, &v)| at[v as usize + 1] += 1);
+        for v in 0..n {
+            at[v + 1] += at[v];
+        }
+        let (mut cell_at, mut next) = (vec![0u32; at[n]], at.clone());
+        for (k, &v) in held() {
+            cell_at[next[v as usize]] = (k / per) as u32;
+            next[v as usize] += 1;
+        }
+        // Each node's neighbours: the other vertices of its cells, each once.
+        let mut seen = vec![NONE; n];
+        let (mut start, mut adjacent) = (Vec::with_capacity(n + 1), Vec::new());
+        start.push(0);
+        for v in 0..n {
+            let first = adjacent.len();
+            for &c in &cell_at[at[v]..at[v + 1]] {
+                for &w in &corners[c as usize * per..][..per] {
+                    if w != NONE && w as usize != v && seen[w as usize] != v as u32 {
+                        seen[w as usize] = v as u32;
+                        adjacent.push(w);
+                    }
+                }
+            }
+            adjacent[first..].sort_unstable();
+            start.push(adjacent.len());
+        }
+        Graph { start, adjacent }
     }
-    adjacent
+
+    /// The neighbours of node v, increasing.
+    fn of(&self, v: usize) -> &[u32] {
+        &self.adjacent[self.start[v]..self.start[v + 1]]
+    }
 }
 
 /// METIS's k-way partition of the nodes' graph into `size` parts: each node's part. Two
@@ -289,15 +333,15 @@ fn partition(
 ) -> Result<Vec<usize>> {
     let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
     let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
-    let mut adjacent = adjacency(disc, cells, nodes);
-    let (mut xadj, mut adjncy) = (vec![0], Vec::new());
-    for list in &mut adjacent {
-        for &w in list.iter() {
-            adjncy.push(idx(w)?);
-        }
-        xadj.push(idx(adjncy.len())?);
-        *list = Vec::new();
-    }
+    let graph = Graph::new(disc, cells, nodes);
+    let mut xadj = graph
+        .start
+        .iter()
+        .map(|&i| idx(i))
+        .collect::<Result<Vec<_>>>()?;
+    let adjncy = graph.adjacent.iter().map(|&w| idx(w as usize));
+    let mut adjncy = adjncy.collect::<Result<Vec<_>>>()?;
+    drop(graph);
     let (mut nvtxs, mut ncon, mut nparts) = (idx(nodes.len())?, 1, idx(size)?);
     let (mut cut, mut part) = (0, vec![0; nodes.len()]);
     // SAFETY: xadj (nvtxs + 1 entries) and adjncy describe a graph without self loops,
