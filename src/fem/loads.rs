@@ -54,6 +54,8 @@ impl Loads {
         for i in 0..scene.physics.body_forces.len() {
             loads.push(body_force(mesh, cells, i));
         }
+        // The quadrature points stay for the run: at their size, not their lists' growth.
+        loads.iter_mut().for_each(|l| l.qps.shrink_to_fit());
         Ok(Loads {
             loads,
             dim: mesh.dim,

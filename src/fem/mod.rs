@@ -991,9 +991,15 @@ fn columns_kept(a: &Sparse, keep: &[bool]) -> Sparse {
 fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) -> bool) -> Sparse {
     let a = a.as_ref();
     let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
-    let (mut col_ptr, mut row_idx, mut val) = (vec![0], Vec::new(), Vec::new());
+    let keep = &keep;
+    let kept = |j: usize| (cp[j]..cp[j + 1]).filter(move |&p| ri[p] < size.0 && keep(ri[p], j));
+    // At their exact size: they stay for the run (grown by doubling, up to twice it).
+    let entries = (0..size.1).map(|j| kept(j).count()).sum();
+    let mut col_ptr = Vec::with_capacity(size.1 + 1);
+    let (mut row_idx, mut val) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
+    col_ptr.push(0);
     for j in 0..size.1 {
-        for p in (cp[j]..cp[j + 1]).filter(|&p| ri[p] < size.0 && keep(ri[p], j)) {
+        for p in kept(j) {
             row_idx.push(ri[p]);
             val.push(v[p]);
         }
