@@ -386,7 +386,7 @@ pub fn memory_mismatch(what: &str) -> String {
 
 /// The state carried from step to step: n, u_n (compensated) and the memory.
 ///
-/// On a follower rank of several (`crate::ranks`) the memory keeps only the dofs that the
+/// On a follower rank of several (docs/cluster.md) the memory keeps only the dofs that the
 /// rank's rows of Σ_g K_R^(g) m^(g)_n and its piece of a frame read (`kept`,
 /// `Discretization::memory_reach`): each Prony state and each past displacement of the
 /// direct sum holds their values alone, in that order, updated by the same arithmetic dof
