@@ -993,7 +993,7 @@ fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) ->
     let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
     let keep = &keep;
     let kept = |j: usize| (cp[j]..cp[j + 1]).filter(move |&p| ri[p] < size.0 && keep(ri[p], j));
-    // At their exact size: they stay for the run (grown by doubling, up to twice it).
+    // At their exact size: they stay for the run.
     let entries = (0..size.1).map(|j| kept(j).count()).sum();
     let mut col_ptr = Vec::with_capacity(size.1 + 1);
     let (mut row_idx, mut val) = (Vec::with_capacity(entries), Vec::with_capacity(entries));

@@ -175,7 +175,7 @@ impl Mesh {
         let raw = msh::read_raw(path, &bytes)?;
         let names = physical_names::read_physical_names(&bytes)
             .map_err(|m| Error::input(format!("mesh file '{}': {m}", path.display())))?;
-        // The file's bytes go before the facets are sorted, the peak of reading a mesh.
+        // The file's bytes go before the facets are sorted, where reading a mesh peaks.
         drop(bytes);
         if raw.tetrahedra.is_empty() {
             plane::build(path, raw, &names)

@@ -644,7 +644,7 @@ fn add_elements(
             )
         })
     };
-    // Each list at its exact size: grown by doubling, the tetrahedra's took up to twice it.
+    // Each list at its exact size (docs/performance.md, "Reading the mesh").
     let count = |t: ElementType| -> usize {
         let blocks = elements.element_blocks.iter();
         blocks

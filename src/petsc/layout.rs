@@ -258,10 +258,9 @@ fn node_unknowns(disc: &Discretization, v: usize) -> Vec<usize> {
 /// The nodes' graph on the nodes with unknowns (`nodes`, in their order): for each, the
 /// others that one of `cells` holds with it (where K_A couples them: P1), increasing, in
 /// compressed rows. Made from the cells' vertices (4 bytes each) and the cells at each
-/// node, each neighbour once: the lists grown cell by cell, each neighbour as often as a
-/// cell holds it, took 100 MB on the fine plate, rank 0's peak on 16 ranks
-/// (docs/cluster.md). Node and cell numbers fit 32 bits (the mesh's reader refuses more:
-/// `mesh::facets`).
+/// node, each neighbour once, so that it holds no more than it says (docs/performance.md,
+/// "The nodes' graph at its size"). Node and cell numbers fit 32 bits (the mesh's reader
+/// refuses more: `mesh::facets`).
 struct Graph {
     /// The neighbours of node v are `adjacent[start[v]..start[v + 1]]`.
     start: Vec<usize>,
