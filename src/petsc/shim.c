@@ -134,6 +134,8 @@ struct VcKsp {
    * galerkin_update; NULL where the constrained PC is not GAMG (the options chose another). */
   PetscInt nlev;
   Mat     *coarse_k;
+  /* The PETSc option -viscontact_galerkin_check, read once at setup (check_galerkin). */
+  PetscBool galerkin_check;
   int      of_start; /* the convergence test's: rtol of the initial residual, else of b; −1: none yet */
 };
 
@@ -850,6 +852,7 @@ static PetscErrorCode constrained_setup(VcKsp *s)
    * options choose one (-pc_mg_cycle_type v puts the V-cycle back). */
   PetscCall(PetscOptionsHasName(NULL, NULL, "-pc_mg_cycle_type", &chosen));
   if (gamg && !chosen) PetscCall(PCMGSetCycleType(pc, PC_MG_CYCLE_W));
+  PetscCall(PetscOptionsHasName(NULL, NULL, "-viscontact_galerkin_check", &s->galerkin_check));
   if (gamg) PetscCall(PCMGGetLevels(pc, &s->nlev));
   if (gamg && s->nlev > 1) {
     /* GAMG's Galerkin products keep what a product of the same pattern would reuse; the
@@ -1257,12 +1260,10 @@ int vc_galerkin_defect(void *ctx, PetscReal *defect);
  * check of the update on several ranks, whose runs no library test can host (tests/petsc). */
 static PetscErrorCode check_galerkin(VcKsp *s)
 {
-  PetscBool check;
   PetscReal defect;
 
   PetscFunctionBeginUser;
-  PetscCall(PetscOptionsHasName(NULL, NULL, "-viscontact_galerkin_check", &check));
-  if (!check) PetscFunctionReturn(0);
+  if (!s->galerkin_check) PetscFunctionReturn(0);
   PetscCall(vc_galerkin_defect(s, &defect));
   PetscCall(PetscPrintf(PETSC_COMM_WORLD, "Galerkin defect %.3e\n", (double)defect));
   PetscFunctionReturn(0);
