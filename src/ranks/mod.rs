@@ -8,7 +8,9 @@
 //! all the ranks, each holding the rows of the nodes METIS's partition gives it
 //! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
 //! of every Krylov vector, and each getting the whole solution back. Every rank reads the
-//! scene and the whole mesh, and of K_A, K_B and K_R holds the columns of its own unknowns
+//! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
+//! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays). Of
+//! K_A, K_B and K_R a rank holds the columns of its own unknowns
 //! alone (a symmetric matrix's column is its row): it assembles only those
 //! ([`Ranks::discretize`]) where the scene's keys take PETSc, or keeps them of the whole
 //! matrices (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It
@@ -36,9 +38,10 @@
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
 //! memory of each rank is the replicated part (u_n and the n-vectors, rank 0's whole
-//! memory; during setup the mesh and the cells, which set a floor), its columns of the
-//! matrices, a follower's part of the memory, and its share of PETSc's; reading the mesh
-//! in parts, and rank 0's memory in parts too, are the next steps (docs/cluster.md).
+//! memory; during setup the mesh, which sets a floor, and on rank 0 its reading), its
+//! columns of the matrices, a follower's part of the memory, and its share of PETSc's;
+//! handing each follower its part of the mesh alone, and rank 0's memory in parts too, are
+//! the next steps (docs/cluster.md).
 //!
 //! # Planning
 //!
@@ -51,8 +54,10 @@
 //!
 //! # Agreement
 //!
-//! - **Setup.** Every rank's setup, failed or not, ends in [`Ranks::agree`] before the
-//!   first collective call of PETSc: if any rank failed, all stop there. Rank 0 reports
+//! - **Setup.** Every rank's setup, failed or not, passes [`Ranks::agree`] twice: once
+//!   its setup up to the mesh, before rank 0 hands the mesh over
+//!   ([`Ranks::with_mesh_of_first`]), and once the whole, before the first collective call
+//!   of PETSc: if any rank failed, all stop there. Rank 0 reports
 //!   its own error; a follower reports its own only where rank 0 had none, and is silent
 //!   ([`Error::Elsewhere`]) otherwise. Rank 0 alone decides at a signal during setup and
 //!   commits the directory ([`Ranks::first_says`] tells the others).
@@ -66,6 +71,8 @@
 //! - **Failures after setup.** A step that fails fails on every rank (the KSP's reason is
 //!   collective); a rank that fails alone (a frame rank 0 cannot write) ends them all
 //!   ([`Ranks::abort`], in `main`), so that none waits forever in a collective call.
+
+mod mesh;
 
 use crate::{Error, Result};
 

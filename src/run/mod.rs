@@ -4,9 +4,10 @@
 //!
 //! 1. load and check everything the run needs (the scene first, then, owning the output
 //!    directory, the mesh, the discretization and the step solver); a failure here leaves
-//!    the directory as it was (`dir`). On several MPI ranks every rank does, and they agree
-//!    before the first collective call; rank 0 owns the directory and the others `follow`
-//!    (`crate::ranks`);
+//!    the directory as it was (`dir`). On several MPI ranks every rank does, but rank 0
+//!    alone reads the mesh and hands it to the others once all agree on their setup so
+//!    far, and they agree again before PETSc's first collective call; rank 0 owns the
+//!    directory and the others `follow` (`crate::ranks`);
 //! 2. replace the run the directory holds (`run`) or continue it (`resume`);
 //! 3. `drive` the time loop: each solved step goes to the consumers (`consumers`:
 //!    statistics, frames, history.csv (`history_csv`), checkpoints, progress) until the
@@ -229,8 +230,13 @@ struct Opened {
     lock: DirLock,
 }
 
-/// A new run's setup up to its time loop, with the output directory locked.
-fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
+/// What rank 0's setup of a new run has read before its mesh: the scene, the output
+/// directory, locked.
+type Read = (Arc<Scene>, PathBuf, DirLock);
+
+/// A new run's setup up to its mesh, with the output directory locked; the mesh for the
+/// other ranks too (`Ranks::with_mesh_of_first`).
+fn read_run(scene_path: &Path, opts: &RunOptions) -> Result<(Read, Option<Mesh>)> {
     // A signal between two stages ends setup with the directory as it was.
     let stage = || opts.interrupt.between_setup_stages();
     let scene = Arc::new(load_scene(scene_path, &opts.overrides)?);
@@ -243,6 +249,13 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     let lock = DirLock::acquire(&out, "run")?;
     stage()?;
     let mesh = read_mesh(&scene)?;
+    Ok(((scene, out, lock), Some(mesh)))
+}
+
+/// A new run's setup up to its time loop, with the output directory locked.
+fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
+    let stage = || opts.interrupt.between_setup_stages();
+    let ((scene, out, lock), mesh) = opts.ranks.with_mesh_of_first(read_run(scene_path, opts))?;
     stage()?;
     let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
     stage()?;
@@ -363,15 +376,19 @@ enum Begun {
 /// the directory, the same steps, nothing written.
 fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
     opts.interrupt.follow();
-    let ready = || -> Result<_> {
-        let (scene, cp) = match begun {
+    let read = || -> Result<_> {
+        let read = match begun {
             Begun::Run => (load_scene(path, &opts.overrides)?, None),
             Begun::Resume => {
                 let cp = checkpoint::Checkpoint::read(path)?;
                 (cp.scene(&opts.overrides)?, Some(cp))
             }
         };
-        let mesh = read_mesh(&scene)?;
+        Ok((read, None))
+    };
+    let ready = || -> Result<_> {
+        // Rank 0 reads the mesh; a follower gets it from rank 0 (`crate::ranks`).
+        let ((scene, cp), mesh) = opts.ranks.with_mesh_of_first(read())?;
         let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
         let solver = Descriptor::of_run(&scene, &disc)?;
         check_started_ranks(&scene, &solver, opts)?;
@@ -474,17 +491,21 @@ fn prepare_resume(
     opts: &ResumeOptions,
 ) -> Result<(Ready, checkpoint::Checkpoint)> {
     let stage = || opts.interrupt.between_setup_stages();
-    // What is wrong with the checkpoint itself is said first, then the directory.
-    let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
-    let scene = Arc::new(cp.scene(&opts.overrides)?);
-    stage()?;
-    let mesh = read_mesh(&scene).map_err(|e| {
-        Error::input(format!(
-            "{}: the run's mesh cannot be read: {e} (a run moved to another place: give its \
-             mesh with --set mesh.file=NEW)",
-            checkpoint_path.display()
-        ))
-    })?;
+    let read = || -> Result<_> {
+        // What is wrong with the checkpoint itself is said first, then the directory.
+        let cp = checkpoint::Checkpoint::read(checkpoint_path)?;
+        let scene = Arc::new(cp.scene(&opts.overrides)?);
+        stage()?;
+        let mesh = read_mesh(&scene).map_err(|e| {
+            Error::input(format!(
+                "{}: the run's mesh cannot be read: {e} (a run moved to another place: give \
+                 its mesh with --set mesh.file=NEW)",
+                checkpoint_path.display()
+            ))
+        })?;
+        Ok(((cp, scene), Some(mesh)))
+    };
+    let ((cp, scene), mesh) = opts.ranks.with_mesh_of_first(read())?;
     stage()?;
     let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
     stage()?;
