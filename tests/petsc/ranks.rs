@@ -7,7 +7,7 @@
 //! count it stopped on, bit for bit; SIGTERM to every rank stops it after a step with a
 //! checkpoint, and SIGKILL of one rank ends the others at once, the run then resuming from
 //! its last checkpoint; a run whose steps do not spread is refused (exit 2) before anything
-//! is written.
+//! is written; the followers run without the mesh file, which rank 0 alone reads.
 
 use crate::common::{self, SceneText};
 use std::path::Path;
@@ -562,6 +562,58 @@ fn check_on_two_ranks_prints_once() {
     assert_eq!(code, 0, "{text}");
     assert_eq!(text.matches("submit with sbatch").count(), 1, "{text}");
     assert!(job.join("job.sh").exists());
+}
+
+/// Rank 0 alone reads the mesh file and hands the mesh to the others: followers started
+/// where the scene's mesh file is not (Open MPI's second app context, in a directory with
+/// the scene alone) run the scene with rank 0, and the run is the same bytes as one whose
+/// ranks all start beside the mesh.
+#[test]
+fn the_followers_never_read_the_mesh_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (with_mesh, without) = (tmp.path().join("with_mesh"), tmp.path().join("without"));
+    std::fs::create_dir_all(&with_mesh).unwrap();
+    std::fs::create_dir_all(&without).unwrap();
+    std::fs::copy(
+        common::repo().join("meshes/3d/block_004.msh"),
+        with_mesh.join("mesh.msh"),
+    )
+    .unwrap();
+    let scene = SceneText::block()
+        .set("mesh.file", "mesh.msh")
+        .set("solver.linear", "petsc")
+        .set("solver.contact", "active_set")
+        .set("time.steps", 4);
+    scene.clone().write(&with_mesh, "scene.toml");
+    scene.write(&without, "scene.toml");
+    let (all, apart) = (tmp.path().join("all"), tmp.path().join("apart"));
+    // Rank 0 beside the mesh, two followers in `followers_in`.
+    let ranks = |out: &Path, followers_in: &Path| {
+        let out = out.to_str().unwrap();
+        let context = |dir: &Path, n: &'static str| -> Vec<String> {
+            let dir = dir.to_str().unwrap();
+            let args = ["-wdir", dir, "-n", n, common::BIN, "run", "scene.toml"];
+            let args = [&args[..], &["--quiet", "--out", out]].concat();
+            args.into_iter().map(String::from).collect()
+        };
+        let apart = [":".to_string()];
+        let args = [
+            context(&with_mesh, "1"),
+            apart.into(),
+            context(followers_in, "2"),
+        ]
+        .concat();
+        let mut mpirun = Command::new("mpirun");
+        launching(&mut mpirun).arg("--oversubscribe").args(args);
+        outcome(mpirun.output().unwrap())
+    };
+    let (code, text) = ranks(&all, &with_mesh);
+    assert_eq!(code, 0, "{text}");
+    let (code, text) = ranks(&apart, &without);
+    assert_eq!(code, 0, "followers without the mesh file: {text}");
+    common::assert_same_series(&all, &apart, "followers without the mesh file");
+    let csv = |dir: &Path| std::fs::read(dir.join("history.csv")).unwrap();
+    assert_eq!(csv(&all), csv(&apart), "history.csv");
 }
 
 /// A run whose steps take the stored factor or a contact solver does not spread: every
