@@ -28,9 +28,11 @@ pub fn out(line: fmt::Arguments) {
     }
 }
 
-/// Writes one line to stderr; a line that cannot be written is dropped.
+/// Writes one line to stderr, in one write; a line that cannot be written is dropped.
+/// Stderr is unbuffered, and a line formatted into it would go out in pieces, which the
+/// MPI ranks of a run, writing to one terminal, would interleave mid-line.
 pub fn err(line: fmt::Arguments) {
-    let _ = writeln!(std::io::stderr().lock(), "{line}");
+    let _ = std::io::stderr().write_all(format!("{line}\n").as_bytes());
 }
 
 /// Why stdout could not be written, if it could not.
