@@ -38,7 +38,7 @@ use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
 use crate::solver::{Abandon, Backend, Factor, Rows, StepAt, StepReport, StepSolver, StepStatus};
 use crate::stability::Verdict;
-use crate::Result;
+use crate::{Error, Result};
 
 pub struct TimeLoop<'p> {
     scene: &'p Scene,
@@ -505,8 +505,8 @@ impl<'p> TimeLoop<'p> {
     /// b_f −= M_fp w_p (`fem::constraints`); returns max|f_n − g_F|, the step's load for
     /// the divergence detector.
     fn right_side(&mut self, t: f64) -> Result<f64> {
-        let h = &mut self.history;
         let disc = self.disc;
+        let h = &self.history;
         if !disc.prescribed.is_empty() {
             let next = (h.n + 1) as f64 * h.k;
             let g = constraints::values(&disc.prescribed, &disc.nodes, self.scene, next)?;
@@ -515,14 +515,14 @@ impl<'p> TimeLoop<'p> {
             }
         }
         self.b.fill(0.0);
-        self.disc.loads.add(
+        let added = self.disc.loads.add(
             t,
             (&self.disc.free, &self.disc.frames),
             self.scene,
             &mut self.b,
-        )?;
-        // max|f_n − g_F| (g_F is empty without friction).
-        let load_max = max_abs_diff(&self.b, &self.disc.g_f);
+        );
+        let load_max = self.load_max(added, t)?;
+        let h = &mut self.history;
         let memory = h.memory_into(self.scene.physics.relaxation.as_ref(), &mut self.m);
         // −K_B u_n − Σ_g K_R^(g) m^(g)_n, the body's group with K_B in one pass where paired.
         let n = h.u.len();
@@ -559,6 +559,41 @@ impl<'p> TimeLoop<'p> {
             self.backend.gather(&mut self.b)?;
         }
         Ok(load_max)
+    }
+
+    /// max|f_n − g_F| (g_F is empty without friction) of f_n in `b`, `added` as
+    /// `Loads::add` left it. On one of several MPI ranks, f_n is exact in its own rows alone
+    /// (a follower keeps their loads alone: `Loads::is_part`): each rank takes the largest
+    /// of its own rows, and the ranks the largest of those (a maximum: one process's
+    /// bits), and a load that is not finite fails the step on every rank, rank 0 (which
+    /// holds every load) saying where, the others quietly.
+    fn load_max(&self, added: Result<()>, t: f64) -> Result<f64> {
+        let Some(own) = &self.disc.own else {
+            added?;
+            return Ok(max_abs_diff(&self.b, &self.disc.g_f));
+        };
+        let failed = self.backend.largest(f64::from(u8::from(added.is_err())))?;
+        if failed > 0.0 {
+            return Err(match (added, self.disc.loads.is_part()) {
+                (_, true) => Error::Elsewhere(1),
+                (Err(e), false) => e,
+                (Ok(()), false) => Error::solve(format!(
+                    "a load is not finite at t = {t} on another rank; the run stops here"
+                )),
+            });
+        }
+        let g_f = |i: usize| self.disc.g_f.get(i).copied().unwrap_or(0.0);
+        let mut nan = false;
+        let mine = own.iter().fold(0.0f64, |m, &i| {
+            let x = (self.b[i] - g_f(i)).abs();
+            nan |= x.is_nan();
+            if x > m {
+                x
+            } else {
+                m
+            }
+        });
+        self.backend.largest(if nan { f64::NAN } else { mine })
     }
 
     /// Whether a step the solver calls solved is trusted: finite, bounded by its loads
@@ -689,12 +724,7 @@ pub fn refusals(scene: &Scene, disc: &Discretization, plans: &Plans) -> Result<(
         Verdict::new(scene, disc, plans).check(scene)?;
     }
     constraints::values(&disc.prescribed, &disc.nodes, scene, scene.time.k())?;
-    disc.loads.add(
-        0.0,
-        (&disc.free, &disc.frames),
-        scene,
-        &mut vec![0.0; disc.n_dofs],
-    )
+    disc.loads_at_start(scene)
 }
 
 #[cfg(test)]

@@ -38,10 +38,20 @@ pub struct Loads {
     loads: Vec<VectorLoad>,
     /// Dofs per node (the mesh's dimension).
     dim: usize,
+    /// Whether only the points that reach some nodes are kept ([`Loads::keep_reaching`]).
+    part: bool,
 }
 
 impl Loads {
-    pub fn new(mesh: &Mesh, scene: &Scene, cells: CellSource) -> Result<Self> {
+    /// The scene's loads on `mesh`; with `reaches` (per node), only the quadrature points
+    /// that put a value into one of its nodes ([`Loads::keep_reaching`]), a body force's
+    /// made for those cells alone.
+    pub fn new(
+        mesh: &Mesh,
+        scene: &Scene,
+        cells: CellSource,
+        reaches: Option<&[bool]>,
+    ) -> Result<Self> {
         // The traction boundary Γ2, for the check that every load group lies inside it.
         let gamma2: std::result::Result<HashSet<Vec<usize>>, String> = mesh
             .boundary_group(&scene.mesh.groups.traction)
@@ -52,18 +62,53 @@ impl Loads {
             loads.push(traction(mesh, scene, i, &gamma2)?);
         }
         for i in 0..scene.physics.body_forces.len() {
-            loads.push(body_force(mesh, cells, i));
+            loads.push(body_force(mesh, cells, i, reaches));
         }
-        // The quadrature points stay for the run: at their size, not their lists' growth.
-        loads.iter_mut().for_each(|l| l.qps.shrink_to_fit());
-        Ok(Loads {
+        let mut loads = Loads {
             loads,
             dim: mesh.dim,
-        })
+            part: false,
+        };
+        match reaches {
+            Some(reaches) => loads.keep_reaching(reaches),
+            // The quadrature points stay for the run: at their size, not their lists' growth.
+            None => (loads.loads.iter_mut()).for_each(|l| l.qps.shrink_to_fit()),
+        }
+        Ok(loads)
+    }
+
+    /// No load (a discretization's, until it makes its own).
+    pub fn none(dim: usize) -> Self {
+        Loads {
+            loads: Vec::new(),
+            dim,
+            part: false,
+        }
     }
 
     pub fn is_empty(&self) -> bool {
         self.loads.is_empty()
+    }
+
+    /// Keeps the quadrature points that put a value into a node that `reaches` (per node)
+    /// alone: the terms that reach those nodes' dofs stay, in their order, so those
+    /// entries of ⟨f(t), φ⟩ keep their bits, and the others become partial (on one of
+    /// several MPI ranks: its own rows; the others' come with b_n's gather). Marks the loads
+    /// as a part ([`Loads::is_part`]).
+    pub fn keep_reaching(&mut self, reaches: &[bool]) {
+        for load in &mut self.loads {
+            load.qps
+                .retain(|q| (q.nodes.iter().zip(q.phi)).any(|(&n, ph)| ph != 0.0 && reaches[n]));
+            load.qps.shrink_to_fit();
+        }
+        self.part = true;
+    }
+
+    /// Whether these are the loads of some nodes alone ([`Loads::keep_reaching`]): an
+    /// entry of [`Loads::add`] outside them is partial, and a value that is not finite
+    /// elsewhere is not seen here.
+    pub fn is_part(&self) -> bool {
+        self.part
     }
 
     /// The loads in the order [`Loads::visit`] numbers them.
@@ -207,10 +252,15 @@ fn traction(
     })
 }
 
-/// Body force i over every cell, by `body_rule`.
-fn body_force(mesh: &Mesh, cells: CellSource, i: usize) -> VectorLoad {
+/// Body force i over every cell (with `reaches`, every cell with one of its nodes), by
+/// `body_rule`.
+fn body_force(mesh: &Mesh, cells: CellSource, i: usize, reaches: Option<&[bool]>) -> VectorLoad {
     let mut qps = Vec::new();
     cells.each(|_, t| {
+        let nodes = &t.nodes[..=t.dim];
+        if reaches.is_some_and(|r| !nodes.iter().any(|&n| r[n])) {
+            return;
+        }
         for (phi, weight) in body_rule(t) {
             let mut p = [0.0; 3];
             for (k, pk) in p.iter_mut().enumerate() {

@@ -598,7 +598,11 @@ impl Discretization {
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
 
-        let loads = Loads::new(mesh, scene, CellSource::setup(hold, &cells, mesh))?;
+        // A follower's loads are made once its own rows are known (below).
+        let loads = match hold {
+            Hold::Nothing => Loads::none(d),
+            _ => Loads::new(mesh, scene, CellSource::setup(hold, &cells, mesh), None)?,
+        };
         let rows = RowMaker {
             numbering: &numbering,
             dim: d,
@@ -642,6 +646,12 @@ impl Discretization {
         };
         let own =
             own(&disc, CellSource::setup(hold, &disc.cells, mesh))?.filter(|_| n_dofs == n_free);
+        if hold == Hold::Nothing {
+            // Those of its own rows alone (`Discretization::keep_own_loads`).
+            let reaches = own.as_deref().map(|own| disc.reaching(own));
+            let cells = CellSource::setup(hold, &disc.cells, mesh);
+            disc.loads = Loads::new(mesh, scene, cells, reaches.as_deref())?;
+        }
         // Without a memory term in any cell K_R would be zero: none is assembled.
         let groups = match disc.materials.memory() {
             true => scene.physics.memory_groups(),
@@ -748,6 +758,41 @@ impl Discretization {
             pair.columns().for_each(|j| read[j] = true);
         }
         Some((0..self.n_dofs).filter(|&i| read[i]).collect())
+    }
+
+    /// The loads at t = 0, refused (bad input) where a value is not finite: before any
+    /// step (`time_loop::refusals`), and on several MPI ranks before a rank keeps its own
+    /// loads alone ([`Discretization::keep_own_loads`]), while every rank still sees every
+    /// value.
+    pub fn loads_at_start(&self, scene: &Scene) -> Result<()> {
+        let mut f = vec![0.0; self.n_dofs];
+        self.loads
+            .add(0.0, (&self.free, &self.frames), scene, &mut f)
+    }
+
+    /// On one of several MPI ranks that keeps its own columns, the loads' quadrature points
+    /// that reach its own unknowns alone (`Loads::keep_reaching`): its rows of f_n keep
+    /// their bits, the others' rows come from their ranks with b_n's gather
+    /// (`TimeLoop`'s right side), and a body force's points, four a tetrahedron, are
+    /// held by each rank for its cells alone.
+    pub fn keep_own_loads(&mut self) {
+        if let Some(own) = &self.own {
+            let reaches = self.reaching(own);
+            self.loads.keep_reaching(&reaches);
+        }
+    }
+
+    /// The nodes of the free unknowns `own`, per node.
+    fn reaching(&self, own: &[usize]) -> Vec<bool> {
+        let mut mine = vec![false; self.n_free];
+        own.iter().for_each(|&d| mine[d] = true);
+        let mut reaches = vec![false; self.nodes.len()];
+        for (g, d) in self.free.iter().enumerate() {
+            if d.is_some_and(|d| d < self.n_free && mine[d]) {
+                reaches[g / self.dim] = true;
+            }
+        }
+        reaches
     }
 
     /// K_A's diagonal alone, where its rows went to the linear backend (on one of several

@@ -538,6 +538,15 @@ impl Krylov {
         })
     }
 
+    /// The largest of every rank's `x` (collective where the rows are spread over ranks:
+    /// the ranks that `gather`); `x` on one rank.
+    pub fn largest(&self, x: f64) -> Result<f64> {
+        match self.layout.permutes() {
+            true => max_real_over_ranks(x),
+            false => Ok(x),
+        }
+    }
+
     /// Every rank's v ← the whole of v, each unknown's value from the rank that holds its
     /// row (a right side each rank made its own entries of); nothing on one rank.
     pub fn gather(&mut self, v: &mut [f64]) -> Result<()> {

@@ -19,7 +19,9 @@
 //! the rank keeps K_A's diagonal alone. The history's memory (the Prony states, the
 //! direct sum's past displacements) a follower keeps of the dofs that its rows of K_R and
 //! its piece of a frame read alone ([`Own`], `History::keeping`), with the same bits
-//! there; rank 0 keeps it whole, for the checkpoints and history.csv. The rest is
+//! there; rank 0 keeps it whole, for the checkpoints and history.csv. Of the loads, a
+//! follower makes the quadrature points that reach its own rows alone (its rows of f_n,
+//! with the same bits; the others come with b_n's gather), rank 0 every one. The rest is
 //! replicated: u_n and every n-vector, so every rank holds the same right side b_n, bit
 //! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
 //! every rank. Rank 0 (the *first*) owns the output directory (lock, series, history.csv,
@@ -287,12 +289,15 @@ impl Ranks {
     /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
     /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`), and K_B and K_R^(0)
     /// become the rank's rows of both, paired (`Discretization::pair_own_rows`). The heap
-    /// the matrices held then goes back to the system (`resources::return_freed_memory`). What
-    /// goes on to PETSc, the layout included, is [`Own`]; nothing on one rank.
+    /// the matrices held then goes back to the system (`resources::return_freed_memory`). A
+    /// follower keeps the loads of its own rows alone (`Discretization::keep_own_loads`),
+    /// once every rank has seen every load's value at t = 0; rank 0 keeps them all, for
+    /// history.csv's reactions, and so sees any value that is not finite. What goes on to
+    /// PETSc, the layout included, is [`Own`]; nothing on one rank.
     pub fn keep_own_columns(
         &self,
         disc: &mut crate::fem::Discretization,
-        history: crate::scene::History,
+        scene: &crate::scene::Scene,
         made: Option<Own>,
     ) -> Result<Option<Own>> {
         #[cfg(feature = "petsc")]
@@ -304,7 +309,7 @@ impl Ranks {
             if disc.own.is_none() {
                 disc.keep_columns(layout.own(self.rank));
             }
-            let rows = if hands_over_k_a(disc, history) {
+            let rows = if hands_over_k_a(disc, scene.solver.history) {
                 let rows = layout.rows_of(&disc.k_a, self.rank)?.into_owned();
                 disc.keep_diagonal_of_k_a();
                 // The implicit variant's step matrix is made of the columns of all three.
@@ -313,6 +318,10 @@ impl Ranks {
             } else {
                 None
             };
+            disc.loads_at_start(scene)?;
+            if !self.is_first() {
+                disc.keep_own_loads();
+            }
             crate::resources::return_freed_memory();
             let memory = (!self.is_first()).then(|| disc.memory_reach()).flatten();
             return Ok(Some(Own {
@@ -321,7 +330,7 @@ impl Ranks {
                 memory,
             }));
         }
-        let _ = (disc, history, made);
+        let _ = (disc, scene, made);
         Ok(None)
     }
 

@@ -264,9 +264,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     let ranks = (opts.ranks.size, made.as_ref());
     let solver = check_contact_plan(&scene, &disc, &estimate, None, ranks)?;
     check_started_ranks(&scene, &solver, opts)?;
-    let own = opts
-        .ranks
-        .keep_own_columns(&mut disc, scene.solver.history, made)?;
+    let own = opts.ranks.keep_own_columns(&mut disc, &scene, made)?;
     let disc = Arc::new(disc);
     let identity = checkpoint::Identity::new(&scene, &mesh, &disc, None);
     // Before the factorization: the series' writer thread compresses the mesh beside it.
@@ -392,9 +390,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
         let solver = Descriptor::of_run(&scene, &disc)?;
         check_started_ranks(&scene, &solver, opts)?;
-        let own = opts
-            .ranks
-            .keep_own_columns(&mut disc, scene.solver.history, made)?;
+        let own = opts.ranks.keep_own_columns(&mut disc, &scene, made)?;
         let options = &scene.output.options;
         let piece =
             frame::piece_of_follower((&mesh, &disc), own.as_ref(), options, opts.ranks.rank);
@@ -522,9 +518,7 @@ fn prepare_resume(
         (opts.ranks.size, made.as_ref()),
     )?;
     check_started_ranks(&scene, &solver, opts)?;
-    let own = opts
-        .ranks
-        .keep_own_columns(&mut disc, scene.solver.history, made)?;
+    let own = opts.ranks.keep_own_columns(&mut disc, &scene, made)?;
     let disc = Arc::new(disc);
     dir::check_out_dir(&out, opts.force)?;
     let lock = DirLock::acquire(&out, "resume")?;

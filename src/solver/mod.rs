@@ -232,6 +232,16 @@ impl Backend {
         }
     }
 
+    /// The largest of every rank's `x` (collective over the ranks that [`Backend::gather`]);
+    /// `x` on one process.
+    pub fn largest(&self, x: f64) -> crate::Result<f64> {
+        match self {
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => krylov.largest(x),
+            _ => Ok(x),
+        }
+    }
+
     /// Every rank's `v` ← the whole of it, each of its unknowns from the rank that holds its
     /// row (`Discretization::keep_columns`); nothing on one process.
     pub fn gather(&mut self, v: &mut [f64]) -> crate::Result<()> {

@@ -264,6 +264,37 @@ fn a_run_with_contact_and_friction_on_1_2_and_3_ranks_agrees_with_one_process() 
     agree_on_1_2_and_3_ranks(&contact_scenes(tmp.path()));
 }
 
+/// A body force, of which a follower keeps the quadrature points of its own rows alone
+/// (rank 0 all of them): on 1, 2 and 3 ranks the run agrees with one process; where it is
+/// not finite at a step in part of the body, every rank stops at that step, rank 0 alone
+/// saying where (exit 1, summary.json "failed").
+#[test]
+fn a_body_force_on_1_2_and_3_ranks_agrees_and_a_load_not_finite_stops_every_rank() {
+    let tmp = tempfile::tempdir().unwrap();
+    let block = |z: &str| {
+        (SceneText::block().body(&["0.001*t", "0", z]))
+            .set("solver.linear", "petsc")
+            .set("solver.contact", "active_set")
+            .set("time.steps", 8)
+    };
+    let scene = block("-0.02*(1+x)*min(t, 0.5)").write(tmp.path(), "body.toml");
+    agree_on_1_2_and_3_ranks(&[scene]);
+    // ln of a negative number beyond x = 1.5 from t = 0.375 (step 3) on.
+    let bad = block("if(x <= 1.5, -0.01, ln(0.31 - t))").write(tmp.path(), "bad.toml");
+    for ranks in [2, 3] {
+        let out = tmp.path().join(format!("bad.{ranks}"));
+        let (code, text) = run(ranks, &bad, &out, &[]);
+        assert_eq!(code, 1, "{text}");
+        assert_eq!(text.matches("error:").count(), 1, "{text}");
+        assert!(
+            text.contains("'load.body[0].value[2]' evaluates to NaN"),
+            "{text}"
+        );
+        assert!(text.contains("at t = 0.375"), "{text}");
+        assert_eq!(common::summary(&out)["status"], "failed", "{text}");
+    }
+}
+
 /// The Newton systems' multigrid, updated in place by the difference carried down its
 /// levels (on 3 ranks and more each rank multiplies its rows of the difference, and the
 /// owner of a coarse row adds the parts in rank order), is the Galerkin hierarchy of its
