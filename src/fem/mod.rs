@@ -761,9 +761,8 @@ impl Discretization {
     }
 
     /// The loads at t = 0, refused (bad input) where a value is not finite: before any
-    /// step (`time_loop::refusals`), and on several MPI ranks before a rank keeps its own
-    /// loads alone ([`Discretization::keep_own_loads`]), while every rank still sees every
-    /// value.
+    /// step, and on several MPI ranks before a follower keeps its own loads alone
+    /// ([`Discretization::keep_own_loads`]), while every rank still sees every value.
     pub fn loads_at_start(&self, scene: &Scene) -> Result<()> {
         let mut f = vec![0.0; self.n_dofs];
         self.loads
@@ -772,9 +771,8 @@ impl Discretization {
 
     /// On one of several MPI ranks that keeps its own columns, the loads' quadrature points
     /// that reach its own unknowns alone (`Loads::keep_reaching`): its rows of f_n keep
-    /// their bits, the others' rows come from their ranks with b_n's gather
-    /// (`TimeLoop`'s right side), and a body force's points, four a tetrahedron, are
-    /// held by each rank for its cells alone.
+    /// their bits, the others' rows come from their ranks with b_n's gather, and a
+    /// follower holds a body force's points, four a tetrahedron, for its cells alone.
     pub fn keep_own_loads(&mut self) {
         if let Some(own) = &self.own {
             let reaches = self.reaching(own);
