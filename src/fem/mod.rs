@@ -942,9 +942,11 @@ impl Discretization {
         // Rank 0 of several makes each cell from its vertices (16 bytes a tetrahedron) as it
         // reads it, on the thread that writes history.csv, beside PETSc's solves; packing
         // them, as one process does beside its factor, would hold 112 bytes a tetrahedron.
+        // It holds the vertices whether or not it keeps its own columns (with prescribed
+        // dofs every rank keeps the matrices whole); any rank of several reads its cells so.
         if let StressCells::Of(cells, materials) = only {
             (cells.iter().zip(materials)).for_each(|(t, &material)| of_cell(t, material));
-        } else if self.own.is_some() {
+        } else if self.own.is_some() || !self.vertices.is_empty() {
             let cells = self.cell_source();
             each(&mut |c| of_cell(&cells.get(c), materials[c]));
         } else {

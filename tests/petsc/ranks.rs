@@ -255,6 +255,20 @@ fn a_half_model_with_two_unknowns_on_its_plane_on_1_2_and_3_ranks_agrees_with_on
     agree_on_1_2_and_3_ranks(&[half]);
 }
 
+/// A punch's prescribed displacement (examples/punch.toml: no clamped group, contact and
+/// friction), whose velocities reach every row's right side, so that every rank keeps the
+/// matrices whole: on 1, 2 and 3 ranks the run agrees with one process, rank 0 making the
+/// stresses of history.csv and of its piece from the cells' vertices it holds.
+#[test]
+fn a_prescribed_displacement_with_contact_on_1_2_and_3_ranks_agrees_with_one_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    let punch = (SceneText::example("punch.toml").set("solver.linear", "petsc"))
+        .set("solver.contact", "active_set")
+        .set("time.steps", 8)
+        .write(tmp.path(), "punch.toml");
+    agree_on_1_2_and_3_ranks(&[punch]);
+}
+
 /// The active set's Newton systems spread as K_A's solves do: each rank makes the Newton
 /// matrix's rows of its own nodes, and every rank takes the same decisions from the whole
 /// w it gets back.
