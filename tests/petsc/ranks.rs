@@ -247,12 +247,18 @@ fn a_linear_run_on_1_2_and_3_ranks_agrees_with_one_process() {
 /// unknowns begin, and the run agrees with one process as the whole models do.
 #[test]
 fn a_half_model_with_two_unknowns_on_its_plane_on_1_2_and_3_ranks_agrees_with_one_process() {
+    example_on_1_2_and_3_ranks("half_block.toml");
+}
+
+/// The example `name` through the active set on PETSc, 8 steps, on 1, 2 and 3 ranks
+/// against one process (`agree_on_1_2_and_3_ranks`).
+fn example_on_1_2_and_3_ranks(name: &str) {
     let tmp = tempfile::tempdir().unwrap();
-    let half = (SceneText::example("half_block.toml").set("solver.linear", "petsc"))
+    let scene = (SceneText::example(name).set("solver.linear", "petsc"))
         .set("solver.contact", "active_set")
         .set("time.steps", 8)
-        .write(tmp.path(), "half_block.toml");
-    agree_on_1_2_and_3_ranks(&[half]);
+        .write(tmp.path(), name);
+    agree_on_1_2_and_3_ranks(&[scene]);
 }
 
 /// A punch's prescribed displacement (examples/punch.toml: no clamped group, contact and
@@ -261,12 +267,7 @@ fn a_half_model_with_two_unknowns_on_its_plane_on_1_2_and_3_ranks_agrees_with_on
 /// stresses of history.csv and of its piece from the cells' vertices it holds.
 #[test]
 fn a_prescribed_displacement_with_contact_on_1_2_and_3_ranks_agrees_with_one_process() {
-    let tmp = tempfile::tempdir().unwrap();
-    let punch = (SceneText::example("punch.toml").set("solver.linear", "petsc"))
-        .set("solver.contact", "active_set")
-        .set("time.steps", 8)
-        .write(tmp.path(), "punch.toml");
-    agree_on_1_2_and_3_ranks(&[punch]);
+    example_on_1_2_and_3_ranks("punch.toml");
 }
 
 /// The active set's Newton systems spread as K_A's solves do: each rank makes the Newton
