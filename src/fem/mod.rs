@@ -761,8 +761,9 @@ impl Discretization {
     }
 
     /// The loads at t = 0, refused (bad input) where a value is not finite: before any
-    /// step, and on several MPI ranks before a follower keeps its own loads alone
-    /// ([`Discretization::keep_own_loads`]), while every rank still sees every value.
+    /// step, and on several MPI ranks by rank 0, which holds every load, before the ranks
+    /// agree on their setup (a follower's own loads alone may not hold the value:
+    /// [`Discretization::keep_own_loads`]).
     pub fn loads_at_start(&self, scene: &Scene) -> Result<()> {
         let mut f = vec![0.0; self.n_dofs];
         self.loads
@@ -773,8 +774,9 @@ impl Discretization {
     /// that reach its own unknowns alone (`Loads::keep_reaching`): its rows of f_n keep
     /// their bits, the others' rows come from their ranks with b_n's gather, and a
     /// follower holds a body force's points, four a tetrahedron, for its cells alone.
+    /// Nothing where the setup made them so already ([`Discretization::with_columns`]).
     pub fn keep_own_loads(&mut self) {
-        if let Some(own) = &self.own {
+        if let Some(own) = self.own.as_ref().filter(|_| !self.loads.is_part()) {
             let reaches = self.reaching(own);
             self.loads.keep_reaching(&reaches);
         }

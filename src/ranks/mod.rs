@@ -290,10 +290,10 @@ impl Ranks {
     /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`), and K_B and K_R^(0)
     /// become the rank's rows of both, paired (`Discretization::pair_own_rows`). The heap
     /// the matrices held then goes back to the system (`resources::return_freed_memory`). A
-    /// follower keeps the loads of its own rows alone (`Discretization::keep_own_loads`),
-    /// once every rank has seen every load's value at t = 0; rank 0 keeps them all, for
-    /// history.csv's reactions, and so sees any value that is not finite. What goes on to
-    /// PETSc, the layout included, is [`Own`]; nothing on one rank.
+    /// follower keeps the loads of its own rows alone (`Discretization::keep_own_loads`);
+    /// rank 0 keeps them all, for history.csv's reactions, and so sees any value that is
+    /// not finite. What goes on to PETSc, the layout included, is [`Own`]; nothing on one
+    /// rank.
     pub fn keep_own_columns(
         &self,
         disc: &mut crate::fem::Discretization,
@@ -318,8 +318,11 @@ impl Ranks {
             } else {
                 None
             };
-            disc.loads_at_start(scene)?;
-            if !self.is_first() {
+            // A load not finite at t = 0, which a follower's own loads may not hold, stops
+            // rank 0 here, before the ranks agree on the setup, not alone in its time loop.
+            if self.is_first() {
+                disc.loads_at_start(scene)?;
+            } else {
                 disc.keep_own_loads();
             }
             crate::resources::return_freed_memory();
