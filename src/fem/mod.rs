@@ -142,8 +142,7 @@ pub struct Discretization {
     /// keeps whole ([`Discretization::keep_columns`]); None: every column (one process).
     pub own: Option<Vec<usize>>,
     /// On one of several MPI ranks, K_B and K_R^(0) as the rank's rows of both, paired
-    /// ([`Discretization::pair_own_rows`]); `k_b` and `k_r[0]` then hold their diagonal
-    /// alone.
+    /// ([`Discretization::pair_own_rows`]); `k_b` and `k_r[0]` then hold no entry.
     pub own_pair: Option<RowsPair>,
     /// The cells as [`Discretization::stress`] reads them on one process, once it is called
     /// (a rank of several reads `cells`).
@@ -675,9 +674,11 @@ impl Discretization {
                     mesh.path.display()
                 ))
             };
-            disc.vertices = (nodes.iter())
-                .map(|&v| u32::try_from(v).map_err(too_large))
-                .collect::<Result<_>>()?;
+            // At their exact size (a collected Result grows by doubling): they stay.
+            disc.vertices = Vec::with_capacity(nodes.len());
+            for &v in nodes {
+                disc.vertices.push(u32::try_from(v).map_err(too_large)?);
+            }
         }
         Ok(disc)
     }
@@ -721,9 +722,10 @@ impl Discretization {
     }
 
     /// On one of several MPI ranks that keeps its own columns, K_B and K_R^(0) as its rows of
-    /// both in one [`RowsPair`] (20 bytes an entry where the two took 32), each then with its
-    /// diagonal alone; nothing without K_B or where the columns are whole. Only where K_A is
-    /// the step matrix: the implicit variant's is made of all three matrices' columns.
+    /// both in one [`RowsPair`] (20 bytes an entry where the two took 32), each then with no
+    /// entry (b_n's products read the pair alone); nothing without K_B or where the columns
+    /// are whole. Only where K_A is the step matrix: the implicit variant's is made of all
+    /// three matrices' columns.
     pub fn pair_own_rows(&mut self) {
         let (Some(own), Some(k_b), Some(k_r)) = (&self.own, &mut self.k_b, self.k_r.first_mut())
         else {
@@ -734,7 +736,7 @@ impl Discretization {
         };
         for m in [k_b, k_r] {
             let size = (m.nrows(), m.ncols());
-            *m = entries_kept(m, size, |i, j| i == j);
+            *m = entries_kept(m, size, |_, _| false);
         }
         self.own_pair = Some(pair);
     }
