@@ -809,6 +809,13 @@ impl Discretization {
         nodal_vectors::<3>(self, v).into_flattened()
     }
 
+    /// [`Discretization::nodal`] at the nodes `at` alone, in their order (a rank's piece of
+    /// a frame).
+    pub fn nodal_at(&self, v: &[f64], at: &[usize]) -> Vec<f64> {
+        let at = at.iter().map(|&i| nodal_vector::<3>(self, v, i));
+        at.collect::<Vec<_>>().into_flattened()
+    }
+
     /// Per-cell stress σ_n = A ε(w_n) + B ε(u_n) + ε(m_n) (2.1 discretized; R = r·I, so the
     /// memory term is ε of m_n = kΣ r(t_n − t_j) u_j) as 6 components XX YY ZZ XY YZ XZ, and
     /// the von Mises stress, of the cells `cells` says (a rank's piece of a frame, or all). Plane stress has σ_zz = 0; plane strain σ_zz =
@@ -1117,16 +1124,19 @@ impl PackedCells {
 /// The first N components at every node of a free-dof vector (0 on Γ1 and beyond d), in
 /// x, y, z (turned out of a node's frame where it has one).
 pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f64; N]> {
-    let d = disc.dim;
     (0..disc.nodes.len())
-        .map(|i| {
-            let mut out = [0.0; N];
-            for (k, o) in out.iter_mut().enumerate().take(d) {
-                *o = disc.free[d * i + k].map_or(0.0, |dof| v[dof]);
-            }
-            disc.frames.to_space(i, out)
-        })
+        .map(|i| nodal_vector(disc, v, i))
         .collect()
+}
+
+/// [`nodal_vectors`] at node i.
+fn nodal_vector<const N: usize>(disc: &Discretization, v: &[f64], i: usize) -> [f64; N] {
+    let d = disc.dim;
+    let mut out = [0.0; N];
+    for (k, o) in out.iter_mut().enumerate().take(d) {
+        *o = disc.free[d * i + k].map_or(0.0, |dof| v[dof]);
+    }
+    disc.frames.to_space(i, out)
 }
 
 /// ‖v‖_{L²} and |v|_{H¹} of a P1 vector field given by its nodal values, computed exactly:

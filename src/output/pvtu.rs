@@ -180,7 +180,7 @@ impl Pieces {
         let parent = v.path.parent().unwrap_or(Path::new("."));
         let (dir_name, _) = piece_name(v.step, 0);
         for p in &mut self.pieces {
-            p.write(parent, v.step, &v.point_data, (&v.cell_data, false))?;
+            p.write(parent, v.step, (&v.point_data, &v.cell_data), false)?;
         }
         let sources: Vec<String> = (self.ranks.iter())
             .map(|&r| format!("{dir_name}/{}", piece_name(v.step, r).1))
@@ -238,8 +238,6 @@ pub struct PieceMesh {
     rank: usize,
     points: Vec<usize>,
     cells: Vec<usize>,
-    /// The whole mesh's point count (of the point fields a frame hands over).
-    whole_points: usize,
     coords: Vec<[f64; 3]>,
     connectivity: Vec<usize>,
     nodes_per_cell: usize,
@@ -280,7 +278,6 @@ impl PieceMesh {
         };
         PieceMesh {
             rank,
-            whole_points: g.points.len(),
             coords: points.iter().map(|&i| g.points[i]).collect(),
             connectivity: (cells.iter())
                 .flat_map(|&c| g.cells[c * npc..(c + 1) * npc].iter().map(|&i| local[i]))
@@ -330,22 +327,27 @@ impl Piece {
     }
 
     /// Writes the piece of step `step`'s frame (in its directory in `parent`, made if
-    /// missing): `point_data` of the whole mesh's points, `cell_data` of the whole mesh's
-    /// cells or (`cells_own`) of the piece's alone, in its order.
+    /// missing): `point_data` and `cell_data` of the whole mesh's points and cells, or
+    /// (`own`) of the piece's alone, in its order.
     fn write(
         &mut self,
         parent: &Path,
         step: usize,
-        point_data: &[Array],
-        (cell_data, cells_own): (&[Array], bool),
+        (point_data, cell_data): (&[Array], &[Array]),
+        own: bool,
     ) -> Result<()> {
         let (dir_name, file) = piece_name(step, self.rank);
         let dir = parent.join(dir_name);
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        let point_data: Vec<Array> = point_data.iter().map(|a| gather(a, &self.points)).collect();
-        let cell_data: Cow<[Array]> = match cells_own {
-            true => Cow::Borrowed(cell_data),
-            false => Cow::Owned(cell_data.iter().map(|a| gather(a, &self.cells)).collect()),
+        let piece = |data: &[Array], at: &[usize]| -> Vec<Array> {
+            data.iter().map(|a| gather(a, at)).collect()
+        };
+        let (point_data, cell_data): (Cow<[Array]>, Cow<[Array]>) = match own {
+            true => (Cow::Borrowed(point_data), Cow::Borrowed(cell_data)),
+            false => (
+                Cow::Owned(piece(point_data, &self.points)),
+                Cow::Owned(piece(cell_data, &self.cells)),
+            ),
         };
         self.grid
             .write_frame(&dir.join(file), &point_data, &cell_data)
@@ -357,7 +359,6 @@ impl Piece {
 /// `.pvtu` (`Series::list_pieces`), once every rank's is on disk.
 pub struct OwnPiece {
     piece: Piece,
-    whole_points: usize,
     dir: PathBuf,
     options: Options,
 }
@@ -366,7 +367,6 @@ impl OwnPiece {
     /// The piece of `mesh` in the series of `dir`, its mesh encoded with the run id.
     pub fn new(dir: &Path, mesh: PieceMesh, run_id: &str, options: &Options) -> Result<OwnPiece> {
         Ok(OwnPiece {
-            whole_points: mesh.whole_points,
             piece: Piece::new(mesh, run_id, options.compression)?,
             dir: dir.to_path_buf(),
             options: options.clone(),
@@ -378,9 +378,14 @@ impl OwnPiece {
         &self.piece.cells
     }
 
-    /// Writes step `step`'s piece: `points`, fields of the whole mesh's points, and
-    /// `cells`, fields of the piece's cells in its order; those the options leave out are
-    /// not written. A field of the wrong size is an input error naming the piece.
+    /// The piece's points, numbered in the whole mesh, in its order (increasing).
+    pub fn points(&self) -> &[usize] {
+        &self.piece.points
+    }
+
+    /// Writes step `step`'s piece: `points` and `cells`, fields of the piece's points and
+    /// cells in its order; those the options leave out are not written. A field of the
+    /// wrong size is an input error naming the piece.
     pub fn write(
         &mut self,
         step: usize,
@@ -389,9 +394,9 @@ impl OwnPiece {
     ) -> Result<()> {
         let (dir_name, file) = piece_name(step, self.piece.rank);
         let at = self.dir.join(dir_name).join(file);
-        let sizes = (self.whole_points, self.piece.cells.len());
+        let sizes = (self.piece.points.len(), self.piece.cells.len());
         let (points, cells) = checked_arrays(&self.options, (&at, step), (points, cells), sizes)?;
-        self.piece.write(&self.dir, step, &points, (&cells, true))
+        self.piece.write(&self.dir, step, (&points, &cells), true)
     }
 }
 

@@ -111,11 +111,11 @@ fn pieces(
 }
 
 /// A rank's own piece of the frames of a run over several ranks whose frames are `.vtu`
-/// files: at a frame's step every rank computes the fields of its piece's cells (and the
-/// point fields) and writes its piece, the ranks agree that every piece is on disk
+/// files: at a frame's step every rank computes the fields of its piece's cells and
+/// points alone and writes its piece, the ranks agree that every piece is on disk
 /// ([`Ranks::written`], which also gives the largest von Mises stress of them all), and
 /// rank 0's series then lists them in the frame's `.pvtu` (`Series::list_pieces`). No rank
-/// computes the whole mesh's cell fields.
+/// computes the whole mesh's fields.
 ///
 /// The piece's encoded mesh, and on a follower its cells, are made at the first frame,
 /// after PETSc's setup, where a rank peaks: until then the rank keeps the piece's mesh
@@ -200,9 +200,13 @@ impl OwnFrames {
         };
         let [w, u, z] = [step.w, step.u, step.z];
         let cells = wants_stress(&self.options).then_some(cells);
+        let at = match &self.piece {
+            Piece::Made(piece, _) => piece.points(),
+            _ => &[],
+        };
         let fields = fields(
             disc,
-            self.model,
+            (self.model, Some(at)),
             step.rows,
             active,
             cells,
@@ -290,7 +294,7 @@ pub(super) fn write_step(
     series.write_with(step.n, step.t, move || {
         let (points, cells) = fields(
             &disc,
-            model,
+            (model, None),
             &rows,
             &active,
             stress.then_some(StressCells::All),
@@ -318,37 +322,46 @@ fn max_von_mises(von_mises: &[f64]) -> f64 {
 
 /// The fields of a step's frame (docs/output.md): point fields, then cell fields (the
 /// stress and von Mises stress of the cells `cells` says, where it is Some), from
-/// `[w, u, z]` and m.
+/// `[w, u, z]` and m. The point fields are of every node, or of the nodes `at` alone, in
+/// their order (increasing: a rank's piece of the frame, whose other points are other
+/// pieces').
 fn fields(
     disc: &Discretization,
-    model: Model,
+    (model, at): (Model, Option<&[usize]>),
     rows: &Rows,
     active: &[bool],
     cells: Option<StressCells>,
     [w, u, z]: [&[f64]; 3],
     m: Option<&[f64]>,
 ) -> (Vec<OwnedField>, Vec<OwnedField>) {
-    let nn = disc.nodes.len();
+    let count = at.map_or(disc.nodes.len(), <[usize]>::len);
+    let point = |node: usize| match at {
+        None => Some(node),
+        Some(at) => at.binary_search(&node).ok(),
+    };
     // Nodal tractions from the multipliers: p = λ_i / ∫φ_i (contact pressure, ≥ 0) and the
     // friction traction γ_i / ∫φ_i: a scalar along τ_i in 2D, the tangential vector
     // Σ_k γ_ik τ_ik / ∫φ_i in 3D.
     let fc = if disc.dim == 2 { 1 } else { 3 };
-    let mut pressure = vec![0.0; nn];
-    let mut friction = vec![0.0; fc * nn];
-    let mut state = vec![0.0; nn];
+    let mut pressure = vec![0.0; count];
+    let mut friction = vec![0.0; fc * count];
+    let mut state = vec![0.0; count];
     for ((i, r), &on) in rows.rows.iter().enumerate().zip(active) {
+        let Some(p) = point(r.node) else {
+            continue;
+        };
         if i < rows.n_contact {
-            pressure[r.node] = z[i] / r.area;
+            pressure[p] = z[i] / r.area;
         } else if fc == 1 {
-            friction[r.node] = z[i] / r.area;
+            friction[p] = z[i] / r.area;
         } else {
             let tau = disc.frames.to_space(r.node, r.dir);
             for (k, t) in tau.iter().enumerate() {
-                friction[3 * r.node + k] += z[i] * t / r.area;
+                friction[3 * p + k] += z[i] * t / r.area;
             }
         }
         if on {
-            state[r.node] = 1.0;
+            state[p] = 1.0;
         }
     }
     let field = |name: &str, components, values| OwnedField {
@@ -362,9 +375,13 @@ fn fields(
         cell_data.push(field("stress", 6, stress));
         cell_data.push(field("von_mises", 1, von_mises));
     }
+    let nodal = |v| match at {
+        None => disc.nodal(v),
+        Some(at) => disc.nodal_at(v, at),
+    };
     let point_data = vec![
-        field("displacement", 3, disc.nodal(u)),
-        field("velocity", 3, disc.nodal(w)),
+        field("displacement", 3, nodal(u)),
+        field("velocity", 3, nodal(w)),
         field("contact_pressure", 1, pressure),
         field("friction_traction", fc, friction),
         field("contact_state", 1, state),
