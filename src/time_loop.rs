@@ -563,10 +563,10 @@ impl<'p> TimeLoop<'p> {
 
     /// max|f_n − g_F| (g_F is empty without friction) of f_n in `b`, `added` as
     /// `Loads::add` left it. On one of several MPI ranks, f_n is exact in its own rows alone
-    /// (a follower keeps their loads alone: `Loads::is_part`): each rank takes the largest
+    /// (a rank keeps their loads alone: `Loads::is_part`): each rank takes the largest
     /// of its own rows, and the ranks the largest of those (a maximum: one process's
     /// bits), and a load that is not finite fails the step on every rank, rank 0 (which
-    /// holds every load) saying where, the others quietly.
+    /// sees every value) saying where, the others quietly.
     fn load_max(&self, added: Result<()>, t: f64) -> Result<f64> {
         let Some(own) = &self.disc.own else {
             added?;
@@ -574,13 +574,17 @@ impl<'p> TimeLoop<'p> {
         };
         let failed = self.backend.largest(f64::from(u8::from(added.is_err())))?;
         if failed > 0.0 {
-            return Err(match (added, self.disc.loads.is_part()) {
-                (_, true) => Error::Elsewhere(1),
-                (Err(e), false) => e,
-                (Ok(()), false) => Error::solve(format!(
+            // Rank 0 sees every value (`Loads::sees_every_value`) and names the first, as
+            // one process does; a follower is quiet.
+            if !self.disc.loads.sees_every_value() {
+                return Err(Error::Elsewhere(1));
+            }
+            let first = self.disc.visit_every_load(t, self.scene, |_, _, _| {});
+            return Err(first.and(added).err().unwrap_or_else(|| {
+                Error::solve(format!(
                     "a load is not finite at t = {t} on another rank; the run stops here"
-                )),
-            });
+                ))
+            }));
         }
         let g_f = |i: usize| self.disc.g_f.get(i).copied().unwrap_or(0.0);
         let mut nan = false;

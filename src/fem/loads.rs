@@ -40,37 +40,58 @@ pub struct Loads {
     dim: usize,
     /// Whether only the points that reach some nodes are kept ([`Loads::keep_reaching`]).
     part: bool,
+    /// Whether every traction's points are kept all the same (rank 0 of several:
+    /// [`Keep::ReachingAndTractions`]).
+    every_traction: bool,
+}
+
+/// Which of its quadrature points a discretization's loads keep.
+#[derive(Clone, Copy)]
+pub enum Keep<'r> {
+    /// Every one (one process, or a rank of several that holds the matrices whole).
+    Every,
+    /// Those that put a value into a node that `reaches` (per node) says: a follower rank's
+    /// own rows ([`Loads::keep_reaching`]).
+    Reaching(&'r [bool]),
+    /// Those, and every traction's (a boundary's): rank 0 of several, which makes a body
+    /// force's other points again from its cells when it reads every value
+    /// ([`Loads::visit_every`]).
+    ReachingAndTractions(&'r [bool]),
+}
+
+impl<'r> Keep<'r> {
+    /// The nodes whose points are kept, and whether every traction's are: None keeps all.
+    fn reaches(self) -> Option<(&'r [bool], bool)> {
+        match self {
+            Keep::Every => None,
+            Keep::Reaching(r) => Some((r, false)),
+            Keep::ReachingAndTractions(r) => Some((r, true)),
+        }
+    }
 }
 
 impl Loads {
-    /// The scene's loads on `mesh`; with `reaches` (per node), only the quadrature points
-    /// that put a value into one of its nodes ([`Loads::keep_reaching`]), a body force's
-    /// made for those cells alone.
-    pub fn new(
-        mesh: &Mesh,
-        scene: &Scene,
-        cells: CellSource,
-        reaches: Option<&[bool]>,
-    ) -> Result<Self> {
+    /// The scene's loads on `mesh`, of their quadrature points those `keep` says
+    /// ([`Loads::keep_reaching`]), a body force's made for the cells it keeps alone.
+    pub fn new(mesh: &Mesh, scene: &Scene, cells: CellSource, keep: Keep) -> Result<Self> {
         // The traction boundary Γ2, for the check that every load group lies inside it.
         let gamma2: std::result::Result<HashSet<Vec<usize>>, String> = mesh
             .boundary_group(&scene.mesh.groups.traction)
             .map(|g| mesh.boundary_facets(g).iter().map(sorted).collect())
             .map_err(|e| e.to_string());
-        let mut loads = Vec::new();
+        let mut loads_made = Vec::new();
         for i in 0..scene.physics.tractions.len() {
-            loads.push(traction(mesh, scene, i, &gamma2)?);
+            loads_made.push(traction(mesh, scene, i, &gamma2)?);
         }
+        let reaches = keep.reaches();
         for i in 0..scene.physics.body_forces.len() {
-            loads.push(body_force(mesh, cells, i, reaches));
+            let reaches = reaches.map(|(r, _)| r);
+            loads_made.push(body_force(&mesh.nodes, cells, i, reaches));
         }
-        let mut loads = Loads {
-            loads,
-            dim: mesh.dim,
-            part: false,
-        };
+        let mut loads = Loads::none(mesh.dim);
+        loads.loads = loads_made;
         match reaches {
-            Some(reaches) => loads.keep_reaching(reaches),
+            Some((reaches, every_traction)) => loads.keep_reaching(reaches, every_traction),
             // The quadrature points stay for the run: at their size, not their lists' growth.
             None => (loads.loads.iter_mut()).for_each(|l| l.qps.shrink_to_fit()),
         }
@@ -83,6 +104,7 @@ impl Loads {
             loads: Vec::new(),
             dim,
             part: false,
+            every_traction: false,
         }
     }
 
@@ -91,24 +113,34 @@ impl Loads {
     }
 
     /// Keeps the quadrature points that put a value into a node that `reaches` (per node)
-    /// alone: the terms that reach those nodes' dofs stay, in their order, so those
-    /// entries of ⟨f(t), φ⟩ keep their bits, and the others become partial (on one of
-    /// several MPI ranks: its own rows; the others' come with b_n's gather). Marks the loads
-    /// as a part ([`Loads::is_part`]).
-    pub fn keep_reaching(&mut self, reaches: &[bool]) {
+    /// alone (with `every_traction`, every traction's too): the terms that reach those
+    /// nodes' dofs stay, in their order, so those entries of ⟨f(t), φ⟩ keep their bits, and
+    /// the others become partial (on one of several MPI ranks: its own rows; the others'
+    /// come with b_n's gather). Marks the loads as a part ([`Loads::is_part`]).
+    pub fn keep_reaching(&mut self, reaches: &[bool], every_traction: bool) {
         for load in &mut self.loads {
+            if every_traction && matches!(load.source, Source::Traction(_)) {
+                load.qps.shrink_to_fit();
+                continue;
+            }
             load.qps
                 .retain(|q| (q.nodes.iter().zip(q.phi)).any(|(&n, ph)| ph != 0.0 && reaches[n]));
             load.qps.shrink_to_fit();
         }
-        self.part = true;
+        (self.part, self.every_traction) = (true, every_traction);
     }
 
     /// Whether these are the loads of some nodes alone ([`Loads::keep_reaching`]): an
-    /// entry of [`Loads::add`] outside them is partial, and a value that is not finite
-    /// elsewhere is not seen here.
+    /// entry of [`Loads::add`] outside them is partial.
     pub fn is_part(&self) -> bool {
         self.part
+    }
+
+    /// Whether [`Loads::visit_every`] sees every value: one process's loads, and rank 0's
+    /// of several (every traction's points kept, a body force's made again); not a
+    /// follower's, which a value that is not finite elsewhere does not reach.
+    pub fn sees_every_value(&self) -> bool {
+        !self.part || self.every_traction
     }
 
     /// The loads in the order [`Loads::visit`] numbers them.
@@ -149,47 +181,96 @@ impl Loads {
         mut put: impl FnMut(usize, usize, f64),
     ) -> Result<()> {
         for (l, load) in self.loads.iter().enumerate() {
-            let value: &[Scalar] = match load.source {
-                Source::Traction(i) => &scene.physics.tractions[i].value,
-                Source::Body(i) => &scene.physics.body_forces[i],
-            };
             for q in &load.qps {
-                let pt = Point {
-                    x: q.p[0],
-                    y: q.p[1],
-                    z: q.p[2],
-                    t,
-                    ..Default::default()
+                self.put_point((l, load.source), q, (t, scene), &mut put)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Loads::visit`] of every quadrature point, the same terms in the same order, where
+    /// these loads are a part that keeps every traction's points (rank 0 of several,
+    /// [`Loads::sees_every_value`]): a body force's points are made again, cell by cell,
+    /// from `cells` and the nodes at `nodes`, as [`Loads::new`] made them. history.csv's
+    /// resultants and reactions read them, and rank 0 finds there a value that is not
+    /// finite on another rank's part. Any other loads are visited as they are.
+    pub fn visit_every(
+        &self,
+        (t, scene): (f64, &Scene),
+        (cells, nodes): (CellSource, &[[f64; 3]]),
+        mut put: impl FnMut(usize, usize, f64),
+    ) -> Result<()> {
+        if !(self.part && self.every_traction) {
+            return self.visit(t, scene, put);
+        }
+        for (l, load) in self.loads.iter().enumerate() {
+            if let Source::Traction(_) = load.source {
+                for q in &load.qps {
+                    self.put_point((l, load.source), q, (t, scene), &mut put)?;
+                }
+                continue;
+            }
+            let mut failed = Ok(());
+            cells.each(|_, cell| {
+                for (phi, weight) in body_rule(cell) {
+                    if failed.is_ok() {
+                        let q = body_point(nodes, cell, phi, weight);
+                        failed = self.put_point((l, load.source), &q, (t, scene), &mut put);
+                    }
+                }
+            });
+            failed?;
+        }
+        Ok(())
+    }
+
+    /// Hands the terms of quadrature point `q` of load l (from `source`) at t to `put`
+    /// ([`Loads::visit`]).
+    fn put_point(
+        &self,
+        (l, source): (usize, Source),
+        q: &Qp,
+        (t, scene): (f64, &Scene),
+        put: &mut impl FnMut(usize, usize, f64),
+    ) -> Result<()> {
+        let value: &[Scalar] = match source {
+            Source::Traction(i) => &scene.physics.tractions[i].value,
+            Source::Body(i) => &scene.physics.body_forces[i],
+        };
+        let pt = Point {
+            x: q.p[0],
+            y: q.p[1],
+            z: q.p[2],
+            t,
+            ..Default::default()
+        };
+        for (c, v) in value.iter().enumerate() {
+            let val = v.eval(&pt);
+            if !val.is_finite() {
+                let key = match source {
+                    Source::Traction(i) => format!("load.traction[{i}].value"),
+                    Source::Body(i) => format!("load.body[{i}].value"),
                 };
-                for (c, v) in value.iter().enumerate() {
-                    let val = v.eval(&pt);
-                    if !val.is_finite() {
-                        let key = match load.source {
-                            Source::Traction(i) => format!("load.traction[{i}].value"),
-                            Source::Body(i) => format!("load.body[{i}].value"),
-                        };
-                        let what = format!(
-                            "{}: key '{key}[{c}]' evaluates to {val} at {} at t = {t}",
-                            scene.path.display(),
-                            super::fmt_at(q.p, scene.mesh.model)
-                        );
-                        // At t = 0 it is known before any step (`TimeLoop::new` evaluates
-                        // the loads there): bad input.
-                        return Err(if t == 0.0 {
-                            Error::input(format!(
-                                "{what}; a load must be finite wherever and whenever it acts"
-                            ))
-                        } else {
-                            Error::solve(format!(
-                                "{what}; the run stops here (the last checkpoint is kept)"
-                            ))
-                        });
-                    }
-                    for (n, ph) in q.nodes.iter().zip(q.phi) {
-                        if ph != 0.0 {
-                            put(l, self.dim * n + c, q.weight * ph * val);
-                        }
-                    }
+                let what = format!(
+                    "{}: key '{key}[{c}]' evaluates to {val} at {} at t = {t}",
+                    scene.path.display(),
+                    super::fmt_at(q.p, scene.mesh.model)
+                );
+                // At t = 0 it is known before any step (`TimeLoop::new` evaluates the loads
+                // there): bad input.
+                return Err(if t == 0.0 {
+                    Error::input(format!(
+                        "{what}; a load must be finite wherever and whenever it acts"
+                    ))
+                } else {
+                    Error::solve(format!(
+                        "{what}; the run stops here (the last checkpoint is kept)"
+                    ))
+                });
+            }
+            for (n, ph) in q.nodes.iter().zip(q.phi) {
+                if ph != 0.0 {
+                    put(l, self.dim * n + c, q.weight * ph * val);
                 }
             }
         }
@@ -253,32 +334,41 @@ fn traction(
 }
 
 /// Body force i over every cell (with `reaches`, every cell with one of its nodes), by
-/// `body_rule`.
-fn body_force(mesh: &Mesh, cells: CellSource, i: usize, reaches: Option<&[bool]>) -> VectorLoad {
+/// `body_rule`, the nodes at `nodes`.
+fn body_force(
+    nodes: &[[f64; 3]],
+    cells: CellSource,
+    i: usize,
+    reaches: Option<&[bool]>,
+) -> VectorLoad {
     let mut qps = Vec::new();
     cells.each(|_, t| {
-        let nodes = &t.nodes[..=t.dim];
-        if reaches.is_some_and(|r| !nodes.iter().any(|&n| r[n])) {
+        let vertices = &t.nodes[..=t.dim];
+        if reaches.is_some_and(|r| !vertices.iter().any(|&n| r[n])) {
             return;
         }
         for (phi, weight) in body_rule(t) {
-            let mut p = [0.0; 3];
-            for (k, pk) in p.iter_mut().enumerate() {
-                *pk = (0..=t.dim)
-                    .map(|i| phi[i] * mesh.nodes[t.nodes[i]][k])
-                    .sum();
-            }
-            qps.push(Qp {
-                p,
-                weight,
-                nodes: t.nodes,
-                phi,
-            });
+            qps.push(body_point(nodes, t, phi, weight));
         }
     });
     VectorLoad {
         source: Source::Body(i),
         qps,
+    }
+}
+
+/// The quadrature point of cell `t` with φ `phi` of its vertices and weight `weight`, the
+/// nodes at `nodes`.
+fn body_point(nodes: &[[f64; 3]], t: &Cell, phi: [f64; 4], weight: f64) -> Qp {
+    let mut p = [0.0; 3];
+    for (k, pk) in p.iter_mut().enumerate() {
+        *pk = (0..=t.dim).map(|i| phi[i] * nodes[t.nodes[i]][k]).sum();
+    }
+    Qp {
+        p,
+        weight,
+        nodes: t.nodes,
+        phi,
     }
 }
 

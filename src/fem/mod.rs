@@ -19,7 +19,7 @@ use crate::{Error, Result};
 pub use constraints::{Frames, Numbering, Prescribed};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-pub use loads::Loads;
+pub use loads::{Keep, Loads};
 pub use materials::{CellMaterials, Stiffness};
 pub use pair::{RowsPair, SymmetricPair};
 use std::path::Path;
@@ -597,10 +597,10 @@ impl Discretization {
         let materials = CellMaterials::new(mesh, scene)?;
         let r = Isotropic::identity();
 
-        // A follower's loads are made once its own rows are known (below).
+        // A rank of several makes its loads once its own rows are known (below).
         let loads = match hold {
-            Hold::Nothing => Loads::none(d),
-            _ => Loads::new(mesh, scene, CellSource::setup(hold, &cells, mesh), None)?,
+            Hold::Cells => Loads::new(mesh, scene, CellSource::Held(&cells), Keep::Every)?,
+            _ => Loads::none(d),
         };
         let rows = RowMaker {
             numbering: &numbering,
@@ -645,11 +645,16 @@ impl Discretization {
         };
         let own =
             own(&disc, CellSource::setup(hold, &disc.cells, mesh))?.filter(|_| n_dofs == n_free);
-        if hold == Hold::Nothing {
+        if hold != Hold::Cells {
             // Those of its own rows alone (`Discretization::keep_own_loads`).
             let reaches = own.as_deref().map(|own| disc.reaching(own));
+            let keep = match (reaches.as_deref(), hold) {
+                (None, _) => Keep::Every,
+                (Some(r), Hold::Vertices) => Keep::ReachingAndTractions(r),
+                (Some(r), _) => Keep::Reaching(r),
+            };
             let cells = CellSource::setup(hold, &disc.cells, mesh);
-            disc.loads = Loads::new(mesh, scene, cells, reaches.as_deref())?;
+            disc.loads = Loads::new(mesh, scene, cells, keep)?;
         }
         // Without a memory term in any cell K_R would be zero: none is assembled.
         let groups = match disc.materials.memory() {
@@ -763,24 +768,37 @@ impl Discretization {
     }
 
     /// The loads at t = 0, refused (bad input) where a value is not finite: before any
-    /// step, and on several MPI ranks by rank 0, which holds every load, before the ranks
-    /// agree on their setup (a follower's own loads alone may not hold the value:
-    /// [`Discretization::keep_own_loads`]).
+    /// step, and on several MPI ranks by rank 0, which sees every value
+    /// ([`Discretization::visit_every_load`]), before the ranks agree on their setup (a
+    /// follower's own loads alone may not hold the value).
     pub fn loads_at_start(&self, scene: &Scene) -> Result<()> {
-        let mut f = vec![0.0; self.n_dofs];
-        self.loads
-            .add(0.0, (&self.free, &self.frames), scene, &mut f)
+        self.visit_every_load(0.0, scene, |_, _, _| {})
+    }
+
+    /// Every term of the loads at t ([`Loads::visit`]), in one process's order, where
+    /// these are one process's or rank 0's of several, which makes a body force's points
+    /// that it does not keep again from its cells ([`Loads::visit_every`]).
+    pub fn visit_every_load(
+        &self,
+        t: f64,
+        scene: &Scene,
+        put: impl FnMut(usize, usize, f64),
+    ) -> Result<()> {
+        let cells = (self.cell_source(), self.nodes.as_slice());
+        self.loads.visit_every((t, scene), cells, put)
     }
 
     /// On one of several MPI ranks that keeps its own columns, the loads' quadrature points
-    /// that reach its own unknowns alone (`Loads::keep_reaching`): its rows of f_n keep
-    /// their bits, the others' rows come from their ranks with b_n's gather, and a
-    /// follower holds a body force's points, four a tetrahedron, for its cells alone.
-    /// Nothing where the setup made them so already ([`Discretization::with_columns`]).
-    pub fn keep_own_loads(&mut self) {
+    /// that reach its own unknowns alone (`Loads::keep_reaching`; on rank 0, `first`,
+    /// every traction's too, and it makes a body force's others again where it reads
+    /// them: [`Discretization::visit_every_load`]): its rows of f_n keep their bits, the
+    /// others' rows come from their ranks with b_n's gather, and a rank holds a body
+    /// force's points, four a tetrahedron, for its cells alone. Nothing where the setup
+    /// made them so already ([`Discretization::with_columns`]).
+    pub fn keep_own_loads(&mut self, first: bool) {
         if let Some(own) = self.own.as_ref().filter(|_| !self.loads.is_part()) {
             let reaches = self.reaching(own);
-            self.loads.keep_reaching(&reaches);
+            self.loads.keep_reaching(&reaches, first);
         }
     }
 

@@ -130,7 +130,7 @@ impl Reactions {
             .collect();
         let d = disc.dim;
         let mut loads = vec![[0.0; 3]; disc.loads.sources().count()];
-        disc.loads.visit(t, scene, |l, dof, v| {
+        disc.visit_every_load(t, scene, |l, dof, v| {
             loads[l][dof % d] += v;
             disc.frames.spread(d, dof, v, |g, v| {
                 if let Some(h) = self.row_of[g] {

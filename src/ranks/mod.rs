@@ -20,8 +20,10 @@
 //! direct sum's past displacements) a follower keeps of the dofs that its rows of K_R and
 //! its piece of a frame read alone ([`Own`], `History::keeping`), with the same bits
 //! there; rank 0 keeps it whole, for the checkpoints and history.csv. Of the loads, a
-//! follower makes the quadrature points that reach its own rows alone (its rows of f_n,
-//! with the same bits; the others come with b_n's gather), rank 0 every one. The rest is
+//! rank makes the quadrature points that reach its own rows alone (its rows of f_n, with
+//! the same bits; the others come with b_n's gather), rank 0 every traction's too, and it
+//! makes a body force's other points again, cell by cell, where history.csv reads every
+//! value (`Discretization::visit_every_load`). The rest is
 //! replicated: u_n and every n-vector, so every rank holds the same right side b_n, bit
 //! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
 //! every rank. Rank 0 (the *first*) owns the output directory (lock, series, history.csv,
@@ -290,10 +292,10 @@ impl Ranks {
     /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`), and K_B and K_R^(0)
     /// become the rank's rows of both, paired (`Discretization::pair_own_rows`). The heap
     /// the matrices held then goes back to the system (`resources::return_freed_memory`). A
-    /// follower keeps the loads of its own rows alone (`Discretization::keep_own_loads`);
-    /// rank 0 keeps them all, for history.csv's reactions, and so sees any value that is
-    /// not finite. What goes on to PETSc, the layout included, is [`Own`]; nothing on one
-    /// rank.
+    /// rank keeps the loads of its own rows alone (`Discretization::keep_own_loads`), rank 0
+    /// every traction's too: it makes a body force's other points again from its cells for
+    /// history.csv's resultants and reactions, and so sees any value that is not finite.
+    /// What goes on to PETSc, the layout included, is [`Own`]; nothing on one rank.
     pub fn keep_own_columns(
         &self,
         disc: &mut crate::fem::Discretization,
@@ -322,9 +324,8 @@ impl Ranks {
             // rank 0 here, before the ranks agree on the setup, not alone in its time loop.
             if self.is_first() {
                 disc.loads_at_start(scene)?;
-            } else {
-                disc.keep_own_loads();
             }
+            disc.keep_own_loads(self.is_first());
             crate::resources::return_freed_memory();
             let memory = (!self.is_first()).then(|| disc.memory_reach()).flatten();
             return Ok(Some(Own {

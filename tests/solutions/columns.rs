@@ -4,10 +4,11 @@
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
 //! agree with the whole matrices' products to round-off, the diagonal stays whole (the
 //! active set's ρ reads it), and the other columns are gone. A rank that assembles those
-//! columns alone (`Discretization::with_columns`) holds the same matrices and loads, bit for
-//! bit, whether it holds the cells, their vertices or nothing; from the vertices alone (rank
-//! 0) it computes the stresses and norms of the cells held, bit for bit; its
-//! rows of K_B and K_R paired (`Discretization::pair_own_rows`) give the same products.
+//! columns alone (`Discretization::with_columns`) holds the same matrices, bit for bit, and
+//! the same loads in its own rows, whether it holds the cells, their vertices or nothing;
+//! from the vertices alone (rank 0) it computes the stresses and norms of the cells held,
+//! and visits every load's terms (a body force's made again), bit for bit; its rows of K_B
+//! and K_R paired (`Discretization::pair_own_rows`) give the same products.
 //! Where a rank's rows of K_A go to PETSc, K_A keeps its diagonal alone
 //! (`Discretization::keep_diagonal_of_k_a`). A scene with prescribed dofs keeps its
 //! matrices whole.
@@ -67,9 +68,9 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
 
 /// On the 3D block and the paper's 2D scene (K_A, K_B and K_R each, and a body force), for
 /// a random half of the nodes: the columns a rank assembles alone are those it keeps of the
-/// whole, bit for bit, and so are its loads (a follower's in its own rows, the only ones
-/// it makes), whether it holds the cells (rank 0) or makes each from the mesh as it reads
-/// it and holds none (a follower).
+/// whole, bit for bit, and so are its loads in its own rows (the only ones it makes),
+/// whether it holds the cells, their vertices (rank 0, which then visits every term of the
+/// loads in the whole's order, a body force's made again) or none (a follower).
 #[test]
 fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_whole() {
     let dir = tempfile::tempdir().unwrap();
@@ -110,15 +111,29 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
                 d.loads.add(0.5, free, &scene, &mut f).unwrap();
                 f
             };
-            // A follower makes the loads of its own rows alone: those rows are the whole's.
+            // A rank of several makes the loads of its own rows alone: those rows are the
+            // whole's.
             let f = loads(&kept);
             assert!(f.iter().any(|&v| v != 0.0), "{case}");
             let at = |f: &[f64]| match hold {
-                Hold::Nothing => own.iter().map(|&i| f[i]).collect(),
-                _ => f.to_vec(),
+                Hold::Cells => f.to_vec(),
+                _ => own.iter().map(|&i| f[i]).collect(),
             };
             assert_eq!(bits(&at(&loads(&mine))), bits(&at(&f)), "{case}");
-            assert_eq!(mine.loads.is_part(), hold == Hold::Nothing, "{case}");
+            assert_eq!(mine.loads.is_part(), hold != Hold::Cells, "{case}");
+            // Rank 0 (and one process) sees every term, in the whole's order, the body
+            // force's made again from its cells; a follower its own alone.
+            let terms = |d: &Discretization| {
+                let mut terms = Vec::new();
+                let put = |l, dof, v: f64| terms.push((l, dof, v.to_bits()));
+                d.visit_every_load(0.5, &scene, put).unwrap();
+                terms
+            };
+            let every = hold != Hold::Nothing;
+            assert_eq!(mine.loads.sees_every_value(), every, "{case}");
+            if every {
+                assert_eq!(terms(&mine), terms(&kept), "{case}");
+            }
             let matrices = |d: &Discretization| {
                 let mut all = vec![d.k_a.clone()];
                 all.extend(d.k_b.iter().cloned());
