@@ -70,7 +70,8 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
 /// a random half of the nodes: the columns a rank assembles alone are those it keeps of the
 /// whole, bit for bit, and so are its loads in its own rows (the only ones it makes),
 /// whether it holds the cells, their vertices (rank 0, which then visits every term of the
-/// loads in the whole's order, a body force's made again) or none (a follower).
+/// loads in the whole's order, a body force's made again) or none (a follower); rank 0 that
+/// assembled the whole first and then keeps its own loads still visits every term.
 #[test]
 fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_whole() {
     let dir = tempfile::tempdir().unwrap();
@@ -123,16 +124,14 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
             assert_eq!(mine.loads.is_part(), hold != Hold::Cells, "{case}");
             // Rank 0 (and one process) sees every term, in the whole's order, the body
             // force's made again from its cells; a follower its own alone.
-            let terms = |d: &Discretization| {
-                let mut terms = Vec::new();
-                let put = |l, dof, v: f64| terms.push((l, dof, v.to_bits()));
-                d.visit_every_load(0.5, &scene, put).unwrap();
-                terms
-            };
             let every = hold != Hold::Nothing;
             assert_eq!(mine.loads.sees_every_value(), every, "{case}");
             if every {
-                assert_eq!(terms(&mine), terms(&kept), "{case}");
+                assert_eq!(
+                    every_term(&mine, &scene),
+                    every_term(&kept, &scene),
+                    "{case}"
+                );
             }
             let matrices = |d: &Discretization| {
                 let mut all = vec![d.k_a.clone()];
@@ -149,7 +148,25 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
                 assert_eq!(bits(a.val()), bits(b.val()), "{case} {k}");
             }
         }
+        // Where the whole was assembled first (`solver.linear = "auto"`), rank 0 then keeps
+        // its own rows' points and the tractions', and still sees every term.
+        let before = every_term(&kept, &scene);
+        kept.keep_own_loads(true);
+        assert!(
+            kept.loads.is_part() && kept.loads.sees_every_value(),
+            "{name}"
+        );
+        assert_eq!(every_term(&kept, &scene), before, "{name}");
     }
+}
+
+/// Every term of `disc`'s loads at t = 0.5 (`Discretization::visit_every_load`): load,
+/// dof and the value's bits, in their order.
+fn every_term(disc: &Discretization, scene: &viscontact::scene::Scene) -> Vec<(usize, usize, u64)> {
+    let mut terms = Vec::new();
+    let put = |l, dof, v: f64| terms.push((l, dof, v.to_bits()));
+    disc.visit_every_load(0.5, scene, put).unwrap();
+    terms
 }
 
 /// Rank 0 of several holds each cell's vertices alone (`Hold::Vertices`) and makes a cell
