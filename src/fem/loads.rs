@@ -79,17 +79,19 @@ impl Loads {
             .boundary_group(&scene.mesh.groups.traction)
             .map(|g| mesh.boundary_facets(g).iter().map(sorted).collect())
             .map_err(|e| e.to_string());
-        let mut loads_made = Vec::new();
+        let mut loads = Vec::new();
         for i in 0..scene.physics.tractions.len() {
-            loads_made.push(traction(mesh, scene, i, &gamma2)?);
+            loads.push(traction(mesh, scene, i, &gamma2)?);
         }
         let reaches = keep.reaches();
         for i in 0..scene.physics.body_forces.len() {
             let reaches = reaches.map(|(r, _)| r);
-            loads_made.push(body_force(&mesh.nodes, cells, i, reaches));
+            loads.push(body_force(&mesh.nodes, cells, i, reaches));
         }
-        let mut loads = Loads::none(mesh.dim);
-        loads.loads = loads_made;
+        let mut loads = Loads {
+            loads,
+            ..Loads::none(mesh.dim)
+        };
         match reaches {
             Some((reaches, every_traction)) => loads.keep_reaching(reaches, every_traction),
             // The quadrature points stay for the run: at their size, not their lists' growth.
@@ -174,48 +176,49 @@ impl Loads {
     /// [`Loads::sources`]. Their sum over the dofs of a component is the load's resultant
     /// (Σ φ = 1); `add` sums them into the free dofs. A value that is not finite stops the
     /// run as `add` says.
-    pub fn visit(
-        &self,
-        t: f64,
-        scene: &Scene,
-        mut put: impl FnMut(usize, usize, f64),
-    ) -> Result<()> {
-        for (l, load) in self.loads.iter().enumerate() {
-            for q in &load.qps {
-                self.put_point((l, load.source), q, (t, scene), &mut put)?;
-            }
-        }
-        Ok(())
+    pub fn visit(&self, t: f64, scene: &Scene, put: impl FnMut(usize, usize, f64)) -> Result<()> {
+        self.visit_making(None, (t, scene), put)
     }
 
     /// [`Loads::visit`] of every quadrature point, the same terms in the same order, where
     /// these loads are a part that keeps every traction's points (rank 0 of several,
     /// [`Loads::sees_every_value`]): a body force's points are made again, cell by cell,
-    /// from `cells` and the nodes at `nodes`, as [`Loads::new`] made them. history.csv's
+    /// from `cells` (the cells and the nodes' places), as [`Loads::new`] made them. history.csv's
     /// resultants and reactions read them, and rank 0 finds there a value that is not
     /// finite on another rank's part. Any other loads are visited as they are.
     pub fn visit_every(
         &self,
         (t, scene): (f64, &Scene),
-        (cells, nodes): (CellSource, &[[f64; 3]]),
+        cells: (CellSource, &[[f64; 3]]),
+        put: impl FnMut(usize, usize, f64),
+    ) -> Result<()> {
+        let making = (self.part && self.every_traction).then_some(cells);
+        self.visit_making(making, (t, scene), put)
+    }
+
+    /// [`Loads::visit`], a body force's points made again from `making` (the cells and
+    /// the nodes' places) where it is Some, the kept ones visited otherwise.
+    fn visit_making(
+        &self,
+        making: Option<(CellSource, &[[f64; 3]])>,
+        (t, scene): (f64, &Scene),
         mut put: impl FnMut(usize, usize, f64),
     ) -> Result<()> {
-        if !(self.part && self.every_traction) {
-            return self.visit(t, scene, put);
-        }
         for (l, load) in self.loads.iter().enumerate() {
-            if let Source::Traction(_) = load.source {
+            let at = (l, load.source);
+            let Some((cells, nodes)) = making.filter(|_| matches!(load.source, Source::Body(_)))
+            else {
                 for q in &load.qps {
-                    self.put_point((l, load.source), q, (t, scene), &mut put)?;
+                    self.put_point(at, q, (t, scene), &mut put)?;
                 }
                 continue;
-            }
+            };
             let mut failed = Ok(());
             cells.each(|_, cell| {
                 for (phi, weight) in body_rule(cell) {
                     if failed.is_ok() {
                         let q = body_point(nodes, cell, phi, weight);
-                        failed = self.put_point((l, load.source), &q, (t, scene), &mut put);
+                        failed = self.put_point(at, &q, (t, scene), &mut put);
                     }
                 }
             });
