@@ -815,11 +815,16 @@ impl Discretization {
         reaches
     }
 
-    /// K_A's diagonal alone, where its rows went to the linear backend (on one of several
-    /// MPI ranks: `Ranks::keep_own_columns`): what the active set's ρ reads of it.
+    /// K_A's diagonal at the unknowns of Γ3's rows alone, where its rows went to the linear
+    /// backend (on one of several MPI ranks: `Ranks::keep_own_columns`): what the active
+    /// set's ρ reads of it (`NodalRow::entries`).
     pub fn keep_diagonal_of_k_a(&mut self) {
         let size = (self.k_a.nrows(), self.k_a.ncols());
-        self.k_a = entries_kept(&self.k_a, size, |i, j| i == j);
+        let mut read = vec![false; size.0];
+        for row in self.contact.iter().chain(&self.friction) {
+            row.entries().for_each(|(d, _)| read[d] = true);
+        }
+        self.k_a = entries_kept(&self.k_a, size, |i, j| i == j && read[i]);
     }
 
     /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1; z = 0 in 2D).

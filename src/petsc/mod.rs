@@ -280,7 +280,7 @@ impl Krylov {
     /// rank's columns on several), its near-null space from `disc`'s nodes. On one of
     /// several ranks, `own` is the layout of `disc` over the ranks where it was made
     /// already, and the rank's rows of K_A where they were taken out of `disc`
-    /// (`Ranks::keep_own_columns`: `matrix` then holds K_A's diagonal alone).
+    /// (`Ranks::keep_own_columns`: `matrix` then holds no more than K_A's diagonal).
     pub fn new(
         matrix: &Sparse,
         own: Option<(Layout, Option<Csr<'static>>)>,

@@ -16,7 +16,7 @@
 //! matrices (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It
 //! computes its entries of the right side's products from them and gathers the others'
 //! (`Backend::gather`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
-//! the rank keeps K_A's diagonal alone. The history's memory (the Prony states, the
+//! the rank keeps K_A's diagonal at Γ3's unknowns alone. The history's memory (the Prony states, the
 //! direct sum's past displacements) a follower keeps of the dofs that its rows of K_R and
 //! its piece of a frame read alone ([`Own`], `History::keeping`), with the same bits
 //! there; rank 0 keeps it whole, for the checkpoints and history.csv. Of the loads, a
@@ -290,7 +290,7 @@ impl Ranks {
     /// [`Ranks::discretize`] made, when it assembled those columns alone), and no others
     /// (`Discretization::keep_columns`). Where K_A is the step matrix (`solver.history =
     /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
-    /// K_A's diagonal alone (`Discretization::keep_diagonal_of_k_a`), and K_B and K_R^(0)
+    /// K_A's diagonal at Γ3's unknowns alone (`Discretization::keep_diagonal_of_k_a`), and K_B and K_R^(0)
     /// become the rank's rows of both, paired (`Discretization::pair_own_rows`). The heap
     /// the matrices held then goes back to the system (`resources::return_freed_memory`). A
     /// rank keeps the loads of its own rows alone (`Discretization::keep_own_loads`), rank 0
