@@ -425,8 +425,9 @@ pub struct ActiveSetSolver {
     /// The diagonal of K along each row, ρ's unit (ρ itself is `Iterate::rho`).
     rho: Vec<f64>,
     terms: Terms,
-    /// b − f_slip, and its projection Π(b − f_slip), the system's right side.
-    force: Vec<f64>,
+    /// b − f_slip at each node's dofs (0 where it has none), what the multipliers read of
+    /// it, and its projection Π(b − f_slip), the system's right side: one n-vector, not two.
+    force: Vec<[f64; 3]>,
     rhs: Vec<f64>,
     /// (K + S) w.
     r: Vec<f64>,
@@ -446,12 +447,13 @@ impl ActiveSetSolver {
             let mean = rho[block.clone()].iter().sum::<f64>() / block.len() as f64;
             rho[block].fill(mean);
         }
+        let nodes = nodes(rows);
         ActiveSetSolver {
             settings,
-            nodes: nodes(rows),
+            force: vec![[0.0; 3]; nodes.len()],
+            nodes,
             rho,
             terms: Terms::default(),
-            force: vec![0.0; diagonal.len()],
             rhs: vec![0.0; diagonal.len()],
             r: vec![0.0; diagonal.len()],
             counts: ActiveSetCounts::default(),
@@ -599,7 +601,7 @@ impl ActiveSetSolver {
     /// The Newton system's terms and right side b − f_slip for `sets`.
     fn assemble(&mut self, rows: &Rows, sets: &Sets, b: &[f64]) {
         self.terms.clear();
-        self.force.copy_from_slice(b);
+        self.rhs.copy_from_slice(b);
         for node in &self.nodes {
             let mut removed: Vec<[f64; 3]> = Vec::new();
             if let Some(i) = node.contact.filter(|&i| sets.active[i]) {
@@ -612,7 +614,7 @@ impl ActiveSetSolver {
                     Friction::Slip { g, beta } => {
                         let c = rows.rows[block.start].bound;
                         for (k, i) in block.clone().enumerate() {
-                            rows.rows[i].add_transpose(-c * g[k], &mut self.force);
+                            rows.rows[i].add_transpose(-c * g[k], &mut self.rhs);
                         }
                         if block.len() == 2 {
                             let tau = [rows.rows[block.start].dir, rows.rows[block.start + 1].dir];
@@ -627,13 +629,17 @@ impl ActiveSetSolver {
                 self.terms.removed.extend(v);
             }
         }
-        self.rhs.copy_from_slice(&self.force);
+        for (force, node) in self.force.iter_mut().zip(&self.nodes) {
+            *force = node
+                .dofs
+                .map(|d| if d < 0 { 0.0 } else { self.rhs[d as usize] });
+        }
         self.terms.project(&mut self.rhs);
     }
 
     /// The multipliers of the iterate w: λ = 0 on inactive rows, γ = c ĝ + β T w_τ on
     /// slipping nodes, and on each node's removed rows the least-squares split of the
-    /// residual r = b − f_slip − (K + S) w there (`force` holds b − f_slip).
+    /// residual r = b − f_slip − (K + S) w there (`force` holds b − f_slip there).
     fn multipliers(
         &mut self,
         system: &mut impl ConstrainedSystem,
@@ -644,7 +650,7 @@ impl ActiveSetSolver {
     ) -> Result<()> {
         system.mult(w, &mut self.r)?;
         self.terms.add_stiffness(w, &mut self.r);
-        for node in &self.nodes {
+        for (node, force) in self.nodes.iter().zip(&self.force) {
             let mut removed: Vec<usize> = Vec::new();
             if let Some(i) = node.contact {
                 z[i] = 0.0;
@@ -659,9 +665,9 @@ impl ActiveSetSolver {
                     Friction::Slip { g, beta } => slip_multipliers(rows, j, g, beta, w, z),
                 }
             }
-            let local = node.dofs.map(|d| match d {
+            let local: [f64; 3] = std::array::from_fn(|c| match node.dofs[c] {
                 -1 => 0.0,
-                d => self.force[d as usize] - self.r[d as usize],
+                d => force[c] - self.r[d as usize],
             });
             let dirs: Vec<[f64; 3]> = removed.iter().map(|&i| rows.rows[i].dir).collect();
             for (i, zi) in removed.iter().zip(split(&dirs, local)) {
