@@ -265,14 +265,22 @@ impl<'a> CellSource<'a> {
 
     /// Cell `c`.
     pub fn get(self, c: usize) -> Cell {
+        if let CellSource::Held(cells) = self {
+            return cells[c];
+        }
         let (points, dim) = self.points();
+        make_cell(dim, self.vertices(c), points)
+    }
+
+    /// The vertices of cell `c` (its first dim + 1 entries; no cell is made).
+    fn vertices(self, c: usize) -> [usize; 4] {
+        let dim = self.points().1;
         let at = c * (dim + 1)..(c + 1) * (dim + 1);
-        let v = match self {
-            CellSource::Held(cells) => return cells[c],
+        match self {
+            CellSource::Held(cells) => cells[c].nodes,
             CellSource::Made(mesh) => corners(&mesh_cells(mesh).0[at], |i| i),
             CellSource::Vertices { vertices, .. } => corners(&vertices[at], |i| i as usize),
-        };
-        make_cell(dim, v, points)
+        }
     }
 
     /// The number of cells.
@@ -912,34 +920,42 @@ impl Discretization {
         mut sink: impl FnMut([f64; 6], f64),
     ) {
         let (r, n) = (self.r, self.n_dofs);
-        // [p_n, q_n] of every node (D components: 32 bytes a node in 2D), for each distinct
-        // material, its memory m from its group's part of `m`.
+        // [p_n, q_n] of every node (D components: 32 bytes a node in 2D), or of the nodes of
+        // a piece's cells alone (`at`, increasing), for each distinct material, its memory m
+        // from its group's part of `m`.
+        let at = self.nodes_of(only);
         let pq_of = |s: &Stiffness| -> Vec<[[f64; D]; 2]> {
             let (a, b) = (s.a, s.b_or_zero());
-            let nodes = self.free.as_chunks::<D>().0.iter().enumerate();
-            nodes
-                .map(|(node, dofs)| {
-                    let mut pq = [[0.0; D]; 2];
-                    for (c, dof) in dofs.iter().enumerate() {
-                        if let Some(dof) = *dof {
-                            let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + dof]);
-                            let (w, u) = (w[dof], u[dof]);
-                            pq[0][c] = a.a * w + b.a * u + r.a * m;
-                            pq[1][c] = a.b * w + b.b * u + r.b * m;
-                        }
+            let dofs = self.free.as_chunks::<D>().0;
+            let pq_at = |node: usize| {
+                let mut pq = [[0.0; D]; 2];
+                for (c, dof) in dofs[node].iter().enumerate() {
+                    if let Some(dof) = *dof {
+                        let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + dof]);
+                        let (w, u) = (w[dof], u[dof]);
+                        pq[0][c] = a.a * w + b.a * u + r.a * m;
+                        pq[1][c] = a.b * w + b.b * u + r.b * m;
                     }
-                    // p and q are linear in the nodal vectors: turned into x, y, z alike.
-                    pq.map(|v| self.frames.to_space(node, v))
-                })
-                .collect()
+                }
+                // p and q are linear in the nodal vectors: turned into x, y, z alike.
+                pq.map(|v| self.frames.to_space(node, v))
+            };
+            match &at {
+                None => (0..dofs.len()).map(pq_at).collect(),
+                Some(at) => at.iter().map(|&node| pq_at(node)).collect(),
+            }
         };
         let pqs: Vec<Vec<[[f64; D]; 2]>> = self.materials.distinct.iter().map(pq_of).collect();
+        let index = |node: usize| match &at {
+            None => node,
+            Some(at) => at.partition_point(|&a| a < node),
+        };
         let mut cell = |nodes: [usize; N], grad: &[[f64; D]; N], material: u32| {
             let pq = &pqs[material as usize];
             let mut g_p = [[0.0; 3]; 3]; // Σ_i ∇φ_i ⊗ p_i
             let mut tr = 0.0;
             for (g, n) in grad.iter().zip(nodes) {
-                let [p, q] = &pq[n];
+                let [p, q] = &pq[index(n)];
                 for a in 0..D {
                     for b in 0..D {
                         g_p[a][b] += g[a] * p[b];
@@ -992,6 +1008,29 @@ impl Discretization {
             let (cells, _) = packed.nodes.as_chunks::<N>();
             each(&mut |c| cell(cells[c].map(|n| n as usize), &grads[c], materials[c]));
         }
+    }
+
+    /// The nodes of the cells `only` says, increasing, where they are a piece's (None: every
+    /// node's, of every cell): the nodes whose p and q [`Discretization::stress`] makes.
+    fn nodes_of(&self, only: StressCells) -> Option<Vec<usize>> {
+        if let StressCells::All = only {
+            return None;
+        }
+        let mut used = vec![false; self.nodes.len()];
+        let mut mark = |vertices: &[usize]| vertices.iter().for_each(|&v| used[v] = true);
+        match only {
+            StressCells::Only(cells) => {
+                let source = self.cell_source();
+                cells
+                    .iter()
+                    .for_each(|&c| mark(&source.vertices(c)[..=self.dim]));
+            }
+            StressCells::Of(cells, _) => cells.iter().for_each(|t| mark(t.vertices())),
+            StressCells::All => {}
+        }
+        let mut nodes = Vec::with_capacity(used.iter().filter(|&&u| u).count());
+        nodes.extend((0..used.len()).filter(|&v| used[v]));
+        Some(nodes)
     }
 
     /// K_A + k K_B + k² Σ_g r_g(0) K_R^(g) on all n_dofs: the step matrix of the implicit
