@@ -44,7 +44,7 @@
 //! memory of each rank is the replicated part (u_n and the n-vectors, rank 0's whole
 //! memory; during setup the mesh, which sets a floor, and on rank 0 its reading), its
 //! columns of the matrices, a follower's part of the memory, and its share of PETSc's;
-//! spreading the n-vectors over the ranks (~230 B a dof on a follower, measured), handing
+//! spreading the n-vectors over the ranks (~250 B a dof on a follower, measured), handing
 //! each follower its part of the mesh alone, and rank 0's memory in parts too, are the next
 //! steps (docs/cluster.md).
 //!
