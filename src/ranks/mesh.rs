@@ -174,7 +174,11 @@ impl Ranks {
     /// rank ([`Ranks::mesh_of_first`]).
     pub fn with_mesh_of_first<T>(&self, read: Result<(T, Option<Mesh>)>) -> Result<(T, Mesh)> {
         let (t, mine) = self.agree(read)?;
-        Ok((t, self.mesh_of_first(mine)?))
+        let mesh = self.mesh_of_first(mine)?;
+        // Rank 0's reading freed the file's bytes and the reader's arrays: they go back to
+        // the system before the assembly, its peak (docs/cluster.md, "Memory per rank").
+        crate::resources::return_freed_memory();
+        Ok((t, mesh))
     }
 }
 
