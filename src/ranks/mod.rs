@@ -10,33 +10,33 @@
 //! of every Krylov vector, and each getting the whole solution back. Every rank reads the
 //! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
 //! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays). Of
-//! K_A, K_B and K_R a rank holds the columns of its own unknowns
-//! alone (a symmetric matrix's column is its row): it assembles only those
-//! ([`Ranks::discretize`]) where the scene's keys take PETSc, or keeps them of the whole
-//! matrices (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It
-//! computes its entries of the right side's products from them and gathers the others'
+//! K_A, K_B and K_R a rank holds the columns of its own unknowns alone (a symmetric
+//! matrix's column is its row): it assembles only those ([`Ranks::discretize`]) where the
+//! scene's keys take PETSc, or keeps them of the whole matrices
+//! (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It computes
+//! its entries of the right side's products from them and gathers the others'
 //! (`Backend::gather`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
-//! the rank keeps K_A's diagonal at Γ3's unknowns alone. The history's memory (the Prony states, the
-//! direct sum's past displacements) a follower keeps of the dofs that its rows of K_R and
-//! its piece of a frame read alone ([`Own`], `History::keeping`), with the same bits
-//! there; rank 0 keeps it whole, for the checkpoints and history.csv. Of the loads, a
+//! the rank keeps K_A's diagonal at Γ3's unknowns alone. The history's memory (the Prony
+//! states, the direct sum's past displacements) a follower keeps of the dofs that its rows
+//! of K_R and its piece of a frame read alone ([`Own`], `History::keeping`), with the same
+//! bits there; rank 0 keeps it whole, for the checkpoints and history.csv. Of the loads, a
 //! rank makes the quadrature points that reach its own rows alone (its rows of f_n, with
 //! the same bits; the others come with b_n's gather), rank 0 every traction's too, and it
 //! makes a body force's other points again, cell by cell, where history.csv reads every
-//! value (`Discretization::visit_every_load`). The rest is
-//! replicated: u_n and every n-vector, so every rank holds the same right side b_n, bit
-//! for bit, and the active set's decisions (its sets, its KKT residual) are the same on
-//! every rank. Rank 0 (the *first*) owns the output directory (lock, series, history.csv,
-//! checkpoints, summary.json) and prints; the others *follow* (`run::follow`). Of each
-//! `.vtu` frame every rank writes its own piece, its part of the mesh, and the ranks agree
-//! that all are on disk ([`Ranks::written`]) before rank 0 lists them in the frame's
-//! `.pvtu` (`run::frame::OwnFrames`). No rank keeps the mesh past its setup, and none
-//! holds the cells where the scene's keys take PETSc: its setup makes each from the mesh
-//! as it reads it (`fem::CellSource::Made`). Rank 0 keeps each cell's vertices, from which
-//! it makes the cells again to compute the norms and history.csv's stresses (`fem::Hold`);
-//! a follower keeps its piece's node numbers, from which it makes the piece's cells at its
-//! first frame (`Discretization::make_cells`). (Where `auto`'s choice assembled the whole,
-//! rank 0 keeps every cell and a follower lets go of them: `Discretization::forget_cells`.)
+//! value (`Discretization::visit_every_load`). The rest is replicated: u_n and every
+//! n-vector, so every rank holds the same right side b_n, bit for bit, and the active set's
+//! decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*)
+//! owns the output directory (lock, series, history.csv, checkpoints, summary.json) and
+//! prints; the others *follow* (`run::follow`). Of each `.vtu` frame every rank writes its
+//! own piece, its part of the mesh, and the ranks agree that all are on disk
+//! ([`Ranks::written`]) before rank 0 lists them in the frame's `.pvtu`
+//! (`run::frame::OwnFrames`). No rank keeps the mesh past its setup, and none holds the
+//! cells where the scene's keys take PETSc: its setup makes each from the mesh as it reads
+//! it (`fem::CellSource::Made`). Rank 0 keeps each cell's vertices, from which it makes the
+//! cells again to compute the norms and history.csv's stresses (`fem::Hold`); a follower
+//! keeps its piece's node numbers, from which it makes the piece's cells at its first frame
+//! (`Discretization::make_cells`). (Where `auto`'s choice assembled the whole, rank 0 keeps
+//! every cell and a follower lets go of them: `Discretization::forget_cells`.)
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
@@ -290,13 +290,14 @@ impl Ranks {
     /// [`Ranks::discretize`] made, when it assembled those columns alone), and no others
     /// (`Discretization::keep_columns`). Where K_A is the step matrix (`solver.history =
     /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
-    /// K_A's diagonal at Γ3's unknowns alone (`Discretization::keep_diagonal_of_k_a`), and K_B and K_R^(0)
-    /// become the rank's rows of both, paired (`Discretization::pair_own_rows`). The heap
-    /// the matrices held then goes back to the system (`resources::return_freed_memory`). A
-    /// rank keeps the loads of its own rows alone (`Discretization::keep_own_loads`), rank 0
-    /// every traction's too: it makes a body force's other points again from its cells for
-    /// history.csv's resultants and reactions, and so sees any value that is not finite.
-    /// What goes on to PETSc, the layout included, is [`Own`]; nothing on one rank.
+    /// K_A's diagonal at Γ3's unknowns alone (`Discretization::keep_diagonal_of_k_a`), and
+    /// K_B and K_R^(0) become the rank's rows of both, paired
+    /// (`Discretization::pair_own_rows`). The heap the matrices held then goes back to the
+    /// system (`resources::return_freed_memory`). A rank keeps the loads of its own rows
+    /// alone (`Discretization::keep_own_loads`), rank 0 every traction's too: it makes a
+    /// body force's other points again from its cells for history.csv's resultants and
+    /// reactions, and so sees any value that is not finite. What goes on to PETSc, the
+    /// layout included, is [`Own`]; nothing on one rank.
     pub fn keep_own_columns(
         &self,
         disc: &mut crate::fem::Discretization,
