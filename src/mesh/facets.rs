@@ -1,27 +1,53 @@
 //! The facets of a mesh's cells (the edges of triangles, the faces of tetrahedra) and how
 //! the cells use them: a boundary facet once, an inner one twice in opposite orientations.
 //!
-//! Every use is one record (the facet's sorted nodes, its orientation in the cell, the
-//! cell), and the records are sorted, so that the uses of a facet stand side by side and a
-//! facet is found by bisection. Not a hash map: on the plate of 684 325 tetrahedra the map
-//! held 273 MB at the peak of reading the mesh, the records 77 MB (docs/performance.md),
-//! and every MPI rank reads the whole mesh.
+//! Every use is one record (the facet's sorted nodes, and the cell with the ordering of
+//! those nodes that is the facet's orientation in the cell), and the records are sorted, so
+//! that the uses of a facet stand side by side and a facet is found by bisection. Not a
+//! hash map: on the plate of 684 325 tetrahedra the map held 273 MB at the peak of reading
+//! the mesh, the records 44 MB (docs/performance.md), and the read is rank 0's peak on many
+//! MPI ranks.
 
 use super::groups::Words;
 use crate::Error;
 
-/// A use of a facet: its nodes sorted (`key`), in the cell's orientation (`dir`), and the
-/// cell's index.
+/// A use of a facet: its nodes sorted (`key`), and the cell's index times 8 plus the
+/// number of the ordering of `key` that is the facet in the cell's orientation
+/// ([`orderings`]: at most 3! = 6 for F ≤ 3). 16 bytes a use of a face, where the nodes in
+/// the cell's orientation took 12 more.
 #[derive(Clone, Copy)]
 struct Use<const F: usize> {
     key: [u32; F],
-    dir: [u32; F],
-    cell: u32,
+    cell_and_order: u32,
+}
+
+/// The bits of [`Use::cell_and_order`] that number the ordering.
+const ORDER_BITS: u32 = 3;
+
+impl<const F: usize> Use<F> {
+    fn cell(&self) -> usize {
+        (self.cell_and_order >> ORDER_BITS) as usize
+    }
+
+    /// The facet's nodes in the cell's orientation.
+    fn dir(&self, orders: &[[usize; F]]) -> [u32; F] {
+        let order = orders[(self.cell_and_order & ((1 << ORDER_BITS) - 1)) as usize];
+        order.map(|i| self.key[i])
+    }
+}
+
+/// The orderings of F things (every permutation of 0..F), in one fixed order.
+fn orderings<const F: usize>() -> Vec<[usize; F]> {
+    let all = (0..F.pow(F as u32)).map(|k| std::array::from_fn(|i| k / F.pow(i as u32) % F));
+    all.filter(|o: &[usize; F]| (0..F).all(|i| o.contains(&i)))
+        .collect()
 }
 
 /// The uses of every facet, sorted by facet and then by cell.
 pub(super) struct Facets<const F: usize> {
     uses: Vec<Use<F>>,
+    /// [`orderings`] of F.
+    orders: Vec<[usize; F]>,
 }
 
 /// A facet that the cells misuse: two on the same side of it (a fold), or three or more.
@@ -83,18 +109,29 @@ impl<const F: usize> Misuse<F> {
 
 impl<const F: usize> Facets<F> {
     /// The facets of the cells, each cell's facets in its orientation (`facets`: the cell
-    /// and the facet's nodes); None where a node's index does not fit 32 bits.
+    /// and the facet's nodes); None where a node's index does not fit 32 bits, or a cell's
+    /// 29 (beside its facet's ordering).
     pub(super) fn new(facets: impl Iterator<Item = (usize, [usize; F])>) -> Option<Facets<F>> {
+        let orders = orderings::<F>();
         let mut uses = Vec::with_capacity(facets.size_hint().0);
         for (cell, dir) in facets {
             let dir = try_u32(dir)?;
             let mut key = dir;
             key.sort_unstable();
-            let cell = u32::try_from(cell).ok()?;
-            uses.push(Use { key, dir, cell });
+            let order = orders.iter().position(|o| o.map(|i| key[i]) == dir)?;
+            let cell = u32::try_from(cell)
+                .ok()
+                .filter(|&c| c < 1 << (32 - ORDER_BITS))?;
+            let cell_and_order = cell << ORDER_BITS | order as u32;
+            uses.push(Use {
+                key,
+                cell_and_order,
+            });
         }
-        uses.sort_unstable_by_key(|u| (u.key, u.cell));
-        Some(Facets { uses })
+        // By facet, then by cell (the ordering, below the cell's bits, never decides: a
+        // cell's facets differ).
+        uses.sort_unstable_by_key(|u| (u.key, u.cell_and_order));
+        Some(Facets { uses, orders })
     }
 
     /// The misuse that the earliest cell shows (None: every facet is used once, or twice
@@ -103,15 +140,15 @@ impl<const F: usize> Facets<F> {
         &self,
         same_side: impl Fn([u32; F], [u32; F]) -> bool,
     ) -> Option<Misuse<F>> {
-        let mut worst: Option<(u32, Misuse<F>)> = None;
+        let mut worst: Option<(usize, Misuse<F>)> = None;
         for run in self.uses.chunk_by(|a, b| a.key == b.key) {
             let nodes = run[0].key.map(|n| n as usize);
-            let first = run[0].cell as usize;
+            let first = run[0].cell();
             let found = match run {
-                [a, b, ..] if same_side(a.dir, b.dir) => {
-                    let second = b.cell as usize;
+                [a, b, ..] if same_side(a.dir(&self.orders), b.dir(&self.orders)) => {
+                    let second = b.cell();
                     (
-                        b.cell,
+                        second,
                         Misuse::Fold {
                             nodes,
                             first,
@@ -120,9 +157,9 @@ impl<const F: usize> Facets<F> {
                     )
                 }
                 [_, _, c, ..] => {
-                    let third = c.cell as usize;
+                    let third = c.cell();
                     (
-                        c.cell,
+                        third,
                         Misuse::Shared {
                             nodes,
                             first,
@@ -147,7 +184,7 @@ impl<const F: usize> Facets<F> {
         let at = self.uses.partition_point(|u| u.key < key);
         let count = self.uses[at..].iter().take_while(|u| u.key == key).count();
         let first = self.uses.get(at).filter(|_| count > 0)?;
-        Some((first.dir.map(|n| n as usize), count as u32))
+        Some((first.dir(&self.orders).map(|n| n as usize), count as u32))
     }
 }
 
