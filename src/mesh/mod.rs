@@ -612,11 +612,11 @@ pub fn fmt_point(p: [f64; 3], dim: usize) -> String {
 
 // What the 2D and 3D builders (`plane.rs`, `solid.rs`) share besides the groups.
 
-/// A mesh whose node or cell indices do not fit 32 bits (`facets::Facets`).
+/// A mesh whose node indices do not fit 32 bits, or cell indices 29 (`facets::Facets`).
 fn too_many_nodes(file: &impl std::fmt::Display) -> Error {
     Error::input(format!(
-        "mesh file '{file}' has more than 2^32 nodes or cells, more than viscontact indexes: \
-         split the body or use a coarser mesh"
+        "mesh file '{file}' has more than 2^32 nodes or 2^29 cells, more than viscontact \
+         indexes: split the body or use a coarser mesh"
     ))
 }
 
