@@ -386,13 +386,13 @@ pub fn memory_mismatch(what: &str) -> String {
 
 /// The state carried from step to step: n, u_n (compensated) and the memory.
 ///
-/// On a follower rank of several (docs/cluster.md) the memory keeps only the dofs that the
-/// rank's rows of Σ_g K_R^(g) m^(g)_n and its piece of a frame read (`kept`,
-/// `Discretization::memory_reach`): each Prony state and each past displacement of the
-/// direct sum holds their values alone, in that order, updated by the same arithmetic dof
-/// by dof, so m_n there has the bits of the whole one (and is 0 elsewhere). Rank 0 keeps
+/// On a follower rank of several (docs/cluster.md) the history holds some dofs alone
+/// ([`Holds`]): the memory those that the rank's rows of Σ_g K_R^(g) m^(g)_n and its piece
+/// of a frame read, and where the rank's matrices number their rows over its own dofs'
+/// neighbours, u_n and its compensated sum those too. Each value there is updated by the
+/// same arithmetic dof by dof, so it has the bits of the whole history's. Rank 0 holds
 /// every dof: it writes the checkpoints, and history.csv's stresses and reactions read the
-/// whole m_n.
+/// whole u_n and m_n.
 #[derive(Clone, Debug)]
 pub struct History {
     pub k: f64,
@@ -404,20 +404,66 @@ pub struct History {
     pub u_comp: Vec<f64>,
     pub u_sum: Vec<f64>,
     pub memory: Memory,
-    /// The dofs whose memory this history keeps, in increasing order (None: every one).
-    pub kept: Option<Vec<usize>>,
+    /// The dofs this history holds.
+    pub holds: Holds,
+}
+
+/// The dofs whose values a [`History`] holds, in increasing order where not every one.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Holds {
+    /// Every dof: one process, and rank 0 of several.
+    Every,
+    /// The memory at these dofs alone and u_n at every one: a follower whose rows of K_B
+    /// and K_R read u_n by the whole numbering (`Discretization::memory_reach`).
+    Memory(Vec<usize>),
+    /// u_n, its compensated sum and the memory at these dofs alone, in their order: a
+    /// follower whose rows of K_B and K_R number their columns over them
+    /// (`Discretization::number_rows_over`). The velocity w_n stays whole.
+    Local(Vec<usize>),
+}
+
+impl Holds {
+    /// This, leaving `Holds::Every` in its place.
+    pub fn take(&mut self) -> Holds {
+        std::mem::replace(self, Holds::Every)
+    }
+
+    /// The dofs the memory holds (None: every one).
+    pub fn dofs(&self) -> Option<&[usize]> {
+        match self {
+            Holds::Every => None,
+            Holds::Memory(dofs) | Holds::Local(dofs) => Some(dofs),
+        }
+    }
+
+    /// The dofs of u_n at which the memory's values lie, where u_n holds others too.
+    fn memory_in_u(&self) -> Option<&[usize]> {
+        match self {
+            Holds::Memory(dofs) => Some(dofs),
+            Holds::Every | Holds::Local(_) => None,
+        }
+    }
+
+    /// The dofs of the whole w_n at which u_n's values lie, where u_n does not hold all.
+    pub fn u_in_whole(&self) -> Option<&[usize]> {
+        match self {
+            Holds::Local(dofs) => Some(dofs),
+            Holds::Every | Holds::Memory(_) => None,
+        }
+    }
 }
 
 impl History {
     /// The state at n = 0: u_0 = 0 (the paper's example; the initial displacement is zero)
     /// and m_0 = 0, for the memory groups of `plans`.
     pub fn new(n_free: usize, k: f64, plans: &Plans) -> Self {
-        Self::keeping(n_free, k, plans, None)
+        Self::holding(n_free, k, plans, Holds::Every)
     }
 
-    /// [`History::new`] whose memory keeps the dofs `kept` alone (None: every one).
-    pub fn keeping(n_free: usize, k: f64, plans: &Plans, kept: Option<Vec<usize>>) -> Self {
-        let n_kept = kept.as_ref().map_or(n_free, Vec::len);
+    /// [`History::new`] holding the dofs `holds` says.
+    pub fn holding(n_free: usize, k: f64, plans: &Plans, holds: Holds) -> Self {
+        let n_kept = holds.dofs().map_or(n_free, <[usize]>::len);
+        let n_u = holds.u_in_whole().map_or(n_free, <[usize]>::len);
         let terms: Vec<PronyTerm> = (0..plans.groups())
             .flat_map(|g| {
                 plans
@@ -445,11 +491,11 @@ impl History {
         History {
             k,
             n: 0,
-            u: vec![0.0; n_free],
-            u_comp: vec![0.0; n_free],
-            u_sum: vec![0.0; n_free],
+            u: vec![0.0; n_u],
+            u_comp: vec![0.0; n_u],
+            u_sum: vec![0.0; n_u],
             memory,
-            kept,
+            holds,
         }
     }
 
@@ -457,9 +503,9 @@ impl History {
         !matches!(self.memory, Memory::None)
     }
 
-    /// m_n of every memory group into `out` (overwritten), group g's at g·n_dofs (the body's
-    /// kernel `kernel` is the direct sum's). Returns false (and leaves `out` alone) without
-    /// memory.
+    /// m_n of every memory group into `out` (overwritten), group g's at g·len(u_n), at the
+    /// dofs of u_n (the body's kernel `kernel` is the direct sum's). Returns false (and
+    /// leaves `out` alone) without memory.
     pub fn memory_into(&mut self, kernel: Option<&Kernel>, out: &mut [f64]) -> bool {
         match &mut self.memory {
             Memory::None => false,
@@ -468,7 +514,7 @@ impl History {
                 let n = self.u.len();
                 for term in terms.iter() {
                     let out = &mut out[term.group * n..][..n];
-                    add_at(out, self.kept.as_deref(), term.a, &term.m);
+                    add_at(out, self.holds.memory_in_u(), term.a, &term.m);
                 }
                 true
             }
@@ -482,7 +528,7 @@ impl History {
                 out.fill(0.0);
                 // m_n = k Σ_{j<n} r((n − j) k) u_j
                 for (j, uj) in past.iter().enumerate() {
-                    add_at(out, self.kept.as_deref(), self.k * r_lag[n - j - 1], uj);
+                    add_at(out, self.holds.memory_in_u(), self.k * r_lag[n - j - 1], uj);
                 }
                 true
             }
@@ -491,9 +537,10 @@ impl History {
 
     /// Takes back a saved history into this one, freshly built from the same scene (a
     /// resume): the memory must be of the kind this one plans, with the same Prony weights
-    /// and, up to the rounding of e^{−b k}, the same decays. A checkpoint holds every dof;
-    /// this history keeps its own of them.
+    /// and, up to the rounding of e^{−b k}, the same decays. A checkpoint holds every dof
+    /// (the sizes were checked by it); this history keeps those it holds.
     pub fn restore(&mut self, saved: SavedHistory) -> Result<()> {
+        let n_dofs = saved.u.len();
         let mismatch = |what: &str| crate::Error::input(memory_mismatch(what));
         match (&mut self.memory, saved.memory) {
             (Memory::None, SavedMemory::None) => {}
@@ -514,17 +561,17 @@ impl History {
                             s.a, s.decay
                         )));
                     }
-                    if s.m.len() != self.u.len() {
+                    if s.m.len() != n_dofs {
                         return Err(mismatch(&format!("term {i} of the wrong size")));
                     }
-                    let m = at(self.kept.as_deref(), &s.m);
+                    let m = at(self.holds.dofs(), &s.m);
                     *t = PronyTerm { m, ..s };
                 }
             }
             (Memory::Direct { past, r_lag }, SavedMemory::Direct(rows)) => {
-                *past = match self.kept.as_deref() {
+                *past = match self.holds.dofs() {
                     None => rows,
-                    kept => rows.iter().map(|u| at(kept, u)).collect(),
+                    dofs => rows.iter().map(|u| at(dofs, u)).collect(),
                 };
                 r_lag.clear();
             }
@@ -534,13 +581,18 @@ impl History {
         }
         self.k = saved.k;
         self.n = saved.n;
-        self.u = saved.u;
-        self.u_sum = saved.u_sum;
-        self.u_comp = saved.u_comp;
+        let held = |v: Vec<f64>| match self.holds.u_in_whole() {
+            None => v,
+            dofs => at(dofs, &v),
+        };
+        self.u = held(saved.u);
+        self.u_sum = held(saved.u_sum);
+        self.u_comp = held(saved.u_comp);
         Ok(())
     }
 
-    /// n → n + 1 with the velocity w_n: u_{n+1} = u_n + k w_n, and the memory update.
+    /// n → n + 1 with the velocity w_n (whole): u_{n+1} = u_n + k w_n, and the memory
+    /// update.
     pub fn advance(&mut self, w: &[f64]) {
         let k = self.k;
         // The memory of step n + 1 uses u_n, so update it before u.
@@ -551,33 +603,43 @@ impl History {
                     // m^(i)_{n+1} = e^{−b_i k} (m^(i)_n + k u_n)
                     let decay = term.decay;
                     let next = |m: &mut f64, u: f64| *m = decay * (*m + k * u);
-                    match &self.kept {
+                    match self.holds.memory_in_u() {
                         None => (term.m.iter_mut().zip(&self.u)).for_each(|(m, &u)| next(m, u)),
-                        Some(kept) => {
-                            (term.m.iter_mut().zip(kept)).for_each(|(m, &i)| next(m, self.u[i]))
+                        Some(dofs) => {
+                            (term.m.iter_mut().zip(dofs)).for_each(|(m, &i)| next(m, self.u[i]))
                         }
                     }
                 }
             }
-            Memory::Direct { past, .. } => past.push(at(self.kept.as_deref(), &self.u)),
+            Memory::Direct { past, .. } => past.push(at(self.holds.memory_in_u(), &self.u)),
         }
-        let state = self
-            .u
-            .iter_mut()
-            .zip(self.u_sum.iter_mut().zip(&mut self.u_comp));
-        for ((u, (sum, comp)), wi) in state.zip(w) {
-            // Neumaier: add k w_i to (sum, comp) without losing the low-order bits.
-            let x = k * wi;
-            let t = *sum + x;
-            *comp += if sum.abs() >= x.abs() {
-                (*sum - t) + x
-            } else {
-                (x - t) + *sum
-            };
-            *sum = t;
-            *u = t + *comp;
+        let u = (&mut self.u[..], &mut self.u_sum[..], &mut self.u_comp[..]);
+        match self.holds.u_in_whole() {
+            None => add_compensated(k, u, w.iter().copied()),
+            Some(dofs) => add_compensated(k, u, dofs.iter().map(|&i| w[i])),
         }
         self.n += 1;
+    }
+}
+
+/// (sum, comp) += k w and u = sum + comp, entry by entry, by Neumaier's compensated sum:
+/// the rounding error not yet in `sum` goes on in `comp`.
+fn add_compensated(
+    k: f64,
+    (u, sum, comp): (&mut [f64], &mut [f64], &mut [f64]),
+    w: impl Iterator<Item = f64>,
+) {
+    let state = u.iter_mut().zip(sum.iter_mut().zip(comp));
+    for ((u, (sum, comp)), wi) in state.zip(w) {
+        let x = k * wi;
+        let t = *sum + x;
+        *comp += if sum.abs() >= x.abs() {
+            (*sum - t) + x
+        } else {
+            (x - t) + *sum
+        };
+        *sum = t;
+        *u = t + *comp;
     }
 }
 
@@ -673,11 +735,11 @@ mod tests {
     }
 
     #[test]
-    fn a_history_keeping_some_dofs_has_their_bits_of_the_whole_memory() {
-        // A follower rank's history (`History::keeping`) against the whole one: the same
-        // m_n bits at the kept dofs and 0 elsewhere, step after step and across a restore
-        // from the whole history's saved state, for the recursion (two groups) and the
-        // direct sum.
+    fn a_history_holding_some_dofs_has_their_bits_of_the_whole_one() {
+        // A follower rank's history (`Holds`) against the whole one, step after step and
+        // across a restore from the whole history's saved state, for the recursion (two
+        // groups) and the direct sum: holding the memory alone, the same m_n bits at its
+        // dofs and 0 elsewhere; holding u_n too, the same u_n and m_n bits at its dofs.
         let k = 0.01;
         let two = Plans {
             body: Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]),
@@ -702,27 +764,46 @@ mod tests {
                 Memory::Direct { past, .. } => SavedMemory::Direct(past.clone()),
             },
         };
+        let dofs = vec![0, 2, 3];
         for plans in [two, exact] {
-            let len = 4 * plans.groups();
-            let mut whole = History::new(4, k, &plans);
-            let mut part = History::keeping(4, k, &plans, Some(vec![0, 2, 3]));
-            let (mut m, mut mp) = (vec![0.0; len], vec![0.0; len]);
-            for n in 0..60 {
-                if n == 30 {
-                    part = History::keeping(4, k, &plans, Some(vec![0, 2, 3]));
-                    part.restore(saved(&whole)).unwrap();
+            let groups = plans.groups();
+            for holds in [Holds::Memory(dofs.clone()), Holds::Local(dofs.clone())] {
+                let local = holds.u_in_whole().is_some();
+                let mut whole = History::new(4, k, &plans);
+                let mut part = History::holding(4, k, &plans, holds.clone());
+                let mut m = vec![0.0; 4 * groups];
+                let mut mp = vec![0.0; if local { 3 } else { 4 } * groups];
+                for n in 0..60 {
+                    if n == 30 {
+                        part = History::holding(4, k, &plans, holds.clone());
+                        part.restore(saved(&whole)).unwrap();
+                    }
+                    assert!(whole.memory_into(Some(&kernel), &mut m));
+                    assert!(part.memory_into(Some(&kernel), &mut mp));
+                    let (expected_m, expected_u): (Vec<f64>, Vec<f64>) = match local {
+                        true => (
+                            (0..groups)
+                                .flat_map(|g| dofs.iter().map(move |&i| 4 * g + i))
+                                .map(|i| m[i])
+                                .collect(),
+                            dofs.iter().map(|&i| whole.u[i]).collect(),
+                        ),
+                        false => (
+                            (m.iter().enumerate())
+                                .map(|(i, &a)| if i % 4 == 1 { 0.0 } else { a })
+                                .collect(),
+                            whole.u.clone(),
+                        ),
+                    };
+                    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&mp), bits(&expected_m), "n = {n}, {holds:?}");
+                    assert_eq!(bits(&part.u), bits(&expected_u), "n = {n}, {holds:?}");
+                    let w = [(n as f64 * 0.3).cos(), 1.0, -0.5 * n as f64, 0.25];
+                    whole.advance(&w);
+                    part.advance(&w);
                 }
-                assert!(whole.memory_into(Some(&kernel), &mut m));
-                assert!(part.memory_into(Some(&kernel), &mut mp));
-                for (i, (a, b)) in m.iter().zip(&mp).enumerate() {
-                    let expected = if i % 4 == 1 { 0.0 } else { *a };
-                    assert_eq!(b.to_bits(), expected.to_bits(), "n = {n}, entry {i}");
-                }
-                let w = [(n as f64 * 0.3).cos(), 1.0, -0.5 * n as f64, 0.25];
-                whole.advance(&w);
-                part.advance(&w);
+                assert!(m.iter().all(|&x| x != 0.0));
             }
-            assert!(m.iter().all(|&x| x != 0.0));
         }
     }
 

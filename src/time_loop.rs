@@ -32,7 +32,7 @@ use crate::effects::{self, Effects};
 use crate::fem::{
     constraints, leading_block, mul_add, mul_add_rows, Discretization, Sparse, SymmetricPair,
 };
-use crate::history::{History, LoopState, Plans, SavedLoop};
+use crate::history::{History, Holds, LoopState, Plans, SavedLoop};
 use crate::ranks::Own;
 use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
@@ -142,9 +142,13 @@ const VIOLATION_TOLERANCE: f64 = 1e-8;
 pub struct Step<'a> {
     pub n: usize,
     pub t: f64,
+    /// u_n, at the dofs `local` where there are some (else every dof).
     pub u: &'a [f64],
     pub w: &'a [f64],
+    /// m_n of each memory group after the other's, at u_n's dofs.
     pub m: Option<&'a [f64]>,
+    /// On a follower rank whose history holds some dofs alone (`Holds::Local`), those.
+    pub local: Option<&'a [usize]>,
     pub z: &'a [f64],
     pub rows: &'a Rows,
     pub report: StepReport,
@@ -226,7 +230,7 @@ impl<'p> TimeLoop<'p> {
         mut own: Option<Own>,
     ) -> Result<Self> {
         refusals(scene, disc, &plans)?;
-        let kept = own.as_mut().and_then(|own| own.memory.take());
+        let holds = own.as_mut().map_or(Holds::Every, |own| own.holds.take());
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
         let implicit = match scene.solver.history {
@@ -251,14 +255,14 @@ impl<'p> TimeLoop<'p> {
         };
         let solver = effects::step_solver(&effects, &descriptor, matrix, &backend, &rows)?;
         let n = disc.n_dofs;
-        let history = History::keeping(n, scene.time.k(), &plans, kept);
+        let history = History::holding(n, scene.time.k(), &plans, holds);
         let paired = disc
             .k_b
             .as_ref()
             .filter(|_| history.has_memory() && disc.own.is_none())
             .and_then(|k_b| SymmetricPair::new(k_b, disc.k_r.first()?));
         let m = if history.has_memory() {
-            vec![0.0; plans.groups() * n]
+            vec![0.0; plans.groups() * history.u.len()]
         } else {
             Vec::new()
         };
@@ -322,7 +326,7 @@ impl<'p> TimeLoop<'p> {
     /// What a checkpoint saves of the loop at t_n, before step n is solved.
     pub fn state(&self) -> LoopState<'_> {
         debug_assert!(
-            self.history.kept.is_none(),
+            self.history.holds == Holds::Every,
             "a follower's history is not saved"
         );
         LoopState {
@@ -429,7 +433,8 @@ impl<'p> TimeLoop<'p> {
         self.history.n
     }
 
-    /// u_n of the current n (after the last step of a completed run: u_N).
+    /// u_n of the current n (after the last step of a completed run: u_N), at every dof
+    /// but on a follower rank that holds some alone (`Step::local`).
     pub fn u(&self) -> &[f64] {
         &self.history.u
     }
@@ -474,7 +479,7 @@ impl<'p> TimeLoop<'p> {
         }
         std::mem::swap(&mut self.z_before, &mut self.spare);
         if report.status == StepStatus::Solved {
-            report.status = self.trust(t, load_max);
+            report.status = self.trust(t, load_max)?;
         }
         let h = &self.history;
         report.check(&StepAt {
@@ -494,6 +499,7 @@ impl<'p> TimeLoop<'p> {
             } else {
                 Some(&self.m)
             },
+            local: h.holds.u_in_whole(),
             z: &self.z,
             rows: &self.rows,
             report,
@@ -602,27 +608,27 @@ impl<'p> TimeLoop<'p> {
 
     /// Whether a step the solver calls solved is trusted: finite, bounded by its loads
     /// (`Growth`) and keeping n·w ≤ 0 on Γ3,1 to the solver's tolerance.
-    fn trust(&mut self, t: f64, load_max: f64) -> StepStatus {
+    fn trust(&mut self, t: f64, load_max: f64) -> Result<StepStatus> {
+        let u_max = self.u_max()?;
         let h = &self.history;
-        let u_max = max_abs(&h.u);
         let w_max = max_abs(&self.w);
         let mean_velocity = u_max / t.max(h.k);
         if !(u_max.is_finite() && w_max.is_finite()) {
-            return StepStatus::NotFinite { u_max, w_max };
+            return Ok(StepStatus::NotFinite { u_max, w_max });
         }
         if let Some(factor) = self.growth.record(h.n, u_max, load_max) {
             let since = ((h.n / 2).max(1).ilog2() as f64).exp2() * h.k;
-            return StepStatus::Diverged {
+            return Ok(StepStatus::Diverged {
                 u_max,
                 factor,
                 since,
-            };
+            });
         }
         let (amount, node) = self.rows.rows[..self.rows.n_contact]
             .iter()
             .map(|r| (r.apply(&self.w), r.node))
             .fold((f64::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
-        if amount > VIOLATION_TOLERANCE * w_max.max(mean_velocity) {
+        Ok(if amount > VIOLATION_TOLERANCE * w_max.max(mean_velocity) {
             StepStatus::Violation {
                 amount,
                 node,
@@ -631,7 +637,21 @@ impl<'p> TimeLoop<'p> {
             }
         } else {
             StepStatus::Solved
+        })
+    }
+
+    /// max|u_n|. On several MPI ranks, the largest of the ranks' (a maximum: one process's
+    /// bits), since a follower may hold some dofs alone and rank 0 holds every one; a rank
+    /// whose u_n is NaN somewhere keeps its NaN, and the others see +∞: not finite either.
+    fn u_max(&self) -> Result<f64> {
+        let mine = max_abs(&self.history.u);
+        if self.disc.own.is_none() {
+            return Ok(mine);
         }
+        let all = self
+            .backend
+            .largest(if mine.is_nan() { f64::INFINITY } else { mine })?;
+        Ok(if mine.is_nan() { mine } else { all })
     }
 
     /// n → n + 1: u_{n+1} = u_n + k w_n and the memory update.

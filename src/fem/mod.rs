@@ -761,10 +761,27 @@ impl Discretization {
     /// whose cell's stress reads m (each cell of the piece has one of the rank's nodes:
     /// `output::pvtu`). None where it holds the matrices whole.
     pub fn memory_reach(&self) -> Option<Vec<usize>> {
+        self.reach(&self.k_r, [])
+    }
+
+    /// [`Discretization::memory_reach`] with the rows of the rank's columns of K_B too and
+    /// the dofs `also`: what a follower's history holds where its matrices number their rows
+    /// over them (`Holds::Local`, [`Discretization::number_rows_over`]).
+    pub fn local_reach(&self, also: impl IntoIterator<Item = usize>) -> Option<Vec<usize>> {
+        self.reach(self.k_b.iter().chain(&self.k_r), also)
+    }
+
+    /// The rows of the rank's columns of `matrices` and of its pair of rows, and `also`, in
+    /// increasing order; None where the rank holds the matrices whole.
+    fn reach<'a>(
+        &self,
+        matrices: impl IntoIterator<Item = &'a Sparse>,
+        also: impl IntoIterator<Item = usize>,
+    ) -> Option<Vec<usize>> {
         let own = self.own.as_ref()?;
         let mut read = vec![false; self.n_dofs];
-        for k_r in &self.k_r {
-            let (cp, ri) = (k_r.symbolic().col_ptr(), k_r.symbolic().row_idx());
+        for a in matrices {
+            let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
             for &j in own {
                 ri[cp[j]..cp[j + 1]].iter().for_each(|&i| read[i] = true);
             }
@@ -772,7 +789,29 @@ impl Discretization {
         if let Some(pair) = &self.own_pair {
             pair.columns().for_each(|j| read[j] = true);
         }
+        also.into_iter().for_each(|i| read[i] = true);
         Some((0..self.n_dofs).filter(|&i| read[i]).collect())
+    }
+
+    /// On a follower rank whose history holds the dofs `local` alone (`Holds::Local`, made
+    /// of [`Discretization::local_reach`]): its columns of K_B and of every K_R^(g), and its
+    /// pair of rows, number their rows by their places in `local`, so that their products
+    /// (`mul_add_rows`, `RowsPair::mul_add`) read u_n and m_n where the history holds them.
+    /// The products' own rows keep the whole numbering, and the others' columns go (the
+    /// diagonals `keep_columns` kept: no product reads them).
+    pub fn number_rows_over(&mut self, local: &[usize]) {
+        let Some(own) = &self.own else {
+            return;
+        };
+        let place = |i: usize| {
+            (local.binary_search(&i)).expect("a row of the rank's columns is in its reach")
+        };
+        for a in self.k_b.iter_mut().chain(&mut self.k_r) {
+            *a = rows_numbered(a, own, local.len(), place);
+        }
+        if let Some(pair) = &mut self.own_pair {
+            pair.number_columns(place);
+        }
     }
 
     /// The loads at t = 0, refused (bad input) where a value is not finite: before any
@@ -841,9 +880,9 @@ impl Discretization {
     }
 
     /// [`Discretization::nodal`] at the nodes `at` alone, in their order (a rank's piece of
-    /// a frame).
-    pub fn nodal_at(&self, v: &[f64], at: &[usize]) -> Vec<f64> {
-        let at = at.iter().map(|&i| nodal_vector::<3>(self, v, i));
+    /// a frame), of `v` held at the dofs `held` alone where given ([`place`]).
+    pub fn nodal_at(&self, (v, held): (&[f64], Option<&[usize]>), at: &[usize]) -> Vec<f64> {
+        let at = at.iter().map(|&i| nodal_vector::<3>(self, (v, held), i));
         at.collect::<Vec<_>>().into_flattened()
     }
 
@@ -858,12 +897,13 @@ impl Discretization {
     /// one pass over the cells instead of three strains each (a frame at every step pays
     /// this on the frame writer's thread, beside the time loop). A and B are the cell's own:
     /// the nodal p, q are made once per distinct material, and a cell reads its material's.
-    /// `m` holds the memory of every memory group, group g's at g·n_dofs.. (the cell's
-    /// material names its group, `Stiffness::memory`).
+    /// `m` holds the memory of every memory group, group g's after the others' before (the
+    /// cell's material names its group, `Stiffness::memory`). Where `held` is given, u and
+    /// each group's m hold their values at those dofs alone ([`place`]); w is whole.
     pub fn stress(
         &self,
         [w, u]: [&[f64]; 2],
-        m: Option<&[f64]>,
+        (m, held): (Option<&[f64]>, Option<&[usize]>),
         model: Model,
         cells: StressCells,
     ) -> (Vec<f64>, Vec<f64>) {
@@ -873,7 +913,7 @@ impl Discretization {
             StressCells::Of(of, _) => of.len(),
         };
         let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
-        self.each_stress([w, u], m, (model, cells), |s, v| {
+        self.each_stress([w, u], (m, held), (model, cells), |s, v| {
             s6.extend(s);
             vm.push(v);
         });
@@ -885,7 +925,7 @@ impl Discretization {
     /// frame (7 doubles a cell less on the thread that makes its rows).
     pub fn max_von_mises(&self, w: &[f64], u: &[f64], m: Option<&[f64]>, model: Model) -> f64 {
         let mut max = 0.0;
-        self.each_stress([w, u], m, (model, StressCells::All), |_, v| {
+        self.each_stress([w, u], (m, None), (model, StressCells::All), |_, v| {
             max = f64::max(max, v)
         });
         max
@@ -896,7 +936,7 @@ impl Discretization {
     fn each_stress(
         &self,
         wu: [&[f64]; 2],
-        m: Option<&[f64]>,
+        m: (Option<&[f64]>, Option<&[usize]>),
         (model, only): (Model, StressCells),
         sink: impl FnMut([f64; 6], f64),
     ) {
@@ -915,11 +955,11 @@ impl Discretization {
     fn stresses<const D: usize, const N: usize>(
         &self,
         [w, u]: [&[f64]; 2],
-        m: Option<&[f64]>,
+        (m, held): (Option<&[f64]>, Option<&[usize]>),
         (plane_stress, only): (bool, StressCells),
         mut sink: impl FnMut([f64; 6], f64),
     ) {
-        let (r, n) = (self.r, self.n_dofs);
+        let (r, n) = (self.r, held.map_or(self.n_dofs, <[usize]>::len));
         // [p_n, q_n] of every node (D components: 32 bytes a node in 2D), or of the nodes of
         // a piece's cells alone (`at`, increasing), for each distinct material, its memory m
         // from its group's part of `m`.
@@ -931,8 +971,9 @@ impl Discretization {
                 let mut pq = [[0.0; D]; 2];
                 for (c, dof) in dofs[node].iter().enumerate() {
                     if let Some(dof) = *dof {
-                        let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + dof]);
-                        let (w, u) = (w[dof], u[dof]);
+                        let at = place(held, dof);
+                        let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + at]);
+                        let (w, u) = (w[dof], u[at]);
                         pq[0][c] = a.a * w + b.a * u + r.a * m;
                         pq[1][c] = a.b * w + b.b * u + r.b * m;
                     }
@@ -1127,6 +1168,32 @@ fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) ->
     SparseColMat::new(pattern, val)
 }
 
+/// The columns `own` (increasing) of `a`, the others empty, with their rows numbered by
+/// `place` (increasing) among `nrows`.
+fn rows_numbered(
+    a: &Sparse,
+    own: &[usize],
+    nrows: usize,
+    place: impl Fn(usize) -> usize,
+) -> Sparse {
+    let a = a.as_ref();
+    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    let entries = own.iter().map(|&j| cp[j + 1] - cp[j]).sum();
+    let mut col_ptr = Vec::with_capacity(a.ncols() + 1);
+    let (mut row_idx, mut val) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
+    col_ptr.push(0);
+    let mut own = own.iter().peekable();
+    for j in 0..a.ncols() {
+        if own.next_if_eq(&&j).is_some() {
+            row_idx.extend(ri[cp[j]..cp[j + 1]].iter().map(|&i| place(i)));
+            val.extend_from_slice(&v[cp[j]..cp[j + 1]]);
+        }
+        col_ptr.push(row_idx.len());
+    }
+    let pattern = SymbolicSparseColMat::new_checked(nrows, a.ncols(), col_ptr, None, row_idx);
+    SparseColMat::new(pattern, val)
+}
+
 /// y_i += α (A x)_i for the unknowns i in `own`, each a column the symmetric `a` keeps
 /// whole (`Discretization::keep_columns`): its row.
 pub fn mul_add_rows(a: &Sparse, own: &[usize], x: &[f64], alpha: f64, y: &mut [f64]) {
@@ -1187,16 +1254,30 @@ impl PackedCells {
 /// x, y, z (turned out of a node's frame where it has one).
 pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f64; N]> {
     (0..disc.nodes.len())
-        .map(|i| nodal_vector(disc, v, i))
+        .map(|i| nodal_vector(disc, (v, None), i))
         .collect()
 }
 
-/// [`nodal_vectors`] at node i.
-fn nodal_vector<const N: usize>(disc: &Discretization, v: &[f64], i: usize) -> [f64; N] {
+/// The place of `dof`'s value in a vector held at the dofs `held` alone (increasing, among
+/// which `dof` is: a follower rank's u_n and m_n, `history::Holds::Local`), or `dof` itself
+/// in a whole vector.
+fn place(held: Option<&[usize]>, dof: usize) -> usize {
+    held.map_or(dof, |held| {
+        (held.binary_search(&dof)).expect("a piece's dofs are among those its rank holds")
+    })
+}
+
+/// [`nodal_vectors`] at node i, of `v` held at the dofs `held` alone where given
+/// ([`place`]).
+fn nodal_vector<const N: usize>(
+    disc: &Discretization,
+    (v, held): (&[f64], Option<&[usize]>),
+    i: usize,
+) -> [f64; N] {
     let d = disc.dim;
     let mut out = [0.0; N];
     for (k, o) in out.iter_mut().enumerate().take(d) {
-        *o = disc.free[d * i + k].map_or(0.0, |dof| v[dof]);
+        *o = disc.free[d * i + k].map_or(0.0, |dof| v[place(held, dof)]);
     }
     disc.frames.to_space(i, out)
 }

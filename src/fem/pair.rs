@@ -278,6 +278,15 @@ impl RowsPair {
         self.cols.iter().map(|&j| j as usize)
     }
 
+    /// The columns numbered by `place` (increasing), where the vectors the products read
+    /// hold their values alone (`Discretization::number_rows_over`).
+    pub fn number_columns(&mut self, place: impl Fn(usize) -> usize) {
+        for j in &mut self.cols {
+            // A place is below the rows' count, itself below 2^32 (`RowsPair::new`).
+            *j = place(*j as usize) as u32;
+        }
+    }
+
     /// y_i += α (A x)_i, then y_i += α (B z)_i where z is given, for the rows i of `own`
     /// (the rows the pair was made of).
     pub fn mul_add(&self, own: &[usize], x: &[f64], z: Option<&[f64]>, alpha: f64, y: &mut [f64]) {

@@ -295,6 +295,11 @@ impl PieceMesh {
         &self.cells
     }
 
+    /// The piece's points, numbered in the whole mesh, in its order (increasing).
+    pub fn points(&self) -> &[usize] {
+        &self.points
+    }
+
     /// The nodes of the piece's cells, numbered in the whole mesh (`nodes_per_cell` a cell).
     pub fn cell_nodes(&self) -> Vec<usize> {
         self.connectivity.iter().map(|&k| self.points[k]).collect()

@@ -16,14 +16,17 @@
 //! (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It computes
 //! its entries of the right side's products from them and gathers the others'
 //! (`Backend::gather`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
-//! the rank keeps K_A's diagonal at Γ3's unknowns alone. The history's memory (the Prony
-//! states, the direct sum's past displacements) a follower keeps of the dofs that its rows
-//! of K_R and its piece of a frame read alone ([`Own`], `History::keeping`), with the same
-//! bits there; rank 0 keeps it whole, for the checkpoints and history.csv. Of the loads, a
+//! the rank keeps K_A's diagonal at Γ3's unknowns alone. A follower's history holds the
+//! dofs that its rows of K_B and K_R and its piece of a frame read alone
+//! ([`Ranks::hold_local`], `history::Holds`): u_n, its compensated sum and the memory (the
+//! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
+//! rows of K_B and K_R then numbering their columns in the order of those dofs; elsewhere
+//! the memory alone. The values it holds have the bits of the whole history's; rank 0
+//! holds it whole, for the checkpoints and history.csv. Of the loads, a
 //! rank makes the quadrature points that reach its own rows alone (its rows of f_n, with
 //! the same bits; the others come with b_n's gather), rank 0 every traction's too, and it
 //! makes a body force's other points again, cell by cell, where history.csv reads every
-//! value (`Discretization::visit_every_load`). The rest is replicated: u_n and every
+//! value (`Discretization::visit_every_load`). The rest is replicated: w_n and every other
 //! n-vector, so every rank holds the same right side b_n, bit for bit, and the active set's
 //! decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*)
 //! owns the output directory (lock, series, history.csv, checkpoints, summary.json) and
@@ -41,10 +44,10 @@
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
-//! memory of each rank is the replicated part (u_n and the n-vectors, rank 0's whole
-//! memory; during setup the mesh, which sets a floor, and on rank 0 its reading), its
-//! columns of the matrices, a follower's part of the memory, and its share of PETSc's;
-//! spreading the n-vectors over the ranks (~250 B a dof on a follower, measured), handing
+//! memory of each rank is the replicated part (w_n and the other n-vectors, rank 0's whole
+//! history; during setup the mesh, which sets a floor, and on rank 0 its reading), its
+//! columns of the matrices, a follower's part of the history, and its share of PETSc's;
+//! spreading the other n-vectors over the ranks (~220 B a dof on a follower), handing
 //! each follower its part of the mesh alone, and rank 0's memory in parts too, are the next
 //! steps (docs/cluster.md).
 //!
@@ -79,6 +82,7 @@
 
 mod mesh;
 
+use crate::history::Holds;
 use crate::{Error, Result};
 
 /// The environment variables by which MPI launchers tell each process how many they
@@ -278,7 +282,7 @@ impl Ranks {
             let own = layout.map(|layout| Own {
                 layout,
                 rows: None,
-                memory: None,
+                holds: Holds::Every,
             });
             return Ok((disc, own));
         }
@@ -333,11 +337,35 @@ impl Ranks {
             return Ok(Some(Own {
                 layout,
                 rows,
-                memory,
+                holds: memory.map_or(Holds::Every, Holds::Memory),
             }));
         }
         let _ = (disc, scene, made);
         Ok(None)
+    }
+
+    /// On a follower that hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]: K_A
+    /// the step matrix, no prescribed dofs), the history holds u_n and m_n at the dofs its
+    /// rows of K_B and K_R read and `also` (its piece's points') alone (`Holds::Local`):
+    /// `disc`'s matrices number their rows over them
+    /// (`Discretization::number_rows_over`). Nothing else reads u_n or m_n on a follower:
+    /// the active set reads b_n and w_n, and the checks' max|u_n| is the ranks' largest.
+    /// Elsewhere the history holds what `keep_own_columns` said.
+    pub fn hold_local(
+        &self,
+        disc: &mut crate::fem::Discretization,
+        own: Option<&mut Own>,
+        also: impl IntoIterator<Item = usize>,
+    ) {
+        #[cfg(feature = "petsc")]
+        if let Some(own) = own.filter(|own| own.rows.is_some() && !self.is_first()) {
+            if let Some(local) = disc.local_reach(also) {
+                disc.number_rows_over(&local);
+                own.holds = Holds::Local(local);
+            }
+        }
+        #[cfg(not(feature = "petsc"))]
+        let _ = (disc, own, also.into_iter());
     }
 
     /// Ends every rank of the run with exit status `code`: a rank that failed alone after
@@ -356,15 +384,16 @@ impl Ranks {
 /// rank), and where K_A is the step matrix, the rank's rows of K_A in PETSc's numbering,
 /// taken out of the discretization: PETSc's matrices are made of them, and the Newton
 /// systems read them as their copy of K, the rank's only one. On a follower, the dofs
-/// whose memory its history keeps (`History::keeping`).
+/// its history holds ([`Ranks::hold_local`]).
 pub struct Own {
     #[cfg(feature = "petsc")]
     pub(crate) layout: crate::petsc::Layout,
     #[cfg(feature = "petsc")]
     pub(crate) rows: Option<crate::petsc::Csr<'static>>,
-    /// A follower's `Discretization::memory_reach`; None on rank 0, which keeps every dof's
-    /// memory (it writes the checkpoints and history.csv).
-    pub(crate) memory: Option<Vec<usize>>,
+    /// What a follower's history holds: the memory of its `Discretization::memory_reach`,
+    /// or u_n and m_n at its `Discretization::local_reach` ([`Ranks::hold_local`]); on rank
+    /// 0, every dof (it writes the checkpoints and history.csv).
+    pub(crate) holds: Holds,
 }
 
 /// Whether a rank of several hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]):

@@ -50,6 +50,17 @@ pub(super) struct PieceSetup {
     materials: Option<Vec<u32>>,
 }
 
+impl PieceSetup {
+    /// The dofs of the piece's points: where its fields read u_n, w_n and m_n.
+    pub fn dofs(&self, disc: &Discretization) -> Vec<usize> {
+        let d = disc.dim;
+        let points = self.mesh.as_ref().map_or(&[][..], PieceMesh::points);
+        (points.iter())
+            .flat_map(|&p| disc.free[d * p..][..d].iter().flatten().copied())
+            .collect()
+    }
+}
+
 /// A follower's piece of the frames of `mesh` where the ranks write their own (`own`:
 /// their layout; `.vtu` frames); None where the frames are not in pieces.
 pub(super) fn piece_of_follower(
@@ -211,7 +222,7 @@ impl OwnFrames {
             active,
             cells,
             [w, u, z],
-            step.m,
+            (step.m, step.local),
         );
         let (points, cells) = fields;
         let named = |fields: &[OwnedField]| -> Vec<OwnedField> {
@@ -299,7 +310,7 @@ pub(super) fn write_step(
             &active,
             stress.then_some(StressCells::All),
             [&w, &u, &z],
-            m.as_deref(),
+            (m.as_deref(), None),
         );
         if let Some(vm) = cells.iter().find(|f| f.name == "von_mises") {
             let _ = tx.send(max_von_mises(&vm.values));
@@ -324,7 +335,8 @@ fn max_von_mises(von_mises: &[f64]) -> f64 {
 /// stress and von Mises stress of the cells `cells` says, where it is Some), from
 /// `[w, u, z]` and m. The point fields are of every node, or of the nodes `at` alone, in
 /// their order (increasing: a rank's piece of the frame, whose other points are other
-/// pieces').
+/// pieces'). u and m hold their values at the dofs `held` alone where it is given (a
+/// follower's, `Step::local`: its piece's are among them).
 fn fields(
     disc: &Discretization,
     (model, at): (Model, Option<&[usize]>),
@@ -332,7 +344,7 @@ fn fields(
     active: &[bool],
     cells: Option<StressCells>,
     [w, u, z]: [&[f64]; 3],
-    m: Option<&[f64]>,
+    (m, held): (Option<&[f64]>, Option<&[usize]>),
 ) -> (Vec<OwnedField>, Vec<OwnedField>) {
     let count = at.map_or(disc.nodes.len(), <[usize]>::len);
     let point = |node: usize| match at {
@@ -371,17 +383,17 @@ fn fields(
     };
     let mut cell_data = Vec::new();
     if let Some(only) = cells {
-        let (stress, von_mises) = disc.stress([w, u], m, model, only);
+        let (stress, von_mises) = disc.stress([w, u], (m, held), model, only);
         cell_data.push(field("stress", 6, stress));
         cell_data.push(field("von_mises", 1, von_mises));
     }
-    let nodal = |v| match at {
+    let nodal = |v, held| match at {
         None => disc.nodal(v),
-        Some(at) => disc.nodal_at(v, at),
+        Some(at) => disc.nodal_at((v, held), at),
     };
     let point_data = vec![
-        field("displacement", 3, nodal(u)),
-        field("velocity", 3, nodal(w)),
+        field("displacement", 3, nodal(u, held)),
+        field("velocity", 3, nodal(w, None)),
         field("contact_pressure", 1, pressure),
         field("friction_traction", fc, friction),
         field("contact_state", 1, state),

@@ -199,8 +199,8 @@ fn rank_0_computes_from_the_cells_vertices_what_it_would_from_the_cells() {
         let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
         let some: Vec<usize> = (0..held.cells.len()).step_by(3).rev().collect();
         for cells in [StressCells::All, StressCells::Only(&some)] {
-            let (s, vm) = held.stress([&w, &u], m, model, cells);
-            let (s2, vm2) = mine.stress([&w, &u], m, model, cells);
+            let (s, vm) = held.stress([&w, &u], (m, None), model, cells);
+            let (s2, vm2) = mine.stress([&w, &u], (m, None), model, cells);
             assert!(vm.iter().any(|&v| v > 0.0), "{name}");
             assert_eq!(
                 (bits(&s2), bits(&vm2)),
