@@ -10,7 +10,9 @@
 //! and visits every load's terms (a body force's made again), bit for bit; its rows of K_B
 //! and K_R paired (`Discretization::pair_own_rows`) give the same products.
 //! Where a rank's rows of K_A go to PETSc, K_A keeps its diagonal at the unknowns of Γ3's rows
-//! alone (`Discretization::keep_diagonal_of_k_a`). A scene with prescribed dofs keeps its
+//! alone (`Discretization::keep_diagonal_of_k_a`), and a follower's rows of K_B and K_R
+//! numbered over the dofs its history holds give the same products of the vectors held
+//! there (`Discretization::number_rows_over`). A scene with prescribed dofs keeps its
 //! matrices whole.
 
 use crate::common;
@@ -256,6 +258,97 @@ fn k_b_and_k_r_paired_give_the_bits_of_their_own_products() {
     for (kept, whole) in [(disc.k_b.as_ref().unwrap(), &k_b), (&disc.k_r[0], &k_r)] {
         assert_eq!(kept.as_ref().val().len(), 0);
         assert_eq!((kept.nrows(), kept.ncols()), (whole.nrows(), whole.ncols()));
+    }
+}
+
+/// A follower whose history holds u_n and m_n at its reach alone (`history::Holds::Local`):
+/// its rows of K_B and K_R, paired or not, numbered over `Discretization::local_reach`
+/// (`Discretization::number_rows_over`), give from the vectors held there the bits of its
+/// rows of the products from the whole vectors, and a piece's stresses and displacements
+/// read from them (`fem::place`) have the bits of the whole vectors'. The reach holds the
+/// rank's own unknowns and the dofs asked for (the piece's), and not every dof.
+#[test]
+fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = SceneText::block().write(dir.path(), "block.toml");
+    let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for paired in [false, true] {
+        let (scene, _, mut disc) = load(&path, &[]);
+        let d = disc.dim;
+        let nodes = disc.free.len() / d;
+        // The unknowns of a quarter of the nodes; the piece: the cells with one of them.
+        let own: Vec<usize> = (0..d * nodes / 4).filter_map(|g| disc.free[g]).collect();
+        let piece: Vec<usize> = (0..disc.cells.len())
+            .filter(|&c| {
+                disc.cells[c].vertices()[..=d]
+                    .iter()
+                    .any(|&v| v < nodes / 4)
+            })
+            .collect();
+        let also: BTreeSet<usize> = (piece.iter())
+            .flat_map(|&c| disc.cells[c].vertices()[..=d].to_vec())
+            .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g]))
+            .collect();
+        disc.keep_columns(own.clone());
+        if paired {
+            disc.pair_own_rows();
+            assert!(disc.own_pair.is_some());
+        }
+        let mut rng = SplitMix(23);
+        let mut random = |len: usize| (0..len).map(|_| rng.unit() - 0.5).collect::<Vec<_>>();
+        let (w, u, m, y0) = (
+            random(disc.n_dofs),
+            random(disc.n_dofs),
+            random(disc.n_dofs),
+            random(disc.n_dofs),
+        );
+        let product = |disc: &Discretization, u: &[f64], m: &[f64]| {
+            let mut y = y0.clone();
+            match &disc.own_pair {
+                Some(pair) => pair.mul_add(&own, u, Some(m), -1.0, &mut y),
+                None => {
+                    mul_add_rows(disc.k_b.as_ref().unwrap(), &own, u, -1.0, &mut y);
+                    mul_add_rows(&disc.k_r[0], &own, m, -1.0, &mut y);
+                }
+            }
+            y
+        };
+        let whole = product(&disc, &u, &m);
+        assert_ne!(bits(&whole), bits(&y0));
+        let model = scene.mesh.model;
+        let cells = StressCells::Only(&piece);
+        let (s, vm) = disc.stress([&w, &u], (Some(&m), None), model, cells);
+        let local = disc.local_reach(also.iter().copied()).unwrap();
+        assert!(also
+            .iter()
+            .chain(&own)
+            .all(|i| local.binary_search(i).is_ok()));
+        assert!(
+            local.len() < disc.n_dofs,
+            "{} of {}",
+            local.len(),
+            disc.n_dofs
+        );
+        disc.number_rows_over(&local);
+        let held = |v: &[f64]| local.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let (u_held, m_held) = (held(&u), held(&m));
+        let numbered = product(&disc, &u_held, &m_held);
+        assert_eq!(bits(&numbered), bits(&whole), "paired: {paired}");
+        let place = Some(local.as_slice());
+        let (s2, vm2) = disc.stress([&w, &u_held], (Some(&m_held), place), model, cells);
+        assert!(vm.iter().any(|&v| v > 0.0));
+        assert_eq!((bits(&s2), bits(&vm2)), (bits(&s), bits(&vm)));
+        let at: Vec<usize> = (0..nodes)
+            .step_by(5)
+            .filter(|&v| {
+                (d * v..d * v + d)
+                    .filter_map(|g| disc.free[g])
+                    .all(|i| also.contains(&i))
+            })
+            .collect();
+        assert!(!at.is_empty());
+        let nodal = disc.nodal_at((&u_held, place), &at);
+        assert_eq!(bits(&nodal), bits(&disc.nodal_at((&u, None), &at)));
     }
 }
 
