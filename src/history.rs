@@ -409,9 +409,10 @@ pub struct History {
 }
 
 /// The dofs whose values a [`History`] holds, in increasing order where not every one.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub enum Holds {
     /// Every dof: one process, and rank 0 of several.
+    #[default]
     Every,
     /// The memory at these dofs alone and u_n at every one: a follower whose rows of K_B
     /// and K_R read u_n by the whole numbering (`Discretization::memory_reach`).
@@ -423,11 +424,6 @@ pub enum Holds {
 }
 
 impl Holds {
-    /// This, leaving `Holds::Every` in its place.
-    pub fn take(&mut self) -> Holds {
-        std::mem::replace(self, Holds::Every)
-    }
-
     /// The dofs the memory holds (None: every one).
     pub fn dofs(&self) -> Option<&[usize]> {
         match self {

@@ -230,7 +230,7 @@ impl<'p> TimeLoop<'p> {
         mut own: Option<Own>,
     ) -> Result<Self> {
         refusals(scene, disc, &plans)?;
-        let holds = own.as_mut().map_or(Holds::Every, |own| own.holds.take());
+        let holds = own.as_mut().map(|own| std::mem::take(&mut own.holds));
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
         let implicit = match scene.solver.history {
@@ -255,7 +255,7 @@ impl<'p> TimeLoop<'p> {
         };
         let solver = effects::step_solver(&effects, &descriptor, matrix, &backend, &rows)?;
         let n = disc.n_dofs;
-        let history = History::holding(n, scene.time.k(), &plans, holds);
+        let history = History::holding(n, scene.time.k(), &plans, holds.unwrap_or_default());
         let paired = disc
             .k_b
             .as_ref()

@@ -806,8 +806,11 @@ impl Discretization {
         let place = |i: usize| {
             (local.binary_search(&i)).expect("a row of the rank's columns is in its reach")
         };
+        let mut is_own = vec![false; self.n_dofs];
+        own.iter().for_each(|&j| is_own[j] = true);
         for a in self.k_b.iter_mut().chain(&mut self.k_r) {
-            *a = rows_numbered(a, own, local.len(), place);
+            let size = (local.len(), a.ncols());
+            *a = entries_placed(a, size, |_, j| is_own[j], place);
         }
         if let Some(pair) = &mut self.own_pair {
             pair.number_columns(place);
@@ -1148,10 +1151,21 @@ fn columns_kept(a: &Sparse, keep: &[bool]) -> Sparse {
 /// The `size` (rows, columns) leading block of `a` with its entries (i, j) where `keep(i,
 /// j)`, in their order.
 fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) -> bool) -> Sparse {
+    entries_placed(a, size, |i, j| i < size.0 && keep(i, j), |i| i)
+}
+
+/// The matrix of `size` (rows, columns) made of `a`'s entries (i, j) where `keep(i, j)`, in
+/// their order, each in row `place(i)` (increasing in i) of column j.
+fn entries_placed(
+    a: &Sparse,
+    size: (usize, usize),
+    keep: impl Fn(usize, usize) -> bool,
+    place: impl Fn(usize) -> usize,
+) -> Sparse {
     let a = a.as_ref();
     let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
     let keep = &keep;
-    let kept = |j: usize| (cp[j]..cp[j + 1]).filter(move |&p| ri[p] < size.0 && keep(ri[p], j));
+    let kept = |j: usize| (cp[j]..cp[j + 1]).filter(move |&p| keep(ri[p], j));
     // At their exact size: they stay for the run.
     let entries = (0..size.1).map(|j| kept(j).count()).sum();
     let mut col_ptr = Vec::with_capacity(size.1 + 1);
@@ -1159,38 +1173,12 @@ fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) ->
     col_ptr.push(0);
     for j in 0..size.1 {
         for p in kept(j) {
-            row_idx.push(ri[p]);
+            row_idx.push(place(ri[p]));
             val.push(v[p]);
         }
         col_ptr.push(row_idx.len());
     }
     let pattern = SymbolicSparseColMat::new_checked(size.0, size.1, col_ptr, None, row_idx);
-    SparseColMat::new(pattern, val)
-}
-
-/// The columns `own` (increasing) of `a`, the others empty, with their rows numbered by
-/// `place` (increasing) among `nrows`.
-fn rows_numbered(
-    a: &Sparse,
-    own: &[usize],
-    nrows: usize,
-    place: impl Fn(usize) -> usize,
-) -> Sparse {
-    let a = a.as_ref();
-    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
-    let entries = own.iter().map(|&j| cp[j + 1] - cp[j]).sum();
-    let mut col_ptr = Vec::with_capacity(a.ncols() + 1);
-    let (mut row_idx, mut val) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
-    col_ptr.push(0);
-    let mut own = own.iter().peekable();
-    for j in 0..a.ncols() {
-        if own.next_if_eq(&&j).is_some() {
-            row_idx.extend(ri[cp[j]..cp[j + 1]].iter().map(|&i| place(i)));
-            val.extend_from_slice(&v[cp[j]..cp[j + 1]]);
-        }
-        col_ptr.push(row_idx.len());
-    }
-    let pattern = SymbolicSparseColMat::new_checked(nrows, a.ncols(), col_ptr, None, row_idx);
     SparseColMat::new(pattern, val)
 }
 

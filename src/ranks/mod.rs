@@ -18,7 +18,7 @@
 //! (`Backend::gather`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
 //! the rank keeps K_A's diagonal at Γ3's unknowns alone. A follower's history holds the
 //! dofs that its rows of K_B and K_R and its piece of a frame read alone
-//! ([`Ranks::hold_local`], `history::Holds`): u_n, its compensated sum and the memory (the
+//! ([`Ranks::hold_history`], `history::Holds`): u_n, its compensated sum and the memory (the
 //! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
 //! rows of K_B and K_R then numbering their columns in the order of those dofs; elsewhere
 //! the memory alone. The values it holds have the bits of the whole history's; rank 0
@@ -47,7 +47,7 @@
 //! memory of each rank is the replicated part (w_n and the other n-vectors, rank 0's whole
 //! history; during setup the mesh, which sets a floor, and on rank 0 its reading), its
 //! columns of the matrices, a follower's part of the history, and its share of PETSc's;
-//! spreading the other n-vectors over the ranks (~220 B a dof on a follower), handing
+//! spreading the other n-vectors over the ranks (most of ~250 B a dof on a follower), handing
 //! each follower its part of the mesh alone, and rank 0's memory in parts too, are the next
 //! steps (docs/cluster.md).
 //!
@@ -333,36 +333,41 @@ impl Ranks {
             }
             disc.keep_own_loads(self.is_first());
             crate::resources::return_freed_memory();
-            let memory = (!self.is_first()).then(|| disc.memory_reach()).flatten();
             return Ok(Some(Own {
                 layout,
                 rows,
-                holds: memory.map_or(Holds::Every, Holds::Memory),
+                holds: Holds::Every,
             }));
         }
         let _ = (disc, scene, made);
         Ok(None)
     }
 
-    /// On a follower that hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]: K_A
-    /// the step matrix, no prescribed dofs), the history holds u_n and m_n at the dofs its
-    /// rows of K_B and K_R read and `also` (its piece's points') alone (`Holds::Local`):
-    /// `disc`'s matrices number their rows over them
-    /// (`Discretization::number_rows_over`). Nothing else reads u_n or m_n on a follower:
-    /// the active set reads b_n and w_n, and the checks' max|u_n| is the ranks' largest.
-    /// Elsewhere the history holds what `keep_own_columns` said.
-    pub fn hold_local(
+    /// What a follower's history holds (`own.holds`; rank 0 holds every dof). Where it hands
+    /// its rows of K_A to PETSc ([`Ranks::keep_own_columns`]: K_A the step matrix, no
+    /// prescribed dofs), u_n and m_n at the dofs its rows of K_B and K_R read and `also`
+    /// (its piece's points') alone (`Holds::Local`): `disc`'s matrices number their rows
+    /// over them (`Discretization::number_rows_over`). Nothing else reads u_n or m_n on a
+    /// follower: the active set reads b_n and w_n, and the checks' max|u_n| is the ranks'
+    /// largest. Elsewhere (the implicit variant, whose step matrix the time loop makes of
+    /// the three matrices' columns, and prescribed dofs), the memory at the dofs its rows of
+    /// K_R read alone (`Holds::Memory`, `Discretization::memory_reach`).
+    pub fn hold_history(
         &self,
         disc: &mut crate::fem::Discretization,
         own: Option<&mut Own>,
         also: impl IntoIterator<Item = usize>,
     ) {
         #[cfg(feature = "petsc")]
-        if let Some(own) = own.filter(|own| own.rows.is_some() && !self.is_first()) {
-            if let Some(local) = disc.local_reach(also) {
-                disc.number_rows_over(&local);
-                own.holds = Holds::Local(local);
-            }
+        if let Some(own) = own.filter(|_| !self.is_first()) {
+            let local = own.rows.is_some().then(|| disc.local_reach(also)).flatten();
+            own.holds = match local {
+                Some(local) => {
+                    disc.number_rows_over(&local);
+                    Holds::Local(local)
+                }
+                None => disc.memory_reach().map_or(Holds::Every, Holds::Memory),
+            };
         }
         #[cfg(not(feature = "petsc"))]
         let _ = (disc, own, also.into_iter());
@@ -384,14 +389,14 @@ impl Ranks {
 /// rank), and where K_A is the step matrix, the rank's rows of K_A in PETSc's numbering,
 /// taken out of the discretization: PETSc's matrices are made of them, and the Newton
 /// systems read them as their copy of K, the rank's only one. On a follower, the dofs
-/// its history holds ([`Ranks::hold_local`]).
+/// its history holds ([`Ranks::hold_history`]).
 pub struct Own {
     #[cfg(feature = "petsc")]
     pub(crate) layout: crate::petsc::Layout,
     #[cfg(feature = "petsc")]
     pub(crate) rows: Option<crate::petsc::Csr<'static>>,
     /// What a follower's history holds: the memory of its `Discretization::memory_reach`,
-    /// or u_n and m_n at its `Discretization::local_reach` ([`Ranks::hold_local`]); on rank
+    /// or u_n and m_n at its `Discretization::local_reach` ([`Ranks::hold_history`]); on rank
     /// 0, every dof (it writes the checkpoints and history.csv).
     pub(crate) holds: Holds,
 }
