@@ -199,12 +199,13 @@ pub fn matrix_free_bytes(m: usize, n: usize) -> f64 {
 }
 
 /// The memory of the active-set solver (`solver::active_set`) on m rows of a problem with n
-/// dofs whose K_A stores `nnz` entries (both triangles), in bytes: four n-vectors (b −
-/// f_slip, the right side, (K + S)w, the shell operator's work vector); per row, a removed
-/// direction or a share of a slip block (three dofs and up to nine values); and PETSc's
-/// part on one rank (`petsc_bytes`).
+/// dofs whose K_A stores `nnz` entries (both triangles), in bytes: one n-vector (the
+/// Krylov's rows of a Newton system's right side and of (K + S)w: `petsc::Krylov`); per
+/// row, a removed direction or a share of a slip block (three dofs and up to nine values),
+/// and at most a node's dofs, b − f_slip, the right side and (K + S)w there (84 bytes); and
+/// PETSc's part on one rank (`petsc_bytes`).
 pub fn active_set_bytes(m: usize, n: usize, nnz: usize) -> f64 {
-    8.0 * 4.0 * n as f64 + 84.0 * m as f64 + petsc_bytes(nnz, true, 1)
+    8.0 * n as f64 + 168.0 * m as f64 + petsc_bytes(nnz, true, 1)
 }
 
 /// PETSc's part of a run through it on a rank that holds `entries` of K_A's, in bytes, on

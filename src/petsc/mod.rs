@@ -92,6 +92,13 @@ extern "C" {
     fn vc_ksp_solve(ctx: *mut c_void, b: *const f64, x: *mut f64, v: *mut VcSolve) -> c_int;
     fn vc_mult(ctx: *mut c_void, x: *const f64, y: *mut f64) -> c_int;
     fn vc_gather(ctx: *mut c_void, x: *mut f64) -> c_int;
+    fn vc_allgather(
+        send: *const f64,
+        nsend: c_int,
+        recv: *mut f64,
+        counts: *const c_int,
+        displs: *const c_int,
+    ) -> c_int;
     #[allow(clippy::too_many_arguments)]
     fn vc_constrained_solve(
         ctx: *mut c_void,
@@ -262,11 +269,15 @@ pub struct Krylov {
     pub options: String,
     /// Whether K_A's solve in progress is to be given up (`Krylov::give_up_when`).
     give_up: Option<GiveUp>,
-    /// Where the unknowns stand among PETSc's rows, and two vectors in that order for the
-    /// calls where they are not the same (several ranks).
+    /// Where the unknowns stand among PETSc's rows, and this rank's rows among them; on
+    /// several ranks a whole vector in the rows' order (a solve's w, a product's x, a
+    /// gathered vector), and where the calls need one, a vector of this rank's rows (a right
+    /// side's, a product's): on several ranks, or for a right side or a product that is
+    /// not a whole vector of the caller's (`solve_constrained`, `mult_at`).
     layout: Layout,
-    rows_b: Vec<f64>,
-    rows_w: Vec<f64>,
+    mine: std::ops::Range<usize>,
+    rows: Vec<f64>,
+    own: Vec<f64>,
     /// On several ranks, for the Newton systems: this rank's rows of the step matrix, which
     /// the shim reads as its copy of K until the KSP is destroyed (it keeps none).
     _rows: Option<Csr<'static>>,
@@ -342,8 +353,9 @@ impl Krylov {
             pc_type: name(pc),
             options: settings.options.clone(),
             give_up: None,
-            rows_b: vec![0.0; if layout.permutes() { n } else { 0 }],
-            rows_w: vec![0.0; if layout.permutes() { n } else { 0 }],
+            mine: layout.blocks[rank]..layout.blocks[rank + 1],
+            rows: vec![0.0; if layout.permutes() { n } else { 0 }],
+            own: Vec::new(),
             layout,
             _rows: (size > 1 && settings.newton).then(|| csr.into_owned()),
         })
@@ -360,62 +372,84 @@ impl Krylov {
     /// (`give_up_when`), w holds an iterate.
     pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
-        // SAFETY: b and w hold n values; PETSc reads b and writes w within the call.
-        self.solved("KSPSolve", b, w, |ctx, b, w, v| unsafe {
+        // SAFETY: the rows of b hold this rank's count and w n values; PETSc reads the one
+        // and writes the other within the call.
+        self.solved("KSPSolve", (b, &[], &[]), w, |ctx, b, w, v| unsafe {
             vc_ksp_solve(ctx, b, w, v)
         })
     }
 
-    /// `call(ctx, b, w)` with b and w in the order of PETSc's rows (`Layout`), and w back
-    /// in the unknowns' order after it.
-    fn in_rows<T>(
-        &mut self,
-        b: &[f64],
-        w: &mut [f64],
-        call: impl FnOnce(*mut c_void, &[f64], &mut [f64], &Option<GiveUp>) -> Result<T>,
-    ) -> Result<T> {
+    /// `call(ctx, x)` on x in the order of PETSc's rows (`Layout`), where it differs from
+    /// the unknowns' in `rows`, and x back in the unknowns' order after it.
+    fn in_rows<T>(&mut self, x: &mut [f64], call: impl FnOnce(*mut c_void, *mut f64) -> T) -> T {
         if !self.layout.permutes() {
-            return call(self.ctx, b, w, &self.give_up);
+            return call(self.ctx, x.as_mut_ptr());
         }
-        self.layout.to_rows(b, &mut self.rows_b);
-        self.layout.to_rows(w, &mut self.rows_w);
-        let out = call(self.ctx, &self.rows_b, &mut self.rows_w, &self.give_up);
-        self.layout.from_rows(&self.rows_w, w);
+        self.layout.to_rows(x, &mut self.rows);
+        let out = call(self.ctx, self.rows.as_mut_ptr());
+        self.layout.from_rows(&self.rows, x);
         out
     }
 
-    /// A shim solve, `call(ctx, b, w, v)` on b and w in the order of PETSc's rows
-    /// (`in_rows`), which asks at every iteration whether to give the solve up (where
-    /// `give_up_when` said how: the shim's `requested` and, in v, a pointer to the question
-    /// that lives through the call) and fills v: what it did, or PETSc's error at `what`.
+    /// This rank's rows of the right side b but at `dofs`, where it is `values` (`dofs` −1:
+    /// none), in PETSc's order: b itself where it is (one rank, nothing at `dofs`), else
+    /// `own` filled.
+    fn own_rows<'a>(&'a mut self, (b, dofs, values): RightSide<'a>) -> &'a [f64] {
+        if !self.layout.permutes() && dofs.is_empty() {
+            return b;
+        }
+        let (layout, mine) = (&self.layout, self.mine.clone());
+        self.own.resize(mine.len(), 0.0);
+        for (i, &bi) in b.iter().enumerate() {
+            if let Some(r) = Some(layout.row(i)).filter(|r| mine.contains(r)) {
+                self.own[r - mine.start] = bi;
+            }
+        }
+        for (&d, &value) in dofs.iter().zip(values).filter(|(&d, _)| d >= 0) {
+            if let Some(r) = Some(layout.row(d as usize)).filter(|r| mine.contains(r)) {
+                self.own[r - mine.start] = value;
+            }
+        }
+        &self.own
+    }
+
+    /// A shim solve, `call(ctx, b, w, v)` on this rank's rows of the right side (b at
+    /// `dofs` replaced by `values`: `own_rows`) and w whole, both in the order of PETSc's
+    /// rows (w back in the unknowns' order after it), which asks at every iteration whether
+    /// to give the solve up (where `give_up_when` said how: the shim's `requested` and, in
+    /// v, a pointer to the question that lives through the call) and fills v: what it did,
+    /// or PETSc's error at `what`.
     fn solved(
         &mut self,
         what: &str,
-        b: &[f64],
+        b: RightSide<'_>,
         w: &mut [f64],
         call: impl FnOnce(*mut c_void, *const f64, *mut f64, *mut VcSolve) -> c_int,
     ) -> Result<Solve> {
-        self.in_rows(b, w, |ctx, b, w, give_up| {
-            let mut v = VcSolve {
-                requested: None,
-                flag: std::ptr::null_mut(),
-                its: 0,
-                reason: 0,
-                rnorm: 0.0,
-                given_up: 0,
-            };
-            if let Some(now) = give_up {
-                v.requested = Some(requested);
-                v.flag = now as *const GiveUp as *mut c_void;
-            }
-            check(call(ctx, b.as_ptr(), w.as_mut_ptr(), &mut v), what)?;
-            Ok(Solve {
-                given_up: v.given_up != 0,
-                ..Solve::of(v.its, v.reason, v.rnorm)
-            })
+        let b = self.own_rows(b).as_ptr();
+        let mut v = VcSolve {
+            requested: None,
+            flag: std::ptr::null_mut(),
+            its: 0,
+            reason: 0,
+            rnorm: 0.0,
+            given_up: 0,
+        };
+        if let Some(now) = &self.give_up {
+            v.requested = Some(requested);
+            v.flag = now as *const GiveUp as *mut c_void;
+        }
+        self.in_rows(w, |ctx, w| check(call(ctx, b, w, &mut v), what))?;
+        Ok(Solve {
+            given_up: v.given_up != 0,
+            ..Solve::of(v.its, v.reason, v.rnorm)
         })
     }
 }
+
+/// A right side as a shim solve takes it: b, but at `dofs` (−1: none), where it is
+/// `values` (the constrained system's Π(b − f_slip), b itself but at Γ3's nodes).
+type RightSide<'a> = (&'a [f64], &'a [i32], &'a [f64]);
 
 /// A shim solve's request and outcome (shim.c's `VcSolve`).
 #[repr(C)]
@@ -474,27 +508,75 @@ pub enum Tolerance {
 }
 
 impl Krylov {
-    /// y = K x.
-    pub fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()> {
-        assert!(x.len() == self.n && y.len() == self.n);
-        // SAFETY: x and y hold n values; PETSc reads x and writes y within the call.
-        self.in_rows(x, y, |ctx, x, y, _| {
-            check(
-                unsafe { vc_mult(ctx, x.as_ptr(), y.as_mut_ptr()) },
-                "MatMult",
-            )
-        })
+    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1), on every rank. x is whole
+    /// and the same on return (on several ranks it is in PETSc's order during the product);
+    /// each rank computes its own rows of K x, and the values at `dofs` come from the ranks
+    /// that hold them (`values_at`), where the whole product crossed to every rank.
+    pub fn mult_at(&mut self, x: &mut [f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
+        assert!(x.len() == self.n && dofs.len() == y.len());
+        self.own.resize(self.mine.len(), 0.0);
+        let own = self.own.as_mut_ptr();
+        // SAFETY: x holds n values and own this rank's rows; PETSc reads x and writes own
+        // within the call.
+        let out = self.in_rows(x, |ctx, x| unsafe { vc_mult(ctx, x, own) });
+        check(out, "MatMult")?;
+        self.values_at(dofs, y)
+    }
+
+    /// y[k] ← `own`'s value at dofs[k] (0 where it is −1), from the rank that holds the
+    /// row: on several ranks each sends its values, in the order of `dofs`, to all.
+    fn values_at(&self, dofs: &[i32], y: &mut [f64]) -> Result<()> {
+        let blocks = &self.layout.blocks;
+        let row = |k: usize| (dofs[k] >= 0).then(|| self.layout.row(dofs[k] as usize));
+        let rank_of = |r: usize| blocks.partition_point(|&b| b <= r) - 1;
+        let mut order: Vec<usize> = (0..dofs.len()).filter(|&k| dofs[k] >= 0).collect();
+        order.sort_by_key(|&k| row(k).map(rank_of));
+        let mine: Vec<f64> = (order.iter().filter_map(|&k| row(k)))
+            .filter(|r| self.mine.contains(r))
+            .map(|r| self.own[r - self.mine.start])
+            .collect();
+        let mut all = vec![0.0; order.len()];
+        match self.layout.permutes() {
+            true => {
+                let ranks = blocks.len() - 1;
+                let mut counts = vec![0; ranks];
+                order
+                    .iter()
+                    .filter_map(|&k| row(k))
+                    .for_each(|r| counts[rank_of(r)] += 1);
+                let displs: Vec<c_int> = (counts.iter())
+                    .scan(0, |at, &c| Some(std::mem::replace(at, *at + c)))
+                    .collect();
+                // SAFETY: mine holds this rank's count, all the sum of counts, which the
+                // displacements cut in rank order; MPI writes all within the call.
+                let code = unsafe {
+                    vc_allgather(
+                        mine.as_ptr(),
+                        mine.len() as c_int,
+                        all.as_mut_ptr(),
+                        counts.as_ptr(),
+                        displs.as_ptr(),
+                    )
+                };
+                check(code, "MPI_Allgatherv")?;
+            }
+            false => all = mine,
+        }
+        y.fill(0.0);
+        order.iter().zip(all).for_each(|(&k, value)| y[k] = value);
+        Ok(())
     }
 
     /// w ← the solution of Π(K + S)Π w + (I − Π) w = Π b, from the initial guess in w, by
     /// the KSP's method (CG by default) on the assembled matrix Π(K + S)Π + (I − Π)(K +
     /// S)(I − Π), which has the same solution, preconditioned by GAMG built from one such
     /// matrix, as `hierarchy` says, on the aggregates and interpolation GAMG made of K.
-    /// Stopped at `tolerance`.
+    /// Stopped at `tolerance`. The right side Π b is given as b but at Γ3's nodes' `dofs`
+    /// (−1: none), where it is `values`: Π acts there alone.
     pub fn solve_constrained(
         &mut self,
         terms: NodalTerms<'_>,
-        b: &[f64],
+        (b, dofs, values): (&[f64], &[i32], &[f64]),
         w: &mut [f64],
         tolerance: Tolerance,
         hierarchy: Hierarchy,
@@ -503,7 +585,7 @@ impl Krylov {
             Tolerance::OfRhs(rtol) => (rtol, false),
             Tolerance::OfStart(eta) => (eta, true),
         };
-        assert!(b.len() == self.n && w.len() == self.n);
+        assert!(b.len() == self.n && w.len() == self.n && dofs.len() == values.len());
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
         assert!(terms.removed.len() == 3 * np && terms.stiffness.len() == 9 * ns);
         // The terms' dofs as PETSc's rows (−1, none, stays).
@@ -516,10 +598,11 @@ impl Krylov {
             dofs.iter().map(row).collect()
         };
         let (removed_rows, stiffness_rows) = (rows(terms.removed_dofs), rows(terms.stiffness_dofs));
-        // SAFETY: the arrays hold what the counts say, b and w n values; PETSc reads them
-        // and writes w within the call, and keeps no pointer after it.
+        // SAFETY: the arrays hold what the counts say, the rows of b this rank's count and
+        // w n values; PETSc reads them and writes w within the call, and keeps no pointer
+        // after it.
         let what = "KSPSolve of the constrained system";
-        self.solved(what, b, w, |ctx, b, w, v| unsafe {
+        self.solved(what, (b, dofs, values), w, |ctx, b, w, v| unsafe {
             vc_constrained_solve(
                 ctx,
                 np as PetscInt,
@@ -554,14 +637,9 @@ impl Krylov {
             return Ok(());
         }
         assert_eq!(v.len(), self.n);
-        self.layout.to_rows(v, &mut self.rows_b);
-        // SAFETY: rows_b holds n values, which the shim gathers in place within the call.
-        check(
-            unsafe { vc_gather(self.ctx, self.rows_b.as_mut_ptr()) },
-            "MPI_Allgatherv",
-        )?;
-        self.layout.from_rows(&self.rows_b, v);
-        Ok(())
+        // SAFETY: v holds n values, which the shim gathers in place within the call.
+        let code = self.in_rows(v, |ctx, v| unsafe { vc_gather(ctx, v) });
+        check(code, "MPI_Allgatherv")
     }
 
     /// How far the Newton systems' multigrid is from the Galerkin products of its fine

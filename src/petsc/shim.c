@@ -329,9 +329,9 @@ static PetscErrorCode gathered(VcKsp *s, PetscScalar *x)
 }
 
 /* x ← the solution of ksp's system (K_A's or the constrained one) with right side b, from
- * the initial guess in x, asking and filling v (VcSolve). b and x are whole on every rank
- * (each gives the same b), and x is whole on every rank after it; where a rank's request
- * gave the solve up, x holds an iterate. */
+ * the initial guess in x, asking and filling v (VcSolve). b is this rank's rows, x whole on
+ * every rank, before and after it; where a rank's request gave the solve up, x holds an
+ * iterate. */
 static PetscErrorCode solved(VcKsp *s, KSP ksp, const PetscScalar *b, PetscScalar *x, VcSolve *v)
 {
   KSPConvergedReason r;
@@ -339,7 +339,7 @@ static PetscErrorCode solved(VcKsp *s, KSP ksp, const PetscScalar *b, PetscScala
 
   PetscFunctionBeginUser;
   v->given_up = 0;
-  PetscCall(VecPlaceArray(s->b, b + s->lo));
+  PetscCall(VecPlaceArray(s->b, b));
   PetscCall(VecPlaceArray(s->x, x + s->lo));
   s->solve = v; /* for the convergence test, during this call only */
   err = KSPSolve(ksp, s->b, s->x);
@@ -386,8 +386,9 @@ int vc_gather(void *ctx, PetscScalar *x)
   return 0;
 }
 
-/* y = K x, x and y whole on every rank: by K's matrix, or where it went (the Newton
- * systems' KSP on several ranks: constrained_setup) by this rank's rows (local_rows). */
+/* y = this rank's rows of K x, x whole on every rank: by K's matrix, or where it went (the
+ * Newton systems' KSP on several ranks: constrained_setup) by this rank's rows
+ * (local_rows). */
 int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 {
   VcKsp *s = (VcKsp *)ctx;
@@ -396,17 +397,23 @@ int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
     for (PetscInt r = 0; r < s->m; r++) {
       PetscScalar sum = 0;
       for (PetscInt k = s->kai[r]; k < s->kai[r + 1]; k++) sum += s->kav[k] * x[s->kaj[k]];
-      y[s->lo + r] = sum;
+      y[r] = sum;
     }
-    PetscCall(gathered(s, y));
     return 0;
   }
   PetscCall(VecPlaceArray(s->b, x + s->lo));
-  PetscCall(VecPlaceArray(s->x, y + s->lo));
+  PetscCall(VecPlaceArray(s->x, y));
   PetscCall(MatMult(s->A, s->b, s->x));
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
-  PetscCall(gathered(s, y));
+  return 0;
+}
+
+/* Every rank's recv ← each rank's send (nsend values), rank r's at displs[r] (counts[r]
+ * values). */
+int vc_allgather(const PetscScalar *send, int nsend, PetscScalar *recv, const int *counts, const int *displs)
+{
+  PetscCallMPI(MPI_Allgatherv(send, nsend, MPIU_SCALAR, recv, counts, displs, MPIU_SCALAR, PETSC_COMM_WORLD));
   return 0;
 }
 
@@ -1269,8 +1276,9 @@ static PetscErrorCode check_galerkin(VcKsp *s)
   PetscFunctionReturn(0);
 }
 
-/* x ← the solution of the constrained system Π(K + S)Π x + (I − Π) x = Π b with the terms
- * given (every rank gives all of them), from the initial guess in x, to relative tolerance
+/* x ← the solution of the constrained system Π(K + S)Π x + (I − Π) x = Π b (b this rank's
+ * rows of Π b) with the terms given (every rank gives all of them), from the initial guess
+ * in x, to relative tolerance
  * rtol (of b's norm, or where `of_start`, of the initial residual's: an inexact Newton
  * system), as `solved` says. `rebuild`: 0, the preconditioner of the last system serves;
  * 1, it is rebuilt from this system's matrix, on K's aggregates and interpolation (what a

@@ -7,7 +7,8 @@
 //! PETSc's Krylov solves spread, K_A's and the active set's Newton systems: their KSPs on
 //! all the ranks, each holding the rows of the nodes METIS's partition gives it
 //! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
-//! of every Krylov vector, and each getting the whole solution back. Every rank reads the
+//! of every Krylov vector, and each getting the whole solution back (of a product with K,
+//! the active set's (K + S) w, its values at Γ3's nodes alone). Every rank reads the
 //! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
 //! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays). Of
 //! K_A, K_B and K_R a rank holds the columns of its own unknowns alone (a symmetric

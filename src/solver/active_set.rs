@@ -86,6 +86,7 @@
 //! converges; the bracket's sliding onset is the hardest (31 iterations in one step).
 
 use super::{kkt_residual, Rows, StepReport, StepStatus};
+use crate::fem::NodalRow;
 use crate::scene::ActiveSetSection;
 use crate::Result;
 
@@ -119,14 +120,16 @@ pub struct LinearSolve {
 /// The systems of the Newton iteration: products with K and solves of the constrained
 /// system Π(K + S)Π w + (I − Π) w = Π b with the terms of `Terms`.
 pub trait ConstrainedSystem {
-    /// y = K x.
-    fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()>;
+    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1). x is the same on return (a
+    /// backend may reorder it in place meanwhile).
+    fn mult_at(&mut self, x: &mut [f64], dofs: &[i32], y: &mut [f64]) -> Result<()>;
     /// w ← the constrained system's solution, from the guess in w, to `tolerance`, with the
-    /// preconditioner `pc` says.
+    /// preconditioner `pc` says. Its right side Π(b − f_slip) is b but at Γ3's nodes, where
+    /// it is `rhs`.
     fn solve(
         &mut self,
         terms: &Terms,
-        b: &[f64],
+        rhs: RightSide<'_>,
         w: &mut [f64],
         tolerance: Tolerance,
         pc: Preconditioner,
@@ -178,28 +181,39 @@ impl Terms {
     /// a ← Π a.
     pub fn project(&self, a: &mut [f64]) {
         for (d, v) in self.removed_dofs.chunks(3).zip(self.removed.chunks(3)) {
-            let p: f64 = (0..3)
-                .filter(|&c| d[c] >= 0)
-                .map(|c| v[c] * a[d[c] as usize])
-                .sum();
-            for c in (0..3).filter(|&c| d[c] >= 0) {
-                a[d[c] as usize] -= p * v[c];
-            }
+            remove(d, v, a, |c| d[c] as usize);
         }
     }
 
-    /// y ← y + S x.
-    pub fn add_stiffness(&self, x: &[f64], y: &mut [f64]) {
-        for (d, m) in self.stiffness_dofs.chunks(3).zip(self.stiffness.chunks(9)) {
-            for r in (0..3).filter(|&r| d[r] >= 0) {
-                let s: f64 = (0..3)
+    /// S x block by block: each block's dofs and its product with x there (0 where a dof
+    /// is −1).
+    pub fn stiffness_products<'a>(
+        &'a self,
+        x: &'a [f64],
+    ) -> impl Iterator<Item = (&'a [i32], [f64; 3])> + 'a {
+        let blocks = self.stiffness_dofs.chunks(3).zip(self.stiffness.chunks(9));
+        blocks.map(|(d, m)| {
+            let row = |r: usize| -> f64 {
+                (0..3)
                     .filter(|&c| d[c] >= 0)
                     .map(|c| m[3 * r + c] * x[d[c] as usize])
-                    .sum();
-                y[d[r] as usize] += s;
-            }
-        }
+                    .sum()
+            };
+            (
+                d,
+                std::array::from_fn(|r| if d[r] >= 0 { row(r) } else { 0.0 }),
+            )
+        })
     }
+}
+
+/// A Newton system's right side Π(b − f_slip): b, but at the dofs of Γ3's nodes (three a
+/// node, −1 where a node has none), where Π and f_slip act and it is `values`.
+#[derive(Clone, Copy, Debug)]
+pub struct RightSide<'a> {
+    pub b: &'a [f64],
+    pub dofs: &'a [i32],
+    pub values: &'a [f64],
 }
 
 /// The settings of the active-set solver (`[solver.active_set]`), with their defaults.
@@ -398,11 +412,9 @@ impl Iterate<'_> {
     }
 }
 
-/// The rows of one node: its local dofs (the union over its rows: −1 where no row touches
-/// the component) and its contact row and friction block, if any.
+/// The rows of one node: its contact row and friction block, if any.
 #[derive(Clone, Debug)]
 struct Node {
-    dofs: [i32; 3],
     contact: Option<usize>,
     friction: Option<usize>,
 }
@@ -425,12 +437,14 @@ pub struct ActiveSetSolver {
     /// The diagonal of K along each row, ρ's unit (ρ itself is `Iterate::rho`).
     rho: Vec<f64>,
     terms: Terms,
-    /// b − f_slip at each node's dofs (0 where it has none), what the multipliers read of
-    /// it, and its projection Π(b − f_slip), the system's right side: one n-vector, not two.
+    /// At each node's dofs (`dofs`, three a node, −1 where it has none; the values there 0):
+    /// b − f_slip, what the multipliers read of it; its projection Π(b − f_slip), where the
+    /// system's right side is not b; and (K + S) w. No n-vector: Π, f_slip and the
+    /// multipliers act at Γ3's nodes alone.
+    dofs: Vec<[i32; 3]>,
     force: Vec<[f64; 3]>,
-    rhs: Vec<f64>,
-    /// (K + S) w.
-    r: Vec<f64>,
+    rhs: Vec<[f64; 3]>,
+    r: Vec<[f64; 3]>,
     counts: ActiveSetCounts,
 }
 
@@ -447,15 +461,16 @@ impl ActiveSetSolver {
             let mean = rho[block.clone()].iter().sum::<f64>() / block.len() as f64;
             rho[block].fill(mean);
         }
-        let nodes = nodes(rows);
+        let (nodes, dofs) = nodes(rows);
         ActiveSetSolver {
             settings,
+            dofs,
             force: vec![[0.0; 3]; nodes.len()],
+            rhs: vec![[0.0; 3]; nodes.len()],
+            r: vec![[0.0; 3]; nodes.len()],
             nodes,
             rho,
             terms: Terms::default(),
-            rhs: vec![0.0; diagonal.len()],
-            r: vec![0.0; diagonal.len()],
             counts: ActiveSetCounts::default(),
         }
     }
@@ -511,7 +526,12 @@ impl ActiveSetSolver {
             if pc != Preconditioner::Last {
                 built = Some(sets.clone());
             }
-            let lin = system.solve(&self.terms, &self.rhs, w, tolerance, pc)?;
+            let rhs = RightSide {
+                b,
+                dofs: self.dofs.as_flattened(),
+                values: self.rhs.as_flattened(),
+            };
+            let lin = system.solve(&self.terms, rhs, w, tolerance, pc)?;
             krylov += lin.iterations;
             self.count_system(lin.iterations);
             if lin.given_up {
@@ -598,11 +618,13 @@ impl ActiveSetSolver {
         }
     }
 
-    /// The Newton system's terms and right side b − f_slip for `sets`.
+    /// The Newton system's terms, and at Γ3's nodes b − f_slip and its projection Π(b −
+    /// f_slip) for `sets`.
     fn assemble(&mut self, rows: &Rows, sets: &Sets, b: &[f64]) {
         self.terms.clear();
-        self.rhs.copy_from_slice(b);
-        for node in &self.nodes {
+        for (k, node) in self.nodes.iter().enumerate() {
+            let (dofs, force) = (self.dofs[k], &mut self.force[k]);
+            *force = dofs.map(|d| if d < 0 { 0.0 } else { b[d as usize] });
             let mut removed: Vec<[f64; 3]> = Vec::new();
             if let Some(i) = node.contact.filter(|&i| sets.active[i]) {
                 removed.push(rows.rows[i].dir);
@@ -614,43 +636,46 @@ impl ActiveSetSolver {
                     Friction::Slip { g, beta } => {
                         let c = rows.rows[block.start].bound;
                         for (k, i) in block.clone().enumerate() {
-                            rows.rows[i].add_transpose(-c * g[k], &mut self.rhs);
+                            add_at_node(&rows.rows[i], -c * g[k], force);
                         }
                         if block.len() == 2 {
                             let tau = [rows.rows[block.start].dir, rows.rows[block.start + 1].dir];
-                            self.terms.stiffness_dofs.extend(node.dofs);
+                            self.terms.stiffness_dofs.extend(dofs);
                             self.terms.stiffness.extend(slip_block(&tau, g, beta));
                         }
                     }
                 }
             }
+            self.rhs[k] = *force;
             for v in orthonormal(&removed).0 {
-                self.terms.removed_dofs.extend(node.dofs);
+                remove(&dofs, &v, &mut self.rhs[k], |c| c);
+                self.terms.removed_dofs.extend(dofs);
                 self.terms.removed.extend(v);
             }
         }
-        for (force, node) in self.force.iter_mut().zip(&self.nodes) {
-            *force = node
-                .dofs
-                .map(|d| if d < 0 { 0.0 } else { self.rhs[d as usize] });
-        }
-        self.terms.project(&mut self.rhs);
     }
 
     /// The multipliers of the iterate w: λ = 0 on inactive rows, γ = c ĝ + β T w_τ on
     /// slipping nodes, and on each node's removed rows the least-squares split of the
-    /// residual r = b − f_slip − (K + S) w there (`force` holds b − f_slip there).
+    /// residual r = b − f_slip − (K + S) w there (`force` holds b − f_slip there). w is the
+    /// same on return (`ConstrainedSystem::mult_at`).
     fn multipliers(
         &mut self,
         system: &mut impl ConstrainedSystem,
         rows: &Rows,
         sets: &Sets,
-        w: &[f64],
+        w: &mut [f64],
         z: &mut [f64],
     ) -> Result<()> {
-        system.mult(w, &mut self.r)?;
-        self.terms.add_stiffness(w, &mut self.r);
-        for (node, force) in self.nodes.iter().zip(&self.force) {
+        system.mult_at(w, self.dofs.as_flattened(), self.r.as_flattened_mut())?;
+        // S w, block by block in the nodes' order (a block is a slipping node's).
+        let mut blocks = self.terms.stiffness_products(w).peekable();
+        for (r, dofs) in self.r.iter_mut().zip(&self.dofs) {
+            if let Some((_, s)) = blocks.next_if(|(d, _)| d == dofs) {
+                (0..3).filter(|&c| dofs[c] >= 0).for_each(|c| r[c] += s[c]);
+            }
+        }
+        for (k, node) in self.nodes.iter().enumerate() {
             let mut removed: Vec<usize> = Vec::new();
             if let Some(i) = node.contact {
                 z[i] = 0.0;
@@ -665,9 +690,9 @@ impl ActiveSetSolver {
                     Friction::Slip { g, beta } => slip_multipliers(rows, j, g, beta, w, z),
                 }
             }
-            let local: [f64; 3] = std::array::from_fn(|c| match node.dofs[c] {
+            let local: [f64; 3] = std::array::from_fn(|c| match self.dofs[k][c] {
                 -1 => 0.0,
-                d => force[c] - self.r[d as usize],
+                _ => self.force[k][c] - self.r[k][c],
             });
             let dirs: Vec<[f64; 3]> = removed.iter().map(|&i| rows.rows[i].dir).collect();
             for (i, zi) in removed.iter().zip(split(&dirs, local)) {
@@ -675,6 +700,23 @@ impl ActiveSetSolver {
             }
         }
         Ok(())
+    }
+}
+
+/// a += z · the row's direction, a at its node's components: `NodalRow::add_transpose` on
+/// the node's dofs alone.
+fn add_at_node(row: &NodalRow, z: f64, a: &mut [f64; 3]) {
+    for c in (0..row.dim).filter(|&c| row.dir[c] != 0.0) {
+        a[c] += z * row.dir[c];
+    }
+}
+
+/// a ← a − (v·a) v over the dofs d that exist, a's value at the c-th of them a[at(c)]: the
+/// removal of one direction of a node (`Terms::project`).
+fn remove(d: &[i32], v: &[f64], a: &mut [f64], at: impl Fn(usize) -> usize) {
+    let p: f64 = (0..3).filter(|&c| d[c] >= 0).map(|c| v[c] * a[at(c)]).sum();
+    for c in (0..3).filter(|&c| d[c] >= 0) {
+        a[at(c)] -= p * v[c];
     }
 }
 
@@ -703,14 +745,14 @@ fn split(dirs: &[[f64; 3]], r: [f64; 3]) -> Vec<f64> {
 /// (`petsc::Krylov::solve_constrained`).
 #[cfg(feature = "petsc")]
 impl ConstrainedSystem for crate::petsc::Krylov {
-    fn mult(&mut self, x: &[f64], y: &mut [f64]) -> Result<()> {
-        crate::petsc::Krylov::mult(self, x, y)
+    fn mult_at(&mut self, x: &mut [f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
+        crate::petsc::Krylov::mult_at(self, x, dofs, y)
     }
 
     fn solve(
         &mut self,
         terms: &Terms,
-        b: &[f64],
+        rhs: RightSide<'_>,
         w: &mut [f64],
         tolerance: Tolerance,
         pc: Preconditioner,
@@ -730,6 +772,7 @@ impl ConstrainedSystem for crate::petsc::Krylov {
             Tolerance::OfRhs(rtol) => crate::petsc::Tolerance::OfRhs(rtol),
             Tolerance::OfStart(eta) => crate::petsc::Tolerance::OfStart(eta),
         };
+        let b = (rhs.b, rhs.dofs, rhs.values);
         let s = self.solve_constrained(view, b, w, tolerance, hierarchy)?;
         Ok(LinearSolve {
             iterations: s.iterations,
@@ -808,29 +851,29 @@ fn orthonormal(vs: &[[f64; 3]]) -> (Vec<[f64; 3]>, Vec<Option<usize>>) {
     (q, index)
 }
 
-/// The nodes of the rows, in the order of their first row.
-fn nodes(rows: &Rows) -> Vec<Node> {
+/// The nodes of the rows, in the order of their first row, and each node's dofs (the union
+/// over its rows: −1 where no row touches the component).
+fn nodes(rows: &Rows) -> (Vec<Node>, Vec<[i32; 3]>) {
     let mut index = std::collections::HashMap::new();
-    let mut nodes: Vec<Node> = Vec::new();
+    let (mut nodes, mut dofs) = (Vec::new(), Vec::new());
     for (i, row) in rows.rows.iter().enumerate() {
         let k = *index.entry(row.node).or_insert_with(|| {
             nodes.push(Node {
-                dofs: [-1; 3],
                 contact: None,
                 friction: None,
             });
+            dofs.push([-1; 3]);
             nodes.len() - 1
         });
-        let node = &mut nodes[k];
         for c in (0..row.dim).filter(|&c| row.dir[c] != 0.0) {
-            node.dofs[c] = row.dofs[c] as i32;
+            dofs[k][c] = row.dofs[c] as i32;
         }
         match i < rows.n_contact {
-            true => node.contact = Some(i),
-            false => node.friction = Some((i - rows.n_contact) / rows.block),
+            true => nodes[k].contact = Some(i),
+            false => nodes[k].friction = Some((i - rows.n_contact) / rows.block),
         }
     }
-    nodes
+    (nodes, dofs)
 }
 
 fn max_abs(v: &[f64]) -> f64 {
@@ -840,7 +883,6 @@ fn max_abs(v: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fem::NodalRow;
 
     /// The least-squares split recovers the coefficients of independent directions exactly,
     /// and gives a direction dependent on those before it nothing (the 90° corner).
@@ -918,7 +960,7 @@ mod tests {
         assert!(!stick.stiffness_moved(&slip(50.0), &rows_3d, &rho));
     }
 
-    /// Π removes the directions of a node and keeps the rest; S adds its block.
+    /// Π removes the directions of a node and keeps the rest; S multiplies by its block.
     #[test]
     fn terms_project_and_add_their_stiffness() {
         let n = [0.6, 0.0, 0.8];
@@ -932,8 +974,8 @@ mod tests {
         terms.project(&mut a);
         assert!(a[3].abs() <= 1e-15 && a[5].abs() <= 1e-15, "{a:?}");
         assert_eq!(a[4], 7.0);
-        let mut y = vec![0.0; 6];
-        terms.add_stiffness(&[1.0, 2.0, 9.0, 9.0, 9.0, 9.0], &mut y);
-        assert_eq!(&y[..3], &[4.0, 7.0, 0.0]);
+        let x = [1.0, 2.0, 9.0, 9.0, 9.0, 9.0];
+        let products: Vec<_> = terms.stiffness_products(&x).collect();
+        assert_eq!(products, [(&[0, 1, -1][..], [4.0, 7.0, 0.0])]);
     }
 }

@@ -404,8 +404,9 @@ fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
     let others = Sets::of(&disc, |i| i % 3 != 1, |j| j % 5 == 0);
     let mut solve = |sets: &Sets, hierarchy: Hierarchy| {
         let mut w = vec![0.0; disc.n_free];
+        let (rhs, tolerance) = ((&b[..], &[][..], &[][..]), Tolerance::OfRhs(1e-12));
         let s = krylov
-            .solve_constrained(sets.view(), &b, &mut w, Tolerance::OfRhs(1e-12), hierarchy)
+            .solve_constrained(sets.view(), rhs, &mut w, tolerance, hierarchy)
             .unwrap();
         assert!(s.failed.is_none(), "{hierarchy:?}: {:?}", s.failed);
         let defect = krylov.galerkin_defect().unwrap();
