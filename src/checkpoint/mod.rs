@@ -194,7 +194,7 @@ impl Identity {
             dof_of: disc
                 .free
                 .iter()
-                .map(|d| d.map_or(-1, |i| i as i64))
+                .map(|d| d.get().map_or(-1, |i| i as i64))
                 .collect(),
         }
     }

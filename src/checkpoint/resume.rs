@@ -213,7 +213,7 @@ impl Checkpoint {
         let dof_of: Vec<i64> = disc
             .free
             .iter()
-            .map(|d| d.map_or(-1, |i| i as i64))
+            .map(|d| d.get().map_or(-1, |i| i as i64))
             .collect();
         if diffs.is_empty() && dof_of != self.id.dof_of {
             diffs.push(

@@ -77,10 +77,36 @@ pub struct Prescribed {
     pub scale: f64,
 }
 
+/// A global dof's index in the numbering (`Numbering::free`): a free dof's 0..n_free, a
+/// prescribed one's n_free..n_dofs, or none where the dof is held at zero. Four bytes a
+/// dof, where an `Option<usize>` took sixteen: every rank holds one a dof of the whole.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DofIndex(u32);
+
+impl DofIndex {
+    /// A dof held at zero.
+    const HELD: DofIndex = DofIndex(u32::MAX);
+    /// The most dofs a numbering holds.
+    pub const MAX_DOFS: usize = u32::MAX as usize;
+
+    pub fn get(self) -> Option<usize> {
+        (self != DofIndex::HELD).then_some(self.0 as usize)
+    }
+
+    fn of(index: usize) -> DofIndex {
+        DofIndex(index as u32)
+    }
+
+    /// A numbering of n global dofs in which each is its own index (no condition held).
+    pub fn each(n: usize) -> Vec<DofIndex> {
+        (0..n).map(DofIndex::of).collect()
+    }
+}
+
 /// The dof numbering under the scene's conditions.
 pub struct Numbering {
-    /// Global dof → index: free dofs 0..n_free, prescribed n_free..n_dofs, None if held at 0.
-    pub free: Vec<Option<usize>>,
+    /// Global dof → index: free dofs 0..n_free, prescribed n_free..n_dofs, none if held at 0.
+    pub free: Vec<DofIndex>,
     pub n_free: usize,
     pub n_dofs: usize,
     pub prescribed: Vec<Prescribed>,
@@ -148,6 +174,16 @@ impl Numbering {
     /// The numbering of `scene`'s conditions on `mesh`, every rule checked.
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Numbering> {
         let d = mesh.dim;
+        if d * mesh.nodes.len() >= DofIndex::MAX_DOFS {
+            return Err(Error::input(format!(
+                "{}: {} nodes make {} dofs, more than the {} that viscontact numbers: \
+                 split the body, or mesh it coarser",
+                mesh.path.display(),
+                mesh.nodes.len(),
+                d * mesh.nodes.len(),
+                DofIndex::MAX_DOFS - 1
+            )));
+        }
         let mut holds: Vec<Option<Hold>> = vec![None; d * mesh.nodes.len()];
         let mut clamped = vec![false; mesh.nodes.len()];
         for (i, name) in scene.mesh.groups.fixed.iter().enumerate() {
@@ -189,14 +225,14 @@ impl Numbering {
 
     /// Free dofs first, then prescribed ones, each in global order.
     fn of(holds: &[Option<Hold>], d: usize, frames: Frames) -> Numbering {
-        let mut free = vec![None; holds.len()];
+        let mut free = vec![DofIndex::HELD; holds.len()];
         let mut held = vec![0u8; holds.len() / d];
         let mut held_by = Vec::new();
         let mut n_free = 0;
         for (g, h) in holds.iter().enumerate() {
             match h {
                 None => {
-                    free[g] = Some(n_free);
+                    free[g] = DofIndex::of(n_free);
                     n_free += 1;
                 }
                 Some(hold) => {
@@ -213,7 +249,7 @@ impl Numbering {
             }) = *h
             {
                 let dof = n_free + prescribed.len();
-                free[g] = Some(dof);
+                free[g] = DofIndex::of(dof);
                 prescribed.push(Prescribed {
                     dof,
                     node: g / d,

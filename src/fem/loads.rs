@@ -6,7 +6,7 @@
 //!
 //! [`Facet::quadrature`]: crate::mesh::Facet::quadrature
 
-use super::{Cell, CellSource, Frames};
+use super::{Cell, CellSource, DofIndex, Frames};
 use crate::expr::{Point, Scalar};
 use crate::mesh::{fmt_point, Mesh};
 use crate::scene::Scene;
@@ -157,13 +157,13 @@ impl Loads {
     pub fn add(
         &self,
         t: f64,
-        (free, frames): (&[Option<usize>], &Frames),
+        (free, frames): (&[DofIndex], &Frames),
         scene: &Scene,
         rhs: &mut [f64],
     ) -> Result<()> {
         self.visit(t, scene, |_, dof, v| {
             frames.spread(self.dim, dof, v, |g, v| {
-                if let Some(d) = free[g] {
+                if let Some(d) = free[g].get() {
                     rhs[d] += v;
                 }
             })

@@ -16,7 +16,7 @@ use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
 use crate::scene::{Friction, MeshChoice, Model, Scene};
 use crate::{Error, Result};
-pub use constraints::{Frames, Numbering, Prescribed};
+pub use constraints::{DofIndex, Frames, Numbering, Prescribed};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::{Keep, Loads};
@@ -95,8 +95,8 @@ pub struct Discretization {
     /// On rank 0 of several, each cell's dim + 1 vertices ([`Hold::Vertices`]); else none.
     vertices: Vec<u32>,
     /// Global dof d·node + component → index: free dofs 0..n_free, prescribed dofs
-    /// n_free..n_dofs; None where a condition holds the dof at zero (Γ1).
-    pub free: Vec<Option<usize>>,
+    /// n_free..n_dofs; none where a condition holds the dof at zero (Γ1).
+    pub free: Vec<DofIndex>,
     /// The unknowns of the step problem.
     pub n_free: usize,
     /// The length of the vectors the loop keeps: n_free plus the prescribed dofs.
@@ -357,7 +357,7 @@ impl RowMaker<'_> {
         let mut dir = self.in_dofs(node, dir);
         let mut dofs = [0; 3];
         for c in 0..d {
-            match self.numbering.free[d * node + c] {
+            match self.numbering.free[d * node + c].get() {
                 Some(i) if self.numbering.held[node] & (1 << c) == 0 => dofs[c] = i,
                 _ if dir[c].abs() <= 1e-9 => dir[c] = 0.0,
                 _ => return Err(Acts(c)),
@@ -536,7 +536,7 @@ fn friction_integrals(
     scene: &Scene,
     fr: &Friction,
     g: &Group,
-    (free, frames): (&[Option<usize>], &Frames),
+    (free, frames): (&[DofIndex], &Frames),
     n_dofs: usize,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
     let d = mesh.dim;
@@ -558,7 +558,7 @@ fn friction_integrals(
                 for comp in 0..d {
                     let v = w * ph * big_f * f.normal[comp];
                     frames.spread(d, d * node + comp, v, |g, v| {
-                        if let Some(dof) = free[g] {
+                        if let Some(dof) = free[g].get() {
                             gf[dof] += v;
                         }
                     });
@@ -858,7 +858,7 @@ impl Discretization {
         own.iter().for_each(|&d| mine[d] = true);
         let mut reaches = vec![false; self.nodes.len()];
         for (g, d) in self.free.iter().enumerate() {
-            if d.is_some_and(|d| d < self.n_free && mine[d]) {
+            if d.get().is_some_and(|d| d < self.n_free && mine[d]) {
                 reaches[g / self.dim] = true;
             }
         }
@@ -973,7 +973,7 @@ impl Discretization {
             let pq_at = |node: usize| {
                 let mut pq = [[0.0; D]; 2];
                 for (c, dof) in dofs[node].iter().enumerate() {
-                    if let Some(dof) = *dof {
+                    if let Some(dof) = dof.get() {
                         let at = place(held, dof);
                         let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + at]);
                         let (w, u) = (w[dof], u[at]);
@@ -1265,7 +1265,9 @@ fn nodal_vector<const N: usize>(
     let d = disc.dim;
     let mut out = [0.0; N];
     for (k, o) in out.iter_mut().enumerate().take(d) {
-        *o = disc.free[d * i + k].map_or(0.0, |dof| v[place(held, dof)]);
+        *o = disc.free[d * i + k]
+            .get()
+            .map_or(0.0, |dof| v[place(held, dof)]);
     }
     disc.frames.to_space(i, out)
 }
@@ -1463,7 +1465,7 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 fn assemble(
     cells: CellSource,
     d: usize,
-    (free, frames, n): (&[Option<usize>], &Frames, usize),
+    (free, frames, n): (&[DofIndex], &Frames, usize),
     materials: &CellMaterials,
     r: Isotropic,
     groups: usize,
@@ -1487,12 +1489,13 @@ fn assemble(
         for (j, &p) in nodes.iter().enumerate() {
             for (i, &q) in nodes.iter().enumerate() {
                 for be in 0..d {
-                    let Some(col) = free[d * p + be] else {
+                    let Some(col) = free[d * p + be].get() else {
                         continue;
                     };
                     let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
                     for al in 0..d {
-                        let Some(row) = free[d * q + al].filter(|&i| i == col || whole(col)) else {
+                        let row = free[d * q + al].get();
+                        let Some(row) = row.filter(|&i| i == col || whole(col)) else {
                             continue;
                         };
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);
@@ -1528,10 +1531,10 @@ fn assemble(
 fn pattern(
     cells: CellSource,
     d: usize,
-    (free, n): (&[Option<usize>], usize),
+    (free, n): (&[DofIndex], usize),
     whole: &dyn Fn(usize) -> bool,
 ) -> (Vec<usize>, Vec<usize>) {
-    let dofs = |p: usize| free[d * p..d * (p + 1)].iter().flatten().copied();
+    let dofs = |p: usize| free[d * p..d * (p + 1)].iter().filter_map(|i| i.get());
     let has_dofs = |p: usize| dofs(p).next().is_some();
     let lists = |p: usize| dofs(p).any(whole);
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
@@ -1547,8 +1550,8 @@ fn pattern(
     }
     let mut node_of = vec![0; n];
     for (g, i) in free.iter().enumerate() {
-        if let Some(i) = i {
-            node_of[*i] = g / d;
+        if let Some(i) = i.get() {
+            node_of[i] = g / d;
         }
     }
     let column_len = |col: usize, p: usize| match whole(col) {

@@ -170,7 +170,9 @@ fn held_rows(
                     continue;
                 };
                 for (j, &p) in nodes.iter().enumerate() {
-                    for (be, col) in (0..d).filter_map(|be| Some((be, disc.free[d * p + be]?))) {
+                    for (be, col) in
+                        (0..d).filter_map(|be| Some((be, disc.free[d * p + be].get()?)))
+                    {
                         let parts = t.parts_in([i, j], [al, be], [frame(i), frame(j)]);
                         let [ka, kb, kr] = [a, b, r].map(|c| t.entry(c, parts));
                         let at = g * disc.n_dofs + col;
@@ -211,7 +213,7 @@ fn normal_stress_load(mesh: &Mesh, scene: &Scene) -> Result<Vec<f64>> {
     let name = &scene.mesh.groups.friction;
     let g = group(mesh, scene, "mesh.groups.friction", name)?;
     // Every global dof its own index, no frame: g_F in x, y, z at every node.
-    let all: Vec<Option<usize>> = (0..mesh.dim * mesh.nodes.len()).map(Some).collect();
+    let all = super::DofIndex::each(mesh.dim * mesh.nodes.len());
     let dofs = (all.as_slice(), &super::Frames::default());
     let (g_f, _) = super::friction_integrals(mesh, scene, fr, g, dofs, all.len())?;
     Ok(g_f)

@@ -697,7 +697,7 @@ impl Drop for Krylov {
 /// The unknown (the index among the n_free unknowns) of global dof `g`, if it is one: not
 /// held at zero, nor prescribed (`[[dirichlet]]` values, numbered from n_free on).
 fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
-    disc.free[g].filter(|&f| f < disc.n_free)
+    disc.free[g].get().filter(|&f| f < disc.n_free)
 }
 
 /// d where every node's unknowns are d consecutive ones starting at a multiple of d, or

@@ -25,7 +25,7 @@ fn random_half(disc: &Discretization, rng: &mut SplitMix) -> Vec<usize> {
     let d = disc.dim;
     (0..disc.free.len() / d)
         .filter(|_| rng.below(2) == 0)
-        .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g]))
+        .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g].get()))
         .collect::<BTreeSet<_>>()
         .into_iter()
         .collect()
@@ -277,7 +277,9 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
         let d = disc.dim;
         let nodes = disc.free.len() / d;
         // The unknowns of a quarter of the nodes; the piece: the cells with one of them.
-        let own: Vec<usize> = (0..d * nodes / 4).filter_map(|g| disc.free[g]).collect();
+        let own: Vec<usize> = (0..d * nodes / 4)
+            .filter_map(|g| disc.free[g].get())
+            .collect();
         let piece: Vec<usize> = (0..disc.cells.len())
             .filter(|&c| {
                 disc.cells[c].vertices()[..=d]
@@ -287,7 +289,7 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
             .collect();
         let also: BTreeSet<usize> = (piece.iter())
             .flat_map(|&c| disc.cells[c].vertices()[..=d].to_vec())
-            .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g]))
+            .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g].get()))
             .collect();
         disc.keep_columns(own.clone());
         if paired {
@@ -342,7 +344,7 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
             .step_by(5)
             .filter(|&v| {
                 (d * v..d * v + d)
-                    .filter_map(|g| disc.free[g])
+                    .filter_map(|g| disc.free[g].get())
                     .all(|i| also.contains(&i))
             })
             .collect();

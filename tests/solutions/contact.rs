@@ -175,7 +175,9 @@ fn normal_stress_pushes_gamma32_away_from_the_foundation_and_nothing_stops_it_th
     let d = disc.dim;
     let mut gamma32_nodes = 0;
     for node in 0..disc.nodes.len() {
-        let dofs: Vec<usize> = (0..d).filter_map(|c| disc.free[d * node + c]).collect();
+        let dofs: Vec<usize> = (0..d)
+            .filter_map(|c| disc.free[d * node + c].get())
+            .collect();
         if dofs.len() < d || dofs.iter().all(|&i| disc.g_f[i] == 0.0) {
             continue;
         }

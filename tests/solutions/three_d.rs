@@ -864,7 +864,7 @@ fn clamped_patch(
     let mut v = vec![0.0; disc.n_free];
     for (i, x) in disc.nodes.iter().enumerate() {
         for (comp, val) in [p, q, r].iter().enumerate() {
-            if let Some(d) = disc.free[3 * i + comp] {
+            if let Some(d) = disc.free[3 * i + comp].get() {
                 v[d] = val * x[0];
             }
         }
@@ -884,7 +884,9 @@ fn clamped_patch(
     let mut rows = 0;
     for i in interior {
         for comp in 0..3 {
-            let dof = disc.free[3 * i + comp].expect("interior nodes are free");
+            let dof = disc.free[3 * i + comp]
+                .get()
+                .expect("interior nodes are free");
             assert_eq!(f[dof], 0.0);
             rows += 1;
         }
@@ -970,7 +972,7 @@ fn three_d_load_quadrature_is_exact_for_polynomials() {
         .body(&body.each_ref().map(poly_expr))
         .write(dir.path(), "box.toml");
     let (s, mesh, disc) = load(&scene, &[]);
-    let all_free: Vec<Option<usize>> = (0..3 * mesh.nodes.len()).map(Some).collect();
+    let all_free = viscontact::fem::DofIndex::each(3 * mesh.nodes.len());
     let mut f = vec![0.0; 3 * mesh.nodes.len()];
     disc.loads
         .add(0.0, (&all_free, &Default::default()), &s, &mut f)
