@@ -83,6 +83,10 @@ impl NodalRow {
     }
 }
 
+/// A vector's values at the dofs where it is not zero, increasing: one that lives on a
+/// boundary.
+pub type DofValues = Vec<(usize, f64)>;
+
 /// Everything the time loop needs from space: matrices, loads, boundary operators.
 pub struct Discretization {
     /// Spatial dimension d (2 or 3): d dofs per node.
@@ -123,8 +127,10 @@ pub struct Discretization {
     /// their velocities to the right side).
     pub k_a_all: Option<Sparse>,
     pub loads: Loads,
-    /// g_F_i = ∫_{Γ3,2} F φ_i ν da (n_dofs); empty when F = 0 or no friction group.
-    pub g_f: Vec<f64>,
+    /// g_F_i = ∫_{Γ3,2} F φ_i ν da at the dofs i where it is not zero, increasing (it lives
+    /// on Γ3,2: a vector of the whole would cost every rank 8 bytes a dof); empty when F =
+    /// 0 or no friction group.
+    pub g_f: DofValues,
     /// Rows n_i on Γ3,1 (empty when contact is off).
     pub contact: Vec<NodalRow>,
     /// Rows τ_i (2D) or τ_i1, τ_i2 (3D, consecutive) at the Γ3,2 nodes with c_i > 0 (empty
@@ -460,15 +466,15 @@ fn contact_rows(mesh: &Mesh, scene: &Scene, rows: &RowMaker) -> Result<(Vec<Noda
     Ok((contact, contact_kink))
 }
 
-/// Γ3,2: g_F (empty when it vanishes), the friction rows τ_i with c_i = ∫ μF φ_i da, and
-/// the largest kink of the normals; a group with every node clamped is refused.
+/// Γ3,2: g_F where it is not zero, the friction rows τ_i with c_i = ∫ μF φ_i da, and the
+/// largest kink of the normals; a group with every node clamped is refused.
 fn friction_rows(
     mesh: &Mesh,
     scene: &Scene,
     fr: &Friction,
     rows: &RowMaker,
     n_dofs: usize,
-) -> Result<(Vec<f64>, Vec<NodalRow>, f64)> {
+) -> Result<(DofValues, Vec<NodalRow>, f64)> {
     let g = group(
         mesh,
         scene,
@@ -486,11 +492,9 @@ fn friction_rows(
     }
     let dofs = (rows.numbering.free.as_slice(), &rows.numbering.frames);
     let (gf, c) = friction_integrals(mesh, scene, fr, g, dofs, n_dofs)?;
-    let g_f = if gf.iter().any(|&v| v != 0.0) {
-        gf
-    } else {
-        Vec::new()
-    };
+    let g_f = (gf.into_iter().enumerate())
+        .filter(|&(_, v)| v != 0.0)
+        .collect();
     let (normals, k) = mesh.nodal_normals(g);
     if normals.iter().all(|&(node, _)| rows.held(node)) {
         return Err(on_fixed(
