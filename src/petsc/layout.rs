@@ -19,8 +19,9 @@ use crate::{Error, Result};
 /// Where each unknown stands among PETSc's rows, and each rank's rows.
 #[derive(Clone, Debug)]
 pub struct Layout {
-    /// The row of each unknown; None on one rank, where they are the same.
-    row: Option<Vec<usize>>,
+    /// The row of each unknown, in 4 bytes as the numbering holds its index
+    /// (`fem::DofIndex`); None on one rank, where they are the same.
+    row: Option<Vec<u32>>,
     /// Rank r holds the rows blocks[r]..blocks[r + 1] (size + 1 values, the last n_free).
     pub blocks: Vec<usize>,
 }
@@ -44,7 +45,7 @@ impl Layout {
         let mut next = 0;
         for v in order {
             for &i in &nodes[v] {
-                row[i] = next;
+                row[i] = next as u32;
                 next += 1;
             }
             blocks[part[v] + 1] += nodes[v].len();
@@ -60,7 +61,7 @@ impl Layout {
 
     /// The row of unknown i.
     pub fn row(&self, i: usize) -> usize {
-        self.row.as_ref().map_or(i, |row| row[i])
+        self.row.as_ref().map_or(i, |row| row[i] as usize)
     }
 
     /// The unknowns whose rows rank `rank` holds, increasing.
@@ -78,7 +79,7 @@ impl Layout {
     /// `rows` ← x in the rows' order.
     pub fn to_rows(&self, x: &[f64], rows: &mut [f64]) {
         match &self.row {
-            Some(row) => (x.iter().zip(row)).for_each(|(&v, &r)| rows[r] = v),
+            Some(row) => (x.iter().zip(row)).for_each(|(&v, &r)| rows[r as usize] = v),
             None => rows.copy_from_slice(x),
         }
     }
@@ -86,7 +87,7 @@ impl Layout {
     /// x ← `rows`, from the rows' order.
     pub fn from_rows(&self, rows: &[f64], x: &mut [f64]) {
         match &self.row {
-            Some(row) => (x.iter_mut().zip(row)).for_each(|(v, &r)| *v = rows[r]),
+            Some(row) => (x.iter_mut().zip(row)).for_each(|(v, &r)| *v = rows[r as usize]),
             None => x.copy_from_slice(rows),
         }
     }
@@ -106,7 +107,7 @@ impl Layout {
         };
         let mut unknown = vec![0; row.len()];
         for (i, &r) in row.iter().enumerate() {
-            unknown[r] = i;
+            unknown[r as usize] = i;
         }
         let own = &unknown[self.blocks[rank]..self.blocks[rank + 1]];
         // Sized once: grown by doubling, the values could hold up to twice their length.
@@ -117,7 +118,7 @@ impl Layout {
         let mut sorted: Vec<(usize, f64)> = Vec::new();
         for &i in own {
             sorted.clear();
-            sorted.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]], val[p])));
+            sorted.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]] as usize, val[p])));
             sorted.sort_by_key(|&(c, _)| c);
             for &(c, v) in &sorted {
                 cols.push(petsc_int(c)?);
