@@ -508,17 +508,22 @@ pub enum Tolerance {
 }
 
 impl Krylov {
-    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1), on every rank. x is whole
-    /// and the same on return (on several ranks it is in PETSc's order during the product);
+    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1), on every rank, x whole:
     /// each rank computes its own rows of K x, and the values at `dofs` come from the ranks
     /// that hold them (`values_at`), where the whole product crossed to every rank.
-    pub fn mult_at(&mut self, x: &mut [f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
+    pub fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
         assert!(x.len() == self.n && dofs.len() == y.len());
         self.own.resize(self.mine.len(), 0.0);
-        let own = self.own.as_mut_ptr();
+        let x = match self.layout.permutes() {
+            true => {
+                self.layout.to_rows(x, &mut self.rows);
+                &self.rows
+            }
+            false => x,
+        };
         // SAFETY: x holds n values and own this rank's rows; PETSc reads x and writes own
         // within the call.
-        let out = self.in_rows(x, |ctx, x| unsafe { vc_mult(ctx, x, own) });
+        let out = unsafe { vc_mult(self.ctx, x.as_ptr(), self.own.as_mut_ptr()) };
         check(out, "MatMult")?;
         self.values_at(dofs, y)
     }

@@ -120,9 +120,8 @@ pub struct LinearSolve {
 /// The systems of the Newton iteration: products with K and solves of the constrained
 /// system Π(K + S)Π w + (I − Π) w = Π b with the terms of `Terms`.
 pub trait ConstrainedSystem {
-    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1). x is the same on return (a
-    /// backend may reorder it in place meanwhile).
-    fn mult_at(&mut self, x: &mut [f64], dofs: &[i32], y: &mut [f64]) -> Result<()>;
+    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1).
+    fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()>;
     /// w ← the constrained system's solution, from the guess in w, to `tolerance`, with the
     /// preconditioner `pc` says. Its right side Π(b − f_slip) is b but at Γ3's nodes, where
     /// it is `rhs`.
@@ -657,14 +656,13 @@ impl ActiveSetSolver {
 
     /// The multipliers of the iterate w: λ = 0 on inactive rows, γ = c ĝ + β T w_τ on
     /// slipping nodes, and on each node's removed rows the least-squares split of the
-    /// residual r = b − f_slip − (K + S) w there (`force` holds b − f_slip there). w is the
-    /// same on return (`ConstrainedSystem::mult_at`).
+    /// residual r = b − f_slip − (K + S) w there (`force` holds b − f_slip there).
     fn multipliers(
         &mut self,
         system: &mut impl ConstrainedSystem,
         rows: &Rows,
         sets: &Sets,
-        w: &mut [f64],
+        w: &[f64],
         z: &mut [f64],
     ) -> Result<()> {
         system.mult_at(w, self.dofs.as_flattened(), self.r.as_flattened_mut())?;
@@ -745,7 +743,7 @@ fn split(dirs: &[[f64; 3]], r: [f64; 3]) -> Vec<f64> {
 /// (`petsc::Krylov::solve_constrained`).
 #[cfg(feature = "petsc")]
 impl ConstrainedSystem for crate::petsc::Krylov {
-    fn mult_at(&mut self, x: &mut [f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
+    fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
         crate::petsc::Krylov::mult_at(self, x, dofs, y)
     }
 
