@@ -64,6 +64,11 @@ impl Layout {
         self.row.as_ref().map_or(i, |row| row[i] as usize)
     }
 
+    /// The rank that holds row r.
+    pub fn rank_of_row(&self, r: usize) -> usize {
+        self.blocks.partition_point(|&b| b <= r) - 1
+    }
+
     /// The unknowns whose rows rank `rank` holds, increasing.
     pub fn own(&self, rank: usize) -> Vec<usize> {
         let block = self.blocks[rank]..self.blocks[rank + 1];
@@ -168,7 +173,7 @@ impl Layout {
     /// The rank that holds each of `nodes` (the unknowns of each node that has any): a rank
     /// holds whole nodes, so a node's first unknown says whose it is.
     fn ranks_of(&self, nodes: &[Vec<usize>]) -> Vec<usize> {
-        let rank_of = |v: &Vec<usize>| self.blocks.partition_point(|&b| b <= self.row(v[0])) - 1;
+        let rank_of = |v: &Vec<usize>| self.rank_of_row(self.row(v[0]));
         nodes.iter().map(rank_of).collect()
     }
 

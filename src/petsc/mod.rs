@@ -278,6 +278,9 @@ pub struct Krylov {
     mine: std::ops::Range<usize>,
     rows: Vec<f64>,
     own: Vec<f64>,
+    /// How `values_at` collects the values at the dofs it was last asked for (the active
+    /// set asks for the same at every product): made once, not at every product.
+    at: Option<AtDofs>,
     /// On several ranks, for the Newton systems: this rank's rows of the step matrix, which
     /// the shim reads as its copy of K until the KSP is destroyed (it keeps none).
     _rows: Option<Csr<'static>>,
@@ -356,6 +359,7 @@ impl Krylov {
             mine: layout.blocks[rank]..layout.blocks[rank + 1],
             rows: vec![0.0; if layout.permutes() { n } else { 0 }],
             own: Vec::new(),
+            at: None,
             layout,
             _rows: (size > 1 && settings.newton).then(|| csr.into_owned()),
         })
@@ -447,6 +451,39 @@ impl Krylov {
     }
 }
 
+/// How the values of a product at some dofs reach every rank (`Krylov::values_at`): the
+/// positions k of the dofs that exist (≥ 0) ordered by the rank that holds their rows, those
+/// rows in that order, and each rank's count and first place among them.
+struct AtDofs {
+    dofs: Vec<i32>,
+    order: Vec<usize>,
+    rows: Vec<usize>,
+    counts: Vec<c_int>,
+    displs: Vec<c_int>,
+}
+
+impl AtDofs {
+    fn new(layout: &Layout, dofs: &[i32]) -> AtDofs {
+        let row = |k: usize| layout.row(dofs[k] as usize);
+        let mut order: Vec<usize> = (0..dofs.len()).filter(|&k| dofs[k] >= 0).collect();
+        order.sort_by_key(|&k| layout.rank_of_row(row(k)));
+        let rows: Vec<usize> = order.iter().map(|&k| row(k)).collect();
+        let mut counts = vec![0; layout.blocks.len() - 1];
+        rows.iter()
+            .for_each(|&r| counts[layout.rank_of_row(r)] += 1);
+        let displs = (counts.iter())
+            .scan(0, |at, &c| Some(std::mem::replace(at, *at + c)))
+            .collect();
+        AtDofs {
+            dofs: dofs.to_vec(),
+            order,
+            rows,
+            counts,
+            displs,
+        }
+    }
+}
+
 /// A right side as a shim solve takes it: b, but at `dofs` (−1: none), where it is
 /// `values` (the constrained system's Π(b − f_slip), b itself but at Γ3's nodes).
 type RightSide<'a> = (&'a [f64], &'a [i32], &'a [f64]);
@@ -530,28 +567,18 @@ impl Krylov {
 
     /// y[k] ← `own`'s value at dofs[k] (0 where it is −1), from the rank that holds the
     /// row: on several ranks each sends its values, in the order of `dofs`, to all.
-    fn values_at(&self, dofs: &[i32], y: &mut [f64]) -> Result<()> {
-        let blocks = &self.layout.blocks;
-        let row = |k: usize| (dofs[k] >= 0).then(|| self.layout.row(dofs[k] as usize));
-        let rank_of = |r: usize| blocks.partition_point(|&b| b <= r) - 1;
-        let mut order: Vec<usize> = (0..dofs.len()).filter(|&k| dofs[k] >= 0).collect();
-        order.sort_by_key(|&k| row(k).map(rank_of));
-        let mine: Vec<f64> = (order.iter().filter_map(|&k| row(k)))
+    fn values_at(&mut self, dofs: &[i32], y: &mut [f64]) -> Result<()> {
+        if self.at.as_ref().is_none_or(|at| at.dofs != dofs) {
+            self.at = Some(AtDofs::new(&self.layout, dofs));
+        }
+        let at = self.at.as_ref().expect("made above");
+        let mine: Vec<f64> = (at.rows.iter())
             .filter(|r| self.mine.contains(r))
             .map(|r| self.own[r - self.mine.start])
             .collect();
-        let mut all = vec![0.0; order.len()];
+        let mut all = vec![0.0; at.order.len()];
         match self.layout.permutes() {
             true => {
-                let ranks = blocks.len() - 1;
-                let mut counts = vec![0; ranks];
-                order
-                    .iter()
-                    .filter_map(|&k| row(k))
-                    .for_each(|r| counts[rank_of(r)] += 1);
-                let displs: Vec<c_int> = (counts.iter())
-                    .scan(0, |at, &c| Some(std::mem::replace(at, *at + c)))
-                    .collect();
                 // SAFETY: mine holds this rank's count, all the sum of counts, which the
                 // displacements cut in rank order; MPI writes all within the call.
                 let code = unsafe {
@@ -559,8 +586,8 @@ impl Krylov {
                         mine.as_ptr(),
                         mine.len() as c_int,
                         all.as_mut_ptr(),
-                        counts.as_ptr(),
-                        displs.as_ptr(),
+                        at.counts.as_ptr(),
+                        at.displs.as_ptr(),
                     )
                 };
                 check(code, "MPI_Allgatherv")?;
@@ -568,7 +595,10 @@ impl Krylov {
             false => all = mine,
         }
         y.fill(0.0);
-        order.iter().zip(all).for_each(|(&k, value)| y[k] = value);
+        at.order
+            .iter()
+            .zip(all)
+            .for_each(|(&k, value)| y[k] = value);
         Ok(())
     }
 
