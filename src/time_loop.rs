@@ -53,7 +53,10 @@ pub struct TimeLoop<'p> {
     /// How the memory sums are computed (the compressed kernels' fits, if any).
     plans: Plans,
     /// w_n of the last solved step, and its unknowns kept while a step that can be given up
-    /// is solved into w (a solver may leave an iterate there).
+    /// is solved into w (a solver may leave an iterate there). On one of several MPI ranks
+    /// whose history holds some dofs alone (`Holds::Local`), w_n is exact at those, at the
+    /// rank's own rows and their neighbours' and at Γ3's alone (`petsc::Reads`): nothing
+    /// reads the others.
     w: Vec<f64>,
     w_start: Vec<f64>,
     /// Multipliers of the last solved step z_{n−1}: λ on contact rows, γ on friction rows;
@@ -144,7 +147,10 @@ pub struct Step<'a> {
     pub t: f64,
     /// u_n, at the dofs `local` where there are some (else every dof).
     pub u: &'a [f64],
+    /// w_n, exact where the loop's w is (on a follower rank, not everywhere), and
+    /// max|w_n| over every dof.
     pub w: &'a [f64],
+    pub w_max: f64,
     /// m_n of each memory group after the other's, at u_n's dofs.
     pub m: Option<&'a [f64]>,
     /// On a follower rank whose history holds some dofs alone (`Holds::Local`), those.
@@ -249,7 +255,10 @@ impl<'p> TimeLoop<'p> {
         // The step matrix is factored once, with the constrained boundary dofs ordered last
         // where the contact solver works on its trailing block, or handed to PETSc.
         let backend = match descriptor.build() {
-            Build::Krylov { newton } => petsc_backend(scene, (matrix, own), disc, *newton)?,
+            Build::Krylov { newton } => {
+                let reads = (&rows, holds.as_ref());
+                petsc_backend(scene, (matrix, own), disc, *newton, reads)?
+            }
             Build::Factor { last } => Backend::Cholesky(Factor::new(matrix, last)?),
             Build::Nothing => Backend::None,
         };
@@ -478,8 +487,11 @@ impl<'p> TimeLoop<'p> {
             return Ok(None);
         }
         std::mem::swap(&mut self.z_before, &mut self.spare);
+        self.backend.complete(&mut self.w[..nf])?;
+        let mut w_max = f64::NAN;
         if report.status == StepStatus::Solved {
-            report.status = self.trust(t, load_max)?;
+            w_max = self.w_max()?;
+            report.status = self.trust(t, load_max, w_max)?;
         }
         let h = &self.history;
         report.check(&StepAt {
@@ -494,6 +506,7 @@ impl<'p> TimeLoop<'p> {
             t,
             u: &h.u,
             w: &self.w,
+            w_max,
             m: if self.m.is_empty() {
                 None
             } else {
@@ -561,9 +574,7 @@ impl<'p> TimeLoop<'p> {
         if let Some(lift) = &self.lift {
             constraints::lift(lift, disc.n_free, &self.w, &mut self.b);
         }
-        if disc.own.is_some() {
-            self.backend.gather(&mut self.b)?;
-        }
+        self.backend.share(&mut self.b)?;
         Ok(load_max)
     }
 
@@ -593,27 +604,15 @@ impl<'p> TimeLoop<'p> {
                 ))
             }));
         }
-        let mut nan = false;
-        let mine = less_g_f(&mut self.b, &disc.g_f, |b| {
-            own.iter().fold(0.0f64, |m, &i| {
-                let x = b[i].abs();
-                nan |= x.is_nan();
-                if x > m {
-                    x
-                } else {
-                    m
-                }
-            })
-        });
-        self.backend.largest(if nan { f64::NAN } else { mine })
+        let mine = less_g_f(&mut self.b, &disc.g_f, |b| max_abs_at(b, own));
+        self.backend.largest(mine)
     }
 
     /// Whether a step the solver calls solved is trusted: finite, bounded by its loads
     /// (`Growth`) and keeping n·w ≤ 0 on Γ3,1 to the solver's tolerance.
-    fn trust(&mut self, t: f64, load_max: f64) -> Result<StepStatus> {
+    fn trust(&mut self, t: f64, load_max: f64, w_max: f64) -> Result<StepStatus> {
         let u_max = self.u_max()?;
         let h = &self.history;
-        let w_max = max_abs(&self.w);
         let mean_velocity = u_max / t.max(h.k);
         if !(u_max.is_finite() && w_max.is_finite()) {
             return Ok(StepStatus::NotFinite { u_max, w_max });
@@ -642,11 +641,32 @@ impl<'p> TimeLoop<'p> {
         })
     }
 
-    /// max|u_n|. On several MPI ranks, the largest of the ranks' (a maximum: one process's
-    /// bits), since a follower may hold some dofs alone and rank 0 holds every one; a rank
-    /// whose u_n is NaN somewhere keeps its NaN, and the others see +∞: not finite either.
+    /// max|u_n|: on several MPI ranks, the ranks' largest (`largest`), since a follower may
+    /// hold some dofs alone and rank 0 holds every one.
     fn u_max(&self) -> Result<f64> {
-        let mine = max_abs(&self.history.u);
+        self.largest(max_abs(&self.history.u))
+    }
+
+    /// max|w_n|. On several MPI ranks, the largest of each rank's own rows' and the
+    /// prescribed dofs' (which every rank holds): w_n is exact there, not everywhere on a
+    /// follower; as `u_max` says.
+    fn w_max(&self) -> Result<f64> {
+        let Some(own) = &self.disc.own else {
+            return Ok(max_abs(&self.w));
+        };
+        let (own_max, prescribed) = (
+            max_abs_at(&self.w, own),
+            max_abs(&self.w[self.disc.n_free..]),
+        );
+        self.largest(match own_max.is_nan() || prescribed.is_nan() {
+            true => f64::NAN,
+            false => own_max.max(prescribed),
+        })
+    }
+
+    /// The largest of the ranks' `mine` (a maximum: one process's bits); a rank whose
+    /// `mine` is NaN keeps its NaN, and the others see +∞: not finite either.
+    fn largest(&self, mine: f64) -> Result<f64> {
         if self.disc.own.is_none() {
             return Ok(mine);
         }
@@ -670,6 +690,7 @@ fn petsc_backend(
     (matrix, own): (&crate::fem::Sparse, Option<Own>),
     disc: &Discretization,
     newton: bool,
+    (rows, holds): (&Rows, Option<&Holds>),
 ) -> Result<Backend> {
     #[cfg(feature = "petsc")]
     {
@@ -679,14 +700,26 @@ fn petsc_backend(
             newton,
         };
         let own = own.map(|o| (o.layout, o.rows));
-        let krylov = crate::petsc::Krylov::new(matrix, own, disc, &settings)?;
+        // What this rank reads of a solution besides its own rows: Γ3's unknowns, and
+        // where its history holds some dofs alone, those; every one where it holds all.
+        let local = match holds {
+            Some(Holds::Local(dofs)) => dofs.as_slice(),
+            _ => &[],
+        };
+        let gamma3 = (rows.rows.iter()).flat_map(|r| r.entries().map(|(d, _)| d));
+        let dofs: Vec<usize> = gamma3.chain(local.iter().copied()).collect();
+        let reads = crate::petsc::Reads {
+            dofs: &dofs,
+            whole: !matches!(holds, Some(Holds::Local(_))),
+        };
+        let krylov = crate::petsc::Krylov::new(matrix, own, disc, &settings, reads)?;
         // GAMG's setup freed what its products held meanwhile.
         crate::resources::return_freed_memory();
         Ok(Backend::Petsc(krylov))
     }
     #[cfg(not(feature = "petsc"))]
     {
-        let _ = (matrix, own, disc, newton);
+        let _ = (matrix, own, disc, newton, rows, holds);
         Err(crate::Error::input(format!(
             "{}: solver.linear = \"petsc\" needs a build with the petsc feature",
             scene.path.display()
@@ -707,6 +740,25 @@ fn less_g_f<T>(b: &mut [f64], g_f: &[(usize, f64)], f: impl FnOnce(&[f64]) -> T)
     let out = f(b);
     g_f.iter().zip(kept).for_each(|(&(i, _), v)| b[i] = v);
     out
+}
+
+/// max|v_i| over i in `at`, NaN if any is NaN.
+fn max_abs_at(v: &[f64], at: &[usize]) -> f64 {
+    let mut nan = false;
+    let largest = at.iter().fold(0.0f64, |m, &i| {
+        let x = v[i].abs();
+        nan |= x.is_nan();
+        if x > m {
+            x
+        } else {
+            m
+        }
+    });
+    if nan {
+        f64::NAN
+    } else {
+        largest
+    }
 }
 
 /// max|v_i|, NaN if any v_i is NaN (`f64::max` would skip it). Eight running maxima: one

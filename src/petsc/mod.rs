@@ -8,7 +8,7 @@
 //! MPI launcher with several processes, before the run reads anything (docs/cluster.md),
 //! and finalized by [`finalize`] at the end of `main`. The KSPs span the ranks, K_A's and
 //! the active set's Newton systems' (each rank holds a block of whole nodes' rows, as
-//! [`Layout`] partitions them, and gets the whole solution back).
+//! [`Layout`] partitions them, and gets back the solution where it reads it: `Spread`).
 //!
 //! # The solve
 //!
@@ -40,8 +40,10 @@
 //! there): a product with K ([`Krylov::mult`]) then takes the rank's rows of K, which
 //! the Krylov keeps (the rank's only copy of them: `ranks::Own`).
 
+mod exchange;
 mod layout;
 
+use exchange::Exchange;
 pub use layout::{Csr, Layout, RankShare};
 
 use crate::fem::constraints::rigid_mode;
@@ -91,7 +93,6 @@ extern "C" {
     ) -> c_int;
     fn vc_ksp_solve(ctx: *mut c_void, b: *const f64, x: *mut f64, v: *mut VcSolve) -> c_int;
     fn vc_mult(ctx: *mut c_void, x: *const f64, y: *mut f64) -> c_int;
-    fn vc_gather(ctx: *mut c_void, x: *mut f64) -> c_int;
     fn vc_allgather(
         send: *const f64,
         nsend: c_int,
@@ -270,14 +271,18 @@ pub struct Krylov {
     /// Whether K_A's solve in progress is to be given up (`Krylov::give_up_when`).
     give_up: Option<GiveUp>,
     /// Where the unknowns stand among PETSc's rows, and this rank's rows among them; on
-    /// several ranks a whole vector in the rows' order (a solve's w, a product's x, a
-    /// gathered vector), and where the calls need one, a vector of this rank's rows (a right
-    /// side's, a product's): on several ranks, or for a right side or a product that is
-    /// not a whole vector of the caller's (`solve_constrained`, `mult_at`).
+    /// several ranks, for a product with K, a whole vector in the rows' order (its x,
+    /// sized at the first product), and where the calls need one, a vector of this rank's
+    /// rows (a right side's, a product's): on several ranks, or for a right side or a
+    /// product that is not a whole vector of the caller's (`solve_constrained`,
+    /// `mult_at`); on several ranks, a solve's x in this rank's rows too.
     layout: Layout,
     mine: std::ops::Range<usize>,
     rows: Vec<f64>,
     own: Vec<f64>,
+    own_x: Vec<f64>,
+    /// On several ranks, how this rank's rows of a solution reach the ranks that read them.
+    spread: Option<Spread>,
     /// How `values_at` collects the values at the dofs it was last asked for (the active
     /// set asks for the same at every product): made once, not at every product.
     at: Option<AtDofs>,
@@ -300,6 +305,7 @@ impl Krylov {
         own: Option<(Layout, Option<Csr<'static>>)>,
         disc: &Discretization,
         settings: &KrylovSettings,
+        reads: Reads<'_>,
     ) -> Result<Self> {
         initialize()?;
         let n = matrix.nrows();
@@ -349,6 +355,10 @@ impl Krylov {
             "KSPGetType",
         )?;
         let name = |p: *const c_char| unsafe { CStr::from_ptr(p) }.to_string_lossy().into();
+        let spread = match layout.permutes() {
+            true => Some(Spread::new(&layout, rank, (settings.newton, &csr), reads)?),
+            false => None,
+        };
         Ok(Krylov {
             ctx,
             n,
@@ -357,8 +367,10 @@ impl Krylov {
             options: settings.options.clone(),
             give_up: None,
             mine: layout.blocks[rank]..layout.blocks[rank + 1],
-            rows: vec![0.0; if layout.permutes() { n } else { 0 }],
+            rows: Vec::new(),
             own: Vec::new(),
+            own_x: Vec::new(),
+            spread,
             at: None,
             layout,
             _rows: (size > 1 && settings.newton).then(|| csr.into_owned()),
@@ -376,50 +388,41 @@ impl Krylov {
     /// (`give_up_when`), w holds an iterate.
     pub fn solve(&mut self, b: &[f64], w: &mut [f64]) -> Result<Solve> {
         assert!(b.len() == self.n && w.len() == self.n);
-        // SAFETY: the rows of b hold this rank's count and w n values; PETSc reads the one
-        // and writes the other within the call.
+        // SAFETY: b and x hold this rank's count of rows; PETSc reads the one and writes
+        // the other within the call.
         self.solved("KSPSolve", (b, &[], &[]), w, |ctx, b, w, v| unsafe {
             vc_ksp_solve(ctx, b, w, v)
         })
-    }
-
-    /// `call(ctx, x)` on x in the order of PETSc's rows (`Layout`), where it differs from
-    /// the unknowns' in `rows`, and x back in the unknowns' order after it.
-    fn in_rows<T>(&mut self, x: &mut [f64], call: impl FnOnce(*mut c_void, *mut f64) -> T) -> T {
-        if !self.layout.permutes() {
-            return call(self.ctx, x.as_mut_ptr());
-        }
-        self.layout.to_rows(x, &mut self.rows);
-        let out = call(self.ctx, self.rows.as_mut_ptr());
-        self.layout.from_rows(&self.rows, x);
-        out
     }
 
     /// This rank's rows of the right side b but at `dofs`, where it is `values` (`dofs` −1:
     /// none), in PETSc's order: b itself where it is (one rank, nothing at `dofs`), else
     /// `own` filled.
     fn own_rows<'a>(&'a mut self, (b, dofs, values): RightSide<'a>) -> &'a [f64] {
-        if !self.layout.permutes() && dofs.is_empty() {
-            return b;
-        }
-        let (layout, mine) = (&self.layout, self.mine.clone());
-        self.own.resize(mine.len(), 0.0);
-        for (i, &bi) in b.iter().enumerate() {
-            if let Some(r) = Some(layout.row(i)).filter(|r| mine.contains(r)) {
-                self.own[r - mine.start] = bi;
+        let mine = self.mine.clone();
+        match &self.spread {
+            None if dofs.is_empty() => return b,
+            None => {
+                self.own.clear();
+                self.own.extend_from_slice(b);
+            }
+            Some(spread) => {
+                self.own.clear();
+                (self.own).extend(spread.unknowns.iter().map(|&i| b[i as usize]));
             }
         }
         for (&d, &value) in dofs.iter().zip(values).filter(|(&d, _)| d >= 0) {
-            if let Some(r) = Some(layout.row(d as usize)).filter(|r| mine.contains(r)) {
+            if let Some(r) = Some(self.layout.row(d as usize)).filter(|r| mine.contains(r)) {
                 self.own[r - mine.start] = value;
             }
         }
         &self.own
     }
 
-    /// A shim solve, `call(ctx, b, w, v)` on this rank's rows of the right side (b at
-    /// `dofs` replaced by `values`: `own_rows`) and w whole, both in the order of PETSc's
-    /// rows (w back in the unknowns' order after it), which asks at every iteration whether
+    /// A shim solve, `call(ctx, b, x, v)` on this rank's rows of the right side (b at
+    /// `dofs` replaced by `values`: `own_rows`) and of w, both in the order of PETSc's rows
+    /// (on several ranks, x's values go back to w, and the values of others' rows that this
+    /// rank reads come to it: `Spread`), which asks at every iteration whether
     /// to give the solve up (where `give_up_when` said how: the shim's `requested` and, in
     /// v, a pointer to the question that lives through the call) and fills v: what it did,
     /// or PETSc's error at `what`.
@@ -443,10 +446,80 @@ impl Krylov {
             v.requested = Some(requested);
             v.flag = now as *const GiveUp as *mut c_void;
         }
-        self.in_rows(w, |ctx, w| check(call(ctx, b, w, &mut v), what))?;
+        let x = match &self.spread {
+            None => w.as_mut_ptr(),
+            Some(spread) => {
+                self.own_x.clear();
+                (self.own_x).extend(spread.unknowns.iter().map(|&i| w[i as usize]));
+                self.own_x.as_mut_ptr()
+            }
+        };
+        check(call(self.ctx, b, x, &mut v), what)?;
+        if let Some(spread) = &self.spread {
+            (spread.unknowns.iter())
+                .zip(&self.own_x)
+                .for_each(|(&i, &x)| w[i as usize] = x);
+            spread.halo.run(w)?;
+        }
         Ok(Solve {
             given_up: v.given_up != 0,
             ..Solve::of(v.its, v.reason, v.rnorm)
+        })
+    }
+}
+
+/// What a rank of several reads of a solution and of a right side besides its own rows: the
+/// unknowns `dofs` at every solve (Γ3's, which the active set's decisions read on every
+/// rank, and a follower's history's, which its steps and its piece of a frame read), and
+/// every unknown once a step is solved where `whole` (its history holds every dof: rank 0,
+/// and a follower where K_A is not the step matrix).
+#[derive(Clone, Copy, Debug)]
+pub struct Reads<'a> {
+    pub dofs: &'a [usize],
+    pub whole: bool,
+}
+
+/// How a rank's rows of a solution reach the ranks that read them (`Exchange`): its rows'
+/// unknowns in PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`, and
+/// the columns of its rows of K, which a product with K reads); once a step is solved, the
+/// rest where it reads every one.
+struct Spread {
+    unknowns: Vec<u32>,
+    halo: Exchange,
+    rest: Exchange,
+}
+
+impl Spread {
+    /// Made by every rank at once: the exchanges are collective. `k` is whether the rank
+    /// multiplies by its rows of K (the Newton systems') and those rows.
+    fn new(layout: &Layout, rank: usize, k: (bool, &Csr), reads: Reads) -> Result<Spread> {
+        let n = *layout.blocks.last().unwrap_or(&0);
+        let mut unknown = vec![0u32; n];
+        (0..n).for_each(|i| unknown[layout.row(i)] = i as u32);
+        let unknowns = unknown[layout.blocks[rank]..layout.blocks[rank + 1]].to_vec();
+        // What this rank reads of each unknown: 0 nothing, 1 at every solve, 2 its own.
+        let mut read = vec![0u8; n];
+        reads
+            .dofs
+            .iter()
+            .filter(|&&i| i < n)
+            .for_each(|&i| read[i] = 1);
+        if let (true, rows) = k {
+            (rows.cols.iter()).for_each(|&c| read[unknown[c as usize] as usize] = 1);
+        }
+        drop(unknown);
+        unknowns.iter().for_each(|&i| read[i as usize] = 2);
+        let these = |wanted: &dyn Fn(u8) -> bool| -> Vec<u32> {
+            (0..n as u32)
+                .filter(|&i| wanted(read[i as usize]))
+                .collect()
+        };
+        let halo = Exchange::new(layout, these(&|r| r == 1))?;
+        let rest = Exchange::new(layout, these(&|r| r == 0 && reads.whole))?;
+        Ok(Spread {
+            unknowns,
+            halo,
+            rest,
         })
     }
 }
@@ -471,9 +544,7 @@ impl AtDofs {
         let mut counts = vec![0; layout.blocks.len() - 1];
         rows.iter()
             .for_each(|&r| counts[layout.rank_of_row(r)] += 1);
-        let displs = (counts.iter())
-            .scan(0, |at, &c| Some(std::mem::replace(at, *at + c)))
-            .collect();
+        let displs = exchange::displacements(&counts);
         AtDofs {
             dofs: dofs.to_vec(),
             order,
@@ -553,6 +624,7 @@ impl Krylov {
         self.own.resize(self.mine.len(), 0.0);
         let x = match self.layout.permutes() {
             true => {
+                self.rows.resize(self.n, 0.0);
                 self.layout.to_rows(x, &mut self.rows);
                 &self.rows
             }
@@ -633,9 +705,8 @@ impl Krylov {
             dofs.iter().map(row).collect()
         };
         let (removed_rows, stiffness_rows) = (rows(terms.removed_dofs), rows(terms.stiffness_dofs));
-        // SAFETY: the arrays hold what the counts say, the rows of b this rank's count and
-        // w n values; PETSc reads them and writes w within the call, and keeps no pointer
-        // after it.
+        // SAFETY: the arrays hold what the counts say, b and x this rank's count of rows;
+        // PETSc reads them and writes x within the call, and keeps no pointer after it.
         let what = "KSPSolve of the constrained system";
         self.solved(what, (b, dofs, values), w, |ctx, b, w, v| unsafe {
             vc_constrained_solve(
@@ -656,8 +727,8 @@ impl Krylov {
         })
     }
 
-    /// The largest of every rank's `x` (collective where the rows are spread over ranks:
-    /// the ranks that `gather`); `x` on one rank.
+    /// The largest of every rank's `x` (collective where the rows are spread over ranks);
+    /// `x` on one rank.
     pub fn largest(&self, x: f64) -> Result<f64> {
         match self.layout.permutes() {
             true => max_real_over_ranks(x),
@@ -665,16 +736,37 @@ impl Krylov {
         }
     }
 
-    /// Every rank's v ← the whole of v, each unknown's value from the rank that holds its
-    /// row (a right side each rank made its own entries of); nothing on one rank.
-    pub fn gather(&mut self, v: &mut [f64]) -> Result<()> {
-        if !self.layout.permutes() {
-            return Ok(());
+    /// v at the unknowns this rank reads (`Reads`) ← their values from the ranks that hold
+    /// their rows, v exact in this rank's own rows (a right side each rank made its own
+    /// entries of); nothing on one rank.
+    pub fn share(&self, v: &mut [f64]) -> Result<()> {
+        match &self.spread {
+            Some(spread) => spread.halo.run(v),
+            None => Ok(()),
         }
-        assert_eq!(v.len(), self.n);
-        // SAFETY: v holds n values, which the shim gathers in place within the call.
-        let code = self.in_rows(v, |ctx, v| unsafe { vc_gather(ctx, v) });
-        check(code, "MPI_Allgatherv")
+    }
+
+    /// A solved step's w at every unknown where this rank's history holds every dof
+    /// (`Reads::whole`), from the ranks that hold their rows (collective, once a step);
+    /// nothing on one rank.
+    pub fn complete(&self, w: &mut [f64]) -> Result<()> {
+        match &self.spread {
+            Some(spread) => spread.rest.run(w),
+            None => Ok(()),
+        }
+    }
+
+    /// The largest |x_i| over the ranks' own rows (`f64::max`: NaN skipped), x exact in
+    /// this rank's (collective on several ranks).
+    pub fn largest_abs(&self, x: &[f64]) -> Result<f64> {
+        let abs = |i: usize| x[i].abs();
+        match &self.spread {
+            Some(spread) => {
+                let mine = (spread.unknowns.iter()).fold(0.0, |m, &i| abs(i as usize).max(m));
+                max_real_over_ranks(mine)
+            }
+            None => Ok((0..x.len()).fold(0.0, |m, i| abs(i).max(m))),
+        }
     }
 
     /// How far the Newton systems' multigrid is from the Galerkin products of its fine

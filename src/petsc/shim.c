@@ -109,7 +109,7 @@ struct VcKsp {
   KSP ksp;
   Vec b, x;
   /* The rows this rank owns, [lo, lo + m) (whole nodes); each rank's count and first row
-   * (displ) for gathering the solution; count and displ NULL on one process. */
+   * (displ); count and displ NULL on one process. */
   PetscInt     lo, m;
   PetscMPIInt *count, *displ;
   /* The convergence tests of K_A's KSP and of the constrained one; the solve in progress
@@ -146,8 +146,7 @@ static PetscErrorCode check_blocks(VcKsp *s);
  * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) of a
  * CSR with the whole's row pointers (the other ranks' rows may be empty), rank r the rows
  * blocks[r] … blocks[r + 1] − 1 (whole nodes: the Newton matrix's frames and slip
- * stiffness act on a node's own rows), with each rank's share recorded for gathering the
- * solution. */
+ * stiffness act on a node's own rows), with each rank's share recorded. */
 static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *rowptr,
                                          const PetscInt *cols, const PetscScalar *vals, PetscInt bs,
                                          const PetscInt *blocks)
@@ -316,22 +315,9 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
   return 0;
 }
 
-/* Every rank's x ← the whole of x, from each rank's owned rows (nothing on one process). */
-static PetscErrorCode gathered(VcKsp *s, PetscScalar *x)
-{
-  MPI_Comm comm;
-
-  PetscFunctionBeginUser;
-  if (!s->count) PetscFunctionReturn(0);
-  comm = PETSC_COMM_WORLD; /* the ranks' (several: count) */
-  PetscCallMPI(MPI_Allgatherv(MPI_IN_PLACE, 0, MPIU_SCALAR, x, s->count, s->displ, MPIU_SCALAR, comm));
-  PetscFunctionReturn(0);
-}
-
 /* x ← the solution of ksp's system (K_A's or the constrained one) with right side b, from
- * the initial guess in x, asking and filling v (VcSolve). b is this rank's rows, x whole on
- * every rank, before and after it; where a rank's request gave the solve up, x holds an
- * iterate. */
+ * the initial guess in x, asking and filling v (VcSolve). b and x are this rank's rows;
+ * where a rank's request gave the solve up, x holds an iterate. */
 static PetscErrorCode solved(VcKsp *s, KSP ksp, const PetscScalar *b, PetscScalar *x, VcSolve *v)
 {
   KSPConvergedReason r;
@@ -340,14 +326,13 @@ static PetscErrorCode solved(VcKsp *s, KSP ksp, const PetscScalar *b, PetscScala
   PetscFunctionBeginUser;
   v->given_up = 0;
   PetscCall(VecPlaceArray(s->b, b));
-  PetscCall(VecPlaceArray(s->x, x + s->lo));
+  PetscCall(VecPlaceArray(s->x, x));
   s->solve = v; /* for the convergence test, during this call only */
   err = KSPSolve(ksp, s->b, s->x);
   s->solve = NULL;
   PetscCall(err);
   PetscCall(VecResetArray(s->x));
   PetscCall(VecResetArray(s->b));
-  PetscCall(gathered(s, x));
   PetscCall(KSPGetIterationNumber(ksp, &v->its));
   PetscCall(KSPGetConvergedReason(ksp, &r));
   PetscCall(KSPGetResidualNorm(ksp, &v->rnorm));
@@ -379,16 +364,9 @@ int vc_ksp_types(void *ctx, const char **ksp_type, const char **pc_type)
   return 0;
 }
 
-/* Every rank's x (in the rows' order) ← the whole of x, from each rank's own rows. */
-int vc_gather(void *ctx, PetscScalar *x)
-{
-  PetscCall(gathered((VcKsp *)ctx, x));
-  return 0;
-}
-
-/* y = this rank's rows of K x, x whole on every rank: by K's matrix, or where it went (the
- * Newton systems' KSP on several ranks: constrained_setup) by this rank's rows
- * (local_rows). */
+/* y = this rank's rows of K x, x of every row (exact at the columns of this rank's rows, which
+ * alone it reads): by K's matrix, or where it went (the Newton systems' KSP on several
+ * ranks: constrained_setup) by this rank's rows (local_rows). */
 int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 {
   VcKsp *s = (VcKsp *)ctx;
@@ -414,6 +392,24 @@ int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 int vc_allgather(const PetscScalar *send, int nsend, PetscScalar *recv, const int *counts, const int *displs)
 {
   PetscCallMPI(MPI_Allgatherv(send, nsend, MPIU_SCALAR, recv, counts, displs, MPIU_SCALAR, PETSC_COMM_WORLD));
+  return 0;
+}
+
+/* Every rank's recv[r] ← rank r's send[rank]: one count to and from each rank. */
+int vc_alltoall_counts(const int *send, int *recv)
+{
+  PetscCallMPI(MPI_Alltoall(send, 1, MPI_INT, recv, 1, MPI_INT, PETSC_COMM_WORLD));
+  return 0;
+}
+
+/* Each rank sends scounts[r] values from send + sdispls[r] to rank r and receives
+ * rcounts[r] values from it at recv + rdispls[r]: doubles, or where `ints`, ints. */
+int vc_alltoallv(const void *send, const int *scounts, const int *sdispls, void *recv,
+                 const int *rcounts, const int *rdispls, int ints)
+{
+  MPI_Datatype t = ints ? MPI_INT : MPIU_SCALAR;
+
+  PetscCallMPI(MPI_Alltoallv(send, scounts, sdispls, t, recv, rcounts, rdispls, t, PETSC_COMM_WORLD));
   return 0;
 }
 

@@ -393,9 +393,10 @@ fn clock(seconds: f64) -> String {
     }
 }
 
-/// Scale of a step's velocities and multipliers for relative tolerances.
+/// Scale of a step's velocities and multipliers for relative tolerances (max|w_n| over
+/// every dof, which a follower rank does not hold).
 fn scales(step: &Step) -> (f64, f64) {
-    let ws = step.w.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let ws = step.w_max;
     let zs = step.z.iter().fold(0.0f64, |a, v| a.max(v.abs()));
     (ws, zs)
 }

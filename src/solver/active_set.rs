@@ -122,6 +122,9 @@ pub struct LinearSolve {
 pub trait ConstrainedSystem {
     /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1).
     fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()>;
+    /// max|w_i| (NaN skipped) over every unknown, w a solution of `solve`: the scale of
+    /// the KKT residual, which a system spread over ranks takes from each rank's rows.
+    fn largest_abs(&mut self, w: &[f64]) -> Result<f64>;
     /// w ← the constrained system's solution, from the guess in w, to `tolerance`, with the
     /// preconditioner `pc` says. Its right side Π(b − f_slip) is b but at Γ3's nodes, where
     /// it is `rhs`.
@@ -547,7 +550,7 @@ impl ActiveSetSolver {
                 return Ok(report(status, newton, kkt_before));
             }
             self.multipliers(system, rows, &sets, w, z)?;
-            let kkt = kkt_residual(rows, w, z, max_abs(w), max_abs(z));
+            let kkt = kkt_residual(rows, w, z, system.largest_abs(w)?, max_abs(z));
             let at = self.at(rows, soften, w, z);
             let proposed = at.sets(Some(&sets));
             let same = proposed.same_as(&sets);
@@ -745,6 +748,10 @@ fn split(dirs: &[[f64; 3]], r: [f64; 3]) -> Vec<f64> {
 impl ConstrainedSystem for crate::petsc::Krylov {
     fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
         crate::petsc::Krylov::mult_at(self, x, dofs, y)
+    }
+
+    fn largest_abs(&mut self, w: &[f64]) -> Result<f64> {
+        crate::petsc::Krylov::largest_abs(self, w)
     }
 
     fn solve(

@@ -232,8 +232,8 @@ impl Backend {
         }
     }
 
-    /// The largest of every rank's `x` (collective over the ranks that [`Backend::gather`]);
-    /// `x` on one process.
+    /// The largest of every rank's `x` (collective over the ranks of a PETSc run); `x` on
+    /// one process.
     pub fn largest(&self, x: f64) -> crate::Result<f64> {
         match self {
             #[cfg(feature = "petsc")]
@@ -242,14 +242,28 @@ impl Backend {
         }
     }
 
-    /// Every rank's `v` ← the whole of it, each of its unknowns from the rank that holds its
-    /// row (`Discretization::keep_columns`); nothing on one process.
-    pub fn gather(&mut self, v: &mut [f64]) -> crate::Result<()> {
+    /// `v` at the unknowns this rank reads (`petsc::Reads`) ← their values from the ranks
+    /// that hold their rows, `v` exact in this rank's own rows
+    /// (`Discretization::keep_columns`); nothing on one process.
+    pub fn share(&self, v: &mut [f64]) -> crate::Result<()> {
         match self {
             #[cfg(feature = "petsc")]
-            Backend::Petsc(krylov) => krylov.gather(v),
+            Backend::Petsc(krylov) => krylov.share(v),
             _ => {
                 let _ = v;
+                Ok(())
+            }
+        }
+    }
+
+    /// A solved step's w at every unknown, where this rank's history holds every dof and a
+    /// solve gave it its reads alone (`petsc::Krylov::complete`); nothing on one process.
+    pub fn complete(&self, w: &mut [f64]) -> crate::Result<()> {
+        match self {
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => krylov.complete(w),
+            _ => {
+                let _ = w;
                 Ok(())
             }
         }

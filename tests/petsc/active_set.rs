@@ -385,7 +385,7 @@ impl Sets {
 /// system on a hierarchy made from K.
 #[test]
 fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
-    use viscontact::petsc::{Hierarchy, Krylov, KrylovSettings, Tolerance};
+    use viscontact::petsc::{Hierarchy, Krylov, KrylovSettings, Reads, Tolerance};
     let dir = tempfile::tempdir().unwrap();
     let path = SceneText::block().write(dir.path(), "s.toml");
     let (_scene, _mesh, disc) = load(&path, &[]);
@@ -396,7 +396,12 @@ fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
         rtol: 1e-12,
         newton: true,
     };
-    let mut krylov = Krylov::new(&disc.k_a, None, &disc, &settings).unwrap();
+    // One process: every unknown is its own.
+    let reads = Reads {
+        dofs: &[],
+        whole: true,
+    };
+    let mut krylov = Krylov::new(&disc.k_a, None, &disc, &settings, reads).unwrap();
     let mut rng = common::SplitMix(50);
     let b: Vec<f64> = (0..disc.n_free).map(|_| rng.unit() - 0.5).collect();
     let all = Sets::of(&disc, |_| true, |j| j % 2 == 0);

@@ -1,0 +1,108 @@
+//! How a rank gets the values of other ranks' rows that it reads (docs/cluster.md, "What
+//! spreads"): a vector in the unknowns' order is exact in the rank's own rows (a solve's w,
+//! a right side's b_n), and an [`Exchange`] brings it the values it reads elsewhere from
+//! the ranks that hold their rows, in one `MPI_Alltoallv`. Where every rank took the whole
+//! vector (an `MPI_Allgatherv` of 8 bytes an unknown, at every Krylov solve), a rank now
+//! takes what it reads: its rows' neighbours and Γ3's unknowns at every solve (the
+//! halo), and the rest once a step is solved where its history holds every dof (rank 0).
+
+use super::{check, Layout, Result};
+use std::ffi::{c_int, c_void};
+
+extern "C" {
+    fn vc_alltoall_counts(send: *const c_int, recv: *mut c_int) -> c_int;
+    fn vc_alltoallv(
+        send: *const c_void,
+        scounts: *const c_int,
+        sdispls: *const c_int,
+        recv: *mut c_void,
+        rcounts: *const c_int,
+        rdispls: *const c_int,
+        ints: c_int,
+    ) -> c_int;
+}
+
+/// Which unknowns a rank sends to each rank and which it receives from each, and each
+/// rank's count and first place among them: made once, collectively, of the unknowns each
+/// rank reads ([`Exchange::new`]).
+pub struct Exchange {
+    send: Vec<u32>,
+    send_counts: Vec<c_int>,
+    send_displs: Vec<c_int>,
+    recv: Vec<u32>,
+    recv_counts: Vec<c_int>,
+    recv_displs: Vec<c_int>,
+}
+
+impl Exchange {
+    /// The exchange by which this rank receives the unknowns `reads` (none of its own rows,
+    /// each once) from the ranks that hold their rows; every rank calls it at once with
+    /// what it reads. The ranks tell each owner which of its unknowns they read: one count
+    /// and one list from each rank to each.
+    pub fn new(layout: &Layout, mut reads: Vec<u32>) -> Result<Exchange> {
+        let size = layout.blocks.len() - 1;
+        let owner = |i: u32| layout.rank_of_row(layout.row(i as usize));
+        reads.sort_by_key(|&i| (owner(i), i));
+        let mut recv_counts = vec![0; size];
+        reads.iter().for_each(|&i| recv_counts[owner(i)] += 1);
+        let mut send_counts = vec![0; size];
+        // SAFETY: both arrays hold one count for each rank; MPI writes send_counts.
+        let code = unsafe { vc_alltoall_counts(recv_counts.as_ptr(), send_counts.as_mut_ptr()) };
+        check(code, "MPI_Alltoall")?;
+        let (send_displs, recv_displs) = (displacements(&send_counts), displacements(&recv_counts));
+        let mut send = vec![0u32; send_counts.iter().map(|&c| c as usize).sum()];
+        // SAFETY: the counts and displacements cut `reads` and `send` as each holds them,
+        // in rank order; MPI writes `send` within the call. The unknowns cross as ints.
+        let code = unsafe {
+            vc_alltoallv(
+                reads.as_ptr().cast(),
+                recv_counts.as_ptr(),
+                recv_displs.as_ptr(),
+                send.as_mut_ptr().cast(),
+                send_counts.as_ptr(),
+                send_displs.as_ptr(),
+                1,
+            )
+        };
+        check(code, "MPI_Alltoallv")?;
+        Ok(Exchange {
+            send,
+            send_counts,
+            send_displs,
+            recv: reads,
+            recv_counts,
+            recv_displs,
+        })
+    }
+
+    /// v at the unknowns this rank reads ← their values on the ranks that hold their rows,
+    /// where v is exact in its own rows (collective).
+    pub fn run(&self, v: &mut [f64]) -> Result<()> {
+        let sent: Vec<f64> = self.send.iter().map(|&i| v[i as usize]).collect();
+        let mut received = vec![0.0; self.recv.len()];
+        // SAFETY: as in `new`, of doubles; MPI writes `received` within the call.
+        let code = unsafe {
+            vc_alltoallv(
+                sent.as_ptr().cast(),
+                self.send_counts.as_ptr(),
+                self.send_displs.as_ptr(),
+                received.as_mut_ptr().cast(),
+                self.recv_counts.as_ptr(),
+                self.recv_displs.as_ptr(),
+                0,
+            )
+        };
+        check(code, "MPI_Alltoallv")?;
+        (self.recv.iter())
+            .zip(received)
+            .for_each(|(&i, x)| v[i as usize] = x);
+        Ok(())
+    }
+}
+
+/// Each rank's first place in an array cut by `counts`, in rank order.
+pub(super) fn displacements(counts: &[c_int]) -> Vec<c_int> {
+    (counts.iter())
+        .scan(0, |at, &c| Some(std::mem::replace(at, *at + c)))
+        .collect()
+}
