@@ -3,8 +3,8 @@
 //! a right side's b_n), and an [`Exchange`] brings it the values it reads elsewhere from
 //! the ranks that hold their rows, in one `MPI_Alltoallv`. Where every rank took the whole
 //! vector (an `MPI_Allgatherv` of 8 bytes an unknown, at every Krylov solve), a rank now
-//! takes what it reads: its rows' neighbours and Γ3's unknowns at every solve (the
-//! halo), and the rest once a step is solved where its history holds every dof (rank 0).
+//! takes at every solve what it reads: its rows' neighbours, Γ3's unknowns and a follower's
+//! history's reach (the halo).
 
 use super::{check, Layout, Result};
 use std::ffi::{c_int, c_void};

@@ -93,12 +93,13 @@ extern "C" {
     ) -> c_int;
     fn vc_ksp_solve(ctx: *mut c_void, b: *const f64, x: *mut f64, v: *mut VcSolve) -> c_int;
     fn vc_mult(ctx: *mut c_void, x: *const f64, y: *mut f64) -> c_int;
-    fn vc_allgather(
+    fn vc_gather(
         send: *const f64,
         nsend: c_int,
         recv: *mut f64,
         counts: *const c_int,
         displs: *const c_int,
+        every: c_int,
     ) -> c_int;
     #[allow(clippy::too_many_arguments)]
     fn vc_constrained_solve(
@@ -479,18 +480,32 @@ pub struct Reads<'a> {
     pub whole: bool,
 }
 
-/// How a rank's rows of a solution reach the ranks that read them (`Exchange`): its rows'
-/// unknowns in PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`, and
-/// the columns of its rows of K, which a product with K reads); once a step is solved, the
-/// rest where it reads every one.
+/// How a rank's rows of a solution reach the ranks that read them: its rows' unknowns in
+/// PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`, and the columns of
+/// its rows of K, which a product with K reads) by an `Exchange`; once a step is solved,
+/// every rank's rows gathered whole in PETSc's order on rank 0, or on every rank where the
+/// followers' histories hold every dof too (`Reads::whole`), where each rank's count and
+/// first row among them say.
 struct Spread {
     unknowns: Vec<u32>,
     halo: Exchange,
-    rest: Exchange,
+    first: bool,
+    whole: Whole,
+    counts: Vec<c_int>,
+    displs: Vec<c_int>,
+}
+
+/// Who gathers every rank's rows once a step is solved (`Krylov::complete`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Whole {
+    /// Rank 0 alone: a follower holds its history at its reach (`Holds::Local`).
+    First,
+    /// Every rank: a follower's history holds every dof of u_n.
+    Every,
 }
 
 impl Spread {
-    /// Made by every rank at once: the exchanges are collective. `k` is whether the rank
+    /// Made by every rank at once: the exchange is collective. `k` is whether the rank
     /// multiplies by its rows of K (the Newton systems') and those rows.
     fn new(layout: &Layout, rank: usize, k: (bool, &Csr), reads: Reads) -> Result<Spread> {
         let n = *layout.blocks.last().unwrap_or(&0);
@@ -509,17 +524,23 @@ impl Spread {
         }
         drop(unknown);
         unknowns.iter().for_each(|&i| read[i as usize] = 2);
-        let these = |wanted: &dyn Fn(u8) -> bool| -> Vec<u32> {
-            (0..n as u32)
-                .filter(|&i| wanted(read[i as usize]))
-                .collect()
+        let halo: Vec<u32> = (0..n as u32).filter(|&i| read[i as usize] == 1).collect();
+        drop(read);
+        let halo = Exchange::new(layout, halo)?;
+        let whole = match max_over_ranks(i32::from(rank > 0 && reads.whole))? {
+            0 => Whole::First,
+            _ => Whole::Every,
         };
-        let halo = Exchange::new(layout, these(&|r| r == 1))?;
-        let rest = Exchange::new(layout, these(&|r| r == 0 && reads.whole))?;
+        let counts: Vec<c_int> = (layout.blocks.windows(2))
+            .map(|b| (b[1] - b[0]) as c_int)
+            .collect();
         Ok(Spread {
             unknowns,
             halo,
-            rest,
+            first: rank == 0,
+            whole,
+            displs: exchange::displacements(&counts),
+            counts,
         })
     }
 }
@@ -654,12 +675,13 @@ impl Krylov {
                 // SAFETY: mine holds this rank's count, all the sum of counts, which the
                 // displacements cut in rank order; MPI writes all within the call.
                 let code = unsafe {
-                    vc_allgather(
+                    vc_gather(
                         mine.as_ptr(),
                         mine.len() as c_int,
                         all.as_mut_ptr(),
                         at.counts.as_ptr(),
                         at.displs.as_ptr(),
+                        1,
                     )
                 };
                 check(code, "MPI_Allgatherv")?;
@@ -746,14 +768,37 @@ impl Krylov {
         }
     }
 
-    /// A solved step's w at every unknown where this rank's history holds every dof
-    /// (`Reads::whole`), from the ranks that hold their rows (collective, once a step);
-    /// nothing on one rank.
-    pub fn complete(&self, w: &mut [f64]) -> Result<()> {
-        match &self.spread {
-            Some(spread) => spread.rest.run(w),
-            None => Ok(()),
+    /// A solved step's w at every unknown on rank 0, and on every rank where the followers'
+    /// histories hold every dof (`Reads::whole`), from the ranks that hold their rows
+    /// (collective, once a step): each rank's rows gathered in PETSc's order, in the
+    /// buffer a product with K reads; nothing on one rank.
+    pub fn complete(&mut self, w: &mut [f64]) -> Result<()> {
+        let Some(spread) = &self.spread else {
+            return Ok(());
+        };
+        self.own_x.clear();
+        (self.own_x).extend(spread.unknowns.iter().map(|&i| w[i as usize]));
+        let receives = spread.whole == Whole::Every || spread.first;
+        if receives {
+            self.rows.resize(self.n, 0.0);
         }
+        // SAFETY: own_x holds this rank's count; rows, where it receives, n values, which
+        // the counts and displacements cut in rank order; MPI writes rows within the call.
+        let code = unsafe {
+            vc_gather(
+                self.own_x.as_ptr(),
+                self.own_x.len() as c_int,
+                self.rows.as_mut_ptr(),
+                spread.counts.as_ptr(),
+                spread.displs.as_ptr(),
+                c_int::from(spread.whole == Whole::Every),
+            )
+        };
+        check(code, "MPI_Gatherv")?;
+        if receives {
+            self.layout.from_rows(&self.rows, w);
+        }
+        Ok(())
     }
 
     /// The largest |x_i| over the ranks' own rows (`f64::max`: NaN skipped), x exact in

@@ -387,11 +387,12 @@ int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
   return 0;
 }
 
-/* Every rank's recv ← each rank's send (nsend values), rank r's at displs[r] (counts[r]
- * values). */
-int vc_allgather(const PetscScalar *send, int nsend, PetscScalar *recv, const int *counts, const int *displs)
+/* recv ← each rank's send (nsend values), rank r's at displs[r] (counts[r] values): on
+ * every rank where `every`, else on rank 0 alone (recv, counts and displs read there only). */
+int vc_gather(const PetscScalar *send, int nsend, PetscScalar *recv, const int *counts, const int *displs, int every)
 {
-  PetscCallMPI(MPI_Allgatherv(send, nsend, MPIU_SCALAR, recv, counts, displs, MPIU_SCALAR, PETSC_COMM_WORLD));
+  if (every) PetscCallMPI(MPI_Allgatherv(send, nsend, MPIU_SCALAR, recv, counts, displs, MPIU_SCALAR, PETSC_COMM_WORLD));
+  else PetscCallMPI(MPI_Gatherv(send, nsend, MPIU_SCALAR, recv, counts, displs, MPIU_SCALAR, 0, PETSC_COMM_WORLD));
   return 0;
 }
 

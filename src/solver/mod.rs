@@ -258,7 +258,7 @@ impl Backend {
 
     /// A solved step's w at every unknown, where this rank's history holds every dof and a
     /// solve gave it its reads alone (`petsc::Krylov::complete`); nothing on one process.
-    pub fn complete(&self, w: &mut [f64]) -> crate::Result<()> {
+    pub fn complete(&mut self, w: &mut [f64]) -> crate::Result<()> {
         match self {
             #[cfg(feature = "petsc")]
             Backend::Petsc(krylov) => krylov.complete(w),
