@@ -118,7 +118,8 @@ impl Loads {
     /// alone (with `every_traction`, every traction's too): the terms that reach those
     /// nodes' dofs stay, in their order, so those entries of ⟨f(t), φ⟩ keep their bits, and
     /// the others become partial (on one of several MPI ranks: its own rows; the others'
-    /// come with b_n's gather). Marks the loads as a part ([`Loads::is_part`]).
+    /// come with b_n's exchange where it reads them). Marks the loads as a part
+    /// ([`Loads::is_part`]).
     pub fn keep_reaching(&mut self, reaches: &[bool], every_traction: bool) {
         for load in &mut self.loads {
             if every_traction && matches!(load.source, Source::Traction(_)) {

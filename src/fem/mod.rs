@@ -846,7 +846,7 @@ impl Discretization {
     /// that reach its own unknowns alone (`Loads::keep_reaching`; on rank 0, `first`,
     /// every traction's too, and it makes a body force's others again where it reads
     /// them: [`Discretization::visit_every_load`]): its rows of f_n keep their bits, the
-    /// others' rows come from their ranks with b_n's gather, and a rank holds a body
+    /// others' rows come from their ranks with b_n's exchange, and a rank holds a body
     /// force's points, four a tetrahedron, for its cells alone. Nothing where the setup
     /// made them so already ([`Discretization::with_columns`]).
     pub fn keep_own_loads(&mut self, first: bool) {

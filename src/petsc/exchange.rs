@@ -1,10 +1,9 @@
 //! How a rank gets the values of other ranks' rows that it reads (docs/cluster.md, "What
 //! spreads"): a vector in the unknowns' order is exact in the rank's own rows (a solve's w,
 //! a right side's b_n), and an [`Exchange`] brings it the values it reads elsewhere from
-//! the ranks that hold their rows, in one `MPI_Alltoallv`. Where every rank took the whole
-//! vector (an `MPI_Allgatherv` of 8 bytes an unknown, at every Krylov solve), a rank now
-//! takes at every solve what it reads: its rows' neighbours, Γ3's unknowns and a follower's
-//! history's reach (the halo).
+//! the ranks that hold their rows, in one `MPI_Alltoallv`: at every solve, what it reads
+//! (its rows' neighbours, Γ3's unknowns, a follower's history's reach: the halo), not the
+//! whole vector, 8 bytes an unknown to every rank.
 
 use super::{check, Layout, Result};
 use std::ffi::{c_int, c_void};

@@ -7,29 +7,32 @@
 //! PETSc's Krylov solves spread, K_A's and the active set's Newton systems: their KSPs on
 //! all the ranks, each holding the rows of the nodes METIS's partition gives it
 //! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
-//! of every Krylov vector, and each getting the whole solution back (of a product with K,
-//! the active set's (K + S) w, its values at Γ3's nodes alone). Every rank reads the
+//! of every Krylov vector, and each getting the solution back where it reads it (its
+//! rows' neighbours, Γ3's unknowns, a follower's history's reach: `petsc::Exchange`; rank
+//! 0 the whole once a step), and of a product with K, the active set's (K + S) w, its
+//! values at Γ3's nodes alone. Every rank reads the
 //! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
 //! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays). Of
 //! K_A, K_B and K_R a rank holds the columns of its own unknowns alone (a symmetric
 //! matrix's column is its row): it assembles only those ([`Ranks::discretize`]) where the
 //! scene's keys take PETSc, or keeps them of the whole matrices
 //! (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It computes
-//! its entries of the right side's products from them and gathers the others'
-//! (`Backend::gather`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
+//! its entries of the right side's products from them and gets the others' where it
+//! reads them (`Backend::share`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
 //! the rank keeps K_A's diagonal at Γ3's unknowns alone. A follower's history holds the
 //! dofs that its rows of K_B and K_R and its piece of a frame read alone
 //! ([`Ranks::hold_history`], `history::Holds`): u_n, its compensated sum and the memory (the
 //! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
 //! rows of K_B and K_R then numbering their columns in the order of those dofs; elsewhere
 //! the memory alone. The values it holds have the bits of the whole history's; rank 0
-//! holds it whole, for the checkpoints and history.csv. Of the loads, a
-//! rank makes the quadrature points that reach its own rows alone (its rows of f_n, with
-//! the same bits; the others come with b_n's gather), rank 0 every traction's too, and it
-//! makes a body force's other points again, cell by cell, where history.csv reads every
-//! value (`Discretization::visit_every_load`). The rest is replicated: w_n and every other
-//! n-vector, so every rank holds the same right side b_n, bit for bit, and the active set's
-//! decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*)
+//! holds it whole, for the checkpoints and history.csv. Of the loads, a rank makes the
+//! quadrature points that reach its own rows alone (its rows of f_n, with the same bits;
+//! those of other rows it reads come with b_n's exchange), rank 0 every traction's too,
+//! and it makes a body force's other points again, cell by cell, where history.csv reads
+//! every value (`Discretization::visit_every_load`). The rest is replicated: every other
+//! n-vector, and w_n and b_n where a rank reads them (its own rows, their neighbours',
+//! Γ3's), so every rank holds the same right side b_n there, bit for bit, and the active
+//! set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*)
 //! owns the output directory (lock, series, history.csv, checkpoints, summary.json) and
 //! prints; the others *follow* (`run::follow`). Of each `.vtu` frame every rank writes its
 //! own piece, its part of the mesh, and the ranks agree that all are on disk
