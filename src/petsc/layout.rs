@@ -76,6 +76,14 @@ impl Layout {
         (0..n).filter(|&i| block.contains(&self.row(i))).collect()
     }
 
+    /// The unknown of each row, in the rows' order: the inverse of [`Layout::row`].
+    pub fn unknowns(&self) -> Vec<u32> {
+        let n = *self.blocks.last().unwrap_or(&0);
+        let mut unknown = vec![0u32; n];
+        (0..n).for_each(|i| unknown[self.row(i)] = i as u32);
+        unknown
+    }
+
     /// Whether the rows are the unknowns in another order.
     pub fn permutes(&self) -> bool {
         self.row.is_some()
@@ -110,18 +118,16 @@ impl Layout {
                 vals: std::borrow::Cow::Borrowed(val),
             });
         };
-        let mut unknown = vec![0; row.len()];
-        for (i, &r) in row.iter().enumerate() {
-            unknown[r as usize] = i;
-        }
+        let unknown = self.unknowns();
         let own = &unknown[self.blocks[rank]..self.blocks[rank + 1]];
         // Sized once: grown by doubling, the values could hold up to twice their length.
-        let entries: usize = own.iter().map(|&i| ptr[i + 1] - ptr[i]).sum();
+        let own = || own.iter().map(|&i| i as usize);
+        let entries: usize = own().map(|i| ptr[i + 1] - ptr[i]).sum();
         let (mut cols, mut vals) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
         let mut rowptr = Vec::with_capacity(row.len() + 1);
         rowptr.resize(self.blocks[rank] + 1, 0);
         let mut sorted: Vec<(usize, f64)> = Vec::new();
-        for &i in own {
+        for i in own() {
             sorted.clear();
             sorted.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]] as usize, val[p])));
             sorted.sort_by_key(|&(c, _)| c);

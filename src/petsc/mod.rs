@@ -509,8 +509,7 @@ impl Spread {
     /// multiplies by its rows of K (the Newton systems') and those rows.
     fn new(layout: &Layout, rank: usize, k: (bool, &Csr), reads: Reads) -> Result<Spread> {
         let n = *layout.blocks.last().unwrap_or(&0);
-        let mut unknown = vec![0u32; n];
-        (0..n).for_each(|i| unknown[layout.row(i)] = i as u32);
+        let unknown = layout.unknowns();
         let unknowns = unknown[layout.blocks[rank]..layout.blocks[rank + 1]].to_vec();
         // What this rank reads of each unknown: 0 nothing, 1 at every solve, 2 its own.
         let mut read = vec![0u8; n];
