@@ -8,8 +8,10 @@
 //! a part, each node's unknowns one after the other. The mesh's numbering cut into blocks
 //! instead made a rank's product with K_A fetch more values of other ranks' rows than it
 //! holds rows, six times as many on 16 ranks of the fine plate (docs/cluster.md, "Planning").
-//! Every rank computes the same partition (METIS is deterministic with its default seed),
-//! so none is sent. Vectors cross between the two orders at every PETSc call (`to_rows`,
+//! Rank 0 alone builds the nodes' graph and runs METIS, and sends the rows' order to the
+//! others ([`Layout::of_first`]: 4 bytes an unknown, once), where every rank had made the
+//! same partition itself from the whole graph, the work and memory of one process on each
+//! (docs/cluster.md, "Memory per rank"). Vectors cross between the two orders at every PETSc call (`to_rows`,
 //! `from_rows`): two copies of n values, against a solve's tens of products with K_A.
 
 use super::PetscInt;
@@ -28,20 +30,35 @@ pub struct Layout {
 
 impl Layout {
     /// The layout of `disc`'s unknowns over `size` ranks, its nodes' graph read from
-    /// `cells` (`disc`'s own, or the mesh's where it holds none: a follower rank).
+    /// `cells` (`disc`'s own, or the mesh's where it holds none).
     pub fn new(disc: &Discretization, cells: CellSource, size: usize) -> Result<Layout> {
-        let n = disc.n_free;
-        if size <= 1 {
-            return Ok(Layout {
+        match size {
+            0 | 1 => Ok(Layout {
                 row: None,
-                blocks: vec![0, n],
-            });
+                blocks: vec![0, disc.n_free],
+            }),
+            _ => Ok(Layout::partition(disc, cells, size)?.0),
         }
+    }
+
+    /// The layout of `disc`'s unknowns over `size` ranks (METIS's partition; one part on
+    /// one rank) and each rank's share of K_A, both from one nodes' graph read from `cells`.
+    pub fn partition(
+        disc: &Discretization,
+        cells: CellSource,
+        size: usize,
+    ) -> Result<(Layout, Vec<RankShare>)> {
         let nodes = nodes(disc);
-        let part = partition(disc, cells, &nodes, size)?;
+        let mut graph = Graph::new(disc, cells, &nodes).for_metis()?;
+        let part = match size {
+            0 | 1 => vec![0; nodes.len()],
+            _ => partition(&mut graph, size)?,
+        };
+        let shares = shares(&graph, &nodes, &part, size.max(1));
+        drop(graph);
         let mut order: Vec<usize> = (0..nodes.len()).collect();
         order.sort_by_key(|&v| (part[v], v));
-        let (mut row, mut blocks) = (vec![0; n], vec![0; size + 1]);
+        let (mut row, mut blocks) = (vec![0; disc.n_free], vec![0; size.max(1) + 1]);
         let mut next = 0;
         for v in order {
             for &i in &nodes[v] {
@@ -50,13 +67,73 @@ impl Layout {
             }
             blocks[part[v] + 1] += nodes[v].len();
         }
-        for r in 0..size {
+        for r in 0..size.max(1) {
             blocks[r + 1] += blocks[r];
         }
-        Ok(Layout {
-            row: Some(row),
-            blocks,
-        })
+        let row = (size > 1).then_some(row);
+        Ok((Layout { row, blocks }, shares))
+    }
+
+    /// The partition that rank 0 makes (`make`, called there alone) on every rank of
+    /// several (collective: every rank calls it, `first` on rank 0), so that no other rank
+    /// builds the nodes' graph or runs METIS: rank 0 sends its error's text, or the rows'
+    /// order, the blocks and the shares as bytes.
+    pub fn of_first(
+        first: bool,
+        make: impl FnOnce() -> Result<(Layout, Vec<RankShare>)>,
+    ) -> Result<(Layout, Vec<RankShare>)> {
+        let made = if first { Some(make()) } else { None };
+        // What follows: the error's bytes (0 where there is none), the rows, the ranks.
+        let mut head = [0u64; 3];
+        match &made {
+            Some(Err(e)) => head[0] = text_of(e).len() as u64,
+            Some(Ok((layout, _))) => {
+                let rows = layout.row.as_ref().map_or(0, Vec::len);
+                head = [0, rows as u64, (layout.blocks.len() - 1) as u64];
+            }
+            None => {}
+        }
+        super::from_rank0_bytes(bytemuck::cast_slice_mut(&mut head))?;
+        if head[0] > 0 {
+            let mut text = match &made {
+                Some(Err(e)) => text_of(e),
+                _ => vec![0; head[0] as usize],
+            };
+            super::from_rank0_bytes(&mut text)?;
+            return match made {
+                Some(Err(e)) => Err(e),
+                _ => Err(Error::solve(String::from_utf8_lossy(&text).into_owned())),
+            };
+        }
+        let (rows, size) = (head[1] as usize, head[2] as usize);
+        let (mut layout, shares) = match made {
+            Some(made) => made?,
+            None => (
+                Layout {
+                    row: Some(vec![0; rows]),
+                    blocks: vec![0; size + 1],
+                },
+                vec![RankShare::default(); size],
+            ),
+        };
+        let mut flat: Vec<u64> = (shares.iter())
+            .flat_map(|s| [s.rows, s.entries, s.ghosts].map(|c| c as u64))
+            .chain(layout.blocks.iter().map(|&b| b as u64))
+            .collect();
+        super::from_rank0_bytes(bytemuck::cast_slice_mut(&mut flat))?;
+        if let Some(row) = &mut layout.row {
+            super::from_rank0_bytes(bytemuck::cast_slice_mut(row))?;
+        }
+        let (counts, blocks) = flat.split_at(3 * size);
+        layout.blocks = blocks.iter().map(|&b| b as usize).collect();
+        let shares = (counts.chunks(3))
+            .map(|c| RankShare {
+                rows: c[0] as usize,
+                entries: c[1] as usize,
+                ghosts: c[2] as usize,
+            })
+            .collect();
+        Ok((layout, shares))
     }
 
     /// The row of unknown i.
@@ -143,37 +220,6 @@ impl Layout {
             cols,
             vals: std::borrow::Cow::Owned(vals),
         })
-    }
-
-    /// Each rank's share of K_A: its rows, entries and the values of other ranks' rows that
-    /// a product fetches. Counted on the nodes' graph, whose pattern K_A's is (the unknowns
-    /// of a node couple with those of the node and of its neighbours), so that a rank that
-    /// assembled only its own columns (`Ranks::discretize`) counts every rank's share (the
-    /// graph read from `cells`, as [`Layout::new`] reads it).
-    pub fn shares(&self, disc: &Discretization, cells: CellSource) -> Vec<RankShare> {
-        let nodes = nodes(disc);
-        let graph = Graph::new(disc, cells, &nodes);
-        let size = self.blocks.len() - 1;
-        let rank = self.ranks_of(&nodes);
-        let mut order: Vec<usize> = (0..nodes.len()).collect();
-        order.sort_by_key(|&v| rank[v]);
-        let mut shares = vec![RankShare::default(); size];
-        let mut seen = vec![usize::MAX; nodes.len()];
-        for v in order {
-            let (r, unknowns) = (rank[v], nodes[v].len());
-            let share = &mut shares[r];
-            let adjacent = graph.of(v).iter().map(|&w| w as usize);
-            let coupled: usize = adjacent.clone().map(|w| nodes[w].len()).sum();
-            share.rows += unknowns;
-            share.entries += unknowns * (unknowns + coupled);
-            for w in adjacent.filter(|&w| rank[w] != r) {
-                if seen[w] != r {
-                    seen[w] = r;
-                    share.ghosts += nodes[w].len();
-                }
-            }
-        }
-        shares
     }
 
     /// The rank that holds each of `nodes` (the unknowns of each node that has any): a rank
@@ -325,36 +371,84 @@ impl Graph {
         }
         Graph { start, adjacent }
     }
+}
 
+/// An error's text as rank 0 sends it to the others ([`Layout::of_first`]): never empty,
+/// since its length says that there is one.
+fn text_of(e: &Error) -> Vec<u8> {
+    let mut text = e.to_string().into_bytes();
+    text.resize(text.len().max(1), b' ');
+    text
+}
+
+/// The nodes' graph in METIS's integers: the neighbours of node v are
+/// `adjncy[xadj[v]..xadj[v + 1]]`.
+struct MetisGraph {
+    xadj: Vec<metis_sys::idx_t>,
+    adjncy: Vec<metis_sys::idx_t>,
+}
+
+impl MetisGraph {
     /// The neighbours of node v, increasing.
-    fn of(&self, v: usize) -> &[u32] {
-        &self.adjacent[self.start[v]..self.start[v + 1]]
+    fn of(&self, v: usize) -> impl Iterator<Item = usize> + Clone + '_ {
+        let (a, b) = (self.xadj[v] as usize, self.xadj[v + 1] as usize);
+        self.adjncy[a..b].iter().map(|&w| w as usize)
     }
+}
+
+impl Graph {
+    /// The graph in METIS's integers, the graph's own arrays let go of as they are copied.
+    fn for_metis(self) -> Result<MetisGraph> {
+        let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
+        let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
+        let xadj = self.start.iter().map(|&i| idx(i)).collect::<Result<_>>()?;
+        drop(self.start);
+        let adjncy = self.adjacent.iter().map(|&w| idx(w as usize));
+        Ok(MetisGraph {
+            xadj,
+            adjncy: adjncy.collect::<Result<_>>()?,
+        })
+    }
+}
+
+/// Each rank's share of K_A over the partition `part` of the nodes' graph (each node's
+/// rank): its rows, entries and the values of other ranks' rows that a product fetches.
+/// Counted on the graph, whose pattern K_A's is (the unknowns of a node couple with those
+/// of the node and of its neighbours), so that a rank that assembled only its own columns
+/// (`Ranks::discretize`) counts every rank's share.
+fn shares(graph: &MetisGraph, nodes: &[Vec<usize>], part: &[usize], size: usize) -> Vec<RankShare> {
+    let mut order: Vec<usize> = (0..nodes.len()).collect();
+    order.sort_by_key(|&v| part[v]);
+    let mut shares = vec![RankShare::default(); size];
+    let mut seen = vec![usize::MAX; nodes.len()];
+    for v in order {
+        let (r, unknowns) = (part[v], nodes[v].len());
+        let share = &mut shares[r];
+        let adjacent = graph.of(v);
+        let coupled: usize = adjacent.clone().map(|w| nodes[w].len()).sum();
+        share.rows += unknowns;
+        share.entries += unknowns * (unknowns + coupled);
+        for w in adjacent.filter(|&w| part[w] != r) {
+            if seen[w] != r {
+                seen[w] = r;
+                share.ghosts += nodes[w].len();
+            }
+        }
+    }
+    shares
 }
 
 /// METIS's k-way partition of the nodes' graph into `size` parts: each node's part. Two
 /// nodes are adjacent where a cell holds both (where K_A couples them: P1), so that the
-/// partition needs no matrix: a rank makes it before it assembles its own columns of K_A
-/// alone (`fem::Discretization::with_columns`), and every rank makes the same one.
-fn partition(
-    disc: &Discretization,
-    cells: CellSource,
-    nodes: &[Vec<usize>],
-    size: usize,
-) -> Result<Vec<usize>> {
+/// partition needs no matrix: rank 0 makes it before it assembles its own columns of K_A
+/// alone (`fem::Discretization::with_columns`), and hands it to the others
+/// ([`Layout::of_first`]).
+fn partition(graph: &mut MetisGraph, size: usize) -> Result<Vec<usize>> {
     let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());
     let idx = |v: usize| metis_sys::idx_t::try_from(v).map_err(too_large);
-    let graph = Graph::new(disc, cells, nodes);
-    let mut xadj = graph
-        .start
-        .iter()
-        .map(|&i| idx(i))
-        .collect::<Result<Vec<_>>>()?;
-    let adjncy = graph.adjacent.iter().map(|&w| idx(w as usize));
-    let mut adjncy = adjncy.collect::<Result<Vec<_>>>()?;
-    drop(graph);
-    let (mut nvtxs, mut ncon, mut nparts) = (idx(nodes.len())?, 1, idx(size)?);
-    let (mut cut, mut part) = (0, vec![0; nodes.len()]);
+    let nodes = graph.xadj.len() - 1;
+    let (mut nvtxs, mut ncon, mut nparts) = (idx(nodes)?, 1, idx(size)?);
+    let (mut cut, mut part) = (0, vec![0; nodes]);
     // SAFETY: xadj (nvtxs + 1 entries) and adjncy describe a graph without self loops,
     // symmetric (a cell makes both arrows); part holds nvtxs entries; null weights, targets
     // and options mean unit weights, even parts and METIS's defaults (a fixed seed). METIS
@@ -364,8 +458,8 @@ fn partition(
         metis_sys::METIS_PartGraphKway(
             &mut nvtxs,
             &mut ncon,
-            xadj.as_mut_ptr(),
-            adjncy.as_mut_ptr(),
+            graph.xadj.as_mut_ptr(),
+            graph.adjncy.as_mut_ptr(),
             std::ptr::null_mut(),
             std::ptr::null_mut(),
             std::ptr::null_mut(),
@@ -379,9 +473,8 @@ fn partition(
     };
     if status != metis_sys::rstatus_et_METIS_OK {
         return Err(Error::solve(format!(
-            "METIS could not partition the mesh's {} nodes among {size} ranks (status \
-             {status})",
-            nodes.len()
+            "METIS could not partition the mesh's {nodes} nodes among {size} ranks (status \
+             {status})"
         )));
     }
     Ok(part.iter().map(|&p| p as usize).collect())

@@ -215,15 +215,18 @@ pub fn max_real_over_ranks(mut value: f64) -> Result<f64> {
     Ok(value)
 }
 
-/// Rank 0's `bytes` (collective: every rank calls it with as many).
+/// Rank 0's `bytes` (collective: every rank calls it with as many), in pieces of at most
+/// 2^30 bytes (MPI counts in an `int`).
 pub fn from_rank0_bytes(bytes: &mut [u8]) -> Result<()> {
-    let n = c_int::try_from(bytes.len())
-        .map_err(|_| Error::solve("MPI_Bcast: more bytes than an int counts"))?;
-    // SAFETY: PETSc (and MPI) is initialized; the shim reads and writes the n bytes.
-    check(
-        unsafe { vc_from_rank0_bytes(bytes.as_mut_ptr().cast(), n) },
-        "MPI_Bcast",
-    )
+    for piece in bytes.chunks_mut(1 << 30) {
+        let n = piece.len() as c_int;
+        // SAFETY: PETSc (and MPI) is initialized; the shim reads and writes the n bytes.
+        check(
+            unsafe { vc_from_rank0_bytes(piece.as_mut_ptr().cast(), n) },
+            "MPI_Bcast",
+        )?;
+    }
+    Ok(())
 }
 
 /// Ends every rank with exit status `code` (`MPI_Abort`).

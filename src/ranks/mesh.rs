@@ -6,8 +6,7 @@
 //! each array's bytes as they lie in memory, into arrays of that shape on the others
 //! ([`Ranks::mesh_of_first`]). So a follower holds the mesh alone, never the file's bytes
 //! nor the reader's arrays, where reading a mesh peaks, and the mesh is the same bits on
-//! every rank. Arrays are sent in pieces of at most 2^30 bytes (MPI counts in an `int`).
-//! The bytes are the ranks' own layout in memory: the ranks of a run are one build on one
+//! every rank. The bytes are the ranks' own layout in memory: the ranks of a run are one build on one
 //! architecture, as MPI runs of one program are.
 
 use std::os::unix::ffi::{OsStrExt, OsStringExt};
@@ -142,9 +141,6 @@ fn arrays(mesh: &mut Mesh) -> Vec<&mut [u8]> {
     out
 }
 
-/// The largest piece of an array one broadcast sends.
-const PIECE: usize = 1 << 30;
-
 impl Ranks {
     /// The mesh rank 0 read (`mine`: `Some` on rank 0, `None` on a follower) on every rank
     /// (collective on several: every rank calls it, once the ranks agreed on their setup
@@ -162,9 +158,7 @@ impl Ranks {
             serde_json::from_str(&self.first_says_text(&shape)?).map_err(|e| failed(&e))?;
         let mut mesh = mine.unwrap_or_else(|| shape.empty());
         for array in arrays(&mut mesh) {
-            for piece in array.chunks_mut(PIECE) {
-                mpi::from_rank0_bytes(piece)?;
-            }
+            mpi::from_rank0_bytes(array)?;
         }
         Ok(mesh)
     }

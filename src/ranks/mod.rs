@@ -12,7 +12,9 @@
 //! 0 the whole once a step), and of a product with K, the active set's (K + S) w, its
 //! values at Γ3's nodes alone. Every rank reads the
 //! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
-//! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays). Of
+//! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays),
+//! and alone partitions the nodes among the ranks (`petsc::Layout::of_first`: a follower
+//! never builds the nodes' graph nor runs METIS). Of
 //! K_A, K_B and K_R a rank holds the columns of its own unknowns alone (a symmetric
 //! matrix's column is its row): it assembles only those ([`Ranks::discretize`]) where the
 //! scene's keys take PETSc, or keeps them of the whole matrices
@@ -271,20 +273,22 @@ impl Ranks {
     ) -> Result<(crate::fem::Discretization, Option<Own>)> {
         #[cfg(feature = "petsc")]
         if self.size > 1 && scene.solver.takes_petsc() {
-            let mut layout = None;
+            let mut made = None;
             let hold = match self.is_first() {
                 true => crate::fem::Hold::Vertices,
                 false => crate::fem::Hold::Nothing,
             };
             let disc =
                 crate::fem::Discretization::with_columns(mesh, scene, hold, |disc, cells| {
-                    let made = crate::petsc::Layout::new(disc, cells, self.size)?;
-                    let own = made.own(self.rank);
-                    layout = Some(made);
+                    let make = || crate::petsc::Layout::partition(disc, cells, self.size);
+                    let (layout, shares) = crate::petsc::Layout::of_first(self.is_first(), make)?;
+                    let own = layout.own(self.rank);
+                    made = Some((layout, shares));
                     Ok(Some(own))
                 })?;
-            let own = layout.map(|layout| Own {
+            let own = made.map(|(layout, shares)| Own {
                 layout,
+                shares,
                 rows: None,
                 holds: Holds::Every,
             });
@@ -314,9 +318,9 @@ impl Ranks {
     ) -> Result<Option<Own>> {
         #[cfg(feature = "petsc")]
         if self.size > 1 {
-            let layout = match made {
-                Some(own) => own.layout,
-                None => crate::petsc::Layout::new(disc, disc.cell_source(), self.size)?,
+            let (layout, shares) = match made {
+                Some(own) => (own.layout, own.shares),
+                None => crate::petsc::Layout::partition(disc, disc.cell_source(), self.size)?,
             };
             if disc.own.is_none() {
                 disc.keep_columns(layout.own(self.rank));
@@ -339,6 +343,7 @@ impl Ranks {
             crate::resources::return_freed_memory();
             return Ok(Some(Own {
                 layout,
+                shares,
                 rows,
                 holds: Holds::Every,
             }));
@@ -389,14 +394,18 @@ impl Ranks {
 }
 
 /// On one of several ranks, what [`Ranks::keep_own_columns`] hands to the time loop's PETSc
-/// backend (`petsc::Krylov`): which rank holds which rows (METIS's partition, made once a
-/// rank), and where K_A is the step matrix, the rank's rows of K_A in PETSc's numbering,
-/// taken out of the discretization: PETSc's matrices are made of them, and the Newton
+/// backend (`petsc::Krylov`): which rank holds which rows (METIS's partition, made by rank
+/// 0 and handed to the others: `petsc::Layout::of_first`) and each rank's share of them,
+/// and where K_A is the step matrix, the rank's rows of K_A in PETSc's numbering, taken
+/// out of the discretization: PETSc's matrices are made of them, and the Newton
 /// systems read them as their copy of K, the rank's only one. On a follower, the dofs
 /// its history holds ([`Ranks::hold_history`]).
 pub struct Own {
     #[cfg(feature = "petsc")]
     pub(crate) layout: crate::petsc::Layout,
+    /// Each rank's share of K_A over the layout, counted where the partition was made.
+    #[cfg(feature = "petsc")]
+    pub(crate) shares: Vec<crate::petsc::RankShare>,
     #[cfg(feature = "petsc")]
     pub(crate) rows: Option<crate::petsc::Csr<'static>>,
     /// What a follower's history holds: the memory of its `Discretization::memory_reach`,
@@ -501,13 +510,10 @@ impl Plan {
         steps: f64,
     ) -> Result<Plan> {
         use crate::resources::{peak_memory, petsc_bytes};
-        let made = made
-            .map(|own| &own.layout)
-            .filter(|l| l.blocks.len() == size + 1);
-        let cells = disc.cell_source();
+        let made = made.filter(|own| own.shares.len() == size);
         let shares = match made {
-            Some(layout) => layout.shares(disc, cells),
-            None => crate::petsc::Layout::new(disc, cells, size)?.shares(disc, cells),
+            Some(own) => own.shares.clone(),
+            None => crate::petsc::Layout::partition(disc, disc.cell_source(), size)?.1,
         };
         let largest = shares
             .iter()

@@ -265,10 +265,11 @@ fn auto_takes_the_active_set_beyond_the_dense_limit() {
     assert_eq!(common::descriptor(&s, &disc).linear(), Linear::Cholesky);
 }
 
-/// Each rank's share of K_A (`petsc::Layout::shares`, `check --ranks`), counted on the
-/// nodes' graph so that a rank that assembled its own columns alone counts every rank's,
-/// is what the whole K_A's pattern says: on the 3D block over 3 ranks and the paper's 2D
-/// scene over 2, each rank's rows, stored entries, and distinct columns outside its rows.
+/// Each rank's share of K_A (`petsc::Layout::partition`, `check --ranks`), counted on the
+/// nodes' graph that METIS partitioned (so that a rank that assembled its own columns
+/// alone counts every rank's, and METIS left the graph as it was), is what the whole K_A's
+/// pattern says: on the 3D block over 3 ranks and the paper's 2D scene over 2, each rank's
+/// rows, stored entries, and distinct columns outside its rows.
 #[cfg(feature = "petsc")]
 #[test]
 fn the_ranks_shares_of_k_a_are_those_of_its_pattern() {
@@ -277,7 +278,8 @@ fn the_ranks_shares_of_k_a_are_those_of_its_pattern() {
     for (scene, size) in [(SceneText::block(), 3), (SceneText::paper(), 2)] {
         let path = scene.write(tmp.path(), "s.toml");
         let (_s, _m, disc) = common::load(&path, &[]);
-        let layout = viscontact::petsc::Layout::new(&disc, disc.cell_source(), size).unwrap();
+        let cells = disc.cell_source();
+        let (layout, shares) = viscontact::petsc::Layout::partition(&disc, cells, size).unwrap();
         let rank = |i: usize| layout.blocks.partition_point(|&b| b <= layout.row(i)) - 1;
         let k = disc.k_a.as_ref();
         let (ptr, idx) = (k.symbolic().col_ptr(), k.symbolic().row_idx());
@@ -292,7 +294,6 @@ fn the_ranks_shares_of_k_a_are_those_of_its_pattern() {
                     .filter(|&&j| rank(j) != rank(i)),
             );
         }
-        let shares = layout.shares(&disc, disc.cell_source());
         for (r, ((rows, entries, ghosts), share)) in expected.iter().zip(&shares).enumerate() {
             assert_eq!(share.rows, *rows, "rank {r} of {size}");
             assert_eq!(share.entries, *entries, "rank {r} of {size}");
