@@ -241,14 +241,26 @@ impl<'a> CellSource<'a> {
     }
 
     /// Hands each cell to `f` with its index, in order.
-    pub fn each(self, mut f: impl FnMut(usize, &Cell)) {
+    pub fn each(self, f: impl FnMut(usize, &Cell)) {
+        self.each_where(|_| true, f)
+    }
+
+    /// [`CellSource::each`] of the cells whose vertices `visit` accepts alone; no other is
+    /// made.
+    pub fn each_where(self, visit: impl Fn(&[usize]) -> bool, mut f: impl FnMut(usize, &Cell)) {
         if let CellSource::Held(cells) = self {
-            return cells.iter().enumerate().for_each(|(c, t)| f(c, t));
+            let visited = cells
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| visit(t.vertices()));
+            return visited.for_each(|(c, t)| f(c, t));
         }
         let (points, dim) = self.points();
         let mut c = 0;
         self.each_vertices(|v| {
-            f(c, &make_cell(dim, corners(v, |i| i), points));
+            if visit(v) {
+                f(c, &make_cell(dim, corners(v, |i| i), points));
+            }
             c += 1;
         });
     }
@@ -582,9 +594,10 @@ impl Discretization {
     }
 
     /// The discretization with of K_A, K_B and K_R only the columns of the unknowns that
-    /// `own` names (increasing) whole, and the diagonal entry alone of the others, as
-    /// [`Discretization::keep_columns`] leaves them, bit for bit, but without the whole
-    /// matrices ever in memory: on one of several MPI ranks (`Ranks::discretize`). `own`
+    /// `own` names (increasing) whole, and of the others the diagonal entry at Γ3's
+    /// unknowns alone, as [`Discretization::keep_columns`] leaves them, bit for bit, but
+    /// without the whole matrices ever in memory, and from the cells that reach those
+    /// entries alone: on one of several MPI ranks (`Ranks::discretize`). `own`
     /// reads the discretization before its matrices are assembled (they are empty then):
     /// its unknowns and cells, of which METIS's partition is made; None keeps every column.
     /// Where there are prescribed dofs every column is kept, as `keep_columns` does. The
@@ -701,37 +714,59 @@ impl Discretization {
     }
 
     /// K_A on all n_dofs, K_B and K_R (`assemble`) of the cells `cells`, of the unknowns
-    /// `own` the columns whole and of the others the diagonal entry (None: every column).
+    /// `own` the columns whole and of the others the diagonal entry at Γ3's unknowns alone
+    /// (None: every column).
     fn assemble(
         &self,
         cells: CellSource,
         groups: usize,
         own: Option<&[usize]>,
     ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
-        let keep = own.map(|own| {
-            let mut keep = vec![false; self.n_dofs];
-            own.iter().for_each(|&i| keep[i] = true);
-            keep
+        let whole = own.map(|own| {
+            let mut whole = vec![false; self.n_dofs];
+            own.iter().for_each(|&i| whole[i] = true);
+            whole
+        });
+        let diagonal = self.diagonal_read();
+        let share = whole.as_deref().map(|whole| Share {
+            whole,
+            diagonal: &diagonal,
         });
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
         let (materials, r) = (&self.materials, self.r);
-        assemble(cells, self.dim, dofs, materials, r, groups, keep.as_deref())
+        assemble(cells, self.dim, dofs, materials, r, groups, share)
+    }
+
+    /// The unknowns at which the active set reads the step matrix's diagonal (its ρ): those
+    /// of Γ3's rows.
+    fn diagonal_read(&self) -> Vec<bool> {
+        let mut read = vec![false; self.n_dofs];
+        for row in self.contact.iter().chain(&self.friction) {
+            row.entries().for_each(|(d, _)| read[d] = true);
+        }
+        read
     }
 
     /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) whole and of
-    /// the others the diagonal entry alone: a rank of several, which holds those unknowns'
-    /// rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric matrix's column is
-    /// its row, so each rank computes its own entries of a product ([`mul_add_rows`]) and
-    /// the ranks gather the rest; the diagonal stays for the active set's ρ. Where K_A has a
+    /// the others the diagonal entry at Γ3's unknowns alone: a rank of several, which holds
+    /// those unknowns' rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric
+    /// matrix's column is its row, so each rank computes its own entries of a product
+    /// ([`mul_add_rows`]) and the ranks gather the rest; the diagonal stays where the
+    /// active set's ρ reads it (`Discretization::diagonal_read`). Where K_A has a
     /// block on prescribed dofs (`k_a_all`), which moves their velocities to every row's
     /// right side, the matrices stay whole.
     pub fn keep_columns(&mut self, own: Vec<usize>) {
         if self.k_a_all.is_some() {
             return;
         }
-        let mut keep = vec![false; self.n_dofs];
-        own.iter().for_each(|&i| keep[i] = true);
-        let trim = |a: &mut Sparse| *a = columns_kept(a, &keep);
+        let mut whole = vec![false; self.n_dofs];
+        own.iter().for_each(|&i| whole[i] = true);
+        let diagonal = self.diagonal_read();
+        let share = Share {
+            whole: &whole,
+            diagonal: &diagonal,
+        };
+        let trim = |a: &mut Sparse| *a = columns_kept(a, share);
         trim(&mut self.k_a);
         self.k_b.iter_mut().for_each(trim);
         self.k_r.iter_mut().for_each(trim);
@@ -874,10 +909,7 @@ impl Discretization {
     /// set's ρ reads of it (`NodalRow::entries`).
     pub fn keep_diagonal_of_k_a(&mut self) {
         let size = (self.k_a.nrows(), self.k_a.ncols());
-        let mut read = vec![false; size.0];
-        for row in self.contact.iter().chain(&self.friction) {
-            row.entries().for_each(|(d, _)| read[d] = true);
-        }
+        let read = self.diagonal_read();
         self.k_a = entries_kept(&self.k_a, size, |i, j| i == j && read[i]);
     }
 
@@ -1146,10 +1178,26 @@ impl Discretization {
     }
 }
 
-/// `a` with the columns j where `keep[j]` whole and the diagonal entry alone of the others.
-fn columns_kept(a: &Sparse, keep: &[bool]) -> Sparse {
+/// What a rank of several holds of K_A, K_B and K_R: the columns j where `whole[j]` (its
+/// own unknowns), and of the others the diagonal entry alone where `diagonal[j]` (Γ3's
+/// unknowns, where the active set's ρ reads it: `Discretization::diagonal_read`).
+#[derive(Clone, Copy)]
+struct Share<'s> {
+    whole: &'s [bool],
+    diagonal: &'s [bool],
+}
+
+impl Share<'_> {
+    /// Whether the share holds entry (i, j).
+    fn holds(&self, i: usize, j: usize) -> bool {
+        self.whole[j] || (i == j && self.diagonal[j])
+    }
+}
+
+/// `a` with the entries that `share` holds alone.
+fn columns_kept(a: &Sparse, share: Share) -> Sparse {
     let (nrows, ncols) = (a.nrows(), a.ncols());
-    entries_kept(a, (nrows, ncols), |i, j| keep[j] || i == j)
+    entries_kept(a, (nrows, ncols), |i, j| share.holds(i, j))
 }
 
 /// The `size` (rows, columns) leading block of `a` with its entries (i, j) where `keep(i,
@@ -1463,9 +1511,10 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 /// all; rows and columns of dofs held at zero dropped; a node with a frame in its frame's
 /// components, `Cell::parts_in`); the three share one sparsity pattern ([`pattern`]). The
 /// element matrices are added at their positions (found by bisection in the column): no
-/// triplets. Where `keep` is given, the column j with `keep[j]` false holds its diagonal
-/// entry alone (a rank of several: the others' columns are not its own); each kept entry
-/// sums the same terms in the same order.
+/// triplets. Where `share` is given (a rank of several), the entries it holds alone, from
+/// the cells that reach them alone (those with a node of the rank's own or of Γ3's): a
+/// rank's setup then makes and visits its part of the mesh and Γ3's neighbourhood, not the
+/// whole. Each entry held sums the same terms in the same order.
 fn assemble(
     cells: CellSource,
     d: usize,
@@ -1473,10 +1522,17 @@ fn assemble(
     materials: &CellMaterials,
     r: Isotropic,
     groups: usize,
-    keep: Option<&[bool]>,
+    share: Option<Share>,
 ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
-    let whole = |col: usize| keep.is_none_or(|keep| keep[col]);
-    let (col_ptr, row_idx) = pattern(cells, d, (free, n), &whole);
+    let holds = |i: usize, j: usize| share.is_none_or(|s| s.holds(i, j));
+    let (col_ptr, row_idx) = pattern(cells, d, (free, n), share);
+    let reached = share.map(|s| {
+        let held = |i: &DofIndex| i.get().is_some_and(|i| s.whole[i] || s.diagonal[i]);
+        free.chunks(d)
+            .map(|node| node.iter().any(held))
+            .collect::<Vec<_>>()
+    });
+    let reaches = |v: &[usize]| reached.as_ref().is_none_or(|r| v.iter().any(|&p| r[p]));
     let nnz = row_idx.len();
     let elastic = materials.elastic();
     let (mut va, mut vb, mut vr) = (
@@ -1486,7 +1542,7 @@ fn assemble(
     );
     // The entries of the three matrices from the same two factors (`Cell::parts`), without
     // building three element matrices per cell.
-    cells.each(|c, t| {
+    cells.each_where(reaches, |c, t| {
         let Stiffness { a, b, memory } = materials.of(c);
         let nodes = t.vertices();
         let frame = |i: usize| frames.of(nodes[i]);
@@ -1499,7 +1555,7 @@ fn assemble(
                     let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
                     for al in 0..d {
                         let row = free[d * q + al].get();
-                        let Some(row) = row.filter(|&i| i == col || whole(col)) else {
+                        let Some(row) = row.filter(|&i| holds(i, col)) else {
                             continue;
                         };
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);
@@ -1529,15 +1585,17 @@ fn assemble(
 /// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,
 /// built from the cells' vertices: node q couples with node p when a cell holds both. The
 /// column of index j, a component of node p, lists the indices of the components of p's
-/// neighbours q, increasing, where `whole(j)`; else j alone (its diagonal entry). Only the
-/// nodes with a whole column list their neighbours (a rank of several: its own nodes, not
-/// the whole mesh's), and the row indices are allocated once, at their exact count.
+/// neighbours q, increasing, where `share` holds it whole (or there is none); else j
+/// alone (its diagonal entry) where it holds that, or nothing. Only the nodes with a whole
+/// column list their neighbours (a rank of several: its own nodes, not the whole mesh's),
+/// and the row indices are allocated once, at their exact count.
 fn pattern(
     cells: CellSource,
     d: usize,
     (free, n): (&[DofIndex], usize),
-    whole: &dyn Fn(usize) -> bool,
+    share: Option<Share>,
 ) -> (Vec<usize>, Vec<usize>) {
+    let whole = |col: usize| share.is_none_or(|s| s.whole[col]);
     let dofs = |p: usize| free[d * p..d * (p + 1)].iter().filter_map(|i| i.get());
     let has_dofs = |p: usize| dofs(p).next().is_some();
     let lists = |p: usize| dofs(p).any(whole);
@@ -1563,7 +1621,7 @@ fn pattern(
             .iter()
             .map(|&q| dofs(q as usize).count())
             .sum(),
-        false => 1,
+        false => usize::from(share.is_some_and(|s| s.diagonal[col])),
     };
     let entries = (node_of.iter().enumerate()).map(|(col, &p)| column_len(col, p));
     let mut row_idx = Vec::with_capacity(entries.sum());
@@ -1575,7 +1633,8 @@ fn pattern(
             true => neighbours[p]
                 .iter()
                 .for_each(|&q| row_idx.extend(dofs(q as usize))),
-            false => row_idx.push(col),
+            // Its diagonal entry, where it is held.
+            false => row_idx.extend((column_len(col, p) == 1).then_some(col)),
         }
         row_idx[start..].sort_unstable();
         col_ptr.push(row_idx.len());

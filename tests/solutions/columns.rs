@@ -2,8 +2,8 @@
 //! ranks keeps of K_A, K_B and K_R the columns of the unknowns whose rows it holds, and
 //! computes its entries of the right side's products from them (`fem::mul_add_rows`). On
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
-//! agree with the whole matrices' products to round-off, the diagonal stays whole (the
-//! active set's ρ reads it), and the other columns are gone. A rank that assembles those
+//! agree with the whole matrices' products to round-off, the diagonal stays at Γ3's
+//! unknowns (the active set's ρ reads it there), and the other columns are gone. A rank that assembles those
 //! columns alone (`Discretization::with_columns`) holds the same matrices, bit for bit, and
 //! the same loads in its own rows, whether it holds the cells, their vertices or nothing;
 //! from the vertices alone (rank 0) it computes the stresses and norms of the cells held,
@@ -42,6 +42,9 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
     assert!(own.len() > whole.n_free / 4 && own.len() < 3 * whole.n_free / 4);
     mine.keep_columns(own.clone());
     assert_eq!(mine.own.as_deref(), Some(own.as_slice()));
+    let gamma3: BTreeSet<usize> = (whole.contact.iter().chain(&whole.friction))
+        .flat_map(|row| row.entries().map(|(d, _)| d))
+        .collect();
     let x: Vec<f64> = (0..whole.n_dofs).map(|_| rng.unit() - 0.5).collect();
     let pairs: Vec<(&Sparse, &Sparse)> = [(&whole.k_a, &mine.k_a)]
         .into_iter()
@@ -56,16 +59,30 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
         let at = |v: &[f64]| own.iter().map(|&i| v[i]).collect::<Vec<_>>();
         let diff = rel_diff(&at(&rows), &at(&y));
         assert!(diff < 1e-14, "matrix {k}: own rows differ by {diff:e}");
-        assert_eq!(diagonal(kept), diagonal(full), "matrix {k}");
-        let entries = |m: &Sparse| m.as_ref().val().len();
-        let others = whole.n_free - own.len();
-        assert!(entries(kept) < entries(full) * 3 / 4 + others, "matrix {k}");
-        // The other columns hold their diagonal alone.
+        // The diagonal at the own unknowns and at Γ3's, the whole's bits; nothing else of
+        // the other columns.
+        let (d_kept, d_full) = (diagonal(kept), diagonal(full));
         let ptr = kept.as_ref().symbolic().col_ptr();
-        let single = (0..whole.n_free)
-            .filter(|&j| ptr[j + 1] - ptr[j] == 1)
-            .count();
-        assert_eq!(single, others, "matrix {k}");
+        let mut held = 0;
+        for j in 0..whole.n_free {
+            let mine = own.binary_search(&j).is_ok();
+            let expected = match mine || gamma3.contains(&j) {
+                true => d_full[j],
+                false => 0.0,
+            };
+            assert_eq!(
+                d_kept[j].to_bits(),
+                expected.to_bits(),
+                "matrix {k}, dof {j}"
+            );
+            if !mine {
+                assert_eq!(ptr[j + 1] - ptr[j], usize::from(gamma3.contains(&j)));
+                held += ptr[j + 1] - ptr[j];
+            }
+        }
+        assert!(held > 0 && held < gamma3.len(), "matrix {k}: {held}");
+        let entries = |m: &Sparse| m.as_ref().val().len();
+        assert!(entries(kept) < entries(full) * 3 / 4 + held, "matrix {k}");
     }
 }
 
