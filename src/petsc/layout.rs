@@ -11,8 +11,9 @@
 //! Rank 0 alone builds the nodes' graph and runs METIS, and sends the rows' order to the
 //! others ([`Layout::of_first`]: 4 bytes an unknown, once), where every rank had made the
 //! same partition itself from the whole graph, the work and memory of one process on each
-//! (docs/cluster.md, "Memory per rank"). Vectors cross between the two orders at every PETSc call (`to_rows`,
-//! `from_rows`): two copies of n values, against a solve's tens of products with K_A.
+//! (docs/cluster.md, "Memory per rank"). Vectors cross between the two orders at every
+//! PETSc call (`to_rows`, `from_rows`): two copies of n values, against a solve's tens of
+//! products with K_A.
 
 use super::PetscInt;
 use crate::fem::{CellSource, Discretization, Sparse};
@@ -106,7 +107,7 @@ impl Layout {
             };
         }
         let (rows, size) = (head[1] as usize, head[2] as usize);
-        let (mut layout, shares) = match made {
+        let made = match made {
             Some(made) => made?,
             None => (
                 Layout {
@@ -116,6 +117,13 @@ impl Layout {
                 vec![RankShare::default(); size],
             ),
         };
+        Layout::sent(made)
+    }
+
+    /// Rank 0's layout and shares in `made` on every rank (collective), each rank's of the
+    /// sizes of rank 0's.
+    fn sent((mut layout, shares): (Layout, Vec<RankShare>)) -> Result<(Layout, Vec<RankShare>)> {
+        let size = shares.len();
         let mut flat: Vec<u64> = (shares.iter())
             .flat_map(|s| [s.rows, s.entries, s.ghosts].map(|c| c as u64))
             .chain(layout.blocks.iter().map(|&b| b as u64))
