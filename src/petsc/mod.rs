@@ -229,6 +229,33 @@ pub fn from_rank0_bytes(bytes: &mut [u8]) -> Result<()> {
     Ok(())
 }
 
+/// `recv` ← each rank's `send`, rank r's at displs[r] (counts[r] values, `cut`), on every
+/// rank where `every`, else on rank 0 alone (collective: every rank calls it; `recv`
+/// holds the sum of the counts where it receives).
+fn gather(send: &[f64], recv: &mut [f64], cut: (&[c_int], &[c_int]), every: bool) -> Result<()> {
+    let (counts, displs) = cut;
+    // SAFETY: send holds this rank's count; recv, where it receives, the sum of counts,
+    // which the displacements cut in rank order; MPI writes recv within the call.
+    let code = unsafe {
+        vc_gather(
+            send.as_ptr(),
+            send.len() as c_int,
+            recv.as_mut_ptr(),
+            counts.as_ptr(),
+            displs.as_ptr(),
+            c_int::from(every),
+        )
+    };
+    check(
+        code,
+        if every {
+            "MPI_Allgatherv"
+        } else {
+            "MPI_Gatherv"
+        },
+    )
+}
+
 /// Ends every rank with exit status `code` (`MPI_Abort`).
 pub fn abort(code: i32) {
     // SAFETY: PETSc (and MPI) is initialized by whoever has several ranks to end.
@@ -673,21 +700,7 @@ impl Krylov {
             .collect();
         let mut all = vec![0.0; at.order.len()];
         match self.layout.permutes() {
-            true => {
-                // SAFETY: mine holds this rank's count, all the sum of counts, which the
-                // displacements cut in rank order; MPI writes all within the call.
-                let code = unsafe {
-                    vc_gather(
-                        mine.as_ptr(),
-                        mine.len() as c_int,
-                        all.as_mut_ptr(),
-                        at.counts.as_ptr(),
-                        at.displs.as_ptr(),
-                        1,
-                    )
-                };
-                check(code, "MPI_Allgatherv")?;
-            }
+            true => gather(&mine, &mut all, (&at.counts, &at.displs), true)?,
             false => all = mine,
         }
         y.fill(0.0);
@@ -784,19 +797,13 @@ impl Krylov {
         if receives {
             self.rows.resize(self.n, 0.0);
         }
-        // SAFETY: own_x holds this rank's count; rows, where it receives, n values, which
-        // the counts and displacements cut in rank order; MPI writes rows within the call.
-        let code = unsafe {
-            vc_gather(
-                self.own_x.as_ptr(),
-                self.own_x.len() as c_int,
-                self.rows.as_mut_ptr(),
-                spread.counts.as_ptr(),
-                spread.displs.as_ptr(),
-                c_int::from(spread.whole == Whole::Every),
-            )
-        };
-        check(code, "MPI_Gatherv")?;
+        let cut = (spread.counts.as_slice(), spread.displs.as_slice());
+        gather(
+            &self.own_x,
+            &mut self.rows,
+            cut,
+            spread.whole == Whole::Every,
+        )?;
         if receives {
             self.layout.from_rows(&self.rows, w);
         }

@@ -3,8 +3,8 @@
  * Open MPI) and its types stay on this side. Every function returns a PetscErrorCode (0:
  * success); vc_error_message turns one into PETSc's text. K_A's own KSP spans the ranks an MPI
  * launcher started (PETSC_COMM_WORLD: each rank holds a contiguous block of its rows, and
- * gets its rows of the solution back: the caller sends them where they are read), and so do the active set's Newton systems,
- * whose matrix each rank assembles for its own rows. */
+ * gets its rows of the solution back: the caller sends them where they are read), and so
+ * do the active set's Newton systems, whose matrix each rank assembles for its own rows. */
 #include <petscksp.h>
 
 #if defined(VC_REQUIRE_32BIT_INDICES) && defined(PETSC_USE_64BIT_INDICES)
