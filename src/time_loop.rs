@@ -30,7 +30,8 @@
 
 use crate::effects::{self, Effects};
 use crate::fem::{
-    constraints, leading_block, mul_add, mul_add_rows, Discretization, Sparse, SymmetricPair,
+    constraints, leading_block, mul_add, mul_add_rows, Discretization, RowsPair, Sparse,
+    SymmetricPair,
 };
 use crate::history::{History, Holds, LoopState, Plans, SavedLoop};
 use crate::ranks::Own;
@@ -74,6 +75,9 @@ pub struct TimeLoop<'p> {
     /// K_B and the body's K_R (when both are used and share their pattern): K_B u_n + K_R
     /// m_n in one pass over their lower triangles.
     paired: Option<SymmetricPair>,
+    /// On one of several MPI ranks, its rows of K_B and K_R^(0) where it makes them after
+    /// PETSc's setup (`Discretization::own_pair_made`); else `disc.own_pair`'s are read.
+    own_pair: Option<RowsPair>,
     /// The step matrix on all n_dofs when there are prescribed dofs: its free-by-prescribed
     /// block moves their velocities to the right side (`fem::constraints`).
     lift: Option<Sparse>,
@@ -263,6 +267,11 @@ impl<'p> TimeLoop<'p> {
             Build::Nothing => Backend::None,
         };
         let solver = effects::step_solver(&effects, &descriptor, matrix, &backend, &rows)?;
+        // After PETSc's setup, where a rank of several peaks: its rows of K_B and K_R^(0).
+        let own_pair = disc.own_pair_made(match &holds {
+            Some(Holds::Local(dofs)) => Some(dofs),
+            _ => None,
+        });
         let n = disc.n_dofs;
         let history = History::holding(n, scene.time.k(), &plans, holds.unwrap_or_default());
         let paired = disc
@@ -294,6 +303,7 @@ impl<'p> TimeLoop<'p> {
             b: vec![0.0; n],
             growth: Growth::default(),
             paired,
+            own_pair,
             lift,
             abandon: None,
             can_stop: false,
@@ -552,7 +562,8 @@ impl<'p> TimeLoop<'p> {
             Some(own) => mul_add_rows(k, own, x, -1.0, b),
             None => mul_add(k, x, -1.0, b),
         };
-        match (&mut self.paired, &disc.own_pair, &disc.k_b) {
+        let own_pair = self.own_pair.as_ref().or(disc.own_pair.as_ref());
+        match (&mut self.paired, own_pair, &disc.k_b) {
             (Some(pair), _, _) if memory => {
                 let (_, m0) = groups.next().expect("group 0");
                 pair.mul_add(&h.u, m0, -1.0, &mut self.b)

@@ -150,6 +150,10 @@ pub struct Discretization {
     /// On one of several MPI ranks, K_B and K_R^(0) as the rank's rows of both, paired
     /// ([`Discretization::pair_own_rows`]); `k_b` and `k_r[0]` then hold no entry.
     pub own_pair: Option<RowsPair>,
+    /// On one of several MPI ranks that pairs its rows of K_B and K_R^(0) after PETSc's
+    /// setup ([`PairWhen::AfterKrylov`]): the cells it assembles them from
+    /// ([`Discretization::own_pair_made`]); `k_b` and `k_r[0]` hold no entry meanwhile.
+    pair_cells: Option<PairCells>,
     /// The cells as [`Discretization::stress`] reads them on one process, once it is called
     /// (a rank of several reads `cells`).
     stress_cells: std::sync::OnceLock<PackedCells>,
@@ -170,6 +174,16 @@ pub enum StressCells<'a> {
     /// These cells with these materials (`CellMaterials::of_cell`'s), made apart from the
     /// discretization's (a follower rank's piece: [`Discretization::make_cells`]).
     Of(&'a [Cell], &'a [u32]),
+}
+
+/// Node `p` of `mesh` in the 32 bits a rank of several numbers its nodes in.
+fn node_u32(p: usize, mesh: &Mesh) -> Result<u32> {
+    u32::try_from(p).map_err(|_| {
+        Error::input(format!(
+            "mesh '{}': more nodes than a run over several MPI ranks numbers (2^32)",
+            mesh.path.display()
+        ))
+    })
 }
 
 /// The mesh's triangles (2D) or tetrahedra (3D) as cells.
@@ -319,6 +333,32 @@ impl<'a> CellSource<'a> {
         }
     }
 }
+
+/// When a rank of several whose rows of K_A go to PETSc makes its rows of K_B and K_R^(0)
+/// ([`Discretization::with_columns`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PairWhen {
+    /// With K_A, in its setup (`Discretization::pair_own_rows` pairs them).
+    Setup,
+    /// After PETSc's setup ([`Discretization::own_pair_made`]), where a scene has
+    /// elasticity and one memory group: GAMG's setup, where a rank peaks, then does not
+    /// hold them (20 bytes an entry of its rows). Elsewhere as `Setup`.
+    AfterKrylov,
+}
+
+/// The cells from which a rank makes its rows of K_B and K_R^(0) after PETSc's setup
+/// ([`PairWhen::AfterKrylov`]): those with one of its own nodes, as vertices and
+/// materials, and the rows' entries.
+struct PairCells {
+    vertices: Vec<u32>,
+    materials: CellMaterials,
+    entries: usize,
+}
+
+/// The pieces in which [`Discretization::own_pair_made`] assembles a rank's rows, so that
+/// what the assembly holds besides the rows (32 bytes an entry of a piece) stays a small
+/// part of them.
+const PAIR_PIECES: usize = 8;
 
 /// What of its cells a discretization holds past its setup.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -590,7 +630,7 @@ impl Discretization {
     /// The discretization of `scene` on `mesh`: the free dofs (Γ1 clamped), the cells, the
     /// stiffness matrices, the loads and the constraint rows on Γ3,1 and Γ3,2.
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
-        Self::with_columns(mesh, scene, Hold::Cells, |_, _| Ok(None))
+        Self::with_columns(mesh, scene, (Hold::Cells, PairWhen::Setup), |_, _| Ok(None))
     }
 
     /// The discretization with of K_A, K_B and K_R only the columns of the unknowns that
@@ -603,11 +643,11 @@ impl Discretization {
     /// Where there are prescribed dofs every column is kept, as `keep_columns` does. The
     /// discretization holds what `hold` says of the cells; where that is not every cell (a
     /// rank of several) its setup makes each from the mesh when it reads it
-    /// ([`CellSource::Made`]).
+    /// ([`CellSource::Made`]). `pair` says when it makes its rows of K_B and K_R^(0).
     pub fn with_columns(
         mesh: &Mesh,
         scene: &Scene,
-        hold: Hold,
+        (hold, pair): (Hold, PairWhen),
         own: impl FnOnce(&Discretization, CellSource) -> Result<Option<Vec<usize>>>,
     ) -> Result<Self> {
         check_model(mesh, scene)?;
@@ -665,6 +705,7 @@ impl Discretization {
             idle_groups: idle_groups(mesh, scene),
             own: None,
             own_pair: None,
+            pair_cells: None,
             stress_cells: std::sync::OnceLock::new(),
             vertices: Vec::new(),
         };
@@ -686,28 +727,39 @@ impl Discretization {
             true => scene.physics.memory_groups(),
             false => 0,
         };
-        let (k_a_all, k_b, k_r) = disc.assemble(
-            CellSource::setup(hold, &disc.cells, mesh),
-            groups,
-            own.as_deref(),
-        );
+        // The implicit variant's step matrix is made of the three matrices' columns.
+        let left = scene.solver.history == crate::scene::History::Left;
+        let later =
+            pair == PairWhen::AfterKrylov && left && groups == 1 && disc.materials.elastic();
+        let terms = match (later, own.as_deref()) {
+            (true, Some(own)) => {
+                let cells = CellSource::setup(hold, &disc.cells, mesh);
+                disc.pair_cells = Some(disc.cells_with_own_nodes(cells, own, mesh)?);
+                (false, 0)
+            }
+            _ => (disc.materials.elastic(), groups),
+        };
+        let cells = CellSource::setup(hold, &disc.cells, mesh);
+        let (k_a_all, k_b, k_r) = disc.assemble(cells, terms, own.as_deref());
         (disc.k_a, disc.k_a_all) = match n_dofs > n_free {
             true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
             false => (k_a_all, None),
         };
         (disc.k_b, disc.k_r, disc.own) = (k_b, k_r, own);
+        if let Some(cells) = &mut disc.pair_cells {
+            // K_B and K_R^(0) as after `pair_own_rows`: present, with no entry.
+            let empty = || entries_kept(&disc.k_a, (n_dofs, n_dofs), |_, _| false);
+            (disc.k_b, disc.k_r) = (Some(empty()), vec![empty()]);
+            let own = disc.own.as_deref().unwrap_or_default();
+            let cp = disc.k_a.symbolic().col_ptr();
+            cells.entries = own.iter().map(|&j| cp[j + 1] - cp[j]).sum();
+        }
         if hold == Hold::Vertices {
             let (nodes, _) = mesh_cells(mesh);
-            let too_large = |_| {
-                Error::input(format!(
-                    "mesh '{}': more nodes than a run over several MPI ranks numbers (2^32)",
-                    mesh.path.display()
-                ))
-            };
             // At their exact size (a collected Result grows by doubling): they stay.
             disc.vertices = Vec::with_capacity(nodes.len());
             for &v in nodes {
-                disc.vertices.push(u32::try_from(v).map_err(too_large)?);
+                disc.vertices.push(node_u32(v, mesh)?);
             }
         }
         Ok(disc)
@@ -719,7 +771,7 @@ impl Discretization {
     fn assemble(
         &self,
         cells: CellSource,
-        groups: usize,
+        terms: (bool, usize),
         own: Option<&[usize]>,
     ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
         let whole = own.map(|own| {
@@ -734,7 +786,7 @@ impl Discretization {
         });
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
         let (materials, r) = (&self.materials, self.r);
-        assemble(cells, self.dim, dofs, materials, r, groups, share)
+        assemble(cells, self.dim, dofs, (materials, r), terms, share)
     }
 
     /// The unknowns at which the active set reads the step matrix's diagonal (its ρ): those
@@ -779,6 +831,9 @@ impl Discretization {
     /// are whole. Only where K_A is the step matrix: the implicit variant's is made of all
     /// three matrices' columns.
     pub fn pair_own_rows(&mut self) {
+        if self.pair_cells.is_some() {
+            return; // `own_pair_made` pairs them after PETSc's setup.
+        }
         let (Some(own), Some(k_b), Some(k_r)) = (&self.own, &mut self.k_b, self.k_r.first_mut())
         else {
             return;
@@ -791,6 +846,70 @@ impl Discretization {
             *m = entries_kept(m, size, |_, _| false);
         }
         self.own_pair = Some(pair);
+    }
+
+    /// The cells of `cells` (`mesh`'s) with one of the nodes of the unknowns `own`, as
+    /// [`PairCells`] (their entries counted once K_A is assembled).
+    fn cells_with_own_nodes(
+        &self,
+        cells: CellSource,
+        own: &[usize],
+        mesh: &Mesh,
+    ) -> Result<PairCells> {
+        node_u32(mesh.nodes.len().saturating_sub(1), mesh)?; // so every node fits in 32 bits
+        let reaches = self.reaching(own);
+        let (mut vertices, mut of_cell, mut c) = (Vec::new(), Vec::new(), 0);
+        cells.each_vertices(|v| {
+            if v.iter().any(|&p| reaches[p]) {
+                vertices.extend(v.iter().map(|&p| p as u32));
+                of_cell.push(self.materials.of_cell[c]);
+            }
+            c += 1;
+        });
+        let materials = CellMaterials {
+            distinct: self.materials.distinct.clone(),
+            of_cell,
+            region: Vec::new(),
+        };
+        Ok(PairCells {
+            vertices,
+            materials,
+            entries: 0,
+        })
+    }
+
+    /// On one of several MPI ranks that pairs its rows of K_B and K_R^(0) after PETSc's
+    /// setup ([`PairWhen::AfterKrylov`]), those rows, the bits that
+    /// [`Discretization::pair_own_rows`] would have kept: assembled from its cells with one
+    /// of its own nodes, [`PAIR_PIECES`] pieces of its rows at a time, each piece's
+    /// entries summing the same terms in the same order as the whole's; their columns
+    /// numbered by their places in `local` where given (a follower's history's dofs:
+    /// [`Discretization::number_rows_over`]). None elsewhere.
+    pub fn own_pair_made(&self, local: Option<&[usize]>) -> Option<RowsPair> {
+        let (cells, own) = (self.pair_cells.as_ref()?, self.own.as_deref()?);
+        let source = CellSource::Vertices {
+            vertices: &cells.vertices,
+            points: &self.nodes,
+            dim: self.dim,
+        };
+        let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
+        let (mut whole, diagonal) = (vec![false; self.n_dofs], vec![false; self.n_dofs]);
+        let mut pair = RowsPair::with_capacity(own.len(), cells.entries);
+        for piece in own.chunks(own.len().div_ceil(PAIR_PIECES).max(1)) {
+            piece.iter().for_each(|&i| whole[i] = true);
+            let share = Share {
+                whole: &whole,
+                diagonal: &diagonal,
+            };
+            let materials = (&cells.materials, self.r);
+            let (_, k_b, k_r) = assemble(source, self.dim, dofs, materials, (true, 1), Some(share));
+            pair.extend(&RowsPair::new(k_b.as_ref()?, k_r.first()?, piece)?);
+            piece.iter().for_each(|&i| whole[i] = false);
+        }
+        if let Some(local) = local {
+            pair.number_columns(|i| local.binary_search(&i).expect("a column in the reach"));
+        }
+        Some(pair)
     }
 
     /// On one of several MPI ranks that keeps its own columns, the dofs whose memory m_n
@@ -827,6 +946,13 @@ impl Discretization {
         }
         if let Some(pair) = &self.own_pair {
             pair.columns().for_each(|j| read[j] = true);
+        }
+        // The columns of the rows `own_pair_made` will make: its cells' unknowns.
+        for &p in self.pair_cells.iter().flat_map(|c| &c.vertices) {
+            let dofs = &self.free[self.dim * p as usize..self.dim * (p as usize + 1)];
+            dofs.iter()
+                .filter_map(|i| i.get())
+                .for_each(|i| read[i] = true);
         }
         also.into_iter().for_each(|i| read[i] = true);
         Some((0..self.n_dofs).filter(|&i| read[i]).collect())
@@ -1506,22 +1632,22 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
     )))
 }
 
-/// Assembles K_A, K_B, K_R over all cells, each with its material (K_B when any cell has
-/// elasticity), on the dofs with an index (`free`: the free and the prescribed ones, n in
-/// all; rows and columns of dofs held at zero dropped; a node with a frame in its frame's
-/// components, `Cell::parts_in`); the three share one sparsity pattern ([`pattern`]). The
-/// element matrices are added at their positions (found by bisection in the column): no
-/// triplets. Where `share` is given (a rank of several), the entries it holds alone, from
-/// the cells that reach them alone (those with a node of the rank's own or of Γ3's): a
-/// rank's setup then makes and visits its part of the mesh and Γ3's neighbourhood, not the
-/// whole. Each entry held sums the same terms in the same order.
+/// Assembles K_A, K_B, K_R over all cells, each with its material (K_B where `elastic`, K_R
+/// of the first `groups` memory groups), on the dofs with an index (`free`: the free and
+/// the prescribed ones, n in all; rows and columns of dofs held at zero dropped; a node
+/// with a frame in its frame's components, `Cell::parts_in`); the three share one sparsity
+/// pattern ([`pattern`]). The element matrices are added at their positions (found by
+/// bisection in the column): no triplets. Where `share` is given (a rank of several), the
+/// entries it holds alone, from the cells that reach them alone (those with a node of the
+/// rank's own or of Γ3's): a rank's setup then makes and visits its part of the mesh and
+/// Γ3's neighbourhood, not the whole. Each entry held sums the same terms in the same
+/// order.
 fn assemble(
     cells: CellSource,
     d: usize,
     (free, frames, n): (&[DofIndex], &Frames, usize),
-    materials: &CellMaterials,
-    r: Isotropic,
-    groups: usize,
+    (materials, r): (&CellMaterials, Isotropic),
+    (elastic, groups): (bool, usize),
     share: Option<Share>,
 ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
     let holds = |i: usize, j: usize| share.is_none_or(|s| s.holds(i, j));
@@ -1534,7 +1660,6 @@ fn assemble(
     });
     let reaches = |v: &[usize]| reached.as_ref().is_none_or(|r| v.iter().any(|&p| r[p]));
     let nnz = row_idx.len();
-    let elastic = materials.elastic();
     let (mut va, mut vb, mut vr) = (
         vec![0.0; nnz],
         vec![0.0; if elastic { nnz } else { 0 }],
@@ -1561,10 +1686,10 @@ fn assemble(
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);
                         let parts = t.parts_in([i, j], [al, be], [frame(i), frame(j)]);
                         va[at] += t.entry(a, parts);
-                        if let Some(b) = b {
+                        if let Some(b) = b.filter(|_| elastic) {
                             vb[at] += t.entry(b, parts);
                         }
-                        if let Some(g) = memory {
+                        if let Some(g) = memory.filter(|&g| g < groups) {
                             vr[g][at] += t.entry(r, parts);
                         }
                     }

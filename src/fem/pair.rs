@@ -273,6 +273,26 @@ impl RowsPair {
         Some(pair)
     }
 
+    /// No rows yet, room for `rows` rows of `entries` entries in all
+    /// ([`RowsPair::extend`]).
+    pub fn with_capacity(rows: usize, entries: usize) -> RowsPair {
+        let mut ptr = Vec::with_capacity(rows + 1);
+        ptr.push(0);
+        RowsPair {
+            ptr,
+            cols: Vec::with_capacity(entries),
+            values: Vec::with_capacity(entries),
+        }
+    }
+
+    /// `more`'s rows after these.
+    pub fn extend(&mut self, more: &RowsPair) {
+        let base = self.cols.len();
+        self.ptr.extend(more.ptr[1..].iter().map(|&p| base + p));
+        self.cols.extend_from_slice(&more.cols);
+        self.values.extend_from_slice(&more.values);
+    }
+
     /// The columns of the rank's rows, each as often as it occurs.
     pub fn columns(&self) -> impl Iterator<Item = usize> + '_ {
         self.cols.iter().map(|&j| j as usize)

@@ -21,7 +21,10 @@
 //! (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It computes
 //! its entries of the right side's products from them and gets the others' where it
 //! reads them (`Backend::share`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
-//! the rank keeps K_A's diagonal at Γ3's unknowns alone. A follower's history holds the
+//! the rank keeps K_A's diagonal at Γ3's unknowns alone, and makes its rows of K_B and
+//! K_R^(0), paired, only once PETSc's setup (where a rank peaks) is done, from its cells
+//! with one of its own nodes, where the scene has elasticity and one memory group
+//! (`fem::PairWhen`). A follower's history holds the
 //! dofs that its rows of K_B and K_R and its piece of a frame read alone
 //! ([`Ranks::hold_history`], `history::Holds`): u_n, its compensated sum and the memory (the
 //! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
@@ -265,7 +268,9 @@ impl Ranks {
     /// here once and handed on in [`Own`]), so that no rank holds the whole matrices. Else
     /// the whole: one rank, or `solver.linear = "auto"`, whose choice reads the whole K_A
     /// (the analysis of its factor) before a rank keeps its columns. A rank that assembles
-    /// its columns alone holds no cell: rank 0 their vertices, a follower nothing.
+    /// its columns alone holds no cell: rank 0 their vertices, a follower nothing (and,
+    /// where it makes its rows of K_B and K_R^(0) after PETSc's setup, those of its cells
+    /// with one of its own nodes: `fem::PairWhen::AfterKrylov`).
     pub fn discretize(
         &self,
         mesh: &crate::mesh::Mesh,
@@ -278,8 +283,9 @@ impl Ranks {
                 true => crate::fem::Hold::Vertices,
                 false => crate::fem::Hold::Nothing,
             };
+            let how = (hold, crate::fem::PairWhen::AfterKrylov);
             let disc =
-                crate::fem::Discretization::with_columns(mesh, scene, hold, |disc, cells| {
+                crate::fem::Discretization::with_columns(mesh, scene, how, |disc, cells| {
                     let make = || crate::petsc::Layout::partition(disc, cells, self.size);
                     let (layout, shares) = crate::petsc::Layout::of_first(self.is_first(), make)?;
                     let own = layout.own(self.rank);
@@ -304,12 +310,13 @@ impl Ranks {
     /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
     /// K_A's diagonal at Γ3's unknowns alone (`Discretization::keep_diagonal_of_k_a`), and
     /// K_B and K_R^(0) become the rank's rows of both, paired
-    /// (`Discretization::pair_own_rows`). The heap the matrices held then goes back to the
-    /// system (`resources::return_freed_memory`). A rank keeps the loads of its own rows
-    /// alone (`Discretization::keep_own_loads`), rank 0 every traction's too: it makes a
-    /// body force's other points again from its cells for history.csv's resultants and
-    /// reactions, and so sees any value that is not finite. What goes on to PETSc, the
-    /// layout included, is [`Own`]; nothing on one rank.
+    /// (`Discretization::pair_own_rows`; or made after PETSc's setup where
+    /// [`Ranks::discretize`] put them off: `fem::PairWhen`). The heap the matrices held
+    /// then goes back to the system (`resources::return_freed_memory`). A rank keeps the
+    /// loads of its own rows alone (`Discretization::keep_own_loads`), rank 0 every
+    /// traction's too: it makes a body force's other points again from its cells for
+    /// history.csv's resultants and reactions, and so sees any value that is not finite.
+    /// What goes on to PETSc, the layout included, is [`Own`]; nothing on one rank.
     pub fn keep_own_columns(
         &self,
         disc: &mut crate::fem::Discretization,

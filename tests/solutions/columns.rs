@@ -8,7 +8,8 @@
 //! the same loads in its own rows, whether it holds the cells, their vertices or nothing;
 //! from the vertices alone (rank 0) it computes the stresses and norms of the cells held,
 //! and visits every load's terms (a body force's made again), bit for bit; its rows of K_B
-//! and K_R paired (`Discretization::pair_own_rows`) give the same products.
+//! and K_R paired (`Discretization::pair_own_rows`) give the same products, and so do
+//! those it makes after PETSc's setup instead (`Discretization::own_pair_made`).
 //! Where a rank's rows of K_A go to PETSc, K_A keeps its diagonal at the unknowns of Γ3's rows
 //! alone (`Discretization::keep_diagonal_of_k_a`), and a follower's rows of K_B and K_R
 //! numbered over the dofs its history holds give the same products of the vectors held
@@ -18,7 +19,9 @@
 use crate::common;
 use common::*;
 use std::collections::BTreeSet;
-use viscontact::fem::{diagonal, mul_add, mul_add_rows, Discretization, Hold, Sparse, StressCells};
+use viscontact::fem::{
+    diagonal, mul_add, mul_add_rows, Discretization, Hold, PairWhen, Sparse, StressCells,
+};
 
 /// The unknowns of a random half of `disc`'s nodes, increasing.
 fn random_half(disc: &Discretization, rng: &mut SplitMix) -> Vec<usize> {
@@ -106,13 +109,18 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
         for hold in [Hold::Cells, Hold::Vertices, Hold::Nothing] {
             let case = format!("{name}, holding {hold:?}");
             let mut asked = false;
-            let mine = Discretization::with_columns(&mesh, &scene, hold, |disc, cells| {
-                let mut vertices = Vec::new();
-                cells.each_vertices(|v| vertices.extend_from_slice(v));
-                let whole = kept.cells.iter().flat_map(|t| t.vertices().iter().copied());
-                asked = disc.n_free == kept.n_free && vertices == whole.collect::<Vec<_>>();
-                Ok(Some(own.clone()))
-            })
+            let mine = Discretization::with_columns(
+                &mesh,
+                &scene,
+                (hold, PairWhen::Setup),
+                |disc, cells| {
+                    let mut vertices = Vec::new();
+                    cells.each_vertices(|v| vertices.extend_from_slice(v));
+                    let whole = kept.cells.iter().flat_map(|t| t.vertices().iter().copied());
+                    asked = disc.n_free == kept.n_free && vertices == whole.collect::<Vec<_>>();
+                    Ok(Some(own.clone()))
+                },
+            )
             .unwrap();
             assert!(
                 asked,
@@ -204,9 +212,12 @@ fn rank_0_computes_from_the_cells_vertices_what_it_would_from_the_cells() {
         let (scene, mesh, mut held) = load(&path, &[]);
         let own = random_half(&held, &mut SplitMix(3));
         held.keep_columns(own.clone());
-        let mine = Discretization::with_columns(&mesh, &scene, Hold::Vertices, |_, _| {
-            Ok(Some(own.clone()))
-        })
+        let mine = Discretization::with_columns(
+            &mesh,
+            &scene,
+            (Hold::Vertices, PairWhen::Setup),
+            |_, _| Ok(Some(own.clone())),
+        )
         .unwrap();
         assert!(mine.cells.is_empty() && mine.n_cells() == held.cells.len());
         let mut rng = SplitMix(5);
@@ -275,6 +286,78 @@ fn k_b_and_k_r_paired_give_the_bits_of_their_own_products() {
     for (kept, whole) in [(disc.k_b.as_ref().unwrap(), &k_b), (&disc.k_r[0], &k_r)] {
         assert_eq!(kept.as_ref().val().len(), 0);
         assert_eq!((kept.nrows(), kept.ncols()), (whole.nrows(), whole.ncols()));
+    }
+}
+
+/// A rank that makes its rows of K_B and K_R^(0) after PETSc's setup
+/// (`PairWhen::AfterKrylov`, `Discretization::own_pair_made`), in pieces, from its cells
+/// with one of its own nodes: on the 3D block and the paper's 2D scene, for a random half of
+/// the nodes, holding the cells' vertices (rank 0) or none (a follower), meanwhile K_B and
+/// K_R^(0) with no entry and the same reach as the rank that paired them in its setup, and
+/// then the products of that rank's pair, bit for bit, in the whole numbering and numbered
+/// over the reach; in the implicit variant, whose step matrix reads all three, it pairs
+/// in its setup.
+#[test]
+fn rows_paired_after_the_krylov_setup_are_those_paired_in_the_setup() {
+    let dir = tempfile::tempdir().unwrap();
+    let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for (name, scene) in [
+        ("block.toml", SceneText::block()),
+        ("paper.toml", SceneText::paper()),
+    ] {
+        let path = scene.write(dir.path(), name);
+        let (scene, mesh, whole) = load(&path, &[]);
+        let own = random_half(&whole, &mut SplitMix(17));
+        for hold in [Hold::Vertices, Hold::Nothing] {
+            let case = format!("{name}, holding {hold:?}");
+            let make = |when| {
+                let mine = Discretization::with_columns(&mesh, &scene, (hold, when), |_, _| {
+                    Ok(Some(own.clone()))
+                });
+                let mut mine = mine.unwrap();
+                mine.pair_own_rows();
+                mine
+            };
+            let (mut now, mut later) = (make(PairWhen::Setup), make(PairWhen::AfterKrylov));
+            assert!(now.own_pair.is_some() && later.own_pair.is_none(), "{case}");
+            assert!(now.own_pair_made(None).is_none(), "{case}");
+            for m in later.k_b.iter().chain(&later.k_r) {
+                assert_eq!(m.as_ref().val().len(), 0, "{case}");
+            }
+            let local = now.local_reach([]).unwrap();
+            assert_eq!(later.local_reach([]).as_ref(), Some(&local), "{case}");
+            assert!(local.len() < now.n_dofs, "{case}");
+            let mut rng = SplitMix(29);
+            let mut random = |len: usize| (0..len).map(|_| rng.unit() - 0.5).collect::<Vec<_>>();
+            let (u, m, y0) = (random(now.n_dofs), random(now.n_dofs), random(now.n_dofs));
+            let product = |pair: &viscontact::fem::RowsPair, u: &[f64], m: &[f64]| {
+                let mut y = y0.clone();
+                pair.mul_add(&own, u, Some(m), -1.0, &mut y);
+                bits(&y)
+            };
+            let paired = now.own_pair.as_ref().unwrap();
+            let made = later.own_pair_made(None).expect("the rows made");
+            assert_eq!(product(&made, &u, &m), product(paired, &u, &m), "{case}");
+            assert_ne!(product(paired, &u, &m), bits(&y0), "{case}");
+            now.number_rows_over(&local);
+            later.number_rows_over(&local);
+            let held = |v: &[f64]| local.iter().map(|&i| v[i]).collect::<Vec<_>>();
+            let (u, m) = (held(&u), held(&m));
+            let made = later.own_pair_made(Some(&local)).unwrap();
+            let paired = now.own_pair.as_ref().unwrap();
+            assert_eq!(product(&made, &u, &m), product(paired, &u, &m), "{case}");
+        }
+        let implicit = SceneText::file(&path).set("scheme.history", "implicit");
+        let path = implicit.write(dir.path(), &format!("implicit_{name}"));
+        let (scene, mesh, _) = load(&path, &[]);
+        let how = (Hold::Nothing, PairWhen::AfterKrylov);
+        let mut mine =
+            Discretization::with_columns(&mesh, &scene, how, |_, _| Ok(Some(own.clone()))).unwrap();
+        mine.pair_own_rows();
+        assert!(
+            mine.own_pair.is_some() && mine.own_pair_made(None).is_none(),
+            "{name}"
+        );
     }
 }
 
@@ -415,8 +498,10 @@ fn a_scene_with_prescribed_dofs_keeps_its_matrices_whole() {
     assert!(disc.own.is_none());
     assert_eq!(disc.k_a.as_ref().val(), &before[..]);
     let mine =
-        Discretization::with_columns(&mesh, &scene, Hold::Nothing, |_, _| Ok(Some(vec![0, 1])))
-            .unwrap();
+        Discretization::with_columns(&mesh, &scene, (Hold::Nothing, PairWhen::Setup), |_, _| {
+            Ok(Some(vec![0, 1]))
+        })
+        .unwrap();
     assert!(mine.own.is_none());
     assert_eq!(mine.k_a.as_ref().val(), &before[..]);
 }
