@@ -746,14 +746,7 @@ impl Discretization {
             false => (k_a_all, None),
         };
         (disc.k_b, disc.k_r, disc.own) = (k_b, k_r, own);
-        if let Some(cells) = &mut disc.pair_cells {
-            // K_B and K_R^(0) as after `pair_own_rows`: present, with no entry.
-            let empty = || entries_kept(&disc.k_a, (n_dofs, n_dofs), |_, _| false);
-            (disc.k_b, disc.k_r) = (Some(empty()), vec![empty()]);
-            let own = disc.own.as_deref().unwrap_or_default();
-            let cp = disc.k_a.symbolic().col_ptr();
-            cells.entries = own.iter().map(|&j| cp[j + 1] - cp[j]).sum();
-        }
+        disc.pair_put_off();
         if hold == Hold::Vertices {
             let (nodes, _) = mesh_cells(mesh);
             // At their exact size (a collected Result grows by doubling): they stay.
@@ -848,6 +841,22 @@ impl Discretization {
         self.own_pair = Some(pair);
     }
 
+    /// Where the rank makes its rows of K_B and K_R^(0) after PETSc's setup
+    /// ([`Discretization::own_pair_made`]): the two meanwhile present with no entry, as after
+    /// [`Discretization::pair_own_rows`], and the rows' entries counted on K_A's own
+    /// columns (one pattern).
+    fn pair_put_off(&mut self) {
+        let Some(cells) = &mut self.pair_cells else {
+            return;
+        };
+        let n = self.n_dofs;
+        let empty = || entries_kept(&self.k_a, (n, n), |_, _| false);
+        (self.k_b, self.k_r) = (Some(empty()), vec![empty()]);
+        let own = self.own.as_deref().unwrap_or_default();
+        let cp = self.k_a.symbolic().col_ptr();
+        cells.entries = own.iter().map(|&j| cp[j + 1] - cp[j]).sum();
+    }
+
     /// The cells of `cells` (`mesh`'s) with one of the nodes of the unknowns `own`, as
     /// [`PairCells`] (their entries counted once K_A is assembled).
     fn cells_with_own_nodes(
@@ -881,7 +890,7 @@ impl Discretization {
     /// On one of several MPI ranks that pairs its rows of K_B and K_R^(0) after PETSc's
     /// setup ([`PairWhen::AfterKrylov`]), those rows, the bits that
     /// [`Discretization::pair_own_rows`] would have kept: assembled from its cells with one
-    /// of its own nodes, [`PAIR_PIECES`] pieces of its rows at a time, each piece's
+    /// of its own nodes, `PAIR_PIECES` pieces of its rows at a time, each piece's
     /// entries summing the same terms in the same order as the whole's; their columns
     /// numbered by their places in `local` where given (a follower's history's dofs:
     /// [`Discretization::number_rows_over`]). None elsewhere.
