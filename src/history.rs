@@ -391,8 +391,8 @@ pub fn memory_mismatch(what: &str) -> String {
 /// of a frame read, and where the rank's matrices number their rows over its own dofs'
 /// neighbours, u_n and its compensated sum those too. Each value there is updated by the
 /// same arithmetic dof by dof, so it has the bits of the whole history's. Rank 0 holds
-/// every dof: it writes the checkpoints, and history.csv's stresses and reactions read the
-/// whole u_n and m_n.
+/// every dof: it writes the checkpoints, and history.csv's reactions (and its stresses,
+/// where the frames are not in pieces) read the whole u_n and m_n.
 #[derive(Clone, Debug)]
 pub struct History {
     pub k: f64,

@@ -366,7 +366,8 @@ pub enum Hold {
     /// Every cell (one process).
     Cells,
     /// Each cell's vertices, from which it makes a cell when it reads it (rank 0 of
-    /// several, which computes the norms and history.csv's stresses of every cell).
+    /// several, which computes the norms of every cell, and history.csv's stresses of
+    /// every cell where the frames are not in pieces).
     Vertices,
     /// None (a follower rank of several).
     Nothing,
@@ -1094,14 +1095,18 @@ impl Discretization {
         (s6, vm)
     }
 
-    /// The largest von Mises stress of the cells of [`Discretization::stress`] (0 without
-    /// cells), the same number, without its arrays: history.csv's at a step without a
-    /// frame (7 doubles a cell less on the thread that makes its rows).
-    pub fn max_von_mises(&self, w: &[f64], u: &[f64], m: Option<&[f64]>, model: Model) -> f64 {
+    /// The largest von Mises stress of the cells `cells` of [`Discretization::stress`] (0
+    /// without cells), the same number, without its arrays: history.csv's at a step
+    /// without a frame (7 doubles a cell less), of every cell or of a rank's piece.
+    pub fn max_von_mises(
+        &self,
+        [w, u]: [&[f64]; 2],
+        m: (Option<&[f64]>, Option<&[usize]>),
+        model: Model,
+        cells: StressCells,
+    ) -> f64 {
         let mut max = 0.0;
-        self.each_stress([w, u], (m, None), (model, StressCells::All), |_, v| {
-            max = f64::max(max, v)
-        });
+        self.each_stress([w, u], m, (model, cells), |_, v| max = f64::max(max, v));
         max
     }
 
@@ -1277,7 +1282,7 @@ impl Discretization {
 
     /// Lets go of the cells (where it held them: `solver.linear = "auto"`) and of each
     /// cell's material and region (`materials.distinct` stays): on a rank of several other
-    /// than rank 0, which computes the norms and history.csv's stresses, nothing reads them
+    /// than rank 0, which computes the norms of every cell, nothing reads them
     /// once the matrices are assembled and the rank's layout is made; its piece of the
     /// frames makes its own cells
     /// ([`Discretization::make_cells`]). [`Discretization::stress`] and

@@ -233,7 +233,7 @@ impl Pieces {
 
 /// The mesh of piece `rank`: its cells, the points they use (both as numbered in the whole
 /// mesh, in its order) and its own numbering of them. Made during a rank's setup, while it
-/// has the mesh; encoded at the rank's first frame ([`OwnPiece::new`]).
+/// has the mesh; encoded once the run's steps begin ([`OwnPiece::new`]).
 pub struct PieceMesh {
     rank: usize,
     points: Vec<usize>,

@@ -80,8 +80,8 @@ impl Observer for Follower<'_> {
     }
 
     fn solved(&mut self, s: &Solved) -> Result<()> {
-        if let Some(frames) = self.frames.as_mut().filter(|f| f.due(s)) {
-            frames.write(self.disc, &s.step, &state_flags(&s.step))?;
+        if let Some(frames) = self.frames.as_mut() {
+            frames.solved(self.disc, s, &state_flags(&s.step))?;
         }
         Ok(())
     }
@@ -179,19 +179,21 @@ pub(super) struct Frames<'a> {
 }
 
 impl Frames<'_> {
-    /// Writes the step's frame if one is due; the receiver of its largest von Mises stress
-    /// when the frame has that field (`write_step`).
+    /// Writes the step's frame if one is due; the receiver of the step's largest von Mises
+    /// stress where the frame has that field (`write_step`), or where the ranks write
+    /// their own pieces, at every step (`OwnFrames::solved`).
     fn solved(&mut self, s: &Solved, flags: &[bool]) -> Result<Option<Receiver<f64>>> {
-        if !due(self.scene.output.every, s) {
-            return Ok(None);
-        }
         if let Some(pieces) = &mut self.pieces {
-            let (fields, largest) = pieces.write(&self.disc, &s.step, flags)?;
-            let stress = fields.1.iter().any(|f| f.name == "von_mises");
-            self.series.list_pieces(s.step.n, s.step.t, fields)?;
+            let (fields, largest) = pieces.solved(&self.disc, s, flags)?;
+            if let Some(fields) = fields {
+                self.series.list_pieces(s.step.n, s.step.t, fields)?;
+            }
             let (tx, rx) = std::sync::mpsc::sync_channel(1);
             let _ = tx.send(largest);
-            return Ok(stress.then_some(rx));
+            return Ok(Some(rx));
+        }
+        if !due(self.scene.output.every, s) {
+            return Ok(None);
         }
         let (disc, rows) = (&self.disc, &self.rows);
         let model = self.scene.mesh.model;

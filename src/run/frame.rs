@@ -125,10 +125,12 @@ fn pieces(
 /// files: at a frame's step every rank computes the fields of its piece's cells and
 /// points alone and writes its piece, the ranks agree that every piece is on disk
 /// ([`Ranks::written`], which also gives the largest von Mises stress of them all), and
-/// rank 0's series then lists them in the frame's `.pvtu` (`Series::list_pieces`). No rank
-/// computes the whole mesh's fields.
+/// rank 0's series then lists them in the frame's `.pvtu` (`Series::list_pieces`). At a
+/// step whose frame does not give history.csv that stress, each rank computes it of its
+/// piece's cells and the ranks take the largest ([`OwnFrames::solved`]). No rank computes
+/// the whole mesh's fields, nor the stress of every cell.
 ///
-/// The piece's encoded mesh, and on a follower its cells, are made at the first frame,
+/// The piece's encoded mesh, and on a follower its cells, are made at the first step,
 /// after PETSc's setup, where a rank peaks: until then the rank keeps the piece's mesh
 /// alone (its node numbers and points), and a follower none of the cells that assembled
 /// its columns (`Discretization::forget_cells`).
@@ -142,11 +144,11 @@ pub(super) struct OwnFrames {
     ranks: Ranks,
 }
 
-/// A rank's piece of the frames, before and after its first frame.
+/// A rank's piece of the frames, before and after its first step.
 enum Piece {
     /// This rank's part has no cells.
     None,
-    /// Before the first frame: the piece's mesh, and (a follower) the material of each of
+    /// Before the first step: the piece's mesh, and (a follower) the material of each of
     /// its cells (rank 0 holds every cell's vertices and material).
     Mesh(PieceMesh, Option<Vec<u32>>),
     /// The piece and (a follower) its cells and their materials.
@@ -172,9 +174,30 @@ impl OwnFrames {
         }
     }
 
-    /// Whether the frame of step `s` is due ([`due`]).
-    pub fn due(&self, s: &Solved) -> bool {
-        due(self.every, s)
+    /// At solved step `s` (`active`: the run's state flags), writes this rank's piece of
+    /// its frame where one is due ([`OwnFrames::write`]), and returns the frame's fields by
+    /// name (None without a frame) and history.csv's largest von Mises stress of every
+    /// rank's cells (collective on several): the frame's where it has that field, else
+    /// each rank's of its own piece's cells, computed for the row, and the largest of
+    /// those. The pieces split the cells, so that is a maximum over every cell, one
+    /// process's bits, and no rank computes the stress of every cell at a step.
+    pub fn solved(
+        &mut self,
+        disc: &Discretization,
+        s: &Solved,
+        active: &[bool],
+    ) -> Result<(Option<Named>, f64)> {
+        let frame = match due(self.every, s) {
+            true => Some(self.write(disc, &s.step, active)?),
+            false => None,
+        };
+        match frame {
+            Some((names, vm)) if wants_stress(&self.options) => Ok((Some(names), vm)),
+            frame => {
+                let mine = (self.make(disc)).map(|()| self.piece_von_mises(disc, &s.step));
+                Ok((frame.map(|(names, _)| names), self.ranks.written(mine)?))
+            }
+        }
     }
 
     /// Writes this rank's piece of step `step`'s frame (`active`: the run's state flags),
@@ -203,11 +226,8 @@ impl OwnFrames {
         active: &[bool],
     ) -> Result<(Named, f64)> {
         self.make(disc)?;
-        let cells = match &self.piece {
-            Piece::Made(_, Some((cells, materials))) => StressCells::Of(cells, materials),
-            Piece::Made(piece, None) => StressCells::Only(piece.cells()),
-            _ if self.ranks.is_first() => StressCells::Only(&[]),
-            _ => return Ok((Named::default(), 0.0)),
+        let Some(cells) = self.stress_cells() else {
+            return Ok((Named::default(), 0.0));
         };
         let [w, u, z] = [step.w, step.u, step.z];
         let cells = wants_stress(&self.options).then_some(cells);
@@ -242,7 +262,29 @@ impl OwnFrames {
         Ok((names, vm))
     }
 
-    /// Makes the piece (its mesh encoded) and a follower's cells, at the first frame.
+    /// The largest von Mises stress of this rank's piece's cells at step `step` (0 without
+    /// cells), once made (`make`).
+    fn piece_von_mises(&self, disc: &Discretization, step: &Step) -> f64 {
+        let Some(cells) = self.stress_cells() else {
+            return 0.0;
+        };
+        let held = (step.m, step.local);
+        disc.max_von_mises([step.w, step.u], held, self.model, cells)
+    }
+
+    /// The piece's cells as [`Discretization::stress`] reads them, once made (`make`): a
+    /// follower's own, rank 0's among the discretization's; None on a follower whose part
+    /// has no cells (rank 0 then lists none, and still writes the frame's `.pvtu`).
+    fn stress_cells(&self) -> Option<StressCells<'_>> {
+        match &self.piece {
+            Piece::Made(_, Some((cells, materials))) => Some(StressCells::Of(cells, materials)),
+            Piece::Made(piece, None) => Some(StressCells::Only(piece.cells())),
+            _ if self.ranks.is_first() => Some(StressCells::Only(&[])),
+            _ => None,
+        }
+    }
+
+    /// Makes the piece (its mesh encoded) and a follower's cells, at the first step.
     fn make(&mut self, disc: &Discretization) -> Result<()> {
         self.piece = match std::mem::replace(&mut self.piece, Piece::None) {
             Piece::Mesh(mesh, materials) => {

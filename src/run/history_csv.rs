@@ -25,7 +25,7 @@
 
 use crate::fem::loads::Source;
 use crate::fem::reactions::{Reactions, StepForces};
-use crate::fem::Discretization;
+use crate::fem::{Discretization, StressCells};
 use crate::mesh::{cross, Mesh};
 use crate::output::Lines;
 use crate::scene::{self, Scene};
@@ -271,8 +271,10 @@ impl RowMaker {
     ) -> Result<String> {
         let (disc, scene) = (&self.disc, &self.scene);
         let forces = (self.reactions).forces(disc, scene, s.t, [&s.w, &s.u], s.m.as_deref())?;
-        let von_mises = (frame.and_then(|rx| rx.recv().ok()))
-            .unwrap_or_else(|| disc.max_von_mises(&s.w, &s.u, s.m.as_deref(), scene.mesh.model));
+        let von_mises = (frame.and_then(|rx| rx.recv().ok())).unwrap_or_else(|| {
+            let (wu, m) = ([&s.w[..], &s.u], (s.m.as_deref(), None));
+            disc.max_von_mises(wu, m, scene.mesh.model, StressCells::All)
+        });
         let mut line = s.n.to_string();
         put_number(&mut line, s.t);
         for v in self.forces(&s.z, &forces) {

@@ -2,7 +2,8 @@
 //! root where CI runs as root and with more ranks than cores: a PETSc run, linear or with
 //! contact and friction through the active set, 2D and 3D, Prony and compressed kernels,
 //! on 1, 2 and 3 ranks agrees with the one-process run (bit for bit on one rank, to 1e-8
-//! relative in u_N and the von Mises stress on more); stopped on 3 ranks and resumed on 2,
+//! relative in u_N and the von Mises stress on more; history.csv's largest stress the same
+//! bits with or without frames); stopped on 3 ranks and resumed on 2,
 //! it agrees with the uninterrupted run on 2 to the same tolerance, and resumed on the rank
 //! count it stopped on, bit for bit; SIGTERM to every rank stops it after a step with a
 //! checkpoint, and SIGKILL of one rank ends the others at once, the run then resuming from
@@ -277,6 +278,45 @@ fn a_prescribed_displacement_with_contact_on_1_2_and_3_ranks_agrees_with_one_pro
 fn a_run_with_contact_and_friction_on_1_2_and_3_ranks_agrees_with_one_process() {
     let tmp = tempfile::tempdir().unwrap();
     agree_on_1_2_and_3_ranks(&contact_scenes(tmp.path()));
+}
+
+/// history.csv's largest von Mises stress, which over several ranks is the largest of the
+/// ranks' pieces' at every step (`run::frame::OwnFrames::solved`): on 3 ranks of the block
+/// with contact it has the same bits whether a frame at the step hands it over, no frame is
+/// due or the frames have no stress, and agrees with one process's at every step.
+#[test]
+fn the_largest_stress_in_history_csv_on_3_ranks_is_the_same_with_or_without_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = contact_scenes(tmp.path()).swap_remove(0);
+    let column = |out: &Path| common::History::read(out).column("max_von_mises");
+    let one = tmp.path().join("one");
+    let (code, text) = run(0, &scene, &one, &["--threads", "1"]);
+    assert_eq!(code, 0, "{text}");
+    let reference = column(&one);
+    assert!(reference.iter().all(|&v| v > 0.0), "{reference:?}");
+    let frames = [
+        ("every step", "output.every=1"),
+        ("the last step", "output.every=100"),
+        ("no stress", "output.fields=[\"displacement\"]"),
+    ];
+    let mut first: Option<Vec<u64>> = None;
+    for (what, set) in frames {
+        let out = tmp.path().join(what.replace(' ', "_"));
+        let (code, text) = run(3, &scene, &out, &["--set", set]);
+        assert_eq!(code, 0, "frames at {what}: {text}");
+        let largest = column(&out);
+        let d = common::rel_diff(&largest, &reference);
+        assert!(
+            d <= 1e-8,
+            "frames at {what}: differs from one process's by {d:e}"
+        );
+        let bits: Vec<u64> = largest.iter().map(|v| v.to_bits()).collect();
+        assert_eq!(
+            first.get_or_insert_with(|| bits.clone()),
+            &bits,
+            "frames at {what}"
+        );
+    }
 }
 
 /// A body force, of which every rank keeps the quadrature points of its own rows alone
