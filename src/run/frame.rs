@@ -204,7 +204,7 @@ impl OwnFrames {
     /// and waits until every rank has written its own (collective). Returns the frame's
     /// fields by name and components (their values left out: what the `.pvtu` lists) and
     /// the largest von Mises stress of every rank's cells (0 without that field).
-    pub fn write(
+    fn write(
         &mut self,
         disc: &Discretization,
         step: &Step,
