@@ -177,33 +177,29 @@ impl OwnFrames {
     /// At solved step `s` (`active`: the run's state flags), writes this rank's piece of
     /// its frame where one is due ([`OwnFrames::write`]), and returns the frame's fields by
     /// name (None without a frame) and history.csv's largest von Mises stress of every
-    /// rank's cells (collective on several): the frame's where it has that field, else
-    /// each rank's of its own piece's cells, computed for the row, and the largest of
-    /// those. The pieces split the cells, so that is a maximum over every cell, one
-    /// process's bits, and no rank computes the stress of every cell at a step.
+    /// rank's cells (collective on several): each rank's of its own piece's cells (the
+    /// frame's, or computed for the row), and the largest of those in one reduction, the
+    /// frame's or its own. The pieces split the cells, so that is a maximum over every
+    /// cell, one process's bits, and no rank computes the stress of every cell at a step.
     pub fn solved(
         &mut self,
         disc: &Discretization,
         s: &Solved,
         active: &[bool],
     ) -> Result<(Option<Named>, f64)> {
-        let frame = match due(self.every, s) {
-            true => Some(self.write(disc, &s.step, active)?),
-            false => None,
-        };
-        match frame {
-            Some((names, vm)) if wants_stress(&self.options) => Ok((Some(names), vm)),
-            frame => {
-                let mine = (self.make(disc)).map(|()| self.piece_von_mises(disc, &s.step));
-                Ok((frame.map(|(names, _)| names), self.ranks.written(mine)?))
-            }
+        if due(self.every, s) {
+            let (names, largest) = self.write(disc, &s.step, active)?;
+            return Ok((Some(names), largest));
         }
+        let mine = (self.make(disc)).map(|()| self.piece_von_mises(disc, &s.step));
+        Ok((None, self.ranks.written(mine)?))
     }
 
     /// Writes this rank's piece of step `step`'s frame (`active`: the run's state flags),
     /// and waits until every rank has written its own (collective). Returns the frame's
     /// fields by name and components (their values left out: what the `.pvtu` lists) and
-    /// the largest von Mises stress of every rank's cells (0 without that field).
+    /// the largest von Mises stress of every rank's cells, of the frame's field or, where
+    /// the frame has none, computed for history.csv.
     fn write(
         &mut self,
         disc: &Discretization,
@@ -254,8 +250,10 @@ impl OwnFrames {
             fields.iter().map(named).collect()
         };
         let names = (named(&points), named(&cells));
-        let von_mises = cells.iter().find(|f| f.name == "von_mises");
-        let vm = von_mises.map_or(0.0, |f| max_von_mises(&f.values));
+        let vm = match cells.iter().find(|f| f.name == "von_mises") {
+            Some(f) => max_von_mises(&f.values),
+            None => self.piece_von_mises(disc, step),
+        };
         if let Piece::Made(piece, _) = &mut self.piece {
             piece.write(step.n, points, cells)?;
         }
