@@ -48,6 +48,7 @@ impl Stiffness {
 }
 
 /// Which material each cell has.
+#[derive(Default)]
 pub struct CellMaterials {
     /// The distinct materials of the cells, in the order of their first cell.
     pub distinct: Vec<Stiffness>,

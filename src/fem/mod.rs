@@ -93,7 +93,7 @@ pub struct Discretization {
     pub dim: usize,
     pub nodes: Vec<[f64; 3]>,
     /// The triangles (2D) or tetrahedra (3D) on one process; none on a rank of several
-    /// ([`Discretization::with_columns`], [`Discretization::forget_cells`]), which reads
+    /// ([`Discretization::assembled`], [`Discretization::forget_cells`]), which reads
     /// them through [`Discretization::cell_source`].
     pub cells: Vec<Cell>,
     /// On rank 0 of several, each cell's dim + 1 vertices ([`Hold::Vertices`]); else none.
@@ -229,7 +229,7 @@ fn corners<T: Copy>(v: &[T], index: impl Fn(T) -> usize) -> [usize; 4] {
 
 /// The cells of a discretization in the mesh's order, as it reads them: held
 /// ([`Discretization::cells`]: one process), or each made when it is read, the same bits,
-/// from the mesh (a rank of several during its setup: [`Discretization::with_columns`]) or
+/// from the mesh (a rank of several during its setup: [`Discretization::assembled`]) or
 /// from the cells' vertices that rank 0 of several holds (16 bytes a tetrahedron where a
 /// cell takes 144), so that no rank of several holds the whole mesh's cells.
 #[derive(Clone, Copy)]
@@ -335,7 +335,7 @@ impl<'a> CellSource<'a> {
 }
 
 /// When a rank of several whose rows of K_A go to PETSc makes its rows of K_B and K_R^(0)
-/// ([`Discretization::with_columns`]).
+/// ([`Discretization::assembled`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PairWhen {
     /// With K_A, in its setup (`Discretization::pair_own_rows` pairs them).
@@ -631,26 +631,23 @@ impl Discretization {
     /// The discretization of `scene` on `mesh`: the free dofs (Γ1 clamped), the cells, the
     /// stiffness matrices, the loads and the constraint rows on Γ3,1 and Γ3,2.
     pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Self> {
-        Self::with_columns(mesh, scene, (Hold::Cells, PairWhen::Setup), |_, _| Ok(None))
+        let disc = Self::numbered(mesh, scene, Hold::Cells)?;
+        let materials = CellMaterials::new(mesh, scene)?;
+        disc.assembled(
+            mesh,
+            scene,
+            (Hold::Cells, PairWhen::Setup),
+            (materials, None),
+        )
     }
 
-    /// The discretization with of K_A, K_B and K_R only the columns of the unknowns that
-    /// `own` names (increasing) whole, and of the others the diagonal entry at Γ3's
-    /// unknowns alone, as [`Discretization::keep_columns`] leaves them, bit for bit, but
-    /// without the whole matrices ever in memory, and from the cells that reach those
-    /// entries alone: on one of several MPI ranks (`Ranks::discretize`). `own`
-    /// reads the discretization before its matrices are assembled (they are empty then):
-    /// its unknowns and cells, of which METIS's partition is made; None keeps every column.
-    /// Where there are prescribed dofs every column is kept, as `keep_columns` does. The
-    /// discretization holds what `hold` says of the cells; where that is not every cell (a
-    /// rank of several) its setup makes each from the mesh when it reads it
-    /// ([`CellSource::Made`]). `pair` says when it makes its rows of K_B and K_R^(0).
-    pub fn with_columns(
-        mesh: &Mesh,
-        scene: &Scene,
-        (hold, pair): (Hold, PairWhen),
-        own: impl FnOnce(&Discretization, CellSource) -> Result<Option<Vec<usize>>>,
-    ) -> Result<Self> {
+    /// A discretization's first stage: its unknowns, Γ3's rows, the cells it holds as
+    /// `hold` says (and where it holds every cell, the loads), its matrices still empty and
+    /// its cells without their materials. What reads it then reads its unknowns and the
+    /// mesh's cells: of them a rank of several makes METIS's partition (`Ranks::discretize`),
+    /// before [`Discretization::assembled`]. It reads of the mesh its nodes and groups, and
+    /// its cells where it holds them alone.
+    pub fn numbered(mesh: &Mesh, scene: &Scene, hold: Hold) -> Result<Self> {
         check_model(mesh, scene)?;
         let d = mesh.dim;
         let numbering = Numbering::new(mesh, scene)?;
@@ -659,11 +656,7 @@ impl Discretization {
             Hold::Cells => cells(mesh),
             _ => Vec::new(),
         };
-
-        let materials = CellMaterials::new(mesh, scene)?;
-        let r = Isotropic::identity();
-
-        // A rank of several makes its loads once its own rows are known (below).
+        // A rank of several makes its loads once its own rows are known (`assembled`).
         let loads = match hold {
             Hold::Cells => Loads::new(mesh, scene, CellSource::Held(&cells), Keep::Every)?,
             _ => Loads::none(d),
@@ -677,8 +670,7 @@ impl Discretization {
             Some(fr) => friction_rows(mesh, scene, fr, &rows, n_dofs)?,
             None => (Vec::new(), Vec::new(), 0.0),
         };
-
-        let mut disc = Discretization {
+        Ok(Discretization {
             dim: d,
             nodes: mesh.nodes.clone(),
             cells,
@@ -689,8 +681,8 @@ impl Discretization {
             free: numbering.free,
             frames: numbering.frames,
             k_a_all: None,
-            materials,
-            r,
+            materials: CellMaterials::default(),
+            r: Isotropic::identity(),
             k_a: Sparse::new(
                 SymbolicSparseColMat::new_checked(0, 0, vec![0], None, vec![]),
                 vec![],
@@ -709,54 +701,80 @@ impl Discretization {
             pair_cells: None,
             stress_cells: std::sync::OnceLock::new(),
             vertices: Vec::new(),
-        };
-        let own =
-            own(&disc, CellSource::setup(hold, &disc.cells, mesh))?.filter(|_| n_dofs == n_free);
+        })
+    }
+
+    /// A discretization's second stage, after [`Discretization::numbered`]: its cells'
+    /// `materials` (those of `mesh`'s cells, in their order) and its matrices, of K_A, K_B
+    /// and K_R only the columns of the unknowns that `own` names (increasing) whole, and of
+    /// the others the diagonal entry at Γ3's unknowns alone, as
+    /// [`Discretization::keep_columns`] leaves them, bit for bit, but without the whole
+    /// matrices ever in memory, and from the cells that reach those entries alone: on one
+    /// of several MPI ranks (`Ranks::discretize`). None keeps every column; so does a scene
+    /// with prescribed dofs, as `keep_columns` does. The discretization holds what `hold`
+    /// says of the cells; where that is not every cell (a rank of several) its setup makes
+    /// each from the mesh when it reads it ([`CellSource::Made`]). `pair` says when it
+    /// makes its rows of K_B and K_R^(0).
+    pub fn assembled(
+        mut self,
+        mesh: &Mesh,
+        scene: &Scene,
+        (hold, pair): (Hold, PairWhen),
+        (materials, own): (CellMaterials, Option<Vec<usize>>),
+    ) -> Result<Self> {
+        self.materials = materials;
+        let own = own.filter(|_| self.keeps_own_columns());
         if hold != Hold::Cells {
             // Those of its own rows alone (`Discretization::keep_own_loads`).
-            let reaches = own.as_deref().map(|own| disc.reaching(own));
+            let reaches = own.as_deref().map(|own| self.reaching(own));
             let keep = match (reaches.as_deref(), hold) {
                 (None, _) => Keep::Every,
                 (Some(r), Hold::Vertices) => Keep::ReachingAndTractions(r),
                 (Some(r), _) => Keep::Reaching(r),
             };
-            let cells = CellSource::setup(hold, &disc.cells, mesh);
-            disc.loads = Loads::new(mesh, scene, cells, keep)?;
+            let cells = CellSource::setup(hold, &self.cells, mesh);
+            self.loads = Loads::new(mesh, scene, cells, keep)?;
         }
         // Without a memory term in any cell K_R would be zero: none is assembled.
-        let groups = match disc.materials.memory() {
+        let groups = match self.materials.memory() {
             true => scene.physics.memory_groups(),
             false => 0,
         };
         // The implicit variant's step matrix is made of the three matrices' columns.
         let left = scene.solver.history == crate::scene::History::Left;
         let later =
-            pair == PairWhen::AfterKrylov && left && groups == 1 && disc.materials.elastic();
+            pair == PairWhen::AfterKrylov && left && groups == 1 && self.materials.elastic();
         let terms = match (later, own.as_deref()) {
             (true, Some(own)) => {
-                let cells = CellSource::setup(hold, &disc.cells, mesh);
-                disc.pair_cells = Some(disc.cells_with_own_nodes(cells, own, mesh)?);
+                let cells = CellSource::setup(hold, &self.cells, mesh);
+                self.pair_cells = Some(self.cells_with_own_nodes(cells, own, mesh)?);
                 (false, 0)
             }
-            _ => (disc.materials.elastic(), groups),
+            _ => (self.materials.elastic(), groups),
         };
-        let cells = CellSource::setup(hold, &disc.cells, mesh);
-        let (k_a_all, k_b, k_r) = disc.assemble(cells, terms, own.as_deref());
-        (disc.k_a, disc.k_a_all) = match n_dofs > n_free {
-            true => (leading_block(&k_a_all, n_free), Some(k_a_all)),
+        let cells = CellSource::setup(hold, &self.cells, mesh);
+        let (k_a_all, k_b, k_r) = self.assemble(cells, terms, own.as_deref());
+        (self.k_a, self.k_a_all) = match self.n_dofs > self.n_free {
+            true => (leading_block(&k_a_all, self.n_free), Some(k_a_all)),
             false => (k_a_all, None),
         };
-        (disc.k_b, disc.k_r, disc.own) = (k_b, k_r, own);
-        disc.pair_put_off();
+        (self.k_b, self.k_r, self.own) = (k_b, k_r, own);
+        self.pair_put_off();
         if hold == Hold::Vertices {
             let (nodes, _) = mesh_cells(mesh);
             // At their exact size (a collected Result grows by doubling): they stay.
-            disc.vertices = Vec::with_capacity(nodes.len());
+            self.vertices = Vec::with_capacity(nodes.len());
             for &v in nodes {
-                disc.vertices.push(node_u32(v, mesh)?);
+                self.vertices.push(node_u32(v, mesh)?);
             }
         }
-        Ok(disc)
+        Ok(self)
+    }
+
+    /// Whether a rank of several keeps of K_A, K_B and K_R its own unknowns' columns alone:
+    /// not where there are prescribed dofs, whose columns the time loop reads whole.
+    pub fn keeps_own_columns(&self) -> bool {
+        self.n_dofs == self.n_free
     }
 
     /// K_A on all n_dofs, K_B and K_R (`assemble`) of the cells `cells`, of the unknowns
@@ -1019,7 +1037,7 @@ impl Discretization {
     /// them: [`Discretization::visit_every_load`]): its rows of f_n keep their bits, the
     /// others' rows come from their ranks with b_n's exchange, and a rank holds a body
     /// force's points, four a tetrahedron, for its cells alone. Nothing where the setup
-    /// made them so already ([`Discretization::with_columns`]).
+    /// made them so already ([`Discretization::assembled`]).
     pub fn keep_own_loads(&mut self, first: bool) {
         if let Some(own) = self.own.as_ref().filter(|_| !self.loads.is_part()) {
             let reaches = self.reaching(own);

@@ -449,7 +449,7 @@ fn shares(graph: &MetisGraph, nodes: &[Vec<usize>], part: &[usize], size: usize)
 /// METIS's k-way partition of the nodes' graph into `size` parts: each node's part. Two
 /// nodes are adjacent where a cell holds both (where K_A couples them: P1), so that the
 /// partition needs no matrix: rank 0 makes it before it assembles its own columns of K_A
-/// alone (`fem::Discretization::with_columns`), and hands it to the others
+/// alone (`fem::Discretization::assembled`), and hands it to the others
 /// ([`Layout::of_first`]).
 fn partition(graph: &mut MetisGraph, size: usize) -> Result<Vec<usize>> {
     let too_large = |_| Error::solve("K_A is too large for METIS's indices".to_string());

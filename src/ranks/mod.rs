@@ -265,7 +265,7 @@ impl Ranks {
     /// The discretization of `scene` on `mesh` as this rank holds it. On one of several
     /// ranks of a run whose keys take PETSc (`SolverChoice::takes_petsc`), the rank
     /// assembles of K_A, K_B and K_R only the columns of the unknowns whose rows it holds
-    /// in PETSc (`Discretization::with_columns`, over `petsc::Layout`'s partition, made
+    /// in PETSc (`Discretization::assembled`, over `petsc::Layout`'s partition, made
     /// here once and handed on in [`Own`]), so that no rank holds the whole matrices. Else
     /// the whole: one rank, or `solver.linear = "auto"`, whose choice reads the whole K_A
     /// (the analysis of its factor) before a rank keeps its columns. A rank that assembles
@@ -279,27 +279,25 @@ impl Ranks {
     ) -> Result<(crate::fem::Discretization, Option<Own>)> {
         #[cfg(feature = "petsc")]
         if self.size > 1 && scene.solver.takes_petsc() {
-            let mut made = None;
             let hold = match self.is_first() {
                 true => crate::fem::Hold::Vertices,
                 false => crate::fem::Hold::Nothing,
             };
+            let disc = crate::fem::Discretization::numbered(mesh, scene, hold)?;
+            let cells = crate::fem::CellSource::Made(mesh);
+            let make = || crate::petsc::Layout::partition(&disc, cells, self.size);
+            let (layout, shares) = crate::petsc::Layout::of_first(self.is_first(), make)?;
+            let own = Some(layout.own(self.rank));
+            let materials = crate::fem::CellMaterials::new(mesh, scene)?;
             let how = (hold, crate::fem::PairWhen::AfterKrylov);
-            let disc =
-                crate::fem::Discretization::with_columns(mesh, scene, how, |disc, cells| {
-                    let make = || crate::petsc::Layout::partition(disc, cells, self.size);
-                    let (layout, shares) = crate::petsc::Layout::of_first(self.is_first(), make)?;
-                    let own = layout.own(self.rank);
-                    made = Some((layout, shares));
-                    Ok(Some(own))
-                })?;
-            let own = made.map(|(layout, shares)| Own {
+            let disc = disc.assembled(mesh, scene, how, (materials, own))?;
+            let own = Own {
                 layout,
                 shares,
                 rows: None,
                 holds: Holds::Every,
-            });
-            return Ok((disc, own));
+            };
+            return Ok((disc, Some(own)));
         }
         Ok((crate::fem::Discretization::new(mesh, scene)?, None))
     }

@@ -4,7 +4,7 @@
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
 //! agree with the whole matrices' products to round-off, the diagonal stays at Γ3's
 //! unknowns (the active set's ρ reads it there), and the other columns are gone. A rank that assembles those
-//! columns alone (`Discretization::with_columns`) holds the same matrices, bit for bit, and
+//! columns alone (`Discretization::numbered`, then `assembled`) holds the same matrices, bit for bit, and
 //! the same loads in its own rows, whether it holds the cells, their vertices or nothing;
 //! from the vertices alone (rank 0) it computes the stresses and norms of the cells held,
 //! and visits every load's terms (a body force's made again), bit for bit; its rows of K_B
@@ -20,8 +20,21 @@ use crate::common;
 use common::*;
 use std::collections::BTreeSet;
 use viscontact::fem::{
-    diagonal, mul_add, mul_add_rows, Discretization, Hold, PairWhen, Sparse, StressCells,
+    diagonal, mul_add, mul_add_rows, CellMaterials, Discretization, Hold, PairWhen, Sparse,
+    StressCells,
 };
+
+/// The discretization of `scene` on `mesh` with of its matrices the columns of `own` alone,
+/// in its two stages, as a rank of several makes it (`Ranks::discretize`).
+fn with_columns(
+    (mesh, scene): (&viscontact::mesh::Mesh, &viscontact::scene::Scene),
+    how: (Hold, PairWhen),
+    own: &[usize],
+) -> Discretization {
+    let materials = CellMaterials::new(mesh, scene).unwrap();
+    let disc = Discretization::numbered(mesh, scene, how.0).unwrap();
+    (disc.assembled(mesh, scene, how, (materials, Some(own.to_vec())))).unwrap()
+}
 
 /// The unknowns of a random half of `disc`'s nodes, increasing.
 fn random_half(disc: &Discretization, rng: &mut SplitMix) -> Vec<usize> {
@@ -108,24 +121,12 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
         kept.keep_columns(own.clone());
         for hold in [Hold::Cells, Hold::Vertices, Hold::Nothing] {
             let case = format!("{name}, holding {hold:?}");
-            let mut asked = false;
-            let mine = Discretization::with_columns(
-                &mesh,
-                &scene,
-                (hold, PairWhen::Setup),
-                |disc, cells| {
-                    let mut vertices = Vec::new();
-                    cells.each_vertices(|v| vertices.extend_from_slice(v));
-                    let whole = kept.cells.iter().flat_map(|t| t.vertices().iter().copied());
-                    asked = disc.n_free == kept.n_free && vertices == whole.collect::<Vec<_>>();
-                    Ok(Some(own.clone()))
-                },
-            )
-            .unwrap();
+            let numbered = Discretization::numbered(&mesh, &scene, hold).unwrap();
             assert!(
-                asked,
-                "{case}: the unknowns and cells come before the matrices"
+                numbered.n_free == kept.n_free && numbered.k_a.nrows() == 0,
+                "{case}: the unknowns come before the matrices"
             );
+            let mine = with_columns((&mesh, &scene), (hold, PairWhen::Setup), &own);
             let (held, read) = match hold {
                 Hold::Cells => (kept.cells.len(), kept.cells.len()),
                 Hold::Vertices => (0, kept.cells.len()),
@@ -212,13 +213,7 @@ fn rank_0_computes_from_the_cells_vertices_what_it_would_from_the_cells() {
         let (scene, mesh, mut held) = load(&path, &[]);
         let own = random_half(&held, &mut SplitMix(3));
         held.keep_columns(own.clone());
-        let mine = Discretization::with_columns(
-            &mesh,
-            &scene,
-            (Hold::Vertices, PairWhen::Setup),
-            |_, _| Ok(Some(own.clone())),
-        )
-        .unwrap();
+        let mine = with_columns((&mesh, &scene), (Hold::Vertices, PairWhen::Setup), &own);
         assert!(mine.cells.is_empty() && mine.n_cells() == held.cells.len());
         let mut rng = SplitMix(5);
         let mut random = |len: usize| (0..len).map(|_| rng.unit() - 0.5).collect::<Vec<_>>();
@@ -314,10 +309,7 @@ fn rows_paired_after_the_krylov_setup_are_those_paired_in_the_setup() {
         for hold in [Hold::Vertices, Hold::Nothing] {
             let case = format!("{name}, holding {hold:?}");
             let make = |when| {
-                let mine = Discretization::with_columns(&mesh, &scene, (hold, when), |_, _| {
-                    Ok(Some(own.clone()))
-                });
-                let mut mine = mine.unwrap();
+                let mut mine = with_columns((&mesh, &scene), (hold, when), &own);
                 mine.pair_own_rows();
                 mine
             };
@@ -354,8 +346,7 @@ fn rows_paired_after_the_krylov_setup_are_those_paired_in_the_setup() {
         let path = implicit.write(dir.path(), &format!("implicit_{name}"));
         let (scene, mesh, _) = load(&path, &[]);
         let how = (Hold::Nothing, PairWhen::AfterKrylov);
-        let mut mine =
-            Discretization::with_columns(&mesh, &scene, how, |_, _| Ok(Some(own.clone()))).unwrap();
+        let mut mine = with_columns((&mesh, &scene), how, &own);
         mine.pair_own_rows();
         assert!(
             mine.own_pair.is_some() && mine.own_pair_made(None).is_none(),
@@ -500,11 +491,7 @@ fn a_scene_with_prescribed_dofs_keeps_its_matrices_whole() {
     disc.keep_columns(vec![0, 1]);
     assert!(disc.own.is_none());
     assert_eq!(disc.k_a.as_ref().val(), &before[..]);
-    let mine =
-        Discretization::with_columns(&mesh, &scene, (Hold::Nothing, PairWhen::Setup), |_, _| {
-            Ok(Some(vec![0, 1]))
-        })
-        .unwrap();
+    let mine = with_columns((&mesh, &scene), (Hold::Nothing, PairWhen::Setup), &[0, 1]);
     assert!(mine.own.is_none());
     assert_eq!(mine.k_a.as_ref().val(), &before[..]);
 }
