@@ -171,8 +171,10 @@ impl Source {
 }
 
 impl Numbering {
-    /// The numbering of `scene`'s conditions on `mesh`, every rule checked.
-    pub fn new(mesh: &Mesh, scene: &Scene) -> Result<Numbering> {
+    /// The numbering of `scene`'s conditions on `mesh`, every rule checked; those of the
+    /// body's parts ([`Numbering::check_parts`], which read every cell) where `parts`: a
+    /// follower rank of several, whose mesh has no cells yet, leaves them to rank 0.
+    pub fn new(mesh: &Mesh, scene: &Scene, parts: bool) -> Result<Numbering> {
         let d = mesh.dim;
         if d * mesh.nodes.len() >= DofIndex::MAX_DOFS {
             return Err(Error::input(format!(
@@ -220,6 +222,9 @@ impl Numbering {
         }
         let numbering = Numbering::of(&holds, d, frames);
         numbering.check(mesh, scene)?;
+        if parts {
+            numbering.check_parts(mesh, scene)?;
+        }
         Ok(numbering)
     }
 
@@ -270,7 +275,7 @@ impl Numbering {
         }
     }
 
-    /// Something free, and every part of the body held against its rigid motions.
+    /// Something free, and some condition.
     fn check(&self, mesh: &Mesh, scene: &Scene) -> Result<()> {
         let file = scene.path.display();
         if self.n_free == 0 {
@@ -289,6 +294,13 @@ impl Numbering {
                  [[dirichlet]] entries that hold every rigid motion"
             )));
         }
+        Ok(())
+    }
+
+    /// Every part of the body (its cells connected by their nodes) held against its rigid
+    /// motions.
+    fn check_parts(&self, mesh: &Mesh, scene: &Scene) -> Result<()> {
+        let file = scene.path.display();
         let held: Vec<bool> = self.held.iter().map(|&h| h != 0).collect();
         mesh.check_parts(&held, &conditions(scene), scene.mesh.separate_parts)
             .map_err(|e| Error::input(format!("{file}: {e}")))?;

@@ -69,14 +69,11 @@ impl CellMaterials {
             true => Vec::new(),
             false => region_of_cells(mesh, scene)?,
         };
-        let (model, physics) = (scene.mesh.model, &scene.physics);
-        let by_region: Vec<Stiffness> = (physics.materials().enumerate())
-            .map(|(i, m)| Stiffness::of(m, model, physics.memory_group(i.checked_sub(1))))
-            .collect();
+        let by_entry = by_entry(scene);
         let mut distinct: Vec<Stiffness> = Vec::new();
         let of_cell = (0..mesh.n_cells())
             .map(|c| {
-                let s = by_region[region.get(c).map_or(0, |&r| r as usize)];
+                let s = by_entry[region.get(c).map_or(0, |&r| r as usize)];
                 let i = distinct.iter().position(|d| *d == s).unwrap_or_else(|| {
                     distinct.push(s);
                     distinct.len() - 1
@@ -89,6 +86,30 @@ impl CellMaterials {
             of_cell,
             region,
         })
+    }
+
+    /// The entry of each distinct material: 0 for `[material]`, i for the i-th
+    /// `[[material.region]]`, the first whose material it is. What rank 0 hands a follower
+    /// of `distinct` ([`CellMaterials::of_part`]).
+    pub fn distinct_entries(&self, scene: &Scene) -> Vec<u32> {
+        let by_entry = by_entry(scene);
+        let entry = |d: &Stiffness| by_entry.iter().position(|s| s == d).unwrap_or(0) as u32;
+        self.distinct.iter().map(entry).collect()
+    }
+
+    /// The materials of a part of the cells, as rank 0 hands them to a follower with its
+    /// part of the mesh (`Ranks::cells_of_first`): the whole mesh's distinct materials by
+    /// their `entries` ([`CellMaterials::distinct_entries`]), made again from `scene`, the
+    /// same bits, and each cell's index into them and its region. So every rank has the
+    /// same distinct materials, whichever its part holds.
+    pub fn of_part(scene: &Scene, entries: &[u32], of_cell: Vec<u32>, region: Vec<i32>) -> Self {
+        let by_entry = by_entry(scene);
+        let distinct = entries.iter().map(|&e| by_entry[e as usize]).collect();
+        CellMaterials {
+            distinct,
+            of_cell,
+            region,
+        }
     }
 
     /// The material of cell `c`.
@@ -110,6 +131,14 @@ impl CellMaterials {
     pub fn count(&self, i: usize) -> usize {
         self.region.iter().filter(|&&r| r as usize == i).count()
     }
+}
+
+/// The material of `[material]` (first) and of each `[[material.region]]` entry.
+fn by_entry(scene: &Scene) -> Vec<Stiffness> {
+    let (model, physics) = (scene.mesh.model, &scene.physics);
+    (physics.materials().enumerate())
+        .map(|(i, m)| Stiffness::of(m, model, physics.memory_group(i.checked_sub(1))))
+        .collect()
 }
 
 /// `check`'s lines on the regions (none for a scene without): each entry's group, its

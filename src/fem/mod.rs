@@ -646,11 +646,13 @@ impl Discretization {
     /// its cells without their materials. What reads it then reads its unknowns and the
     /// mesh's cells: of them a rank of several makes METIS's partition (`Ranks::discretize`),
     /// before [`Discretization::assembled`]. It reads of the mesh its nodes and groups, and
-    /// its cells where it holds them alone.
+    /// its cells where it holds them or their vertices: a follower of several (`Hold::Nothing`)
+    /// has none yet, and leaves the checks of the body's parts to rank 0
+    /// (`Numbering::new`).
     pub fn numbered(mesh: &Mesh, scene: &Scene, hold: Hold) -> Result<Self> {
         check_model(mesh, scene)?;
         let d = mesh.dim;
-        let numbering = Numbering::new(mesh, scene)?;
+        let numbering = Numbering::new(mesh, scene, hold != Hold::Nothing)?;
         let (n_free, n_dofs) = (numbering.n_free, numbering.n_dofs);
         let cells = match hold {
             Hold::Cells => cells(mesh),
@@ -809,6 +811,18 @@ impl Discretization {
             row.entries().for_each(|(d, _)| read[d] = true);
         }
         read
+    }
+
+    /// The nodes whose cells every rank of several assembles: those with an unknown at
+    /// which the active set reads K_A's diagonal (`diagonal_read`: Γ3's rows'), whose
+    /// diagonal entry every rank holds.
+    pub fn diagonal_nodes(&self) -> Vec<bool> {
+        let read = self.diagonal_read();
+        let held = |i: &DofIndex| i.get().is_some_and(|i| read[i]);
+        self.free
+            .chunks(self.dim)
+            .map(|node| node.iter().any(held))
+            .collect()
     }
 
     /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) whole and of

@@ -6,6 +6,7 @@
 //! whole vector, 8 bytes an unknown to every rank.
 
 use super::{check, Layout, Result};
+use crate::Error;
 use std::ffi::{c_int, c_void};
 
 extern "C" {
@@ -97,6 +98,41 @@ impl Exchange {
             .for_each(|(&i, x)| v[i as usize] = x);
         Ok(())
     }
+}
+
+/// Each rank's part of `parts` (given on rank 0, one a rank; None on the others), sent from
+/// rank 0 (collective): one count and one list from rank 0 to each. A part must hold
+/// fewer than 2^31 values (MPI's counts): the caller refuses larger ones before, on every
+/// rank, since rank 0 failing here alone would leave the others in the call.
+pub fn scatter_from_first(parts: Option<&[Vec<u32>]>) -> Result<Vec<u32>> {
+    let size = super::world()?.1;
+    let too_many = |_| Error::solve("a rank's part of the mesh exceeds MPI's counts".to_string());
+    let mut send_counts = vec![0; size];
+    for (count, part) in send_counts.iter_mut().zip(parts.unwrap_or_default()) {
+        *count = c_int::try_from(part.len()).map_err(too_many)?;
+    }
+    let mut recv_counts = vec![0; size];
+    // SAFETY: both arrays hold one count for each rank; MPI writes recv_counts.
+    let code = unsafe { vc_alltoall_counts(send_counts.as_ptr(), recv_counts.as_mut_ptr()) };
+    check(code, "MPI_Alltoall")?;
+    let send: Vec<u32> = parts.unwrap_or_default().concat();
+    let (send_displs, recv_displs) = (displacements(&send_counts), displacements(&recv_counts));
+    let mut recv = vec![0u32; recv_counts.iter().map(|&c| c as usize).sum()];
+    // SAFETY: the counts and displacements cut `send` and `recv` as each holds them, in
+    // rank order; MPI writes `recv` within the call. The values cross as ints.
+    let code = unsafe {
+        vc_alltoallv(
+            send.as_ptr().cast(),
+            send_counts.as_ptr(),
+            send_displs.as_ptr(),
+            recv.as_mut_ptr().cast(),
+            recv_counts.as_ptr(),
+            recv_displs.as_ptr(),
+            1,
+        )
+    };
+    check(code, "MPI_Alltoallv")?;
+    Ok(recv)
 }
 
 /// Each rank's first place in an array cut by `counts`, in rank order.

@@ -247,12 +247,7 @@ impl Layout {
         cells: &[usize],
         nodes_per_cell: usize,
     ) -> Vec<u32> {
-        let nodes = nodes(disc);
-        let mut of_node = vec![u32::MAX; disc.free.len() / disc.dim];
-        let with_unknowns = (0..of_node.len()).filter(|&v| !node_unknowns(disc, v).is_empty());
-        for (v, r) in with_unknowns.zip(self.ranks_of(&nodes)) {
-            of_node[v] = r as u32;
-        }
+        let of_node = self.rank_of_nodes(disc);
         cells
             .chunks(nodes_per_cell.max(1))
             .map(|c| {
@@ -263,6 +258,44 @@ impl Layout {
             })
             .map(|p| p.unwrap_or(0))
             .collect()
+    }
+
+    /// The rank that holds each mesh node's unknowns; `u32::MAX` for a node without any.
+    fn rank_of_nodes(&self, disc: &Discretization) -> Vec<u32> {
+        let nodes = nodes(disc);
+        let mut of_node = vec![u32::MAX; disc.free.len() / disc.dim];
+        let with_unknowns = (0..of_node.len()).filter(|&v| !node_unknowns(disc, v).is_empty());
+        for (v, r) in with_unknowns.zip(self.ranks_of(&nodes)) {
+            of_node[v] = r as u32;
+        }
+        of_node
+    }
+
+    /// Each follower's part of the mesh (`cells`, in their order): the cells its assembly
+    /// reads, those with one of its own nodes or one of the nodes at which every rank
+    /// reads K_A's diagonal (`Discretization::diagonal_nodes`), as indices increasing; for
+    /// a scene whose ranks keep every column (`Discretization::keeps_own_columns`), every
+    /// cell. Rank 0's (the first) is empty: it holds the mesh. One pass over the cells.
+    pub fn cell_parts(&self, disc: &Discretization, cells: CellSource) -> Vec<Vec<u32>> {
+        let size = self.blocks.len() - 1;
+        let (of_node, every) = (self.rank_of_nodes(disc), disc.diagonal_nodes());
+        let whole = !disc.keeps_own_columns();
+        let mut parts = vec![Vec::new(); size];
+        let mut c = 0u32;
+        cells.each_vertices(|v| {
+            if whole || v.iter().any(|&p| every[p]) {
+                parts[1..].iter_mut().for_each(|part| part.push(c));
+            } else {
+                let mut ranks: Vec<u32> = v.iter().map(|&p| of_node[p]).collect();
+                ranks.sort_unstable();
+                ranks.dedup();
+                for r in ranks.into_iter().filter(|&r| r != 0 && r != u32::MAX) {
+                    parts[r as usize].push(c);
+                }
+            }
+            c += 1;
+        });
+        parts
     }
 }
 

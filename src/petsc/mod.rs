@@ -43,6 +43,7 @@
 mod exchange;
 mod layout;
 
+pub use exchange::scatter_from_first;
 use exchange::Exchange;
 pub use layout::{Csr, Layout, RankShare};
 

@@ -15,7 +15,11 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::{mpi, Ranks};
+#[cfg(feature = "petsc")]
+use crate::fem::{CellMaterials, Discretization};
 use crate::mesh::{Group, Mesh};
+#[cfg(feature = "petsc")]
+use crate::scene::Scene;
 use crate::{Error, Result};
 
 /// What a rank needs to receive a mesh's arrays: their lengths, and the small fields.
@@ -71,18 +75,22 @@ impl Shape {
         }
     }
 
-    /// A mesh of this shape, its arrays zero, to receive them.
-    fn empty(self) -> Mesh {
+    /// A mesh of this shape, its arrays zero, to receive them; without its cells where
+    /// `cells` is false (a follower's part comes later: [`Ranks::cells_of_first`]).
+    fn empty(self, cells: bool) -> Mesh {
+        let n = |len: usize| if cells { len } else { 0 };
         Mesh {
             path: PathBuf::from(std::ffi::OsString::from_vec(self.path)),
             dim: self.dim,
             nodes: vec![[0.0; 3]; self.nodes],
-            triangles: vec![[0; 3]; self.triangles],
-            tetrahedra: vec![[0; 4]; self.tetrahedra],
-            groups: self.groups.into_iter().map(GroupShape::empty).collect(),
+            triangles: vec![[0; 3]; n(self.triangles)],
+            tetrahedra: vec![[0; 4]; n(self.tetrahedra)],
+            groups: (self.groups.into_iter())
+                .map(|g| GroupShape::empty(g, cells))
+                .collect(),
             flipped: self.flipped,
             other_groups: self.other_groups,
-            cell_entity: vec![0; self.cell_entity],
+            cell_entity: vec![0; n(self.cell_entity)],
         }
     }
 }
@@ -109,34 +117,36 @@ impl GroupShape {
         }
     }
 
-    fn empty(self) -> Group {
+    fn empty(self, cells: bool) -> Group {
         Group {
             dim: self.dim,
             tag: self.tag,
             name: self.name,
             facets: vec![[0; 2]; self.facets],
             faces: vec![[0; 3]; self.faces],
-            cells: vec![0; self.cells],
+            cells: vec![0; if cells { self.cells } else { 0 }],
             defect: self.defect,
         }
     }
 }
 
-/// The mesh's arrays as bytes, in the order in which they are sent.
-fn arrays(mesh: &mut Mesh) -> Vec<&mut [u8]> {
+/// The mesh's arrays as bytes, in the order in which they are sent; those of its cells
+/// (the cells, their entities and the cell groups') only where `cells`.
+fn arrays(mesh: &mut Mesh, cells: bool) -> Vec<&mut [u8]> {
     use bytemuck::cast_slice_mut as bytes;
-    let mut out: Vec<&mut [u8]> = vec![
-        bytes(&mut mesh.nodes),
-        bytes(&mut mesh.triangles),
-        bytes(&mut mesh.tetrahedra),
-        bytes(&mut mesh.cell_entity),
-    ];
-    for g in &mut mesh.groups {
+    let mut out: Vec<&mut [u8]> = vec![bytes(&mut mesh.nodes)];
+    if cells {
         out.extend([
-            bytes(&mut g.facets),
-            bytes(&mut g.faces),
-            bytes(&mut g.cells),
+            bytes(&mut mesh.triangles),
+            bytes(&mut mesh.tetrahedra),
+            bytes(&mut mesh.cell_entity),
         ]);
+    }
+    for g in &mut mesh.groups {
+        out.extend([bytes(&mut g.facets), bytes(&mut g.faces)]);
+        if cells {
+            out.push(bytes(&mut g.cells));
+        }
     }
     out
 }
@@ -144,8 +154,8 @@ fn arrays(mesh: &mut Mesh) -> Vec<&mut [u8]> {
 impl Ranks {
     /// The mesh rank 0 read (`mine`: `Some` on rank 0, `None` on a follower) on every rank
     /// (collective on several: every rank calls it, once the ranks agreed on their setup
-    /// so far).
-    pub fn mesh_of_first(&self, mine: Option<Mesh>) -> Result<Mesh> {
+    /// so far); on a follower without its cells where `cells` is false.
+    pub fn mesh_of_first(&self, mine: Option<Mesh>, cells: bool) -> Result<Mesh> {
         let failed = |e: &dyn std::fmt::Display| Error::solve(format!("the mesh of rank 0: {e}"));
         if self.size == 1 {
             return mine.ok_or_else(|| failed(&"one rank, and it read none"));
@@ -156,8 +166,8 @@ impl Ranks {
         };
         let shape: Shape =
             serde_json::from_str(&self.first_says_text(&shape)?).map_err(|e| failed(&e))?;
-        let mut mesh = mine.unwrap_or_else(|| shape.empty());
-        for array in arrays(&mut mesh) {
+        let mut mesh = mine.unwrap_or_else(|| shape.empty(cells));
+        for array in arrays(&mut mesh, cells) {
             mpi::from_rank0_bytes(array)?;
         }
         Ok(mesh)
@@ -165,14 +175,199 @@ impl Ranks {
 
     /// Every rank's setup up to its mesh (`read`: the mesh on rank 0, `None` on a
     /// follower) agreed ([`Ranks::agree`]), and then the mesh that rank 0 read on every
-    /// rank ([`Ranks::mesh_of_first`]).
-    pub fn with_mesh_of_first<T>(&self, read: Result<(T, Option<Mesh>)>) -> Result<(T, Mesh)> {
+    /// rank ([`Ranks::mesh_of_first`]): on a follower of a run whose setup spreads
+    /// ([`Ranks::spreads_setup`], of the scene that `scene` reads of what it read) without
+    /// its cells, which come with the partition ([`Ranks::cells_of_first`]).
+    pub fn with_mesh_of_first<T>(
+        &self,
+        read: Result<(T, Option<Mesh>)>,
+        scene: impl FnOnce(&T) -> &crate::scene::Scene,
+    ) -> Result<(T, Mesh)> {
         let (t, mine) = self.agree(read)?;
-        let mesh = self.mesh_of_first(mine)?;
+        let mesh = self.mesh_of_first(mine, !self.spreads_setup(scene(&t)))?;
         // Rank 0's reading freed the file's bytes and the reader's arrays: they go back to
         // the system before the assembly, its peak (docs/cluster.md, "Memory per rank").
         crate::resources::return_freed_memory();
         Ok((t, mesh))
+    }
+}
+
+/// What rank 0 hands each follower of the mesh's cells with the partition: per rank (rank
+/// 0's empty), the vertices of its part's cells (dim + 1 a cell), their gmsh entities,
+/// their materials (`CellMaterials::of_cell`), their regions (none without
+/// `[[material.region]]`), and of each group of the mesh, in order, the count and the
+/// indices in the part of its cells; then the distinct materials' entries
+/// (`CellMaterials::distinct_entries`), the same for every rank.
+#[cfg(feature = "petsc")]
+struct Parts {
+    vertices: Vec<Vec<u32>>,
+    entities: Vec<Vec<u32>>,
+    of_cell: Vec<Vec<u32>>,
+    region: Vec<Vec<u32>>,
+    groups: Vec<Vec<u32>>,
+    entries: Vec<u32>,
+}
+
+#[cfg(feature = "petsc")]
+impl Parts {
+    /// Each follower's part of `mesh` (its cells: `layout.cell_parts`) with what it needs of
+    /// them, `materials` those of the whole mesh's cells.
+    fn of(
+        mesh: &Mesh,
+        (disc, layout): (&Discretization, &crate::petsc::Layout),
+        (materials, scene): (&CellMaterials, &Scene),
+    ) -> Result<Parts> {
+        if u32::try_from(mesh.n_cells()).is_err() {
+            return Err(Error::input(format!(
+                "mesh '{}': more cells than a run over several MPI ranks numbers (2^32)",
+                mesh.path.display()
+            )));
+        }
+        let ids = layout.cell_parts(disc, crate::fem::CellSource::Made(mesh));
+        let (cells, npc) = mesh.cell_nodes();
+        // Of each part, `f`'s values of each of its cells, in order.
+        let each = |f: &dyn Fn(usize, &mut Vec<u32>)| -> Vec<Vec<u32>> {
+            let part = |ids: &Vec<u32>| {
+                let mut values = Vec::new();
+                ids.iter().for_each(|&c| f(c as usize, &mut values));
+                values
+            };
+            ids.iter().map(part).collect()
+        };
+        let region = &materials.region;
+        let parts = Parts {
+            vertices: each(&|c, v| {
+                v.extend(cells[c * npc..(c + 1) * npc].iter().map(|&p| p as u32))
+            }),
+            entities: each(&|c, v| v.push(mesh.cell_entity[c] as u32)),
+            of_cell: each(&|c, v| v.push(materials.of_cell[c])),
+            region: each(&|c, v| v.extend(region.get(c).map(|&r| r as u32))),
+            groups: groups_of_parts(mesh, &ids),
+            entries: materials.distinct_entries(scene),
+        };
+        // MPI counts a part's values in an int (`petsc::scatter_from_first`).
+        let counted = |p: &Vec<u32>| i32::try_from(p.len()).is_ok();
+        if !parts.vertices.iter().chain(&parts.groups).all(counted) {
+            return Err(Error::input(format!(
+                "mesh '{}': a rank's part of the mesh holds more than 2^31 values; run it on \
+                 more ranks",
+                mesh.path.display()
+            )));
+        }
+        Ok(parts)
+    }
+}
+
+/// Of each group of `mesh` (in order), in each part (`ids`: the cells of each, increasing),
+/// the count and the indices in the part of the group's cells: in one pass over each
+/// part's cells, which groups hold a cell read from a table of every cell's groups.
+#[cfg(feature = "petsc")]
+fn groups_of_parts(mesh: &Mesh, ids: &[Vec<u32>]) -> Vec<Vec<u32>> {
+    let mut start = vec![0usize; mesh.n_cells() + 1];
+    let held = || {
+        mesh.groups
+            .iter()
+            .enumerate()
+            .flat_map(|(g, group)| group.cells.iter().map(move |&c| (g, c)))
+    };
+    held().for_each(|(_, c)| start[c + 1] += 1);
+    (1..start.len()).for_each(|c| start[c] += start[c - 1]);
+    let (mut of_cell, mut at) = (vec![0u32; start[mesh.n_cells()]], start.clone());
+    for (g, c) in held() {
+        of_cell[at[c]] = g as u32;
+        at[c] += 1;
+    }
+    let part = |ids: &Vec<u32>| {
+        let mut groups = vec![Vec::new(); mesh.groups.len()];
+        for (k, &c) in ids.iter().enumerate() {
+            let c = c as usize;
+            of_cell[start[c]..start[c + 1]]
+                .iter()
+                .for_each(|&g| groups[g as usize].push(k as u32));
+        }
+        groups
+            .into_iter()
+            .flat_map(|g| std::iter::once(g.len() as u32).chain(g))
+            .collect()
+    };
+    ids.iter().map(part).collect()
+}
+
+#[cfg(feature = "petsc")]
+impl Ranks {
+    /// The materials of this rank's cells, of a run whose setup spreads
+    /// ([`Ranks::spreads_setup`]), once rank 0 has partitioned the nodes (`layout`;
+    /// collective): rank 0 makes the whole mesh's (an error of them goes to the others as
+    /// its exit status) and hands each follower its part of the mesh's cells
+    /// ([`Parts`]), which the follower's `mesh`, received without its cells
+    /// ([`Ranks::with_mesh_of_first`]), now holds, numbered in the whole's order. So no
+    /// follower holds the whole mesh's cells, nor checks the regions of a part.
+    pub fn cells_of_first(
+        &self,
+        mesh: &mut Mesh,
+        scene: &Scene,
+        (disc, layout): (&Discretization, &crate::petsc::Layout),
+    ) -> Result<CellMaterials> {
+        let made = self.is_first().then(|| -> Result<_> {
+            let materials = CellMaterials::new(mesh, scene)?;
+            let parts = Parts::of(mesh, (disc, layout), (&materials, scene))?;
+            Ok((materials, parts))
+        });
+        let code = match &made {
+            Some(Err(e)) => e.exit_code(),
+            _ => 0,
+        };
+        if let code @ 1.. = self.first_says(code)? {
+            return Err(match made {
+                Some(Err(e)) => e,
+                _ => Error::Elsewhere(code),
+            });
+        }
+        let (materials, parts) = match made {
+            Some(made) => {
+                let (materials, parts) = made?;
+                (Some(materials), Some(parts))
+            }
+            None => (None, None),
+        };
+        let field = |f: fn(&Parts) -> &[Vec<u32>]| mpi::scatter_from_first(parts.as_ref().map(f));
+        let (vertices, entities) = (field(|p| &p.vertices)?, field(|p| &p.entities)?);
+        let (of_cell, region) = (field(|p| &p.of_cell)?, field(|p| &p.region)?);
+        let groups = field(|p| &p.groups)?;
+        let mut entries = parts.map_or(Vec::new(), |p| p.entries);
+        let count = self.first_says(entries.len() as i32)?;
+        entries.resize(count as usize, 0);
+        mpi::from_rank0_bytes(bytemuck::cast_slice_mut(&mut entries))?;
+        if let Some(materials) = materials {
+            return Ok(materials);
+        }
+        hold_part(mesh, (vertices, entities), groups);
+        let region = region.into_iter().map(|r| r as i32).collect();
+        Ok(CellMaterials::of_part(scene, &entries, of_cell, region))
+    }
+}
+
+/// A follower's `mesh`, received without its cells, with its part's: their vertices and
+/// entities, and of each group the cells it holds among them (`groups`: count, indices).
+#[cfg(feature = "petsc")]
+fn hold_part(mesh: &mut Mesh, (vertices, entities): (Vec<u32>, Vec<u32>), groups: Vec<u32>) {
+    fn cells<const N: usize>(vertices: &[u32]) -> Vec<[usize; N]> {
+        let cell = |c: &[u32]| std::array::from_fn(|i| c[i] as usize);
+        vertices.chunks_exact(N).map(cell).collect()
+    }
+    match mesh.dim {
+        2 => mesh.triangles = cells(&vertices),
+        _ => mesh.tetrahedra = cells(&vertices),
+    }
+    mesh.cell_entity = entities.into_iter().map(|e| e as i32).collect();
+    let mut at = 0;
+    for g in &mut mesh.groups {
+        let count = groups[at] as usize;
+        g.cells = groups[at + 1..at + 1 + count]
+            .iter()
+            .map(|&k| k as usize)
+            .collect();
+        at += 1 + count;
     }
 }
 
@@ -192,9 +387,12 @@ mod tests {
         for file in files {
             let mut sent = Mesh::read(std::path::Path::new(file)).unwrap();
             let json = serde_json::to_string(&Shape::of(&sent)).unwrap();
-            let mut received = serde_json::from_str::<Shape>(&json).unwrap().empty();
+            let mut received = serde_json::from_str::<Shape>(&json).unwrap().empty(true);
             assert_ne!(received, sent, "{file}: the empty mesh is not the mesh yet");
-            for (to, from) in arrays(&mut received).into_iter().zip(arrays(&mut sent)) {
+            for (to, from) in arrays(&mut received, true)
+                .into_iter()
+                .zip(arrays(&mut sent, true))
+            {
                 to.copy_from_slice(from);
             }
             assert_eq!(received, sent, "{file}");

@@ -262,6 +262,14 @@ impl Ranks {
         }
     }
 
+    /// Whether the setup of a run of `scene` spreads over the ranks: on several ranks, where
+    /// the scene's keys take PETSc (`SolverChoice::takes_petsc`). Then rank 0 alone reads
+    /// the mesh and partitions it, and each follower gets its part of the mesh's cells
+    /// ([`Ranks::cells_of_first`]); elsewhere every rank gets the whole mesh.
+    pub fn spreads_setup(&self, scene: &crate::scene::Scene) -> bool {
+        cfg!(feature = "petsc") && self.size > 1 && scene.solver.takes_petsc()
+    }
+
     /// The discretization of `scene` on `mesh` as this rank holds it. On one of several
     /// ranks of a run whose keys take PETSc (`SolverChoice::takes_petsc`), the rank
     /// assembles of K_A, K_B and K_R only the columns of the unknowns whose rows it holds
@@ -274,21 +282,22 @@ impl Ranks {
     /// with one of its own nodes: `fem::PairWhen::AfterKrylov`).
     pub fn discretize(
         &self,
-        mesh: &crate::mesh::Mesh,
+        mesh: &mut crate::mesh::Mesh,
         scene: &crate::scene::Scene,
     ) -> Result<(crate::fem::Discretization, Option<Own>)> {
         #[cfg(feature = "petsc")]
-        if self.size > 1 && scene.solver.takes_petsc() {
+        if self.spreads_setup(scene) {
             let hold = match self.is_first() {
                 true => crate::fem::Hold::Vertices,
                 false => crate::fem::Hold::Nothing,
             };
-            let disc = crate::fem::Discretization::numbered(mesh, scene, hold)?;
+            // Rank 0 alone checks the body's parts, which read the cells: the ranks agree.
+            let disc = self.agree(crate::fem::Discretization::numbered(mesh, scene, hold))?;
             let cells = crate::fem::CellSource::Made(mesh);
             let make = || crate::petsc::Layout::partition(&disc, cells, self.size);
             let (layout, shares) = crate::petsc::Layout::of_first(self.is_first(), make)?;
             let own = Some(layout.own(self.rank));
-            let materials = crate::fem::CellMaterials::new(mesh, scene)?;
+            let materials = self.cells_of_first(mesh, scene, (&disc, &layout))?;
             let how = (hold, crate::fem::PairWhen::AfterKrylov);
             let disc = disc.assembled(mesh, scene, how, (materials, own))?;
             let own = Own {

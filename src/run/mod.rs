@@ -255,9 +255,10 @@ fn read_run(scene_path: &Path, opts: &RunOptions) -> Result<(Read, Option<Mesh>)
 /// A new run's setup up to its time loop, with the output directory locked.
 fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     let stage = || opts.interrupt.between_setup_stages();
-    let ((scene, out, lock), mesh) = opts.ranks.with_mesh_of_first(read_run(scene_path, opts))?;
-    stage()?;
-    let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
+    let read = read_run(scene_path, opts);
+    let ((scene, out, lock), mut mesh) = opts.ranks.with_mesh_of_first(read, |r| &r.0)?;
+    before_discretizing(opts, &scene)?;
+    let (mut disc, made) = opts.ranks.discretize(&mut mesh, &scene)?;
     stage()?;
     let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
     estimate.check(&out)?;
@@ -291,6 +292,17 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
             lock,
         },
     })
+}
+
+/// The stage boundary of setup between the mesh and its discretization, where the latter
+/// is rank 0's alone: where the ranks' discretization is collective
+/// (`Ranks::spreads_setup`), the followers already wait in it for rank 0 (the partition,
+/// their parts of the mesh), which must reach them; the boundary after it takes the signal.
+fn before_discretizing(opts: &RunOptions, scene: &Scene) -> Result<()> {
+    match opts.ranks.spreads_setup(scene) {
+        true => Ok(()),
+        false => opts.interrupt.between_setup_stages(),
+    }
 }
 
 /// Refuses (exit 2) a run on `ranks` MPI ranks whose steps do not spread over them
@@ -385,9 +397,10 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         Ok((read, None))
     };
     let ready = || -> Result<_> {
-        // Rank 0 reads the mesh; a follower gets it from rank 0 (`crate::ranks`).
-        let ((scene, cp), mesh) = opts.ranks.with_mesh_of_first(read())?;
-        let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
+        // Rank 0 reads the mesh; a follower gets it from rank 0, and its part of the cells
+        // with the partition (`crate::ranks`).
+        let ((scene, cp), mut mesh) = opts.ranks.with_mesh_of_first(read(), |r| &r.0)?;
+        let (mut disc, made) = opts.ranks.discretize(&mut mesh, &scene)?;
         let solver = Descriptor::of_run(&scene, &disc)?;
         check_started_ranks(&scene, &solver, opts)?;
         let mut own = opts.ranks.keep_own_columns(&mut disc, &scene, made)?;
@@ -502,9 +515,9 @@ fn prepare_resume(
         })?;
         Ok(((cp, scene), Some(mesh)))
     };
-    let ((cp, scene), mesh) = opts.ranks.with_mesh_of_first(read())?;
-    stage()?;
-    let (mut disc, made) = opts.ranks.discretize(&mesh, &scene)?;
+    let ((cp, scene), mut mesh) = opts.ranks.with_mesh_of_first(read(), |r| &r.1)?;
+    before_discretizing(opts, &scene)?;
+    let (mut disc, made) = opts.ranks.discretize(&mut mesh, &scene)?;
     stage()?;
     cp.check(&scene, &mesh, &disc)?;
     check_continuation(checkpoint_path, &cp, &scene, opts.stop_after)?;

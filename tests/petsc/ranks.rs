@@ -280,6 +280,93 @@ fn a_run_with_contact_and_friction_on_1_2_and_3_ranks_agrees_with_one_process() 
     agree_on_1_2_and_3_ranks(&contact_scenes(tmp.path()));
 }
 
+/// Regions (examples/bimaterial.toml: a soft layer under its core, `[[material.region]]`),
+/// whose materials and physical groups a follower gets with its part of the mesh's cells
+/// from rank 0 (`Ranks::cells_of_first`): on 1, 2 and 3 ranks the run agrees with one
+/// process, and the last frame's pieces hold between them as many cells of each physical
+/// group (`region`) and of each material region (`material_region`) as the one process's
+/// frame.
+#[test]
+fn regions_on_1_2_and_3_ranks_agree_and_the_pieces_hold_each_regions_cells() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = (SceneText::example("bimaterial.toml").set("solver.linear", "petsc"))
+        .set("solver.contact", "active_set")
+        .set("time.steps", 4)
+        .write(tmp.path(), "bimaterial.toml");
+    agree_on_1_2_and_3_ranks(std::slice::from_ref(&scene));
+    // The cells of each (region, material_region) pair in the frames `files`.
+    let counts = |files: &[std::path::PathBuf]| {
+        let mut counts = std::collections::BTreeMap::new();
+        for file in files {
+            let vtu = read_vtu(file).unwrap();
+            let field = |name: &str| {
+                let a = vtu.cell_data.iter().find(|a| a.name == name);
+                a.unwrap_or_else(|| panic!("{}: no {name}", file.display()))
+                    .values
+                    .clone()
+            };
+            for pair in field("region").into_iter().zip(field("material_region")) {
+                *counts.entry(format!("{pair:?}")).or_insert(0) += 1;
+            }
+        }
+        counts
+    };
+    let last = |dir: &Path| {
+        read_series(&dir.join("solution.pvd"))
+            .unwrap()
+            .1
+            .last()
+            .unwrap()
+            .1
+            .path()
+            .to_path_buf()
+    };
+    let one = counts(&[last(&tmp.path().join("bimaterial.toml.one"))]);
+    assert!(one.len() >= 2, "the layer and the core: {one:?}");
+    let pvtu = last(&tmp.path().join("bimaterial.toml.3"));
+    let text = std::fs::read_to_string(&pvtu).unwrap();
+    let pieces: Vec<_> = (text.split("Source=\"").skip(1))
+        .map(|s| pvtu.parent().unwrap().join(&s[..s.find('"').unwrap()]))
+        .collect();
+    assert_eq!(pieces.len(), 3);
+    assert_eq!(counts(&pieces), one, "the pieces' cells of each region");
+}
+
+/// What only the whole mesh shows, which rank 0 alone checks (a follower holds its part of
+/// the mesh's cells alone): regions that share cells, and two halves of a body that were
+/// not fragmented (their nodes coincide), each refused on 3 ranks (exit 2) with rank 0's
+/// message alone, the others quiet, and nothing written.
+#[test]
+fn what_only_the_whole_mesh_shows_is_refused_on_3_ranks_with_rank_0s_message() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = common::repo().join("tests/data/mesh_checks");
+    let mesh = data.join("regions.msh");
+    let shared = SceneText::parse(&format!(
+        "name = \"shared\"\n[mesh]\nfile = {:?}\nmodel = \"plane_stress\"\n\
+         [mesh.groups]\nfixed = [\"Γ1\"]\n[time]\nend = 1.0\nsteps = 2\n\
+         [material.viscosity]\ntheta = 0.1\nzeta = 0.1\n\
+         [[material.region]]\non = \"Ω\"\n[material.region.viscosity]\ntheta = 0.2\nzeta = 0.1\n\
+         [[material.region]]\non = \"inner\"\n[material.region.viscosity]\ntheta = 0.3\nzeta = 0.1\n\
+         [[load.body]]\nvalue = [\"0.01*t\", \"-0.02*t\"]\n",
+        mesh.display().to_string()
+    ));
+    let unfragmented = SceneText::file(&data.join("unfragmented.toml"));
+    for (scene, what) in [
+        (shared, "share 14 elements"),
+        (unfragmented, "coincide with another node"),
+    ] {
+        let path = scene
+            .set("solver.linear", "petsc")
+            .write(tmp.path(), "scene.toml");
+        let out = tmp.path().join("o");
+        let (code, text) = run(3, &path, &out, &[]);
+        assert_eq!(code, 2, "{text}");
+        assert_eq!(text.matches("error:").count(), 1, "{text}");
+        assert!(text.contains(what), "{text}");
+        assert!(!out.exists(), "a refused run wrote {}", out.display());
+    }
+}
+
 /// history.csv's largest von Mises stress, which over several ranks is the largest of the
 /// ranks' pieces' at every step (`run::frame::OwnFrames::solved`): on 3 ranks of the block
 /// with contact it has the same bits whether a frame at the step hands it over, no frame is
