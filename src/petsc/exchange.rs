@@ -45,26 +45,9 @@ impl Exchange {
         reads.sort_by_key(|&i| (owner(i), i));
         let mut recv_counts = vec![0; size];
         reads.iter().for_each(|&i| recv_counts[owner(i)] += 1);
-        let mut send_counts = vec![0; size];
-        // SAFETY: both arrays hold one count for each rank; MPI writes send_counts.
-        let code = unsafe { vc_alltoall_counts(recv_counts.as_ptr(), send_counts.as_mut_ptr()) };
-        check(code, "MPI_Alltoall")?;
+        // What the others read of this rank's rows: the values it sends them at each run.
+        let (send, send_counts) = all_to_all(&reads, &recv_counts)?;
         let (send_displs, recv_displs) = (displacements(&send_counts), displacements(&recv_counts));
-        let mut send = vec![0u32; send_counts.iter().map(|&c| c as usize).sum()];
-        // SAFETY: the counts and displacements cut `reads` and `send` as each holds them,
-        // in rank order; MPI writes `send` within the call. The unknowns cross as ints.
-        let code = unsafe {
-            vc_alltoallv(
-                reads.as_ptr().cast(),
-                recv_counts.as_ptr(),
-                recv_displs.as_ptr(),
-                send.as_mut_ptr().cast(),
-                send_counts.as_ptr(),
-                send_displs.as_ptr(),
-                1,
-            )
-        };
-        check(code, "MPI_Alltoallv")?;
         Ok(Exchange {
             send,
             send_counts,
@@ -80,7 +63,7 @@ impl Exchange {
     pub fn run(&self, v: &mut [f64]) -> Result<()> {
         let sent: Vec<f64> = self.send.iter().map(|&i| v[i as usize]).collect();
         let mut received = vec![0.0; self.recv.len()];
-        // SAFETY: as in `new`, of doubles; MPI writes `received` within the call.
+        // SAFETY: as in `all_to_all`, of doubles; MPI writes `received` within the call.
         let code = unsafe {
             vc_alltoallv(
                 sent.as_ptr().cast(),
@@ -111,28 +94,35 @@ pub fn scatter_from_first(parts: Option<&[Vec<u32>]>) -> Result<Vec<u32>> {
     for (count, part) in send_counts.iter_mut().zip(parts.unwrap_or_default()) {
         *count = c_int::try_from(part.len()).map_err(too_many)?;
     }
-    let mut recv_counts = vec![0; size];
-    // SAFETY: both arrays hold one count for each rank; MPI writes recv_counts.
-    let code = unsafe { vc_alltoall_counts(send_counts.as_ptr(), recv_counts.as_mut_ptr()) };
-    check(code, "MPI_Alltoall")?;
     let send: Vec<u32> = parts.unwrap_or_default().concat();
-    let (send_displs, recv_displs) = (displacements(&send_counts), displacements(&recv_counts));
-    let mut recv = vec![0u32; recv_counts.iter().map(|&c| c as usize).sum()];
-    // SAFETY: the counts and displacements cut `send` and `recv` as each holds them, in
-    // rank order; MPI writes `recv` within the call. The values cross as ints.
+    Ok(all_to_all(&send, &send_counts)?.0)
+}
+
+/// `values` cut by `counts` (in rank order), each rank's piece sent to it, and what each
+/// rank sends this one, with their counts (collective: one count and one list from each
+/// rank to each; the values cross as ints).
+fn all_to_all(values: &[u32], counts: &[c_int]) -> Result<(Vec<u32>, Vec<c_int>)> {
+    let mut received_counts = vec![0; counts.len()];
+    // SAFETY: both arrays hold one count for each rank; MPI writes received_counts.
+    let code = unsafe { vc_alltoall_counts(counts.as_ptr(), received_counts.as_mut_ptr()) };
+    check(code, "MPI_Alltoall")?;
+    let (displs, received_displs) = (displacements(counts), displacements(&received_counts));
+    let mut received = vec![0u32; received_counts.iter().map(|&c| c as usize).sum()];
+    // SAFETY: the counts and displacements cut `values` and `received` as each holds them,
+    // in rank order; MPI writes `received` within the call.
     let code = unsafe {
         vc_alltoallv(
-            send.as_ptr().cast(),
-            send_counts.as_ptr(),
-            send_displs.as_ptr(),
-            recv.as_mut_ptr().cast(),
-            recv_counts.as_ptr(),
-            recv_displs.as_ptr(),
+            values.as_ptr().cast(),
+            counts.as_ptr(),
+            displs.as_ptr(),
+            received.as_mut_ptr().cast(),
+            received_counts.as_ptr(),
+            received_displs.as_ptr(),
             1,
         )
     };
     check(code, "MPI_Alltoallv")?;
-    Ok(recv)
+    Ok((received, received_counts))
 }
 
 /// Each rank's first place in an array cut by `counts`, in rank order.
