@@ -14,7 +14,11 @@
 //! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
 //! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays),
 //! and alone partitions the nodes among the ranks (`petsc::Layout::of_first`: a follower
-//! never builds the nodes' graph nor runs METIS). Of
+//! never builds the nodes' graph nor runs METIS). Where the scene's keys take PETSc, the
+//! followers get the mesh without its cells, and then each its part of them alone, those
+//! its assembly reads (its own nodes' and Γ3's), with their materials
+//! ([`Ranks::cells_of_first`]); what only the whole mesh shows (the body's parts, regions
+//! that overlap) is rank 0's to check. Of
 //! K_A, K_B and K_R a rank holds the columns of its own unknowns alone (a symmetric
 //! matrix's column is its row): it assembles only those ([`Ranks::discretize`]) where the
 //! scene's keys take PETSc, or keeps them of the whole matrices
@@ -55,11 +59,11 @@
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
 //! memory of each rank is the replicated part (w_n and the other n-vectors, rank 0's whole
-//! history; during setup the mesh, which sets a floor, and on rank 0 its reading), its
-//! columns of the matrices, a follower's part of the history, and its share of PETSc's;
-//! spreading the other n-vectors over the ranks (most of ~250 B a dof on a follower), handing
-//! each follower its part of the mesh alone, and rank 0's memory in parts too, are the next
-//! steps (docs/cluster.md).
+//! history; during setup the nodes' places, 8 bytes a dof, and on rank 0 the whole mesh
+//! and its reading), its columns of the matrices, a follower's part of the history and of
+//! the mesh, and its share of PETSc's; spreading the other n-vectors over the ranks (most
+//! of ~250 B a dof on a follower), and rank 0's memory in parts too, are the next steps
+//! (docs/cluster.md).
 //!
 //! # Planning
 //!
@@ -75,7 +79,10 @@
 //! - **Setup.** Every rank's setup, failed or not, passes [`Ranks::agree`] twice: once
 //!   its setup up to the mesh, before rank 0 hands the mesh over
 //!   ([`Ranks::with_mesh_of_first`]), and once the whole, before the first collective call
-//!   of PETSc: if any rank failed, all stop there. Rank 0 reports
+//!   of PETSc: if any rank failed, all stop there. Where the followers get their parts of
+//!   the mesh, the ranks also agree after the dofs' numbering (whose check of the body's
+//!   parts is rank 0's), and rank 0's error in the cells' materials reaches the others as
+//!   its exit status before it hands the parts over. Rank 0 reports
 //!   its own error; a follower reports its own only where rank 0 had none, and is silent
 //!   ([`Error::Elsewhere`]) otherwise. Rank 0 alone decides at a signal during setup and
 //!   commits the directory ([`Ranks::first_says`] tells the others).
