@@ -172,7 +172,7 @@ impl Source {
 
 impl Numbering {
     /// The numbering of `scene`'s conditions on `mesh`, every rule checked; those of the
-    /// body's parts ([`Numbering::check_parts`], which read every cell) where `parts`: a
+    /// body's parts (`Numbering::check_parts`, which read every cell) where `parts`: a
     /// follower rank of several, whose mesh has no cells yet, leaves them to rank 0.
     pub fn new(mesh: &Mesh, scene: &Scene, parts: bool) -> Result<Numbering> {
         let d = mesh.dim;

@@ -12,7 +12,7 @@
 //! Where the run's setup spreads (several ranks, PETSc: [`Ranks::spreads_setup`]), the
 //! followers get the mesh without its cells (its nodes and its groups' facets), and, once
 //! rank 0 has partitioned the nodes, each its part of the cells alone
-//! ([`Ranks::cells_of_first`]): those its assembly reads, with one of its own nodes or of
+//! (`Ranks::cells_of_first`): those its assembly reads, with one of its own nodes or of
 //! Γ3's (`petsc::Layout::cell_parts`), in the whole's order, so that each entry it
 //! assembles sums the same terms in the same order; their gmsh entities, materials and
 //! regions, which rank 0 makes of the whole mesh; and each group's cells among them. A
@@ -87,7 +87,7 @@ impl Shape {
     }
 
     /// A mesh of this shape, its arrays zero, to receive them; without its cells where
-    /// `cells` is false (a follower's part comes later: [`Ranks::cells_of_first`]).
+    /// `cells` is false (a follower's part comes later: `Ranks::cells_of_first`).
     fn empty(self, cells: bool) -> Mesh {
         let n = |len: usize| if cells { len } else { 0 };
         Mesh {
@@ -188,7 +188,7 @@ impl Ranks {
     /// follower) agreed ([`Ranks::agree`]), and then the mesh that rank 0 read on every
     /// rank ([`Ranks::mesh_of_first`]): on a follower of a run whose setup spreads
     /// ([`Ranks::spreads_setup`], of the scene that `scene` reads of what it read) without
-    /// its cells, which come with the partition ([`Ranks::cells_of_first`]).
+    /// its cells, which come with the partition (`Ranks::cells_of_first`).
     pub fn with_mesh_of_first<T>(
         &self,
         read: Result<(T, Option<Mesh>)>,

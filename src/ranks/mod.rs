@@ -17,7 +17,7 @@
 //! never builds the nodes' graph nor runs METIS). Where the scene's keys take PETSc, the
 //! followers get the mesh without its cells, and then each its part of them alone, those
 //! its assembly reads (its own nodes' and Γ3's), with their materials
-//! ([`Ranks::cells_of_first`]); what only the whole mesh shows (the body's parts, regions
+//! (`Ranks::cells_of_first`); what only the whole mesh shows (the body's parts, regions
 //! that overlap) is rank 0's to check. Of
 //! K_A, K_B and K_R a rank holds the columns of its own unknowns alone (a symmetric
 //! matrix's column is its row): it assembles only those ([`Ranks::discretize`]) where the
@@ -272,7 +272,7 @@ impl Ranks {
     /// Whether the setup of a run of `scene` spreads over the ranks: on several ranks, where
     /// the scene's keys take PETSc (`SolverChoice::takes_petsc`). Then rank 0 alone reads
     /// the mesh and partitions it, and each follower gets its part of the mesh's cells
-    /// ([`Ranks::cells_of_first`]); elsewhere every rank gets the whole mesh.
+    /// (`Ranks::cells_of_first`); elsewhere every rank gets the whole mesh.
     pub fn spreads_setup(&self, scene: &crate::scene::Scene) -> bool {
         cfg!(feature = "petsc") && self.size > 1 && scene.solver.takes_petsc()
     }
