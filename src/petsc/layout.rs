@@ -286,11 +286,14 @@ impl Layout {
             if whole || v.iter().any(|&p| every[p]) {
                 parts[1..].iter_mut().for_each(|part| part.push(c));
             } else {
-                let mut ranks: Vec<u32> = v.iter().map(|&p| of_node[p]).collect();
+                // Each rank of the cell's nodes once (a cell has at most four).
+                let mut ranks = [u32::MAX; 4];
+                v.iter().zip(&mut ranks).for_each(|(&p, r)| *r = of_node[p]);
                 ranks.sort_unstable();
-                ranks.dedup();
-                for r in ranks.into_iter().filter(|&r| r != 0 && r != u32::MAX) {
-                    parts[r as usize].push(c);
+                for (i, &r) in ranks.iter().enumerate() {
+                    if r != 0 && r != u32::MAX && (i == 0 || ranks[i - 1] != r) {
+                        parts[r as usize].push(c);
+                    }
                 }
             }
             c += 1;

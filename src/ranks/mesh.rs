@@ -235,7 +235,11 @@ impl Parts {
             )));
         }
         let ids = layout.cell_parts(disc, crate::fem::CellSource::Made(mesh));
-        let (cells, npc) = mesh.cell_nodes();
+        // Cell c's vertices, read in place (no copy of the whole mesh's cells).
+        let vertices = |c: usize| match mesh.dim {
+            2 => &mesh.triangles[c][..],
+            _ => &mesh.tetrahedra[c][..],
+        };
         // Of each part, `f`'s values of each of its cells, in order.
         let each = |f: &dyn Fn(usize, &mut Vec<u32>)| -> Vec<Vec<u32>> {
             let part = |ids: &Vec<u32>| {
@@ -247,9 +251,7 @@ impl Parts {
         };
         let region = &materials.region;
         let parts = Parts {
-            vertices: each(&|c, v| {
-                v.extend(cells[c * npc..(c + 1) * npc].iter().map(|&p| p as u32))
-            }),
+            vertices: each(&|c, v| v.extend(vertices(c).iter().map(|&p| p as u32))),
             entities: each(&|c, v| v.push(mesh.cell_entity[c] as u32)),
             of_cell: each(&|c, v| v.push(materials.of_cell[c])),
             region: each(&|c, v| v.extend(region.get(c).map(|&r| r as u32))),
