@@ -708,8 +708,7 @@ impl Discretization {
 
     /// A discretization's second stage, after [`Discretization::numbered`]: its cells'
     /// `materials` (those of `mesh`'s cells, in their order) and its matrices, of K_A, K_B
-    /// and K_R only the columns of the unknowns that `own` names (increasing) whole, and of
-    /// the others the diagonal entry at Γ3's unknowns alone, as
+    /// and K_R only the columns of the unknowns that `own` names (increasing), as
     /// [`Discretization::keep_columns`] leaves them, bit for bit, but without the whole
     /// matrices ever in memory, and from the cells that reach those entries alone: on one
     /// of several MPI ranks (`Ranks::discretize`). None keeps every column; so does a scene
@@ -779,9 +778,8 @@ impl Discretization {
         self.n_dofs == self.n_free
     }
 
-    /// K_A on all n_dofs, K_B and K_R (`assemble`) of the cells `cells`, of the unknowns
-    /// `own` the columns whole and of the others the diagonal entry at Γ3's unknowns alone
-    /// (None: every column).
+    /// K_A on all n_dofs, K_B and K_R (`assemble`) of the cells `cells`, the columns of the
+    /// unknowns `own` alone (None: every column).
     fn assemble(
         &self,
         cells: CellSource,
@@ -793,14 +791,10 @@ impl Discretization {
             own.iter().for_each(|&i| whole[i] = true);
             whole
         });
-        let diagonal = self.diagonal_read();
-        let share = whole.as_deref().map(|whole| Share {
-            whole,
-            diagonal: &diagonal,
-        });
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
         let (materials, r) = (&self.materials, self.r);
-        assemble(cells, self.dim, dofs, (materials, r), terms, share)
+        let held = whole.as_deref();
+        assemble(cells, self.dim, dofs, (materials, r), terms, held)
     }
 
     /// The unknowns at which the active set reads the step matrix's diagonal (its ρ): those
@@ -813,38 +807,20 @@ impl Discretization {
         read
     }
 
-    /// The nodes whose cells every rank of several assembles: those with an unknown at
-    /// which the active set reads K_A's diagonal (`diagonal_read`: Γ3's rows'), whose
-    /// diagonal entry every rank holds.
-    pub fn diagonal_nodes(&self) -> Vec<bool> {
-        let read = self.diagonal_read();
-        let held = |i: &DofIndex| i.get().is_some_and(|i| read[i]);
-        self.free
-            .chunks(self.dim)
-            .map(|node| node.iter().any(held))
-            .collect()
-    }
-
-    /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) whole and of
-    /// the others the diagonal entry at Γ3's unknowns alone: a rank of several, which holds
-    /// those unknowns' rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric
-    /// matrix's column is its row, so each rank computes its own entries of a product
-    /// ([`mul_add_rows`]) and the ranks gather the rest; the diagonal stays where the
-    /// active set's ρ reads it (`Discretization::diagonal_read`). Where K_A has a
-    /// block on prescribed dofs (`k_a_all`), which moves their velocities to every row's
-    /// right side, the matrices stay whole.
+    /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) alone: a
+    /// rank of several, which holds those unknowns' rows in PETSc (`petsc::Layout`), needs
+    /// no more of them. A symmetric matrix's column is its row, so each rank computes its
+    /// own entries of a product ([`mul_add_rows`]) and the ranks gather the rest; so too
+    /// the step matrix's diagonal at Γ3's unknowns, which the active set's ρ reads
+    /// (`effects::step_solver`). Where K_A has a block on prescribed dofs (`k_a_all`),
+    /// which moves their velocities to every row's right side, the matrices stay whole.
     pub fn keep_columns(&mut self, own: Vec<usize>) {
         if self.k_a_all.is_some() {
             return;
         }
         let mut whole = vec![false; self.n_dofs];
         own.iter().for_each(|&i| whole[i] = true);
-        let diagonal = self.diagonal_read();
-        let share = Share {
-            whole: &whole,
-            diagonal: &diagonal,
-        };
-        let trim = |a: &mut Sparse| *a = columns_kept(a, share);
+        let trim = |a: &mut Sparse| *a = entries_kept(a, (a.nrows(), a.ncols()), |_, j| whole[j]);
         trim(&mut self.k_a);
         self.k_b.iter_mut().for_each(trim);
         self.k_r.iter_mut().for_each(trim);
@@ -935,16 +911,13 @@ impl Discretization {
             dim: self.dim,
         };
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
-        let (mut whole, diagonal) = (vec![false; self.n_dofs], vec![false; self.n_dofs]);
+        let mut whole = vec![false; self.n_dofs];
         let mut pair = RowsPair::with_capacity(own.len(), cells.entries);
         for piece in own.chunks(own.len().div_ceil(PAIR_PIECES).max(1)) {
             piece.iter().for_each(|&i| whole[i] = true);
-            let share = Share {
-                whole: &whole,
-                diagonal: &diagonal,
-            };
             let materials = (&cells.materials, self.r);
-            let (_, k_b, k_r) = assemble(source, self.dim, dofs, materials, (true, 1), Some(share));
+            let (_, k_b, k_r) =
+                assemble(source, self.dim, dofs, materials, (true, 1), Some(&whole));
             pair.extend(&RowsPair::new(k_b.as_ref()?, k_r.first()?, piece)?);
             piece.iter().for_each(|&i| whole[i] = false);
         }
@@ -1073,8 +1046,9 @@ impl Discretization {
     }
 
     /// K_A's diagonal at the unknowns of Γ3's rows alone, where its rows went to the linear
-    /// backend (on one of several MPI ranks: `Ranks::keep_own_columns`): what the active
-    /// set's ρ reads of it (`NodalRow::entries`).
+    /// backend (on one of several MPI ranks: `Ranks::keep_own_columns`, which kept its own
+    /// columns alone, so Γ3's own unknowns'): what the active set's ρ reads of it
+    /// (`NodalRow::entries`), the others' from their ranks (`effects::step_solver`).
     pub fn keep_diagonal_of_k_a(&mut self) {
         let size = (self.k_a.nrows(), self.k_a.ncols());
         let read = self.diagonal_read();
@@ -1348,28 +1322,6 @@ impl Discretization {
     pub fn make_cells(&self, nodes: &[usize]) -> Vec<Cell> {
         cells_of(self.dim, nodes, &self.nodes).collect()
     }
-}
-
-/// What a rank of several holds of K_A, K_B and K_R: the columns j where `whole[j]` (its
-/// own unknowns), and of the others the diagonal entry alone where `diagonal[j]` (Γ3's
-/// unknowns, where the active set's ρ reads it: `Discretization::diagonal_read`).
-#[derive(Clone, Copy)]
-struct Share<'s> {
-    whole: &'s [bool],
-    diagonal: &'s [bool],
-}
-
-impl Share<'_> {
-    /// Whether the share holds entry (i, j).
-    fn holds(&self, i: usize, j: usize) -> bool {
-        self.whole[j] || (i == j && self.diagonal[j])
-    }
-}
-
-/// `a` with the entries that `share` holds alone.
-fn columns_kept(a: &Sparse, share: Share) -> Sparse {
-    let (nrows, ncols) = (a.nrows(), a.ncols());
-    entries_kept(a, (nrows, ncols), |i, j| share.holds(i, j))
 }
 
 /// The `size` (rows, columns) leading block of `a` with its entries (i, j) where `keep(i,
@@ -1683,23 +1635,22 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 /// the prescribed ones, n in all; rows and columns of dofs held at zero dropped; a node
 /// with a frame in its frame's components, `Cell::parts_in`); the three share one sparsity
 /// pattern ([`pattern`]). The element matrices are added at their positions (found by
-/// bisection in the column): no triplets. Where `share` is given (a rank of several), the
-/// entries it holds alone, from the cells that reach them alone (those with a node of the
-/// rank's own or of Γ3's): a rank's setup then makes and visits its part of the mesh and
-/// Γ3's neighbourhood, not the whole. Each entry held sums the same terms in the same
-/// order.
+/// bisection in the column): no triplets. Where `whole` is given (a rank of several), the
+/// columns j where `whole[j]` (its own unknowns) alone, from the cells that reach them
+/// alone (those with a node of the rank's own): a rank's setup then makes and visits its
+/// part of the mesh, not the whole. Each entry held sums the same terms in the same order.
 fn assemble(
     cells: CellSource,
     d: usize,
     (free, frames, n): (&[DofIndex], &Frames, usize),
     (materials, r): (&CellMaterials, Isotropic),
     (elastic, groups): (bool, usize),
-    share: Option<Share>,
+    whole: Option<&[bool]>,
 ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
-    let holds = |i: usize, j: usize| share.is_none_or(|s| s.holds(i, j));
-    let (col_ptr, row_idx) = pattern(cells, d, (free, n), share);
-    let reached = share.map(|s| {
-        let held = |i: &DofIndex| i.get().is_some_and(|i| s.whole[i] || s.diagonal[i]);
+    let holds = |j: usize| whole.is_none_or(|w| w[j]);
+    let (col_ptr, row_idx) = pattern(cells, d, (free, n), whole);
+    let reached = whole.map(|w| {
+        let held = |i: &DofIndex| i.get().is_some_and(|i| w[i]);
         free.chunks(d)
             .map(|node| node.iter().any(held))
             .collect::<Vec<_>>()
@@ -1720,13 +1671,12 @@ fn assemble(
         for (j, &p) in nodes.iter().enumerate() {
             for (i, &q) in nodes.iter().enumerate() {
                 for be in 0..d {
-                    let Some(col) = free[d * p + be].get() else {
+                    let Some(col) = free[d * p + be].get().filter(|&j| holds(j)) else {
                         continue;
                     };
                     let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
                     for al in 0..d {
-                        let row = free[d * q + al].get();
-                        let Some(row) = row.filter(|&i| holds(i, col)) else {
+                        let Some(row) = free[d * q + al].get() else {
                             continue;
                         };
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);
@@ -1756,20 +1706,19 @@ fn assemble(
 /// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,
 /// built from the cells' vertices: node q couples with node p when a cell holds both. The
 /// column of index j, a component of node p, lists the indices of the components of p's
-/// neighbours q, increasing, where `share` holds it whole (or there is none); else j
-/// alone (its diagonal entry) where it holds that, or nothing. Only the nodes with a whole
-/// column list their neighbours (a rank of several: its own nodes, not the whole mesh's),
-/// and the row indices are allocated once, at their exact count.
+/// neighbours q, increasing, where `whole[j]` (or there is none); else nothing. Only the
+/// nodes with a column held list their neighbours (a rank of several: its own nodes, not
+/// the whole mesh's), and the row indices are allocated once, at their exact count.
 fn pattern(
     cells: CellSource,
     d: usize,
     (free, n): (&[DofIndex], usize),
-    share: Option<Share>,
+    whole: Option<&[bool]>,
 ) -> (Vec<usize>, Vec<usize>) {
-    let whole = |col: usize| share.is_none_or(|s| s.whole[col]);
+    let held = |col: usize| whole.is_none_or(|w| w[col]);
     let dofs = |p: usize| free[d * p..d * (p + 1)].iter().filter_map(|i| i.get());
     let has_dofs = |p: usize| dofs(p).next().is_some();
-    let lists = |p: usize| dofs(p).any(whole);
+    let lists = |p: usize| dofs(p).any(held);
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
     cells.each_vertices(|vertices| {
         for &p in vertices.iter().filter(|&&p| lists(p)) {
@@ -1787,12 +1736,16 @@ fn pattern(
             node_of[i] = g / d;
         }
     }
-    let column_len = |col: usize, p: usize| match whole(col) {
-        true => neighbours[p]
+    // Column `col`, of node p, lists p's neighbours' unknowns where it is held.
+    let listed = |col: usize, p: usize| match held(col) {
+        true => neighbours[p].as_slice(),
+        false => &[],
+    };
+    let column_len = |col, p| -> usize {
+        listed(col, p)
             .iter()
             .map(|&q| dofs(q as usize).count())
-            .sum(),
-        false => usize::from(share.is_some_and(|s| s.diagonal[col])),
+            .sum()
     };
     let entries = (node_of.iter().enumerate()).map(|(col, &p)| column_len(col, p));
     let mut row_idx = Vec::with_capacity(entries.sum());
@@ -1800,13 +1753,7 @@ fn pattern(
     col_ptr.push(0);
     for (col, &p) in node_of.iter().enumerate() {
         let start = row_idx.len();
-        match whole(col) {
-            true => neighbours[p]
-                .iter()
-                .for_each(|&q| row_idx.extend(dofs(q as usize))),
-            // Its diagonal entry, where it is held.
-            false => row_idx.extend((column_len(col, p) == 1).then_some(col)),
-        }
+        (listed(col, p).iter()).for_each(|&q| row_idx.extend(dofs(q as usize)));
         row_idx[start..].sort_unstable();
         col_ptr.push(row_idx.len());
     }

@@ -272,18 +272,17 @@ impl Layout {
     }
 
     /// Each follower's part of the mesh (`cells`, in their order): the cells its assembly
-    /// reads, those with one of its own nodes or one of the nodes at which every rank
-    /// reads K_A's diagonal (`Discretization::diagonal_nodes`), as indices increasing; for
-    /// a scene whose ranks keep every column (`Discretization::keeps_own_columns`), every
-    /// cell. Rank 0's (the first) is empty: it holds the mesh. One pass over the cells.
+    /// reads, those with one of its own nodes, as indices increasing; for a scene whose
+    /// ranks keep every column (`Discretization::keeps_own_columns`), every cell. Rank 0's
+    /// (the first) is empty: it holds the mesh. One pass over the cells.
     pub fn cell_parts(&self, disc: &Discretization, cells: CellSource) -> Vec<Vec<u32>> {
         let size = self.blocks.len() - 1;
-        let (of_node, every) = (self.rank_of_nodes(disc), disc.diagonal_nodes());
+        let of_node = self.rank_of_nodes(disc);
         let whole = !disc.keeps_own_columns();
         let mut parts = vec![Vec::new(); size];
         let mut c = 0u32;
         cells.each_vertices(|v| {
-            if whole || v.iter().any(|&p| every[p]) {
+            if whole {
                 parts[1..].iter_mut().for_each(|part| part.push(c));
             } else {
                 // Each rank of the cell's nodes once (a cell has at most four).

@@ -12,13 +12,12 @@
 //! Where the run's setup spreads (several ranks, PETSc: [`Ranks::spreads_setup`]), the
 //! followers get the mesh without its cells (its nodes and its groups' facets), and, once
 //! rank 0 has partitioned the nodes, each its part of the cells alone
-//! (`Ranks::cells_of_first`): those its assembly reads, with one of its own nodes or of
-//! Γ3's (`petsc::Layout::cell_parts`), in the whole's order, so that each entry it
-//! assembles sums the same terms in the same order; their gmsh entities, materials and
-//! regions, which rank 0 makes of the whole mesh; and each group's cells among them. A
-//! cell with nodes in several parts, and Γ3's neighbourhood, go to each rank that reads
-//! them. So no follower holds the whole mesh's cells, whose bytes every follower had
-//! received and held through its setup.
+//! (`Ranks::cells_of_first`): those its assembly reads, with one of its own nodes
+//! (`petsc::Layout::cell_parts`), in the whole's order, so that each entry it assembles
+//! sums the same terms in the same order; their gmsh entities, materials and regions,
+//! which rank 0 makes of the whole mesh; and each group's cells among them. A cell with
+//! nodes in several parts goes to each rank that reads it. So no follower holds the whole
+//! mesh's cells, whose bytes every follower had received and held through its setup.
 
 use std::os::unix::ffi::{OsStrExt, OsStringExt};
 use std::path::PathBuf;

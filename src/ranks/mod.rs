@@ -16,7 +16,7 @@
 //! and alone partitions the nodes among the ranks (`petsc::Layout::of_first`: a follower
 //! never builds the nodes' graph nor runs METIS). Where the scene's keys take PETSc, the
 //! followers get the mesh without its cells, and then each its part of them alone, those
-//! its assembly reads (its own nodes' and Γ3's), with their materials
+//! its assembly reads (its own nodes'), with their materials
 //! (`Ranks::cells_of_first`); what only the whole mesh shows (the body's parts, regions
 //! that overlap) is rank 0's to check. Of
 //! K_A, K_B and K_R a rank holds the columns of its own unknowns alone (a symmetric
@@ -24,8 +24,10 @@
 //! scene's keys take PETSc, or keeps them of the whole matrices
 //! (`Discretization::keep_columns`) where `auto`'s choice read the whole K_A. It computes
 //! its entries of the right side's products from them and gets the others' where it
-//! reads them (`Backend::share`); where K_A is the step matrix its rows go to PETSc ([`Own`]), and
-//! the rank keeps K_A's diagonal at Γ3's unknowns alone, and makes its rows of K_B and
+//! reads them (`Backend::share`), as of the step matrix's diagonal at Γ3's unknowns, which
+//! the active set's ρ reads (`effects::step_solver`); where K_A is the step matrix its rows
+//! go to PETSc ([`Own`]), and the rank keeps K_A's diagonal at its own of Γ3's unknowns
+//! alone, and makes its rows of K_B and
 //! K_R^(0), paired, only once PETSc's setup (where a rank peaks) is done, from its cells
 //! with one of its own nodes, where the scene has elasticity and one memory group
 //! (`fem::PairWhen`). A follower's history holds the
@@ -323,7 +325,8 @@ impl Ranks {
     /// [`Ranks::discretize`] made, when it assembled those columns alone), and no others
     /// (`Discretization::keep_columns`). Where K_A is the step matrix (`solver.history =
     /// "left"`, no prescribed dofs), its rows go on in PETSc's numbering, and `disc` keeps
-    /// K_A's diagonal at Γ3's unknowns alone (`Discretization::keep_diagonal_of_k_a`), and
+    /// K_A's diagonal at its own of Γ3's unknowns alone
+    /// (`Discretization::keep_diagonal_of_k_a`), and
     /// K_B and K_R^(0) become the rank's rows of both, paired
     /// (`Discretization::pair_own_rows`; or made after PETSc's setup where
     /// [`Ranks::discretize`] put them off: `fem::PairWhen`). The heap the matrices held
