@@ -3,7 +3,7 @@
 //! A run outlives its terminal: an ssh session that drops, `run … | head -1` or a log on a
 //! full disk close or fill stdout and stderr, and `println!` would then panic (exit 101)
 //! at the next progress line, with no checkpoint and no summary.json. Everything the
-//! program prints goes through [`outln!`] and [`errln!`] instead: a line that cannot be
+//! program prints goes through [`outln!`](crate::outln) and [`errln!`](crate::errln) instead: a line that cannot be
 //! written is dropped, the run goes on and ends as it would have (its files are its
 //! results), and the first failure on stdout is kept for [`stdout_failure`].
 //!
@@ -50,7 +50,7 @@ pub fn end_quietly_on_broken_pipe() {
 }
 
 /// From now on a write to a pipe whose reader has gone fails with an error that
-/// [`outln!`] and [`errln!`] drop (Rust's default for a process): for runs and studies.
+/// [`outln!`](crate::outln) and [`errln!`](crate::errln) drop (Rust's default for a process): for runs and studies.
 pub fn outlive_broken_pipes() {
     // SAFETY: sets one signal's disposition to "ignore"; no handler is involved.
     unsafe {

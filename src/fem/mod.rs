@@ -1061,7 +1061,7 @@ impl Discretization {
     }
 
     /// [`Discretization::nodal`] at the nodes `at` alone, in their order (a rank's piece of
-    /// a frame), of `v` held at the dofs `held` alone where given ([`place`]).
+    /// a frame), of `v` held at the dofs `held` alone where given (`place`).
     pub fn nodal_at(&self, (v, held): (&[f64], Option<&[usize]>), at: &[usize]) -> Vec<f64> {
         let at = at.iter().map(|&i| nodal_vector::<3>(self, (v, held), i));
         at.collect::<Vec<_>>().into_flattened()
@@ -1080,7 +1080,7 @@ impl Discretization {
     /// the nodal p, q are made once per distinct material, and a cell reads its material's.
     /// `m` holds the memory of every memory group, group g's after the others' before (the
     /// cell's material names its group, `Stiffness::memory`). Where `held` is given, u and
-    /// each group's m hold their values at those dofs alone ([`place`]); w is whole.
+    /// each group's m hold their values at those dofs alone (`place`); w is whole.
     pub fn stress(
         &self,
         [w, u]: [&[f64]; 2],

@@ -25,7 +25,7 @@ pub struct Layout {
     /// The row of each unknown, in 4 bytes as the numbering holds its index
     /// (`fem::DofIndex`); None on one rank, where they are the same.
     row: Option<Vec<u32>>,
-    /// Rank r holds the rows blocks[r]..blocks[r + 1] (size + 1 values, the last n_free).
+    /// Rank r holds the rows `blocks[r]..blocks[r + 1]` (size + 1 values, the last n_free).
     pub blocks: Vec<usize>,
 }
 

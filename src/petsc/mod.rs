@@ -37,7 +37,7 @@
 //! (`Hierarchy`). A KSP made for them (`KrylovSettings::newton`) sets up only their
 //! multigrid: K's own KSP keeps its type and options but is never set up or solved, and on
 //! several ranks it goes, with K's matrix, before GAMG's setup (a rank's memory peaks
-//! there): a product with K ([`Krylov::mult`]) then takes the rank's rows of K, which
+//! there): a product with K ([`Krylov::mult_at`]) then takes the rank's rows of K, which
 //! the Krylov keeps (the rank's only copy of them: `ranks::Own`).
 
 mod exchange;
@@ -667,7 +667,7 @@ pub enum Tolerance {
 }
 
 impl Krylov {
-    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1), on every rank, x whole:
+    /// y ← (K x) at `dofs`, `y[k]` at `dofs[k]` (0 where it is −1), on every rank, x whole:
     /// each rank computes its own rows of K x, and the values at `dofs` come from the ranks
     /// that hold them (`values_at`), where the whole product crossed to every rank.
     pub fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {

@@ -311,7 +311,7 @@ impl Ranks {
     /// ([`Ranks::spreads_setup`]), once rank 0 has partitioned the nodes (`layout`;
     /// collective): rank 0 makes the whole mesh's (an error of them goes to the others as
     /// its exit status) and hands each follower its part of the mesh's cells
-    /// ([`Parts`]), which the follower's `mesh`, received without its cells
+    /// (`Parts`), which the follower's `mesh`, received without its cells
     /// ([`Ranks::with_mesh_of_first`]), now holds, numbered in the whole's order. So no
     /// follower holds the whole mesh's cells, nor checks the regions of a part.
     pub fn cells_of_first(

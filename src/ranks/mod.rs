@@ -69,11 +69,11 @@
 //!
 //! # Planning
 //!
-//! [`Plan`] is what a rank of a run over N ranks holds and does (`check --ranks N`): its
+//! `Plan` is what a rank of a run over N ranks holds and does (`check --ranks N`): its
 //! share of K_A's rows, entries and of the values a product fetches from other ranks, and
 //! its memory, its own part (the setup's peak, measured, less what of the matrices it
 //! does not hold) and its share of PETSc's, and for `check` a step's expected time on this
-//! machine ([`Plan::timed`]).
+//! machine (`Plan::timed`).
 //! `check` and `run` refuse ranks that would not fit, naming how many would.
 //!
 //! # Agreement

@@ -120,7 +120,7 @@ pub struct LinearSolve {
 /// The systems of the Newton iteration: products with K and solves of the constrained
 /// system Π(K + S)Π w + (I − Π) w = Π b with the terms of `Terms`.
 pub trait ConstrainedSystem {
-    /// y ← (K x) at `dofs`, y[k] at dofs[k] (0 where it is −1).
+    /// y ← (K x) at `dofs`, `y[k]` at `dofs[k]` (0 where it is −1).
     fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()>;
     /// max|w_i| (NaN skipped) over every unknown, w a solution of `solve`: the scale of
     /// the KKT residual, which a system spread over ranks takes from each rank's rows.
