@@ -303,6 +303,58 @@ fn the_ranks_shares_of_k_a_are_those_of_its_pattern() {
     }
 }
 
+/// Each follower's part of the mesh (`petsc::Layout::cell_parts`, what rank 0 sends it) is
+/// the cells with one of its own nodes, in the whole's order, and rank 0's is empty: no
+/// cell of Γ3's neighbourhood beyond them (the diagonal there comes from the ranks that hold
+/// it). On the 3D block over 3 ranks and the paper's 2D scene over 2; with prescribed dofs,
+/// whose matrices every rank holds whole, every cell.
+#[cfg(feature = "petsc")]
+#[test]
+fn a_followers_part_of_the_mesh_is_the_cells_with_one_of_its_own_nodes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let prescribed =
+        SceneText::unclamped_square().dirichlet("Γ1", &["x", "y"], Some(&["0.01*t", "0"]));
+    for (scene, size) in [
+        (SceneText::block(), 3),
+        (SceneText::paper(), 2),
+        (prescribed, 2),
+    ] {
+        let path = scene.write(tmp.path(), "s.toml");
+        let (_s, _m, disc) = common::load(&path, &[]);
+        let (layout, _) =
+            viscontact::petsc::Layout::partition(&disc, disc.cell_source(), size).unwrap();
+        let parts = layout.cell_parts(&disc, disc.cell_source());
+        let d = disc.dim;
+        // A node's rank, that of its unknowns' rows (none where it has no unknown).
+        let of_node = |v: usize| {
+            let mut unknowns = (d * v..d * v + d).filter_map(|g| disc.free[g].get());
+            let unknown = unknowns.find(|&i| i < disc.n_free)?;
+            Some(layout.rank_of_row(layout.row(unknown)))
+        };
+        let whole = !disc.keeps_own_columns();
+        let mut expected = vec![Vec::new(); size];
+        let mut c = 0u32;
+        disc.cell_source().each_vertices(|v| {
+            for (r, part) in expected.iter_mut().enumerate().skip(1) {
+                if whole || v.iter().any(|&p| of_node(p) == Some(r)) {
+                    part.push(c);
+                }
+            }
+            c += 1;
+        });
+        assert_eq!(parts.len(), size);
+        assert!(
+            parts[0].is_empty(),
+            "{}: rank 0 holds the mesh",
+            path.display()
+        );
+        for r in 1..size {
+            assert_eq!(parts[r], expected[r], "rank {r} of {size}, whole {whole}");
+            assert!(!parts[r].is_empty() && (whole || parts[r].len() < c as usize));
+        }
+    }
+}
+
 /// A build without the feature refuses `linear = "petsc"` and `contact = "active_set"`
 /// (exit 2) and says how to build with it; `cholesky` and `auto` run as before.
 #[cfg(not(feature = "petsc"))]
