@@ -203,7 +203,7 @@ pub fn step_solver(
         Contact::Clarabel => StepSolver::Conic(Box::new(ConicSolver::new(matrix, rows)?)),
         Contact::ActiveSet => {
             // On one of several MPI ranks, `matrix` holds the diagonal of its own rows alone:
-            // Γ3's others come from the ranks that hold them (collective).
+            // Γ3's others come from the ranks that hold them (collective on several).
             let mut diagonal = diagonal(matrix);
             backend.share(&mut diagonal)?;
             let solver = ActiveSetSolver::new(rows, &diagonal, solver.active_set());

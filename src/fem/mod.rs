@@ -341,7 +341,7 @@ pub enum PairWhen {
     /// With K_A, in its setup (`Discretization::pair_own_rows` pairs them).
     Setup,
     /// After PETSc's setup ([`Discretization::own_pair_made`]), where a scene has
-    /// elasticity and one memory group: GAMG's setup, where a rank peaks, then does not
+    /// elasticity and one memory group: GAMG's setup, where a rank of a few peaks, then does not
     /// hold them (20 bytes an entry of its rows). Elsewhere as `Setup`.
     AfterKrylov,
 }

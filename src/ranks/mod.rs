@@ -28,7 +28,7 @@
 //! the active set's ρ reads (`effects::step_solver`); where K_A is the step matrix its rows
 //! go to PETSc ([`Own`]), and the rank keeps K_A's diagonal at its own of Γ3's unknowns
 //! alone, and makes its rows of K_B and
-//! K_R^(0), paired, only once PETSc's setup (where a rank peaks) is done, from its cells
+//! K_R^(0), paired, only once PETSc's setup (where a rank of a few peaks) is done, from its cells
 //! with one of its own nodes, where the scene has elasticity and one memory group
 //! (`fem::PairWhen`). A follower's history holds the
 //! dofs that its rows of K_B and K_R and its piece of a frame read alone

@@ -131,7 +131,7 @@ fn pieces(
 /// the whole mesh's fields, nor the stress of every cell.
 ///
 /// The piece's encoded mesh, and on a follower its cells, are made at the first step,
-/// after PETSc's setup, where a rank peaks: until then the rank keeps the piece's mesh
+/// after PETSc's setup, where a rank of a few peaks: until then the rank keeps the piece's mesh
 /// alone (its node numbers and points), and a follower none of the cells that assembled
 /// its columns (`Discretization::forget_cells`).
 pub(super) struct OwnFrames {
