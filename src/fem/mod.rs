@@ -171,9 +171,11 @@ pub enum StressCells<'a> {
     All,
     /// The cells of these indices, in their order (rank 0's piece of a frame).
     Only(&'a [usize]),
-    /// These cells with these materials (`CellMaterials::of_cell`'s), made apart from the
-    /// discretization's (a follower rank's piece: [`Discretization::make_cells`]).
-    Of(&'a [Cell], &'a [u32]),
+    /// The cells of these vertices (dim + 1 a cell, node numbers) with these materials
+    /// (`CellMaterials::of_cell`'s), apart from the discretization's (a follower rank's
+    /// piece): each made from the nodes' places when it is read, as the discretization
+    /// made its own, so the same bits.
+    Of(&'a [usize], &'a [u32]),
 }
 
 /// Node `p` of `mesh` in the 32 bits a rank of several numbers its nodes in.
@@ -1091,7 +1093,7 @@ impl Discretization {
         let n_cells = match cells {
             StressCells::All => self.n_cells(),
             StressCells::Only(only) => only.len(),
-            StressCells::Of(of, _) => of.len(),
+            StressCells::Of(_, materials) => materials.len(),
         };
         let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
         self.each_stress([w, u], (m, held), (model, cells), |s, v| {
@@ -1219,9 +1221,11 @@ impl Discretization {
         // reads it, on the thread that writes history.csv, beside PETSc's solves; packing
         // them, as one process does beside its factor, would hold 112 bytes a tetrahedron.
         // It holds the vertices whether or not it keeps its own columns (with prescribed
-        // dofs every rank keeps the matrices whole); any rank of several reads its cells so.
-        if let StressCells::Of(cells, materials) = only {
-            (cells.iter().zip(materials)).for_each(|(t, &material)| of_cell(t, material));
+        // dofs every rank keeps the matrices whole); any rank of several reads its cells so,
+        // a follower its piece's (a cell held would take 144 bytes).
+        if let StressCells::Of(vertices, materials) = only {
+            let cells = cells_of(self.dim, vertices, &self.nodes);
+            (cells.zip(materials)).for_each(|(t, &material)| of_cell(&t, material));
         } else if self.own.is_some() || !self.vertices.is_empty() {
             let cells = self.cell_source();
             each(&mut |c| of_cell(&cells.get(c), materials[c]));
@@ -1251,7 +1255,7 @@ impl Discretization {
                     .iter()
                     .for_each(|&c| mark(&source.vertices(c)[..=self.dim]));
             }
-            StressCells::Of(cells, _) => cells.iter().for_each(|t| mark(t.vertices())),
+            StressCells::Of(vertices, _) => mark(vertices),
             StressCells::All => {}
         }
         let mut nodes = Vec::with_capacity(used.iter().filter(|&&u| u).count());
@@ -1290,8 +1294,8 @@ impl Discretization {
     /// cell's material and region (`materials.distinct` stays): on a rank of several other
     /// than rank 0, which computes the norms of every cell, nothing reads them
     /// once the matrices are assembled and the rank's layout is made; its piece of the
-    /// frames makes its own cells
-    /// ([`Discretization::make_cells`]). [`Discretization::stress`] and
+    /// frames makes its own cells from their vertices (`StressCells::Of`).
+    /// [`Discretization::stress`] and
     /// [`Discretization::norms`] would see an empty mesh afterwards.
     pub fn forget_cells(&mut self) {
         self.cells = Vec::new();
@@ -1315,12 +1319,6 @@ impl Discretization {
     /// The number of cells of the mesh (those it holds, or their vertices).
     pub fn n_cells(&self) -> usize {
         self.cell_source().count()
-    }
-
-    /// The cells of the nodes `nodes` (dim + 1 a cell), made from the nodes' coordinates as
-    /// the discretization made its own: the same bits.
-    pub fn make_cells(&self, nodes: &[usize]) -> Vec<Cell> {
-        cells_of(self.dim, nodes, &self.nodes).collect()
     }
 }
 

@@ -52,8 +52,8 @@
 //! cells where the scene's keys take PETSc: its setup makes each from the mesh as it reads
 //! it (`fem::CellSource::Made`). Rank 0 keeps each cell's vertices, from which it makes the
 //! cells again to compute the norms and its piece's stresses (`fem::Hold`); a follower
-//! keeps its piece's node numbers, from which it makes the piece's cells at its first step
-//! (`Discretization::make_cells`). history.csv's largest von Mises stress is, at every
+//! keeps its piece's node numbers, from which it makes each of the piece's cells when it
+//! reads it (`fem::StressCells::Of`). history.csv's largest von Mises stress is, at every
 //! step, the largest of the ranks' pieces' (`run::frame::OwnFrames::solved`). (Where `auto`'s choice assembled the whole, rank 0 keeps
 //! every cell and a follower lets go of them: `Discretization::forget_cells`.)
 //!

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 
-use crate::fem::{Cell, Discretization, StressCells};
+use crate::fem::{Discretization, StressCells};
 use crate::mesh::Mesh;
 use crate::output::{Geometry, Options, OwnPiece, OwnedField, PieceMesh, Resumed, Series};
 use crate::ranks::Ranks;
@@ -130,10 +130,11 @@ fn pieces(
 /// piece's cells and the ranks take the largest ([`OwnFrames::solved`]). No rank computes
 /// the whole mesh's fields, nor the stress of every cell.
 ///
-/// The piece's encoded mesh, and on a follower its cells, are made at the first step,
-/// after PETSc's setup, where a rank of a few peaks: until then the rank keeps the piece's mesh
-/// alone (its node numbers and points), and a follower none of the cells that assembled
-/// its columns (`Discretization::forget_cells`).
+/// The piece's encoded mesh is made at the first step, after PETSc's setup, where a rank
+/// of a few peaks: until then the rank keeps the piece's mesh alone (its node numbers and
+/// points), and a follower none of the cells that assembled its columns
+/// (`Discretization::forget_cells`). A follower then keeps its piece's cells as their
+/// vertices and makes each when it reads it, as rank 0 does its own (`fem::StressCells`).
 pub(super) struct OwnFrames {
     piece: Piece,
     /// The series' directory and the run id, which the piece's file records.
@@ -151,8 +152,9 @@ enum Piece {
     /// Before the first step: the piece's mesh, and (a follower) the material of each of
     /// its cells (rank 0 holds every cell's vertices and material).
     Mesh(PieceMesh, Option<Vec<u32>>),
-    /// The piece and (a follower) its cells and their materials.
-    Made(Box<OwnPiece>, Option<(Vec<Cell>, Vec<u32>)>),
+    /// The piece and (a follower) its cells' vertices (dim + 1 a cell), from which
+    /// [`Discretization::stress`] makes each cell when it reads it, and their materials.
+    Made(Box<OwnPiece>, Option<(Vec<usize>, Vec<u32>)>),
 }
 
 impl OwnFrames {
@@ -191,7 +193,7 @@ impl OwnFrames {
             let (names, largest) = self.write(disc, &s.step, active)?;
             return Ok((Some(names), largest));
         }
-        let mine = (self.make(disc)).map(|()| self.piece_von_mises(disc, &s.step));
+        let mine = self.make().map(|()| self.piece_von_mises(disc, &s.step));
         Ok((None, self.ranks.written(mine)?))
     }
 
@@ -221,7 +223,7 @@ impl OwnFrames {
         step: &Step,
         active: &[bool],
     ) -> Result<(Named, f64)> {
-        self.make(disc)?;
+        self.make()?;
         let Some(cells) = self.stress_cells() else {
             return Ok((Named::default(), 0.0));
         };
@@ -282,11 +284,11 @@ impl OwnFrames {
         }
     }
 
-    /// Makes the piece (its mesh encoded) and a follower's cells, at the first step.
-    fn make(&mut self, disc: &Discretization) -> Result<()> {
+    /// Makes the piece (its mesh encoded), with a follower's cells' vertices, at the first step.
+    fn make(&mut self) -> Result<()> {
         self.piece = match std::mem::replace(&mut self.piece, Piece::None) {
             Piece::Mesh(mesh, materials) => {
-                let cells = materials.map(|m| (disc.make_cells(&mesh.cell_nodes()), m));
+                let cells = materials.map(|m| (mesh.cell_nodes(), m));
                 let (out, run_id) = &self.out;
                 let piece = OwnPiece::new(out, mesh, run_id, &self.options)?;
                 Piece::Made(Box::new(piece), cells)
