@@ -195,7 +195,7 @@ fn cells(mesh: &Mesh) -> Vec<Cell> {
 }
 
 /// The mesh's cells' vertices (dim + 1 a cell), flattened, and the dimension.
-fn mesh_cells(mesh: &Mesh) -> (&[usize], usize) {
+pub(crate) fn mesh_cells(mesh: &Mesh) -> (&[usize], usize) {
     match mesh.dim {
         2 => (mesh.triangles.as_flattened(), 2),
         _ => (mesh.tetrahedra.as_flattened(), 3),

@@ -235,10 +235,8 @@ impl Parts {
         }
         let ids = layout.cell_parts(disc, crate::fem::CellSource::Made(mesh));
         // Cell c's vertices, read in place (no copy of the whole mesh's cells).
-        let vertices = |c: usize| match mesh.dim {
-            2 => &mesh.triangles[c][..],
-            _ => &mesh.tetrahedra[c][..],
-        };
+        let (cells, dim) = crate::fem::mesh_cells(mesh);
+        let vertices = |c: usize| &cells[c * (dim + 1)..(c + 1) * (dim + 1)];
         // Of each part, `f`'s values of each of its cells, in order.
         let each = |f: &dyn Fn(usize, &mut Vec<u32>)| -> Vec<Vec<u32>> {
             let part = |ids: &Vec<u32>| {
