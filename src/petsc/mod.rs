@@ -19,11 +19,14 @@
 //! linear elasticity, the rigid-body modes restricted to the free dofs: d translations
 //! e_c and the rotations, (−y, x) in 2D and (0, −z, y), (z, 0, −x), (−y, x, 0) in 3D, about
 //! the centroid of the nodes, orthonormalized (PETSc's `MatNullSpaceCreate` asks for
-//! orthonormal vectors). The modes are built here rather than by
-//! `MatNullSpaceCreateRigidBody`, which needs every node's d dofs in one block: a node on a
-//! Γ1 that clamps some of its components breaks the blocks. Where the free dofs are node
-//! blocks (each node's d dofs free and consecutive, or all clamped), the matrix gets block
-//! size d, which GAMG uses to aggregate nodes.
+//! orthonormal vectors). Each rank makes its own rows of them alone, the Gram–Schmidt's
+//! inner products each rank's part summed over the ranks in rank order
+//! ([`rigid_body_modes`]): the same bits run after run on a rank count, one process's on
+//! one. The modes are built here rather than by `MatNullSpaceCreateRigidBody`, which needs
+//! every node's d dofs in one block: a node on a Γ1 that clamps some of its components
+//! breaks the blocks. Where the free dofs are node blocks (each node's d dofs free and
+//! consecutive, or all clamped), the matrix gets block size d, which GAMG uses to
+//! aggregate nodes.
 //!
 //! The scene's `[solver.petsc] options` are inserted into PETSc's options database before
 //! `KSPSetFromOptions`, after the `PETSC_OPTIONS` environment variable that PETSc reads at
@@ -351,16 +354,15 @@ impl Krylov {
             None => layout.rows_of(matrix, rank)?,
         };
         let blocks = layout::petsc_ints(&layout.blocks)?;
-        let mut near = rigid_body_modes(disc);
-        for mode in near.chunks_mut(n.max(1)) {
-            let unknowns = mode.to_vec();
-            layout.to_rows(&unknowns, mode);
-        }
+        let mine = layout.blocks[rank]..layout.blocks[rank + 1];
+        let modes = rigid_body_modes(disc, &layout, mine.clone(), sum_over_ranks)?;
+        let (nvec, near) = (modes.len(), modes.concat());
         let options = CString::new(settings.options.as_str())
             .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
         let mut ctx = std::ptr::null_mut();
-        // SAFETY: the arrays hold n + 1, nnz, nnz, size + 1 and nvec·n values as the shim
-        // reads them (nnz this rank's entries, on several ranks); PETSc copies them, and
+        // SAFETY: the arrays hold n + 1, nnz, nnz, size + 1 and nvec times this rank's
+        // count of rows values as the shim reads them (nnz this rank's entries, on several
+        // ranks); PETSc copies them, and
         // on several ranks for the Newton systems the shim reads cols and vals until the
         // KSP is destroyed: the Krylov keeps them (`_rows`), their buffers never moved.
         let code = unsafe {
@@ -371,7 +373,7 @@ impl Krylov {
                 csr.vals.as_ptr(),
                 block_size(disc) as PetscInt,
                 blocks.as_ptr(),
-                (near.len() / n.max(1)) as PetscInt,
+                nvec as PetscInt,
                 near.as_ptr(),
                 settings.rtol,
                 options.as_ptr(),
@@ -398,7 +400,7 @@ impl Krylov {
             pc_type: name(pc),
             options: settings.options.clone(),
             give_up: None,
-            mine: layout.blocks[rank]..layout.blocks[rank + 1],
+            mine,
             rows: Vec::new(),
             own: Vec::new(),
             own_x: Vec::new(),
@@ -900,11 +902,19 @@ fn block_size(disc: &Discretization) -> usize {
     }
 }
 
-/// The rigid-body modes on the free dofs, about the nodes' centroid, orthonormalized
-/// (modified Gram–Schmidt, twice): d(d + 1)/2 vectors of n_free values, one after the other
-/// (fewer where a mode vanishes on the free dofs).
-fn rigid_body_modes(disc: &Discretization) -> Vec<f64> {
-    let (d, n) = (disc.dim, disc.n_free);
+/// GAMG's near-null space: the rigid-body modes on the free dofs at the rows `mine` (a
+/// rank's, in the order of `layout`'s rows), about the nodes' centroid, orthonormalized over
+/// every rank's rows (modified Gram–Schmidt, twice; each inner product the rank's part of it
+/// summed over the ranks by `sum`, every rank's call at once: `sum_over_ranks` in a run):
+/// d(d + 1)/2 vectors of `mine.len()` values (fewer where a mode vanishes on the free dofs).
+/// A rank makes and holds its own rows of them alone; on one process they are the whole.
+pub fn rigid_body_modes(
+    disc: &Discretization,
+    layout: &Layout,
+    mine: std::ops::Range<usize>,
+    mut sum: impl FnMut(f64) -> Result<f64>,
+) -> Result<Vec<Vec<f64>>> {
+    let d = disc.dim;
     let count = disc.nodes.len().max(1) as f64;
     let mut centre = [0.0; 3];
     for x in &disc.nodes {
@@ -915,35 +925,55 @@ fn rigid_body_modes(disc: &Discretization) -> Vec<f64> {
     let modes = d * (d + 1) / 2;
     let mut v: Vec<Vec<f64>> = (0..modes)
         .map(|k| {
-            let mut m = vec![0.0; n];
+            let mut m = vec![0.0; mine.len()];
             for (i, x) in disc.nodes.iter().enumerate() {
                 let y = [0, 1, 2].map(|c| x[c] - centre[c]);
                 // Mode k at the node (relative to the centre), in the node's dofs.
                 let mode = disc.frames.to_dofs(i, rigid_mode(k, d, y));
                 for (c, value) in mode.into_iter().enumerate().take(d) {
-                    if let Some(f) = unknown(disc, d * i + c) {
-                        m[f] = value;
+                    let row = unknown(disc, d * i + c).map(|f| layout.row(f));
+                    if let Some(r) = row.filter(|r| mine.contains(r)) {
+                        m[r - mine.start] = value;
                     }
                 }
             }
             m
         })
         .collect();
+    let mut dot = |a: &[f64], b: &[f64]| sum(dot(a, b));
     let mut basis: Vec<Vec<f64>> = Vec::new();
     for m in v.iter_mut() {
-        let norm0 = dot(m, m).sqrt();
+        let norm0 = dot(m, m)?.sqrt();
         for _ in 0..2 {
             for q in &basis {
-                let p = dot(m, q);
+                let p = dot(m, q)?;
                 m.iter_mut().zip(q).for_each(|(a, b)| *a -= p * b);
             }
         }
-        let norm = dot(m, m).sqrt();
+        let norm = dot(m, m)?.sqrt();
         if norm > 1e-10 * norm0 {
             basis.push(m.iter().map(|a| a / norm).collect());
         }
     }
-    basis.concat()
+    Ok(basis)
+}
+
+/// The sum of every rank's `x`, added in rank order, so that a rank count gives the same
+/// bits run after run (collective: every rank calls it); `x` on one rank.
+fn sum_over_ranks(x: f64) -> Result<f64> {
+    let size = world()?.1;
+    if size == 1 {
+        return Ok(x);
+    }
+    let counts = vec![1; size];
+    let mut all = vec![0.0; size];
+    gather(
+        &[x],
+        &mut all,
+        (&counts, &exchange::displacements(&counts)),
+        true,
+    )?;
+    Ok(all.into_iter().fold(0.0, |sum, x| sum + x))
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {

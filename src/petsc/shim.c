@@ -254,11 +254,12 @@ static PetscErrorCode watch(VcKsp *s, KSP ksp, Watch *w)
 }
 
 /* The matrix in CSR (a symmetric matrix's CSC is its CSR), the ranks' rows (`blocks`: size
- * + 1 row numbers, distributed_matrix), its near-null space as `nvec` orthonormal vectors of
- * length n stored one after the other, CG + GAMG with relative tolerance `rtol`, then
- * `options` (PETSc's command-line syntax) and KSPSetFromOptions; set up for K's own
- * solves, or where `newton`, for the constrained systems alone (their KSP and multigrid:
- * constrained_setup), K's never being solved (on several ranks K's matrix and KSP then go).
+ * + 1 row numbers, distributed_matrix), its near-null space as `nvec` orthonormal vectors,
+ * the rank's rows of each (the whole on one rank) stored one after the other, CG + GAMG
+ * with relative tolerance `rtol`, then `options` (PETSc's command-line syntax) and
+ * KSPSetFromOptions; set up for K's own solves, or where `newton`, for the constrained
+ * systems alone (their KSP and multigrid: constrained_setup), K's never being solved (on
+ * several ranks K's matrix and KSP then go).
  * On one rank the matrix is whole; on several each rank gives (and keeps) its own rows, the
  * others' rows empty, and for the Newton systems the shim reads `cols` and `vals` of them
  * until vc_ksp_destroy (its copy of K's rows: the caller keeps them). */
@@ -284,7 +285,7 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
     PetscScalar *a;
     PetscCall(MatCreateVecs(s->A, &vecs[k], NULL));
     PetscCall(VecGetArray(vecs[k], &a));
-    PetscCall(PetscArraycpy(a, near + k * n + s->lo, s->m));
+    PetscCall(PetscArraycpy(a, near + k * s->m, s->m));
     PetscCall(VecRestoreArray(vecs[k], &a));
   }
   PetscCall(MatNullSpaceCreate(comm, PETSC_FALSE, nvec, vecs, &space));

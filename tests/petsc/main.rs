@@ -355,6 +355,76 @@ fn a_followers_part_of_the_mesh_is_the_cells_with_one_of_its_own_nodes() {
     }
 }
 
+/// GAMG's near-null space as the ranks make it, each its own rows of the rigid-body modes
+/// and its part of each inner product, summed over the ranks: together the modes that one
+/// process makes, to rounding, and orthonormal over the whole. The ranks are threads here,
+/// summing through a barrier in rank order as `MPI_Allgatherv` does in a run: the 3D block
+/// over 3 ranks (6 modes) and the paper's 2D scene over 2 (3 modes).
+#[cfg(feature = "petsc")]
+#[test]
+fn each_rank_makes_its_own_rows_of_the_near_null_space() {
+    use std::sync::{Barrier, Mutex};
+    use viscontact::petsc::{rigid_body_modes, Layout};
+    let tmp = tempfile::tempdir().unwrap();
+    for (scene, size) in [(SceneText::block(), 3), (SceneText::paper(), 2)] {
+        let path = scene.write(tmp.path(), "s.toml");
+        let (_s, _m, disc) = common::load(&path, &[]);
+        let n = disc.n_free;
+        let of = |size| {
+            Layout::partition(&disc, disc.cell_source(), size)
+                .unwrap()
+                .0
+        };
+        let (one, layout) = (of(1), of(size));
+        // Each rank's rows of each mode, the sums through `slots` (each rank's part in its
+        // own; every rank adds them in rank order).
+        let (barrier, slots) = (Barrier::new(size), Mutex::new(vec![0.0; size]));
+        let ranks: Vec<Vec<Vec<f64>>> = std::thread::scope(|scope| {
+            let (disc, layout, barrier, slots) = (&disc, &layout, &barrier, &slots);
+            let threads: Vec<_> = (0..size)
+                .map(|r| {
+                    scope.spawn(move || {
+                        let sum = |x: f64| {
+                            slots.lock().unwrap()[r] = x;
+                            barrier.wait();
+                            let all = slots.lock().unwrap().iter().fold(0.0, |s, x| s + x);
+                            barrier.wait();
+                            Ok(all)
+                        };
+                        let mine = layout.blocks[r]..layout.blocks[r + 1];
+                        rigid_body_modes(disc, layout, mine, sum).unwrap()
+                    })
+                })
+                .collect();
+            threads.into_iter().map(|t| t.join().unwrap()).collect()
+        });
+        // A mode in the unknowns' order, from the ranks' rows of it.
+        let joined = |layout: &Layout, ranks: &[Vec<Vec<f64>>], k: usize| -> Vec<f64> {
+            (0..n)
+                .map(|i| {
+                    let row = layout.row(i);
+                    let r = layout.rank_of_row(row);
+                    ranks[r][k][row - layout.blocks[r]]
+                })
+                .collect()
+        };
+        let whole = [rigid_body_modes(&disc, &one, 0..n, Ok).unwrap()];
+        let modes = disc.dim * (disc.dim + 1) / 2;
+        assert_eq!(whole[0].len(), modes, "{}", path.display());
+        assert!(ranks.iter().all(|rank| rank.len() == modes));
+        let spread: Vec<Vec<f64>> = (0..modes).map(|k| joined(&layout, &ranks, k)).collect();
+        for k in 0..modes {
+            let d = common::rel_diff(&spread[k], &joined(&one, &whole, k));
+            assert!(d <= 1e-12, "mode {k} over {size} ranks differs by {d:e}");
+            for (l, other) in spread.iter().enumerate() {
+                let dot: f64 = spread[k].iter().zip(other).map(|(a, b)| a * b).sum();
+                let delta = if k == l { 1.0 } else { 0.0 };
+                assert!((dot - delta).abs() <= 1e-12, "modes {k} and {l}: {dot:e}");
+            }
+        }
+    }
+}
+
 /// A build without the feature refuses `linear = "petsc"` and `contact = "active_set"`
 /// (exit 2) and says how to build with it; `cholesky` and `auto` run as before.
 #[cfg(not(feature = "petsc"))]
