@@ -11,9 +11,9 @@
 //! Rank 0 alone builds the nodes' graph and runs METIS, and sends the rows' order to the
 //! others ([`Layout::of_first`]: 4 bytes an unknown, once), where every rank had made the
 //! same partition itself from the whole graph, the work and memory of one process on each
-//! (docs/cluster.md, "Memory per rank"). Vectors cross between the two orders at every
-//! PETSc call (`to_rows`, `from_rows`): two copies of n values, against a solve's tens of
-//! products with K_A.
+//! (docs/cluster.md, "Memory per rank"). A rank's vectors cross to PETSc's order at its
+//! own rows alone, at every PETSc call, and a solved step's rows come back whole to rank 0
+//! in that order once a step (`from_rows`).
 
 use super::PetscInt;
 use crate::fem::{CellSource, Discretization, Sparse};
@@ -172,14 +172,6 @@ impl Layout {
     /// Whether the rows are the unknowns in another order.
     pub fn permutes(&self) -> bool {
         self.row.is_some()
-    }
-
-    /// `rows` ← x in the rows' order.
-    pub fn to_rows(&self, x: &[f64], rows: &mut [f64]) {
-        match &self.row {
-            Some(row) => (x.iter().zip(row)).for_each(|(&v, &r)| rows[r as usize] = v),
-            None => rows.copy_from_slice(x),
-        }
     }
 
     /// x ← `rows`, from the rows' order.

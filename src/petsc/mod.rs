@@ -41,7 +41,8 @@
 //! multigrid: K's own KSP keeps its type and options but is never set up or solved, and on
 //! several ranks it goes, with K's matrix, before GAMG's setup (a rank's memory peaks
 //! there): a product with K ([`Krylov::mult_at`]) then takes the rank's rows of K, which
-//! the Krylov keeps (the rank's only copy of them: `ranks::Own`).
+//! the Krylov keeps (the rank's only copy of them: `ranks::Own`), and its rows of x, the
+//! values of the others' rows that its rows read coming from them in the shim.
 
 mod exchange;
 mod layout;
@@ -306,11 +307,12 @@ pub struct Krylov {
     /// Whether K_A's solve in progress is to be given up (`Krylov::give_up_when`).
     give_up: Option<GiveUp>,
     /// Where the unknowns stand among PETSc's rows, and this rank's rows among them; on
-    /// several ranks, for a product with K, a whole vector in the rows' order (its x,
-    /// sized at the first product), and where the calls need one, a vector of this rank's
-    /// rows (a right side's, a product's): on several ranks, or for a right side or a
-    /// product that is not a whole vector of the caller's (`solve_constrained`,
-    /// `mult_at`); on several ranks, a solve's x in this rank's rows too.
+    /// several ranks, where it receives every rank's rows of a solved step (`complete`),
+    /// a whole vector in the rows' order (sized at the first step), and where the calls
+    /// need one, a vector of this rank's rows (a right side's, a product's): on several
+    /// ranks, or for a right side or a product that is not a whole vector of the caller's
+    /// (`solve_constrained`, `mult_at`); on several ranks, a solve's x, and a product's,
+    /// in this rank's rows too.
     layout: Layout,
     mine: std::ops::Range<usize>,
     rows: Vec<f64>,
@@ -390,7 +392,7 @@ impl Krylov {
         )?;
         let name = |p: *const c_char| unsafe { CStr::from_ptr(p) }.to_string_lossy().into();
         let spread = match layout.permutes() {
-            true => Some(Spread::new(&layout, rank, (settings.newton, &csr), reads)?),
+            true => Some(Spread::new(&layout, rank, reads)?),
             false => None,
         };
         Ok(Krylov {
@@ -441,8 +443,7 @@ impl Krylov {
                 self.own.extend_from_slice(b);
             }
             Some(spread) => {
-                self.own.clear();
-                (self.own).extend(spread.unknowns.iter().map(|&i| b[i as usize]));
+                spread.own_of(b, &mut self.own);
             }
         }
         for (&d, &value) in dofs.iter().zip(values).filter(|(&d, _)| d >= 0) {
@@ -483,8 +484,7 @@ impl Krylov {
         let x = match &self.spread {
             None => w.as_mut_ptr(),
             Some(spread) => {
-                self.own_x.clear();
-                (self.own_x).extend(spread.unknowns.iter().map(|&i| w[i as usize]));
+                spread.own_of(w, &mut self.own_x);
                 self.own_x.as_mut_ptr()
             }
         };
@@ -514,8 +514,8 @@ pub struct Reads<'a> {
 }
 
 /// How a rank's rows of a solution reach the ranks that read them: its rows' unknowns in
-/// PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`, and the columns of
-/// its rows of K, which a product with K reads) by an `Exchange`; once a step is solved,
+/// PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`) by an `Exchange`
+/// (a product with K takes the other ranks' values its rows read itself: `vc_mult`); once a step is solved,
 /// every rank's rows gathered whole in PETSc's order on rank 0, or on every rank where the
 /// followers' histories hold every dof too (`Reads::whole`), where each rank's count and
 /// first row among them say.
@@ -538,12 +538,10 @@ enum Whole {
 }
 
 impl Spread {
-    /// Made by every rank at once: the exchange is collective. `k` is whether the rank
-    /// multiplies by its rows of K (the Newton systems') and those rows.
-    fn new(layout: &Layout, rank: usize, k: (bool, &Csr), reads: Reads) -> Result<Spread> {
+    /// Made by every rank at once: the exchange is collective.
+    fn new(layout: &Layout, rank: usize, reads: Reads) -> Result<Spread> {
         let n = *layout.blocks.last().unwrap_or(&0);
-        let unknown = layout.unknowns();
-        let unknowns = unknown[layout.blocks[rank]..layout.blocks[rank + 1]].to_vec();
+        let unknowns = layout.unknowns()[layout.blocks[rank]..layout.blocks[rank + 1]].to_vec();
         // What this rank reads of each unknown: 0 nothing, 1 at every solve, 2 its own.
         let mut read = vec![0u8; n];
         reads
@@ -551,10 +549,6 @@ impl Spread {
             .iter()
             .filter(|&&i| i < n)
             .for_each(|&i| read[i] = 1);
-        if let (true, rows) = k {
-            (rows.cols.iter()).for_each(|&c| read[unknown[c as usize] as usize] = 1);
-        }
-        drop(unknown);
         unknowns.iter().for_each(|&i| read[i as usize] = 2);
         let halo: Vec<u32> = (0..n as u32).filter(|&i| read[i as usize] == 1).collect();
         drop(read);
@@ -574,6 +568,12 @@ impl Spread {
             displs: exchange::displacements(&counts),
             counts,
         })
+    }
+
+    /// out ← v at this rank's rows' unknowns, in PETSc's order.
+    fn own_of(&self, v: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        out.extend(self.unknowns.iter().map(|&i| v[i as usize]));
     }
 }
 
@@ -669,21 +669,22 @@ pub enum Tolerance {
 }
 
 impl Krylov {
-    /// y ← (K x) at `dofs`, `y[k]` at `dofs[k]` (0 where it is −1), on every rank, x whole:
-    /// each rank computes its own rows of K x, and the values at `dofs` come from the ranks
-    /// that hold them (`values_at`), where the whole product crossed to every rank.
+    /// y ← (K x) at `dofs`, `y[k]` at `dofs[k]` (0 where it is −1), on every rank, x exact
+    /// in this rank's rows: each rank computes its own rows of K x from its rows of x and
+    /// the others' values its rows read (which the shim takes from the ranks that hold
+    /// them), and the values at `dofs` come from the ranks that hold them (`values_at`),
+    /// where the whole product crossed to every rank.
     pub fn mult_at(&mut self, x: &[f64], dofs: &[i32], y: &mut [f64]) -> Result<()> {
         assert!(x.len() == self.n && dofs.len() == y.len());
         self.own.resize(self.mine.len(), 0.0);
-        let x = match self.layout.permutes() {
-            true => {
-                self.rows.resize(self.n, 0.0);
-                self.layout.to_rows(x, &mut self.rows);
-                &self.rows
+        let x = match &self.spread {
+            Some(spread) => {
+                spread.own_of(x, &mut self.own_x);
+                &self.own_x
             }
-            false => x,
+            None => x,
         };
-        // SAFETY: x holds n values and own this rank's rows; PETSc reads x and writes own
+        // SAFETY: x and own hold this rank's count of rows; PETSc reads x and writes own
         // within the call.
         let out = unsafe { vc_mult(self.ctx, x.as_ptr(), self.own.as_mut_ptr()) };
         check(out, "MatMult")?;
@@ -794,8 +795,7 @@ impl Krylov {
         let Some(spread) = &self.spread else {
             return Ok(());
         };
-        self.own_x.clear();
-        (self.own_x).extend(spread.unknowns.iter().map(|&i| w[i as usize]));
+        spread.own_of(w, &mut self.own_x);
         let receives = spread.whole == Whole::Every || spread.first;
         if receives {
             self.rows.resize(self.n, 0.0);

@@ -130,6 +130,11 @@ struct VcKsp {
   PetscInt          *kai, *below;
   const PetscInt    *kaj;
   const PetscScalar *kav;
+  /* On several ranks, for vc_mult: the values of x at the columns of this rank's rows that
+   * other ranks hold (`ghost`, in the order of N's off-diagonal columns, garray) and how
+   * they come from those ranks' rows (`ghosts`). */
+  Vec        ghost;
+  VecScatter ghosts;
   /* GAMG's levels (0: coarsest) and K's Galerkin operators on levels 0 … nlev − 2, kept for
    * galerkin_update; NULL where the constrained PC is not GAMG (the options chose another). */
   PetscInt nlev;
@@ -213,6 +218,27 @@ static PetscErrorCode local_rows(VcKsp *s, const PetscInt *rowptr, const PetscIn
     while (x < s->kai[r + 1] && s->kaj[x] < s->lo) x++;
     s->below[r] = x - s->kai[r];
   }
+  PetscFunctionReturn(0);
+}
+
+/* On several ranks, how vc_mult gets x at the columns of this rank's rows that other ranks
+ * hold: N's off-diagonal block's columns (garray, increasing; N holds K's pattern:
+ * check_blocks), scattered from a vector of the ranks' rows into `ghost`, a value each
+ * (no rank holds x whole). */
+static PetscErrorCode ghost_scatter(VcKsp *s)
+{
+  Mat             off;
+  const PetscInt *garray;
+  PetscInt        nghost;
+  IS              is;
+
+  PetscFunctionBeginUser;
+  PetscCall(MatMPIAIJGetSeqAIJ(s->N, NULL, &off, &garray));
+  PetscCall(MatGetSize(off, NULL, &nghost));
+  PetscCall(VecCreateSeq(PETSC_COMM_SELF, nghost, &s->ghost));
+  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, nghost, garray, PETSC_USE_POINTER, &is));
+  PetscCall(VecScatterCreate(s->b, is, s->ghost, NULL, &s->ghosts));
+  PetscCall(ISDestroy(&is));
   PetscFunctionReturn(0);
 }
 
@@ -312,6 +338,7 @@ int vc_ksp_create(PetscInt n, const PetscInt *rowptr, const PetscInt *cols, cons
     PetscCall(watch(s, s->ksp, &s->kw));
   }
   PetscCall(MatCreateVecs(s->A ? s->A : s->N, &s->x, &s->b));
+  if (newton && s->count) PetscCall(ghost_scatter(s));
   *out = s;
   return 0;
 }
@@ -365,22 +392,45 @@ int vc_ksp_types(void *ctx, const char **ksp_type, const char **pc_type)
   return 0;
 }
 
-/* y = this rank's rows of K x, x of every row (exact at the columns of this rank's rows, which
- * alone it reads): by K's matrix, or where it went (the Newton systems' KSP on several
- * ranks: constrained_setup) by this rank's rows (local_rows). */
+/* y = this rank's rows of K x, x this rank's rows: by K's matrix, or where it went (the
+ * Newton systems' KSP on several ranks: constrained_setup) by this rank's rows
+ * (local_rows), the values of other ranks' rows from them (ghost_scatter), each row's sum
+ * in the order of its columns. Collective on several ranks. */
 int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
 {
   VcKsp *s = (VcKsp *)ctx;
 
   if (!s->A) {
+    const PetscInt    *garray;
+    const PetscScalar *g;
+    PetscInt           nghost;
+
+    PetscCall(VecPlaceArray(s->b, x));
+    PetscCall(VecScatterBegin(s->ghosts, s->b, s->ghost, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(s->ghosts, s->b, s->ghost, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecResetArray(s->b));
+    PetscCall(MatMPIAIJGetSeqAIJ(s->N, NULL, NULL, &garray));
+    PetscCall(VecGetLocalSize(s->ghost, &nghost));
+    PetscCall(VecGetArrayRead(s->ghost, &g));
     for (PetscInt r = 0; r < s->m; r++) {
       PetscScalar sum = 0;
-      for (PetscInt k = s->kai[r]; k < s->kai[r + 1]; k++) sum += s->kav[k] * x[s->kaj[k]];
+      for (PetscInt k = s->kai[r]; k < s->kai[r + 1]; k++) {
+        PetscInt    col = s->kaj[k], at = col - s->lo;
+        PetscScalar v;
+        if (at >= 0 && at < s->m) v = x[at];
+        else {
+          PetscCall(PetscFindInt(col, nghost, garray, &at));
+          PetscCheck(at >= 0, PETSC_COMM_SELF, PETSC_ERR_PLIB, "a column of K's rows is not among N's");
+          v = g[at];
+        }
+        sum += s->kav[k] * v;
+      }
       y[r] = sum;
     }
+    PetscCall(VecRestoreArrayRead(s->ghost, &g));
     return 0;
   }
-  PetscCall(VecPlaceArray(s->b, x + s->lo));
+  PetscCall(VecPlaceArray(s->b, x));
   PetscCall(VecPlaceArray(s->x, y));
   PetscCall(MatMult(s->A, s->b, s->x));
   PetscCall(VecResetArray(s->x));
@@ -1355,6 +1405,8 @@ int vc_ksp_destroy(void *ctx)
   PetscCall(MatDestroy(&s->Q));
   PetscCall(PetscFree(s->frame_of));
   PetscCall(PetscFree2(s->kai, s->below));
+  PetscCall(VecScatterDestroy(&s->ghosts));
+  PetscCall(VecDestroy(&s->ghost));
   PetscCall(VecDestroy(&s->b));
   PetscCall(VecDestroy(&s->x));
   PetscCall(KSPDestroy(&s->ksp));
