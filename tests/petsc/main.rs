@@ -355,6 +355,44 @@ fn a_followers_part_of_the_mesh_is_the_cells_with_one_of_its_own_nodes() {
     }
 }
 
+/// A barrier of `size` threads that fails where one does not arrive within a minute (a
+/// thread that panicked, or threads that sum a different number of times), where
+/// `std::sync::Barrier` would wait for ever.
+#[cfg(feature = "petsc")]
+struct Rendezvous {
+    /// The threads arrived at this round, and the rounds completed.
+    state: std::sync::Mutex<(usize, usize)>,
+    all_in: std::sync::Condvar,
+    size: usize,
+}
+
+#[cfg(feature = "petsc")]
+impl Rendezvous {
+    fn new(size: usize) -> Self {
+        Rendezvous {
+            state: std::sync::Mutex::new((0, 0)),
+            all_in: std::sync::Condvar::new(),
+            size,
+        }
+    }
+
+    fn wait(&self) {
+        let mut state = self.state.lock().unwrap();
+        let round = state.1;
+        state.0 += 1;
+        if state.0 == self.size {
+            *state = (0, round + 1);
+            self.all_in.notify_all();
+            return;
+        }
+        let minute = std::time::Duration::from_secs(60);
+        let (_state, waited) = (self.all_in)
+            .wait_timeout_while(state, minute, |s| s.1 == round)
+            .unwrap();
+        assert!(!waited.timed_out(), "a rank did not come to the sum");
+    }
+}
+
 /// GAMG's near-null space as the ranks make it, each its own rows of the rigid-body modes
 /// and its part of each inner product, summed over the ranks: together the modes that one
 /// process makes, to rounding, and orthonormal over the whole. The ranks are threads here,
@@ -363,7 +401,7 @@ fn a_followers_part_of_the_mesh_is_the_cells_with_one_of_its_own_nodes() {
 #[cfg(feature = "petsc")]
 #[test]
 fn each_rank_makes_its_own_rows_of_the_near_null_space() {
-    use std::sync::{Barrier, Mutex};
+    use std::sync::Mutex;
     use viscontact::petsc::{rigid_body_modes, Layout};
     let tmp = tempfile::tempdir().unwrap();
     for (scene, size) in [(SceneText::block(), 3), (SceneText::paper(), 2)] {
@@ -378,7 +416,7 @@ fn each_rank_makes_its_own_rows_of_the_near_null_space() {
         let (one, layout) = (of(1), of(size));
         // Each rank's rows of each mode, the sums through `slots` (each rank's part in its
         // own; every rank adds them in rank order).
-        let (barrier, slots) = (Barrier::new(size), Mutex::new(vec![0.0; size]));
+        let (barrier, slots) = (Rendezvous::new(size), Mutex::new(vec![0.0; size]));
         let ranks: Vec<Vec<Vec<f64>>> = std::thread::scope(|scope| {
             let (disc, layout, barrier, slots) = (&disc, &layout, &barrier, &slots);
             let threads: Vec<_> = (0..size)
