@@ -57,7 +57,8 @@ pub struct TimeLoop<'p> {
     /// is solved into w (a solver may leave an iterate there). On one of several MPI ranks
     /// whose history holds some dofs alone (`Holds::Local`), w_n is exact at those, at the
     /// rank's own rows and their neighbours' and at Γ3's alone (`petsc::Reads`): nothing
-    /// reads the others.
+    /// reads the others; it keeps its own rows alone, the others coming back from the
+    /// ranks that hold them (`Backend::keep`).
     w: Vec<f64>,
     w_start: Vec<f64>,
     /// Multipliers of the last solved step z_{n−1}: λ on contact rows, γ on friction rows;
@@ -298,7 +299,7 @@ impl<'p> TimeLoop<'p> {
             history,
             plans,
             w: vec![0.0; n],
-            w_start: vec![0.0; disc.n_free],
+            w_start: Vec::new(),
             m,
             b: vec![0.0; n],
             growth: Growth::default(),
@@ -479,7 +480,7 @@ impl<'p> TimeLoop<'p> {
             .map(Abandon::arm);
         let nf = self.disc.n_free;
         if armed.is_some() {
-            self.w_start.copy_from_slice(&self.w[..nf]);
+            self.backend.keep(&self.w[..nf], &mut self.w_start);
         }
         let mut report = self.solver.solve(
             &mut self.backend,
@@ -492,7 +493,7 @@ impl<'p> TimeLoop<'p> {
         drop(armed);
         if report.status == StepStatus::Abandoned {
             // w and z may hold the step's iterate: both go back to the step before.
-            self.w[..nf].copy_from_slice(&self.w_start);
+            self.backend.restore(&self.w_start, &mut self.w[..nf])?;
             self.z.copy_from_slice(&self.spare);
             return Ok(None);
         }

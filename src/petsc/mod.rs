@@ -490,9 +490,7 @@ impl Krylov {
         };
         check(call(self.ctx, b, x, &mut v), what)?;
         if let Some(spread) = &self.spread {
-            (spread.unknowns.iter())
-                .zip(&self.own_x)
-                .for_each(|(&i, &x)| w[i as usize] = x);
+            spread.put(&self.own_x, w);
             spread.halo.run(w)?;
         }
         Ok(Solve {
@@ -574,6 +572,18 @@ impl Spread {
     fn own_of(&self, v: &[f64], out: &mut Vec<f64>) {
         out.clear();
         out.extend(self.unknowns.iter().map(|&i| v[i as usize]));
+    }
+
+    /// v at this rank's rows' unknowns ← `own`, in PETSc's order (what `own_of` took).
+    fn put(&self, own: &[f64], v: &mut [f64]) {
+        (self.unknowns.iter())
+            .zip(own)
+            .for_each(|(&i, &x)| v[i as usize] = x);
+    }
+
+    /// Whether this rank receives every rank's rows of a solved step (`Krylov::complete`).
+    fn receives(&self) -> bool {
+        self.whole == Whole::Every || self.first
     }
 }
 
@@ -796,7 +806,7 @@ impl Krylov {
             return Ok(());
         };
         spread.own_of(w, &mut self.own_x);
-        let receives = spread.whole == Whole::Every || spread.first;
+        let receives = spread.receives();
         if receives {
             self.rows.resize(self.n, 0.0);
         }
@@ -811,6 +821,31 @@ impl Krylov {
             self.layout.from_rows(&self.rows, w);
         }
         Ok(())
+    }
+
+    /// `kept` ← what of w this rank restores a step given up from (`restore`): on a rank of
+    /// several that holds w exact where it reads it alone, its own rows, in PETSc's order
+    /// (the others it reads come back from the ranks that hold them); elsewhere every
+    /// value (one rank, rank 0, a follower whose history holds every dof).
+    pub fn keep(&self, w: &[f64], kept: &mut Vec<f64>) {
+        match &self.spread {
+            Some(spread) if !spread.receives() => spread.own_of(w, kept),
+            _ => {
+                kept.clear();
+                kept.extend_from_slice(w);
+            }
+        }
+    }
+
+    /// w ← what `keep` kept in `kept`, and on several ranks the values this rank reads of
+    /// the others' rows from the ranks that hold them (collective): w as it was, wherever
+    /// it is exact.
+    pub fn restore(&self, kept: &[f64], w: &mut [f64]) -> Result<()> {
+        match &self.spread {
+            Some(spread) if !spread.receives() => spread.put(kept, w),
+            _ => w.copy_from_slice(kept),
+        }
+        self.share(w)
     }
 
     /// The largest |x_i| over the ranks' own rows (`f64::max`: NaN skipped), x exact in

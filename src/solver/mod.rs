@@ -256,6 +256,33 @@ impl Backend {
         }
     }
 
+    /// `kept` ← w as `restore` takes it back after a step given up: on a rank of several
+    /// whose w is exact where it reads it alone, its own rows (`petsc::Krylov::keep`);
+    /// elsewhere every value.
+    pub fn keep(&self, w: &[f64], kept: &mut Vec<f64>) {
+        match self {
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => krylov.keep(w, kept),
+            _ => {
+                kept.clear();
+                kept.extend_from_slice(w);
+            }
+        }
+    }
+
+    /// w ← w as `keep` kept it in `kept`, wherever it is exact (collective over the ranks
+    /// of a PETSc run: the values a rank reads of the others' rows come from them).
+    pub fn restore(&self, kept: &[f64], w: &mut [f64]) -> crate::Result<()> {
+        match self {
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => krylov.restore(kept, w),
+            _ => {
+                w.copy_from_slice(kept);
+                Ok(())
+            }
+        }
+    }
+
     /// A solved step's w at every unknown, where this rank's history holds every dof and a
     /// solve gave it its reads alone (`petsc::Krylov::complete`); nothing on one process.
     pub fn complete(&mut self, w: &mut [f64]) -> crate::Result<()> {
