@@ -392,52 +392,6 @@ int vc_ksp_types(void *ctx, const char **ksp_type, const char **pc_type)
   return 0;
 }
 
-/* y = this rank's rows of K x, x this rank's rows: by K's matrix, or where it went (the
- * Newton systems' KSP on several ranks: constrained_setup) by this rank's rows
- * (local_rows), the values of other ranks' rows from them (ghost_scatter), each row's sum
- * in the order of its columns. Collective on several ranks. */
-int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
-{
-  VcKsp *s = (VcKsp *)ctx;
-
-  if (!s->A) {
-    const PetscInt    *garray;
-    const PetscScalar *g;
-    PetscInt           nghost;
-
-    PetscCall(VecPlaceArray(s->b, x));
-    PetscCall(VecScatterBegin(s->ghosts, s->b, s->ghost, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(s->ghosts, s->b, s->ghost, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecResetArray(s->b));
-    PetscCall(MatMPIAIJGetSeqAIJ(s->N, NULL, NULL, &garray));
-    PetscCall(VecGetLocalSize(s->ghost, &nghost));
-    PetscCall(VecGetArrayRead(s->ghost, &g));
-    for (PetscInt r = 0; r < s->m; r++) {
-      PetscScalar sum = 0;
-      for (PetscInt k = s->kai[r]; k < s->kai[r + 1]; k++) {
-        PetscInt    col = s->kaj[k], at = col - s->lo;
-        PetscScalar v;
-        if (at >= 0 && at < s->m) v = x[at];
-        else {
-          PetscCall(PetscFindInt(col, nghost, garray, &at));
-          PetscCheck(at >= 0, PETSC_COMM_SELF, PETSC_ERR_PLIB, "a column of K's rows is not among N's");
-          v = g[at];
-        }
-        sum += s->kav[k] * v;
-      }
-      y[r] = sum;
-    }
-    PetscCall(VecRestoreArrayRead(s->ghost, &g));
-    return 0;
-  }
-  PetscCall(VecPlaceArray(s->b, x));
-  PetscCall(VecPlaceArray(s->x, y));
-  PetscCall(MatMult(s->A, s->b, s->x));
-  PetscCall(VecResetArray(s->x));
-  PetscCall(VecResetArray(s->b));
-  return 0;
-}
-
 /* recv ← each rank's send (nsend values), rank r's at displs[r] (counts[r] values): on
  * every rank where `every`, else on rank 0 alone (recv, counts and displs read there only). */
 int vc_gather(const PetscScalar *send, int nsend, PetscScalar *recv, const int *counts, const int *displs, int every)
@@ -634,6 +588,47 @@ static PetscErrorCode values_close(Mat m, PetscBool write, Values *v)
   if (write) PetscCall(MatAssemblyBegin(m, MAT_FINAL_ASSEMBLY));
   if (write) PetscCall(MatAssemblyEnd(m, MAT_FINAL_ASSEMBLY));
   PetscFunctionReturn(0);
+}
+
+/* y = this rank's rows of K x, x this rank's rows: by K's matrix, or where it went (the
+ * Newton systems' KSP on several ranks: constrained_setup) by this rank's rows
+ * (local_rows), the values of other ranks' rows from them (ghost_scatter), each row's sum
+ * in the order of its columns. Collective on several ranks. */
+int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
+{
+  VcKsp *s = (VcKsp *)ctx;
+
+  if (!s->A) {
+    const PetscScalar *g;
+    Values             n;
+
+    PetscCall(VecPlaceArray(s->b, x));
+    PetscCall(VecScatterBegin(s->ghosts, s->b, s->ghost, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(s->ghosts, s->b, s->ghost, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecResetArray(s->b));
+    PetscCall(VecGetArrayRead(s->ghost, &g));
+    /* A CSR entry's ghost is its column in N's off-diagonal block, as `at` finds it. */
+    PetscCall(values_open(s->N, PETSC_FALSE, &n));
+    for (PetscInt r = 0; r < s->m; r++) {
+      PetscInt        left = s->below[r], own = n.ai[0][r + 1] - n.ai[0][r];
+      const PetscInt *off = n.aj[1] + n.ai[1][r];
+      PetscScalar     sum = 0;
+      for (PetscInt k = s->kai[r], e = 0; k < s->kai[r + 1]; k++, e++) {
+        PetscScalar v = e < left ? g[off[e]] : e < left + own ? x[s->kaj[k] - s->lo] : g[off[e - own]];
+        sum += s->kav[k] * v;
+      }
+      y[r] = sum;
+    }
+    PetscCall(values_close(s->N, PETSC_FALSE, &n));
+    PetscCall(VecRestoreArrayRead(s->ghost, &g));
+    return 0;
+  }
+  PetscCall(VecPlaceArray(s->b, x));
+  PetscCall(VecPlaceArray(s->x, y));
+  PetscCall(MatMult(s->A, s->b, s->x));
+  PetscCall(VecResetArray(s->x));
+  PetscCall(VecResetArray(s->b));
+  return 0;
 }
 
 /* (A M B)_ij, M the local rows' values (n) with row i among them, A = R over the frame
