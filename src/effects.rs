@@ -3,7 +3,7 @@
 //! friction term; no relaxation → no memory state; neither contact nor friction → every step
 //! is one solve with the stored factorization and no optimization solver is built.
 
-use crate::fem::{diagonal, Discretization, Gamma3, Sparse};
+use crate::fem::{Discretization, Gamma3, Sparse};
 use crate::mesh::{fmt_num, fmt_point};
 use crate::scene::Scene;
 use crate::solver::active_set::ActiveSetSolver;
@@ -176,9 +176,10 @@ pub fn warnings(scene: &Scene, disc: &Discretization, solver: &Descriptor) -> Ve
 /// contact solver that `solver` names (`solver::choice::Descriptor`, the scene's keys
 /// resolved): the dense dual, a dual without D or clarabel on the stored factor, or the
 /// active-set solver on PETSc. `matrix` is the step matrix (K_A, or K_A + k K_B + k² r(0)
-/// K_R for the implicit variant) that `backend` holds, as `solver.build()` says.
+/// K_R for the implicit variant) that `backend` holds, as `solver.build()` says, over
+/// `disc`'s columns (a rank's own alone on several: `Discretization::own`).
 pub fn step_solver(
-    effects: &Effects,
+    (effects, disc): (&Effects, &Discretization),
     solver: &Descriptor,
     matrix: &Sparse,
     backend: &Backend,
@@ -204,7 +205,7 @@ pub fn step_solver(
         Contact::ActiveSet => {
             // On one of several MPI ranks, `matrix` holds the diagonal of its own rows alone:
             // Γ3's others come from the ranks that hold them (collective on several).
-            let mut diagonal = diagonal(matrix);
+            let mut diagonal = disc.diagonal_of(matrix);
             backend.share(&mut diagonal)?;
             let solver = ActiveSetSolver::new(rows, &diagonal, solver.active_set());
             StepSolver::ActiveSet(Box::new(solver))

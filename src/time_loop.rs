@@ -267,7 +267,7 @@ impl<'p> TimeLoop<'p> {
             Build::Factor { last } => Backend::Cholesky(Factor::new(matrix, last)?),
             Build::Nothing => Backend::None,
         };
-        let solver = effects::step_solver(&effects, &descriptor, matrix, &backend, &rows)?;
+        let solver = effects::step_solver((&effects, disc), &descriptor, matrix, &backend, &rows)?;
         // After PETSc's setup, where a rank of several peaks: its rows of K_B and K_R^(0).
         let own_pair = disc.own_pair_made(match &holds {
             Some(Holds::Local(dofs)) => Some(dofs),

@@ -145,7 +145,9 @@ pub struct Discretization {
     /// leaves off: that boundary then carries no condition at all (`effects::warnings`).
     pub idle_groups: Vec<Gamma3>,
     /// On one of several MPI ranks, the unknowns whose columns of K_A, K_B and K_R this rank
-    /// keeps whole ([`Discretization::keep_columns`]); None: every column (one process).
+    /// keeps whole ([`Discretization::keep_columns`]), in increasing order: the matrices'
+    /// columns are then these alone, column k the unknown own[k] (`own_columns`); None:
+    /// every column (one process).
     pub own: Option<Vec<usize>>,
     /// On one of several MPI ranks, K_B and K_R^(0) as the rank's rows of both, paired
     /// ([`Discretization::pair_own_rows`]); `k_b` and `k_r[0]` then hold no entry.
@@ -796,7 +798,16 @@ impl Discretization {
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
         let (materials, r) = (&self.materials, self.r);
         let held = whole.as_deref();
-        assemble(cells, self.dim, dofs, (materials, r), terms, held)
+        let (k_a, k_b, k_r) = assemble(cells, self.dim, dofs, (materials, r), terms, held);
+        let Some(own) = own else {
+            return (k_a, k_b, k_r);
+        };
+        let compact = |a: Sparse| columns_compacted(a, own);
+        (
+            compact(k_a),
+            k_b.map(compact),
+            k_r.into_iter().map(compact).collect(),
+        )
     }
 
     /// The unknowns at which the active set reads the step matrix's diagonal (its ρ): those
@@ -809,9 +820,10 @@ impl Discretization {
         read
     }
 
-    /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) alone: a
-    /// rank of several, which holds those unknowns' rows in PETSc (`petsc::Layout`), needs
-    /// no more of them. A symmetric matrix's column is its row, so each rank computes its
+    /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) alone, as
+    /// their only columns (column k the unknown own[k]: no rank holds a column start of
+    /// the whole problem, 8 bytes a dof a matrix): a rank of several, which holds those
+    /// unknowns' rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric matrix's column is its row, so each rank computes its
     /// own entries of a product ([`mul_add_rows`]) and the ranks gather the rest; so too
     /// the step matrix's diagonal at Γ3's unknowns, which the active set's ρ reads
     /// (`effects::step_solver`). Where K_A has a block on prescribed dofs (`k_a_all`),
@@ -820,9 +832,7 @@ impl Discretization {
         if self.k_a_all.is_some() {
             return;
         }
-        let mut whole = vec![false; self.n_dofs];
-        own.iter().for_each(|&i| whole[i] = true);
-        let trim = |a: &mut Sparse| *a = entries_kept(a, (a.nrows(), a.ncols()), |_, j| whole[j]);
+        let trim = |a: &mut Sparse| *a = own_columns(a, &own, |_, _| true);
         trim(&mut self.k_a);
         self.k_b.iter_mut().for_each(trim);
         self.k_r.iter_mut().for_each(trim);
@@ -842,12 +852,11 @@ impl Discretization {
         else {
             return;
         };
-        let Some(pair) = RowsPair::new(k_b, k_r, own) else {
+        let Some(pair) = RowsPair::new(k_b, k_r, 0..own.len()) else {
             return;
         };
         for m in [k_b, k_r] {
-            let size = (m.nrows(), m.ncols());
-            *m = entries_kept(m, size, |_, _| false);
+            *m = own_columns(m, own, |_, _| false);
         }
         self.own_pair = Some(pair);
     }
@@ -860,12 +869,10 @@ impl Discretization {
         let Some(cells) = &mut self.pair_cells else {
             return;
         };
-        let n = self.n_dofs;
-        let empty = || entries_kept(&self.k_a, (n, n), |_, _| false);
+        let size = (self.k_a.nrows(), self.k_a.ncols());
+        let empty = || entries_kept(&self.k_a, size, |_, _| false);
         (self.k_b, self.k_r) = (Some(empty()), vec![empty()]);
-        let own = self.own.as_deref().unwrap_or_default();
-        let cp = self.k_a.symbolic().col_ptr();
-        cells.entries = own.iter().map(|&j| cp[j + 1] - cp[j]).sum();
+        cells.entries = self.k_a.compute_nnz();
     }
 
     /// The cells of `cells` (`mesh`'s) with one of the nodes of the unknowns `own`, as
@@ -920,7 +927,8 @@ impl Discretization {
             let materials = (&cells.materials, self.r);
             let (_, k_b, k_r) =
                 assemble(source, self.dim, dofs, materials, (true, 1), Some(&whole));
-            pair.extend(&RowsPair::new(k_b.as_ref()?, k_r.first()?, piece)?);
+            let columns = piece.iter().copied();
+            pair.extend(&RowsPair::new(k_b.as_ref()?, k_r.first()?, columns)?);
             piece.iter().for_each(|&i| whole[i] = false);
         }
         if let Some(local) = local {
@@ -957,9 +965,7 @@ impl Discretization {
         let mut read = vec![false; self.n_dofs];
         for a in matrices {
             let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
-            for &j in own {
-                ri[cp[j]..cp[j + 1]].iter().for_each(|&i| read[i] = true);
-            }
+            ri[..cp[own.len()]].iter().for_each(|&i| read[i] = true);
         }
         if let Some(pair) = &self.own_pair {
             pair.columns().for_each(|j| read[j] = true);
@@ -979,20 +985,17 @@ impl Discretization {
     /// of [`Discretization::local_reach`]): its columns of K_B and of every K_R^(g), and its
     /// pair of rows, number their rows by their places in `local`, so that their products
     /// (`mul_add_rows`, `RowsPair::mul_add`) read u_n and m_n where the history holds them.
-    /// The products' own rows keep the whole numbering, and the others' columns go (the
-    /// diagonals `keep_columns` kept: no product reads them).
+    /// The products' own rows keep the whole numbering.
     pub fn number_rows_over(&mut self, local: &[usize]) {
-        let Some(own) = &self.own else {
+        if self.own.is_none() {
             return;
-        };
+        }
         let place = |i: usize| {
             (local.binary_search(&i)).expect("a row of the rank's columns is in its reach")
         };
-        let mut is_own = vec![false; self.n_dofs];
-        own.iter().for_each(|&j| is_own[j] = true);
         for a in self.k_b.iter_mut().chain(&mut self.k_r) {
             let size = (local.len(), a.ncols());
-            *a = entries_placed(a, size, |_, j| is_own[j], place);
+            *a = entries_placed(a, size, |_, _| true, place);
         }
         if let Some(pair) = &mut self.own_pair {
             pair.number_columns(place);
@@ -1052,9 +1055,25 @@ impl Discretization {
     /// columns alone, so Γ3's own unknowns'): what the active set's ρ reads of it
     /// (`NodalRow::entries`), the others' from their ranks (`effects::step_solver`).
     pub fn keep_diagonal_of_k_a(&mut self) {
-        let size = (self.k_a.nrows(), self.k_a.ncols());
         let read = self.diagonal_read();
-        self.k_a = entries_kept(&self.k_a, size, |i, j| i == j && read[i]);
+        let own = self.own.as_deref().expect("a rank's own columns");
+        self.k_a = own_columns(&self.k_a, own, |i, j| i == j && read[i]);
+    }
+
+    /// The diagonal of `a`, the step matrix or K_A: its columns, placed at their unknowns
+    /// where they are a rank's own alone ([`Discretization::own`]; 0 at the others).
+    pub fn diagonal_of(&self, a: &Sparse) -> Vec<f64> {
+        let Some(own) = self.own.as_deref() else {
+            return diagonal(a);
+        };
+        let mut whole = vec![0.0; a.nrows()];
+        let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+        for (k, &j) in own.iter().enumerate() {
+            if let Some(p) = (cp[k]..cp[k + 1]).find(|&p| ri[p] == j) {
+                whole[j] = v[p];
+            }
+        }
+        whole
     }
 
     /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1; z = 0 in 2D).
@@ -1328,6 +1347,49 @@ fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) ->
     entries_placed(a, size, |i, j| i < size.0 && keep(i, j), |i| i)
 }
 
+/// The matrix of `a`'s rows and its columns `own` (increasing) alone, column k its
+/// column own[k] (a rank's own columns: [`Discretization::own`]), with a's entries (i, j)
+/// where `keep(i, j)`, in their order. Column k of `a` is read where `a` has as many
+/// columns as `own` (its own columns already), column own[k] otherwise.
+fn own_columns(a: &Sparse, own: &[usize], keep: impl Fn(usize, usize) -> bool) -> Sparse {
+    let compact = a.ncols() == own.len();
+    let column = |k: usize| if compact { k } else { own[k] };
+    let a = a.as_ref();
+    let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    let keep = &keep;
+    let kept = |k: usize| (cp[column(k)]..cp[column(k) + 1]).filter(move |&p| keep(ri[p], own[k]));
+    // At their exact size: they stay for the run.
+    let entries = (0..own.len()).map(|k| kept(k).count()).sum();
+    let mut col_ptr = Vec::with_capacity(own.len() + 1);
+    let (mut row_idx, mut val) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
+    col_ptr.push(0);
+    for k in 0..own.len() {
+        for p in kept(k) {
+            row_idx.push(ri[p]);
+            val.push(v[p]);
+        }
+        col_ptr.push(row_idx.len());
+    }
+    let pattern = SymbolicSparseColMat::new_checked(a.nrows(), own.len(), col_ptr, None, row_idx);
+    SparseColMat::new(pattern, val)
+}
+
+/// `a`, whose columns other than `own` (increasing) have no entry, as its columns `own`
+/// alone, column k its column own[k]: its entries kept where they lie, its n + 1 column
+/// starts replaced by own.len() + 1 (8 bytes a dof of the whole problem, on every rank).
+fn columns_compacted(a: Sparse, own: &[usize]) -> Sparse {
+    let (symbolic, val) = a.into_parts();
+    let (nrows, _, col_ptr, _, row_idx) = symbolic.into_parts();
+    debug_assert_eq!(
+        col_ptr.last(),
+        own.last().map(|&j| &col_ptr[j + 1]).or(Some(&0))
+    );
+    let starts = std::iter::once(0).chain(own.iter().map(|&j| col_ptr[j + 1]));
+    let pattern =
+        SymbolicSparseColMat::new_checked(nrows, own.len(), starts.collect(), None, row_idx);
+    SparseColMat::new(pattern, val)
+}
+
 /// The matrix of `size` (rows, columns) made of `a`'s entries (i, j) where `keep(i, j)`, in
 /// their order, each in row `place(i)` (increasing in i) of column j.
 fn entries_placed(
@@ -1356,13 +1418,13 @@ fn entries_placed(
     SparseColMat::new(pattern, val)
 }
 
-/// y_i += α (A x)_i for the unknowns i in `own`, each a column the symmetric `a` keeps
-/// whole (`Discretization::keep_columns`): its row.
+/// y_i += α (A x)_i for the unknowns i in `own`, whose columns the symmetric `a` keeps
+/// whole and alone, column k the unknown own[k] (`Discretization::keep_columns`): its row.
 pub fn mul_add_rows(a: &Sparse, own: &[usize], x: &[f64], alpha: f64, y: &mut [f64]) {
     let a = a.as_ref();
     let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
-    for &i in own {
-        let range = cp[i]..cp[i + 1];
+    for (k, &i) in own.iter().enumerate() {
+        let range = cp[k]..cp[k + 1];
         let row: f64 = (ri[range.clone()].iter().zip(&v[range]))
             .map(|(&j, a)| a * x[j])
             .sum();

@@ -249,22 +249,26 @@ pub struct RowsPair {
 }
 
 impl RowsPair {
-    /// The rows `own` of `a` and `b` (their columns: the matrices are symmetric); None
-    /// unless the two have the same pattern and fewer than 2^32 rows.
-    pub fn new(a: &Sparse, b: &Sparse, own: &[usize]) -> Option<RowsPair> {
+    /// The rows of `a` and `b` that their `columns` are (the matrices are symmetric), in
+    /// that order; None unless the two have the same pattern and fewer than 2^32 rows.
+    pub fn new(
+        a: &Sparse,
+        b: &Sparse,
+        columns: impl Iterator<Item = usize> + Clone,
+    ) -> Option<RowsPair> {
         if !same_pattern(a.symbolic(), b.symbolic()) || u32::try_from(a.nrows()).is_err() {
             return None;
         }
         let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
         let (va, vb) = (a.val(), b.val());
-        let entries: usize = own.iter().map(|&i| cp[i + 1] - cp[i]).sum();
+        let entries: usize = columns.clone().map(|i| cp[i + 1] - cp[i]).sum();
         let mut pair = RowsPair {
-            ptr: Vec::with_capacity(own.len() + 1),
+            ptr: Vec::with_capacity(columns.clone().count() + 1),
             cols: Vec::with_capacity(entries),
             values: Vec::with_capacity(entries),
         };
         pair.ptr.push(0);
-        for &i in own {
+        for i in columns {
             let col = cp[i]..cp[i + 1];
             pair.cols.extend(ri[col.clone()].iter().map(|&j| j as u32));
             pair.values.extend(col.map(|p| [va[p], vb[p]]));

@@ -184,7 +184,9 @@ impl Layout {
 
     /// Rank `rank`'s rows of the symmetric `matrix` in the rows' order, as CSR (its CSC)
     /// with the n + 1 row pointers of the whole and the other ranks' rows empty: what the
-    /// shim keeps of it. On one rank the matrix's own arrays, its values not copied.
+    /// shim keeps of it. On one rank the matrix's own arrays, its values not copied. A
+    /// matrix with fewer columns than rows holds the rank's own columns alone, in the
+    /// unknowns' order (`Discretization::own`).
     pub fn rows_of<'a>(&self, matrix: &'a Sparse, rank: usize) -> Result<Csr<'a>> {
         let m = matrix.as_ref();
         let (ptr, idx, val) = (m.symbolic().col_ptr(), m.symbolic().row_idx(), m.val());
@@ -199,16 +201,25 @@ impl Layout {
         let own = &unknown[self.blocks[rank]..self.blocks[rank + 1]];
         // Sized once: grown by doubling, the values could hold up to twice their length.
         let own = || own.iter().map(|&i| i as usize);
-        let entries: usize = own().map(|i| ptr[i + 1] - ptr[i]).sum();
+        let sorted = (m.ncols() < m.nrows()).then(|| {
+            let mut sorted: Vec<usize> = own().collect();
+            sorted.sort_unstable();
+            sorted
+        });
+        let column = |i: usize| match &sorted {
+            Some(sorted) => sorted.binary_search(&i).expect("an own column"),
+            None => i,
+        };
+        let entries: usize = own().map(|i| ptr[column(i) + 1] - ptr[column(i)]).sum();
         let (mut cols, mut vals) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
         let mut rowptr = Vec::with_capacity(row.len() + 1);
         rowptr.resize(self.blocks[rank] + 1, 0);
-        let mut sorted: Vec<(usize, f64)> = Vec::new();
-        for i in own() {
-            sorted.clear();
-            sorted.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]] as usize, val[p])));
-            sorted.sort_by_key(|&(c, _)| c);
-            for &(c, v) in &sorted {
+        let mut by_row: Vec<(usize, f64)> = Vec::new();
+        for i in own().map(column) {
+            by_row.clear();
+            by_row.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]] as usize, val[p])));
+            by_row.sort_by_key(|&(c, _)| c);
+            for &(c, v) in &by_row {
                 cols.push(petsc_int(c)?);
                 vals.push(v);
             }

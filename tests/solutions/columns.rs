@@ -2,8 +2,9 @@
 //! ranks keeps of K_A, K_B and K_R the columns of the unknowns whose rows it holds, and
 //! computes its entries of the right side's products from them (`fem::mul_add_rows`). On
 //! the 3D block with elasticity and memory, for a random half of the nodes: those entries
-//! agree with the whole matrices' products to round-off, and the other columns are gone
-//! (the diagonal at Γ3's unknowns too: the ranks that hold their rows send it). A rank that assembles those
+//! agree with the whole matrices' products to round-off, and the other columns are gone,
+//! the matrices' columns those alone, each the whole's bits (the diagonal at Γ3's other
+//! unknowns too: the ranks that hold their rows send it). A rank that assembles those
 //! columns alone (`Discretization::numbered`, then `assembled`) holds the same matrices, bit for bit, and
 //! the same loads in its own rows, whether it holds the cells, their vertices or nothing;
 //! from the vertices alone (rank 0) it computes the stresses and norms of the cells held,
@@ -72,21 +73,33 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
         let at = |v: &[f64]| own.iter().map(|&i| v[i]).collect::<Vec<_>>();
         let diff = rel_diff(&at(&rows), &at(&y));
         assert!(diff < 1e-14, "matrix {k}: own rows differ by {diff:e}");
-        // The diagonal at the own unknowns, the whole's bits; nothing of the other columns.
-        let (d_kept, d_full) = (diagonal(kept), diagonal(full));
-        let ptr = kept.as_ref().symbolic().col_ptr();
-        for j in 0..whole.n_free {
-            let mine = own.binary_search(&j).is_ok();
-            let expected = if mine { d_full[j] } else { 0.0 };
-            assert_eq!(
-                d_kept[j].to_bits(),
-                expected.to_bits(),
-                "matrix {k}, dof {j}"
-            );
-            assert!(mine || ptr[j + 1] == ptr[j], "matrix {k}, dof {j}");
+        // Its own columns alone, column c the whole's column own[c], the same bits: no
+        // column start of the others (8 bytes a dof of the whole on every rank).
+        assert_eq!((kept.nrows(), kept.ncols()), (full.nrows(), own.len()));
+        let (kept, full) = (kept.as_ref(), full.as_ref());
+        let column = |m: faer::sparse::SparseColMatRef<'_, usize, f64>, j: usize| {
+            let p = m.symbolic().col_ptr()[j]..m.symbolic().col_ptr()[j + 1];
+            let bits = m.val()[p.clone()].iter().map(|v| v.to_bits());
+            m.symbolic().row_idx()[p]
+                .iter()
+                .copied()
+                .zip(bits)
+                .collect::<Vec<_>>()
+        };
+        for (c, &j) in own.iter().enumerate() {
+            assert_eq!(column(kept, c), column(full, j), "matrix {k}, dof {j}");
         }
-        let entries = |m: &Sparse| m.as_ref().val().len();
-        assert!(entries(kept) < entries(full) * 3 / 4, "matrix {k}");
+        let d_full = diagonal(&whole.k_a);
+        let d_kept = mine.diagonal_of(&mine.k_a);
+        for j in 0..whole.n_free {
+            let expected = if own.binary_search(&j).is_ok() {
+                d_full[j]
+            } else {
+                0.0
+            };
+            assert_eq!(d_kept[j].to_bits(), expected.to_bits(), "dof {j}");
+        }
+        assert!(kept.val().len() < full.val().len() * 3 / 4, "matrix {k}");
     }
 }
 
@@ -453,16 +466,19 @@ fn k_a_handed_over_keeps_its_diagonal_at_its_own_rows_of_gamma3_alone() {
         read.len(),
         disc.n_free
     );
-    disc.keep_columns((0..disc.n_free).step_by(2).collect());
+    let own: Vec<usize> = (0..disc.n_free).step_by(2).collect();
+    disc.keep_columns(own.clone());
     disc.keep_diagonal_of_k_a();
     let own_read = read.iter().filter(|&&d| d % 2 == 0).count();
     assert!(own_read > 0 && own_read < read.len());
     assert_eq!(disc.k_a.as_ref().val().len(), own_read);
+    // Its own columns alone: no column start of the whole (8 bytes a dof on every rank).
     assert_eq!(
         (disc.k_a.nrows(), disc.k_a.ncols()),
-        (disc.n_free, disc.n_free)
+        (disc.n_free, own.len())
     );
-    let kept = diagonal(&disc.k_a);
+    let kept = disc.diagonal_of(&disc.k_a);
+    assert_eq!(kept.len(), disc.n_free);
     for (d, (kept, whole)) in kept.iter().zip(&whole).enumerate() {
         let expected = if read.contains(&d) && d % 2 == 0 {
             *whole
