@@ -47,15 +47,28 @@ pub struct Reactions {
     pub held: Vec<(usize, Source)>,
     /// Global dof → its row, None at a dof no condition holds.
     row_of: Vec<Option<u32>>,
-    /// The rows, compressed: columns (indices of u and w; of m, in its memory group's part)
-    /// and the values of M, K_B, K_R.
+    /// The rows, compressed: columns (places in `reads` and in `m_reads`) and the values
+    /// of M, K_B, K_R.
     ptr: Vec<usize>,
-    cols: Vec<[usize; 2]>,
+    cols: Vec<[u32; 2]>,
     values: Vec<[f64; 3]>,
+    /// The dofs of u and w the rows read, increasing, and the indices of m (in its memory
+    /// group's part): all that a step's reactions read of the state ([`Reactions::read`]).
+    reads: Vec<usize>,
+    m_reads: Vec<usize>,
     /// g_F at the held dofs.
     g_f: Vec<f64>,
     /// −Σ g_F per component: the force of the normal stress F on the body.
     pub normal_stress: [f64; 3],
+}
+
+/// What the held rows read of a step's state: w, u and m (None without memory) at
+/// [`Reactions`]' `reads` and `m_reads`, a few times the held dofs' count where the state
+/// has n values each.
+pub struct StateRead {
+    w: Vec<f64>,
+    u: Vec<f64>,
+    m: Option<Vec<f64>>,
 }
 
 /// The forces on the body at one step.
@@ -80,7 +93,18 @@ impl Reactions {
         for (i, &(dof, _)) in disc.held.iter().enumerate() {
             row_of[dof] = Some(i as u32);
         }
-        let (ptr, cols, values) = held_rows(disc, &row_of, k_b, k_r);
+        let (ptr, whole_cols, values) = held_rows(disc, &row_of, k_b, k_r);
+        let listed = |c: usize| {
+            let mut read: Vec<usize> = whole_cols.iter().map(|col| col[c]).collect();
+            read.sort_unstable();
+            read.dedup();
+            read
+        };
+        let (reads, m_reads) = (listed(0), listed(1));
+        let place = |read: &[usize], i: usize| read.binary_search(&i).expect("listed") as u32;
+        let cols = (whole_cols.iter())
+            .map(|&[col, at]| [place(&reads, col), place(&m_reads, at)])
+            .collect();
         let d = disc.dim;
         let g_f_all = normal_stress_load(mesh, scene)?;
         let mut normal_stress = [0.0; 3];
@@ -103,26 +127,40 @@ impl Reactions {
             ptr,
             cols,
             values,
+            reads,
+            m_reads,
             g_f,
             normal_stress,
         })
     }
 
-    /// The reactions r_{n,h} = (M w + K_B u + K_R m)_h − f_h + g_F,h of the state
-    /// `[w, u]`, `m` (None without memory) at time `t`, and the loads' resultants.
+    /// What the held rows read of the state `[w, u]`, `m` (None without memory): all that
+    /// [`Reactions::forces`] needs of it.
+    pub fn read(&self, [w, u]: [&[f64]; 2], m: Option<&[f64]>) -> StateRead {
+        let at = |v: &[f64], read: &[usize]| read.iter().map(|&i| v[i]).collect();
+        StateRead {
+            w: at(w, &self.reads),
+            u: at(u, &self.reads),
+            m: m.map(|m| at(m, &self.m_reads)),
+        }
+    }
+
+    /// The reactions r_{n,h} = (M w + K_B u + K_R m)_h − f_h + g_F,h of the state `read`
+    /// ([`Reactions::read`]) at time `t`, and the loads' resultants.
     pub fn forces(
         &self,
         disc: &Discretization,
         scene: &Scene,
         t: f64,
-        [w, u]: [&[f64]; 2],
-        m: Option<&[f64]>,
+        read: &StateRead,
     ) -> Result<StepForces> {
+        let (w, u, m) = (&read.w, &read.u, read.m.as_deref());
         let mut reactions: Vec<f64> = (0..self.held.len())
             .map(|h| {
                 let range = self.ptr[h]..self.ptr[h + 1];
                 let mut s = 0.0;
                 for (&[col, at], v) in self.cols[range.clone()].iter().zip(&self.values[range]) {
+                    let (col, at) = (col as usize, at as usize);
                     s += v[0] * w[col] + v[1] * u[col] + m.map_or(0.0, |m| v[2] * m[at]);
                 }
                 s + self.g_f[h]

@@ -24,7 +24,7 @@
 //! others again: its file equals the uninterrupted run's byte for byte.
 
 use crate::fem::loads::Source;
-use crate::fem::reactions::{Reactions, StepForces};
+use crate::fem::reactions::{Reactions, StateRead, StepForces};
 use crate::fem::{Discretization, StressCells};
 use crate::mesh::{cross, Mesh};
 use crate::output::Lines;
@@ -173,11 +173,24 @@ struct RowMaker {
 struct StepCopy {
     n: usize,
     t: f64,
-    w: Vec<f64>,
-    u: Vec<f64>,
-    m: Option<Vec<f64>>,
+    /// What the reactions read of the state (`Reactions::read`).
+    read: StateRead,
+    von_mises: VonMises,
     z: Vec<f64>,
     iterations: usize,
+}
+
+/// Where a step's largest von Mises stress comes from.
+enum VonMises {
+    /// The step's frame, or the ranks' pieces, which compute it.
+    Handed(Receiver<f64>),
+    /// The row's writer, from w, u and m whole (a step without a frame on one process):
+    /// only then copied whole, 8 bytes a dof of each.
+    Computed {
+        w: Vec<f64>,
+        u: Vec<f64>,
+        m: Option<Vec<f64>>,
+    },
 }
 
 /// The held rows and the constant forces that history.csv's reactions are computed from
@@ -245,14 +258,20 @@ impl HistoryCsv {
         let copy = StepCopy {
             n: step.n,
             t: step.t,
-            w: step.w.to_vec(),
-            u: step.u.to_vec(),
-            m: step.m.map(<[f64]>::to_vec),
+            read: self.rows.reactions.read([step.w, step.u], step.m),
+            von_mises: match frame_von_mises {
+                Some(rx) => VonMises::Handed(rx),
+                None => VonMises::Computed {
+                    w: step.w.to_vec(),
+                    u: step.u.to_vec(),
+                    m: step.m.map(<[f64]>::to_vec),
+                },
+            },
             z: step.z.to_vec(),
             iterations: step.report.iterations,
         };
         let rows = Arc::clone(&self.rows);
-        (self.lines).send(move || rows.row(&copy, counts, frame_von_mises))
+        (self.lines).send(move || rows.row(&copy, counts))
     }
 
     /// Waits until every row handed over is written (before a checkpoint, at the end).
@@ -263,18 +282,22 @@ impl HistoryCsv {
 
 impl RowMaker {
     /// The row of a step, its line ended.
-    fn row(
-        &self,
-        s: &StepCopy,
-        counts: [usize; 3],
-        frame: Option<Receiver<f64>>,
-    ) -> Result<String> {
+    fn row(&self, s: &StepCopy, counts: [usize; 3]) -> Result<String> {
         let (disc, scene) = (&self.disc, &self.scene);
-        let forces = (self.reactions).forces(disc, scene, s.t, [&s.w, &s.u], s.m.as_deref())?;
-        let von_mises = (frame.and_then(|rx| rx.recv().ok())).unwrap_or_else(|| {
-            let (wu, m) = ([&s.w[..], &s.u], (s.m.as_deref(), None));
-            disc.max_von_mises(wu, m, scene.mesh.model, StressCells::All)
-        });
+        let forces = (self.reactions).forces(disc, scene, s.t, &s.read)?;
+        let von_mises = match &s.von_mises {
+            VonMises::Handed(rx) => rx.recv().map_err(|_| {
+                Error::solve(format!(
+                    "step {}: its frame's writer stopped before it computed the largest von \
+                     Mises stress for history.csv",
+                    s.n
+                ))
+            })?,
+            VonMises::Computed { w, u, m } => {
+                let (wu, m) = ([&w[..], u], (m.as_deref(), None));
+                disc.max_von_mises(wu, m, scene.mesh.model, StressCells::All)
+            }
+        };
         let mut line = s.n.to_string();
         put_number(&mut line, s.t);
         for v in self.forces(&s.z, &forces) {
