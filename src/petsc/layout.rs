@@ -183,8 +183,8 @@ impl Layout {
     }
 
     /// Rank `rank`'s rows of the symmetric `matrix` in the rows' order, as CSR (its CSC)
-    /// with the n + 1 row pointers of the whole and the other ranks' rows empty: what the
-    /// shim keeps of it. On one rank the matrix's own arrays, its values not copied. A
+    /// with the row pointers of those rows alone (m + 1, from 0): what the shim keeps of it.
+    /// On one rank the matrix's own arrays, its values not copied. A
     /// matrix with fewer columns than rows holds the rank's own columns alone, in the
     /// unknowns' order (`Discretization::own`).
     pub fn rows_of<'a>(&self, matrix: &'a Sparse, rank: usize) -> Result<Csr<'a>> {
@@ -212,8 +212,8 @@ impl Layout {
         };
         let entries: usize = own().map(|i| ptr[column(i) + 1] - ptr[column(i)]).sum();
         let (mut cols, mut vals) = (Vec::with_capacity(entries), Vec::with_capacity(entries));
-        let mut rowptr = Vec::with_capacity(row.len() + 1);
-        rowptr.resize(self.blocks[rank] + 1, 0);
+        let mut rowptr = Vec::with_capacity(self.blocks[rank + 1] - self.blocks[rank] + 1);
+        rowptr.push(0);
         let mut by_row: Vec<(usize, f64)> = Vec::new();
         for i in own().map(column) {
             by_row.clear();
@@ -225,7 +225,6 @@ impl Layout {
             }
             rowptr.push(petsc_int(cols.len())?);
         }
-        rowptr.resize(row.len() + 1, petsc_int(cols.len())?);
         Ok(Csr {
             rowptr,
             cols,

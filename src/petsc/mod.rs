@@ -362,9 +362,9 @@ impl Krylov {
         let options = CString::new(settings.options.as_str())
             .map_err(|_| Error::input("[solver.petsc] options: a NUL character"))?;
         let mut ctx = std::ptr::null_mut();
-        // SAFETY: the arrays hold n + 1, nnz, nnz, size + 1 and nvec times this rank's
-        // count of rows values as the shim reads them (nnz this rank's entries, on several
-        // ranks); PETSc copies them, and on several ranks for the Newton systems the shim
+        // SAFETY: the arrays hold m + 1, nnz, nnz, size + 1 and nvec times m values as the
+        // shim reads them (m this rank's count of rows, n on one rank; nnz its entries);
+        // PETSc copies them, and on several ranks for the Newton systems the shim
         // reads cols and vals until the KSP is destroyed: the Krylov keeps them (`_rows`),
         // their buffers never moved.
         let code = unsafe {

@@ -148,8 +148,8 @@ static PetscErrorCode constrained_setup(VcKsp *s);
 static PetscErrorCode check_blocks(VcKsp *s);
 
 /* K_A on the ranks: on one, a SEQAIJ of the whole CSR (what the Newton systems update in
- * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) of a
- * CSR with the whole's row pointers (the other ranks' rows may be empty), rank r the rows
+ * place); on several, an MPIAIJ of which each rank gives its own rows [lo, lo + m) as a
+ * CSR of those rows alone (m + 1 row pointers from 0), rank r the rows
  * blocks[r] … blocks[r + 1] − 1 (whole nodes: the Newton matrix's frames and slip
  * stiffness act on a node's own rows), with each rank's share recorded. */
 static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *rowptr,
@@ -171,7 +171,6 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
     s->m = n;
     PetscFunctionReturn(0);
   }
-  PetscInt *local;
   PetscBool chosen;
   /* GAMG's Galerkin products add other ranks' contributions in the order their messages
    * arrive with PETSc's default algorithm: on 3 ranks and more (two have one message each
@@ -189,30 +188,26 @@ static PetscErrorCode distributed_matrix(VcKsp *s, PetscInt n, const PetscInt *r
   }
   s->lo = s->displ[rank];
   s->m = s->count[rank];
-  PetscCall(PetscMalloc1(s->m + 1, &local));
-  for (PetscInt i = 0; i <= s->m; i++) local[i] = rowptr[s->lo + i] - rowptr[s->lo];
   PetscCall(MatCreate(PETSC_COMM_WORLD, &s->A));
   PetscCall(MatSetSizes(s->A, s->m, s->m, n, n));
   PetscCall(MatSetType(s->A, MATMPIAIJ));
   if (bs > 1) PetscCall(MatSetBlockSize(s->A, bs));
-  PetscCall(MatMPIAIJSetPreallocationCSR(s->A, local, cols + rowptr[s->lo], vals + rowptr[s->lo]));
-  PetscCall(PetscFree(local));
+  PetscCall(MatMPIAIJSetPreallocationCSR(s->A, rowptr, cols, vals));
   PetscFunctionReturn(0);
 }
 
 /* On several ranks, this rank's rows of K (columns in order) that the Newton systems are
- * made from (newton_matrix) and vc_mult multiplies by: the caller's arrays, read in place,
- * with row offsets from 0 and each row's count of columns left of the rank's own. */
+ * made from (newton_matrix) and vc_mult multiplies by: the caller's arrays, read in place
+ * (their row pointers, from 0, copied), with each row's count of columns left of the
+ * rank's own. */
 static PetscErrorCode local_rows(VcKsp *s, const PetscInt *rowptr, const PetscInt *cols,
                                  const PetscScalar *vals)
 {
-  PetscInt base = rowptr[s->lo];
-
   PetscFunctionBeginUser;
   PetscCall(PetscMalloc2(s->m + 1, &s->kai, s->m, &s->below));
-  for (PetscInt i = 0; i <= s->m; i++) s->kai[i] = rowptr[s->lo + i] - base;
-  s->kaj = cols + base;
-  s->kav = vals + base;
+  for (PetscInt i = 0; i <= s->m; i++) s->kai[i] = rowptr[i];
+  s->kaj = cols;
+  s->kav = vals;
   for (PetscInt r = 0; r < s->m; r++) {
     PetscInt x = s->kai[r];
     while (x < s->kai[r + 1] && s->kaj[x] < s->lo) x++;
