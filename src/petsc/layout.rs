@@ -184,9 +184,9 @@ impl Layout {
 
     /// Rank `rank`'s rows of the symmetric `matrix` in the rows' order, as CSR (its CSC)
     /// with the row pointers of those rows alone (m + 1, from 0): what the shim keeps of it.
-    /// On one rank the matrix's own arrays, its values not copied. A
-    /// matrix with fewer columns than rows holds the rank's own columns alone, in the
-    /// unknowns' order (`Discretization::own`).
+    /// On one rank the matrix's own arrays, its values not copied. A matrix with fewer
+    /// columns than rows holds the rank's own columns alone, in the unknowns' order
+    /// (`Discretization::own`).
     pub fn rows_of<'a>(&self, matrix: &'a Sparse, rank: usize) -> Result<Csr<'a>> {
         let m = matrix.as_ref();
         let (ptr, idx, val) = (m.symbolic().col_ptr(), m.symbolic().row_idx(), m.val());
