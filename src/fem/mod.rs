@@ -146,7 +146,7 @@ pub struct Discretization {
     pub idle_groups: Vec<Gamma3>,
     /// On one of several MPI ranks, the unknowns whose columns of K_A, K_B and K_R this rank
     /// keeps whole ([`Discretization::keep_columns`]), in increasing order: the matrices'
-    /// columns are then these alone, column k the unknown own[k] (`own_columns`); None:
+    /// columns are then these alone, column k the unknown `own[k]` (`own_columns`); None:
     /// every column (one process).
     pub own: Option<Vec<usize>>,
     /// On one of several MPI ranks, K_B and K_R^(0) as the rank's rows of both, paired
@@ -821,7 +821,7 @@ impl Discretization {
     }
 
     /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) alone, as
-    /// their only columns (column k the unknown own[k]: no rank holds a column start of
+    /// their only columns (column k the unknown `own[k]`: no rank holds a column start of
     /// the whole problem, 8 bytes a dof a matrix): a rank of several, which holds those
     /// unknowns' rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric matrix's column is its row, so each rank computes its
     /// own entries of a product ([`mul_add_rows`]) and the ranks gather the rest; so too
@@ -1348,9 +1348,9 @@ fn entries_kept(a: &Sparse, size: (usize, usize), keep: impl Fn(usize, usize) ->
 }
 
 /// The matrix of `a`'s rows and its columns `own` (increasing) alone, column k its
-/// column own[k] (a rank's own columns: [`Discretization::own`]), with a's entries (i, j)
+/// column `own[k]` (a rank's own columns: [`Discretization::own`]), with a's entries (i, j)
 /// where `keep(i, j)`, in their order. Column k of `a` is read where `a` has as many
-/// columns as `own` (its own columns already), column own[k] otherwise.
+/// columns as `own` (its own columns already), column `own[k]` otherwise.
 fn own_columns(a: &Sparse, own: &[usize], keep: impl Fn(usize, usize) -> bool) -> Sparse {
     let compact = a.ncols() == own.len();
     let column = |k: usize| if compact { k } else { own[k] };
@@ -1375,7 +1375,7 @@ fn own_columns(a: &Sparse, own: &[usize], keep: impl Fn(usize, usize) -> bool) -
 }
 
 /// `a`, whose columns other than `own` (increasing) have no entry, as its columns `own`
-/// alone, column k its column own[k]: its entries kept where they lie, its n + 1 column
+/// alone, column k its column `own[k]`: its entries kept where they lie, its n + 1 column
 /// starts replaced by own.len() + 1 (8 bytes a dof of the whole problem, on every rank).
 fn columns_compacted(a: Sparse, own: &[usize]) -> Sparse {
     let (symbolic, val) = a.into_parts();
@@ -1419,7 +1419,7 @@ fn entries_placed(
 }
 
 /// y_i += α (A x)_i for the unknowns i in `own`, whose columns the symmetric `a` keeps
-/// whole and alone, column k the unknown own[k] (`Discretization::keep_columns`): its row.
+/// whole and alone, column k the unknown `own[k]` (`Discretization::keep_columns`): its row.
 pub fn mul_add_rows(a: &Sparse, own: &[usize], x: &[f64], alpha: f64, y: &mut [f64]) {
     let a = a.as_ref();
     let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
