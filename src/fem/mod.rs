@@ -823,11 +823,12 @@ impl Discretization {
     /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) alone, as
     /// their only columns (column k the unknown `own[k]`: no rank holds a column start of
     /// the whole problem, 8 bytes a dof a matrix): a rank of several, which holds those
-    /// unknowns' rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric matrix's column is its row, so each rank computes its
-    /// own entries of a product ([`mul_add_rows`]) and the ranks gather the rest; so too
-    /// the step matrix's diagonal at Γ3's unknowns, which the active set's ρ reads
-    /// (`effects::step_solver`). Where K_A has a block on prescribed dofs (`k_a_all`),
-    /// which moves their velocities to every row's right side, the matrices stay whole.
+    /// unknowns' rows in PETSc (`petsc::Layout`), needs no more of them. A symmetric
+    /// matrix's column is its row, so each rank computes its own entries of a product
+    /// ([`mul_add_rows`]) and the ranks gather the rest; so too the step matrix's diagonal
+    /// at Γ3's unknowns, which the active set's ρ reads (`effects::step_solver`). Where K_A
+    /// has a block on prescribed dofs (`k_a_all`), which moves their velocities to every
+    /// row's right side, the matrices stay whole.
     pub fn keep_columns(&mut self, own: Vec<usize>) {
         if self.k_a_all.is_some() {
             return;
