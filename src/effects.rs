@@ -177,9 +177,11 @@ pub fn warnings(scene: &Scene, disc: &Discretization, solver: &Descriptor) -> Ve
 /// resolved): the dense dual, a dual without D or clarabel on the stored factor, or the
 /// active-set solver on PETSc. `matrix` is the step matrix (K_A, or K_A + k K_B + k² r(0)
 /// K_R for the implicit variant) that `backend` holds, as `solver.build()` says, over
-/// `disc`'s columns (a rank's own alone on several: `Discretization::own`).
+/// `disc`'s columns (a rank's own alone on several: `Discretization::own`); `rows` and
+/// the step's vectors are held at the dofs `held` alone where given (a follower's,
+/// `time_loop`).
 pub fn step_solver(
-    (effects, disc): (&Effects, &Discretization),
+    (effects, disc, held): (&Effects, &Discretization, Option<&[usize]>),
     solver: &Descriptor,
     matrix: &Sparse,
     backend: &Backend,
@@ -205,7 +207,7 @@ pub fn step_solver(
         Contact::ActiveSet => {
             // On one of several MPI ranks, `matrix` holds the diagonal of its own rows alone:
             // Γ3's others come from the ranks that hold them (collective on several).
-            let mut diagonal = disc.diagonal_of(matrix);
+            let mut diagonal = disc.diagonal_of(matrix, held);
             backend.share(&mut diagonal)?;
             let solver = ActiveSetSolver::new(rows, &diagonal, solver.active_set());
             StepSolver::ActiveSet(Box::new(solver))

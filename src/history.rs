@@ -419,7 +419,7 @@ pub enum Holds {
     Memory(Vec<usize>),
     /// u_n, its compensated sum and the memory at these dofs alone, in their order: a
     /// follower whose rows of K_B and K_R number their columns over them
-    /// (`Discretization::number_rows_over`). The velocity w_n stays whole.
+    /// (`Discretization::number_rows_over`).
     Local(Vec<usize>),
 }
 
@@ -440,8 +440,8 @@ impl Holds {
         }
     }
 
-    /// The dofs of the whole w_n at which u_n's values lie, where u_n does not hold all.
-    pub fn u_in_whole(&self) -> Option<&[usize]> {
+    /// The dofs at which u_n is held, where not at every one.
+    pub fn local(&self) -> Option<&[usize]> {
         match self {
             Holds::Local(dofs) => Some(dofs),
             Holds::Every | Holds::Memory(_) => None,
@@ -459,7 +459,7 @@ impl History {
     /// [`History::new`] holding the dofs `holds` says.
     pub fn holding(n_free: usize, k: f64, plans: &Plans, holds: Holds) -> Self {
         let n_kept = holds.dofs().map_or(n_free, <[usize]>::len);
-        let n_u = holds.u_in_whole().map_or(n_free, <[usize]>::len);
+        let n_u = holds.local().map_or(n_free, <[usize]>::len);
         let terms: Vec<PronyTerm> = (0..plans.groups())
             .flat_map(|g| {
                 plans
@@ -577,7 +577,7 @@ impl History {
         }
         self.k = saved.k;
         self.n = saved.n;
-        let held = |v: Vec<f64>| match self.holds.u_in_whole() {
+        let held = |v: Vec<f64>| match self.holds.local() {
             None => v,
             dofs => at(dofs, &v),
         };
@@ -587,9 +587,10 @@ impl History {
         Ok(())
     }
 
-    /// n → n + 1 with the velocity w_n (whole): u_{n+1} = u_n + k w_n, and the memory
-    /// update.
-    pub fn advance(&mut self, w: &[f64]) {
+    /// n → n + 1 with the velocity w_n, held at the dofs `held` alone where given
+    /// (increasing, among which u_n's are: a follower's, `time_loop`), else whole:
+    /// u_{n+1} = u_n + k w_n, and the memory update.
+    pub fn advance(&mut self, w: &[f64], held: Option<&[usize]>) {
         let k = self.k;
         // The memory of step n + 1 uses u_n, so update it before u.
         match &mut self.memory {
@@ -610,12 +611,25 @@ impl History {
             Memory::Direct { past, .. } => past.push(at(self.holds.memory_in_u(), &self.u)),
         }
         let u = (&mut self.u[..], &mut self.u_sum[..], &mut self.u_comp[..]);
-        match self.holds.u_in_whole() {
+        match self.holds.local() {
             None => add_compensated(k, u, w.iter().copied()),
-            Some(dofs) => add_compensated(k, u, dofs.iter().map(|&i| w[i])),
+            Some(dofs) => add_compensated(k, u, places(dofs, held).map(|p| w[p])),
         }
         self.n += 1;
     }
+}
+
+/// The places of the dofs `dofs` (increasing) in a vector held at the dofs `held` alone
+/// (increasing, among which they are), or in a whole one: one walk along both.
+fn places<'a>(dofs: &'a [usize], held: Option<&'a [usize]>) -> impl Iterator<Item = usize> + 'a {
+    let mut at = 0;
+    dofs.iter().map(move |&i| match held {
+        None => i,
+        Some(held) => {
+            at += held[at..].partition_point(|&d| d < i);
+            at
+        }
+    })
 }
 
 /// (sum, comp) += k w and u = sum + comp, entry by entry, by Neumaier's compensated sum:
@@ -694,7 +708,7 @@ mod tests {
             assert!(h0.memory_into(None, &mut m0) && h1.memory_into(None, &mut m1));
             assert_eq!(m, [m0.clone(), m1.clone()].concat(), "n = {n}");
             for h in [&mut h, &mut h0, &mut h1] {
-                h.advance(&w);
+                h.advance(&w, None);
             }
         }
         assert!(m[2..].iter().all(|&x| x != 0.0) && m[..2] != m[2..]);
@@ -725,8 +739,8 @@ mod tests {
                     "n={n} {mp:?} {md:?}"
                 );
             }
-            hp.advance(&w);
-            hd.advance(&w);
+            hp.advance(&w, None);
+            hd.advance(&w, None);
         }
     }
 
@@ -764,7 +778,7 @@ mod tests {
         for plans in [two, exact] {
             let groups = plans.groups();
             for holds in [Holds::Memory(dofs.clone()), Holds::Local(dofs.clone())] {
-                let local = holds.u_in_whole().is_some();
+                let local = holds.local().is_some();
                 let mut whole = History::new(4, k, &plans);
                 let mut part = History::holding(4, k, &plans, holds.clone());
                 let mut m = vec![0.0; 4 * groups];
@@ -795,8 +809,11 @@ mod tests {
                     assert_eq!(bits(&mp), bits(&expected_m), "n = {n}, {holds:?}");
                     assert_eq!(bits(&part.u), bits(&expected_u), "n = {n}, {holds:?}");
                     let w = [(n as f64 * 0.3).cos(), 1.0, -0.5 * n as f64, 0.25];
-                    whole.advance(&w);
-                    part.advance(&w);
+                    whole.advance(&w, None);
+                    // A follower's w_n is held at its u_n's dofs, and maybe others' too.
+                    let held: &[usize] = if n % 2 == 0 { &dofs } else { &[0, 1, 2, 3] };
+                    let w_held: Vec<f64> = held.iter().map(|&i| w[i]).collect();
+                    part.advance(if local { &w_held } else { &w }, local.then_some(held));
                 }
                 assert!(m.iter().all(|&x| x != 0.0));
             }
@@ -810,7 +827,7 @@ mod tests {
         let mut h = History::new(1, k, &alone(Plan::None));
         let mut plain = 0.0f64;
         for _ in 0..n {
-            h.advance(&[1.0]);
+            h.advance(&[1.0], None);
             plain += k;
         }
         let exact = 10_000.0;

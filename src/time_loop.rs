@@ -28,6 +28,8 @@
 //! amplification 2θ/(2θ + kE) ∈ (0, 1]: unconditionally stable, and for θ → 0 it gives the
 //! elastic response ε_{n+1} = f/E.
 
+use std::borrow::Cow;
+
 use crate::effects::{self, Effects};
 use crate::fem::{
     constraints, leading_block, mul_add, mul_add_rows, Discretization, RowsPair, Sparse,
@@ -55,9 +57,8 @@ pub struct TimeLoop<'p> {
     plans: Plans,
     /// w_n of the last solved step, and its unknowns kept while a step that can be given up
     /// is solved into w (a solver may leave an iterate there). On one of several MPI ranks
-    /// whose history holds some dofs alone (`Holds::Local`), w_n is exact at those, at the
-    /// rank's own rows and their neighbours' and at Γ3's alone (`petsc::Reads`): nothing
-    /// reads the others; it keeps its own rows alone, the others coming back from the
+    /// whose history holds some dofs alone (`Holds::Local`), w_n and b_n are held at the
+    /// dofs `held` alone; it keeps its own rows alone, the others coming back from the
     /// ranks that hold them (`Backend::keep`).
     w: Vec<f64>,
     w_start: Vec<f64>,
@@ -79,6 +80,15 @@ pub struct TimeLoop<'p> {
     /// On one of several MPI ranks, its rows of K_B and K_R^(0) where it makes them after
     /// PETSc's setup (`Discretization::own_pair_made`); else `disc.own_pair`'s are read.
     own_pair: Option<RowsPair>,
+    /// On a follower rank whose history holds some dofs alone (`Holds::Local`), the dofs
+    /// at which w_n and b_n are held, increasing (`held_at`): the history's, its own rows
+    /// and Γ3's unknowns. `rows` numbers Γ3's dofs by their places there (`fem::place`),
+    /// and PETSc reads and writes the solution there (`petsc::Reads::held`).
+    held: Option<Vec<usize>>,
+    /// On one of several MPI ranks, the places of its own rows (`Discretization::own`) in
+    /// w and b, and g_F's dofs' there (all of `disc.g_f`'s elsewhere).
+    own: Option<Cow<'p, [usize]>>,
+    g_f: Cow<'p, [(usize, f64)]>,
     /// The step matrix on all n_dofs when there are prescribed dofs: its free-by-prescribed
     /// block moves their velocities to the right side (`fem::constraints`).
     lift: Option<Sparse>,
@@ -152,15 +162,18 @@ pub struct Step<'a> {
     pub t: f64,
     /// u_n, at the dofs `local` where there are some (else every dof).
     pub u: &'a [f64],
-    /// w_n, exact where the loop's w is (on a follower rank, not everywhere), and
-    /// max|w_n| over every dof.
+    /// w_n, at the dofs `held` where there are some (else every dof), exact where the
+    /// loop's w is (on a follower rank, not everywhere), and max|w_n| over every dof.
     pub w: &'a [f64],
     pub w_max: f64,
     /// m_n of each memory group after the other's, at u_n's dofs.
     pub m: Option<&'a [f64]>,
-    /// On a follower rank whose history holds some dofs alone (`Holds::Local`), those.
+    /// On a follower rank whose history holds some dofs alone (`Holds::Local`), those,
+    /// and the dofs at which w_n and `rows` are held (`TimeLoop::held`).
     pub local: Option<&'a [usize]>,
+    pub held: Option<&'a [usize]>,
     pub z: &'a [f64],
+    /// The rows of Γ3, on w's places (`Rows::placed` where `local` is given).
     pub rows: &'a Rows,
     pub report: StepReport,
 }
@@ -244,6 +257,8 @@ impl<'p> TimeLoop<'p> {
         let holds = own.as_mut().map(|own| std::mem::take(&mut own.holds));
         let effects = Effects::new(scene, disc);
         let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
+        let local = holds.as_ref().and_then(Holds::local);
+        let held = local.map(|local| held_at(local, &rows, disc.own.as_deref()));
         let implicit = match scene.solver.history {
             scene::History::Left => None,
             scene::History::Implicit => {
@@ -261,20 +276,29 @@ impl<'p> TimeLoop<'p> {
         // where the contact solver works on its trailing block, or handed to PETSc.
         let backend = match descriptor.build() {
             Build::Krylov { newton } => {
-                let reads = (&rows, holds.as_ref());
+                let reads = (&rows, held.as_deref());
                 petsc_backend(scene, (matrix, own), disc, *newton, reads)?
             }
             Build::Factor { last } => Backend::Cholesky(Factor::new(matrix, last)?),
             Build::Nothing => Backend::None,
         };
-        let solver = effects::step_solver((&effects, disc), &descriptor, matrix, &backend, &rows)?;
+        let rows = match &held {
+            Some(held) => rows.placed(held),
+            None => rows,
+        };
+        let solver = effects::step_solver(
+            (&effects, disc, held.as_deref()),
+            &descriptor,
+            matrix,
+            &backend,
+            &rows,
+        )?;
         // After PETSc's setup, where a rank of several peaks: its rows of K_B and K_R^(0).
-        let own_pair = disc.own_pair_made(match &holds {
-            Some(Holds::Local(dofs)) => Some(dofs),
-            _ => None,
-        });
-        let n = disc.n_dofs;
-        let history = History::holding(n, scene.time.k(), &plans, holds.unwrap_or_default());
+        let own_pair = disc.own_pair_made(local);
+        let (own, g_f) = own_placed(disc, held.as_deref());
+        let n = held.as_ref().map_or(disc.n_dofs, Vec::len);
+        let holds = holds.unwrap_or_default();
+        let history = History::holding(disc.n_dofs, scene.time.k(), &plans, holds);
         let paired = disc
             .k_b
             .as_ref()
@@ -305,6 +329,9 @@ impl<'p> TimeLoop<'p> {
             growth: Growth::default(),
             paired,
             own_pair,
+            held,
+            own,
+            g_f,
             lift,
             abandon: None,
             can_stop: false,
@@ -362,7 +389,10 @@ impl<'p> TimeLoop<'p> {
     /// are checked here.
     pub fn restore(&mut self, saved: SavedLoop) -> Result<()> {
         self.history.restore(saved.history)?;
-        self.w = saved.w;
+        self.w = match &self.held {
+            Some(held) => held.iter().map(|&i| saved.w[i]).collect(),
+            None => saved.w,
+        };
         self.z = saved.z;
         self.z_before = saved.z_before;
         Ok(())
@@ -478,7 +508,7 @@ impl<'p> TimeLoop<'p> {
         let armed = (self.abandon.as_ref())
             .filter(|_| self.can_stop)
             .map(Abandon::arm);
-        let nf = self.disc.n_free;
+        let nf = self.unknowns();
         if armed.is_some() {
             self.backend.keep(&self.w[..nf], &mut self.w_start);
         }
@@ -523,7 +553,8 @@ impl<'p> TimeLoop<'p> {
             } else {
                 Some(&self.m)
             },
-            local: h.holds.u_in_whole(),
+            local: h.holds.local(),
+            held: self.held.as_deref(),
             z: &self.z,
             rows: &self.rows,
             report,
@@ -549,7 +580,7 @@ impl<'p> TimeLoop<'p> {
             t,
             (&self.disc.free, &self.disc.frames),
             self.scene,
-            &mut self.b,
+            (&mut self.b, self.held.as_deref()),
         );
         let load_max = self.load_max(added, t)?;
         let h = &mut self.history;
@@ -559,7 +590,8 @@ impl<'p> TimeLoop<'p> {
         let mut groups = (self.disc.k_r.iter()).zip(self.m.chunks_exact(n.max(1)));
         // A rank of several holds its own columns (`Discretization::keep_columns`): its
         // rows of the products, gathered below.
-        let product = |k: &Sparse, x: &[f64], b: &mut [f64]| match &disc.own {
+        let own = self.own.as_deref();
+        let product = |k: &Sparse, x: &[f64], b: &mut [f64]| match own {
             Some(own) => mul_add_rows(k, own, x, -1.0, b),
             None => mul_add(k, x, -1.0, b),
         };
@@ -570,7 +602,7 @@ impl<'p> TimeLoop<'p> {
                 pair.mul_add(&h.u, m0, -1.0, &mut self.b)
             }
             (_, Some(rows), _) => {
-                let own = disc.own.as_deref().unwrap_or_default();
+                let own = own.unwrap_or_default();
                 let m0 = groups.next().map(|(_, m0)| m0);
                 rows.mul_add(own, &h.u, m0, -1.0, &mut self.b)
             }
@@ -580,7 +612,7 @@ impl<'p> TimeLoop<'p> {
         for (k_r, m) in groups {
             product(k_r, m, &mut self.b);
         }
-        for &(i, g) in &self.disc.g_f {
+        for &(i, g) in self.g_f.iter() {
             self.b[i] -= g;
         }
         if let Some(lift) = &self.lift {
@@ -597,10 +629,9 @@ impl<'p> TimeLoop<'p> {
     /// bits), and a load that is not finite fails the step on every rank, rank 0 (which
     /// sees every value) saying where, the others quietly.
     fn load_max(&mut self, added: Result<()>, t: f64) -> Result<f64> {
-        let disc = self.disc;
-        let Some(own) = &disc.own else {
+        let Some(own) = &self.own else {
             added?;
-            return Ok(less_g_f(&mut self.b, &disc.g_f, max_abs));
+            return Ok(less_g_f(&mut self.b, &self.g_f, max_abs));
         };
         let failed = self.backend.largest(f64::from(u8::from(added.is_err())))?;
         if failed > 0.0 {
@@ -616,7 +647,7 @@ impl<'p> TimeLoop<'p> {
                 ))
             }));
         }
-        let mine = less_g_f(&mut self.b, &disc.g_f, |b| max_abs_at(b, own));
+        let mine = less_g_f(&mut self.b, &self.g_f, |b| max_abs_at(b, own));
         self.backend.largest(mine)
     }
 
@@ -663,12 +694,12 @@ impl<'p> TimeLoop<'p> {
     /// prescribed dofs' (which every rank holds): w_n is exact there, not everywhere on a
     /// follower; as `u_max` says.
     fn w_max(&self) -> Result<f64> {
-        let Some(own) = &self.disc.own else {
+        let Some(own) = &self.own else {
             return Ok(max_abs(&self.w));
         };
         let (own_max, prescribed) = (
             max_abs_at(&self.w, own),
-            max_abs(&self.w[self.disc.n_free..]),
+            max_abs(&self.w[self.unknowns()..]),
         );
         self.largest(match own_max.is_nan() || prescribed.is_nan() {
             true => f64::NAN,
@@ -688,10 +719,52 @@ impl<'p> TimeLoop<'p> {
         Ok(if mine.is_nan() { mine } else { all })
     }
 
+    /// The count of unknowns among w's values: n_free, or on a follower that holds some
+    /// dofs alone (`held`: no prescribed dofs), every value w holds.
+    fn unknowns(&self) -> usize {
+        match self.held {
+            Some(_) => self.w.len(),
+            None => self.disc.n_free,
+        }
+    }
+
     /// n → n + 1: u_{n+1} = u_n + k w_n and the memory update.
     fn advance(&mut self) {
-        self.history.advance(&self.w);
+        self.history.advance(&self.w, self.held.as_deref());
     }
+}
+
+/// A rank's own rows (`Discretization::own`) and g_F's terms, at their places in vectors
+/// held at the dofs `held` alone where given (`fem::place`); g_F's terms at other dofs
+/// are dropped: they are others' rows, whose b_n comes from those ranks. Borrowed where
+/// the vectors are whole (rank 0 and one process: no copy).
+fn own_placed<'a>(disc: &'a Discretization, held: Option<&[usize]>) -> OwnPlaced<'a> {
+    let own = disc.own.as_deref();
+    let Some(held) = held else {
+        return (own.map(Cow::Borrowed), Cow::Borrowed(&disc.g_f));
+    };
+    let placed = |i: usize| crate::fem::place(Some(held), i);
+    let own = own.map(|own| own.iter().map(|&i| placed(i)).collect());
+    let g_f = (disc.g_f.iter())
+        .filter_map(|&(i, g)| Some((held.binary_search(&i).ok()?, g)))
+        .collect();
+    (own, g_f)
+}
+
+/// A rank's own rows and g_F's terms, placed ([`own_placed`]).
+type OwnPlaced<'a> = (Option<Cow<'a, [usize]>>, Cow<'a, [(usize, f64)]>);
+
+/// The dofs at which a follower whose history holds the dofs `local` alone holds w_n and
+/// b_n, increasing: those (which its rows of K_B and K_R and its piece read), its own rows
+/// (which it solves for) and Γ3's unknowns (which every rank's active set reads). Its
+/// history does not hold Γ3's unknowns: measured, that cost more than w_n and b_n of the
+/// whole had (docs/cluster.md, "Memory per rank", 38.).
+fn held_at(local: &[usize], rows: &Rows, own: Option<&[usize]>) -> Vec<usize> {
+    let mut held = rows.dofs();
+    held.extend(local.iter().chain(own.unwrap_or_default()));
+    held.sort_unstable();
+    held.dedup();
+    held
 }
 
 /// The PETSc backend of the step matrix (`Build::Krylov`): its KSP with the scene's options. A
@@ -702,7 +775,7 @@ fn petsc_backend(
     (matrix, own): (&crate::fem::Sparse, Option<Own>),
     disc: &Discretization,
     newton: bool,
-    (rows, holds): (&Rows, Option<&Holds>),
+    (rows, held): (&Rows, Option<&[usize]>),
 ) -> Result<Backend> {
     #[cfg(feature = "petsc")]
     {
@@ -712,17 +785,17 @@ fn petsc_backend(
             newton,
         };
         let own = own.map(|o| (o.layout, o.rows));
-        // What this rank reads of a solution besides its own rows: Γ3's unknowns, and
-        // where its history holds some dofs alone, those; every one where it holds all.
-        let local = match holds {
-            Some(Holds::Local(dofs)) => dofs.as_slice(),
-            _ => &[],
+        // What this rank reads of a solution besides its own rows: where it holds its
+        // vectors at some dofs alone, those (Γ3's among them); else Γ3's unknowns, and
+        // every one once a step is solved.
+        let gamma3 = match held {
+            Some(_) => Vec::new(),
+            None => rows.dofs(),
         };
-        let gamma3 = (rows.rows.iter()).flat_map(|r| r.entries().map(|(d, _)| d));
-        let dofs: Vec<usize> = gamma3.chain(local.iter().copied()).collect();
         let reads = crate::petsc::Reads {
-            dofs: &dofs,
-            whole: !matches!(holds, Some(Holds::Local(_))),
+            dofs: held.unwrap_or(&gamma3),
+            whole: held.is_none(),
+            held: held.is_some(),
         };
         let krylov = crate::petsc::Krylov::new(matrix, own, disc, &settings, reads)?;
         // GAMG's setup freed what its products held meanwhile.
@@ -731,7 +804,7 @@ fn petsc_backend(
     }
     #[cfg(not(feature = "petsc"))]
     {
-        let _ = (matrix, own, disc, newton, rows, holds);
+        let _ = (matrix, own, disc, newton, rows, held);
         Err(crate::Error::input(format!(
             "{}: solver.linear = \"petsc\" needs a build with the petsc feature",
             scene.path.display()

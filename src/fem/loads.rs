@@ -155,7 +155,8 @@ impl Loads {
     }
 
     /// Adds ⟨f(t), φ_d⟩ for every free dof d to `rhs` (`free` its index, `frames` where
-    /// a node's dofs are components in a frame of its own). A value that is not finite
+    /// a node's dofs are components in a frame of its own), held at the dofs `held` alone
+    /// where given (`fem::place`). A value that is not finite
     /// stops the run with the key, the time and the place (bad input at t = 0, a failed run
     /// later).
     pub fn add(
@@ -163,11 +164,17 @@ impl Loads {
         t: f64,
         (free, frames): (&[DofIndex], &Frames),
         scene: &Scene,
-        rhs: &mut [f64],
+        (rhs, held): (&mut [f64], Option<&[usize]>),
     ) -> Result<()> {
+        // Held at some dofs alone (a follower's b_n: its own rows' loads have their bits),
+        // a term at another dof is dropped: its rank adds it.
+        let at = |d: usize| match held {
+            None => Some(d),
+            Some(held) => held.binary_search(&d).ok(),
+        };
         self.visit(t, scene, |_, dof, v| {
             frames.spread(self.dim, dof, v, |g, v| {
-                if let Some(d) = free[g].get() {
+                if let Some(d) = free[g].get().and_then(at) {
                     rhs[d] += v;
                 }
             })

@@ -790,24 +790,9 @@ impl Discretization {
         terms: (bool, usize),
         own: Option<&[usize]>,
     ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
-        let whole = own.map(|own| {
-            let mut whole = vec![false; self.n_dofs];
-            own.iter().for_each(|&i| whole[i] = true);
-            whole
-        });
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
         let (materials, r) = (&self.materials, self.r);
-        let held = whole.as_deref();
-        let (k_a, k_b, k_r) = assemble(cells, self.dim, dofs, (materials, r), terms, held);
-        let Some(own) = own else {
-            return (k_a, k_b, k_r);
-        };
-        let compact = |a: Sparse| columns_compacted(a, own);
-        (
-            compact(k_a),
-            k_b.map(compact),
-            k_r.into_iter().map(compact).collect(),
-        )
+        assemble(cells, self.dim, dofs, (materials, r), terms, own)
     }
 
     /// The unknowns at which the active set reads the step matrix's diagonal (its ρ): those
@@ -921,16 +906,12 @@ impl Discretization {
             dim: self.dim,
         };
         let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
-        let mut whole = vec![false; self.n_dofs];
         let mut pair = RowsPair::with_capacity(own.len(), cells.entries);
         for piece in own.chunks(own.len().div_ceil(PAIR_PIECES).max(1)) {
-            piece.iter().for_each(|&i| whole[i] = true);
             let materials = (&cells.materials, self.r);
-            let (_, k_b, k_r) =
-                assemble(source, self.dim, dofs, materials, (true, 1), Some(&whole));
-            let columns = piece.iter().copied();
+            let (_, k_b, k_r) = assemble(source, self.dim, dofs, materials, (true, 1), Some(piece));
+            let columns = 0..piece.len();
             pair.extend(&RowsPair::new(k_b.as_ref()?, k_r.first()?, columns)?);
-            piece.iter().for_each(|&i| whole[i] = false);
         }
         if let Some(local) = local {
             pair.number_columns(|i| local.binary_search(&i).expect("a column in the reach"));
@@ -1062,19 +1043,20 @@ impl Discretization {
     }
 
     /// The diagonal of `a`, the step matrix or K_A: its columns, placed at their unknowns
-    /// where they are a rank's own alone ([`Discretization::own`]; 0 at the others).
-    pub fn diagonal_of(&self, a: &Sparse) -> Vec<f64> {
+    /// where they are a rank's own alone ([`Discretization::own`]; 0 at the others), in a
+    /// vector held at the dofs `held` alone where given ([`place`]).
+    pub fn diagonal_of(&self, a: &Sparse, held: Option<&[usize]>) -> Vec<f64> {
         let Some(own) = self.own.as_deref() else {
             return diagonal(a);
         };
-        let mut whole = vec![0.0; a.nrows()];
+        let mut out = vec![0.0; held.map_or(a.nrows(), <[usize]>::len)];
         let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
         for (k, &j) in own.iter().enumerate() {
             if let Some(p) = (cp[k]..cp[k + 1]).find(|&p| ri[p] == j) {
-                whole[j] = v[p];
+                out[place(held, j)] = v[p];
             }
         }
-        whole
+        out
     }
 
     /// Expands a free-dof vector to 3-component nodal vectors (0 on Γ1; z = 0 in 2D).
@@ -1101,12 +1083,13 @@ impl Discretization {
     /// this on the frame writer's thread, beside the time loop). A and B are the cell's own:
     /// the nodal p, q are made once per distinct material, and a cell reads its material's.
     /// `m` holds the memory of every memory group, group g's after the others' before (the
-    /// cell's material names its group, `Stiffness::memory`). Where `held` is given, u and
-    /// each group's m hold their values at those dofs alone (`place`); w is whole.
+    /// cell's material names its group, `Stiffness::memory`). `held` gives the dofs at
+    /// which w, and u and each group's m, hold their values alone where they do not hold
+    /// every one (`place`: a follower rank's, `time_loop::Step`).
     pub fn stress(
         &self,
         [w, u]: [&[f64]; 2],
-        (m, held): (Option<&[f64]>, Option<&[usize]>),
+        (m, held): (Option<&[f64]>, [Option<&[usize]>; 2]),
         model: Model,
         cells: StressCells,
     ) -> (Vec<f64>, Vec<f64>) {
@@ -1129,7 +1112,7 @@ impl Discretization {
     pub fn max_von_mises(
         &self,
         [w, u]: [&[f64]; 2],
-        m: (Option<&[f64]>, Option<&[usize]>),
+        m: (Option<&[f64]>, [Option<&[usize]>; 2]),
         model: Model,
         cells: StressCells,
     ) -> f64 {
@@ -1143,7 +1126,7 @@ impl Discretization {
     fn each_stress(
         &self,
         wu: [&[f64]; 2],
-        m: (Option<&[f64]>, Option<&[usize]>),
+        m: (Option<&[f64]>, [Option<&[usize]>; 2]),
         (model, only): (Model, StressCells),
         sink: impl FnMut([f64; 6], f64),
     ) {
@@ -1162,7 +1145,7 @@ impl Discretization {
     fn stresses<const D: usize, const N: usize>(
         &self,
         [w, u]: [&[f64]; 2],
-        (m, held): (Option<&[f64]>, Option<&[usize]>),
+        (m, [w_held, held]): (Option<&[f64]>, [Option<&[usize]>; 2]),
         (plane_stress, only): (bool, StressCells),
         mut sink: impl FnMut([f64; 6], f64),
     ) {
@@ -1180,7 +1163,7 @@ impl Discretization {
                     if let Some(dof) = dof.get() {
                         let at = place(held, dof);
                         let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + at]);
-                        let (w, u) = (w[dof], u[at]);
+                        let (w, u) = (w[place(w_held, dof)], u[at]);
                         pq[0][c] = a.a * w + b.a * u + r.a * m;
                         pq[1][c] = a.b * w + b.b * u + r.b * m;
                     }
@@ -1375,22 +1358,6 @@ fn own_columns(a: &Sparse, own: &[usize], keep: impl Fn(usize, usize) -> bool) -
     SparseColMat::new(pattern, val)
 }
 
-/// `a`, whose columns other than `own` (increasing) have no entry, as its columns `own`
-/// alone, column k its column `own[k]`: its entries kept where they lie, its n + 1 column
-/// starts replaced by own.len() + 1 (8 bytes a dof of the whole problem, on every rank).
-fn columns_compacted(a: Sparse, own: &[usize]) -> Sparse {
-    let (symbolic, val) = a.into_parts();
-    let (nrows, _, col_ptr, _, row_idx) = symbolic.into_parts();
-    debug_assert_eq!(
-        col_ptr.last(),
-        own.last().map(|&j| &col_ptr[j + 1]).or(Some(&0))
-    );
-    let starts = std::iter::once(0).chain(own.iter().map(|&j| col_ptr[j + 1]));
-    let pattern =
-        SymbolicSparseColMat::new_checked(nrows, own.len(), starts.collect(), None, row_idx);
-    SparseColMat::new(pattern, val)
-}
-
 /// The matrix of `size` (rows, columns) made of `a`'s entries (i, j) where `keep(i, j)`, in
 /// their order, each in row `place(i)` (increasing in i) of column j.
 fn entries_placed(
@@ -1484,11 +1451,11 @@ pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f
 }
 
 /// The place of `dof`'s value in a vector held at the dofs `held` alone (increasing, among
-/// which `dof` is: a follower rank's u_n and m_n, `history::Holds::Local`), or `dof` itself
-/// in a whole vector.
-fn place(held: Option<&[usize]>, dof: usize) -> usize {
+/// which `dof` is: a follower rank's u_n and m_n, `history::Holds::Local`, and its w_n and
+/// b_n, `time_loop`), or `dof` itself in a whole vector.
+pub fn place(held: Option<&[usize]>, dof: usize) -> usize {
     held.map_or(dof, |held| {
-        (held.binary_search(&dof)).expect("a piece's dofs are among those its rank holds")
+        (held.binary_search(&dof)).expect("a rank reads its vectors where it holds them")
     })
 }
 
@@ -1696,20 +1663,31 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 /// the prescribed ones, n in all; rows and columns of dofs held at zero dropped; a node
 /// with a frame in its frame's components, `Cell::parts_in`); the three share one sparsity
 /// pattern ([`pattern`]). The element matrices are added at their positions (found by
-/// bisection in the column): no triplets. Where `whole` is given (a rank of several), the
-/// columns j where `whole[j]` (its own unknowns) alone, from the cells that reach them
-/// alone (those with a node of the rank's own): a rank's setup then makes and visits its
-/// part of the mesh, not the whole. Each entry held sums the same terms in the same order.
+/// bisection in the column): no triplets. Where `own` is given (a rank of several: its own
+/// unknowns, increasing), their columns alone, column k the unknown own[k] (no column start
+/// of the whole problem, 8 bytes a dof a matrix), from the cells that reach them alone
+/// (those with a node of the rank's own): a rank's setup then makes and visits its part of
+/// the mesh, not the whole. Each entry held sums the same terms in the same order.
 fn assemble(
     cells: CellSource,
     d: usize,
     (free, frames, n): (&[DofIndex], &Frames, usize),
     (materials, r): (&CellMaterials, Isotropic),
     (elastic, groups): (bool, usize),
-    whole: Option<&[bool]>,
+    own: Option<&[usize]>,
 ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
-    let holds = |j: usize| whole.is_none_or(|w| w[j]);
-    let (col_ptr, row_idx) = pattern(cells, d, (free, n), whole);
+    let whole = own.map(|own| {
+        let mut whole = vec![false; n];
+        own.iter().for_each(|&i| whole[i] = true);
+        whole
+    });
+    let whole = whole.as_deref();
+    // The column of unknown j, where it has one.
+    let column_of = |j: usize| match own {
+        None => Some(j),
+        Some(own) => (whole.is_some_and(|w| w[j])).then(|| own.partition_point(|&i| i < j)),
+    };
+    let (col_ptr, row_idx) = pattern(cells, d, (free, n), (own, whole));
     let reached = whole.map(|w| {
         let held = |i: &DofIndex| i.get().is_some_and(|i| w[i]);
         free.chunks(d)
@@ -1732,7 +1710,7 @@ fn assemble(
         for (j, &p) in nodes.iter().enumerate() {
             for (i, &q) in nodes.iter().enumerate() {
                 for be in 0..d {
-                    let Some(col) = free[d * p + be].get().filter(|&j| holds(j)) else {
+                    let Some(col) = free[d * p + be].get().and_then(column_of) else {
                         continue;
                     };
                     let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
@@ -1756,7 +1734,8 @@ fn assemble(
     });
     // Each matrix owns its pattern: the last takes this one, so that no spare copy of it
     // stands beside them at the setup's peak.
-    let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+    let columns = col_ptr.len() - 1;
+    let pattern = SymbolicSparseColMat::new_checked(n, columns, col_ptr, None, row_idx);
     let k_b = elastic.then(|| SparseColMat::new(pattern.clone(), vb));
     let k_r = (vr.into_iter())
         .map(|v| SparseColMat::new(pattern.clone(), v))
@@ -1767,14 +1746,15 @@ fn assemble(
 /// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,
 /// built from the cells' vertices: node q couples with node p when a cell holds both. The
 /// column of index j, a component of node p, lists the indices of the components of p's
-/// neighbours q, increasing, where `whole[j]` (or there is none); else nothing. Only the
-/// nodes with a column held list their neighbours (a rank of several: its own nodes, not
-/// the whole mesh's), and the row indices are allocated once, at their exact count.
+/// neighbours q, increasing; of every index j, or of the unknowns `own` alone where given
+/// (`whole[j]` marks them), column k of own[k]. Only the nodes with a column held list
+/// their neighbours (a rank of several: its own nodes, not the whole mesh's), and the row
+/// indices are allocated once, at their exact count.
 fn pattern(
     cells: CellSource,
     d: usize,
     (free, n): (&[DofIndex], usize),
-    whole: Option<&[bool]>,
+    (own, whole): (Option<&[usize]>, Option<&[bool]>),
 ) -> (Vec<usize>, Vec<usize>) {
     let held = |col: usize| whole.is_none_or(|w| w[col]);
     let dofs = |p: usize| free[d * p..d * (p + 1)].iter().filter_map(|i| i.get());
@@ -1791,30 +1771,27 @@ fn pattern(
         list.sort_unstable();
         list.dedup();
     }
-    let mut node_of = vec![0; n];
+    // The node of each column's unknown.
+    let mut node_of = vec![0; own.map_or(n, <[usize]>::len)];
     for (g, i) in free.iter().enumerate() {
-        if let Some(i) = i.get() {
-            node_of[i] = g / d;
+        match (i.get(), own) {
+            (Some(i), None) => node_of[i] = g / d,
+            (Some(i), Some(own)) if held(i) => node_of[own.partition_point(|&j| j < i)] = g / d,
+            _ => {}
         }
     }
-    // Column `col`, of node p, lists p's neighbours' unknowns where it is held.
-    let listed = |col: usize, p: usize| match held(col) {
-        true => neighbours[p].as_slice(),
-        false => &[],
-    };
-    let column_len = |col, p| -> usize {
-        listed(col, p)
-            .iter()
+    // Column k, of node p, lists p's neighbours' unknowns.
+    let column_len = |p: usize| -> usize {
+        (neighbours[p].iter())
             .map(|&q| dofs(q as usize).count())
             .sum()
     };
-    let entries = (node_of.iter().enumerate()).map(|(col, &p)| column_len(col, p));
-    let mut row_idx = Vec::with_capacity(entries.sum());
-    let mut col_ptr = Vec::with_capacity(n + 1);
+    let mut row_idx = Vec::with_capacity(node_of.iter().map(|&p| column_len(p)).sum());
+    let mut col_ptr = Vec::with_capacity(node_of.len() + 1);
     col_ptr.push(0);
-    for (col, &p) in node_of.iter().enumerate() {
+    for &p in &node_of {
         let start = row_idx.len();
-        (listed(col, p).iter()).for_each(|&q| row_idx.extend(dofs(q as usize)));
+        (neighbours[p].iter()).for_each(|&q| row_idx.extend(dofs(q as usize)));
         row_idx[start..].sort_unstable();
         col_ptr.push(row_idx.len());
     }

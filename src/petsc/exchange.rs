@@ -58,6 +58,12 @@ impl Exchange {
         })
     }
 
+    /// The exchange of vectors that hold each unknown at `place(unknown)`, not at its own
+    /// index (a follower's, held at some unknowns alone: `Reads::held`).
+    pub fn place(&mut self, place: impl Fn(u32) -> u32) {
+        (self.send.iter_mut().chain(&mut self.recv)).for_each(|i| *i = place(*i));
+    }
+
     /// v at the unknowns this rank reads ← their values on the ranks that hold their rows,
     /// where v is exact in its own rows (collective).
     pub fn run(&self, v: &mut [f64]) -> Result<()> {

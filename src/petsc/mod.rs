@@ -320,6 +320,9 @@ pub struct Krylov {
     own_x: Vec<f64>,
     /// On several ranks, how this rank's rows of a solution reach the ranks that read them.
     spread: Option<Spread>,
+    /// The unknown at each place of the caller's vectors, where they hold some alone
+    /// (`Reads::held`); else each place is its unknown.
+    held: Option<Vec<u32>>,
     /// How `values_at` collects the values at the dofs it was last asked for (the active
     /// set asks for the same at every product): made once, not at every product.
     at: Option<AtDofs>,
@@ -345,7 +348,11 @@ impl Krylov {
         reads: Reads<'_>,
     ) -> Result<Self> {
         initialize()?;
-        let n = matrix.nrows();
+        // The length of the caller's vectors.
+        let n = match reads.held {
+            true => reads.dofs.len(),
+            false => matrix.nrows(),
+        };
         let (rank, size) = world()?;
         let (layout, rows) = match own {
             Some(own) => own,
@@ -369,7 +376,7 @@ impl Krylov {
         // their buffers never moved.
         let code = unsafe {
             vc_ksp_create(
-                n as PetscInt,
+                matrix.nrows() as PetscInt,
                 csr.rowptr.as_ptr(),
                 csr.cols.as_ptr(),
                 csr.vals.as_ptr(),
@@ -395,6 +402,7 @@ impl Krylov {
             true => Some(Spread::new(&layout, rank, reads)?),
             false => None,
         };
+        let held = (reads.held).then(|| reads.dofs.iter().map(|&d| d as u32).collect());
         Ok(Krylov {
             ctx,
             n,
@@ -407,6 +415,7 @@ impl Krylov {
             own: Vec::new(),
             own_x: Vec::new(),
             spread,
+            held,
             at: None,
             layout,
             _rows: (size > 1 && settings.newton).then(|| csr.into_owned()),
@@ -431,6 +440,11 @@ impl Krylov {
         })
     }
 
+    /// The PETSc row of the caller's place `d` (`held`).
+    fn row(&self, d: usize) -> usize {
+        row_of(&self.layout, self.held.as_deref(), d)
+    }
+
     /// This rank's rows of the right side b but at `dofs`, where it is `values` (`dofs` −1:
     /// none), in PETSc's order: b itself where it is (one rank, nothing at `dofs`), else
     /// `own` filled.
@@ -447,7 +461,8 @@ impl Krylov {
             }
         }
         for (&d, &value) in dofs.iter().zip(values).filter(|(&d, _)| d >= 0) {
-            if let Some(r) = Some(self.layout.row(d as usize)).filter(|r| mine.contains(r)) {
+            let row = self.row(d as usize);
+            if let Some(r) = Some(row).filter(|r| mine.contains(r)) {
                 self.own[r - mine.start] = value;
             }
         }
@@ -504,11 +519,15 @@ impl Krylov {
 /// unknowns `dofs` at every solve (Γ3's, which the active set's decisions read on every
 /// rank, and a follower's history's, which its steps and its piece of a frame read), and
 /// every unknown once a step is solved where `whole` (its history holds every dof: rank 0,
-/// and a follower where K_A is not the step matrix).
+/// and a follower where K_A is not the step matrix). Where `held`, the rank's vectors (a
+/// solve's b and w, a product's x) hold the unknowns `dofs` alone, in their order
+/// (increasing, its own rows among them: a follower's, `time_loop`), and not
+/// every unknown.
 #[derive(Clone, Copy, Debug)]
 pub struct Reads<'a> {
     pub dofs: &'a [usize],
     pub whole: bool,
+    pub held: bool,
 }
 
 /// How a rank's rows of a solution reach the ranks that read them: its rows' unknowns in
@@ -539,7 +558,7 @@ impl Spread {
     /// Made by every rank at once: the exchange is collective.
     fn new(layout: &Layout, rank: usize, reads: Reads) -> Result<Spread> {
         let n = *layout.blocks.last().unwrap_or(&0);
-        let unknowns = layout.unknowns()[layout.blocks[rank]..layout.blocks[rank + 1]].to_vec();
+        let mut unknowns = layout.unknowns()[layout.blocks[rank]..layout.blocks[rank + 1]].to_vec();
         // What this rank reads of each unknown: 0 nothing, 1 at every solve, 2 its own.
         let mut read = vec![0u8; n];
         reads
@@ -550,7 +569,13 @@ impl Spread {
         unknowns.iter().for_each(|&i| read[i as usize] = 2);
         let halo: Vec<u32> = (0..n as u32).filter(|&i| read[i as usize] == 1).collect();
         drop(read);
-        let halo = Exchange::new(layout, halo)?;
+        let mut halo = Exchange::new(layout, halo)?;
+        if reads.held {
+            // The caller's vectors hold `reads.dofs` alone: each unknown at its place there.
+            let place = |i: u32| crate::fem::place(Some(reads.dofs), i as usize) as u32;
+            unknowns.iter_mut().for_each(|i| *i = place(*i));
+            halo.place(place);
+        }
         let whole = match max_over_ranks(i32::from(rank > 0 && reads.whole))? {
             0 => Whole::First,
             _ => Whole::Every,
@@ -599,8 +624,8 @@ struct AtDofs {
 }
 
 impl AtDofs {
-    fn new(layout: &Layout, dofs: &[i32]) -> AtDofs {
-        let row = |k: usize| layout.row(dofs[k] as usize);
+    fn new(layout: &Layout, held: Option<&[u32]>, dofs: &[i32]) -> AtDofs {
+        let row = |k: usize| row_of(layout, held, dofs[k] as usize);
         let mut order: Vec<usize> = (0..dofs.len()).filter(|&k| dofs[k] >= 0).collect();
         order.sort_by_key(|&k| layout.rank_of_row(row(k)));
         let rows: Vec<usize> = order.iter().map(|&k| row(k)).collect();
@@ -705,7 +730,7 @@ impl Krylov {
     /// row: on several ranks each sends its values, in the order of `dofs`, to all.
     fn values_at(&mut self, dofs: &[i32], y: &mut [f64]) -> Result<()> {
         if self.at.as_ref().is_none_or(|at| at.dofs != dofs) {
-            self.at = Some(AtDofs::new(&self.layout, dofs));
+            self.at = Some(AtDofs::new(&self.layout, self.held.as_deref(), dofs));
         }
         let at = self.at.as_ref().expect("made above");
         let mine: Vec<f64> = (at.rows.iter())
@@ -747,11 +772,10 @@ impl Krylov {
         let (np, ns) = (terms.removed_dofs.len() / 3, terms.stiffness_dofs.len() / 3);
         assert!(terms.removed.len() == 3 * np && terms.stiffness.len() == 9 * ns);
         // The terms' dofs as PETSc's rows (−1, none, stays).
-        let layout = &self.layout;
         let rows = |dofs: &[PetscInt]| -> Vec<PetscInt> {
             let row = |&d: &PetscInt| match d {
                 d if d < 0 => d,
-                d => layout.row(d as usize) as PetscInt,
+                d => self.row(d as usize) as PetscInt,
             };
             dofs.iter().map(row).collect()
         };
@@ -911,6 +935,12 @@ impl Drop for Krylov {
             crate::errln!("warning: destroying the KSP: {}", message(code));
         }
     }
+}
+
+/// The PETSc row of place `d` of a vector held at the unknowns `held` alone where given
+/// (`Reads::held`), else of the whole.
+fn row_of(layout: &Layout, held: Option<&[u32]>, d: usize) -> usize {
+    layout.row(held.map_or(d, |held| held[d] as usize))
 }
 
 /// The unknown (the index among the n_free unknowns) of global dof `g`, if it is one: not

@@ -381,7 +381,8 @@ impl Ranks {
     /// its rows of K_A to PETSc ([`Ranks::keep_own_columns`]: K_A the step matrix, no
     /// prescribed dofs), u_n and m_n at the dofs its rows of K_B and K_R read and `also`
     /// (its piece's points') alone (`Holds::Local`): `disc`'s matrices number their rows
-    /// over them (`Discretization::number_rows_over`). Nothing else reads u_n or m_n on a
+    /// over them (`Discretization::number_rows_over`); its w_n and b_n are held there, at
+    /// its own rows and at Γ3's unknowns (`time_loop`). Nothing else reads u_n or m_n on a
     /// follower: the active set reads b_n and w_n, and the checks' max|u_n| is the ranks'
     /// largest. Elsewhere (the implicit variant, whose step matrix the time loop makes of
     /// the three matrices' columns, and prescribed dofs), the memory at the dofs its rows of

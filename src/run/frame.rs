@@ -240,7 +240,7 @@ impl OwnFrames {
             active,
             cells,
             [w, u, z],
-            (step.m, step.local),
+            (step.m, [step.held, step.local]),
         );
         let (points, cells) = fields;
         let named = |fields: &[OwnedField]| -> Vec<OwnedField> {
@@ -268,7 +268,7 @@ impl OwnFrames {
         let Some(cells) = self.stress_cells() else {
             return 0.0;
         };
-        let held = (step.m, step.local);
+        let held = (step.m, [step.held, step.local]);
         disc.max_von_mises([step.w, step.u], held, self.model, cells)
     }
 
@@ -352,7 +352,7 @@ pub(super) fn write_step(
             &active,
             stress.then_some(StressCells::All),
             [&w, &u, &z],
-            (m.as_deref(), None),
+            (m.as_deref(), [None; 2]),
         );
         if let Some(vm) = cells.iter().find(|f| f.name == "von_mises") {
             let _ = tx.send(max_von_mises(&vm.values));
@@ -377,8 +377,8 @@ fn max_von_mises(von_mises: &[f64]) -> f64 {
 /// stress and von Mises stress of the cells `cells` says, where it is Some), from
 /// `[w, u, z]` and m. The point fields are of every node, or of the nodes `at` alone, in
 /// their order (increasing: a rank's piece of the frame, whose other points are other
-/// pieces'). u and m hold their values at the dofs `held` alone where it is given (a
-/// follower's, `Step::local`: its piece's are among them).
+/// pieces'). w, and u and m, hold their values at the dofs `held` gives alone where it
+/// gives some (a follower's, `Step::held` and `Step::local`: its piece's are among them).
 fn fields(
     disc: &Discretization,
     (model, at): (Model, Option<&[usize]>),
@@ -386,7 +386,7 @@ fn fields(
     active: &[bool],
     cells: Option<StressCells>,
     [w, u, z]: [&[f64]; 3],
-    (m, held): (Option<&[f64]>, Option<&[usize]>),
+    (m, held): (Option<&[f64]>, [Option<&[usize]>; 2]),
 ) -> (Vec<OwnedField>, Vec<OwnedField>) {
     let count = at.map_or(disc.nodes.len(), <[usize]>::len);
     let point = |node: usize| match at {
@@ -434,8 +434,8 @@ fn fields(
         Some(at) => disc.nodal_at((v, held), at),
     };
     let point_data = vec![
-        field("displacement", 3, nodal(u, held)),
-        field("velocity", 3, nodal(w, None)),
+        field("displacement", 3, nodal(u, held[1])),
+        field("velocity", 3, nodal(w, held[0])),
         field("contact_pressure", 1, pressure),
         field("friction_traction", fc, friction),
         field("contact_state", 1, state),

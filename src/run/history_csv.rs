@@ -294,7 +294,7 @@ impl RowMaker {
                 ))
             })?,
             VonMises::Computed { w, u, m } => {
-                let (wu, m) = ([&w[..], u], (m.as_deref(), None));
+                let (wu, m) = ([&w[..], u], (m.as_deref(), [None; 2]));
                 disc.max_von_mises(wu, m, scene.mesh.model, StressCells::All)
             }
         };

@@ -97,6 +97,20 @@ impl Rows {
         self.rows.is_empty()
     }
 
+    /// These rows on a vector held at the dofs `held` alone (increasing, among which every
+    /// dof the rows touch is: a follower rank's w_n, `time_loop`): each
+    /// dof's place there (`fem::place`).
+    pub fn placed(mut self, held: &[usize]) -> Rows {
+        for r in &mut self.rows {
+            let mut dofs = [0; 3];
+            for c in (0..r.dim).filter(|&c| r.dir[c] != 0.0) {
+                dofs[c] = crate::fem::place(Some(held), r.dofs[c]);
+            }
+            r.dofs = dofs;
+        }
+        self
+    }
+
     /// The number of friction nodes (blocks).
     pub fn n_friction_nodes(&self) -> usize {
         (self.rows.len() - self.n_contact) / self.block.max(1)

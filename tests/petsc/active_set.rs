@@ -400,6 +400,7 @@ fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
     let reads = Reads {
         dofs: &[],
         whole: true,
+        held: false,
     };
     let mut krylov = Krylov::new(&disc.k_a, None, &disc, &settings, reads).unwrap();
     let mut rng = common::SplitMix(50);

@@ -90,7 +90,7 @@ fn a_ranks_own_columns_give_its_rows_of_the_products() {
             assert_eq!(column(kept, c), column(full, j), "matrix {k}, dof {j}");
         }
         let d_full = diagonal(&whole.k_a);
-        let d_kept = mine.diagonal_of(&mine.k_a);
+        let d_kept = mine.diagonal_of(&mine.k_a, None);
         for j in 0..whole.n_free {
             let expected = if own.binary_search(&j).is_ok() {
                 d_full[j]
@@ -139,7 +139,7 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
             let loads = |d: &Discretization| {
                 let mut f = vec![0.0; d.n_dofs];
                 let free = (d.free.as_slice(), &d.frames);
-                d.loads.add(0.5, free, &scene, &mut f).unwrap();
+                d.loads.add(0.5, free, &scene, (&mut f, None)).unwrap();
                 f
             };
             // A rank of several makes the loads of its own rows alone: those rows are the
@@ -151,6 +151,12 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
                 _ => own.iter().map(|&i| f[i]).collect(),
             };
             assert_eq!(bits(&at(&loads(&mine))), bits(&at(&f)), "{case}");
+            // A follower's b_n, held at its own rows alone (and others: `time_loop`).
+            let mut f_own = vec![0.0; own.len()];
+            let free = (mine.free.as_slice(), &mine.frames);
+            (mine.loads.add(0.5, free, &scene, (&mut f_own, Some(&own)))).unwrap();
+            let own_f: Vec<f64> = own.iter().map(|&i| f[i]).collect();
+            assert_eq!(bits(&f_own), bits(&own_f), "{case}");
             assert_eq!(mine.loads.is_part(), hold != Hold::Cells, "{case}");
             // Rank 0 (and one process) sees every term, in the whole's order, the body
             // force's made again from its cells; a follower its own alone.
@@ -225,8 +231,8 @@ fn rank_0_computes_from_the_cells_vertices_what_it_would_from_the_cells() {
         let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
         let some: Vec<usize> = (0..held.cells.len()).step_by(3).rev().collect();
         for cells in [StressCells::All, StressCells::Only(&some)] {
-            let (s, vm) = held.stress([&w, &u], (m, None), model, cells);
-            let (s2, vm2) = mine.stress([&w, &u], (m, None), model, cells);
+            let (s, vm) = held.stress([&w, &u], (m, [None; 2]), model, cells);
+            let (s2, vm2) = mine.stress([&w, &u], (m, [None; 2]), model, cells);
             assert!(vm.iter().any(|&v| v > 0.0), "{name}");
             assert_eq!(
                 (bits(&s2), bits(&vm2)),
@@ -234,8 +240,8 @@ fn rank_0_computes_from_the_cells_vertices_what_it_would_from_the_cells() {
                 "{name} {cells:?}"
             );
         }
-        let largest = held.max_von_mises([&w, &u], (m, None), model, StressCells::All);
-        let vm = |cells| mine.max_von_mises([&w, &u], (m, None), model, cells);
+        let largest = held.max_von_mises([&w, &u], (m, [None; 2]), model, StressCells::All);
+        let vm = |cells| mine.max_von_mises([&w, &u], (m, [None; 2]), model, cells);
         assert_eq!(vm(StressCells::All).to_bits(), largest.to_bits());
         // Over pieces that split the cells, the largest of theirs (how the ranks of a run
         // compute it: each its own piece's, then the largest of those).
@@ -414,7 +420,7 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
         assert_ne!(bits(&whole), bits(&y0));
         let model = scene.mesh.model;
         let cells = StressCells::Only(&piece);
-        let (s, vm) = disc.stress([&w, &u], (Some(&m), None), model, cells);
+        let (s, vm) = disc.stress([&w, &u], (Some(&m), [None; 2]), model, cells);
         let local = disc.local_reach(also.iter().copied()).unwrap();
         assert!(also
             .iter()
@@ -432,9 +438,14 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
         let numbered = product(&disc, &u_held, &m_held);
         assert_eq!(bits(&numbered), bits(&whole), "paired: {paired}");
         let place = Some(local.as_slice());
-        let (s2, vm2) = disc.stress([&w, &u_held], (Some(&m_held), place), model, cells);
+        let (s2, vm2) = disc.stress([&w, &u_held], (Some(&m_held), [None, place]), model, cells);
         assert!(vm.iter().any(|&v| v > 0.0));
         assert_eq!((bits(&s2), bits(&vm2)), (bits(&s), bits(&vm)));
+        // A follower's w_n held at its history's dofs too (and more: `time_loop`).
+        let w_held = held(&w);
+        let m_u = (Some(m_held.as_slice()), [place, place]);
+        let (s3, vm3) = disc.stress([&w_held, &u_held], m_u, model, cells);
+        assert_eq!((bits(&s3), bits(&vm3)), (bits(&s), bits(&vm)));
         let at: Vec<usize> = (0..nodes)
             .step_by(5)
             .filter(|&v| {
@@ -477,7 +488,7 @@ fn k_a_handed_over_keeps_its_diagonal_at_its_own_rows_of_gamma3_alone() {
         (disc.k_a.nrows(), disc.k_a.ncols()),
         (disc.n_free, own.len())
     );
-    let kept = disc.diagonal_of(&disc.k_a);
+    let kept = disc.diagonal_of(&disc.k_a, None);
     assert_eq!(kept.len(), disc.n_free);
     for (d, (kept, whole)) in kept.iter().zip(&whole).enumerate() {
         let expected = if read.contains(&d) && d % 2 == 0 {

@@ -65,7 +65,7 @@ fn check(model: &str, pick: impl Fn(&viscontact::fem::Discretization) -> (Isotro
     mul_add(k, &v, 1.0, &mut kv);
     let mut f = vec![0.0; disc.n_free];
     disc.loads
-        .add(0.0, (&disc.free, &disc.frames), &s, &mut f)
+        .add(0.0, (&disc.free, &disc.frames), &s, (&mut f, None))
         .unwrap();
     let d = rel_diff(&kv, &f);
     assert!(d < 1e-13, "{model}: |K v − f| / |f| = {d:e}");
@@ -132,7 +132,8 @@ fn stress_of_linear_fields_is_exact_in_every_cell() {
             "plane_stress" => viscontact::scene::Model::PlaneStress,
             _ => viscontact::scene::Model::PlaneStrain,
         };
-        let (stress, von_mises) = disc.stress([&w, &u], (Some(&m), None), model, StressCells::All);
+        let (stress, von_mises) =
+            disc.stress([&w, &u], (Some(&m), [None; 2]), model, StressCells::All);
         assert_eq!(von_mises.len(), disc.cells.len());
         for (c, (s, v)) in stress.chunks(6).zip(&von_mises).enumerate() {
             for (k, (x, y)) in s.iter().zip(&want).enumerate() {

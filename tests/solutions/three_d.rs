@@ -873,7 +873,7 @@ fn clamped_patch(
     mul_add(k, &v, 1.0, &mut kv);
     let mut f = vec![0.0; disc.n_free];
     disc.loads
-        .add(0.0, (&disc.free, &disc.frames), &s, &mut f)
+        .add(0.0, (&disc.free, &disc.frames), &s, (&mut f, None))
         .unwrap();
     // Rounding only (sums of ~20 element contributions per row): 1e-12 of the load.
     let d = rel_diff(&kv, &f);
@@ -975,7 +975,7 @@ fn three_d_load_quadrature_is_exact_for_polynomials() {
     let all_free = viscontact::fem::DofIndex::each(3 * mesh.nodes.len());
     let mut f = vec![0.0; 3 * mesh.nodes.len()];
     disc.loads
-        .add(0.0, (&all_free, &Default::default()), &s, &mut f)
+        .add(0.0, (&all_free, &Default::default()), &s, (&mut f, None))
         .unwrap();
     for (a, (fb, ft)) in body.iter().zip(&traction).enumerate() {
         for (m, w) in [
