@@ -746,7 +746,7 @@ fn own_placed<'a>(disc: &'a Discretization, held: Option<&[usize]>) -> OwnPlaced
     let placed = |i: usize| crate::fem::place(Some(held), i);
     let own = own.map(|own| own.iter().map(|&i| placed(i)).collect());
     let g_f = (disc.g_f.iter())
-        .filter_map(|&(i, g)| Some((held.binary_search(&i).ok()?, g)))
+        .filter_map(|&(i, g)| Some((crate::fem::place_if_held(Some(held), i)?, g)))
         .collect();
     (own, g_f)
 }

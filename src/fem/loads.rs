@@ -168,10 +168,7 @@ impl Loads {
     ) -> Result<()> {
         // Held at some dofs alone (a follower's b_n: its own rows' loads have their bits),
         // a term at another dof is dropped: its rank adds it.
-        let at = |d: usize| match held {
-            None => Some(d),
-            Some(held) => held.binary_search(&d).ok(),
-        };
+        let at = |d: usize| super::place_if_held(held, d);
         self.visit(t, scene, |_, dof, v| {
             frames.spread(self.dim, dof, v, |g, v| {
                 if let Some(d) = free[g].get().and_then(at) {

@@ -1454,9 +1454,13 @@ pub fn nodal_vectors<const N: usize>(disc: &Discretization, v: &[f64]) -> Vec<[f
 /// which `dof` is: a follower rank's u_n and m_n, `history::Holds::Local`, and its w_n and
 /// b_n, `time_loop`), or `dof` itself in a whole vector.
 pub fn place(held: Option<&[usize]>, dof: usize) -> usize {
-    held.map_or(dof, |held| {
-        (held.binary_search(&dof)).expect("a rank reads its vectors where it holds them")
-    })
+    place_if_held(held, dof).expect("a rank reads its vectors where it holds them")
+}
+
+/// [`place`], or None where `dof` is not among the dofs `held` (another rank's row, whose
+/// terms that rank adds).
+pub fn place_if_held(held: Option<&[usize]>, dof: usize) -> Option<usize> {
+    held.map_or(Some(dof), |held| held.binary_search(&dof).ok())
 }
 
 /// [`nodal_vectors`] at node i, of `v` held at the dofs `held` alone where given
