@@ -122,7 +122,9 @@ struct VcKsp {
   Mat       N, Q;
   KSP       kc;
   VcTerms   terms;
-  PetscInt *frame_of; /* n entries, −1 between calls (newton_matrix) */
+  /* Each of this rank's columns of N's frame (−1: none; −1 between calls: newton_matrix),
+   * by its place: its own rows', then the off-diagonal block's columns (`place_of`). */
+  PetscInt *frame_of;
   /* On several ranks, the CSR of this rank's rows of K (offsets from 0; global columns
    * and values in the caller's arrays, vc_ksp_create), and how many entries of each row
    * lie left of the rank's own columns (`below`, by which a CSR entry is found in N's and
@@ -429,7 +431,7 @@ static PetscInt present(const PetscInt *d, PetscInt idx[3], int pos[3])
 /* A node's removed directions as the reflection R = I − 2 Σ v vᵀ on its k dofs (packed,
  * row-major k × k; orthonormal directions, so R = Π − (I − Π) and R² = I). */
 typedef struct {
-  PetscInt    k, dof[3];
+  PetscInt    k, dof[3], place[3]; /* the dofs as PETSc's rows, and as s->frame_of's places */
   PetscScalar r[9];
 } Frame;
 
@@ -445,32 +447,67 @@ static PetscInt entry(const PetscInt *ai, const PetscInt *aj, PetscInt row, Pets
   return lo < ai[row + 1] && aj[lo] == col ? lo : -1;
 }
 
-/* The frames of the terms' directions, one per node, and each dof's frame (−1: none) in
- * s->frame_of, which the caller resets. */
-static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
+/* The place of PETSc's row g among this rank's columns of N, as s->frame_of holds them:
+ * g − lo for its own rows, m + k for the off-diagonal block's column k (garray, ng
+ * increasing), −1 where its rows read none. */
+static PetscInt place_of(const VcKsp *s, const PetscInt *garray, PetscInt ng, PetscInt g)
 {
-  const VcTerms *t = &s->terms;
-  Frame         *fr;
-  PetscInt       nf = 0;
+  PetscInt lo = 0, hi = ng;
+
+  if (g >= s->lo && g < s->lo + s->m) return g - s->lo;
+  while (lo < hi) {
+    PetscInt mid = (lo + hi) / 2;
+    if (garray[mid] < g) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo < ng && garray[lo] == g ? s->m + lo : -1;
+}
+
+/* N's off-diagonal columns on several ranks (garray, *ng of them); none on one process. */
+static PetscErrorCode ghost_columns(const VcKsp *s, const PetscInt **garray, PetscInt *ng)
+{
+  Mat off;
 
   PetscFunctionBeginUser;
+  *garray = NULL;
+  *ng = 0;
+  if (!s->count) PetscFunctionReturn(0);
+  PetscCall(MatMPIAIJGetSeqAIJ(s->N, NULL, &off, garray));
+  PetscCall(MatGetSize(off, NULL, ng));
+  PetscFunctionReturn(0);
+}
+
+/* The frames of the terms' directions at the nodes this rank's rows read, one per node,
+ * and the frame (−1: none) of each of its columns in s->frame_of, which the caller resets:
+ * a node's dofs are one rank's rows, and P1 assembly couples every pair of dofs of
+ * neighbouring nodes, so a node's dofs are all among a rank's columns or none is. */
+static PetscErrorCode frames(VcKsp *s, Frame **out, PetscInt *count)
+{
+  const VcTerms  *t = &s->terms;
+  const PetscInt *garray;
+  Frame          *fr;
+  PetscInt        nf = 0, ng;
+
+  PetscFunctionBeginUser;
+  PetscCall(ghost_columns(s, &garray, &ng));
   PetscCall(PetscMalloc1(t->np, &fr));
   for (PetscInt e = 0; e < t->np; e++) {
     PetscInt           idx[3];
     int                pos[3];
     const PetscScalar *v = t->pdirs + 3 * e;
-    PetscInt           k = present(t->pdofs + 3 * e, idx, pos);
+    PetscInt           k = present(t->pdofs + 3 * e, idx, pos), first;
     Frame             *f;
-    if (k == 0) continue;
-    if (s->frame_of[idx[0]] < 0) {
+    if (k == 0 || (first = place_of(s, garray, ng, idx[0])) < 0) continue;
+    if (s->frame_of[first] < 0) {
       f = &fr[nf];
-      *f = (Frame){k, {idx[0], idx[1 % k], idx[2 % k]}, {0}};
+      *f = (Frame){k, {idx[0], idx[1 % k], idx[2 % k]}, {0}, {0}};
       for (PetscInt a = 0; a < k; a++) {
+        f->place[a] = place_of(s, garray, ng, idx[a]);
         f->r[k * a + a] = 1.0;
-        s->frame_of[idx[a]] = nf;
+        s->frame_of[f->place[a]] = nf;
       }
       nf++;
-    } else f = &fr[s->frame_of[idx[0]]];
+    } else f = &fr[s->frame_of[first]];
     for (PetscInt a = 0; a < k; a++)
       for (PetscInt b = 0; b < k; b++) f->r[k * a + b] -= 2.0 * v[pos[a]] * v[pos[b]];
   }
@@ -513,6 +550,21 @@ static PetscScalar *at(const Values *v, const Local *l, PetscInt r, PetscInt x)
   if (off < left) return v->a[1] + v->ai[1][r] + off;
   if (off < left + own) return v->a[0] + v->ai[0][r] + off - left;
   return v->a[1] + v->ai[1][r] + off - own;
+}
+
+/* The place of row r's CSR entry x's column among the rank's columns of N (`place_of`):
+ * on several ranks, its column in the diagonal block, or m + its column in the
+ * off-diagonal one; on one process the column itself. */
+static PetscInt column_place(const Values *v, const Local *l, PetscInt r, PetscInt x)
+{
+  PetscInt off = x - l->ai[r], left, own;
+
+  if (!v->blocks[0]) return l->aj[x];
+  left = l->below[r];
+  own = v->ai[0][r + 1] - v->ai[0][r];
+  if (off < left) return l->m + v->aj[1][v->ai[1][r] + off];
+  if (off < left + own) return v->aj[0][v->ai[0][r] + off - left];
+  return l->m + v->aj[1][v->ai[1][r] + off - own];
 }
 
 /* Row r's CSR entries among v's values as three runs, one after the other in CSR order:
@@ -626,16 +678,16 @@ int vc_mult(void *ctx, const PetscScalar *x, PetscScalar *y)
   return 0;
 }
 
-/* (A M B)_ij, M the local rows' values (n) with row i among them, A = R over the frame
- * of i where `left` (else I), B = R over the frame of j where `right` (else I); a dof
+/* (A M B)_ij, M the local rows' values (n) with row i among them, A = R over i's frame
+ * `left` where given (else I), B = R over j's frame `right` where given (else I); a dof
  * without a frame is its own (R = 1). A node's dofs are all on one rank, so the rows of
  * i's frame are local too. */
-static PetscScalar reflected(const Frame *fr, const PetscInt *frame_of, const Local *l,
-                             const Values *n, PetscInt i, PetscInt j, int left, int right)
+static PetscScalar reflected(const Frame *left, const Frame *right, const Local *l,
+                             const Values *n, PetscInt i, PetscInt j)
 {
-  Frame        unit_i = {1, {i}, {1.0}}, unit_j = {1, {j}, {1.0}};
-  const Frame *fi = left && frame_of[i] >= 0 ? &fr[frame_of[i]] : &unit_i;
-  const Frame *fj = right && frame_of[j] >= 0 ? &fr[frame_of[j]] : &unit_j;
+  Frame        unit_i = {1, {i}, {0}, {1.0}}, unit_j = {1, {j}, {0}, {1.0}};
+  const Frame *fi = left ? left : &unit_i;
+  const Frame *fj = right ? right : &unit_j;
   PetscInt     a = 0, b = 0;
   PetscScalar  sum = 0;
 
@@ -783,14 +835,15 @@ static PetscErrorCode newton_matrix(VcKsp *s)
   PetscCall(frames(s, &fr, &nf));
   /* The new values, from N = K + S as it stands, written once all are known. */
   for (PetscInt r = 0; r < l.m; r++) {
-    PetscInt i = l.lo + r;
-    int      framed = s->frame_of[i] >= 0;
+    PetscInt     i = l.lo + r;
+    const Frame *fi = s->frame_of[r] >= 0 ? &fr[s->frame_of[r]] : NULL;
     for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++) {
-      PetscInt j = l.aj[x];
-      if (!framed && s->frame_of[j] < 0) continue;
-      PetscScalar rmr = reflected(fr, s->frame_of, &l, &n, i, j, 1, 1);
-      PetscScalar rm = reflected(fr, s->frame_of, &l, &n, i, j, 1, 0);
-      PetscScalar mr = reflected(fr, s->frame_of, &l, &n, i, j, 0, 1);
+      PetscInt     j = l.aj[x], c = s->frame_of[column_place(&n, &l, r, x)];
+      const Frame *fj = c >= 0 ? &fr[c] : NULL;
+      if (!fi && !fj) continue;
+      PetscScalar rmr = reflected(fi, fj, &l, &n, i, j);
+      PetscScalar rm = reflected(fi, NULL, &l, &n, i, j);
+      PetscScalar mr = reflected(NULL, fj, &l, &n, i, j);
       if (nu == cap) {
         cap = PetscMax(2 * cap, 1024);
         PetscCall(PetscRealloc(cap * sizeof(*upd), &upd));
@@ -803,7 +856,7 @@ static PetscErrorCode newton_matrix(VcKsp *s)
   }
   for (PetscInt u = 0; u < nu; u++) *dst[u] = upd[u];
   for (PetscInt f = 0; f < nf; f++)
-    for (PetscInt a = 0; a < fr[f].k; a++) s->frame_of[fr[f].dof[a]] = -1;
+    for (PetscInt a = 0; a < fr[f].k; a++) s->frame_of[fr[f].place[a]] = -1;
   PetscCall(PetscFree(upd));
   PetscCall(PetscFree(dst));
   PetscCall(PetscFree(fr));
@@ -845,21 +898,19 @@ static PetscErrorCode spd(Mat m, MatNullSpace near)
  * Q at each rebuild. */
 static PetscErrorCode constrained_setup(VcKsp *s)
 {
-  KSPType      type;
-  PC           pc;
-  MatNullSpace near;
-  PetscInt     n;
-  PetscBool    gamg, chosen;
-  MPI_Comm     comm;
+  KSPType         type;
+  PC              pc;
+  MatNullSpace    near;
+  const PetscInt *garray;
+  PetscInt        ng;
+  PetscBool       gamg, chosen;
+  MPI_Comm        comm;
 
   PetscFunctionBeginUser;
   PetscCall(PetscObjectGetComm((PetscObject)s->A, &comm));
   PetscCall(MatGetNearNullSpace(s->A, &near));
   PetscCall(MatDuplicate(s->A, MAT_COPY_VALUES, &s->Q));
   PetscCall(spd(s->Q, near)); /* Q's reference keeps `near` when K's matrix goes, below */
-  PetscCall(MatGetSize(s->A, &n, NULL));
-  PetscCall(PetscMalloc1(n, &s->frame_of));
-  for (PetscInt i = 0; i < n; i++) s->frame_of[i] = -1;
   PetscCall(KSPCreate(comm, &s->kc));
   /* Q is the operator too until the multigrid is made: N, whose values every solve writes
    * (newton_matrix), is made last, so that it is not held through the setup's peak. */
@@ -929,6 +980,11 @@ static PetscErrorCode constrained_setup(VcKsp *s)
   /* N's values are written in place (newton_matrix), never a new entry. */
   PetscCall(MatSetOption(s->N, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
   PetscCall(KSPSetOperators(s->kc, s->N, s->Q));
+  /* Each of the rank's columns of N has its place in frame_of: its rows and its ghosts,
+   * not the whole (4 bytes a dof on every rank). */
+  PetscCall(ghost_columns(s, &garray, &ng));
+  PetscCall(PetscMalloc1(s->m + ng, &s->frame_of));
+  for (PetscInt c = 0; c < s->m + ng; c++) s->frame_of[c] = -1;
   PetscFunctionReturn(0);
 }
 
