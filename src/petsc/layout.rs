@@ -23,7 +23,8 @@ use crate::{Error, Result};
 #[derive(Clone, Debug)]
 pub struct Layout {
     /// The row of each unknown, in 4 bytes as the numbering holds its index
-    /// (`fem::DofIndex`); None on one rank, where they are the same.
+    /// (`fem::DofIndex`), or of each place of a rank's vectors where it holds some unknowns
+    /// alone ([`Layout::placed`]); None on one rank, where they are the same.
     row: Option<Vec<u32>>,
     /// Rank r holds the rows `blocks[r]..blocks[r + 1]` (size + 1 values, the last n_free).
     pub blocks: Vec<usize>,
@@ -144,7 +145,21 @@ impl Layout {
         Ok((layout, shares))
     }
 
-    /// The row of unknown i.
+    /// This layout read at the places of a rank's vectors that hold the unknowns `places`
+    /// alone (increasing; `petsc::Reads::held`): [`Layout::row`] of place k is then the row
+    /// of unknown places[k], and [`Layout::from_rows`] fills those places, 4 bytes a place
+    /// and not an unknown of the whole on a follower. What reads the whole (`own`,
+    /// `unknowns`, `rows_of`) is the setup's, done before. A place past the unknowns (a
+    /// prescribed dof's) has no row.
+    pub fn placed(self, places: &[usize]) -> Layout {
+        let row = self.row.map(|row| {
+            let at = |&i: &usize| row.get(i).copied().unwrap_or(u32::MAX);
+            places.iter().map(at).collect()
+        });
+        Layout { row, ..self }
+    }
+
+    /// The row of unknown i (of place i where [`Layout::placed`]).
     pub fn row(&self, i: usize) -> usize {
         self.row.as_ref().map_or(i, |row| row[i] as usize)
     }
@@ -174,7 +189,7 @@ impl Layout {
         self.row.is_some()
     }
 
-    /// x ← `rows`, from the rows' order.
+    /// x ← `rows`, from the rows' order (x at the places where [`Layout::placed`]).
     pub fn from_rows(&self, rows: &[f64], x: &mut [f64]) {
         match &self.row {
             Some(row) => (x.iter_mut().zip(row)).for_each(|(v, &r)| *v = rows[r as usize]),

@@ -306,7 +306,8 @@ pub struct Krylov {
     pub options: String,
     /// Whether K_A's solve in progress is to be given up (`Krylov::give_up_when`).
     give_up: Option<GiveUp>,
-    /// Where the unknowns stand among PETSc's rows, and this rank's rows among them; on
+    /// Where the caller's places stand among PETSc's rows (its unknowns', or those it holds
+    /// alone: `Layout::placed`), and this rank's rows among them; on
     /// several ranks, where it receives every rank's rows of a solved step (`complete`),
     /// a whole vector in the rows' order (sized at the first step), and where the calls
     /// need one, a vector of this rank's rows (a right side's, a product's): on several
@@ -320,9 +321,6 @@ pub struct Krylov {
     own_x: Vec<f64>,
     /// On several ranks, how this rank's rows of a solution reach the ranks that read them.
     spread: Option<Spread>,
-    /// The unknown at each place of the caller's vectors, where they hold some alone
-    /// (`Reads::held`); else each place is its unknown.
-    held: Option<Vec<u32>>,
     /// How `values_at` collects the values at the dofs it was last asked for (the active
     /// set asks for the same at every product): made once, not at every product.
     at: Option<AtDofs>,
@@ -402,7 +400,10 @@ impl Krylov {
             true => Some(Spread::new(&layout, rank, reads)?),
             false => None,
         };
-        let held = (reads.held).then(|| reads.dofs.iter().map(|&d| d as u32).collect());
+        let layout = match reads.held {
+            true => layout.placed(reads.dofs),
+            false => layout,
+        };
         Ok(Krylov {
             ctx,
             n,
@@ -415,7 +416,6 @@ impl Krylov {
             own: Vec::new(),
             own_x: Vec::new(),
             spread,
-            held,
             at: None,
             layout,
             _rows: (size > 1 && settings.newton).then(|| csr.into_owned()),
@@ -440,9 +440,9 @@ impl Krylov {
         })
     }
 
-    /// The PETSc row of the caller's place `d` (`held`).
+    /// The PETSc row of the caller's place `d`.
     fn row(&self, d: usize) -> usize {
-        row_of(&self.layout, self.held.as_deref(), d)
+        self.layout.row(d)
     }
 
     /// This rank's rows of the right side b but at `dofs`, where it is `values` (`dofs` −1:
@@ -624,8 +624,8 @@ struct AtDofs {
 }
 
 impl AtDofs {
-    fn new(layout: &Layout, held: Option<&[u32]>, dofs: &[i32]) -> AtDofs {
-        let row = |k: usize| row_of(layout, held, dofs[k] as usize);
+    fn new(layout: &Layout, dofs: &[i32]) -> AtDofs {
+        let row = |k: usize| layout.row(dofs[k] as usize);
         let mut order: Vec<usize> = (0..dofs.len()).filter(|&k| dofs[k] >= 0).collect();
         order.sort_by_key(|&k| layout.rank_of_row(row(k)));
         let rows: Vec<usize> = order.iter().map(|&k| row(k)).collect();
@@ -730,7 +730,7 @@ impl Krylov {
     /// row: on several ranks each sends its values, in the order of `dofs`, to all.
     fn values_at(&mut self, dofs: &[i32], y: &mut [f64]) -> Result<()> {
         if self.at.as_ref().is_none_or(|at| at.dofs != dofs) {
-            self.at = Some(AtDofs::new(&self.layout, self.held.as_deref(), dofs));
+            self.at = Some(AtDofs::new(&self.layout, dofs));
         }
         let at = self.at.as_ref().expect("made above");
         let mine: Vec<f64> = (at.rows.iter())
@@ -935,12 +935,6 @@ impl Drop for Krylov {
             crate::errln!("warning: destroying the KSP: {}", message(code));
         }
     }
-}
-
-/// The PETSc row of place `d` of a vector held at the unknowns `held` alone where given
-/// (`Reads::held`), else of the whole.
-fn row_of(layout: &Layout, held: Option<&[u32]>, d: usize) -> usize {
-    layout.row(held.map_or(d, |held| held[d] as usize))
 }
 
 /// The unknown (the index among the n_free unknowns) of global dof `g`, if it is one: not
