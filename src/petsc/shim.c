@@ -552,21 +552,6 @@ static PetscScalar *at(const Values *v, const Local *l, PetscInt r, PetscInt x)
   return v->a[1] + v->ai[1][r] + off - own;
 }
 
-/* The place of row r's CSR entry x's column among the rank's columns of N (`place_of`):
- * on several ranks, its column in the diagonal block, or m + its column in the
- * off-diagonal one; on one process the column itself. */
-static PetscInt column_place(const Values *v, const Local *l, PetscInt r, PetscInt x)
-{
-  PetscInt off = x - l->ai[r], left, own;
-
-  if (!v->blocks[0]) return l->aj[x];
-  left = l->below[r];
-  own = v->ai[0][r + 1] - v->ai[0][r];
-  if (off < left) return l->m + v->aj[1][v->ai[1][r] + off];
-  if (off < left + own) return v->aj[0][v->ai[0][r] + off - left];
-  return l->m + v->aj[1][v->ai[1][r] + off - own];
-}
-
 /* Row r's CSR entries among v's values as three runs, one after the other in CSR order:
  * on several ranks its left columns (off-diagonal block), its own (diagonal block) and its
  * right ones (off-diagonal block, after the left); on one process the row, then nothing. */
@@ -585,6 +570,34 @@ static void runs(const Values *v, const Local *l, PetscInt r, PetscScalar *run[3
   run[0] = v->a[1] + v->ai[1][r];
   run[1] = v->a[0] + v->ai[0][r];
   run[2] = run[0] + left;
+  len[0] = left;
+  len[1] = own;
+  len[2] = width - left - own;
+}
+
+/* The places of row r's columns among the rank's columns of N (`place_of`), in the three
+ * runs of `runs`: shift[p] + col[p][k] for the k-th entry of run p, of len[p] entries. On
+ * several ranks the left and right runs are the off-diagonal block's columns (m + its
+ * column), the middle one the diagonal block's; on one process the row's columns. */
+static void column_runs(const Values *v, const Local *l, PetscInt r, const PetscInt *col[3],
+                        PetscInt shift[3], PetscInt len[3])
+{
+  PetscInt width = l->ai[r + 1] - l->ai[r], left, own;
+
+  if (!v->blocks[0]) {
+    col[0] = col[1] = col[2] = l->aj + l->ai[r];
+    shift[0] = shift[1] = shift[2] = 0;
+    len[0] = width;
+    len[1] = len[2] = 0;
+    return;
+  }
+  left = l->below[r];
+  own = v->ai[0][r + 1] - v->ai[0][r];
+  col[0] = v->aj[1] + v->ai[1][r];
+  col[1] = v->aj[0] + v->ai[0][r];
+  col[2] = col[0] + left;
+  shift[0] = shift[2] = l->m;
+  shift[1] = 0;
   len[0] = left;
   len[1] = own;
   len[2] = width - left - own;
@@ -835,24 +848,27 @@ static PetscErrorCode newton_matrix(VcKsp *s)
   PetscCall(frames(s, &fr, &nf));
   /* The new values, from N = K + S as it stands, written once all are known. */
   for (PetscInt r = 0; r < l.m; r++) {
-    PetscInt     i = l.lo + r;
-    const Frame *fi = s->frame_of[r] >= 0 ? &fr[s->frame_of[r]] : NULL;
-    for (PetscInt x = l.ai[r]; x < l.ai[r + 1]; x++) {
-      PetscInt     j = l.aj[x], c = s->frame_of[column_place(&n, &l, r, x)];
-      const Frame *fj = c >= 0 ? &fr[c] : NULL;
-      if (!fi && !fj) continue;
-      PetscScalar rmr = reflected(fi, fj, &l, &n, i, j);
-      PetscScalar rm = reflected(fi, NULL, &l, &n, i, j);
-      PetscScalar mr = reflected(NULL, fj, &l, &n, i, j);
-      if (nu == cap) {
-        cap = PetscMax(2 * cap, 1024);
-        PetscCall(PetscRealloc(cap * sizeof(*upd), &upd));
-        PetscCall(PetscRealloc(cap * sizeof(*dst), &dst));
+    PetscInt        i = l.lo + r, x = l.ai[r], shift[3], len[3];
+    const PetscInt *col[3];
+    const Frame    *fi = s->frame_of[r] >= 0 ? &fr[s->frame_of[r]] : NULL;
+    column_runs(&n, &l, r, col, shift, len);
+    for (int p = 0; p < 3; p++)
+      for (PetscInt k = 0; k < len[p]; k++, x++) {
+        PetscInt     j = l.aj[x], c = s->frame_of[shift[p] + col[p][k]];
+        const Frame *fj = c >= 0 ? &fr[c] : NULL;
+        if (!fi && !fj) continue;
+        PetscScalar rmr = reflected(fi, fj, &l, &n, i, j);
+        PetscScalar rm = reflected(fi, NULL, &l, &n, i, j);
+        PetscScalar mr = reflected(NULL, fj, &l, &n, i, j);
+        if (nu == cap) {
+          cap = PetscMax(2 * cap, 1024);
+          PetscCall(PetscRealloc(cap * sizeof(*upd), &upd));
+          PetscCall(PetscRealloc(cap * sizeof(*dst), &dst));
+        }
+        dst[nu] = at(&n, &l, r, x);
+        upd[nu] = 0.25 * (1 + DECOUPLED) * (*dst[nu] + rmr) + 0.25 * (1 - DECOUPLED) * (rm + mr);
+        nu++;
       }
-      dst[nu] = at(&n, &l, r, x);
-      upd[nu] = 0.25 * (1 + DECOUPLED) * (*dst[nu] + rmr) + 0.25 * (1 - DECOUPLED) * (rm + mr);
-      nu++;
-    }
   }
   for (PetscInt u = 0; u < nu; u++) *dst[u] = upd[u];
   for (PetscInt f = 0; f < nf; f++)
