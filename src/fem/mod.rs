@@ -1671,7 +1671,9 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 /// unknowns, increasing), their columns alone, column k the unknown own[k] (no column start
 /// of the whole problem, 8 bytes a dof a matrix), from the cells that reach them alone
 /// (those with a node of the rank's own): a rank's setup then makes and visits its part of
-/// the mesh, not the whole. Each entry held sums the same terms in the same order.
+/// the mesh, not the whole. It finds an unknown among its own and a node among theirs by
+/// binary search, holding no flag of every dof or node. Each entry held sums the same
+/// terms in the same order.
 fn assemble(
     cells: CellSource,
     d: usize,
@@ -1680,25 +1682,23 @@ fn assemble(
     (elastic, groups): (bool, usize),
     own: Option<&[usize]>,
 ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
-    let whole = own.map(|own| {
-        let mut whole = vec![false; n];
-        own.iter().for_each(|&i| whole[i] = true);
-        whole
-    });
-    let whole = whole.as_deref();
     // The column of unknown j, where it has one.
     let column_of = |j: usize| match own {
         None => Some(j),
-        Some(own) => (whole.is_some_and(|w| w[j])).then(|| own.partition_point(|&i| i < j)),
+        Some(own) => own.binary_search(&j).ok(),
     };
-    let (col_ptr, row_idx) = pattern(cells, d, (free, n), (own, whole));
-    let reached = whole.map(|w| {
-        let held = |i: &DofIndex| i.get().is_some_and(|i| w[i]);
-        free.chunks(d)
-            .map(|node| node.iter().any(held))
-            .collect::<Vec<_>>()
+    let node_of = column_nodes(free, d, n, own);
+    // With `own`, the nodes of its unknowns, increasing.
+    let mine = own.map(|_| {
+        let mut mine = node_of.clone();
+        mine.sort_unstable();
+        mine.dedup();
+        mine
     });
-    let reaches = |v: &[usize]| reached.as_ref().is_none_or(|r| v.iter().any(|&p| r[p]));
+    let mine = mine.as_deref();
+    let (col_ptr, row_idx) = pattern(cells, d, free, (&node_of, mine));
+    drop(node_of);
+    let reaches = |v: &[usize]| mine.is_none_or(|m| v.iter().any(|p| m.binary_search(p).is_ok()));
     let nnz = row_idx.len();
     let (mut va, mut vb, mut vr) = (
         vec![0.0; nnz],
@@ -1747,55 +1747,63 @@ fn assemble(
     (SparseColMat::new(pattern, va), k_b, k_r)
 }
 
+/// The node of each column of [`assemble`]'s matrices: of every index 0..n, or of the
+/// unknowns `own` alone where given (increasing), column k of own[k].
+fn column_nodes(free: &[DofIndex], d: usize, n: usize, own: Option<&[usize]>) -> Vec<usize> {
+    let mut node_of = vec![0; own.map_or(n, <[usize]>::len)];
+    for (g, i) in free.iter().enumerate() {
+        let column = match own {
+            None => i.get(),
+            Some(own) => i.get().and_then(|i| own.binary_search(&i).ok()),
+        };
+        if let Some(k) = column {
+            node_of[k] = g / d;
+        }
+    }
+    node_of
+}
+
 /// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,
 /// built from the cells' vertices: node q couples with node p when a cell holds both. The
 /// column of index j, a component of node p, lists the indices of the components of p's
-/// neighbours q, increasing; of every index j, or of the unknowns `own` alone where given
-/// (`whole[j]` marks them), column k of own[k]. Only the nodes with a column held list
-/// their neighbours (a rank of several: its own nodes, not the whole mesh's), and the row
-/// indices are allocated once, at their exact count.
+/// neighbours q, increasing; column k's node is node_of[k] ([`column_nodes`]). Only the
+/// nodes with a column list their neighbours: every node, or those `mine` names
+/// (increasing; a rank of several: its own nodes, not the whole mesh's, each list at its
+/// place there), and the row indices are allocated once, at their exact count.
 fn pattern(
     cells: CellSource,
     d: usize,
-    (free, n): (&[DofIndex], usize),
-    (own, whole): (Option<&[usize]>, Option<&[bool]>),
+    free: &[DofIndex],
+    (node_of, mine): (&[usize], Option<&[usize]>),
 ) -> (Vec<usize>, Vec<usize>) {
-    let held = |col: usize| whole.is_none_or(|w| w[col]);
     let dofs = |p: usize| free[d * p..d * (p + 1)].iter().filter_map(|i| i.get());
     let has_dofs = |p: usize| dofs(p).next().is_some();
-    let lists = |p: usize| dofs(p).any(held);
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); free.len() / d];
+    // The place of node p's list, where it has one.
+    let list_of = |p: usize| match mine {
+        None => dofs(p).next().map(|_| p),
+        Some(mine) => mine.binary_search(&p).ok(),
+    };
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); mine.map_or(free.len() / d, <[_]>::len)];
     cells.each_vertices(|vertices| {
-        for &p in vertices.iter().filter(|&&p| lists(p)) {
+        for list in vertices.iter().filter_map(|&p| list_of(p)) {
             let with_dofs = vertices.iter().filter(|&&q| has_dofs(q));
-            neighbours[p].extend(with_dofs.map(|&q| q as u32));
+            neighbours[list].extend(with_dofs.map(|&q| q as u32));
         }
     });
     for list in neighbours.iter_mut() {
         list.sort_unstable();
         list.dedup();
     }
-    // The node of each column's unknown.
-    let mut node_of = vec![0; own.map_or(n, <[usize]>::len)];
-    for (g, i) in free.iter().enumerate() {
-        match (i.get(), own) {
-            (Some(i), None) => node_of[i] = g / d,
-            (Some(i), Some(own)) if held(i) => node_of[own.partition_point(|&j| j < i)] = g / d,
-            _ => {}
-        }
-    }
+    let list = |p: usize| &neighbours[list_of(p).expect("a column's node has a list")];
     // Column k, of node p, lists p's neighbours' unknowns.
-    let column_len = |p: usize| -> usize {
-        (neighbours[p].iter())
-            .map(|&q| dofs(q as usize).count())
-            .sum()
-    };
+    let column_len =
+        |p: usize| -> usize { (list(p).iter()).map(|&q| dofs(q as usize).count()).sum() };
     let mut row_idx = Vec::with_capacity(node_of.iter().map(|&p| column_len(p)).sum());
     let mut col_ptr = Vec::with_capacity(node_of.len() + 1);
     col_ptr.push(0);
-    for &p in &node_of {
+    for &p in node_of {
         let start = row_idx.len();
-        (neighbours[p].iter()).for_each(|&q| row_idx.extend(dofs(q as usize)));
+        (list(p).iter()).for_each(|&q| row_idx.extend(dofs(q as usize)));
         row_idx[start..].sort_unstable();
         col_ptr.push(row_idx.len());
     }
