@@ -176,11 +176,21 @@ impl Layout {
         (0..n).filter(|&i| block.contains(&self.row(i))).collect()
     }
 
-    /// The unknown of each row, in the rows' order: the inverse of [`Layout::row`].
-    pub fn unknowns(&self) -> Vec<u32> {
+    /// The unknown of each of rank `rank`'s rows, in the rows' order: the inverse of
+    /// [`Layout::row`] there (4 bytes a row of its own, not of every rank's).
+    pub fn unknowns_of(&self, rank: usize) -> Vec<u32> {
+        let block = self.blocks[rank]..self.blocks[rank + 1];
         let n = *self.blocks.last().unwrap_or(&0);
-        let mut unknown = vec![0u32; n];
-        (0..n).for_each(|i| unknown[self.row(i)] = i as u32);
+        let mut unknown = vec![0u32; block.len()];
+        for i in 0..n {
+            if let Some(k) = self
+                .row(i)
+                .checked_sub(block.start)
+                .filter(|&k| k < block.len())
+            {
+                unknown[k] = i as u32;
+            }
+        }
         unknown
     }
 
@@ -212,8 +222,7 @@ impl Layout {
                 vals: std::borrow::Cow::Borrowed(val),
             });
         };
-        let unknown = self.unknowns();
-        let own = &unknown[self.blocks[rank]..self.blocks[rank + 1]];
+        let own = self.unknowns_of(rank);
         // Sized once: grown by doubling, the values could hold up to twice their length.
         let own = || own.iter().map(|&i| i as usize);
         let sorted = (m.ncols() < m.nrows()).then(|| {

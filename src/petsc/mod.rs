@@ -558,17 +558,18 @@ impl Spread {
     /// Made by every rank at once: the exchange is collective.
     fn new(layout: &Layout, rank: usize, reads: Reads) -> Result<Spread> {
         let n = *layout.blocks.last().unwrap_or(&0);
-        let mut unknowns = layout.unknowns()[layout.blocks[rank]..layout.blocks[rank + 1]].to_vec();
-        // What this rank reads of each unknown: 0 nothing, 1 at every solve, 2 its own.
-        let mut read = vec![0u8; n];
-        reads
-            .dofs
-            .iter()
-            .filter(|&&i| i < n)
-            .for_each(|&i| read[i] = 1);
-        unknowns.iter().for_each(|&i| read[i as usize] = 2);
-        let halo: Vec<u32> = (0..n as u32).filter(|&i| read[i as usize] == 1).collect();
-        drop(read);
+        let mut unknowns = layout.unknowns_of(rank);
+        // What this rank reads at every solve of the others' rows: the unknowns it reads
+        // that are not its own, increasing (no flag of every unknown).
+        let mut own = unknowns.clone();
+        own.sort_unstable();
+        let mut halo: Vec<u32> = (reads.dofs.iter())
+            .filter(|&&i| i < n && own.binary_search(&(i as u32)).is_err())
+            .map(|&i| i as u32)
+            .collect();
+        drop(own);
+        halo.sort_unstable();
+        halo.dedup();
         let mut halo = Exchange::new(layout, halo)?;
         if reads.held {
             // The caller's vectors hold `reads.dofs` alone: each unknown at its place there.
@@ -947,11 +948,10 @@ fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
 /// none (a node clamped on Γ1); 1 otherwise.
 fn block_size(disc: &Discretization) -> usize {
     let d = disc.dim;
-    let unknowns: Vec<Option<usize>> = (0..disc.free.len()).map(|g| unknown(disc, g)).collect();
-    let blocked = unknowns.chunks(d).all(|node| match node[0] {
-        None => node.iter().all(Option::is_none),
+    let blocked = (0..disc.free.len() / d).all(|p| match unknown(disc, d * p) {
+        None => (1..d).all(|c| unknown(disc, d * p + c).is_none()),
         Some(first) => {
-            first % d == 0 && node.iter().enumerate().all(|(c, f)| *f == Some(first + c))
+            first % d == 0 && (1..d).all(|c| unknown(disc, d * p + c) == Some(first + c))
         }
     });
     if blocked {
