@@ -64,7 +64,7 @@ use super::{group, Sparse};
 use crate::mesh::{Group, Mesh, Part};
 use crate::scene::{Components, Scene};
 use crate::{Error, Result};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// A prescribed dof: global dof d·node + c gets index `dof` (≥ n_free) and the value
 /// scale · value_`value`(x, t) of `[[dirichlet]]` entry `entry`.
@@ -186,7 +186,9 @@ impl Numbering {
                 DofIndex::MAX_DOFS - 1
             )));
         }
-        let mut holds: Vec<Option<Hold>> = vec![None; d * mesh.nodes.len()];
+        // The held dofs alone (a boundary's), not a slot of every dof: 40 bytes a dof of the
+        // whole on every rank, the largest thing a follower's setup held of it.
+        let mut holds: BTreeMap<usize, Hold> = BTreeMap::new();
         let mut clamped = vec![false; mesh.nodes.len()];
         for (i, name) in scene.mesh.groups.fixed.iter().enumerate() {
             let g = group(mesh, scene, "mesh.groups.fixed", name)?;
@@ -220,7 +222,7 @@ impl Numbering {
                 }
             }
         }
-        let numbering = Numbering::of(&holds, d, frames);
+        let numbering = Numbering::of((&holds, d * mesh.nodes.len()), d, frames);
         numbering.check(mesh, scene)?;
         if parts {
             numbering.check_parts(mesh, scene)?;
@@ -228,30 +230,32 @@ impl Numbering {
         Ok(numbering)
     }
 
-    /// Free dofs first, then prescribed ones, each in global order.
-    fn of(holds: &[Option<Hold>], d: usize, frames: Frames) -> Numbering {
-        let mut free = vec![DofIndex::HELD; holds.len()];
-        let mut held = vec![0u8; holds.len() / d];
-        let mut held_by = Vec::new();
+    /// Free dofs first, then prescribed ones, each in global order: of `n` dofs, those
+    /// `holds` names held.
+    fn of((holds, n): (&BTreeMap<usize, Hold>, usize), d: usize, frames: Frames) -> Numbering {
+        let mut free = vec![DofIndex::HELD; n];
+        let mut held = vec![0u8; n / d];
+        let mut held_by = Vec::with_capacity(holds.len());
         let mut n_free = 0;
-        for (g, h) in holds.iter().enumerate() {
-            match h {
+        let mut next = holds.iter().peekable();
+        for g in 0..n {
+            match next.next_if(|&(&h, _)| h == g) {
                 None => {
                     free[g] = DofIndex::of(n_free);
                     n_free += 1;
                 }
-                Some(hold) => {
+                Some((_, hold)) => {
                     held[g / d] |= 1 << (g % d);
                     held_by.push((g, hold.source));
                 }
             }
         }
         let mut prescribed = Vec::new();
-        for (g, h) in holds.iter().enumerate() {
-            if let Some(Hold {
+        for (&g, h) in holds {
+            if let Hold {
                 source: Source::Dirichlet(entry),
                 value: Some((value, scale)),
-            }) = *h
+            } = *h
             {
                 let dof = n_free + prescribed.len();
                 free[g] = DofIndex::of(dof);
@@ -368,9 +372,17 @@ impl Numbering {
 
 /// Records `hold` on global dof `g`; a dof held twice keeps one hold when both are zero and
 /// is refused otherwise.
-fn put(holds: &mut [Option<Hold>], g: usize, hold: Hold, mesh: &Mesh, scene: &Scene) -> Result<()> {
-    match holds[g] {
-        None => holds[g] = Some(hold),
+fn put(
+    holds: &mut BTreeMap<usize, Hold>,
+    g: usize,
+    hold: Hold,
+    mesh: &Mesh,
+    scene: &Scene,
+) -> Result<()> {
+    match holds.get(&g).copied() {
+        None => {
+            holds.insert(g, hold);
+        }
         Some(old) if old.agrees(hold, scene) => {}
         Some(old) => {
             let (d, node) = (mesh.dim, g / mesh.dim);

@@ -22,6 +22,7 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::{Keep, Loads};
 pub use materials::{CellMaterials, Stiffness};
 pub use pair::{RowsPair, SymmetricPair};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Sparse symmetric matrix (both triangles stored), columns compressed.
@@ -503,7 +504,7 @@ fn contact_rows(mesh: &Mesh, scene: &Scene, rows: &RowMaker) -> Result<(Vec<Noda
         contact_kink = k;
         let area = lumped_area(mesh, g);
         for (node, n) in normals {
-            match rows.row(node, n, f64::INFINITY, area[node]) {
+            match rows.row(node, n, f64::INFINITY, area(node)) {
                 Ok(row) => contact.extend(row),
                 Err(Acts(c)) => {
                     let why = "along the contact normal: the two conditions contradict";
@@ -530,7 +531,6 @@ fn friction_rows(
     scene: &Scene,
     fr: &Friction,
     rows: &RowMaker,
-    n_dofs: usize,
 ) -> Result<(DofValues, Vec<NodalRow>, f64)> {
     let g = group(
         mesh,
@@ -548,10 +548,9 @@ fn friction_rows(
         check_overlap(mesh, scene, c, g)?;
     }
     let dofs = (rows.numbering.free.as_slice(), &rows.numbering.frames);
-    let (gf, c) = friction_integrals(mesh, scene, fr, g, dofs, n_dofs)?;
-    let g_f = (gf.into_iter().enumerate())
-        .filter(|&(_, v)| v != 0.0)
-        .collect();
+    let (gf, c) = friction_integrals(mesh, scene, fr, g, dofs)?;
+    let g_f = gf.into_iter().filter(|&(_, v)| v != 0.0).collect();
+    let c = |node: usize| c.get(&node).copied().unwrap_or(0.0);
     let (normals, k) = mesh.nodal_normals(g);
     if normals.iter().all(|&(node, _)| rows.held(node)) {
         return Err(on_fixed(
@@ -564,11 +563,11 @@ fn friction_rows(
     let area = lumped_area(mesh, g);
     let mut friction = Vec::new();
     // μF may vanish on parts of Γ3,2: nodes with c_i = 0 carry no friction.
-    for (node, n) in normals.into_iter().filter(|&(node, _)| c[node] > 0.0) {
+    for (node, n) in normals.into_iter().filter(|&(node, _)| c(node) > 0.0) {
         let ts = tangents(n, rows.dim);
         let made: std::result::Result<Vec<_>, Acts> = ts
             .iter()
-            .map(|&t| rows.row(node, t, c[node], area[node]))
+            .map(|&t| rows.row(node, t, c(node), area(node)))
             .collect();
         match made {
             Ok(r) => friction.extend(r.into_iter().flatten()),
@@ -598,11 +597,11 @@ fn friction_integrals(
     fr: &Friction,
     g: &Group,
     (free, frames): (&[DofIndex], &Frames),
-    n_dofs: usize,
-) -> Result<(Vec<f64>, Vec<f64>)> {
+) -> Result<(BTreeMap<usize, f64>, BTreeMap<usize, f64>)> {
     let d = mesh.dim;
-    let mut gf = vec![0.0; n_dofs];
-    let mut c = vec![0.0; mesh.nodes.len()];
+    // At Γ3,2's dofs and nodes alone, not a slot of every one (8 bytes a dof and a node of
+    // the whole on every rank); each sums its terms in the same order.
+    let (mut gf, mut c) = (BTreeMap::new(), BTreeMap::new());
     for f in mesh.boundary_facets(g) {
         for (p, w, phi) in f.quadrature(mesh) {
             let pt = Point {
@@ -620,11 +619,11 @@ fn friction_integrals(
                     let v = w * ph * big_f * f.normal[comp];
                     frames.spread(d, d * node + comp, v, |g, v| {
                         if let Some(dof) = free[g].get() {
-                            gf[dof] += v;
+                            *gf.entry(dof).or_insert(0.0) += v;
                         }
                     });
                 }
-                c[node] += w * ph * mu * big_f;
+                *c.entry(node).or_insert(0.0) += w * ph * mu * big_f;
             }
         }
     }
@@ -673,7 +672,7 @@ impl Discretization {
         };
         let (contact, contact_kink) = contact_rows(mesh, scene, &rows)?;
         let (g_f, friction, friction_kink) = match &scene.physics.friction {
-            Some(fr) => friction_rows(mesh, scene, fr, &rows, n_dofs)?,
+            Some(fr) => friction_rows(mesh, scene, fr, &rows)?,
             None => (Vec::new(), Vec::new(), 0.0),
         };
         Ok(Discretization {
@@ -1512,17 +1511,17 @@ fn norms_of<const N: usize>(cells: CellSource, v: &[[f64; N]]) -> (f64, f64) {
     (l2.sqrt(), h1.sqrt())
 }
 
-/// ∫_g φ_i da for every node (zero off the group): a facet's measure shared equally by its
-/// nodes.
-fn lumped_area(mesh: &Mesh, g: &Group) -> Vec<f64> {
-    let mut area = vec![0.0; mesh.nodes.len()];
+/// ∫_g φ_i da at each node (zero off the group): a facet's measure shared equally by its
+/// nodes, held at the group's nodes alone.
+fn lumped_area(mesh: &Mesh, g: &Group) -> impl Fn(usize) -> f64 {
+    let mut area = BTreeMap::new();
     for f in mesh.boundary_facets(g) {
         let share = f.measure / f.nodes().len() as f64;
         for &n in f.nodes() {
-            area[n] += share;
+            *area.entry(n).or_insert(0.0) += share;
         }
     }
-    area
+    move |node| area.get(&node).copied().unwrap_or(0.0)
 }
 
 /// Whether a unit direction is a coordinate axis (one nonzero component).

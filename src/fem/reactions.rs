@@ -253,6 +253,8 @@ fn normal_stress_load(mesh: &Mesh, scene: &Scene) -> Result<Vec<f64>> {
     // Every global dof its own index, no frame: g_F in x, y, z at every node.
     let all = super::DofIndex::each(mesh.dim * mesh.nodes.len());
     let dofs = (all.as_slice(), &super::Frames::default());
-    let (g_f, _) = super::friction_integrals(mesh, scene, fr, g, dofs, all.len())?;
+    let (at, _) = super::friction_integrals(mesh, scene, fr, g, dofs)?;
+    let mut g_f = vec![0.0; all.len()];
+    at.into_iter().for_each(|(dof, v)| g_f[dof] = v);
     Ok(g_f)
 }
