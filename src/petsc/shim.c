@@ -552,55 +552,54 @@ static PetscScalar *at(const Values *v, const Local *l, PetscInt r, PetscInt x)
   return v->a[1] + v->ai[1][r] + off - own;
 }
 
-/* Row r's CSR entries among v's values as three runs, one after the other in CSR order:
- * on several ranks its left columns (off-diagonal block), its own (diagonal block) and its
- * right ones (off-diagonal block, after the left); on one process the row, then nothing. */
-static void runs(const Values *v, const Local *l, PetscInt r, PetscScalar *run[3], PetscInt len[3])
+/* The lengths of row r's three runs of CSR entries, one after the other in CSR order: on
+ * several ranks its left columns (off-diagonal block), its own (diagonal block) and its
+ * right ones (off-diagonal block, after the left), and 1; on one process the row, then
+ * nothing, and 0. */
+static int run_lengths(const Values *v, const Local *l, PetscInt r, PetscInt len[3])
 {
-  PetscInt width = l->ai[r + 1] - l->ai[r], left, own;
+  PetscInt width = l->ai[r + 1] - l->ai[r];
 
   if (!v->blocks[0]) {
-    run[0] = run[1] = run[2] = v->a[0] + l->ai[r];
     len[0] = width;
     len[1] = len[2] = 0;
-    return;
+    return 0;
   }
-  left = l->below[r];
-  own = v->ai[0][r + 1] - v->ai[0][r];
-  run[0] = v->a[1] + v->ai[1][r];
-  run[1] = v->a[0] + v->ai[0][r];
-  run[2] = run[0] + left;
-  len[0] = left;
-  len[1] = own;
-  len[2] = width - left - own;
+  len[0] = l->below[r];
+  len[1] = v->ai[0][r + 1] - v->ai[0][r];
+  len[2] = width - len[0] - len[1];
+  return 1;
 }
 
-/* The places of row r's columns among the rank's columns of N (`place_of`), in the three
- * runs of `runs`: shift[p] + col[p][k] for the k-th entry of run p, of len[p] entries. On
- * several ranks the left and right runs are the off-diagonal block's columns (m + its
- * column), the middle one the diagonal block's; on one process the row's columns. */
+/* Row r's CSR entries among v's values as the three runs of `run_lengths`. */
+static void runs(const Values *v, const Local *l, PetscInt r, PetscScalar *run[3], PetscInt len[3])
+{
+  if (!run_lengths(v, l, r, len)) {
+    run[0] = run[1] = run[2] = v->a[0] + l->ai[r];
+    return;
+  }
+  run[0] = v->a[1] + v->ai[1][r];
+  run[1] = v->a[0] + v->ai[0][r];
+  run[2] = run[0] + len[0];
+}
+
+/* The places of row r's columns among the rank's columns of N (`place_of`), in the runs
+ * of `run_lengths`: shift[p] + col[p][k] for the k-th entry of run p. On several ranks
+ * the left and right runs are the off-diagonal block's columns (m + its column), the
+ * middle one the diagonal block's; on one process the row's columns. */
 static void column_runs(const Values *v, const Local *l, PetscInt r, const PetscInt *col[3],
                         PetscInt shift[3], PetscInt len[3])
 {
-  PetscInt width = l->ai[r + 1] - l->ai[r], left, own;
-
-  if (!v->blocks[0]) {
+  if (!run_lengths(v, l, r, len)) {
     col[0] = col[1] = col[2] = l->aj + l->ai[r];
     shift[0] = shift[1] = shift[2] = 0;
-    len[0] = width;
-    len[1] = len[2] = 0;
     return;
   }
-  left = l->below[r];
-  own = v->ai[0][r + 1] - v->ai[0][r];
   col[0] = v->aj[1] + v->ai[1][r];
   col[1] = v->aj[0] + v->ai[0][r];
-  col[2] = col[0] + left;
+  col[2] = col[0] + len[0];
   shift[0] = shift[2] = l->m;
   shift[1] = 0;
-  len[0] = left;
-  len[1] = own;
-  len[2] = width - left - own;
 }
 
 /* The values of m (N or Q) in place (`write`: to be written). */
