@@ -147,9 +147,9 @@ impl Layout {
 
     /// This layout read at the places of a rank's vectors that hold the unknowns `places`
     /// alone (increasing; `petsc::Reads::held`): [`Layout::row`] of place k is then the row
-    /// of unknown places[k], and [`Layout::from_rows`] fills those places, 4 bytes a place
-    /// and not an unknown of the whole on a follower. What reads the whole (`own`,
-    /// `unknowns`, `rows_of`) is the setup's, done before. A place past the unknowns (a
+    /// of unknown `places[k]`, and [`Layout::from_rows`] fills those places, 4 bytes a place
+    /// and not an unknown of the whole on a follower. What reads every unknown (`own`,
+    /// `unknowns_of`, `rows_of`) is the setup's, done before. A place past the unknowns (a
     /// prescribed dof's) has no row.
     pub fn placed(self, places: &[usize]) -> Layout {
         let row = self.row.map(|row| {
@@ -547,4 +547,68 @@ fn partition(graph: &mut MetisGraph, size: usize) -> Result<Vec<usize>> {
         )));
     }
     Ok(part.iter().map(|&p| p as usize).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::SplitMix;
+
+    /// A layout of `n` unknowns in a random order over `size` ranks of random sizes.
+    fn shuffled(n: usize, size: usize, rng: &mut SplitMix) -> Layout {
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        for i in (1..n).rev() {
+            order.swap(i, rng.next() as usize % (i + 1));
+        }
+        let mut row = vec![0; n];
+        order
+            .iter()
+            .enumerate()
+            .for_each(|(r, &i)| row[i as usize] = r as u32);
+        let mut cuts: Vec<usize> = (1..size).map(|_| rng.next() as usize % (n + 1)).collect();
+        cuts.sort_unstable();
+        let blocks = [vec![0], cuts, vec![n]].concat();
+        Layout {
+            row: Some(row),
+            blocks,
+        }
+    }
+
+    #[test]
+    fn each_rank_makes_the_unknowns_of_its_own_rows_alone() {
+        let mut rng = SplitMix(52);
+        let layout = shuffled(40, 4, &mut rng);
+        for rank in 0..4 {
+            let unknowns = layout.unknowns_of(rank);
+            let block = layout.blocks[rank]..layout.blocks[rank + 1];
+            assert_eq!(unknowns.len(), block.len());
+            for (k, &i) in unknowns.iter().enumerate() {
+                assert_eq!(layout.row(i as usize), block.start + k);
+            }
+            let mut own: Vec<usize> = unknowns.iter().map(|&i| i as usize).collect();
+            own.sort_unstable();
+            assert_eq!(own, layout.own(rank));
+        }
+    }
+
+    #[test]
+    fn a_placed_layout_reads_the_rows_of_its_places() {
+        let mut rng = SplitMix(38);
+        let layout = shuffled(30, 3, &mut rng);
+        // Increasing places, and one past the unknowns (a prescribed dof's: no row).
+        let places: Vec<usize> = (0..30)
+            .filter(|_| rng.next().is_multiple_of(3))
+            .chain([31])
+            .collect();
+        let rows: Vec<f64> = (0..30).map(|r| r as f64).collect();
+        let placed = layout.clone().placed(&places);
+        let mut x = vec![0.0; places.len() - 1];
+        placed.from_rows(&rows, &mut x);
+        for (k, &i) in places[..places.len() - 1].iter().enumerate() {
+            assert_eq!(placed.row(k), layout.row(i));
+            assert_eq!(x[k], layout.row(i) as f64);
+        }
+        assert_eq!(placed.row(places.len() - 1), u32::MAX as usize);
+        assert!(placed.permutes());
+    }
 }
