@@ -60,12 +60,14 @@
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
-//! memory of each rank is the replicated part (w_n and the other n-vectors, rank 0's whole
-//! history; during setup the nodes' places, 8 bytes a dof, and on rank 0 the whole mesh
-//! and its reading), its columns of the matrices, a follower's part of the history and of
-//! the mesh, and its share of PETSc's; spreading the other n-vectors over the ranks (most
-//! of ~250 B a dof on a follower), and rank 0's memory in parts too, are the next steps
-//! (docs/cluster.md).
+//! memory of each rank is the replicated part (w_n and b_n of the whole on rank 0 and on a
+//! follower whose history holds every dof, rank 0's whole history; the nodes' places, 8
+//! bytes a dof, and on rank 0 during setup the whole mesh and its reading), its columns of
+//! the matrices, a follower's part of the history, of w_n, b_n and of the mesh, and its
+//! share of PETSc's; a follower's setup in a numbering of its own (what
+//! it still holds of the whole at its peak is the nodes' places and the numbering's index
+//! of each dof, 12 B a dof), and rank 0's memory in parts, are the next steps
+//! (docs/cluster.md, "Not built yet").
 //!
 //! # Planning
 //!
