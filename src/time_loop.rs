@@ -794,7 +794,6 @@ fn petsc_backend(
         };
         let reads = crate::petsc::Reads {
             dofs: held.unwrap_or(&gamma3),
-            whole: held.is_none(),
             held: held.is_some(),
         };
         let krylov = crate::petsc::Krylov::new(matrix, own, disc, &settings, reads)?;

@@ -1686,7 +1686,7 @@ fn assemble(
         None => Some(j),
         Some(own) => own.binary_search(&j).ok(),
     };
-    let node_of = column_nodes(free, d, n, own);
+    let node_of = column_nodes(free, d, own.map_or(n, <[usize]>::len), column_of);
     // With `own`, the nodes of its unknowns, increasing.
     let mine = own.map(|_| {
         let mut mine = node_of.clone();
@@ -1746,16 +1746,17 @@ fn assemble(
     (SparseColMat::new(pattern, va), k_b, k_r)
 }
 
-/// The node of each column of [`assemble`]'s matrices: of every index 0..n, or of the
-/// unknowns `own` alone where given (increasing), column k of own[k].
-fn column_nodes(free: &[DofIndex], d: usize, n: usize, own: Option<&[usize]>) -> Vec<usize> {
-    let mut node_of = vec![0; own.map_or(n, <[usize]>::len)];
+/// The node of each of [`assemble`]'s `columns` columns, index j's column being
+/// `column_of(j)` where it has one.
+fn column_nodes(
+    free: &[DofIndex],
+    d: usize,
+    columns: usize,
+    column_of: impl Fn(usize) -> Option<usize>,
+) -> Vec<usize> {
+    let mut node_of = vec![0; columns];
     for (g, i) in free.iter().enumerate() {
-        let column = match own {
-            None => i.get(),
-            Some(own) => i.get().and_then(|i| own.binary_search(&i).ok()),
-        };
-        if let Some(k) = column {
+        if let Some(k) = i.get().and_then(&column_of) {
             node_of[k] = g / d;
         }
     }

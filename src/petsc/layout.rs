@@ -182,14 +182,8 @@ impl Layout {
         let block = self.blocks[rank]..self.blocks[rank + 1];
         let n = *self.blocks.last().unwrap_or(&0);
         let mut unknown = vec![0u32; block.len()];
-        for i in 0..n {
-            if let Some(k) = self
-                .row(i)
-                .checked_sub(block.start)
-                .filter(|&k| k < block.len())
-            {
-                unknown[k] = i as u32;
-            }
+        for i in (0..n).filter(|&i| block.contains(&self.row(i))) {
+            unknown[self.row(i) - block.start] = i as u32;
         }
         unknown
     }

@@ -440,11 +440,6 @@ impl Krylov {
         })
     }
 
-    /// The PETSc row of the caller's place `d`.
-    fn row(&self, d: usize) -> usize {
-        self.layout.row(d)
-    }
-
     /// This rank's rows of the right side b but at `dofs`, where it is `values` (`dofs` −1:
     /// none), in PETSc's order: b itself where it is (one rank, nothing at `dofs`), else
     /// `own` filled.
@@ -461,8 +456,7 @@ impl Krylov {
             }
         }
         for (&d, &value) in dofs.iter().zip(values).filter(|(&d, _)| d >= 0) {
-            let row = self.row(d as usize);
-            if let Some(r) = Some(row).filter(|r| mine.contains(r)) {
+            if let Some(r) = Some(self.layout.row(d as usize)).filter(|r| mine.contains(r)) {
                 self.own[r - mine.start] = value;
             }
         }
@@ -516,17 +510,16 @@ impl Krylov {
 }
 
 /// What a rank of several reads of a solution and of a right side besides its own rows: the
-/// unknowns `dofs` at every solve (Γ3's, which the active set's decisions read on every
-/// rank, and a follower's history's, which its steps and its piece of a frame read), and
-/// every unknown once a step is solved where `whole` (its history holds every dof: rank 0,
-/// and a follower where K_A is not the step matrix). Where `held`, the rank's vectors (a
-/// solve's b and w, a product's x) hold the unknowns `dofs` alone, in their order
-/// (increasing, its own rows among them: a follower's, `time_loop`), and not
-/// every unknown.
+/// unknowns `dofs` at every solve. Where `held` (a follower whose history holds some dofs
+/// alone, `time_loop`), its vectors (a solve's b and w, a product's x) hold the unknowns
+/// `dofs` alone, in their order (increasing: its history's, its own rows and Γ3's), and
+/// not every unknown; elsewhere they are whole, `dofs` are Γ3's unknowns (which the active
+/// set's decisions read on every rank), and every unknown comes to the rank once a step is
+/// solved (its history holds every dof: rank 0, and a follower where K_A is not the step
+/// matrix).
 #[derive(Clone, Copy, Debug)]
 pub struct Reads<'a> {
     pub dofs: &'a [usize],
-    pub whole: bool,
     pub held: bool,
 }
 
@@ -534,7 +527,7 @@ pub struct Reads<'a> {
 /// PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`) by an `Exchange`
 /// (a product with K takes the other ranks' values its rows read itself: `vc_mult`); once a step is solved,
 /// every rank's rows gathered whole in PETSc's order on rank 0, or on every rank where the
-/// followers' histories hold every dof too (`Reads::whole`), where each rank's count and
+/// followers' histories hold every dof too (not `Reads::held`), where each rank's count and
 /// first row among them say.
 struct Spread {
     unknowns: Vec<u32>,
@@ -560,14 +553,12 @@ impl Spread {
         let n = *layout.blocks.last().unwrap_or(&0);
         let mut unknowns = layout.unknowns_of(rank);
         // What this rank reads at every solve of the others' rows: the unknowns it reads
-        // that are not its own, increasing (no flag of every unknown).
-        let mut own = unknowns.clone();
-        own.sort_unstable();
+        // whose rows are not its own, increasing (no flag of every unknown).
+        let mine = layout.blocks[rank]..layout.blocks[rank + 1];
         let mut halo: Vec<u32> = (reads.dofs.iter())
-            .filter(|&&i| i < n && own.binary_search(&(i as u32)).is_err())
+            .filter(|&&i| i < n && !mine.contains(&layout.row(i)))
             .map(|&i| i as u32)
             .collect();
-        drop(own);
         halo.sort_unstable();
         halo.dedup();
         let mut halo = Exchange::new(layout, halo)?;
@@ -577,7 +568,7 @@ impl Spread {
             unknowns.iter_mut().for_each(|i| *i = place(*i));
             halo.place(place);
         }
-        let whole = match max_over_ranks(i32::from(rank > 0 && reads.whole))? {
+        let whole = match max_over_ranks(i32::from(rank > 0 && !reads.held))? {
             0 => Whole::First,
             _ => Whole::Every,
         };
@@ -776,7 +767,7 @@ impl Krylov {
         let rows = |dofs: &[PetscInt]| -> Vec<PetscInt> {
             let row = |&d: &PetscInt| match d {
                 d if d < 0 => d,
-                d => self.row(d as usize) as PetscInt,
+                d => self.layout.row(d as usize) as PetscInt,
             };
             dofs.iter().map(row).collect()
         };
@@ -823,7 +814,7 @@ impl Krylov {
     }
 
     /// A solved step's w at every unknown on rank 0, and on every rank where the followers'
-    /// histories hold every dof (`Reads::whole`), from the ranks that hold their rows
+    /// histories hold every dof (not `Reads::held`), from the ranks that hold their rows
     /// (collective, once a step): each rank's rows gathered in PETSc's order, in the
     /// buffer a product with K reads; nothing on one rank.
     pub fn complete(&mut self, w: &mut [f64]) -> Result<()> {

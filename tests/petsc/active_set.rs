@@ -399,7 +399,6 @@ fn the_updated_multigrid_is_the_galerkin_hierarchy_of_its_system() {
     // One process: every unknown is its own.
     let reads = Reads {
         dofs: &[],
-        whole: true,
         held: false,
     };
     let mut krylov = Krylov::new(&disc.k_a, None, &disc, &settings, reads).unwrap();
