@@ -191,11 +191,7 @@ impl Identity {
             nodes: mesh.nodes.len(),
             triangles: mesh.n_cells(),
             physics: physics_signature(&scene.text),
-            dof_of: disc
-                .free
-                .iter()
-                .map(|d| d.get().map_or(-1, |i| i as i64))
-                .collect(),
+            dof_of: disc.free.signed().collect(),
         }
     }
 }

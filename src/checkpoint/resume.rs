@@ -210,11 +210,7 @@ impl Checkpoint {
                 self.k, scene.time.end, scene.time.steps
             ));
         }
-        let dof_of: Vec<i64> = disc
-            .free
-            .iter()
-            .map(|d| d.get().map_or(-1, |i| i as i64))
-            .collect();
+        let dof_of: Vec<i64> = disc.free.signed().collect();
         if diffs.is_empty() && dof_of != self.id.dof_of {
             diffs.push(
                 "the held dofs differ from the run's (clamped groups or [[dirichlet]] \

@@ -77,41 +77,142 @@ pub struct Prescribed {
     pub scale: f64,
 }
 
-/// A global dof's index in the numbering (`Numbering::free`): a free dof's 0..n_free, a
-/// prescribed one's n_free..n_dofs, or none where the dof is held at zero. Four bytes a
-/// dof, where an `Option<usize>` took sixteen: every rank holds one a dof of the whole.
+/// A global dof's index in the numbering: a free dof's 0..n_free, a prescribed one's
+/// n_free..n_dofs, or none where the dof is held at zero (`DofIndices::whole`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct DofIndex(u32);
+struct DofIndex(u32);
 
 impl DofIndex {
     /// A dof held at zero.
     const HELD: DofIndex = DofIndex(u32::MAX);
+
+    fn get(self) -> Option<usize> {
+        (self != DofIndex::HELD).then_some(self.0 as usize)
+    }
+}
+
+/// Global dof d·node + c → its index in the numbering (`Numbering::free`), and back.
+///
+/// The held dofs are a boundary's, few beside the whole, and they say every index: a free
+/// dof g is the (g − h)-th unknown, h the held dofs before it, and a prescribed one comes
+/// n_free + its place among the prescribed. So the numbering keeps those two lists and
+/// finds an index by binary search in them; the index of every dof of the whole (four
+/// bytes a dof) it keeps only where it reads every cell ([`DofIndices::whole`]: one
+/// process and rank 0 of several, whose assembly looks one up at every entry of every
+/// cell). A follower rank of several then holds nothing of the whole problem here.
+#[derive(Clone, Debug, Default)]
+pub struct DofIndices {
+    /// The global dofs: d × the nodes.
+    n: usize,
+    n_free: usize,
+    /// The held global dofs (at zero or prescribed), increasing.
+    held: Vec<u32>,
+    /// The prescribed global dofs, increasing: their indices are n_free, n_free + 1, …
+    prescribed: Vec<u32>,
+    /// Each global dof's index, where kept; else empty.
+    whole: Vec<DofIndex>,
+}
+
+impl DofIndices {
     /// The most dofs a numbering holds.
     pub const MAX_DOFS: usize = u32::MAX as usize;
 
-    pub fn get(self) -> Option<usize> {
-        (self != DofIndex::HELD).then_some(self.0 as usize)
-    }
-
-    fn of(index: usize) -> DofIndex {
-        DofIndex(index as u32)
-    }
-
     /// A numbering of n global dofs in which each is its own index (no condition held).
-    pub fn each(n: usize) -> Vec<DofIndex> {
-        (0..n).map(DofIndex::of).collect()
+    pub fn each(n: usize) -> DofIndices {
+        DofIndices {
+            n,
+            n_free: n,
+            ..DofIndices::default()
+        }
+    }
+
+    /// The numbering of n global dofs of which `held` (increasing) are held and
+    /// `prescribed` (increasing, among them) prescribed; the rest free, in global order.
+    fn new(n: usize, held: Vec<u32>, prescribed: Vec<u32>) -> DofIndices {
+        DofIndices {
+            n,
+            n_free: n - held.len(),
+            held,
+            prescribed,
+            whole: Vec::new(),
+        }
+    }
+
+    /// The same numbering with the index of every dof kept, so that [`DofIndices::get`]
+    /// reads one array instead of searching.
+    pub fn whole(mut self) -> DofIndices {
+        self.whole = (0..self.n)
+            .map(|g| {
+                self.search(g)
+                    .map_or(DofIndex::HELD, |i| DofIndex(i as u32))
+            })
+            .collect();
+        self
+    }
+
+    /// The global dofs: d × the nodes.
+    pub fn dofs(&self) -> usize {
+        self.n
+    }
+
+    /// The index of global dof g; none where g is held at zero.
+    #[inline]
+    pub fn get(&self, g: usize) -> Option<usize> {
+        match self.whole.get(g) {
+            Some(i) => i.get(),
+            None => self.search(g),
+        }
+    }
+
+    fn search(&self, g: usize) -> Option<usize> {
+        match self.held.binary_search(&(g as u32)) {
+            Err(h) => Some(g - h),
+            Ok(_) => (self.prescribed.binary_search(&(g as u32)).ok()).map(|p| self.n_free + p),
+        }
+    }
+
+    /// Whether a condition holds global dof g (at zero or at a prescribed value).
+    pub fn is_held(&self, g: usize) -> bool {
+        self.held.binary_search(&(g as u32)).is_ok()
+    }
+
+    /// The global dof of index i (i < n_dofs).
+    pub fn global(&self, i: usize) -> usize {
+        if i >= self.n_free {
+            return self.prescribed[i - self.n_free] as usize;
+        }
+        // The i-th free dof lies after the held ones with fewer than i + 1 free dofs before
+        // them: held[t] − t of those is at most i, and it does not decrease with t.
+        let (mut lo, mut hi) = (0, self.held.len());
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if self.held[mid] as usize - mid <= i {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        i + lo
+    }
+
+    /// The indices of node p's d dofs, those held at zero left out.
+    pub fn of_node(&self, d: usize, p: usize) -> impl Iterator<Item = usize> + '_ {
+        (d * p..d * (p + 1)).filter_map(|g| self.get(g))
+    }
+
+    /// Each global dof's index in global order (−1 where held at zero).
+    pub fn signed(&self) -> impl Iterator<Item = i64> + '_ {
+        (0..self.n).map(|g| self.get(g).map_or(-1, |i| i as i64))
     }
 }
 
 /// The dof numbering under the scene's conditions.
 pub struct Numbering {
     /// Global dof → index: free dofs 0..n_free, prescribed n_free..n_dofs, none if held at 0.
-    pub free: Vec<DofIndex>,
+    pub free: DofIndices,
     pub n_free: usize,
     pub n_dofs: usize,
     pub prescribed: Vec<Prescribed>,
-    /// Per node, which components carry a condition (bit c for component c).
-    pub held: Vec<u8>,
     /// Every held global dof (at zero or prescribed), increasing, with the condition that
     /// holds it: the first to name it, the clamped groups in order, then the `[[dirichlet]]`
     /// entries (the reactions of `fem::reactions` are reported per condition group).
@@ -173,17 +274,18 @@ impl Source {
 impl Numbering {
     /// The numbering of `scene`'s conditions on `mesh`, every rule checked; those of the
     /// body's parts (`Numbering::check_parts`, which read every cell) where `parts`: a
-    /// follower rank of several, whose mesh has no cells yet, leaves them to rank 0.
+    /// follower rank of several, whose mesh has no cells yet, leaves them to rank 0, and
+    /// keeps no index of every dof ([`DofIndices::whole`]).
     pub fn new(mesh: &Mesh, scene: &Scene, parts: bool) -> Result<Numbering> {
         let d = mesh.dim;
-        if d * mesh.nodes.len() >= DofIndex::MAX_DOFS {
+        if d * mesh.nodes.len() >= DofIndices::MAX_DOFS {
             return Err(Error::input(format!(
                 "{}: {} nodes make {} dofs, more than the {} that viscontact numbers: \
                  split the body, or mesh it coarser",
                 mesh.path.display(),
                 mesh.nodes.len(),
                 d * mesh.nodes.len(),
-                DofIndex::MAX_DOFS - 1
+                DofIndices::MAX_DOFS - 1
             )));
         }
         // The held dofs alone (a boundary's), not a slot of every dof: 40 bytes a dof of the
@@ -222,9 +324,10 @@ impl Numbering {
                 }
             }
         }
-        let numbering = Numbering::of((&holds, d * mesh.nodes.len()), d, frames);
+        let mut numbering = Numbering::of((&holds, d * mesh.nodes.len()), d, frames);
         numbering.check(mesh, scene)?;
         if parts {
+            numbering.free = numbering.free.whole();
             numbering.check_parts(mesh, scene)?;
         }
         Ok(numbering)
@@ -233,47 +336,32 @@ impl Numbering {
     /// Free dofs first, then prescribed ones, each in global order: of `n` dofs, those
     /// `holds` names held.
     fn of((holds, n): (&BTreeMap<usize, Hold>, usize), d: usize, frames: Frames) -> Numbering {
-        let mut free = vec![DofIndex::HELD; n];
-        let mut held = vec![0u8; n / d];
-        let mut held_by = Vec::with_capacity(holds.len());
-        let mut n_free = 0;
-        let mut next = holds.iter().peekable();
-        for g in 0..n {
-            match next.next_if(|&(&h, _)| h == g) {
-                None => {
-                    free[g] = DofIndex::of(n_free);
-                    n_free += 1;
-                }
-                Some((_, hold)) => {
-                    held[g / d] |= 1 << (g % d);
-                    held_by.push((g, hold.source));
-                }
-            }
-        }
+        let held = holds.keys().map(|&g| g as u32).collect();
+        let held_by = holds.iter().map(|(&g, h)| (g, h.source)).collect();
+        let n_free = n - holds.len();
         let mut prescribed = Vec::new();
+        let mut prescribed_dofs = Vec::new();
         for (&g, h) in holds {
             if let Hold {
                 source: Source::Dirichlet(entry),
                 value: Some((value, scale)),
             } = *h
             {
-                let dof = n_free + prescribed.len();
-                free[g] = DofIndex::of(dof);
                 prescribed.push(Prescribed {
-                    dof,
+                    dof: n_free + prescribed.len(),
                     node: g / d,
                     entry,
                     value,
                     scale,
                 });
+                prescribed_dofs.push(g as u32);
             }
         }
         Numbering {
-            free,
+            free: DofIndices::new(n, held, prescribed_dofs),
             n_free,
             n_dofs: n_free + prescribed.len(),
             prescribed,
-            held,
             held_by,
             frames,
         }
@@ -305,7 +393,10 @@ impl Numbering {
     /// motions.
     fn check_parts(&self, mesh: &Mesh, scene: &Scene) -> Result<()> {
         let file = scene.path.display();
-        let held: Vec<bool> = self.held.iter().map(|&h| h != 0).collect();
+        let d = mesh.dim;
+        let held: Vec<bool> = (0..mesh.nodes.len())
+            .map(|p| (d * p..d * (p + 1)).any(|g| self.free.is_held(g)))
+            .collect();
         mesh.check_parts(&held, &conditions(scene), scene.mesh.separate_parts)
             .map_err(|e| Error::input(format!("{file}: {e}")))?;
         if scene.physics.dirichlet.is_empty() {
@@ -345,7 +436,7 @@ impl Numbering {
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n_modes];
         for &node in &part.nodes {
             let x: [f64; 3] = std::array::from_fn(|i| (mesh.nodes[node][i] - centre[i]) / size);
-            for c in (0..d).filter(|c| self.held[node] & (1 << c) != 0) {
+            for c in (0..d).filter(|c| self.free.is_held(d * node + c)) {
                 for (m, col) in columns.iter_mut().enumerate() {
                     col.push(self.frames.to_dofs(node, rigid_mode(m, d, x))[c]);
                 }
@@ -737,6 +828,52 @@ pub fn lift(m: &Sparse, n_free: usize, w: &[f64], b: &mut [f64]) {
             if ri[p] < n_free {
                 b[ri[p]] -= v[p] * w[j];
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::DofIndices;
+    use crate::testing::SplitMix;
+
+    /// The searched numbering and the kept one give every dof the index that numbering
+    /// them one by one gives (free first, then prescribed, each in global order), and
+    /// `global` inverts it: held runs at either end, one free dof, none held, random sets.
+    #[test]
+    fn searched_indices_are_the_whole_numbering() {
+        let mut rng = SplitMix(52);
+        let mut cases: Vec<(usize, Vec<u32>, Vec<u32>)> = vec![
+            (7, vec![], vec![]),
+            (7, vec![0, 1, 2], vec![1]),
+            (7, vec![4, 5, 6], vec![4, 6]),
+            (7, vec![0, 1, 2, 3, 5, 6], vec![0, 6]),
+        ];
+        for _ in 0..50 {
+            let n = 1 + (rng.next() % 60) as usize;
+            let held: Vec<u32> = (0..n as u32).filter(|_| rng.next() % 3 == 0).collect();
+            let prescribed = held.iter().copied().filter(|_| rng.next() % 2 == 0).collect();
+            if held.len() < n {
+                cases.push((n, held, prescribed));
+            }
+        }
+        for (n, held, prescribed) in cases {
+            let free_dofs = (0..n).filter(|&g| !held.contains(&(g as u32)));
+            let mut expected = vec![None; n];
+            let order = free_dofs.chain(prescribed.iter().map(|&g| g as usize));
+            order.enumerate().for_each(|(i, g)| expected[g] = Some(i));
+            let searched = DofIndices::new(n, held.clone(), prescribed.clone());
+            let whole = searched.clone().whole();
+            for g in 0..n {
+                let case = format!("n = {n}, held {held:?}, prescribed {prescribed:?}, dof {g}");
+                assert_eq!(searched.get(g), expected[g], "{case}");
+                assert_eq!(whole.get(g), expected[g], "{case}");
+                assert_eq!(searched.is_held(g), held.contains(&(g as u32)), "{case}");
+                if let Some(i) = expected[g] {
+                    assert_eq!((searched.global(i), whole.global(i)), (g, g), "{case}");
+                }
+            }
+            assert!(searched.signed().eq(whole.signed()));
         }
     }
 }

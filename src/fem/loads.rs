@@ -6,7 +6,7 @@
 //!
 //! [`Facet::quadrature`]: crate::mesh::Facet::quadrature
 
-use super::{Cell, CellSource, DofIndex, Frames};
+use super::{Cell, CellSource, DofIndices, Frames};
 use crate::expr::{Point, Scalar};
 use crate::mesh::{fmt_point, Mesh};
 use crate::scene::Scene;
@@ -14,7 +14,7 @@ use crate::{Error, Result};
 use std::collections::HashSet;
 
 /// A quadrature point of a load: where, how much weight, which nodes with which φ (the
-/// nodes' indices in four bytes, as the numbering holds its dofs': `DofIndex::MAX_DOFS`;
+/// nodes' indices in four bytes, as the numbering holds its dofs': `DofIndices::MAX_DOFS`;
 /// 80 bytes a point, where they took 96: four points a tetrahedron for a body force).
 struct Qp {
     p: [f64; 3],
@@ -162,7 +162,7 @@ impl Loads {
     pub fn add(
         &self,
         t: f64,
-        (free, frames): (&[DofIndex], &Frames),
+        (free, frames): (&DofIndices, &Frames),
         scene: &Scene,
         (rhs, held): (&mut [f64], Option<&[usize]>),
     ) -> Result<()> {
@@ -171,7 +171,7 @@ impl Loads {
         let at = |d: usize| super::place_if_held(held, d);
         self.visit(t, scene, |_, dof, v| {
             frames.spread(self.dim, dof, v, |g, v| {
-                if let Some(d) = free[g].get().and_then(at) {
+                if let Some(d) = free.get(g).and_then(at) {
                     rhs[d] += v;
                 }
             })

@@ -16,7 +16,7 @@ use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
 use crate::scene::{Friction, MeshChoice, Model, Scene};
 use crate::{Error, Result};
-pub use constraints::{DofIndex, Frames, Numbering, Prescribed};
+pub use constraints::{DofIndices, Frames, Numbering, Prescribed};
 pub use element::{Cell, Isotropic};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::{Keep, Loads};
@@ -101,7 +101,7 @@ pub struct Discretization {
     vertices: Vec<u32>,
     /// Global dof d·node + component → index: free dofs 0..n_free, prescribed dofs
     /// n_free..n_dofs; none where a condition holds the dof at zero (Γ1).
-    pub free: Vec<DofIndex>,
+    pub free: DofIndices,
     /// The unknowns of the step problem.
     pub n_free: usize,
     /// The length of the vectors the loop keeps: n_free plus the prescribed dofs.
@@ -392,7 +392,8 @@ struct Acts(usize);
 impl RowMaker<'_> {
     /// Whether every component of `node` is held.
     fn held(&self, node: usize) -> bool {
-        self.numbering.held[node].count_ones() as usize == self.dim
+        let d = self.dim;
+        (d * node..d * (node + 1)).all(|g| self.numbering.free.is_held(g))
     }
 
     /// The spatial direction `dir` at `node` in the node's dof components (its frame's,
@@ -421,8 +422,8 @@ impl RowMaker<'_> {
         let mut dir = self.in_dofs(node, dir);
         let mut dofs = [0; 3];
         for c in 0..d {
-            match self.numbering.free[d * node + c].get() {
-                Some(i) if self.numbering.held[node] & (1 << c) == 0 => dofs[c] = i,
+            match self.numbering.free.get(d * node + c) {
+                Some(i) if !self.numbering.free.is_held(d * node + c) => dofs[c] = i,
                 _ if dir[c].abs() <= 1e-9 => dir[c] = 0.0,
                 _ => return Err(Acts(c)),
             }
@@ -547,7 +548,7 @@ fn friction_rows(
         )?;
         check_overlap(mesh, scene, c, g)?;
     }
-    let dofs = (rows.numbering.free.as_slice(), &rows.numbering.frames);
+    let dofs = (&rows.numbering.free, &rows.numbering.frames);
     let (gf, c) = friction_integrals(mesh, scene, fr, g, dofs)?;
     let g_f = gf.into_iter().filter(|&(_, v)| v != 0.0).collect();
     let c = |node: usize| c.get(&node).copied().unwrap_or(0.0);
@@ -596,7 +597,7 @@ fn friction_integrals(
     scene: &Scene,
     fr: &Friction,
     g: &Group,
-    (free, frames): (&[DofIndex], &Frames),
+    (free, frames): (&DofIndices, &Frames),
 ) -> Result<(BTreeMap<usize, f64>, BTreeMap<usize, f64>)> {
     let d = mesh.dim;
     // At Γ3,2's dofs and nodes alone, not a slot of every one (8 bytes a dof and a node of
@@ -618,7 +619,7 @@ fn friction_integrals(
                 for comp in 0..d {
                     let v = w * ph * big_f * f.normal[comp];
                     frames.spread(d, d * node + comp, v, |g, v| {
-                        if let Some(dof) = free[g].get() {
+                        if let Some(dof) = free.get(g) {
                             *gf.entry(dof).or_insert(0.0) += v;
                         }
                     });
@@ -789,7 +790,7 @@ impl Discretization {
         terms: (bool, usize),
         own: Option<&[usize]>,
     ) -> (Sparse, Option<Sparse>, Vec<Sparse>) {
-        let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
+        let dofs = (&self.free, &self.frames, self.n_dofs);
         let (materials, r) = (&self.materials, self.r);
         assemble(cells, self.dim, dofs, (materials, r), terms, own)
     }
@@ -904,7 +905,7 @@ impl Discretization {
             points: &self.nodes,
             dim: self.dim,
         };
-        let dofs = (self.free.as_slice(), &self.frames, self.n_dofs);
+        let dofs = (&self.free, &self.frames, self.n_dofs);
         let mut pair = RowsPair::with_capacity(own.len(), cells.entries);
         for piece in own.chunks(own.len().div_ceil(PAIR_PIECES).max(1)) {
             let materials = (&cells.materials, self.r);
@@ -953,10 +954,7 @@ impl Discretization {
         }
         // The columns of the rows `own_pair_made` will make: its cells' unknowns.
         for &p in self.pair_cells.iter().flat_map(|c| &c.vertices) {
-            let dofs = &self.free[self.dim * p as usize..self.dim * (p as usize + 1)];
-            dofs.iter()
-                .filter_map(|i| i.get())
-                .for_each(|i| read[i] = true);
+            (self.free.of_node(self.dim, p as usize)).for_each(|i| read[i] = true);
         }
         also.into_iter().for_each(|i| read[i] = true);
         Some((0..self.n_dofs).filter(|&i| read[i]).collect())
@@ -1020,14 +1018,8 @@ impl Discretization {
 
     /// The nodes of the free unknowns `own`, per node.
     fn reaching(&self, own: &[usize]) -> Vec<bool> {
-        let mut mine = vec![false; self.n_free];
-        own.iter().for_each(|&d| mine[d] = true);
         let mut reaches = vec![false; self.nodes.len()];
-        for (g, d) in self.free.iter().enumerate() {
-            if d.get().is_some_and(|d| d < self.n_free && mine[d]) {
-                reaches[g / self.dim] = true;
-            }
-        }
+        (own.iter()).for_each(|&j| reaches[self.free.global(j) / self.dim] = true);
         reaches
     }
 
@@ -1155,23 +1147,22 @@ impl Discretization {
         let at = self.nodes_of(only);
         let pq_of = |s: &Stiffness| -> Vec<[[f64; D]; 2]> {
             let (a, b) = (s.a, s.b_or_zero());
-            let dofs = self.free.as_chunks::<D>().0;
             let pq_at = |node: usize| {
-                let mut pq = [[0.0; D]; 2];
-                for (c, dof) in dofs[node].iter().enumerate() {
-                    if let Some(dof) = dof.get() {
+                let [mut p, mut q] = [[0.0; D]; 2];
+                for (c, (p, q)) in p.iter_mut().zip(&mut q).enumerate() {
+                    if let Some(dof) = self.free.get(D * node + c) {
                         let at = place(held, dof);
                         let m = (m.zip(s.memory)).map_or(0.0, |(m, g)| m[g * n + at]);
                         let (w, u) = (w[place(w_held, dof)], u[at]);
-                        pq[0][c] = a.a * w + b.a * u + r.a * m;
-                        pq[1][c] = a.b * w + b.b * u + r.b * m;
+                        *p = a.a * w + b.a * u + r.a * m;
+                        *q = a.b * w + b.b * u + r.b * m;
                     }
                 }
                 // p and q are linear in the nodal vectors: turned into x, y, z alike.
-                pq.map(|v| self.frames.to_space(node, v))
+                [p, q].map(|v| self.frames.to_space(node, v))
             };
             match &at {
-                None => (0..dofs.len()).map(pq_at).collect(),
+                None => (0..self.nodes.len()).map(pq_at).collect(),
                 Some(at) => at.iter().map(|&node| pq_at(node)).collect(),
             }
         };
@@ -1472,9 +1463,7 @@ fn nodal_vector<const N: usize>(
     let d = disc.dim;
     let mut out = [0.0; N];
     for (k, o) in out.iter_mut().enumerate().take(d) {
-        *o = disc.free[d * i + k]
-            .get()
-            .map_or(0.0, |dof| v[place(held, dof)]);
+        *o = (disc.free.get(d * i + k)).map_or(0.0, |dof| v[place(held, dof)]);
     }
     disc.frames.to_space(i, out)
 }
@@ -1676,7 +1665,7 @@ fn check_overlap(mesh: &Mesh, scene: &Scene, contact: &Group, friction: &Group) 
 fn assemble(
     cells: CellSource,
     d: usize,
-    (free, frames, n): (&[DofIndex], &Frames, usize),
+    (free, frames, n): (&DofIndices, &Frames, usize),
     (materials, r): (&CellMaterials, Isotropic),
     (elastic, groups): (bool, usize),
     own: Option<&[usize]>,
@@ -1686,7 +1675,7 @@ fn assemble(
         None => Some(j),
         Some(own) => own.binary_search(&j).ok(),
     };
-    let node_of = column_nodes(free, d, own.map_or(n, <[usize]>::len), column_of);
+    let node_of = column_nodes(free, d, own, n);
     // With `own`, the nodes of its unknowns, increasing.
     let mine = own.map(|_| {
         let mut mine = node_of.clone();
@@ -1713,12 +1702,12 @@ fn assemble(
         for (j, &p) in nodes.iter().enumerate() {
             for (i, &q) in nodes.iter().enumerate() {
                 for be in 0..d {
-                    let Some(col) = free[d * p + be].get().and_then(column_of) else {
+                    let Some(col) = free.get(d * p + be).and_then(column_of) else {
                         continue;
                     };
                     let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
                     for al in 0..d {
-                        let Some(row) = free[d * q + al].get() else {
+                        let Some(row) = free.get(d * q + al) else {
                             continue;
                         };
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);
@@ -1746,21 +1735,14 @@ fn assemble(
     (SparseColMat::new(pattern, va), k_b, k_r)
 }
 
-/// The node of each of [`assemble`]'s `columns` columns, index j's column being
-/// `column_of(j)` where it has one.
-fn column_nodes(
-    free: &[DofIndex],
-    d: usize,
-    columns: usize,
-    column_of: impl Fn(usize) -> Option<usize>,
-) -> Vec<usize> {
-    let mut node_of = vec![0; columns];
-    for (g, i) in free.iter().enumerate() {
-        if let Some(k) = i.get().and_then(&column_of) {
-            node_of[k] = g / d;
-        }
+/// The node of each of [`assemble`]'s columns: column k's unknown is own[k], or k of the
+/// n indices without `own`.
+fn column_nodes(free: &DofIndices, d: usize, own: Option<&[usize]>, n: usize) -> Vec<usize> {
+    let node = |j: usize| free.global(j) / d;
+    match own {
+        Some(own) => own.iter().map(|&j| node(j)).collect(),
+        None => (0..n).map(node).collect(),
     }
-    node_of
 }
 
 /// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,
@@ -1773,17 +1755,17 @@ fn column_nodes(
 fn pattern(
     cells: CellSource,
     d: usize,
-    free: &[DofIndex],
+    free: &DofIndices,
     (node_of, mine): (&[usize], Option<&[usize]>),
 ) -> (Vec<usize>, Vec<usize>) {
-    let dofs = |p: usize| free[d * p..d * (p + 1)].iter().filter_map(|i| i.get());
+    let dofs = |p: usize| free.of_node(d, p);
     let has_dofs = |p: usize| dofs(p).next().is_some();
     // The place of node p's list, where it has one.
     let list_of = |p: usize| match mine {
         None => dofs(p).next().map(|_| p),
         Some(mine) => mine.binary_search(&p).ok(),
     };
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); mine.map_or(free.len() / d, <[_]>::len)];
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); mine.map_or(free.dofs() / d, <[_]>::len)];
     cells.each_vertices(|vertices| {
         for list in vertices.iter().filter_map(|&p| list_of(p)) {
             let with_dofs = vertices.iter().filter(|&&q| has_dofs(q));

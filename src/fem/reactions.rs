@@ -89,7 +89,7 @@ impl Reactions {
         k_b: f64,
         k_r: &[f64],
     ) -> Result<Self> {
-        let mut row_of = vec![None; disc.free.len()];
+        let mut row_of = vec![None; disc.free.dofs()];
         for (i, &(dof, _)) in disc.held.iter().enumerate() {
             row_of[dof] = Some(i as u32);
         }
@@ -208,8 +208,7 @@ fn held_rows(
                     continue;
                 };
                 for (j, &p) in nodes.iter().enumerate() {
-                    for (be, col) in
-                        (0..d).filter_map(|be| Some((be, disc.free[d * p + be].get()?)))
+                    for (be, col) in (0..d).filter_map(|be| Some((be, disc.free.get(d * p + be)?)))
                     {
                         let parts = t.parts_in([i, j], [al, be], [frame(i), frame(j)]);
                         let [ka, kb, kr] = [a, b, r].map(|c| t.entry(c, parts));
@@ -251,10 +250,10 @@ fn normal_stress_load(mesh: &Mesh, scene: &Scene) -> Result<Vec<f64>> {
     let name = &scene.mesh.groups.friction;
     let g = group(mesh, scene, "mesh.groups.friction", name)?;
     // Every global dof its own index, no frame: g_F in x, y, z at every node.
-    let all = super::DofIndex::each(mesh.dim * mesh.nodes.len());
-    let dofs = (all.as_slice(), &super::Frames::default());
+    let all = super::DofIndices::each(mesh.dim * mesh.nodes.len());
+    let dofs = (&all, &super::Frames::default());
     let (at, _) = super::friction_integrals(mesh, scene, fr, g, dofs)?;
-    let mut g_f = vec![0.0; all.len()];
+    let mut g_f = vec![0.0; all.dofs()];
     at.into_iter().for_each(|(dof, v)| g_f[dof] = v);
     Ok(g_f)
 }

@@ -283,7 +283,7 @@ impl Layout {
     /// The rank that holds each mesh node's unknowns; `u32::MAX` for a node without any.
     fn rank_of_nodes(&self, disc: &Discretization) -> Vec<u32> {
         let nodes = nodes(disc);
-        let mut of_node = vec![u32::MAX; disc.free.len() / disc.dim];
+        let mut of_node = vec![u32::MAX; disc.free.dofs() / disc.dim];
         let with_unknowns = (0..of_node.len()).filter(|&v| !node_unknowns(disc, v).is_empty());
         for (v, r) in with_unknowns.zip(self.ranks_of(&nodes)) {
             of_node[v] = r as u32;
@@ -362,7 +362,7 @@ fn petsc_int(i: usize) -> Result<PetscInt> {
 
 /// The unknowns of each node that has any, node by node.
 fn nodes(disc: &Discretization) -> Vec<Vec<usize>> {
-    (0..disc.free.len() / disc.dim)
+    (0..disc.free.dofs() / disc.dim)
         .map(|v| node_unknowns(disc, v))
         .filter(|u| !u.is_empty())
         .collect()
@@ -391,7 +391,7 @@ struct Graph {
 impl Graph {
     fn new(disc: &Discretization, cells: CellSource, nodes: &[Vec<usize>]) -> Graph {
         const NONE: u32 = u32::MAX;
-        let mut vertex = vec![NONE; disc.free.len() / disc.dim];
+        let mut vertex = vec![NONE; disc.free.dofs() / disc.dim];
         let with_unknowns = (0..vertex.len()).filter(|&p| !node_unknowns(disc, p).is_empty());
         for (v, p) in with_unknowns.enumerate() {
             vertex[p] = v as u32;

@@ -56,7 +56,7 @@ impl PieceSetup {
         let d = disc.dim;
         let points = self.mesh.as_ref().map_or(&[][..], PieceMesh::points);
         (points.iter())
-            .flat_map(|&p| disc.free[d * p..][..d].iter().filter_map(|i| i.get()))
+            .flat_map(|&p| disc.free.of_node(d, p))
             .collect()
     }
 }

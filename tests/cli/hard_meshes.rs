@@ -160,7 +160,7 @@ fn nodes_where_boundary_parts_meet_get_every_row_of_their_parts_and_gamma1_wins(
     let mu_f = fr.normal_stress.eval(&p) * fr.coefficient.eval(&p);
     assert_eq!(mu_f, 0.01 * 0.5);
     let edge = 2.0 / 8.0; // rect_008: the bottom is cut into edges of 2/8
-    let free = |n: usize| (d.free[2 * n].get(), d.free[2 * n + 1].get());
+    let free = |n: usize| (d.free.get(2 * n), d.free.get(2 * n + 1));
 
     // (1, 0): on Γ3,1 and on Γ3,2. One contact row with the normal of Γ3,1's last edge and
     // one friction row with half an edge's bound (only one Γ3,2 edge meets it).

@@ -327,7 +327,7 @@ fn a_followers_part_of_the_mesh_is_the_cells_with_one_of_its_own_nodes() {
         let d = disc.dim;
         // A node's rank, that of its unknowns' rows (none where it has no unknown).
         let of_node = |v: usize| {
-            let mut unknowns = (d * v..d * v + d).filter_map(|g| disc.free[g].get());
+            let mut unknowns = (d * v..d * v + d).filter_map(|g| disc.free.get(g));
             let unknown = unknowns.find(|&i| i < disc.n_free)?;
             Some(layout.rank_of_row(layout.row(unknown)))
         };

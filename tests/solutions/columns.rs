@@ -40,9 +40,9 @@ fn with_columns(
 /// The unknowns of a random half of `disc`'s nodes, increasing.
 fn random_half(disc: &Discretization, rng: &mut SplitMix) -> Vec<usize> {
     let d = disc.dim;
-    (0..disc.free.len() / d)
+    (0..disc.free.dofs() / d)
         .filter(|_| rng.below(2) == 0)
-        .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g].get()))
+        .flat_map(|v| disc.free.of_node(d, v))
         .collect::<BTreeSet<_>>()
         .into_iter()
         .collect()
@@ -138,7 +138,7 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
             let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             let loads = |d: &Discretization| {
                 let mut f = vec![0.0; d.n_dofs];
-                let free = (d.free.as_slice(), &d.frames);
+                let free = (&d.free, &d.frames);
                 d.loads.add(0.5, free, &scene, (&mut f, None)).unwrap();
                 f
             };
@@ -153,7 +153,7 @@ fn a_rank_that_assembles_its_own_columns_alone_holds_what_it_would_keep_of_the_w
             assert_eq!(bits(&at(&loads(&mine))), bits(&at(&f)), "{case}");
             // A follower's b_n, held at its own rows alone (and others: `time_loop`).
             let mut f_own = vec![0.0; own.len()];
-            let free = (mine.free.as_slice(), &mine.frames);
+            let free = (&mine.free, &mine.frames);
             (mine.loads.add(0.5, free, &scene, (&mut f_own, Some(&own)))).unwrap();
             let own_f: Vec<f64> = own.iter().map(|&i| f[i]).collect();
             assert_eq!(bits(&f_own), bits(&own_f), "{case}");
@@ -376,10 +376,10 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
     for paired in [false, true] {
         let (scene, _, mut disc) = load(&path, &[]);
         let d = disc.dim;
-        let nodes = disc.free.len() / d;
+        let nodes = disc.free.dofs() / d;
         // The unknowns of a quarter of the nodes; the piece: the cells with one of them.
         let own: Vec<usize> = (0..d * nodes / 4)
-            .filter_map(|g| disc.free[g].get())
+            .filter_map(|g| disc.free.get(g))
             .collect();
         let piece: Vec<usize> = (0..disc.cells.len())
             .filter(|&c| {
@@ -390,7 +390,7 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
             .collect();
         let also: BTreeSet<usize> = (piece.iter())
             .flat_map(|&c| disc.cells[c].vertices()[..=d].to_vec())
-            .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free[g].get()))
+            .flat_map(|v| (d * v..d * v + d).filter_map(|g| disc.free.get(g)))
             .collect();
         disc.keep_columns(own.clone());
         if paired {
@@ -450,7 +450,7 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
             .step_by(5)
             .filter(|&v| {
                 (d * v..d * v + d)
-                    .filter_map(|g| disc.free[g].get())
+                    .filter_map(|g| disc.free.get(g))
                     .all(|i| also.contains(&i))
             })
             .collect();

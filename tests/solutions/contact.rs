@@ -181,9 +181,7 @@ fn normal_stress_pushes_gamma32_away_from_the_foundation_and_nothing_stops_it_th
     };
     let mut gamma32_nodes = 0;
     for node in 0..disc.nodes.len() {
-        let dofs: Vec<usize> = (0..d)
-            .filter_map(|c| disc.free[d * node + c].get())
-            .collect();
+        let dofs: Vec<usize> = (0..d).filter_map(|c| disc.free.get(d * node + c)).collect();
         if dofs.len() < d || dofs.iter().all(|&i| g_f(i) == 0.0) {
             continue;
         }

@@ -45,7 +45,7 @@ fn linear(disc: &viscontact::fem::Discretization, p: f64, q: f64) -> Vec<f64> {
     let mut v = vec![0.0; disc.n_free];
     for (i, x) in disc.nodes.iter().enumerate() {
         for (comp, val) in [(0, p * x[0]), (1, q * x[0])] {
-            if let Some(d) = disc.free[2 * i + comp].get() {
+            if let Some(d) = disc.free.get(2 * i + comp) {
                 v[d] = val;
             }
         }

@@ -687,7 +687,7 @@ fn three_d_tensors_are_lame_and_viscosity() {
     assert_eq!(disc.dim, 3);
     assert_eq!(disc.cells.len(), mesh.tetrahedra.len());
     assert!(disc.cells.iter().all(|c| c.dim == 3 && c.measure > 0.0));
-    assert_eq!(disc.free.len(), 3 * mesh.nodes.len());
+    assert_eq!(disc.free.dofs(), 3 * mesh.nodes.len());
     let clamped = mesh.group_nodes(mesh.boundary_group("Γ1").unwrap()).len();
     assert_eq!(disc.n_free, 3 * (mesh.nodes.len() - clamped));
     assert_eq!(disc.k_a.nrows(), disc.n_free);
@@ -864,7 +864,7 @@ fn clamped_patch(
     let mut v = vec![0.0; disc.n_free];
     for (i, x) in disc.nodes.iter().enumerate() {
         for (comp, val) in [p, q, r].iter().enumerate() {
-            if let Some(d) = disc.free[3 * i + comp].get() {
+            if let Some(d) = disc.free.get(3 * i + comp) {
                 v[d] = val * x[0];
             }
         }
@@ -884,8 +884,9 @@ fn clamped_patch(
     let mut rows = 0;
     for i in interior {
         for comp in 0..3 {
-            let dof = disc.free[3 * i + comp]
-                .get()
+            let dof = disc
+                .free
+                .get(3 * i + comp)
                 .expect("interior nodes are free");
             assert_eq!(f[dof], 0.0);
             rows += 1;
@@ -972,7 +973,7 @@ fn three_d_load_quadrature_is_exact_for_polynomials() {
         .body(&body.each_ref().map(poly_expr))
         .write(dir.path(), "box.toml");
     let (s, mesh, disc) = load(&scene, &[]);
-    let all_free = viscontact::fem::DofIndex::each(3 * mesh.nodes.len());
+    let all_free = viscontact::fem::DofIndices::each(3 * mesh.nodes.len());
     let mut f = vec![0.0; 3 * mesh.nodes.len()];
     disc.loads
         .add(0.0, (&all_free, &Default::default()), &s, (&mut f, None))
