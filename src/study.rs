@@ -672,7 +672,7 @@ fn check_levels(opts: &StudyOptions) -> Result<()> {
 /// What the report says of the reference run `r` (on the mesh of level `ref_n`).
 fn reference_info(meshes: &Meshes, r: &Solved, ref_n: usize) -> ReferenceInfo {
     let (ref_l2, ref_semi) = p1_norms(&r.disc.cells, &r.u);
-    let ref_hmax = max_edge(&r.disc.nodes, &r.disc.cells);
+    let ref_hmax = max_edge(r.disc.nodes.all(), &r.disc.cells);
     ReferenceInfo {
         mesh: r.mesh.clone(),
         h: meshes.nominal_h(ref_n, ref_hmax),
@@ -709,7 +709,7 @@ fn family_of(
     for l in levels {
         let (s, given) = &solved[l.case];
         kernel = family.form.label(given);
-        let h_max = max_edge(&s.disc.nodes, &s.disc.cells);
+        let h_max = max_edge(s.disc.nodes.all(), &s.disc.cells);
         let h = [meshes.nominal_h(l.mesh_n, h_max), h_max];
         let (r, ref_mesh) = (family.ref_run, &family.reference.mesh);
         let t = transfers.between((&s.mesh, &s.disc), (ref_mesh, &r.disc));

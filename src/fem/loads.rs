@@ -6,7 +6,7 @@
 //!
 //! [`Facet::quadrature`]: crate::mesh::Facet::quadrature
 
-use super::{Cell, CellSource, DofIndices, Frames};
+use super::{Cell, CellSource, DofIndices, Frames, Points};
 use crate::expr::{Point, Scalar};
 use crate::mesh::{fmt_point, Mesh};
 use crate::scene::Scene;
@@ -88,7 +88,7 @@ impl Loads {
         let reaches = keep.reaches();
         for i in 0..scene.physics.body_forces.len() {
             let reaches = reaches.map(|(r, _)| r);
-            loads.push(body_force(&mesh.nodes, cells, i, reaches));
+            loads.push(body_force(Points::Every(&mesh.nodes), cells, i, reaches));
         }
         let mut loads = Loads {
             loads,
@@ -197,7 +197,7 @@ impl Loads {
     pub fn visit_every(
         &self,
         (t, scene): (f64, &Scene),
-        cells: (CellSource, &[[f64; 3]]),
+        cells: (CellSource, Points),
         put: impl FnMut(usize, usize, f64),
     ) -> Result<()> {
         let making = (self.part && self.every_traction).then_some(cells);
@@ -208,7 +208,7 @@ impl Loads {
     /// the nodes' places) where it is Some, the kept ones visited otherwise.
     fn visit_making(
         &self,
-        making: Option<(CellSource, &[[f64; 3]])>,
+        making: Option<(CellSource, Points)>,
         (t, scene): (f64, &Scene),
         mut put: impl FnMut(usize, usize, f64),
     ) -> Result<()> {
@@ -346,12 +346,7 @@ fn traction(
 
 /// Body force i over every cell (with `reaches`, every cell with one of its nodes), by
 /// `body_rule`, the nodes at `nodes`.
-fn body_force(
-    nodes: &[[f64; 3]],
-    cells: CellSource,
-    i: usize,
-    reaches: Option<&[bool]>,
-) -> VectorLoad {
+fn body_force(nodes: Points, cells: CellSource, i: usize, reaches: Option<&[bool]>) -> VectorLoad {
     let mut qps = Vec::new();
     cells.each(|_, t| {
         let vertices = &t.nodes[..=t.dim];
@@ -370,7 +365,7 @@ fn body_force(
 
 /// The quadrature point of cell `t` with φ `phi` of its vertices and weight `weight`, the
 /// nodes at `nodes`.
-fn body_point(nodes: &[[f64; 3]], t: &Cell, phi: [f64; 4], weight: f64) -> Qp {
+fn body_point(nodes: Points, t: &Cell, phi: [f64; 4], weight: f64) -> Qp {
     let mut p = [0.0; 3];
     for (k, pk) in p.iter_mut().enumerate() {
         *pk = (0..=t.dim).map(|i| phi[i] * nodes[t.nodes[i]][k]).sum();

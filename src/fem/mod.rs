@@ -10,6 +10,7 @@ pub mod element;
 pub mod loads;
 pub mod materials;
 mod pair;
+mod places;
 pub mod reactions;
 
 use crate::expr::Point;
@@ -22,6 +23,7 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::{Keep, Loads};
 pub use materials::{CellMaterials, Stiffness};
 pub use pair::{RowsPair, SymmetricPair};
+pub use places::{Places, Points};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -92,7 +94,9 @@ pub type DofValues = Vec<(usize, f64)>;
 pub struct Discretization {
     /// Spatial dimension d (2 or 3): d dofs per node.
     pub dim: usize,
-    pub nodes: Vec<[f64; 3]>,
+    /// Every node's place; on a follower rank of several, past its setup, those it reads
+    /// alone ([`Discretization::keep_places`]).
+    pub nodes: Places,
     /// The triangles (2D) or tetrahedra (3D) on one process; none on a rank of several
     /// ([`Discretization::assembled`], [`Discretization::forget_cells`]), which reads
     /// them through [`Discretization::cell_source`].
@@ -194,7 +198,7 @@ fn node_u32(p: usize, mesh: &Mesh) -> Result<u32> {
 /// The mesh's triangles (2D) or tetrahedra (3D) as cells.
 fn cells(mesh: &Mesh) -> Vec<Cell> {
     let (nodes, dim) = mesh_cells(mesh);
-    cells_of(dim, nodes, &mesh.nodes).collect()
+    cells_of(dim, nodes, Points::Every(&mesh.nodes)).collect()
 }
 
 /// The mesh's cells' vertices (dim + 1 a cell), flattened, and the dimension.
@@ -210,13 +214,13 @@ pub(crate) fn mesh_cells(mesh: &Mesh) -> (&[usize], usize) {
 fn cells_of<'a>(
     dim: usize,
     nodes: &'a [usize],
-    points: &'a [[f64; 3]],
+    points: Points<'a>,
 ) -> impl Iterator<Item = Cell> + 'a {
     (nodes.chunks_exact(dim + 1)).map(move |v| make_cell(dim, corners(v, |i| i), points))
 }
 
 /// The cell of dimension `dim` with the vertices `v` (the first dim + 1), at `points`.
-fn make_cell(dim: usize, v: [usize; 4], points: &[[f64; 3]]) -> Cell {
+fn make_cell(dim: usize, v: [usize; 4], points: Points) -> Cell {
     match dim {
         2 => {
             let t = [v[0], v[1], v[2]];
@@ -244,7 +248,7 @@ pub enum CellSource<'a> {
     /// Each cell's dim + 1 vertices, at `points`.
     Vertices {
         vertices: &'a [u32],
-        points: &'a [[f64; 3]],
+        points: Points<'a>,
         dim: usize,
     },
 }
@@ -330,10 +334,10 @@ impl<'a> CellSource<'a> {
     }
 
     /// The points the vertices number and the dimension (none for held cells).
-    fn points(self) -> (&'a [[f64; 3]], usize) {
+    fn points(self) -> (Points<'a>, usize) {
         match self {
-            CellSource::Held(cells) => (&[], cells.first().map_or(0, |t| t.dim)),
-            CellSource::Made(mesh) => (&mesh.nodes, mesh.dim),
+            CellSource::Held(cells) => (Points::Every(&[]), cells.first().map_or(0, |t| t.dim)),
+            CellSource::Made(mesh) => (Points::Every(&mesh.nodes), mesh.dim),
             CellSource::Vertices { points, dim, .. } => (points, dim),
         }
     }
@@ -678,7 +682,12 @@ impl Discretization {
         };
         Ok(Discretization {
             dim: d,
-            nodes: mesh.nodes.clone(),
+            // A follower keeps the places it reads once its own rows are known
+            // (`keep_places`), and holds no copy of every node's before.
+            nodes: match hold {
+                Hold::Nothing => Places::of(&mesh.nodes, &[]),
+                _ => Places::every(mesh.nodes.clone()),
+            },
             cells,
             n_free,
             n_dofs,
@@ -902,7 +911,7 @@ impl Discretization {
         let (cells, own) = (self.pair_cells.as_ref()?, self.own.as_deref()?);
         let source = CellSource::Vertices {
             vertices: &cells.vertices,
-            points: &self.nodes,
+            points: self.nodes.points(),
             dim: self.dim,
         };
         let dofs = (&self.free, &self.frames, self.n_dofs);
@@ -998,7 +1007,7 @@ impl Discretization {
         scene: &Scene,
         put: impl FnMut(usize, usize, f64),
     ) -> Result<()> {
-        let cells = (self.cell_source(), self.nodes.as_slice());
+        let cells = (self.cell_source(), self.nodes.points());
         self.loads.visit_every((t, scene), cells, put)
     }
 
@@ -1217,7 +1226,7 @@ impl Discretization {
         // dofs every rank keeps the matrices whole); any rank of several reads its cells so,
         // a follower its piece's (a cell held would take 144 bytes).
         if let StressCells::Of(vertices, materials) = only {
-            let cells = cells_of(self.dim, vertices, &self.nodes);
+            let cells = cells_of(self.dim, vertices, self.nodes.points());
             (cells.zip(materials)).for_each(|(t, &material)| of_cell(&t, material));
         } else if self.own.is_some() || !self.vertices.is_empty() {
             let cells = self.cell_source();
@@ -1296,6 +1305,35 @@ impl Discretization {
         self.materials.region = Vec::new();
     }
 
+    /// On a follower rank of several that keeps its own columns, past its setup: the
+    /// places of the nodes it still reads alone ([`Places`]), those of its own unknowns
+    /// (GAMG's rigid-body modes), of its rows of K_B and K_R^(0) made after PETSc's setup
+    /// (their cells' vertices), of Γ3's rows, of the prescribed dofs (their values at each
+    /// step) and `also` (its piece's points), of every node's places `all` (the mesh's),
+    /// not every node's; every node's where it keeps every column (`own` is None), whose
+    /// GAMG reads every node's.
+    pub fn keep_places(&mut self, all: &[[f64; 3]], also: &[usize]) {
+        let Some(own) = &self.own else {
+            self.nodes = Places::every(all.to_vec());
+            return;
+        };
+        let d = self.dim;
+        let mut read: Vec<usize> = (own.iter().map(|&j| self.free.global(j) / d))
+            .chain(
+                self.pair_cells
+                    .iter()
+                    .flat_map(|c| &c.vertices)
+                    .map(|&p| p as usize),
+            )
+            .chain(self.contact.iter().chain(&self.friction).map(|r| r.node))
+            .chain(self.prescribed.iter().map(|p| p.node))
+            .chain(also.iter().copied())
+            .collect();
+        read.sort_unstable();
+        read.dedup();
+        self.nodes = Places::of(all, &read);
+    }
+
     /// Its cells: those it holds ([`Discretization::cells`]), or on rank 0 of several
     /// each made from its vertices when it is read; none on a follower rank of several.
     pub fn cell_source(&self) -> CellSource<'_> {
@@ -1303,7 +1341,7 @@ impl Discretization {
             true => CellSource::Held(&self.cells),
             false => CellSource::Vertices {
                 vertices: &self.vertices,
-                points: &self.nodes,
+                points: self.nodes.points(),
                 dim: self.dim,
             },
         }

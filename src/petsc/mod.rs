@@ -965,29 +965,25 @@ pub fn rigid_body_modes(
     mut sum: impl FnMut(f64) -> Result<f64>,
 ) -> Result<Vec<Vec<f64>>> {
     let d = disc.dim;
-    let count = disc.nodes.len().max(1) as f64;
-    let mut centre = [0.0; 3];
-    for x in &disc.nodes {
-        for c in 0..3 {
-            centre[c] += x[c] / count;
-        }
-    }
+    let centre = disc.nodes.centre();
+    // The global dof of each of the rank's rows: the modes read the places of its own
+    // unknowns' nodes alone (a follower keeps no others: `fem::Places`).
+    let dofs: Vec<usize> = match mine.is_empty() {
+        true => Vec::new(),
+        false => (layout.unknowns_of(layout.rank_of_row(mine.start)).iter())
+            .map(|&u| disc.free.global(u as usize))
+            .collect(),
+    };
     let modes = d * (d + 1) / 2;
     let mut v: Vec<Vec<f64>> = (0..modes)
         .map(|k| {
-            let mut m = vec![0.0; mine.len()];
-            for (i, x) in disc.nodes.iter().enumerate() {
+            let value = |g: usize| {
+                let (i, x) = (g / d, disc.nodes[g / d]);
                 let y = [0, 1, 2].map(|c| x[c] - centre[c]);
                 // Mode k at the node (relative to the centre), in the node's dofs.
-                let mode = disc.frames.to_dofs(i, rigid_mode(k, d, y));
-                for (c, value) in mode.into_iter().enumerate().take(d) {
-                    let row = unknown(disc, d * i + c).map(|f| layout.row(f));
-                    if let Some(r) = row.filter(|r| mine.contains(r)) {
-                        m[r - mine.start] = value;
-                    }
-                }
-            }
-            m
+                disc.frames.to_dofs(i, rigid_mode(k, d, y))[g % d]
+            };
+            dofs.iter().map(|&g| value(g)).collect()
         })
         .collect();
     let mut dot = |a: &[f64], b: &[f64]| sum(dot(a, b));

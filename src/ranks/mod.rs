@@ -61,13 +61,14 @@
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
 //! memory of each rank is the replicated part (w_n and b_n of the whole on rank 0 and on a
-//! follower whose history holds every dof, rank 0's whole history; the nodes' places, 8
-//! bytes a dof, and on rank 0 during setup the whole mesh and its reading), its columns of
-//! the matrices, a follower's part of the history, of w_n, b_n and of the mesh, and its
-//! share of PETSc's; a follower's setup in a numbering of its own (what
-//! it still holds of the whole at its peak is the nodes' places and the numbering's index
-//! of each dof, 12 B a dof), and rank 0's memory in parts, are the next steps
-//! (docs/cluster.md, "Not built yet").
+//! follower whose history holds every dof, rank 0's whole history, every node's place and
+//! every dof's index; during setup every node's place on every rank, and on rank 0 the
+//! whole mesh and its reading), its columns of the matrices, a follower's part of the
+//! history, of w_n, b_n, of the mesh and of the nodes' places (`fem::Places`, those it
+//! reads past its setup alone; it finds a dof's index by searching the held dofs:
+//! `fem::DofIndices`), and its share of PETSc's; a follower's setup in a numbering of its
+//! own (so that it never receives every node's place), and rank 0's memory in parts, are
+//! the next steps (docs/cluster.md, "Not built yet").
 //!
 //! # Planning
 //!

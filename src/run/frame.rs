@@ -51,11 +51,15 @@ pub(super) struct PieceSetup {
 }
 
 impl PieceSetup {
+    /// The piece's points: the nodes of its cells, increasing.
+    pub fn points(&self) -> &[usize] {
+        self.mesh.as_ref().map_or(&[][..], PieceMesh::points)
+    }
+
     /// The dofs of the piece's points: where its fields read u_n, w_n and m_n.
     pub fn dofs(&self, disc: &Discretization) -> Vec<usize> {
         let d = disc.dim;
-        let points = self.mesh.as_ref().map_or(&[][..], PieceMesh::points);
-        (points.iter())
+        (self.points().iter())
             .flat_map(|&p| disc.free.of_node(d, p))
             .collect()
     }

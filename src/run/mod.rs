@@ -413,6 +413,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         // cell; a follower holds none (or, where `auto` assembled the whole, no longer),
         // and its piece makes its own cells at its first step, after that peak.
         disc.forget_cells();
+        disc.keep_places(&mesh.nodes, piece.as_ref().map_or(&[][..], |p| p.points()));
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
             None => crate::history::Plans::new(&scene)?,

@@ -365,16 +365,16 @@ impl Transfer {
         );
         if source.dim == 2 {
             Transfer::new(
-                &source.nodes,
+                source.nodes.all(),
                 &cells::<3>(source),
-                &target.nodes,
+                target.nodes.all(),
                 &cells::<3>(target),
             )
         } else {
             Transfer::new(
-                &source.nodes,
+                source.nodes.all(),
                 &cells::<4>(source),
-                &target.nodes,
+                target.nodes.all(),
                 &cells::<4>(target),
             )
         }

@@ -28,6 +28,7 @@ fn all_finite(vs: &[Vec<f64>]) -> bool {
 /// The node at (x, y) of the discretization.
 fn node_at(d: &Discretization, x: f64, y: f64) -> usize {
     d.nodes
+        .all()
         .iter()
         .position(|p| (p[0] - x).abs() < 1e-12 && (p[1] - y).abs() < 1e-12)
         .unwrap_or_else(|| panic!("no node at ({x}, {y})"))

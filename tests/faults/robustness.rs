@@ -29,6 +29,7 @@ fn bar_strain(scene: &viscontact::scene::Scene, disc: &viscontact::fem::Discreti
     let u = disc.nodal(&tr.u_final);
     let (i, p) = disc
         .nodes
+        .all()
         .iter()
         .enumerate()
         .max_by(|a, b| a.1[0].total_cmp(&b.1[0]))

@@ -37,7 +37,7 @@ fn a_prescribed_affine_motion_is_reproduced_exactly() {
         let tr = trace(&scene, &disc);
         let t_end = scene.time.end;
         let u = viscontact::fem::nodal_vectors::<2>(&disc, &tr.u_final);
-        let want: Vec<f64> = disc.nodes.iter().flat_map(|&x| g(x, t_end)).collect();
+        let want: Vec<f64> = disc.nodes.all().iter().flat_map(|&x| g(x, t_end)).collect();
         let got: Vec<f64> = u.into_iter().flatten().collect();
         let d = rel_diff(&got, &want);
         assert!(
@@ -71,7 +71,7 @@ fn half_agrees_with_whole(half: SceneText, whole: SceneText, plane: Plane) -> Ve
     let n_contact = dh.contact.len();
     assert!(last[..n_contact].iter().any(|&z| z != 0.0));
     assert!(last[n_contact..].iter().any(|&z| z != 0.0));
-    for (a, b) in dh.nodes.iter().zip(&dw.nodes) {
+    for (a, b) in dh.nodes.all().iter().zip(dw.nodes.all()) {
         assert_eq!(a, b);
     }
     let uw = viscontact::fem::nodal_vectors::<3>(&dw, &tw.u_final);
@@ -83,6 +83,7 @@ fn half_agrees_with_whole(half: SceneText, whole: SceneText, plane: Plane) -> Ve
     let along = |v: &[f64; 3]| (0..3).map(|c| v[c] * plane.normal[c]).sum::<f64>();
     let on_plane = dh
         .nodes
+        .all()
         .iter()
         .zip(&uh)
         .filter(|(x, _)| (along(x) - plane.offset).abs() < 1e-9);

@@ -43,7 +43,7 @@ fn scene(dir: &std::path::Path, model: &str, t: &[String; 2]) -> std::path::Path
 /// The free-dof vector of the linear field (p x, q x).
 fn linear(disc: &viscontact::fem::Discretization, p: f64, q: f64) -> Vec<f64> {
     let mut v = vec![0.0; disc.n_free];
-    for (i, x) in disc.nodes.iter().enumerate() {
+    for (i, x) in disc.nodes.all().iter().enumerate() {
         for (comp, val) in [(0, p * x[0]), (1, q * x[0])] {
             if let Some(d) = disc.free.get(2 * i + comp) {
                 v[d] = val;
@@ -164,7 +164,7 @@ fn first_step_reproduces_a_linear_velocity_exactly() {
     let tr = trace(&s, &disc);
     let w = disc.nodal(&tr.w[0]);
     let scale = P.abs().max(Q.abs());
-    for (i, p) in disc.nodes.iter().enumerate() {
+    for (i, p) in disc.nodes.all().iter().enumerate() {
         let err = (w[3 * i] - P * p[0])
             .abs()
             .max((w[3 * i + 1] - Q * p[0]).abs());

@@ -118,7 +118,7 @@ fn run(dir: &Path, scene: &SceneText, name: &str) -> Run {
         .collect();
     let off_exact = u.iter().enumerate().fold(0.0f64, |m, (n, u)| {
         let t = n as f64 * K;
-        let exact: Vec<f64> = (disc.nodes.iter())
+        let exact: Vec<f64> = (disc.nodes.all().iter())
             .flat_map(|x| [0.0, -DELTA * t * x[1] / H])
             .collect();
         m.max(rel_diff(u, &exact))

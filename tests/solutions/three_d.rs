@@ -862,7 +862,7 @@ fn clamped_patch(
     let (s, mesh, disc) = load(&scene, &[]);
     let k = pick(&disc);
     let mut v = vec![0.0; disc.n_free];
-    for (i, x) in disc.nodes.iter().enumerate() {
+    for (i, x) in disc.nodes.all().iter().enumerate() {
         for (comp, val) in [p, q, r].iter().enumerate() {
             if let Some(d) = disc.free.get(3 * i + comp) {
                 v[d] = val * x[0];
@@ -1065,7 +1065,7 @@ fn check_affine_run(scene: &Path, overrides: &[&str], dir: V3, exact: &[(f64, f6
         tr.effects
     );
     assert_eq!(tr.u.len(), exact.len());
-    let xmax = disc.nodes.iter().fold(0.0f64, |a, p| a.max(p[0]));
+    let xmax = disc.nodes.all().iter().fold(0.0f64, |a, p| a.max(p[0]));
     let s_max = exact.iter().fold(0.0f64, |a, e| a.max(e.0.abs())) * xmax;
     let rate_max = exact.iter().fold(0.0f64, |a, e| a.max(e.1.abs())) * xmax;
     let mut worst: f64 = 0.0;
@@ -1073,7 +1073,7 @@ fn check_affine_run(scene: &Path, overrides: &[&str], dir: V3, exact: &[(f64, f6
         let u = disc.nodal(&tr.u[n]);
         let w = disc.nodal(&tr.w[n]);
         for (what, field, val, scale) in [("u", &u, s, s_max), ("w", &w, rate, rate_max)] {
-            for (i, p) in disc.nodes.iter().enumerate() {
+            for (i, p) in disc.nodes.all().iter().enumerate() {
                 let err = (0..3)
                     .map(|c| (field[3 * i + c] - val * p[0] * dir[c]).abs())
                     .fold(0.0, f64::max);
@@ -1196,6 +1196,7 @@ fn clamped_bar_with_poisson_ratio_is_not_uniaxial() {
     let u = disc.nodal(&tr.u[STEPS]);
     let worst = disc
         .nodes
+        .all()
         .iter()
         .enumerate()
         .map(|(i, p)| {
@@ -1284,6 +1285,7 @@ fn slab_differences(
     // rect_016.msh's nodes.
     let index: HashMap<(u64, u64), usize> = disc2
         .nodes
+        .all()
         .iter()
         .enumerate()
         .map(|(i, p)| ((p[0].to_bits(), p[1].to_bits()), i))
@@ -1302,7 +1304,7 @@ fn slab_differences(
         assert_eq!(tr.effects, tr2.effects, "same effects in 2D and 3D");
         let u3 = nodal_vectors::<3>(&disc3, &tr.u_final);
         let mut diff = vec![[f64::NAN; 2]; u2.len()];
-        for (i, p) in disc3.nodes.iter().enumerate() {
+        for (i, p) in disc3.nodes.all().iter().enumerate() {
             if p[2] == 0.0 {
                 let j = index[&(p[0].to_bits(), p[1].to_bits())];
                 diff[j] = [u3[i][0] - u2[j][0], u3[i][1] - u2[j][1]];

@@ -1,0 +1,161 @@
+//! The nodes' places that a discretization holds: every node's, or on a follower rank of
+//! several those of the nodes it still reads once its setup is done.
+//!
+//! Every rank gets every node's place with the mesh (24 bytes a node, 8 a dof of the whole
+//! problem), which its setup reads: the conditions' groups, Γ3, the loads, its cells. Past
+//! that, a follower reads few of them: its rows of K_B and K_R^(0), made after PETSc's
+//! setup (`Discretization::own_pair_made`), read its cells' vertices; GAMG's rigid-body
+//! modes its own unknowns' nodes, and the centroid of every node, which is kept as a
+//! number; its piece's stresses its piece's points; a message Γ3's nodes. So a follower
+//! keeps those alone ([`Places::of`], `Discretization::keep_places`), found by binary
+//! search in their increasing node numbers; rank 0 and one process keep every node's,
+//! which rank 0's frames, norms and history.csv read.
+
+use std::ops::Index;
+
+/// The nodes' places of a discretization: every node's, or some.
+#[derive(Clone, Debug, Default)]
+pub struct Places {
+    /// The nodes of the mesh, held or not.
+    n: usize,
+    /// The nodes held, increasing; None where every node is.
+    kept: Option<Vec<u32>>,
+    /// Their places, or every node's.
+    places: Vec<[f64; 3]>,
+    /// The centroid of every node (GAMG's rigid-body modes turn about it:
+    /// `petsc::rigid_body_modes`).
+    centre: [f64; 3],
+}
+
+impl Places {
+    /// Every node's place, `places[p]` node p's.
+    pub fn every(places: Vec<[f64; 3]>) -> Places {
+        Places {
+            n: places.len(),
+            kept: None,
+            centre: centroid(&places),
+            places,
+        }
+    }
+
+    /// Of every node's places `all`, those of `nodes` alone (increasing, no repeats).
+    pub fn of(all: &[[f64; 3]], nodes: &[usize]) -> Places {
+        Places {
+            n: all.len(),
+            kept: Some(nodes.iter().map(|&p| p as u32).collect()),
+            places: nodes.iter().map(|&p| all[p]).collect(),
+            centre: centroid(all),
+        }
+    }
+
+    /// The nodes of the mesh, held or not.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether the mesh has no nodes.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Every node's place, in node order.
+    ///
+    /// # Panics
+    /// On a follower rank of several, which holds some alone ([`Places::of`]): only rank 0
+    /// and one process read every node's.
+    pub fn all(&self) -> &[[f64; 3]] {
+        assert!(
+            self.kept.is_none(),
+            "every node's place, read where some alone are held"
+        );
+        &self.places
+    }
+
+    /// The centroid of every node.
+    pub fn centre(&self) -> [f64; 3] {
+        self.centre
+    }
+
+    /// A view of them, as cells made from their vertices read them
+    /// ([`super::CellSource::Vertices`]).
+    pub fn points(&self) -> Points<'_> {
+        match &self.kept {
+            None => Points::Every(&self.places),
+            Some(kept) => Points::Some(kept, &self.places),
+        }
+    }
+}
+
+/// The mean of `places`, each divided by their count and added in node order.
+fn centroid(places: &[[f64; 3]]) -> [f64; 3] {
+    let count = places.len().max(1) as f64;
+    let mut centre = [0.0; 3];
+    for x in places {
+        for c in 0..3 {
+            centre[c] += x[c] / count;
+        }
+    }
+    centre
+}
+
+impl Index<usize> for Places {
+    type Output = [f64; 3];
+
+    /// Node p's place.
+    ///
+    /// # Panics
+    /// Where p's is not held: a follower reads only the places it kept ([`Places::of`]).
+    fn index(&self, p: usize) -> &[f64; 3] {
+        match &self.kept {
+            None => &self.places[p],
+            Some(kept) => kept_at((kept, &self.places), p),
+        }
+    }
+}
+
+/// The places of the nodes, every node's (a mesh's, or [`Places::every`]) or some.
+#[derive(Clone, Copy, Debug)]
+pub enum Points<'a> {
+    Every(&'a [[f64; 3]]),
+    /// The nodes held (increasing) and their places.
+    Some(&'a [u32], &'a [[f64; 3]]),
+}
+
+impl Index<usize> for Points<'_> {
+    type Output = [f64; 3];
+
+    fn index(&self, p: usize) -> &[f64; 3] {
+        match *self {
+            Points::Every(places) => &places[p],
+            Points::Some(nodes, places) => kept_at((nodes, places), p),
+        }
+    }
+}
+
+/// Node p's place among the places of `nodes` (increasing).
+fn kept_at<'a>((nodes, places): (&[u32], &'a [[f64; 3]]), p: usize) -> &'a [f64; 3] {
+    let at = nodes.binary_search(&(p as u32));
+    &places[at.expect("a follower reads the places it kept alone")]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Places;
+
+    /// The kept places are those of the whole at the same nodes, and the centroid is the
+    /// whole's.
+    #[test]
+    fn kept_places_are_the_whole_ones() {
+        let whole: Vec<[f64; 3]> = (0..8).map(|p| [p as f64, 0.5 * p as f64, -1.0]).collect();
+        let every = Places::every(whole.clone());
+        let kept = Places::of(&whole, &[1, 4, 7]);
+        assert_eq!((kept.len(), every.centre()), (8, kept.centre()));
+        assert_eq!(every.centre(), [3.5, 1.75, -1.0]);
+        for p in [1, 4, 7] {
+            assert_eq!((kept[p], every[p]), (whole[p], whole[p]));
+        }
+        assert_eq!(every.all(), &whole[..]);
+        let missing = std::panic::catch_unwind(|| kept[5]);
+        assert!(missing.is_err());
+    }
+}
