@@ -239,16 +239,20 @@ fn main() -> ExitCode {
             ranks.abort(e.exit_code());
         }
     }
-    // After every PETSc object of the run is dropped (with the time loop, in dispatch).
-    #[cfg(feature = "petsc")]
-    viscontact::petsc::finalize();
-    match viscontact::console::stdout_failure() {
+    // Printed before PETSc's finalize: MPI's waits there for every rank, and a follower
+    // that leaves it first and exits with a failed setup's status makes mpirun end the
+    // others, which took rank 0's message with it when rank 0 printed after.
+    let code = match viscontact::console::stdout_failure() {
         Some(why) if only_prints && result.is_ok() => {
             viscontact::errln!("error: cannot write to standard output: {why}");
             ExitCode::FAILURE
         }
         _ => exit_code(result),
-    }
+    };
+    // After every PETSc object of the run is dropped (with the time loop, in dispatch).
+    #[cfg(feature = "petsc")]
+    viscontact::petsc::finalize();
+    code
 }
 
 /// SIGINT/SIGTERM stop a run or resume after its current step, or its setup before it
