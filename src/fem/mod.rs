@@ -1737,15 +1737,24 @@ fn assemble(
         let Stiffness { a, b, memory } = materials.of(c);
         let nodes = t.vertices();
         let frame = |i: usize| frames.of(nodes[i]);
-        for (j, &p) in nodes.iter().enumerate() {
-            for (i, &q) in nodes.iter().enumerate() {
-                for be in 0..d {
-                    let Some(col) = free.get(d * p + be).and_then(column_of) else {
+        // The index of each of the cell's dofs and its column, found once a cell (a
+        // follower searches the held dofs for it: `DofIndices`), not at each entry.
+        let index_of = |j: usize, k: usize| match nodes.get(j) {
+            Some(&p) if k < d => free.get(d * p + k),
+            _ => None,
+        };
+        let index: [[Option<usize>; 3]; 4] =
+            std::array::from_fn(|j| std::array::from_fn(|k| index_of(j, k)));
+        let columns = index.map(|node| node.map(|i| i.and_then(&column_of)));
+        for (j, cols) in columns.iter().enumerate().take(nodes.len()) {
+            for (i, rows) in index.iter().enumerate().take(nodes.len()) {
+                for (be, &col) in cols.iter().enumerate().take(d) {
+                    let Some(col) = col else {
                         continue;
                     };
                     let column = &row_idx[col_ptr[col]..col_ptr[col + 1]];
-                    for al in 0..d {
-                        let Some(row) = free.get(d * q + al) else {
+                    for (al, &row) in rows.iter().enumerate().take(d) {
+                        let Some(row) = row else {
                             continue;
                         };
                         let at = col_ptr[col] + column.partition_point(|&x| x < row);
@@ -1805,9 +1814,10 @@ fn pattern(
     };
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); mine.map_or(free.dofs() / d, <[_]>::len)];
     cells.each_vertices(|vertices| {
+        let has: [bool; 4] = std::array::from_fn(|i| vertices.get(i).is_some_and(|&q| has_dofs(q)));
         for list in vertices.iter().filter_map(|&p| list_of(p)) {
-            let with_dofs = vertices.iter().filter(|&&q| has_dofs(q));
-            neighbours[list].extend(with_dofs.map(|&q| q as u32));
+            let with_dofs = vertices.iter().zip(has).filter(|&(_, has)| has);
+            neighbours[list].extend(with_dofs.map(|(&q, _)| q as u32));
         }
     });
     for list in neighbours.iter_mut() {
@@ -1815,17 +1825,29 @@ fn pattern(
         list.dedup();
     }
     let list = |p: usize| &neighbours[list_of(p).expect("a column's node has a list")];
-    // Column k, of node p, lists p's neighbours' unknowns.
-    let column_len =
-        |p: usize| -> usize { (list(p).iter()).map(|&q| dofs(q as usize).count()).sum() };
-    let mut row_idx = Vec::with_capacity(node_of.iter().map(|&p| column_len(p)).sum());
+    // Column k, of node p, lists p's neighbours' unknowns: the same for each of p's columns,
+    // which follow each other (a node's unknowns are consecutive but where some are
+    // prescribed), so they are found once for a run of them (a follower searches the held
+    // dofs for each: `DofIndices`).
+    let runs = || {
+        node_of
+            .chunk_by(|p, q| p == q)
+            .map(|run| (run[0], run.len()))
+    };
+    let count = |p: usize| -> usize { (list(p).iter()).map(|&q| dofs(q as usize).count()).sum() };
+    let mut row_idx = Vec::with_capacity(runs().map(|(p, len)| len * count(p)).sum());
     let mut col_ptr = Vec::with_capacity(node_of.len() + 1);
     col_ptr.push(0);
-    for &p in node_of {
+    for (p, len) in runs() {
         let start = row_idx.len();
         (list(p).iter()).for_each(|&q| row_idx.extend(dofs(q as usize)));
         row_idx[start..].sort_unstable();
-        col_ptr.push(row_idx.len());
+        let end = row_idx.len();
+        col_ptr.push(end);
+        for _ in 1..len {
+            row_idx.extend_from_within(start..end);
+            col_ptr.push(row_idx.len());
+        }
     }
     (col_ptr, row_idx)
 }
