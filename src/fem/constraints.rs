@@ -291,11 +291,12 @@ impl Numbering {
         // The held dofs alone (a boundary's), not a slot of every dof: 40 bytes a dof of the
         // whole on every rank, the largest thing a follower's setup held of it.
         let mut holds: BTreeMap<usize, Hold> = BTreeMap::new();
-        let mut clamped = vec![false; mesh.nodes.len()];
+        // The clamped nodes, increasing: a boundary's, not a flag of every node.
+        let mut clamped = Vec::new();
         for (i, name) in scene.mesh.groups.fixed.iter().enumerate() {
             let g = group(mesh, scene, "mesh.groups.fixed", name)?;
             for node in mesh.group_nodes(g) {
-                clamped[node] = true;
+                clamped.push(node);
                 for c in 0..d {
                     let hold = Hold {
                         source: Source::Fixed(i),
@@ -310,6 +311,8 @@ impl Numbering {
             let g = group(mesh, scene, &format!("dirichlet[{i}].on"), &e.on)?;
             entries.push((mesh.group_nodes(g), directions(mesh, scene, g, i)?));
         }
+        clamped.sort_unstable();
+        clamped.dedup();
         let frames = Frames::new(mesh, scene, &entries, &clamped)?;
         for (i, (nodes, held)) in entries.iter().enumerate() {
             let e = &scene.physics.dirichlet[i];
@@ -561,21 +564,22 @@ pub struct Frames(HashMap<usize, Axes>);
 
 impl Frames {
     /// The frames of the nodes that an inclined direction of `entries` (each `[[dirichlet]]`
-    /// entry's nodes and directions) holds, unless clamped: the node's held directions first
-    /// (a_0, and a_1 where a second one holds it), completed right-handed. A node's held
-    /// directions must be parallel or perpendicular; others are refused.
+    /// entry's nodes and directions) holds, unless `clamped` (increasing) holds it: the
+    /// node's held directions first (a_0, and a_1 where a second one holds it), completed
+    /// right-handed. A node's held directions must be parallel or perpendicular; others are
+    /// refused.
     fn new(
         mesh: &Mesh,
         scene: &Scene,
         entries: &[(Vec<usize>, Vec<Held>)],
-        clamped: &[bool],
+        clamped: &[usize],
     ) -> Result<Frames> {
         let d = mesh.dim;
         let inclined = |dir: [f64; 3]| (0..d).all(|c| dir[c].abs() < 1.0 - 1e-12);
         let mut at: HashMap<usize, Vec<([f64; 3], usize)>> = HashMap::new();
         for (nodes, held) in entries {
             if held.iter().any(|h| inclined(h.dir)) {
-                for &node in nodes.iter().filter(|&&n| !clamped[n]) {
+                for &node in nodes.iter().filter(|n| clamped.binary_search(n).is_err()) {
                     at.entry(node).or_default();
                 }
             }

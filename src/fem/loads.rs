@@ -52,18 +52,18 @@ pub struct Loads {
 pub enum Keep<'r> {
     /// Every one (one process, or a rank of several that holds the matrices whole).
     Every,
-    /// Those that put a value into a node that `reaches` (per node) says: a follower rank's
-    /// own rows ([`Loads::keep_reaching`]).
-    Reaching(&'r [bool]),
+    /// Those that put a value into one of the nodes `reaches` (increasing): a follower
+    /// rank's own rows' ([`Loads::keep_reaching`]).
+    Reaching(&'r [usize]),
     /// Those, and every traction's (a boundary's): rank 0 of several, which makes a body
     /// force's other points again from its cells when it reads every value
     /// ([`Loads::visit_every`]).
-    ReachingAndTractions(&'r [bool]),
+    ReachingAndTractions(&'r [usize]),
 }
 
 impl<'r> Keep<'r> {
     /// The nodes whose points are kept, and whether every traction's are: None keeps all.
-    fn reaches(self) -> Option<(&'r [bool], bool)> {
+    fn reaches(self) -> Option<(&'r [usize], bool)> {
         match self {
             Keep::Every => None,
             Keep::Reaching(r) => Some((r, false)),
@@ -116,20 +116,21 @@ impl Loads {
         self.loads.is_empty()
     }
 
-    /// Keeps the quadrature points that put a value into a node that `reaches` (per node)
-    /// alone (with `every_traction`, every traction's too): the terms that reach those
+    /// Keeps the quadrature points that put a value into one of the nodes `reaches`
+    /// (increasing) alone (with `every_traction`, every traction's too): the terms that reach those
     /// nodes' dofs stay, in their order, so those entries of ⟨f(t), φ⟩ keep their bits, and
     /// the others become partial (on one of several MPI ranks: its own rows; the others'
     /// come with b_n's exchange where it reads them). Marks the loads as a part
     /// ([`Loads::is_part`]).
-    pub fn keep_reaching(&mut self, reaches: &[bool], every_traction: bool) {
+    pub fn keep_reaching(&mut self, reaches: &[usize], every_traction: bool) {
         for load in &mut self.loads {
             if every_traction && matches!(load.source, Source::Traction(_)) {
                 load.qps.shrink_to_fit();
                 continue;
             }
             load.qps.retain(|q| {
-                (q.nodes.iter().zip(q.phi)).any(|(&n, ph)| ph != 0.0 && reaches[n as usize])
+                let reached = |n: u32| reaches.binary_search(&(n as usize)).is_ok();
+                (q.nodes.iter().zip(q.phi)).any(|(&n, ph)| ph != 0.0 && reached(n))
             });
             load.qps.shrink_to_fit();
         }
@@ -346,11 +347,11 @@ fn traction(
 
 /// Body force i over every cell (with `reaches`, every cell with one of its nodes), by
 /// `body_rule`, the nodes at `nodes`.
-fn body_force(nodes: Points, cells: CellSource, i: usize, reaches: Option<&[bool]>) -> VectorLoad {
+fn body_force(nodes: Points, cells: CellSource, i: usize, reaches: Option<&[usize]>) -> VectorLoad {
     let mut qps = Vec::new();
     cells.each(|_, t| {
         let vertices = &t.nodes[..=t.dim];
-        if reaches.is_some_and(|r| !vertices.iter().any(|&n| r[n])) {
+        if reaches.is_some_and(|r| !vertices.iter().any(|n| r.binary_search(n).is_ok())) {
             return;
         }
         for (phi, weight) in body_rule(t) {

@@ -882,7 +882,7 @@ impl Discretization {
         let reaches = self.reaching(own);
         let (mut vertices, mut of_cell, mut c) = (Vec::new(), Vec::new(), 0);
         cells.each_vertices(|v| {
-            if v.iter().any(|&p| reaches[p]) {
+            if v.iter().any(|p| reaches.binary_search(p).is_ok()) {
                 vertices.extend(v.iter().map(|&p| p as u32));
                 of_cell.push(self.materials.of_cell[c]);
             }
@@ -1025,10 +1025,13 @@ impl Discretization {
         }
     }
 
-    /// The nodes of the free unknowns `own`, per node.
-    fn reaching(&self, own: &[usize]) -> Vec<bool> {
-        let mut reaches = vec![false; self.nodes.len()];
-        (own.iter()).for_each(|&j| reaches[self.free.global(j) / self.dim] = true);
+    /// The nodes of the unknowns `own`, increasing (a list of the rank's nodes, not a
+    /// flag of every node).
+    fn reaching(&self, own: &[usize]) -> Vec<usize> {
+        let mut reaches: Vec<usize> =
+            (own.iter().map(|&j| self.free.global(j) / self.dim)).collect();
+        reaches.sort_unstable();
+        reaches.dedup();
         reaches
     }
 
@@ -1317,18 +1320,12 @@ impl Discretization {
             self.nodes = Places::every(all.to_vec());
             return;
         };
-        let d = self.dim;
-        let mut read: Vec<usize> = (own.iter().map(|&j| self.free.global(j) / d))
-            .chain(
-                self.pair_cells
-                    .iter()
-                    .flat_map(|c| &c.vertices)
-                    .map(|&p| p as usize),
-            )
-            .chain(self.contact.iter().chain(&self.friction).map(|r| r.node))
-            .chain(self.prescribed.iter().map(|p| p.node))
-            .chain(also.iter().copied())
-            .collect();
+        let mut read = self.reaching(own);
+        let cells = self.pair_cells.iter().flat_map(|c| &c.vertices);
+        read.extend(cells.map(|&p| p as usize));
+        read.extend(self.contact.iter().chain(&self.friction).map(|r| r.node));
+        read.extend(self.prescribed.iter().map(|p| p.node));
+        read.extend(also);
         read.sort_unstable();
         read.dedup();
         self.nodes = Places::of(all, &read);
