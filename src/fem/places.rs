@@ -6,7 +6,8 @@
 //! that, a follower reads few of them: its rows of K_B and K_R^(0), made after PETSc's
 //! setup (`Discretization::own_pair_made`), read its cells' vertices; GAMG's rigid-body
 //! modes its own unknowns' nodes, and the centroid of every node, which is kept as a
-//! number; its piece's stresses its piece's points; a message Γ3's nodes. So a follower
+//! number; its piece's stresses its piece's points; a message Γ3's nodes; the prescribed
+//! values, at each step, their nodes (`constraints::values`). So a follower
 //! keeps those alone ([`Places::of`], `Discretization::keep_places`), found by binary
 //! search in their increasing node numbers; rank 0 and one process keep every node's,
 //! which rank 0's frames, norms and history.csv read.
