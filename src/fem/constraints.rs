@@ -171,6 +171,12 @@ impl DofIndices {
         }
     }
 
+    /// The unknown of global dof g (its index among the n_free), where it is one: neither
+    /// held at zero nor prescribed.
+    pub fn unknown(&self, g: usize) -> Option<usize> {
+        self.get(g).filter(|&i| i < self.n_free)
+    }
+
     /// Whether a condition holds global dof g (at zero or at a prescribed value).
     pub fn is_held(&self, g: usize) -> bool {
         self.held.binary_search(&(g as u32)).is_ok()

@@ -426,8 +426,8 @@ impl RowMaker<'_> {
         let mut dir = self.in_dofs(node, dir);
         let mut dofs = [0; 3];
         for c in 0..d {
-            match self.numbering.free.get(d * node + c) {
-                Some(i) if !self.numbering.free.is_held(d * node + c) => dofs[c] = i,
+            match self.numbering.free.unknown(d * node + c) {
+                Some(i) => dofs[c] = i,
                 _ if dir[c].abs() <= 1e-9 => dir[c] = 0.0,
                 _ => return Err(Acts(c)),
             }
@@ -1028,11 +1028,7 @@ impl Discretization {
     /// The nodes of the unknowns `own`, increasing (a list of the rank's nodes, not a
     /// flag of every node).
     fn reaching(&self, own: &[usize]) -> Vec<usize> {
-        let mut reaches: Vec<usize> =
-            (own.iter().map(|&j| self.free.global(j) / self.dim)).collect();
-        reaches.sort_unstable();
-        reaches.dedup();
-        reaches
+        increasing(column_nodes(&self.free, self.dim, Some(own), 0))
     }
 
     /// K_A's diagonal at the unknowns of Γ3's rows alone, where its rows went to the linear
@@ -1326,9 +1322,7 @@ impl Discretization {
         read.extend(self.contact.iter().chain(&self.friction).map(|r| r.node));
         read.extend(self.prescribed.iter().map(|p| p.node));
         read.extend(also);
-        read.sort_unstable();
-        read.dedup();
-        self.nodes = Places::of(all, &read);
+        self.nodes = Places::of(all, &increasing(read));
     }
 
     /// Its cells: those it holds ([`Discretization::cells`]), or on rank 0 of several
@@ -1712,12 +1706,7 @@ fn assemble(
     };
     let node_of = column_nodes(free, d, own, n);
     // With `own`, the nodes of its unknowns, increasing.
-    let mine = own.map(|_| {
-        let mut mine = node_of.clone();
-        mine.sort_unstable();
-        mine.dedup();
-        mine
-    });
+    let mine = own.map(|_| increasing(node_of.clone()));
     let mine = mine.as_deref();
     let (col_ptr, row_idx) = pattern(cells, d, free, (&node_of, mine));
     drop(node_of);
@@ -1787,6 +1776,13 @@ fn column_nodes(free: &DofIndices, d: usize, own: Option<&[usize]>, n: usize) ->
         Some(own) => own.iter().map(|&j| node(j)).collect(),
         None => (0..n).map(node).collect(),
     }
+}
+
+/// `nodes` sorted, each once.
+fn increasing(mut nodes: Vec<usize>) -> Vec<usize> {
+    nodes.sort_unstable();
+    nodes.dedup();
+    nodes
 }
 
 /// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,

@@ -372,7 +372,7 @@ fn nodes(disc: &Discretization) -> Vec<Vec<usize>> {
 fn node_unknowns(disc: &Discretization, v: usize) -> Vec<usize> {
     let g = v * disc.dim;
     (g..g + disc.dim)
-        .filter_map(|g| super::unknown(disc, g))
+        .filter_map(|g| disc.free.unknown(g))
         .collect()
 }
 

@@ -929,21 +929,13 @@ impl Drop for Krylov {
     }
 }
 
-/// The unknown (the index among the n_free unknowns) of global dof `g`, if it is one: not
-/// held at zero, nor prescribed (`[[dirichlet]]` values, numbered from n_free on).
-fn unknown(disc: &Discretization, g: usize) -> Option<usize> {
-    disc.free.get(g).filter(|&f| f < disc.n_free)
-}
-
 /// d where every node's unknowns are d consecutive ones starting at a multiple of d, or
 /// none (a node clamped on Γ1); 1 otherwise.
 fn block_size(disc: &Discretization) -> usize {
-    let d = disc.dim;
-    let blocked = (0..disc.free.dofs() / d).all(|p| match unknown(disc, d * p) {
-        None => (1..d).all(|c| unknown(disc, d * p + c).is_none()),
-        Some(first) => {
-            first % d == 0 && (1..d).all(|c| unknown(disc, d * p + c) == Some(first + c))
-        }
+    let (d, unknown) = (disc.dim, |g: usize| disc.free.unknown(g));
+    let blocked = (0..disc.free.dofs() / d).all(|p| match unknown(d * p) {
+        None => (1..d).all(|c| unknown(d * p + c).is_none()),
+        Some(first) => first % d == 0 && (1..d).all(|c| unknown(d * p + c) == Some(first + c)),
     });
     if blocked {
         d
