@@ -42,7 +42,7 @@ impl Hash64 {
 pub fn mesh_fingerprint(mesh: &Mesh) -> u64 {
     let mut h = Hash64::default();
     h.word(mesh.nodes.len() as u64);
-    for p in &mesh.nodes {
+    for p in mesh.nodes.all() {
         h.f64s(p);
     }
     h.word(mesh.triangles.len() as u64);

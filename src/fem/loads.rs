@@ -88,7 +88,7 @@ impl Loads {
         let reaches = keep.reaches();
         for i in 0..scene.physics.body_forces.len() {
             let reaches = reaches.map(|(r, _)| r);
-            loads.push(body_force(Points::Every(&mesh.nodes), cells, i, reaches));
+            loads.push(body_force(mesh.nodes.points(), cells, i, reaches));
         }
         let mut loads = Loads {
             loads,

@@ -10,11 +10,11 @@ pub mod element;
 pub mod loads;
 pub mod materials;
 mod pair;
-mod places;
 pub mod reactions;
 
 use crate::expr::Point;
 use crate::mesh::{cross, norm, Group, Mesh};
+pub use crate::mesh::{Places, Points};
 use crate::scene::{Friction, MeshChoice, Model, Scene};
 use crate::{Error, Result};
 pub use constraints::{DofIndices, Frames, Numbering, Prescribed};
@@ -23,7 +23,6 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::{Keep, Loads};
 pub use materials::{CellMaterials, Stiffness};
 pub use pair::{RowsPair, SymmetricPair};
-pub use places::{Places, Points};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -198,7 +197,7 @@ fn node_u32(p: usize, mesh: &Mesh) -> Result<u32> {
 /// The mesh's triangles (2D) or tetrahedra (3D) as cells.
 fn cells(mesh: &Mesh) -> Vec<Cell> {
     let (nodes, dim) = mesh_cells(mesh);
-    cells_of(dim, nodes, Points::Every(&mesh.nodes)).collect()
+    cells_of(dim, nodes, mesh.nodes.points()).collect()
 }
 
 /// The mesh's cells' vertices (dim + 1 a cell), flattened, and the dimension.
@@ -337,7 +336,7 @@ impl<'a> CellSource<'a> {
     fn points(self) -> (Points<'a>, usize) {
         match self {
             CellSource::Held(cells) => (Points::Every(&[]), cells.first().map_or(0, |t| t.dim)),
-            CellSource::Made(mesh) => (Points::Every(&mesh.nodes), mesh.dim),
+            CellSource::Made(mesh) => (mesh.nodes.points(), mesh.dim),
             CellSource::Vertices { points, dim, .. } => (points, dim),
         }
     }
@@ -685,8 +684,8 @@ impl Discretization {
             // A follower keeps the places it reads once its own rows are known
             // (`keep_places`), and holds no copy of every node's before.
             nodes: match hold {
-                Hold::Nothing => Places::of(&mesh.nodes, &[]),
-                _ => Places::every(mesh.nodes.clone()),
+                Hold::Nothing => mesh.nodes.some(&[]),
+                _ => mesh.nodes.clone(),
             },
             cells,
             n_free,
@@ -1311,9 +1310,9 @@ impl Discretization {
     /// step) and `also` (its piece's points), of every node's places `all` (the mesh's),
     /// not every node's; every node's where it keeps every column (`own` is None), whose
     /// GAMG reads every node's.
-    pub fn keep_places(&mut self, all: &[[f64; 3]], also: &[usize]) {
+    pub fn keep_places(&mut self, all: &Places, also: &[usize]) {
         let Some(own) = &self.own else {
-            self.nodes = Places::every(all.to_vec());
+            self.nodes = all.clone();
             return;
         };
         let mut read = self.reaching(own);
@@ -1322,7 +1321,7 @@ impl Discretization {
         read.extend(self.contact.iter().chain(&self.friction).map(|r| r.node));
         read.extend(self.prescribed.iter().map(|p| p.node));
         read.extend(also);
-        self.nodes = Places::of(all, &increasing(read));
+        self.nodes = all.some(&increasing(read));
     }
 
     /// Its cells: those it holds ([`Discretization::cells`]), or on rank 0 of several

@@ -32,6 +32,7 @@ mod groups;
 mod msh;
 mod parts;
 mod physical_names;
+mod places;
 mod plane;
 mod quality;
 mod solid;
@@ -40,6 +41,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 pub use parts::{Coincident, Part, COINCIDENT_TOLERANCE};
+pub use places::{Places, Points};
 pub use quality::Quality;
 pub(crate) use solid::{cross, dot, norm, sub};
 
@@ -54,7 +56,7 @@ pub struct Mesh {
     pub dim: usize,
     /// Node coordinates; only nodes used by the cells, numbered `0..` in file order;
     /// z = 0 in 2D.
-    pub nodes: Vec<[f64; 3]>,
+    pub nodes: Places,
     /// 2D: the cells, as 0-based node indices, counter-clockwise (positive signed area).
     /// Empty in 3D.
     pub triangles: Vec<[usize; 3]>,
@@ -361,8 +363,8 @@ impl Mesh {
     /// (2D) or volume (3D; the angle is the smallest dihedral angle).
     pub fn quality(&self) -> Quality {
         match self.dim {
-            2 => quality::quality(&self.nodes, &self.triangles),
-            _ => solid::quality(&self.nodes, &self.tetrahedra),
+            2 => quality::quality(self.nodes.all(), &self.triangles),
+            _ => solid::quality(self.nodes.all(), &self.tetrahedra),
         }
     }
 

@@ -160,7 +160,7 @@ impl Mesh {
     /// order of their first node.
     pub fn coincident_nodes(&self) -> Vec<Coincident> {
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for p in &self.nodes {
+        for p in self.nodes.all() {
             for k in 0..3 {
                 lo[k] = lo[k].min(p[k]);
                 hi[k] = hi[k].max(p[k]);
@@ -171,12 +171,12 @@ impl Mesh {
         // Grid keys are at most 1e10 (the diagonal over tol): they fit an i64.
         let key = |p: &[f64; 3]| [0, 1, 2].map(|k| ((p[k] - lo[k]) / tol).floor() as i64);
         let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::with_capacity(self.nodes.len());
-        for (i, p) in self.nodes.iter().enumerate() {
+        for (i, p) in self.nodes.all().iter().enumerate() {
             grid.entry(key(p)).or_default().push(i);
         }
         let span = |k: usize| if k < self.dim { -1..=1 } else { 0..=0 };
         let mut sets = Sets::new(self.nodes.len());
-        for (i, p) in self.nodes.iter().enumerate() {
+        for (i, p) in self.nodes.all().iter().enumerate() {
             let g = key(p);
             for dx in span(0) {
                 for dy in span(1) {
@@ -330,7 +330,7 @@ mod tests {
         Mesh {
             path: "square.msh".into(),
             dim: 2,
-            nodes,
+            nodes: crate::mesh::Places::every(nodes),
             triangles: vec![[0, 1, 2], second],
             tetrahedra: Vec::new(),
             groups: Vec::new(),

@@ -13,7 +13,7 @@ use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::signed_area;
-use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh};
+use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh, Places};
 use crate::{Error, Result};
 
 /// How messages about the triangle mesh name its parts.
@@ -58,7 +58,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
     Ok(Mesh {
         path: path.to_path_buf(),
         dim: 2,
-        nodes,
+        nodes: Places::every(nodes),
         triangles,
         tetrahedra: Vec::new(),
         groups,

@@ -13,7 +13,7 @@ use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::msh::RawMesh;
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh};
+use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh, Places};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -83,7 +83,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
     Ok(Mesh {
         path: path.to_path_buf(),
         dim: 3,
-        nodes,
+        nodes: Places::every(nodes),
         triangles: Vec::new(),
         tetrahedra,
         groups,

@@ -56,6 +56,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use crate::mesh::Points;
 use crate::{Error, Result};
 pub use lines::Lines;
 pub use verify::{FrameSum, Resumed};
@@ -151,7 +152,8 @@ impl Options {
 /// empty for one file a frame.
 #[derive(Clone, Copy, Debug)]
 pub struct Geometry<'a> {
-    pub points: &'a [[f64; 3]],
+    /// The nodes' places: every node's, or on a follower rank of several those it holds.
+    pub points: Points<'a>,
     pub cells: &'a [usize],
     pub nodes_per_cell: usize,
     pub region: &'a [i32],
@@ -205,7 +207,7 @@ impl<'a> Geometry<'a> {
                 cells.len()
             )));
         }
-        let num_points = self.points.len();
+        let num_points = self.points.whole().len();
         let num_cells = cells.len() / nodes_per_cell;
         if let Some(pos) = cells.iter().position(|&i| i >= num_points) {
             return Err(Error::input(format!(
@@ -375,7 +377,10 @@ impl Series {
     ) -> Result<Series> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         let g = geometry.chosen(options);
-        let sizes = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
+        let sizes = (
+            g.points.whole().len(),
+            g.cells.len() / g.nodes_per_cell.max(1),
+        );
         let (sink, files) = match options.format {
             Format::Vtu => {
                 let pieces = !g.pieces.is_empty();

@@ -42,6 +42,7 @@ use super::vtu::{array_attrs, escape_attr, global_ids, Grid, Job, Vtu, GLOBAL_ID
 use super::writer::{Sink, Written};
 use super::{checked_arrays, pvd, vtu_name, write_atomic, Array, Compression, Geometry};
 use super::{Options, OwnedField, Values};
+use crate::mesh::Points;
 use crate::{Error, Result};
 
 /// The `.pvtu` of step `step`: `solution_{step:06}.pvtu`.
@@ -260,13 +261,15 @@ impl PieceMesh {
     /// Piece `rank` of `g`: the cells `cells` and the points they use.
     fn of(g: &Geometry, rank: usize, cells: Vec<usize>) -> PieceMesh {
         let npc = g.nodes_per_cell;
-        let mut local = vec![usize::MAX; g.points.len()];
+        let mut local = vec![usize::MAX; g.points.whole().len()];
         for &c in &cells {
             g.cells[c * npc..(c + 1) * npc]
                 .iter()
                 .for_each(|&i| local[i] = 0);
         }
-        let points: Vec<usize> = (0..g.points.len()).filter(|&i| local[i] == 0).collect();
+        let points: Vec<usize> = (0..g.points.whole().len())
+            .filter(|&i| local[i] == 0)
+            .collect();
         for (k, &i) in points.iter().enumerate() {
             local[i] = k;
         }
@@ -311,7 +314,7 @@ impl Piece {
     fn new(mesh: PieceMesh, run_id: &str, compression: Compression) -> Result<Piece> {
         let grid = Grid::new(
             &Geometry {
-                points: &mesh.coords,
+                points: Points::Every(&mesh.coords),
                 cells: &mesh.connectivity,
                 nodes_per_cell: mesh.nodes_per_cell,
                 region: &mesh.region,

@@ -582,7 +582,7 @@ mod tests {
             for precision in [Precision::Float64, Precision::Float32] {
                 let dir = tempfile::tempdir().unwrap();
                 let geometry = Geometry {
-                    points: &points,
+                    points: crate::mesh::Points::Every(&points),
                     cells: &cells,
                     nodes_per_cell: 3,
                     region: &[7, 9],

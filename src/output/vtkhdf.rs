@@ -222,7 +222,7 @@ impl Sink {
         Ok(Sink {
             path: path.to_path_buf(),
             cell_type: g.cell_type()?,
-            points: g.points.to_vec(),
+            points: g.points.whole().to_vec(),
             cells: g.cells.to_vec(),
             nodes_per_cell: g.nodes_per_cell,
             cell_arrays: (g.cell_statics().into_iter())
@@ -750,7 +750,10 @@ impl Stored {
 
     /// A resumed run must write into the file the mesh and precision it holds.
     pub(super) fn check(&self, path: &Path, g: &Geometry, precision: Precision) -> Result<()> {
-        let (n, c) = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
+        let (n, c) = (
+            g.points.whole().len(),
+            g.cells.len() / g.nodes_per_cell.max(1),
+        );
         if (self.num_points, self.num_cells) != (n, c) {
             return Err(Error::input(format!(
                 "{} holds a mesh of {} points and {} cells, this run's has {n} and {c}; move \
@@ -802,7 +805,10 @@ pub(super) fn stored_sums(
     let file = h5_open(path, OpenMode::Read).map_err(|e| e.to_string())?;
     visit_every_object(&file).map_err(|e| e.to_string())?;
     check_static(&file, g, run_id)?;
-    let (n, c) = (g.points.len(), g.cells.len() / g.nodes_per_cell.max(1));
+    let (n, c) = (
+        g.points.whole().len(),
+        g.cells.len() / g.nodes_per_cell.max(1),
+    );
     let frames = frames_in(&file, n, c)
         .map_err(|e| e.to_string())?
         .min(limit);
@@ -907,7 +913,7 @@ fn rows_le(ds: &Dataset, from: usize, rows: usize) -> hdf5::Result<Vec<u8>> {
 /// The mesh arrays and the run id hold exactly what [`Sink::create`] writes for `g`.
 fn check_static(file: &hdf5::File, g: &Geometry, run_id: &str) -> std::result::Result<(), String> {
     let (n, c, p) = (
-        g.points.len(),
+        g.points.whole().len(),
         g.cells.len() / g.nodes_per_cell.max(1),
         g.nodes_per_cell,
     );
@@ -935,7 +941,7 @@ fn check_static(file: &hdf5::File, g: &Geometry, run_id: &str) -> std::result::R
                 points.len() == 3 * n
                     && points
                         .iter()
-                        .zip(g.points.as_flattened())
+                        .zip(g.points.whole().as_flattened())
                         .all(|(a, b)| a.to_bits() == b.to_bits()),
             ),
             (

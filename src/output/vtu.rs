@@ -236,7 +236,7 @@ impl Grid {
     /// Checks ([`Geometry::cell_type`]) and encodes the geometry.
     pub(super) fn new(g: &Geometry, run_id: &str, compression: Compression) -> Result<Grid> {
         let cell_type = g.cell_type()?;
-        let (points, cells, nodes_per_cell) = (g.points, g.cells, g.nodes_per_cell);
+        let (points, cells, nodes_per_cell) = (g.points.whole(), g.cells, g.nodes_per_cell);
         let num_points = points.len();
         let num_cells = cells.len() / nodes_per_cell;
 

@@ -4,7 +4,7 @@
 //! so far succeeded ([`Ranks::agree`]), it broadcasts the mesh in two parts: its [`Shape`]
 //! (its arrays' lengths, the groups' tags and names, the file's path) as JSON, and then
 //! each array's bytes as they lie in memory, into arrays of that shape on the others
-//! ([`Ranks::mesh_of_first`]). So a follower holds the mesh alone, never the file's bytes
+//! ([`Ranks::mesh_of_first`]), the nodes' places on their own. So a follower holds the mesh alone, never the file's bytes
 //! nor the reader's arrays, where reading a mesh peaks, and the mesh is the same bits on
 //! every rank. The bytes are the ranks' own layout in memory: the ranks of a run are one build on one
 //! architecture, as MPI runs of one program are.
@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use super::{mpi, Ranks};
 #[cfg(feature = "petsc")]
 use crate::fem::{CellMaterials, Discretization};
-use crate::mesh::{Group, Mesh};
+use crate::mesh::{Group, Mesh, Places};
 #[cfg(feature = "petsc")]
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -92,7 +92,7 @@ impl Shape {
         Mesh {
             path: PathBuf::from(std::ffi::OsString::from_vec(self.path)),
             dim: self.dim,
-            nodes: vec![[0.0; 3]; self.nodes],
+            nodes: Places::default(),
             triangles: vec![[0; 3]; n(self.triangles)],
             tetrahedra: vec![[0; 4]; n(self.tetrahedra)],
             groups: (self.groups.into_iter())
@@ -144,7 +144,7 @@ impl GroupShape {
 /// (the cells, their entities and the cell groups') only where `cells`.
 fn arrays(mesh: &mut Mesh, cells: bool) -> Vec<&mut [u8]> {
     use bytemuck::cast_slice_mut as bytes;
-    let mut out: Vec<&mut [u8]> = vec![bytes(&mut mesh.nodes)];
+    let mut out: Vec<&mut [u8]> = Vec::new();
     if cells {
         out.extend([
             bytes(&mut mesh.triangles),
@@ -159,6 +159,18 @@ fn arrays(mesh: &mut Mesh, cells: bool) -> Vec<&mut [u8]> {
         }
     }
     out
+}
+
+/// Every node's place of rank 0's `mesh` (`first`; on the others, none yet), on
+/// every rank (collective; `n` nodes).
+fn every_place_of_first(mesh: &mut Mesh, (n, first): (usize, bool)) -> Result<()> {
+    let mut all = match first {
+        true => std::mem::take(&mut mesh.nodes).into_all(),
+        false => vec![[0.0; 3]; n],
+    };
+    mpi::from_rank0_bytes(bytemuck::cast_slice_mut(&mut all))?;
+    mesh.nodes = Places::every(all);
+    Ok(())
 }
 
 impl Ranks {
@@ -176,10 +188,12 @@ impl Ranks {
         };
         let shape: Shape =
             serde_json::from_str(&self.first_says_text(&shape)?).map_err(|e| failed(&e))?;
+        let n = (shape.nodes, self.is_first());
         let mut mesh = mine.unwrap_or_else(|| shape.empty(cells));
         for array in arrays(&mut mesh, cells) {
             mpi::from_rank0_bytes(array)?;
         }
+        every_place_of_first(&mut mesh, n)?;
         Ok(mesh)
     }
 
@@ -405,6 +419,9 @@ mod tests {
             {
                 to.copy_from_slice(from);
             }
+            // The places go on their own (`every_place_of_first`).
+            assert_ne!(received, sent, "{file}: the mesh without its places");
+            received.nodes = Places::every(sent.nodes.all().to_vec());
             assert_eq!(received, sent, "{file}");
         }
     }

@@ -97,7 +97,7 @@ fn with_geometry<T>(
     let region = region(mesh);
     let pieces = pieces(disc, (&cells, nodes_per_cell), own, options);
     f(&Geometry {
-        points: &mesh.nodes,
+        points: mesh.nodes.points(),
         cells: &cells,
         nodes_per_cell,
         region: &region,

@@ -337,7 +337,7 @@ fn all_clockwise_mesh_with_saveall() {
     assert!(m.triangles.iter().all(|&t| signed_area(&m, t) > 0.0));
     assert!((total_area(&m) - 1.0).abs() < 1e-12);
     assert!(
-        m.nodes.iter().all(|p| p[0] <= 1.0 && p[1] <= 1.0),
+        m.nodes.all().iter().all(|p| p[0] <= 1.0 && p[1] <= 1.0),
         "point (3, 3) dropped"
     );
     let names: Vec<String> = m.groups.iter().map(Mesh::display_name).collect();
@@ -357,7 +357,7 @@ fn sparse_tags_unused_nodes_duplicates_and_names_with_commas() {
     let m = read("tests/data/mesh_import/sparse_tags.msh");
     // Node 99 is not used by any triangle; file order 20, 10, 40, 30 gives indices 0..3.
     assert_eq!(
-        m.nodes,
+        m.nodes.all(),
         vec![
             [1.0, 0.0, 0.0],
             [0.0, 0.0, 0.0],

@@ -67,11 +67,11 @@ const SAMPLES: [[f64; 3]; 7] = [
 fn prolongation_on_nested_meshes_is_exact() {
     let coarse = read("paper/rect_008.msh");
     let fine = read("paper/rect_032.msh");
-    let v: Vec<[f64; 2]> = coarse.nodes.iter().map(field).collect();
+    let v: Vec<[f64; 2]> = coarse.nodes.all().iter().map(field).collect();
     let t = Transfer::new(
-        &coarse.nodes,
+        coarse.nodes.all(),
         &coarse.triangles,
-        &fine.nodes,
+        fine.nodes.all(),
         &fine.triangles,
     );
     assert!(t.nested, "rect_008 → rect_032 must be detected as nested");
@@ -88,7 +88,7 @@ fn prolongation_on_nested_meshes_is_exact() {
                 l[0] * c[0][1] + l[1] * c[1][1] + l[2] * c[2][1],
             ];
             let fine_val = [0, 1].map(|k| (0..3).map(|i| l[i] * w[ft[i]][k]).sum::<f64>());
-            let coarse_val = eval_brute(&coarse.nodes, &coarse.triangles, &v, q);
+            let coarse_val = eval_brute(coarse.nodes.all(), &coarse.triangles, &v, q);
             for k in 0..2 {
                 worst = worst.max((fine_val[k] - coarse_val[k]).abs());
             }
@@ -97,8 +97,8 @@ fn prolongation_on_nested_meshes_is_exact() {
     assert!(worst <= 1e-14, "prolongation differs by {worst:e}");
 
     // So the norms of the two P1 functions are the same, computed on either mesh.
-    let (l2c, h1c) = p1_norms(&p1_triangles(&coarse.nodes, &coarse.triangles), &v);
-    let (l2f, h1f) = p1_norms(&p1_triangles(&fine.nodes, &fine.triangles), &w);
+    let (l2c, h1c) = p1_norms(&p1_triangles(coarse.nodes.all(), &coarse.triangles), &v);
+    let (l2f, h1f) = p1_norms(&p1_triangles(fine.nodes.all(), &fine.triangles), &w);
     assert!((l2c - l2f).abs() <= 1e-13 * l2c, "{l2c} vs {l2f}");
     assert!((h1c - h1f).abs() <= 1e-13 * h1c, "{h1c} vs {h1f}");
 }
@@ -107,17 +107,17 @@ fn prolongation_on_nested_meshes_is_exact() {
 fn point_location_agrees_with_the_prolongation() {
     let coarse = read("paper/rect_016.msh");
     let fine = read("paper/rect_064.msh");
-    let v: Vec<[f64; 2]> = coarse.nodes.iter().map(field).collect();
+    let v: Vec<[f64; 2]> = coarse.nodes.all().iter().map(field).collect();
     let w = Transfer::new(
-        &coarse.nodes,
+        coarse.nodes.all(),
         &coarse.triangles,
-        &fine.nodes,
+        fine.nodes.all(),
         &fine.triangles,
     )
     .apply(&v);
-    let loc = Locator::new(&coarse.nodes, &coarse.triangles);
+    let loc = Locator::new(coarse.nodes.all(), &coarse.triangles);
     let mut worst: f64 = 0.0;
-    for (i, p) in fine.nodes.iter().enumerate() {
+    for (i, p) in fine.nodes.all().iter().enumerate() {
         let l = loc.locate([p[0], p[1]]).unwrap();
         assert!(l.distance <= 1e-14, "node {i} is outside by {}", l.distance);
         let t = coarse.triangles[l.cell];
@@ -154,19 +154,19 @@ fn flipped_grid(n: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
 fn non_nested_transfer_interpolates_and_reproduces_linear_fields() {
     let (cn, ct) = flipped_grid(8);
     let fine = read("paper/rect_032.msh");
-    let t = Transfer::new(&cn, &ct, &fine.nodes, &fine.triangles);
+    let t = Transfer::new(&cn, &ct, fine.nodes.all(), &fine.triangles);
     assert!(!t.nested, "flipped diagonals are not nested in rect_032");
     assert_eq!(t.outside, 0);
     // A linear field is reproduced exactly by any P1 interpolation.
     let lin = |p: &[f64; 3]| [0.3 + 2.0 * p[0] - p[1], -1.0 + 0.5 * p[0] + 4.0 * p[1]];
     let v: Vec<[f64; 2]> = cn.iter().map(lin).collect();
-    for (p, w) in fine.nodes.iter().zip(t.apply(&v)) {
+    for (p, w) in fine.nodes.all().iter().zip(t.apply(&v)) {
         let e = lin(p);
         assert!((w[0] - e[0]).abs() < 1e-13 && (w[1] - e[1]).abs() < 1e-13);
     }
     // A general P1 field: the values at the fine nodes are those of the coarse function.
     let v: Vec<[f64; 2]> = cn.iter().map(field).collect();
-    for (p, w) in fine.nodes.iter().zip(t.apply(&v)) {
+    for (p, w) in fine.nodes.all().iter().zip(t.apply(&v)) {
         let e = eval_brute(&cn, &ct, &v, [p[0], p[1]]);
         assert!((w[0] - e[0]).abs() < 1e-14 && (w[1] - e[1]).abs() < 1e-14);
     }
@@ -175,8 +175,8 @@ fn non_nested_transfer_interpolates_and_reproduces_linear_fields() {
 #[test]
 fn unstructured_meshes_transfer_onto_themselves_exactly() {
     let m = read("plate_hole/plate_hole.msh");
-    let v: Vec<[f64; 2]> = m.nodes.iter().map(field).collect();
-    let t = Transfer::new(&m.nodes, &m.triangles, &m.nodes, &m.triangles);
+    let v: Vec<[f64; 2]> = m.nodes.all().iter().map(field).collect();
+    let t = Transfer::new(m.nodes.all(), &m.triangles, m.nodes.all(), &m.triangles);
     assert!(t.nested);
     for (a, b) in v.iter().zip(t.apply(&v)) {
         assert!((a[0] - b[0]).abs() < 1e-14 && (a[1] - b[1]).abs() < 1e-14);
@@ -607,11 +607,11 @@ fn prolongation_on_nested_tetrahedral_meshes_is_exact() {
     // every level: each tetrahedron of block_008 lies in one of block_004.
     let coarse = read("3d/block_004.msh");
     let fine = read("3d/block_008.msh");
-    let v: Vec<[f64; 3]> = coarse.nodes.iter().map(field3).collect();
+    let v: Vec<[f64; 3]> = coarse.nodes.all().iter().map(field3).collect();
     let t = Transfer::new(
-        &coarse.nodes,
+        coarse.nodes.all(),
         &coarse.tetrahedra,
-        &fine.nodes,
+        fine.nodes.all(),
         &fine.tetrahedra,
     );
     assert!(t.nested, "block_004 → block_008 must be detected as nested");
@@ -625,7 +625,7 @@ fn prolongation_on_nested_tetrahedral_meshes_is_exact() {
         for l in SAMPLES3 {
             let q = [0, 1, 2].map(|k| (0..4).map(|i| l[i] * fine.nodes[ft[i]][k]).sum());
             let fine_val = [0, 1, 2].map(|k| (0..4).map(|i| l[i] * w[ft[i]][k]).sum::<f64>());
-            let coarse_val = eval_brute3(&coarse.nodes, &coarse.tetrahedra, &v, q);
+            let coarse_val = eval_brute3(coarse.nodes.all(), &coarse.tetrahedra, &v, q);
             for k in 0..3 {
                 worst = worst.max((fine_val[k] - coarse_val[k]).abs());
             }
@@ -634,8 +634,8 @@ fn prolongation_on_nested_tetrahedral_meshes_is_exact() {
     assert!(worst <= 1e-14, "prolongation differs by {worst:e}");
 
     // So the norms of the two P1 functions are the same, computed on either mesh.
-    let (l2c, h1c) = p1_norms(&p1_tetrahedra(&coarse.nodes, &coarse.tetrahedra), &v);
-    let (l2f, h1f) = p1_norms(&p1_tetrahedra(&fine.nodes, &fine.tetrahedra), &w);
+    let (l2c, h1c) = p1_norms(&p1_tetrahedra(coarse.nodes.all(), &coarse.tetrahedra), &v);
+    let (l2f, h1f) = p1_norms(&p1_tetrahedra(fine.nodes.all(), &fine.tetrahedra), &w);
     assert!((l2c - l2f).abs() <= 1e-13 * l2c, "{l2c} vs {l2f}");
     assert!((h1c - h1f).abs() <= 1e-13 * h1c, "{h1c} vs {h1f}");
 }
@@ -647,6 +647,7 @@ fn non_nested_tetrahedral_transfer_interpolates_and_reproduces_linear_fields() {
     let coarse = read("3d/block_004.msh");
     let nodes: Vec<[f64; 3]> = coarse
         .nodes
+        .all()
         .iter()
         .map(|p| [2.0 - p[0], p[1], p[2]])
         .collect();
@@ -656,7 +657,7 @@ fn non_nested_tetrahedral_transfer_interpolates_and_reproduces_linear_fields() {
         .map(|t| [t[1], t[0], t[2], t[3]])
         .collect();
     let fine = read("3d/block_008.msh");
-    let t = Transfer::new(&nodes, &tets, &fine.nodes, &fine.tetrahedra);
+    let t = Transfer::new(&nodes, &tets, fine.nodes.all(), &fine.tetrahedra);
     assert!(
         !t.nested,
         "the mirrored block_004 is not nested in block_008"
@@ -671,7 +672,7 @@ fn non_nested_tetrahedral_transfer_interpolates_and_reproduces_linear_fields() {
         ]
     };
     let v: Vec<[f64; 3]> = nodes.iter().map(lin).collect();
-    for (p, w) in fine.nodes.iter().zip(t.apply(&v)) {
+    for (p, w) in fine.nodes.all().iter().zip(t.apply(&v)) {
         let e = lin(p);
         for k in 0..3 {
             assert!((w[k] - e[k]).abs() < 1e-13, "{p:?}: {w:?} vs {e:?}");
@@ -680,7 +681,7 @@ fn non_nested_tetrahedral_transfer_interpolates_and_reproduces_linear_fields() {
     // A general P1 field: the values at the fine nodes are those of the coarse function.
     let v: Vec<[f64; 3]> = nodes.iter().map(field3).collect();
     let w = t.apply(&v);
-    for (p, w) in fine.nodes.iter().zip(&w) {
+    for (p, w) in fine.nodes.all().iter().zip(&w) {
         let e = eval_brute3(&nodes, &tets, &v, *p);
         for k in 0..3 {
             assert!((w[k] - e[k]).abs() < 1e-14, "{p:?}: {w:?} vs {e:?}");
@@ -689,7 +690,7 @@ fn non_nested_tetrahedral_transfer_interpolates_and_reproduces_linear_fields() {
     // The interpolant is not the coarse function: its H¹ seminorm differs (the gradient
     // jumps across coarse faces are smeared over fine cells), its L² norm hardly.
     let (l2c, h1c) = p1_norms(&p1_tetrahedra(&nodes, &tets), &v);
-    let (l2f, h1f) = p1_norms(&p1_tetrahedra(&fine.nodes, &fine.tetrahedra), &w);
+    let (l2f, h1f) = p1_norms(&p1_tetrahedra(fine.nodes.all(), &fine.tetrahedra), &w);
     println!("coarse ‖v‖ = {l2c:.6e}, |v|_1 = {h1c:.6e}; interpolant {l2f:.6e}, {h1f:.6e}");
     assert!((l2c - l2f).abs() <= 1e-2 * l2c, "{l2c} vs {l2f}");
     assert!((h1c - h1f).abs() > 1e-8 * h1c, "{h1c} vs {h1f}");

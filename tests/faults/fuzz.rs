@@ -69,7 +69,7 @@ fn check_mesh(m: &Mesh) -> Result<(), String> {
     if m.triangles.is_empty() {
         return Err("accepted a mesh without triangles".into());
     }
-    for (i, p) in m.nodes.iter().enumerate() {
+    for (i, p) in m.nodes.all().iter().enumerate() {
         if !p.iter().all(|c| c.is_finite()) || p[2] != 0.0 {
             return Err(format!("node {i} = {p:?}"));
         }

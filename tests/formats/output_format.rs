@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
+use viscontact::mesh::Points;
 use viscontact::output::{write_atomic, Field, Frame, Geometry, Options, OwnedField, Series};
 
 /// The run id the series of these tests carry.
@@ -26,7 +27,7 @@ fn create(
     per_cell: usize,
 ) -> viscontact::Result<Series> {
     let g = Geometry {
-        points,
+        points: Points::Every(points),
         cells,
         nodes_per_cell: per_cell,
         region: &[],
@@ -40,7 +41,7 @@ fn create(
 /// [`Series::reopen`] with the default options for run `run`.
 fn reopen(dir: &Path, run: &str, last_step: usize) -> viscontact::Result<Series> {
     let g = Geometry {
-        points: &POINTS,
+        points: Points::Every(&POINTS),
         cells: &CELLS,
         nodes_per_cell: 3,
         region: &[],
@@ -675,7 +676,7 @@ for kind, data in (("point", g.GetPointData()), ("cell", g.GetCellData())):
         for precision in [Precision::Float64, Precision::Float32] {
             let dir = tempfile::tempdir().unwrap();
             let g = Geometry {
-                points: &POINTS,
+                points: Points::Every(&POINTS),
                 cells: &CELLS,
                 nodes_per_cell: 3,
                 region: &[3, 8],
@@ -759,7 +760,7 @@ for kind, data in (("point", g.GetPointData()), ("cell", g.GetCellData())):
 fn only_the_chosen_fields_are_written() {
     let dir = tempfile::tempdir().unwrap();
     let g = Geometry {
-        points: &POINTS,
+        points: Points::Every(&POINTS),
         cells: &CELLS,
         nodes_per_cell: 3,
         region: &[1, 2],

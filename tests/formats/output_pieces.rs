@@ -8,6 +8,7 @@ use crate::common;
 
 use std::path::Path;
 
+use viscontact::mesh::Points;
 use viscontact::output::read::{read_frame, read_series};
 use viscontact::output::{Field, Frame, FrameSum, Geometry, Options, Resumed, Series};
 
@@ -47,7 +48,7 @@ fn with_geometry<T>(pieces: &[u32], f: impl FnOnce(&Geometry) -> T) -> T {
     let (points, cells) = grid();
     let region = vec![7; 12];
     f(&Geometry {
-        points: &points,
+        points: Points::Every(&points),
         cells: &cells,
         nodes_per_cell: 3,
         region: &region,

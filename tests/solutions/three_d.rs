@@ -155,7 +155,7 @@ fn box_normal(pts: &[V3], lo: V3, hi: V3) -> V3 {
 
 /// Nodal values of x ↦ f(x) as a flat vector with 3 dofs per node (3·node + component).
 fn nodal_field(m: &Mesh, f: impl Fn(V3) -> V3) -> Vec<f64> {
-    m.nodes.iter().flat_map(|&p| f(p)).collect()
+    m.nodes.all().iter().flat_map(|&p| f(p)).collect()
 }
 
 // ---- 1. mesh import ----------------------------------------------------------------------
@@ -987,6 +987,7 @@ fn three_d_load_quadrature_is_exact_for_polynomials() {
         ] {
             let got: f64 = mesh
                 .nodes
+                .all()
                 .iter()
                 .enumerate()
                 .map(|(i, p)| (0..3).map(|k| p[k].powi(m[k])).product::<f64>() * f[3 * i + a])

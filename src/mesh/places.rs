@@ -1,5 +1,5 @@
-//! The nodes' places that a discretization holds: every node's, or on a follower rank of
-//! several those of the nodes it still reads once its setup is done.
+//! The nodes' places that a mesh and a discretization hold: every node's, or on a follower
+//! rank of several those of the nodes it still reads once its setup is done.
 //!
 //! Every rank gets every node's place with the mesh (24 bytes a node, 8 a dof of the whole
 //! problem), which its setup reads: the conditions' groups, Γ3, the loads, its cells. Past
@@ -8,14 +8,14 @@
 //! modes its own unknowns' nodes, and the centroid of every node, which is kept as a
 //! number; its piece's stresses its piece's points; a message Γ3's nodes; the prescribed
 //! values, at each step, their nodes (`constraints::values`). So a follower
-//! keeps those alone ([`Places::of`], `Discretization::keep_places`), found by binary
+//! keeps those alone ([`Places::some`], `Discretization::keep_places`), found by binary
 //! search in their increasing node numbers; rank 0 and one process keep every node's,
 //! which rank 0's frames, norms and history.csv read.
 
 use std::ops::Index;
 
-/// The nodes' places of a discretization: every node's, or some.
-#[derive(Clone, Debug, Default)]
+/// The nodes' places of a mesh or a discretization: every node's, or some.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Places {
     /// The nodes of the mesh, held or not.
     n: usize,
@@ -39,14 +39,28 @@ impl Places {
         }
     }
 
-    /// Of every node's places `all`, those of `nodes` alone (increasing, no repeats).
-    pub fn of(all: &[[f64; 3]], nodes: &[usize]) -> Places {
+    /// Of these places, those of `nodes` alone (increasing, no repeats; each held here),
+    /// with the same centroid.
+    pub fn some(&self, nodes: &[usize]) -> Places {
         Places {
-            n: all.len(),
+            n: self.n,
             kept: Some(nodes.iter().map(|&p| p as u32).collect()),
-            places: nodes.iter().map(|&p| all[p]).collect(),
-            centre: centroid(all),
+            places: nodes.iter().map(|&p| self[p]).collect(),
+            centre: self.centre,
         }
+    }
+
+    /// Every node's place, in node order, given back to be sent (rank 0's, to the other
+    /// ranks; [`Places::every`] makes them again).
+    ///
+    /// # Panics
+    /// Where some alone are held.
+    pub fn into_all(self) -> Vec<[f64; 3]> {
+        assert!(
+            self.kept.is_none(),
+            "every node's place, where some are held"
+        );
+        self.places
     }
 
     /// The nodes of the mesh, held or not.
@@ -62,7 +76,7 @@ impl Places {
     /// Every node's place, in node order.
     ///
     /// # Panics
-    /// On a follower rank of several, which holds some alone ([`Places::of`]): only rank 0
+    /// On a follower rank of several, which holds some alone ([`Places::some`]): only rank 0
     /// and one process read every node's.
     pub fn all(&self) -> &[[f64; 3]] {
         assert!(
@@ -105,7 +119,7 @@ impl Index<usize> for Places {
     /// Node p's place.
     ///
     /// # Panics
-    /// Where p's is not held: a follower reads only the places it kept ([`Places::of`]).
+    /// Where p's is not held: a follower reads only the places it kept ([`Places::some`]).
     fn index(&self, p: usize) -> &[f64; 3] {
         match &self.kept {
             None => &self.places[p],
@@ -120,6 +134,19 @@ pub enum Points<'a> {
     Every(&'a [[f64; 3]]),
     /// The nodes held (increasing) and their places.
     Some(&'a [u32], &'a [[f64; 3]]),
+}
+
+impl<'a> Points<'a> {
+    /// Every node's place, in node order.
+    ///
+    /// # Panics
+    /// Where some alone are held: only rank 0 and one process read every node's.
+    pub fn whole(&self) -> &'a [[f64; 3]] {
+        match *self {
+            Points::Every(places) => places,
+            Points::Some(..) => panic!("every node's place, read where some alone are held"),
+        }
+    }
 }
 
 impl Index<usize> for Points<'_> {
@@ -149,7 +176,7 @@ mod tests {
     fn kept_places_are_the_whole_ones() {
         let whole: Vec<[f64; 3]> = (0..8).map(|p| [p as f64, 0.5 * p as f64, -1.0]).collect();
         let every = Places::every(whole.clone());
-        let kept = Places::of(&whole, &[1, 4, 7]);
+        let kept = every.some(&[1, 4, 7]);
         assert_eq!((kept.len(), every.centre()), (8, kept.centre()));
         assert_eq!(every.centre(), [3.5, 1.75, -1.0]);
         for p in [1, 4, 7] {
