@@ -1778,7 +1778,7 @@ fn column_nodes(free: &DofIndices, d: usize, own: Option<&[usize]>, n: usize) ->
 }
 
 /// `nodes` sorted, each once.
-fn increasing(mut nodes: Vec<usize>) -> Vec<usize> {
+pub(crate) fn increasing<T: Ord>(mut nodes: Vec<T>) -> Vec<T> {
     nodes.sort_unstable();
     nodes.dedup();
     nodes

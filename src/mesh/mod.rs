@@ -55,7 +55,8 @@ pub struct Mesh {
     /// Spatial dimension: 2 (triangles in the xy-plane) or 3 (tetrahedra).
     pub dim: usize,
     /// Node coordinates; only nodes used by the cells, numbered `0..` in file order;
-    /// z = 0 in 2D.
+    /// z = 0 in 2D. On a follower rank of a run whose setup spreads, those of its groups'
+    /// nodes and its part's cells alone ([`Places`]).
     pub nodes: Places,
     /// 2D: the cells, as 0-based node indices, counter-clockwise (positive signed area).
     /// Empty in 3D.

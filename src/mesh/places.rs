@@ -1,16 +1,21 @@
 //! The nodes' places that a mesh and a discretization hold: every node's, or on a follower
-//! rank of several those of the nodes it still reads once its setup is done.
+//! rank of several those of the nodes it reads.
 //!
-//! Every rank gets every node's place with the mesh (24 bytes a node, 8 a dof of the whole
-//! problem), which its setup reads: the conditions' groups, Γ3, the loads, its cells. Past
-//! that, a follower reads few of them: its rows of K_B and K_R^(0), made after PETSc's
-//! setup (`Discretization::own_pair_made`), read its cells' vertices; GAMG's rigid-body
-//! modes its own unknowns' nodes, and the centroid of every node, which is kept as a
-//! number; its piece's stresses its piece's points; a message Γ3's nodes; the prescribed
-//! values, at each step, their nodes (`constraints::values`). So a follower
-//! keeps those alone ([`Places::some`], `Discretization::keep_places`), found by binary
-//! search in their increasing node numbers; rank 0 and one process keep every node's,
-//! which rank 0's frames, norms and history.csv read.
+//! Rank 0 and one process hold every node's, which rank 0's frames, norms and history.csv
+//! read. A follower of a run whose setup spreads never holds every node's (24 bytes a
+//! node, 8 a dof of the whole problem): with the mesh it gets those of the boundary
+//! groups' nodes, which its numbering, Γ3's rows and the tractions read, and the centroid
+//! of every node as a number (GAMG's rigid-body modes turn about it); with its part of the
+//! cells those of their vertices, which its assembly and its piece of the frames read
+//! ([`Places::held`], [`Places::joined`]; `ranks::mesh`). Past its setup it reads fewer:
+//! its rows of K_B and K_R^(0), made after PETSc's setup (`Discretization::own_pair_made`),
+//! read their cells' vertices; GAMG's rigid-body modes its own unknowns' nodes; its piece's
+//! stresses its piece's points; a message Γ3's nodes; the prescribed values, at each step,
+//! their nodes (`constraints::values`). So its discretization keeps those alone
+//! ([`Places::some`], `Discretization::keep_places`). A node's place is found by binary
+//! search in the increasing node numbers held; reading one not held panics, as does
+//! reading every node's where some alone are held: which rank reads what is the code's
+//! invariant, not the user's input.
 
 use std::ops::Index;
 
@@ -48,6 +53,43 @@ impl Places {
             places: nodes.iter().map(|&p| self[p]).collect(),
             centre: self.centre,
         }
+    }
+
+    /// Of a mesh of `n` nodes whose centroid is `centre`, the places `places` of `nodes`
+    /// alone (increasing, no repeats): a follower's, handed over by rank 0.
+    pub fn held(n: usize, (nodes, places): (Vec<u32>, Vec<[f64; 3]>), centre: [f64; 3]) -> Places {
+        assert_eq!(nodes.len(), places.len(), "a place for each node held");
+        Places {
+            n,
+            kept: Some(nodes),
+            places,
+            centre,
+        }
+    }
+
+    /// These places and those `places` of `nodes` (increasing, no repeats), the nodes held
+    /// here or there; a node held in both keeps its place here.
+    ///
+    /// # Panics
+    /// Where every node's is held here: there is nothing to join.
+    pub fn joined(&self, nodes: &[u32], places: &[[f64; 3]]) -> Places {
+        let mine = self.kept.as_deref().expect("some places, joined to others");
+        let (mut kept, mut joined) = (Vec::new(), Vec::new());
+        let (mut i, mut j) = (0, 0);
+        while i < mine.len() || j < nodes.len() {
+            let here = i < mine.len() && (j == nodes.len() || mine[i] <= nodes[j]);
+            let (p, x) = match here {
+                true => (mine[i], self.places[i]),
+                false => (nodes[j], places[j]),
+            };
+            if here && j < nodes.len() && nodes[j] == p {
+                j += 1;
+            }
+            (i, j) = if here { (i + 1, j) } else { (i, j + 1) };
+            kept.push(p);
+            joined.push(x);
+        }
+        Places::held(self.n, (kept, joined), self.centre)
     }
 
     /// Every node's place, in node order, given back to be sent (rank 0's, to the other
@@ -185,5 +227,32 @@ mod tests {
         assert_eq!(every.all(), &whole[..]);
         let missing = std::panic::catch_unwind(|| kept[5]);
         assert!(missing.is_err());
+    }
+
+    /// Joining two sets of places holds each node of either once, in increasing order,
+    /// with its place; the count and the centroid stay.
+    #[test]
+    fn joined_places_hold_each_node_of_either_once() {
+        let whole: Vec<[f64; 3]> = (0..10).map(|p| [p as f64, -(p as f64), 0.25]).collect();
+        let every = Places::every(whole.clone());
+        for (a, b) in [
+            (vec![1, 4, 7], vec![0, 4, 8, 9]),
+            (vec![], vec![2, 3]),
+            (vec![5], vec![]),
+            (vec![0, 9], vec![0, 9]),
+        ] {
+            let b_places: Vec<[f64; 3]> = b.iter().map(|&p| whole[p]).collect();
+            let b: Vec<u32> = b.iter().map(|&p| p as u32).collect();
+            let joined = every.some(&a).joined(&b, &b_places);
+            let mut both: Vec<usize> = a
+                .iter()
+                .copied()
+                .chain(b.iter().map(|&p| p as usize))
+                .collect();
+            both.sort_unstable();
+            both.dedup();
+            assert_eq!(joined, every.some(&both), "{a:?} and {b:?}");
+            assert_eq!((joined.len(), joined.centre()), (10, every.centre()));
+        }
     }
 }

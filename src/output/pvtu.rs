@@ -261,18 +261,14 @@ impl PieceMesh {
     /// Piece `rank` of `g`: the cells `cells` and the points they use.
     fn of(g: &Geometry, rank: usize, cells: Vec<usize>) -> PieceMesh {
         let npc = g.nodes_per_cell;
-        let mut local = vec![usize::MAX; g.points.whole().len()];
-        for &c in &cells {
-            g.cells[c * npc..(c + 1) * npc]
-                .iter()
-                .for_each(|&i| local[i] = 0);
-        }
-        let points: Vec<usize> = (0..g.points.whole().len())
-            .filter(|&i| local[i] == 0)
-            .collect();
-        for (k, &i) in points.iter().enumerate() {
-            local[i] = k;
-        }
+        let vertices = |c: usize| &g.cells[c * npc..(c + 1) * npc];
+        // Its points, increasing, and each one's number in the piece by binary search: no
+        // array of every node (a follower holds some nodes' places alone).
+        let mut points: Vec<usize> = cells.iter().flat_map(|&c| vertices(c)).copied().collect();
+        points.sort_unstable();
+        points.dedup();
+        points.shrink_to_fit();
+        let local = |i: &usize| points.binary_search(i).expect("a vertex of the piece");
         let subset = |a: &[i32]| -> Vec<i32> {
             match a.is_empty() {
                 true => Vec::new(),
@@ -283,7 +279,7 @@ impl PieceMesh {
             rank,
             coords: points.iter().map(|&i| g.points[i]).collect(),
             connectivity: (cells.iter())
-                .flat_map(|&c| g.cells[c * npc..(c + 1) * npc].iter().map(|&i| local[i]))
+                .flat_map(|&c| vertices(c).iter().map(local))
                 .collect(),
             nodes_per_cell: npc,
             region: subset(g.region),

@@ -10,14 +10,15 @@
 //! architecture, as MPI runs of one program are.
 //!
 //! Where the run's setup spreads (several ranks, PETSc: [`Ranks::spreads_setup`]), the
-//! followers get the mesh without its cells (its nodes and its groups' facets), and, once
-//! rank 0 has partitioned the nodes, each its part of the cells alone
-//! (`Ranks::cells_of_first`): those its assembly reads, with one of its own nodes
-//! (`petsc::Layout::cell_parts`), in the whole's order, so that each entry it assembles
-//! sums the same terms in the same order; their gmsh entities, materials and regions,
-//! which rank 0 makes of the whole mesh; and each group's cells among them. A cell with
-//! nodes in several parts goes to each rank that reads it. So no follower holds the whole
-//! mesh's cells, whose bytes every follower had received and held through its setup.
+//! followers get the mesh without its cells (its groups' facets, the places of their
+//! nodes and the centroid of every node), and, once rank 0 has partitioned the nodes, each
+//! its part of the cells alone (`Ranks::cells_of_first`): those its assembly reads, with
+//! one of its own nodes (`petsc::Layout::cell_parts`), in the whole's order, so that each
+//! entry it assembles sums the same terms in the same order; their vertices' places;
+//! their gmsh entities, materials and regions, which rank 0 makes of the whole mesh; and
+//! each group's cells among them. A cell with nodes in several parts goes to each rank
+//! that reads it. So no follower holds the whole mesh's cells, nor every node's place
+//! (`mesh::Places`), whose bytes every follower had received and held through its setup.
 
 use std::os::unix::ffi::{OsStrExt, OsStringExt};
 use std::path::PathBuf;
@@ -25,6 +26,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::{mpi, Ranks};
+use crate::fem::increasing;
 #[cfg(feature = "petsc")]
 use crate::fem::{CellMaterials, Discretization};
 use crate::mesh::{Group, Mesh, Places};
@@ -173,6 +175,37 @@ fn every_place_of_first(mesh: &mut Mesh, (n, first): (usize, bool)) -> Result<()
     Ok(())
 }
 
+/// Of the places of rank 0's `mesh` (`first`), on a follower, which has its groups and
+/// none yet, those of its groups' nodes and the centroid of every node (collective; `n`
+/// nodes): what its setup reads of them before its part of the cells comes, with their
+/// nodes' places (`Ranks::cells_of_first`).
+fn group_places_of_first(mesh: &mut Mesh, (n, first): (usize, bool)) -> Result<()> {
+    let nodes = group_nodes(mesh);
+    let (mut places, mut centre) = match first {
+        true => (
+            nodes.iter().map(|&p| mesh.nodes[p as usize]).collect(),
+            mesh.nodes.centre(),
+        ),
+        false => (vec![[0.0; 3]; nodes.len()], [0.0; 3]),
+    };
+    mpi::from_rank0_bytes(bytemuck::cast_slice_mut(&mut places))?;
+    mpi::from_rank0_bytes(bytemuck::cast_slice_mut(&mut centre))?;
+    if !first {
+        mesh.nodes = Places::held(n, (nodes, places), centre);
+    }
+    Ok(())
+}
+
+/// The nodes of `mesh`'s boundary groups' facets, increasing: those whose places the
+/// setup of a run reads (its conditions', Γ3's, the tractions').
+fn group_nodes(mesh: &Mesh) -> Vec<u32> {
+    let facets = mesh.groups.iter().flat_map(|g| {
+        let edges = g.facets.iter().flatten();
+        edges.chain(g.faces.iter().flatten())
+    });
+    increasing(facets.map(|&p| p as u32).collect())
+}
+
 impl Ranks {
     /// The mesh rank 0 read (`mine`: `Some` on rank 0, `None` on a follower) on every rank
     /// (collective on several: every rank calls it, once the ranks agreed on their setup
@@ -193,7 +226,10 @@ impl Ranks {
         for array in arrays(&mut mesh, cells) {
             mpi::from_rank0_bytes(array)?;
         }
-        every_place_of_first(&mut mesh, n)?;
+        match cells {
+            true => every_place_of_first(&mut mesh, n)?,
+            false => group_places_of_first(&mut mesh, n)?,
+        }
         Ok(mesh)
     }
 
@@ -220,7 +256,8 @@ impl Ranks {
 /// 0's empty), the vertices of its part's cells (dim + 1 a cell), their gmsh entities,
 /// their materials (`CellMaterials::of_cell`), their regions (none without
 /// `[[material.region]]`), and of each group of the mesh, in order, the count and the
-/// indices in the part of its cells; then the distinct materials' entries
+/// indices in the part of its cells, and the places of its cells' vertices (in increasing
+/// node order, each as six words); then the distinct materials' entries
 /// (`CellMaterials::distinct_entries`), the same for every rank.
 #[cfg(feature = "petsc")]
 struct Parts {
@@ -229,6 +266,7 @@ struct Parts {
     of_cell: Vec<Vec<u32>>,
     region: Vec<Vec<u32>>,
     groups: Vec<Vec<u32>>,
+    places: Vec<Vec<u32>>,
     entries: Vec<u32>,
 }
 
@@ -261,8 +299,15 @@ impl Parts {
             ids.iter().map(part).collect()
         };
         let region = &materials.region;
+        let vertices = each(&|c, v| v.extend(vertices(c).iter().map(|&p| p as u32)));
+        let places_of = |part: &Vec<u32>| -> Vec<u32> {
+            let at = |p: &u32| mesh.nodes[*p as usize];
+            bytemuck::cast_slice(&increasing(part.clone()).iter().map(at).collect::<Vec<_>>())
+                .to_vec()
+        };
         let parts = Parts {
-            vertices: each(&|c, v| v.extend(vertices(c).iter().map(|&p| p as u32))),
+            places: vertices.iter().map(places_of).collect(),
+            vertices,
             entities: each(&|c, v| v.push(mesh.cell_entity[c] as u32)),
             of_cell: each(&|c, v| v.push(materials.of_cell[c])),
             region: each(&|c, v| v.extend(region.get(c).map(|&r| r as u32))),
@@ -271,7 +316,8 @@ impl Parts {
         };
         // MPI counts a part's values in an int (`petsc::scatter_from_first`).
         let counted = |p: &Vec<u32>| i32::try_from(p.len()).is_ok();
-        if !parts.vertices.iter().chain(&parts.groups).all(counted) {
+        let mut values = (parts.vertices.iter().chain(&parts.groups)).chain(&parts.places);
+        if !values.all(counted) {
             return Err(Error::input(format!(
                 "mesh '{}': a rank's part of the mesh holds more than 2^31 values; run it on \
                  more ranks",
@@ -357,7 +403,7 @@ impl Ranks {
         let field = |f: fn(&Parts) -> &[Vec<u32>]| mpi::scatter_from_first(parts.as_ref().map(f));
         let (vertices, entities) = (field(|p| &p.vertices)?, field(|p| &p.entities)?);
         let (of_cell, region) = (field(|p| &p.of_cell)?, field(|p| &p.region)?);
-        let groups = field(|p| &p.groups)?;
+        let (groups, places) = (field(|p| &p.groups)?, field(|p| &p.places)?);
         let mut entries = parts.map_or(Vec::new(), |p| p.entries);
         let count = self.first_says(entries.len() as i32)?;
         entries.resize(count as usize, 0);
@@ -365,6 +411,8 @@ impl Ranks {
         if let Some(materials) = materials {
             return Ok(materials);
         }
+        let nodes = increasing(vertices.clone());
+        mesh.nodes = (mesh.nodes).joined(&nodes, &bytemuck::pod_collect_to_vec(&places));
         hold_part(mesh, (vertices, entities), groups);
         let region = region.into_iter().map(|r| r as i32).collect();
         Ok(CellMaterials::of_part(scene, &entries, of_cell, region))
@@ -419,7 +467,9 @@ mod tests {
             {
                 to.copy_from_slice(from);
             }
-            // The places go on their own (`every_place_of_first`).
+            // The places go on their own (`every_place_of_first`, `group_places_of_first`):
+            // a follower finds the groups' nodes whose places it receives as rank 0 does.
+            assert_eq!(group_nodes(&received), group_nodes(&sent), "{file}");
             assert_ne!(received, sent, "{file}: the mesh without its places");
             received.nodes = Places::every(sent.nodes.all().to_vec());
             assert_eq!(received, sent, "{file}");
