@@ -250,11 +250,12 @@ impl Layout {
         })
     }
 
-    /// The rank that holds each of `nodes` (the unknowns of each node that has any): a rank
+    /// The rank that holds mesh node v's unknowns, None for a node without any: a rank
     /// holds whole nodes, so a node's first unknown says whose it is.
-    fn ranks_of(&self, nodes: &[Vec<usize>]) -> Vec<usize> {
-        let rank_of = |v: &Vec<usize>| self.rank_of_row(self.row(v[0]));
-        nodes.iter().map(rank_of).collect()
+    fn rank_of_node(&self, disc: &Discretization, v: usize) -> Option<u32> {
+        let g = v * disc.dim;
+        let first = (g..g + disc.dim).find_map(|g| disc.free.unknown(g))?;
+        Some(self.rank_of_row(self.row(first)) as u32)
     }
 
     /// The piece of each cell (`cells`: `nodes_per_cell` mesh nodes each) in the `.pvtu`
@@ -267,28 +268,17 @@ impl Layout {
         cells: &[usize],
         nodes_per_cell: usize,
     ) -> Vec<u32> {
-        let of_node = self.rank_of_nodes(disc);
-        cells
-            .chunks(nodes_per_cell.max(1))
-            .map(|c| {
-                c.iter()
-                    .map(|&v| of_node[v])
-                    .min()
-                    .filter(|&p| p != u32::MAX)
-            })
-            .map(|p| p.unwrap_or(0))
+        // Node by node, not from an array of every node's: a follower's cells are its part's.
+        let of_node = |&v: &usize| self.rank_of_node(disc, v);
+        (cells.chunks(nodes_per_cell.max(1)))
+            .map(|c| c.iter().filter_map(of_node).min().unwrap_or(0))
             .collect()
     }
 
     /// The rank that holds each mesh node's unknowns; `u32::MAX` for a node without any.
     fn rank_of_nodes(&self, disc: &Discretization) -> Vec<u32> {
-        let nodes = nodes(disc);
-        let mut of_node = vec![u32::MAX; disc.free.dofs() / disc.dim];
-        let with_unknowns = (0..of_node.len()).filter(|&v| !node_unknowns(disc, v).is_empty());
-        for (v, r) in with_unknowns.zip(self.ranks_of(&nodes)) {
-            of_node[v] = r as u32;
-        }
-        of_node
+        let rank_of = |v| self.rank_of_node(disc, v).unwrap_or(u32::MAX);
+        (0..disc.free.dofs() / disc.dim).map(rank_of).collect()
     }
 
     /// Each follower's part of the mesh (`cells`, in their order): the cells its assembly
