@@ -23,6 +23,7 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 pub use loads::{Keep, Loads};
 pub use materials::{CellMaterials, Stiffness};
 pub use pair::{RowsPair, SymmetricPair};
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -179,9 +180,9 @@ pub enum StressCells<'a> {
     Only(&'a [usize]),
     /// The cells of these vertices (dim + 1 a cell, node numbers) with these materials
     /// (`CellMaterials::of_cell`'s), apart from the discretization's (a follower rank's
-    /// piece): each made from the nodes' places when it is read, as the discretization
-    /// made its own, so the same bits.
-    Of(&'a [usize], &'a [u32]),
+    /// piece), and their nodes, increasing: each made from the nodes' places when it is
+    /// read, as the discretization made its own, so the same bits.
+    Of(&'a [usize], &'a [u32], &'a [usize]),
 }
 
 /// Node `p` of `mesh` in the 32 bits a rank of several numbers its nodes in.
@@ -804,13 +805,10 @@ impl Discretization {
     }
 
     /// The unknowns at which the active set reads the step matrix's diagonal (its ρ): those
-    /// of Γ3's rows.
-    fn diagonal_read(&self) -> Vec<bool> {
-        let mut read = vec![false; self.n_dofs];
-        for row in self.contact.iter().chain(&self.friction) {
-            row.entries().for_each(|(d, _)| read[d] = true);
-        }
-        read
+    /// of Γ3's rows, increasing (a list of Γ3's, not a flag of every dof).
+    fn diagonal_read(&self) -> Vec<usize> {
+        let rows = self.contact.iter().chain(&self.friction);
+        increasing(rows.flat_map(|row| row.entries().map(|(d, _)| d)).collect())
     }
 
     /// Keeps of K_A, K_B and K_R the columns of the unknowns `own` (increasing) alone, as
@@ -952,20 +950,21 @@ impl Discretization {
         also: impl IntoIterator<Item = usize>,
     ) -> Option<Vec<usize>> {
         let own = self.own.as_ref()?;
-        let mut read = vec![false; self.n_dofs];
+        // A set of the rank's own and its neighbours' dofs, not a flag of every dof.
+        let mut read = std::collections::HashSet::new();
         for a in matrices {
             let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
-            ri[..cp[own.len()]].iter().for_each(|&i| read[i] = true);
+            read.extend(&ri[..cp[own.len()]]);
         }
         if let Some(pair) = &self.own_pair {
-            pair.columns().for_each(|j| read[j] = true);
+            read.extend(pair.columns());
         }
         // The columns of the rows `own_pair_made` will make: its cells' unknowns.
         for &p in self.pair_cells.iter().flat_map(|c| &c.vertices) {
-            (self.free.of_node(self.dim, p as usize)).for_each(|i| read[i] = true);
+            read.extend(self.free.of_node(self.dim, p as usize));
         }
-        also.into_iter().for_each(|i| read[i] = true);
-        Some((0..self.n_dofs).filter(|&i| read[i]).collect())
+        read.extend(also);
+        Some(increasing(read.into_iter().collect()))
     }
 
     /// On a follower rank whose history holds the dofs `local` alone (`Holds::Local`, made
@@ -1037,7 +1036,9 @@ impl Discretization {
     pub fn keep_diagonal_of_k_a(&mut self) {
         let read = self.diagonal_read();
         let own = self.own.as_deref().expect("a rank's own columns");
-        self.k_a = own_columns(&self.k_a, own, |i, j| i == j && read[i]);
+        self.k_a = own_columns(&self.k_a, own, |i, j| {
+            i == j && read.binary_search(&i).is_ok()
+        });
     }
 
     /// The diagonal of `a`, the step matrix or K_A: its columns, placed at their unknowns
@@ -1094,7 +1095,7 @@ impl Discretization {
         let n_cells = match cells {
             StressCells::All => self.n_cells(),
             StressCells::Only(only) => only.len(),
-            StressCells::Of(_, materials) => materials.len(),
+            StressCells::Of(_, materials, _) => materials.len(),
         };
         let (mut s6, mut vm) = (Vec::with_capacity(6 * n_cells), Vec::with_capacity(n_cells));
         self.each_stress([w, u], (m, held), (model, cells), |s, v| {
@@ -1223,7 +1224,7 @@ impl Discretization {
         // It holds the vertices whether or not it keeps its own columns (with prescribed
         // dofs every rank keeps the matrices whole); any rank of several reads its cells so,
         // a follower its piece's (a cell held would take 144 bytes).
-        if let StressCells::Of(vertices, materials) = only {
+        if let StressCells::Of(vertices, materials, _) = only {
             let cells = cells_of(self.dim, vertices, self.nodes.points());
             (cells.zip(materials)).for_each(|(t, &material)| of_cell(&t, material));
         } else if self.own.is_some() || !self.vertices.is_empty() {
@@ -1241,10 +1242,13 @@ impl Discretization {
     }
 
     /// The nodes of the cells `only` says, increasing, where they are a piece's (None: every
-    /// node's, of every cell): the nodes whose p and q [`Discretization::stress`] makes.
-    fn nodes_of(&self, only: StressCells) -> Option<Vec<usize>> {
-        if let StressCells::All = only {
-            return None;
+    /// node's, of every cell): the nodes whose p and q [`Discretization::stress`] makes. A
+    /// follower's piece names them (no flag of every node there); rank 0 marks its own.
+    fn nodes_of<'a>(&self, only: StressCells<'a>) -> Option<Cow<'a, [usize]>> {
+        match only {
+            StressCells::All => return None,
+            StressCells::Of(_, _, nodes) => return Some(Cow::Borrowed(nodes)),
+            StressCells::Only(_) => {}
         }
         let mut used = vec![false; self.nodes.len()];
         let mut mark = |vertices: &[usize]| vertices.iter().for_each(|&v| used[v] = true);
@@ -1255,12 +1259,11 @@ impl Discretization {
                     .iter()
                     .for_each(|&c| mark(&source.vertices(c)[..=self.dim]));
             }
-            StressCells::Of(vertices, _) => mark(vertices),
-            StressCells::All => {}
+            StressCells::Of(..) | StressCells::All => {}
         }
         let mut nodes = Vec::with_capacity(used.iter().filter(|&&u| u).count());
         nodes.extend((0..used.len()).filter(|&v| used[v]));
-        Some(nodes)
+        Some(Cow::Owned(nodes))
     }
 
     /// K_A + k K_B + k² Σ_g r_g(0) K_R^(g) on all n_dofs: the step matrix of the implicit

@@ -281,7 +281,9 @@ impl OwnFrames {
     /// has no cells (rank 0 then lists none, and still writes the frame's `.pvtu`).
     fn stress_cells(&self) -> Option<StressCells<'_>> {
         match &self.piece {
-            Piece::Made(_, Some((cells, materials))) => Some(StressCells::Of(cells, materials)),
+            Piece::Made(piece, Some((cells, materials))) => {
+                Some(StressCells::Of(cells, materials, piece.points()))
+            }
             Piece::Made(piece, None) => Some(StressCells::Only(piece.cells())),
             _ if self.ranks.is_first() => Some(StressCells::Only(&[])),
             _ => None,
