@@ -4,10 +4,11 @@
 //! so far succeeded ([`Ranks::agree`]), it broadcasts the mesh in two parts: its [`Shape`]
 //! (its arrays' lengths, the groups' tags and names, the file's path) as JSON, and then
 //! each array's bytes as they lie in memory, into arrays of that shape on the others
-//! ([`Ranks::mesh_of_first`]), the nodes' places on their own. So a follower holds the mesh alone, never the file's bytes
-//! nor the reader's arrays, where reading a mesh peaks, and the mesh is the same bits on
-//! every rank. The bytes are the ranks' own layout in memory: the ranks of a run are one build on one
-//! architecture, as MPI runs of one program are.
+//! ([`Ranks::mesh_of_first`]), the nodes' places on their own. So a follower holds the
+//! mesh alone, never the file's bytes nor the reader's arrays, where reading a mesh peaks,
+//! and the mesh is the same bits on every rank. The bytes are the ranks' own layout in
+//! memory: the ranks of a run are one build on one architecture, as MPI runs of one
+//! program are.
 //!
 //! Where the run's setup spreads (several ranks, PETSc: [`Ranks::spreads_setup`]), the
 //! followers get the mesh without its cells (its groups' facets, the places of their
