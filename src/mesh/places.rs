@@ -134,7 +134,7 @@ impl Places {
     }
 
     /// A view of them, as cells made from their vertices read them
-    /// ([`super::CellSource::Vertices`]).
+    /// (`fem::CellSource::Vertices`).
     pub fn points(&self) -> Points<'_> {
         match &self.kept {
             None => Points::Every(&self.places),
