@@ -11,7 +11,9 @@
 //! Rank 0 alone builds the nodes' graph and runs METIS, and sends the rows' order to the
 //! others ([`Layout::of_first`]: 4 bytes an unknown, once), where every rank had made the
 //! same partition itself from the whole graph, the work and memory of one process on each
-//! (docs/cluster.md, "Memory per rank"). A rank's vectors cross to PETSc's order at its
+//! (docs/cluster.md, "Memory per rank"). A follower whose vectors hold its own unknowns
+//! and their neighbours' alone gets the rows of those and of Γ3's alone, with its part of
+//! the cells ([`Layout::keep_rows_of_first`]), and finds one by binary search. A rank's vectors cross to PETSc's order at its
 //! own rows alone, at every PETSc call, and a solved step's rows come back whole to rank 0
 //! in that order once a step (`from_rows`).
 
@@ -26,6 +28,9 @@ pub struct Layout {
     /// (`fem::DofIndex`), or of each place of a rank's vectors where it holds some unknowns
     /// alone ([`Layout::placed`]); None on one rank, where they are the same.
     row: Option<Vec<u32>>,
+    /// The unknowns whose rows `row` holds, increasing, where a follower holds those it
+    /// reads alone ([`Layout::keep_rows_of_first`]); None where `row` is every unknown's.
+    kept: Option<Vec<u32>>,
     /// Rank r holds the rows `blocks[r]..blocks[r + 1]` (size + 1 values, the last n_free).
     pub blocks: Vec<usize>,
 }
@@ -37,6 +42,7 @@ impl Layout {
         match size {
             0 | 1 => Ok(Layout {
                 row: None,
+                kept: None,
                 blocks: vec![0, disc.n_free],
             }),
             _ => Ok(Layout::partition(disc, cells, size)?.0),
@@ -73,15 +79,17 @@ impl Layout {
             blocks[r + 1] += blocks[r];
         }
         let row = (size > 1).then_some(row);
-        Ok((Layout { row, blocks }, shares))
+        let kept = None;
+        Ok((Layout { row, kept, blocks }, shares))
     }
 
     /// The partition that rank 0 makes (`make`, called there alone) on every rank of
     /// several (collective: every rank calls it, `first` on rank 0), so that no other rank
-    /// builds the nodes' graph or runs METIS: rank 0 sends its error's text, or the rows'
-    /// order, the blocks and the shares as bytes.
+    /// builds the nodes' graph or runs METIS: rank 0 sends its error's text, or the blocks,
+    /// the shares and, where `every_row`, the rows' order as bytes. Else a follower's
+    /// layout holds no row until it keeps those it reads ([`Layout::keep_rows_of_first`]).
     pub fn of_first(
-        first: bool,
+        (first, every_row): (bool, bool),
         make: impl FnOnce() -> Result<(Layout, Vec<RankShare>)>,
     ) -> Result<(Layout, Vec<RankShare>)> {
         let made = if first { Some(make()) } else { None };
@@ -90,7 +98,7 @@ impl Layout {
         match &made {
             Some(Err(e)) => head[0] = text_of(e).len() as u64,
             Some(Ok((layout, _))) => {
-                let rows = layout.row.as_ref().map_or(0, Vec::len);
+                let rows = (layout.row.as_ref().filter(|_| every_row)).map_or(0, Vec::len);
                 head = [0, rows as u64, (layout.blocks.len() - 1) as u64];
             }
             None => {}
@@ -113,24 +121,28 @@ impl Layout {
             None => (
                 Layout {
                     row: Some(vec![0; rows]),
+                    kept: (!every_row).then(Vec::new),
                     blocks: vec![0; size + 1],
                 },
                 vec![RankShare::default(); size],
             ),
         };
-        Layout::sent(made)
+        Layout::sent(made, every_row)
     }
 
     /// Rank 0's layout and shares in `made` on every rank (collective), each rank's of the
     /// sizes of rank 0's.
-    fn sent((mut layout, shares): (Layout, Vec<RankShare>)) -> Result<(Layout, Vec<RankShare>)> {
+    fn sent(
+        (mut layout, shares): (Layout, Vec<RankShare>),
+        every_row: bool,
+    ) -> Result<(Layout, Vec<RankShare>)> {
         let size = shares.len();
         let mut flat: Vec<u64> = (shares.iter())
             .flat_map(|s| [s.rows, s.entries, s.ghosts].map(|c| c as u64))
             .chain(layout.blocks.iter().map(|&b| b as u64))
             .collect();
         super::from_rank0_bytes(bytemuck::cast_slice_mut(&mut flat))?;
-        if let Some(row) = &mut layout.row {
+        if let Some(row) = layout.row.as_mut().filter(|_| every_row) {
             super::from_rank0_bytes(bytemuck::cast_slice_mut(row))?;
         }
         let (counts, blocks) = flat.split_at(3 * size);
@@ -152,16 +164,67 @@ impl Layout {
     /// `unknowns_of`, `rows_of`) is the setup's, done before. A place past the unknowns (a
     /// prescribed dof's) has no row.
     pub fn placed(self, places: &[usize]) -> Layout {
-        let row = self.row.map(|row| {
-            let at = |&i: &usize| row.get(i).copied().unwrap_or(u32::MAX);
-            places.iter().map(at).collect()
-        });
-        Layout { row, ..self }
+        let n = *self.blocks.last().unwrap_or(&0);
+        let at = |&i: &usize| if i < n { self.row(i) as u32 } else { u32::MAX };
+        let row = self.row.is_some().then(|| places.iter().map(at).collect());
+        let kept = None;
+        Layout { row, kept, ..self }
+    }
+
+    /// Of a follower's layout made without the rows' order ([`Layout::of_first`]), the
+    /// rows of the unknowns `kept` that it reads (increasing: its part's cells' and Γ3's,
+    /// [`part_unknowns`]), which rank 0 sends, knowing each rank r's as `kept_of(r)`
+    /// (collective; `first` on rank 0, whose layout, every unknown's, stays as it is): 4
+    /// bytes an unknown the follower reads, not of every unknown.
+    pub fn keep_rows_of_first(
+        &mut self,
+        (first, kept): (bool, Vec<u32>),
+        kept_of: impl Fn(usize) -> Vec<u32>,
+    ) -> Result<()> {
+        let size = self.blocks.len() - 1;
+        let rows_of = |r: usize| match r {
+            0 => Vec::new(),
+            r => kept_of(r)
+                .iter()
+                .map(|&i| self.row(i as usize) as u32)
+                .collect(),
+        };
+        let parts = first.then(|| (0..size).map(rows_of).collect::<Vec<_>>());
+        let rows = super::scatter_from_first(parts.as_deref())?;
+        if !first {
+            assert_eq!(
+                kept.len(),
+                rows.len(),
+                "a row for each unknown a follower reads"
+            );
+            (self.row, self.kept) = (Some(rows), Some(kept));
+        }
+        Ok(())
     }
 
     /// The row of unknown i (of place i where [`Layout::placed`]).
+    ///
+    /// # Panics
+    /// Where a follower keeps the rows it reads alone and i is not among them: which
+    /// unknowns a rank reads is the code's invariant, not the user's input.
     pub fn row(&self, i: usize) -> usize {
-        self.row.as_ref().map_or(i, |row| row[i] as usize)
+        match (&self.row, &self.kept) {
+            (None, _) => i,
+            (Some(row), None) => row[i] as usize,
+            (Some(row), Some(kept)) => {
+                let at = kept.binary_search(&(i as u32));
+                row[at.expect("the row of an unknown this rank reads")] as usize
+            }
+        }
+    }
+
+    /// The unknowns whose rows this layout says: every one, or those a follower keeps.
+    fn unknowns(&self) -> Box<dyn Iterator<Item = usize> + '_> {
+        let n = *self.blocks.last().unwrap_or(&0);
+        match &self.kept {
+            None => Box::new(0..n),
+            Some(kept) => Box::new(kept.iter().map(|&i| i as usize)),
+        }
     }
 
     /// The rank that holds row r.
@@ -172,17 +235,17 @@ impl Layout {
     /// The unknowns whose rows rank `rank` holds, increasing.
     pub fn own(&self, rank: usize) -> Vec<usize> {
         let block = self.blocks[rank]..self.blocks[rank + 1];
-        let n = *self.blocks.last().unwrap_or(&0);
-        (0..n).filter(|&i| block.contains(&self.row(i))).collect()
+        self.unknowns()
+            .filter(|&i| block.contains(&self.row(i)))
+            .collect()
     }
 
     /// The unknown of each of rank `rank`'s rows, in the rows' order: the inverse of
     /// [`Layout::row`] there (4 bytes a row of its own, not of every rank's).
     pub fn unknowns_of(&self, rank: usize) -> Vec<u32> {
         let block = self.blocks[rank]..self.blocks[rank + 1];
-        let n = *self.blocks.last().unwrap_or(&0);
         let mut unknown = vec![0u32; block.len()];
-        for i in (0..n).filter(|&i| block.contains(&self.row(i))) {
+        for i in self.unknowns().filter(|&i| block.contains(&self.row(i))) {
             unknown[self.row(i) - block.start] = i as u32;
         }
         unknown
@@ -195,6 +258,7 @@ impl Layout {
 
     /// x ← `rows`, from the rows' order (x at the places where [`Layout::placed`]).
     pub fn from_rows(&self, rows: &[f64], x: &mut [f64]) {
+        assert!(self.kept.is_none(), "rows placed, not kept");
         match &self.row {
             Some(row) => (x.iter_mut().zip(row)).for_each(|(v, &r)| *v = rows[r as usize]),
             None => x.copy_from_slice(rows),
@@ -209,7 +273,7 @@ impl Layout {
     pub fn rows_of<'a>(&self, matrix: &'a Sparse, rank: usize) -> Result<Csr<'a>> {
         let m = matrix.as_ref();
         let (ptr, idx, val) = (m.symbolic().col_ptr(), m.symbolic().row_idx(), m.val());
-        let Some(row) = &self.row else {
+        if self.row.is_none() {
             return Ok(Csr {
                 rowptr: petsc_ints(ptr)?,
                 cols: petsc_ints(idx)?,
@@ -235,7 +299,7 @@ impl Layout {
         let mut by_row: Vec<(usize, f64)> = Vec::new();
         for i in own().map(column) {
             by_row.clear();
-            by_row.extend((ptr[i]..ptr[i + 1]).map(|p| (row[idx[p]] as usize, val[p])));
+            by_row.extend((ptr[i]..ptr[i + 1]).map(|p| (self.row(idx[p]), val[p])));
             by_row.sort_by_key(|&(c, _)| c);
             for &(c, v) in &by_row {
                 cols.push(petsc_int(c)?);
@@ -356,6 +420,16 @@ fn nodes(disc: &Discretization) -> Vec<Vec<usize>> {
         .map(|v| node_unknowns(disc, v))
         .filter(|u| !u.is_empty())
         .collect()
+}
+
+/// The unknowns of the nodes that `vertices` name and of Γ3's rows, increasing: those a
+/// follower reads where its vectors hold its own unknowns and their neighbours' alone
+/// ([`Layout::keep_rows_of_first`]; the cells with one of its own nodes are its part).
+pub fn part_unknowns(disc: &Discretization, vertices: &[u32]) -> Vec<u32> {
+    let gamma3 = (disc.contact.iter().chain(&disc.friction)).map(|row| row.node as u32);
+    let of_node = |v: u32| (disc.free.of_node(disc.dim, v as usize)).map(|i| i as u32);
+    let nodes = vertices.iter().copied().chain(gamma3);
+    crate::fem::increasing(nodes.flat_map(of_node).collect())
 }
 
 /// The unknowns of mesh node `v`.
@@ -554,6 +628,7 @@ mod tests {
         let blocks = [vec![0], cuts, vec![n]].concat();
         Layout {
             row: Some(row),
+            kept: None,
             blocks,
         }
     }
@@ -594,5 +669,35 @@ mod tests {
         }
         assert_eq!(placed.row(places.len() - 1), u32::MAX as usize);
         assert!(placed.permutes());
+    }
+
+    /// A layout that keeps the rows of some unknowns alone (a rank's own among them) reads
+    /// the same rows, own unknowns and places as the whole, and no row of another unknown.
+    #[test]
+    fn a_layout_of_some_rows_reads_them_as_the_whole_does() {
+        let mut rng = SplitMix(44);
+        let whole = shuffled(50, 4, &mut rng);
+        for rank in 0..4 {
+            let mut kept: Vec<u32> = (0..50).filter(|_| rng.next().is_multiple_of(2)).collect();
+            kept.extend(whole.unknowns_of(rank));
+            kept.sort_unstable();
+            kept.dedup();
+            let some = Layout {
+                row: Some(kept.iter().map(|&i| whole.row(i as usize) as u32).collect()),
+                kept: Some(kept.clone()),
+                blocks: whole.blocks.clone(),
+            };
+            assert_eq!(some.own(rank), whole.own(rank));
+            assert_eq!(some.unknowns_of(rank), whole.unknowns_of(rank));
+            let places: Vec<usize> = (kept.iter().map(|&i| i as usize)).chain([57]).collect();
+            let (a, b) = (some.clone().placed(&places), whole.clone().placed(&places));
+            for k in 0..places.len() {
+                assert_eq!(a.row(k), b.row(k));
+            }
+            if let Some(other) = (0..50).find(|i| kept.binary_search(i).is_err()) {
+                let read = std::panic::catch_unwind(|| some.row(other as usize));
+                assert!(read.is_err(), "the row of an unknown not kept");
+            }
+        }
     }
 }

@@ -49,7 +49,7 @@ mod layout;
 
 pub use exchange::scatter_from_first;
 use exchange::Exchange;
-pub use layout::{Csr, Layout, RankShare};
+pub use layout::{part_unknowns, Csr, Layout, RankShare};
 
 use crate::fem::constraints::rigid_mode;
 use crate::fem::{Discretization, Sparse};

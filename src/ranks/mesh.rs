@@ -372,16 +372,18 @@ impl Ranks {
     /// its exit status) and hands each follower its part of the mesh's cells
     /// (`Parts`), which the follower's `mesh`, received without its cells
     /// ([`Ranks::with_mesh_of_first`]), now holds, numbered in the whole's order. So no
-    /// follower holds the whole mesh's cells, nor checks the regions of a part.
+    /// follower holds the whole mesh's cells, nor checks the regions of a part. Where
+    /// `layout` was sent without the rows' order (not `every_row`), each follower gets the
+    /// rows of its part's unknowns and Γ3's alone too (`Layout::keep_rows_of_first`).
     pub fn cells_of_first(
         &self,
         mesh: &mut Mesh,
         scene: &Scene,
-        (disc, layout): (&Discretization, &crate::petsc::Layout),
+        (disc, layout, every_row): (&Discretization, &mut crate::petsc::Layout, bool),
     ) -> Result<CellMaterials> {
         let made = self.is_first().then(|| -> Result<_> {
             let materials = CellMaterials::new(mesh, scene)?;
-            let parts = Parts::of(mesh, (disc, layout), (&materials, scene))?;
+            let parts = Parts::of(mesh, (disc, &*layout), (&materials, scene))?;
             Ok((materials, parts))
         });
         let code = match &made {
@@ -405,6 +407,15 @@ impl Ranks {
         let (vertices, entities) = (field(|p| &p.vertices)?, field(|p| &p.entities)?);
         let (of_cell, region) = (field(|p| &p.of_cell)?, field(|p| &p.region)?);
         let (groups, places) = (field(|p| &p.groups)?, field(|p| &p.places)?);
+        if !every_row {
+            let of_part = |vertices: &[u32]| crate::petsc::part_unknowns(disc, vertices);
+            let mine = match self.is_first() {
+                true => Vec::new(),
+                false => of_part(&vertices),
+            };
+            let kept_of = |r: usize| of_part(&parts.as_ref().expect("rank 0's").vertices[r]);
+            layout.keep_rows_of_first((self.is_first(), mine), kept_of)?;
+        }
         let mut entries = parts.map_or(Vec::new(), |p| p.entries);
         let count = self.first_says(entries.len() as i32)?;
         entries.resize(count as usize, 0);

@@ -307,9 +307,14 @@ impl Ranks {
             let disc = self.agree(crate::fem::Discretization::numbered(mesh, scene, hold))?;
             let cells = crate::fem::CellSource::Made(mesh);
             let make = || crate::petsc::Layout::partition(&disc, cells, self.size);
-            let (layout, shares) = crate::petsc::Layout::of_first(self.is_first(), make)?;
+            // A follower whose vectors will hold its own unknowns and their neighbours'
+            // alone (`Holds::Local`) gets the rows of those with its part of the cells.
+            let every_row = !hands_over_k_a_of(&disc, scene.solver.history);
+            let first = (self.is_first(), every_row);
+            let (mut layout, shares) = crate::petsc::Layout::of_first(first, make)?;
+            let with = (&disc, &mut layout, every_row);
+            let materials = self.cells_of_first(mesh, scene, with)?;
             let own = Some(layout.own(self.rank));
-            let materials = self.cells_of_first(mesh, scene, (&disc, &layout))?;
             let how = (hold, crate::fem::PairWhen::AfterKrylov);
             let disc = disc.assembled(mesh, scene, how, (materials, own))?;
             let own = Own {
@@ -449,6 +454,13 @@ pub struct Own {
 #[cfg(feature = "petsc")]
 fn hands_over_k_a(disc: &crate::fem::Discretization, history: crate::scene::History) -> bool {
     history == crate::scene::History::Left && disc.k_a_all.is_none()
+}
+
+/// [`hands_over_k_a`] said before the assembly, of the numbered `disc`: no prescribed
+/// dofs (`Discretization::keeps_own_columns`), which would give K_A a block on them.
+#[cfg(feature = "petsc")]
+fn hands_over_k_a_of(disc: &crate::fem::Discretization, history: crate::scene::History) -> bool {
+    history == crate::scene::History::Left && disc.keeps_own_columns()
 }
 
 /// What Open MPI adds to a rank's resident memory, which a process without a launcher (as
