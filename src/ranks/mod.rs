@@ -309,7 +309,7 @@ impl Ranks {
             let make = || crate::petsc::Layout::partition(&disc, cells, self.size);
             // A follower whose vectors will hold its own unknowns and their neighbours'
             // alone (`Holds::Local`) gets the rows of those with its part of the cells.
-            let every_row = !hands_over_k_a_of(&disc, scene.solver.history);
+            let every_row = !hands_over_k_a(&disc, scene.solver.history);
             let first = (self.is_first(), every_row);
             let (mut layout, shares) = crate::petsc::Layout::of_first(first, make)?;
             let with = (&disc, &mut layout, every_row);
@@ -450,16 +450,10 @@ pub struct Own {
 
 /// Whether a rank of several hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]):
 /// where K_A is the step matrix (the left endpoint history) and the rank keeps its columns
-/// (no prescribed dofs, whose right side reads K_A whole).
+/// (no prescribed dofs, whose right side reads K_A whole: `Discretization::keeps_own_columns`,
+/// which the numbered `disc` says already, before its assembly).
 #[cfg(feature = "petsc")]
 fn hands_over_k_a(disc: &crate::fem::Discretization, history: crate::scene::History) -> bool {
-    history == crate::scene::History::Left && disc.k_a_all.is_none()
-}
-
-/// [`hands_over_k_a`] said before the assembly, of the numbered `disc`: no prescribed
-/// dofs (`Discretization::keeps_own_columns`), which would give K_A a block on them.
-#[cfg(feature = "petsc")]
-fn hands_over_k_a_of(disc: &crate::fem::Discretization, history: crate::scene::History) -> bool {
     history == crate::scene::History::Left && disc.keeps_own_columns()
 }
 
