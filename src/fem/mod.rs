@@ -13,7 +13,7 @@ mod pair;
 pub mod reactions;
 
 use crate::expr::Point;
-use crate::mesh::{cross, norm, Group, Mesh};
+use crate::mesh::{cross, increasing, norm, Group, Mesh};
 pub use crate::mesh::{Places, Points};
 use crate::scene::{Friction, MeshChoice, Model, Scene};
 use crate::{Error, Result};
@@ -1778,13 +1778,6 @@ fn column_nodes(free: &DofIndices, d: usize, own: Option<&[usize]>, n: usize) ->
         Some(own) => own.iter().map(|&j| node(j)).collect(),
         None => (0..n).map(node).collect(),
     }
-}
-
-/// `nodes` sorted, each once.
-pub(crate) fn increasing<T: Ord>(mut nodes: Vec<T>) -> Vec<T> {
-    nodes.sort_unstable();
-    nodes.dedup();
-    nodes
 }
 
 /// The sparsity pattern of [`assemble`]'s matrices, column pointers and row indices,

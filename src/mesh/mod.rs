@@ -41,7 +41,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 pub use parts::{Coincident, Part, COINCIDENT_TOLERANCE};
-pub use places::{Places, Points};
+pub use places::{increasing, Places, Points};
 pub use quality::Quality;
 pub(crate) use solid::{cross, dot, norm, sub};
 

@@ -143,6 +143,13 @@ impl Places {
     }
 }
 
+/// `nodes` sorted, each once (node lists held by binary search).
+pub fn increasing<T: Ord>(mut nodes: Vec<T>) -> Vec<T> {
+    nodes.sort_unstable();
+    nodes.dedup();
+    nodes
+}
+
 /// The mean of `places`, each divided by their count and added in node order.
 fn centroid(places: &[[f64; 3]]) -> [f64; 3] {
     let count = places.len().max(1) as f64;

@@ -42,7 +42,7 @@ use super::vtu::{array_attrs, escape_attr, global_ids, Grid, Job, Vtu, GLOBAL_ID
 use super::writer::{Sink, Written};
 use super::{checked_arrays, pvd, vtu_name, write_atomic, Array, Compression, Geometry};
 use super::{Options, OwnedField, Values};
-use crate::mesh::Points;
+use crate::mesh::{increasing, Points};
 use crate::{Error, Result};
 
 /// The `.pvtu` of step `step`: `solution_{step:06}.pvtu`.
@@ -264,9 +264,7 @@ impl PieceMesh {
         let vertices = |c: usize| &g.cells[c * npc..(c + 1) * npc];
         // Its points, increasing, and each one's number in the piece by binary search: no
         // array of every node (a follower holds some nodes' places alone).
-        let mut points: Vec<usize> = cells.iter().flat_map(|&c| vertices(c)).copied().collect();
-        points.sort_unstable();
-        points.dedup();
+        let mut points = increasing(cells.iter().flat_map(|&c| vertices(c)).copied().collect());
         points.shrink_to_fit();
         let local = |i: &usize| points.binary_search(i).expect("a vertex of the piece");
         let subset = |a: &[i32]| -> Vec<i32> {

@@ -429,7 +429,7 @@ pub fn part_unknowns(disc: &Discretization, vertices: &[u32]) -> Vec<u32> {
     let gamma3 = (disc.contact.iter().chain(&disc.friction)).map(|row| row.node as u32);
     let of_node = |v: u32| (disc.free.of_node(disc.dim, v as usize)).map(|i| i as u32);
     let nodes = vertices.iter().copied().chain(gamma3);
-    crate::fem::increasing(nodes.flat_map(of_node).collect())
+    crate::mesh::increasing(nodes.flat_map(of_node).collect())
 }
 
 /// The unknowns of mesh node `v`.

@@ -27,10 +27,9 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::{mpi, Ranks};
-use crate::fem::increasing;
 #[cfg(feature = "petsc")]
 use crate::fem::{CellMaterials, Discretization};
-use crate::mesh::{Group, Mesh, Places};
+use crate::mesh::{increasing, Group, Mesh, Places};
 #[cfg(feature = "petsc")]
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -407,11 +406,16 @@ impl Ranks {
         let (vertices, entities) = (field(|p| &p.vertices)?, field(|p| &p.entities)?);
         let (of_cell, region) = (field(|p| &p.of_cell)?, field(|p| &p.region)?);
         let (groups, places) = (field(|p| &p.groups)?, field(|p| &p.places)?);
+        // A follower's part's nodes, sorted once for its rows and its places.
+        let nodes = match self.is_first() {
+            true => Vec::new(),
+            false => increasing(vertices.clone()),
+        };
         if !every_row {
             let of_part = |vertices: &[u32]| crate::petsc::part_unknowns(disc, vertices);
             let mine = match self.is_first() {
                 true => Vec::new(),
-                false => of_part(&vertices),
+                false => of_part(&nodes),
             };
             let kept_of = |r: usize| of_part(&parts.as_ref().expect("rank 0's").vertices[r]);
             layout.keep_rows_of_first((self.is_first(), mine), kept_of)?;
@@ -423,7 +427,6 @@ impl Ranks {
         if let Some(materials) = materials {
             return Ok(materials);
         }
-        let nodes = increasing(vertices.clone());
         mesh.nodes = (mesh.nodes).joined(&nodes, &bytemuck::pod_collect_to_vec(&places));
         hold_part(mesh, (vertices, entities), groups);
         let region = region.into_iter().map(|r| r as i32).collect();
