@@ -27,6 +27,7 @@
 //! ([`Mesh::group`]). The code downstream sees the boundary of either dimension through
 //! [`Mesh::boundary_facets`]: edges in 2D, triangles in 3D, with normal and measure.
 
+mod elements;
 mod facets;
 mod groups;
 mod msh;

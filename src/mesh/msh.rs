@@ -23,6 +23,7 @@ use std::path::Path;
 
 use mshio::{ElementType, MshParserError};
 
+use super::elements::{Section, Unread};
 use crate::Error;
 
 /// The parsed content of an MSH file, before any geometric processing. Node indices are
@@ -59,6 +60,12 @@ pub(crate) struct Format {
 
 /// Offset just past the line `name` (which must start a line and be alone on it), or `None`.
 pub(crate) fn find_section(bytes: &[u8], name: &[u8]) -> Option<usize> {
+    find_marker(bytes, name).map(|(_, past)| past)
+}
+
+/// The offsets of the marker `name` (which must start a line and be alone on it) and just
+/// past its line, or `None`.
+pub(super) fn find_marker(bytes: &[u8], name: &[u8]) -> Option<(usize, usize)> {
     let mut from = 0;
     while from + name.len() <= bytes.len() {
         let hit = from + find_sub(&bytes[from..], name)?;
@@ -75,7 +82,7 @@ pub(crate) fn find_section(bytes: &[u8], name: &[u8]) -> Option<usize> {
             .count();
         let eol = (after.get(blanks) == Some(&b'\n')).then_some(blanks + 1);
         if let (true, Some(eol)) = (at_line_start, eol) {
-            return Some(hit + name.len() + eol);
+            return Some((hit, hit + name.len() + eol));
         }
         from = hit + 1;
     }
@@ -190,10 +197,10 @@ fn shell_quote(p: &Path) -> String {
 }
 
 /// Reads size_t / int / double values of an MSH section, ASCII or binary.
-struct Scanner<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-    fmt: Format,
+pub(super) struct Scanner<'a> {
+    pub bytes: &'a [u8],
+    pub pos: usize,
+    pub fmt: Format,
 }
 
 impl Scanner<'_> {
@@ -228,7 +235,16 @@ impl Scanner<'_> {
         Some(v)
     }
 
-    fn size_t(&mut self) -> Option<u64> {
+    /// The position of the next value: past the blanks before it in an ASCII file.
+    pub fn next_at(&mut self) -> usize {
+        if !self.fmt.binary {
+            let blanks = self.bytes[self.pos.min(self.bytes.len())..].iter();
+            self.pos += blanks.take_while(|b| b.is_ascii_whitespace()).count();
+        }
+        self.pos
+    }
+
+    pub fn size_t(&mut self) -> Option<u64> {
         if self.fmt.binary {
             self.fixed(self.fmt.size_t)
         } else {
@@ -236,7 +252,7 @@ impl Scanner<'_> {
         }
     }
 
-    fn int(&mut self) -> Option<i64> {
+    pub fn int(&mut self) -> Option<i64> {
         if self.fmt.binary {
             self.fixed(4).map(|v| i64::from(v as u32 as i32))
         } else {
@@ -280,7 +296,7 @@ fn section_headers(bytes: &[u8], fmt: Format, name: &[u8]) -> Vec<[u64; 4]> {
 
 /// Node tags of each node block of `$Nodes`, in file order. `None` if the section cannot be
 /// scanned (mshio parsed it, so this does not happen for a consistent file).
-fn scan_node_tags(bytes: &[u8], fmt: Format) -> Option<Vec<Vec<u64>>> {
+pub(super) fn scan_node_tags(bytes: &[u8], fmt: Format) -> Option<Vec<Vec<u64>>> {
     Some(
         scan_node_blocks(bytes, fmt)?
             .into_iter()
@@ -319,20 +335,18 @@ fn scan_node_blocks(bytes: &[u8], fmt: Format) -> Option<Vec<(Vec<u64>, bool)>> 
 }
 
 /// Turns an mshio parse error into an input error naming the file, the place and the problem.
-fn parse_error(path: &Path, bytes: &[u8], fmt: Format, e: &MshParserError<&[u8]>) -> Error {
+/// `given`: the bytes mshio read, the file's without the `$Elements` section `cut` (if any).
+fn parse_error(
+    path: &Path,
+    (bytes, given, cut): (&[u8], &[u8], Option<&Section>),
+    fmt: Format,
+    e: &MshParserError<&[u8]>,
+) -> Error {
     let trace = e.filtered_backtrace();
-    let mut place = String::new();
-    if let Some((rest, _)) = trace.first() {
-        let offset = (rest.as_ptr() as usize).wrapping_sub(bytes.as_ptr() as usize);
-        if offset <= bytes.len() {
-            if fmt.binary {
-                place = format!(" at byte {offset}");
-            } else {
-                let line = bytes[..offset].iter().filter(|&&b| b == b'\n').count() + 1;
-                place = format!(" at line {line}");
-            }
-        }
-    }
+    let at = trace.first().and_then(|(rest, _)| {
+        let offset = (rest.as_ptr() as usize).wrapping_sub(given.as_ptr() as usize);
+        (offset <= given.len()).then(|| cut.map_or(offset, |c| c.in_file(offset)))
+    });
     // The backtrace runs from the innermost error outwards; print it outermost first.
     let chain: Vec<String> = trace
         .iter()
@@ -348,6 +362,20 @@ fn parse_error(path: &Path, bytes: &[u8], fmt: Format, e: &MshParserError<&[u8]>
         "unknown error".to_string()
     } else {
         chain.join(" > ")
+    };
+    stopped(path, bytes, fmt, at, &what)
+}
+
+/// The input error of a file that cannot be parsed: where (the byte offset `at` in the
+/// file, shown as a line in an ASCII file) and what was being read.
+fn stopped(path: &Path, bytes: &[u8], fmt: Format, at: Option<usize>, what: &str) -> Error {
+    let place = match at {
+        Some(offset) if fmt.binary => format!(" at byte {offset}"),
+        Some(offset) => {
+            let line = bytes[..offset].iter().filter(|&&b| b == b'\n').count() + 1;
+            format!(" at line {line}")
+        }
+        None => String::new(),
     };
     let ending = if ends_with_end_tag(bytes) {
         "looks corrupt"
@@ -414,13 +442,25 @@ fn describe_element_type(t: ElementType) -> (String, &'static str) {
     (text, hint)
 }
 
-/// Reads the file content `bytes` of `path` into a [`RawMesh`].
+/// Reads the file content `bytes` of `path` into a [`RawMesh`]: mshio parses the file
+/// without its `$Elements` section, which `elements.rs` reads (its module says why).
 pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
     let fmt = check_format(path, bytes)?;
     check_section_headers(path, bytes, fmt)?;
     check_options_mshio_reads(path, bytes, fmt)?;
-    let msh = mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(path, bytes, fmt, &e))?;
+    let section = Section::find(bytes, fmt).map_err(|e| unread(path, bytes, fmt, e))?;
+    let rest = section.as_ref().map(|s| s.without(bytes));
+    let given = rest.as_deref().unwrap_or(bytes);
+    let msh = mshio::parse_msh_bytes(given)
+        .map_err(|e| parse_error(path, (bytes, given, section.as_ref()), fmt, &e))?;
+    drop(rest);
     let data = msh.data;
+    if data.elements.is_some() {
+        return Err(corrupt(
+            path,
+            "it has more than one $Elements section".into(),
+        ));
+    }
 
     let mut raw = RawMesh::default();
     if let Some(ent) = &data.entities {
@@ -433,19 +473,37 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
         ))
     })?;
     let index = add_nodes(path, bytes, fmt, &nodes, &mut raw)?;
-    let elements = data.elements.ok_or_else(|| {
+    drop(nodes);
+    let section = section.ok_or_else(|| {
         Error::input(format!(
             "mesh file '{}' has no $Elements section; it looks truncated, regenerate it with \
              gmsh",
             path.display()
         ))
     })?;
-    check_element_types(path, &elements)?;
-    add_elements(path, &elements, &index, &mut raw)?;
+    check_element_types(path, section.blocks.iter().map(|b| b.kind))?;
+    let missing = |elem, tag| {
+        corrupt(
+            path,
+            format!("element {elem} refers to node {tag}, which is not in the $Nodes section"),
+        )
+    };
+    section.read(bytes, fmt, &index, missing, &mut raw)?;
     if data.entities.is_some() {
-        check_element_entities(path, &elements, &raw)?;
+        check_element_entities(path, &section, &raw)?;
     }
     Ok(raw)
+}
+
+/// The input error of an `$Elements` section that cannot be walked.
+fn unread(path: &Path, bytes: &[u8], fmt: Format, e: Unread) -> Error {
+    match e {
+        Unread::Stop(stop) => stopped(path, bytes, fmt, Some(stop.at), &stop.what),
+        Unread::Unskippable(kind) => match check_element_types(path, [kind].into_iter()) {
+            Err(e) => e,
+            Ok(()) => stopped(path, bytes, fmt, None, "element section"),
+        },
+    }
 }
 
 /// The error for a file whose sections contradict each other.
@@ -579,10 +637,9 @@ fn add_nodes(
 
 /// Refuses every element type but P1 tetrahedra and triangles, 2-node lines and points,
 /// naming the types found and how to remesh.
-fn check_element_types(path: &Path, elements: &mshio::Elements<u64, i32>) -> crate::Result<()> {
+fn check_element_types(path: &Path, kinds: impl Iterator<Item = ElementType>) -> crate::Result<()> {
     let mut unsupported: Vec<ElementType> = Vec::new();
-    for block in &elements.element_blocks {
-        let t = block.element_type;
+    for t in kinds {
         if !matches!(
             t,
             ElementType::Pnt | ElementType::Lin2 | ElementType::Tri3 | ElementType::Tet4
@@ -628,74 +685,11 @@ fn check_element_types(path: &Path, elements: &mshio::Elements<u64, i32>) -> cra
     )))
 }
 
-/// Appends the triangles, tetrahedra and lines to `raw`, their nodes as indices into
-/// `raw.nodes` (points are skipped).
-fn add_elements(
-    path: &Path,
-    elements: &mshio::Elements<u64, i32>,
-    index: &HashMap<u64, usize>,
-    raw: &mut RawMesh,
-) -> crate::Result<()> {
-    let node_of = |elem: u64, tag: u64| {
-        index.get(&tag).copied().ok_or_else(|| {
-            corrupt(
-                path,
-                format!("element {elem} refers to node {tag}, which is not in the $Nodes section"),
-            )
-        })
-    };
-    // Each list at its exact size (docs/performance.md, "Reading the mesh").
-    let count = |t: ElementType| -> usize {
-        let blocks = elements.element_blocks.iter();
-        blocks
-            .filter(|b| b.element_type == t)
-            .map(|b| b.elements.len())
-            .sum()
-    };
-    raw.triangles.reserve_exact(count(ElementType::Tri3));
-    raw.tetrahedra.reserve_exact(count(ElementType::Tet4));
-    raw.lines.reserve_exact(count(ElementType::Lin2));
-    for block in &elements.element_blocks {
-        let entity = (block.entity_dim, block.entity_tag);
-        for e in &block.elements {
-            match block.element_type {
-                ElementType::Tri3 => raw.triangles.push(element(e, entity, &node_of)?),
-                ElementType::Tet4 => raw.tetrahedra.push(element(e, entity, &node_of)?),
-                ElementType::Lin2 => raw.lines.push(element(e, entity, &node_of)?),
-                _ => {}
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The element's first N nodes as indices into `raw.nodes`.
-fn element<const N: usize>(
-    e: &mshio::Element<u64>,
-    entity: (i32, i32),
-    node_of: &dyn Fn(u64, u64) -> crate::Result<usize>,
-) -> crate::Result<RawElement<N>> {
-    // mshio reads exactly the type's node count (N for the types used here).
-    let mut nodes = [0; N];
-    for (slot, &tag) in nodes.iter_mut().zip(&e.nodes) {
-        *slot = node_of(e.element_tag, tag)?;
-    }
-    Ok(RawElement {
-        tag: e.element_tag,
-        nodes,
-        entity,
-    })
-}
-
 /// Refuses an element block (other than points) whose entity `$Entities` does not list.
-fn check_element_entities(
-    path: &Path,
-    elements: &mshio::Elements<u64, i32>,
-    raw: &RawMesh,
-) -> crate::Result<()> {
-    for b in &elements.element_blocks {
-        let key = (b.entity_dim, b.entity_tag);
-        if b.element_type != ElementType::Pnt && !raw.physical.contains_key(&key) {
+fn check_element_entities(path: &Path, section: &Section, raw: &RawMesh) -> crate::Result<()> {
+    for b in &section.blocks {
+        let key = b.entity;
+        if b.kind != ElementType::Pnt && !raw.physical.contains_key(&key) {
             return Err(corrupt(
                 path,
                 format!(

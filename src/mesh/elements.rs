@@ -1,0 +1,432 @@
+//! The `$Elements` section of an MSH 4.1 file, read here and not by `mshio`.
+//!
+//! mshio keeps each element as its tag and a `Vec` of its node tags, a heap allocation an
+//! element, and holds all of them before it returns: on the fine plate (684 k tetrahedra,
+//! a 33 MB binary file) 64 MB of the 140 MB of heap at which reading the mesh peaks, and
+//! rank 0 of a run over MPI ranks, which reads the mesh for all of them, peaked there
+//! (docs/performance.md, "Reading the mesh"). So `msh.rs` hands mshio the file without
+//! this section ([`Section::without`]), and this module walks the section twice, with the
+//! scanner that reads the node tags: once for its blocks' heads (entity, type, count, where
+//! the elements start: [`Section::find`]; a block of a type that is not read is skipped by
+//! the type's node count, which mshio's `ElementType` knows), and once for the elements of
+//! the types that are read, lines, triangles and tetrahedra, each into `RawMesh`'s lists
+//! at their exact size ([`Section::read`]). What mshio checked of the section is checked
+//! here too: every number where the format puts one, a known element type, the closing
+//! `$EndElements`; a file that fails says where, as mshio's errors do
+//! (`msh::stopped`).
+
+use std::collections::HashMap;
+
+use mshio::ElementType;
+use num_traits::FromPrimitive;
+
+use super::msh::{find_marker, Format, RawElement, RawMesh, Scanner};
+
+/// One element block's head.
+pub(super) struct Block {
+    /// `(dim, tag)` of the entity its elements belong to.
+    pub entity: (i32, i32),
+    pub kind: ElementType,
+    count: u64,
+    /// Where its first element starts in the file.
+    data: usize,
+}
+
+/// The `$Elements` section of a file: its blocks, and where it lies.
+pub(super) struct Section {
+    pub blocks: Vec<Block>,
+    /// From its `$Elements` marker to just past its `$EndElements` marker.
+    pub span: std::ops::Range<usize>,
+}
+
+/// Where and why the section cannot be read: the byte offset in the file and what was
+/// being read, outermost first (`element section > element entity block (2 of 6) > …`).
+pub(super) struct Stop {
+    pub at: usize,
+    pub what: String,
+}
+
+/// Why a file's `$Elements` cannot be walked: it cannot be parsed (`Stop`), or it holds an
+/// element type without a fixed node count, which no reader here can skip.
+pub(super) enum Unread {
+    Stop(Stop),
+    Unskippable(ElementType),
+}
+
+impl Section {
+    /// The file's first `$Elements` section, walked for its blocks' heads; `None` where the
+    /// file has none.
+    pub fn find(bytes: &[u8], fmt: Format) -> Result<Option<Section>, Unread> {
+        let Some((start, pos)) = find_marker(bytes, b"$Elements") else {
+            return Ok(None);
+        };
+        let mut s = Scanner { bytes, pos, fmt };
+        let stop = |at, what: &str| {
+            Unread::Stop(Stop {
+                at,
+                what: format!("element section > {what}"),
+            })
+        };
+        let head = "element section header > number of element entity blocks";
+        let n_blocks = s.size_t().ok_or_else(|| stop(s.pos, head))?;
+        for what in [
+            "total number of elements",
+            "min element tag",
+            "max element tag",
+        ] {
+            s.size_t()
+                .ok_or_else(|| stop(s.pos, &format!("element section header > {what}")))?;
+        }
+        let mut blocks = Vec::new();
+        for i in 1..=n_blocks {
+            let within = |what: &str| format!("element entity block ({i} of {n_blocks}) > {what}");
+            let block = block_head(&mut s, &within)?;
+            let nodes = block
+                .kind
+                .nodes()
+                .map_err(|()| Unread::Unskippable(block.kind))?;
+            skip_elements(&mut s, block.count, nodes).map_err(|(at, j)| {
+                stop(
+                    at,
+                    &within(&format!("element definition ({j} of {})", block.count)),
+                )
+            })?;
+            blocks.push(block);
+        }
+        let at = s.next_at();
+        let end = end_marker(bytes, at).ok_or_else(|| stop(at, "$EndElements"))?;
+        Ok(Some(Section {
+            blocks,
+            span: start..end,
+        }))
+    }
+
+    /// The file without this section, for mshio.
+    pub fn without(&self, bytes: &[u8]) -> Vec<u8> {
+        [&bytes[..self.span.start], &bytes[self.span.end..]].concat()
+    }
+
+    /// The offset in the file of `at`, an offset in [`Section::without`]'s bytes.
+    pub fn in_file(&self, at: usize) -> usize {
+        match at < self.span.start {
+            true => at,
+            false => at + self.span.len(),
+        }
+    }
+
+    /// The lines, triangles and tetrahedra into `raw`, each list at its exact size, their
+    /// nodes as positions in `raw.nodes` by `index` (node tag → position); an element that
+    /// refers to a node `index` lacks is `missing(element tag, node tag)`'s error.
+    pub fn read<E>(
+        &self,
+        bytes: &[u8],
+        fmt: Format,
+        index: &HashMap<u64, usize>,
+        missing: impl Fn(u64, u64) -> E,
+        raw: &mut RawMesh,
+    ) -> Result<(), E> {
+        let count = |kind| {
+            self.blocks
+                .iter()
+                .filter(|b| b.kind == kind)
+                .map(|b| b.count)
+                .sum::<u64>()
+        };
+        // Each count was walked in the file, so it is no more than the file's bytes.
+        let exact = |kind| usize::try_from(count(kind)).unwrap_or(0);
+        raw.lines.reserve_exact(exact(ElementType::Lin2));
+        raw.triangles.reserve_exact(exact(ElementType::Tri3));
+        raw.tetrahedra.reserve_exact(exact(ElementType::Tet4));
+        let node_of =
+            |elem: u64, tag: u64| index.get(&tag).copied().ok_or_else(|| missing(elem, tag));
+        for b in &self.blocks {
+            let mut s = Scanner {
+                bytes,
+                pos: b.data,
+                fmt,
+            };
+            for _ in 0..b.count {
+                match b.kind {
+                    ElementType::Lin2 => raw.lines.push(element(&mut s, b.entity, &node_of)?),
+                    ElementType::Tri3 => raw.triangles.push(element(&mut s, b.entity, &node_of)?),
+                    ElementType::Tet4 => raw.tetrahedra.push(element(&mut s, b.entity, &node_of)?),
+                    _ => break,
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A block's head at `s`: entity dimension and tag, element type, element count.
+fn block_head(s: &mut Scanner, within: &dyn Fn(&str) -> String) -> Result<Block, Unread> {
+    let stop = |at, what: &str| {
+        Unread::Stop(Stop {
+            at,
+            what: format!("element section > {}", within(what)),
+        })
+    };
+    let int = |s: &mut Scanner, what: &str| {
+        let at = s.next_at();
+        s.int()
+            .and_then(|v| i32::try_from(v).ok())
+            .ok_or_else(|| stop(at, what))
+    };
+    let entity = (int(s, "entity dimension")?, int(s, "entity tag")?);
+    let at = s.next_at();
+    let code = int(s, "element type")?;
+    let kind = ElementType::from_i32(code)
+        .ok_or_else(|| stop(at, &format!("element type > unknown element type {code}")))?;
+    let at = s.next_at();
+    let count = s
+        .size_t()
+        .ok_or_else(|| stop(at, "number of elements in element block"))?;
+    Ok(Block {
+        entity,
+        kind,
+        count,
+        data: s.pos,
+    })
+}
+
+/// Past `count` elements of `nodes` nodes each at `s`: every number there, or the offset
+/// and the number (from 1) of the first element that is not whole.
+fn skip_elements(s: &mut Scanner, count: u64, nodes: usize) -> Result<(), (usize, u64)> {
+    let per = 1 + nodes as u64;
+    if s.fmt.binary {
+        let len = count
+            .checked_mul(per)
+            .and_then(|v| v.checked_mul(s.fmt.size_t as u64));
+        let end = len
+            .and_then(|l| usize::try_from(l).ok())
+            .and_then(|l| s.pos.checked_add(l));
+        if let Some(end) = end.filter(|&e| e <= s.bytes.len()) {
+            s.pos = end;
+            return Ok(());
+        }
+        let whole = (s.bytes.len() - s.pos) as u64 / (per * s.fmt.size_t as u64);
+        return Err((s.pos + (whole * per) as usize * s.fmt.size_t, whole + 1));
+    }
+    for j in 1..=count {
+        let at = s.next_at();
+        for _ in 0..per {
+            s.size_t().ok_or((at, j))?;
+        }
+    }
+    Ok(())
+}
+
+/// The element at `s`, its N nodes as positions by `node_of`.
+fn element<const N: usize, E>(
+    s: &mut Scanner,
+    entity: (i32, i32),
+    node_of: &impl Fn(u64, u64) -> Result<usize, E>,
+) -> Result<RawElement<N>, E> {
+    // `Section::find` read every number of the block, so none is missing here.
+    let tag = s.size_t().unwrap_or(0);
+    let mut nodes = [0; N];
+    for slot in &mut nodes {
+        *slot = node_of(tag, s.size_t().unwrap_or(0))?;
+    }
+    Ok(RawElement { tag, nodes, entity })
+}
+
+/// Just past the `$EndElements` marker that follows blanks at `pos`, if it does.
+fn end_marker(bytes: &[u8], pos: usize) -> Option<usize> {
+    let blanks = bytes
+        .get(pos..)?
+        .iter()
+        .take_while(|b| b" \t\r\n".contains(b))
+        .count();
+    let at = pos + blanks;
+    bytes[at..]
+        .starts_with(b"$EndElements")
+        .then_some(at + b"$EndElements".len())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::{Path, PathBuf};
+
+    use super::super::msh::{read_raw, RawElement};
+    use mshio::ElementType;
+
+    /// Every mesh file of the repository under `dir`.
+    fn meshes(dir: &Path, out: &mut Vec<PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                meshes(&path, out);
+            } else if path.extension().is_some_and(|e| e == "msh") {
+                out.push(path);
+            }
+        }
+    }
+
+    /// (element tag, node tags, entity) of each element, from the reader's lists.
+    fn ours<const N: usize>(
+        list: &[RawElement<N>],
+        tags: &[u64],
+    ) -> Vec<(u64, Vec<u64>, (i32, i32))> {
+        let node_tags = |e: &RawElement<N>| e.nodes.iter().map(|&i| tags[i]).collect();
+        list.iter()
+            .map(|e| (e.tag, node_tags(e), e.entity))
+            .collect()
+    }
+
+    /// The same of mshio's whole parse, for one element type.
+    fn mshio_s(
+        elements: &mshio::Elements<u64, i32>,
+        kind: ElementType,
+    ) -> Vec<(u64, Vec<u64>, (i32, i32))> {
+        let blocks = elements
+            .element_blocks
+            .iter()
+            .filter(|b| b.element_type == kind);
+        let each = |b: &mshio::ElementBlock<u64, i32>| {
+            let entity = (b.entity_dim, b.entity_tag);
+            b.elements
+                .iter()
+                .map(move |e| (e.element_tag, e.nodes.clone(), entity))
+                .collect::<Vec<_>>()
+        };
+        blocks.flat_map(each).collect()
+    }
+
+    #[test]
+    fn the_elements_of_every_mesh_of_the_repository_are_mshio_s() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut files = Vec::new();
+        meshes(&root.join("meshes"), &mut files);
+        meshes(&root.join("tests/data"), &mut files);
+        let mut compared = 0;
+        for path in files {
+            let bytes = std::fs::read(&path).unwrap();
+            let (Ok(raw), Ok(whole)) = (read_raw(&path, &bytes), mshio::parse_msh_bytes(&bytes))
+            else {
+                continue;
+            };
+            let fmt = super::super::msh::check_format(&path, &bytes).unwrap();
+            let tags: Vec<u64> = super::super::msh::scan_node_tags(&bytes, fmt)
+                .unwrap()
+                .concat();
+            let elements = whole.data.elements.unwrap();
+            let file = path.display();
+            assert_eq!(
+                ours(&raw.lines, &tags),
+                mshio_s(&elements, ElementType::Lin2),
+                "{file}"
+            );
+            assert_eq!(
+                ours(&raw.triangles, &tags),
+                mshio_s(&elements, ElementType::Tri3),
+                "{file}"
+            );
+            assert_eq!(
+                ours(&raw.tetrahedra, &tags),
+                mshio_s(&elements, ElementType::Tet4),
+                "{file}"
+            );
+            compared += 1;
+        }
+        assert!(compared >= 40, "{compared} files compared");
+    }
+
+    const HEAD: &str = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n";
+    const NODES: &str =
+        "$Nodes\n1 4 1 4\n2 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n$EndNodes\n";
+
+    fn read(elements: &str) -> crate::Result<super::super::msh::RawMesh> {
+        let text = format!("{HEAD}{NODES}{elements}");
+        read_raw(Path::new("t.msh"), text.as_bytes())
+    }
+
+    #[test]
+    fn points_are_skipped_and_lines_and_triangles_read_in_their_blocks() {
+        let raw = read(
+            "$Elements\n3 4 1 4\n0 1 15 1\n1 1\n1 1 1 1\n2 1 2\n2 1 2 2\n3 1 2 3\n4 2 4 3\n\
+             $EndElements\n",
+        )
+        .unwrap();
+        assert_eq!(raw.lines.len(), 1);
+        assert_eq!(raw.lines[0].nodes, [0, 1]);
+        assert_eq!(
+            raw.triangles.iter().map(|t| t.tag).collect::<Vec<_>>(),
+            [3, 4]
+        );
+        assert_eq!(raw.triangles[1].nodes, [1, 3, 2]);
+        assert_eq!(raw.triangles[1].entity, (2, 1));
+        assert_eq!(raw.triangles.capacity(), 2);
+    }
+
+    #[test]
+    fn a_cut_or_unclosed_section_says_where_it_stopped() {
+        let cut = "truncated";
+        let cases = [
+            (
+                "$Elements\n1 2 1 2\n2 1 2 2\n1 1 2 3\n2 2 3\n",
+                [cut, "line 20", "element definition (2 of 2)"],
+            ),
+            (
+                "$Elements\n1 1 1 1\n2 1 2 1\n1 1 2 3\n",
+                [cut, "line 20", "> $EndElements"],
+            ),
+            (
+                "$Elements\n1 1 1 1\n2 1 2\n",
+                [cut, "line 19", "number of elements in element block"],
+            ),
+            (
+                "$Elements\n1 1 1 1\n2 1 999 1\n1 1\n$EndElements\n",
+                [
+                    "corrupt",
+                    "line 18",
+                    "element type > unknown element type 999",
+                ],
+            ),
+        ];
+        for (elements, needles) in cases {
+            let e = read(elements).unwrap_err().to_string();
+            for needle in needles.iter().chain(&["cannot be read", "regenerate"]) {
+                assert!(e.contains(needle), "{needle}: {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn an_unskippable_or_unread_type_is_refused_by_name() {
+        // Quadrangles are skipped by their node count, and named with their remedy.
+        let e = read("$Elements\n2 2 1 2\n2 1 3 1\n1 1 2 4 3\n2 1 2 1\n2 1 2 3\n$EndElements\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("4-node quadrangles") && e.contains("recombination"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_second_section_and_a_parse_error_after_the_section_are_placed_in_the_file() {
+        let one = "$Elements\n1 1 1 1\n2 1 2 1\n1 1 2 3\n$EndElements\n";
+        let e = read(&format!("{one}{one}")).unwrap_err().to_string();
+        assert!(e.contains("more than one $Elements"), "{e}");
+        // Line 21 of the file, after the five lines that mshio does not see.
+        let e = read(&format!("{one}garbage\n")).unwrap_err().to_string();
+        assert!(e.contains("line 21"), "{e}");
+    }
+
+    #[test]
+    fn a_binary_section_cut_in_an_element_names_it() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/paper/rect_016_binary.msh");
+        let bytes = std::fs::read(&path).unwrap();
+        let end = super::super::msh::find_section(&bytes, b"$EndElements").unwrap();
+        let e = read_raw(&path, &bytes[..end - 30]).unwrap_err().to_string();
+        for needle in [
+            "cannot be read",
+            "truncated",
+            "at byte",
+            "element definition",
+        ] {
+            assert!(e.contains(needle), "{needle}: {e}");
+        }
+    }
+}
