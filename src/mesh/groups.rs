@@ -21,26 +21,29 @@ pub(super) struct Words {
 }
 
 /// Fills the groups of `group_table` (dimension D of the cells, D − 1 of the facets): each
-/// cell element goes into the cell groups of its entity, each facet element (a line in 2D, a
-/// triangle in 3D) into the boundary groups of its entity, once, as the oriented boundary
-/// facet that `lookup` finds for its nodes (`(oriented nodes, number of cells using it)`). A
-/// facet element that is not a boundary facet of the cells (an embedded curve or surface)
-/// marks its groups with a `defect`: refused where a scene uses the group as a boundary.
+/// cell element goes into the cell groups of its entity (`cells`: each one's entity), each
+/// facet element (a line in 2D, a triangle in 3D) into the boundary groups of its entity,
+/// once, as the oriented boundary facet that `lookup` finds for its nodes (`(oriented
+/// nodes, number of cells using it)`). A facet element that is not a boundary facet of the
+/// cells (an embedded curve or surface) marks its groups with a `defect`: refused where a
+/// scene uses the group as a boundary.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn fill_groups<const C: usize, const F: usize>(
+pub(super) fn fill_groups<const F: usize>(
     file: &impl std::fmt::Display,
     raw: &RawMesh,
-    (cells, facets): (&[msh::RawElement<C>], &[msh::RawElement<F>]),
+    (cells, facets): (&[(i32, i32)], &[msh::RawElement<F>]),
     (mut groups, groups_of): (Vec<Group>, impl Fn((i32, i32)) -> Vec<usize>),
     new_index: &[usize],
     lookup: impl Fn([usize; F]) -> Option<([usize; F], u32)>,
     words: &Words,
     store: impl Fn(&mut Group, [usize; F]),
 ) -> Result<Vec<Group>> {
-    let (cell_dim, facet_dim) = (C as i32 - 1, F as i32 - 1);
-    for (k, t) in cells.iter().enumerate() {
-        if t.entity.0 == cell_dim {
-            for g in groups_of(t.entity) {
+    // A facet of F nodes bounds a cell of dimension F (an edge a triangle, a triangle a
+    // tetrahedron).
+    let (cell_dim, facet_dim) = (F as i32, F as i32 - 1);
+    for (k, &entity) in cells.iter().enumerate() {
+        if entity.0 == cell_dim {
+            for g in groups_of(entity) {
                 groups[g].cells.push(k);
             }
         }

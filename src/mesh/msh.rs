@@ -50,6 +50,25 @@ pub(crate) struct RawElement<const N: usize> {
     pub entity: (i32, i32),
 }
 
+/// What a mesh keeps of its cells as read once their nodes are oriented: each one's tag
+/// in the file (for messages) and entity, 16 bytes a cell where the cell as read held 48
+/// (a tetrahedron), which the faces' records that come next need more
+/// (docs/performance.md, "Reading the mesh").
+pub(crate) struct CellsRead {
+    pub tags: Vec<u64>,
+    pub entities: Vec<(i32, i32)>,
+}
+
+impl CellsRead {
+    /// The tags and entities of `cells`, which go.
+    pub fn of<const N: usize>(cells: Vec<RawElement<N>>) -> CellsRead {
+        CellsRead {
+            tags: cells.iter().map(|c| c.tag).collect(),
+            entities: cells.iter().map(|c| c.entity).collect(),
+        }
+    }
+}
+
 /// Encoding details from `$MeshFormat`.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Format {

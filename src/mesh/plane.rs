@@ -10,7 +10,7 @@ use std::path::Path;
 
 use super::facets::Facets;
 use super::groups::{fill_groups, group_table, other_groups, Words};
-use super::msh::RawMesh;
+use super::msh::{CellsRead, RawMesh};
 use super::physical_names::PhysicalName;
 use super::quality::signed_area;
 use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh, Places};
@@ -28,7 +28,7 @@ const WORDS: Words = Words {
 };
 
 /// Geometry, topology and groups of a 2D mesh from the raw file content.
-pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
+pub(crate) fn build(path: &Path, mut raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
     let file = path.display();
     if raw.triangles.is_empty() {
         return Err(Error::input(format!(
@@ -41,13 +41,14 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
     let (new_index, mut nodes) = renumber(&raw.nodes, &raw.triangles);
     let scale = flatten_onto_xy_plane(&file, &mut nodes)?;
     let (triangles, flipped) = orient_triangles(&file, &raw, &new_index, &nodes, scale)?;
-    let edges = edge_uses(&file, &raw, &triangles, &nodes)?;
+    let cells = CellsRead::of(std::mem::take(&mut raw.triangles));
+    let edges = edge_uses(&file, &cells.tags, &triangles, &nodes)?;
 
     let lookup = |f: [usize; 2]| edges.lookup(f);
     let groups = fill_groups(
         &file,
         &raw,
-        (&raw.triangles, &raw.lines),
+        (&cells.entities, &raw.lines),
         group_table(&raw, names, 2),
         &new_index,
         lookup,
@@ -64,7 +65,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         groups,
         flipped,
         other_groups: other_groups(&raw, names, 2),
-        cell_entity: raw.triangles.iter().map(|t| t.entity.1).collect(),
+        cell_entity: cells.entities.iter().map(|e| e.1).collect(),
     })
 }
 
@@ -153,14 +154,14 @@ fn orient_triangles(
 /// opposite directions; a fold or an edge of three triangles is refused.
 fn edge_uses(
     file: &impl std::fmt::Display,
-    raw: &RawMesh,
+    tags: &[u64],
     triangles: &[[usize; 3]],
     nodes: &[[f64; 3]],
 ) -> Result<Facets<2>> {
     let uses = (triangles.iter().enumerate())
         .flat_map(|(k, tri)| [0, 1, 2].map(|i| (k, [tri[i], tri[(i + 1) % 3]])));
     let edges = Facets::new(uses).ok_or_else(|| too_many_nodes(file))?;
-    let tri_tag = |k: usize| raw.triangles[k].tag;
+    let tri_tag = |k: usize| tags[k];
     let edge_at =
         |[a, b]: [usize; 2]| format!("{}–{}", fmt_point(nodes[a], 2), fmt_point(nodes[b], 2));
     match edges.misuse(|a, b| a == b) {

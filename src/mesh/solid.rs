@@ -10,7 +10,7 @@ use std::path::Path;
 
 use super::facets::Facets;
 use super::groups::{fill_groups, group_table, other_groups, Words};
-use super::msh::RawMesh;
+use super::msh::{CellsRead, RawMesh};
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
 use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh, Places};
@@ -57,7 +57,7 @@ const WORDS: Words = Words {
 };
 
 /// Geometry, topology and groups of a 3D mesh from the raw file content.
-pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
+pub(crate) fn build(path: &Path, mut raw: RawMesh, names: &[PhysicalName]) -> Result<Mesh> {
     let file = path.display();
     let (new_index, nodes) = renumber(&raw.nodes, &raw.tetrahedra);
     check_finite(&file, &nodes)?;
@@ -66,13 +66,14 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         .map(|p| p.iter().fold(0.0_f64, |a, c| a.max(c.abs())))
         .fold(0.0_f64, f64::max);
     let (tetrahedra, flipped) = orient_tetrahedra(&file, &raw, &new_index, &nodes, scale)?;
-    let faces = face_uses(&file, &raw, &tetrahedra, &nodes)?;
+    let cells = CellsRead::of(std::mem::take(&mut raw.tetrahedra));
+    let faces = face_uses(&file, &cells.tags, &tetrahedra, &nodes)?;
 
     let lookup = |f: [usize; 3]| faces.lookup(f);
     let groups = fill_groups(
         &file,
         &raw,
-        (&raw.tetrahedra, &raw.triangles),
+        (&cells.entities, &raw.triangles),
         group_table(&raw, names, 3),
         &new_index,
         lookup,
@@ -89,7 +90,7 @@ pub(crate) fn build(path: &Path, raw: RawMesh, names: &[PhysicalName]) -> Result
         groups,
         flipped,
         other_groups: other_groups(&raw, names, 3),
-        cell_entity: raw.tetrahedra.iter().map(|t| t.entity.1).collect(),
+        cell_entity: cells.entities.iter().map(|e| e.1).collect(),
     })
 }
 
@@ -154,14 +155,14 @@ fn orient_tetrahedra(
 /// opposite orientations; a fold or a face of three tetrahedra is refused.
 fn face_uses(
     file: &impl std::fmt::Display,
-    raw: &RawMesh,
+    tags: &[u64],
     tetrahedra: &[[usize; 4]],
     nodes: &[[f64; 3]],
 ) -> Result<Facets<3>> {
     let uses = (tetrahedra.iter().enumerate())
         .flat_map(|(k, tet)| FACES.map(|local| (k, local.map(|i| tet[i]))));
     let faces = Facets::new(uses).ok_or_else(|| too_many_nodes(file))?;
-    let tet_tag = |k: usize| raw.tetrahedra[k].tag;
+    let tet_tag = |k: usize| tags[k];
     let face_at = |f: [usize; 3]| {
         let pts: Vec<String> = f.iter().map(|&n| fmt_point(nodes[n], 3)).collect();
         pts.join("–")
