@@ -36,6 +36,8 @@
 //! products of these few rows and one more evaluation of the loads (`Loads::visit`), which
 //! splits ⟨f_n, φ⟩ by load and keeps its values at the held dofs.
 
+use std::collections::HashMap;
+
 use super::{constraints::Source, group, Discretization};
 use crate::mesh::Mesh;
 use crate::scene::Scene;
@@ -45,8 +47,9 @@ use crate::Result;
 pub struct Reactions {
     /// Every held global dof d·node + c with its condition (`Discretization::held`): row i.
     pub held: Vec<(usize, Source)>,
-    /// Global dof → its row, None at a dof no condition holds.
-    row_of: Vec<Option<u32>>,
+    /// Global dof → its row, at the dofs a condition holds alone (a boundary's: an array of
+    /// every dof had held 8 bytes a dof of the whole on rank 0 and one process).
+    row_of: HashMap<usize, u32>,
     /// The rows, compressed: columns (places in `reads` and in `m_reads`) and the values
     /// of M, K_B, K_R.
     ptr: Vec<usize>,
@@ -89,10 +92,9 @@ impl Reactions {
         k_b: f64,
         k_r: &[f64],
     ) -> Result<Self> {
-        let mut row_of = vec![None; disc.free.dofs()];
-        for (i, &(dof, _)) in disc.held.iter().enumerate() {
-            row_of[dof] = Some(i as u32);
-        }
+        let row_of: HashMap<usize, u32> = (disc.held.iter().enumerate())
+            .map(|(i, &(dof, _))| (dof, i as u32))
+            .collect();
         let (ptr, whole_cols, values) = held_rows(disc, &row_of, k_b, k_r);
         let listed = |c: usize| {
             let mut read: Vec<usize> = whole_cols.iter().map(|col| col[c]).collect();
@@ -171,7 +173,7 @@ impl Reactions {
         disc.visit_every_load(t, scene, |l, dof, v| {
             loads[l][dof % d] += v;
             disc.frames.spread(d, dof, v, |g, v| {
-                if let Some(h) = self.row_of[g] {
+                if let Some(&h) = self.row_of.get(&g) {
                     reactions[h as usize] -= v;
                 }
             });
@@ -186,7 +188,7 @@ impl Reactions {
 /// group's m.
 fn held_rows(
     disc: &Discretization,
-    row_of: &[Option<u32>],
+    row_of: &HashMap<usize, u32>,
     k_b: f64,
     k_r: &[f64],
 ) -> (Vec<usize>, Vec<[usize; 2]>, Vec<[f64; 3]>) {
@@ -204,7 +206,7 @@ fn held_rows(
         let frame = |i: usize| disc.frames.of(nodes[i]);
         for (i, &q) in nodes.iter().enumerate() {
             for al in 0..d {
-                let Some(row) = row_of[d * q + al] else {
+                let Some(&row) = row_of.get(&(d * q + al)) else {
                     continue;
                 };
                 for (j, &p) in nodes.iter().enumerate() {
