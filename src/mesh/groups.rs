@@ -4,8 +4,8 @@
 
 use std::collections::{HashMap, HashSet};
 
-use super::msh::{self, RawMesh};
 use super::physical_names::PhysicalName;
+use super::raw::{RawElement, RawMesh};
 use super::{fmt_point, Group, UNUSED};
 use crate::Result;
 
@@ -31,7 +31,7 @@ pub(super) struct Words {
 pub(super) fn fill_groups<const F: usize>(
     file: &impl std::fmt::Display,
     raw: &RawMesh,
-    (cells, facets): (&[(i32, i32)], &[msh::RawElement<F>]),
+    (cells, facets): (&[(i32, i32)], &[RawElement<F>]),
     (mut groups, groups_of): (Vec<Group>, impl Fn((i32, i32)) -> Vec<usize>),
     new_index: &[usize],
     lookup: impl Fn([usize; F]) -> Option<([usize; F], u32)>,

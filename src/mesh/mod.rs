@@ -36,6 +36,7 @@ mod physical_names;
 mod places;
 mod plane;
 mod quality;
+mod raw;
 mod solid;
 
 use std::collections::BTreeMap;
@@ -631,7 +632,7 @@ const UNUSED: usize = usize::MAX;
 /// `usize::MAX` for unused nodes; the coordinates of the used ones).
 fn renumber<const N: usize>(
     raw_nodes: &[[f64; 3]],
-    cells: &[msh::RawElement<N>],
+    cells: &[raw::RawElement<N>],
 ) -> (Vec<usize>, Vec<[f64; 3]>) {
     let mut new_index = vec![UNUSED; raw_nodes.len()];
     for t in cells {

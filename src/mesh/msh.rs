@@ -17,6 +17,10 @@
 //! - Its `Display` for parse errors appends a hex dump of the whole rest of the file; the
 //!   message is built here from the error backtrace instead, with the byte offset / line.
 //! - It does not check that elements refer to existing nodes; this module does.
+//! - It holds every element as a `Vec` of its node tags, all of them at once: mshio is
+//!   handed the file without its `$Elements` section, which `elements.rs` reads (its
+//!   module says what that saved). What a read fills, and the scanner of a section's
+//!   numbers that both use, are `raw.rs`'s.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -24,104 +28,8 @@ use std::path::Path;
 use mshio::{ElementType, MshParserError};
 
 use super::elements::{Section, Unread};
+use super::raw::{find_section, Format, RawMesh, Scanner};
 use crate::Error;
-
-/// The parsed content of an MSH file, before any geometric processing. Node indices are
-/// positions in `nodes` (file order); tags are the file's tags.
-#[derive(Debug, Default)]
-pub(crate) struct RawMesh {
-    pub nodes: Vec<[f64; 3]>,
-    pub triangles: Vec<RawElement<3>>,
-    pub tetrahedra: Vec<RawElement<4>>,
-    pub lines: Vec<RawElement<2>>,
-    /// Physical tags of each entity `(dim, entity tag)`, from `$Entities`.
-    pub physical: HashMap<(i32, i32), Vec<i32>>,
-    /// Every `(dim, physical tag)` that some entity lists, in file order (curves, then
-    /// surfaces, then volumes; points are skipped).
-    pub physical_order: Vec<(i32, i32)>,
-}
-
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct RawElement<const N: usize> {
-    /// The element tag in the file (for messages).
-    pub tag: u64,
-    pub nodes: [usize; N],
-    /// `(dim, tag)` of the entity the element belongs to.
-    pub entity: (i32, i32),
-}
-
-/// What a mesh keeps of its cells as read once their nodes are oriented: each one's tag
-/// in the file (for messages) and entity, 16 bytes a cell where the cell as read held 48
-/// (a tetrahedron), which the faces' records that come next need more
-/// (docs/performance.md, "Reading the mesh").
-pub(crate) struct CellsRead {
-    pub tags: Vec<u64>,
-    pub entities: Vec<(i32, i32)>,
-}
-
-impl CellsRead {
-    /// The tags and entities of `cells`, which go.
-    pub fn of<const N: usize>(cells: Vec<RawElement<N>>) -> CellsRead {
-        CellsRead {
-            tags: cells.iter().map(|c| c.tag).collect(),
-            entities: cells.iter().map(|c| c.entity).collect(),
-        }
-    }
-}
-
-/// Encoding details from `$MeshFormat`.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Format {
-    pub binary: bool,
-    pub size_t: usize,
-    pub big_endian: bool,
-}
-
-/// Offset just past the line `name` (which must start a line and be alone on it), or `None`.
-pub(crate) fn find_section(bytes: &[u8], name: &[u8]) -> Option<usize> {
-    find_marker(bytes, name).map(|(_, past)| past)
-}
-
-/// The offsets of the marker `name` (which must start a line and be alone on it) and just
-/// past its line, or `None`.
-pub(super) fn find_marker(bytes: &[u8], name: &[u8]) -> Option<(usize, usize)> {
-    let mut from = 0;
-    while from + name.len() <= bytes.len() {
-        let hit = from + find_sub(&bytes[from..], name)?;
-        // A marker may be indented and followed by blanks (mshio accepts both).
-        let before = bytes[..hit]
-            .iter()
-            .rev()
-            .find(|&&b| b != b' ' && b != b'\t');
-        let at_line_start = before.is_none_or(|&b| b == b'\n');
-        let after = &bytes[hit + name.len()..];
-        let blanks = after
-            .iter()
-            .take_while(|&&b| b == b' ' || b == b'\t' || b == b'\r')
-            .count();
-        let eol = (after.get(blanks) == Some(&b'\n')).then_some(blanks + 1);
-        if let (true, Some(eol)) = (at_line_start, eol) {
-            return Some((hit, hit + name.len() + eol));
-        }
-        from = hit + 1;
-    }
-    None
-}
-
-fn find_sub(hay: &[u8], needle: &[u8]) -> Option<usize> {
-    let first = *needle.first()?;
-    let mut i = 0;
-    while i + needle.len() <= hay.len() {
-        let j = i + hay[i..=hay.len() - needle.len()]
-            .iter()
-            .position(|&b| b == first)?;
-        if hay[j..].starts_with(needle) {
-            return Some(j);
-        }
-        i = j + 1;
-    }
-    None
-}
 
 /// Checks the `$MeshFormat` header: an MSH file, version 4.1, ASCII or binary with a
 /// supported `size_t` width.
@@ -212,87 +120,6 @@ fn shell_quote(p: &Path) -> String {
         s
     } else {
         format!("'{}'", s.replace('\'', r"'\''"))
-    }
-}
-
-/// Reads size_t / int / double values of an MSH section, ASCII or binary.
-pub(super) struct Scanner<'a> {
-    pub bytes: &'a [u8],
-    pub pos: usize,
-    pub fmt: Format,
-}
-
-impl Scanner<'_> {
-    fn token(&mut self) -> Option<&str> {
-        let b = self.bytes;
-        while self.pos < b.len() && b[self.pos].is_ascii_whitespace() {
-            self.pos += 1;
-        }
-        let start = self.pos;
-        while self.pos < b.len() && !b[self.pos].is_ascii_whitespace() {
-            self.pos += 1;
-        }
-        if start == self.pos {
-            return None;
-        }
-        std::str::from_utf8(&b[start..self.pos]).ok()
-    }
-
-    fn fixed(&mut self, n: usize) -> Option<u64> {
-        let raw = self.bytes.get(self.pos..self.pos + n)?;
-        self.pos += n;
-        let mut v: u64 = 0;
-        if self.fmt.big_endian {
-            for &byte in raw {
-                v = (v << 8) | u64::from(byte);
-            }
-        } else {
-            for &byte in raw.iter().rev() {
-                v = (v << 8) | u64::from(byte);
-            }
-        }
-        Some(v)
-    }
-
-    /// The position of the next value: past the blanks before it in an ASCII file.
-    pub fn next_at(&mut self) -> usize {
-        if !self.fmt.binary {
-            let blanks = self.bytes[self.pos.min(self.bytes.len())..].iter();
-            self.pos += blanks.take_while(|b| b.is_ascii_whitespace()).count();
-        }
-        self.pos
-    }
-
-    pub fn size_t(&mut self) -> Option<u64> {
-        if self.fmt.binary {
-            self.fixed(self.fmt.size_t)
-        } else {
-            self.token()?.parse().ok()
-        }
-    }
-
-    pub fn int(&mut self) -> Option<i64> {
-        if self.fmt.binary {
-            self.fixed(4).map(|v| i64::from(v as u32 as i32))
-        } else {
-            self.token()?.parse().ok()
-        }
-    }
-
-    fn skip_doubles(&mut self, n: u64) -> Option<()> {
-        if self.fmt.binary {
-            let len = usize::try_from(n.checked_mul(8)?).ok()?;
-            let end = self.pos.checked_add(len)?;
-            if end > self.bytes.len() {
-                return None;
-            }
-            self.pos = end;
-        } else {
-            for _ in 0..n {
-                self.token()?;
-            }
-        }
-        Some(())
     }
 }
 
@@ -753,5 +580,191 @@ mod tests {
         let src = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n0 0 1 1\n$EndNodes\n";
         let e = read_raw(Path::new("t.msh"), src.as_bytes()).unwrap_err();
         assert!(e.to_string().contains("has no nodes"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod elements_tests {
+    use std::path::{Path, PathBuf};
+
+    use super::super::raw::{RawElement, RawMesh};
+    use super::{check_format, find_section, read_raw, scan_node_tags};
+    use mshio::ElementType;
+
+    /// Every mesh file of the repository under `dir`.
+    fn meshes(dir: &Path, out: &mut Vec<PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                meshes(&path, out);
+            } else if path.extension().is_some_and(|e| e == "msh") {
+                out.push(path);
+            }
+        }
+    }
+
+    /// (element tag, node tags, entity) of each element, from the reader's lists.
+    fn ours<const N: usize>(
+        list: &[RawElement<N>],
+        tags: &[u64],
+    ) -> Vec<(u64, Vec<u64>, (i32, i32))> {
+        let node_tags = |e: &RawElement<N>| e.nodes.iter().map(|&i| tags[i]).collect();
+        list.iter()
+            .map(|e| (e.tag, node_tags(e), e.entity))
+            .collect()
+    }
+
+    /// The same of mshio's whole parse, for one element type.
+    fn mshio_s(
+        elements: &mshio::Elements<u64, i32>,
+        kind: ElementType,
+    ) -> Vec<(u64, Vec<u64>, (i32, i32))> {
+        let blocks = elements
+            .element_blocks
+            .iter()
+            .filter(|b| b.element_type == kind);
+        let each = |b: &mshio::ElementBlock<u64, i32>| {
+            let entity = (b.entity_dim, b.entity_tag);
+            b.elements
+                .iter()
+                .map(move |e| (e.element_tag, e.nodes.clone(), entity))
+                .collect::<Vec<_>>()
+        };
+        blocks.flat_map(each).collect()
+    }
+
+    #[test]
+    fn the_elements_of_every_mesh_of_the_repository_are_mshio_s() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut files = Vec::new();
+        meshes(&root.join("meshes"), &mut files);
+        meshes(&root.join("tests/data"), &mut files);
+        let mut compared = 0;
+        for path in files {
+            let bytes = std::fs::read(&path).unwrap();
+            let (Ok(raw), Ok(whole)) = (read_raw(&path, &bytes), mshio::parse_msh_bytes(&bytes))
+            else {
+                continue;
+            };
+            let fmt = check_format(&path, &bytes).unwrap();
+            let tags: Vec<u64> = scan_node_tags(&bytes, fmt).unwrap().concat();
+            let elements = whole.data.elements.unwrap();
+            let file = path.display();
+            assert_eq!(
+                ours(&raw.lines, &tags),
+                mshio_s(&elements, ElementType::Lin2),
+                "{file}"
+            );
+            assert_eq!(
+                ours(&raw.triangles, &tags),
+                mshio_s(&elements, ElementType::Tri3),
+                "{file}"
+            );
+            assert_eq!(
+                ours(&raw.tetrahedra, &tags),
+                mshio_s(&elements, ElementType::Tet4),
+                "{file}"
+            );
+            compared += 1;
+        }
+        assert!(compared >= 40, "{compared} files compared");
+    }
+
+    const HEAD: &str = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n";
+    const NODES: &str =
+        "$Nodes\n1 4 1 4\n2 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n$EndNodes\n";
+
+    fn read(elements: &str) -> crate::Result<RawMesh> {
+        let text = format!("{HEAD}{NODES}{elements}");
+        read_raw(Path::new("t.msh"), text.as_bytes())
+    }
+
+    #[test]
+    fn points_are_skipped_and_lines_and_triangles_read_in_their_blocks() {
+        let raw = read(
+            "$Elements\n3 4 1 4\n0 1 15 1\n1 1\n1 1 1 1\n2 1 2\n2 1 2 2\n3 1 2 3\n4 2 4 3\n\
+             $EndElements\n",
+        )
+        .unwrap();
+        assert_eq!(raw.lines.len(), 1);
+        assert_eq!(raw.lines[0].nodes, [0, 1]);
+        assert_eq!(
+            raw.triangles.iter().map(|t| t.tag).collect::<Vec<_>>(),
+            [3, 4]
+        );
+        assert_eq!(raw.triangles[1].nodes, [1, 3, 2]);
+        assert_eq!(raw.triangles[1].entity, (2, 1));
+        assert_eq!(raw.triangles.capacity(), 2);
+    }
+
+    #[test]
+    fn a_cut_or_unclosed_section_says_where_it_stopped() {
+        let cut = "truncated";
+        let cases = [
+            (
+                "$Elements\n1 2 1 2\n2 1 2 2\n1 1 2 3\n2 2 3\n",
+                [cut, "line 20", "element definition (2 of 2)"],
+            ),
+            (
+                "$Elements\n1 1 1 1\n2 1 2 1\n1 1 2 3\n",
+                [cut, "line 20", "> $EndElements"],
+            ),
+            (
+                "$Elements\n1 1 1 1\n2 1 2\n",
+                [cut, "line 19", "number of elements in element block"],
+            ),
+            (
+                "$Elements\n1 1 1 1\n2 1 999 1\n1 1\n$EndElements\n",
+                [
+                    "corrupt",
+                    "line 18",
+                    "element type > unknown element type 999",
+                ],
+            ),
+        ];
+        for (elements, needles) in cases {
+            let e = read(elements).unwrap_err().to_string();
+            for needle in needles.iter().chain(&["cannot be read", "regenerate"]) {
+                assert!(e.contains(needle), "{needle}: {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn an_unskippable_or_unread_type_is_refused_by_name() {
+        // Quadrangles are skipped by their node count, and named with their remedy.
+        let e = read("$Elements\n2 2 1 2\n2 1 3 1\n1 1 2 4 3\n2 1 2 1\n2 1 2 3\n$EndElements\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("4-node quadrangles") && e.contains("recombination"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_second_section_and_a_parse_error_after_the_section_are_placed_in_the_file() {
+        let one = "$Elements\n1 1 1 1\n2 1 2 1\n1 1 2 3\n$EndElements\n";
+        let e = read(&format!("{one}{one}")).unwrap_err().to_string();
+        assert!(e.contains("more than one $Elements"), "{e}");
+        // Line 21 of the file, after the five lines that mshio does not see.
+        let e = read(&format!("{one}garbage\n")).unwrap_err().to_string();
+        assert!(e.contains("line 21"), "{e}");
+    }
+
+    #[test]
+    fn a_binary_section_cut_in_an_element_names_it() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/paper/rect_016_binary.msh");
+        let bytes = std::fs::read(&path).unwrap();
+        let end = find_section(&bytes, b"$EndElements").unwrap();
+        let e = read_raw(&path, &bytes[..end - 30]).unwrap_err().to_string();
+        for needle in [
+            "cannot be read",
+            "truncated",
+            "at byte",
+            "element definition",
+        ] {
+            assert!(e.contains(needle), "{needle}: {e}");
+        }
     }
 }

@@ -16,7 +16,7 @@
 //!
 //! Each entry is `dim tag "name"`; the name is UTF-8 and may contain commas and spaces.
 
-use super::msh::find_section;
+use super::raw::find_section;
 
 /// One entry of `$PhysicalNames`.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -10,9 +10,9 @@ use std::path::Path;
 
 use super::facets::Facets;
 use super::groups::{fill_groups, group_table, other_groups, Words};
-use super::msh::{CellsRead, RawMesh};
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
+use super::raw::{CellsRead, RawMesh};
 use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh, Places};
 use crate::{Error, Result};
 
