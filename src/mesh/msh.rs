@@ -767,4 +767,66 @@ mod elements_tests {
             assert!(e.contains(needle), "{needle}: {e}");
         }
     }
+
+    /// The mesh of [`read`]'s points with two triangles and a line, in binary with
+    /// `size_t` of `width` bytes in either byte order.
+    fn binary(width: usize, big: bool) -> Vec<u8> {
+        let bytes = |v: u64, n: usize| {
+            let le = v.to_le_bytes()[..n].to_vec();
+            if big {
+                le.into_iter().rev().collect()
+            } else {
+                le
+            }
+        };
+        let size_t = |v: u64| bytes(v, width);
+        let int = |v: i32| bytes(u64::from(v as u32), 4);
+        let real = |v: f64| bytes(v.to_bits(), 8);
+        let mut b = format!("$MeshFormat\n4.1 1 {width}\n").into_bytes();
+        b.extend(int(1));
+        b.extend(b"\n$EndMeshFormat\n$Nodes\n");
+        [1, 4, 1, 4].map(|v| b.extend(size_t(v)));
+        [2, 1, 0].map(|v| b.extend(int(v)));
+        b.extend(size_t(4));
+        (1..=4).for_each(|t| b.extend(size_t(t)));
+        for p in [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]] {
+            [p[0], p[1], 0.0].map(|x| b.extend(real(x)));
+        }
+        b.extend(b"\n$EndNodes\n$Elements\n");
+        [2, 3, 1, 3].map(|v| b.extend(size_t(v)));
+        let blocks: [(i32, i32, &[&[u64]]); 2] = [
+            (1, 1, &[&[1, 1, 2]]),
+            (2, 2, &[&[2, 1, 2, 3], &[3, 2, 4, 3]]),
+        ];
+        for (dim, kind, elements) in blocks {
+            [dim, 1, kind].map(|v| b.extend(int(v)));
+            b.extend(size_t(elements.len() as u64));
+            elements
+                .iter()
+                .flat_map(|e| e.iter())
+                .for_each(|&v| b.extend(size_t(v)));
+        }
+        b.extend(b"\n$EndElements\n");
+        b
+    }
+
+    #[test]
+    fn binary_files_of_either_byte_order_and_size_t_read_as_the_ascii_one() {
+        let ascii =
+            read("$Elements\n2 3 1 3\n1 1 1 1\n1 1 2\n2 1 2 2\n2 1 2 3\n3 2 4 3\n$EndElements\n")
+                .unwrap();
+        let tags = [1, 2, 3, 4];
+        for (width, big) in [(8, false), (8, true), (4, false), (4, true)] {
+            let raw = read_raw(Path::new("t.msh"), &binary(width, big)).unwrap();
+            let case = format!("size_t {width}, big-endian {big}");
+            assert_eq!(raw.nodes, ascii.nodes, "{case}");
+            assert_eq!(ours(&raw.lines, &tags), ours(&ascii.lines, &tags), "{case}");
+            assert_eq!(
+                ours(&raw.triangles, &tags),
+                ours(&ascii.triangles, &tags),
+                "{case}"
+            );
+            assert_eq!(raw.triangles.len(), 2, "{case}");
+        }
+    }
 }
