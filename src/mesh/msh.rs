@@ -785,21 +785,23 @@ mod elements_tests {
         let mut b = format!("$MeshFormat\n4.1 1 {width}\n").into_bytes();
         b.extend(int(1));
         b.extend(b"\n$EndMeshFormat\n$Nodes\n");
-        [1, 4, 1, 4].map(|v| b.extend(size_t(v)));
-        [2, 1, 0].map(|v| b.extend(int(v)));
+        [1, 4, 1, 4].into_iter().for_each(|v| b.extend(size_t(v)));
+        [2, 1, 0].into_iter().for_each(|v| b.extend(int(v)));
         b.extend(size_t(4));
         (1..=4).for_each(|t| b.extend(size_t(t)));
         for p in [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]] {
-            [p[0], p[1], 0.0].map(|x| b.extend(real(x)));
+            [p[0], p[1], 0.0]
+                .into_iter()
+                .for_each(|x| b.extend(real(x)));
         }
         b.extend(b"\n$EndNodes\n$Elements\n");
-        [2, 3, 1, 3].map(|v| b.extend(size_t(v)));
+        [2, 3, 1, 3].into_iter().for_each(|v| b.extend(size_t(v)));
         let blocks: [(i32, i32, &[&[u64]]); 2] = [
             (1, 1, &[&[1, 1, 2]]),
             (2, 2, &[&[2, 1, 2, 3], &[3, 2, 4, 3]]),
         ];
         for (dim, kind, elements) in blocks {
-            [dim, 1, kind].map(|v| b.extend(int(v)));
+            [dim, 1, kind].into_iter().for_each(|v| b.extend(int(v)));
             b.extend(size_t(elements.len() as u64));
             elements
                 .iter()
