@@ -39,18 +39,21 @@ pub(super) struct Section {
     pub span: std::ops::Range<usize>,
 }
 
-/// Where and why the section cannot be read: the byte offset in the file and what was
-/// being read, outermost first (`element section > element entity block (2 of 6) > …`).
-pub(super) struct Stop {
-    pub at: usize,
-    pub what: String,
+/// Why a file's `$Elements` cannot be walked: it cannot be parsed (`Stop`: the byte
+/// offset in the file and what was being read, outermost first, `element section >
+/// element entity block (2 of 6) > …`), or it holds an element type without a fixed node
+/// count, which no reader here can skip.
+pub(super) enum Unread {
+    Stop { at: usize, what: String },
+    Unskippable(ElementType),
 }
 
-/// Why a file's `$Elements` cannot be walked: it cannot be parsed (`Stop`), or it holds an
-/// element type without a fixed node count, which no reader here can skip.
-pub(super) enum Unread {
-    Stop(Stop),
-    Unskippable(ElementType),
+impl Unread {
+    /// The section stops at `at`, in what `what` names within it.
+    fn stop(at: usize, what: &str) -> Unread {
+        let what = format!("element section > {what}");
+        Unread::Stop { at, what }
+    }
 }
 
 impl Section {
@@ -61,12 +64,7 @@ impl Section {
             return Ok(None);
         };
         let mut s = Scanner { bytes, pos, fmt };
-        let stop = |at, what: &str| {
-            Unread::Stop(Stop {
-                at,
-                what: format!("element section > {what}"),
-            })
-        };
+        let stop = Unread::stop;
         let head = "element section header > number of element entity blocks";
         let n_blocks = s.size_t().ok_or_else(|| stop(s.pos, head))?;
         for what in [
@@ -140,18 +138,16 @@ impl Section {
         let node_of =
             |elem: u64, tag: u64| index.get(&tag).copied().ok_or_else(|| missing(elem, tag));
         for b in &self.blocks {
-            let mut s = Scanner {
+            let s = Scanner {
                 bytes,
                 pos: b.data,
                 fmt,
             };
-            for _ in 0..b.count {
-                match b.kind {
-                    ElementType::Lin2 => raw.lines.push(element(&mut s, b.entity, &node_of)?),
-                    ElementType::Tri3 => raw.triangles.push(element(&mut s, b.entity, &node_of)?),
-                    ElementType::Tet4 => raw.tetrahedra.push(element(&mut s, b.entity, &node_of)?),
-                    _ => break,
-                }
+            match b.kind {
+                ElementType::Lin2 => block(s, b, &node_of, &mut raw.lines)?,
+                ElementType::Tri3 => block(s, b, &node_of, &mut raw.triangles)?,
+                ElementType::Tet4 => block(s, b, &node_of, &mut raw.tetrahedra)?,
+                _ => {}
             }
         }
         Ok(())
@@ -160,12 +156,7 @@ impl Section {
 
 /// A block's head at `s`: entity dimension and tag, element type, element count.
 fn block_head(s: &mut Scanner, within: &dyn Fn(&str) -> String) -> Result<Block, Unread> {
-    let stop = |at, what: &str| {
-        Unread::Stop(Stop {
-            at,
-            what: format!("element section > {}", within(what)),
-        })
-    };
+    let stop = |at, what: &str| Unread::stop(at, &within(what));
     let int = |s: &mut Scanner, what: &str| {
         let at = s.next_at();
         s.int()
@@ -216,19 +207,24 @@ fn skip_elements(s: &mut Scanner, count: u64, nodes: usize) -> Result<(), (usize
     Ok(())
 }
 
-/// The element at `s`, its N nodes as positions by `node_of`.
-fn element<const N: usize, E>(
-    s: &mut Scanner,
-    entity: (i32, i32),
+/// The elements of block `b` at `s` onto `list`, their N nodes as positions by `node_of`.
+fn block<const N: usize, E>(
+    mut s: Scanner,
+    b: &Block,
     node_of: &impl Fn(u64, u64) -> Result<usize, E>,
-) -> Result<RawElement<N>, E> {
-    // `Section::find` read every number of the block, so none is missing here.
-    let tag = s.size_t().unwrap_or(0);
-    let mut nodes = [0; N];
-    for slot in &mut nodes {
-        *slot = node_of(tag, s.size_t().unwrap_or(0))?;
+    list: &mut Vec<RawElement<N>>,
+) -> Result<(), E> {
+    for _ in 0..b.count {
+        // `Section::find` read every number of the block, so none is missing here.
+        let tag = s.size_t().unwrap_or(0);
+        let mut nodes = [0; N];
+        for slot in &mut nodes {
+            *slot = node_of(tag, s.size_t().unwrap_or(0))?;
+        }
+        let entity = b.entity;
+        list.push(RawElement { tag, nodes, entity });
     }
-    Ok(RawElement { tag, nodes, entity })
+    Ok(())
 }
 
 /// Just past the `$EndElements` marker that follows blanks at `pos`, if it does.

@@ -344,7 +344,7 @@ pub(crate) fn read_raw(path: &Path, bytes: &[u8]) -> crate::Result<RawMesh> {
 /// The input error of an `$Elements` section that cannot be walked.
 fn unread(path: &Path, bytes: &[u8], fmt: Format, e: Unread) -> Error {
     match e {
-        Unread::Stop(stop) => stopped(path, bytes, fmt, Some(stop.at), &stop.what),
+        Unread::Stop { at, what } => stopped(path, bytes, fmt, Some(at), &what),
         Unread::Unskippable(kind) => match check_element_types(path, [kind].into_iter()) {
             Err(e) => e,
             Ok(()) => stopped(path, bytes, fmt, None, "element section"),

@@ -164,7 +164,7 @@ impl Layout {
     /// `unknowns_of`, `rows_of`) is the setup's, done before. A place past the unknowns (a
     /// prescribed dof's) has no row.
     pub fn placed(self, places: &[usize]) -> Layout {
-        let n = *self.blocks.last().unwrap_or(&0);
+        let n = self.n_unknowns();
         let at = |&i: &usize| if i < n { self.row(i) as u32 } else { u32::MAX };
         let row = self.row.is_some().then(|| places.iter().map(at).collect());
         let kept = None;
@@ -220,11 +220,15 @@ impl Layout {
 
     /// The unknowns whose rows this layout says: every one, or those a follower keeps.
     fn unknowns(&self) -> Box<dyn Iterator<Item = usize> + '_> {
-        let n = *self.blocks.last().unwrap_or(&0);
         match &self.kept {
-            None => Box::new(0..n),
+            None => Box::new(0..self.n_unknowns()),
             Some(kept) => Box::new(kept.iter().map(|&i| i as usize)),
         }
+    }
+
+    /// The number of unknowns, which the rows number: the last block's end.
+    pub fn n_unknowns(&self) -> usize {
+        *self.blocks.last().unwrap_or(&0)
     }
 
     /// The rank that holds row r.

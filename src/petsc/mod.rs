@@ -550,7 +550,7 @@ enum Whole {
 impl Spread {
     /// Made by every rank at once: the exchange is collective.
     fn new(layout: &Layout, rank: usize, reads: Reads) -> Result<Spread> {
-        let n = *layout.blocks.last().unwrap_or(&0);
+        let n = layout.n_unknowns();
         let mut unknowns = layout.unknowns_of(rank);
         // What this rank reads at every solve of the others' rows: the unknowns it reads
         // whose rows are not its own, increasing (no flag of every unknown).
