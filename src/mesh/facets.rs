@@ -7,6 +7,15 @@
 //! hash map: on the plate of 684 325 tetrahedra the map held 273 MB at the peak of reading
 //! the mesh, the records 44 MB (docs/performance.md), and the read is rank 0's peak on many
 //! MPI ranks.
+//!
+//! The read asks two things of the uses ([`survey`]): the misuse the earliest cell shows,
+//! and where the boundary groups' facets lie. Both are answered a range of lowest nodes at
+//! a time: a pass holds the records of the facets whose lowest node lies in its range, at
+//! most [`PASS_USES`] but for one range's own, since a facet's uses all have its lowest
+//! node. The answers are those of one pass over every record, and the records held at once
+//! are at most a few million however large the mesh.
+
+use std::ops::Range;
 
 use super::groups::Words;
 use crate::Error;
@@ -43,8 +52,9 @@ fn orderings<const F: usize>() -> Vec<[usize; F]> {
         .collect()
 }
 
-/// The uses of every facet, sorted by facet and then by cell.
-pub(super) struct Facets<const F: usize> {
+/// The uses of the facets (every facet, or those of one pass), sorted by facet and then by
+/// cell.
+struct Facets<const F: usize> {
     uses: Vec<Use<F>>,
     /// [`orderings`] of F.
     orders: Vec<[usize; F]>,
@@ -67,6 +77,14 @@ pub(super) enum Misuse<const F: usize> {
 }
 
 impl<const F: usize> Misuse<F> {
+    /// The cell that shows the misuse (the second or the third).
+    fn shown_by(&self) -> usize {
+        match *self {
+            Misuse::Fold { second, .. } => second,
+            Misuse::Shared { third, .. } => third,
+        }
+    }
+
     /// The refusal of a mesh `file` whose cells misuse a facet, in the mesh's `words`, with
     /// a cell's gmsh tag (`tag`) and a facet's place (`at`).
     pub(super) fn error(
@@ -111,7 +129,7 @@ impl<const F: usize> Facets<F> {
     /// The facets of the cells, each cell's facets in its orientation (`facets`: the cell
     /// and the facet's nodes); None where a node's index does not fit 32 bits, or a cell's
     /// 29 (beside its facet's ordering).
-    pub(super) fn new(facets: impl Iterator<Item = (usize, [usize; F])>) -> Option<Facets<F>> {
+    fn new(facets: impl Iterator<Item = (usize, [usize; F])>) -> Option<Facets<F>> {
         let orders = orderings::<F>();
         let mut uses = Vec::with_capacity(facets.size_hint().0);
         for (cell, dir) in facets {
@@ -136,10 +154,7 @@ impl<const F: usize> Facets<F> {
 
     /// The misuse that the earliest cell shows (None: every facet is used once, or twice
     /// with `same_side` false for its two orientations).
-    pub(super) fn misuse(
-        &self,
-        same_side: impl Fn([u32; F], [u32; F]) -> bool,
-    ) -> Option<Misuse<F>> {
+    fn misuse(&self, same_side: impl Fn([u32; F], [u32; F]) -> bool) -> Option<Misuse<F>> {
         let mut worst: Option<(usize, Misuse<F>)> = None;
         for run in self.uses.chunk_by(|a, b| a.key == b.key) {
             let nodes = run[0].key.map(|n| n as usize);
@@ -178,7 +193,7 @@ impl<const F: usize> Facets<F> {
 
     /// The facet with the nodes `f` (in any order): its orientation in the first cell that
     /// has it and how many cells have it; None where no cell has it.
-    pub(super) fn lookup(&self, f: [usize; F]) -> Option<([usize; F], u32)> {
+    fn lookup(&self, f: [usize; F]) -> Option<([usize; F], u32)> {
         let mut key = try_u32(f)?;
         key.sort_unstable();
         let at = self.uses.partition_point(|u| u.key < key);
@@ -186,6 +201,112 @@ impl<const F: usize> Facets<F> {
         let first = self.uses.get(at).filter(|_| count > 0)?;
         Some((first.dir(&self.orders).map(|n| n as usize), count as u32))
     }
+}
+
+/// The most records one pass of [`survey`] holds (32 MiB of a tetrahedron's faces'), but
+/// where one range of lowest nodes has more.
+const PASS_USES: usize = 1 << 21;
+
+/// What the read asks of the cells' facets: the misuse the earliest cell shows, and the
+/// facets that were asked about, each with its orientation in the first cell that has it
+/// and how many cells have it.
+pub(super) struct Survey<const F: usize> {
+    pub(super) misuse: Option<Misuse<F>>,
+    /// The asked facets that a cell has, by their sorted nodes: (sorted, orientation, count).
+    found: Vec<([usize; F], [usize; F], u32)>,
+}
+
+impl<const F: usize> Survey<F> {
+    /// The facet with the nodes `f` (in any order), where it was asked about: its
+    /// orientation in the first cell that has it and how many cells have it; None where
+    /// no cell has it.
+    pub(super) fn lookup(&self, mut f: [usize; F]) -> Option<([usize; F], u32)> {
+        f.sort_unstable();
+        let at = self.found.binary_search_by_key(&f, |r| r.0).ok()?;
+        Some((self.found[at].1, self.found[at].2))
+    }
+}
+
+/// The survey of the facets that `uses` lists (the cell and the facet's nodes in its
+/// orientation, every time it is called the same), over nodes numbered below `n_nodes`:
+/// the misuse (where `same_side` says two orientations are the same side) and the facets
+/// of `asked`; None where a node's index does not fit 32 bits, or a cell's 29.
+pub(super) fn survey<const F: usize, I: Iterator<Item = (usize, [usize; F])>>(
+    uses: impl Fn() -> I,
+    n_nodes: usize,
+    asked: impl Iterator<Item = [usize; F]>,
+    same_side: impl Fn([u32; F], [u32; F]) -> bool + Copy,
+) -> Option<Survey<F>> {
+    survey_in_passes(uses, n_nodes, asked, same_side, PASS_USES)
+}
+
+/// [`survey`] in passes of at most `most` records (but where a bucket alone has more).
+fn survey_in_passes<const F: usize, I: Iterator<Item = (usize, [usize; F])>>(
+    uses: impl Fn() -> I,
+    n_nodes: usize,
+    asked: impl Iterator<Item = [usize; F]>,
+    same_side: impl Fn([u32; F], [u32; F]) -> bool + Copy,
+    most: usize,
+) -> Option<Survey<F>> {
+    let lowest = |f: &[usize; F]| f.iter().copied().min().unwrap_or(0);
+    let mut asked: Vec<[usize; F]> = (asked.filter(|f| try_u32(*f).is_some()))
+        .map(|mut f| {
+            f.sort_unstable();
+            f
+        })
+        .collect();
+    asked.sort_unstable();
+    asked.dedup();
+    let mut survey = Survey {
+        misuse: None,
+        found: Vec::with_capacity(asked.len()),
+    };
+    let mut asked = asked.into_iter().peekable();
+    for range in pass_ranges(uses().map(|(_, f)| lowest(&f)), n_nodes, most) {
+        let pass = Facets::new(uses().filter(|(_, f)| range.contains(&lowest(f))))?;
+        // The passes go up in the facets' order, so a tie keeps the earlier facet, as one
+        // pass over every record does.
+        if let Some(m) = pass.misuse(same_side) {
+            let earlier = |old: &Misuse<F>| old.shown_by() <= m.shown_by();
+            if !survey.misuse.as_ref().is_some_and(earlier) {
+                survey.misuse = Some(m);
+            }
+        }
+        while let Some(f) = asked.next_if(|f| f[0] < range.end) {
+            if let Some((dir, count)) = pass.lookup(f) {
+                survey.found.push((f, dir, count));
+            }
+        }
+    }
+    Some(survey)
+}
+
+/// The ranges of lowest nodes of the passes, in order and together every node: each holds
+/// at most `most` records but where a bucket of consecutive nodes alone has more (the
+/// `lowest` nodes of the uses counted in up to 2^16 buckets below `n_nodes`).
+fn pass_ranges(
+    lowest: impl Iterator<Item = usize>,
+    n_nodes: usize,
+    most: usize,
+) -> Vec<Range<usize>> {
+    let width = n_nodes.div_ceil(1 << 16).max(1);
+    let mut counts = vec![0_usize; n_nodes.div_ceil(width)];
+    for n in lowest {
+        if let Some(c) = counts.get_mut(n / width) {
+            *c += 1;
+        }
+    }
+    let mut ranges = Vec::new();
+    let (mut start, mut held) = (0, 0);
+    for (b, &c) in counts.iter().enumerate() {
+        if held + c > most && held > 0 {
+            ranges.push(start..b * width);
+            (start, held) = (b * width, 0);
+        }
+        held += c;
+    }
+    ranges.push(start..usize::MAX);
+    ranges
 }
 
 /// The nodes as u32, or None where one does not fit.
@@ -216,6 +337,105 @@ mod tests {
         assert_eq!(e.lookup([3, 2]), Some(([3, 2], 1)));
         assert_eq!(e.lookup([0, 3]), None);
         assert_eq!(e.lookup([usize::MAX, 0]), None);
+    }
+
+    /// The survey of the triangles' edges in passes of at most `most` records, every edge
+    /// of theirs and one of no triangle asked.
+    fn surveyed(triangles: &[[usize; 3]], most: usize) -> Survey<2> {
+        let uses = || {
+            (triangles.iter().enumerate())
+                .flat_map(|(k, t)| [0, 1, 2].map(|i| (k, [t[i], t[(i + 1) % 3]])))
+        };
+        let n = triangles.iter().flatten().max().map_or(0, |&n| n + 1);
+        let asked = uses().map(|(_, e)| e).chain([[0, n + 7]]);
+        survey_in_passes(uses, n, asked, |a, b| a == b, most).unwrap()
+    }
+
+    /// The misuse as (facet, first, shower, a fold).
+    fn seen(m: &Option<Misuse<2>>) -> Option<([usize; 2], usize, usize, bool)> {
+        m.as_ref().map(|m| match *m {
+            Misuse::Fold {
+                nodes,
+                first,
+                second,
+            } => (nodes, first, second, true),
+            Misuse::Shared {
+                nodes,
+                first,
+                third,
+            } => (nodes, first, third, false),
+        })
+    }
+
+    #[test]
+    fn a_survey_in_passes_answers_as_one_pass_over_every_use() {
+        // A grid of 12 × 9 squares, each cut into two triangles, then two misuses: a fold
+        // over an inner edge and a third triangle on a boundary edge.
+        let node = |i: usize, j: usize| j * 13 + i;
+        let mut triangles = Vec::new();
+        for j in 0..9 {
+            for i in 0..12 {
+                let [a, b, c, d] = [
+                    node(i, j),
+                    node(i + 1, j),
+                    node(i + 1, j + 1),
+                    node(i, j + 1),
+                ];
+                triangles.extend([[a, b, c], [a, c, d]]);
+            }
+        }
+        let whole = |t: &[[usize; 3]]| surveyed(t, usize::MAX);
+        let passes = [1, 2, 5, 40];
+        for t in [
+            &triangles[..],
+            &[&triangles[..], &[[node(5, 5), node(6, 6), node(9, 2)]]].concat(),
+            &[&triangles[..], &[[node(0, 0), node(1, 0), node(3, 3)]]].concat(),
+        ] {
+            let one = whole(t);
+            assert!(one.found.len() > 200);
+            for most in passes {
+                let s = surveyed(t, most);
+                assert_eq!(s.found, one.found, "passes of {most}");
+                assert_eq!(seen(&s.misuse), seen(&one.misuse), "passes of {most}");
+            }
+        }
+        assert_eq!(seen(&whole(&triangles).misuse), None);
+        // The diagonal 70–84 of square (5, 5) in triangles 130, 131 and the new one, 216.
+        let shared = [&triangles[..], &[[node(5, 5), node(6, 6), node(9, 2)]]].concat();
+        assert_eq!(
+            seen(&whole(&shared).misuse),
+            Some(([70, 84], 130, 216, false))
+        );
+        // The boundary edge 0–1 of triangle 0, used again in its direction.
+        let fold = [&triangles[..], &[[node(0, 0), node(1, 0), node(3, 3)]]].concat();
+        assert_eq!(seen(&whole(&fold).misuse), Some(([0, 1], 0, 216, true)));
+        assert_eq!(
+            whole(&triangles).lookup([node(1, 0), node(0, 0)]),
+            Some(([0, 1], 1))
+        );
+        assert_eq!(
+            whole(&triangles).lookup([node(1, 1), node(0, 0)]),
+            Some(([14, 0], 2))
+        );
+        assert_eq!(whole(&triangles).lookup([node(0, 1), node(1, 0)]), None);
+    }
+
+    #[test]
+    fn the_earliest_cell_that_misuses_a_facet_is_named_in_any_passes() {
+        // The examples of the test below, surveyed in passes of 1 to 4 records: the
+        // shared edge 0–1 and the fold over 5–6 fall in different passes.
+        let shared = [[0, 1, 2], [1, 0, 3], [0, 1, 4], [5, 6, 7], [5, 6, 8]];
+        let fold = [[5, 6, 7], [5, 6, 8], [0, 1, 2], [1, 0, 3], [0, 1, 4]];
+        for most in [1, 2, 3, 4, usize::MAX] {
+            assert_eq!(
+                seen(&surveyed(&shared, most).misuse),
+                Some(([0, 1], 0, 2, false))
+            );
+            assert_eq!(
+                seen(&surveyed(&fold, most).misuse),
+                Some(([5, 6], 0, 1, true))
+            );
+        }
     }
 
     #[test]

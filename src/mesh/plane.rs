@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use super::facets::Facets;
+use super::facets::{survey, Survey};
 use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::physical_names::PhysicalName;
 use super::quality::signed_area;
@@ -42,7 +42,7 @@ pub(crate) fn build(path: &Path, mut raw: RawMesh, names: &[PhysicalName]) -> Re
     let scale = flatten_onto_xy_plane(&file, &mut nodes)?;
     let (triangles, flipped) = orient_triangles(&file, &raw, &new_index, &nodes, scale)?;
     let cells = CellsRead::of(std::mem::take(&mut raw.triangles));
-    let edges = edge_uses(&file, &cells.tags, &triangles, &nodes)?;
+    let edges = edge_uses(&file, &cells.tags, &triangles, &nodes, &raw, &new_index)?;
 
     let lookup = |f: [usize; 2]| edges.lookup(f);
     let groups = fill_groups(
@@ -151,20 +151,27 @@ fn orient_triangles(
 }
 
 /// The edges of the triangles: each is used by one triangle (boundary) or by two in
-/// opposite directions; a fold or an edge of three triangles is refused.
+/// opposite directions; a fold or an edge of three triangles is refused. Found are the
+/// lines of the file (`raw`'s, in the nodes' `new_index`), which the groups look up.
 fn edge_uses(
     file: &impl std::fmt::Display,
     tags: &[u64],
     triangles: &[[usize; 3]],
     nodes: &[[f64; 3]],
-) -> Result<Facets<2>> {
-    let uses = (triangles.iter().enumerate())
-        .flat_map(|(k, tri)| [0, 1, 2].map(|i| (k, [tri[i], tri[(i + 1) % 3]])));
-    let edges = Facets::new(uses).ok_or_else(|| too_many_nodes(file))?;
+    raw: &RawMesh,
+    new_index: &[usize],
+) -> Result<Survey<2>> {
+    let uses = || {
+        (triangles.iter().enumerate())
+            .flat_map(|(k, tri)| [0, 1, 2].map(|i| (k, [tri[i], tri[(i + 1) % 3]])))
+    };
+    let asked = (raw.lines.iter()).map(|l| l.nodes.map(|n| new_index[n]));
+    let edges =
+        survey(uses, nodes.len(), asked, |a, b| a == b).ok_or_else(|| too_many_nodes(file))?;
     let tri_tag = |k: usize| tags[k];
     let edge_at =
         |[a, b]: [usize; 2]| format!("{}–{}", fmt_point(nodes[a], 2), fmt_point(nodes[b], 2));
-    match edges.misuse(|a, b| a == b) {
+    match &edges.misuse {
         None => Ok(edges),
         Some(misuse) => Err(misuse.error(file, &WORDS, tri_tag, edge_at)),
     }

@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use super::facets::Facets;
+use super::facets::{survey, Survey};
 use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
@@ -67,7 +67,7 @@ pub(crate) fn build(path: &Path, mut raw: RawMesh, names: &[PhysicalName]) -> Re
         .fold(0.0_f64, f64::max);
     let (tetrahedra, flipped) = orient_tetrahedra(&file, &raw, &new_index, &nodes, scale)?;
     let cells = CellsRead::of(std::mem::take(&mut raw.tetrahedra));
-    let faces = face_uses(&file, &cells.tags, &tetrahedra, &nodes)?;
+    let faces = face_uses(&file, &cells.tags, &tetrahedra, &nodes, &raw, &new_index)?;
 
     let lookup = |f: [usize; 3]| faces.lookup(f);
     let groups = fill_groups(
@@ -152,25 +152,31 @@ fn orient_tetrahedra(
 }
 
 /// The faces of the tetrahedra: each is used by one tetrahedron (boundary) or by two in
-/// opposite orientations; a fold or a face of three tetrahedra is refused.
+/// opposite orientations; a fold or a face of three tetrahedra is refused. Found are the
+/// triangles of the file (`raw`'s, in the nodes' `new_index`), which the groups look up.
 fn face_uses(
     file: &impl std::fmt::Display,
     tags: &[u64],
     tetrahedra: &[[usize; 4]],
     nodes: &[[f64; 3]],
-) -> Result<Facets<3>> {
-    let uses = (tetrahedra.iter().enumerate())
-        .flat_map(|(k, tet)| FACES.map(|local| (k, local.map(|i| tet[i]))));
-    let faces = Facets::new(uses).ok_or_else(|| too_many_nodes(file))?;
+    raw: &RawMesh,
+    new_index: &[usize],
+) -> Result<Survey<3>> {
+    let uses = || {
+        (tetrahedra.iter().enumerate())
+            .flat_map(|(k, tet)| FACES.map(|local| (k, local.map(|i| tet[i]))))
+    };
+    let asked = (raw.triangles.iter()).map(|t| t.nodes.map(|n| new_index[n]));
+    // The same face seen from the other side is an odd permutation: the same side, an even one.
+    let same_side =
+        |a: [u32; 3], b: [u32; 3]| (0..3).any(|r| [a[r], a[(r + 1) % 3], a[(r + 2) % 3]] == b);
+    let faces = survey(uses, nodes.len(), asked, same_side).ok_or_else(|| too_many_nodes(file))?;
     let tet_tag = |k: usize| tags[k];
     let face_at = |f: [usize; 3]| {
         let pts: Vec<String> = f.iter().map(|&n| fmt_point(nodes[n], 3)).collect();
         pts.join("–")
     };
-    // The same face seen from the other side is an odd permutation: the same side, an even one.
-    let same_side =
-        |a: [u32; 3], b: [u32; 3]| (0..3).any(|r| [a[r], a[(r + 1) % 3], a[(r + 2) % 3]] == b);
-    match faces.misuse(same_side) {
+    match &faces.misuse {
         None => Ok(faces),
         Some(misuse) => Err(misuse.error(file, &WORDS, tet_tag, face_at)),
     }
