@@ -296,22 +296,20 @@ impl Mesh {
         self.triangles.len() + self.tetrahedra.len()
     }
 
-    /// The nodes of a group's facets or cells, sorted, unique.
+    /// The nodes of a group's facets or cells, sorted, unique: marked, then listed (a
+    /// volume's cells list each node a dozen times or more, which a sort would hold).
     pub fn group_nodes(&self, g: &Group) -> Vec<usize> {
-        let mut nodes: Vec<usize> = g
-            .facets
-            .iter()
-            .flatten()
-            .chain(g.faces.iter().flatten())
-            .copied()
-            .chain(g.cells.iter().flat_map(|&c| match self.dim {
-                2 => self.triangles[c].to_vec(),
-                _ => self.tetrahedra[c].to_vec(),
-            }))
-            .collect();
-        nodes.sort_unstable();
-        nodes.dedup();
-        nodes
+        let cells = g.cells.iter().flat_map(|&c| match self.dim {
+            2 => &self.triangles[c][..],
+            _ => &self.tetrahedra[c][..],
+        });
+        let facets = g.facets.iter().flatten().chain(g.faces.iter().flatten());
+        let nodes = facets.chain(cells);
+        let mut marked = vec![false; nodes.clone().max().map_or(0, |&n| n + 1)];
+        for &n in nodes {
+            marked[n] = true;
+        }
+        (0..marked.len()).filter(|&n| marked[n]).collect()
     }
 
     /// Outward unit normal at each node of a boundary group: the measure-weighted average of
