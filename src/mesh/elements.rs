@@ -119,7 +119,7 @@ impl Section {
         &self,
         bytes: &[u8],
         fmt: Format,
-        index: &HashMap<u64, usize>,
+        index: &HashMap<u64, u32>,
         missing: impl Fn(u64, u64) -> E,
         raw: &mut RawMesh,
     ) -> Result<(), E> {
@@ -211,18 +211,18 @@ fn skip_elements(s: &mut Scanner, count: u64, nodes: usize) -> Result<(), (usize
 fn block<const N: usize, E>(
     mut s: Scanner,
     b: &Block,
-    node_of: &impl Fn(u64, u64) -> Result<usize, E>,
+    node_of: &impl Fn(u64, u64) -> Result<u32, E>,
     list: &mut Vec<RawElement<N>>,
 ) -> Result<(), E> {
     for _ in 0..b.count {
         // `Section::find` read every number of the block, so none is missing here.
         let tag = s.size_t().unwrap_or(0);
-        let mut nodes = [0; N];
-        for slot in &mut nodes {
+        let mut at = [0; N];
+        for slot in &mut at {
             *slot = node_of(tag, s.size_t().unwrap_or(0))?;
         }
         let entity = b.entity;
-        list.push(RawElement { tag, nodes, entity });
+        list.push(RawElement { tag, at, entity });
     }
     Ok(())
 }

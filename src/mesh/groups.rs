@@ -59,7 +59,7 @@ pub(super) fn fill_groups<const F: usize>(
         if member.is_empty() {
             continue;
         }
-        let f = el.nodes.map(|n| new_index[n]);
+        let f = el.nodes().map(|n| new_index[n]);
         let found = if f.contains(&UNUSED) { None } else { lookup(f) };
         for &g in &member {
             misfits[g].elements += 1;
@@ -68,7 +68,7 @@ pub(super) fn fill_groups<const F: usize>(
             Some((dir, 1)) => dir,
             other => {
                 let pts: Vec<String> = el
-                    .nodes
+                    .nodes()
                     .iter()
                     .map(|&n| fmt_point(raw.nodes[n], F))
                     .collect();

@@ -634,7 +634,7 @@ fn renumber<const N: usize>(
 ) -> (Vec<usize>, Vec<[f64; 3]>) {
     let mut new_index = vec![UNUSED; raw_nodes.len()];
     for t in cells {
-        for &n in &t.nodes {
+        for n in t.nodes() {
             new_index[n] = 0;
         }
     }

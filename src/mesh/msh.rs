@@ -443,7 +443,7 @@ fn add_nodes(
     fmt: Format,
     nodes: &mshio::Nodes<u64, i32, f64>,
     raw: &mut RawMesh,
-) -> crate::Result<HashMap<u64, usize>> {
+) -> crate::Result<HashMap<u64, u32>> {
     let tags = scan_node_tags(bytes, fmt).ok_or_else(|| {
         corrupt(
             path,
@@ -460,7 +460,7 @@ fn add_nodes(
             ),
         ));
     }
-    let mut index: HashMap<u64, usize> = HashMap::new();
+    let mut index: HashMap<u64, u32> = HashMap::new();
     for (block, tags) in nodes.node_blocks.iter().zip(&tags) {
         if block.nodes.len() != tags.len() {
             return Err(corrupt(
@@ -469,7 +469,14 @@ fn add_nodes(
             ));
         }
         for (node, &tag) in block.nodes.iter().zip(tags) {
-            if index.insert(tag, raw.nodes.len()).is_some() {
+            let at = u32::try_from(raw.nodes.len()).map_err(|_| {
+                Error::input(format!(
+                    "mesh file '{}' has more than 2^32 nodes, more than viscontact indexes: \
+                     split the body or use a coarser mesh",
+                    path.display()
+                ))
+            })?;
+            if index.insert(tag, at).is_some() {
                 return Err(corrupt(
                     path,
                     format!("node tag {tag} appears twice in $Nodes"),
@@ -569,7 +576,7 @@ mod tests {
                    1 0 0\n0 1 0\n0 0 0\n$EndNodes\n$Elements\n1 1 1 1\n2 1 2 1\n1 1 2 3\n\
                    $EndElements\n";
         let raw = read_raw(Path::new("t.msh"), src.as_bytes()).unwrap();
-        let t = raw.triangles[0].nodes;
+        let t = raw.triangles[0].nodes();
         assert_eq!(raw.nodes[t[0]], [0.0, 0.0, 0.0]);
         assert_eq!(raw.nodes[t[1]], [1.0, 0.0, 0.0]);
         assert_eq!(raw.nodes[t[2]], [0.0, 1.0, 0.0]);
@@ -608,7 +615,7 @@ mod elements_tests {
         list: &[RawElement<N>],
         tags: &[u64],
     ) -> Vec<(u64, Vec<u64>, (i32, i32))> {
-        let node_tags = |e: &RawElement<N>| e.nodes.iter().map(|&i| tags[i]).collect();
+        let node_tags = |e: &RawElement<N>| e.nodes().iter().map(|&i| tags[i]).collect();
         list.iter()
             .map(|e| (e.tag, node_tags(e), e.entity))
             .collect()
@@ -687,12 +694,12 @@ mod elements_tests {
         )
         .unwrap();
         assert_eq!(raw.lines.len(), 1);
-        assert_eq!(raw.lines[0].nodes, [0, 1]);
+        assert_eq!(raw.lines[0].nodes(), [0, 1]);
         assert_eq!(
             raw.triangles.iter().map(|t| t.tag).collect::<Vec<_>>(),
             [3, 4]
         );
-        assert_eq!(raw.triangles[1].nodes, [1, 3, 2]);
+        assert_eq!(raw.triangles[1].nodes(), [1, 3, 2]);
         assert_eq!(raw.triangles[1].entity, (2, 1));
         assert_eq!(raw.triangles.capacity(), 2);
     }

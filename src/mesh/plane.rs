@@ -115,7 +115,7 @@ fn orient_triangles(
     let mut flipped = 0;
     let mut degenerate = Vec::new();
     for t in &raw.triangles {
-        let mut tri = t.nodes.map(|n| new_index[n]);
+        let mut tri = t.nodes().map(|n| new_index[n]);
         let [a, b, c] = tri.map(|n| nodes[n]);
         let area2 = 2.0 * signed_area(a, b, c);
         let lmax = [(a, b), (b, c), (c, a)]
@@ -132,7 +132,7 @@ fn orient_triangles(
     }
     if let Some(t) = degenerate.first() {
         let pts: Vec<String> = t
-            .nodes
+            .nodes()
             .iter()
             .map(|&n| fmt_point(raw.nodes[n], 2))
             .collect();
@@ -165,7 +165,7 @@ fn edge_uses(
         (triangles.iter().enumerate())
             .flat_map(|(k, tri)| [0, 1, 2].map(|i| (k, [tri[i], tri[(i + 1) % 3]])))
     };
-    let asked = (raw.lines.iter()).map(|l| l.nodes.map(|n| new_index[n]));
+    let asked = (raw.lines.iter()).map(|l| l.nodes().map(|n| new_index[n]));
     let edges =
         survey(uses, nodes.len(), asked, |a, b| a == b).ok_or_else(|| too_many_nodes(file))?;
     let tri_tag = |k: usize| tags[k];

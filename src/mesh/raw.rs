@@ -24,13 +24,23 @@ pub(crate) struct RawMesh {
 pub(crate) struct RawElement<const N: usize> {
     /// The element tag in the file (for messages).
     pub tag: u64,
-    pub nodes: [usize; N],
+    /// The nodes' positions in [`RawMesh::nodes`] ([`RawElement::nodes`]): 32 bytes a
+    /// tetrahedron, where positions as `usize` took 48, and a read holds every cell as read
+    /// beside the cells oriented (docs/performance.md, "Reading the mesh").
+    pub at: [u32; N],
     /// `(dim, tag)` of the entity the element belongs to.
     pub entity: (i32, i32),
 }
 
+impl<const N: usize> RawElement<N> {
+    /// The nodes' positions in [`RawMesh::nodes`].
+    pub fn nodes(&self) -> [usize; N] {
+        self.at.map(|n| n as usize)
+    }
+}
+
 /// What a mesh keeps of its cells as read once their nodes are oriented: each one's tag
-/// in the file (for messages) and entity, 16 bytes a cell where the cell as read held 48
+/// in the file (for messages) and entity, 16 bytes a cell where the cell as read held 32
 /// (a tetrahedron), which the faces' records that come next need more
 /// (docs/performance.md, "Reading the mesh").
 pub(crate) struct CellsRead {

@@ -110,7 +110,7 @@ fn orient_tetrahedra(
     let mut flipped = 0;
     let mut flat = Vec::new();
     for t in &raw.tetrahedra {
-        let mut tet = t.nodes.map(|n| new_index[n]);
+        let mut tet = t.nodes().map(|n| new_index[n]);
         let p = tet.map(|n| nodes[n]);
         let v6 = volume6(p);
         let mut lmax: f64 = 0.0;
@@ -133,7 +133,7 @@ fn orient_tetrahedra(
     }
     if let Some(t) = flat.first() {
         let pts: Vec<String> = t
-            .nodes
+            .nodes()
             .iter()
             .map(|&n| fmt_point(raw.nodes[n], 3))
             .collect();
@@ -166,7 +166,7 @@ fn face_uses(
         (tetrahedra.iter().enumerate())
             .flat_map(|(k, tet)| FACES.map(|local| (k, local.map(|i| tet[i]))))
     };
-    let asked = (raw.triangles.iter()).map(|t| t.nodes.map(|n| new_index[n]));
+    let asked = (raw.triangles.iter()).map(|t| t.nodes().map(|n| new_index[n]));
     // The same face seen from the other side is an odd permutation: the same side, an even one.
     let same_side =
         |a: [u32; 3], b: [u32; 3]| (0..3).any(|r| [a[r], a[(r + 1) % 3], a[(r + 2) % 3]] == b);
