@@ -15,7 +15,7 @@
 //! and their neighbours' alone gets the rows of those and of Γ3's alone, with its part of
 //! the cells ([`Layout::keep_rows_of_first`]), and finds one by binary search. A rank's vectors cross to PETSc's order at its
 //! own rows alone, at every PETSc call, and a solved step's rows come back whole to rank 0
-//! in that order once a step (`from_rows`).
+//! in that order once a step ([`Layout::to_unknowns_order`]).
 
 use super::PetscInt;
 use crate::fem::{CellSource, Discretization, Sparse};
@@ -159,8 +159,8 @@ impl Layout {
 
     /// This layout read at the places of a rank's vectors that hold the unknowns `places`
     /// alone (increasing; `petsc::Reads::held`): [`Layout::row`] of place k is then the row
-    /// of unknown `places[k]`, and [`Layout::from_rows`] fills those places, 4 bytes a place
-    /// and not an unknown of the whole on a follower. What reads every unknown (`own`,
+    /// of unknown `places[k]`, 4 bytes a place and not an unknown of the whole on a
+    /// follower. What reads every unknown (`own`,
     /// `unknowns_of`, `rows_of`) is the setup's, done before. A place past the unknowns (a
     /// prescribed dof's) has no row.
     pub fn placed(self, places: &[usize]) -> Layout {
@@ -260,12 +260,38 @@ impl Layout {
         self.row.is_some()
     }
 
-    /// x ← `rows`, from the rows' order (x at the places where [`Layout::placed`]).
-    pub fn from_rows(&self, rows: &[f64], x: &mut [f64]) {
-        assert!(self.kept.is_none(), "rows placed, not kept");
-        match &self.row {
-            Some(row) => (x.iter_mut().zip(row)).for_each(|(v, &r)| *v = rows[r as usize]),
-            None => x.copy_from_slice(rows),
+    /// x ← x from the rows' order to the unknowns', in place: x holds every row (a solved
+    /// step's, gathered), and x_i ← x_row(i) along each cycle of the permutation, a bit a
+    /// value marking those done, where a copy in the rows' order held 8 bytes an unknown
+    /// of the whole (docs/cluster.md, "Memory per rank", 51.).
+    pub fn to_unknowns_order(&self, x: &mut [f64]) {
+        assert!(self.kept.is_none(), "every unknown's row, not kept");
+        let Some(row) = &self.row else {
+            return;
+        };
+        assert_eq!(x.len(), row.len(), "every row, not placed");
+        let mut done = vec![0_u64; x.len().div_ceil(64)];
+        let is_done = |done: &[u64], i: usize| done[i / 64] >> (i % 64) & 1 == 1;
+        for start in 0..x.len() {
+            if is_done(&done, start) {
+                continue;
+            }
+            let first = x[start];
+            let mut i = start;
+            loop {
+                done[i / 64] |= 1 << (i % 64);
+                let r = row[i] as usize;
+                if r == start {
+                    x[i] = first;
+                    break;
+                }
+                assert!(
+                    !is_done(&done, r),
+                    "the rows are a permutation of the unknowns"
+                );
+                x[i] = x[r];
+                i = r;
+            }
         }
     }
 
@@ -654,6 +680,33 @@ mod tests {
         }
     }
 
+    /// A vector in the rows' order goes to the unknowns' order in place as a copy read
+    /// at each unknown's row would put it, for permutations of one long cycle, many short
+    /// ones and none.
+    #[test]
+    fn rows_go_to_the_unknowns_order_in_place() {
+        let mut rng = SplitMix(51);
+        let n = 1000;
+        let mut layouts = vec![shuffled(n, 4, &mut rng), shuffled(1, 1, &mut rng)];
+        let one_cycle: Vec<u32> = (0..n as u32).map(|i| (i + 1) % n as u32).collect();
+        let swaps: Vec<u32> = (0..n as u32).map(|i| i ^ 1).collect();
+        for row in [one_cycle, swaps, (0..n as u32).collect()] {
+            layouts.push(Layout {
+                row: Some(row),
+                ..layouts[0].clone()
+            });
+        }
+        for layout in &layouts {
+            let m = layout.n_unknowns();
+            let rows: Vec<f64> = (0..m).map(|_| rng.next() as f64).collect();
+            let mut x = rows.clone();
+            layout.to_unknowns_order(&mut x);
+            for (i, v) in x.iter().enumerate() {
+                assert_eq!(v.to_bits(), rows[layout.row(i)].to_bits(), "unknown {i}");
+            }
+        }
+    }
+
     #[test]
     fn a_placed_layout_reads_the_rows_of_its_places() {
         let mut rng = SplitMix(38);
@@ -663,13 +716,9 @@ mod tests {
             .filter(|_| rng.next().is_multiple_of(3))
             .chain([31])
             .collect();
-        let rows: Vec<f64> = (0..30).map(|r| r as f64).collect();
         let placed = layout.clone().placed(&places);
-        let mut x = vec![0.0; places.len() - 1];
-        placed.from_rows(&rows, &mut x);
         for (k, &i) in places[..places.len() - 1].iter().enumerate() {
             assert_eq!(placed.row(k), layout.row(i));
-            assert_eq!(x[k], layout.row(i) as f64);
         }
         assert_eq!(placed.row(places.len() - 1), u32::MAX as usize);
         assert!(placed.permutes());

@@ -307,16 +307,13 @@ pub struct Krylov {
     /// Whether K_A's solve in progress is to be given up (`Krylov::give_up_when`).
     give_up: Option<GiveUp>,
     /// Where the caller's places stand among PETSc's rows (its unknowns', or those it holds
-    /// alone: `Layout::placed`), and this rank's rows among them; on
-    /// several ranks, where it receives every rank's rows of a solved step (`complete`),
-    /// a whole vector in the rows' order (sized at the first step), and where the calls
+    /// alone: `Layout::placed`), and this rank's rows among them; where the calls
     /// need one, a vector of this rank's rows (a right side's, a product's): on several
     /// ranks, or for a right side or a product that is not a whole vector of the caller's
     /// (`solve_constrained`, `mult_at`); on several ranks, a solve's x, and a product's,
     /// in this rank's rows too.
     layout: Layout,
     mine: std::ops::Range<usize>,
-    rows: Vec<f64>,
     own: Vec<f64>,
     own_x: Vec<f64>,
     /// On several ranks, how this rank's rows of a solution reach the ranks that read them.
@@ -412,7 +409,6 @@ impl Krylov {
             options: settings.options.clone(),
             give_up: None,
             mine,
-            rows: Vec::new(),
             own: Vec::new(),
             own_x: Vec::new(),
             spread,
@@ -815,26 +811,22 @@ impl Krylov {
 
     /// A solved step's w at every unknown on rank 0, and on every rank where the followers'
     /// histories hold every dof (not `Reads::held`), from the ranks that hold their rows
-    /// (collective, once a step): each rank's rows gathered in PETSc's order, in the
-    /// buffer a product with K reads; nothing on one rank.
+    /// (collective, once a step): each rank's rows gathered into w in PETSc's order, then
+    /// put in the unknowns' order in place (`Layout::to_unknowns_order`); nothing on one
+    /// rank.
     pub fn complete(&mut self, w: &mut [f64]) -> Result<()> {
         let Some(spread) = &self.spread else {
             return Ok(());
         };
         spread.own_of(w, &mut self.own_x);
-        let receives = spread.receives();
-        if receives {
-            self.rows.resize(self.n, 0.0);
-        }
         let cut = (spread.counts.as_slice(), spread.displs.as_slice());
-        gather(
-            &self.own_x,
-            &mut self.rows,
-            cut,
-            spread.whole == Whole::Every,
-        )?;
-        if receives {
-            self.layout.from_rows(&self.rows, w);
+        let every = spread.whole == Whole::Every;
+        match spread.receives() {
+            true => {
+                gather(&self.own_x, w, cut, every)?;
+                self.layout.to_unknowns_order(w);
+            }
+            false => gather(&self.own_x, &mut [], cut, every)?,
         }
         Ok(())
     }
