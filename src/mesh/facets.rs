@@ -127,11 +127,11 @@ impl<const F: usize> Misuse<F> {
 
 impl<const F: usize> Facets<F> {
     /// The facets of the cells, each cell's facets in its orientation (`facets`: the cell
-    /// and the facet's nodes); None where a node's index does not fit 32 bits, or a cell's
-    /// 29 (beside its facet's ordering).
-    fn new(facets: impl Iterator<Item = (usize, [usize; F])>) -> Option<Facets<F>> {
+    /// and the facet's nodes, `count` of them); None where a node's index does not fit 32
+    /// bits, or a cell's 29 (beside its facet's ordering).
+    fn new(facets: impl Iterator<Item = (usize, [usize; F])>, count: usize) -> Option<Facets<F>> {
         let orders = orderings::<F>();
-        let mut uses = Vec::with_capacity(facets.size_hint().0);
+        let mut uses = Vec::with_capacity(count);
         for (cell, dir) in facets {
             let dir = try_u32(dir)?;
             let mut key = dir;
@@ -262,8 +262,8 @@ fn survey_in_passes<const F: usize, I: Iterator<Item = (usize, [usize; F])>>(
         found: Vec::with_capacity(asked.len()),
     };
     let mut asked = asked.into_iter().peekable();
-    for range in pass_ranges(uses().map(|(_, f)| lowest(&f)), n_nodes, most) {
-        let pass = Facets::new(uses().filter(|(_, f)| range.contains(&lowest(f))))?;
+    for (range, count) in pass_ranges(uses().map(|(_, f)| lowest(&f)), n_nodes, most) {
+        let pass = Facets::new(uses().filter(|(_, f)| range.contains(&lowest(f))), count)?;
         // The passes go up in the facets' order, so a tie keeps the earlier facet, as one
         // pass over every record does.
         if let Some(m) = pass.misuse(same_side) {
@@ -281,31 +281,31 @@ fn survey_in_passes<const F: usize, I: Iterator<Item = (usize, [usize; F])>>(
     Some(survey)
 }
 
-/// The ranges of lowest nodes of the passes, in order and together every node: each holds
-/// at most `most` records but where a bucket of consecutive nodes alone has more (the
-/// `lowest` nodes of the uses counted in up to 2^16 buckets below `n_nodes`).
+/// The ranges of lowest nodes of the passes, in order and together every node, each with
+/// its count of records: at most `most` but where a bucket of consecutive nodes alone has
+/// more (the `lowest` nodes of the uses counted in up to 2^16 buckets below `n_nodes`,
+/// the last bucket taking those at or above it).
 fn pass_ranges(
     lowest: impl Iterator<Item = usize>,
     n_nodes: usize,
     most: usize,
-) -> Vec<Range<usize>> {
+) -> Vec<(Range<usize>, usize)> {
     let width = n_nodes.div_ceil(1 << 16).max(1);
-    let mut counts = vec![0_usize; n_nodes.div_ceil(width)];
+    let mut counts = vec![0_usize; n_nodes.div_ceil(width).max(1)];
+    let last = counts.len() - 1;
     for n in lowest {
-        if let Some(c) = counts.get_mut(n / width) {
-            *c += 1;
-        }
+        counts[(n / width).min(last)] += 1;
     }
     let mut ranges = Vec::new();
     let (mut start, mut held) = (0, 0);
     for (b, &c) in counts.iter().enumerate() {
         if held + c > most && held > 0 {
-            ranges.push(start..b * width);
+            ranges.push((start..b * width, held));
             (start, held) = (b * width, 0);
         }
         held += c;
     }
-    ranges.push(start..usize::MAX);
+    ranges.push((start..usize::MAX, held));
     ranges
 }
 
@@ -326,7 +326,7 @@ mod tests {
     fn edges(triangles: &[[usize; 3]]) -> Facets<2> {
         let uses = (triangles.iter().enumerate())
             .flat_map(|(k, t)| [0, 1, 2].map(|i| (k, [t[i], t[(i + 1) % 3]])));
-        Facets::new(uses).unwrap()
+        Facets::new(uses, 3 * triangles.len()).unwrap()
     }
 
     #[test]

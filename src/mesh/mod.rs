@@ -615,14 +615,6 @@ pub fn fmt_point(p: [f64; 3], dim: usize) -> String {
 
 // What the 2D and 3D builders (`plane.rs`, `solid.rs`) share besides the groups.
 
-/// A mesh whose node indices do not fit 32 bits, or cell indices 29 (`facets::Facets`).
-fn too_many_nodes(file: &impl std::fmt::Display) -> Error {
-    Error::input(format!(
-        "mesh file '{file}' has more than 2^32 nodes or 2^29 cells, more than viscontact \
-         indexes: split the body or use a coarser mesh"
-    ))
-}
-
 /// The index of a node no cell uses.
 const UNUSED: usize = usize::MAX;
 

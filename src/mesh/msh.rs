@@ -28,7 +28,7 @@ use std::path::Path;
 use mshio::{ElementType, MshParserError};
 
 use super::elements::{Section, Unread};
-use super::raw::{find_section, Format, RawMesh, Scanner};
+use super::raw::{find_section, too_many_nodes, Format, RawMesh, Scanner};
 use crate::Error;
 
 /// Checks the `$MeshFormat` header: an MSH file, version 4.1, ASCII or binary with a
@@ -469,13 +469,7 @@ fn add_nodes(
             ));
         }
         for (node, &tag) in block.nodes.iter().zip(tags) {
-            let at = u32::try_from(raw.nodes.len()).map_err(|_| {
-                Error::input(format!(
-                    "mesh file '{}' has more than 2^32 nodes, more than viscontact indexes: \
-                     split the body or use a coarser mesh",
-                    path.display()
-                ))
-            })?;
+            let at = u32::try_from(raw.nodes.len()).map_err(|_| too_many_nodes(&path.display()))?;
             if index.insert(tag, at).is_some() {
                 return Err(corrupt(
                     path,

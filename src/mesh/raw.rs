@@ -41,8 +41,8 @@ impl<const N: usize> RawElement<N> {
 
 /// What a mesh keeps of its cells as read once their nodes are oriented: each one's tag
 /// in the file (for messages) and entity, 16 bytes a cell where the cell as read held 32
-/// (a tetrahedron), which the faces' records that come next need more
-/// (docs/performance.md, "Reading the mesh").
+/// (a tetrahedron), freed before the faces' passes (docs/performance.md, "Reading the
+/// mesh").
 pub(crate) struct CellsRead {
     pub tags: Vec<u64>,
     pub entities: Vec<(i32, i32)>,
@@ -56,6 +56,15 @@ impl CellsRead {
             entities: cells.iter().map(|c| c.entity).collect(),
         }
     }
+}
+
+/// A mesh whose node indices do not fit 32 bits ([`RawElement::at`], `facets::Facets`),
+/// or cell indices 29 (`facets::Facets`).
+pub(crate) fn too_many_nodes(file: &impl std::fmt::Display) -> crate::Error {
+    crate::Error::input(format!(
+        "mesh file '{file}' has more than 2^32 nodes or 2^29 cells, more than viscontact \
+         indexes: split the body or use a coarser mesh"
+    ))
 }
 
 /// Encoding details from `$MeshFormat`.

@@ -12,8 +12,8 @@ use super::facets::{survey, Survey};
 use super::groups::{fill_groups, group_table, other_groups, Words};
 use super::physical_names::PhysicalName;
 use super::quality::Quality;
-use super::raw::{CellsRead, RawMesh};
-use super::{check_finite, fmt_point, renumber, too_many_nodes, Mesh, Places};
+use super::raw::{too_many_nodes, CellsRead, RawMesh};
+use super::{check_finite, fmt_point, renumber, Mesh, Places};
 use crate::{Error, Result};
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
