@@ -30,6 +30,9 @@ use std::path::{Path, PathBuf};
 const MAGIC: &str = "viscontact checkpoint history";
 /// Rows of a history file's first allocation (or the run's steps + 1, if fewer).
 const FIRST_CAPACITY: usize = 64;
+/// The most bytes of rows a write, a read or a grown copy holds at once: a copy of the
+/// whole past had doubled the writer's memory at each growth (several GB on a large run).
+const CHUNK_BYTES: usize = if cfg!(test) { 24 } else { 64 << 20 };
 
 /// The append-only history file of this run's directory.
 pub(super) struct HistoryFile {
@@ -71,7 +74,20 @@ impl HistoryFile {
         capacity: usize,
         past: &[Vec<f64>],
     ) -> Result<HistoryFile> {
-        let capacity = capacity.max(past.len()).max(1);
+        Self::create_after(path, (run_id, n_free), capacity, None, past)
+    }
+
+    /// [`HistoryFile::create`], the file's first rows copied from rows 0..n of `kept`
+    /// (`Some((old, n))`: the file this one grows from) a chunk at a time, then `past`.
+    fn create_after(
+        path: &Path,
+        (run_id, n_free): (&str, usize),
+        capacity: usize,
+        kept: Option<(&HistoryFile, usize)>,
+        past: &[Vec<f64>],
+    ) -> Result<HistoryFile> {
+        let copied = kept.map_or(0, |(_, n)| n);
+        let capacity = capacity.max(copied + past.len()).max(1);
         let tmp = path.with_file_name(format!("{HISTORY_FILE_NAME}.tmp"));
         let write = || -> hdf5_metno::Result<u64> {
             let f = h5_create_sealed(&tmp)?;
@@ -114,19 +130,31 @@ impl HistoryFile {
             offset,
             row_bytes: 8 * n_free as u64,
         };
-        file.write_rows(0, past).map_err(failed)?;
-        file.seal(run_id).map_err(failed)?;
-        fsync_file(&tmp).map_err(failed)?;
+        let mut fill = || -> Result<()> {
+            if let Some((old, n)) = kept {
+                for start in (0..n).step_by(old.rows_per_chunk()) {
+                    file.push(&old.read_rows(start..n.min(start + old.rows_per_chunk()))?)?;
+                }
+            }
+            file.push(past)?;
+            file.seal(run_id)?;
+            fsync_file(&tmp)
+        };
+        fill().map_err(failed)?;
         std::fs::rename(&tmp, path).map_err(|e| failed(Error::io(path, e)))?;
         if let Some(dir) = path.parent() {
             fsync_dir(dir);
         }
         file.path = path.to_path_buf();
-        file.rows = past.len();
-        for row in past {
-            file.hash.f64s(row);
-        }
         Ok(file)
+    }
+
+    /// Writes `rows` after the rows this file holds, and hashes them.
+    fn push(&mut self, rows: &[Vec<f64>]) -> Result<()> {
+        self.write_rows(self.rows, rows)?;
+        rows.iter().for_each(|row| self.hash.f64s(row));
+        self.rows += rows.len();
+        Ok(())
     }
 
     /// The history file of a checkpoint in `dir`, whose rows 0..rows hash to `hash` (resume
@@ -170,10 +198,11 @@ impl HistoryFile {
             )));
         }
         if end > self.capacity {
-            let mut past = self.read_rows(from)?;
-            past.extend_from_slice(rows);
+            // Rows 0..from copied a chunk at a time: never every row in memory at once.
             let capacity = grown_capacity(self.capacity, end, steps);
-            *self = HistoryFile::create(&self.path, run_id, self.n_free(), capacity, &past)?;
+            let sizes = (run_id, self.n_free());
+            *self =
+                HistoryFile::create_after(&self.path, sizes, capacity, Some((self, from)), rows)?;
             return Ok(());
         }
         self.write_rows(from, rows)?;
@@ -190,36 +219,48 @@ impl HistoryFile {
         (self.row_bytes / 8) as usize
     }
 
-    /// Positioned writes of rows `from..` into the rows block.
+    /// Rows a chunk of at most [`CHUNK_BYTES`] holds (at least one).
+    fn rows_per_chunk(&self) -> usize {
+        (CHUNK_BYTES / self.row_bytes.max(1) as usize).max(1)
+    }
+
+    /// Positioned writes of rows `from..` into the rows block, a chunk at a time.
     fn write_rows(&self, from: usize, rows: &[Vec<f64>]) -> Result<()> {
         let f = std::fs::OpenOptions::new()
             .write(true)
             .open(&self.path)
             .map_err(|e| Error::io(&self.path, e))?;
-        let bytes: Vec<u8> = rows
-            .iter()
-            .flatten()
-            .flat_map(|x| x.to_le_bytes())
-            .collect();
-        f.write_all_at(&bytes, self.offset + from as u64 * self.row_bytes)
-            .map_err(|e| Error::io(&self.path, e))
+        let per = self.rows_per_chunk();
+        for (c, chunk) in rows.chunks(per).enumerate() {
+            let bytes: Vec<u8> = (chunk.iter().flatten())
+                .flat_map(|x| x.to_le_bytes())
+                .collect();
+            let at = self.offset + (from + c * per) as u64 * self.row_bytes;
+            f.write_all_at(&bytes, at)
+                .map_err(|e| Error::io(&self.path, e))?;
+        }
+        Ok(())
     }
 
-    /// Rows 0..n, read back by offset.
-    fn read_rows(&self, n: usize) -> Result<Vec<Vec<f64>>> {
+    /// Rows `range`, read back by offset a chunk at a time.
+    fn read_rows(&self, range: std::ops::Range<usize>) -> Result<Vec<Vec<f64>>> {
         let f = std::fs::File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
-        let mut bytes = vec![0u8; n * self.row_bytes as usize];
-        f.read_exact_at(&mut bytes, self.offset)
-            .map_err(|e| Error::io(&self.path, e))?;
-        Ok(bytes
-            .chunks(self.row_bytes.max(1) as usize)
-            .map(|r| {
+        let (per, row) = (self.rows_per_chunk(), self.row_bytes as usize);
+        let mut rows = Vec::with_capacity(range.len());
+        let mut bytes = vec![0u8; per.min(range.len()) * row];
+        for start in range.clone().step_by(per) {
+            let bytes = &mut bytes[..(range.end - start).min(per) * row];
+            f.read_exact_at(bytes, self.offset + start as u64 * self.row_bytes)
+                .map_err(|e| Error::io(&self.path, e))?;
+            rows.extend(bytes.chunks(row.max(1)).map(|r| {
                 r.chunks(8)
                     .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
                     .collect()
-            })
-            .take(n)
-            .collect())
+            }));
+        }
+        // A row of no values (no free dof) takes no bytes.
+        rows.resize(range.len(), Vec::new());
+        Ok(rows)
     }
 
     /// Writes the user block: run id, layout and the CRC of every byte outside the rows.
@@ -345,7 +386,7 @@ pub(super) fn read_history(
         return Err(refuse(path, "missing".into()));
     }
     let file = HistoryFile::open(path, id, n_free, rows, hash)?;
-    let past = file.read_rows(rows)?;
+    let past = file.read_rows(0..rows)?;
     let mut h = Hash64::default();
     for row in &past {
         h.f64s(row);
@@ -360,4 +401,30 @@ pub(super) fn read_history(
         ));
     }
     Ok(past)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_grown_file_copies_its_rows_a_chunk_at_a_time() {
+        // One value a row: a chunk holds 3 rows in tests (`CHUNK_BYTES`), so the copy and
+        // the reads end in a part of a chunk.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(HISTORY_FILE_NAME);
+        let rows: Vec<Vec<f64>> = (0..8).map(|j| vec![j as f64 + 0.25 - 1e-300]).collect();
+        let mut file = HistoryFile::create(&path, "run", 1, 4, &rows[..3]).unwrap();
+        file.append(3, &rows[3..4], "run", 100).unwrap();
+        assert_eq!((file.capacity, file.rows), (4, 4));
+        // Row 2 sent again, as a checkpoint's rows can be, and the file grows.
+        file.append(2, &rows[2..], "run", 100).unwrap();
+        assert_eq!((file.capacity, file.rows), (64, 8));
+        assert_eq!(file.read_rows(0..8).unwrap(), rows);
+        assert_eq!(file.read_rows(4..7).unwrap(), rows[4..7]);
+        let mut hash = Hash64::default();
+        rows.iter().for_each(|row| hash.f64s(row));
+        assert_eq!(file.hash.0, hash.0);
+        assert!(!dir.path().join(format!("{HISTORY_FILE_NAME}.tmp")).exists());
+    }
 }

@@ -40,7 +40,8 @@
 //! which records how many rows are valid (`/memory/history_rows` = n) and a running 64-bit
 //! hash of them (`/memory/history_hash`). A torn append can only touch rows beyond the
 //! recorded length, which resume ignores and overwrites. The capacity grows with the run by
-//! powers of two (a new file, rows copied, temp + rename; `history_file.rs`), so the old
+//! powers of two (a new file, rows copied a chunk at a time, temp + rename;
+//! `history_file.rs`), so the old
 //! checkpoint stays valid against the new file. `checkpoint.h5` holds an HDF5 external link
 //! `/memory/past_displacements` to it, so h5py opening the checkpoint finds the history there.
 //!
