@@ -32,7 +32,7 @@ const MAGIC: &str = "viscontact checkpoint history";
 const FIRST_CAPACITY: usize = 64;
 /// The most bytes of rows a write, a read or a grown copy holds at once: a copy of the
 /// whole past had doubled the writer's memory at each growth (several GB on a large run).
-const CHUNK_BYTES: usize = if cfg!(test) { 24 } else { 64 << 20 };
+const CHUNK_BYTES: usize = if cfg!(test) { 24 } else { 8 << 20 };
 
 /// The append-only history file of this run's directory.
 pub(super) struct HistoryFile {
