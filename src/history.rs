@@ -44,11 +44,23 @@ pub enum Memory {
     /// No relaxation term (Remark 2.5: no memory state at all).
     None,
     Prony(Vec<PronyTerm>),
-    /// r(l·k) for l = 1, 2, … (grown as needed) and the past displacements u_0..u_{n−1}.
+    /// r(l·k) for l = 1, 2, … (grown as needed) and the past displacements u_0..u_{n−1},
+    /// each at the dofs the history holds, or where `kept` says (rank 0 of several) the
+    /// first of them at its dofs alone.
     Direct {
         r_lag: Vec<f64>,
         past: Vec<Vec<f64>>,
+        kept: Option<Kept>,
     },
+}
+
+/// Where rank 0 of several, whose history holds every dof, keeps the direct sum's past
+/// rows that a checkpoint holds ([`History::keep_saved_past_at`]): rows `..rows` at `dofs`
+/// alone (increasing), the later ones whole.
+#[derive(Clone, Debug)]
+pub struct Kept {
+    dofs: Vec<usize>,
+    rows: usize,
 }
 
 /// The memory a checkpoint holds, as [`Plan::resumed`] needs it.
@@ -392,7 +404,9 @@ pub fn memory_mismatch(what: &str) -> String {
 /// neighbours, u_n and its compensated sum those too. Each value there is updated by the
 /// same arithmetic dof by dof, so it has the bits of the whole history's. Rank 0 holds
 /// every dof: it writes the checkpoints, and history.csv's reactions (and its stresses,
-/// where the frames are not in pieces) read the whole u_n and m_n.
+/// where the frames are not in pieces) read the whole u_n and m_n; a direct sum's past
+/// rows, once a checkpoint holds them, it may keep at the dofs it reads alone
+/// ([`History::keep_saved_past_at`]).
 #[derive(Clone, Debug)]
 pub struct History {
     pub k: f64,
@@ -480,6 +494,7 @@ impl History {
             Plan::Exact { .. } => Memory::Direct {
                 r_lag: Vec::new(),
                 past: Vec::new(),
+                kept: None,
             },
             _ if terms.is_empty() => Memory::None,
             _ => Memory::Prony(terms),
@@ -499,6 +514,55 @@ impl History {
         !matches!(self.memory, Memory::None)
     }
 
+    /// The dofs at which the direct sum's past rows a checkpoint holds are kept (None:
+    /// whole, or no direct sum).
+    pub fn past_dofs(&self) -> Option<&[usize]> {
+        match &self.memory {
+            Memory::Direct {
+                kept: Some(kept), ..
+            } => Some(&kept.dofs),
+            Memory::Direct { .. } => self.holds.dofs(),
+            _ => None,
+        }
+    }
+
+    /// Whether the memory keeps the past displacements (a direct sum).
+    pub fn keeps_past(&self) -> bool {
+        matches!(self.memory, Memory::Direct { .. })
+    }
+
+    /// On rank 0 of several, whose history holds every dof for its checkpoints: from now
+    /// on, keep each past row of the direct sum at `dofs` alone (increasing: all that its
+    /// steps and history.csv read of m_n) once a checkpoint holds it ([`History::past_saved`]).
+    /// m_n is then exact at `dofs` alone. Nothing changes without a direct sum.
+    pub fn keep_saved_past_at(&mut self, dofs: Vec<usize>) {
+        debug_assert!(
+            self.holds == Holds::Every,
+            "rank 0's history holds every dof"
+        );
+        if let Memory::Direct { kept, .. } = &mut self.memory {
+            *kept = Some(Kept { dofs, rows: 0 });
+        }
+    }
+
+    /// The direct sum's past rows `..saved` are in a checkpoint (or none is written): where
+    /// [`History::keep_saved_past_at`] said so, each is kept at its dofs alone from now on,
+    /// the same values there.
+    pub fn past_saved(&mut self, saved: usize) {
+        if let Memory::Direct {
+            past,
+            kept: Some(kept),
+            ..
+        } = &mut self.memory
+        {
+            let end = saved.min(past.len());
+            for row in past.iter_mut().take(end).skip(kept.rows) {
+                *row = at(Some(&kept.dofs), row);
+            }
+            kept.rows = kept.rows.max(end);
+        }
+    }
+
     /// m_n of every memory group into `out` (overwritten), group g's at g·len(u_n), at the
     /// dofs of u_n (the body's kernel `kernel` is the direct sum's). Returns false (and
     /// leaves `out` alone) without memory.
@@ -514,7 +578,7 @@ impl History {
                 }
                 true
             }
-            Memory::Direct { r_lag, past } => {
+            Memory::Direct { r_lag, past, kept } => {
                 let kernel = kernel.expect("a direct-sum memory has a kernel");
                 let n = self.n;
                 while r_lag.len() < n {
@@ -522,9 +586,15 @@ impl History {
                     r_lag.push(kernel.eval(l as f64 * self.k));
                 }
                 out.fill(0.0);
-                // m_n = k Σ_{j<n} r((n − j) k) u_j
+                // m_n = k Σ_{j<n} r((n − j) k) u_j, at every dof a row holds (rank 0 of
+                // several reads it at those of its first rows alone).
+                let shrunk = kept.as_ref().map_or(0, |kept| kept.rows);
                 for (j, uj) in past.iter().enumerate() {
-                    add_at(out, self.holds.memory_in_u(), self.k * r_lag[n - j - 1], uj);
+                    let dofs = match kept {
+                        Some(kept) if j < shrunk => Some(&kept.dofs[..]),
+                        _ => self.holds.memory_in_u(),
+                    };
+                    add_at(out, dofs, self.k * r_lag[n - j - 1], uj);
                 }
                 true
             }
@@ -564,12 +634,18 @@ impl History {
                     *t = PronyTerm { m, ..s };
                 }
             }
-            (Memory::Direct { past, r_lag }, SavedMemory::Direct(rows)) => {
-                *past = match self.holds.dofs() {
-                    None => rows,
-                    dofs => rows.iter().map(|u| at(dofs, u)).collect(),
-                };
+            (Memory::Direct { past, r_lag, kept }, SavedMemory::Direct(rows)) => {
+                // Each row whole, or read at the dofs this history keeps it at already
+                // (`Checkpoint::saved` with `History::past_dofs`).
+                let dofs = kept.as_ref().map(|k| &k.dofs[..]).or(self.holds.dofs());
+                *past = (rows.into_iter())
+                    .map(|u| if u.len() == n_dofs { at(dofs, &u) } else { u })
+                    .collect();
                 r_lag.clear();
+                // The checkpoint holds every row.
+                if let Some(kept) = kept {
+                    kept.rows = past.len();
+                }
             }
             (_, SavedMemory::None) => return Err(mismatch("absent (no relaxation)")),
             (_, SavedMemory::Prony(_)) => return Err(mismatch("a Prony series")),
@@ -818,6 +894,79 @@ mod tests {
                 assert!(m.iter().all(|&x| x != 0.0));
             }
         }
+    }
+
+    #[test]
+    fn rank_0_keeps_the_saved_past_at_its_dofs_with_the_same_bits_there() {
+        // Rank 0 of several (`keep_saved_past_at`) against the whole direct sum, the rows
+        // saved at irregular steps and across a restore: m_n has the whole one's bits at
+        // the kept dofs, the saved rows hold those dofs alone, the rest every dof.
+        let k = 0.01;
+        let kernel = Kernel::Expr(Box::new(
+            crate::expr::Expr::parse("1/(1+s)", &["s"], "r").unwrap(),
+        ));
+        let plans = alone(Plan::Exact {
+            lags: Lags::new(&kernel, k, 60, false, "r").unwrap(),
+            fallback: None,
+        });
+        let dofs = vec![1, 2, 4];
+        let mut whole = History::new(5, k, &plans);
+        let mut kept = History::new(5, k, &plans);
+        kept.keep_saved_past_at(dofs.clone());
+        let (mut m, mut mk) = (vec![0.0; 5], vec![0.0; 5]);
+        let mut saved = 0;
+        for n in 0..60 {
+            if n == 40 {
+                // A resume: the checkpoint's rows whole, kept at the dofs once saved again.
+                // The rows read at the kept dofs alone (`Checkpoint::saved`).
+                let read_at = kept.past_dofs().unwrap().to_vec();
+                let rows = match &whole.memory {
+                    Memory::Direct { past, .. } => {
+                        past.iter().map(|u| at(Some(&read_at), u)).collect()
+                    }
+                    _ => unreachable!(),
+                };
+                let state = SavedHistory {
+                    n: whole.n,
+                    k,
+                    u: whole.u.clone(),
+                    u_sum: whole.u_sum.clone(),
+                    u_comp: whole.u_comp.clone(),
+                    memory: SavedMemory::Direct(rows),
+                };
+                kept.restore(state).unwrap();
+            }
+            assert!(whole.memory_into(Some(&kernel), &mut m));
+            assert!(kept.memory_into(Some(&kernel), &mut mk));
+            for &i in &dofs {
+                assert_eq!(m[i].to_bits(), mk[i].to_bits(), "n = {n}, dof {i}");
+            }
+            let w = [
+                (n as f64 * 0.3).cos(),
+                1.0,
+                -0.5 * n as f64,
+                0.25,
+                (n as f64).sqrt(),
+            ];
+            whole.advance(&w, None);
+            kept.advance(&w, None);
+            // Checkpoints at steps 3, 10, 11, 25, 44 (rows sent then: n + 1), none after;
+            // the resume's checkpoint holds its 40 rows.
+            if [3, 10, 11, 25, 44].contains(&n) {
+                saved = n + 1;
+            }
+            if n == 39 {
+                saved = 40;
+            }
+            kept.past_saved(saved);
+            let Memory::Direct { past, .. } = &kept.memory else {
+                unreachable!()
+            };
+            let lengths: Vec<usize> = past.iter().map(Vec::len).collect();
+            let expected: Vec<usize> = (0..=n).map(|j| if j < saved { 3 } else { 5 }).collect();
+            assert_eq!(lengths, expected, "n = {n}");
+        }
+        assert!(mk.iter().all(|&x| x != 0.0));
     }
 
     #[test]

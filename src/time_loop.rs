@@ -212,6 +212,13 @@ pub trait Observer {
         let _ = tl;
         Ok(())
     }
+
+    /// How many of the direct sum's past rows the observer's checkpoints hold (all: it
+    /// writes none). Rank 0 of several keeps those at some dofs alone
+    /// ([`TimeLoop::keep_saved_past_at`]).
+    fn past_saved(&self) -> usize {
+        usize::MAX
+    }
 }
 
 impl<F: FnMut(&Solved) -> Result<()>> Observer for F {
@@ -364,6 +371,7 @@ impl<'p> TimeLoop<'p> {
             self.advance();
             self.can_stop = true;
             observer.advanced(self)?;
+            self.history.past_saved(observer.past_saved());
             if stop {
                 return Ok(RunEnd::Stopped);
             }
@@ -382,6 +390,22 @@ impl<'p> TimeLoop<'p> {
             z: &self.z,
             z_before: &self.z_before,
         }
+    }
+
+    /// On rank 0 of several: keep each past row of a direct sum at `dofs` alone once a
+    /// checkpoint holds it (`History::keep_saved_past_at`: m_n is then exact there alone;
+    /// `dofs` must hold every dof whose m_n the steps and history.csv read).
+    /// `dofs` is asked only where the memory is a direct sum.
+    pub fn keep_saved_past_at(&mut self, dofs: impl FnOnce() -> Option<Vec<usize>>) {
+        if let Some(dofs) = self.history.keeps_past().then(dofs).flatten() {
+            self.history.keep_saved_past_at(dofs);
+        }
+    }
+
+    /// Where the history keeps a direct sum's past rows (None: whole): a resume reads
+    /// them there alone (`Checkpoint::saved`).
+    pub fn past_dofs(&self) -> Option<&[usize]> {
+        self.history.past_dofs()
     }
 
     /// Takes back the state a checkpoint saved (a resume), into this loop built from the

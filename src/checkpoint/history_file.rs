@@ -244,23 +244,33 @@ impl HistoryFile {
 
     /// Rows `range`, read back by offset a chunk at a time.
     fn read_rows(&self, range: std::ops::Range<usize>) -> Result<Vec<Vec<f64>>> {
-        let f = std::fs::File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
-        let (per, row) = (self.rows_per_chunk(), self.row_bytes as usize);
         let mut rows = Vec::with_capacity(range.len());
+        self.each_row(range, |row| rows.push(row.to_vec()))?;
+        Ok(rows)
+    }
+
+    /// Each of rows `range` in turn, read back by offset a chunk at a time.
+    fn each_row(&self, range: std::ops::Range<usize>, mut f: impl FnMut(&[f64])) -> Result<()> {
+        let row = self.row_bytes as usize;
+        if row == 0 {
+            range.for_each(|_| f(&[]));
+            return Ok(());
+        }
+        let file = std::fs::File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
+        let per = self.rows_per_chunk();
         let mut bytes = vec![0u8; per.min(range.len()) * row];
+        let mut values = Vec::with_capacity(bytes.len() / 8);
         for start in range.clone().step_by(per) {
             let bytes = &mut bytes[..(range.end - start).min(per) * row];
-            f.read_exact_at(bytes, self.offset + start as u64 * self.row_bytes)
+            file.read_exact_at(bytes, self.offset + start as u64 * self.row_bytes)
                 .map_err(|e| Error::io(&self.path, e))?;
-            rows.extend(bytes.chunks(row.max(1)).map(|r| {
-                r.chunks(8)
-                    .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
-                    .collect()
-            }));
+            values.clear();
+            values.extend(
+                (bytes.chunks(8)).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))),
+            );
+            values.chunks(row / 8).for_each(&mut f);
         }
-        // A row of no values (no free dof) takes no bytes.
-        rows.resize(range.len(), Vec::new());
-        Ok(rows)
+        Ok(())
     }
 
     /// Writes the user block: run id, layout and the CRC of every byte outside the rows.
@@ -374,23 +384,28 @@ fn refuse(path: &Path, why: String) -> Error {
 }
 
 /// Rows 0..rows of a history file, checked: its header and metadata (CRC-32), its run id and
-/// sizes, and the rows' running hash against the checkpoint's.
+/// sizes, and the rows' running hash against the checkpoint's; each row whole, or its values
+/// at the dofs `at` alone (a rank of several: never every row whole in memory).
 pub(super) fn read_history(
     path: &Path,
-    rows: usize,
-    hash: u64,
+    (rows, hash): (usize, u64),
     n_free: usize,
     id: &Identity,
+    at: Option<&[usize]>,
 ) -> Result<Vec<Vec<f64>>> {
     if !path.exists() {
         return Err(refuse(path, "missing".into()));
     }
     let file = HistoryFile::open(path, id, n_free, rows, hash)?;
-    let past = file.read_rows(0..rows)?;
+    let mut past = Vec::with_capacity(rows);
     let mut h = Hash64::default();
-    for row in &past {
+    file.each_row(0..rows, |row| {
         h.f64s(row);
-    }
+        past.push(match at {
+            None => row.to_vec(),
+            Some(dofs) => dofs.iter().map(|&i| row[i]).collect(),
+        });
+    })?;
     if h.0 != hash {
         return Err(refuse(
             path,
@@ -422,6 +437,9 @@ mod tests {
         assert_eq!((file.capacity, file.rows), (64, 8));
         assert_eq!(file.read_rows(0..8).unwrap(), rows);
         assert_eq!(file.read_rows(4..7).unwrap(), rows[4..7]);
+        let mut each = Vec::new();
+        file.each_row(1..8, |row| each.push(row.to_vec())).unwrap();
+        assert_eq!(each, rows[1..]);
         let mut hash = Hash64::default();
         rows.iter().for_each(|row| hash.f64s(row));
         assert_eq!(file.hash.0, hash.0);

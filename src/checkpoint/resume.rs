@@ -250,8 +250,14 @@ impl Checkpoint {
 
     /// The saved state of the loop, checked against the sizes of the scene's discretization
     /// (`n_free` dofs, `n_rows` contact and friction rows); for a general kernel the past
-    /// displacements are read from the history file and their hash checked.
-    pub fn saved(&self, n_free: usize, n_rows: usize) -> Result<SavedLoop> {
+    /// displacements are read from the history file and their hash checked, each kept at
+    /// the dofs `past_at` alone where given (`TimeLoop::past_dofs`).
+    pub fn saved(
+        &self,
+        n_free: usize,
+        n_rows: usize,
+        past_at: Option<&[usize]>,
+    ) -> Result<SavedLoop> {
         let shown = self.path.display();
         let sizes = [
             ("state/u", self.u.len(), n_free),
@@ -288,7 +294,8 @@ impl Checkpoint {
                     let what = format!("{rows} history rows at step {}", self.n);
                     return Err(Error::input(format!("{shown}: {}", memory_mismatch(&what))));
                 }
-                let past = read_history(&self.dir().join(file), *rows, *hash, n_free, &self.id)?;
+                let path = self.dir().join(file);
+                let past = read_history(&path, (*rows, *hash), n_free, &self.id, past_at)?;
                 SavedMemory::Direct(past)
             }
         };

@@ -147,6 +147,12 @@ impl Writer {
         }
     }
 
+    /// The direct sum's past rows handed to the writer so far (all that a checkpoint on
+    /// disk or on its way holds).
+    pub fn rows_sent(&self) -> usize {
+        self.rows_sent
+    }
+
     /// `DIR/checkpoint.h5`.
     pub fn path(&self) -> PathBuf {
         self.path.clone()
@@ -170,6 +176,12 @@ impl Writer {
             Memory::Direct { past, .. } => {
                 let from = self.rows_sent;
                 self.rows_sent = past.len();
+                // Rows not yet sent are whole (`History::past_saved` keeps a row at some
+                // dofs alone only once it was sent).
+                assert!(
+                    past[from..].iter().all(|row| row.len() == h.u.len()),
+                    "a past row sent to the checkpoint holds every dof"
+                );
                 SnapshotMemory::Direct {
                     from,
                     rows: past[from..].to_vec(),

@@ -136,6 +136,11 @@ impl Reactions {
         })
     }
 
+    /// The dofs whose u, w and m the held rows read, increasing.
+    pub fn dofs_read(&self) -> &[usize] {
+        &self.reads
+    }
+
     /// What the held rows read of the state `[w, u]`, `m` (None without memory): all that
     /// [`Reactions::forces`] needs of it.
     pub fn read(&self, [w, u]: [&[f64]; 2], m: Option<&[f64]>) -> StateRead {

@@ -36,7 +36,9 @@
 //! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
 //! rows of K_B and K_R then numbering their columns in the order of those dofs; elsewhere
 //! the memory alone. The values it holds have the bits of the whole history's; rank 0
-//! holds it whole, for the checkpoints and history.csv. Of the loads, a rank makes the
+//! holds it whole, for the checkpoints and history.csv, but for a direct sum's past rows,
+//! which it keeps at the dofs its steps and history.csv read once a checkpoint holds them
+//! (`TimeLoop::keep_saved_past_at`, where the frames are in pieces). Of the loads, a rank makes the
 //! quadrature points that reach its own rows alone (its rows of f_n, with the same bits;
 //! those of other rows it reads come with b_n's exchange), rank 0 every traction's too,
 //! and it makes a body force's other points again, cell by cell, where history.csv reads

@@ -132,6 +132,13 @@ impl Observer for Consumers<'_> {
         self.checkpoints
             .advanced(tl, &self.statistics.log, &self.frames.series)
     }
+
+    fn past_saved(&self) -> usize {
+        match self.checkpoints.enabled {
+            true => self.checkpoints.writer.rows_sent(),
+            false => usize::MAX,
+        }
+    }
 }
 
 /// The run-wide numbers of summary.json that depend on every step so far.

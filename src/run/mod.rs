@@ -169,7 +169,8 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     let ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
-    let tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
+    let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
+    tl.keep_saved_past_at(|| past_read(opts.ranks, &ready.opened, &ready.disc, &ready.reactions));
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
     // a signal came first (then it stays as it was).
     let committed = opts
@@ -424,7 +425,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
     let frames = series_of_follower(piece, &scene, opts)?;
     let mut tl = solving.time_loop(&scene, &disc)?;
     if let Some(cp) = &cp {
-        tl.restore(cp.saved(disc.n_dofs, tl.rows().len())?)?;
+        tl.restore(cp.saved(disc.n_dofs, tl.rows().len(), tl.past_dofs())?)?;
     }
     match opts.ranks.first_says(0)? {
         0 => {}
@@ -456,6 +457,29 @@ fn follow_signals(tl: &mut TimeLoop, opts: &RunOptions) {
     tl.abandon_on(opts.interrupt.abandon());
 }
 
+/// On rank 0 of several whose frames are in pieces (`opened`), the dofs whose memory m_n
+/// its steps and history.csv read: its rows of K_R's columns and its piece's points
+/// (`Discretization::memory_reach`) and the held rows' (`Reactions::dofs_read`). Its
+/// history keeps a direct sum's past rows there alone once a checkpoint holds them
+/// (`TimeLoop::keep_saved_past_at`), as a follower's does from the start. None on one
+/// process, and where rank 0 computes every cell's stress (`format = "vtkhdf"`) or holds
+/// the matrices whole.
+fn past_read(
+    ranks: Ranks,
+    opened: &Opened,
+    disc: &Discretization,
+    reactions: &Reactions,
+) -> Option<Vec<usize>> {
+    if ranks.size == 1 || opened.pieces.is_none() {
+        return None;
+    }
+    let mut dofs = disc.memory_reach()?;
+    dofs.extend_from_slice(reactions.dofs_read());
+    dofs.sort_unstable();
+    dofs.dedup();
+    Some(dofs)
+}
+
 /// Options of `viscontact resume`: those of a run; `out` defaults to the checkpoint's
 /// directory, and `overrides` may only set `time.end`, `output.*` and `checkpoint.*` (see
 /// [`checkpoint::Checkpoint::scene`]).
@@ -474,7 +498,8 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let (ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
     let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
-    let saved = cp.saved(ready.disc.n_dofs, tl.rows().len())?;
+    tl.keep_saved_past_at(|| past_read(opts.ranks, &ready.opened, &ready.disc, &ready.reactions));
+    let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.past_dofs())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
     // The last moment a signal ends the resume unchanged; after it, it stops after a step.
@@ -723,22 +748,22 @@ fn drive(d: Drive) -> Result<Outcome> {
         out,
         lock: _lock,
     } = d.opened;
+    let mut tl = d.tl;
     let from = d.resumed.map(|cp| cp.n);
-    let history = HistoryCsv::open(&out, d.scene, d.reactions, d.disc, &d.tl, from)?;
+    let history = HistoryCsv::open(&out, d.scene, d.reactions, d.disc, &tl, from)?;
     let run_id = identity.run_id.clone();
     let steps = d.scene.time.steps;
     let writer = match d.resumed {
-        Some(cp) => checkpoint::Writer::resume(&out, identity, steps, d.tl.rows(), cp),
-        None => checkpoint::Writer::new(&out, identity, steps, d.tl.rows()),
+        Some(cp) => checkpoint::Writer::resume(&out, identity, steps, tl.rows(), cp),
+        None => checkpoint::Writer::new(&out, identity, steps, tl.rows()),
     };
     let log = d.resumed.map_or_else(RunLog::default, |cp| cp.log.clone());
     let setup_s = d.start.elapsed().as_secs_f64();
-    let warnings = crate::effects::warnings(d.scene, d.disc, d.tl.descriptor());
+    let warnings = crate::effects::warnings(d.scene, d.disc, tl.descriptor());
     for w in &warnings {
         crate::errln!("warning: {w}");
     }
     note_stop_after(d.opts.stop_after, d.scene.time.steps);
-    let mut tl = d.tl;
     let rows = Arc::new(tl.rows().clone());
     let mut consumers = Consumers {
         statistics: Statistics::new(log),

@@ -524,9 +524,11 @@ fn the_implicit_history_with_contact_on_1_2_and_3_ranks_agrees_with_one_process(
 }
 
 /// The direct sum (an expression kernel with `memory = "exact"`), whose past displacements
-/// a follower keeps of the dofs it reads alone (`History::keeping`), with contact and
-/// friction: on 1, 2 and 3 ranks it agrees with one process, and stopped on 3 ranks it
-/// resumes from the checkpoint's whole past on 3, bit for bit, and on 2.
+/// a follower keeps of the dofs it reads alone (`Holds`) and rank 0 of those its steps and
+/// history.csv read once a checkpoint holds them (`History::keep_saved_past_at`: here one
+/// every 2 steps), with contact and friction: on 1, 2 and 3 ranks it agrees with one
+/// process, its reactions too, and stopped on 3 ranks it resumes from the checkpoint's
+/// whole past on 3, bit for bit, and on 2.
 #[test]
 fn the_direct_sum_on_1_2_and_3_ranks_agrees_and_resumes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -535,8 +537,21 @@ fn the_direct_sum_on_1_2_and_3_ranks_agrees_and_resumes() {
         .set("solver.linear", "petsc")
         .set("solver.contact", "active_set")
         .set("time.steps", 8)
+        .set("checkpoint.every", 2)
         .write(tmp.path(), "block.toml");
     agree_on_1_2_and_3_ranks(std::slice::from_ref(&block));
+    let reactions = |out: &str| {
+        let h = common::History::read(&tmp.path().join(out));
+        let names = h.header.iter().filter(|n| n.starts_with("reaction_"));
+        names.flat_map(|n| h.column(n)).collect::<Vec<f64>>()
+    };
+    let one = reactions("block.toml.one");
+    assert!(common::max_abs(&one) > 0.0);
+    for ranks in [2, 3] {
+        let d = common::rel_diff(&reactions(&format!("block.toml.{ranks}")), &one);
+        println!("{ranks} ranks: history.csv's reactions, max|Δ| / max|r| = {d:e}");
+        assert!(d <= 1e-8, "{ranks} ranks: the reactions differ by {d:e}");
+    }
     stopped_on_3_resumed_on_2_and_on_3(&block);
 }
 
