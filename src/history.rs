@@ -526,22 +526,18 @@ impl History {
         }
     }
 
-    /// Whether the memory keeps the past displacements (a direct sum).
-    pub fn keeps_past(&self) -> bool {
-        matches!(self.memory, Memory::Direct { .. })
-    }
-
     /// On rank 0 of several, whose history holds every dof for its checkpoints: from now
     /// on, keep each past row of the direct sum at `dofs` alone (increasing: all that its
     /// steps and history.csv read of m_n) once a checkpoint holds it ([`History::past_saved`]).
-    /// m_n is then exact at `dofs` alone. Nothing changes without a direct sum.
-    pub fn keep_saved_past_at(&mut self, dofs: Vec<usize>) {
+    /// m_n is then exact at `dofs` alone. Nothing changes without a direct sum, and
+    /// `dofs` is asked only with one.
+    pub fn keep_saved_past_at(&mut self, dofs: impl FnOnce() -> Option<Vec<usize>>) {
         debug_assert!(
             self.holds == Holds::Every,
             "rank 0's history holds every dof"
         );
         if let Memory::Direct { kept, .. } = &mut self.memory {
-            *kept = Some(Kept { dofs, rows: 0 });
+            *kept = dofs().map(|dofs| Kept { dofs, rows: 0 });
         }
     }
 
@@ -730,7 +726,7 @@ fn add_compensated(
 }
 
 /// The values of the whole vector `v` at the dofs `kept` (all of it without).
-fn at(kept: Option<&[usize]>, v: &[f64]) -> Vec<f64> {
+pub(crate) fn at(kept: Option<&[usize]>, v: &[f64]) -> Vec<f64> {
     match kept {
         None => v.to_vec(),
         Some(kept) => kept.iter().map(|&i| v[i]).collect(),
@@ -912,7 +908,7 @@ mod tests {
         let dofs = vec![1, 2, 4];
         let mut whole = History::new(5, k, &plans);
         let mut kept = History::new(5, k, &plans);
-        kept.keep_saved_past_at(dofs.clone());
+        kept.keep_saved_past_at(|| Some(dofs.clone()));
         let (mut m, mut mk) = (vec![0.0; 5], vec![0.0; 5]);
         let mut saved = 0;
         for n in 0..60 {

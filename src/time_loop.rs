@@ -397,9 +397,7 @@ impl<'p> TimeLoop<'p> {
     /// `dofs` must hold every dof whose m_n the steps and history.csv read).
     /// `dofs` is asked only where the memory is a direct sum.
     pub fn keep_saved_past_at(&mut self, dofs: impl FnOnce() -> Option<Vec<usize>>) {
-        if let Some(dofs) = self.history.keeps_past().then(dofs).flatten() {
-            self.history.keep_saved_past_at(dofs);
-        }
+        self.history.keep_saved_past_at(dofs);
     }
 
     /// Where the history keeps a direct sum's past rows (None: whole): a resume reads

@@ -385,13 +385,13 @@ fn refuse(path: &Path, why: String) -> Error {
 
 /// Rows 0..rows of a history file, checked: its header and metadata (CRC-32), its run id and
 /// sizes, and the rows' running hash against the checkpoint's; each row whole, or its values
-/// at the dofs `at` alone (a rank of several: never every row whole in memory).
+/// at the dofs `keep` alone (a rank of several: never every row whole in memory).
 pub(super) fn read_history(
     path: &Path,
     (rows, hash): (usize, u64),
     n_free: usize,
     id: &Identity,
-    at: Option<&[usize]>,
+    keep: Option<&[usize]>,
 ) -> Result<Vec<Vec<f64>>> {
     if !path.exists() {
         return Err(refuse(path, "missing".into()));
@@ -401,10 +401,7 @@ pub(super) fn read_history(
     let mut h = Hash64::default();
     file.each_row(0..rows, |row| {
         h.f64s(row);
-        past.push(match at {
-            None => row.to_vec(),
-            Some(dofs) => dofs.iter().map(|&i| row[i]).collect(),
-        });
+        past.push(crate::history::at(keep, row));
     })?;
     if h.0 != hash {
         return Err(refuse(

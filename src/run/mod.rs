@@ -748,22 +748,22 @@ fn drive(d: Drive) -> Result<Outcome> {
         out,
         lock: _lock,
     } = d.opened;
-    let mut tl = d.tl;
     let from = d.resumed.map(|cp| cp.n);
-    let history = HistoryCsv::open(&out, d.scene, d.reactions, d.disc, &tl, from)?;
+    let history = HistoryCsv::open(&out, d.scene, d.reactions, d.disc, &d.tl, from)?;
     let run_id = identity.run_id.clone();
     let steps = d.scene.time.steps;
     let writer = match d.resumed {
-        Some(cp) => checkpoint::Writer::resume(&out, identity, steps, tl.rows(), cp),
-        None => checkpoint::Writer::new(&out, identity, steps, tl.rows()),
+        Some(cp) => checkpoint::Writer::resume(&out, identity, steps, d.tl.rows(), cp),
+        None => checkpoint::Writer::new(&out, identity, steps, d.tl.rows()),
     };
     let log = d.resumed.map_or_else(RunLog::default, |cp| cp.log.clone());
     let setup_s = d.start.elapsed().as_secs_f64();
-    let warnings = crate::effects::warnings(d.scene, d.disc, tl.descriptor());
+    let warnings = crate::effects::warnings(d.scene, d.disc, d.tl.descriptor());
     for w in &warnings {
         crate::errln!("warning: {w}");
     }
     note_stop_after(d.opts.stop_after, d.scene.time.steps);
+    let mut tl = d.tl;
     let rows = Arc::new(tl.rows().clone());
     let mut consumers = Consumers {
         statistics: Statistics::new(log),
