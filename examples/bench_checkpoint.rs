@@ -109,10 +109,11 @@ fn main() {
             self.log.iterations.push(s.step.report.iterations);
             Ok(())
         }
-        fn advanced(&mut self, tl: &TimeLoop) -> viscontact::Result<()> {
+        fn advanced(&mut self, tl: &mut TimeLoop) -> viscontact::Result<()> {
             let t = Instant::now();
+            let memory = tl.gather_memory()?;
             self.writer
-                .write(tl.state(), &self.log, &self.active, Vec::new())?;
+                .write(tl.state(), memory, &self.log, &self.active, Vec::new())?;
             self.writer.flush()?;
             self.latency.push((tl.n(), t.elapsed().as_secs_f64()));
             Ok(())

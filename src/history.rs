@@ -45,22 +45,11 @@ pub enum Memory {
     None,
     Prony(Vec<PronyTerm>),
     /// r(l·k) for l = 1, 2, … (grown as needed) and the past displacements u_0..u_{n−1},
-    /// each at the dofs the history holds, or where `kept` says (rank 0 of several) the
-    /// first of them at its dofs alone.
+    /// each at the dofs the history holds.
     Direct {
         r_lag: Vec<f64>,
         past: Vec<Vec<f64>>,
-        kept: Option<Kept>,
     },
-}
-
-/// Where rank 0 of several, whose history holds every dof, keeps the direct sum's past
-/// rows that a checkpoint holds ([`History::keep_saved_past_at`]): rows `..rows` at `dofs`
-/// alone (increasing), the later ones whole.
-#[derive(Clone, Debug)]
-pub struct Kept {
-    dofs: Vec<usize>,
-    rows: usize,
 }
 
 /// The memory a checkpoint holds, as [`Plan::resumed`] needs it.
@@ -402,11 +391,11 @@ pub fn memory_mismatch(what: &str) -> String {
 /// ([`Holds`]): the memory those that the rank's rows of Σ_g K_R^(g) m^(g)_n and its piece
 /// of a frame read, and where the rank's matrices number their rows over its own dofs'
 /// neighbours, u_n and its compensated sum those too. Each value there is updated by the
-/// same arithmetic dof by dof, so it has the bits of the whole history's. Rank 0 holds
-/// every dof: it writes the checkpoints, and history.csv's reactions (and its stresses,
-/// where the frames are not in pieces) read the whole u_n and m_n; a direct sum's past
-/// rows, once a checkpoint holds them, it may keep at the dofs it reads alone
-/// ([`History::keep_saved_past_at`]).
+/// same arithmetic dof by dof, so it has the bits of the whole history's. Rank 0 holds u_n
+/// at every dof, which history.csv's reactions and summary.json's norms read, and the
+/// memory at the dofs its steps and history.csv read (every one where the frames are not
+/// in pieces: it computes every cell's stress then); a checkpoint gathers each rank's
+/// values at its own rows into the whole memory ([`History::gathered`]).
 #[derive(Clone, Debug)]
 pub struct History {
     pub k: f64,
@@ -494,7 +483,6 @@ impl History {
             Plan::Exact { .. } => Memory::Direct {
                 r_lag: Vec::new(),
                 past: Vec::new(),
-                kept: None,
             },
             _ if terms.is_empty() => Memory::None,
             _ => Memory::Prony(terms),
@@ -514,49 +502,54 @@ impl History {
         !matches!(self.memory, Memory::None)
     }
 
-    /// The dofs at which the direct sum's past rows a checkpoint holds are kept (None:
-    /// whole, or no direct sum).
+    /// The dofs at which the direct sum's past rows are held (None: every one, or no
+    /// direct sum): a resume reads them there alone (`Checkpoint::saved`).
     pub fn past_dofs(&self) -> Option<&[usize]> {
         match &self.memory {
-            Memory::Direct {
-                kept: Some(kept), ..
-            } => Some(&kept.dofs),
             Memory::Direct { .. } => self.holds.dofs(),
             _ => None,
         }
     }
 
-    /// On rank 0 of several, whose history holds every dof for its checkpoints: from now
-    /// on, keep each past row of the direct sum at `dofs` alone (increasing: all that its
-    /// steps and history.csv read of m_n) once a checkpoint holds it ([`History::past_saved`]).
-    /// m_n is then exact at `dofs` alone. Nothing changes without a direct sum, and
-    /// `dofs` is asked only with one.
-    pub fn keep_saved_past_at(&mut self, dofs: impl FnOnce() -> Option<Vec<usize>>) {
-        debug_assert!(
-            self.holds == Holds::Every,
-            "rank 0's history holds every dof"
-        );
-        if let Memory::Direct { kept, .. } = &mut self.memory {
-            *kept = dofs().map(|dofs| Kept { dofs, rows: 0 });
-        }
-    }
-
-    /// The direct sum's past rows `..saved` are in a checkpoint (or none is written): where
-    /// [`History::keep_saved_past_at`] said so, each is kept at its dofs alone from now on,
-    /// the same values there.
-    pub fn past_saved(&mut self, saved: usize) {
-        if let Memory::Direct {
-            past,
-            kept: Some(kept),
-            ..
-        } = &mut self.memory
-        {
-            let end = saved.min(past.len());
-            for row in past.iter_mut().take(end).skip(kept.rows) {
-                *row = at(Some(&kept.dofs), row);
-            }
-            kept.rows = kept.rows.max(end);
-        }
+    /// The memory as a checkpoint saves it, every dof's, on rank 0 of several whose ranks
+    /// hold their parts of it (None elsewhere, and without memory): `whole` makes rank 0's every-dof vector of
+    /// each rank's values at the unknowns of its own rows (`solver::Backend::gather_at_first`,
+    /// collective: every rank calls this at every checkpoint), rank 0 adding the
+    /// prescribed dofs' (n_free.., which it holds). Of a direct sum, the past rows
+    /// `from..` (those the checkpoints hold not yet). Each value is the one its rank
+    /// holds, with the bits of one process's.
+    pub fn gathered(
+        &self,
+        from: usize,
+        whole: impl Fn(&dyn Fn(usize) -> f64) -> Result<Option<Vec<f64>>>,
+    ) -> Result<Option<SavedMemory>> {
+        let dofs = self.holds.dofs();
+        let n_dofs = self.u.len();
+        let of = |held: &[f64]| -> Result<Option<Vec<f64>>> {
+            let value = |i: usize| held[crate::fem::place(dofs, i)];
+            let Some(mut v) = whole(&value)? else {
+                return Ok(None);
+            };
+            let n_free = v.len();
+            v.extend((n_free..n_dofs).map(value));
+            Ok(Some(v))
+        };
+        Ok(match &self.memory {
+            Memory::None => None,
+            // Every rank takes part in every gather: collected whole, not to the first None.
+            Memory::Prony(terms) => (terms.iter())
+                .map(|t| Ok(of(&t.m)?.map(|m| PronyTerm { m, ..*t })))
+                .collect::<Result<Vec<_>>>()?
+                .into_iter()
+                .collect::<Option<Vec<_>>>()
+                .map(SavedMemory::Prony),
+            Memory::Direct { past, .. } => (past[from.min(past.len())..].iter())
+                .map(|row| of(row))
+                .collect::<Result<Vec<_>>>()?
+                .into_iter()
+                .collect::<Option<Vec<_>>>()
+                .map(SavedMemory::Direct),
+        })
     }
 
     /// m_n of every memory group into `out` (overwritten), group g's at g·len(u_n), at the
@@ -574,7 +567,7 @@ impl History {
                 }
                 true
             }
-            Memory::Direct { r_lag, past, kept } => {
+            Memory::Direct { r_lag, past } => {
                 let kernel = kernel.expect("a direct-sum memory has a kernel");
                 let n = self.n;
                 while r_lag.len() < n {
@@ -582,14 +575,9 @@ impl History {
                     r_lag.push(kernel.eval(l as f64 * self.k));
                 }
                 out.fill(0.0);
-                // m_n = k Σ_{j<n} r((n − j) k) u_j, at every dof a row holds (rank 0 of
-                // several reads it at those of its first rows alone).
-                let shrunk = kept.as_ref().map_or(0, |kept| kept.rows);
+                // m_n = k Σ_{j<n} r((n − j) k) u_j, at every dof a row holds.
+                let dofs = self.holds.memory_in_u();
                 for (j, uj) in past.iter().enumerate() {
-                    let dofs = match kept {
-                        Some(kept) if j < shrunk => Some(&kept.dofs[..]),
-                        _ => self.holds.memory_in_u(),
-                    };
                     add_at(out, dofs, self.k * r_lag[n - j - 1], uj);
                 }
                 true
@@ -630,18 +618,14 @@ impl History {
                     *t = PronyTerm { m, ..s };
                 }
             }
-            (Memory::Direct { past, r_lag, kept }, SavedMemory::Direct(rows)) => {
-                // Each row whole, or read at the dofs this history keeps it at already
+            (Memory::Direct { past, r_lag }, SavedMemory::Direct(rows)) => {
+                // Each row whole, or read at the dofs this history holds already
                 // (`Checkpoint::saved` with `History::past_dofs`).
-                let dofs = kept.as_ref().map(|k| &k.dofs[..]).or(self.holds.dofs());
+                let dofs = self.holds.dofs();
                 *past = (rows.into_iter())
                     .map(|u| if u.len() == n_dofs { at(dofs, &u) } else { u })
                     .collect();
                 r_lag.clear();
-                // The checkpoint holds every row.
-                if let Some(kept) = kept {
-                    kept.rows = past.len();
-                }
             }
             (_, SavedMemory::None) => return Err(mismatch("absent (no relaxation)")),
             (_, SavedMemory::Prony(_)) => return Err(mismatch("a Prony series")),
@@ -893,76 +877,102 @@ mod tests {
     }
 
     #[test]
-    fn rank_0_keeps_the_saved_past_at_its_dofs_with_the_same_bits_there() {
-        // Rank 0 of several (`keep_saved_past_at`) against the whole direct sum, the rows
-        // saved at irregular steps and across a restore: m_n has the whole one's bits at
-        // the kept dofs, the saved rows hold those dofs alone, the rest every dof.
+    fn the_ranks_parts_gathered_are_the_whole_memory_with_its_bits() {
+        // Two ranks' histories holding the memory at their reach alone (`Holds::Memory`),
+        // rank 0 the prescribed dof 5 too, against one process's, for the recursion (two
+        // groups) and the direct sum: what a checkpoint gathers at irregular steps (each
+        // rank's values at its own rows, `History::gathered`) has the whole memory's bits,
+        // of a direct sum the rows after the last checkpoint's alone, and a restore from it
+        // goes on with the same bits.
         let k = 0.01;
+        let two = Plans {
+            body: Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]),
+            regions: vec![Plan::Prony(vec![(2.0, 1.0)])],
+        };
         let kernel = Kernel::Expr(Box::new(
             crate::expr::Expr::parse("1/(1+s)", &["s"], "r").unwrap(),
         ));
-        let plans = alone(Plan::Exact {
+        let exact = alone(Plan::Exact {
             lags: Lags::new(&kernel, k, 60, false, "r").unwrap(),
             fallback: None,
         });
-        let dofs = vec![1, 2, 4];
-        let mut whole = History::new(5, k, &plans);
-        let mut kept = History::new(5, k, &plans);
-        kept.keep_saved_past_at(|| Some(dofs.clone()));
-        let (mut m, mut mk) = (vec![0.0; 5], vec![0.0; 5]);
-        let mut saved = 0;
-        for n in 0..60 {
-            if n == 40 {
-                // A resume: the checkpoint's rows whole, kept at the dofs once saved again.
-                // The rows read at the kept dofs alone (`Checkpoint::saved`).
-                let read_at = kept.past_dofs().unwrap().to_vec();
-                let rows = match &whole.memory {
-                    Memory::Direct { past, .. } => {
-                        past.iter().map(|u| at(Some(&read_at), u)).collect()
+        // Five unknowns and a prescribed dof; rank 0 owns 0, 3 and 4, rank 1 owns 1 and 2.
+        let (own, reach) = (
+            [vec![0, 3, 4], vec![1, 2]],
+            [vec![0, 1, 3, 4, 5], vec![1, 2, 3]],
+        );
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for plans in [two, exact] {
+            let holding =
+                |r: usize| History::holding(6, k, &plans, Holds::Memory(reach[r].clone()));
+            let mut whole = History::new(6, k, &plans);
+            let mut ranks = [holding(0), holding(1)];
+            let mut from = 0;
+            for n in 0..40 {
+                let w = [(n as f64 * 0.3).cos(), 1.0, -0.5 * n as f64, 0.25, 0.1, 2.0];
+                for h in ranks.iter_mut().chain([&mut whole]) {
+                    h.advance(&w, None);
+                }
+                if ![3, 10, 11, 25, 30].contains(&n) {
+                    continue;
+                }
+                // Rank 1's values at its own rows, then rank 0's and the whole vector.
+                let sent = std::cell::RefCell::new(std::collections::VecDeque::new());
+                let of_1 = |value: &dyn Fn(usize) -> f64| {
+                    sent.borrow_mut()
+                        .push_back(own[1].iter().map(|&i| value(i)).collect());
+                    Ok(None)
+                };
+                assert!(ranks[1].gathered(from, of_1).unwrap().is_none());
+                let of_0 = |value: &dyn Fn(usize) -> f64| {
+                    let theirs: Vec<f64> = sent.borrow_mut().pop_front().unwrap();
+                    let mut v = vec![0.0; 5];
+                    own[0].iter().for_each(|&i| v[i] = value(i));
+                    own[1].iter().zip(theirs).for_each(|(&i, x)| v[i] = x);
+                    Ok(Some(v))
+                };
+                let gathered = ranks[0].gathered(from, of_0).unwrap().unwrap();
+                let expected: Vec<Vec<f64>> = match (&whole.memory, &gathered) {
+                    (Memory::Prony(terms), SavedMemory::Prony(got)) => {
+                        assert_eq!(got.len(), terms.len());
+                        terms.iter().map(|t| t.m.clone()).collect()
                     }
-                    _ => unreachable!(),
+                    (Memory::Direct { past, .. }, SavedMemory::Direct(_)) => past[from..].to_vec(),
+                    _ => unreachable!("the gathered memory is the history's kind"),
                 };
-                let state = SavedHistory {
-                    n: whole.n,
-                    k,
-                    u: whole.u.clone(),
-                    u_sum: whole.u_sum.clone(),
-                    u_comp: whole.u_comp.clone(),
-                    memory: SavedMemory::Direct(rows),
+                let got: Vec<Vec<f64>> = match &gathered {
+                    SavedMemory::Prony(terms) => terms.iter().map(|t| t.m.clone()).collect(),
+                    SavedMemory::Direct(rows) => rows.clone(),
+                    SavedMemory::None => unreachable!(),
                 };
-                kept.restore(state).unwrap();
+                assert_eq!(got.len(), expected.len(), "n = {n}");
+                for (g, e) in got.iter().zip(&expected) {
+                    assert_eq!(bits(g), bits(e), "n = {n}");
+                }
+                from = whole.n;
+                if n == 25 {
+                    // A resume on rank 1 from the whole saved state goes on as before.
+                    let memory = match &whole.memory {
+                        Memory::Prony(terms) => SavedMemory::Prony(terms.clone()),
+                        Memory::Direct { past, .. } => SavedMemory::Direct(past.clone()),
+                        Memory::None => SavedMemory::None,
+                    };
+                    let (u, u_sum, u_comp) =
+                        (whole.u.clone(), whole.u_sum.clone(), whole.u_comp.clone());
+                    ranks[1] = holding(1);
+                    let (n, k) = (whole.n, whole.k);
+                    let state = SavedHistory {
+                        n,
+                        k,
+                        u,
+                        u_sum,
+                        u_comp,
+                        memory,
+                    };
+                    ranks[1].restore(state).unwrap();
+                }
             }
-            assert!(whole.memory_into(Some(&kernel), &mut m));
-            assert!(kept.memory_into(Some(&kernel), &mut mk));
-            for &i in &dofs {
-                assert_eq!(m[i].to_bits(), mk[i].to_bits(), "n = {n}, dof {i}");
-            }
-            let w = [
-                (n as f64 * 0.3).cos(),
-                1.0,
-                -0.5 * n as f64,
-                0.25,
-                (n as f64).sqrt(),
-            ];
-            whole.advance(&w, None);
-            kept.advance(&w, None);
-            // Checkpoints at steps 3, 10, 11, 25, 44 (rows sent then: n + 1), none after;
-            // the resume's checkpoint holds its 40 rows.
-            if [3, 10, 11, 25, 44].contains(&n) {
-                saved = n + 1;
-            }
-            if n == 39 {
-                saved = 40;
-            }
-            kept.past_saved(saved);
-            let Memory::Direct { past, .. } = &kept.memory else {
-                unreachable!()
-            };
-            let lengths: Vec<usize> = past.iter().map(Vec::len).collect();
-            let expected: Vec<usize> = (0..=n).map(|j| if j < saved { 3 } else { 5 }).collect();
-            assert_eq!(lengths, expected, "n = {n}");
         }
-        assert!(mk.iter().all(|&x| x != 0.0));
     }
 
     #[test]

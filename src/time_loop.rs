@@ -35,7 +35,7 @@ use crate::fem::{
     constraints, leading_block, mul_add, mul_add_rows, Discretization, RowsPair, Sparse,
     SymmetricPair,
 };
-use crate::history::{History, Holds, LoopState, Plans, SavedLoop};
+use crate::history::{History, Holds, LoopState, Plans, SavedLoop, SavedMemory};
 use crate::ranks::Own;
 use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
@@ -94,6 +94,9 @@ pub struct TimeLoop<'p> {
     lift: Option<Sparse>,
     /// The request that gives up a step, where the step solver honours one.
     abandon: Option<Abandon>,
+    /// How many of a direct sum's past rows the checkpoints hold
+    /// ([`TimeLoop::gather_memory`]).
+    past_saved: usize,
     /// Whether the state at t_n follows a step this loop solved, so that a stop can save it
     /// (the last step's flags are the consumers'). Only then is a step given up: a new run
     /// would have nothing to resume from, and a resumed one, written into another directory,
@@ -201,23 +204,18 @@ pub trait Observer {
     fn solved(&mut self, s: &Solved) -> Result<()>;
 
     /// Step n was given up ([`TimeLoop::abandon_on`]): the loop stands at t_n as before it,
-    /// `tl.state()` is what a checkpoint saves, and the run stops.
-    fn abandoned(&mut self, tl: &TimeLoop) -> Result<()> {
+    /// `tl.state()` is what a checkpoint saves (of the memory, what `tl.gather_memory()`
+    /// makes of the ranks' parts, every rank calling it), and the run stops.
+    fn abandoned(&mut self, tl: &mut TimeLoop) -> Result<()> {
         let _ = tl;
         Ok(())
     }
 
-    /// The loop advanced to t_{n+1}: `tl.state()` is what a checkpoint of step n + 1 saves.
-    fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
+    /// The loop advanced to t_{n+1}: `tl.state()` is what a checkpoint of step n + 1 saves
+    /// (with `tl.gather_memory()`'s memory).
+    fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
         let _ = tl;
         Ok(())
-    }
-
-    /// How many of the direct sum's past rows the observer's checkpoints hold (all: it
-    /// writes none). Rank 0 of several keeps those at some dofs alone
-    /// ([`TimeLoop::keep_saved_past_at`]).
-    fn past_saved(&self) -> usize {
-        usize::MAX
     }
 }
 
@@ -341,6 +339,7 @@ impl<'p> TimeLoop<'p> {
             g_f,
             lift,
             abandon: None,
+            past_saved: 0,
             can_stop: false,
         })
     }
@@ -371,17 +370,18 @@ impl<'p> TimeLoop<'p> {
             self.advance();
             self.can_stop = true;
             observer.advanced(self)?;
-            self.history.past_saved(observer.past_saved());
             if stop {
                 return Ok(RunEnd::Stopped);
             }
         }
     }
 
-    /// What a checkpoint saves of the loop at t_n, before step n is solved.
+    /// What a checkpoint saves of the loop at t_n, before step n is solved, on rank 0 (or
+    /// one process): on several ranks, whose memory each holds in its part, call
+    /// [`TimeLoop::gather_memory`] first, on every rank.
     pub fn state(&self) -> LoopState<'_> {
         debug_assert!(
-            self.history.holds == Holds::Every,
+            self.history.holds.local().is_none(),
             "a follower's history is not saved"
         );
         LoopState {
@@ -392,15 +392,23 @@ impl<'p> TimeLoop<'p> {
         }
     }
 
-    /// On rank 0 of several: keep each past row of a direct sum at `dofs` alone once a
-    /// checkpoint holds it (`History::keep_saved_past_at`: m_n is then exact there alone;
-    /// `dofs` must hold every dof whose m_n the steps and history.csv read).
-    /// `dofs` is asked only where the memory is a direct sum.
-    pub fn keep_saved_past_at(&mut self, dofs: impl FnOnce() -> Option<Vec<usize>>) {
-        self.history.keep_saved_past_at(dofs);
+    /// The memory at t_n as a checkpoint saves it, every dof's, made on rank 0 of several
+    /// of each rank's values at its own rows, for [`TimeLoop::state`]'s (collective: every
+    /// rank calls it at every checkpoint, which rank 0's schedule shares with the others:
+    /// `run`): Some on rank 0, None elsewhere and on one process, whose history holds every
+    /// dof. Of a direct sum, the past rows that no checkpoint holds yet, which every rank
+    /// counts alike.
+    pub fn gather_memory(&mut self) -> Result<Option<SavedMemory>> {
+        let backend = &self.backend;
+        let whole = |value: &dyn Fn(usize) -> f64| backend.gather_at_first(value);
+        let gathered = self.history.gathered(self.past_saved, whole)?;
+        if let crate::history::Memory::Direct { past, .. } = &self.history.memory {
+            self.past_saved = past.len();
+        }
+        Ok(gathered)
     }
 
-    /// Where the history keeps a direct sum's past rows (None: whole): a resume reads
+    /// Where the history holds a direct sum's past rows (None: whole): a resume reads
     /// them there alone (`Checkpoint::saved`).
     pub fn past_dofs(&self) -> Option<&[usize]> {
         self.history.past_dofs()
@@ -408,9 +416,10 @@ impl<'p> TimeLoop<'p> {
 
     /// Takes back the state a checkpoint saved (a resume), into this loop built from the
     /// same scene; the sizes were checked by the checkpoint, the memory's kind and terms
-    /// are checked here.
+    /// are checked here. Its every past row is the checkpoint's.
     pub fn restore(&mut self, saved: SavedLoop) -> Result<()> {
         self.history.restore(saved.history)?;
+        self.past_saved = self.history.n;
         self.w = match &self.held {
             Some(held) => held.iter().map(|&i| saved.w[i]).collect(),
             None => saved.w,

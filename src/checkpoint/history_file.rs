@@ -66,20 +66,10 @@ pub(super) fn grown_capacity(old: usize, needed: usize, steps: usize) -> usize {
 }
 
 impl HistoryFile {
-    /// Creates the file with room for `capacity` rows holding `past` (temp + rename).
-    pub(super) fn create(
-        path: &Path,
-        run_id: &str,
-        n_free: usize,
-        capacity: usize,
-        past: &[Vec<f64>],
-    ) -> Result<HistoryFile> {
-        Self::create_after(path, (run_id, n_free), capacity, None, past)
-    }
-
-    /// [`HistoryFile::create`], the file's first rows copied from rows 0..n of `kept`
-    /// (`Some((old, n))`: the file this one grows from) a chunk at a time, then `past`.
-    fn create_after(
+    /// Creates the file with room for `capacity` rows (temp + rename): its first rows
+    /// copied from rows 0..n of `kept` (`Some((old, n))`: the file this one grows from, or
+    /// a resumed run's earlier one) a chunk at a time, then `past`.
+    pub(super) fn create_after(
         path: &Path,
         (run_id, n_free): (&str, usize),
         capacity: usize,
@@ -134,6 +124,17 @@ impl HistoryFile {
             if let Some((old, n)) = kept {
                 for start in (0..n).step_by(old.rows_per_chunk()) {
                     file.push(&old.read_rows(start..n.min(start + old.rows_per_chunk()))?)?;
+                }
+                // All of its rows copied: the same hash, or the file changed since it was
+                // checked (a resume's read, the last append).
+                if n == old.rows && file.hash.0 != old.hash.0 {
+                    return Err(Error::solve(format!(
+                        "{}: rows 0..{n} hash to {:#018x} where {:#018x} was recorded: the \
+                         file changed while the run read it; the run's last checkpoint is kept",
+                        old.path.display(),
+                        file.hash.0,
+                        old.hash.0
+                    )));
                 }
             }
             file.push(past)?;
@@ -426,7 +427,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join(HISTORY_FILE_NAME);
         let rows: Vec<Vec<f64>> = (0..8).map(|j| vec![j as f64 + 0.25 - 1e-300]).collect();
-        let mut file = HistoryFile::create(&path, "run", 1, 4, &rows[..3]).unwrap();
+        let mut file = HistoryFile::create_after(&path, ("run", 1), 4, None, &rows[..3]).unwrap();
         file.append(3, &rows[3..4], "run", 100).unwrap();
         assert_eq!((file.capacity, file.rows), (4, 4));
         // Row 2 sent again, as a checkpoint's rows can be, and the file grows.

@@ -8,8 +8,7 @@ use super::seal;
 use super::snapshot::{Snapshot, SnapshotMemory};
 use super::template::Template;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
-use crate::history::LoopState;
-use crate::history::Memory;
+use crate::history::{LoopState, Memory, SavedMemory};
 use crate::output::FrameSum;
 use crate::solver::Rows;
 use crate::{Error, Result};
@@ -56,6 +55,10 @@ pub(super) struct Disk {
     /// The run's number of steps.
     steps: usize,
     history: Option<HistoryFile>,
+    /// Where a resume into another directory (or whose history file could not be opened
+    /// to append to) finds the checkpoint's past rows, their count and hash, copied into
+    /// this run's file at its first checkpoint.
+    earlier: Option<(PathBuf, usize, u64)>,
     row_node: Vec<u64>,
     /// The bytes of the last checkpoint written through HDF5 and where its variable data
     /// lie; later checkpoints patch them (see [`Template`]).
@@ -70,6 +73,7 @@ impl Disk {
             id,
             steps,
             history: None,
+            earlier: None,
             row_node: rows.rows.iter().map(|r| r.node as u64).collect(),
             template: None,
         }
@@ -82,9 +86,11 @@ impl Writer {
         Writer::start(Disk::new(dir, id, steps, rows), 0)
     }
 
-    /// A writer that continues `cp` in `dir` for a run of `steps` steps. The history file is
-    /// appended to in place when it is the checkpoint's own (grown when full); otherwise the
-    /// first checkpoint writes a new one with all rows (once).
+    /// A writer that continues `cp` in `dir` for a run of `steps` steps, the checkpoint's
+    /// past rows of a direct sum sent already. The history file is appended to in place when
+    /// it is the checkpoint's own (grown when full); otherwise the first checkpoint writes a
+    /// new one, its first rows copied from the checkpoint's a chunk at a time (once): no
+    /// rank holds every past row whole (`TimeLoop::gather_memory` sends the later ones).
     pub fn resume(dir: &Path, id: Identity, steps: usize, rows: &Rows, cp: &Checkpoint) -> Writer {
         let mut disk = Disk::new(dir, id, steps, rows);
         let mut rows_sent = 0;
@@ -96,10 +102,11 @@ impl Writer {
             let path = dir.join(HISTORY_FILE_NAME);
             if same_dir {
                 disk.history = HistoryFile::open(&path, &disk.id, cp.u.len(), *rows, *hash).ok();
-                if disk.history.is_some() {
-                    rows_sent = *rows;
-                }
             }
+            if disk.history.is_none() {
+                disk.earlier = Some((cp.dir().join(HISTORY_FILE_NAME), *rows, *hash));
+            }
+            rows_sent = *rows;
         }
         Writer::start(disk, rows_sent)
     }
@@ -147,12 +154,6 @@ impl Writer {
         }
     }
 
-    /// The direct sum's past rows handed to the writer so far (all that a checkpoint on
-    /// disk or on its way holds).
-    pub fn rows_sent(&self) -> usize {
-        self.rows_sent
-    }
-
     /// `DIR/checkpoint.h5`.
     pub fn path(&self) -> PathBuf {
         self.path.clone()
@@ -165,28 +166,25 @@ impl Writer {
     pub fn write(
         &mut self,
         state: LoopState,
+        gathered: Option<SavedMemory>,
         log: &RunLog,
         active: &[bool],
         frames: Vec<FrameSum>,
     ) -> Result<()> {
         let h = state.history;
-        let memory = match &h.memory {
-            Memory::None => SnapshotMemory::None,
-            Memory::Prony(terms) => SnapshotMemory::Prony(terms.clone()),
-            Memory::Direct { past, .. } => {
-                let from = self.rows_sent;
-                self.rows_sent = past.len();
-                // Rows not yet sent are whole (`History::past_saved` keeps a row at some
-                // dofs alone only once it was sent).
-                assert!(
-                    past[from..].iter().all(|row| row.len() == h.u.len()),
-                    "a past row sent to the checkpoint holds every dof"
-                );
-                SnapshotMemory::Direct {
-                    from,
-                    rows: past[from..].to_vec(),
-                }
+        let memory = match (gathered, &h.memory) {
+            (_, Memory::None) => SnapshotMemory::None,
+            (Some(SavedMemory::Prony(terms)), _) => SnapshotMemory::Prony(terms),
+            (None, Memory::Prony(terms)) => SnapshotMemory::Prony(terms.clone()),
+            // The rows after the last checkpoint's, which every rank counts alike.
+            (Some(SavedMemory::Direct(rows)), Memory::Direct { past, .. }) => {
+                self.past_rows(rows, past.len(), h.u.len())
             }
+            (None, Memory::Direct { past, .. }) => {
+                let rows = past[self.rows_sent..].to_vec();
+                self.past_rows(rows, past.len(), h.u.len())
+            }
+            (Some(_), _) => unreachable!("the gathered memory is the history's kind"),
         };
         let snapshot = Snapshot {
             n: h.n,
@@ -212,6 +210,17 @@ impl Writer {
         }
         self.shared.changed.notify_all();
         Ok(())
+    }
+
+    /// The past rows `rows` of every dof (`n_dofs`) after those sent, up to row `end`.
+    fn past_rows(&mut self, rows: Vec<Vec<f64>>, end: usize, n_dofs: usize) -> SnapshotMemory {
+        let from = self.rows_sent;
+        assert!(
+            from + rows.len() == end && rows.iter().all(|r| r.len() == n_dofs),
+            "the past rows after the last checkpoint's, each of every dof"
+        );
+        self.rows_sent = end;
+        SnapshotMemory::Direct { from, rows }
     }
 
     /// Waits until every checkpoint handed over so far is on disk (the writer stays open);
@@ -257,22 +266,40 @@ impl Drop for Writer {
 }
 
 impl Disk {
+    /// This run's first history file, holding rows `..from` (those of the checkpoint a
+    /// resume continues: [`Writer::resume`]) and `rows` after them.
+    fn new_history(&self, from: usize, rows: &[Vec<f64>], n_free: usize) -> Result<HistoryFile> {
+        let path = self.dir.join(HISTORY_FILE_NAME);
+        let earlier = match &self.earlier {
+            Some((earlier, n, hash)) if *n == from && from > 0 => {
+                Some(HistoryFile::open(earlier, &self.id, n_free, *n, *hash)?)
+            }
+            _ if from == 0 => None,
+            _ => {
+                return Err(Error::solve(format!(
+                    "{}: history rows from {from} have no earlier rows to follow (internal error)",
+                    path.display()
+                )))
+            }
+        };
+        let capacity = grown_capacity(0, from + rows.len(), self.steps);
+        let id = (self.id.run_id.as_str(), n_free);
+        HistoryFile::create_after(
+            &path,
+            id,
+            capacity,
+            earlier.as_ref().map(|e| (e, from)),
+            rows,
+        )
+    }
+
     /// First the new history rows (fsync'ed), then `checkpoint.h5.tmp`, fsync, rename, fsync
     /// of the directory.
     fn write(&mut self, s: &Snapshot) -> Result<()> {
         if let SnapshotMemory::Direct { from, rows } = &s.memory {
             match &mut self.history {
                 Some(h) => h.append(*from, rows, &self.id.run_id, self.steps)?,
-                None => {
-                    assert_eq!(*from, 0, "a new history file starts at row 0");
-                    self.history = Some(HistoryFile::create(
-                        &self.dir.join(HISTORY_FILE_NAME),
-                        &self.id.run_id,
-                        s.u.len(),
-                        grown_capacity(0, rows.len(), self.steps),
-                        rows,
-                    )?)
-                }
+                None => self.history = Some(self.new_history(*from, rows, s.u.len())?),
             }
         }
         let path = self.dir.join(FILE_NAME);

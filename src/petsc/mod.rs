@@ -527,6 +527,9 @@ pub struct Reads<'a> {
 /// first row among them say.
 struct Spread {
     unknowns: Vec<u32>,
+    /// The unknowns of this rank's rows (`unknowns` before they were placed), for what a
+    /// caller holds by the unknowns' numbering (`Krylov::gather_at_first`).
+    numbered: Vec<u32>,
     halo: Exchange,
     first: bool,
     whole: Whole,
@@ -558,6 +561,7 @@ impl Spread {
         halo.sort_unstable();
         halo.dedup();
         let mut halo = Exchange::new(layout, halo)?;
+        let numbered = unknowns.clone();
         if reads.held {
             // The caller's vectors hold `reads.dofs` alone: each unknown at its place there.
             let place = |i: u32| crate::fem::place(Some(reads.dofs), i as usize) as u32;
@@ -573,6 +577,7 @@ impl Spread {
             .collect();
         Ok(Spread {
             unknowns,
+            numbered,
             halo,
             first: rank == 0,
             whole,
@@ -829,6 +834,26 @@ impl Krylov {
             false => gather(&self.own_x, &mut [], cut, every)?,
         }
         Ok(())
+    }
+
+    /// Every unknown's value on rank 0, each rank giving `value` of the unknowns of its own
+    /// rows (collective: every rank calls it): Some on rank 0 (n_free values, in the
+    /// unknowns' order), None elsewhere, and on one rank. What a checkpoint saves of the
+    /// values that each rank holds in its part alone (`history::History::gathered`).
+    pub fn gather_at_first(&self, value: &dyn Fn(usize) -> f64) -> Result<Option<Vec<f64>>> {
+        let Some(spread) = &self.spread else {
+            return Ok(None);
+        };
+        let mine: Vec<f64> = spread.numbered.iter().map(|&i| value(i as usize)).collect();
+        let cut = (spread.counts.as_slice(), spread.displs.as_slice());
+        if !spread.first {
+            gather(&mine, &mut [], cut, false)?;
+            return Ok(None);
+        }
+        let mut all = vec![0.0; self.layout.n_unknowns()];
+        gather(&mine, &mut all, cut, false)?;
+        self.layout.to_unknowns_order(&mut all);
+        Ok(Some(all))
     }
 
     /// `kept` ← what of w this rank restores a step given up from (`restore`): on a rank of

@@ -35,10 +35,13 @@
 //! ([`Ranks::hold_history`], `history::Holds`): u_n, its compensated sum and the memory (the
 //! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
 //! rows of K_B and K_R then numbering their columns in the order of those dofs; elsewhere
-//! the memory alone. The values it holds have the bits of the whole history's; rank 0
-//! holds it whole, for the checkpoints and history.csv, but for a direct sum's past rows,
-//! which it keeps at the dofs its steps and history.csv read once a checkpoint holds them
-//! (`TimeLoop::keep_saved_past_at`, where the frames are in pieces). Of the loads, a rank makes the
+//! the memory alone (and at its own rows). The values it holds have the bits of the whole
+//! history's; rank 0 holds u_n whole, for the checkpoints, history.csv and summary.json,
+//! and the memory where the frames are in pieces at the dofs its steps and history.csv
+//! read alone, with its own rows and the prescribed dofs (`run::hold_memory_of_first`).
+//! At a checkpoint every rank sends its own rows of the memory to rank 0
+//! (`TimeLoop::gather_memory`): every rank knows the checkpoints' steps, rank 0's clock
+//! reaching the others with the stop requests ([`Ranks::stop`]). Of the loads, a rank makes the
 //! quadrature points that reach its own rows alone (its rows of f_n, with the same bits;
 //! those of other rows it reads come with b_n's exchange), rank 0 every traction's too,
 //! and it makes a body force's other points again, cell by cell, where history.csv reads
@@ -202,15 +205,21 @@ impl Ranks {
         }
     }
 
-    /// Whether the run stops after this step, and by which signal: this rank's request
-    /// (`signal`, `after`: `--stop-after` says so) combined with every other's, the same
-    /// answer on every rank (collective on several).
-    pub fn stop(&self, signal: Option<i32>, after: bool) -> Result<(Option<i32>, bool)> {
-        let all = self.max(2 * signal.unwrap_or(0) + i32::from(after))?;
-        Ok((
-            (all / 2 > 0).then_some(all / 2),
-            all % 2 == 1 || all / 2 > 0,
-        ))
+    /// Whether the run stops after this step, by which signal, and whether rank 0's clock
+    /// says a checkpoint is due: this rank's request (`signal`, `after`: `--stop-after`
+    /// says so) combined with every other's, and rank 0's `clock` (a follower's is not
+    /// read), the same answer on every rank (collective on several).
+    pub fn stop(&self, signal: Option<i32>, after: bool, clock: bool) -> Result<AfterStep> {
+        // One reduction, the largest of 4 s + 2 a + c: where no rank asks to stop, the
+        // largest is rank 0's c; a stop makes a checkpoint due anyway.
+        let mine = 4 * signal.unwrap_or(0) + 2 * i32::from(after);
+        let all = self.max(mine + i32::from(clock && self.is_first()))?;
+        let stop = all >= 2;
+        Ok(AfterStep {
+            signal: (all / 4 > 0).then_some(all / 4),
+            stop,
+            clock: all == 1,
+        })
     }
 
     /// Every rank's part of a frame written (collective on several): the largest of the
@@ -411,7 +420,11 @@ impl Ranks {
                     disc.number_rows_over(&local);
                     Holds::Local(local)
                 }
-                None => disc.memory_reach().map_or(Holds::Every, Holds::Memory),
+                // Its own rows too, which it sends to rank 0's checkpoints.
+                None => disc.memory_reach().map_or(Holds::Every, |mut dofs| {
+                    dofs.extend(disc.own.iter().flatten());
+                    Holds::Memory(crate::mesh::increasing(dofs))
+                }),
             };
         }
         #[cfg(not(feature = "petsc"))]
@@ -427,6 +440,17 @@ impl Ranks {
         }
         let _ = code;
     }
+}
+
+/// What the ranks agreed after a step ([`Ranks::stop`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AfterStep {
+    /// The signal that reached a rank, if one did.
+    pub signal: Option<i32>,
+    /// Whether the run stops after the step.
+    pub stop: bool,
+    /// Whether rank 0's clock says a checkpoint is due after it (where the run goes on).
+    pub clock: bool,
 }
 
 /// On one of several ranks, what [`Ranks::keep_own_columns`] hands to the time loop's PETSc
@@ -920,9 +944,26 @@ mod tests {
                 .exit_code(),
             2
         );
-        assert_eq!(one.stop(None, false).unwrap(), (None, false));
-        assert_eq!(one.stop(None, true).unwrap(), (None, true));
-        assert_eq!(one.stop(Some(15), false).unwrap(), (Some(15), true));
+        let said = |signal, stop, clock| AfterStep {
+            signal,
+            stop,
+            clock,
+        };
+        assert_eq!(
+            one.stop(None, false, false).unwrap(),
+            said(None, false, false)
+        );
+        assert_eq!(
+            one.stop(None, true, false).unwrap(),
+            said(None, true, false)
+        );
+        assert_eq!(
+            one.stop(None, false, true).unwrap(),
+            said(None, false, true)
+        );
+        assert_eq!(one.stop(None, true, true).unwrap(), said(None, true, false));
+        let signalled = one.stop(Some(15), false, true).unwrap();
+        assert_eq!(signalled, said(Some(15), true, false));
         assert_eq!(one.first_says(7).unwrap(), 7);
     }
 }

@@ -46,55 +46,77 @@ pub(super) struct StopRule {
 }
 
 impl StopRule {
-    /// Whether the run stops after step n, the same answer on every rank; a signal that
-    /// reached another rank is recorded here as if it had come to this one.
-    pub fn asks(&self, n: usize) -> bool {
+    /// Whether the run stops after step n, and whether rank 0's clock says a checkpoint is
+    /// due (`clock`, on rank 0: [`Schedule::clock`]), the same answers on every rank; a
+    /// signal that reached another rank is recorded here as if it had come to this one.
+    pub fn asks(&self, n: usize, clock: bool) -> (bool, bool) {
         let signal = self.interrupt.signal();
         let after = self.after == Some(n);
         // An MPI failure ends the process in PETSc's handler; were it to return, stop here.
-        let (any, stop) = self.ranks.stop(signal, after).unwrap_or((signal, true));
-        if let Some(s) = any.filter(|_| signal.is_none()) {
+        let said = (self.ranks.stop(signal, after, clock)).unwrap_or(crate::ranks::AfterStep {
+            signal,
+            stop: true,
+            clock,
+        });
+        if let Some(s) = said.signal.filter(|_| signal.is_none()) {
             self.interrupt.raise(s);
         }
-        stop
+        (said.stop, said.clock)
     }
 
     /// A step given up (on every rank at once): the signal that did it, recorded on every
     /// rank, as `asks` does.
     pub fn share_signal(&self) {
-        let _ = self.asks(usize::MAX);
+        let _ = self.asks(usize::MAX, false);
     }
 }
 
 /// A follower rank's observer (`crate::ranks`): it writes its piece of the frames where
-/// the ranks write their own, nothing else, and stops with the others.
+/// the ranks write their own, sends its part of the memory to rank 0's checkpoints,
+/// nothing else, and stops with the others.
 pub(super) struct Follower<'a> {
     pub stop: StopRule,
     pub frames: Option<OwnFrames>,
+    pub schedule: Schedule,
     pub disc: &'a Discretization,
 }
 
 impl Observer for Follower<'_> {
     fn stop_after(&mut self, n: usize) -> bool {
-        self.stop.asks(n)
+        let stop;
+        (stop, self.schedule.clock) = self.stop.asks(n, false);
+        stop
     }
 
     fn solved(&mut self, s: &Solved) -> Result<()> {
         if let Some(frames) = self.frames.as_mut() {
             frames.solved(self.disc, s, &state_flags(&s.step))?;
         }
+        // Its checkpoints' flags are rank 0's.
+        self.schedule.solved(s, Vec::new());
         Ok(())
     }
 
-    fn abandoned(&mut self, _: &TimeLoop) -> Result<()> {
+    fn abandoned(&mut self, tl: &mut TimeLoop) -> Result<()> {
         self.stop.share_signal();
+        self.schedule.abandoned();
+        self.advanced(tl)
+    }
+
+    fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
+        if self.schedule.due.take().is_some() {
+            tl.gather_memory()?;
+        }
         Ok(())
     }
 }
 
 impl Observer for Consumers<'_> {
     fn stop_after(&mut self, n: usize) -> bool {
-        self.stop.asks(n)
+        let schedule = &mut self.checkpoints.schedule;
+        let stop;
+        (stop, schedule.clock) = self.stop.asks(n, schedule.clock());
+        stop
     }
 
     fn solved(&mut self, s: &Solved) -> Result<()> {
@@ -111,33 +133,24 @@ impl Observer for Consumers<'_> {
         Ok(())
     }
 
-    fn abandoned(&mut self, tl: &TimeLoop) -> Result<()> {
+    fn abandoned(&mut self, tl: &mut TimeLoop) -> Result<()> {
         self.stop.share_signal();
-        // The state before the step given up: the last solved step's, saved unless its
-        // checkpoint is on disk already.
-        self.checkpoints.due = self.checkpoints.unsaved.take();
+        self.checkpoints.schedule.abandoned();
         self.advanced(tl)
     }
 
-    fn advanced(&mut self, tl: &TimeLoop) -> Result<()> {
+    fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
         // A checkpoint of step n + 1 may reach the disk only after the frames and the
         // history rows of steps ≤ n have: their writers run on threads of their own, and a
         // resume keeps the frames and rows before its step (a kill -9 in between lost a
         // frame for good).
         // The checkpoint records the checksums of those frames (output/verify.rs).
-        if self.checkpoints.due.is_some() {
+        if self.checkpoints.schedule.due.is_some() {
             self.frames.series.finish()?;
             self.history.finish()?;
         }
         self.checkpoints
             .advanced(tl, &self.statistics.log, &self.frames.series)
-    }
-
-    fn past_saved(&self) -> usize {
-        match self.checkpoints.enabled {
-            true => self.checkpoints.writer.rows_sent(),
-            false => usize::MAX,
-        }
     }
 }
 
@@ -208,46 +221,92 @@ impl Frames<'_> {
     }
 }
 
-/// `checkpoint.h5`: the state at t_{n+1} after step n at every `checkpoint.every`-th step,
-/// after the first step that ends `checkpoint.every_seconds` or more after the last
-/// checkpoint (or the start), before the last step and where the run stops
-/// (`[checkpoint] enabled = false`: never). The wall-clock checkpoints change no result: a
-/// checkpoint copies the state, and resume from any of them is bit for bit.
+/// `checkpoint.h5`: the state at t_{n+1} after step n when its [`Schedule`] says, written by
+/// a thread of its own.
 pub(super) struct Checkpoints {
     pub writer: checkpoint::Writer,
-    pub enabled: bool,
-    pub every: Option<usize>,
-    pub every_seconds: Option<Duration>,
-    pub steps: usize,
-    /// When the last checkpoint was handed to the writer (or the loop started).
-    last_written: Instant,
-    /// The contact/stick flags of the step just solved, when its checkpoint is due.
-    due: Option<Vec<bool>>,
-    /// Else (checkpoints enabled, not the last step) the same flags: a step given up next
-    /// saves the state after this one with them (`Observer::abandoned`).
-    unsaved: Option<Vec<bool>>,
+    pub schedule: Schedule,
 }
 
 impl Checkpoints {
     pub fn new(writer: checkpoint::Writer, scene: &Scene) -> Checkpoints {
         Checkpoints {
             writer,
-            enabled: scene.checkpoint.enabled,
-            every: scene.checkpoint.every,
-            every_seconds: scene.checkpoint.every_seconds.map(Duration::from_secs_f64),
-            steps: scene.time.steps,
-            last_written: Instant::now(),
-            due: None,
-            unsaved: None,
+            schedule: Schedule::new(scene),
         }
     }
 
     /// Decides whether the state after step n is saved; `flags` are the solved step's.
     fn solved(&mut self, s: &Solved, flags: Vec<bool>) {
+        self.schedule.solved(s, flags);
+    }
+
+    /// The checkpoint of the loop at t_{n+1} where it is due, the memory gathered from the
+    /// ranks' parts (collective on several: the followers' [`Schedule`] says the same).
+    fn advanced(&mut self, tl: &mut TimeLoop, log: &RunLog, series: &Series) -> Result<()> {
+        match self.schedule.due.take() {
+            Some(flags) => {
+                let memory = tl.gather_memory()?;
+                (self.writer).write(tl.state(), memory, log, &flags, series.checksums())
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// `DIR/checkpoint.h5` when checkpoints are written.
+    pub fn path(&self) -> Option<std::path::PathBuf> {
+        self.schedule.enabled.then(|| self.writer.path())
+    }
+}
+
+/// When the state at t_{n+1} after step n is saved: at every `checkpoint.every`-th step,
+/// after the first step that ends `checkpoint.every_seconds` or more after the last
+/// checkpoint (or the start), before the last step and where the run stops
+/// (`[checkpoint] enabled = false`: never). The wall-clock checkpoints change no result: a
+/// checkpoint copies the state, and resume from any of them is bit for bit. On several
+/// ranks every rank keeps one, rank 0's clock reaching the others with the stop requests
+/// ([`StopRule::asks`]), so that each sends its part of the memory to the same checkpoints.
+pub(super) struct Schedule {
+    pub enabled: bool,
+    every: Option<usize>,
+    every_seconds: Option<Duration>,
+    steps: usize,
+    /// When the last checkpoint was handed to the writer (or the loop started).
+    last_written: Instant,
+    /// Whether rank 0's clock said, after the step just solved, that a checkpoint is due.
+    clock: bool,
+    /// The contact/stick flags of the step just solved, when its checkpoint is due (none
+    /// on a follower, which writes no checkpoint).
+    due: Option<Vec<bool>>,
+    /// Else (checkpoints enabled, not the last step) the same flags: a step given up next
+    /// saves the state after this one with them (`Observer::abandoned`).
+    unsaved: Option<Vec<bool>>,
+}
+
+impl Schedule {
+    pub fn new(scene: &Scene) -> Schedule {
+        Schedule {
+            enabled: scene.checkpoint.enabled,
+            every: scene.checkpoint.every,
+            every_seconds: scene.checkpoint.every_seconds.map(Duration::from_secs_f64),
+            steps: scene.time.steps,
+            last_written: Instant::now(),
+            clock: false,
+            due: None,
+            unsaved: None,
+        }
+    }
+
+    /// Whether `checkpoint.every_seconds` have passed since the last checkpoint (rank 0's
+    /// to say).
+    fn clock(&self) -> bool {
+        (self.every_seconds).is_some_and(|d| self.last_written.elapsed() >= d)
+    }
+
+    /// Decides whether the state after step n is saved; `flags` are the solved step's.
+    fn solved(&mut self, s: &Solved, flags: Vec<bool>) {
         let next = s.step.n + 1;
-        let clock = self
-            .every_seconds
-            .is_some_and(|d| self.last_written.elapsed() >= d);
+        let clock = std::mem::take(&mut self.clock);
         let due = self.enabled
             && !s.last
             && (s.stop
@@ -264,18 +323,10 @@ impl Checkpoints {
         };
     }
 
-    fn advanced(&mut self, tl: &TimeLoop, log: &RunLog, series: &Series) -> Result<()> {
-        match self.due.take() {
-            Some(flags) => self
-                .writer
-                .write(tl.state(), log, &flags, series.checksums()),
-            None => Ok(()),
-        }
-    }
-
-    /// `DIR/checkpoint.h5` when checkpoints are written.
-    pub fn path(&self) -> Option<std::path::PathBuf> {
-        self.enabled.then(|| self.writer.path())
+    /// A step given up: the state before it, the last solved step's, is saved unless its
+    /// checkpoint is on disk already.
+    fn abandoned(&mut self) {
+        self.due = self.unsaved.take();
     }
 }
 

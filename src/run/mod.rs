@@ -40,7 +40,9 @@ use crate::scene::{read_scene_file, MeshChoice, Scene};
 use crate::solver::choice::Descriptor;
 use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
-use consumers::{Checkpoints, Consumers, Follower, Frames, Progress, Statistics, StopRule};
+use consumers::{
+    Checkpoints, Consumers, Follower, Frames, Progress, Schedule, Statistics, StopRule,
+};
 use dir::DirLock;
 use frame::{open_series, OwnFrames, PieceSetup};
 use history_csv::HistoryCsv;
@@ -167,10 +169,10 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
         return follow(scene_path, Begun::Run, opts);
     }
     let start = Instant::now();
-    let ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
+    let mut ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
-    let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
-    tl.keep_saved_past_at(|| past_read(opts.ranks, &ready.opened, &ready.disc, &ready.reactions));
+    hold_memory_of_first(opts.ranks, &mut ready);
+    let tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
     // a signal came first (then it stays as it was).
     let committed = opts
@@ -439,6 +441,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
             ranks: opts.ranks,
         },
         frames,
+        schedule: Schedule::new(&scene),
         disc: &disc,
     };
     tl.run(scene.time.steps, &mut follower)?;
@@ -457,27 +460,25 @@ fn follow_signals(tl: &mut TimeLoop, opts: &RunOptions) {
     tl.abandon_on(opts.interrupt.abandon());
 }
 
-/// On rank 0 of several whose frames are in pieces (`opened`), the dofs whose memory m_n
-/// its steps and history.csv read: its rows of K_R's columns and its piece's points
-/// (`Discretization::memory_reach`) and the held rows' (`Reactions::dofs_read`). Its
-/// history keeps a direct sum's past rows there alone once a checkpoint holds them
-/// (`TimeLoop::keep_saved_past_at`), as a follower's does from the start. None on one
-/// process, and where rank 0 computes every cell's stress (`format = "vtkhdf"`) or holds
-/// the matrices whole.
-fn past_read(
-    ranks: Ranks,
-    opened: &Opened,
-    disc: &Discretization,
-    reactions: &Reactions,
-) -> Option<Vec<usize>> {
-    if ranks.size == 1 || opened.pieces.is_none() {
-        return None;
+/// On rank 0 of several whose frames are in pieces, its history holds the memory (the
+/// Prony states, the direct sum's past rows) at the dofs whose m_n its steps and
+/// history.csv read alone, as a follower's does, and at its own rows and the prescribed
+/// dofs, which it sends to its checkpoints (`TimeLoop::gather_memory`): its rows of K_R's
+/// columns and its piece's points (`Discretization::memory_reach`) and the held rows'
+/// (`Reactions::dofs_read`); u_n at every dof. It holds every dof's where it computes
+/// every cell's stress (`format = "vtkhdf"`) or holds the matrices whole.
+fn hold_memory_of_first(ranks: Ranks, ready: &mut Ready) {
+    if ranks.size == 1 || ready.opened.pieces.is_none() {
+        return;
     }
-    let mut dofs = disc.memory_reach()?;
-    dofs.extend_from_slice(reactions.dofs_read());
-    dofs.sort_unstable();
-    dofs.dedup();
-    Some(dofs)
+    let disc = &ready.disc;
+    let (Some(own), Some(mut dofs)) = (ready.solving.own.as_mut(), disc.memory_reach()) else {
+        return;
+    };
+    dofs.extend_from_slice(ready.reactions.dofs_read());
+    dofs.extend(disc.own.iter().flatten());
+    dofs.extend(disc.n_free..disc.n_dofs);
+    own.holds = crate::history::Holds::Memory(crate::mesh::increasing(dofs));
 }
 
 /// Options of `viscontact resume`: those of a run; `out` defaults to the checkpoint's
@@ -495,10 +496,10 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         return follow(checkpoint_path, Begun::Resume, opts);
     }
     let start = Instant::now();
-    let (ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
+    let (mut ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
+    hold_memory_of_first(opts.ranks, &mut ready);
     let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
-    tl.keep_saved_past_at(|| past_read(opts.ranks, &ready.opened, &ready.disc, &ready.reactions));
     let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.past_dofs())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;

@@ -297,6 +297,20 @@ impl Backend {
         }
     }
 
+    /// Every unknown's value on rank 0 of several, each rank giving `value` of its own
+    /// rows' unknowns (collective; `petsc::Krylov::gather_at_first`): None elsewhere and
+    /// on one process.
+    pub fn gather_at_first(&self, value: &dyn Fn(usize) -> f64) -> crate::Result<Option<Vec<f64>>> {
+        match self {
+            #[cfg(feature = "petsc")]
+            Backend::Petsc(krylov) => krylov.gather_at_first(value),
+            _ => {
+                let _ = value;
+                Ok(None)
+            }
+        }
+    }
+
     /// A solved step's w at every unknown, where this rank's history holds every dof and a
     /// solve gave it its reads alone (`petsc::Krylov::complete`); nothing on one process.
     pub fn complete(&mut self, w: &mut [f64]) -> crate::Result<()> {

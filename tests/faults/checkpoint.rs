@@ -1052,6 +1052,53 @@ fn a_moved_run_resumes_with_its_mesh_in_a_new_place() {
     assert_eq!(frames(&there.join("run")), frames(&full));
 }
 
+/// A general kernel's run resumed into another directory: its first checkpoint there copies
+/// the checkpoint's past rows from the history file it came from (a chunk at a time: no
+/// process holds the past whole, `checkpoint::Writer::resume`), which stays as it was, and
+/// the run stopped and resumed again there equals the run that never stopped, bit for bit.
+#[test]
+fn a_direct_sum_resumed_into_another_directory_copies_its_past_and_resumes_again() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = paper_scene(tmp.path(), "s.toml", "paper/rect_008.msh", true);
+    let set = ["time.steps=16", "checkpoint.every=2"];
+    let [full, a, b] = ["full", "a", "b"].map(|d| tmp.path().join(d));
+    let s = finished(run(&scene, &opts(&full, &set, None)).unwrap());
+    run(&scene, &opts(&a, &set, Some(5))).unwrap();
+    let a_history = std::fs::read(a.join("checkpoint_history.h5")).unwrap();
+    let into_b = ResumeOptions {
+        out: Some(b.clone()),
+        stop_after: Some(10),
+        ..ResumeOptions::default()
+    };
+    let stopped = resume(&a.join("checkpoint.h5"), &into_b).unwrap();
+    assert!(
+        matches!(stopped, Outcome::Stopped { step: 10, .. }),
+        "{stopped:?}"
+    );
+    let rows = |dir: &Path| -> u64 {
+        let f = hdf5::File::open(dir.join("checkpoint.h5")).unwrap();
+        f.dataset("memory/history_rows")
+            .unwrap()
+            .read_scalar()
+            .unwrap()
+    };
+    assert_eq!(rows(&b), 11, "rows 0..6 copied from a's file, 6..11 sent");
+    assert_eq!(
+        std::fs::read(a.join("checkpoint_history.h5")).unwrap(),
+        a_history,
+        "the history file the resume came from is left as it was"
+    );
+    let r = finished(resume_quiet(&b.join("checkpoint.h5")));
+    assert_eq!(s.final_.u_h1.to_bits(), r.final_.u_h1.to_bits());
+    let (whole, resumed) = (frames(&full), frames(&b));
+    assert!(resumed.len() >= 2, "{:?}", resumed.keys());
+    for (name, bytes) in &resumed {
+        if name.ends_with(".vtu") {
+            assert_eq!(Some(bytes), whole.get(name), "{name}");
+        }
+    }
+}
+
 // ---- hostile sizes (issue 12 item 4) ---------------------------------------------------------
 
 /// The history file grows with the run (64, 128, 256 rows, …, at most N + 1) instead of

@@ -524,11 +524,11 @@ fn the_implicit_history_with_contact_on_1_2_and_3_ranks_agrees_with_one_process(
 }
 
 /// The direct sum (an expression kernel with `memory = "exact"`), whose past displacements
-/// a follower keeps of the dofs it reads alone (`Holds`) and rank 0 of those its steps and
-/// history.csv read once a checkpoint holds them (`History::keep_saved_past_at`: here one
-/// every 2 steps), with contact and friction: on 1, 2 and 3 ranks it agrees with one
-/// process, its reactions too, and stopped on 3 ranks it resumes from the checkpoint's
-/// whole past on 3, bit for bit, and on 2.
+/// each rank keeps of the dofs it reads alone (`Holds`), rank 0 those its steps and
+/// history.csv read, and a checkpoint (here one every 2 steps) gathers from the ranks'
+/// own rows (`TimeLoop::gather_memory`), with contact and friction: on 1, 2 and 3 ranks it
+/// agrees with one process, its reactions too, and stopped on 3 ranks it resumes from the
+/// checkpoint's whole past on 3, bit for bit, and on 2.
 #[test]
 fn the_direct_sum_on_1_2_and_3_ranks_agrees_and_resumes() {
     let tmp = tempfile::tempdir().unwrap();
