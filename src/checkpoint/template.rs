@@ -18,9 +18,13 @@ pub(super) struct Template {
 }
 
 impl Template {
-    /// Reads back the file just written and finds its variable datasets; None when one is
-    /// not contiguous with exactly the expected size.
-    pub(super) fn capture(path: &Path, data: &[(&'static str, Vec<u8>)]) -> Option<Template> {
+    /// The file just written at `path`, whose bytes are `bytes`, with its variable
+    /// datasets found; None when one is not contiguous with exactly the expected size.
+    pub(super) fn capture(
+        path: &Path,
+        bytes: Vec<u8>,
+        data: &[(&'static str, Vec<u8>)],
+    ) -> Option<Template> {
         let regions = {
             let f = h5_file(OpenMode::Read, path).ok()?;
             let mut regions = Vec::with_capacity(data.len());
@@ -38,7 +42,6 @@ impl Template {
             }
             regions
         };
-        let bytes = std::fs::read(path).ok()?;
         for ((offset, len), (_, data)) in regions.iter().zip(data) {
             if offset + len > bytes.len() || bytes[*offset..offset + len] != data[..] {
                 return None;

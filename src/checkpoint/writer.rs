@@ -304,27 +304,26 @@ impl Disk {
         }
         let path = self.dir.join(FILE_NAME);
         let tmp = self.dir.join(format!("{FILE_NAME}.tmp"));
-        let data = variable_data(s, self.steps);
-        let history_hash = self.history.as_ref().map(|h| h.hash.0);
-        let fast = match (&mut self.template, history_hash) {
-            (Some(t), hash) => {
-                let mut data = data.clone();
-                if let Some(h) = hash {
-                    data.push(("memory/history_hash", h.to_le_bytes().to_vec()));
-                }
-                t.patch(&data).map(|bytes| {
-                    seal::seal_checkpoint(bytes);
-                    std::fs::write(&tmp, bytes).map_err(|e| {
-                        let _ = std::fs::remove_file(&tmp);
-                        Error::io(&path, e)
-                    })
+        let mut data = variable_data(s, self.steps);
+        if let Some(h) = &self.history {
+            data.push(("memory/history_hash", h.hash.0.to_le_bytes().to_vec()));
+        }
+        let fast = self
+            .template
+            .as_mut()
+            .and_then(|t| t.patch(&data))
+            .map(|bytes| {
+                seal::seal_checkpoint(bytes);
+                std::fs::write(&tmp, bytes).map_err(|e| {
+                    let _ = std::fs::remove_file(&tmp);
+                    Error::io(&path, e)
                 })
-            }
-            (None, _) => None,
-        };
+            });
         match fast {
             Some(result) => result?,
             None => {
+                // The bytes of a template that no longer fits go before the new ones come.
+                self.template = None;
                 write_checkpoint(
                     &tmp,
                     &self.id,
@@ -343,11 +342,7 @@ impl Disk {
                     let _ = std::fs::remove_file(&tmp);
                     Error::io(&path, e)
                 })?;
-                let mut data = data;
-                if let Some(h) = history_hash {
-                    data.push(("memory/history_hash", h.to_le_bytes().to_vec()));
-                }
-                self.template = Template::capture(&tmp, &data);
+                self.template = Template::capture(&tmp, bytes, &data);
             }
         }
         fsync_file(&tmp)?;
