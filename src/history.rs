@@ -526,7 +526,8 @@ impl History {
         let dofs = self.holds.dofs();
         let n_dofs = self.u.len();
         let of = |held: &[f64]| -> Result<Option<Vec<f64>>> {
-            let value = |i: usize| held[crate::fem::place(dofs, i)];
+            let place = |i: usize| dofs.map_or(Ok(i), |dofs| dofs.binary_search(&i));
+            let value = |i: usize| held[place(i).expect("a rank holds its own rows")];
             let Some(mut v) = whole(&value)? else {
                 return Ok(None);
             };

@@ -305,18 +305,24 @@ impl Schedule {
 
     /// Decides whether the state after step n is saved; `flags` are the solved step's.
     fn solved(&mut self, s: &Solved, flags: Vec<bool>) {
-        let next = s.step.n + 1;
+        self.after(s.step.n, (s.last, s.stop), flags);
+    }
+
+    /// Decides whether the state after step `n` is saved, which is the run's `last` step or
+    /// one it `stop`s after; `flags` are the step's.
+    fn after(&mut self, n: usize, (last, stop): (bool, bool), flags: Vec<bool>) {
+        let next = n + 1;
         let clock = std::mem::take(&mut self.clock);
         let due = self.enabled
-            && !s.last
-            && (s.stop
+            && !last
+            && (stop
                 || clock
                 || next == self.steps
                 || self.every.is_some_and(|e| next.is_multiple_of(e)));
         if due {
             self.last_written = Instant::now();
         }
-        let flags = (self.enabled && !s.last).then_some(flags);
+        let flags = (self.enabled && !last).then_some(flags);
         (self.due, self.unsaved) = match due {
             true => (flags, None),
             false => (None, flags),
@@ -518,6 +524,53 @@ mod tests {
         );
         assert!(line.ends_with("remaining ≈ 3m02s"), "{line}");
         assert_eq!(clock(3723.4), "1h02m03s");
+    }
+
+    /// The steps after which a checkpoint is due: every 3rd, the one before the last, where
+    /// rank 0's clock says (on every rank: `StopRule::asks`), where the run stops, and a
+    /// step given up saves the last solved step's state unless it is saved already.
+    #[test]
+    fn the_schedule_saves_where_the_keys_the_clock_and_a_stop_say() {
+        let mut schedule = Schedule {
+            enabled: true,
+            every: Some(3),
+            every_seconds: None,
+            steps: 10,
+            last_written: Instant::now(),
+            clock: false,
+            due: None,
+            unsaved: None,
+        };
+        let mut saved = Vec::new();
+        // Steps 0..=10, the last one 10.
+        for n in 0..=10 {
+            // Rank 0's clock after step 3, shared by the stop requests' reduction.
+            schedule.clock = n == 3;
+            schedule.after(n, (n == 10, n == 6), vec![n % 2 == 0]);
+            if let Some(flags) = schedule.due.take() {
+                assert_eq!(flags, [n % 2 == 0], "the step's flags");
+                saved.push(n);
+            }
+            assert!(!schedule.clock, "the clock is read once");
+        }
+        // After steps 2, 5 and 8 (the states at every 3rd step), 3 (the clock), 6 (a stop),
+        // 9 (the state before the last step), none after the last.
+        assert_eq!(saved, [2, 3, 5, 6, 8, 9]);
+        // A step given up after step 3 saves the state after it; after step 5, whose
+        // checkpoint is due already, nothing more.
+        schedule.after(3, (false, false), vec![true]);
+        schedule.abandoned();
+        assert_eq!(schedule.due.take(), Some(vec![true]));
+        schedule.after(4, (false, false), vec![false]);
+        schedule.due.take();
+        schedule.after(5, (false, false), vec![false]);
+        assert!(schedule.due.take().is_some());
+        schedule.abandoned();
+        assert_eq!(schedule.due, None);
+        schedule.enabled = false;
+        schedule.after(5, (false, true), vec![true]);
+        schedule.abandoned();
+        assert_eq!(schedule.due, None, "checkpoints disabled");
     }
 
     /// Issue 49: the bar counted N + 1 steps and restarted at 0 after a resume.
