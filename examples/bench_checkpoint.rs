@@ -111,7 +111,7 @@ fn main() {
         }
         fn advanced(&mut self, tl: &mut TimeLoop) -> viscontact::Result<()> {
             let t = Instant::now();
-            let memory = tl.gather_memory()?;
+            let memory = tl.gather_memory()?.expect("one process gets its memory");
             self.writer
                 .write(tl.state(), memory, &self.log, &self.active, Vec::new())?;
             self.writer.flush()?;

@@ -511,13 +511,14 @@ impl History {
         }
     }
 
-    /// The memory as a checkpoint saves it, every dof's, on rank 0 of several whose ranks
-    /// hold their parts of it (None elsewhere, and without memory): `whole` makes rank 0's every-dof vector of
-    /// each rank's values at the unknowns of its own rows (`solver::Backend::gather_at_first`,
-    /// collective: every rank calls this at every checkpoint), rank 0 adding the
-    /// prescribed dofs' (n_free.., which it holds). Of a direct sum, the past rows
-    /// `from..` (those the checkpoints hold not yet). Each value is the one its rank
-    /// holds, with the bits of one process's.
+    /// The memory as a checkpoint saves it, every dof's, on one process and on rank 0 of
+    /// several whose ranks hold their parts of it (None on the others, where there is
+    /// memory): `whole` makes the every-unknown vector there of each rank's values at the
+    /// unknowns of its own rows (`solver::Backend::gather_at_first`, collective: every rank
+    /// calls this at every checkpoint), to which it adds the prescribed dofs' (n_free..,
+    /// which it holds). Of a direct sum, the past rows `from..` (those the checkpoints
+    /// hold not yet). Each value is the one its rank holds, with the bits of one
+    /// process's.
     pub fn gathered(
         &self,
         from: usize,
@@ -536,7 +537,7 @@ impl History {
             Ok(Some(v))
         };
         Ok(match &self.memory {
-            Memory::None => None,
+            Memory::None => Some(SavedMemory::None),
             // Every rank takes part in every gather: collected whole, not to the first None.
             Memory::Prony(terms) => (terms.iter())
                 .map(|t| Ok(of(&t.m)?.map(|m| PronyTerm { m, ..*t })))
@@ -739,6 +740,39 @@ mod tests {
         }
     }
 
+    /// A kernel r(s) = 1/(1+s) and two plans at step k: a recursion of two memory groups
+    /// (the body's two terms, a region's one) and r's direct sum over 60 lags.
+    fn two_groups_and_direct(k: f64) -> (Kernel, [Plans; 2]) {
+        let two = Plans {
+            body: Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]),
+            regions: vec![Plan::Prony(vec![(2.0, 1.0)])],
+        };
+        let kernel = Kernel::Expr(Box::new(
+            crate::expr::Expr::parse("1/(1+s)", &["s"], "r").unwrap(),
+        ));
+        let exact = alone(Plan::Exact {
+            lags: Lags::new(&kernel, k, 60, false, "r").unwrap(),
+            fallback: None,
+        });
+        (kernel, [two, exact])
+    }
+
+    /// The state a checkpoint saves of the whole history `h`.
+    fn saved(h: &History) -> SavedHistory {
+        SavedHistory {
+            n: h.n,
+            k: h.k,
+            u: h.u.clone(),
+            u_sum: h.u_sum.clone(),
+            u_comp: h.u_comp.clone(),
+            memory: match &h.memory {
+                Memory::None => SavedMemory::None,
+                Memory::Prony(terms) => SavedMemory::Prony(terms.clone()),
+                Memory::Direct { past, .. } => SavedMemory::Direct(past.clone()),
+            },
+        }
+    }
+
     #[test]
     fn each_group_sums_its_own_kernel() {
         // Group 0: r = e^{−10s}; group 1: r = 0.5 e^{−3s} + 2 e^{−s}; each against the
@@ -808,29 +842,7 @@ mod tests {
         // groups) and the direct sum: holding the memory alone, the same m_n bits at its
         // dofs and 0 elsewhere; holding u_n too, the same u_n and m_n bits at its dofs.
         let k = 0.01;
-        let two = Plans {
-            body: Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]),
-            regions: vec![Plan::Prony(vec![(2.0, 1.0)])],
-        };
-        let kernel = Kernel::Expr(Box::new(
-            crate::expr::Expr::parse("1/(1+s)", &["s"], "r").unwrap(),
-        ));
-        let exact = alone(Plan::Exact {
-            lags: Lags::new(&kernel, k, 60, false, "r").unwrap(),
-            fallback: None,
-        });
-        let saved = |h: &History| SavedHistory {
-            n: h.n,
-            k: h.k,
-            u: h.u.clone(),
-            u_sum: h.u_sum.clone(),
-            u_comp: h.u_comp.clone(),
-            memory: match &h.memory {
-                Memory::None => SavedMemory::None,
-                Memory::Prony(terms) => SavedMemory::Prony(terms.clone()),
-                Memory::Direct { past, .. } => SavedMemory::Direct(past.clone()),
-            },
-        };
+        let (kernel, [two, exact]) = two_groups_and_direct(k);
         let dofs = vec![0, 2, 3];
         for plans in [two, exact] {
             let groups = plans.groups();
@@ -886,17 +898,7 @@ mod tests {
         // of a direct sum the rows after the last checkpoint's alone, and a restore from it
         // goes on with the same bits.
         let k = 0.01;
-        let two = Plans {
-            body: Plan::Prony(vec![(1.0, 10.0), (0.5, 3.0)]),
-            regions: vec![Plan::Prony(vec![(2.0, 1.0)])],
-        };
-        let kernel = Kernel::Expr(Box::new(
-            crate::expr::Expr::parse("1/(1+s)", &["s"], "r").unwrap(),
-        ));
-        let exact = alone(Plan::Exact {
-            lags: Lags::new(&kernel, k, 60, false, "r").unwrap(),
-            fallback: None,
-        });
+        let (_, [two, exact]) = two_groups_and_direct(k);
         // Five unknowns and a prescribed dof; rank 0 owns 0, 3 and 4, rank 1 owns 1 and 2.
         let (own, reach) = (
             [vec![0, 3, 4], vec![1, 2]],
@@ -953,24 +955,8 @@ mod tests {
                 from = whole.n;
                 if n == 25 {
                     // A resume on rank 1 from the whole saved state goes on as before.
-                    let memory = match &whole.memory {
-                        Memory::Prony(terms) => SavedMemory::Prony(terms.clone()),
-                        Memory::Direct { past, .. } => SavedMemory::Direct(past.clone()),
-                        Memory::None => SavedMemory::None,
-                    };
-                    let (u, u_sum, u_comp) =
-                        (whole.u.clone(), whole.u_sum.clone(), whole.u_comp.clone());
                     ranks[1] = holding(1);
-                    let (n, k) = (whole.n, whole.k);
-                    let state = SavedHistory {
-                        n,
-                        k,
-                        u,
-                        u_sum,
-                        u_comp,
-                        memory,
-                    };
-                    ranks[1].restore(state).unwrap();
+                    ranks[1].restore(saved(&whole)).unwrap();
                 }
             }
         }

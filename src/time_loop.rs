@@ -377,8 +377,8 @@ impl<'p> TimeLoop<'p> {
     }
 
     /// What a checkpoint saves of the loop at t_n, before step n is solved, on rank 0 (or
-    /// one process): on several ranks, whose memory each holds in its part, call
-    /// [`TimeLoop::gather_memory`] first, on every rank.
+    /// one process), but for the memory: [`TimeLoop::gather_memory`]'s, which every rank
+    /// calls.
     pub fn state(&self) -> LoopState<'_> {
         debug_assert!(
             self.history.holds.local().is_none(),
@@ -392,15 +392,14 @@ impl<'p> TimeLoop<'p> {
         }
     }
 
-    /// The memory at t_n as a checkpoint saves it, every dof's, made on rank 0 of several
-    /// of each rank's values at its own rows, for [`TimeLoop::state`]'s (collective: every
-    /// rank calls it at every checkpoint, which rank 0's schedule shares with the others:
-    /// `run`): Some on rank 0, None elsewhere and on one process, whose history holds every
-    /// dof. Of a direct sum, the past rows that no checkpoint holds yet, which every rank
-    /// counts alike.
+    /// The memory at t_n as a checkpoint saves it, every dof's (collective: every rank
+    /// calls it at every checkpoint, which rank 0's schedule shares with the others: `run`):
+    /// Some on one process and on rank 0 of several, made there of each rank's values at
+    /// its own rows, None on the other ranks. Of a direct sum, the past rows that no
+    /// checkpoint holds yet, which every rank counts alike.
     pub fn gather_memory(&mut self) -> Result<Option<SavedMemory>> {
-        let backend = &self.backend;
-        let whole = |value: &dyn Fn(usize) -> f64| backend.gather_at_first(value);
+        let (backend, n_free) = (&self.backend, self.disc.n_free);
+        let whole = |value: &dyn Fn(usize) -> f64| backend.gather_at_first(n_free, value);
         let gathered = self.history.gathered(self.past_saved, whole)?;
         if let crate::history::Memory::Direct { past, .. } = &self.history.memory {
             self.past_saved = past.len();

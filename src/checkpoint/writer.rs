@@ -8,7 +8,7 @@ use super::seal;
 use super::snapshot::{Snapshot, SnapshotMemory};
 use super::template::Template;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
-use crate::history::{LoopState, Memory, SavedMemory};
+use crate::history::{LoopState, SavedMemory};
 use crate::output::FrameSum;
 use crate::solver::Rows;
 use crate::{Error, Result};
@@ -42,8 +42,6 @@ pub(super) struct Shared {
 /// at most one write behind. [`Writer::finish`] waits until the last one is on disk.
 pub struct Writer {
     path: PathBuf,
-    /// History rows already handed to the writer thread.
-    rows_sent: usize,
     shared: std::sync::Arc<Shared>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -83,7 +81,7 @@ impl Disk {
 impl Writer {
     /// A writer for a run of `steps` steps into `dir` whose Γ3 has `rows`.
     pub fn new(dir: &Path, id: Identity, steps: usize, rows: &Rows) -> Writer {
-        Writer::start(Disk::new(dir, id, steps, rows), 0)
+        Writer::start(Disk::new(dir, id, steps, rows))
     }
 
     /// A writer that continues `cp` in `dir` for a run of `steps` steps, the checkpoint's
@@ -93,7 +91,6 @@ impl Writer {
     /// rank holds every past row whole (`TimeLoop::gather_memory` sends the later ones).
     pub fn resume(dir: &Path, id: Identity, steps: usize, rows: &Rows, cp: &Checkpoint) -> Writer {
         let mut disk = Disk::new(dir, id, steps, rows);
-        let mut rows_sent = 0;
         if let StoredMemory::Direct { rows, hash, .. } = &cp.memory {
             let same_dir = match (std::fs::canonicalize(dir), cp.dir().canonicalize()) {
                 (Ok(a), Ok(b)) => a == b,
@@ -106,12 +103,11 @@ impl Writer {
             if disk.history.is_none() {
                 disk.earlier = Some((cp.dir().join(HISTORY_FILE_NAME), *rows, *hash));
             }
-            rows_sent = *rows;
         }
-        Writer::start(disk, rows_sent)
+        Writer::start(disk)
     }
 
-    fn start(mut disk: Disk, rows_sent: usize) -> Writer {
+    fn start(mut disk: Disk) -> Writer {
         let shared = std::sync::Arc::new(Shared {
             mailbox: std::sync::Mutex::new(Mailbox::default()),
             changed: std::sync::Condvar::new(),
@@ -148,7 +144,6 @@ impl Writer {
             .expect("a thread for the checkpoint writer");
         Writer {
             path,
-            rows_sent,
             shared,
             thread: Some(thread),
         }
@@ -160,31 +155,33 @@ impl Writer {
     }
 
     /// Hands the checkpoint of the loop's `state` (at step n, before solving it) to the writer
-    /// thread. `active`: the contact/stick flags of the last solved step's rows; `frames`:
+    /// thread, with its memory as `TimeLoop::gather_memory` made it (of a direct sum, the
+    /// rows after the last checkpoint's). `active`: the contact/stick flags of the last solved step's rows; `frames`:
     /// the frames of the series written so far (all on disk). Returns the error of an earlier
     /// checkpoint that failed.
     pub fn write(
         &mut self,
         state: LoopState,
-        gathered: Option<SavedMemory>,
+        memory: SavedMemory,
         log: &RunLog,
         active: &[bool],
         frames: Vec<FrameSum>,
     ) -> Result<()> {
         let h = state.history;
-        let memory = match (gathered, &h.memory) {
-            (_, Memory::None) => SnapshotMemory::None,
-            (Some(SavedMemory::Prony(terms)), _) => SnapshotMemory::Prony(terms),
-            (None, Memory::Prony(terms)) => SnapshotMemory::Prony(terms.clone()),
-            // The rows after the last checkpoint's, which every rank counts alike.
-            (Some(SavedMemory::Direct(rows)), Memory::Direct { past, .. }) => {
-                self.past_rows(rows, past.len(), h.u.len())
+        let memory = match memory {
+            SavedMemory::None => SnapshotMemory::None,
+            SavedMemory::Prony(terms) => SnapshotMemory::Prony(terms),
+            // The past rows after the last checkpoint's, up to u_{n−1}.
+            SavedMemory::Direct(rows) => {
+                assert!(
+                    rows.len() <= h.n && rows.iter().all(|r| r.len() == h.u.len()),
+                    "the past rows after the last checkpoint's, each of every dof"
+                );
+                SnapshotMemory::Direct {
+                    from: h.n - rows.len(),
+                    rows,
+                }
             }
-            (None, Memory::Direct { past, .. }) => {
-                let rows = past[self.rows_sent..].to_vec();
-                self.past_rows(rows, past.len(), h.u.len())
-            }
-            (Some(_), _) => unreachable!("the gathered memory is the history's kind"),
         };
         let snapshot = Snapshot {
             n: h.n,
@@ -210,17 +207,6 @@ impl Writer {
         }
         self.shared.changed.notify_all();
         Ok(())
-    }
-
-    /// The past rows `rows` of every dof (`n_dofs`) after those sent, up to row `end`.
-    fn past_rows(&mut self, rows: Vec<Vec<f64>>, end: usize, n_dofs: usize) -> SnapshotMemory {
-        let from = self.rows_sent;
-        assert!(
-            from + rows.len() == end && rows.iter().all(|r| r.len() == n_dofs),
-            "the past rows after the last checkpoint's, each of every dof"
-        );
-        self.rows_sent = end;
-        SnapshotMemory::Direct { from, rows }
     }
 
     /// Waits until every checkpoint handed over so far is on disk (the writer stays open);

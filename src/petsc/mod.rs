@@ -836,13 +836,17 @@ impl Krylov {
         Ok(())
     }
 
-    /// Every unknown's value on rank 0, each rank giving `value` of the unknowns of its own
-    /// rows (collective: every rank calls it): Some on rank 0 (n_free values, in the
-    /// unknowns' order), None elsewhere, and on one rank. What a checkpoint saves of the
-    /// values that each rank holds in its part alone (`history::History::gathered`).
-    pub fn gather_at_first(&self, value: &dyn Fn(usize) -> f64) -> Result<Option<Vec<f64>>> {
+    /// The `n` unknowns' values on rank 0 (and on one rank), each rank giving `value` of the
+    /// unknowns of its own rows (collective: every rank calls it): Some there, in the
+    /// unknowns' order, None elsewhere. What a checkpoint saves of the values that each
+    /// rank holds in its part alone (`history::History::gathered`).
+    pub fn gather_at_first(
+        &self,
+        n: usize,
+        value: &dyn Fn(usize) -> f64,
+    ) -> Result<Option<Vec<f64>>> {
         let Some(spread) = &self.spread else {
-            return Ok(None);
+            return Ok(Some((0..n).map(value).collect()));
         };
         let mine: Vec<f64> = spread.numbered.iter().map(|&i| value(i as usize)).collect();
         let cut = (spread.counts.as_slice(), spread.displs.as_slice());

@@ -297,17 +297,18 @@ impl Backend {
         }
     }
 
-    /// Every unknown's value on rank 0 of several, each rank giving `value` of its own
-    /// rows' unknowns (collective; `petsc::Krylov::gather_at_first`): None elsewhere and
-    /// on one process.
-    pub fn gather_at_first(&self, value: &dyn Fn(usize) -> f64) -> crate::Result<Option<Vec<f64>>> {
+    /// The `n` unknowns' values on one process, and on rank 0 of several, each rank giving
+    /// `value` of its own rows' unknowns (collective; `petsc::Krylov::gather_at_first`):
+    /// None on the other ranks.
+    pub fn gather_at_first(
+        &self,
+        n: usize,
+        value: &dyn Fn(usize) -> f64,
+    ) -> crate::Result<Option<Vec<f64>>> {
         match self {
             #[cfg(feature = "petsc")]
-            Backend::Petsc(krylov) => krylov.gather_at_first(value),
-            _ => {
-                let _ = value;
-                Ok(None)
-            }
+            Backend::Petsc(krylov) => krylov.gather_at_first(n, value),
+            _ => Ok(Some((0..n).map(value).collect())),
         }
     }
 
