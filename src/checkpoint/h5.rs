@@ -86,6 +86,26 @@ pub(super) fn vector<T: hdf5::H5Type>(
     describe(&ds, description, units)
 }
 
+/// A 2-D dataset of `rows` (each of `width` values), written row by row: the Prony
+/// states, the checkpoint's largest dataset, are never copied into one array.
+pub(super) fn rows_dataset(
+    g: &hdf5::Group,
+    name: &str,
+    (rows, width): (&[&[f64]], usize),
+    description: &str,
+    units: &str,
+) -> hdf5::Result<()> {
+    let ds = g
+        .new_dataset::<f64>()
+        .shape([rows.len(), width])
+        .create(name)?;
+    for (i, row) in rows.iter().enumerate() {
+        let row = ndarray::ArrayView2::from_shape((1, width), row).map_err(|e| e.to_string())?;
+        ds.write_slice(row, ndarray::s![i..i + 1, ..])?;
+    }
+    describe(&ds, description, units)
+}
+
 pub(super) fn string_dataset(
     g: &hdf5::Group,
     name: &str,

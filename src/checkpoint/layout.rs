@@ -1,7 +1,7 @@
 //! The checkpoint's HDF5 layout: every group, dataset and attribute (written through the
 //! library), and the datasets whose values change between checkpoints.
 
-use super::h5::{h5_create_sealed, scalar, str_attr, string_dataset, vector};
+use super::h5::{h5_create_sealed, rows_dataset, scalar, str_attr, string_dataset, vector};
 use super::history_file::HistoryFile;
 use super::snapshot::{Snapshot, SnapshotMemory};
 use super::{Identity, RunLog, FORMAT, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
@@ -10,57 +10,107 @@ use hdf5_metno as hdf5;
 use std::path::Path;
 
 /// The datasets whose values change from one checkpoint to the next, in file byte order
-/// (little endian, as the datasets are declared).
-pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Vec<u8>)> {
-    fn f64s(v: &[f64]) -> Vec<u8> {
-        v.iter().flat_map(|x| x.to_le_bytes()).collect()
-    }
+/// (little endian, as the datasets are declared): their values where the snapshot holds
+/// them, which a checkpoint writes where they go in its file (`Template`), never copied
+/// whole; the rest as bytes.
+pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Raw<'_>)> {
+    let bytes = |b: &[u8]| Raw::Bytes(b.to_vec());
+    let f64s = |v| Raw::F64s(vec![v]);
     let mut out = vec![
-        ("step", (s.n as u64).to_le_bytes().to_vec()),
-        ("time", (s.n as f64 * s.k).to_le_bytes().to_vec()),
-        ("state/u", f64s(&s.u)),
-        ("state/u_sum", f64s(&s.u_sum)),
-        ("state/u_comp", f64s(&s.u_comp)),
-        ("state/w", f64s(&s.w)),
-        ("state/z", f64s(&s.z)),
-        ("state/z_before", f64s(&s.z_before)),
-        ("state/active", s.active.iter().map(|&a| a as u8).collect()),
+        ("step", bytes(&(s.n as u64).to_le_bytes())),
+        ("time", bytes(&(s.n as f64 * s.k).to_le_bytes())),
+        ("state/u", f64s(&s.u[..])),
+        ("state/u_sum", f64s(&s.u_sum[..])),
+        ("state/u_comp", f64s(&s.u_comp[..])),
+        ("state/w", f64s(&s.w[..])),
+        ("state/z", f64s(&s.z[..])),
+        ("state/z_before", f64s(&s.z_before[..])),
         (
-            "run/iterations",
-            iterations(&s.log, steps)
-                .iter()
-                .flat_map(|x| x.to_le_bytes())
-                .collect(),
+            "state/active",
+            Raw::Bytes(s.active.iter().map(|&a| a as u8).collect()),
         ),
+        ("run/iterations", Raw::Bytes(le(&iterations(&s.log, steps)))),
         (
             "run/max_violation",
-            s.log.max_violation.to_le_bytes().to_vec(),
+            bytes(&s.log.max_violation.to_le_bytes()),
         ),
         (
             "run/max_kkt_residual",
-            s.log.max_kkt_residual.to_le_bytes().to_vec(),
+            bytes(&s.log.max_kkt_residual.to_le_bytes()),
         ),
     ];
     let series = series_columns(&s.frames);
     out.push((
         "series/frames",
-        (s.frames.len() as u64).to_le_bytes().to_vec(),
+        bytes(&(s.frames.len() as u64).to_le_bytes()),
     ));
-    out.push(("series/step", le(&series.step)));
-    out.push(("series/time", le(&series.time)));
-    out.push(("series/crc32", le(&series.crc32)));
-    out.push(("series/bytes", le(&series.bytes)));
+    out.push(("series/step", Raw::Bytes(le(&series.step))));
+    out.push(("series/time", Raw::Bytes(le(&series.time))));
+    out.push(("series/crc32", Raw::Bytes(le(&series.crc32))));
+    out.push(("series/bytes", Raw::Bytes(le(&series.bytes))));
     match &s.memory {
         SnapshotMemory::None => {}
         SnapshotMemory::Prony(terms) => {
-            let m: Vec<f64> = terms.iter().flat_map(|t| t.m.iter().copied()).collect();
-            out.push(("memory/prony_state", f64s(&m)));
+            let states = terms.iter().map(|t| &t.m[..]).collect();
+            out.push(("memory/prony_state", Raw::F64s(states)));
         }
         SnapshotMemory::Direct { .. } => {
-            out.push(("memory/history_rows", (s.n as u64).to_le_bytes().to_vec()));
+            out.push(("memory/history_rows", bytes(&(s.n as u64).to_le_bytes())));
         }
     }
     out
+}
+
+/// A variable dataset's raw data: bytes, or f64 values in parts (the state's vectors, the
+/// Prony states one row a term), in file byte order once written.
+pub(super) enum Raw<'a> {
+    Bytes(Vec<u8>),
+    F64s(Vec<&'a [f64]>),
+}
+
+impl Raw<'_> {
+    /// Its bytes' count.
+    pub(super) fn len(&self) -> usize {
+        match self {
+            Raw::Bytes(b) => b.len(),
+            Raw::F64s(parts) => parts.iter().map(|p| std::mem::size_of_val(*p)).sum(),
+        }
+    }
+
+    /// Its bytes into `out`, of [`Raw::len`] bytes.
+    pub(super) fn write_into(&self, out: &mut [u8]) {
+        match self {
+            Raw::Bytes(b) => out.copy_from_slice(b),
+            Raw::F64s(parts) => {
+                let mut at = 0;
+                for part in parts {
+                    let to = at + std::mem::size_of_val(*part);
+                    write_le(part, &mut out[at..to]);
+                    at = to;
+                }
+            }
+        }
+    }
+
+    /// Whether `bytes` are its bytes.
+    pub(super) fn is(&self, bytes: &[u8]) -> bool {
+        let values = match self {
+            Raw::Bytes(b) => return b[..] == *bytes,
+            Raw::F64s(parts) => parts.iter().flat_map(|p| p.iter()),
+        };
+        bytes.len() == self.len()
+            && (bytes.chunks_exact(8).zip(values)).all(|(b, x)| *b == x.to_le_bytes())
+    }
+}
+
+/// The little-endian bytes of `v` into `out`, of as many bytes.
+fn write_le(v: &[f64], out: &mut [u8]) {
+    if cfg!(target_endian = "little") {
+        return out.copy_from_slice(bytemuck::cast_slice(v));
+    }
+    for (b, x) in out.chunks_exact_mut(8).zip(v) {
+        b.copy_from_slice(&x.to_le_bytes());
+    }
 }
 
 /// Little-endian bytes of numbers.
@@ -269,7 +319,7 @@ fn write_memory(f: &hdf5::File, s: &Snapshot, history: Option<&HistoryFile>) -> 
             let a: Vec<f64> = terms.iter().map(|t| t.a).collect();
             let decay: Vec<f64> = terms.iter().map(|t| t.decay).collect();
             let b: Vec<f64> = terms.iter().map(|t| -t.decay.ln() / s.k).collect();
-            let m: Vec<f64> = terms.iter().flat_map(|t| t.m.iter().copied()).collect();
+            let states: Vec<&[f64]> = terms.iter().map(|t| &t.m[..]).collect();
             let nt = [terms.len()];
             vector(
                 &memory,
@@ -308,11 +358,10 @@ fn write_memory(f: &hdf5::File, s: &Snapshot, history: Option<&HistoryFile>) -> 
                     "1",
                 )?;
             }
-            vector(
+            rows_dataset(
                 &memory,
                 "prony_state",
-                &[terms.len(), n_free],
-                &m,
+                (&states, n_free),
                 "m^(i)_n = k Σ_{j<n} exp(-b_i (t_n - t_j)) u_j, one row per term; \
                  m_n = Σ a_i m^(i)_n",
                 "m s",
@@ -499,4 +548,24 @@ fn write_series(f: &hdf5::File, frames: &[FrameSum]) -> hdf5::Result<()> {
         "number of bytes the CRC-32 covers",
         "1",
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Raw;
+
+    #[test]
+    fn values_in_parts_are_written_and_recognized_as_their_little_endian_bytes() {
+        let (a, b) = ([1.5, -0.0, f64::MIN_POSITIVE], [3.25e300]);
+        let raw = Raw::F64s(vec![&a, &[], &b]);
+        let bytes: Vec<u8> = a.iter().chain(&b).flat_map(|x| x.to_le_bytes()).collect();
+        assert_eq!(raw.len(), 32);
+        let mut out = vec![0u8; 32];
+        raw.write_into(&mut out);
+        assert_eq!(out, bytes);
+        assert!(raw.is(&bytes) && Raw::Bytes(bytes.clone()).is(&bytes));
+        let mut flipped = bytes.clone();
+        flipped[31] ^= 1;
+        assert!(!raw.is(&flipped) && !raw.is(&bytes[..24]));
+    }
 }

@@ -1,6 +1,7 @@
 //! Later checkpoints of a process: the first one's bytes with the variable data patched.
 
 use super::h5::{h5_file, OpenMode};
+use super::layout::Raw;
 use std::path::Path;
 
 /// The first checkpoint of a run is written through the HDF5 library; every later one has
@@ -20,48 +21,46 @@ pub(super) struct Template {
 impl Template {
     /// The file just written at `path`, whose bytes are `bytes`, with its variable
     /// datasets found; None when one is not contiguous with exactly the expected size.
-    pub(super) fn capture(
-        path: &Path,
-        bytes: Vec<u8>,
-        data: &[(&'static str, Vec<u8>)],
-    ) -> Option<Template> {
+    pub(super) fn capture(path: &Path, bytes: Vec<u8>, data: &[(&str, Raw)]) -> Option<Template> {
         let regions = {
             let f = h5_file(OpenMode::Read, path).ok()?;
             let mut regions = Vec::with_capacity(data.len());
-            for (name, bytes) in data {
+            for (name, raw) in data {
                 let ds = f.dataset(name).ok()?;
-                if bytes.is_empty() {
+                let len = raw.len();
+                if len == 0 {
                     regions.push((0, 0));
                     continue;
                 }
                 let offset = ds.offset()? as usize;
-                if ds.storage_size() as usize != bytes.len() {
+                if ds.storage_size() as usize != len {
                     return None;
                 }
-                regions.push((offset, bytes.len()));
+                regions.push((offset, len));
             }
             regions
         };
-        for ((offset, len), (_, data)) in regions.iter().zip(data) {
-            if offset + len > bytes.len() || bytes[*offset..offset + len] != data[..] {
+        for ((offset, len), (_, raw)) in regions.iter().zip(data) {
+            if offset + len > bytes.len() || !raw.is(&bytes[*offset..offset + len]) {
                 return None;
             }
         }
         Some(Template { bytes, regions })
     }
 
-    /// The file bytes for `data`; None when the sizes no longer match.
-    pub(super) fn patch(&mut self, data: &[(&'static str, Vec<u8>)]) -> Option<&mut [u8]> {
+    /// The file bytes for `data`, written where each dataset's raw data lies; None when
+    /// the sizes no longer match.
+    pub(super) fn patch(&mut self, data: &[(&str, Raw)]) -> Option<&mut [u8]> {
         if data.len() != self.regions.len() {
             return None;
         }
-        for ((_, len), (_, d)) in self.regions.iter().zip(data) {
-            if *len != d.len() {
+        for ((_, len), (_, raw)) in self.regions.iter().zip(data) {
+            if *len != raw.len() {
                 return None;
             }
         }
-        for ((offset, len), (_, d)) in self.regions.iter().zip(data) {
-            self.bytes[*offset..offset + len].copy_from_slice(d);
+        for ((offset, len), (_, raw)) in self.regions.iter().zip(data) {
+            raw.write_into(&mut self.bytes[*offset..offset + len]);
         }
         Some(&mut self.bytes)
     }

@@ -3,7 +3,7 @@
 
 use super::h5::{fsync_dir, fsync_file};
 use super::history_file::{grown_capacity, HistoryFile};
-use super::layout::{variable_data, write_checkpoint};
+use super::layout::{variable_data, write_checkpoint, Raw};
 use super::seal;
 use super::snapshot::{Snapshot, SnapshotMemory};
 use super::template::Template;
@@ -292,7 +292,10 @@ impl Disk {
         let tmp = self.dir.join(format!("{FILE_NAME}.tmp"));
         let mut data = variable_data(s, self.steps);
         if let Some(h) = &self.history {
-            data.push(("memory/history_hash", h.hash.0.to_le_bytes().to_vec()));
+            data.push((
+                "memory/history_hash",
+                Raw::Bytes(h.hash.0.to_le_bytes().to_vec()),
+            ));
         }
         let fast = self
             .template
