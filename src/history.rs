@@ -329,6 +329,18 @@ impl Plans {
         1 + self.regions.len()
     }
 
+    /// The Prony terms of every group, each of which keeps a state at every dof.
+    pub fn terms(&self) -> usize {
+        (0..self.groups())
+            .map(|g| self.group(g).prony().map_or(0, <[_]>::len))
+            .sum()
+    }
+
+    /// Whether the body's memory is the direct sum, which keeps every step's displacement.
+    pub fn direct(&self) -> bool {
+        matches!(self.body, Plan::Exact { .. })
+    }
+
     /// r_g(0) of each group as the run uses it (None: a group without memory).
     pub fn r0(&self, scene: &Scene) -> Vec<Option<f64>> {
         let kernels = scene.physics.region_kernels();

@@ -492,10 +492,15 @@ fn check(path: &std::path::Path, set: &[String], ranks: usize) -> Result<()> {
     if let Some(line) = solver.with_petsc(&disc)? {
         viscontact::outln!("petsc      {line}");
     }
-    // Sizes first: a hostile time.steps is refused before anything is allocated per step.
+    // Sizes first: a hostile time.steps is refused before anything is allocated per step,
+    // then the kernels' plans, whose terms each keep a state at every dof.
+    let out = viscontact::run::default_out(&scene)?;
     let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
+    estimate.check(&out)?;
+    let plans = Plans::new(&scene)?;
+    let estimate = estimate.with_plans(&plans, &disc);
     viscontact::outln!("resources  {estimate}");
-    estimate.check(&viscontact::run::default_out(&scene)?)?;
+    estimate.check(&out)?;
     let mut show = |line: &str| viscontact::outln!("ranks      {line}");
     viscontact::run::check_memory(
         &scene,
@@ -508,7 +513,6 @@ fn check(path: &std::path::Path, set: &[String], ranks: usize) -> Result<()> {
     if let Some(bytes) = factor {
         viscontact::resources::check_factor(bytes, disc.n_free)?;
     }
-    let plans = Plans::new(&scene)?;
     print_stability(&scene, &disc, &plans);
     print_kernels(&scene, &disc, &plans);
     for w in viscontact::effects::warnings(&scene, &disc, &solver) {

@@ -7,11 +7,18 @@
 //! them. With d free dofs, n nodes and c cells:
 //!
 //! - memory: a general kernel's direct sum keeps u_0..u_N (8 d (N+1) bytes) and r at every
-//!   lag (8 (N+1)), and the checkpoint writer may copy all rows once more; every kernel keeps
-//!   the per-step iteration counts (8 N). A compressed kernel (expr or table, `memory =
-//!   "compressed"`) counts its fit, 16 bytes per lag up to max(N, horizon/k) (r and the
-//!   certificate's deviation, `kernel_fit`), and the direct sum's rows only when its run may
-//!   fall back to it (N ≤ `kernel_fit::EXACT_STEPS`; a longer one is refused instead);
+//!   lag (8 (N+1)), and a checkpoint gathers the rows no checkpoint holds yet, at most all
+//!   of them, once more; every kernel keeps the per-step iteration counts (8 N). A
+//!   compressed kernel (expr or table, `memory = "compressed"`) counts its fit, 16 bytes per
+//!   lag up to max(N, horizon/k) (r and the certificate's deviation, `kernel_fit`), and the
+//!   direct sum's rows only when its run may fall back to it (N ≤ `kernel_fit::EXACT_STEPS`;
+//!   a longer one is refused instead). Once the kernels' plans are known
+//!   ([`Estimate::with_plans`]: after the sizes above passed, since a plan evaluates the
+//!   kernel on every lag), the direct sum's rows are counted where it runs alone, and the
+//!   Prony states (a compressed kernel's too) are: 8 d bytes a term, which a checkpoint
+//!   holds twice more (`Held::gathered`). Over several MPI ranks
+//!   ([`Estimate::largest_rank`]) rank 0 holds the memory at the dofs it reads alone and
+//!   gathers it whole at each checkpoint;
 //! - disk: a frame every `output.every` steps (`frame_bytes`: the values of the fields
 //!   written, at `output.precision`, the points and the cells; zlib, the default, keeps the
 //!   values that are in general nonzero and about a fifth of the rest, the zeros and the
@@ -29,6 +36,7 @@
 //! overlay file systems) does not count them and is not refused for them.
 
 use crate::fem::Discretization;
+use crate::history::Plans;
 use crate::kernel::Kernel;
 use crate::kernel_fit::EXACT_STEPS;
 use crate::output::{Compression, Format, Precision};
@@ -44,26 +52,62 @@ pub const MARGIN: f64 = 0.8;
 const SPARE_FILES: f64 = 16.0;
 
 /// A run's estimated memory and disk use, in bytes, and the files it creates, for its steps
-/// from `from` on.
+/// from `from` on; `memory` is one process's.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Estimate {
     pub memory: f64,
     pub disk: f64,
     pub files: f64,
+    /// What of `memory` the memory sum holds at every dof.
+    held: Held,
     /// The key to change when the memory does not fit.
     memory_key: &'static str,
 }
+
+/// The bytes of what a run's steps hold: the memory sum's at every dof and the rest.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Held {
+    /// A direct sum's past rows, 8 d (N + 1).
+    rows: f64,
+    /// The Prony states, 8 d a term (0 until the plans are known).
+    states: f64,
+    /// What no rank count divides: r at every lag, the fit, the iteration counts.
+    rest: f64,
+    /// Whether checkpoints are written, which gather the memory.
+    checkpoints: bool,
+}
+
+impl Held {
+    /// What a checkpoint adds to the process that writes it, the memory gathered whole: a
+    /// direct sum's rows that no checkpoint holds yet (at most all), and the Prony states
+    /// twice (gathered, and the checkpoint file's bytes, which the writer keeps to patch
+    /// the next one with them: `checkpoint::Template`); and the rest.
+    fn gathered(&self) -> f64 {
+        let checkpoint = if self.checkpoints { 1.0 } else { 0.0 };
+        self.rest + checkpoint * (self.rows + 2.0 * self.states)
+    }
+
+    /// One process's: every dof's memory, and what a checkpoint gathers.
+    fn one_process(&self) -> f64 {
+        self.gathered() + self.rows + self.states
+    }
+}
+
+/// The key an estimate names when its memory does not fit.
+const STEPS_KEY: &str = "time.steps";
+const DIRECT_KEY: &str = "time.steps (a general kernel keeps every step's displacement; a \
+                          Prony kernel, material.relaxation.prony, keeps O(1) per step)";
+const TERMS_KEY: &str = "the kernels' terms (each Prony term keeps a value at every dof: a \
+                         shorter series, or a compressed kernel's looser tolerance or horizon)";
 
 impl Estimate {
     /// The key to change when the memory does not fit (with why, for a general kernel).
     pub fn memory_key(&self) -> &'static str {
         self.memory_key
     }
-}
 
-impl Estimate {
     /// The estimate for a run of `scene` (its `time.steps` N) continuing from step `from`
-    /// (0 for a new run; a resumed run writes only the rest).
+    /// (0 for a new run; a resumed run writes only the rest), before its kernels' plans.
     pub fn new(scene: &Scene, disc: &Discretization, from: usize) -> Estimate {
         let steps = scene.time.steps as f64;
         let d = disc.n_free as f64;
@@ -78,29 +122,63 @@ impl Estimate {
             (true, None) => 16.0 * (steps + 1.0),
             (true, Some(h)) => 16.0 * ((h / scene.time.k()).ceil().max(steps) + 1.0),
         };
-        let rows = if direct { 8.0 * d * (steps + 1.0) } else { 0.0 };
-        let copies = if scene.checkpoint.enabled { 2.0 } else { 1.0 };
-        let memory =
-            copies * rows + if direct { 8.0 * (steps + 1.0) } else { 0.0 } + fit + 8.0 * steps;
+        let held = Held {
+            rows: if direct { 8.0 * d * (steps + 1.0) } else { 0.0 },
+            states: 0.0,
+            rest: if direct { 8.0 * (steps + 1.0) } else { 0.0 } + fit + 8.0 * steps,
+            checkpoints: scene.checkpoint.enabled,
+        };
         let remaining = (scene.time.steps.saturating_sub(from) + 1) as f64;
         let frames = (remaining / scene.output.every as f64).ceil() + 1.0;
         let frame = frame_bytes(scene, disc);
-        let history = if scene.checkpoint.enabled { rows } else { 0.0 };
+        let history = if scene.checkpoint.enabled {
+            held.rows
+        } else {
+            0.0
+        };
         let series = match scene.output.options.format {
             Format::Vtu => frames + 1.0,
             Format::Vtkhdf => 1.0,
         };
         Estimate {
-            memory,
+            memory: held.one_process(),
             disk: frames * frame + history,
             files: series + SPARE_FILES,
-            memory_key: if direct {
-                "time.steps (a general kernel keeps every step's displacement; a Prony kernel, \
-                 material.relaxation.prony, keeps O(1) per step)"
-            } else {
-                "time.steps"
-            },
+            held,
+            memory_key: if direct { DIRECT_KEY } else { STEPS_KEY },
         }
+    }
+
+    /// The estimate once the kernels' `plans` are known, for `disc`'s dofs: the direct
+    /// sum's rows where it runs (not where a compressed kernel might have fallen back to
+    /// it and did not), and the Prony states of every term.
+    pub fn with_plans(mut self, plans: &Plans, disc: &Discretization) -> Estimate {
+        let d = disc.n_free as f64;
+        if !plans.direct() {
+            self.disk -= if self.held.checkpoints {
+                self.held.rows
+            } else {
+                0.0
+            };
+            self.held.rows = 0.0;
+        }
+        self.held.states = 8.0 * d * plans.terms() as f64;
+        self.memory = self.held.one_process();
+        self.memory_key = match (plans.direct(), plans.terms() > 0) {
+            (true, _) => DIRECT_KEY,
+            (false, true) => TERMS_KEY,
+            (false, false) => STEPS_KEY,
+        };
+        self
+    }
+
+    /// What the steps hold on the largest of several ranks, rank 0, which holds the memory
+    /// at a fraction of the dofs (those its steps and history.csv read, and its own rows;
+    /// every dof where it holds them all: `ranks::Plan`) and gathers it whole at each
+    /// checkpoint: (what no rank count lowers, the memory at every dof, of which it holds
+    /// that fraction).
+    pub fn largest_rank(&self) -> (f64, f64) {
+        (self.held.gathered(), self.held.rows + self.held.states)
     }
 
     /// Refuses (exit 2, the estimate and what to change) a run this machine cannot hold:
@@ -416,7 +494,8 @@ mod tests {
             memory: 1e30,
             disk: 0.0,
             files: 1.0,
-            memory_key: "time.steps",
+            held: Held::default(),
+            memory_key: STEPS_KEY,
         };
         if available_memory().unwrap().is_some() {
             let err = e.check(Path::new(".")).unwrap_err().to_string();
@@ -429,7 +508,8 @@ mod tests {
             memory: 0.0,
             disk: 1e30,
             files: 1.0,
-            memory_key: "time.steps",
+            held: Held::default(),
+            memory_key: STEPS_KEY,
         };
         let err = e.check(Path::new("no/such/dir")).unwrap_err().to_string();
         assert!(
@@ -440,7 +520,8 @@ mod tests {
             memory: 1.0,
             disk: 1.0,
             files: 1.0,
-            memory_key: "time.steps",
+            held: Held::default(),
+            memory_key: STEPS_KEY,
         };
         fits.check(Path::new(".")).unwrap();
     }
@@ -466,7 +547,8 @@ mod tests {
             memory: 0.0,
             disk: 1e6,
             files: 1001.0 + SPARE_FILES,
-            memory_key: "time.steps",
+            held: Held::default(),
+            memory_key: STEPS_KEY,
         };
         let err = e
             .check_file_system(&fs(1000.0, 1e6))

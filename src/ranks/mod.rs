@@ -551,6 +551,11 @@ pub struct Plan {
     holding: Holding,
     /// The largest rank's fraction of K_A's entries.
     share: f64,
+    /// The memory sum's bytes at every dof (`resources::Estimate::largest_rank`), and the
+    /// fraction of them that the largest rank holds: its reach, every dof where rank 0
+    /// holds them all.
+    memory: f64,
+    reach: f64,
     /// Through the active set's Newton systems.
     newton: bool,
     /// A step's expected seconds on this machine ([`Plan::timed`]), once timed.
@@ -562,13 +567,13 @@ impl Plan {
     /// The plan of `disc` (whole, or a rank's columns) for `scene` over `size` ranks (the
     /// partition `made` holds where this rank made one for them: `Ranks::discretize`; else
     /// made here), its steps through the active set's Newton systems where `newton` (else
-    /// K_A's solves), holding `steps` bytes besides the setup.
+    /// K_A's solves), holding what `steps` estimates besides the setup.
     pub fn new(
         disc: &crate::fem::Discretization,
         scene: &crate::scene::Scene,
         (size, made): (usize, Option<&Own>),
         newton: bool,
-        steps: f64,
+        steps: &crate::resources::Estimate,
     ) -> Result<Plan> {
         use crate::resources::{peak_memory, petsc_bytes};
         let made = made.filter(|own| own.shares.len() == size);
@@ -584,7 +589,7 @@ impl Plan {
         let entries: usize = shares.iter().map(|s| s.entries).sum();
         // Under a launcher the peak holds MPI's runtime already.
         let launched = launched().is_some();
-        let setup = peak_memory().unwrap_or(0.0) + steps;
+        let peak = peak_memory().unwrap_or(0.0);
         let holding = Holding::of(disc, scene);
         let hands_over = hands_over_k_a(disc, scene.solver.history);
         // With the matrices whole on every rank they are part of what every rank holds.
@@ -596,8 +601,11 @@ impl Plan {
                 kept_per_entry(disc, hands_over) * entries as f64,
             ),
         };
-        let base =
-            setup + if launched { 0.0 } else { MPI_RUNTIME } - held - cell_bytes(disc, holding);
+        let (gathered, memory) = steps.largest_rank();
+        let base = peak + gathered + if launched { 0.0 } else { MPI_RUNTIME }
+            - held
+            - cell_bytes(disc, holding);
+        let reach = memory_reach(disc, scene, holding, &largest);
         let rows_bytes = if hands_over {
             12.0 * entries as f64
         } else {
@@ -608,7 +616,10 @@ impl Plan {
             size,
             rows: disc.n_free,
             largest,
-            own: if size > 1 { base + share * kept } else { setup },
+            own: match size {
+                1 => peak + steps.memory,
+                _ => base + share * kept + reach * memory,
+            },
             spread: petsc_bytes(largest.entries, newton, size),
             base,
             matrices,
@@ -617,6 +628,8 @@ impl Plan {
             spread_several: petsc_bytes(entries, newton, 2),
             holding,
             share,
+            memory,
+            reach,
             newton,
             step_s: None,
         })
@@ -670,10 +683,13 @@ impl Plan {
         if self.per_rank() <= budget {
             return Ok(());
         }
-        // R ranks hold base + (M' + PETSc's)/R each, and at setup base + M, or base +
+        // R ranks hold base + (M' + PETSc's + H)/R each, and at setup base + M, or base +
         // (M + rows)/R where a rank assembles its own columns alone (M: the matrices, M'
-        // what a rank keeps of them), evenly but for whole nodes: 5 % more for the largest.
-        let (left, split) = (budget - self.base, self.kept + self.spread_several);
+        // what a rank keeps of them, H the memory sum at every dof where rank 0 holds it
+        // at its reach), evenly but for whole nodes: 5 % more for the largest.
+        let history = if self.reach < 1.0 { self.memory } else { 0.0 };
+        let left = budget - self.base - (self.memory - history);
+        let split = self.kept + self.spread_several + history;
         let spreads = match self.holding {
             Holding::Columns => split.max(self.matrices + self.rows_bytes),
             _ => split,
@@ -693,9 +709,10 @@ impl Plan {
                 (1.05 * spreads / left).ceil().max(self.size as f64 + 1.0)
             ),
             false => format!(
-                "no rank count would: every rank reads the mesh, and rank 0 holds the whole \
-                 history (≈ {} here{}), and only the matrices and PETSc's part spread; use a coarser mesh \
-                 or ranks with more memory (docs/cluster.md)",
+                "no rank count would: every rank reads the mesh, and rank 0 holds u_n at \
+                 every dof and gathers the whole memory at each checkpoint (≈ {} here{}), and \
+                 only the matrices, PETSc's part and the rest of the memory spread; use a \
+                 coarser mesh or ranks with more memory (docs/cluster.md)",
                 human(self.setup_peak(0.0)),
                 whole,
             ),
@@ -772,6 +789,24 @@ impl std::fmt::Display for Plan {
             )?;
         }
         Ok(())
+    }
+}
+
+/// The fraction of the dofs at which the largest rank, rank 0, holds the memory sum
+/// (`run::hold_memory_of_first`): its rows and the values its rows' products fetch (its
+/// reach: its rows of K_R's columns, which are K_A's, and its piece's points), where the
+/// frames are in pieces (`.vtu`) and the matrices spread; else every dof.
+#[cfg(feature = "petsc")]
+fn memory_reach(
+    disc: &crate::fem::Discretization,
+    scene: &crate::scene::Scene,
+    holding: Holding,
+    largest: &crate::petsc::RankShare,
+) -> f64 {
+    let pieces = scene.output.options.format == crate::output::Format::Vtu;
+    match pieces && holding != Holding::Whole {
+        true => ((largest.rows + largest.ghosts) as f64 / disc.n_free.max(1) as f64).min(1.0),
+        false => 1.0,
     }
 }
 

@@ -33,9 +33,11 @@ pub use summary::{ContactSummary, Final, Iterations, OutputSummary, Status, Summ
 use crate::checkpoint::{self, RunLog};
 use crate::fem::reactions::Reactions;
 use crate::fem::Discretization;
+use crate::history::Plans;
 use crate::mesh::Mesh;
 use crate::output::{write_atomic, Resumed, Series};
 use crate::ranks::Ranks;
+use crate::resources::Estimate;
 use crate::scene::{read_scene_file, MeshChoice, Scene};
 use crate::solver::choice::Descriptor;
 use crate::time_loop::{RunEnd, TimeLoop};
@@ -211,7 +213,7 @@ struct Solving {
     solver: Descriptor,
     /// On one of several ranks, its layout and rows of K_A for PETSc (`Ranks::keep_own_columns`).
     own: Option<crate::ranks::Own>,
-    plans: crate::history::Plans,
+    plans: Plans,
 }
 
 impl Solving {
@@ -263,8 +265,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     before_discretizing(opts, &scene)?;
     let (mut disc, made) = opts.ranks.discretize(&mut mesh, &scene)?;
     stage()?;
-    let estimate = crate::resources::Estimate::new(&scene, &disc, 0);
-    estimate.check(&out)?;
+    let (estimate, plans) = estimate(&scene, &disc, (0, &out), || Plans::new(&scene))?;
     let ranks = (opts.ranks.size, made.as_ref());
     let solver = check_contact_plan(&scene, &disc, &estimate, None, ranks)?;
     check_started_ranks(&scene, &solver, opts)?;
@@ -280,7 +281,6 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
         None,
     )?;
     stage()?;
-    let plans = crate::history::Plans::new(&scene)?;
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
     Ok(Ready {
         scene,
@@ -295,6 +295,24 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
             lock,
         },
     })
+}
+
+/// What a run's steps from `from` on will hold in memory and write into `out`, refused
+/// (exit 2) where it would not fit: sizes first, so that a hostile `time.steps` is refused
+/// before the kernels' `plans` evaluate anything per step, then with their terms, each of
+/// which keeps a state at every dof.
+fn estimate(
+    scene: &Scene,
+    disc: &Discretization,
+    (from, out): (usize, &Path),
+    plans: impl FnOnce() -> Result<Plans>,
+) -> Result<(Estimate, Plans)> {
+    let sizes = Estimate::new(scene, disc, from);
+    sizes.check(out)?;
+    let plans = plans()?;
+    let estimate = sizes.with_plans(&plans, disc);
+    estimate.check(out)?;
+    Ok((estimate, plans))
 }
 
 /// The stage boundary of setup between the mesh and its discretization, where the latter
@@ -419,7 +437,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         disc.keep_places(&mesh.nodes, piece.as_ref().map_or(&[][..], |p| p.points()));
         let plans = match &cp {
             Some(cp) => cp.plans(&scene)?,
-            None => crate::history::Plans::new(&scene)?,
+            None => Plans::new(&scene)?,
         };
         Ok((scene, (disc, piece), Solving { solver, own, plans }, cp))
     };
@@ -549,8 +567,7 @@ fn prepare_resume(
     cp.check(&scene, &mesh, &disc)?;
     check_continuation(checkpoint_path, &cp, &scene, opts.stop_after)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
-    let estimate = crate::resources::Estimate::new(&scene, &disc, cp.n);
-    estimate.check(&out)?;
+    let (estimate, plans) = estimate(&scene, &disc, (cp.n, &out), || cp.plans(&scene))?;
     let solver = check_contact_plan(
         &scene,
         &disc,
@@ -591,7 +608,6 @@ fn prepare_resume(
         resumed.as_ref(),
     )?;
     stage()?;
-    let plans = cp.plans(&scene)?;
     let reactions = history_csv::reactions(&scene, &mesh, &disc, &plans)?;
     let ready = Ready {
         scene,
@@ -660,7 +676,7 @@ fn note_stop_after(stop_after: Option<usize>, steps: usize) {
 fn check_contact_plan(
     scene: &Scene,
     disc: &Discretization,
-    steps: &crate::resources::Estimate,
+    steps: &Estimate,
     checkpoint: Option<&Path>,
     ranks: (usize, Option<&crate::ranks::Own>),
 ) -> Result<Descriptor> {
@@ -686,12 +702,12 @@ pub fn check_memory(
     scene: &Scene,
     disc: &Discretization,
     solver: &Descriptor,
-    steps: &crate::resources::Estimate,
+    steps: &Estimate,
     ranks: (usize, Option<&crate::ranks::Own>),
     show: Option<&mut dyn FnMut(&str)>,
 ) -> Result<()> {
     #[cfg(feature = "petsc")]
-    if let Some(plan) = ranks_plan(scene, disc, solver, ranks, steps.memory)? {
+    if let Some(plan) = ranks_plan(scene, disc, solver, ranks, steps)? {
         if let Some(show) = show {
             show(&plan.clone().timed(disc).to_string());
         }
@@ -705,15 +721,15 @@ pub fn check_memory(
 }
 
 /// What a rank of a run through PETSc over `ranks` ranks holds and does (`ranks::Plan`,
-/// what `check --ranks` prints), holding `steps` bytes besides its setup; None for a run
-/// that does not go through PETSc.
+/// what `check --ranks` prints), holding what `steps` estimates besides its setup; None
+/// for a run that does not go through PETSc.
 #[cfg(feature = "petsc")]
 fn ranks_plan(
     scene: &Scene,
     disc: &Discretization,
     solver: &Descriptor,
     (ranks, made): (usize, Option<&crate::ranks::Own>),
-    steps: f64,
+    steps: &Estimate,
 ) -> Result<Option<crate::ranks::Plan>> {
     match *solver.build() {
         crate::solver::choice::Build::Krylov { newton } => {

@@ -85,7 +85,8 @@ pub fn emit(
     }
     let mut solver = Descriptor::of_run(&scene, &disc)?;
     check_ranks(job, &solver)?;
-    let estimate = Estimate::new(&scene, &disc, 0);
+    let plans = crate::history::Plans::new(&scene)?;
+    let estimate = Estimate::new(&scene, &disc, 0).with_plans(&plans, &disc);
     // A run through PETSc: what `check --ranks` says a rank holds, and a step's time.
     #[cfg(feature = "petsc")]
     let plan = super::ranks_plan(
@@ -93,7 +94,7 @@ pub fn emit(
         &disc,
         &solver,
         (job.nodes * job.ntasks_per_node, None),
-        estimate.memory,
+        &estimate,
     )?
     .map(|p| p.timed(&disc));
     #[cfg(feature = "petsc")]

@@ -3,7 +3,7 @@
 //! refuse (exit 2) a plan that does not fit the memory available, naming the key that would,
 //! before the run directory is touched. `VISCONTACT_MEMORY` stands for a smaller machine.
 
-use crate::common::{self, SceneText};
+use crate::common::{self, with_memory, SceneText};
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -34,16 +34,6 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
     let factor = common::descriptor(&s, &disc).factor_bytes(&disc);
     let factor = factor.unwrap().unwrap();
     (scene, (dense * sparse).sqrt() / MARGIN, factor)
-}
-
-/// `viscontact ARGS` with `VISCONTACT_MEMORY` = `memory` bytes.
-fn with_memory(memory: f64, args: &[&str]) -> Output {
-    std::process::Command::new(common::BIN)
-        .args(args)
-        .env(MEMORY_ENV, format!("{memory}"))
-        .current_dir(common::repo())
-        .output()
-        .unwrap()
 }
 
 /// Exit 2 and a message holding every one of `parts`.

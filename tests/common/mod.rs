@@ -312,6 +312,17 @@ pub fn viscontact(args: &[&str]) -> Output {
     viscontact_in(&repo(), args)
 }
 
+/// Runs the binary from the repository root with `VISCONTACT_MEMORY` = `memory` bytes, a
+/// smaller machine.
+pub fn with_memory(memory: f64, args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .env(viscontact::resources::MEMORY_ENV, format!("{memory}"))
+        .current_dir(repo())
+        .output()
+        .unwrap()
+}
+
 /// Runs the binary from the working directory `cwd`.
 pub fn viscontact_in(cwd: &Path, args: &[&str]) -> Output {
     Command::new(BIN)

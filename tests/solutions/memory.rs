@@ -524,6 +524,55 @@ fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
     assert!(mb >= 15.36, "{text}");
 }
 
+/// The estimate counts the Prony states once the kernels' plans are known: 8 bytes a free
+/// dof for each term, which a checkpoint holds twice more (gathered, and the file's bytes
+/// that its writer keeps); and a compressed kernel's direct sum only where its fit failed, not where it
+/// merely might have (N ≤ `kernel_fit::EXACT_STEPS`). `check` says so, and names the
+/// terms where the states do not fit.
+#[test]
+fn the_estimate_counts_every_prony_terms_state_at_every_dof() {
+    use viscontact::history::Plans;
+    use viscontact::resources::Estimate;
+    let dir = tempfile::tempdir().unwrap();
+    let memory = |scene: &SceneText, set: &[&str]| {
+        let (scene, _, disc) = common::load(&scene.write(dir.path(), "s.toml"), set);
+        let sizes = Estimate::new(&scene, &disc, 0);
+        let plans = Plans::new(&scene).unwrap();
+        let held = sizes.clone().with_plans(&plans, &disc);
+        (sizes.memory, held.memory, disc.n_free as f64, plans.terms())
+    };
+    let prony = |terms: usize| {
+        let series: Vec<String> = (0..terms).map(|i| format!("[0.1, {}.0]", i + 1)).collect();
+        SceneText::paper().table(
+            "material.relaxation",
+            &format!("prony = [{}]", series.join(", ")),
+        )
+    };
+    for (set, copies) in [(&[][..], 3.0), (&["checkpoint.enabled=false"][..], 1.0)] {
+        let (sizes, one, d, t1) = memory(&prony(1), set);
+        let (_, seven, _, t7) = memory(&prony(7), set);
+        assert_eq!((t1, t7), (1, 7));
+        assert_eq!(one - sizes, copies * 8.0 * d, "{set:?}");
+        assert_eq!(seven - one, copies * 6.0 * 8.0 * d, "{set:?}");
+    }
+    // 3200 steps may fall back to the direct sum: counted before the fit, not after it.
+    let (sizes, held, d, terms) = memory(&power_law(), &["time.steps=3200", "time.end=100"]);
+    let rows = 8.0 * d * 3201.0;
+    assert!(terms > 0 && sizes > 2.0 * rows, "{sizes} {rows}");
+    assert!(
+        held < sizes - 2.0 * rows + 3.0 * 8.0 * d * terms as f64 + 1.0,
+        "{held}"
+    );
+    assert!(held >= 3.0 * 8.0 * d * terms as f64, "{held}");
+    // Where the states do not fit, `check` names the terms.
+    let scene = prony(7).write(dir.path(), "p7.toml");
+    let fits = 8.0 * d * 7.0 * 3.0 / 0.8;
+    let out = common::with_memory(0.9 * fits, &["check", scene.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{text}");
+    assert!(text.contains("the kernels' terms"), "{text}");
+}
+
 /// A body without a memory term (no `[material.relaxation]`: Remark 2.5) assembles no K_R,
 /// which would be zero, and runs as with a kernel whose weight is zero, to round-off (the
 /// products of K_B then run alone or paired with K_R, in another order).
