@@ -495,10 +495,13 @@ fn check(path: &std::path::Path, set: &[String], ranks: usize) -> Result<()> {
     // Sizes first: a hostile time.steps is refused before anything is allocated per step,
     // then the kernels' plans, whose terms each keep a state at every dof.
     let out = viscontact::run::default_out(&scene)?;
-    let estimate = viscontact::resources::Estimate::new(&scene, &disc, 0);
-    estimate.check(&out)?;
+    let sizes = viscontact::resources::Estimate::new(&scene, &disc, 0);
+    if let Err(e) = sizes.check(&out) {
+        viscontact::outln!("resources  {sizes}");
+        return Err(e);
+    }
     let plans = Plans::new(&scene)?;
-    let estimate = estimate.with_plans(&plans, &disc);
+    let estimate = sizes.with_plans(&plans, &disc);
     viscontact::outln!("resources  {estimate}");
     estimate.check(&out)?;
     let mut show = |line: &str| viscontact::outln!("ranks      {line}");

@@ -2,9 +2,9 @@
 //! scene's sizes, and refused when this machine cannot hold it (`time.steps = 10^12` once
 //! passed `check` and then aborted in an allocation, or grew a 631 GB history file).
 //!
-//! Only what grows with the number of steps N is counted; the mesh, the matrices and their
-//! factor are the same for N = 10 and N = 10^9 and are known to fit once setup has built
-//! them. With d free dofs, n nodes and c cells:
+//! What grows with the number of steps N is counted, and the memory sum's states; the mesh,
+//! the matrices and their factor are the same for N = 10 and N = 10^9 and are known to fit
+//! once setup has built them. With d free dofs, n nodes and c cells:
 //!
 //! - memory: a general kernel's direct sum keeps u_0..u_N (8 d (N+1) bytes) and r at every
 //!   lag (8 (N+1)), and a checkpoint gathers the rows no checkpoint holds yet, at most all
@@ -12,11 +12,12 @@
 //!   compressed kernel (expr or table, `memory = "compressed"`) counts its fit, 16 bytes per
 //!   lag up to max(N, horizon/k) (r and the certificate's deviation, `kernel_fit`), and the
 //!   direct sum's rows only when its run may fall back to it (N ≤ `kernel_fit::EXACT_STEPS`;
-//!   a longer one is refused instead). Once the kernels' plans are known
-//!   ([`Estimate::with_plans`]: after the sizes above passed, since a plan evaluates the
-//!   kernel on every lag), the direct sum's rows are counted where it runs alone, and the
-//!   Prony states (a compressed kernel's too) are: 8 d bytes a term, which a checkpoint
-//!   holds twice more (`Held::gathered`). Over several MPI ranks
+//!   a longer one is refused instead). The Prony states are 8 d bytes a term, which a
+//!   checkpoint holds twice more (`Held::gathered`): a scene's own series' from the start,
+//!   every term's once the kernels' plans are known ([`Estimate::with_plans`]: after the
+//!   sizes above passed, since a plan evaluates the kernel on every lag; a compressed
+//!   kernel's fit too), and then the direct sum's rows only where it runs (`study`'s
+//!   packing of cases plans before any fit). Over several MPI ranks
 //!   ([`Estimate::largest_rank`]) rank 0 holds the memory at the dofs it reads alone and
 //!   gathers it whole at each checkpoint;
 //! - disk: a frame every `output.every` steps (`frame_bytes`: the values of the fields
@@ -69,7 +70,8 @@ pub struct Estimate {
 struct Held {
     /// A direct sum's past rows, 8 d (N + 1).
     rows: f64,
-    /// The Prony states, 8 d a term (0 until the plans are known).
+    /// The Prony states, 8 d a term: of the scene's own series, then of every term the
+    /// plans run (a compressed kernel's fit too).
     states: f64,
     /// What no rank count divides: r at every lag, the fit, the iteration counts.
     rest: f64,
@@ -87,10 +89,35 @@ impl Held {
         self.rest + checkpoint * (self.rows + 2.0 * self.states)
     }
 
+    /// The key that lowers the most of what it holds.
+    fn key(&self) -> &'static str {
+        match (self.rows > 0.0, self.states > self.rest) {
+            (true, _) => DIRECT_KEY,
+            (false, true) => TERMS_KEY,
+            (false, false) => STEPS_KEY,
+        }
+    }
+
     /// One process's: every dof's memory, and what a checkpoint gathers.
     fn one_process(&self) -> f64 {
         self.gathered() + self.rows + self.states
     }
+}
+
+/// The Prony terms that `scene` gives as series (`prony = [...]`), the body's and its
+/// regions': known before any fit, which a compressed kernel's terms are not.
+fn given_terms(scene: &Scene) -> usize {
+    let body = scene.physics.relaxation.as_ref();
+    let regions = scene.physics.region_kernels();
+    let kernels = body
+        .into_iter()
+        .chain(regions.iter().filter_map(|(_, r)| r.kernel.as_ref()));
+    kernels
+        .map(|k| match k {
+            Kernel::Prony(terms) => terms.len(),
+            _ => 0,
+        })
+        .sum()
 }
 
 /// The key an estimate names when its memory does not fit.
@@ -124,7 +151,7 @@ impl Estimate {
         };
         let held = Held {
             rows: if direct { 8.0 * d * (steps + 1.0) } else { 0.0 },
-            states: 0.0,
+            states: 8.0 * d * given_terms(scene) as f64,
             rest: if direct { 8.0 * (steps + 1.0) } else { 0.0 } + fit + 8.0 * steps,
             checkpoints: scene.checkpoint.enabled,
         };
@@ -144,8 +171,8 @@ impl Estimate {
             memory: held.one_process(),
             disk: frames * frame + history,
             files: series + SPARE_FILES,
+            memory_key: held.key(),
             held,
-            memory_key: if direct { DIRECT_KEY } else { STEPS_KEY },
         }
     }
 
@@ -164,11 +191,7 @@ impl Estimate {
         }
         self.held.states = 8.0 * d * plans.terms() as f64;
         self.memory = self.held.one_process();
-        self.memory_key = match (plans.direct(), plans.terms() > 0) {
-            (true, _) => DIRECT_KEY,
-            (false, true) => TERMS_KEY,
-            (false, false) => STEPS_KEY,
-        };
+        self.memory_key = self.held.key();
         self
     }
 
@@ -235,7 +258,8 @@ impl std::fmt::Display for Estimate {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         write!(
             f,
-            "≈ {} of memory and {} of disk that grow with the steps",
+            "≈ {} of memory and {} of disk for the steps (what grows with them, and the \
+             memory sum's values at every dof)",
             human(self.memory),
             human(self.disk)
         )

@@ -524,11 +524,12 @@ fn a_horizon_beyond_the_fits_lag_limit_is_refused_at_once() {
     assert!(mb >= 15.36, "{text}");
 }
 
-/// The estimate counts the Prony states once the kernels' plans are known: 8 bytes a free
-/// dof for each term, which a checkpoint holds twice more (gathered, and the file's bytes
-/// that its writer keeps); and a compressed kernel's direct sum only where its fit failed, not where it
-/// merely might have (N ≤ `kernel_fit::EXACT_STEPS`). `check` says so, and names the
-/// terms where the states do not fit.
+/// The estimate counts the Prony states, a scene's own series from the start and a
+/// compressed kernel's once the kernels' plans are known: 8 bytes a free dof for each
+/// term, which a checkpoint holds twice more (gathered, and the file's bytes that its
+/// writer keeps); and a compressed kernel's direct sum only where its fit failed, not
+/// where it merely might have (N ≤ `kernel_fit::EXACT_STEPS`). `check` names the terms
+/// where the states do not fit.
 #[test]
 fn the_estimate_counts_every_prony_terms_state_at_every_dof() {
     use viscontact::history::Plans;
@@ -548,11 +549,15 @@ fn the_estimate_counts_every_prony_terms_state_at_every_dof() {
             &format!("prony = [{}]", series.join(", ")),
         )
     };
+    let none = SceneText::paper().remove("material.relaxation");
     for (set, copies) in [(&[][..], 3.0), (&["checkpoint.enabled=false"][..], 1.0)] {
-        let (sizes, one, d, t1) = memory(&prony(1), set);
-        let (_, seven, _, t7) = memory(&prony(7), set);
-        assert_eq!((t1, t7), (1, 7));
-        assert_eq!(one - sizes, copies * 8.0 * d, "{set:?}");
+        let (_, without, d, t0) = memory(&none, set);
+        let (sizes1, one, _, t1) = memory(&prony(1), set);
+        let (sizes7, seven, _, t7) = memory(&prony(7), set);
+        assert_eq!((t0, t1, t7), (0, 1, 7));
+        // A scene's own series is counted from the start, before the plans.
+        assert_eq!((sizes1, sizes7), (one, seven), "{set:?}");
+        assert_eq!(one - without, copies * 8.0 * d, "{set:?}");
         assert_eq!(seven - one, copies * 6.0 * 8.0 * d, "{set:?}");
     }
     // 3200 steps may fall back to the direct sum: counted before the fit, not after it.
@@ -565,9 +570,9 @@ fn the_estimate_counts_every_prony_terms_state_at_every_dof() {
     );
     assert!(held >= 3.0 * 8.0 * d * terms as f64, "{held}");
     // Where the states do not fit, `check` names the terms.
+    let (_, seven, _, _) = memory(&prony(7), &[]);
     let scene = prony(7).write(dir.path(), "p7.toml");
-    let fits = 8.0 * d * 7.0 * 3.0 / 0.8;
-    let out = common::with_memory(0.9 * fits, &["check", scene.to_str().unwrap()]);
+    let out = common::with_memory(0.9 * seven / 0.8, &["check", scene.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{text}");
     assert!(text.contains("the kernels' terms"), "{text}");
