@@ -7,7 +7,7 @@ use crate::common::{self, with_memory, SceneText};
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
-use viscontact::resources::{MARGIN, MEMORY_ENV};
+use viscontact::resources::{Estimate, MARGIN, MEMORY_ENV};
 use viscontact::solver::choice::{Contact, ContactPlan, Why};
 use viscontact::solver::Rows;
 
@@ -20,8 +20,9 @@ fn block(steps: i64) -> SceneText {
 
 /// The block at h = 1/4 over 4 steps, written into `dir`, a memory (bytes) in which its
 /// sparse plan fits and its dense one does not (each besides the factor of K_A, as `check`
-/// counts them), and the bytes of that factor's values.
-fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
+/// counts them), and the bytes of that factor's values; and a memory in which what its
+/// steps hold fits and its sparse plan alone does not.
+fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64, f64) {
     let scene = block(4).write(dir, "s.toml");
     let (s, _m, disc) = common::load(&scene, &[]);
     let rows = Rows::new(&disc.contact, &disc.friction, disc.dim - 1);
@@ -33,7 +34,11 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64) {
     assert!(sparse < dense, "{sparse} {dense}");
     let factor = common::descriptor(&s, &disc).factor_bytes(&disc);
     let factor = factor.unwrap().unwrap();
-    (scene, (dense * sparse).sqrt() / MARGIN, factor)
+    let plans = viscontact::history::Plans::new(&s).unwrap();
+    let steps = Estimate::new(&s, &disc, 0).with_plans(&plans, &disc).memory;
+    assert!(steps < sparse, "{steps} {sparse}");
+    let below_plan = (steps + sparse) / 2.0 / MARGIN;
+    (scene, (dense * sparse).sqrt() / MARGIN, factor, below_plan)
 }
 
 /// Exit 2 and a message holding every one of `parts`.
@@ -48,7 +53,7 @@ fn refused(o: &Output, parts: &[&str]) {
 #[test]
 fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
     let tmp = tempfile::tempdir().unwrap();
-    let (scene, tight, factor) = scene_and_tight_memory(tmp.path());
+    let (scene, tight, factor, below_plan) = scene_and_tight_memory(tmp.path());
     let scene = scene.to_str().unwrap();
     let (code, text) = common::cli(&["check", scene]);
     assert_eq!(code, 0, "{text}");
@@ -82,7 +87,7 @@ fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
         stdout.contains("contact    sparse (solver.contact = \"sparse\"): memory ≈ "),
         "{stdout}"
     );
-    refused(&with_memory(tight / 100.0, &forced), &["coarser mesh"]);
+    refused(&with_memory(below_plan, &forced), &["coarser mesh"]);
     refused(
         &with_memory(-1.0, &["check", scene]),
         &[MEMORY_ENV, "bytes"],
@@ -92,7 +97,7 @@ fn check_prints_the_plan_and_refuses_one_that_does_not_fit() {
 #[test]
 fn run_and_resume_refuse_a_plan_that_does_not_fit_and_leave_the_directory_as_it_was() {
     let tmp = tempfile::tempdir().unwrap();
-    let (scene, tight, _) = scene_and_tight_memory(tmp.path());
+    let (scene, tight, _, _) = scene_and_tight_memory(tmp.path());
     let (scene, dir) = (scene.to_str().unwrap(), tmp.path().join("o"));
     let dir_s = dir.to_str().unwrap();
     let (code, text) = common::cli(&["run", scene, "--out", dir_s, "--quiet", "--stop-after", "2"]);
