@@ -77,39 +77,33 @@ impl Raw<'_> {
         }
     }
 
-    /// Its bytes into `out`, of [`Raw::len`] bytes.
-    pub(super) fn write_into(&self, out: &mut [u8]) {
-        match self {
-            Raw::Bytes(b) => out.copy_from_slice(b),
-            Raw::F64s(parts) => {
-                let mut at = 0;
-                for part in parts {
-                    let to = at + std::mem::size_of_val(*part);
-                    write_le(part, &mut out[at..to]);
-                    at = to;
-                }
-            }
-        }
-    }
-
-    /// Whether `bytes` are its bytes.
-    pub(super) fn is(&self, bytes: &[u8]) -> bool {
-        let values = match self {
-            Raw::Bytes(b) => return b[..] == *bytes,
-            Raw::F64s(parts) => parts.iter().flat_map(|p| p.iter()),
+    /// Its bytes from byte `from` on into `out`, as many as `out` holds.
+    pub(super) fn write_range(&self, from: usize, out: &mut [u8]) {
+        let parts = match self {
+            Raw::Bytes(b) => return out.copy_from_slice(&b[from..from + out.len()]),
+            Raw::F64s(parts) => parts,
         };
-        bytes.len() == self.len()
-            && (bytes.chunks_exact(8).zip(values)).all(|(b, x)| *b == x.to_le_bytes())
+        let (to, mut start) = (from + out.len(), 0);
+        for part in parts {
+            let end = start + std::mem::size_of_val(*part);
+            let (lo, hi) = (from.max(start), to.min(end));
+            if lo < hi {
+                le_range(part, lo - start, &mut out[lo - from..hi - from]);
+            }
+            start = end;
+        }
     }
 }
 
-/// The little-endian bytes of `v` into `out`, of as many bytes.
-fn write_le(v: &[f64], out: &mut [u8]) {
+/// The little-endian bytes of `v` from byte `from` on into `out`, as many as it holds.
+fn le_range(v: &[f64], from: usize, out: &mut [u8]) {
     if cfg!(target_endian = "little") {
-        return out.copy_from_slice(bytemuck::cast_slice(v));
+        let bytes: &[u8] = bytemuck::cast_slice(v);
+        return out.copy_from_slice(&bytes[from..from + out.len()]);
     }
-    for (b, x) in out.chunks_exact_mut(8).zip(v) {
-        b.copy_from_slice(&x.to_le_bytes());
+    for (i, b) in out.iter_mut().enumerate() {
+        let at = from + i;
+        *b = v[at / 8].to_le_bytes()[at % 8];
     }
 }
 
@@ -555,17 +549,17 @@ mod tests {
     use super::Raw;
 
     #[test]
-    fn values_in_parts_are_written_and_recognized_as_their_little_endian_bytes() {
+    fn values_in_parts_are_written_as_their_little_endian_bytes_in_any_range() {
         let (a, b) = ([1.5, -0.0, f64::MIN_POSITIVE], [3.25e300]);
         let raw = Raw::F64s(vec![&a, &[], &b]);
         let bytes: Vec<u8> = a.iter().chain(&b).flat_map(|x| x.to_le_bytes()).collect();
         assert_eq!(raw.len(), 32);
-        let mut out = vec![0u8; 32];
-        raw.write_into(&mut out);
-        assert_eq!(out, bytes);
-        assert!(raw.is(&bytes) && Raw::Bytes(bytes.clone()).is(&bytes));
-        let mut flipped = bytes.clone();
-        flipped[31] ^= 1;
-        assert!(!raw.is(&flipped) && !raw.is(&bytes[..24]));
+        for (from, to) in [(0, 32), (3, 29), (7, 25), (24, 32), (5, 5)] {
+            let mut out = vec![0u8; to - from];
+            raw.write_range(from, &mut out);
+            assert_eq!(out, bytes[from..to], "{from}..{to}");
+            Raw::Bytes(bytes.clone()).write_range(from, &mut out);
+            assert_eq!(out, bytes[from..to], "{from}..{to}");
+        }
     }
 }

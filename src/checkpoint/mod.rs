@@ -62,8 +62,8 @@
 //! previous one is still being written are coalesced (the newest state wins, history rows
 //! accumulate), so the file on disk is always a complete, recent state and the run is never
 //! throttled by fsync. The first checkpoint of a process goes through the HDF5 library; the
-//! later ones reuse its bytes with the variable datasets patched in place (`Template`), a
-//! memory copy instead of creating some fifty HDF5 objects. The end of a run (and
+//! later ones copy the last file a chunk at a time with the variable datasets patched in
+//! place (`Template`) instead of creating some fifty HDF5 objects. The end of a run (and
 //! `--stop-after`) waits until the last checkpoint is on disk.
 
 mod fingerprint;

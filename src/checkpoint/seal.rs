@@ -13,7 +13,7 @@
 //! parsed and compares all 512 bytes, so a flipped bit in the padding is found too. CRC-32
 //! finds every error of up to 32 consecutive bits (every flipped bit among them) and misses
 //! random damage with probability 2^−32; it runs at memory speed (crate crc32fast), which
-//! matters because a later checkpoint costs a memory copy (see `Template`).
+//! matters because a later checkpoint streams the last one's bytes through it (`Template`).
 
 /// Bytes of the user block (HDF5 allows 512 · 2^k).
 pub(super) const USERBLOCK: usize = 512;
@@ -77,6 +77,67 @@ pub(super) fn seal_checkpoint(bytes: &mut [u8]) {
     let block = block(&checkpoint_fields(bytes.len()), &[&bytes[USERBLOCK..]]);
     bytes[..USERBLOCK].copy_from_slice(&block);
 }
+
+/// The CRC-32 of a checkpoint of a given length, fed its bytes in order as they stream by
+/// (a file sealed, or copied and patched, a chunk at a time: `Template`).
+#[derive(Clone)]
+pub(super) struct Sealing {
+    fields: String,
+    hasher: crc32fast::Hasher,
+}
+
+impl Sealing {
+    /// For a checkpoint of `len` bytes.
+    pub(super) fn checkpoint(len: usize) -> Sealing {
+        let fields = checkpoint_fields(len);
+        let mut hasher = crc32fast::Hasher::new();
+        hasher.update(fields.as_bytes());
+        Sealing { fields, hasher }
+    }
+
+    /// Feeds the file's bytes at `at..at + chunk.len()` (the user block's are not covered).
+    pub(super) fn feed(&mut self, at: usize, chunk: &[u8]) {
+        if at + chunk.len() > USERBLOCK {
+            self.hasher.update(&chunk[USERBLOCK.saturating_sub(at)..]);
+        }
+    }
+
+    /// Whether `block` is the user block of the bytes fed.
+    pub(super) fn seals(&self, block: &[u8]) -> bool {
+        let parsed = parse(block, super::FORMAT);
+        parsed.is_some_and(|(fields, crc)| fields == self.fields && crc == self.crc())
+    }
+
+    /// The user block of the bytes fed.
+    pub(super) fn block(&self) -> [u8; USERBLOCK] {
+        render(&self.fields, self.crc()).expect("user block fields fit in 512 bytes")
+    }
+
+    fn crc(&self) -> u32 {
+        self.hasher.clone().finalize()
+    }
+}
+
+/// Seals the checkpoint file at `path` in place, reading it a chunk at a time.
+pub(super) fn seal_checkpoint_file(path: &std::path::Path) -> std::io::Result<()> {
+    use std::os::unix::fs::FileExt;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)?;
+    let len = file.metadata()?.len() as usize;
+    let mut sealing = Sealing::checkpoint(len);
+    let mut chunk = vec![0u8; CHUNK.min(len)];
+    for at in (0..len).step_by(CHUNK) {
+        let part = &mut chunk[..CHUNK.min(len - at)];
+        file.read_exact_at(part, at as u64)?;
+        sealing.feed(at, part);
+    }
+    file.write_all_at(&sealing.block(), 0)
+}
+
+/// The bytes a checkpoint is read and written in at a time where it streams.
+pub(super) const CHUNK: usize = 8 << 20;
 
 /// Whether `bytes` begin like a sealed checkpoint (the first line of the user block); such a
 /// file is verified by [`verify_checkpoint`] and never parsed otherwise.

@@ -1,27 +1,37 @@
-//! Later checkpoints of a process: the first one's bytes with the variable data patched.
+//! Later checkpoints of a process: the last one's file, copied with the variable data patched.
 
 use super::h5::{h5_file, OpenMode};
 use super::layout::Raw;
+use super::seal::{Sealing, CHUNK, USERBLOCK};
+use std::fs::File;
+use std::io::Write;
+use std::os::unix::fs::FileExt;
 use std::path::Path;
 
 /// The first checkpoint of a run is written through the HDF5 library; every later one has
 /// the same structure and differs only in the raw data of its variable datasets (contiguous
 /// layout, fixed sizes: `/run/iterations` has one entry per step of the whole run, −1 for
-/// steps not yet solved). So the file's bytes are kept with the offsets of those datasets
-/// (H5Dget_offset), and a later checkpoint is the same bytes with the new values written at
-/// those offsets: a valid HDF5 file (raw data carries no checksum) at the cost of a memory
-/// copy instead of creating some fifty HDF5 objects. Whatever does not fit (a dataset
-/// without an offset, a size that changed) falls back to the library.
+/// steps not yet solved). So the writer keeps the file's length and the offsets of those
+/// datasets (H5Dget_offset), and a later checkpoint is the last one's bytes with the new
+/// values written at those offsets: a valid HDF5 file (raw data carries no checksum) at the
+/// cost of a copy instead of creating some fifty HDF5 objects. The copy streams a chunk at a
+/// time ([`CHUNK`]), the last file's CRC checked and the new one computed on the way, so the
+/// writer holds no copy of the file (it held the first file's bytes, the size of the
+/// state, for the whole run: docs/restart.md, "Checkpoint cost"). Whatever does not fit (a
+/// dataset without an offset, a size that changed, a last file that is not as sealed)
+/// falls back to the library.
 pub(super) struct Template {
-    pub(super) bytes: Vec<u8>,
+    len: usize,
     /// (offset, length) of each entry of [`variable_data`], in its order.
-    pub(super) regions: Vec<(usize, usize)>,
+    ///
+    /// [`variable_data`]: super::layout::variable_data
+    regions: Vec<(usize, usize)>,
 }
 
 impl Template {
-    /// The file just written at `path`, whose bytes are `bytes`, with its variable
-    /// datasets found; None when one is not contiguous with exactly the expected size.
-    pub(super) fn capture(path: &Path, bytes: Vec<u8>, data: &[(&str, Raw)]) -> Option<Template> {
+    /// The sealed file just written at `path` with its variable datasets found; None when
+    /// one is not contiguous with exactly the expected size and bytes.
+    pub(super) fn capture(path: &Path, data: &[(&str, Raw)]) -> Option<Template> {
         let regions = {
             let f = h5_file(OpenMode::Read, path).ok()?;
             let mut regions = Vec::with_capacity(data.len());
@@ -40,28 +50,81 @@ impl Template {
             }
             regions
         };
-        for ((offset, len), (_, raw)) in regions.iter().zip(data) {
-            if offset + len > bytes.len() || !raw.is(&bytes[*offset..offset + len]) {
+        let file = File::open(path).ok()?;
+        let len = file.metadata().ok()?.len() as usize;
+        let (mut found, mut expected) = (Vec::new(), Vec::new());
+        for ((offset, len_r), (_, raw)) in regions.iter().zip(data) {
+            if offset + len_r > len {
                 return None;
             }
+            for from in (0..*len_r).step_by(CHUNK) {
+                let n = CHUNK.min(len_r - from);
+                found.resize(n, 0);
+                expected.resize(n, 0);
+                file.read_exact_at(&mut found, (offset + from) as u64)
+                    .ok()?;
+                raw.write_range(from, &mut expected);
+                if found != expected {
+                    return None;
+                }
+            }
         }
-        Some(Template { bytes, regions })
+        Some(Template { len, regions })
     }
 
-    /// The file bytes for `data`, written where each dataset's raw data lies; None when
-    /// the sizes no longer match.
-    pub(super) fn patch(&mut self, data: &[(&str, Raw)]) -> Option<&mut [u8]> {
-        if data.len() != self.regions.len() {
-            return None;
+    /// Whether `data` has the sizes this template was captured with.
+    pub(super) fn fits(&self, data: &[(&str, Raw)]) -> bool {
+        data.len() == self.regions.len()
+            && (self.regions.iter().zip(data)).all(|((_, len), (_, raw))| *len == raw.len())
+    }
+
+    /// Writes at `to` the checkpoint `last` (the last one written, sealed) with `data` (of
+    /// the sizes [`Template::fits`] checked), and seals it. Ok(false), `to` incomplete,
+    /// where `last` cannot be read or is not as sealed: the caller writes through HDF5.
+    pub(super) fn write(
+        &self,
+        last: &Path,
+        to: &Path,
+        data: &[(&str, Raw)],
+    ) -> std::io::Result<bool> {
+        let Ok(from) = File::open(last) else {
+            return Ok(false);
+        };
+        if from.metadata().map(|m| m.len() as usize).ok() != Some(self.len) {
+            return Ok(false);
         }
-        for ((_, len), (_, raw)) in self.regions.iter().zip(data) {
-            if *len != raw.len() {
-                return None;
+        let mut out = File::create(to)?;
+        let (mut old, mut new) = (Sealing::checkpoint(self.len), Sealing::checkpoint(self.len));
+        let mut chunk = vec![0u8; CHUNK.min(self.len)];
+        let mut block = [0u8; USERBLOCK];
+        for at in (0..self.len).step_by(CHUNK) {
+            let part = &mut chunk[..CHUNK.min(self.len - at)];
+            if from.read_exact_at(part, at as u64).is_err() {
+                return Ok(false);
+            }
+            old.feed(at, part);
+            if at == 0 {
+                block.copy_from_slice(&part[..USERBLOCK]);
+            }
+            self.patch(at, part, data);
+            new.feed(at, part);
+            out.write_all(part)?;
+        }
+        if !old.seals(&block) {
+            return Ok(false);
+        }
+        out.write_all_at(&new.block(), 0)?;
+        Ok(true)
+    }
+
+    /// Writes into `part`, the file's bytes from `at`, the values of `data` that fall there.
+    fn patch(&self, at: usize, part: &mut [u8], data: &[(&str, Raw)]) {
+        let end = at + part.len();
+        for ((offset, len), (_, raw)) in self.regions.iter().zip(data) {
+            let (lo, hi) = (at.max(*offset), end.min(offset + len));
+            if lo < hi {
+                raw.write_range(lo - offset, &mut part[lo - at..hi - at]);
             }
         }
-        for ((offset, len), (_, raw)) in self.regions.iter().zip(data) {
-            raw.write_into(&mut self.bytes[*offset..offset + len]);
-        }
-        Some(&mut self.bytes)
     }
 }

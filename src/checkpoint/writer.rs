@@ -58,8 +58,8 @@ pub(super) struct Disk {
     /// this run's file at its first checkpoint.
     earlier: Option<(PathBuf, usize, u64)>,
     row_node: Vec<u64>,
-    /// The bytes of the last checkpoint written through HDF5 and where its variable data
-    /// lie; later checkpoints patch them (see [`Template`]).
+    /// The length of the last checkpoint written through HDF5 and where its variable data
+    /// lie; later checkpoints copy the last file and patch them (see [`Template`]).
     template: Option<Template>,
 }
 
@@ -297,42 +297,32 @@ impl Disk {
                 Raw::Bytes(h.hash.0.to_le_bytes().to_vec()),
             ));
         }
-        let fast = self
-            .template
-            .as_mut()
-            .and_then(|t| t.patch(&data))
-            .map(|bytes| {
-                seal::seal_checkpoint(bytes);
-                std::fs::write(&tmp, bytes).map_err(|e| {
-                    let _ = std::fs::remove_file(&tmp);
-                    Error::io(&path, e)
-                })
-            });
-        match fast {
-            Some(result) => result?,
-            None => {
-                // The bytes of a template that no longer fits go before the new ones come.
-                self.template = None;
-                write_checkpoint(
-                    &tmp,
-                    &self.id,
-                    &self.row_node,
-                    s,
-                    self.steps,
-                    self.history.as_ref(),
-                )
-                .map_err(|e| {
-                    let _ = std::fs::remove_file(&tmp);
-                    Error::hdf5(&path, e)
-                })?;
-                let mut bytes = std::fs::read(&tmp).map_err(|e| Error::io(&tmp, e))?;
-                seal::seal_checkpoint(&mut bytes);
-                std::fs::write(&tmp, &bytes).map_err(|e| {
-                    let _ = std::fs::remove_file(&tmp);
-                    Error::io(&path, e)
-                })?;
-                self.template = Template::capture(&tmp, bytes, &data);
-            }
+        let fast = match &self.template {
+            Some(t) if t.fits(&data) => t.write(&path, &tmp, &data),
+            _ => Ok(false),
+        };
+        let fast = fast.map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            Error::io(&path, e)
+        })?;
+        if !fast {
+            write_checkpoint(
+                &tmp,
+                &self.id,
+                &self.row_node,
+                s,
+                self.steps,
+                self.history.as_ref(),
+            )
+            .map_err(|e| {
+                let _ = std::fs::remove_file(&tmp);
+                Error::hdf5(&path, e)
+            })?;
+            seal::seal_checkpoint_file(&tmp).map_err(|e| {
+                let _ = std::fs::remove_file(&tmp);
+                Error::io(&path, e)
+            })?;
+            self.template = Template::capture(&tmp, &data);
         }
         fsync_file(&tmp)?;
         std::fs::rename(&tmp, &path).map_err(|e| Error::io(&path, e))?;
