@@ -13,7 +13,7 @@
 //!   lag up to max(N, horizon/k) (r and the certificate's deviation, `kernel_fit`), and the
 //!   direct sum's rows only when its run may fall back to it (N ≤ `kernel_fit::EXACT_STEPS`;
 //!   a longer one is refused instead). The Prony states are 8 d bytes a term, which a
-//!   checkpoint holds twice more (`Held::gathered`): a scene's own series' from the start,
+//!   checkpoint gathers once more (`Held::gathered`): a scene's own series' from the start,
 //!   every term's once the kernels' plans are known ([`Estimate::with_plans`]: after the
 //!   sizes above passed, since a plan evaluates the kernel on every lag; a compressed
 //!   kernel's fit too), and then the direct sum's rows only where it runs (`study`'s
@@ -82,11 +82,10 @@ struct Held {
 impl Held {
     /// What a checkpoint adds to the process that writes it, the memory gathered whole: a
     /// direct sum's rows that no checkpoint holds yet (at most all), and the Prony states
-    /// twice (gathered, and the checkpoint file's bytes, which the writer keeps to patch
-    /// the next one with them: `checkpoint::Template`); and the rest.
+    /// (the file streams through a chunk at a time: `checkpoint::Template`); and the rest.
     fn gathered(&self) -> f64 {
         let checkpoint = if self.checkpoints { 1.0 } else { 0.0 };
-        self.rest + checkpoint * (self.rows + 2.0 * self.states)
+        self.rest + checkpoint * (self.rows + self.states)
     }
 
     /// The key that lowers the most of what it holds.
