@@ -128,3 +128,50 @@ impl Template {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::checkpoint::seal::{seal_checkpoint, verify_checkpoint};
+
+    /// A later checkpoint is the last file with the values written where their datasets
+    /// lie, also across a chunk's end, and sealed; a last file whose bytes no longer match
+    /// its CRC, or whose length changed, is not copied (the writer then uses HDF5).
+    #[test]
+    fn the_last_file_is_copied_with_the_values_patched_and_sealed_unless_it_was_damaged() {
+        let dir = tempfile::tempdir().unwrap();
+        let (last, to) = (dir.path().join("last.h5"), dir.path().join("to.h5"));
+        let len = CHUNK + 4096;
+        let mut bytes: Vec<u8> = (0..len).map(|i| (i * 7 % 251) as u8).collect();
+        seal_checkpoint(&mut bytes);
+        std::fs::write(&last, &bytes).unwrap();
+        let values = [1.5, -2.25, 3e300];
+        let regions = vec![(CHUNK - 8, 24), (600, 0), (1000, 2)];
+        let template = Template { len, regions };
+        let data = [
+            ("x", Raw::F64s(vec![&values[..1], &values[1..]])),
+            ("empty", Raw::Bytes(Vec::new())),
+            ("flags", Raw::Bytes(vec![9, 8])),
+        ];
+        assert!(template.fits(&data));
+        assert!(template.write(&last, &to, &data).unwrap());
+        let written = std::fs::read(&to).unwrap();
+        verify_checkpoint(&written).unwrap();
+        let mut expected = bytes.clone();
+        let le: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
+        expected[CHUNK - 8..CHUNK + 16].copy_from_slice(&le);
+        expected[1000..1002].copy_from_slice(&[9, 8]);
+        seal_checkpoint(&mut expected);
+        assert!(written == expected);
+        // One flipped bit in the last file: not copied.
+        bytes[CHUNK + 100] ^= 4;
+        std::fs::write(&last, &bytes).unwrap();
+        assert!(!template.write(&last, &to, &data).unwrap());
+        // Another length, or no last file at all: not copied either.
+        std::fs::write(&last, &bytes[..len - 1]).unwrap();
+        assert!(!template.write(&last, &to, &data).unwrap());
+        std::fs::remove_file(&last).unwrap();
+        assert!(!template.write(&last, &to, &data).unwrap());
+        assert!(!template.fits(&data[..2]));
+    }
+}
