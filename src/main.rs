@@ -492,18 +492,11 @@ fn check(path: &std::path::Path, set: &[String], ranks: usize) -> Result<()> {
     if let Some(line) = solver.with_petsc(&disc)? {
         viscontact::outln!("petsc      {line}");
     }
-    // Sizes first: a hostile time.steps is refused before anything is allocated per step,
-    // then the kernels' plans, whose terms each keep a state at every dof.
     let out = viscontact::run::default_out(&scene)?;
-    let sizes = viscontact::resources::Estimate::new(&scene, &disc, 0);
-    if let Err(e) = sizes.check(&out) {
-        viscontact::outln!("resources  {sizes}");
-        return Err(e);
-    }
-    let plans = Plans::new(&scene)?;
-    let estimate = sizes.with_plans(&plans, &disc);
-    viscontact::outln!("resources  {estimate}");
-    estimate.check(&out)?;
+    let (estimate, plans) =
+        viscontact::run::estimate(&scene, &disc, (0, &out), || Plans::new(&scene), &mut |e| {
+            viscontact::outln!("resources  {e}")
+        })?;
     let mut show = |line: &str| viscontact::outln!("ranks      {line}");
     viscontact::run::check_memory(
         &scene,

@@ -53,16 +53,14 @@ pub const MARGIN: f64 = 0.8;
 const SPARE_FILES: f64 = 16.0;
 
 /// A run's estimated memory and disk use, in bytes, and the files it creates, for its steps
-/// from `from` on; `memory` is one process's.
+/// from `from` on: what its steps hold ([`Estimate::memory`], one process's) and the
+/// bytes of its frames, besides which a direct sum writes its history file
+/// ([`Estimate::disk`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Estimate {
-    pub memory: f64,
-    pub disk: f64,
-    pub files: f64,
-    /// What of `memory` the memory sum holds at every dof.
     held: Held,
-    /// The key to change when the memory does not fit.
-    memory_key: &'static str,
+    frames: f64,
+    pub files: f64,
 }
 
 /// The bytes of what a run's steps hold: the memory sum's at every dof and the rest.
@@ -127,9 +125,24 @@ const TERMS_KEY: &str = "the kernels' terms (each Prony term keeps a value at ev
                          shorter series, or a compressed kernel's looser tolerance or horizon)";
 
 impl Estimate {
+    /// The memory one process's steps hold, in bytes.
+    pub fn memory(&self) -> f64 {
+        self.held.one_process()
+    }
+
+    /// The bytes written: the frames, and with checkpoints a direct sum's history file.
+    pub fn disk(&self) -> f64 {
+        self.frames
+            + if self.held.checkpoints {
+                self.held.rows
+            } else {
+                0.0
+            }
+    }
+
     /// The key to change when the memory does not fit (with why, for a general kernel).
     pub fn memory_key(&self) -> &'static str {
-        self.memory_key
+        self.held.key()
     }
 
     /// The estimate for a run of `scene` (its `time.steps` N) continuing from step `from`
@@ -157,21 +170,14 @@ impl Estimate {
         let remaining = (scene.time.steps.saturating_sub(from) + 1) as f64;
         let frames = (remaining / scene.output.every as f64).ceil() + 1.0;
         let frame = frame_bytes(scene, disc);
-        let history = if scene.checkpoint.enabled {
-            held.rows
-        } else {
-            0.0
-        };
         let series = match scene.output.options.format {
             Format::Vtu => frames + 1.0,
             Format::Vtkhdf => 1.0,
         };
         Estimate {
-            memory: held.one_process(),
-            disk: frames * frame + history,
-            files: series + SPARE_FILES,
-            memory_key: held.key(),
             held,
+            frames: frames * frame,
+            files: series + SPARE_FILES,
         }
     }
 
@@ -181,16 +187,9 @@ impl Estimate {
     pub fn with_plans(mut self, plans: &Plans, disc: &Discretization) -> Estimate {
         let d = disc.n_free as f64;
         if !plans.direct() {
-            self.disk -= if self.held.checkpoints {
-                self.held.rows
-            } else {
-                0.0
-            };
             self.held.rows = 0.0;
         }
         self.held.states = 8.0 * d * plans.terms() as f64;
-        self.memory = self.held.one_process();
-        self.memory_key = self.held.key();
         self
     }
 
@@ -208,14 +207,14 @@ impl Estimate {
     /// (or its nearest existing parent) is. Unknown capacities (no /proc/meminfo) pass.
     pub fn check(&self, out: &Path) -> Result<()> {
         if let Some(avail) = available_memory()? {
-            if self.memory > MARGIN * avail {
+            if self.memory() > MARGIN * avail {
                 return Err(Error::input(format!(
                     "the run would need ≈ {} of memory for its steps but {} (a run may plan \
                      {:.0} % of it): lower {}",
-                    human(self.memory),
+                    human(self.memory()),
                     memory_phrase(avail),
                     100.0 * MARGIN,
-                    self.memory_key
+                    self.memory_key()
                 )));
             }
         }
@@ -228,11 +227,11 @@ impl Estimate {
     /// Refuses (exit 2) a run whose frames and history exceed 80 % of the bytes free on `fs`,
     /// or whose files exceed 80 % of its free inodes (not counted where it reports none).
     fn check_file_system(&self, fs: &FileSystem) -> Result<()> {
-        if self.disk > MARGIN * fs.bytes_free {
+        if self.disk() > MARGIN * fs.bytes_free {
             return Err(Error::input(format!(
                 "the run would write ≈ {} but {} has {} free (a run may plan {:.0} % of \
                  it): lower time.steps, raise output.every, or give --out on a larger disk",
-                human(self.disk),
+                human(self.disk()),
                 fs.dir.display(),
                 human(fs.bytes_free),
                 100.0 * MARGIN
@@ -259,8 +258,8 @@ impl std::fmt::Display for Estimate {
             f,
             "≈ {} of memory and {} of disk for the steps (what grows with them, and the \
              memory sum's values at every dof)",
-            human(self.memory),
-            human(self.disk)
+            human(self.memory()),
+            human(self.disk())
         )
     }
 }
@@ -511,15 +510,23 @@ fn frame_bytes(scene: &Scene, disc: &Discretization) -> f64 {
 mod tests {
     use super::*;
 
+    /// An estimate of `memory` bytes held by the steps (none of them the memory sum's),
+    /// `disk` bytes of frames and `files` files.
+    fn estimate(memory: f64, disk: f64, files: f64) -> Estimate {
+        let held = Held {
+            rest: memory,
+            ..Held::default()
+        };
+        Estimate {
+            held,
+            frames: disk,
+            files,
+        }
+    }
+
     #[test]
     fn an_impossible_estimate_is_refused_naming_the_key() {
-        let e = Estimate {
-            memory: 1e30,
-            disk: 0.0,
-            files: 1.0,
-            held: Held::default(),
-            memory_key: STEPS_KEY,
-        };
+        let e = estimate(1e30, 0.0, 1.0);
         if available_memory().unwrap().is_some() {
             let err = e.check(Path::new(".")).unwrap_err().to_string();
             assert!(
@@ -527,25 +534,13 @@ mod tests {
                 "{err}"
             );
         }
-        let e = Estimate {
-            memory: 0.0,
-            disk: 1e30,
-            files: 1.0,
-            held: Held::default(),
-            memory_key: STEPS_KEY,
-        };
+        let e = estimate(0.0, 1e30, 1.0);
         let err = e.check(Path::new("no/such/dir")).unwrap_err().to_string();
         assert!(
             err.contains("output.every") && err.contains("free"),
             "{err}"
         );
-        let fits = Estimate {
-            memory: 1.0,
-            disk: 1.0,
-            files: 1.0,
-            held: Held::default(),
-            memory_key: STEPS_KEY,
-        };
+        let fits = estimate(1.0, 1.0, 1.0);
         fits.check(Path::new(".")).unwrap();
     }
 
@@ -566,13 +561,7 @@ mod tests {
             inodes_free,
             inodes_total,
         };
-        let e = Estimate {
-            memory: 0.0,
-            disk: 1e6,
-            files: 1001.0 + SPARE_FILES,
-            held: Held::default(),
-            memory_key: STEPS_KEY,
-        };
+        let e = estimate(0.0, 1e6, 1001.0 + SPARE_FILES);
         let err = e
             .check_file_system(&fs(1000.0, 1e6))
             .unwrap_err()

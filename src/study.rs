@@ -420,7 +420,7 @@ impl Prepared {
     /// The memory a run of the case may take, in bytes: what `check` estimates its steps
     /// hold, plus [`SETUP_MEMORY`].
     fn memory(&self) -> f64 {
-        crate::resources::Estimate::new(&self.scene, &self.mesh.disc, 0).memory + SETUP_MEMORY
+        crate::resources::Estimate::new(&self.scene, &self.mesh.disc, 0).memory() + SETUP_MEMORY
     }
 
     /// The case solved: u_N per node and the times of one run.

@@ -83,15 +83,18 @@ pub use writer::Writer;
 /// Recomputes the CRC-32 in the header of a checkpoint that was edited on purpose (with h5py,
 /// say): resume refuses a checkpoint whose bytes changed in any other way.
 pub fn reseal(path: &std::path::Path) -> crate::Result<()> {
-    let mut bytes = std::fs::read(path).map_err(|e| crate::Error::io(path, e))?;
-    if !seal::looks_sealed(&bytes) {
+    use std::io::Read;
+    let mut head = Vec::new();
+    let file = std::fs::File::open(path).map_err(|e| crate::Error::io(path, e))?;
+    (file.take(seal::USERBLOCK as u64).read_to_end(&mut head))
+        .map_err(|e| crate::Error::io(path, e))?;
+    if !seal::looks_sealed(&head) {
         return Err(crate::Error::input(format!(
             "{}: not a checkpoint with a viscontact header",
             path.display()
         )));
     }
-    seal::seal_checkpoint(&mut bytes);
-    std::fs::write(path, bytes).map_err(|e| crate::Error::io(path, e))
+    seal::seal_checkpoint_file(path).map_err(|e| crate::Error::io(path, e))
 }
 
 use crate::fem::Discretization;

@@ -72,7 +72,9 @@ fn checkpoint_fields(len: usize) -> String {
     format!("{}\nlength {len}\n", super::FORMAT)
 }
 
-/// Writes the user block of a checkpoint's final bytes: CRC-32 of everything after it.
+/// Writes the user block of a checkpoint's final bytes: CRC-32 of everything after it (a
+/// file is sealed where it lies: [`seal_checkpoint_file`]).
+#[cfg(test)]
 pub(super) fn seal_checkpoint(bytes: &mut [u8]) {
     let block = block(&checkpoint_fields(bytes.len()), &[&bytes[USERBLOCK..]]);
     bytes[..USERBLOCK].copy_from_slice(&block);

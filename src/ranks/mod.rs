@@ -617,7 +617,7 @@ impl Plan {
             rows: disc.n_free,
             largest,
             own: match size {
-                1 => peak + steps.memory,
+                1 => peak + steps.memory(),
                 _ => base + share * kept + reach * memory,
             },
             spread: petsc_bytes(largest.entries, newton, size),

@@ -265,7 +265,7 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
     before_discretizing(opts, &scene)?;
     let (mut disc, made) = opts.ranks.discretize(&mut mesh, &scene)?;
     stage()?;
-    let (estimate, plans) = estimate(&scene, &disc, (0, &out), || Plans::new(&scene))?;
+    let (estimate, plans) = estimate(&scene, &disc, (0, &out), || Plans::new(&scene), &mut |_| {})?;
     let ranks = (opts.ranks.size, made.as_ref());
     let solver = check_contact_plan(&scene, &disc, &estimate, None, ranks)?;
     check_started_ranks(&scene, &solver, opts)?;
@@ -300,17 +300,23 @@ fn prepare_run(scene_path: &Path, opts: &RunOptions) -> Result<Ready> {
 /// What a run's steps from `from` on will hold in memory and write into `out`, refused
 /// (exit 2) where it would not fit: sizes first, so that a hostile `time.steps` is refused
 /// before the kernels' `plans` evaluate anything per step, then with their terms, each of
-/// which keeps a state at every dof.
-fn estimate(
+/// which keeps a state at every dof. `show` gets the estimate that is checked last
+/// (`check` prints it).
+pub fn estimate(
     scene: &Scene,
     disc: &Discretization,
     (from, out): (usize, &Path),
     plans: impl FnOnce() -> Result<Plans>,
+    show: &mut dyn FnMut(&Estimate),
 ) -> Result<(Estimate, Plans)> {
     let sizes = Estimate::new(scene, disc, from);
-    sizes.check(out)?;
+    if let Err(e) = sizes.check(out) {
+        show(&sizes);
+        return Err(e);
+    }
     let plans = plans()?;
     let estimate = sizes.with_plans(&plans, disc);
+    show(&estimate);
     estimate.check(out)?;
     Ok((estimate, plans))
 }
@@ -567,7 +573,13 @@ fn prepare_resume(
     cp.check(&scene, &mesh, &disc)?;
     check_continuation(checkpoint_path, &cp, &scene, opts.stop_after)?;
     let out = opts.out.clone().unwrap_or_else(|| cp.dir());
-    let (estimate, plans) = estimate(&scene, &disc, (cp.n, &out), || cp.plans(&scene))?;
+    let (estimate, plans) = estimate(
+        &scene,
+        &disc,
+        (cp.n, &out),
+        || cp.plans(&scene),
+        &mut |_| {},
+    )?;
     let solver = check_contact_plan(
         &scene,
         &disc,

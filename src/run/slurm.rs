@@ -110,7 +110,7 @@ pub fn emit(
         None => {
             let factor = solver.factor_bytes(&disc)?.unwrap_or(0.0);
             let contact = solver.contact().and_then(|p| p.memory).unwrap_or(0.0);
-            estimate.memory + factor + contact + SETUP_MEMORY
+            estimate.memory() + factor + contact + SETUP_MEMORY
         }
     };
     let memory = task * job.ntasks_per_node as f64;

@@ -567,7 +567,7 @@ impl ContactPlan {
     /// PETSc too, whose `auto` picks the active-set solver.
     pub fn check(&self, steps: &Estimate) -> Result<()> {
         match resources::available_memory()? {
-            Some(avail) => self.fits(avail, steps.memory, steps.memory_key()),
+            Some(avail) => self.fits(avail, steps.memory(), steps.memory_key()),
             None => Ok(()),
         }
     }

@@ -35,7 +35,9 @@ fn scene_and_tight_memory(dir: &Path) -> (PathBuf, f64, f64, f64) {
     let factor = common::descriptor(&s, &disc).factor_bytes(&disc);
     let factor = factor.unwrap().unwrap();
     let plans = viscontact::history::Plans::new(&s).unwrap();
-    let steps = Estimate::new(&s, &disc, 0).with_plans(&plans, &disc).memory;
+    let steps = Estimate::new(&s, &disc, 0)
+        .with_plans(&plans, &disc)
+        .memory();
     assert!(steps < sparse, "{steps} {sparse}");
     let below_plan = (steps + sparse) / 2.0 / MARGIN;
     (scene, (dense * sparse).sqrt() / MARGIN, factor, below_plan)
@@ -141,7 +143,7 @@ fn the_contact_solver_and_the_steps_are_counted_together() {
         .unwrap()
         .memory
         .unwrap();
-    let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory;
+    let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory();
     assert!(steps > solver, "{steps} {solver}");
     // Room for the steps and half of the solver, in the share a run may plan.
     let memory = (steps + 0.5 * solver) / MARGIN;
@@ -289,7 +291,7 @@ fn check_says_what_the_build_with_petsc_would_pick() {
     }
     // Room for the steps and half of the sparse plan: refused, naming the build with PETSc.
     let plan = solver.contact().unwrap().memory.unwrap();
-    let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory;
+    let steps = viscontact::resources::Estimate::new(&s, &disc, 0).memory();
     let o = with_memory((steps + 0.5 * plan) / MARGIN, &["check", scene]);
     refused(
         &o,

@@ -1066,7 +1066,7 @@ fn the_disk_estimate_is_near_what_a_run_writes() {
             .sum();
         let path = crate::common::repo().join(scene);
         let (s, _, disc) = crate::common::load(&path, &Vec::from_iter(set));
-        let estimate = viscontact::resources::Estimate::new(&s, &disc, 0).disk;
+        let estimate = viscontact::resources::Estimate::new(&s, &disc, 0).disk();
         let ratio = estimate / written as f64;
         assert!(
             (1.0 / 1.5..=1.5).contains(&ratio),

@@ -539,7 +539,12 @@ fn the_estimate_counts_every_prony_terms_state_at_every_dof() {
         let sizes = Estimate::new(&scene, &disc, 0);
         let plans = Plans::new(&scene).unwrap();
         let held = sizes.clone().with_plans(&plans, &disc);
-        (sizes.memory, held.memory, disc.n_free as f64, plans.terms())
+        (
+            sizes.memory(),
+            held.memory(),
+            disc.n_free as f64,
+            plans.terms(),
+        )
     };
     let prony = |terms: usize| {
         let series: Vec<String> = (0..terms).map(|i| format!("[0.1, {}.0]", i + 1)).collect();
