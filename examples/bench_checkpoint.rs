@@ -111,9 +111,9 @@ fn main() {
         }
         fn advanced(&mut self, tl: &mut TimeLoop) -> viscontact::Result<()> {
             let t = Instant::now();
-            let memory = tl.gather_memory()?.expect("one process gets its memory");
-            self.writer
-                .write(tl.state(), memory, &self.log, &self.active, Vec::new())?;
+            let mut feed = (self.writer).write(tl.state(), &self.log, &self.active, Vec::new());
+            tl.gather_memory(&mut |v| feed.send(v))?;
+            feed.end()?;
             self.writer.flush()?;
             self.latency.push((tl.n(), t.elapsed().as_secs_f64()));
             Ok(())

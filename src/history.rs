@@ -52,6 +52,23 @@ pub enum Memory {
     },
 }
 
+/// The bytes of the memory's vectors gathered for a checkpoint that may wait for its
+/// writer (at least one vector: `History::gathered` sends them one at a time, and the
+/// writer takes them as it writes them: `checkpoint::Feed`).
+pub const QUEUE_BYTES: usize = 16 << 20;
+
+/// The vectors of `width` values that may wait for the checkpoint writer.
+pub fn queue_len(width: usize) -> usize {
+    (QUEUE_BYTES / (8 * width.max(1))).max(1)
+}
+
+/// The bytes of `count` Prony states of `width` values that the process writing a
+/// checkpoint holds at most: those waiting, the one the writer is writing and the one being
+/// gathered.
+pub fn held_bytes(width: usize, count: usize) -> f64 {
+    (8 * width) as f64 * count.min(queue_len(width) + 2) as f64
+}
+
 /// The memory a checkpoint holds, as [`Plan::resumed`] needs it.
 pub enum Stored {
     /// The Prony terms (a_i, b_i) the run's recursion used.
@@ -523,47 +540,41 @@ impl History {
         }
     }
 
-    /// The memory as a checkpoint saves it, every dof's, on one process and on rank 0 of
-    /// several whose ranks hold their parts of it (None on the others, where there is
-    /// memory): `whole` makes the every-unknown vector there of each rank's values at the
-    /// unknowns of its own rows (`solver::Backend::gather_at_first`, collective: every rank
-    /// calls this at every checkpoint), to which it adds the prescribed dofs' (n_free..,
-    /// which it holds). Of a direct sum, the past rows `from..` (those the checkpoints
-    /// hold not yet). Each value is the one its rank holds, with the bits of one
-    /// process's.
+    /// The memory as a checkpoint saves it, every dof's, one vector at a time into `each`
+    /// (in the file's order: the Prony states term by term, or a direct sum's past rows
+    /// `from..`, those the checkpoints hold not yet), on one process and on rank 0 of
+    /// several whose ranks hold their parts of it (`each` is never called on the others):
+    /// `whole` makes the every-unknown vector there of each rank's values at the unknowns
+    /// of its own rows (`solver::Backend::gather_at_first`, collective: every rank calls
+    /// this at every checkpoint), to which it adds the prescribed dofs' (n_free.., which it
+    /// holds). Each value is the one its rank holds, with the bits of one process's. One
+    /// vector at a time, so that the process that writes the checkpoint never holds the
+    /// whole memory twice (`checkpoint::Feed`).
     pub fn gathered(
         &self,
         from: usize,
         whole: impl Fn(&dyn Fn(usize) -> f64) -> Result<Option<Vec<f64>>>,
-    ) -> Result<Option<SavedMemory>> {
+        each: &mut dyn FnMut(Vec<f64>),
+    ) -> Result<()> {
         let dofs = self.holds.dofs();
         let n_dofs = self.u.len();
-        let of = |held: &[f64]| -> Result<Option<Vec<f64>>> {
+        let mut send = |held: &[f64]| -> Result<()> {
             let place = |i: usize| dofs.map_or(Ok(i), |dofs| dofs.binary_search(&i));
             let value = |i: usize| held[place(i).expect("a rank holds its own rows")];
-            let Some(mut v) = whole(&value)? else {
-                return Ok(None);
-            };
-            let n_free = v.len();
-            v.extend((n_free..n_dofs).map(value));
-            Ok(Some(v))
+            if let Some(mut v) = whole(&value)? {
+                let n_free = v.len();
+                v.extend((n_free..n_dofs).map(value));
+                each(v);
+            }
+            Ok(())
         };
-        Ok(match &self.memory {
-            Memory::None => Some(SavedMemory::None),
-            // Every rank takes part in every gather: collected whole, not to the first None.
-            Memory::Prony(terms) => (terms.iter())
-                .map(|t| Ok(of(&t.m)?.map(|m| PronyTerm { m, ..*t })))
-                .collect::<Result<Vec<_>>>()?
-                .into_iter()
-                .collect::<Option<Vec<_>>>()
-                .map(SavedMemory::Prony),
-            Memory::Direct { past, .. } => (past[from.min(past.len())..].iter())
-                .map(|row| of(row))
-                .collect::<Result<Vec<_>>>()?
-                .into_iter()
-                .collect::<Option<Vec<_>>>()
-                .map(SavedMemory::Direct),
-        })
+        match &self.memory {
+            Memory::None => Ok(()),
+            Memory::Prony(terms) => terms.iter().try_for_each(|t| send(&t.m)),
+            Memory::Direct { past, .. } => past[from.min(past.len())..]
+                .iter()
+                .try_for_each(|row| send(row)),
+        }
     }
 
     /// m_n of every memory group into `out` (overwritten), group g's at g·len(u_n), at the
@@ -938,7 +949,8 @@ mod tests {
                         .push_back(own[1].iter().map(|&i| value(i)).collect());
                     Ok(None)
                 };
-                assert!(ranks[1].gathered(from, of_1).unwrap().is_none());
+                let none = &mut |_: Vec<f64>| unreachable!("rank 1 gets no vector");
+                ranks[1].gathered(from, of_1, none).unwrap();
                 let of_0 = |value: &dyn Fn(usize) -> f64| {
                     let theirs: Vec<f64> = sent.borrow_mut().pop_front().unwrap();
                     let mut v = vec![0.0; 5];
@@ -946,19 +958,12 @@ mod tests {
                     own[1].iter().zip(theirs).for_each(|(&i, x)| v[i] = x);
                     Ok(Some(v))
                 };
-                let gathered = ranks[0].gathered(from, of_0).unwrap().unwrap();
-                let expected: Vec<Vec<f64>> = match (&whole.memory, &gathered) {
-                    (Memory::Prony(terms), SavedMemory::Prony(got)) => {
-                        assert_eq!(got.len(), terms.len());
-                        terms.iter().map(|t| t.m.clone()).collect()
-                    }
-                    (Memory::Direct { past, .. }, SavedMemory::Direct(_)) => past[from..].to_vec(),
-                    _ => unreachable!("the gathered memory is the history's kind"),
-                };
-                let got: Vec<Vec<f64>> = match &gathered {
-                    SavedMemory::Prony(terms) => terms.iter().map(|t| t.m.clone()).collect(),
-                    SavedMemory::Direct(rows) => rows.clone(),
-                    SavedMemory::None => unreachable!(),
+                let mut got = Vec::new();
+                ranks[0].gathered(from, of_0, &mut |v| got.push(v)).unwrap();
+                let expected: Vec<Vec<f64>> = match &whole.memory {
+                    Memory::Prony(terms) => terms.iter().map(|t| t.m.clone()).collect(),
+                    Memory::Direct { past, .. } => past[from..].to_vec(),
+                    Memory::None => unreachable!("both plans have memory"),
                 };
                 assert_eq!(got.len(), expected.len(), "n = {n}");
                 for (g, e) in got.iter().zip(&expected) {

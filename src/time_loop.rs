@@ -35,7 +35,7 @@ use crate::fem::{
     constraints, leading_block, mul_add, mul_add_rows, Discretization, RowsPair, Sparse,
     SymmetricPair,
 };
-use crate::history::{History, Holds, LoopState, Plans, SavedLoop, SavedMemory};
+use crate::history::{History, Holds, LoopState, Plans, SavedLoop};
 use crate::ranks::Own;
 use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
@@ -392,19 +392,20 @@ impl<'p> TimeLoop<'p> {
         }
     }
 
-    /// The memory at t_n as a checkpoint saves it, every dof's (collective: every rank
-    /// calls it at every checkpoint, which rank 0's schedule shares with the others: `run`):
-    /// Some on one process and on rank 0 of several, made there of each rank's values at
-    /// its own rows, None on the other ranks. Of a direct sum, the past rows that no
-    /// checkpoint holds yet, which every rank counts alike.
-    pub fn gather_memory(&mut self) -> Result<Option<SavedMemory>> {
+    /// The memory at t_n as a checkpoint saves it, every dof's, one vector at a time into
+    /// `each` (collective: every rank calls it at every checkpoint, which rank 0's schedule
+    /// shares with the others: `run`): called on one process and on rank 0 of several,
+    /// each vector made there of each rank's values at its own rows, never on the other
+    /// ranks. Of a direct sum, the past rows that no checkpoint holds yet, which every rank
+    /// counts alike (`History::gathered`).
+    pub fn gather_memory(&mut self, each: &mut dyn FnMut(Vec<f64>)) -> Result<()> {
         let (backend, n_free) = (&self.backend, self.disc.n_free);
         let whole = |value: &dyn Fn(usize) -> f64| backend.gather_at_first(n_free, value);
-        let gathered = self.history.gathered(self.past_saved, whole)?;
+        self.history.gathered(self.past_saved, whole, each)?;
         if let crate::history::Memory::Direct { past, .. } = &self.history.memory {
             self.past_saved = past.len();
         }
-        Ok(gathered)
+        Ok(())
     }
 
     /// Where the history holds a direct sum's past rows (None: whole): a resume reads

@@ -86,22 +86,24 @@ pub(super) fn vector<T: hdf5::H5Type>(
     describe(&ds, description, units)
 }
 
-/// A 2-D dataset of `rows` (each of `width` values), written row by row: the Prony
-/// states, the checkpoint's largest dataset, are never copied into one array.
+/// A 2-D dataset of `rows` rows of `width` values, written row by row as `with_row` hands
+/// each to its writer: the Prony states, the checkpoint's largest dataset, are never held
+/// in one array (they come one at a time: `States`).
 pub(super) fn rows_dataset(
     g: &hdf5::Group,
     name: &str,
-    (rows, width): (&[&[f64]], usize),
+    (rows, width): (usize, usize),
+    with_row: impl Fn(usize, &mut dyn FnMut(&[f64]) -> hdf5::Result<()>) -> hdf5::Result<()>,
     description: &str,
     units: &str,
 ) -> hdf5::Result<()> {
-    let ds = g
-        .new_dataset::<f64>()
-        .shape([rows.len(), width])
-        .create(name)?;
-    for (i, row) in rows.iter().enumerate() {
-        let row = ndarray::ArrayView2::from_shape((1, width), row).map_err(|e| e.to_string())?;
-        ds.write_slice(row, ndarray::s![i..i + 1, ..])?;
+    let ds = g.new_dataset::<f64>().shape([rows, width]).create(name)?;
+    for i in 0..rows {
+        with_row(i, &mut |row| {
+            let row =
+                ndarray::ArrayView2::from_shape((1, width), row).map_err(|e| e.to_string())?;
+            ds.write_slice(row, ndarray::s![i..i + 1, ..])
+        })?;
     }
     describe(&ds, description, units)
 }

@@ -4,6 +4,7 @@
 use super::h5::{h5_create_sealed, rows_dataset, scalar, str_attr, string_dataset, vector};
 use super::history_file::HistoryFile;
 use super::snapshot::{Snapshot, SnapshotMemory};
+use super::states::{le_range, States};
 use super::{Identity, RunLog, FORMAT, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
 use crate::output::FrameSum;
 use hdf5_metno as hdf5;
@@ -15,7 +16,7 @@ use std::path::Path;
 /// whole; the rest as bytes.
 pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Raw<'_>)> {
     let bytes = |b: &[u8]| Raw::Bytes(b.to_vec());
-    let f64s = |v| Raw::F64s(vec![v]);
+    let f64s = Raw::F64s;
     let mut out = vec![
         ("step", bytes(&(s.n as u64).to_le_bytes())),
         ("time", bytes(&(s.n as f64 * s.k).to_le_bytes())),
@@ -50,9 +51,8 @@ pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Ra
     out.push(("series/bytes", Raw::Bytes(le(&series.bytes))));
     match &s.memory {
         SnapshotMemory::None => {}
-        SnapshotMemory::Prony(terms) => {
-            let states = terms.iter().map(|t| &t.m[..]).collect();
-            out.push(("memory/prony_state", Raw::F64s(states)));
+        SnapshotMemory::Prony { states, .. } => {
+            out.push((PRONY_STATE, Raw::States(states)));
         }
         SnapshotMemory::Direct { .. } => {
             out.push(("memory/history_rows", bytes(&(s.n as u64).to_le_bytes())));
@@ -61,11 +61,15 @@ pub(super) fn variable_data(s: &Snapshot, steps: usize) -> Vec<(&'static str, Ra
     out
 }
 
-/// A variable dataset's raw data: bytes, or f64 values in parts (the state's vectors, the
-/// Prony states one row a term), in file byte order once written.
+/// The dataset of the Prony states among [`variable_data`]'s.
+pub(super) const PRONY_STATE: &str = "memory/prony_state";
+
+/// A variable dataset's raw data: bytes, f64 values (the state's vectors), or the Prony
+/// states as they come from the run (one row a term), in file byte order once written.
 pub(super) enum Raw<'a> {
     Bytes(Vec<u8>),
-    F64s(Vec<&'a [f64]>),
+    F64s(&'a [f64]),
+    States(&'a States),
 }
 
 impl Raw<'_> {
@@ -73,37 +77,20 @@ impl Raw<'_> {
     pub(super) fn len(&self) -> usize {
         match self {
             Raw::Bytes(b) => b.len(),
-            Raw::F64s(parts) => parts.iter().map(|p| std::mem::size_of_val(*p)).sum(),
+            Raw::F64s(v) => std::mem::size_of_val(*v),
+            Raw::States(states) => states.len(),
         }
     }
 
-    /// Its bytes from byte `from` on into `out`, as many as `out` holds.
-    pub(super) fn write_range(&self, from: usize, out: &mut [u8]) {
-        let parts = match self {
-            Raw::Bytes(b) => return out.copy_from_slice(&b[from..from + out.len()]),
-            Raw::F64s(parts) => parts,
-        };
-        let (to, mut start) = (from + out.len(), 0);
-        for part in parts {
-            let end = start + std::mem::size_of_val(*part);
-            let (lo, hi) = (from.max(start), to.min(end));
-            if lo < hi {
-                le_range(part, lo - start, &mut out[lo - from..hi - from]);
-            }
-            start = end;
+    /// Its bytes from byte `from` on into `out`, as many as `out` holds (the Prony states
+    /// in order: [`States::write_range`]).
+    pub(super) fn write_range(&self, from: usize, out: &mut [u8]) -> std::io::Result<()> {
+        match self {
+            Raw::Bytes(b) => out.copy_from_slice(&b[from..from + out.len()]),
+            Raw::F64s(v) => le_range(v, from, out),
+            Raw::States(states) => return states.write_range(from, out),
         }
-    }
-}
-
-/// The little-endian bytes of `v` from byte `from` on into `out`, as many as it holds.
-fn le_range(v: &[f64], from: usize, out: &mut [u8]) {
-    if cfg!(target_endian = "little") {
-        let bytes: &[u8] = bytemuck::cast_slice(v);
-        return out.copy_from_slice(&bytes[from..from + out.len()]);
-    }
-    for (i, b) in out.iter_mut().enumerate() {
-        let at = from + i;
-        *b = v[at / 8].to_le_bytes()[at % 8];
+        Ok(())
     }
 }
 
@@ -304,16 +291,14 @@ fn write_state(f: &hdf5::File, row_node: &[u64], s: &Snapshot) -> hdf5::Result<(
 
 /// `/memory`: the Prony terms' states, or where the direct sum's past displacements lie.
 fn write_memory(f: &hdf5::File, s: &Snapshot, history: Option<&HistoryFile>) -> hdf5::Result<()> {
-    let n_free = s.u.len();
     let memory = f.create_group("memory")?;
     match &s.memory {
         SnapshotMemory::None => str_attr(&memory, "kind", "none")?,
-        SnapshotMemory::Prony(terms) => {
+        SnapshotMemory::Prony { terms, states } => {
             str_attr(&memory, "kind", "prony")?;
             let a: Vec<f64> = terms.iter().map(|t| t.a).collect();
             let decay: Vec<f64> = terms.iter().map(|t| t.decay).collect();
             let b: Vec<f64> = terms.iter().map(|t| -t.decay.ln() / s.k).collect();
-            let states: Vec<&[f64]> = terms.iter().map(|t| &t.m[..]).collect();
             let nt = [terms.len()];
             vector(
                 &memory,
@@ -355,7 +340,10 @@ fn write_memory(f: &hdf5::File, s: &Snapshot, history: Option<&HistoryFile>) -> 
             rows_dataset(
                 &memory,
                 "prony_state",
-                (&states, n_free),
+                (states.count(), states.width()),
+                |i, write| {
+                    (states.with_row(i, write)).map_err(|e| hdf5::Error::from(e.to_string()))?
+                },
                 "m^(i)_n = k Σ_{j<n} exp(-b_i (t_n - t_j)) u_j, one row per term; \
                  m_n = Σ a_i m^(i)_n",
                 "m s",
@@ -546,20 +534,52 @@ fn write_series(f: &hdf5::File, frames: &[FrameSum]) -> hdf5::Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::Raw;
+    use super::{Raw, States};
 
+    /// The state's vectors and the Prony states as they come, one row at a time, are
+    /// written as their little-endian bytes in any range taken in order, also across a
+    /// row's end; a range behind the last row taken, or a row that never comes, is an
+    /// error, not a wrong value.
     #[test]
-    fn values_in_parts_are_written_as_their_little_endian_bytes_in_any_range() {
-        let (a, b) = ([1.5, -0.0, f64::MIN_POSITIVE], [3.25e300]);
-        let raw = Raw::F64s(vec![&a, &[], &b]);
-        let bytes: Vec<u8> = a.iter().chain(&b).flat_map(|x| x.to_le_bytes()).collect();
-        assert_eq!(raw.len(), 32);
-        for (from, to) in [(0, 32), (3, 29), (7, 25), (24, 32), (5, 5)] {
-            let mut out = vec![0u8; to - from];
-            raw.write_range(from, &mut out);
-            assert_eq!(out, bytes[from..to], "{from}..{to}");
-            Raw::Bytes(bytes.clone()).write_range(from, &mut out);
-            assert_eq!(out, bytes[from..to], "{from}..{to}");
+    fn values_and_states_are_written_as_their_little_endian_bytes_in_any_range_in_order() {
+        let rows = [[1.5, -0.0], [f64::MIN_POSITIVE, 3.25e300], [7.0, -1e-300]];
+        let values: Vec<f64> = rows.concat();
+        let bytes: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let ranges = [(0, 5), (5, 5), (5, 16), (16, 29), (29, 48)];
+        let queued = || {
+            let (tx, states) = States::queue(2, 3);
+            std::thread::spawn(move || rows.iter().for_each(|r| tx.send(r.to_vec()).unwrap()));
+            states
+        };
+        let states = queued();
+        for raw in [
+            Raw::F64s(&values),
+            Raw::Bytes(bytes.clone()),
+            Raw::States(&states),
+        ] {
+            assert_eq!(raw.len(), 48);
+            for (from, to) in ranges {
+                let mut out = vec![0u8; to - from];
+                raw.write_range(from, &mut out).unwrap();
+                assert_eq!(out, bytes[from..to], "{from}..{to}");
+            }
         }
+        assert_eq!(states.crc(), Some(crc32fast::hash(&bytes)));
+        let states = queued();
+        let mut out = vec![0u8; 8];
+        Raw::States(&states).write_range(32, &mut out).unwrap();
+        assert!(
+            states.write_range(0, &mut out).is_err(),
+            "behind the rows taken"
+        );
+        let (tx, short) = States::queue(2, 3);
+        tx.send(rows[0].to_vec()).unwrap();
+        drop(tx);
+        assert!(short.write_range(8, &mut out).is_ok());
+        assert!(
+            short.write_range(16, &mut out).is_err(),
+            "a row that never came"
+        );
+        assert_eq!(short.crc(), None);
     }
 }

@@ -61,7 +61,10 @@
 //! new history rows) and a background thread writes it. Checkpoints that fall due while the
 //! previous one is still being written are coalesced (the newest state wins, history rows
 //! accumulate), so the file on disk is always a complete, recent state and the run is never
-//! throttled by fsync. The first checkpoint of a process goes through the HDF5 library; the
+//! throttled by fsync. The Prony states (8 bytes a dof a term) are not copied whole: they go
+//! to the writer a term at a time through a queue of 16 MiB ([`Feed`], `states.rs`), so the
+//! run waits for the writer only where the states are more than that, at most until the
+//! writer has taken the last of them. The first checkpoint of a process goes through the HDF5 library; the
 //! later ones copy the last file a chunk at a time with the variable datasets patched in
 //! place (`Template`) instead of creating some fifty HDF5 objects. The end of a run (and
 //! `--stop-after`) waits until the last checkpoint is on disk.
@@ -74,11 +77,12 @@ mod read;
 mod resume;
 mod seal;
 mod snapshot;
+mod states;
 mod template;
 mod writer;
 
 pub use fingerprint::{groups_fingerprint, mesh_fingerprint, physics_signature, Hash64};
-pub use writer::Writer;
+pub use writer::{Feed, Writer};
 
 /// Recomputes the CRC-32 in the header of a checkpoint that was edited on purpose (with h5py,
 /// say): resume refuses a checkpoint whose bytes changed in any other way.

@@ -1,12 +1,13 @@
 //! A checkpoint's state in memory: copied out of the time loop by the run, folded with a newer
 //! one while the writer thread is busy, laid out by `layout` and written by `writer`.
 
+use super::states::States;
 use super::RunLog;
-use crate::history::PronyTerm;
 use crate::output::FrameSum;
 
 /// The state saved at one checkpoint, copied out of the time loop (so that the run goes on
-/// while a background thread writes it).
+/// while a background thread writes it), but for the Prony states, which reach the writer
+/// one at a time as the run gathers them (`States`).
 pub(super) struct Snapshot {
     pub(super) n: usize,
     pub(super) k: f64,
@@ -25,12 +26,24 @@ pub(super) struct Snapshot {
 
 pub(super) enum SnapshotMemory {
     None,
-    Prony(Vec<PronyTerm>),
+    /// The terms, and their states as the run sends them (`States`).
+    Prony {
+        terms: Vec<Term>,
+        states: States,
+    },
     /// The past displacements not yet sent to the writer: rows `from..from + rows.len()`.
     Direct {
         from: usize,
         rows: Vec<Vec<f64>>,
     },
+}
+
+/// A Prony term's weight, one-step decay and memory group (`history::PronyTerm` without
+/// its state).
+pub(super) struct Term {
+    pub(super) a: f64,
+    pub(super) decay: f64,
+    pub(super) group: usize,
 }
 
 impl Snapshot {

@@ -57,14 +57,25 @@ impl Template {
             if offset + len_r > len {
                 return None;
             }
+            // The Prony states came one at a time and are gone: their CRC stands for them.
+            let mut crc = crc32fast::Hasher::new();
             for from in (0..*len_r).step_by(CHUNK) {
                 let n = CHUNK.min(len_r - from);
                 found.resize(n, 0);
-                expected.resize(n, 0);
                 file.read_exact_at(&mut found, (offset + from) as u64)
                     .ok()?;
-                raw.write_range(from, &mut expected);
+                if let Raw::States(_) = raw {
+                    crc.update(&found);
+                    continue;
+                }
+                expected.resize(n, 0);
+                raw.write_range(from, &mut expected).ok()?;
                 if found != expected {
+                    return None;
+                }
+            }
+            if let Raw::States(states) = raw {
+                if states.crc() != Some(crc.finalize()) {
                     return None;
                 }
             }
@@ -79,8 +90,11 @@ impl Template {
     }
 
     /// Writes at `to` the checkpoint `last` (the last one written, sealed) with `data` (of
-    /// the sizes [`Template::fits`] checked), and seals it. Ok(false), `to` incomplete,
-    /// where `last` cannot be read or is not as sealed: the caller writes through HDF5.
+    /// the sizes [`Template::fits`] checked), and seals it. Ok(false) where `last` cannot be
+    /// read or is not as sealed: the caller writes through HDF5. Before any of `data` is
+    /// taken where `last` cannot be opened or has another length; otherwise once all was
+    /// taken, `to` then holding every value where its dataset lies but not sealed (the Prony
+    /// states, which came one at a time, are read back from there: `Disk::write`).
     pub(super) fn write(
         &self,
         last: &Path,
@@ -97,35 +111,42 @@ impl Template {
         let (mut old, mut new) = (Sealing::checkpoint(self.len), Sealing::checkpoint(self.len));
         let mut chunk = vec![0u8; CHUNK.min(self.len)];
         let mut block = [0u8; USERBLOCK];
+        let mut intact = true;
         for at in (0..self.len).step_by(CHUNK) {
             let part = &mut chunk[..CHUNK.min(self.len - at)];
-            if from.read_exact_at(part, at as u64).is_err() {
-                return Ok(false);
+            intact = intact && from.read_exact_at(part, at as u64).is_ok();
+            if intact {
+                old.feed(at, part);
             }
-            old.feed(at, part);
             if at == 0 {
                 block.copy_from_slice(&part[..USERBLOCK]);
             }
-            self.patch(at, part, data);
+            self.patch(at, part, data)?;
             new.feed(at, part);
             out.write_all(part)?;
         }
-        if !old.seals(&block) {
+        if !intact || !old.seals(&block) {
             return Ok(false);
         }
         out.write_all_at(&new.block(), 0)?;
         Ok(true)
     }
 
+    /// Where the `i`-th entry of the data lies in the file.
+    pub(super) fn offset(&self, i: usize) -> usize {
+        self.regions[i].0
+    }
+
     /// Writes into `part`, the file's bytes from `at`, the values of `data` that fall there.
-    fn patch(&self, at: usize, part: &mut [u8], data: &[(&str, Raw)]) {
+    fn patch(&self, at: usize, part: &mut [u8], data: &[(&str, Raw)]) -> std::io::Result<()> {
         let end = at + part.len();
         for ((offset, len), (_, raw)) in self.regions.iter().zip(data) {
             let (lo, hi) = (at.max(*offset), end.min(offset + len));
             if lo < hi {
-                raw.write_range(lo - offset, &mut part[lo - at..hi - at]);
+                raw.write_range(lo - offset, &mut part[lo - at..hi - at])?;
             }
         }
+        Ok(())
     }
 }
 
@@ -133,10 +154,13 @@ impl Template {
 mod tests {
     use super::*;
     use crate::checkpoint::seal::{seal_checkpoint, verify_checkpoint};
+    use crate::checkpoint::states::States;
 
     /// A later checkpoint is the last file with the values written where their datasets
-    /// lie, also across a chunk's end, and sealed; a last file whose bytes no longer match
-    /// its CRC, or whose length changed, is not copied (the writer then uses HDF5).
+    /// lie (the Prony states as they come), also across a chunk's end, and sealed; a last
+    /// file whose bytes no longer match its CRC is not copied (the writer then uses HDF5),
+    /// the states taken and left where they lie in the unsealed copy, nor one whose length
+    /// changed, the states left in their queue.
     #[test]
     fn the_last_file_is_copied_with_the_values_patched_and_sealed_unless_it_was_damaged() {
         let dir = tempfile::tempdir().unwrap();
@@ -148,13 +172,21 @@ mod tests {
         let values = [1.5, -2.25, 3e300];
         let regions = vec![(CHUNK - 8, 24), (600, 0), (1000, 2)];
         let template = Template { len, regions };
-        let data = [
-            ("x", Raw::F64s(vec![&values[..1], &values[1..]])),
-            ("empty", Raw::Bytes(Vec::new())),
-            ("flags", Raw::Bytes(vec![9, 8])),
-        ];
-        assert!(template.fits(&data));
-        assert!(template.write(&last, &to, &data).unwrap());
+        let queued = || {
+            let (tx, states) = States::queue(1, 3);
+            values.iter().for_each(|&x| tx.send(vec![x]).unwrap());
+            states
+        };
+        let states = queued();
+        let data = |states| {
+            [
+                ("x", Raw::States(states)),
+                ("empty", Raw::Bytes(Vec::new())),
+                ("flags", Raw::Bytes(vec![9, 8])),
+            ]
+        };
+        assert!(template.fits(&data(&states)));
+        assert!(template.write(&last, &to, &data(&states)).unwrap());
         let written = std::fs::read(&to).unwrap();
         verify_checkpoint(&written).unwrap();
         let mut expected = bytes.clone();
@@ -163,15 +195,21 @@ mod tests {
         expected[1000..1002].copy_from_slice(&[9, 8]);
         seal_checkpoint(&mut expected);
         assert!(written == expected);
-        // One flipped bit in the last file: not copied.
+        // One flipped bit in the last file: not copied, the states where they lie in `to`.
         bytes[CHUNK + 100] ^= 4;
         std::fs::write(&last, &bytes).unwrap();
-        assert!(!template.write(&last, &to, &data).unwrap());
-        // Another length, or no last file at all: not copied either.
+        let states = queued();
+        assert!(!template.write(&last, &to, &data(&states)).unwrap());
+        assert!(!states.untouched());
+        let copy = std::fs::read(&to).unwrap();
+        assert_eq!(copy[template.offset(0)..][..24], le[..]);
+        // Another length, or no last file at all: not copied either, no state taken.
         std::fs::write(&last, &bytes[..len - 1]).unwrap();
-        assert!(!template.write(&last, &to, &data).unwrap());
+        let states = queued();
+        assert!(!template.write(&last, &to, &data(&states)).unwrap());
         std::fs::remove_file(&last).unwrap();
-        assert!(!template.write(&last, &to, &data).unwrap());
-        assert!(!template.fits(&data[..2]));
+        assert!(!template.write(&last, &to, &data(&states)).unwrap());
+        assert!(states.untouched());
+        assert!(!template.fits(&data(&states)[..2]));
     }
 }

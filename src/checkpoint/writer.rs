@@ -3,12 +3,13 @@
 
 use super::h5::{fsync_dir, fsync_file};
 use super::history_file::{grown_capacity, HistoryFile};
-use super::layout::{variable_data, write_checkpoint, Raw};
+use super::layout::{variable_data, write_checkpoint, Raw, PRONY_STATE};
 use super::seal;
-use super::snapshot::{Snapshot, SnapshotMemory};
+use super::snapshot::{Snapshot, SnapshotMemory, Term};
+use super::states::States;
 use super::template::Template;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
-use crate::history::{LoopState, SavedMemory};
+use crate::history::{LoopState, Memory};
 use crate::output::FrameSum;
 use crate::solver::Rows;
 use crate::{Error, Result};
@@ -154,33 +155,39 @@ impl Writer {
         self.path.clone()
     }
 
-    /// Hands the checkpoint of the loop's `state` (at step n, before solving it) to the writer
-    /// thread, with its memory as `TimeLoop::gather_memory` made it (of a direct sum, the
-    /// rows after the last checkpoint's). `active`: the contact/stick flags of the last solved step's rows; `frames`:
-    /// the frames of the series written so far (all on disk). Returns the error of an earlier
-    /// checkpoint that failed.
+    /// Hands the checkpoint of the loop's `state` (at step n, before solving it) to the
+    /// writer thread, whose memory follows through the [`Feed`] as `TimeLoop::gather_memory`
+    /// makes it, one vector at a time (of a direct sum, the rows after the last checkpoint's).
+    /// `active`: the contact/stick flags of the last solved step's rows; `frames`: the frames
+    /// of the series written so far (all on disk). [`Feed::end`] returns the error of an
+    /// earlier checkpoint that failed.
     pub fn write(
         &mut self,
         state: LoopState,
-        memory: SavedMemory,
         log: &RunLog,
         active: &[bool],
         frames: Vec<FrameSum>,
-    ) -> Result<()> {
+    ) -> Feed {
+        if let Err(e) = self.writing() {
+            return Feed(Fed::Refused(e));
+        }
         let h = state.history;
-        let memory = match memory {
-            SavedMemory::None => SnapshotMemory::None,
-            SavedMemory::Prony(terms) => SnapshotMemory::Prony(terms),
-            // The past rows after the last checkpoint's, up to u_{n−1}.
-            SavedMemory::Direct(rows) => {
-                assert!(
-                    rows.len() <= h.n && rows.iter().all(|r| r.len() == h.u.len()),
-                    "the past rows after the last checkpoint's, each of every dof"
-                );
-                SnapshotMemory::Direct {
-                    from: h.n - rows.len(),
-                    rows,
-                }
+        let (memory, tx) = match &h.memory {
+            Memory::None => (SnapshotMemory::None, None),
+            Memory::Prony(terms) => {
+                let (tx, states) = States::queue(h.u.len(), terms.len());
+                let terms = (terms.iter())
+                    .map(|t| Term {
+                        a: t.a,
+                        decay: t.decay,
+                        group: t.group,
+                    })
+                    .collect();
+                (SnapshotMemory::Prony { terms, states }, Some(tx))
+            }
+            Memory::Direct { .. } => {
+                let (from, rows) = (h.n, Vec::new());
+                (SnapshotMemory::Direct { from, rows }, None)
             }
         };
         let snapshot = Snapshot {
@@ -197,16 +204,21 @@ impl Writer {
             log: log.clone(),
             frames,
         };
+        let shared = self.shared.clone();
+        Feed(match tx {
+            // The writer may take the states as they come.
+            Some(tx) => match post(&shared, snapshot) {
+                Ok(()) => Fed::States(tx),
+                Err(e) => Fed::Refused(e),
+            },
+            None => Fed::Rows(Box::new(snapshot), shared),
+        })
+    }
+
+    /// Ok where the writer takes checkpoints: the error of an earlier one that failed.
+    fn writing(&self) -> Result<()> {
         let mut mb = self.shared.mailbox.lock().expect("checkpoint mailbox");
-        if let Some(e) = mb.error.take() {
-            return Err(e);
-        }
-        match &mut mb.pending {
-            Some(older) => older.absorb(snapshot),
-            None => mb.pending = Some(snapshot),
-        }
-        self.shared.changed.notify_all();
-        Ok(())
+        refused(&mut mb)
     }
 
     /// Waits until every checkpoint handed over so far is on disk (the writer stays open);
@@ -240,6 +252,81 @@ impl Writer {
         match mb.error.take() {
             Some(e) => Err(e),
             None => Ok(()),
+        }
+    }
+}
+
+/// The error of an earlier checkpoint that failed, or that the writer stopped after one.
+fn refused(mb: &mut Mailbox) -> Result<()> {
+    match (mb.error.take(), mb.closed) {
+        (Some(e), _) => Err(e),
+        (None, true) => Err(Error::solve(
+            "the checkpoint writer stopped after an earlier checkpoint failed",
+        )),
+        (None, false) => Ok(()),
+    }
+}
+
+/// Hands `snapshot` to the writer thread, folded into one still waiting.
+fn post(shared: &Shared, snapshot: Snapshot) -> Result<()> {
+    let mut mb = shared.mailbox.lock().expect("checkpoint mailbox");
+    refused(&mut mb)?;
+    match &mut mb.pending {
+        Some(older) => older.absorb(snapshot),
+        None => mb.pending = Some(snapshot),
+    }
+    shared.changed.notify_all();
+    Ok(())
+}
+
+/// A checkpoint being handed to the writer ([`Writer::write`]): its memory's vectors, each
+/// of every dof, go in one at a time ([`Feed::send`]) as the run gathers them. The Prony
+/// states go on to the writer thread at once, through a queue of a few (`States`), so that
+/// the process never holds them all twice; a direct sum's rows, which the writer appends to
+/// the history file before the checkpoint, go with the state at [`Feed::end`].
+pub struct Feed(Fed);
+
+enum Fed {
+    States(std::sync::mpsc::SyncSender<Vec<f64>>),
+    Rows(Box<Snapshot>, std::sync::Arc<Shared>),
+    /// An earlier checkpoint failed: the vectors are let go, the error told at the end.
+    Refused(Error),
+}
+
+impl Feed {
+    /// The memory's next vector.
+    pub fn send(&mut self, v: Vec<f64>) {
+        match &mut self.0 {
+            // A writer that failed has let the queue go; its error comes at the next
+            // checkpoint.
+            Fed::States(tx) => drop(tx.send(v)),
+            Fed::Rows(snapshot, _) => {
+                if let SnapshotMemory::Direct { rows, .. } = &mut snapshot.memory {
+                    rows.push(v);
+                }
+            }
+            Fed::Refused(_) => {}
+        }
+    }
+
+    /// Every vector was sent: the checkpoint is the writer's. Returns the error of an
+    /// earlier checkpoint that failed.
+    pub fn end(self) -> Result<()> {
+        match self.0 {
+            Fed::States(_) => Ok(()),
+            Fed::Rows(mut snapshot, shared) => {
+                if let SnapshotMemory::Direct { from, rows } = &mut snapshot.memory {
+                    // The past rows after the last checkpoint's, up to u_{n−1}.
+                    assert!(
+                        rows.len() <= snapshot.n
+                            && rows.iter().all(|r| r.len() == snapshot.u.len()),
+                        "the past rows after the last checkpoint's, each of every dof"
+                    );
+                    *from = snapshot.n - rows.len();
+                }
+                post(&shared, *snapshot)
+            }
+            Fed::Refused(e) => Err(e),
         }
     }
 }
@@ -279,6 +366,31 @@ impl Disk {
         )
     }
 
+    /// Where a copy of the last checkpoint took the Prony states into `tmp` and then found
+    /// the last file damaged (`Template::write`): `tmp` moved aside, the states to be read
+    /// back from it; the path it was moved to.
+    fn states_taken(
+        &self,
+        s: &Snapshot,
+        data: &[(&str, Raw)],
+        tmp: &Path,
+    ) -> Result<Option<PathBuf>> {
+        let (SnapshotMemory::Prony { states, .. }, Some(template)) = (&s.memory, &self.template)
+        else {
+            return Ok(None);
+        };
+        if states.untouched() {
+            return Ok(None);
+        }
+        let at = data.iter().position(|(name, _)| *name == PRONY_STATE);
+        let offset = at.map(|i| template.offset(i)).expect("the states' dataset");
+        let taken = tmp.with_extension("states.tmp");
+        std::fs::rename(tmp, &taken).map_err(|e| Error::io(tmp, e))?;
+        let file = std::fs::File::open(&taken).map_err(|e| Error::io(&taken, e))?;
+        states.reread(file, offset as u64);
+        Ok(Some(taken))
+    }
+
     /// First the new history rows (fsync'ed), then `checkpoint.h5.tmp`, fsync, rename, fsync
     /// of the directory.
     fn write(&mut self, s: &Snapshot) -> Result<()> {
@@ -306,15 +418,19 @@ impl Disk {
             Error::io(&path, e)
         })?;
         if !fast {
-            write_checkpoint(
+            let taken = self.states_taken(s, &data, &tmp)?;
+            let written = write_checkpoint(
                 &tmp,
                 &self.id,
                 &self.row_node,
                 s,
                 self.steps,
                 self.history.as_ref(),
-            )
-            .map_err(|e| {
+            );
+            if let Some(taken) = taken {
+                let _ = std::fs::remove_file(taken);
+            }
+            written.map_err(|e| {
                 let _ = std::fs::remove_file(&tmp);
                 Error::hdf5(&path, e)
             })?;
@@ -328,5 +444,88 @@ impl Disk {
         std::fs::rename(&tmp, &path).map_err(|e| Error::io(&path, e))?;
         fsync_dir(&self.dir);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The Prony states reach the file as they come, through HDF5 at the first checkpoint
+    /// and the last file's copy at the later ones; where that copy finds the last file
+    /// damaged once it has taken them, they are read back from the copy and the checkpoint
+    /// is written through HDF5 with the same values, nothing left beside it.
+    #[test]
+    fn states_taken_by_a_copy_of_a_damaged_last_file_reach_the_checkpoint_through_hdf5() {
+        let dir = tempfile::tempdir().unwrap();
+        let (width, terms) = (5, 3);
+        let id = Identity {
+            run_id: "states".into(),
+            scene_text: String::new(),
+            scene_path: String::new(),
+            scene_path_absolute: String::new(),
+            mesh_path: String::new(),
+            mesh_fingerprint: 0,
+            groups_fingerprint: 0,
+            nodes: 3,
+            triangles: 1,
+            physics: Vec::new(),
+            dof_of: (0..width as i64).chain([-1]).collect(),
+        };
+        let mut disk = Disk::new(dir.path(), id, 10, &Rows::new(&[], &[], 1));
+        let state = |n: usize, i: usize| -> Vec<f64> {
+            (0..width)
+                .map(|j| (n * 100 + i * 10 + j) as f64 / 7.0)
+                .collect()
+        };
+        let write = |disk: &mut Disk, n: usize| {
+            let (tx, states) = States::queue(width, terms);
+            (0..terms).for_each(|i| tx.send(state(n, i)).unwrap());
+            let term = |i| Term {
+                a: 1.0 + i as f64,
+                decay: 0.5,
+                group: 0,
+            };
+            let vector = vec![n as f64; width];
+            let snapshot = Snapshot {
+                n,
+                k: 0.1,
+                u: vector.clone(),
+                u_sum: vector.clone(),
+                u_comp: vector.clone(),
+                w: vector,
+                z: Vec::new(),
+                z_before: Vec::new(),
+                active: Vec::new(),
+                memory: SnapshotMemory::Prony {
+                    terms: (0..terms).map(term).collect(),
+                    states,
+                },
+                log: RunLog {
+                    iterations: vec![1; n],
+                    ..RunLog::default()
+                },
+                frames: Vec::new(),
+            };
+            disk.write(&snapshot).unwrap();
+            let cp = Checkpoint::read(&disk.dir.join(FILE_NAME)).unwrap();
+            let StoredMemory::Prony { m, .. } = cp.memory else {
+                panic!("a Prony checkpoint")
+            };
+            for (i, m) in m.iter().enumerate() {
+                assert_eq!(m, &state(n, i), "step {n}, term {i}");
+            }
+        };
+        write(&mut disk, 1);
+        assert!(disk.template.is_some(), "the first file is the template");
+        write(&mut disk, 2);
+        let path = disk.dir.join(FILE_NAME);
+        let mut bytes = std::fs::read(&path).unwrap();
+        let at = bytes.len() - 1;
+        bytes[at] ^= 1;
+        std::fs::write(&path, bytes).unwrap();
+        write(&mut disk, 3);
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(left.len(), 1, "checkpoint.h5 alone: {left:?}");
     }
 }

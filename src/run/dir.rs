@@ -82,11 +82,15 @@ fn remove_entry(dir: &Path, name: &str) -> std::io::Result<()> {
     Ok(())
 }
 
-/// A temporary file of our writers: `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`, or
-/// `.NAME.tmp.PID.N` (`output::write_atomic`) for a NAME of ours.
+/// A temporary file of our writers: `checkpoint.h5.tmp`, `checkpoint_history.h5.tmp`,
+/// `checkpoint.h5.states.tmp` (a copy whose Prony states a checkpoint reads back:
+/// `checkpoint::Writer`), or `.NAME.tmp.PID.N` (`output::write_atomic`) for a NAME of ours.
 fn temporary(name: &str) -> bool {
     if let Some(base) = name.strip_suffix(".tmp") {
-        return matches!(base, "checkpoint.h5" | "checkpoint_history.h5");
+        return matches!(
+            base,
+            "checkpoint.h5" | "checkpoint_history.h5" | "checkpoint.h5.states"
+        );
     }
     temporary_of(name, run_file)
 }
@@ -429,6 +433,7 @@ mod tests {
             "checkpoint_history.h5",
             "checkpoint.h5.tmp",
             "checkpoint_history.h5.tmp",
+            "checkpoint.h5.states.tmp",
             ".solution_000012.vtu.tmp.4242.7",
             ".solution.pvd.tmp.1.0",
             ".summary.json.tmp.99.3",
