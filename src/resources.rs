@@ -12,14 +12,17 @@
 //!   compressed kernel (expr or table, `memory = "compressed"`) counts its fit, 16 bytes per
 //!   lag up to max(N, horizon/k) (r and the certificate's deviation, `kernel_fit`), and the
 //!   direct sum's rows only when its run may fall back to it (N ≤ `kernel_fit::EXACT_STEPS`;
-//!   a longer one is refused instead). The Prony states are 8 d bytes a term, which a
-//!   checkpoint gathers once more (`Held::gathered`): a scene's own series' from the start,
+//!   a longer one is refused instead). The Prony states are 8 d bytes a term, of which a
+//!   checkpoint holds a few more at once as they stream to its writer (at most 16 MiB
+//!   waiting and two more, `history::held_bytes`; `Held::gathered`): a scene's own
+//!   series' from the start,
 //!   every term's once the kernels' plans are known ([`Estimate::with_plans`]: after the
 //!   sizes above passed, since a plan evaluates the kernel on every lag; a compressed
 //!   kernel's fit too), and then the direct sum's rows only where it runs (`study`'s
 //!   packing of cases plans before any fit). Over several MPI ranks
 //!   ([`Estimate::largest_rank`]) rank 0 holds the memory at the dofs it reads alone and
-//!   gathers it whole at each checkpoint;
+//!   gathers it at each checkpoint, the Prony states a few at a time and a direct sum's
+//!   rows that no checkpoint holds yet whole;
 //! - disk: a frame every `output.every` steps (`frame_bytes`: the values of the fields
 //!   written, at `output.precision`, the points and the cells; zlib, the default, keeps the
 //!   values that are in general nonzero and about a fifth of the rest, the zeros and the
@@ -37,7 +40,7 @@
 //! overlay file systems) does not count them and is not refused for them.
 
 use crate::fem::Discretization;
-use crate::history::Plans;
+use crate::history::{held_bytes, Plans};
 use crate::kernel::Kernel;
 use crate::kernel_fit::EXACT_STEPS;
 use crate::output::{Compression, Format, Precision};
@@ -71,6 +74,9 @@ struct Held {
     /// The Prony states, 8 d a term: of the scene's own series, then of every term the
     /// plans run (a compressed kernel's fit too).
     states: f64,
+    /// What a checkpoint holds of the states at once, as they stream to its writer a term
+    /// at a time (`history::held_bytes`): a few terms, at most all.
+    streamed: f64,
     /// What no rank count divides: r at every lag, the fit, the iteration counts.
     rest: f64,
     /// Whether checkpoints are written, which gather the memory.
@@ -78,12 +84,12 @@ struct Held {
 }
 
 impl Held {
-    /// What a checkpoint adds to the process that writes it, the memory gathered whole: a
-    /// direct sum's rows that no checkpoint holds yet (at most all), and the Prony states
-    /// (the file streams through a chunk at a time: `checkpoint::Template`); and the rest.
+    /// What a checkpoint adds to the process that writes it, the memory gathered at every
+    /// dof: a direct sum's rows that no checkpoint holds yet (at most all), and the Prony
+    /// states that stream to the writer at once (`checkpoint::Feed`); and the rest.
     fn gathered(&self) -> f64 {
         let checkpoint = if self.checkpoints { 1.0 } else { 0.0 };
-        self.rest + checkpoint * (self.rows + self.states)
+        self.rest + checkpoint * (self.rows + self.streamed)
     }
 
     /// The key that lowers the most of what it holds.
@@ -164,6 +170,7 @@ impl Estimate {
         let held = Held {
             rows: if direct { 8.0 * d * (steps + 1.0) } else { 0.0 },
             states: 8.0 * d * given_terms(scene) as f64,
+            streamed: held_bytes(disc.n_free, given_terms(scene)),
             rest: if direct { 8.0 * (steps + 1.0) } else { 0.0 } + fit + 8.0 * steps,
             checkpoints: scene.checkpoint.enabled,
         };
@@ -190,6 +197,7 @@ impl Estimate {
             self.held.rows = 0.0;
         }
         self.held.states = 8.0 * d * plans.terms() as f64;
+        self.held.streamed = held_bytes(disc.n_free, plans.terms());
         self
     }
 
