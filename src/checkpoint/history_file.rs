@@ -18,6 +18,7 @@
 
 use super::h5::{describe, fsync_dir, fsync_file, h5_create_sealed, str_attr};
 use super::seal;
+use super::states::from_le;
 use super::{Hash64, Identity, HISTORY_DATASET, HISTORY_FILE_NAME};
 
 /// The history file's layout version (unchanged since checkpoint format version 2).
@@ -266,9 +267,7 @@ impl HistoryFile {
             file.read_exact_at(bytes, self.offset + start as u64 * self.row_bytes)
                 .map_err(|e| Error::io(&self.path, e))?;
             values.clear();
-            values.extend(
-                (bytes.chunks(8)).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))),
-            );
+            from_le(bytes, &mut values);
             values.chunks(row / 8).for_each(&mut f);
         }
         Ok(())

@@ -148,11 +148,7 @@ impl Reading {
                 let mut bytes = vec![0u8; 8 * width];
                 file.read_exact_at(&mut bytes, offset + (self.taken * 8 * width) as u64)?;
                 self.row.clear();
-                (self.row).extend(
-                    bytes
-                        .chunks_exact(8)
-                        .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))),
-                );
+                from_le(&bytes, &mut self.row);
             }
         }
         self.taken += 1;
@@ -170,6 +166,13 @@ pub(super) fn le_range(v: &[f64], from: usize, out: &mut [u8]) {
         let at = from + i;
         *b = v[at / 8].to_le_bytes()[at % 8];
     }
+}
+
+/// The values whose little-endian bytes are `bytes`, appended to `out` (`le_range`'s
+/// inverse).
+pub(super) fn from_le(bytes: &[u8], out: &mut Vec<f64>) {
+    let value = |b: &[u8]| f64::from_le_bytes(b.try_into().expect("8 bytes"));
+    out.extend(bytes.chunks_exact(8).map(value));
 }
 
 #[cfg(test)]
