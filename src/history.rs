@@ -62,9 +62,9 @@ pub fn queue_len(width: usize) -> usize {
     (QUEUE_BYTES / (8 * width.max(1))).max(1)
 }
 
-/// The bytes of `count` Prony states of `width` values that the process writing a
-/// checkpoint holds at most: those waiting, the one the writer is writing and the one being
-/// gathered.
+/// The bytes of `count` vectors of `width` values (Prony states, a direct sum's past rows)
+/// that the process writing a checkpoint holds at most: those waiting, the one the writer
+/// is writing and the one being gathered.
 pub fn held_bytes(width: usize, count: usize) -> f64 {
     (8 * width) as f64 * count.min(queue_len(width) + 2) as f64
 }

@@ -7,8 +7,9 @@
 //! once setup has built them. With d free dofs, n nodes and c cells:
 //!
 //! - memory: a general kernel's direct sum keeps u_0..u_N (8 d (N+1) bytes) and r at every
-//!   lag (8 (N+1)), and a checkpoint gathers the rows no checkpoint holds yet, at most all
-//!   of them, once more; every kernel keeps the per-step iteration counts (8 N). A
+//!   lag (8 (N+1)), and a checkpoint holds a few of the rows no checkpoint holds yet once
+//!   more as they stream to its writer (as the Prony states below do); every kernel keeps
+//!   the per-step iteration counts (8 N). A
 //!   compressed kernel (expr or table, `memory = "compressed"`) counts its fit, 16 bytes per
 //!   lag up to max(N, horizon/k) (r and the certificate's deviation, `kernel_fit`), and the
 //!   direct sum's rows only when its run may fall back to it (N ≤ `kernel_fit::EXACT_STEPS`;
@@ -21,8 +22,8 @@
 //!   kernel's fit too), and then the direct sum's rows only where it runs (`study`'s
 //!   packing of cases plans before any fit). Over several MPI ranks
 //!   ([`Estimate::largest_rank`]) rank 0 holds the memory at the dofs it reads alone and
-//!   gathers it at each checkpoint, the Prony states a few at a time and a direct sum's
-//!   rows that no checkpoint holds yet whole;
+//!   gathers it at each checkpoint a few vectors at a time (the Prony states, a direct
+//!   sum's rows that no checkpoint holds yet);
 //! - disk: a frame every `output.every` steps (`frame_bytes`: the values of the fields
 //!   written, at `output.precision`, the points and the cells; zlib, the default, keeps the
 //!   values that are in general nonzero and about a fifth of the rest, the zeros and the
@@ -74,22 +75,30 @@ struct Held {
     /// The Prony states, 8 d a term: of the scene's own series, then of every term the
     /// plans run (a compressed kernel's fit too).
     states: f64,
-    /// What a checkpoint holds of the states at once, as they stream to its writer a term
-    /// at a time (`history::held_bytes`): a few terms, at most all.
-    streamed: f64,
+    /// What a checkpoint holds at once of the states and of a direct sum's rows, as they
+    /// stream to its writer a vector at a time (`history::held_bytes`): a few, at most all.
+    streamed: Streamed,
     /// What no rank count divides: r at every lag, the fit, the iteration counts.
     rest: f64,
     /// Whether checkpoints are written, which gather the memory.
     checkpoints: bool,
 }
 
+/// What a checkpoint holds at once of the memory it streams to its writer, in bytes.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Streamed {
+    /// Of the Prony states.
+    states: f64,
+    /// Of a direct sum's rows that no checkpoint holds yet.
+    rows: f64,
+}
+
 impl Held {
     /// What a checkpoint adds to the process that writes it, the memory gathered at every
-    /// dof: a direct sum's rows that no checkpoint holds yet (at most all), and the Prony
-    /// states that stream to the writer at once (`checkpoint::Feed`); and the rest.
+    /// dof that streams to the writer at once (`checkpoint::Feed`); and the rest.
     fn gathered(&self) -> f64 {
         let checkpoint = if self.checkpoints { 1.0 } else { 0.0 };
-        self.rest + checkpoint * (self.rows + self.streamed)
+        self.rest + checkpoint * (self.streamed.states + self.streamed.rows)
     }
 
     /// The key that lowers the most of what it holds.
@@ -170,7 +179,14 @@ impl Estimate {
         let held = Held {
             rows: if direct { 8.0 * d * (steps + 1.0) } else { 0.0 },
             states: 8.0 * d * given_terms(scene) as f64,
-            streamed: held_bytes(disc.n_free, given_terms(scene)),
+            streamed: Streamed {
+                states: held_bytes(disc.n_free, given_terms(scene)),
+                rows: if direct {
+                    held_bytes(disc.n_free, scene.time.steps.saturating_add(1))
+                } else {
+                    0.0
+                },
+            },
             rest: if direct { 8.0 * (steps + 1.0) } else { 0.0 } + fit + 8.0 * steps,
             checkpoints: scene.checkpoint.enabled,
         };
@@ -194,10 +210,10 @@ impl Estimate {
     pub fn with_plans(mut self, plans: &Plans, disc: &Discretization) -> Estimate {
         let d = disc.n_free as f64;
         if !plans.direct() {
-            self.held.rows = 0.0;
+            (self.held.rows, self.held.streamed.rows) = (0.0, 0.0);
         }
         self.held.states = 8.0 * d * plans.terms() as f64;
-        self.held.streamed = held_bytes(disc.n_free, plans.terms());
+        self.held.streamed.states = held_bytes(disc.n_free, plans.terms());
         self
     }
 

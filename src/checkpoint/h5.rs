@@ -88,7 +88,7 @@ pub(super) fn vector<T: hdf5::H5Type>(
 
 /// A 2-D dataset of `rows` rows of `width` values, written row by row as `with_row` hands
 /// each to its writer: the Prony states, the checkpoint's largest dataset, are never held
-/// in one array (they come one at a time: `States`).
+/// in one array (they come one at a time: `Vectors`).
 pub(super) fn rows_dataset(
     g: &hdf5::Group,
     name: &str,

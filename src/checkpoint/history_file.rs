@@ -18,7 +18,7 @@
 
 use super::h5::{describe, fsync_dir, fsync_file, h5_create_sealed, str_attr};
 use super::seal;
-use super::states::from_le;
+use super::vectors::{from_le, RowSource};
 use super::{Hash64, Identity, HISTORY_DATASET, HISTORY_FILE_NAME};
 
 /// The history file's layout version (unchanged since checkpoint format version 2).
@@ -75,10 +75,10 @@ impl HistoryFile {
         (run_id, n_free): (&str, usize),
         capacity: usize,
         kept: Option<(&HistoryFile, usize)>,
-        past: &[Vec<f64>],
+        past: &(impl RowSource + ?Sized),
     ) -> Result<HistoryFile> {
         let copied = kept.map_or(0, |(_, n)| n);
-        let capacity = capacity.max(copied + past.len()).max(1);
+        let capacity = capacity.max(copied + past.count()).max(1);
         let tmp = path.with_file_name(format!("{HISTORY_FILE_NAME}.tmp"));
         let write = || -> hdf5_metno::Result<u64> {
             let f = h5_create_sealed(&tmp)?;
@@ -124,7 +124,7 @@ impl HistoryFile {
         let mut fill = || -> Result<()> {
             if let Some((old, n)) = kept {
                 for start in (0..n).step_by(old.rows_per_chunk()) {
-                    file.push(&old.read_rows(start..n.min(start + old.rows_per_chunk()))?)?;
+                    file.push(&old.read_rows(start..n.min(start + old.rows_per_chunk()))?[..])?;
                 }
                 // All of its rows copied: the same hash, or the file changed since it was
                 // checked (a resume's read, the last append).
@@ -152,10 +152,11 @@ impl HistoryFile {
     }
 
     /// Writes `rows` after the rows this file holds, and hashes them.
-    fn push(&mut self, rows: &[Vec<f64>]) -> Result<()> {
-        self.write_rows(self.rows, rows)?;
-        rows.iter().for_each(|row| self.hash.f64s(row));
-        self.rows += rows.len();
+    fn push(&mut self, rows: &(impl RowSource + ?Sized)) -> Result<()> {
+        let mut hash = self.hash;
+        self.write_rows(self.rows, rows, |_, row| hash.f64s(row))?;
+        self.hash = hash;
+        self.rows += rows.count();
         Ok(())
     }
 
@@ -184,14 +185,14 @@ impl HistoryFile {
     pub(super) fn append(
         &mut self,
         from: usize,
-        rows: &[Vec<f64>],
+        rows: &(impl RowSource + ?Sized),
         run_id: &str,
         steps: usize,
     ) -> Result<()> {
-        if rows.is_empty() {
+        if rows.count() == 0 {
             return Ok(());
         }
-        let end = from + rows.len();
+        let end = from + rows.count();
         if from > self.rows {
             return Err(Error::solve(format!(
                 "{}: history rows from {from} leave a gap after row {} (internal error)",
@@ -207,13 +208,15 @@ impl HistoryFile {
                 HistoryFile::create_after(&self.path, sizes, capacity, Some((self, from)), rows)?;
             return Ok(());
         }
-        self.write_rows(from, rows)?;
+        // The hash covers rows 0..self.rows; rows before `self.rows` are not hashed again.
+        let (mut hash, known) = (self.hash, self.rows - from);
+        self.write_rows(from, rows, |i, row| {
+            if i >= known {
+                hash.f64s(row)
+            }
+        })?;
         fsync_file(&self.path)?;
-        // The hash covers rows 0..self.rows; rows before `self.rows` are not sent again.
-        for row in &rows[self.rows - from..] {
-            self.hash.f64s(row);
-        }
-        self.rows = end;
+        (self.hash, self.rows) = (hash, end);
         Ok(())
     }
 
@@ -226,20 +229,31 @@ impl HistoryFile {
         (CHUNK_BYTES / self.row_bytes.max(1) as usize).max(1)
     }
 
-    /// Positioned writes of rows `from..` into the rows block, a chunk at a time.
-    fn write_rows(&self, from: usize, rows: &[Vec<f64>]) -> Result<()> {
-        let f = std::fs::OpenOptions::new()
-            .write(true)
+    /// Positioned writes of rows `from..` into the rows block, a chunk at a time, each row
+    /// `i` of `rows` shown to `seen` as it passes.
+    fn write_rows(
+        &self,
+        from: usize,
+        rows: &(impl RowSource + ?Sized),
+        mut seen: impl FnMut(usize, &[f64]),
+    ) -> Result<()> {
+        let io = |e| Error::io(&self.path, e);
+        let f = (std::fs::OpenOptions::new().write(true))
             .open(&self.path)
-            .map_err(|e| Error::io(&self.path, e))?;
+            .map_err(io)?;
         let per = self.rows_per_chunk();
-        for (c, chunk) in rows.chunks(per).enumerate() {
-            let bytes: Vec<u8> = (chunk.iter().flatten())
-                .flat_map(|x| x.to_le_bytes())
-                .collect();
-            let at = self.offset + (from + c * per) as u64 * self.row_bytes;
-            f.write_all_at(&bytes, at)
-                .map_err(|e| Error::io(&self.path, e))?;
+        let mut bytes = Vec::new();
+        for start in (0..rows.count()).step_by(per) {
+            bytes.clear();
+            for i in start..rows.count().min(start + per) {
+                rows.row(i, &mut |row| {
+                    bytes.extend(row.iter().flat_map(|x| x.to_le_bytes()));
+                    seen(i, row);
+                })
+                .map_err(io)?;
+            }
+            let at = self.offset + (from + start) as u64 * self.row_bytes;
+            f.write_all_at(&bytes, at).map_err(io)?;
         }
         Ok(())
     }

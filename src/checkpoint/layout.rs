@@ -4,7 +4,7 @@
 use super::h5::{h5_create_sealed, rows_dataset, scalar, str_attr, string_dataset, vector};
 use super::history_file::HistoryFile;
 use super::snapshot::{Snapshot, SnapshotMemory};
-use super::states::{le_range, States};
+use super::vectors::{le_range, Vectors};
 use super::{Identity, RunLog, FORMAT, FORMAT_VERSION, HISTORY_DATASET, HISTORY_FILE_NAME};
 use crate::output::FrameSum;
 use hdf5_metno as hdf5;
@@ -69,7 +69,7 @@ pub(super) const PRONY_STATE: &str = "memory/prony_state";
 pub(super) enum Raw<'a> {
     Bytes(Vec<u8>),
     F64s(&'a [f64]),
-    States(&'a States),
+    States(&'a Vectors),
 }
 
 impl Raw<'_> {
@@ -83,7 +83,7 @@ impl Raw<'_> {
     }
 
     /// Its bytes from byte `from` on into `out`, as many as `out` holds (the Prony states
-    /// in order: [`States::write_range`]).
+    /// in order: [`Vectors::write_range`]).
     pub(super) fn write_range(&self, from: usize, out: &mut [u8]) -> std::io::Result<()> {
         match self {
             Raw::Bytes(b) => out.copy_from_slice(&b[from..from + out.len()]),
@@ -534,7 +534,7 @@ fn write_series(f: &hdf5::File, frames: &[FrameSum]) -> hdf5::Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::{Raw, States};
+    use super::{Raw, Vectors};
 
     /// The state's vectors and the Prony states as they come, one row at a time, are
     /// written as their little-endian bytes in any range taken in order, also across a
@@ -547,7 +547,7 @@ mod tests {
         let bytes: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
         let ranges = [(0, 5), (5, 5), (5, 16), (16, 29), (29, 48)];
         let queued = || {
-            let (tx, states) = States::queue(2, 3);
+            let (tx, states) = Vectors::queue(2, 3);
             std::thread::spawn(move || rows.iter().for_each(|r| tx.send(r.to_vec()).unwrap()));
             states
         };
@@ -572,7 +572,7 @@ mod tests {
             states.write_range(0, &mut out).is_err(),
             "behind the rows taken"
         );
-        let (tx, short) = States::queue(2, 3);
+        let (tx, short) = Vectors::queue(2, 3);
         tx.send(rows[0].to_vec()).unwrap();
         drop(tx);
         assert!(short.write_range(8, &mut out).is_ok());

@@ -57,16 +57,17 @@
 //!
 //! # Cost
 //!
-//! The run does not wait for the disk: [`Writer::write`] copies the state (O(dofs), plus the
-//! new history rows) and a background thread writes it. Checkpoints that fall due while the
-//! previous one is still being written are coalesced (the newest state wins, history rows
-//! accumulate), so the file on disk is always a complete, recent state and the run is never
-//! throttled by fsync. The Prony states (8 bytes a dof a term) are not copied whole: they go
-//! to the writer a term at a time through a queue of 16 MiB ([`Feed`], `states.rs`), so the
-//! run waits for the writer only where the states are more than that, at most until the
-//! writer has taken the last of them. The first checkpoint of a process goes through the HDF5 library; the
-//! later ones copy the last file a chunk at a time with the variable datasets patched in
-//! place (`Template`) instead of creating some fifty HDF5 objects. The end of a run (and
+//! The run does not wait for the disk: [`Writer::write`] copies the state (O(dofs)) and a
+//! background thread writes it. Checkpoints that fall due while the previous one is still
+//! being written are coalesced (the newest state wins, history rows accumulate), so the
+//! file on disk is always a complete, recent state and the run is never throttled by fsync.
+//! The memory (the Prony states, 8 bytes a dof a term; a direct sum's rows since the last
+//! checkpoint, 8 bytes a dof a step) is not copied whole: it goes to the writer a vector at
+//! a time through a queue of 16 MiB ([`Feed`], `vectors.rs`), so the run waits for the
+//! writer only where it is more than that, at most until the writer has taken the last
+//! vector. The first checkpoint of a process goes through the HDF5 library; the later ones
+//! copy the last file a chunk at a time with the variable datasets patched in place
+//! (`Template`) instead of creating some fifty HDF5 objects. The end of a run (and
 //! `--stop-after`) waits until the last checkpoint is on disk.
 
 mod fingerprint;
@@ -77,8 +78,8 @@ mod read;
 mod resume;
 mod seal;
 mod snapshot;
-mod states;
 mod template;
+mod vectors;
 mod writer;
 
 pub use fingerprint::{groups_fingerprint, mesh_fingerprint, physics_signature, Hash64};

@@ -1,13 +1,14 @@
 //! A checkpoint's state in memory: copied out of the time loop by the run, folded with a newer
 //! one while the writer thread is busy, laid out by `layout` and written by `writer`.
 
-use super::states::States;
+use super::vectors::Vectors;
 use super::RunLog;
 use crate::output::FrameSum;
 
 /// The state saved at one checkpoint, copied out of the time loop (so that the run goes on
-/// while a background thread writes it), but for the Prony states, which reach the writer
-/// one at a time as the run gathers them (`States`).
+/// while a background thread writes it), but for the memory (the Prony states, a direct
+/// sum's past rows), which reaches the writer a vector at a time as the run gathers it
+/// (`Vectors`).
 pub(super) struct Snapshot {
     pub(super) n: usize,
     pub(super) k: f64,
@@ -26,15 +27,16 @@ pub(super) struct Snapshot {
 
 pub(super) enum SnapshotMemory {
     None,
-    /// The terms, and their states as the run sends them (`States`).
+    /// The terms, and their states as the run sends them (`Vectors`).
     Prony {
         terms: Vec<Term>,
-        states: States,
+        states: Vectors,
     },
-    /// The past displacements not yet sent to the writer: rows `from..from + rows.len()`.
+    /// The past displacements not yet sent to the writer, as the run sends them: rows
+    /// `from..`, those of each checkpoint folded into this one after its own.
     Direct {
         from: usize,
-        rows: Vec<Vec<f64>>,
+        rows: Vec<Vectors>,
     },
 }
 
@@ -48,7 +50,7 @@ pub(super) struct Term {
 
 impl Snapshot {
     /// Folds a newer snapshot into this unwritten one: the newer state wins, history rows
-    /// accumulate.
+    /// accumulate (the newer's after this one's, still to be taken in that order).
     pub(super) fn absorb(&mut self, mut newer: Snapshot) {
         if let (SnapshotMemory::Direct { from, rows }, SnapshotMemory::Direct { rows: more, .. }) =
             (&mut self.memory, &mut newer.memory)

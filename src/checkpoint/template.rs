@@ -154,7 +154,7 @@ impl Template {
 mod tests {
     use super::*;
     use crate::checkpoint::seal::{seal_checkpoint, verify_checkpoint};
-    use crate::checkpoint::states::States;
+    use crate::checkpoint::vectors::Vectors;
 
     /// A later checkpoint is the last file with the values written where their datasets
     /// lie (the Prony states as they come), also across a chunk's end, and sealed; a last
@@ -173,7 +173,7 @@ mod tests {
         let regions = vec![(CHUNK - 8, 24), (600, 0), (1000, 2)];
         let template = Template { len, regions };
         let queued = || {
-            let (tx, states) = States::queue(1, 3);
+            let (tx, states) = Vectors::queue(1, 3);
             values.iter().for_each(|&x| tx.send(vec![x]).unwrap());
             states
         };

@@ -6,8 +6,8 @@ use super::history_file::{grown_capacity, HistoryFile};
 use super::layout::{variable_data, write_checkpoint, Raw, PRONY_STATE};
 use super::seal;
 use super::snapshot::{Snapshot, SnapshotMemory, Term};
-use super::states::States;
 use super::template::Template;
+use super::vectors::Vectors;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
 use crate::history::{LoopState, Memory};
 use crate::output::FrameSum;
@@ -35,14 +35,17 @@ pub(super) struct Shared {
 
 /// Writes the checkpoints of one run into its directory, on a background thread.
 ///
-/// [`Writer::write`] copies the state (O(dofs) plus the history rows new since the last
-/// checkpoint) and returns; a thread writes it (history rows, `checkpoint.h5.tmp`, fsync,
-/// rename), so the time loop does not wait for the disk. When checkpoints fall due faster
+/// [`Writer::write`] copies the state (O(dofs); the memory follows through its [`Feed`] a
+/// vector at a time) and returns; a thread writes it (history rows, `checkpoint.h5.tmp`,
+/// fsync, rename), so the time loop does not wait for the disk. When checkpoints fall due faster
 /// than the disk takes them, a snapshot still waiting is replaced by the newer one (its
 /// history rows are kept): the checkpoint on disk is always a complete state of the run,
 /// at most one write behind. [`Writer::finish`] waits until the last one is on disk.
 pub struct Writer {
     path: PathBuf,
+    /// How many of a direct sum's past rows the checkpoints handed over hold (those of a
+    /// resumed checkpoint among them): a checkpoint at step n is sent the rest, up to n.
+    past_sent: usize,
     shared: std::sync::Arc<Shared>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -82,7 +85,7 @@ impl Disk {
 impl Writer {
     /// A writer for a run of `steps` steps into `dir` whose Γ3 has `rows`.
     pub fn new(dir: &Path, id: Identity, steps: usize, rows: &Rows) -> Writer {
-        Writer::start(Disk::new(dir, id, steps, rows))
+        Writer::start(Disk::new(dir, id, steps, rows), 0)
     }
 
     /// A writer that continues `cp` in `dir` for a run of `steps` steps, the checkpoint's
@@ -92,7 +95,9 @@ impl Writer {
     /// rank holds every past row whole (`TimeLoop::gather_memory` sends the later ones).
     pub fn resume(dir: &Path, id: Identity, steps: usize, rows: &Rows, cp: &Checkpoint) -> Writer {
         let mut disk = Disk::new(dir, id, steps, rows);
+        let mut past_sent = 0;
         if let StoredMemory::Direct { rows, hash, .. } = &cp.memory {
+            past_sent = *rows;
             let same_dir = match (std::fs::canonicalize(dir), cp.dir().canonicalize()) {
                 (Ok(a), Ok(b)) => a == b,
                 _ => false,
@@ -105,10 +110,10 @@ impl Writer {
                 disk.earlier = Some((cp.dir().join(HISTORY_FILE_NAME), *rows, *hash));
             }
         }
-        Writer::start(disk)
+        Writer::start(disk, past_sent)
     }
 
-    fn start(mut disk: Disk) -> Writer {
+    fn start(mut disk: Disk, past_sent: usize) -> Writer {
         let shared = std::sync::Arc::new(Shared {
             mailbox: std::sync::Mutex::new(Mailbox::default()),
             changed: std::sync::Condvar::new(),
@@ -145,6 +150,7 @@ impl Writer {
             .expect("a thread for the checkpoint writer");
         Writer {
             path,
+            past_sent,
             shared,
             thread: Some(thread),
         }
@@ -157,7 +163,8 @@ impl Writer {
 
     /// Hands the checkpoint of the loop's `state` (at step n, before solving it) to the
     /// writer thread, whose memory follows through the [`Feed`] as `TimeLoop::gather_memory`
-    /// makes it, one vector at a time (of a direct sum, the rows after the last checkpoint's).
+    /// makes it, one vector at a time (of a direct sum, the rows after the last checkpoint's,
+    /// up to u_{n−1}).
     /// `active`: the contact/stick flags of the last solved step's rows; `frames`: the frames
     /// of the series written so far (all on disk). [`Feed::end`] returns the error of an
     /// earlier checkpoint that failed.
@@ -172,10 +179,10 @@ impl Writer {
             return Feed(Fed::Refused(e));
         }
         let h = state.history;
-        let (memory, tx) = match &h.memory {
+        let (memory, queue) = match &h.memory {
             Memory::None => (SnapshotMemory::None, None),
             Memory::Prony(terms) => {
-                let (tx, states) = States::queue(h.u.len(), terms.len());
+                let (tx, states) = Vectors::queue(h.u.len(), terms.len());
                 let terms = (terms.iter())
                     .map(|t| Term {
                         a: t.a,
@@ -183,11 +190,15 @@ impl Writer {
                         group: t.group,
                     })
                     .collect();
-                (SnapshotMemory::Prony { terms, states }, Some(tx))
+                let count = states.count();
+                (SnapshotMemory::Prony { terms, states }, Some((tx, count)))
             }
             Memory::Direct { .. } => {
-                let (from, rows) = (h.n, Vec::new());
-                (SnapshotMemory::Direct { from, rows }, None)
+                let from = std::mem::replace(&mut self.past_sent, h.n);
+                let count = h.n.checked_sub(from).expect("no past row sent twice");
+                let (tx, rows) = Vectors::queue(h.u.len(), count);
+                let rows = vec![rows];
+                (SnapshotMemory::Direct { from, rows }, Some((tx, count)))
             }
         };
         let snapshot = Snapshot {
@@ -204,14 +215,10 @@ impl Writer {
             log: log.clone(),
             frames,
         };
-        let shared = self.shared.clone();
-        Feed(match tx {
-            // The writer may take the states as they come.
-            Some(tx) => match post(&shared, snapshot) {
-                Ok(()) => Fed::States(tx),
-                Err(e) => Fed::Refused(e),
-            },
-            None => Fed::Rows(Box::new(snapshot), shared),
+        // The writer may take the memory as it comes.
+        Feed(match post(&self.shared, snapshot) {
+            Ok(()) => Fed::Queue(queue),
+            Err(e) => Fed::Refused(e),
         })
     }
 
@@ -280,15 +287,14 @@ fn post(shared: &Shared, snapshot: Snapshot) -> Result<()> {
 }
 
 /// A checkpoint being handed to the writer ([`Writer::write`]): its memory's vectors, each
-/// of every dof, go in one at a time ([`Feed::send`]) as the run gathers them. The Prony
-/// states go on to the writer thread at once, through a queue of a few (`States`), so that
-/// the process never holds them all twice; a direct sum's rows, which the writer appends to
-/// the history file before the checkpoint, go with the state at [`Feed::end`].
+/// of every dof (the Prony states, or a direct sum's past rows), go in one at a time
+/// ([`Feed::send`]) as the run gathers them, on to the writer thread at once through a
+/// queue of a few (`Vectors`), so that the process never holds them all twice.
 pub struct Feed(Fed);
 
 enum Fed {
-    States(std::sync::mpsc::SyncSender<Vec<f64>>),
-    Rows(Box<Snapshot>, std::sync::Arc<Shared>),
+    /// The queue and how many vectors are still to come (None: no memory).
+    Queue(Option<(std::sync::mpsc::SyncSender<Vec<f64>>, usize)>),
     /// An earlier checkpoint failed: the vectors are let go, the error told at the end.
     Refused(Error),
 }
@@ -296,16 +302,13 @@ enum Fed {
 impl Feed {
     /// The memory's next vector.
     pub fn send(&mut self, v: Vec<f64>) {
-        match &mut self.0 {
+        if let Fed::Queue(Some((tx, left))) = &mut self.0 {
+            *left = left
+                .checked_sub(1)
+                .expect("no more vectors than the memory holds");
             // A writer that failed has let the queue go; its error comes at the next
             // checkpoint.
-            Fed::States(tx) => drop(tx.send(v)),
-            Fed::Rows(snapshot, _) => {
-                if let SnapshotMemory::Direct { rows, .. } = &mut snapshot.memory {
-                    rows.push(v);
-                }
-            }
-            Fed::Refused(_) => {}
+            drop(tx.send(v));
         }
     }
 
@@ -313,18 +316,10 @@ impl Feed {
     /// earlier checkpoint that failed.
     pub fn end(self) -> Result<()> {
         match self.0 {
-            Fed::States(_) => Ok(()),
-            Fed::Rows(mut snapshot, shared) => {
-                if let SnapshotMemory::Direct { from, rows } = &mut snapshot.memory {
-                    // The past rows after the last checkpoint's, up to u_{n−1}.
-                    assert!(
-                        rows.len() <= snapshot.n
-                            && rows.iter().all(|r| r.len() == snapshot.u.len()),
-                        "the past rows after the last checkpoint's, each of every dof"
-                    );
-                    *from = snapshot.n - rows.len();
-                }
-                post(&shared, *snapshot)
+            Fed::Queue(queue) => {
+                let left = queue.map_or(0, |(_, left)| left);
+                assert_eq!(left, 0, "every vector of the memory sent");
+                Ok(())
             }
             Fed::Refused(e) => Err(e),
         }
@@ -341,7 +336,7 @@ impl Drop for Writer {
 impl Disk {
     /// This run's first history file, holding rows `..from` (those of the checkpoint a
     /// resume continues: [`Writer::resume`]) and `rows` after them.
-    fn new_history(&self, from: usize, rows: &[Vec<f64>], n_free: usize) -> Result<HistoryFile> {
+    fn new_history(&self, from: usize, rows: &Vectors, n_free: usize) -> Result<HistoryFile> {
         let path = self.dir.join(HISTORY_FILE_NAME);
         let earlier = match &self.earlier {
             Some((earlier, n, hash)) if *n == from && from > 0 => {
@@ -355,7 +350,7 @@ impl Disk {
                 )))
             }
         };
-        let capacity = grown_capacity(0, from + rows.len(), self.steps);
+        let capacity = grown_capacity(0, from + rows.count(), self.steps);
         let id = (self.id.run_id.as_str(), n_free);
         HistoryFile::create_after(
             &path,
@@ -395,9 +390,13 @@ impl Disk {
     /// of the directory.
     fn write(&mut self, s: &Snapshot) -> Result<()> {
         if let SnapshotMemory::Direct { from, rows } = &s.memory {
-            match &mut self.history {
-                Some(h) => h.append(*from, rows, &self.id.run_id, self.steps)?,
-                None => self.history = Some(self.new_history(*from, rows, s.u.len())?),
+            let mut from = *from;
+            for rows in rows {
+                match &mut self.history {
+                    Some(h) => h.append(from, rows, &self.id.run_id, self.steps)?,
+                    None => self.history = Some(self.new_history(from, rows, s.u.len())?),
+                }
+                from += rows.count();
             }
         }
         let path = self.dir.join(FILE_NAME);
@@ -449,7 +448,49 @@ impl Disk {
 
 #[cfg(test)]
 mod tests {
+    use super::super::history_file::read_history;
     use super::*;
+    use crate::history::QUEUE_BYTES;
+
+    /// A run's identity for checkpoints of `width` free dofs in 2D (and one or two held).
+    fn identity(run_id: &str, width: usize) -> Identity {
+        let held = [-1; 2][width % 2..].iter().copied();
+        Identity {
+            run_id: run_id.into(),
+            scene_text: String::new(),
+            scene_path: String::new(),
+            scene_path_absolute: String::new(),
+            mesh_path: String::new(),
+            mesh_fingerprint: 0,
+            groups_fingerprint: 0,
+            nodes: width / 2 + 1,
+            triangles: 1,
+            physics: Vec::new(),
+            dof_of: (0..width as i64).chain(held).collect(),
+        }
+    }
+
+    /// The checkpoint of step n of `width` dofs, each vector of the state n.
+    fn snapshot(n: usize, width: usize, memory: SnapshotMemory) -> Snapshot {
+        let vector = vec![n as f64; width];
+        Snapshot {
+            n,
+            k: 0.1,
+            u: vector.clone(),
+            u_sum: vector.clone(),
+            u_comp: vector.clone(),
+            w: vector,
+            z: Vec::new(),
+            z_before: Vec::new(),
+            active: Vec::new(),
+            memory,
+            log: RunLog {
+                iterations: vec![1; n],
+                ..RunLog::default()
+            },
+            frames: Vec::new(),
+        }
+    }
 
     /// The Prony states reach the file as they come, through HDF5 at the first checkpoint
     /// and the last file's copy at the later ones; where that copy finds the last file
@@ -459,19 +500,7 @@ mod tests {
     fn states_taken_by_a_copy_of_a_damaged_last_file_reach_the_checkpoint_through_hdf5() {
         let dir = tempfile::tempdir().unwrap();
         let (width, terms) = (5, 3);
-        let id = Identity {
-            run_id: "states".into(),
-            scene_text: String::new(),
-            scene_path: String::new(),
-            scene_path_absolute: String::new(),
-            mesh_path: String::new(),
-            mesh_fingerprint: 0,
-            groups_fingerprint: 0,
-            nodes: 3,
-            triangles: 1,
-            physics: Vec::new(),
-            dof_of: (0..width as i64).chain([-1]).collect(),
-        };
+        let id = identity("states", width);
         let mut disk = Disk::new(dir.path(), id, 10, &Rows::new(&[], &[], 1));
         let state = |n: usize, i: usize| -> Vec<f64> {
             (0..width)
@@ -479,34 +508,15 @@ mod tests {
                 .collect()
         };
         let write = |disk: &mut Disk, n: usize| {
-            let (tx, states) = States::queue(width, terms);
+            let (tx, states) = Vectors::queue(width, terms);
             (0..terms).for_each(|i| tx.send(state(n, i)).unwrap());
             let term = |i| Term {
                 a: 1.0 + i as f64,
                 decay: 0.5,
                 group: 0,
             };
-            let vector = vec![n as f64; width];
-            let snapshot = Snapshot {
-                n,
-                k: 0.1,
-                u: vector.clone(),
-                u_sum: vector.clone(),
-                u_comp: vector.clone(),
-                w: vector,
-                z: Vec::new(),
-                z_before: Vec::new(),
-                active: Vec::new(),
-                memory: SnapshotMemory::Prony {
-                    terms: (0..terms).map(term).collect(),
-                    states,
-                },
-                log: RunLog {
-                    iterations: vec![1; n],
-                    ..RunLog::default()
-                },
-                frames: Vec::new(),
-            };
+            let terms = (0..terms).map(term).collect();
+            let snapshot = snapshot(n, width, SnapshotMemory::Prony { terms, states });
             disk.write(&snapshot).unwrap();
             let cp = Checkpoint::read(&disk.dir.join(FILE_NAME)).unwrap();
             let StoredMemory::Prony { m, .. } = cp.memory else {
@@ -527,5 +537,49 @@ mod tests {
         write(&mut disk, 3);
         let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(left.len(), 1, "checkpoint.h5 alone: {left:?}");
+    }
+
+    /// Past row j of `width` values.
+    fn past_row(width: usize, j: usize) -> Vec<f64> {
+        (0..width).map(|i| (j * width + i) as f64 / 3.0).collect()
+    }
+
+    /// A direct sum's past rows reach the history file as the run sends them, more of them
+    /// than the queue holds (the run waits for the writer), those of a checkpoint still
+    /// waiting when a newer one came (`Snapshot::absorb`) first: the file holds every row
+    /// in order, and the checkpoint their count and hash.
+    #[test]
+    fn past_rows_stream_into_the_history_file_in_order_after_a_folded_checkpoints() {
+        let dir = tempfile::tempdir().unwrap();
+        // Rows of half the queue's bytes: two wait in it, the others wait for the writer.
+        let width = QUEUE_BYTES / 16;
+        let id = || identity("rows", width);
+        let mut disk = Disk::new(dir.path(), id(), 10, &Rows::new(&[], &[], 1));
+        let direct = |from, rows| SnapshotMemory::Direct {
+            from,
+            rows: vec![rows],
+        };
+        // The checkpoint of step 2, its two rows sent, waits for the writer when step 6's
+        // comes, whose rows the run sends as the writer takes them.
+        let (tx, rows) = Vectors::queue(width, 2);
+        (0..2).for_each(|j| tx.send(past_row(width, j)).unwrap());
+        let mut waiting = snapshot(2, width, direct(0, rows));
+        let (tx, rows) = Vectors::queue(width, 4);
+        waiting.absorb(snapshot(6, width, direct(2, rows)));
+        let run = std::thread::spawn(move || {
+            (2..6).for_each(|j| tx.send(past_row(width, j)).unwrap());
+        });
+        disk.write(&waiting).unwrap();
+        run.join().unwrap();
+        let cp = Checkpoint::read(&disk.dir.join(FILE_NAME)).unwrap();
+        let StoredMemory::Direct { rows, hash, .. } = cp.memory else {
+            panic!("a direct sum's checkpoint")
+        };
+        assert_eq!(rows, 6);
+        let file = dir.path().join(HISTORY_FILE_NAME);
+        let past = read_history(&file, (rows, hash), width, &id(), None).unwrap();
+        for (j, row) in past.iter().enumerate() {
+            assert!(row == &past_row(width, j), "row {j}");
+        }
     }
 }

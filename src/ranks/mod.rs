@@ -710,7 +710,8 @@ impl Plan {
             ),
             false => format!(
                 "no rank count would: every rank reads the mesh, and rank 0 holds u_n at \
-                 every dof and gathers the whole memory at each checkpoint (≈ {} here{}), and \
+                 every dof and a few of the memory's vectors more at each checkpoint (≈ {} \
+                 here{}), and \
                  only the matrices, PETSc's part and the rest of the memory spread; use a \
                  coarser mesh or ranks with more memory (docs/cluster.md)",
                 human(self.setup_peak(0.0)),

@@ -582,6 +582,39 @@ fn the_estimate_counts_every_prony_terms_state_at_every_dof() {
     assert!(text.contains("the kernels' terms"), "{text}");
 }
 
+/// A checkpoint of a direct sum holds the rows it streams to its writer at once (the
+/// queue's and two more), not every row no checkpoint holds yet once more: the estimate
+/// with checkpoints exceeds the one without by those rows alone, all of them where the
+/// queue takes every one.
+#[test]
+fn a_direct_sums_checkpoint_counts_the_rows_it_streams() {
+    use viscontact::history::{queue_len, Plans};
+    use viscontact::resources::Estimate;
+    let dir = tempfile::tempdir().unwrap();
+    let exact = power_law()
+        .table(
+            "material.relaxation",
+            "expr = \"exp(-10*s)\"\nmemory = \"exact\"",
+        )
+        .write(dir.path(), "exact.toml");
+    let memory = |set: &[&str]| {
+        let (scene, _, disc) = common::load(&exact, set);
+        let plans = Plans::new(&scene).unwrap();
+        let held = Estimate::new(&scene, &disc, 0).with_plans(&plans, &disc);
+        (held.memory(), disc.n_free)
+    };
+    let mut capped = false;
+    for steps in [10, 100_000] {
+        let n = format!("time.steps={steps}");
+        let (with, d) = memory(&[&n]);
+        let (without, _) = memory(&[&n, "checkpoint.enabled=false"]);
+        let rows = (steps + 1).min(queue_len(d) + 2);
+        capped |= rows < steps + 1;
+        assert_eq!(with - without, 8.0 * (d * rows) as f64, "{steps} steps");
+    }
+    assert!(capped, "the queue holds fewer rows than the longer run's");
+}
+
 /// A body without a memory term (no `[material.relaxation]`: Remark 2.5) assembles no K_R,
 /// which would be zero, and runs as with a kernel whose weight is zero, to round-off (the
 /// products of K_B then run alone or paired with K_R, in another order).

@@ -1,14 +1,17 @@
-//! The Prony states of a checkpoint as they reach the writer: one term's vector at a time,
-//! from the run through a bounded queue, so that the process that writes checkpoints holds a
-//! few of them at once, never all (the states of 40 terms are 40 vectors of every dof, which
-//! rank 0 of several gathers from the ranks' parts: `TimeLoop::gather_memory`).
+//! The memory of a checkpoint as it reaches the writer: one vector of every dof at a time
+//! (a Prony term's state, a direct sum's past row), from the run through a bounded queue, so
+//! that the process that writes checkpoints holds a few of them at once, never all (the
+//! states of 40 terms are 40 vectors of every dof, and a direct sum's rows since the last
+//! checkpoint one a step, which rank 0 of several gathers from the ranks' parts:
+//! `TimeLoop::gather_memory`).
 //!
-//! The run sends each state as it is gathered; the writer takes them in the file's order
-//! (the rows of `/memory/prony_state`), where a later checkpoint's copy of the last file
-//! reaches them (`Template::write`) or the HDF5 library writes them row by row. Where the
-//! copy found the last file damaged once it had taken the states, they are read back from
-//! the copy (`Disk::write`). Small states fit the queue whole, and the run never waits for
-//! the writer; larger ones wait for it a vector at a time.
+//! The run sends each vector as it is gathered; the writer takes them in the file's order:
+//! a direct sum's rows into the history file (`HistoryFile::append`, through [`RowSource`]),
+//! the Prony states into the rows of `/memory/prony_state`, where a later checkpoint's copy
+//! of the last file reaches them (`Template::write`) or the HDF5 library writes them row by
+//! row. Where the copy found the last file damaged once it had taken the states, they are
+//! read back from the copy (`Disk::write`). Small vectors fit the queue whole, and the run
+//! never waits for the writer; larger ones wait for it a vector at a time.
 
 use crate::history::queue_len;
 use std::cell::RefCell;
@@ -17,8 +20,8 @@ use std::io;
 use std::os::unix::fs::FileExt;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 
-/// `count` states of `width` values each, taken in order.
-pub(super) struct States {
+/// `count` vectors of `width` values each, taken in order.
+pub(super) struct Vectors {
     width: usize,
     count: usize,
     reading: RefCell<Reading>,
@@ -26,23 +29,23 @@ pub(super) struct States {
 
 struct Reading {
     source: Source,
-    /// How many states were taken; `row` is the last of them.
+    /// How many vectors were taken; `row` is the last of them.
     taken: usize,
     row: Vec<f64>,
-    /// The CRC-32 of the bytes of the states taken from the queue (`Template::capture`
+    /// The CRC-32 of the bytes of the vectors taken from the queue (`Template::capture`
     /// compares it with the file's), None once any was read back from a file.
     crc: Option<crc32fast::Hasher>,
 }
 
 enum Source {
     Queue(Receiver<Vec<f64>>),
-    /// A file holding the states' bytes from `offset` on.
+    /// A file holding the vectors' bytes from `offset` on.
     File(File, u64),
 }
 
-impl States {
-    /// The states and the end of their queue, which the run sends them into.
-    pub(super) fn queue(width: usize, count: usize) -> (SyncSender<Vec<f64>>, States) {
+impl Vectors {
+    /// The vectors and the end of their queue, which the run sends them into.
+    pub(super) fn queue(width: usize, count: usize) -> (SyncSender<Vec<f64>>, Vectors) {
         let (tx, rx) = sync_channel(queue_len(width));
         let reading = Reading {
             source: Source::Queue(rx),
@@ -50,7 +53,7 @@ impl States {
             row: Vec::new(),
             crc: Some(crc32fast::Hasher::new()),
         };
-        let states = States {
+        let states = Vectors {
             width,
             count,
             reading: RefCell::new(reading),
@@ -91,12 +94,12 @@ impl States {
         reading.crc = None;
     }
 
-    /// `f` of state `i`, taken in order: `i` is the last state taken or a later one.
+    /// `f` of vector `i`, taken in order: `i` is the last vector taken or a later one.
     pub(super) fn with_row<R>(&self, i: usize, f: impl FnOnce(&[f64]) -> R) -> io::Result<R> {
         let mut reading = self.reading.borrow_mut();
         if i + 1 < reading.taken || i >= self.count {
             return Err(io::Error::other(format!(
-                "Prony state {i} asked out of order (internal error)"
+                "vector {i} of a checkpoint's memory asked out of order (internal error)"
             )));
         }
         while reading.taken <= i {
@@ -106,7 +109,7 @@ impl States {
     }
 
     /// Their bytes from byte `from` on into `out`, as many as it holds (in order, as
-    /// [`States::with_row`]).
+    /// [`Vectors::with_row`]).
     pub(super) fn write_range(&self, from: usize, out: &mut [u8]) -> io::Result<()> {
         let row_bytes = 8 * self.width;
         let mut done = 0;
@@ -122,16 +125,16 @@ impl States {
 }
 
 impl Reading {
-    /// Takes the next state.
+    /// Takes the next vector.
     fn next(&mut self, width: usize) -> io::Result<()> {
         match &self.source {
             Source::Queue(rx) => {
                 self.row = rx.recv().map_err(|_| {
-                    io::Error::other("the run stopped sending the Prony states of a checkpoint")
+                    io::Error::other("the run stopped sending the memory of a checkpoint")
                 })?;
                 if self.row.len() != width {
                     return Err(io::Error::other(format!(
-                        "a Prony state of {} values where the checkpoint holds {width} \
+                        "a vector of {} values in a checkpoint's memory of {width} a vector \
                          (internal error)",
                         self.row.len()
                     )));
@@ -153,6 +156,36 @@ impl Reading {
         }
         self.taken += 1;
         Ok(())
+    }
+}
+
+/// Rows taken in order, each once: a direct sum's past rows as the history file takes them
+/// (`HistoryFile::append`), from the run's queue ([`Vectors`]) or from memory.
+pub(super) trait RowSource {
+    /// How many.
+    fn count(&self) -> usize;
+    /// `f` of row `i`, asked in increasing order.
+    fn row(&self, i: usize, f: &mut dyn FnMut(&[f64])) -> io::Result<()>;
+}
+
+impl RowSource for [Vec<f64>] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    fn row(&self, i: usize, f: &mut dyn FnMut(&[f64])) -> io::Result<()> {
+        f(&self[i]);
+        Ok(())
+    }
+}
+
+impl RowSource for Vectors {
+    fn count(&self) -> usize {
+        self.count
+    }
+
+    fn row(&self, i: usize, f: &mut dyn FnMut(&[f64])) -> io::Result<()> {
+        self.with_row(i, |row| f(row))
     }
 }
 
@@ -185,7 +218,7 @@ mod tests {
     #[test]
     fn the_queue_holds_what_the_estimate_counts() {
         for (width, count) in [(10, 7), (QUEUE_BYTES / 8 / 3, 40), (QUEUE_BYTES, 40)] {
-            let (tx, _states) = States::queue(width, count);
+            let (tx, _states) = Vectors::queue(width, count);
             let queued = (0..count)
                 .take_while(|_| tx.try_send(Vec::new()).is_ok())
                 .count();
