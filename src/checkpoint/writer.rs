@@ -9,7 +9,7 @@ use super::snapshot::{Snapshot, SnapshotMemory, Term};
 use super::template::Template;
 use super::vectors::Vectors;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FILE_NAME, HISTORY_FILE_NAME};
-use crate::history::{LoopState, Memory};
+use crate::history::{queue_len, LoopState, Memory};
 use crate::output::FrameSum;
 use crate::solver::Rows;
 use crate::{Error, Result};
@@ -215,9 +215,19 @@ impl Writer {
             log: log.clone(),
             frames,
         };
-        // The writer may take the memory as it comes.
+        // Memory that the queue holds whole goes to the writer with the state once it is all
+        // sent, so the writer is woken once (docs/restart.md, "Checkpoint cost"); more, the
+        // writer takes as it comes, the run waiting for it.
+        let whole = (queue.as_ref()).is_none_or(|(_, count)| *count <= queue_len(h.u.len()));
+        if whole {
+            let at_end = Some((Box::new(snapshot), self.shared.clone()));
+            return Feed(Fed::Queue { queue, at_end });
+        }
         Feed(match post(&self.shared, snapshot) {
-            Ok(()) => Fed::Queue(queue),
+            Ok(()) => Fed::Queue {
+                queue,
+                at_end: None,
+            },
             Err(e) => Fed::Refused(e),
         })
     }
@@ -293,8 +303,12 @@ fn post(shared: &Shared, snapshot: Snapshot) -> Result<()> {
 pub struct Feed(Fed);
 
 enum Fed {
-    /// The queue and how many vectors are still to come (None: no memory).
-    Queue(Option<(std::sync::mpsc::SyncSender<Vec<f64>>, usize)>),
+    Queue {
+        /// The memory's queue and how many vectors are still to come (None: no memory).
+        queue: Option<(std::sync::mpsc::SyncSender<Vec<f64>>, usize)>,
+        /// The snapshot, where it goes to the writer once every vector is sent.
+        at_end: Option<(Box<Snapshot>, std::sync::Arc<Shared>)>,
+    },
     /// An earlier checkpoint failed: the vectors are let go, the error told at the end.
     Refused(Error),
 }
@@ -302,7 +316,11 @@ enum Fed {
 impl Feed {
     /// The memory's next vector.
     pub fn send(&mut self, v: Vec<f64>) {
-        if let Fed::Queue(Some((tx, left))) = &mut self.0 {
+        if let Fed::Queue {
+            queue: Some((tx, left)),
+            ..
+        } = &mut self.0
+        {
             *left = left
                 .checked_sub(1)
                 .expect("no more vectors than the memory holds");
@@ -316,10 +334,13 @@ impl Feed {
     /// earlier checkpoint that failed.
     pub fn end(self) -> Result<()> {
         match self.0 {
-            Fed::Queue(queue) => {
+            Fed::Queue { queue, at_end } => {
                 let left = queue.map_or(0, |(_, left)| left);
                 assert_eq!(left, 0, "every vector of the memory sent");
-                Ok(())
+                match at_end {
+                    Some((snapshot, shared)) => post(&shared, *snapshot),
+                    None => Ok(()),
+                }
             }
             Fed::Refused(e) => Err(e),
         }
@@ -450,7 +471,7 @@ impl Disk {
 mod tests {
     use super::super::history_file::read_history;
     use super::*;
-    use crate::history::QUEUE_BYTES;
+    use crate::history::{History, QUEUE_BYTES};
 
     /// A run's identity for checkpoints of `width` free dofs in 2D (and one or two held).
     fn identity(run_id: &str, width: usize) -> Identity {
@@ -576,6 +597,65 @@ mod tests {
             panic!("a direct sum's checkpoint")
         };
         assert_eq!(rows, 6);
+        let file = dir.path().join(HISTORY_FILE_NAME);
+        let past = read_history(&file, (rows, hash), width, &id(), None).unwrap();
+        for (j, row) in past.iter().enumerate() {
+            assert!(row == &past_row(width, j), "row {j}");
+        }
+    }
+
+    /// Through the writer of a run: checkpoints whose new rows fill the queue and more
+    /// (streamed as the writer takes them) and one whose row fits it (sent with the state
+    /// at the end) leave the history file holding every row in order; the writer counts the
+    /// rows it was sent, so each checkpoint sends those after the last one's alone.
+    #[test]
+    fn a_runs_checkpoints_send_each_past_row_once_streamed_or_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let width = QUEUE_BYTES / 16;
+        let id = || identity("run", width);
+        let mut writer = Writer::new(dir.path(), id(), 10, &Rows::new(&[], &[], 1));
+        let mut history = History {
+            k: 0.1,
+            n: 0,
+            u: vec![0.0; width],
+            u_comp: vec![0.0; width],
+            u_sum: vec![0.0; width],
+            memory: Memory::Direct {
+                r_lag: Vec::new(),
+                past: Vec::new(),
+            },
+            holds: crate::history::Holds::Every,
+        };
+        let mut sent = 0;
+        for n in [3, 4, 7] {
+            while history.n < n {
+                if let Memory::Direct { past, .. } = &mut history.memory {
+                    past.push(past_row(width, history.n));
+                }
+                history.n += 1;
+            }
+            let state = LoopState {
+                history: &history,
+                w: &history.u,
+                z: &[],
+                z_before: &[],
+            };
+            let log = RunLog {
+                iterations: vec![1; n],
+                ..RunLog::default()
+            };
+            let mut feed = writer.write(state, &log, &[], Vec::new());
+            (sent..n).for_each(|j| feed.send(past_row(width, j)));
+            feed.end().unwrap();
+            sent = n;
+            writer.flush().unwrap();
+        }
+        writer.finish().unwrap();
+        let cp = Checkpoint::read(&dir.path().join(FILE_NAME)).unwrap();
+        let StoredMemory::Direct { rows, hash, .. } = cp.memory else {
+            panic!("a direct sum's checkpoint")
+        };
+        assert_eq!(rows, 7);
         let file = dir.path().join(HISTORY_FILE_NAME);
         let past = read_history(&file, (rows, hash), width, &id(), None).unwrap();
         for (j, row) in past.iter().enumerate() {
