@@ -219,9 +219,9 @@ impl Estimate {
 
     /// What the steps hold on the largest of several ranks, rank 0, which holds the memory
     /// at a fraction of the dofs (those its steps and history.csv read, and its own rows;
-    /// every dof where it holds them all: `ranks::Plan`) and gathers it whole at each
-    /// checkpoint: (what no rank count lowers, the memory at every dof, of which it holds
-    /// that fraction).
+    /// every dof where it holds them all: `ranks::Plan`) and gathers the rest at each
+    /// checkpoint a few vectors at a time: (what no rank count lowers, the memory at every
+    /// dof, of which it holds that fraction).
     pub fn largest_rank(&self) -> (f64, f64) {
         (self.held.gathered(), self.held.rows + self.held.states)
     }
