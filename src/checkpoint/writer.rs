@@ -565,6 +565,22 @@ mod tests {
         (0..width).map(|i| (j * width + i) as f64 / 3.0).collect()
     }
 
+    /// The checkpoint in `dir` holds `n` past rows, and its history file rows 0..n of
+    /// [`past_row`], checked against its hash.
+    fn assert_past_rows(dir: &Path, id: &Identity, n: usize) {
+        let cp = Checkpoint::read(&dir.join(FILE_NAME)).unwrap();
+        let StoredMemory::Direct { rows, hash, .. } = cp.memory else {
+            panic!("a direct sum's checkpoint")
+        };
+        assert_eq!(rows, n);
+        let width = id.dof_of.iter().filter(|&&d| d >= 0).count();
+        let file = dir.join(HISTORY_FILE_NAME);
+        let past = read_history(&file, (rows, hash), width, id, None).unwrap();
+        for (j, row) in past.iter().enumerate() {
+            assert!(row == &past_row(width, j), "row {j}");
+        }
+    }
+
     /// A direct sum's past rows reach the history file as the run sends them, more of them
     /// than the queue holds (the run waits for the writer), those of a checkpoint still
     /// waiting when a newer one came (`Snapshot::absorb`) first: the file holds every row
@@ -592,16 +608,7 @@ mod tests {
         });
         disk.write(&waiting).unwrap();
         run.join().unwrap();
-        let cp = Checkpoint::read(&disk.dir.join(FILE_NAME)).unwrap();
-        let StoredMemory::Direct { rows, hash, .. } = cp.memory else {
-            panic!("a direct sum's checkpoint")
-        };
-        assert_eq!(rows, 6);
-        let file = dir.path().join(HISTORY_FILE_NAME);
-        let past = read_history(&file, (rows, hash), width, &id(), None).unwrap();
-        for (j, row) in past.iter().enumerate() {
-            assert!(row == &past_row(width, j), "row {j}");
-        }
+        assert_past_rows(dir.path(), &id(), 6);
     }
 
     /// Through the writer of a run: checkpoints whose new rows fill the queue and more
@@ -651,15 +658,6 @@ mod tests {
             writer.flush().unwrap();
         }
         writer.finish().unwrap();
-        let cp = Checkpoint::read(&dir.path().join(FILE_NAME)).unwrap();
-        let StoredMemory::Direct { rows, hash, .. } = cp.memory else {
-            panic!("a direct sum's checkpoint")
-        };
-        assert_eq!(rows, 7);
-        let file = dir.path().join(HISTORY_FILE_NAME);
-        let past = read_history(&file, (rows, hash), width, &id(), None).unwrap();
-        for (j, row) in past.iter().enumerate() {
-            assert!(row == &past_row(width, j), "row {j}");
-        }
+        assert_past_rows(dir.path(), &id(), 7);
     }
 }
