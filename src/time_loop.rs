@@ -520,6 +520,12 @@ impl<'p> TimeLoop<'p> {
         &self.history.u
     }
 
+    /// [`TimeLoop::u`] and the dofs it holds its values at where not every one
+    /// (`Step::local`).
+    pub fn u_held(&self) -> (&[f64], Option<&[usize]>) {
+        (&self.history.u, self.history.holds.local())
+    }
+
     /// The step size k.
     pub fn k(&self) -> f64 {
         self.history.k

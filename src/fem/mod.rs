@@ -103,6 +103,9 @@ pub struct Discretization {
     pub cells: Vec<Cell>,
     /// On rank 0 of several, each cell's dim + 1 vertices ([`Hold::Vertices`]); else none.
     vertices: Vec<u32>,
+    /// The mesh's cells, counted before any rank lets go of them (summary.json's
+    /// `elements`).
+    pub cells_in_mesh: usize,
     /// Global dof d·node + component → index: free dofs 0..n_free, prescribed dofs
     /// n_free..n_dofs; none where a condition holds the dof at zero (Γ1).
     pub free: DofIndices,
@@ -178,10 +181,11 @@ pub enum StressCells<'a> {
     All,
     /// The cells of these indices, in their order (rank 0's piece of a frame).
     Only(&'a [usize]),
-    /// The cells of these vertices (dim + 1 a cell, node numbers) with these materials
-    /// (`CellMaterials::of_cell`'s), apart from the discretization's (a follower rank's
-    /// piece), and their nodes, increasing: each made from the nodes' places when it is
-    /// read, as the discretization made its own, so the same bits.
+    /// The cells of these vertices (dim + 1 a cell, each by its place in the third list)
+    /// with these materials (`CellMaterials::of_cell`'s), apart from the discretization's
+    /// (a rank's piece of the frames), and their nodes, increasing: each made from the
+    /// nodes' places when it is read, as the discretization made its own, so the same
+    /// bits. A node's values are found at its place in the list, not searched.
     Of(&'a [usize], &'a [u32], &'a [usize]),
 }
 
@@ -375,8 +379,9 @@ pub enum Hold {
     /// Every cell (one process).
     Cells,
     /// Each cell's vertices, from which it makes a cell when it reads it (rank 0 of
-    /// several, which computes the norms of every cell, and history.csv's stresses of
-    /// every cell where the frames are not in pieces).
+    /// several during its setup, and past it where it reads every cell: the stresses of
+    /// every cell where the frames are not in pieces, a body force's resultant in
+    /// history.csv: `ranks::first_keeps_vertices`).
     Vertices,
     /// None (a follower rank of several).
     Nothing,
@@ -716,6 +721,7 @@ impl Discretization {
             pair_cells: None,
             stress_cells: std::sync::OnceLock::new(),
             vertices: Vec::new(),
+            cells_in_mesh: mesh.n_cells(),
         })
     }
 
@@ -1175,9 +1181,11 @@ impl Discretization {
             }
         };
         let pqs: Vec<Vec<[[f64; D]; 2]>> = self.materials.distinct.iter().map(pq_of).collect();
-        let index = |node: usize| match &at {
-            None => node,
-            Some(at) => at.partition_point(|&a| a < node),
+        // The nodes the cells name: every node, the piece's (`Of`: already their places
+        // among its points), or those `at` lists.
+        let index = |node: usize| match (&at, only) {
+            (None, _) | (_, StressCells::Of(..)) => node,
+            (Some(at), _) => at.partition_point(|&a| a < node),
         };
         let mut cell = |nodes: [usize; N], grad: &[[f64; D]; N], material: u32| {
             let pq = &pqs[material as usize];
@@ -1224,9 +1232,13 @@ impl Discretization {
         // It holds the vertices whether or not it keeps its own columns (with prescribed
         // dofs every rank keeps the matrices whole); any rank of several reads its cells so,
         // a follower its piece's (a cell held would take 144 bytes).
-        if let StressCells::Of(vertices, materials, _) = only {
-            let cells = cells_of(self.dim, vertices, self.nodes.points());
-            (cells.zip(materials)).for_each(|(t, &material)| of_cell(&t, material));
+        if let StressCells::Of(vertices, materials, nodes) = only {
+            let points = self.nodes.points();
+            for (v, &material) in vertices.chunks_exact(self.dim + 1).zip(materials) {
+                let t = make_cell(self.dim, corners(v, |i| nodes[i]), points);
+                let grad = std::array::from_fn(|i| std::array::from_fn(|a| t.grad[i][a]));
+                cell(std::array::from_fn(|i| v[i]), &grad, material);
+            }
         } else if self.own.is_some() || !self.vertices.is_empty() {
             let cells = self.cell_source();
             each(&mut |c| of_cell(&cells.get(c), materials[c]));
@@ -1293,15 +1305,58 @@ impl Discretization {
         norms_of(self.cell_source(), &nodal_vectors::<3>(self, v))
     }
 
-    /// Lets go of the cells (where it held them: `solver.linear = "auto"`) and of each
-    /// cell's material and region (`materials.distinct` stays): on a rank of several other
-    /// than rank 0, which computes the norms of every cell, nothing reads them
-    /// once the matrices are assembled and the rank's layout is made; its piece of the
-    /// frames makes its own cells from their vertices (`StressCells::Of`).
+    /// ‖v‖²_{L²} and |v|²_{H¹} over the cells `cells` says alone (a rank's piece of the
+    /// frames), of `v` held at the dofs `held` alone where given ([`place`]): the pieces
+    /// split the cells, so the ranks' parts sum to the squares of
+    /// [`Discretization::norms`] (to its last digits: the sum's order is the ranks').
+    pub fn norm_parts(
+        &self,
+        (v, held): (&[f64], Option<&[usize]>),
+        cells: StressCells,
+    ) -> [f64; 2] {
+        let at = self.nodes_of(cells);
+        let values: Vec<[f64; 3]> = match &at {
+            None => nodal_vectors(self, v),
+            Some(at) => at
+                .iter()
+                .map(|&i| nodal_vector(self, (v, held), i))
+                .collect(),
+        };
+        let value = |node: usize| match &at {
+            None => values[node],
+            Some(at) => values[at.partition_point(|&a| a < node)],
+        };
+        let mut sums = [0.0; 2];
+        let mut add = |t: &Cell| add_norms(t, |k| value(t.nodes[k]), &mut sums);
+        match cells {
+            StressCells::Of(vertices, _, nodes) => {
+                let points = self.nodes.points();
+                for v in vertices.chunks_exact(self.dim + 1) {
+                    let t = make_cell(self.dim, corners(v, |i| nodes[i]), points);
+                    add_norms(&t, |k| values[v[k]], &mut sums);
+                }
+            }
+            StressCells::Only(only) => {
+                let source = self.cell_source();
+                only.iter().for_each(|&c| add(&source.get(c)));
+            }
+            StressCells::All => self.cell_source().each(|_, t| add(t)),
+        }
+        sums
+    }
+
+    /// Lets go of the cells (where it held them: `solver.linear = "auto"`), of their
+    /// vertices (rank 0's) and of each cell's material and region (`materials.distinct`
+    /// stays): on a rank of several other than rank 0, nothing reads them once the
+    /// matrices are assembled and the rank's layout is made, nor on rank 0 where it does
+    /// not read every cell (`ranks::first_keeps_vertices`); a rank's piece of the frames
+    /// makes its own cells from their vertices (`StressCells::Of`), and summary.json's
+    /// norms are the pieces' sums ([`Discretization::norm_parts`]).
     /// [`Discretization::stress`] and
     /// [`Discretization::norms`] would see an empty mesh afterwards.
     pub fn forget_cells(&mut self) {
         self.cells = Vec::new();
+        self.vertices = Vec::new();
         self.materials.of_cell = Vec::new();
         self.materials.region = Vec::new();
     }
@@ -1508,27 +1563,27 @@ pub fn p1_norms<const N: usize>(cells: &[Cell], v: &[[f64; N]]) -> (f64, f64) {
 
 /// [`p1_norms`] over the cells `cells` reads.
 fn norms_of<const N: usize>(cells: CellSource, v: &[[f64; N]]) -> (f64, f64) {
-    let (mut l2, mut h1) = (0.0, 0.0);
-    cells.each(|_, t| {
-        let vs = t.vertices();
-        let denom = ((t.dim + 1) * (t.dim + 2)) as f64;
-        // c is a component of v[n] for every vertex n, not an index into v.
-        #[allow(clippy::needless_range_loop)]
-        for c in 0..N {
-            let s: f64 = vs.iter().map(|&n| v[n][c]).sum();
-            let q: f64 = vs.iter().map(|&n| v[n][c] * v[n][c]).sum();
-            l2 += t.measure / denom * (q + s * s);
-            for k in 0..t.dim {
-                let g: f64 = vs
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &n)| t.grad[i][k] * v[n][c])
-                    .sum();
-                h1 += t.measure * g * g;
-            }
+    let mut sums = [0.0; 2];
+    cells.each(|_, t| add_norms(t, |k| v[t.nodes[k]], &mut sums));
+    (sums[0].sqrt(), sums[1].sqrt())
+}
+
+/// Adds cell `t`'s ∫(Σ v_i φ_i)² and ∫|∇(Σ v_i φ_i)|² to `sums`, a component at a time, of
+/// the values `value(k)` at its k-th vertex.
+fn add_norms<const N: usize>(t: &Cell, value: impl Fn(usize) -> [f64; N], sums: &mut [f64; 2]) {
+    let count = t.dim + 1;
+    let v: [[f64; N]; 4] = std::array::from_fn(|k| if k < count { value(k) } else { [0.0; N] });
+    let v = &v[..count];
+    let denom = ((t.dim + 1) * (t.dim + 2)) as f64;
+    for c in 0..N {
+        let s: f64 = v.iter().map(|v| v[c]).sum();
+        let q: f64 = v.iter().map(|v| v[c] * v[c]).sum();
+        sums[0] += t.measure / denom * (q + s * s);
+        for k in 0..t.dim {
+            let g: f64 = v.iter().enumerate().map(|(i, v)| t.grad[i][k] * v[c]).sum();
+            sums[1] += t.measure * g * g;
         }
-    });
-    (l2.sqrt(), h1.sqrt())
+    }
 }
 
 /// ∫_g φ_i da at each node (zero off the group): a facet's measure shared equally by its

@@ -297,9 +297,10 @@ impl PieceMesh {
         &self.points
     }
 
-    /// The nodes of the piece's cells, numbered in the whole mesh (`nodes_per_cell` a cell).
-    pub fn cell_nodes(&self) -> Vec<usize> {
-        self.connectivity.iter().map(|&k| self.points[k]).collect()
+    /// The vertices of the piece's cells (`nodes_per_cell` a cell), each by its place
+    /// among the piece's points.
+    pub fn connectivity(&self) -> &[usize] {
+        &self.connectivity
     }
 }
 

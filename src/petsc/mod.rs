@@ -220,6 +220,26 @@ pub fn max_real_over_ranks(mut value: f64) -> Result<f64> {
     Ok(value)
 }
 
+/// Every rank's `values` summed on rank 0, rank by rank in their order, so that a run
+/// on as many ranks sums them alike (collective: every rank calls it with as many); the
+/// rank's own `values` elsewhere.
+pub fn sum_at_first(values: &[f64]) -> Result<Vec<f64>> {
+    let (rank, size) = world()?;
+    let n = values.len();
+    let counts = vec![n as c_int; size];
+    let displs: Vec<c_int> = (0..size).map(|r| (r * n) as c_int).collect();
+    let mut all = vec![0.0; if rank == 0 { n * size } else { 0 }];
+    gather(values, &mut all, (&counts, &displs), false)?;
+    if rank != 0 {
+        return Ok(values.to_vec());
+    }
+    let mut sums = vec![0.0; n];
+    for part in all.chunks_exact(n.max(1)) {
+        sums.iter_mut().zip(part).for_each(|(s, v)| *s += v);
+    }
+    Ok(sums)
+}
+
 /// Rank 0's `bytes` (collective: every rank calls it with as many), in pieces of at most
 /// 2^30 bytes (MPI counts in an `int`).
 pub fn from_rank0_bytes(bytes: &mut [u8]) -> Result<()> {

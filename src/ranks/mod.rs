@@ -36,9 +36,10 @@
 //! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
 //! rows of K_B and K_R then numbering their columns in the order of those dofs; elsewhere
 //! the memory alone (and at its own rows). The values it holds have the bits of the whole
-//! history's; rank 0 holds u_n whole, for the checkpoints, history.csv and summary.json,
-//! and the memory where the frames are in pieces at the dofs its steps and history.csv
-//! read alone, with its own rows and the prescribed dofs (`run::hold_memory_of_first`).
+//! history's; rank 0 holds u_n whole, for the checkpoints, history.csv and summary.json's
+//! u_max, and the memory where the frames are in pieces at the dofs its steps and
+//! history.csv read alone, with its own rows and the prescribed dofs
+//! (`run::hold_memory_of_first`).
 //! At a checkpoint every rank sends its own rows of the memory to rank 0
 //! (`TimeLoop::gather_memory`): every rank knows the checkpoints' steps, rank 0's clock
 //! reaching the others with the stop requests ([`Ranks::stop`]). Of the loads, a rank makes the
@@ -55,12 +56,16 @@
 //! ([`Ranks::written`]) before rank 0 lists them in the frame's `.pvtu`
 //! (`run::frame::OwnFrames`). No rank keeps the mesh past its setup, and none holds the
 //! cells where the scene's keys take PETSc: its setup makes each from the mesh as it reads
-//! it (`fem::CellSource::Made`). Rank 0 keeps each cell's vertices, from which it makes the
-//! cells again to compute the norms and its piece's stresses (`fem::Hold`); a follower
-//! keeps its piece's node numbers, from which it makes each of the piece's cells when it
-//! reads it (`fem::StressCells::Of`). history.csv's largest von Mises stress is, at every
-//! step, the largest of the ranks' pieces' (`run::frame::OwnFrames::solved`). (Where `auto`'s choice assembled the whole, rank 0 keeps
-//! every cell and a follower lets go of them: `Discretization::forget_cells`.)
+//! it (`fem::CellSource::Made`). Every rank keeps its piece's node numbers, from which it
+//! makes each of the piece's cells when it reads it (`fem::StressCells::Of`); rank 0 keeps
+//! each cell's vertices besides only where it reads every cell past its setup
+//! ([`first_keeps_vertices`]). history.csv's largest von Mises stress is, at every
+//! step, the largest of the ranks' pieces' (`run::frame::OwnFrames::solved`), and
+//! summary.json's norms the sum of their pieces' parts, at the loop's start and after
+//! every step (`run::consumers::norms_of_pieces`), so that rank 0 knows them when its run
+//! fails, where no collective call may stand. (Where `auto`'s choice assembled the whole,
+//! rank 0 keeps every cell where it would keep their vertices, and a follower lets go of
+//! them: `Discretization::forget_cells`.)
 //!
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
@@ -266,6 +271,15 @@ impl Ranks {
         match self.size {
             1 => Ok(value),
             _ => mpi::max_real_over_ranks(value),
+        }
+    }
+
+    /// The sums of every rank's `parts` on rank 0, rank by rank in their order (the same
+    /// bits on as many ranks), `parts` elsewhere (collective on several).
+    pub fn sum_at_first(&self, parts: [f64; 2]) -> Result<[f64; 2]> {
+        match self.size {
+            1 => Ok(parts),
+            _ => Ok(mpi::sum_at_first(&parts)?.try_into().unwrap_or(parts)),
         }
     }
 
@@ -549,6 +563,8 @@ pub struct Plan {
     rows_bytes: f64,
     spread_several: f64,
     holding: Holding,
+    /// Whether rank 0 keeps every cell's vertices ([`first_keeps_vertices`]).
+    vertices: bool,
     /// The largest rank's fraction of K_A's entries.
     share: f64,
     /// The memory sum's bytes at every dof (`resources::Estimate::largest_rank`), and the
@@ -604,7 +620,7 @@ impl Plan {
         let (gathered, memory) = steps.largest_rank();
         let base = peak + gathered + if launched { 0.0 } else { MPI_RUNTIME }
             - held
-            - cell_bytes(disc, holding);
+            - cell_bytes(disc, holding, scene);
         let reach = memory_reach(disc, scene, holding, &largest);
         let rows_bytes = if hands_over {
             12.0 * entries as f64
@@ -627,6 +643,7 @@ impl Plan {
             rows_bytes,
             spread_several: petsc_bytes(entries, newton, 2),
             holding,
+            vertices: first_keeps_vertices(scene),
             share,
             memory,
             reach,
@@ -751,8 +768,11 @@ impl std::fmt::Display for Plan {
             Holding::WholeFirst => format!(", less {others}, which it drops once assembled"),
             Holding::Whole => ", with the matrices whole (prescribed dofs)".to_string(),
         };
-        let cells = match self.holding {
-            Holding::Columns => ", and the cells, which it does not hold (rank 0 their vertices)",
+        let cells = match (self.holding, self.vertices) {
+            (Holding::Columns, true) => {
+                ", and the cells, which it does not hold (rank 0 their vertices)"
+            }
+            (Holding::Columns, false) => ", and the cells, which it does not hold",
             _ => "",
         };
         let dropped = match (self.size, self.rows_bytes > 0.0) {
@@ -811,12 +831,30 @@ fn memory_reach(
     }
 }
 
+/// Whether rank 0 of several keeps every cell's vertices past its setup (`fem::Hold`), for
+/// the stresses of every cell in a frame that is not in pieces (`format = "vtkhdf"`) or
+/// for history.csv's resultant of a body force, made again from every cell at every step;
+/// elsewhere it lets go of them (`run::first_lets_go_of_cells`).
+pub fn first_keeps_vertices(scene: &crate::scene::Scene) -> bool {
+    let pieces = scene.output.options.format == crate::output::Format::Vtu;
+    !pieces || !scene.physics.body_forces.is_empty()
+}
+
 /// The bytes of the cells that `disc` holds (`check`, one process) and a rank of several
 /// holding the matrices as `holding` says does not: where a rank assembles its own columns
-/// alone it holds no cell, rank 0 (the largest) each cell's vertices (`fem::Hold`).
+/// alone it holds no cell, rank 0 (the largest) each cell's vertices where it keeps them
+/// ([`first_keeps_vertices`]).
 #[cfg(feature = "petsc")]
-fn cell_bytes(disc: &crate::fem::Discretization, holding: Holding) -> f64 {
-    let vertices = 4 * (disc.dim + 1);
+fn cell_bytes(
+    disc: &crate::fem::Discretization,
+    holding: Holding,
+    scene: &crate::scene::Scene,
+) -> f64 {
+    let vertices = if first_keeps_vertices(scene) {
+        4 * (disc.dim + 1)
+    } else {
+        0
+    };
     match holding {
         Holding::Columns => {
             let cell = std::mem::size_of::<crate::fem::Cell>() - vertices;
@@ -963,6 +1001,10 @@ mod mpi {
 
     pub fn from_rank0_bytes(_: &mut [u8]) -> crate::Result<()> {
         Ok(())
+    }
+
+    pub fn sum_at_first(values: &[f64]) -> crate::Result<Vec<f64>> {
+        Ok(values.to_vec())
     }
 }
 

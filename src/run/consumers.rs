@@ -104,6 +104,7 @@ impl Observer for Follower<'_> {
     }
 
     fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
+        norms_of_pieces(self.frames.as_ref(), self.disc, tl, self.stop.ranks)?;
         if self.schedule.due.take().is_some() {
             tl.gather_memory(&mut |_| unreachable!("a follower gets no vector of the memory"))?;
         }
@@ -140,6 +141,9 @@ impl Observer for Consumers<'_> {
     }
 
     fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
+        let frames = &self.frames;
+        let norms = norms_of_pieces(frames.pieces.as_ref(), &frames.disc, tl, self.stop.ranks)?;
+        self.statistics.norms = norms;
         // A checkpoint of step n + 1 may reach the disk only after the frames and the
         // history rows of steps ≤ n have: their writers run on threads of their own, and a
         // resume keeps the frames and rows before its step (a kill -9 in between lost a
@@ -154,6 +158,26 @@ impl Observer for Consumers<'_> {
     }
 }
 
+/// Where the ranks write their own pieces of the frames (`frames`: this rank's), the squares
+/// of summary.json's norms of the loop's u_n as the ranks' pieces sum them, on rank 0
+/// (`Ranks::sum_at_first`; a follower's own part elsewhere): collective on several, every
+/// rank calls it where the loop starts and after each step, before anything there that
+/// may fail on one rank alone. None where the frames are not in pieces (rank 0 then
+/// computes the norms of every cell itself).
+pub(super) fn norms_of_pieces(
+    frames: Option<&OwnFrames>,
+    disc: &Discretization,
+    tl: &TimeLoop,
+    ranks: crate::ranks::Ranks,
+) -> Result<Option<[f64; 2]>> {
+    let Some(frames) = frames else {
+        return Ok(None);
+    };
+    ranks
+        .sum_at_first(frames.norm_parts(disc, tl.u_held()))
+        .map(Some)
+}
+
 /// The run-wide numbers of summary.json that depend on every step so far.
 pub(super) struct Statistics {
     /// What a checkpoint saves of them (iterations, running maxima).
@@ -163,6 +187,9 @@ pub(super) struct Statistics {
     pub stick: usize,
     /// The last step solved.
     pub last: Option<usize>,
+    /// ‖u_n‖²_{L²} and |u_n|²_{H¹} of the loop's u_n, where the ranks' pieces sum them
+    /// ([`norms_of_pieces`]).
+    pub norms: Option<[f64; 2]>,
 }
 
 impl Statistics {
@@ -172,6 +199,7 @@ impl Statistics {
             active: 0,
             stick: 0,
             last: None,
+            norms: None,
         }
     }
 

@@ -74,9 +74,14 @@ pub(super) fn piece_of_follower(
     rank: usize,
 ) -> Option<PieceSetup> {
     let mesh = with_geometry((mesh, disc), own, options, |g| piece_of(g, rank, options))?;
-    let of_cell = &disc.materials.of_cell;
-    let materials = (mesh.as_ref()).map(|p| p.cells().iter().map(|&c| of_cell[c]).collect());
+    let materials = mesh.as_ref().map(|p| materials_of(p, disc));
     Some(PieceSetup { mesh, materials })
+}
+
+/// The material of each of the piece `mesh`'s cells, from `disc`'s cells.
+fn materials_of(mesh: &PieceMesh, disc: &Discretization) -> Vec<u32> {
+    let of_cell = &disc.materials.of_cell;
+    mesh.cells().iter().map(|&c| of_cell[c]).collect()
 }
 
 /// Rank `rank`'s piece of the frames' geometry `g`: its mesh, None inside where its part
@@ -153,10 +158,12 @@ pub(super) struct OwnFrames {
 enum Piece {
     /// This rank's part has no cells.
     None,
-    /// Before the first step: the piece's mesh, and (a follower) the material of each of
-    /// its cells (rank 0 holds every cell's vertices and material).
+    /// Before the first step: the piece's mesh, and the material of each of its cells (a
+    /// follower's, and rank 0's where it lets go of its cells: None where it holds every
+    /// cell's vertices and material).
     Mesh(PieceMesh, Option<Vec<u32>>),
-    /// The piece and (a follower) its cells' vertices (dim + 1 a cell), from which
+    /// The piece and (where its materials were given) its cells' vertices (dim + 1 a
+    /// cell, each by its place among the piece's points), from which
     /// [`Discretization::stress`] makes each cell when it reads it, and their materials.
     Made(Box<OwnPiece>, Option<(Vec<usize>, Vec<u32>)>),
 }
@@ -276,6 +283,30 @@ impl OwnFrames {
         disc.max_von_mises([step.w, step.u], held, self.model, cells)
     }
 
+    /// ‖u‖²_{L²} and |u|²_{H¹} over the piece's cells (`u` held at the dofs given alone
+    /// where some are: `TimeLoop::u_held`), made or not: this rank's part of summary.json's
+    /// norms ([`Discretization::norm_parts`]; zero where its part has no cells).
+    pub fn norm_parts(&self, disc: &Discretization, u: (&[f64], Option<&[usize]>)) -> [f64; 2] {
+        match &self.piece {
+            Piece::None => [0.0; 2],
+            Piece::Mesh(mesh, Some(materials)) => {
+                let cells = StressCells::Of(mesh.connectivity(), materials, mesh.points());
+                disc.norm_parts(u, cells)
+            }
+            Piece::Mesh(mesh, None) => disc.norm_parts(u, StressCells::Only(mesh.cells())),
+            Piece::Made(..) => (self.stress_cells()).map_or([0.0; 2], |c| disc.norm_parts(u, c)),
+        }
+    }
+
+    /// On rank 0, whose discretization lets go of its cells' vertices
+    /// (`run::first_lets_go_of_cells`): its piece keeps its own cells' materials, from which
+    /// it makes them as a follower's does.
+    pub fn keep_own_cells(&mut self, disc: &Discretization) {
+        if let Piece::Mesh(mesh, materials @ None) = &mut self.piece {
+            *materials = Some(materials_of(mesh, disc));
+        }
+    }
+
     /// The piece's cells as [`Discretization::stress`] reads them, once made (`make`): a
     /// follower's own, rank 0's among the discretization's; None on a follower whose part
     /// has no cells (rank 0 then lists none, and still writes the frame's `.pvtu`).
@@ -290,11 +321,12 @@ impl OwnFrames {
         }
     }
 
-    /// Makes the piece (its mesh encoded), with a follower's cells' vertices, at the first step.
+    /// Makes the piece (its mesh encoded), with its cells' vertices where it keeps them, at
+    /// the first step.
     fn make(&mut self) -> Result<()> {
         self.piece = match std::mem::replace(&mut self.piece, Piece::None) {
             Piece::Mesh(mesh, materials) => {
-                let cells = materials.map(|m| (mesh.cell_nodes(), m));
+                let cells = materials.map(|m| (mesh.connectivity().to_vec(), m));
                 let (out, run_id) = &self.out;
                 let piece = OwnPiece::new(out, mesh, run_id, &self.options)?;
                 Piece::Made(Box::new(piece), cells)

@@ -43,7 +43,8 @@ use crate::solver::choice::Descriptor;
 use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
 use consumers::{
-    Checkpoints, Consumers, Follower, Frames, Progress, Schedule, Statistics, StopRule,
+    norms_of_pieces, Checkpoints, Consumers, Follower, Frames, Progress, Schedule, Statistics,
+    StopRule,
 };
 use dir::DirLock;
 use frame::{open_series, OwnFrames, PieceSetup};
@@ -174,6 +175,7 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let mut ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
     hold_memory_of_first(opts.ranks, &mut ready);
+    first_lets_go_of_cells(opts.ranks, &mut ready);
     let tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
     // a signal came first (then it stays as it was).
@@ -458,6 +460,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         code => return Err(Error::Elsewhere(code)),
     }
     follow_signals(&mut tl, opts);
+    norms_of_pieces(frames.as_ref(), &disc, &tl, opts.ranks)?;
     let mut follower = Follower {
         stop: StopRule {
             after: opts.stop_after,
@@ -505,6 +508,30 @@ fn hold_memory_of_first(ranks: Ranks, ready: &mut Ready) {
     own.holds = crate::history::Holds::Memory(crate::mesh::increasing(dofs));
 }
 
+/// On rank 0 of several whose frames are in pieces and whose loads have no body force,
+/// the discretization lets go of its cells' vertices (16 bytes a tetrahedron of the whole
+/// mesh), which nothing reads past the setup there: summary.json's norms are the ranks'
+/// pieces' sums (`consumers::norms_of_pieces`), and rank 0's piece makes its own cells from
+/// their vertices as a follower's does (`OwnFrames::keep_own_cells`). A body force keeps
+/// them: history.csv's resultant of it is made again from every cell at every step
+/// (`Discretization::visit_every_load`).
+fn first_lets_go_of_cells(ranks: Ranks, ready: &mut Ready) {
+    if ranks.size == 1 || crate::ranks::first_keeps_vertices(&ready.scene) {
+        return;
+    }
+    let Some(pieces) = ready.opened.pieces.as_mut() else {
+        return;
+    };
+    pieces.keep_own_cells(&ready.disc);
+    // Nothing shares the discretization before the time loop's setup.
+    let alone = Arc::get_mut(&mut ready.disc);
+    debug_assert!(
+        alone.is_some(),
+        "rank 0's discretization is shared in its setup"
+    );
+    alone.map(Discretization::forget_cells);
+}
+
 /// Options of `viscontact resume`: those of a run; `out` defaults to the checkpoint's
 /// directory, and `overrides` may only set `time.end`, `output.*` and `checkpoint.*` (see
 /// [`checkpoint::Checkpoint::scene`]).
@@ -523,6 +550,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let (mut ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
     hold_memory_of_first(opts.ranks, &mut ready);
+    first_lets_go_of_cells(opts.ranks, &mut ready);
     let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.past_dofs())?;
     tl.restore(saved)
@@ -814,6 +842,8 @@ fn drive(d: Drive) -> Result<Outcome> {
     };
     follow_signals(&mut tl, d.opts);
     let steps_start = Instant::now();
+    let (frames, ranks) = (&consumers.frames, d.opts.ranks);
+    consumers.statistics.norms = norms_of_pieces(frames.pieces.as_ref(), d.disc, &tl, ranks)?;
     let ended = tl.run(d.scene.time.steps, &mut consumers);
     let Consumers {
         statistics,

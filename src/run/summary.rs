@@ -215,13 +215,16 @@ impl Summary {
         stats: Statistics,
     ) -> Summary {
         let u_n = tl.u();
-        let (l2, semi) = disc.norms(u_n);
         let Statistics {
             log,
             active,
             stick,
             last,
+            norms,
         } = stats;
+        // Where the ranks write their own pieces, the squares their pieces summed (rank 0
+        // may hold no cell); else of every cell, here.
+        let (l2, semi) = norms.map_or_else(|| disc.norms(u_n), |[l2, h1]| (l2.sqrt(), h1.sqrt()));
         let rows = tl.rows();
         let per_step = log.iterations;
         let completed = ending.status == Status::Completed;
@@ -236,7 +239,7 @@ impl Summary {
             // cells (the summary is rank 0's, which keeps them, or their vertices).
             mesh: absolute(&scene.mesh.file),
             nodes: disc.nodes.len(),
-            elements: disc.n_cells(),
+            elements: disc.cells_in_mesh,
             dofs: disc.n_free,
             steps: scene.time.steps,
             step_size: tl.k(),

@@ -178,7 +178,27 @@ fn agree_on_1_2_and_3_ranks(scenes: &[std::path::PathBuf]) {
                 "{what} on {ranks} ranks: von Mises differs by {d:e}"
             );
             assert_pieces(&out, &one, ranks, &what);
+            assert_same_final(&out, &one, &format!("{what} on {ranks} ranks"));
         }
+    }
+}
+
+/// summary.json's `final` of the run in `out` (its norms the ranks' pieces' sums over
+/// several) agrees with `reference`'s to 1e-8 relative, at the same time, and the two count
+/// the same cells.
+fn assert_same_final(out: &Path, reference: &Path, what: &str) {
+    let (s, r) = (common::summary(out), common::summary(reference));
+    assert_eq!(s["final"]["time"], r["final"]["time"], "{what}");
+    assert_eq!(s["elements"], r["elements"], "{what}");
+    for key in ["u_l2", "u_h1", "u_max"] {
+        let (a, b) = (
+            s["final"][key].as_f64().unwrap(),
+            r["final"][key].as_f64().unwrap(),
+        );
+        assert!(
+            b > 0.0 && (a - b).abs() <= 1e-8 * b,
+            "{what}: final.{key} {a} against {b}"
+        );
     }
 }
 
@@ -575,11 +595,16 @@ fn stopped_on_3_resumed_on_2_and_on_3(scene: &Path) {
         out
     };
     let (whole2, whole3) = (whole(2), whole(3));
+    let one_stopped = dir.join("stopped_one");
+    let (code, text) = run(0, scene, &one_stopped, &["--stop-after", "5"]);
+    assert_eq!(code, 0, "{text}");
     for (again, reference) in [(3, &whole3), (2, &whole2)] {
         let out = dir.join(format!("stopped_resumed_on_{again}"));
         let (code, text) = run(3, scene, &out, &["--stop-after", "5"]);
         assert_eq!(code, 0, "{text}");
         assert_eq!(common::summary(&out)["status"], "interrupted");
+        // Of u_6, which the loop holds once it stops after step 5.
+        assert_same_final(&out, &one_stopped, "stopped on 3 ranks");
         let (code, text) = resume(again, &out);
         assert_eq!(code, 0, "resumed on {again}: {text}");
         assert_eq!(common::summary(&out)["status"], "completed");
@@ -589,6 +614,7 @@ fn stopped_on_3_resumed_on_2_and_on_3(scene: &Path) {
             let d = common::rel_diff(&u_last(&out), &u_last(reference));
             println!("stopped on 3, resumed on 2: max|Δu_N| / max|u_N| = {d:e}");
             assert!(d <= 1e-8, "u_N differs by {d:e} from the run on 2");
+            assert_same_final(&out, reference, "stopped on 3 ranks, resumed on 2");
         }
     }
 }

@@ -255,6 +255,39 @@ fn rank_0_computes_from_the_cells_vertices_what_it_would_from_the_cells() {
             [l2_mine, semi_mine].map(f64::to_bits),
             [l2, semi].map(f64::to_bits)
         );
+        // summary.json's norms over the same pieces (how the ranks of a run compute them:
+        // each its piece's part of the squares, summed), to the last digits.
+        let part = |cells| mine.norm_parts((&w, None), cells);
+        let ([l2_a, h1_a], [l2_b, h1_b]) =
+            (part(StressCells::Only(&a)), part(StressCells::Only(&b)));
+        let close = |x: f64, y: f64| (x - y).abs() <= 1e-14 * y;
+        assert!(
+            close((l2_a + l2_b).sqrt(), l2),
+            "{name}: {l2_a} + {l2_b} against {l2}²"
+        );
+        assert!(
+            close((h1_a + h1_b).sqrt(), semi),
+            "{name}: {h1_a} + {h1_b} against {semi}²"
+        );
+        // A piece's cells named by their vertices' places among its points (`Of`, a rank's
+        // piece of the frames): its part's bits and its stresses'.
+        let vertices = |c: &usize| held.cells[*c].vertices().to_vec();
+        let mut points: Vec<usize> = a.iter().flat_map(vertices).collect();
+        points.sort_unstable();
+        points.dedup();
+        let places: Vec<usize> = (a.iter().flat_map(vertices))
+            .map(|v| points.binary_search(&v).unwrap())
+            .collect();
+        let materials: Vec<u32> = a.iter().map(|&c| held.materials.of_cell[c]).collect();
+        let of = StressCells::Of(&places, &materials, &points);
+        assert_eq!(part(of).map(f64::to_bits), [l2_a, h1_a].map(f64::to_bits));
+        let stress = |cells| mine.stress([&w, &u], (m, [None; 2]), model, cells);
+        let ((s_of, vm_of), (s_a, vm_a)) = (stress(of), stress(StressCells::Only(&a)));
+        assert_eq!(
+            (bits(&s_of), bits(&vm_of)),
+            (bits(&s_a), bits(&vm_a)),
+            "{name}"
+        );
     }
 }
 
@@ -451,6 +484,11 @@ fn rows_numbered_over_the_reach_give_the_bits_of_the_whole_vectors() {
         let m_u = (Some(m_held.as_slice()), [place, place]);
         let (s3, vm3) = disc.stress([&w_held, &u_held], m_u, model, cells);
         assert_eq!((bits(&s3), bits(&vm3)), (bits(&s), bits(&vm)));
+        // Its part of summary.json's norms of u_n held at its history's dofs.
+        let norms = disc.norm_parts((&u, None), cells);
+        assert!(norms.iter().all(|&v| v > 0.0));
+        let norms_held = disc.norm_parts((&u_held, place), cells);
+        assert_eq!(norms_held.map(f64::to_bits), norms.map(f64::to_bits));
         let at: Vec<usize> = (0..nodes)
             .step_by(5)
             .filter(|&v| {
