@@ -438,9 +438,9 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
             frame::piece_of_follower((&mesh, &disc), own.as_ref(), options, opts.ranks.rank);
         let points = piece.as_ref().map_or(Vec::new(), |p| p.dofs(&disc));
         opts.ranks.hold_history(&mut disc, own.as_mut(), points);
-        // Before PETSc's setup, the rank's peak: rank 0 alone computes the norms from every
-        // cell; a follower holds none (or, where `auto` assembled the whole, no longer),
-        // and its piece makes its own cells at its first step, after that peak.
+        // Before PETSc's setup, the rank's peak: a follower holds no cell (or, where `auto`
+        // assembled the whole, no longer), and its piece makes its own cells at its first
+        // step, after that peak.
         disc.forget_cells();
         disc.keep_places(&mesh.nodes, piece.as_ref().map_or(&[][..], |p| p.points()));
         let plans = match &cp {
