@@ -531,13 +531,10 @@ impl History {
         !matches!(self.memory, Memory::None)
     }
 
-    /// The dofs at which the direct sum's past rows are held (None: every one, or no
-    /// direct sum): a resume reads them there alone (`Checkpoint::saved`).
-    pub fn past_dofs(&self) -> Option<&[usize]> {
-        match &self.memory {
-            Memory::Direct { .. } => self.holds.dofs(),
-            _ => None,
-        }
+    /// The dofs at which the memory (the Prony states, the direct sum's past rows) is held
+    /// (None: every one): a resume reads it there alone (`Checkpoint::saved`).
+    pub fn memory_dofs(&self) -> Option<&[usize]> {
+        self.holds.dofs()
     }
 
     /// The memory as a checkpoint saves it, every dof's, one vector at a time into `each`
@@ -636,20 +633,19 @@ impl History {
                             s.a, s.decay
                         )));
                     }
-                    if s.m.len() != n_dofs {
+                    let Some(m) = held_part(self.holds.dofs(), n_dofs, s.m) else {
                         return Err(mismatch(&format!("term {i} of the wrong size")));
-                    }
-                    let m = at(self.holds.dofs(), &s.m);
+                    };
                     *t = PronyTerm { m, ..s };
                 }
             }
             (Memory::Direct { past, r_lag }, SavedMemory::Direct(rows)) => {
-                // Each row whole, or read at the dofs this history holds already
-                // (`Checkpoint::saved` with `History::past_dofs`).
                 let dofs = self.holds.dofs();
-                *past = (rows.into_iter())
-                    .map(|u| if u.len() == n_dofs { at(dofs, &u) } else { u })
-                    .collect();
+                let held = rows.into_iter().map(|u| held_part(dofs, n_dofs, u));
+                let Some(held) = held.collect() else {
+                    return Err(mismatch("a past row of the wrong size"));
+                };
+                *past = held;
                 r_lag.clear();
             }
             (_, SavedMemory::None) => return Err(mismatch("absent (no relaxation)")),
@@ -731,6 +727,17 @@ fn add_compensated(
         };
         *sum = t;
         *u = t + *comp;
+    }
+}
+
+/// A saved vector of the memory, whole (`n_dofs` values) or read at the dofs `dofs` that a
+/// history holds its memory at already (`Checkpoint::saved` with
+/// [`History::memory_dofs`]), at those dofs; None for another size.
+fn held_part(dofs: Option<&[usize]>, n_dofs: usize, v: Vec<f64>) -> Option<Vec<f64>> {
+    match v.len() {
+        l if l == n_dofs => Some(at(dofs, &v)),
+        l if dofs.is_some_and(|d| d.len() == l) => Some(v),
+        _ => None,
     }
 }
 

@@ -408,10 +408,10 @@ impl<'p> TimeLoop<'p> {
         Ok(())
     }
 
-    /// Where the history holds a direct sum's past rows (None: whole): a resume reads
-    /// them there alone (`Checkpoint::saved`).
-    pub fn past_dofs(&self) -> Option<&[usize]> {
-        self.history.past_dofs()
+    /// Where the history holds the memory, the Prony states or a direct sum's past rows
+    /// (None: whole): a resume reads it there alone (`Checkpoint::saved`).
+    pub fn memory_dofs(&self) -> Option<&[usize]> {
+        self.history.memory_dofs()
     }
 
     /// Takes back the state a checkpoint saved (a resume), into this loop built from the

@@ -217,13 +217,16 @@ fn new_run_id() -> String {
 #[derive(Clone, Debug)]
 pub enum StoredMemory {
     None,
+    /// The terms; their states m^(i)_n stay in the file until a resume reads each rank's
+    /// part of them, a term at a time (`Checkpoint::saved`): no rank holds every term's
+    /// whole state.
     Prony {
         a: Vec<f64>,
         decay: Vec<f64>,
-        /// m^(i)_n per term.
-        m: Vec<Vec<f64>>,
         /// The memory group of each term (all 0 where the file has no `prony_group`).
         group: Vec<usize>,
+        /// The dofs each state holds.
+        width: usize,
     },
     /// Rows 0..rows of the history file and their running hash.
     Direct {
@@ -242,6 +245,9 @@ pub struct Checkpoint {
     pub time: f64,
     pub k: f64,
     pub id: Identity,
+    /// The dofs of its vectors (their length when read: [`Checkpoint::saved`] hands the
+    /// vectors over).
+    pub n_dofs: usize,
     pub u: Vec<f64>,
     pub u_sum: Vec<f64>,
     pub u_comp: Vec<f64>,

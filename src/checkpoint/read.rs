@@ -6,9 +6,24 @@ use super::{Checkpoint, Identity, RunLog, StoredMemory, FORMAT, FORMAT_VERSION};
 use crate::{Error, Result};
 use hdf5::types::VarLenUnicode;
 use hdf5_metno as hdf5;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 impl Checkpoint {
+    /// The Prony states m^(i)_n, every dof's, term by term, read from the file (a resume
+    /// reads its own dofs' alone: [`Checkpoint::saved`]); none for another memory.
+    pub fn prony_states(&self) -> Result<Vec<Vec<f64>>> {
+        if !matches!(self.memory, StoredMemory::Prony { .. }) {
+            return Ok(Vec::new());
+        }
+        prony_states(&self.path, None).map_err(|e| {
+            Error::input(format!(
+                "{}: damaged checkpoint: memory/prony_state unreadable ({e})",
+                self.path.display()
+            ))
+        })
+    }
+
     /// The directory the checkpoint is in.
     pub fn dir(&self) -> PathBuf {
         match self.path.parent() {
@@ -42,9 +57,9 @@ impl Checkpoint {
     }
 }
 
-/// Reads the file at `path` and verifies its checksum where it carries our header; returns
-/// whether it does (an HDF5 file without it is told apart by `format_version`). Anything
-/// else is refused.
+/// Reads the first bytes of the file at `path` and verifies its checksum, a chunk at a time,
+/// where it carries our header; returns whether it does (an HDF5 file without it is told
+/// apart by `format_version`). Anything else is refused.
 fn verify_seal(path: &Path) -> Result<bool> {
     let shown = path.display();
     let cannot = |e: String| {
@@ -58,9 +73,13 @@ fn verify_seal(path: &Path) -> Result<bool> {
         Ok(_) => return Err(cannot("not a regular file".into())),
         Err(e) => return Err(cannot(e.to_string())),
     }
-    let bytes = std::fs::read(path).map_err(|e| cannot(e.to_string()))?;
+    // Its first bytes tell what it is; a sealed one is then checked a chunk at a time.
+    let mut bytes = Vec::new();
+    let file = std::fs::File::open(path).map_err(|e| cannot(e.to_string()))?;
+    (file.take(seal::USERBLOCK as u64).read_to_end(&mut bytes))
+        .map_err(|e| cannot(e.to_string()))?;
     if seal::looks_sealed(&bytes) {
-        seal::verify_checkpoint(&bytes).map_err(|why| {
+        seal::verify_checkpoint_file(path).map_err(|why| {
             Error::input(format!(
                 "{shown}: damaged checkpoint, refused: {why}; resume from an intact copy \
                  of the run directory or start the run again"
@@ -137,6 +156,7 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
     let memory = read_memory(f)?;
     let log = read_log(f, n)?;
     let id = read_identity(f)?;
+    let u = vec("state/u")?;
     let cp = Checkpoint {
         path: path.to_path_buf(),
         version,
@@ -144,7 +164,8 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
         time,
         k,
         id,
-        u: vec("state/u")?,
+        n_dofs: u.len(),
+        u,
         u_sum: vec("state/u_sum")?,
         u_comp: vec("state/u_comp")?,
         w: vec("state/w")?,
@@ -190,17 +211,10 @@ fn read_memory(f: &hdf5::File) -> hdf5::Result<StoredMemory> {
         "prony" => {
             let a = vec("memory/prony_a")?;
             let decay = vec("memory/prony_decay")?;
-            let state = f.dataset("memory/prony_state")?;
-            let flat = state.read_raw::<f64>()?;
-            let shape = state.shape();
+            let shape = f.dataset("memory/prony_state")?.shape();
             if shape.len() != 2 || shape[0] != a.len() || decay.len() != a.len() {
                 return Err("memory/prony_* have inconsistent shapes".into());
             }
-            let m = if shape[1] == 0 {
-                vec![Vec::new(); shape[0]]
-            } else {
-                flat.chunks(shape[1]).map(|c| c.to_vec()).collect()
-            };
             // Written only where a region has a kernel of its own.
             let group = match f.link_exists("memory/prony_group") {
                 true => vec("memory/prony_group")?,
@@ -210,7 +224,12 @@ fn read_memory(f: &hdf5::File) -> hdf5::Result<StoredMemory> {
                 return Err("memory/prony_group is not one group index per term".into());
             }
             let group = group.iter().map(|&g| g as usize).collect();
-            StoredMemory::Prony { a, decay, m, group }
+            StoredMemory::Prony {
+                a,
+                decay,
+                group,
+                width: shape[1],
+            }
         }
         "direct" => StoredMemory::Direct {
             file: str_attr_of(&mem, "history_file")?,
@@ -219,6 +238,29 @@ fn read_memory(f: &hdf5::File) -> hdf5::Result<StoredMemory> {
         },
         other => return Err(format!("/memory kind {other:?} is unknown").into()),
     })
+}
+
+/// The Prony states m^(i)_n of the checkpoint at `path`, term by term, each at the dofs
+/// `at` alone (increasing, each below the states' width; None: every dof): one term's row
+/// at a time is read whole.
+pub(super) fn prony_states(path: &Path, at: Option<&[usize]>) -> hdf5::Result<Vec<Vec<f64>>> {
+    let f = h5_file(OpenMode::Read, path)?;
+    let state = f.dataset("memory/prony_state")?;
+    let (terms, width) = match state.shape()[..] {
+        [terms, width] => (terms, width),
+        _ => return Err("memory/prony_state is not terms × dofs".into()),
+    };
+    let read = |i: usize| -> hdf5::Result<Vec<f64>> {
+        if width == 0 {
+            return Ok(Vec::new());
+        }
+        let row = state.read_slice_1d::<f64, _>(ndarray::s![i, ..])?;
+        Ok(match at {
+            None => row.to_vec(),
+            Some(at) => at.iter().map(|&d| row[d]).collect(),
+        })
+    };
+    (0..terms).map(read).collect()
 }
 
 /// `/run`: the iteration counts of steps 0..n and the run's worst violation and residual.

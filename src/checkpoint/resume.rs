@@ -248,15 +248,17 @@ impl Checkpoint {
             .map_err(|e| Error::input(format!("{}: {e}", self.path.display())))
     }
 
-    /// The saved state of the loop, checked against the sizes of the scene's discretization
-    /// (`n_free` dofs, `n_rows` contact and friction rows); for a general kernel the past
-    /// displacements are read from the history file and their hash checked, each kept at
-    /// the dofs `past_at` alone where given (`TimeLoop::past_dofs`).
+    /// The saved state of the loop (its vectors handed over: the checkpoint keeps their
+    /// length alone, `n_dofs`), checked against the sizes of the scene's discretization
+    /// (`n_free` dofs, `n_rows` contact and friction rows); the memory is read now, each
+    /// vector kept at the dofs `memory_at` alone where given (`TimeLoop::memory_dofs`): the
+    /// Prony states from this file a term at a time, or a general kernel's past
+    /// displacements from the history file, their hash checked.
     pub fn saved(
-        &self,
+        &mut self,
         n_free: usize,
         n_rows: usize,
-        past_at: Option<&[usize]>,
+        memory_at: Option<&[usize]>,
     ) -> Result<SavedLoop> {
         let shown = self.path.display();
         let sizes = [
@@ -277,16 +279,30 @@ impl Checkpoint {
         }
         let memory = match &self.memory {
             StoredMemory::None => SavedMemory::None,
-            StoredMemory::Prony { a, decay, m, group } => SavedMemory::Prony(
-                (0..a.len())
-                    .map(|i| PronyTerm {
-                        a: a[i],
-                        decay: decay[i],
-                        m: m[i].clone(),
-                        group: group[i],
-                    })
-                    .collect(),
-            ),
+            StoredMemory::Prony {
+                a,
+                decay,
+                group,
+                width,
+            } => {
+                if *width != n_free || memory_at.is_some_and(|at| at.iter().any(|&d| d >= n_free)) {
+                    let what = format!("states of {width} dofs");
+                    return Err(Error::input(format!("{shown}: {}", memory_mismatch(&what))));
+                }
+                let states = super::read::prony_states(&self.path, memory_at).map_err(|e| {
+                    Error::input(format!(
+                        "{shown}: damaged checkpoint: memory/prony_state unreadable ({e}); \
+                         resume from an intact checkpoint or start the run again"
+                    ))
+                })?;
+                let term = |(i, m)| PronyTerm {
+                    a: a[i],
+                    decay: decay[i],
+                    m,
+                    group: group[i],
+                };
+                SavedMemory::Prony(states.into_iter().enumerate().map(term).collect())
+            }
             StoredMemory::Direct {
                 file, rows, hash, ..
             } => {
@@ -295,22 +311,24 @@ impl Checkpoint {
                     return Err(Error::input(format!("{shown}: {}", memory_mismatch(&what))));
                 }
                 let path = self.dir().join(file);
-                let past = read_history(&path, (*rows, *hash), n_free, &self.id, past_at)?;
+                let past = read_history(&path, (*rows, *hash), n_free, &self.id, memory_at)?;
                 SavedMemory::Direct(past)
             }
         };
+        // Handed over, not copied: a rank holds the whole vectors once while it restores.
+        let take = std::mem::take;
         Ok(SavedLoop {
             history: SavedHistory {
                 n: self.n,
                 k: self.k,
-                u: self.u.clone(),
-                u_sum: self.u_sum.clone(),
-                u_comp: self.u_comp.clone(),
+                u: take(&mut self.u),
+                u_sum: take(&mut self.u_sum),
+                u_comp: take(&mut self.u_comp),
                 memory,
             },
-            w: self.w.clone(),
-            z: self.z.clone(),
-            z_before: self.z_before.clone(),
+            w: take(&mut self.w),
+            z: take(&mut self.z),
+            z_before: take(&mut self.z_before),
         })
     }
 }

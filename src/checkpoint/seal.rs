@@ -142,25 +142,56 @@ pub(super) fn seal_checkpoint_file(path: &std::path::Path) -> std::io::Result<()
 pub(super) const CHUNK: usize = 8 << 20;
 
 /// Whether `bytes` begin like a sealed checkpoint (the first line of the user block); such a
-/// file is verified by [`verify_checkpoint`] and never parsed otherwise.
+/// file is verified by [`verify_checkpoint_file`] and never parsed otherwise.
 pub(super) fn looks_sealed(bytes: &[u8]) -> bool {
     bytes.starts_with(format!("{}\n", super::FORMAT).as_bytes())
 }
 
+/// Checks the sealed checkpoint at `path`, reading it a chunk at a time (a resume on every
+/// rank of a run checks it, and none holds its bytes whole); the error says what is wrong.
+pub(super) fn verify_checkpoint_file(path: &std::path::Path) -> std::result::Result<(), String> {
+    use std::os::unix::fs::FileExt;
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let len = file.metadata().map_err(|e| e.to_string())?.len() as usize;
+    verify_sealed(len, |at, part| file.read_exact_at(part, at as u64))
+}
+
 /// Checks a sealed checkpoint's bytes; the error says what is wrong.
+#[cfg(test)]
 pub(super) fn verify_checkpoint(bytes: &[u8]) -> std::result::Result<(), String> {
-    let (fields, crc) = bytes
-        .get(..USERBLOCK)
-        .and_then(|b| parse(b, super::FORMAT))
+    verify_sealed(bytes.len(), |at, part| {
+        part.copy_from_slice(&bytes[at..at + part.len()]);
+        Ok(())
+    })
+}
+
+/// Checks a sealed checkpoint of `len` bytes, which `read_at(at, part)` reads a chunk at a
+/// time: its user block, the length it records and the CRC-32 of the rest.
+fn verify_sealed(
+    len: usize,
+    mut read_at: impl FnMut(usize, &mut [u8]) -> std::io::Result<()>,
+) -> std::result::Result<(), String> {
+    let mut block = [0u8; USERBLOCK];
+    let head = &mut block[..USERBLOCK.min(len)];
+    read_at(0, head).map_err(|e| e.to_string())?;
+    let (fields, crc) = (len >= USERBLOCK)
+        .then(|| parse(&block, super::FORMAT))
+        .flatten()
         .ok_or("its 512-byte header is damaged")?;
-    if fields != checkpoint_fields(bytes.len()) {
+    if fields != checkpoint_fields(len) {
         return Err(format!(
-            "the file is {} bytes long, its header says {} (truncated or damaged)",
-            bytes.len(),
+            "the file is {len} bytes long, its header says {} (truncated or damaged)",
             field(fields, "length").unwrap_or("?")
         ));
     }
-    if self::crc(fields, &[&bytes[USERBLOCK..]]) != crc {
+    let mut sealing = Sealing::checkpoint(len);
+    let mut chunk = vec![0u8; CHUNK.min(len)];
+    for at in (0..len).step_by(CHUNK) {
+        let part = &mut chunk[..CHUNK.min(len - at)];
+        read_at(at, part).map_err(|e| e.to_string())?;
+        sealing.feed(at, part);
+    }
+    if sealing.crc() != crc {
         return Err(
             "its bytes do not match the CRC-32 in its header (changed since viscontact wrote \
              it: a disk, copy or transfer error)"

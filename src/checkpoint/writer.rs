@@ -104,7 +104,7 @@ impl Writer {
             };
             let path = dir.join(HISTORY_FILE_NAME);
             if same_dir {
-                disk.history = HistoryFile::open(&path, &disk.id, cp.u.len(), *rows, *hash).ok();
+                disk.history = HistoryFile::open(&path, &disk.id, cp.n_dofs, *rows, *hash).ok();
             }
             if disk.history.is_none() {
                 disk.earlier = Some((cp.dir().join(HISTORY_FILE_NAME), *rows, *hash));
@@ -540,11 +540,24 @@ mod tests {
             let snapshot = snapshot(n, width, SnapshotMemory::Prony { terms, states });
             disk.write(&snapshot).unwrap();
             let cp = Checkpoint::read(&disk.dir.join(FILE_NAME)).unwrap();
-            let StoredMemory::Prony { m, .. } = cp.memory else {
-                panic!("a Prony checkpoint")
-            };
+            assert!(
+                matches!(cp.memory, StoredMemory::Prony { .. }),
+                "a Prony checkpoint"
+            );
+            let m = cp.prony_states().unwrap();
             for (i, m) in m.iter().enumerate() {
                 assert_eq!(m, &state(n, i), "step {n}, term {i}");
+            }
+            // A resume's part of them: at some dofs alone, read a term at a time.
+            let mut cp = cp;
+            let part = cp.saved(width, 0, Some(&[1, 3])).unwrap().history.memory;
+            let crate::history::SavedMemory::Prony(part) = part else {
+                panic!("a Prony memory")
+            };
+            assert_eq!(part.len(), m.len());
+            for (i, t) in part.iter().enumerate() {
+                let whole = state(n, i);
+                assert_eq!(t.m, [whole[1], whole[3]], "step {n}, term {i}");
             }
         };
         write(&mut disk, 1);

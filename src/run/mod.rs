@@ -452,8 +452,9 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
     let (scene, (disc, piece), solving, cp) = opts.ranks.agree(ready())?;
     let frames = series_of_follower(piece, &scene, opts)?;
     let mut tl = solving.time_loop(&scene, &disc)?;
-    if let Some(cp) = &cp {
-        tl.restore(cp.saved(disc.n_dofs, tl.rows().len(), tl.past_dofs())?)?;
+    // The checkpoint goes once restored: the follower holds its part of the state alone.
+    if let Some(mut cp) = cp {
+        tl.restore(cp.saved(disc.n_dofs, tl.rows().len(), tl.memory_dofs())?)?;
     }
     match opts.ranks.first_says(0)? {
         0 => {}
@@ -547,12 +548,12 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
         return follow(checkpoint_path, Begun::Resume, opts);
     }
     let start = Instant::now();
-    let (mut ready, cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
+    let (mut ready, mut cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
     hold_memory_of_first(opts.ranks, &mut ready);
     first_lets_go_of_cells(opts.ranks, &mut ready);
     let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
-    let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.past_dofs())?;
+    let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.memory_dofs())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
     // The last moment a signal ends the resume unchanged; after it, it stops after a step.

@@ -44,11 +44,13 @@ fn run_with(scene: &Path, out: &Path, threads: &str, set: &[&str]) {
 /// checksums of its frames (which hold the run id; the frames are compared themselves).
 fn checkpoint(dir: &Path) -> String {
     let mut cp = Checkpoint::read(&dir.join("checkpoint.h5")).unwrap();
+    // The Prony states stay in the file until read (a resume reads its part of them).
+    let states = cp.prony_states().unwrap();
     cp.path = Default::default();
     cp.id.run_id.clear();
     cp.frames = None;
     // Debug writes every f64 so that it reads back to the same bits.
-    format!("{cp:?}")
+    format!("{cp:?}\n{states:?}")
 }
 
 /// Every frame of a run, as bytes (.vtu/.pvd without the run id) or, for a .vtkhdf, as
