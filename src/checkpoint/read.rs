@@ -13,12 +13,19 @@ impl Checkpoint {
     /// The Prony states m^(i)_n, every dof's, term by term, read from the file (a resume
     /// reads its own dofs' alone: [`Checkpoint::saved`]); none for another memory.
     pub fn prony_states(&self) -> Result<Vec<Vec<f64>>> {
-        if !matches!(self.memory, StoredMemory::Prony { .. }) {
-            return Ok(Vec::new());
+        match self.memory {
+            StoredMemory::Prony { .. } => self.prony_states_at(None),
+            _ => Ok(Vec::new()),
         }
-        prony_states(&self.path, None).map_err(|e| {
+    }
+
+    /// The Prony states term by term, each at the dofs `at` alone (None: every dof),
+    /// read from the file a term at a time.
+    pub(super) fn prony_states_at(&self, at: Option<&[usize]>) -> Result<Vec<Vec<f64>>> {
+        prony_states(&self.path, at).map_err(|e| {
             Error::input(format!(
-                "{}: damaged checkpoint: memory/prony_state unreadable ({e})",
+                "{}: damaged checkpoint: memory/prony_state unreadable ({e}); resume from an \
+                 intact checkpoint or start the run again",
                 self.path.display()
             ))
         })
@@ -76,10 +83,10 @@ fn verify_seal(path: &Path) -> Result<bool> {
     // Its first bytes tell what it is; a sealed one is then checked a chunk at a time.
     let mut bytes = Vec::new();
     let file = std::fs::File::open(path).map_err(|e| cannot(e.to_string()))?;
-    (file.take(seal::USERBLOCK as u64).read_to_end(&mut bytes))
+    ((&file).take(seal::USERBLOCK as u64).read_to_end(&mut bytes))
         .map_err(|e| cannot(e.to_string()))?;
     if seal::looks_sealed(&bytes) {
-        seal::verify_checkpoint_file(path).map_err(|why| {
+        seal::verify_checkpoint_file(&file).map_err(|why| {
             Error::input(format!(
                 "{shown}: damaged checkpoint, refused: {why}; resume from an intact copy \
                  of the run directory or start the run again"
@@ -243,7 +250,7 @@ fn read_memory(f: &hdf5::File) -> hdf5::Result<StoredMemory> {
 /// The Prony states m^(i)_n of the checkpoint at `path`, term by term, each at the dofs
 /// `at` alone (increasing, each below the states' width; None: every dof): one term's row
 /// at a time is read whole.
-pub(super) fn prony_states(path: &Path, at: Option<&[usize]>) -> hdf5::Result<Vec<Vec<f64>>> {
+fn prony_states(path: &Path, at: Option<&[usize]>) -> hdf5::Result<Vec<Vec<f64>>> {
     let f = h5_file(OpenMode::Read, path)?;
     let state = f.dataset("memory/prony_state")?;
     let (terms, width) = match state.shape()[..] {

@@ -289,12 +289,7 @@ impl Checkpoint {
                     let what = format!("states of {width} dofs");
                     return Err(Error::input(format!("{shown}: {}", memory_mismatch(&what))));
                 }
-                let states = super::read::prony_states(&self.path, memory_at).map_err(|e| {
-                    Error::input(format!(
-                        "{shown}: damaged checkpoint: memory/prony_state unreadable ({e}); \
-                         resume from an intact checkpoint or start the run again"
-                    ))
-                })?;
+                let states = self.prony_states_at(memory_at)?;
                 let term = |(i, m)| PronyTerm {
                     a: a[i],
                     decay: decay[i],

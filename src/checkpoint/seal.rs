@@ -147,11 +147,10 @@ pub(super) fn looks_sealed(bytes: &[u8]) -> bool {
     bytes.starts_with(format!("{}\n", super::FORMAT).as_bytes())
 }
 
-/// Checks the sealed checkpoint at `path`, reading it a chunk at a time (a resume on every
+/// Checks the sealed checkpoint `file`, reading it a chunk at a time (a resume on every
 /// rank of a run checks it, and none holds its bytes whole); the error says what is wrong.
-pub(super) fn verify_checkpoint_file(path: &std::path::Path) -> std::result::Result<(), String> {
+pub(super) fn verify_checkpoint_file(file: &std::fs::File) -> std::result::Result<(), String> {
     use std::os::unix::fs::FileExt;
-    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let len = file.metadata().map_err(|e| e.to_string())?.len() as usize;
     verify_sealed(len, |at, part| file.read_exact_at(part, at as u64))
 }

@@ -1233,9 +1233,7 @@ impl Discretization {
         // dofs every rank keeps the matrices whole); any rank of several reads its cells so,
         // a follower its piece's (a cell held would take 144 bytes).
         if let StressCells::Of(vertices, materials, nodes) = only {
-            let points = self.nodes.points();
-            for (v, &material) in vertices.chunks_exact(self.dim + 1).zip(materials) {
-                let t = make_cell(self.dim, corners(v, |i| nodes[i]), points);
+            for ((v, t), &material) in self.piece_cells(vertices, nodes).zip(materials) {
                 let grad = std::array::from_fn(|i| std::array::from_fn(|a| t.grad[i][a]));
                 cell(std::array::from_fn(|i| v[i]), &grad, material);
             }
@@ -1302,7 +1300,21 @@ impl Discretization {
 
     /// ‖v‖_{L²(Ω)} and |v|_{H¹(Ω)} of a P1 field (free-dof vector), computed exactly.
     pub fn norms(&self, v: &[f64]) -> (f64, f64) {
-        norms_of(self.cell_source(), &nodal_vectors::<3>(self, v))
+        let [l2, h1] = self.norm_parts((v, None), StressCells::All);
+        (l2.sqrt(), h1.sqrt())
+    }
+
+    /// The cells of a piece (`StressCells::Of`: `vertices` dim + 1 a cell, each by its
+    /// place in `nodes`), each with its vertices' places, made from the nodes' places as
+    /// the discretization made its own.
+    fn piece_cells<'a>(
+        &'a self,
+        vertices: &'a [usize],
+        nodes: &'a [usize],
+    ) -> impl Iterator<Item = (&'a [usize], Cell)> + 'a {
+        let points = self.nodes.points();
+        (vertices.chunks_exact(self.dim + 1))
+            .map(move |v| (v, make_cell(self.dim, corners(v, |i| nodes[i]), points)))
     }
 
     /// ‖v‖²_{L²} and |v|²_{H¹} over the cells `cells` says alone (a rank's piece of the
@@ -1330,9 +1342,7 @@ impl Discretization {
         let mut add = |t: &Cell| add_norms(t, |k| value(t.nodes[k]), &mut sums);
         match cells {
             StressCells::Of(vertices, _, nodes) => {
-                let points = self.nodes.points();
-                for v in vertices.chunks_exact(self.dim + 1) {
-                    let t = make_cell(self.dim, corners(v, |i| nodes[i]), points);
+                for (v, t) in self.piece_cells(vertices, nodes) {
                     add_norms(&t, |k| values[v[k]], &mut sums);
                 }
             }
@@ -1558,13 +1568,8 @@ fn nodal_vector<const N: usize>(
 /// per simplex of dimension d, ∫(Σ v_i φ_i)² = |T|/((d+1)(d+2)) (Σ v_i² + (Σ v_i)²), and the
 /// gradient is constant.
 pub fn p1_norms<const N: usize>(cells: &[Cell], v: &[[f64; N]]) -> (f64, f64) {
-    norms_of(CellSource::Held(cells), v)
-}
-
-/// [`p1_norms`] over the cells `cells` reads.
-fn norms_of<const N: usize>(cells: CellSource, v: &[[f64; N]]) -> (f64, f64) {
     let mut sums = [0.0; 2];
-    cells.each(|_, t| add_norms(t, |k| v[t.nodes[k]], &mut sums));
+    (cells.iter()).for_each(|t| add_norms(t, |k| v[t.nodes[k]], &mut sums));
     (sums[0].sqrt(), sums[1].sqrt())
 }
 
