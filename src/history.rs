@@ -380,6 +380,7 @@ pub struct LoopState<'a> {
 }
 
 /// A [`LoopState`] as a checkpoint gives it back (`TimeLoop::restore`).
+#[derive(Debug)]
 pub struct SavedLoop {
     pub history: SavedHistory,
     pub w: Vec<f64>,
@@ -387,7 +388,22 @@ pub struct SavedLoop {
     pub z_before: Vec<f64>,
 }
 
-/// A history as a checkpoint saved it, for [`History::restore`].
+/// Where a rank holds each vector of a loop's state, each at the dofs given (increasing;
+/// None: at every dof): what a resume reads of a checkpoint (`Checkpoint::saved`), so that
+/// a follower rank never holds the whole of one of them.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct HeldAt<'a> {
+    /// u_n and its compensated sum.
+    pub u: Option<&'a [usize]>,
+    /// The memory: the Prony states, the direct sum's past displacements.
+    pub memory: Option<&'a [usize]>,
+    /// w_n.
+    pub w: Option<&'a [usize]>,
+}
+
+/// A history as a checkpoint saved it, each vector at the dofs the history holds it
+/// ([`History::held_at`]), for [`History::restore`].
+#[derive(Debug)]
 pub struct SavedHistory {
     pub n: usize,
     pub k: f64,
@@ -398,6 +414,7 @@ pub struct SavedHistory {
 }
 
 /// The memory state a checkpoint saved.
+#[derive(Debug)]
 pub enum SavedMemory {
     None,
     /// The Prony terms with their weights, one-step decays and states.
@@ -531,10 +548,14 @@ impl History {
         !matches!(self.memory, Memory::None)
     }
 
-    /// The dofs at which the memory (the Prony states, the direct sum's past rows) is held
-    /// (None: every one): a resume reads it there alone (`Checkpoint::saved`).
-    pub fn memory_dofs(&self) -> Option<&[usize]> {
-        self.holds.dofs()
+    /// The dofs at which u_n and the memory (the Prony states, the direct sum's past rows)
+    /// are held (None: every one): a resume reads them there alone (`Checkpoint::saved`).
+    pub fn held_at(&self) -> HeldAt<'_> {
+        HeldAt {
+            u: self.holds.local(),
+            memory: self.holds.dofs(),
+            w: None,
+        }
     }
 
     /// The memory as a checkpoint saves it, every dof's, one vector at a time into `each`
@@ -609,11 +630,14 @@ impl History {
 
     /// Takes back a saved history into this one, freshly built from the same scene (a
     /// resume): the memory must be of the kind this one plans, with the same Prony weights
-    /// and, up to the rounding of e^{−b k}, the same decays. A checkpoint holds every dof
-    /// (the sizes were checked by it); this history keeps those it holds.
+    /// and, up to the rounding of e^{−b k}, the same decays. Its vectors are this history's
+    /// dofs' ([`History::held_at`]: the checkpoint read them there).
     pub fn restore(&mut self, saved: SavedHistory) -> Result<()> {
-        let n_dofs = saved.u.len();
         let mismatch = |what: &str| crate::Error::input(memory_mismatch(what));
+        let u = [&saved.u, &saved.u_sum, &saved.u_comp];
+        if u.iter().any(|v| v.len() != self.u.len()) {
+            return Err(mismatch("held at other dofs than this rank's"));
+        }
         match (&mut self.memory, saved.memory) {
             (Memory::None, SavedMemory::None) => {}
             (Memory::Prony(terms), SavedMemory::Prony(stored)) => {
@@ -633,19 +657,18 @@ impl History {
                             s.a, s.decay
                         )));
                     }
-                    let Some(m) = held_part(self.holds.dofs(), n_dofs, s.m) else {
+                    if s.m.len() != t.m.len() {
                         return Err(mismatch(&format!("term {i} of the wrong size")));
-                    };
-                    *t = PronyTerm { m, ..s };
+                    }
+                    *t = s;
                 }
             }
             (Memory::Direct { past, r_lag }, SavedMemory::Direct(rows)) => {
-                let dofs = self.holds.dofs();
-                let held = rows.into_iter().map(|u| held_part(dofs, n_dofs, u));
-                let Some(held) = held.collect() else {
+                let n_kept = self.holds.dofs().map_or(self.u.len(), <[usize]>::len);
+                if rows.iter().any(|row| row.len() != n_kept) {
                     return Err(mismatch("a past row of the wrong size"));
-                };
-                *past = held;
+                }
+                *past = rows;
                 r_lag.clear();
             }
             (_, SavedMemory::None) => return Err(mismatch("absent (no relaxation)")),
@@ -654,13 +677,9 @@ impl History {
         }
         self.k = saved.k;
         self.n = saved.n;
-        let held = |v: Vec<f64>| match self.holds.local() {
-            None => v,
-            dofs => at(dofs, &v),
-        };
-        self.u = held(saved.u);
-        self.u_sum = held(saved.u_sum);
-        self.u_comp = held(saved.u_comp);
+        self.u = saved.u;
+        self.u_sum = saved.u_sum;
+        self.u_comp = saved.u_comp;
         Ok(())
     }
 
@@ -730,17 +749,6 @@ fn add_compensated(
     }
 }
 
-/// A saved vector of the memory, whole (`n_dofs` values) or read at the dofs `dofs` that a
-/// history holds its memory at already (`Checkpoint::saved` with
-/// [`History::memory_dofs`]), at those dofs; None for another size.
-fn held_part(dofs: Option<&[usize]>, n_dofs: usize, v: Vec<f64>) -> Option<Vec<f64>> {
-    match v.len() {
-        l if l == n_dofs => Some(at(dofs, &v)),
-        l if dofs.is_some_and(|d| d.len() == l) => Some(v),
-        _ => None,
-    }
-}
-
 /// The values of the whole vector `v` at the dofs `kept` (all of it without).
 pub(crate) fn at(kept: Option<&[usize]>, v: &[f64]) -> Vec<f64> {
     match kept {
@@ -787,18 +795,29 @@ mod tests {
         (kernel, [two, exact])
     }
 
-    /// The state a checkpoint saves of the whole history `h`.
-    fn saved(h: &History) -> SavedHistory {
+    /// The state a checkpoint saves of the whole history `h`, as a resume reads it at the
+    /// dofs `held` (`Checkpoint::saved`).
+    fn saved(h: &History, held: HeldAt) -> SavedHistory {
+        let memory = |v: &[f64]| at(held.memory, v);
         SavedHistory {
             n: h.n,
             k: h.k,
-            u: h.u.clone(),
-            u_sum: h.u_sum.clone(),
-            u_comp: h.u_comp.clone(),
+            u: at(held.u, &h.u),
+            u_sum: at(held.u, &h.u_sum),
+            u_comp: at(held.u, &h.u_comp),
             memory: match &h.memory {
                 Memory::None => SavedMemory::None,
-                Memory::Prony(terms) => SavedMemory::Prony(terms.clone()),
-                Memory::Direct { past, .. } => SavedMemory::Direct(past.clone()),
+                Memory::Prony(terms) => SavedMemory::Prony(
+                    (terms.iter())
+                        .map(|t| PronyTerm {
+                            m: memory(&t.m),
+                            ..t.clone()
+                        })
+                        .collect(),
+                ),
+                Memory::Direct { past, .. } => {
+                    SavedMemory::Direct(past.iter().map(|row| memory(row)).collect())
+                }
             },
         }
     }
@@ -885,7 +904,7 @@ mod tests {
                 for n in 0..60 {
                     if n == 30 {
                         part = History::holding(4, k, &plans, holds.clone());
-                        part.restore(saved(&whole)).unwrap();
+                        part.restore(saved(&whole, part.held_at())).unwrap();
                     }
                     assert!(whole.memory_into(Some(&kernel), &mut m));
                     assert!(part.memory_into(Some(&kernel), &mut mp));
@@ -980,7 +999,7 @@ mod tests {
                 if n == 25 {
                     // A resume on rank 1 from the whole saved state goes on as before.
                     ranks[1] = holding(1);
-                    ranks[1].restore(saved(&whole)).unwrap();
+                    ranks[1].restore(saved(&whole, ranks[1].held_at())).unwrap();
                 }
             }
         }

@@ -35,7 +35,7 @@ use crate::fem::{
     constraints, leading_block, mul_add, mul_add_rows, Discretization, RowsPair, Sparse,
     SymmetricPair,
 };
-use crate::history::{History, Holds, LoopState, Plans, SavedLoop};
+use crate::history::{HeldAt, History, Holds, LoopState, Plans, SavedLoop};
 use crate::ranks::Own;
 use crate::scene::{self, Scene};
 use crate::solver::choice::{Build, Descriptor};
@@ -408,22 +408,27 @@ impl<'p> TimeLoop<'p> {
         Ok(())
     }
 
-    /// Where the history holds the memory, the Prony states or a direct sum's past rows
-    /// (None: whole): a resume reads it there alone (`Checkpoint::saved`).
-    pub fn memory_dofs(&self) -> Option<&[usize]> {
-        self.history.memory_dofs()
+    /// Where the loop holds u_n, the memory (the Prony states or a direct sum's past rows)
+    /// and w_n: a resume reads them there alone (`Checkpoint::saved`).
+    pub fn held_at(&self) -> HeldAt<'_> {
+        HeldAt {
+            w: self.held.as_deref(),
+            ..self.history.held_at()
+        }
     }
 
     /// Takes back the state a checkpoint saved (a resume), into this loop built from the
-    /// same scene; the sizes were checked by the checkpoint, the memory's kind and terms
-    /// are checked here. Its every past row is the checkpoint's.
+    /// same scene, its vectors at the dofs this loop holds them ([`TimeLoop::held_at`]);
+    /// the sizes were checked by the checkpoint, the memory's kind and terms are checked
+    /// here. Its every past row is the checkpoint's.
     pub fn restore(&mut self, saved: SavedLoop) -> Result<()> {
+        if saved.w.len() != self.w.len() {
+            let why = "the checkpoint's w_n was read at other dofs than this rank holds";
+            return Err(crate::Error::input(why));
+        }
         self.history.restore(saved.history)?;
         self.past_saved = self.history.n;
-        self.w = match &self.held {
-            Some(held) => held.iter().map(|&i| saved.w[i]).collect(),
-            None => saved.w,
-        };
+        self.w = saved.w;
         self.z = saved.z;
         self.z_before = saved.z_before;
         Ok(())

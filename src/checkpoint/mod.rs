@@ -245,13 +245,9 @@ pub struct Checkpoint {
     pub time: f64,
     pub k: f64,
     pub id: Identity,
-    /// The dofs of its vectors (their length when read: [`Checkpoint::saved`] hands the
-    /// vectors over).
+    /// The dofs of its vectors u_n, its compensated sum and w_n, which stay in the file
+    /// until a resume reads each rank's part of them ([`Checkpoint::saved`]).
     pub n_dofs: usize,
-    pub u: Vec<f64>,
-    pub u_sum: Vec<f64>,
-    pub u_comp: Vec<f64>,
-    pub w: Vec<f64>,
     pub z: Vec<f64>,
     /// z_{n−2}; z itself for a checkpoint of format version < 4 (`Z_BEFORE_VERSION`).
     pub z_before: Vec<f64>,

@@ -3,6 +3,7 @@
 use super::h5::{h5_file, has_hdf5_signature, str_attr_of, OpenMode, HDF5_SIGNATURE};
 use super::seal;
 use super::{Checkpoint, Identity, RunLog, StoredMemory, FORMAT, FORMAT_VERSION};
+use crate::history::HeldAt;
 use crate::{Error, Result};
 use hdf5::types::VarLenUnicode;
 use hdf5_metno as hdf5;
@@ -10,25 +11,42 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 impl Checkpoint {
-    /// The Prony states m^(i)_n, every dof's, term by term, read from the file (a resume
-    /// reads its own dofs' alone: [`Checkpoint::saved`]); none for another memory.
-    pub fn prony_states(&self) -> Result<Vec<Vec<f64>>> {
-        match self.memory {
-            StoredMemory::Prony { .. } => self.prony_states_at(None),
-            _ => Ok(Vec::new()),
-        }
-    }
-
     /// The Prony states term by term, each at the dofs `at` alone (None: every dof),
     /// read from the file a term at a time.
     pub(super) fn prony_states_at(&self, at: Option<&[usize]>) -> Result<Vec<Vec<f64>>> {
-        prony_states(&self.path, at).map_err(|e| {
-            Error::input(format!(
-                "{}: damaged checkpoint: memory/prony_state unreadable ({e}); resume from an \
-                 intact checkpoint or start the run again",
-                self.path.display()
-            ))
+        self.read_file("memory/prony_state", |f| prony_states(f, at))
+    }
+
+    /// u_n, its compensated sum, the compensation and w_n, each at the dofs `held` gives
+    /// (`n_dofs` values where None), read from the file 2^20 values at a time.
+    pub(super) fn state_at(&self, held: &HeldAt) -> Result<[Vec<f64>; 4]> {
+        self.read_file("/state", |f| {
+            let read = |name: &str, at| row_at(&f.dataset(name)?, None, self.n_dofs, at);
+            Ok([
+                read("state/u", held.u)?,
+                read("state/u_sum", held.u)?,
+                read("state/u_comp", held.u)?,
+                read("state/w", held.w)?,
+            ])
         })
+    }
+
+    /// What `read` reads of the checkpoint's file, its failure told as a damaged
+    /// checkpoint's (`what`: the datasets it reads).
+    fn read_file<T>(
+        &self,
+        what: &str,
+        read: impl FnOnce(&hdf5::File) -> hdf5::Result<T>,
+    ) -> Result<T> {
+        h5_file(OpenMode::Read, &self.path)
+            .and_then(|f| read(&f))
+            .map_err(|e| {
+                Error::input(format!(
+                    "{}: damaged checkpoint: {what} unreadable ({e}); resume from an intact \
+                 checkpoint or start the run again",
+                    self.path.display()
+                ))
+            })
     }
 
     /// The directory the checkpoint is in.
@@ -163,7 +181,13 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
     let memory = read_memory(f)?;
     let log = read_log(f, n)?;
     let id = read_identity(f)?;
-    let u = vec("state/u")?;
+    // u_n, its sums and w_n stay in the file: a resume reads each rank's part of them.
+    let n_dofs = length(f, "state/u")?;
+    for name in ["state/u_sum", "state/u_comp", "state/w"] {
+        if length(f, name)? != n_dofs {
+            return Err(format!("{name} and state/u differ in length").into());
+        }
+    }
     let cp = Checkpoint {
         path: path.to_path_buf(),
         version,
@@ -171,11 +195,7 @@ pub(super) fn read_body(f: &hdf5::File, path: &Path, version: u32) -> hdf5::Resu
         time,
         k,
         id,
-        n_dofs: u.len(),
-        u,
-        u_sum: vec("state/u_sum")?,
-        u_comp: vec("state/u_comp")?,
-        w: vec("state/w")?,
+        n_dofs,
         z: vec("state/z")?,
         z_before: if version >= super::Z_BEFORE_VERSION || f.link_exists("state/z_before") {
             vec("state/z_before")?
@@ -247,27 +267,65 @@ fn read_memory(f: &hdf5::File) -> hdf5::Result<StoredMemory> {
     })
 }
 
-/// The Prony states m^(i)_n of the checkpoint at `path`, term by term, each at the dofs
-/// `at` alone (increasing, each below the states' width; None: every dof): one term's row
-/// at a time is read whole.
-fn prony_states(path: &Path, at: Option<&[usize]>) -> hdf5::Result<Vec<Vec<f64>>> {
-    let f = h5_file(OpenMode::Read, path)?;
+/// The length of the 1-D dataset `name`.
+fn length(f: &hdf5::File, name: &str) -> hdf5::Result<usize> {
+    match f.dataset(name)?.shape()[..] {
+        [len] => Ok(len),
+        _ => Err(format!("{name} is not a vector").into()),
+    }
+}
+
+/// The values a resume reads of a vector at a time: 2^20 (8 MiB), as the CRC check reads.
+const CHUNK: usize = 1 << 20;
+
+/// Row `row` of the f64 dataset `ds` (None: `ds` is a vector), `len` values, at the dofs
+/// `at` alone (increasing, each below `len`; None: every one), read `CHUNK` values at a
+/// time, so that a rank that keeps some dofs alone never holds the whole row.
+fn row_at(
+    ds: &hdf5::Dataset,
+    row: Option<usize>,
+    len: usize,
+    at: Option<&[usize]>,
+) -> hdf5::Result<Vec<f64>> {
+    let read = |r: std::ops::Range<usize>| -> hdf5::Result<Vec<f64>> {
+        if r.is_empty() {
+            return Ok(Vec::new());
+        }
+        let values = match row {
+            None => ds.read_slice_1d::<f64, _>(ndarray::s![r])?,
+            Some(i) => ds.read_slice_1d::<f64, _>(ndarray::s![i, r])?,
+        };
+        Ok(values.into_raw_vec_and_offset().0)
+    };
+    let Some(at) = at else { return read(0..len) };
+    if at.last().is_some_and(|&d| d >= len) {
+        return Err(format!("{} holds {len} values, fewer than the dofs read", ds.name()).into());
+    }
+    let mut out = Vec::with_capacity(at.len());
+    let mut rest = at;
+    while let Some(&first) = rest.first() {
+        let start = first - first % CHUNK;
+        let end = (start + CHUNK).min(len);
+        let values = read(start..end)?;
+        let here = rest.partition_point(|&d| d < end);
+        out.extend(rest[..here].iter().map(|&d| values[d - start]));
+        rest = &rest[here..];
+    }
+    Ok(out)
+}
+
+/// The Prony states m^(i)_n of the checkpoint's file `f`, term by term, each at the dofs
+/// `at` alone (increasing, each below the states' width; None: every dof), read
+/// [`row_at`].
+fn prony_states(f: &hdf5::File, at: Option<&[usize]>) -> hdf5::Result<Vec<Vec<f64>>> {
     let state = f.dataset("memory/prony_state")?;
     let (terms, width) = match state.shape()[..] {
         [terms, width] => (terms, width),
         _ => return Err("memory/prony_state is not terms × dofs".into()),
     };
-    let read = |i: usize| -> hdf5::Result<Vec<f64>> {
-        if width == 0 {
-            return Ok(Vec::new());
-        }
-        let row = state.read_slice_1d::<f64, _>(ndarray::s![i, ..])?;
-        Ok(match at {
-            None => row.to_vec(),
-            Some(at) => at.iter().map(|&d| row[d]).collect(),
-        })
-    };
-    (0..terms).map(read).collect()
+    (0..terms)
+        .map(|i| row_at(&state, Some(i), width, at))
+        .collect()
 }
 
 /// `/run`: the iteration counts of steps 0..n and the run's worst violation and residual.
@@ -344,4 +402,33 @@ fn read_series(f: &hdf5::File, n: usize) -> hdf5::Result<Vec<crate::output::Fram
         return Err(format!("/series/step is not a list of steps before step {n}").into());
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vector and a row of a matrix longer than one chunk, read at dofs on both sides of
+    /// the chunks' border, at none, and whole: each value is the file's.
+    #[test]
+    fn a_row_read_at_some_dofs_has_their_values_across_chunks() {
+        let dir = tempfile::tempdir().unwrap();
+        let len = CHUNK + 5;
+        let value = |r: usize, j: usize| (r * len + j) as f64 / 3.0;
+        let f = h5_file(OpenMode::Create, dir.path().join("rows.h5")).unwrap();
+        let rows: Vec<f64> = (0..2 * len).map(|i| value(i / len, i % len)).collect();
+        let vector = f.new_dataset::<f64>().shape([len]).create("v").unwrap();
+        vector.write_raw(&rows[len..]).unwrap();
+        let matrix = f.new_dataset::<f64>().shape([2, len]).create("m").unwrap();
+        matrix.write_raw(&rows).unwrap();
+        let at = [0, 3, CHUNK - 1, CHUNK, CHUNK + 4];
+        for (ds, row) in [(&vector, None), (&matrix, Some(1))] {
+            let got = row_at(ds, row, len, Some(&at)).unwrap();
+            let expected: Vec<f64> = at.iter().map(|&j| value(1, j)).collect();
+            assert_eq!(got, expected, "{row:?}");
+            assert!(row_at(ds, row, len, Some(&[])).unwrap().is_empty());
+            assert_eq!(row_at(ds, row, len, None).unwrap(), rows[len..]);
+            assert!(row_at(ds, row, len, Some(&[len])).is_err(), "past the end");
+        }
+    }
 }

@@ -5,7 +5,7 @@ use super::history_file::read_history;
 use super::{groups_fingerprint, mesh_fingerprint, physics_signature, Checkpoint, StoredMemory};
 use crate::fem::Discretization;
 use crate::history::{
-    memory_mismatch, Plans, PronyTerm, SavedHistory, SavedLoop, SavedMemory, Stored,
+    memory_mismatch, HeldAt, Plans, PronyTerm, SavedHistory, SavedLoop, SavedMemory, Stored,
 };
 use crate::mesh::Mesh;
 use crate::scene::{self, Scene};
@@ -248,24 +248,16 @@ impl Checkpoint {
             .map_err(|e| Error::input(format!("{}: {e}", self.path.display())))
     }
 
-    /// The saved state of the loop (its vectors handed over: the checkpoint keeps their
-    /// length alone, `n_dofs`), checked against the sizes of the scene's discretization
-    /// (`n_free` dofs, `n_rows` contact and friction rows); the memory is read now, each
-    /// vector kept at the dofs `memory_at` alone where given (`TimeLoop::memory_dofs`): the
-    /// Prony states from this file a term at a time, or a general kernel's past
-    /// displacements from the history file, their hash checked.
-    pub fn saved(
-        &mut self,
-        n_free: usize,
-        n_rows: usize,
-        memory_at: Option<&[usize]>,
-    ) -> Result<SavedLoop> {
+    /// The saved state of the loop, checked against the sizes of the scene's discretization
+    /// (`n_free` dofs, `n_rows` contact and friction rows), each vector read from the file
+    /// now at the dofs the loop holds it (`held`, `TimeLoop::held_at`): u_n, its sums and
+    /// w_n, and the memory, the Prony states from this file a term at a time, or a general
+    /// kernel's past displacements from the history file, their hash checked. z and
+    /// z_before are handed over.
+    pub fn saved(&mut self, n_free: usize, n_rows: usize, held: HeldAt) -> Result<SavedLoop> {
         let shown = self.path.display();
         let sizes = [
-            ("state/u", self.u.len(), n_free),
-            ("state/u_sum", self.u_sum.len(), n_free),
-            ("state/u_comp", self.u_comp.len(), n_free),
-            ("state/w", self.w.len(), n_free),
+            ("state/u", self.n_dofs, n_free),
             ("state/z", self.z.len(), n_rows),
             ("state/z_before", self.z_before.len(), n_rows),
         ];
@@ -285,11 +277,11 @@ impl Checkpoint {
                 group,
                 width,
             } => {
-                if *width != n_free || memory_at.is_some_and(|at| at.iter().any(|&d| d >= n_free)) {
+                if *width != n_free {
                     let what = format!("states of {width} dofs");
                     return Err(Error::input(format!("{shown}: {}", memory_mismatch(&what))));
                 }
-                let states = self.prony_states_at(memory_at)?;
+                let states = self.prony_states_at(held.memory)?;
                 let term = |(i, m)| PronyTerm {
                     a: a[i],
                     decay: decay[i],
@@ -306,22 +298,22 @@ impl Checkpoint {
                     return Err(Error::input(format!("{shown}: {}", memory_mismatch(&what))));
                 }
                 let path = self.dir().join(file);
-                let past = read_history(&path, (*rows, *hash), n_free, &self.id, memory_at)?;
+                let past = read_history(&path, (*rows, *hash), n_free, &self.id, held.memory)?;
                 SavedMemory::Direct(past)
             }
         };
-        // Handed over, not copied: a rank holds the whole vectors once while it restores.
+        let [u, u_sum, u_comp, w] = self.state_at(&held)?;
         let take = std::mem::take;
         Ok(SavedLoop {
             history: SavedHistory {
                 n: self.n,
                 k: self.k,
-                u: take(&mut self.u),
-                u_sum: take(&mut self.u_sum),
-                u_comp: take(&mut self.u_comp),
+                u,
+                u_sum,
+                u_comp,
                 memory,
             },
-            w: take(&mut self.w),
+            w,
             z: take(&mut self.z),
             z_before: take(&mut self.z_before),
         })

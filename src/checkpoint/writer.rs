@@ -471,7 +471,7 @@ impl Disk {
 mod tests {
     use super::super::history_file::read_history;
     use super::*;
-    use crate::history::{History, QUEUE_BYTES};
+    use crate::history::{HeldAt, History, QUEUE_BYTES};
 
     /// A run's identity for checkpoints of `width` free dofs in 2D (and one or two held).
     fn identity(run_id: &str, width: usize) -> Identity {
@@ -493,14 +493,14 @@ mod tests {
 
     /// The checkpoint of step n of `width` dofs, each vector of the state n.
     fn snapshot(n: usize, width: usize, memory: SnapshotMemory) -> Snapshot {
-        let vector = vec![n as f64; width];
+        let vector = |c: usize| vector_of(n, c, width);
         Snapshot {
             n,
             k: 0.1,
-            u: vector.clone(),
-            u_sum: vector.clone(),
-            u_comp: vector.clone(),
-            w: vector,
+            u: vector(0),
+            u_sum: vector(1),
+            u_comp: vector(2),
+            w: vector(3),
             z: Vec::new(),
             z_before: Vec::new(),
             active: Vec::new(),
@@ -511,6 +511,13 @@ mod tests {
             },
             frames: Vec::new(),
         }
+    }
+
+    /// Vector `c` (u_n, its sum, its compensation, w_n) of [`snapshot`]'s step `n`.
+    fn vector_of(n: usize, c: usize, width: usize) -> Vec<f64> {
+        (0..width)
+            .map(|j| (n * 1000 + c * 100 + j) as f64)
+            .collect()
     }
 
     /// The Prony states reach the file as they come, through HDF5 at the first checkpoint
@@ -544,14 +551,26 @@ mod tests {
                 matches!(cp.memory, StoredMemory::Prony { .. }),
                 "a Prony checkpoint"
             );
-            let m = cp.prony_states().unwrap();
+            let m = cp.prony_states_at(None).unwrap();
             for (i, m) in m.iter().enumerate() {
                 assert_eq!(m, &state(n, i), "step {n}, term {i}");
             }
-            // A resume's part of them: at some dofs alone, read a term at a time.
+            // A resume's part of them: at some dofs alone, read a term at a time, and u_n
+            // and w_n at others.
             let mut cp = cp;
-            let part = cp.saved(width, 0, Some(&[1, 3])).unwrap().history.memory;
-            let crate::history::SavedMemory::Prony(part) = part else {
+            let held = HeldAt {
+                u: Some(&[0, 4]),
+                memory: Some(&[1, 3]),
+                w: Some(&[2]),
+            };
+            let saved = cp.saved(width, 0, held).unwrap();
+            let h = &saved.history;
+            for (c, v) in [&h.u, &h.u_sum, &h.u_comp].into_iter().enumerate() {
+                let whole = vector_of(n, c, width);
+                assert_eq!(v, &[whole[0], whole[4]], "step {n}, vector {c}");
+            }
+            assert_eq!(saved.w, [vector_of(n, 3, width)[2]], "step {n}: w_n");
+            let crate::history::SavedMemory::Prony(part) = saved.history.memory else {
                 panic!("a Prony memory")
             };
             assert_eq!(part.len(), m.len());

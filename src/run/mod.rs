@@ -454,7 +454,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
     let mut tl = solving.time_loop(&scene, &disc)?;
     // The checkpoint goes once restored: the follower holds its part of the state alone.
     if let Some(mut cp) = cp {
-        tl.restore(cp.saved(disc.n_dofs, tl.rows().len(), tl.memory_dofs())?)?;
+        tl.restore(cp.saved(disc.n_dofs, tl.rows().len(), tl.held_at())?)?;
     }
     match opts.ranks.first_says(0)? {
         0 => {}
@@ -553,7 +553,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     hold_memory_of_first(opts.ranks, &mut ready);
     first_lets_go_of_cells(opts.ranks, &mut ready);
     let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
-    let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.memory_dofs())?;
+    let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.held_at())?;
     tl.restore(saved)
         .map_err(|e| Error::input(format!("{}: {e}", checkpoint_path.display())))?;
     // The last moment a signal ends the resume unchanged; after it, it stops after a step.

@@ -13,6 +13,7 @@ use common::{cli, frames, paper_scene, repo, BIN};
 use std::path::Path;
 use std::process::Command;
 use viscontact::checkpoint::Checkpoint;
+use viscontact::history::HeldAt;
 use viscontact::output::read::{read_frame, read_vtkhdf, FrameRef};
 
 const COUNTS: [&str; 4] = ["1", "2", "3", "4"];
@@ -44,13 +45,14 @@ fn run_with(scene: &Path, out: &Path, threads: &str, set: &[&str]) {
 /// checksums of its frames (which hold the run id; the frames are compared themselves).
 fn checkpoint(dir: &Path) -> String {
     let mut cp = Checkpoint::read(&dir.join("checkpoint.h5")).unwrap();
-    // The Prony states stay in the file until read (a resume reads its part of them).
-    let states = cp.prony_states().unwrap();
+    // The vectors stay in the file until read (a resume reads its part of them): every
+    // dof's here.
+    let saved = (cp.saved(cp.n_dofs, cp.z.len(), HeldAt::default())).unwrap();
     cp.path = Default::default();
     cp.id.run_id.clear();
     cp.frames = None;
     // Debug writes every f64 so that it reads back to the same bits.
-    format!("{cp:?}\n{states:?}")
+    format!("{cp:?}\n{saved:?}")
 }
 
 /// Every frame of a run, as bytes (.vtu/.pvd without the run id) or, for a .vtkhdf, as
