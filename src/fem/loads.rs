@@ -8,7 +8,7 @@
 
 use super::{Cell, CellSource, DofIndices, Frames, Points};
 use crate::expr::{Point, Scalar};
-use crate::mesh::{fmt_point, Mesh};
+use crate::mesh::{facet_rule, fmt_point, Mesh};
 use crate::scene::Scene;
 use crate::{Error, Result};
 use std::collections::HashSet;
@@ -33,6 +33,20 @@ pub enum Source {
 struct VectorLoad {
     source: Source,
     qps: Vec<Qp>,
+    /// A traction's every facet, where its points are a part and it visits every one all
+    /// the same (rank 0 of several: [`Loads::visit_every`]); empty otherwise.
+    facets: Vec<LoadFacet>,
+}
+
+/// A facet of a traction's boundary as rank 0 of several keeps every one: its nodes (an
+/// edge's second repeated) and its rule's weights ([`Facet::weights`]), from which
+/// [`facet_rule`] makes its points again with their bits (32 bytes a facet, where its
+/// points take 80 bytes each, six a triangle).
+///
+/// [`Facet::weights`]: crate::mesh::Facet::weights
+struct LoadFacet {
+    nodes: [u32; 3],
+    weights: [f64; 2],
 }
 
 /// All loads of a scene, ready to be evaluated at any t.
@@ -42,7 +56,7 @@ pub struct Loads {
     dim: usize,
     /// Whether only the points that reach some nodes are kept ([`Loads::keep_reaching`]).
     part: bool,
-    /// Whether every traction's points are kept all the same (rank 0 of several:
+    /// Whether every traction's facets are kept all the same (rank 0 of several:
     /// [`Keep::ReachingAndTractions`]).
     every_traction: bool,
 }
@@ -55,14 +69,15 @@ pub enum Keep<'r> {
     /// Those that put a value into one of the nodes `reaches` (increasing): a follower
     /// rank's own rows' ([`Loads::keep_reaching`]).
     Reaching(&'r [usize]),
-    /// Those, and every traction's (a boundary's): rank 0 of several, which makes a body
-    /// force's other points again from its cells when it reads every value
-    /// ([`Loads::visit_every`]).
+    /// Those, and every traction's facets (a boundary's): rank 0 of several, which makes
+    /// the other points again when it reads every value, a traction's from those facets,
+    /// a body force's from its cells ([`Loads::visit_every`]).
     ReachingAndTractions(&'r [usize]),
 }
 
 impl<'r> Keep<'r> {
-    /// The nodes whose points are kept, and whether every traction's are: None keeps all.
+    /// The nodes whose points are kept, and whether every traction's facets are: None
+    /// keeps all.
     fn reaches(self) -> Option<(&'r [usize], bool)> {
         match self {
             Keep::Every => None,
@@ -117,16 +132,23 @@ impl Loads {
     }
 
     /// Keeps the quadrature points that put a value into one of the nodes `reaches`
-    /// (increasing) alone (with `every_traction`, every traction's too): the terms that reach those
-    /// nodes' dofs stay, in their order, so those entries of ⟨f(t), φ⟩ keep their bits, and
+    /// (increasing) alone, and with `every_traction` every traction's facets, of which
+    /// [`Loads::visit_every`] makes the points again: the terms that reach those nodes'
+    /// dofs stay, in their order, so those entries of ⟨f(t), φ⟩ keep their bits, and
     /// the others become partial (on one of several MPI ranks: its own rows; the others'
     /// come with b_n's exchange where it reads them). Marks the loads as a part
     /// ([`Loads::is_part`]).
     pub fn keep_reaching(&mut self, reaches: &[usize], every_traction: bool) {
+        // A facet's points, consecutive: an edge's two, a triangle's six.
+        let per_facet = if self.dim == 2 { 2 } else { 6 };
         for load in &mut self.loads {
             if every_traction && matches!(load.source, Source::Traction(_)) {
-                load.qps.shrink_to_fit();
-                continue;
+                load.facets = (load.qps.chunks_exact(per_facet))
+                    .map(|f| LoadFacet {
+                        nodes: [0, 1, 2].map(|k| f[0].nodes[k]),
+                        weights: [f[0].weight, f[per_facet - 1].weight],
+                    })
+                    .collect();
             }
             load.qps.retain(|q| {
                 let reached = |n: u32| reaches.binary_search(&(n as usize)).is_ok();
@@ -144,7 +166,7 @@ impl Loads {
     }
 
     /// Whether [`Loads::visit_every`] sees every value: one process's loads, and rank 0's
-    /// of several (every traction's points kept, a body force's made again); not a
+    /// of several (every traction's and body force's points made again); not a
     /// follower's, which a value that is not finite elsewhere does not reach.
     pub fn sees_every_value(&self) -> bool {
         !self.part || self.every_traction
@@ -190,9 +212,10 @@ impl Loads {
     }
 
     /// [`Loads::visit`] of every quadrature point, the same terms in the same order, where
-    /// these loads are a part that keeps every traction's points (rank 0 of several,
-    /// [`Loads::sees_every_value`]): a body force's points are made again, cell by cell,
-    /// from `cells` (the cells and the nodes' places), as [`Loads::new`] made them. history.csv's
+    /// these loads are a part that keeps every traction's facets (rank 0 of several,
+    /// [`Loads::sees_every_value`]): their points are made again, a traction's facet by
+    /// facet and a body force's cell by cell from `cells` (the cells and the nodes'
+    /// places), as [`Loads::new`] made them, the same bits in the same order. history.csv's
     /// resultants and reactions read them, and rank 0 finds there a value that is not
     /// finite on another rank's part. Any other loads are visited as they are.
     pub fn visit_every(
@@ -215,13 +238,20 @@ impl Loads {
     ) -> Result<()> {
         for (l, load) in self.loads.iter().enumerate() {
             let at = (l, load.source);
-            let Some((cells, nodes)) = making.filter(|_| matches!(load.source, Source::Body(_)))
-            else {
+            let Some((cells, nodes)) = making else {
                 for q in &load.qps {
                     self.put_point(at, q, (t, scene), &mut put)?;
                 }
                 continue;
             };
+            if let Source::Traction(_) = load.source {
+                for f in &load.facets {
+                    for q in facet_points(f, self.dim, nodes) {
+                        self.put_point(at, &q, (t, scene), &mut put)?;
+                    }
+                }
+                continue;
+            }
             let mut failed = Ok(());
             cells.each(|_, cell| {
                 for (phi, weight) in body_rule(cell) {
@@ -329,20 +359,37 @@ fn traction(
     let mut qps = Vec::new();
     for f in facets {
         let fnodes = f.nodes();
-        let nodes = [0, 1, 2, 3].map(|k| fnodes[k.min(fnodes.len() - 1)] as u32);
-        for (p, weight, phi) in f.quadrature(mesh) {
-            qps.push(Qp {
-                p,
-                weight,
-                nodes,
-                phi: [phi[0], phi[1], phi[2], 0.0],
-            });
-        }
+        let nodes = [0, 1, 2].map(|k| fnodes[k.min(fnodes.len() - 1)] as u32);
+        qps.extend(
+            f.quadrature(mesh)
+                .into_iter()
+                .map(|q| facet_point(nodes, q)),
+        );
     }
     Ok(VectorLoad {
         source: Source::Traction(i),
         qps,
+        facets: Vec::new(),
     })
+}
+
+/// The quadrature point (x, weight, φ) of a facet with the nodes `nodes` (an edge's second
+/// repeated).
+fn facet_point(nodes: [u32; 3], (p, weight, phi): ([f64; 3], f64, [f64; 3])) -> Qp {
+    Qp {
+        p,
+        weight,
+        nodes: [nodes[0], nodes[1], nodes[2], nodes[2]],
+        phi: [phi[0], phi[1], phi[2], 0.0],
+    }
+}
+
+/// The points of the facet `f` of dimension `dim` − 1, the nodes at `nodes`, made again
+/// with the bits [`traction`] made them with.
+fn facet_points(f: &LoadFacet, dim: usize, nodes: Points) -> impl Iterator<Item = Qp> {
+    let (facet, places) = (f.nodes, f.nodes.map(|n| nodes[n as usize]));
+    let rule = facet_rule(places, dim, f.weights);
+    rule.into_iter().map(move |q| facet_point(facet, q))
 }
 
 /// Body force i over every cell (with `reaches`, every cell with one of its nodes), by
@@ -361,6 +408,7 @@ fn body_force(nodes: Points, cells: CellSource, i: usize, reaches: Option<&[usiz
     VectorLoad {
         source: Source::Body(i),
         qps,
+        facets: Vec::new(),
     }
 }
 

@@ -1017,8 +1017,9 @@ impl Discretization {
 
     /// On one of several MPI ranks that keeps its own columns, the loads' quadrature points
     /// that reach its own unknowns alone (`Loads::keep_reaching`; on rank 0, `first`,
-    /// every traction's too, and it makes a body force's others again where it reads
-    /// them: [`Discretization::visit_every_load`]): its rows of f_n keep their bits, the
+    /// every traction's facets too, and it makes the others again, a traction's from
+    /// those, a body force's from its cells, where it reads them:
+    /// [`Discretization::visit_every_load`]): its rows of f_n keep their bits, the
     /// others' rows come from their ranks with b_n's exchange, and a rank holds a body
     /// force's points, four a tetrahedron, for its cells alone. Nothing where the setup
     /// made them so already ([`Discretization::assembled`]).

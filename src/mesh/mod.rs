@@ -100,45 +100,71 @@ impl Facet {
     /// 2-point Gauss on an edge, the 6-point degree-4 Dunavant rule on a triangle. Each point
     /// as (x, weight, φ of the facet's nodes at x; unused entries 0).
     pub fn quadrature(&self, mesh: &Mesh) -> Vec<([f64; 3], f64, [f64; 3])> {
-        let p = self.nodes.map(|n| mesh.nodes[n]);
-        let at = |bary: [f64; 3], weight: f64| {
-            let mut x = [0.0; 3];
-            for (k, xk) in x.iter_mut().enumerate() {
-                *xk = (0..self.count).map(|i| bary[i] * p[i][k]).sum();
-            }
-            (x, weight, bary)
-        };
-        if self.count == 2 {
-            // s ∈ (0, 1) along a → b; φ_a = 1 − s, φ_b = s.
-            let half = 0.5 * self.measure;
-            let g = 0.5 / 3f64.sqrt();
-            let edge = |s: f64| {
-                let x = [0, 1, 2].map(|k| p[0][k] + s * (p[1][k] - p[0][k]));
-                (x, half, [1.0 - s, s, 0.0])
-            };
-            return vec![edge(0.5 - g), edge(0.5 + g)];
-        }
-        // Dunavant (1985), degree 4: two orbits of 3 points.
-        const ORBITS: [(f64, f64, f64); 2] = [
-            (
-                0.445_948_490_915_965,
-                0.108_103_018_168_070,
-                0.223_381_589_678_011,
-            ),
-            (
-                0.091_576_213_509_771,
-                0.816_847_572_980_459,
-                0.109_951_743_655_322,
-            ),
-        ];
-        let mut out = Vec::with_capacity(6);
-        for (a, b, w) in ORBITS {
-            for bary in [[b, a, a], [a, b, a], [a, a, b]] {
-                out.push(at(bary, w * self.measure));
-            }
-        }
-        out
+        facet_rule(
+            self.nodes.map(|n| mesh.nodes[n]),
+            self.count,
+            self.weights(),
+        )
     }
+
+    /// The weights of the orbits of [`Facet::quadrature`]'s rule: an edge's two points
+    /// |e|/2 each, a triangle's two orbits w_o |T|.
+    pub fn weights(&self) -> [f64; 2] {
+        match self.count {
+            2 => [0.5 * self.measure; 2],
+            _ => DUNAVANT.map(|(_, _, w)| w * self.measure),
+        }
+    }
+}
+
+/// Dunavant (1985), degree 4: two orbits of 3 points, (a, b, w): barycentric coordinates
+/// (b, a, a) and their permutations, weight w |T|.
+const DUNAVANT: [(f64, f64, f64); 2] = [
+    (
+        0.445_948_490_915_965,
+        0.108_103_018_168_070,
+        0.223_381_589_678_011,
+    ),
+    (
+        0.091_576_213_509_771,
+        0.816_847_572_980_459,
+        0.109_951_743_655_322,
+    ),
+];
+
+/// The points of [`Facet::quadrature`] on a facet of `count` nodes at the places `p` (a
+/// triangle's three; an edge's first two), its orbits' weights `weights` ([`Facet::weights`]),
+/// as (x, weight, φ of the facet's nodes at x): the same bits from the facet's nodes and
+/// weights alone, which a load that keeps those of every facet of a boundary remakes
+/// its points from (`fem::loads`).
+pub fn facet_rule(
+    p: [[f64; 3]; 3],
+    count: usize,
+    weights: [f64; 2],
+) -> Vec<([f64; 3], f64, [f64; 3])> {
+    let at = |bary: [f64; 3], weight: f64| {
+        let mut x = [0.0; 3];
+        for (k, xk) in x.iter_mut().enumerate() {
+            *xk = (0..count).map(|i| bary[i] * p[i][k]).sum();
+        }
+        (x, weight, bary)
+    };
+    if count == 2 {
+        // s ∈ (0, 1) along a → b; φ_a = 1 − s, φ_b = s.
+        let g = 0.5 / 3f64.sqrt();
+        let edge = |s: f64| {
+            let x = [0, 1, 2].map(|k| p[0][k] + s * (p[1][k] - p[0][k]));
+            (x, weights[0], [1.0 - s, s, 0.0])
+        };
+        return vec![edge(0.5 - g), edge(0.5 + g)];
+    }
+    let mut out = Vec::with_capacity(6);
+    for ((a, b, _), weight) in DUNAVANT.into_iter().zip(weights) {
+        for bary in [[b, a, a], [a, b, a], [a, a, b]] {
+            out.push(at(bary, weight));
+        }
+    }
+    out
 }
 
 /// A physical group of the mesh.
