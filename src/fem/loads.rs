@@ -159,6 +159,13 @@ impl Loads {
         (self.part, self.every_traction) = (true, every_traction);
     }
 
+    /// The nodes of every traction's facets where these loads keep them (rank 0 of
+    /// several: [`Loads::visit_every`] makes their points again from their places).
+    pub fn facet_nodes(&self) -> impl Iterator<Item = usize> + '_ {
+        let facets = self.loads.iter().flat_map(|l| &l.facets);
+        facets.flat_map(|f| f.nodes).map(|n| n as usize)
+    }
+
     /// Whether these are the loads of some nodes alone ([`Loads::keep_reaching`]): an
     /// entry of [`Loads::add`] outside them is partial.
     pub fn is_part(&self) -> bool {

@@ -1393,6 +1393,17 @@ impl Discretization {
         self.nodes = all.some(&increasing(read));
     }
 
+    /// On rank 0 of several that lets go of its cells' vertices (`run`): the places of the
+    /// nodes it still reads alone, a follower's ([`Discretization::keep_places`]), its
+    /// traction facets' (history.csv's resultants make their points again) and `also`
+    /// (its piece's points, history.csv's held nodes, whose moments read them).
+    pub fn first_keeps_places(&mut self, also: impl IntoIterator<Item = usize>) {
+        let mut read: Vec<usize> = self.loads.facet_nodes().collect();
+        read.extend(also);
+        let every = std::mem::take(&mut self.nodes);
+        self.keep_places(&every, &increasing(read));
+    }
+
     /// Its cells: those it holds ([`Discretization::cells`]), or on rank 0 of several
     /// each made from its vertices when it is read; none on a follower rank of several.
     pub fn cell_source(&self) -> CellSource<'_> {

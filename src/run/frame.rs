@@ -298,6 +298,16 @@ impl OwnFrames {
         }
     }
 
+    /// The piece's points, the nodes of its cells (increasing; none where its part has no
+    /// cells).
+    pub fn points(&self) -> &[usize] {
+        match &self.piece {
+            Piece::None => &[],
+            Piece::Mesh(mesh, _) => mesh.points(),
+            Piece::Made(piece, _) => piece.points(),
+        }
+    }
+
     /// On rank 0, whose discretization lets go of its cells' vertices
     /// (`run::first_lets_go_of_cells`): its piece keeps its own cells' materials, from which
     /// it makes them as a follower's does.

@@ -515,7 +515,8 @@ fn hold_memory_of_first(ranks: Ranks, ready: &mut Ready) {
 /// pieces' sums (`consumers::norms_of_pieces`), and rank 0's piece makes its own cells from
 /// their vertices as a follower's does (`OwnFrames::keep_own_cells`). A body force keeps
 /// them: history.csv's resultant of it is made again from every cell at every step
-/// (`Discretization::visit_every_load`).
+/// (`Discretization::visit_every_load`). With them go the places of the nodes it no longer
+/// reads, as on a follower (24 bytes a node of the whole mesh: `first_keeps_places`).
 fn first_lets_go_of_cells(ranks: Ranks, ready: &mut Ready) {
     if ranks.size == 1 || crate::ranks::first_keeps_vertices(&ready.scene) {
         return;
@@ -524,13 +525,19 @@ fn first_lets_go_of_cells(ranks: Ranks, ready: &mut Ready) {
         return;
     };
     pieces.keep_own_cells(&ready.disc);
+    let d = ready.disc.dim;
+    let held = ready.reactions.held.iter().map(|&(dof, _)| dof / d);
+    let read: Vec<usize> = pieces.points().iter().copied().chain(held).collect();
     // Nothing shares the discretization before the time loop's setup.
     let alone = Arc::get_mut(&mut ready.disc);
     debug_assert!(
         alone.is_some(),
         "rank 0's discretization is shared in its setup"
     );
-    alone.map(Discretization::forget_cells);
+    if let Some(disc) = alone {
+        disc.forget_cells();
+        disc.first_keeps_places(read);
+    }
 }
 
 /// Options of `viscontact resume`: those of a run; `out` defaults to the checkpoint's
