@@ -1,8 +1,11 @@
-//! The nodes' places that a mesh and a discretization hold: every node's, or on a follower
-//! rank of several those of the nodes it reads.
+//! The nodes' places that a mesh and a discretization hold: every node's, or on a rank of
+//! several those of the nodes it reads.
 //!
-//! Rank 0 and one process hold every node's, which rank 0's frames, norms and history.csv
-//! read. A follower of a run whose setup spreads never holds every node's (24 bytes a
+//! One process holds every node's, and so does rank 0 of several where it reads every cell
+//! (a frame not in pieces, a body force's resultant in history.csv). Elsewhere rank 0 lets
+//! go of them with its cells' vertices, past its setup, and keeps a follower's and those
+//! that history.csv reads: its held nodes' (their moments) and the traction facets' nodes
+//! (`Discretization::first_keeps_places`). A follower of a run whose setup spreads never holds every node's (24 bytes a
 //! node, 8 a dof of the whole problem): with the mesh it gets those of the boundary
 //! groups' nodes, which its numbering, Γ3's rows and the tractions read, and the centroid
 //! of every node as a number (GAMG's rigid-body modes turn about it); with its part of the
