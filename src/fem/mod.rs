@@ -1376,9 +1376,12 @@ impl Discretization {
     /// places of the nodes it still reads alone ([`Places`]), those of its own unknowns
     /// (GAMG's rigid-body modes), of its rows of K_B and K_R^(0) made after PETSc's setup
     /// (their cells' vertices), of Γ3's rows, of the prescribed dofs (their values at each
-    /// step) and `also` (its piece's points), of every node's places `all` (the mesh's),
-    /// not every node's; every node's where it keeps every column (`own` is None), whose
-    /// GAMG reads every node's.
+    /// step), of the traction facets it keeps (rank 0's: history.csv's resultants make
+    /// their points again) and `also` (its piece's points; on rank 0 history.csv's held
+    /// nodes too, whose moments read them), of every node's places `all` (the mesh's), not
+    /// every node's; every node's where it keeps every column (`own` is None), whose GAMG
+    /// reads every node's. Rank 0 keeps them so where it lets go of its cells' vertices
+    /// (`run`).
     pub fn keep_places(&mut self, all: &Places, also: &[usize]) {
         let Some(own) = &self.own else {
             self.nodes = all.clone();
@@ -1389,19 +1392,9 @@ impl Discretization {
         read.extend(cells.map(|&p| p as usize));
         read.extend(self.contact.iter().chain(&self.friction).map(|r| r.node));
         read.extend(self.prescribed.iter().map(|p| p.node));
+        read.extend(self.loads.facet_nodes());
         read.extend(also);
         self.nodes = all.some(&increasing(read));
-    }
-
-    /// On rank 0 of several that lets go of its cells' vertices (`run`): the places of the
-    /// nodes it still reads alone, a follower's ([`Discretization::keep_places`]), its
-    /// traction facets' (history.csv's resultants make their points again) and `also`
-    /// (its piece's points, history.csv's held nodes, whose moments read them).
-    pub fn first_keeps_places(&mut self, also: impl IntoIterator<Item = usize>) {
-        let mut read: Vec<usize> = self.loads.facet_nodes().collect();
-        read.extend(also);
-        let every = std::mem::take(&mut self.nodes);
-        self.keep_places(&every, &increasing(read));
     }
 
     /// Its cells: those it holds ([`Discretization::cells`]), or on rank 0 of several

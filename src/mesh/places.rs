@@ -5,12 +5,13 @@
 //! (a frame not in pieces, a body force's resultant in history.csv). Elsewhere rank 0 lets
 //! go of them with its cells' vertices, past its setup, and keeps a follower's and those
 //! that history.csv reads: its held nodes' (their moments) and the traction facets' nodes
-//! (`Discretization::first_keeps_places`). A follower of a run whose setup spreads never holds every node's (24 bytes a
-//! node, 8 a dof of the whole problem): with the mesh it gets those of the boundary
-//! groups' nodes, which its numbering, Γ3's rows and the tractions read, and the centroid
-//! of every node as a number (GAMG's rigid-body modes turn about it); with its part of the
-//! cells those of their vertices, which its assembly and its piece of the frames read
-//! ([`Places::held`], [`Places::joined`]; `ranks::mesh`). Past its setup it reads fewer:
+//! (`Discretization::keep_places`). A follower of a run whose setup spreads never holds
+//! every node's (24 bytes a node, 8 a dof of the whole problem): with the mesh it gets
+//! those of the boundary groups' nodes, which its numbering, Γ3's rows and the tractions
+//! read, and the centroid of every node as a number (GAMG's rigid-body modes turn about
+//! it); with its part of the cells those of their vertices, which its assembly and its
+//! piece of the frames read ([`Places::held`], [`Places::joined`]; `ranks::mesh`). Past
+//! its setup it reads fewer:
 //! its rows of K_B and K_R^(0), made after PETSc's setup (`Discretization::own_pair_made`),
 //! read their cells' vertices; GAMG's rigid-body modes its own unknowns' nodes; its piece's
 //! stresses its piece's points; a message Γ3's nodes; the prescribed values, at each step,

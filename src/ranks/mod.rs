@@ -46,8 +46,8 @@
 //! quadrature points that reach its own rows alone (its rows of f_n, with the same bits;
 //! those of other rows it reads come with b_n's exchange), rank 0 every traction's facets
 //! too, and it makes the other points again, a traction's facet by facet and a body
-//! force's cell by cell, where history.csv reads every value (`Discretization::visit_every_load`). The rest is replicated: every other
-//! n-vector, and w_n and b_n where a rank reads them (its own rows, their neighbours',
+//! force's cell by cell, where history.csv reads every value
+//! (`Discretization::visit_every_load`). The rest is replicated: every other n-vector, and w_n and b_n where a rank reads them (its own rows, their neighbours',
 //! Γ3's), so every rank holds the same right side b_n there, bit for bit, and the active
 //! set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*)
 //! owns the output directory (lock, series, history.csv, checkpoints, summary.json) and
@@ -366,8 +366,8 @@ impl Ranks {
     /// then goes back to the system (`resources::return_freed_memory`). A rank keeps the
     /// loads of its own rows alone (`Discretization::keep_own_loads`), rank 0 every
     /// traction's facets too: it makes the other points again (a body force's from its
-    /// cells) for
-    /// history.csv's resultants and reactions, and so sees any value that is not finite.
+    /// cells) for history.csv's resultants and reactions, and so sees any value that is not
+    /// finite.
     /// What goes on to PETSc, the layout included, is [`Own`]; nothing on one rank.
     pub fn keep_own_columns(
         &self,

@@ -516,7 +516,8 @@ fn hold_memory_of_first(ranks: Ranks, ready: &mut Ready) {
 /// their vertices as a follower's does (`OwnFrames::keep_own_cells`). A body force keeps
 /// them: history.csv's resultant of it is made again from every cell at every step
 /// (`Discretization::visit_every_load`). With them go the places of the nodes it no longer
-/// reads, as on a follower (24 bytes a node of the whole mesh: `first_keeps_places`).
+/// reads, as on a follower (24 bytes a node of the whole mesh:
+/// `Discretization::keep_places`).
 fn first_lets_go_of_cells(ranks: Ranks, ready: &mut Ready) {
     if ranks.size == 1 || crate::ranks::first_keeps_vertices(&ready.scene) {
         return;
@@ -536,7 +537,8 @@ fn first_lets_go_of_cells(ranks: Ranks, ready: &mut Ready) {
     );
     if let Some(disc) = alone {
         disc.forget_cells();
-        disc.first_keeps_places(read);
+        let every = std::mem::take(&mut disc.nodes);
+        disc.keep_places(&every, &read);
     }
 }
 
