@@ -267,7 +267,7 @@ impl Ranks {
     }
 
     /// The largest of every rank's `value` (collective on several).
-    fn largest(&self, value: f64) -> Result<f64> {
+    pub fn largest(&self, value: f64) -> Result<f64> {
         match self.size {
             1 => Ok(value),
             _ => mpi::max_real_over_ranks(value),

@@ -104,7 +104,7 @@ impl Observer for Follower<'_> {
     }
 
     fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
-        norms_of_pieces(self.frames.as_ref(), self.disc, tl, self.stop.ranks)?;
+        of_pieces(self.frames.as_ref(), self.disc, tl, self.stop.ranks)?;
         if self.schedule.due.take().is_some() {
             tl.gather_memory(&mut |_| unreachable!("a follower gets no vector of the memory"))?;
         }
@@ -142,8 +142,8 @@ impl Observer for Consumers<'_> {
 
     fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
         let frames = &self.frames;
-        let norms = norms_of_pieces(frames.pieces.as_ref(), &frames.disc, tl, self.stop.ranks)?;
-        self.statistics.norms = norms;
+        let of = of_pieces(frames.pieces.as_ref(), &frames.disc, tl, self.stop.ranks)?;
+        self.statistics.of_pieces = of;
         // A checkpoint of step n + 1 may reach the disk only after the frames and the
         // history rows of steps ≤ n have: their writers run on threads of their own, and a
         // resume keeps the frames and rows before its step (a kill -9 in between lost a
@@ -158,24 +158,39 @@ impl Observer for Consumers<'_> {
     }
 }
 
-/// Where the ranks write their own pieces of the frames (`frames`: this rank's), the squares
-/// of summary.json's norms of the loop's u_n as the ranks' pieces sum them, on rank 0
-/// (`Ranks::sum_at_first`; a follower's own part elsewhere): collective on several, every
-/// rank calls it where the loop starts and after each step, before anything there that
-/// may fail on one rank alone. None where the frames are not in pieces (rank 0 then
-/// computes the norms of every cell itself).
-pub(super) fn norms_of_pieces(
+/// Where the ranks write their own pieces of the frames (`frames`: this rank's), what
+/// summary.json says of the loop's u_n, on rank 0 (a follower's own part elsewhere): the
+/// squares of its norms as the ranks' pieces sum them (`Ranks::sum_at_first`), and
+/// max|u_n| as the largest of the ranks' held values (`Ranks::largest`), which together
+/// cover every dof with the whole's bits. Collective on several: every rank calls it where
+/// the loop starts and after each step, before anything there that may fail on one rank
+/// alone. None where the frames are not in pieces (rank 0 then computes both of every cell
+/// and every dof itself).
+pub(super) fn of_pieces(
     frames: Option<&OwnFrames>,
     disc: &Discretization,
     tl: &TimeLoop,
     ranks: crate::ranks::Ranks,
-) -> Result<Option<[f64; 2]>> {
+) -> Result<Option<OfPieces>> {
     let Some(frames) = frames else {
         return Ok(None);
     };
-    ranks
-        .sum_at_first(frames.norm_parts(disc, tl.u_held()))
-        .map(Some)
+    let norms = ranks.sum_at_first(frames.norm_parts(disc, tl.u_held()))?;
+    let u_max = ranks.largest(largest_abs(tl.u()))?;
+    Ok(Some(OfPieces { norms, u_max }))
+}
+
+/// What summary.json says of u_n where the ranks' pieces compute it ([`of_pieces`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct OfPieces {
+    /// ‖u_n‖²_{L²} and |u_n|²_{H¹}.
+    pub norms: [f64; 2],
+    pub u_max: f64,
+}
+
+/// max|v_i|, a value that is not a number left out (0 for none).
+pub(super) fn largest_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |a, x| a.max(x.abs()))
 }
 
 /// The run-wide numbers of summary.json that depend on every step so far.
@@ -187,9 +202,9 @@ pub(super) struct Statistics {
     pub stick: usize,
     /// The last step solved.
     pub last: Option<usize>,
-    /// ‖u_n‖²_{L²} and |u_n|²_{H¹} of the loop's u_n, where the ranks' pieces sum them
-    /// ([`norms_of_pieces`]).
-    pub norms: Option<[f64; 2]>,
+    /// What summary.json says of the loop's u_n, where the ranks' pieces compute it
+    /// ([`of_pieces`]).
+    pub of_pieces: Option<OfPieces>,
 }
 
 impl Statistics {
@@ -199,7 +214,7 @@ impl Statistics {
             active: 0,
             stick: 0,
             last: None,
-            norms: None,
+            of_pieces: None,
         }
     }
 

@@ -43,8 +43,7 @@ use crate::solver::choice::Descriptor;
 use crate::time_loop::{RunEnd, TimeLoop};
 use crate::{Error, Result};
 use consumers::{
-    norms_of_pieces, Checkpoints, Consumers, Follower, Frames, Progress, Schedule, Statistics,
-    StopRule,
+    of_pieces, Checkpoints, Consumers, Follower, Frames, Progress, Schedule, Statistics, StopRule,
 };
 use dir::DirLock;
 use frame::{open_series, OwnFrames, PieceSetup};
@@ -461,7 +460,7 @@ fn follow(path: &Path, begun: Begun, opts: &RunOptions) -> Result<Outcome> {
         code => return Err(Error::Elsewhere(code)),
     }
     follow_signals(&mut tl, opts);
-    norms_of_pieces(frames.as_ref(), &disc, &tl, opts.ranks)?;
+    of_pieces(frames.as_ref(), &disc, &tl, opts.ranks)?;
     let mut follower = Follower {
         stop: StopRule {
             after: opts.stop_after,
@@ -853,7 +852,7 @@ fn drive(d: Drive) -> Result<Outcome> {
     follow_signals(&mut tl, d.opts);
     let steps_start = Instant::now();
     let (frames, ranks) = (&consumers.frames, d.opts.ranks);
-    consumers.statistics.norms = norms_of_pieces(frames.pieces.as_ref(), d.disc, &tl, ranks)?;
+    consumers.statistics.of_pieces = of_pieces(frames.pieces.as_ref(), d.disc, &tl, ranks)?;
     let ended = tl.run(d.scene.time.steps, &mut consumers);
     let Consumers {
         statistics,

@@ -1,6 +1,6 @@
 //! summary.json (docs/output.md): what a run did, in numbers.
 
-use super::consumers::Statistics;
+use super::consumers::{largest_abs, OfPieces, Statistics};
 use crate::fem::Discretization;
 use crate::scene::Scene;
 use crate::time_loop::TimeLoop;
@@ -214,17 +214,25 @@ impl Summary {
         tl: &TimeLoop,
         stats: Statistics,
     ) -> Summary {
-        let u_n = tl.u();
         let Statistics {
             log,
             active,
             stick,
             last,
-            norms,
+            of_pieces,
         } = stats;
-        // Where the ranks write their own pieces, the squares their pieces summed (rank 0
-        // may hold no cell); else of every cell, here.
-        let (l2, semi) = norms.map_or_else(|| disc.norms(u_n), |[l2, h1]| (l2.sqrt(), h1.sqrt()));
+        // Where the ranks write their own pieces, what they computed (rank 0 may hold
+        // neither every cell nor every dof); else of every cell and dof, here.
+        let (l2, semi, u_max) = match of_pieces {
+            Some(OfPieces {
+                norms: [l2, h1],
+                u_max,
+            }) => (l2.sqrt(), h1.sqrt(), u_max),
+            None => {
+                let (l2, semi) = disc.norms(tl.u());
+                (l2, semi, largest_abs(tl.u()))
+            }
+        };
         let rows = tl.rows();
         let per_step = log.iterations;
         let completed = ending.status == Status::Completed;
@@ -253,7 +261,7 @@ impl Summary {
                 time: if completed { scene.time.end } else { tl.time() },
                 u_l2: l2,
                 u_h1: (l2 * l2 + semi * semi).sqrt(),
-                u_max: u_n.iter().fold(0.0f64, |a, v| a.max(v.abs())),
+                u_max,
             },
             contact: ContactSummary {
                 max_violation: if rows.n_contact == 0 {
