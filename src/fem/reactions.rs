@@ -38,7 +38,7 @@
 
 use std::collections::HashMap;
 
-use super::{constraints::Source, group, Discretization};
+use super::{constraints::Source, group, place, Discretization};
 use crate::mesh::Mesh;
 use crate::scene::Scene;
 use crate::Result;
@@ -59,6 +59,8 @@ pub struct Reactions {
     /// group's part): all that a step's reactions read of the state ([`Reactions::read`]).
     reads: Vec<usize>,
     m_reads: Vec<usize>,
+    /// The dofs' count, of which `m_reads` count each memory group's.
+    n_dofs: usize,
     /// g_F at the held dofs.
     g_f: Vec<f64>,
     /// −Σ g_F per component: the force of the normal stress F on the body.
@@ -131,6 +133,7 @@ impl Reactions {
             values,
             reads,
             m_reads,
+            n_dofs: disc.n_dofs,
             g_f,
             normal_stress,
         })
@@ -142,13 +145,23 @@ impl Reactions {
     }
 
     /// What the held rows read of the state `[w, u]`, `m` (None without memory): all that
-    /// [`Reactions::forces`] needs of it.
-    pub fn read(&self, [w, u]: [&[f64]; 2], m: Option<&[f64]>) -> StateRead {
-        let at = |v: &[f64], read: &[usize]| read.iter().map(|&i| v[i]).collect();
+    /// [`Reactions::forces`] needs of it. On a rank whose vectors hold some dofs alone, u
+    /// and m (each memory group's part after the other's) at `local`, w at `held`
+    /// (`time_loop::Step`; `fem::place`).
+    pub fn read(
+        &self,
+        [w, u]: [&[f64]; 2],
+        m: Option<&[f64]>,
+        [local, held]: [Option<&[usize]>; 2],
+    ) -> StateRead {
+        let at =
+            |v: &[f64], at| -> Vec<f64> { self.reads.iter().map(|&i| v[place(at, i)]).collect() };
+        // m_reads are g·n_dofs + dof; a group's part holds u's dofs.
+        let in_m = |i: usize| (i / self.n_dofs) * u.len() + place(local, i % self.n_dofs);
         StateRead {
-            w: at(w, &self.reads),
-            u: at(u, &self.reads),
-            m: m.map(|m| at(m, &self.m_reads)),
+            w: at(w, held),
+            u: at(u, local),
+            m: m.map(|m| self.m_reads.iter().map(|&i| m[in_m(i)]).collect()),
         }
     }
 

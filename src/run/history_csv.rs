@@ -258,7 +258,7 @@ impl HistoryCsv {
         let copy = StepCopy {
             n: step.n,
             t: step.t,
-            read: self.rows.reactions.read([step.w, step.u], step.m),
+            read: (self.rows.reactions).read([step.w, step.u], step.m, [step.local, step.held]),
             von_mises: match frame_von_mises {
                 Some(rx) => VonMises::Handed(rx),
                 None => VonMises::Computed {
