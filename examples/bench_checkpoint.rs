@@ -111,7 +111,8 @@ fn main() {
         }
         fn advanced(&mut self, tl: &mut TimeLoop) -> viscontact::Result<()> {
             let t = Instant::now();
-            let mut feed = (self.writer).write(tl.state(), &self.log, &self.active, Vec::new());
+            let state = tl.state()?.expect("one process");
+            let mut feed = (self.writer).write(state, &self.log, &self.active, Vec::new());
             tl.gather_memory(&mut |v| feed.send(v))?;
             feed.end()?;
             self.writer.flush()?;

@@ -372,8 +372,14 @@ impl Plans {
 /// and multipliers (the next solve's warm start). What a checkpoint saves
 /// (`TimeLoop::state`); everything else of the loop is rebuilt from the scene.
 pub struct LoopState<'a> {
+    /// n, k and the memory's kind; its values come one vector at a time
+    /// (`TimeLoop::gather_memory`).
     pub history: &'a History,
-    pub w: &'a [f64],
+    /// u_n, its compensated sum (`History::u_sum`, `u_comp`) and w_n, at every dof.
+    pub u: Vec<f64>,
+    pub u_sum: Vec<f64>,
+    pub u_comp: Vec<f64>,
+    pub w: Vec<f64>,
     /// The multipliers of the last solved step and of the step before it.
     pub z: &'a [f64],
     pub z_before: &'a [f64],
@@ -562,26 +568,18 @@ impl History {
     /// (in the file's order: the Prony states term by term, or a direct sum's past rows
     /// `from..`, those the checkpoints hold not yet), on one process and on rank 0 of
     /// several whose ranks hold their parts of it (`each` is never called on the others):
-    /// `whole` makes the every-unknown vector there of each rank's values at the unknowns
-    /// of its own rows (`solver::Backend::gather_at_first`, collective: every rank calls
-    /// this at every checkpoint), to which it adds the prescribed dofs' (n_free.., which it
-    /// holds). Each value is the one its rank holds, with the bits of one process's. One
-    /// vector at a time, so that the process that writes the checkpoint never holds the
+    /// `whole` makes the every-dof vector there of a vector held at some dofs
+    /// (`TimeLoop::gathered`, collective: every rank calls this at every checkpoint).
+    /// One vector at a time, so that the process that writes the checkpoint never holds the
     /// whole memory twice (`checkpoint::Feed`).
     pub fn gathered(
         &self,
         from: usize,
-        whole: impl Fn(&dyn Fn(usize) -> f64) -> Result<Option<Vec<f64>>>,
+        whole: impl Fn(&[f64], Option<&[usize]>) -> Result<Option<Vec<f64>>>,
         each: &mut dyn FnMut(Vec<f64>),
     ) -> Result<()> {
-        let dofs = self.holds.dofs();
-        let n_dofs = self.u.len();
         let mut send = |held: &[f64]| -> Result<()> {
-            let place = |i: usize| dofs.map_or(Ok(i), |dofs| dofs.binary_search(&i));
-            let value = |i: usize| held[place(i).expect("a rank holds its own rows")];
-            if let Some(mut v) = whole(&value)? {
-                let n_free = v.len();
-                v.extend((n_free..n_dofs).map(value));
+            if let Some(v) = whole(held, self.holds.dofs())? {
                 each(v);
             }
             Ok(())
@@ -970,17 +968,23 @@ mod tests {
                 }
                 // Rank 1's values at its own rows, then rank 0's and the whole vector.
                 let sent = std::cell::RefCell::new(std::collections::VecDeque::new());
-                let of_1 = |value: &dyn Fn(usize) -> f64| {
-                    sent.borrow_mut()
-                        .push_back(own[1].iter().map(|&i| value(i)).collect());
+                // What `TimeLoop::gathered` reads of a rank's vector: its values at its own
+                // rows' places, and rank 0's at the prescribed dof.
+                let value = |held: &[f64], at: Option<&[usize]>, i| held[crate::fem::place(at, i)];
+                let of_1 = |held: &[f64], at: Option<&[usize]>| {
+                    let mine = own[1].iter().map(|&i| value(held, at, i)).collect();
+                    sent.borrow_mut().push_back(mine);
                     Ok(None)
                 };
                 let none = &mut |_: Vec<f64>| unreachable!("rank 1 gets no vector");
                 ranks[1].gathered(from, of_1, none).unwrap();
-                let of_0 = |value: &dyn Fn(usize) -> f64| {
+                let of_0 = |held: &[f64], at: Option<&[usize]>| {
                     let theirs: Vec<f64> = sent.borrow_mut().pop_front().unwrap();
-                    let mut v = vec![0.0; 5];
-                    own[0].iter().for_each(|&i| v[i] = value(i));
+                    let mut v = vec![0.0; 6];
+                    own[0]
+                        .iter()
+                        .chain([&5])
+                        .for_each(|&i| v[i] = value(held, at, i));
                     own[1].iter().zip(theirs).for_each(|(&i, x)| v[i] = x);
                     Ok(Some(v))
                 };

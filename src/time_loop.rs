@@ -204,15 +204,15 @@ pub trait Observer {
     fn solved(&mut self, s: &Solved) -> Result<()>;
 
     /// Step n was given up ([`TimeLoop::abandon_on`]): the loop stands at t_n as before it,
-    /// `tl.state()` is what a checkpoint saves (of the memory, what `tl.gather_memory()`
-    /// makes of the ranks' parts, every rank calling it), and the run stops.
+    /// `tl.state()` and `tl.gather_memory()` make what a checkpoint saves of the ranks'
+    /// parts (every rank calling both), and the run stops.
     fn abandoned(&mut self, tl: &mut TimeLoop) -> Result<()> {
         let _ = tl;
         Ok(())
     }
 
-    /// The loop advanced to t_{n+1}: `tl.state()` is what a checkpoint of step n + 1 saves
-    /// (with `tl.gather_memory()`'s memory).
+    /// The loop advanced to t_{n+1}: `tl.state()` and `tl.gather_memory()` make what a
+    /// checkpoint of step n + 1 saves (every rank calling both).
     fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
         let _ = tl;
         Ok(())
@@ -376,20 +376,51 @@ impl<'p> TimeLoop<'p> {
         }
     }
 
-    /// What a checkpoint saves of the loop at t_n, before step n is solved, on rank 0 (or
-    /// one process), but for the memory: [`TimeLoop::gather_memory`]'s, which every rank
-    /// calls.
-    pub fn state(&self) -> LoopState<'_> {
-        debug_assert!(
-            self.history.holds.local().is_none(),
-            "a follower's history is not saved"
-        );
-        LoopState {
+    /// What a checkpoint saves of the loop at t_n, before step n is solved, but for the
+    /// memory ([`TimeLoop::gather_memory`]'s): on one process and on rank 0 of several,
+    /// None on the others. Each vector is made there of each rank's values at its own rows
+    /// ([`TimeLoop::gathered`]): rank 0 may hold some dofs alone, as a follower does.
+    /// Collective: every rank calls it at every checkpoint, before `gather_memory`.
+    pub fn state(&self) -> Result<Option<LoopState<'_>>> {
+        let local = self.history.holds.local();
+        let [u, u_sum, u_comp] = [&self.history.u, &self.history.u_sum, &self.history.u_comp];
+        let gathered = [
+            (u, local),
+            (u_sum, local),
+            (u_comp, local),
+            (&self.w, self.held.as_deref()),
+        ];
+        let mut whole = Vec::with_capacity(4);
+        for (v, at) in gathered {
+            whole.extend(self.gathered(v, at)?);
+        }
+        let Ok([u, u_sum, u_comp, w]) = <[Vec<f64>; 4]>::try_from(whole) else {
+            return Ok(None);
+        };
+        Ok(Some(LoopState {
             history: &self.history,
-            w: &self.w,
+            u,
+            u_sum,
+            u_comp,
+            w,
             z: &self.z,
             z_before: &self.z_before,
-        }
+        }))
+    }
+
+    /// `v`, held at the dofs `at` (None: every one), at every dof on one process and on
+    /// rank 0 of several, None on the others (collective: every rank calls it): the
+    /// unknowns' values each rank's own rows give (`Backend::gather_at_first`), with the
+    /// bits of one process's, then the prescribed dofs' (n_free.., which a rank that holds
+    /// them holds whole).
+    fn gathered(&self, v: &[f64], at: Option<&[usize]>) -> Result<Option<Vec<f64>>> {
+        let value = |i: usize| v[crate::fem::place(at, i)];
+        let (n_free, n_dofs) = (self.disc.n_free, self.disc.n_dofs);
+        let whole = self.backend.gather_at_first(n_free, &value)?;
+        Ok(whole.map(|mut whole| {
+            whole.extend((n_free..n_dofs).map(value));
+            whole
+        }))
     }
 
     /// The memory at t_n as a checkpoint saves it, every dof's, one vector at a time into
@@ -399,8 +430,7 @@ impl<'p> TimeLoop<'p> {
     /// ranks. Of a direct sum, the past rows that no checkpoint holds yet, which every rank
     /// counts alike (`History::gathered`).
     pub fn gather_memory(&mut self, each: &mut dyn FnMut(Vec<f64>)) -> Result<()> {
-        let (backend, n_free) = (&self.backend, self.disc.n_free);
-        let whole = |value: &dyn Fn(usize) -> f64| backend.gather_at_first(n_free, value);
+        let whole = |v: &[f64], at: Option<&[usize]>| self.gathered(v, at);
         self.history.gathered(self.past_saved, whole, each)?;
         if let crate::history::Memory::Direct { past, .. } = &self.history.memory {
             self.past_saved = past.len();

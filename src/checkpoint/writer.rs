@@ -182,7 +182,7 @@ impl Writer {
         let (memory, queue) = match &h.memory {
             Memory::None => (SnapshotMemory::None, None),
             Memory::Prony(terms) => {
-                let (tx, states) = Vectors::queue(h.u.len(), terms.len());
+                let (tx, states) = Vectors::queue(state.u.len(), terms.len());
                 let terms = (terms.iter())
                     .map(|t| Term {
                         a: t.a,
@@ -196,18 +196,19 @@ impl Writer {
             Memory::Direct { .. } => {
                 let from = std::mem::replace(&mut self.past_sent, h.n);
                 let count = h.n.checked_sub(from).expect("no past row sent twice");
-                let (tx, rows) = Vectors::queue(h.u.len(), count);
+                let (tx, rows) = Vectors::queue(state.u.len(), count);
                 let rows = vec![rows];
                 (SnapshotMemory::Direct { from, rows }, Some((tx, count)))
             }
         };
+        let whole = (queue.as_ref()).is_none_or(|(_, count)| *count <= queue_len(state.u.len()));
         let snapshot = Snapshot {
             n: h.n,
             k: h.k,
-            u: h.u.clone(),
-            u_sum: h.u_sum.clone(),
-            u_comp: h.u_comp.clone(),
-            w: state.w.to_vec(),
+            u: state.u,
+            u_sum: state.u_sum,
+            u_comp: state.u_comp,
+            w: state.w,
             z: state.z.to_vec(),
             z_before: state.z_before.to_vec(),
             active: active.to_vec(),
@@ -218,7 +219,6 @@ impl Writer {
         // Memory that the queue holds whole goes to the writer with the state once it is all
         // sent, so the writer is woken once (docs/restart.md, "Checkpoint cost"); more, the
         // writer takes as it comes, the run waiting for it.
-        let whole = (queue.as_ref()).is_none_or(|(_, count)| *count <= queue_len(h.u.len()));
         if whole {
             let at_end = Some((Box::new(snapshot), self.shared.clone()));
             return Feed(Fed::Queue { queue, at_end });
@@ -675,7 +675,10 @@ mod tests {
             }
             let state = LoopState {
                 history: &history,
-                w: &history.u,
+                u: history.u.clone(),
+                u_sum: history.u_sum.clone(),
+                u_comp: history.u_comp.clone(),
+                w: history.u.clone(),
                 z: &[],
                 z_before: &[],
             };

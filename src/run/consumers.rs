@@ -106,6 +106,7 @@ impl Observer for Follower<'_> {
     fn advanced(&mut self, tl: &mut TimeLoop) -> Result<()> {
         of_pieces(self.frames.as_ref(), self.disc, tl, self.stop.ranks)?;
         if self.schedule.due.take().is_some() {
+            tl.state()?;
             tl.gather_memory(&mut |_| unreachable!("a follower gets no vector of the memory"))?;
         }
         Ok(())
@@ -289,7 +290,8 @@ impl Checkpoints {
     fn advanced(&mut self, tl: &mut TimeLoop, log: &RunLog, series: &Series) -> Result<()> {
         match self.schedule.due.take() {
             Some(flags) => {
-                let mut feed = (self.writer).write(tl.state(), log, &flags, series.checksums());
+                let state = tl.state()?.expect("rank 0 gets the whole state");
+                let mut feed = (self.writer).write(state, log, &flags, series.checksums());
                 tl.gather_memory(&mut |v| feed.send(v))?;
                 feed.end()
             }

@@ -258,7 +258,8 @@ fn a_step_given_up_leaves_the_loop_as_a_stop_before_it() {
                 continue; // every step from s on was solved at its warm start
             }
             given_up += 1;
-            let (a, b) = (stopped.state(), abandoned.state());
+            let (a, b) = (stopped.state().unwrap(), abandoned.state().unwrap());
+            let (a, b) = (a.expect("one process"), b.expect("one process"));
             assert_eq!(stopped.n(), s, "{contact}");
             assert_eq!(abandoned.n(), s, "{contact}: given up at another step");
             assert!(
