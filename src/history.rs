@@ -466,7 +466,7 @@ pub struct History {
 /// The dofs whose values a [`History`] holds, in increasing order where not every one.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub enum Holds {
-    /// Every dof: one process, and rank 0 of several.
+    /// Every dof: one process, and rank 0 of several whose frames are not in pieces.
     #[default]
     Every,
     /// The memory at these dofs alone and u_n at every one: a follower whose rows of K_B

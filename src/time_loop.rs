@@ -756,8 +756,8 @@ impl<'p> TimeLoop<'p> {
         })
     }
 
-    /// max|u_n|: on several MPI ranks, the ranks' largest (`largest`), since a follower may
-    /// hold some dofs alone and rank 0 holds every one.
+    /// max|u_n|: on several MPI ranks, the ranks' largest (`largest`), since a rank may
+    /// hold some dofs alone.
     fn u_max(&self) -> Result<f64> {
         self.largest(max_abs(&self.history.u))
     }

@@ -526,13 +526,13 @@ impl Krylov {
 }
 
 /// What a rank of several reads of a solution and of a right side besides its own rows: the
-/// unknowns `dofs` at every solve. Where `held` (a follower whose history holds some dofs
-/// alone, `time_loop`), its vectors (a solve's b and w, a product's x) hold the unknowns
+/// unknowns `dofs` at every solve. Where `held` (a rank whose history holds some dofs
+/// alone, `time_loop`: a follower, and rank 0 whose frames are in pieces), its vectors (a solve's b and w, a product's x) hold the unknowns
 /// `dofs` alone, in their order (increasing: its history's, its own rows and Γ3's), and
 /// not every unknown; elsewhere they are whole, `dofs` are Γ3's unknowns (which the active
 /// set's decisions read on every rank), and every unknown comes to the rank once a step is
-/// solved (its history holds every dof: rank 0, and a follower where K_A is not the step
-/// matrix).
+/// solved (its history holds every dof: rank 0 whose frames are not in pieces, and a
+/// follower where K_A is not the step matrix).
 #[derive(Clone, Copy, Debug)]
 pub struct Reads<'a> {
     pub dofs: &'a [usize],
@@ -540,11 +540,11 @@ pub struct Reads<'a> {
 }
 
 /// How a rank's rows of a solution reach the ranks that read them: its rows' unknowns in
-/// PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`) by an `Exchange`
-/// (a product with K takes the other ranks' values its rows read itself: `vc_mult`); once a step is solved,
-/// every rank's rows gathered whole in PETSc's order on rank 0, or on every rank where the
-/// followers' histories hold every dof too (not `Reads::held`), where each rank's count and
-/// first row among them say.
+/// PETSc's order; at every solve, the unknowns it reads (`Reads::dofs`) by an `Exchange` (a
+/// product with K takes the other ranks' values its rows read itself: `vc_mult`); once a
+/// step is solved, every rank's rows gathered whole in PETSc's order on rank 0 where its
+/// history holds every dof (`Whole`), or on every rank where the followers' histories hold
+/// every dof too (not `Reads::held`), where each rank's count and first row among them say.
 struct Spread {
     unknowns: Vec<u32>,
     /// The unknowns of this rank's rows (`unknowns` before they were placed), for what a
@@ -552,6 +552,10 @@ struct Spread {
     numbered: Vec<u32>,
     halo: Exchange,
     first: bool,
+    /// On rank 0 where its vectors hold some unknowns alone (`Reads::held`), the layout of
+    /// every unknown, which puts what its checkpoints gather in the unknowns' order
+    /// (`Krylov::gather_at_first`; the Krylov's own is placed: `Layout::placed`).
+    every: Option<Layout>,
     whole: Whole,
     counts: Vec<c_int>,
     displs: Vec<c_int>,
@@ -560,6 +564,9 @@ struct Spread {
 /// Who gathers every rank's rows once a step is solved (`Krylov::complete`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Whole {
+    /// Nobody: every rank holds its history at its reach (`Holds::Local`), rank 0 too,
+    /// whose checkpoints gather what they save (`Krylov::gather_at_first`).
+    Nobody,
     /// Rank 0 alone: a follower holds its history at its reach (`Holds::Local`).
     First,
     /// Every rank: a follower's history holds every dof of u_n.
@@ -588,10 +595,22 @@ impl Spread {
             unknowns.iter_mut().for_each(|i| *i = place(*i));
             halo.place(place);
         }
-        let whole = match max_over_ranks(i32::from(rank > 0 && !reads.held))? {
-            0 => Whole::First,
+        // The most any rank receives: 2, a follower whose history holds every dof; 1, rank
+        // 0 that does; 0, none (each rank holds its reach alone).
+        let receives = match (rank, reads.held) {
+            (_, true) => 0,
+            (0, false) => 1,
+            (_, false) => 2,
+        };
+        let whole = match max_over_ranks(receives)? {
+            0 => Whole::Nobody,
+            1 => Whole::First,
             _ => Whole::Every,
         };
+        debug_assert!(
+            whole != Whole::Every || !reads.held,
+            "a rank that holds its reach alone receives no whole solution"
+        );
         let counts: Vec<c_int> = (layout.blocks.windows(2))
             .map(|b| (b[1] - b[0]) as c_int)
             .collect();
@@ -600,6 +619,7 @@ impl Spread {
             numbered,
             halo,
             first: rank == 0,
+            every: (rank == 0 && reads.held).then(|| layout.clone()),
             whole,
             displs: exchange::displacements(&counts),
             counts,
@@ -621,7 +641,11 @@ impl Spread {
 
     /// Whether this rank receives every rank's rows of a solved step (`Krylov::complete`).
     fn receives(&self) -> bool {
-        self.whole == Whole::Every || self.first
+        match self.whole {
+            Whole::Nobody => false,
+            Whole::First => self.first,
+            Whole::Every => true,
+        }
     }
 }
 
@@ -834,13 +858,14 @@ impl Krylov {
         }
     }
 
-    /// A solved step's w at every unknown on rank 0, and on every rank where the followers'
-    /// histories hold every dof (not `Reads::held`), from the ranks that hold their rows
-    /// (collective, once a step): each rank's rows gathered into w in PETSc's order, then
-    /// put in the unknowns' order in place (`Layout::to_unknowns_order`); nothing on one
-    /// rank.
+    /// A solved step's w at every unknown on rank 0 where its history holds every dof, and
+    /// on every rank where the followers' histories do (not `Reads::held`), from the ranks
+    /// that hold their rows (collective, once a step): each rank's rows gathered into w in
+    /// PETSc's order, then put in the unknowns' order in place
+    /// (`Layout::to_unknowns_order`); nothing on one rank, nor where every rank holds its
+    /// reach alone (`Whole::Nobody`).
     pub fn complete(&mut self, w: &mut [f64]) -> Result<()> {
-        let Some(spread) = &self.spread else {
+        let Some(spread) = self.spread.as_ref().filter(|s| s.whole != Whole::Nobody) else {
             return Ok(());
         };
         spread.own_of(w, &mut self.own_x);
@@ -874,9 +899,10 @@ impl Krylov {
             gather(&mine, &mut [], cut, false)?;
             return Ok(None);
         }
-        let mut all = vec![0.0; self.layout.n_unknowns()];
+        let layout = spread.every.as_ref().unwrap_or(&self.layout);
+        let mut all = vec![0.0; layout.n_unknowns()];
         gather(&mine, &mut all, cut, false)?;
-        self.layout.to_unknowns_order(&mut all);
+        layout.to_unknowns_order(&mut all);
         Ok(Some(all))
     }
 

@@ -36,12 +36,13 @@
 //! Prony states, the direct sum's past displacements) where K_A is the step matrix, its
 //! rows of K_B and K_R then numbering their columns in the order of those dofs; elsewhere
 //! the memory alone (and at its own rows). The values it holds have the bits of the whole
-//! history's; rank 0 holds u_n whole, for the checkpoints, history.csv and summary.json's
-//! u_max, and the memory where the frames are in pieces at the dofs its steps and
-//! history.csv read alone, with its own rows and the prescribed dofs
-//! (`run::hold_memory_of_first`).
-//! At a checkpoint every rank sends its own rows of the memory to rank 0
-//! (`TimeLoop::gather_memory`): every rank knows the checkpoints' steps, rank 0's clock
+//! history's. Where the frames are in pieces, rank 0's history holds what its steps, its
+//! piece and history.csv's reactions read, as a follower's does, and where they are not,
+//! every dof (`run::hold_history_of_first`); summary.json's u_max is then the ranks'
+//! largest, taken with the norms (`run::consumers::of_pieces`).
+//! At a checkpoint every rank sends its own rows of u_n, its compensated sum and w_n
+//! (`TimeLoop::state`) and of the memory, one vector at a time (`TimeLoop::gather_memory`),
+//! to rank 0: every rank knows the checkpoints' steps, rank 0's clock
 //! reaching the others with the stop requests ([`Ranks::stop`]). Of the loads, a rank makes the
 //! quadrature points that reach its own rows alone (its rows of f_n, with the same bits;
 //! those of other rows it reads come with b_n's exchange), rank 0 every traction's facets
@@ -70,15 +71,16 @@
 //! So only the runs whose steps are PETSc solves spread (`solver.linear = "petsc"`: linear,
 //! or with contact and friction through the active set: `Descriptor::spreads`); any other
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
-//! memory of each rank is the replicated part (w_n and b_n of the whole on rank 0 and on a
-//! follower whose history holds every dof, rank 0's whole history, every node's place and
-//! every dof's index; during setup every node's place on every rank, and on rank 0 the
-//! whole mesh and its reading), its columns of the matrices, a follower's part of the
+//! memory of each rank is the replicated part (the history, w_n and b_n of the whole on a
+//! rank whose history holds every dof: rank 0 where the frames are not in pieces, a
+//! follower where K_A is not the step matrix; rank 0's every dof's index, and at a
+//! checkpoint the vectors it gathers; during setup every node's place on every rank, and
+//! on rank 0 the whole mesh and its reading), its columns of the matrices, its part of the
 //! history, of w_n, b_n, of the mesh and of the nodes' places (`fem::Places`, those it
-//! reads past its setup alone; it finds a dof's index by searching the held dofs:
+//! reads past its setup alone; a follower finds a dof's index by searching the held dofs:
 //! `fem::DofIndices`), and its share of PETSc's; a follower's setup in a numbering of its
-//! own (so that it never receives every node's place), and rank 0's memory in parts, are
-//! the next steps (docs/cluster.md, "Not built yet").
+//! own (so that it never receives every node's place), and rank 0's dofs' indices in
+//! parts, are the next steps (docs/cluster.md, "Not built yet").
 //!
 //! # Planning
 //!
@@ -411,7 +413,8 @@ impl Ranks {
         Ok(None)
     }
 
-    /// What a follower's history holds (`own.holds`; rank 0 holds every dof). Where it hands
+    /// What a follower's history holds (`own.holds`; rank 0's where its frames are in
+    /// pieces, `run::hold_history_of_first`, which adds history.csv's reads). Where it hands
     /// its rows of K_A to PETSc ([`Ranks::keep_own_columns`]: K_A the step matrix, no
     /// prescribed dofs), u_n and m_n at the dofs its rows of K_B and K_R read and `also`
     /// (its piece's points') alone (`Holds::Local`): `disc`'s matrices number their rows
@@ -428,7 +431,7 @@ impl Ranks {
         also: impl IntoIterator<Item = usize>,
     ) {
         #[cfg(feature = "petsc")]
-        if let Some(own) = own.filter(|_| !self.is_first()) {
+        if let Some(own) = own {
             let local = own.rows.is_some().then(|| disc.local_reach(also)).flatten();
             own.holds = match local {
                 Some(local) => {
@@ -483,9 +486,9 @@ pub struct Own {
     pub(crate) shares: Vec<crate::petsc::RankShare>,
     #[cfg(feature = "petsc")]
     pub(crate) rows: Option<crate::petsc::Csr<'static>>,
-    /// What a follower's history holds: the memory of its `Discretization::memory_reach`,
-    /// or u_n and m_n at its `Discretization::local_reach` ([`Ranks::hold_history`]); on rank
-    /// 0, every dof (it writes the checkpoints and history.csv).
+    /// What a rank's history holds: the memory of its `Discretization::memory_reach`, or
+    /// u_n and m_n at its `Discretization::local_reach` ([`Ranks::hold_history`]); on rank
+    /// 0, every dof where its frames are not in pieces (`run::hold_history_of_first`).
     pub(crate) holds: Holds,
 }
 

@@ -173,7 +173,7 @@ fn run_scene(scene_path: &Path, opts: &RunOptions) -> Result<Outcome> {
     let start = Instant::now();
     let mut ready = opts.ranks.agree(prepare_run(scene_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
-    hold_memory_of_first(opts.ranks, &mut ready);
+    hold_history_of_first(opts.ranks, &mut ready);
     first_lets_go_of_cells(opts.ranks, &mut ready);
     let tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     // Setup succeeded: the run the directory held goes, before the first new frame, unless
@@ -487,22 +487,41 @@ fn follow_signals(tl: &mut TimeLoop, opts: &RunOptions) {
     tl.abandon_on(opts.interrupt.abandon());
 }
 
-/// On rank 0 of several whose frames are in pieces, its history holds the memory (the
-/// Prony states, the direct sum's past rows) at the dofs whose m_n its steps and
-/// history.csv read alone, as a follower's does, and at its own rows and the prescribed
-/// dofs, which it sends to its checkpoints (`TimeLoop::gather_memory`): its rows of K_R's
-/// columns and its piece's points (`Discretization::memory_reach`) and the held rows'
-/// (`Reactions::dofs_read`); u_n at every dof. It holds every dof's where it computes
-/// every cell's stress (`format = "vtkhdf"`) or holds the matrices whole.
-fn hold_memory_of_first(ranks: Ranks, ready: &mut Ready) {
-    if ranks.size == 1 || ready.opened.pieces.is_none() {
+/// On rank 0 of several whose frames are in pieces, its history holds what its steps,
+/// its piece and history.csv read, as a follower's does, and its checkpoints gather the
+/// rest from the ranks' own rows (`TimeLoop::state`, `TimeLoop::gather_memory`). Where it
+/// hands its rows of K_A to PETSc (`Own::rows`: K_A the step matrix, no prescribed dofs),
+/// u_n, its compensated sum and the memory at the dofs its rows of K_B and K_R, its
+/// piece's points and the held rows read (`Ranks::hold_history`, `Reactions::dofs_read`),
+/// and w_n and b_n there, at its own rows and Γ3's unknowns (`Holds::Local`). Elsewhere
+/// (the implicit variant, prescribed dofs) the memory alone at those dofs, its own rows
+/// and the prescribed dofs (`Holds::Memory`), u_n at every dof. It holds every dof where it
+/// computes every cell's stress (`format = "vtkhdf"`).
+fn hold_history_of_first(ranks: Ranks, ready: &mut Ready) {
+    if ranks.size == 1 {
+        return;
+    }
+    let (Some(pieces), Some(own)) = (&ready.opened.pieces, ready.solving.own.as_mut()) else {
+        return;
+    };
+    let read = ready.reactions.dofs_read();
+    if own.rows.is_some() {
+        // Nothing shares the discretization before the time loop's setup.
+        let disc = Arc::get_mut(&mut ready.disc).expect("rank 0's setup alone holds it");
+        let d = disc.dim;
+        let points = pieces
+            .points()
+            .iter()
+            .flat_map(|&p| disc.free.of_node(d, p));
+        let also: Vec<usize> = points.chain(read.iter().copied()).collect();
+        ranks.hold_history(disc, Some(own), also);
         return;
     }
     let disc = &ready.disc;
-    let (Some(own), Some(mut dofs)) = (ready.solving.own.as_mut(), disc.memory_reach()) else {
+    let Some(mut dofs) = disc.memory_reach() else {
         return;
     };
-    dofs.extend_from_slice(ready.reactions.dofs_read());
+    dofs.extend_from_slice(read);
     dofs.extend(disc.own.iter().flatten());
     dofs.extend(disc.n_free..disc.n_dofs);
     own.holds = crate::history::Holds::Memory(crate::mesh::increasing(dofs));
@@ -558,7 +577,7 @@ pub fn resume(checkpoint_path: &Path, opts: &ResumeOptions) -> Result<Outcome> {
     let start = Instant::now();
     let (mut ready, mut cp) = opts.ranks.agree(prepare_resume(checkpoint_path, opts))?;
     tell_followers_the_series(opts, &ready.opened)?;
-    hold_memory_of_first(opts.ranks, &mut ready);
+    hold_history_of_first(opts.ranks, &mut ready);
     first_lets_go_of_cells(opts.ranks, &mut ready);
     let mut tl = ready.solving.time_loop(&ready.scene, &ready.disc)?;
     let saved = cp.saved(ready.disc.n_dofs, tl.rows().len(), tl.held_at())?;
