@@ -99,7 +99,8 @@ impl DofIndex {
 /// finds an index by binary search in them; the index of every dof of the whole (four
 /// bytes a dof) it keeps only where it reads every cell ([`DofIndices::whole`]: one
 /// process and rank 0 of several, whose assembly looks one up at every entry of every
-/// cell). A follower rank of several then holds nothing of the whole problem here.
+/// cell, until it lets go of the cells: [`DofIndices::forget_whole`]). A follower rank of
+/// several then holds nothing of the whole problem here.
 #[derive(Clone, Debug, Default)]
 pub struct DofIndices {
     /// The global dofs: d × the nodes.
@@ -148,6 +149,13 @@ impl DofIndices {
             })
             .collect();
         self
+    }
+
+    /// The same numbering without the index of every dof ([`DofIndices::whole`]), which
+    /// [`DofIndices::get`] then finds by searching: where the rank no longer reads every
+    /// cell.
+    pub fn forget_whole(&mut self) {
+        self.whole = Vec::new();
     }
 
     /// The global dofs: d × the nodes.

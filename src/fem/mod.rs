@@ -1362,10 +1362,13 @@ impl Discretization {
     /// matrices are assembled and the rank's layout is made, nor on rank 0 where it does
     /// not read every cell (`ranks::first_keeps_vertices`); a rank's piece of the frames
     /// makes its own cells from their vertices (`StressCells::Of`), and summary.json's
-    /// norms are the pieces' sums ([`Discretization::norm_parts`]).
+    /// norms are the pieces' sums ([`Discretization::norm_parts`]). With them goes the
+    /// index of every dof, which the assembly of every cell read
+    /// (`DofIndices::forget_whole`: a dof's is then found by searching the held dofs).
     /// [`Discretization::stress`] and
     /// [`Discretization::norms`] would see an empty mesh afterwards.
     pub fn forget_cells(&mut self) {
+        self.free.forget_whole();
         self.cells = Vec::new();
         self.vertices = Vec::new();
         self.materials.of_cell = Vec::new();
