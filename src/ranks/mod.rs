@@ -492,6 +492,17 @@ pub struct Own {
     pub(crate) holds: Holds,
 }
 
+impl Own {
+    /// Whether the rank handed its rows of K_A to PETSc ([`Ranks::keep_own_columns`]), so
+    /// that its history may hold its reach alone ([`Ranks::hold_history`]).
+    pub fn handed_k_a(&self) -> bool {
+        #[cfg(feature = "petsc")]
+        return self.rows.is_some();
+        #[cfg(not(feature = "petsc"))]
+        false
+    }
+}
+
 /// Whether a rank of several hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]):
 /// where K_A is the step matrix (the left endpoint history) and the rank keeps its columns
 /// (no prescribed dofs, whose right side reads K_A whole: `Discretization::keeps_own_columns`,

@@ -505,7 +505,7 @@ fn hold_history_of_first(ranks: Ranks, ready: &mut Ready) {
         return;
     };
     let read = ready.reactions.dofs_read();
-    if own.rows.is_some() {
+    if own.handed_k_a() {
         // Nothing shares the discretization before the time loop's setup.
         let disc = Arc::get_mut(&mut ready.disc).expect("rank 0's setup alone holds it");
         let d = disc.dim;
