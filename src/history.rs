@@ -970,7 +970,9 @@ mod tests {
                 let sent = std::cell::RefCell::new(std::collections::VecDeque::new());
                 // What `TimeLoop::gathered` reads of a rank's vector: its values at its own
                 // rows' places, and rank 0's at the prescribed dof.
-                let value = |held: &[f64], at: Option<&[usize]>, i| held[crate::fem::place(at, i)];
+                let place =
+                    |at: Option<&[usize]>, i| at.map_or(i, |at| at.binary_search(&i).unwrap());
+                let value = |held: &[f64], at: Option<&[usize]>, i| held[place(at, i)];
                 let of_1 = |held: &[f64], at: Option<&[usize]>| {
                     let mine = own[1].iter().map(|&i| value(held, at, i)).collect();
                     sent.borrow_mut().push_back(mine);

@@ -73,14 +73,14 @@
 //! run under a launcher with several processes is refused (exit 2), as is `study`. The
 //! memory of each rank is the replicated part (the history, w_n and b_n of the whole on a
 //! rank whose history holds every dof: rank 0 where the frames are not in pieces, a
-//! follower where K_A is not the step matrix; rank 0's every dof's index, and at a
-//! checkpoint the vectors it gathers; during setup every node's place on every rank, and
-//! on rank 0 the whole mesh and its reading), its columns of the matrices, its part of the
-//! history, of w_n, b_n, of the mesh and of the nodes' places (`fem::Places`, those it
-//! reads past its setup alone; a follower finds a dof's index by searching the held dofs:
-//! `fem::DofIndices`), and its share of PETSc's; a follower's setup in a numbering of its
-//! own (so that it never receives every node's place), and rank 0's dofs' indices in
-//! parts, are the next steps (docs/cluster.md, "Not built yet").
+//! follower where K_A is not the step matrix; rank 0's unknowns' row order, its every
+//! dof's index while it holds the cells, and at a checkpoint the vectors it gathers;
+//! during setup every node's place on every rank, and on rank 0 the whole mesh and its
+//! reading), its columns of the matrices, its part of the history, of w_n, b_n, of the
+//! mesh and of the nodes' places (`fem::Places`, those it reads past its setup alone; it
+//! finds a dof's index by searching the held dofs: `fem::DofIndices`), and its share of PETSc's; a follower's setup in a numbering of its
+//! own (so that it never receives every node's place), and rank 0's unknowns' row order
+//! in parts, are the next steps (docs/cluster.md, "Not built yet").
 //!
 //! # Planning
 //!
