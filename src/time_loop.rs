@@ -379,7 +379,7 @@ impl<'p> TimeLoop<'p> {
     /// What a checkpoint saves of the loop at t_n, before step n is solved, but for the
     /// memory ([`TimeLoop::gather_memory`]'s): on one process and on rank 0 of several,
     /// None on the others. Each vector is made there of each rank's values at its own rows
-    /// ([`TimeLoop::gathered`]): rank 0 may hold some dofs alone, as a follower does.
+    /// (`TimeLoop::gathered`): rank 0 may hold some dofs alone, as a follower does.
     /// Collective: every rank calls it at every checkpoint, before `gather_memory`.
     pub fn state(&self) -> Result<Option<LoopState<'_>>> {
         let local = self.history.holds.local();
