@@ -394,6 +394,7 @@ impl<'p> TimeLoop<'p> {
         for (v, at) in gathered {
             whole.extend(self.gathered(v, at)?);
         }
+        // All four on rank 0 and one process, none on the other ranks.
         let Ok([u, u_sum, u_comp, w]) = <[Vec<f64>; 4]>::try_from(whole) else {
             return Ok(None);
         };

@@ -490,13 +490,13 @@ fn follow_signals(tl: &mut TimeLoop, opts: &RunOptions) {
 /// On rank 0 of several whose frames are in pieces, its history holds what its steps,
 /// its piece and history.csv read, as a follower's does, and its checkpoints gather the
 /// rest from the ranks' own rows (`TimeLoop::state`, `TimeLoop::gather_memory`). Where it
-/// hands its rows of K_A to PETSc (`Own::rows`: K_A the step matrix, no prescribed dofs),
-/// u_n, its compensated sum and the memory at the dofs its rows of K_B and K_R, its
+/// handed its rows of K_A to PETSc (`Own::handed_k_a`: K_A the step matrix, no prescribed
+/// dofs), u_n, its compensated sum and the memory at the dofs its rows of K_B and K_R, its
 /// piece's points and the held rows read (`Ranks::hold_history`, `Reactions::dofs_read`),
 /// and w_n and b_n there, at its own rows and Γ3's unknowns (`Holds::Local`). Elsewhere
 /// (the implicit variant, prescribed dofs) the memory alone at those dofs, its own rows
-/// and the prescribed dofs (`Holds::Memory`), u_n at every dof. It holds every dof where it
-/// computes every cell's stress (`format = "vtkhdf"`).
+/// and the prescribed dofs (`Holds::Memory`), u_n at every dof. It holds every dof where
+/// it computes every cell's stress (`format = "vtkhdf"`).
 fn hold_history_of_first(ranks: Ranks, ready: &mut Ready) {
     if ranks.size == 1 {
         return;
