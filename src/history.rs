@@ -439,15 +439,14 @@ pub fn memory_mismatch(what: &str) -> String {
 
 /// The state carried from step to step: n, u_n (compensated) and the memory.
 ///
-/// On a follower rank of several (docs/cluster.md) the history holds some dofs alone
-/// ([`Holds`]): the memory those that the rank's rows of Σ_g K_R^(g) m^(g)_n and its piece
-/// of a frame read, and where the rank's matrices number their rows over its own dofs'
-/// neighbours, u_n and its compensated sum those too. Each value there is updated by the
-/// same arithmetic dof by dof, so it has the bits of the whole history's. Rank 0 holds u_n
-/// at every dof, which history.csv's reactions and summary.json's norms read, and the
-/// memory at the dofs its steps and history.csv read (every one where the frames are not
-/// in pieces: it computes every cell's stress then); a checkpoint gathers each rank's
-/// values at its own rows into the whole memory ([`History::gathered`]).
+/// On a rank of several (docs/cluster.md) the history holds some dofs alone ([`Holds`]):
+/// the memory those that the rank's rows of Σ_g K_R^(g) m^(g)_n and its piece of a frame
+/// read (on rank 0, history.csv's reactions too), and where the rank's matrices number
+/// their rows over its own dofs' neighbours, u_n and its compensated sum those too. Each
+/// value there is updated by the same arithmetic dof by dof, so it has the bits of the
+/// whole history's. Rank 0 holds every dof where the frames are not in pieces (it computes
+/// every cell's stress then); a checkpoint gathers each rank's values at its own rows
+/// into the whole vectors (`TimeLoop::state`, [`History::gathered`]).
 #[derive(Clone, Debug)]
 pub struct History {
     pub k: f64,
