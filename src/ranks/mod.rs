@@ -8,8 +8,8 @@
 //! all the ranks, each holding the rows of the nodes METIS's partition gives it
 //! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
 //! of every Krylov vector, and each getting the solution back where it reads it (its
-//! rows' neighbours, Γ3's unknowns, a follower's history's reach: `petsc::Exchange`; rank
-//! 0 the whole once a step), and of a product with K, the active set's (K + S) w, its
+//! rows' neighbours, Γ3's unknowns, a rank's history's reach: `petsc::Exchange`; the
+//! whole once a step where a rank's history holds every dof), and of a product with K, the active set's (K + S) w, its
 //! values at Γ3's nodes alone. Every rank reads the
 //! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
 //! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays),
