@@ -9,8 +9,8 @@
 //! (`petsc::Layout`), of which it makes the Newton matrix, its part of GAMG's hierarchy and
 //! of every Krylov vector, and each getting the solution back where it reads it (its
 //! rows' neighbours, Γ3's unknowns, a rank's history's reach: `petsc::Exchange`; the
-//! whole once a step where a rank's history holds every dof), and of a product with K, the active set's (K + S) w, its
-//! values at Γ3's nodes alone. Every rank reads the
+//! whole once a step where a rank's history holds every dof), and of a product with K,
+//! the active set's (K + S) w, its values at Γ3's nodes alone. Every rank reads the
 //! scene; rank 0 alone reads the mesh file, and hands the mesh to the others during their
 //! setup (`mesh.rs`: a follower never holds the file's bytes nor the reader's arrays),
 //! and alone partitions the nodes among the ranks (`petsc::Layout::of_first`: a follower
@@ -48,9 +48,10 @@
 //! those of other rows it reads come with b_n's exchange), rank 0 every traction's facets
 //! too, and it makes the other points again, a traction's facet by facet and a body
 //! force's cell by cell, where history.csv reads every value
-//! (`Discretization::visit_every_load`). The rest is replicated: every other n-vector, and w_n and b_n where a rank reads them (its own rows, their neighbours',
-//! Γ3's), so every rank holds the same right side b_n there, bit for bit, and the active
-//! set's decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*)
+//! (`Discretization::visit_every_load`). The rest is replicated: every other n-vector,
+//! and w_n and b_n where a rank reads them (its own rows, their neighbours', Γ3's), so
+//! every rank holds the same right side b_n there, bit for bit, and the active set's
+//! decisions (its sets, its KKT residual) are the same on every rank. Rank 0 (the *first*)
 //! owns the output directory (lock, series, history.csv, checkpoints, summary.json) and
 //! prints; the others *follow* (`run::follow`). Of each `.vtu` frame every rank writes its
 //! own piece, its part of the mesh, and the ranks agree that all are on disk
@@ -63,7 +64,7 @@
 //! ([`first_keeps_vertices`]). history.csv's largest von Mises stress is, at every
 //! step, the largest of the ranks' pieces' (`run::frame::OwnFrames::solved`), and
 //! summary.json's norms the sum of their pieces' parts, at the loop's start and after
-//! every step (`run::consumers::norms_of_pieces`), so that rank 0 knows them when its run
+//! every step (`run::consumers::of_pieces`), so that rank 0 knows them when its run
 //! fails, where no collective call may stand. (Where `auto`'s choice assembled the whole,
 //! rank 0 keeps every cell where it would keep their vertices, and a follower lets go of
 //! them: `Discretization::forget_cells`.)
@@ -78,9 +79,10 @@
 //! during setup every node's place on every rank, and on rank 0 the whole mesh and its
 //! reading), its columns of the matrices, its part of the history, of w_n, b_n, of the
 //! mesh and of the nodes' places (`fem::Places`, those it reads past its setup alone; it
-//! finds a dof's index by searching the held dofs: `fem::DofIndices`), and its share of PETSc's; a follower's setup in a numbering of its
-//! own (so that it never receives every node's place), and rank 0's unknowns' row order
-//! in parts, are the next steps (docs/cluster.md, "Not built yet").
+//! finds a dof's index by searching the held dofs: `fem::DofIndices`), and its share of
+//! PETSc's; a follower's setup in a numbering of its own (so that it never receives every
+//! node's place), and rank 0's unknowns' row order in parts, are the next steps
+//! (docs/cluster.md, "Not built yet").
 //!
 //! # Planning
 //!
@@ -413,40 +415,43 @@ impl Ranks {
         Ok(None)
     }
 
-    /// What a follower's history holds (`own.holds`; rank 0's where its frames are in
-    /// pieces, `run::hold_history_of_first`, which adds history.csv's reads). Where it hands
-    /// its rows of K_A to PETSc ([`Ranks::keep_own_columns`]: K_A the step matrix, no
+    /// What a rank's history holds (`own.holds`; rank 0 calls this where its frames are in
+    /// pieces, `run::hold_history_of_first`, and else holds every dof). Where it hands its
+    /// rows of K_A to PETSc ([`Ranks::keep_own_columns`]: K_A the step matrix, no
     /// prescribed dofs), u_n and m_n at the dofs its rows of K_B and K_R read and `also`
-    /// (its piece's points') alone (`Holds::Local`): `disc`'s matrices number their rows
-    /// over them (`Discretization::number_rows_over`); its w_n and b_n are held there, at
-    /// its own rows and at Γ3's unknowns (`time_loop`). Nothing else reads u_n or m_n on a
+    /// (what else it reads: its piece's points'; on rank 0 history.csv's too) alone
+    /// (`Holds::Local`): `disc`'s matrices number their rows over them
+    /// (`Discretization::number_rows_over`); its w_n and b_n are held there, at its own
+    /// rows and at Γ3's unknowns (`time_loop`). Nothing else reads u_n or m_n on a
     /// follower: the active set reads b_n and w_n, and the checks' max|u_n| is the ranks'
     /// largest. Elsewhere (the implicit variant, whose step matrix the time loop makes of
-    /// the three matrices' columns, and prescribed dofs), the memory at the dofs its rows of
-    /// K_R read alone (`Holds::Memory`, `Discretization::memory_reach`).
+    /// the three matrices' columns, and prescribed dofs), the memory alone at the dofs its
+    /// rows of K_R read, its own rows and `also` (`Holds::Memory`,
+    /// `Discretization::memory_reach`).
     pub fn hold_history(
         &self,
         disc: &mut crate::fem::Discretization,
         own: Option<&mut Own>,
-        also: impl IntoIterator<Item = usize>,
+        also: Vec<usize>,
     ) {
         #[cfg(feature = "petsc")]
         if let Some(own) = own {
-            let local = own.rows.is_some().then(|| disc.local_reach(also)).flatten();
-            own.holds = match local {
-                Some(local) => {
+            own.holds = match own.rows.is_some() {
+                true => disc.local_reach(also).map(|local| {
                     disc.number_rows_over(&local);
                     Holds::Local(local)
-                }
+                }),
                 // Its own rows too, which it sends to rank 0's checkpoints.
-                None => disc.memory_reach().map_or(Holds::Every, |mut dofs| {
+                false => disc.memory_reach().map(|mut dofs| {
                     dofs.extend(disc.own.iter().flatten());
+                    dofs.extend(also);
                     Holds::Memory(crate::mesh::increasing(dofs))
                 }),
-            };
+            }
+            .unwrap_or(Holds::Every);
         }
         #[cfg(not(feature = "petsc"))]
-        let _ = (disc, own, also.into_iter());
+        let _ = (disc, own, also);
     }
 
     /// Ends every rank of the run with exit status `code`: a rank that failed alone after
@@ -490,17 +495,6 @@ pub struct Own {
     /// u_n and m_n at its `Discretization::local_reach` ([`Ranks::hold_history`]); on rank
     /// 0, every dof where its frames are not in pieces (`run::hold_history_of_first`).
     pub(crate) holds: Holds,
-}
-
-impl Own {
-    /// Whether the rank handed its rows of K_A to PETSc ([`Ranks::keep_own_columns`]), so
-    /// that its history may hold its reach alone ([`Ranks::hold_history`]).
-    pub fn handed_k_a(&self) -> bool {
-        #[cfg(feature = "petsc")]
-        return self.rows.is_some();
-        #[cfg(not(feature = "petsc"))]
-        false
-    }
 }
 
 /// Whether a rank of several hands its rows of K_A to PETSc ([`Ranks::keep_own_columns`]):
@@ -829,7 +823,7 @@ impl std::fmt::Display for Plan {
 }
 
 /// The fraction of the dofs at which the largest rank, rank 0, holds the memory sum
-/// (`run::hold_memory_of_first`): its rows and the values its rows' products fetch (its
+/// (`run::hold_history_of_first`): its rows and the values its rows' products fetch (its
 /// reach: its rows of K_R's columns, which are K_A's, and its piece's points), where the
 /// frames are in pieces (`.vtu`) and the matrices spread; else every dof.
 #[cfg(feature = "petsc")]

@@ -58,11 +58,16 @@ impl PieceSetup {
 
     /// The dofs of the piece's points: where its fields read u_n, w_n and m_n.
     pub fn dofs(&self, disc: &Discretization) -> Vec<usize> {
-        let d = disc.dim;
-        (self.points().iter())
-            .flat_map(|&p| disc.free.of_node(d, p))
-            .collect()
+        dofs_of(disc, self.points())
     }
+}
+
+/// The free dofs of the nodes `points`: where a piece's fields read u_n, w_n and m_n.
+pub(super) fn dofs_of(disc: &Discretization, points: &[usize]) -> Vec<usize> {
+    let d = disc.dim;
+    (points.iter())
+        .flat_map(|&p| disc.free.of_node(d, p))
+        .collect()
 }
 
 /// A follower's piece of the frames of `mesh` where the ranks write their own (`own`:

@@ -487,50 +487,29 @@ fn follow_signals(tl: &mut TimeLoop, opts: &RunOptions) {
     tl.abandon_on(opts.interrupt.abandon());
 }
 
-/// On rank 0 of several whose frames are in pieces, its history holds what its steps,
-/// its piece and history.csv read, as a follower's does, and its checkpoints gather the
-/// rest from the ranks' own rows (`TimeLoop::state`, `TimeLoop::gather_memory`). Where it
-/// handed its rows of K_A to PETSc (`Own::handed_k_a`: K_A the step matrix, no prescribed
-/// dofs), u_n, its compensated sum and the memory at the dofs its rows of K_B and K_R, its
-/// piece's points and the held rows read (`Ranks::hold_history`, `Reactions::dofs_read`),
-/// and w_n and b_n there, at its own rows and Γ3's unknowns (`Holds::Local`). Elsewhere
-/// (the implicit variant, prescribed dofs) the memory alone at those dofs, its own rows
-/// and the prescribed dofs (`Holds::Memory`), u_n at every dof. It holds every dof where
-/// it computes every cell's stress (`format = "vtkhdf"`).
+/// On rank 0 of several whose frames are in pieces, its history holds what its steps, its
+/// piece and history.csv read, as a follower's does (`Ranks::hold_history`), and its
+/// checkpoints gather the rest from the ranks' own rows (`TimeLoop::state`,
+/// `TimeLoop::gather_memory`): besides a follower's dofs, its piece's points', those the
+/// held rows read (`Reactions::dofs_read`) and the prescribed dofs (which it sends to its
+/// checkpoints, where there are any). It holds every dof where it computes every cell's
+/// stress (`format = "vtkhdf"`).
 fn hold_history_of_first(ranks: Ranks, ready: &mut Ready) {
-    if ranks.size == 1 {
-        return;
-    }
-    let (Some(pieces), Some(own)) = (&ready.opened.pieces, ready.solving.own.as_mut()) else {
+    let Some(pieces) = ready.opened.pieces.as_ref().filter(|_| ranks.size > 1) else {
         return;
     };
-    let read = ready.reactions.dofs_read();
-    if own.handed_k_a() {
-        // Nothing shares the discretization before the time loop's setup.
-        let disc = Arc::get_mut(&mut ready.disc).expect("rank 0's setup alone holds it");
-        let d = disc.dim;
-        let points = pieces
-            .points()
-            .iter()
-            .flat_map(|&p| disc.free.of_node(d, p));
-        let also: Vec<usize> = points.chain(read.iter().copied()).collect();
-        ranks.hold_history(disc, Some(own), also);
-        return;
-    }
-    let disc = &ready.disc;
-    let Some(mut dofs) = disc.memory_reach() else {
-        return;
-    };
-    dofs.extend_from_slice(read);
-    dofs.extend(disc.own.iter().flatten());
-    dofs.extend(disc.n_free..disc.n_dofs);
-    own.holds = crate::history::Holds::Memory(crate::mesh::increasing(dofs));
+    // Nothing shares the discretization before the time loop's setup.
+    let disc = Arc::get_mut(&mut ready.disc).expect("rank 0's setup alone holds it");
+    let mut also = frame::dofs_of(disc, pieces.points());
+    also.extend_from_slice(ready.reactions.dofs_read());
+    also.extend(disc.n_free..disc.n_dofs);
+    ranks.hold_history(disc, ready.solving.own.as_mut(), also);
 }
 
 /// On rank 0 of several whose frames are in pieces and whose loads have no body force,
 /// the discretization lets go of its cells' vertices (16 bytes a tetrahedron of the whole
 /// mesh), which nothing reads past the setup there: summary.json's norms are the ranks'
-/// pieces' sums (`consumers::norms_of_pieces`), and rank 0's piece makes its own cells from
+/// pieces' sums (`consumers::of_pieces`), and rank 0's piece makes its own cells from
 /// their vertices as a follower's does (`OwnFrames::keep_own_cells`). A body force keeps
 /// them: history.csv's resultant of it is made again from every cell at every step
 /// (`Discretization::visit_every_load`). With them go the places of the nodes it no longer
